@@ -1,0 +1,155 @@
+//! Arc-length reparameterisation for `speed: "constant"` (SPEC §2.6).
+//!
+//! Built once per track, in `f64`: the path is cut into pieces inside which
+//! the Bezier parameter is linear in arc length to within a tolerance of
+//! `1e-6·L` in position (checked at three points per piece, pieces split
+//! adaptively, which also handles zero-speed cusps such as `zero_slope`
+//! ends). The piece boundaries become the track's timeline, so sampling is
+//! the ordinary span search plus one Bezier evaluation.
+
+use glam::DVec3;
+
+use super::curve::ArcPiece;
+
+/// Position tolerance relative to the path length.
+const REL_TOLERANCE: f64 = 1e-6;
+const MAX_DEPTH: u32 = 30;
+
+pub(crate) fn point(p: &[DVec3; 4], u: f64) -> DVec3 {
+    let v = 1.0 - u;
+    p[0] * (v * v * v) + p[1] * (3.0 * u * v * v) + p[2] * (3.0 * u * u * v) + p[3] * (u * u * u)
+}
+
+fn velocity(p: &[DVec3; 4], u: f64) -> DVec3 {
+    let v = 1.0 - u;
+    (p[1] - p[0]) * (3.0 * v * v) + (p[2] - p[1]) * (6.0 * u * v) + (p[3] - p[2]) * (3.0 * u * u)
+}
+
+/// Five-point Gauss-Legendre quadrature of the speed over `[a, b]`.
+fn gauss5(p: &[DVec3; 4], a: f64, b: f64) -> f64 {
+    const X: [f64; 5] =
+        [0.0, -0.538_469_310_105_683_1, 0.538_469_310_105_683_1, -0.906_179_845_938_664, 0.906_179_845_938_664];
+    const W: [f64; 5] = [
+        0.568_888_888_888_888_9,
+        0.478_628_670_499_366_5,
+        0.478_628_670_499_366_5,
+        0.236_926_885_056_189_1,
+        0.236_926_885_056_189_1,
+    ];
+    let (mid, half) = ((a + b) / 2.0, (b - a) / 2.0);
+    half * X.iter().zip(W).map(|(x, w)| w * velocity(p, mid + half * x).length()).sum::<f64>()
+}
+
+/// Arc length of `p` over `[a, b]`, adaptively to `abs_tol`.
+pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64) -> f64 {
+    fn go(p: &[DVec3; 4], a: f64, b: f64, whole: f64, tol: f64, depth: u32) -> f64 {
+        let m = (a + b) / 2.0;
+        let (l, r) = (gauss5(p, a, m), gauss5(p, m, b));
+        if depth >= 40 || (l + r - whole).abs() <= tol {
+            l + r
+        } else {
+            go(p, a, m, l, tol / 2.0, depth + 1) + go(p, m, b, r, tol / 2.0, depth + 1)
+        }
+    }
+    go(p, a, b, gauss5(p, a, b), abs_tol.max(1e-300), 0)
+}
+
+/// The parameter in `[a, b]` whose arc length from `a` is `target`.
+fn invert(p: &[DVec3; 4], a: f64, b: f64, target: f64, abs_tol: f64) -> f64 {
+    let (mut lo, mut hi) = (a, b);
+    let mut u = a + (b - a) * 0.5;
+    for _ in 0..60 {
+        let s = length(p, a, u, abs_tol);
+        let err = s - target;
+        if err.abs() <= abs_tol * 0.01 {
+            break;
+        }
+        if err > 0.0 {
+            hi = u
+        } else {
+            lo = u
+        }
+        let speed = velocity(p, u).length();
+        let newton = if speed > 0.0 { u - err / speed } else { f64::NAN };
+        u = if newton > lo && newton < hi { newton } else { (lo + hi) / 2.0 };
+        if hi - lo < 1e-15 {
+            break;
+        }
+    }
+    u
+}
+
+/// The arc-length breakpoints of a path of Bezier segments spanning
+/// `[t0, t1]`: piece start times (plus the end time) and the pieces.
+/// Returns `None` for a path of zero length (nothing moves).
+pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
+    let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12)).collect();
+    let total: f64 = lengths.iter().sum();
+    if total.is_nan() || total <= 0.0 || !total.is_finite() {
+        return None;
+    }
+    let tol = REL_TOLERANCE * total;
+    let quad_tol = tol * 1e-3;
+    // (start arc length, piece)
+    let mut raw: Vec<(f64, ArcPiece)> = Vec::new();
+    let mut s0 = 0.0;
+    for (k, (p, &len)) in segments.iter().zip(&lengths).enumerate() {
+        if len > 0.0 {
+            split(p, k as u32, (0.0, 1.0), (s0, s0 + len), tol, quad_tol, 0, &mut raw);
+        }
+        s0 += len;
+    }
+    let scale = (t1 - t0) / total;
+    let mut times: Vec<f32> = Vec::with_capacity(raw.len() + 1);
+    let mut pieces = Vec::with_capacity(raw.len());
+    for (s, piece) in raw {
+        let t = (t0 + s * scale) as f32;
+        // Pieces shorter than f32 time resolution merge into their neighbour.
+        if times.last().is_some_and(|&last| t <= last) {
+            continue;
+        }
+        times.push(t);
+        pieces.push(piece);
+    }
+    let end = t1 as f32;
+    if times.last().is_some_and(|&last| end <= last) {
+        times.pop();
+        pieces.pop();
+    }
+    if pieces.is_empty() {
+        return None;
+    }
+    times.push(end);
+    Some((times, pieces))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn split(
+    p: &[DVec3; 4],
+    segment: u32,
+    (ua, ub): (f64, f64),
+    (sa, sb): (f64, f64),
+    tol: f64,
+    quad_tol: f64,
+    depth: u32,
+    out: &mut Vec<(f64, ArcPiece)>,
+) {
+    let mut worst = 0.0f64;
+    let mut u_mid = (ua + ub) / 2.0;
+    for w in [0.25, 0.5, 0.75] {
+        let target = w * (sb - sa);
+        let u_true = invert(p, ua, ub, target, quad_tol);
+        let u_lin = ua + w * (ub - ua);
+        worst = worst.max((point(p, u_true) - point(p, u_lin)).length());
+        if w == 0.5 {
+            u_mid = u_true;
+        }
+    }
+    if worst <= tol || depth >= MAX_DEPTH {
+        out.push((sa, ArcPiece { segment, u0: ua as f32, du: (ub - ua) as f32 }));
+    } else {
+        let sm = (sa + sb) / 2.0;
+        split(p, segment, (ua, u_mid), (sa, sm), tol, quad_tol, depth + 1, out);
+        split(p, segment, (u_mid, ub), (sm, sb), tol, quad_tol, depth + 1, out);
+    }
+}

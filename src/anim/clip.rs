@@ -1,0 +1,431 @@
+//! [`Clip`]: the validated, immutable runtime form of a [`ClipSpec`], and
+//! the sampling kernel.
+//!
+//! `Clip::build` is the only constructor, so a `Clip` that exists is valid:
+//! sampling cannot fail and does not allocate once the caller's buffers
+//! ([`Cursor`], [`Pose`]) have their size. Tracks are grouped by kind so the
+//! per-track dispatch runs in long predictable stretches.
+
+use std::collections::HashMap;
+
+use glam::{Mat4, Vec3A};
+
+use super::compile::{self, Compiled, finite3, unit_quat};
+use super::curve::{QuatCurve, Vec3Curve};
+use super::error::{ClipError, ClipErrorKind as K, Path};
+use super::skeleton::{NO_PARENT, Pose, Skeleton};
+use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
+use super::timeline::{Span, Timeline};
+
+/// Longest accepted clip or event name, in characters.
+pub const MAX_NAME_CHARS: usize = 256;
+
+#[derive(Debug, Clone, PartialEq)]
+struct Vec3Track {
+    joint: u32,
+    scale: bool,
+    timeline: u32,
+    curve: Vec3Curve,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct QuatTrack {
+    joint: u32,
+    timeline: u32,
+    curve: QuatCurve,
+}
+
+/// A named instant of the clip (a footstep, a sound cue).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Event {
+    pub time: f32,
+    pub name: String,
+}
+
+/// A validated clip, ready to sample.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Clip {
+    name: String,
+    playback: Playback,
+    start: f32,
+    end: f32,
+    skeleton: Skeleton,
+    timelines: Vec<Timeline>,
+    vec3_tracks: Vec<Vec3Track>,
+    quat_tracks: Vec<QuatTrack>,
+    events: Vec<Event>,
+}
+
+/// Per-caller search state: the last span of each timeline, which makes
+/// forward playback O(1). Any cursor works with any clip (it re-fits itself),
+/// but a cursor kept per playback is what makes it fast.
+#[derive(Debug, Clone, Default)]
+pub struct Cursor {
+    hints: Vec<u32>,
+    spans: Vec<Span>,
+}
+
+impl Cursor {
+    #[inline]
+    fn fit(&mut self, timelines: usize) {
+        if self.hints.len() != timelines {
+            self.hints.clear();
+            self.hints.resize(timelines, 0);
+            self.spans.clear();
+            self.spans.resize(timelines, Span::default());
+        }
+    }
+}
+
+/// How a request maps to clip time and space (SPEC §2.6–2.8).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SampleOptions {
+    /// `None`: the clip's own default.
+    pub playback: Option<Playback>,
+    pub ease: Ease,
+    pub space: Space,
+}
+
+impl Clip {
+    /// Validates `spec` and compiles it (SPEC §1–2).
+    ///
+    /// # Errors
+    /// The first rule `spec` breaks, with the path of the offending field.
+    pub fn build(spec: &ClipSpec) -> Result<Clip, ClipError> {
+        let chars = spec.name.chars().count();
+        if chars == 0 || chars > MAX_NAME_CHARS {
+            return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
+        }
+        if spec.tracks.is_empty() {
+            return Err(ClipError::new(Path::root().field("tracks"), K::NoTracks));
+        }
+        let skeleton = build_skeleton(spec)?;
+
+        let mut timelines: Vec<Timeline> = Vec::new();
+        let mut timeline_of: HashMap<Vec<u32>, u32> = HashMap::new();
+        let mut intern = |times: Vec<f32>| -> u32 {
+            let key: Vec<u32> = times.iter().map(|t| t.to_bits()).collect();
+            *timeline_of.entry(key).or_insert_with(|| {
+                timelines.push(Timeline::new(&times));
+                (timelines.len() - 1) as u32
+            })
+        };
+        let mut seen: HashMap<(usize, Channel), ()> = HashMap::new();
+        let (mut vec3_tracks, mut quat_tracks) = (Vec::new(), Vec::new());
+        let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (i, track) in spec.tracks.iter().enumerate() {
+            let path = Path::root().field("tracks").index(i);
+            let joint = skeleton.index_of(&track.joint).ok_or_else(|| {
+                ClipError::new(path.clone().field("joint"), K::UnknownJoint { joint: track.joint.clone() })
+            })?;
+            if seen.insert((joint, track.channel), ()).is_some() {
+                return Err(ClipError::new(
+                    path.field("channel"),
+                    K::DuplicateTrack { joint: track.joint.clone(), channel: track.channel.as_str() },
+                ));
+            }
+            let joint = joint as u32;
+            let domain = if track.channel == Channel::Rotation {
+                let Compiled { times, curve, domain } = compile::quat_track(track, &path)?;
+                quat_tracks.push(QuatTrack { joint, timeline: intern(times), curve });
+                domain
+            } else {
+                let Compiled { times, curve, domain } = compile::vec3_track(track, &path)?;
+                let scale = track.channel == Channel::Scale;
+                vec3_tracks.push(Vec3Track { joint, scale, timeline: intern(times), curve });
+                domain
+            };
+            start = start.min(domain.0);
+            end = end.max(domain.1);
+        }
+        vec3_tracks.sort_by_key(|t| vec3_kind(&t.curve));
+        quat_tracks.sort_by_key(|t| quat_kind(&t.curve));
+
+        let mut events = Vec::with_capacity(spec.events.len());
+        for (i, e) in spec.events.iter().enumerate() {
+            let path = Path::root().field("events").index(i);
+            if !e.time.is_finite() {
+                return Err(ClipError::new(path.field("time"), K::NonFinite));
+            }
+            let chars = e.name.chars().count();
+            if chars == 0 || chars > MAX_NAME_CHARS {
+                return Err(ClipError::new(path.field("name"), K::BadName { max: MAX_NAME_CHARS }));
+            }
+            events.push(Event { time: e.time, name: e.name.clone() });
+        }
+        events.sort_by(|a, b| a.time.total_cmp(&b.time));
+
+        Ok(Clip {
+            name: spec.name.clone(),
+            playback: spec.playback,
+            start,
+            end,
+            skeleton,
+            timelines,
+            vec3_tracks,
+            quat_tracks,
+            events,
+        })
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The default playback mode.
+    pub fn playback(&self) -> Playback {
+        self.playback
+    }
+
+    /// Smallest first key over all tracks (SPEC §1).
+    pub fn start(&self) -> f32 {
+        self.start
+    }
+
+    /// Largest last key over all tracks.
+    pub fn end(&self) -> f32 {
+        self.end
+    }
+
+    pub fn duration(&self) -> f32 {
+        self.end - self.start
+    }
+
+    pub fn skeleton(&self) -> &Skeleton {
+        &self.skeleton
+    }
+
+    pub fn joint_count(&self) -> usize {
+        self.skeleton.len()
+    }
+
+    pub fn track_count(&self) -> usize {
+        self.vec3_tracks.len() + self.quat_tracks.len()
+    }
+
+    /// Distinct key-time arrays; tracks that share times share one search.
+    pub fn timeline_count(&self) -> usize {
+        self.timelines.len()
+    }
+
+    /// Events sorted by time.
+    pub fn events(&self) -> &[Event] {
+        &self.events
+    }
+
+    /// Maps a request time to clip time (SPEC §2.6–2.7): playback first
+    /// (`once` clamps, `loop` wraps, `ping_pong` reflects), then the ease
+    /// warp over normalised time. Computed in `f64` so long-running loops
+    /// keep their precision; non-finite `t` maps to the start.
+    pub fn clip_time(&self, t: f64, playback: Playback, ease: Ease) -> f32 {
+        let (start, dur) = (self.start as f64, (self.end - self.start) as f64);
+        if dur.is_nan() || dur <= 0.0 || !t.is_finite() {
+            return self.start;
+        }
+        let x = t - start;
+        let x = match playback {
+            Playback::Once => x.clamp(0.0, dur),
+            Playback::Loop => x.rem_euclid(dur),
+            Playback::PingPong => {
+                let p = x.rem_euclid(2.0 * dur);
+                if p > dur { 2.0 * dur - p } else { p }
+            }
+        };
+        let x = ease.apply((x / dur).clamp(0.0, 1.0)) * dur;
+        ((start + x) as f32).clamp(self.start, self.end)
+    }
+
+    /// The local pose at clip time `t` (already mapped by
+    /// [`Clip::clip_time`]; outside the range each track holds its ends).
+    /// The hot path: no allocation once `cursor` and `pose` have been used
+    /// with a clip of this size.
+    #[inline]
+    pub fn sample_into(&self, t: f32, cursor: &mut Cursor, pose: &mut Pose) {
+        cursor.fit(self.timelines.len());
+        for ((timeline, hint), span) in self.timelines.iter().zip(&mut cursor.hints).zip(&mut cursor.spans) {
+            *span = timeline.locate(t, hint);
+        }
+        pose.copy_from(self.skeleton.rest());
+        let spans = &cursor.spans;
+        for track in &self.vec3_tracks {
+            let v: Vec3A = track.curve.eval(spans[track.timeline as usize]);
+            let out = if track.scale { &mut pose.scales } else { &mut pose.translations };
+            out[track.joint as usize] = v;
+        }
+        for track in &self.quat_tracks {
+            pose.rotations[track.joint as usize] = track.curve.eval(spans[track.timeline as usize]);
+        }
+    }
+
+    /// Like [`Clip::sample_into`] but takes a request time and options and
+    /// returns the pose in the requested space. Returns the clip time used.
+    pub fn sample(&self, t: f64, options: &SampleOptions, sampler: &mut Sampler) -> f32 {
+        let clip_time = self.clip_time(t, options.playback.unwrap_or(self.playback), options.ease);
+        self.sample_into(clip_time, &mut sampler.cursor, &mut sampler.local);
+        if options.space == Space::Model {
+            self.skeleton.to_model(&sampler.local, &mut sampler.model);
+        }
+        sampler.space = options.space;
+        clip_time
+    }
+
+    /// Model matrices (or skinning matrices, `M_j · invBind_j`) at request
+    /// time `t`, into `out`. Returns `false` if skinning was asked of a clip
+    /// without inverse bind matrices.
+    pub fn matrices(
+        &self,
+        t: f64,
+        options: &SampleOptions,
+        skinning: bool,
+        sampler: &mut Sampler,
+        out: &mut Vec<Mat4>,
+    ) -> bool {
+        let local = SampleOptions { space: Space::Local, ..*options };
+        self.sample(t, &local, sampler);
+        if skinning {
+            self.skeleton.skinning_matrices(&sampler.local, out)
+        } else {
+            self.skeleton.model_matrices(&sampler.local, out);
+            true
+        }
+    }
+}
+
+/// Reusable buffers for [`Clip::sample`]: one per playback or per worker.
+#[derive(Debug, Clone, Default)]
+pub struct Sampler {
+    cursor: Cursor,
+    local: Pose,
+    model: Pose,
+    space: Space,
+}
+
+impl Sampler {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The pose of the last [`Clip::sample`] call, in the space it asked for.
+    pub fn pose(&self) -> &Pose {
+        match self.space {
+            Space::Local => &self.local,
+            Space::Model => &self.model,
+        }
+    }
+}
+
+fn vec3_kind(c: &Vec3Curve) -> u8 {
+    match c {
+        Vec3Curve::Constant(_) => 0,
+        Vec3Curve::Step(_) => 1,
+        Vec3Curve::Linear(_) => 2,
+        Vec3Curve::Bezier(_) => 3,
+        Vec3Curve::ConstantSpeed { .. } => 4,
+    }
+}
+
+fn quat_kind(c: &QuatCurve) -> u8 {
+    match c {
+        QuatCurve::Constant(_) => 0,
+        QuatCurve::Step(_) => 1,
+        QuatCurve::Slerp(_) => 2,
+        QuatCurve::SlerpBezier(_) => 3,
+        QuatCurve::Hermite(_) => 4,
+    }
+}
+
+/// The skeleton of `spec`, or one root joint per animated joint in order of
+/// first appearance when it has none (SPEC §1).
+fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
+    let Some(skel) = &spec.skeleton else {
+        let mut names: Vec<String> = Vec::new();
+        for (i, t) in spec.tracks.iter().enumerate() {
+            if t.joint.is_empty() {
+                return Err(ClipError::new(Path::root().field("tracks").index(i).field("joint"), K::EmptyJointName));
+            }
+            if !names.contains(&t.joint) {
+                names.push(t.joint.clone());
+            }
+        }
+        let n = names.len();
+        return Ok(Skeleton::new(names, vec![NO_PARENT; n], Pose::identity(n), None));
+    };
+    let joints = &skel.joints;
+    let mut index: HashMap<&str, usize> = HashMap::with_capacity(joints.len());
+    for (j, joint) in joints.iter().enumerate() {
+        let path = Path::root().field("skeleton").field("joints").index(j);
+        if joint.name.is_empty() {
+            return Err(ClipError::new(path.field("name"), K::EmptyJointName));
+        }
+        if index.insert(joint.name.as_str(), j).is_some() {
+            return Err(ClipError::new(path.field("name"), K::DuplicateJoint { name: joint.name.clone() }));
+        }
+    }
+    let mut parents = Vec::with_capacity(joints.len());
+    let mut rest = Pose::identity(0);
+    let mut binds = Vec::with_capacity(joints.len());
+    for (j, joint) in joints.iter().enumerate() {
+        let path = Path::root().field("skeleton").field("joints").index(j);
+        let parent = match &joint.parent {
+            None => NO_PARENT,
+            Some(p) => match index.get(p.as_str()) {
+                None => return Err(ClipError::new(path.field("parent"), K::UnknownParent { parent: p.clone() })),
+                Some(&pj) if pj < j => pj as u32,
+                Some(_) if on_cycle(joints, &index, j) => {
+                    return Err(ClipError::new(path.field("parent"), K::ParentCycle { joint: joint.name.clone() }));
+                }
+                Some(_) => return Err(ClipError::new(path.field("parent"), K::ParentAfterChild { parent: p.clone() })),
+            },
+        };
+        parents.push(parent);
+        let rp = path.clone().field("rest");
+        rest.translations.push(finite3(joint.rest.translation, rp.clone().field("translation"))?);
+        rest.scales.push(finite3(joint.rest.scale, rp.clone().field("scale"))?);
+        let q = glam::Vec4::from(joint.rest.rotation);
+        if !q.is_finite() {
+            return Err(ClipError::new(rp.field("rotation"), K::NonFinite));
+        }
+        rest.rotations.push(unit_quat(q, &rp.field("rotation"))?.as_quat());
+        if let Some(m) = joint.inverse_bind {
+            if !m.is_finite() {
+                return Err(ClipError::new(path.field("inverse_bind"), K::NonFinite));
+            }
+            binds.push(Some(m));
+        } else {
+            binds.push(None);
+        }
+    }
+    let inverse_binds =
+        binds.iter().any(Option::is_some).then(|| binds.iter().map(|b| b.unwrap_or(Mat4::IDENTITY)).collect());
+    let names = joints.iter().map(|j| j.name.clone()).collect();
+    Ok(Skeleton::new(names, parents, rest, inverse_binds))
+}
+
+/// Whether following parents from joint `j` comes back to `j`.
+fn on_cycle(joints: &[super::spec::JointSpec], index: &HashMap<&str, usize>, j: usize) -> bool {
+    let mut at = j;
+    for _ in 0..joints.len() {
+        match joints[at].parent.as_deref().and_then(|p| index.get(p)) {
+            Some(&p) if p == j => return true,
+            Some(&p) => at = p,
+            None => return false,
+        }
+    }
+    false
+}
+
+/// The times `start + k/fps` for `k = 0, 1, …` up to and including `end`
+/// (a `start,end,fps` sample request, SPEC §3). The caller bounds the count
+/// with [`frame_count`] before asking for them.
+pub fn frame_times(start: f64, end: f64, fps: f64) -> impl Iterator<Item = f64> {
+    (0..frame_count(start, end, fps)).map(move |k| start + k as f64 / fps)
+}
+
+/// How many frames [`frame_times`] yields (0 for an empty or invalid range).
+pub fn frame_count(start: f64, end: f64, fps: f64) -> u64 {
+    if !(start.is_finite() && end.is_finite() && fps.is_finite() && fps > 0.0 && end >= start) {
+        return 0;
+    }
+    // A tolerance so that e.g. 0..1 at 30 fps includes t = 1.
+    ((end - start) * fps + 1e-9).floor() as u64 + 1
+}

@@ -1,0 +1,43 @@
+//! The evaluation core: keyframes in, poses out (SPEC §1–2).
+//!
+//! **Architecture invariant:** this module is pure. It knows nothing of the
+//! network, storage, async runtimes or wire formats (no tokio, axum, tonic,
+//! sqlx, serde or prost), does no I/O, and cannot fail once a [`Clip`] is
+//! built. The service layers wrap it; they never reach inside.
+//!
+//! The flow is `ClipSpec` (authoring data, unchecked) → [`Clip::build`]
+//! (validated; quaternions normalised and made hemisphere-continuous; each
+//! segment's Bezier control points precomputed in `f64`) → sampling into
+//! caller-owned buffers ([`Cursor`], [`Pose`]) with no allocation.
+//!
+//! Module map: `spec` the authoring types; `error` why a spec is refused;
+//! `compile` per-track validation and control points; `curve` the runtime
+//! curves and their evaluation; `quat` quaternion tools and fast slerp;
+//! `timeline` the segment search; `arc` constant-speed tables; `skeleton`
+//! hierarchy and model space; `clip` the clip and the sampling kernel.
+
+mod arc;
+mod clip;
+mod compile;
+mod curve;
+mod error;
+pub mod quat;
+mod skeleton;
+mod spec;
+mod timeline;
+
+pub use clip::{Clip, Cursor, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times};
+pub use error::{ClipError, ClipErrorKind, Path, Step};
+pub use skeleton::{Pose, Skeleton};
+pub use spec::{
+    Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Space, Speed,
+    TrackSpec, Transform,
+};
+pub use timeline::{Span, Timeline};
+
+/// Internals exposed for benchmarks and reference tests only.
+#[doc(hidden)]
+pub mod internals {
+    pub use super::compile::{Key, catmull_rom};
+    pub use super::curve::{QuatSegment, bezier3, slerp_bezier};
+}

@@ -1,0 +1,132 @@
+//! Joints, their hierarchy and rest pose; local → model space (SPEC §2.8).
+//!
+//! Joints are stored parents-first (SPEC §1 requires each parent to be an
+//! earlier joint), so local-to-model is one linear pass with no recursion
+//! and no stack, as in ozz-animation.
+
+use glam::{Mat4, Quat, Vec3A};
+
+/// Joint transforms in structure-of-arrays form, caller-owned so sampling
+/// never allocates. Index `j` of each array is joint `j` of the skeleton.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Pose {
+    pub translations: Vec<Vec3A>,
+    pub rotations: Vec<Quat>,
+    pub scales: Vec<Vec3A>,
+}
+
+impl Pose {
+    /// `n` identity transforms.
+    pub fn identity(n: usize) -> Self {
+        Pose { translations: vec![Vec3A::ZERO; n], rotations: vec![Quat::IDENTITY; n], scales: vec![Vec3A::ONE; n] }
+    }
+
+    pub fn len(&self) -> usize {
+        self.translations.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.translations.is_empty()
+    }
+
+    /// Copies `other` into `self`, reusing `self`'s storage.
+    #[inline]
+    pub fn copy_from(&mut self, other: &Pose) {
+        self.translations.clone_from(&other.translations);
+        self.rotations.clone_from(&other.rotations);
+        self.scales.clone_from(&other.scales);
+    }
+}
+
+/// The validated hierarchy: names, parents (always earlier joints) and the
+/// rest pose, plus inverse bind matrices when the clip came with a skin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skeleton {
+    names: Vec<String>,
+    /// `NO_PARENT` for roots, else an index smaller than the joint's own.
+    parents: Vec<u32>,
+    rest: Pose,
+    inverse_binds: Option<Vec<Mat4>>,
+}
+
+pub(crate) const NO_PARENT: u32 = u32::MAX;
+
+impl Skeleton {
+    /// Joints must already be checked (`Clip::build` does): parents earlier.
+    pub(crate) fn new(names: Vec<String>, parents: Vec<u32>, rest: Pose, inverse_binds: Option<Vec<Mat4>>) -> Self {
+        debug_assert!(parents.iter().enumerate().all(|(j, &p)| p == NO_PARENT || (p as usize) < j));
+        Skeleton { names, parents, rest, inverse_binds }
+    }
+
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    /// The parent of joint `j`, if any.
+    pub fn parent(&self, j: usize) -> Option<usize> {
+        let p = self.parents[j];
+        (p != NO_PARENT).then_some(p as usize)
+    }
+
+    pub fn rest(&self) -> &Pose {
+        &self.rest
+    }
+
+    pub fn has_inverse_binds(&self) -> bool {
+        self.inverse_binds.is_some()
+    }
+
+    /// Composes local transforms down the hierarchy (SPEC §2.8):
+    /// `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m = q_p·q_l`, `s_m = s_p ⊙ s_l`.
+    /// Exact for uniform scale; use [`Skeleton::model_matrices`] otherwise.
+    pub fn to_model(&self, local: &Pose, model: &mut Pose) {
+        model.copy_from(local);
+        let (t, q, s) = (&mut model.translations, &mut model.rotations, &mut model.scales);
+        for (j, &p) in self.parents.iter().enumerate() {
+            if p == NO_PARENT {
+                continue;
+            }
+            let p = p as usize;
+            let (tp, qp, sp) = (t[p], q[p], s[p]);
+            t[j] = tp + qp * (sp * t[j]);
+            q[j] = qp * q[j];
+            s[j] = sp * s[j];
+        }
+    }
+
+    /// Column-major model matrices `M_j = M_parent · T·R·S`.
+    pub fn model_matrices(&self, local: &Pose, out: &mut Vec<Mat4>) {
+        out.clear();
+        for (j, &p) in self.parents.iter().enumerate() {
+            let m = Mat4::from_scale_rotation_translation(
+                local.scales[j].into(),
+                local.rotations[j],
+                local.translations[j].into(),
+            );
+            out.push(if p == NO_PARENT { m } else { out[p as usize] * m });
+        }
+    }
+
+    /// Skinning matrices `M_j · invBind_j`; `false` (and `out` untouched
+    /// beyond the model matrices) when the clip has no inverse binds.
+    pub fn skinning_matrices(&self, local: &Pose, out: &mut Vec<Mat4>) -> bool {
+        let Some(binds) = &self.inverse_binds else { return false };
+        self.model_matrices(local, out);
+        for (m, b) in out.iter_mut().zip(binds) {
+            *m *= *b;
+        }
+        true
+    }
+}

@@ -1,0 +1,140 @@
+//! Key times and the search for the segment that holds a time.
+//!
+//! Tracks whose key times are identical share one [`Timeline`] (glTF
+//! samplers often share inputs; every BVH channel shares the frame times),
+//! so a pose does one search per distinct timeline rather than per track.
+//! The search is O(1) for forward playback (the caller's hint is the last
+//! segment, and the next one is tried second), O(1) for uniformly spaced
+//! keys (the index is computed, then checked), and a binary search
+//! otherwise.
+
+/// Strictly increasing key times, with each segment's reciprocal length.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timeline {
+    times: Box<[f32]>,
+    inv_h: Box<[f32]>,
+    /// `(t0, 1/h)` when every key sits at `t0 + i·h` to within f32 rounding.
+    uniform: Option<(f32, f32)>,
+}
+
+/// Where a time falls: segment `index` (keys `index` and `index + 1`) at
+/// parameter `u ∈ [0, 1]`. A single-key timeline always gives `(0, 0)`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Span {
+    pub index: u32,
+    pub u: f32,
+}
+
+impl Timeline {
+    /// `times` must be non-empty and strictly increasing (checked by the
+    /// caller, `Clip::build`).
+    pub(crate) fn new(times: &[f32]) -> Self {
+        debug_assert!(!times.is_empty());
+        debug_assert!(times.windows(2).all(|w| w[0] < w[1]));
+        let inv_h: Box<[f32]> = times.windows(2).map(|w| 1.0 / (w[1] - w[0])).collect();
+        let uniform = Self::detect_uniform(times);
+        Timeline { times: times.into(), inv_h, uniform }
+    }
+
+    fn detect_uniform(times: &[f32]) -> Option<(f32, f32)> {
+        let n = times.len();
+        if n < 3 {
+            return None;
+        }
+        let t0 = times[0] as f64;
+        let h = (times[n - 1] as f64 - t0) / (n - 1) as f64;
+        let tolerance = 1e-3 * h;
+        let uniform = times.iter().enumerate().all(|(i, &t)| (t as f64 - (t0 + i as f64 * h)).abs() <= tolerance);
+        uniform.then_some((times[0], (1.0 / h) as f32))
+    }
+
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    pub fn first(&self) -> f32 {
+        self.times[0]
+    }
+
+    pub fn last(&self) -> f32 {
+        self.times[self.times.len() - 1]
+    }
+
+    /// The segment holding `t`, clamped outside the keys (SPEC §2: a track
+    /// holds its end values; at `t = t_n` the last segment with `u = 1`).
+    /// `hint` is the caller's last answer and is updated.
+    #[inline]
+    pub fn locate(&self, t: f32, hint: &mut u32) -> Span {
+        let times = &*self.times;
+        let n = times.len();
+        if n < 2 || t <= times[0] || t.is_nan() {
+            *hint = 0;
+            return Span { index: 0, u: 0.0 };
+        }
+        let last = n - 2;
+        if t >= times[n - 1] {
+            *hint = last as u32;
+            return Span { index: last as u32, u: 1.0 };
+        }
+        // Here times[0] < t < times[n-1], so some i in 0..=last holds it.
+        let mut i = (*hint as usize).min(last);
+        if !(times[i] <= t && t < times[i + 1]) {
+            i = if i < last && times[i + 1] <= t && t < times[i + 2] {
+                i + 1
+            } else if let Some((t0, inv_h)) = self.uniform {
+                let mut j = (((t - t0) * inv_h) as usize).min(last);
+                while j > 0 && t < times[j] {
+                    j -= 1;
+                }
+                while j < last && t >= times[j + 1] {
+                    j += 1;
+                }
+                j
+            } else {
+                times.partition_point(|&k| k <= t) - 1
+            };
+        }
+        *hint = i as u32;
+        let u = ((t - times[i]) * self.inv_h[i]).clamp(0.0, 1.0);
+        Span { index: i as u32, u }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(times: &[f32], t: f32, hint: u32, expect: (u32, f32)) {
+        let tl = Timeline::new(times);
+        let mut h = hint;
+        let span = tl.locate(t, &mut h);
+        assert_eq!(span.index, expect.0, "index for t={t}");
+        assert!((span.u - expect.1).abs() < 1e-5, "u for t={t}: {} vs {}", span.u, expect.1);
+        assert_eq!(h, span.index);
+    }
+
+    #[test]
+    fn every_search_path_finds_the_same_segment() {
+        let irregular = [0.0, 0.5, 2.0, 2.5, 4.0];
+        let uniform: Vec<f32> = (0..50).map(|i| i as f32 / 24.0).collect();
+        for times in [&irregular[..], &uniform[..]] {
+            let n = times.len();
+            for k in 0..n - 1 {
+                let t = 0.25 * times[k] + 0.75 * times[k + 1];
+                for hint in [0, k as u32, (k as u32).saturating_sub(1), (n - 2) as u32, 999] {
+                    check(times, t, hint, (k as u32, 0.75));
+                }
+                check(times, times[k], 7, (k as u32, 0.0));
+            }
+        }
+    }
+
+    #[test]
+    fn clamps_outside_and_at_the_last_key() {
+        let times = [1.0, 2.0, 4.0];
+        check(&times, -5.0, 1, (0, 0.0));
+        check(&times, 4.0, 0, (1, 1.0));
+        check(&times, 9.0, 0, (1, 1.0));
+        check(&[3.0], 9.0, 0, (0, 0.0));
+    }
+}

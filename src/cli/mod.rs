@@ -1,0 +1,35 @@
+//! Command-line entry points, one file per subcommand.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod sample;
+
+#[derive(Debug, Parser)]
+#[command(name = "inbetween", version, about = "Keyframes in, inbetweens out: a keyframe-animation server and tools.")]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Sample a clip file offline and print its poses as JSON.
+    Sample(sample::SampleArgs),
+}
+
+impl Cli {
+    pub fn run(self) -> ExitCode {
+        let result = match self.command {
+            Command::Sample(args) => sample::run(args),
+        };
+        match result {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("inbetween: {e:#}");
+                ExitCode::FAILURE
+            }
+        }
+    }
+}

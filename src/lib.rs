@@ -1,0 +1,6 @@
+//! inbetween: a keyframe-animation server. See `ARCHITECTURE.md` for the
+//! codemap; `anim` is the pure evaluation core the service layers wrap.
+
+pub mod anim;
+pub mod cli;
+pub mod wire;

@@ -1,0 +1,387 @@
+//! The JSON clip document and pose rendering (SPEC §1, §3).
+//!
+//! [`ClipDoc`] is the clip as it travels: parsed strictly (unknown fields are
+//! refused, so a typo is an error rather than a silently ignored option),
+//! converted to the core's [`ClipSpec`], and back again for imports and for
+//! `GET /v1/clips/{id}`. Every error carries the JSON pointer of the field at
+//! fault. Quaternions are `[x, y, z, w]` here and everywhere.
+
+use glam::{Mat4, Quat, Vec3, Vec4};
+use serde::ser::{SerializeMap, SerializeSeq};
+use serde::{Deserialize, Serialize, Serializer};
+
+use crate::anim::{
+    Channel, ClipError, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, Skeleton,
+    SkeletonSpec, Space, Speed, TrackSpec, Transform,
+};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClipDoc {
+    pub name: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skeleton: Option<SkeletonDoc>,
+    pub tracks: Vec<TrackDoc>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<EventDoc>,
+    #[serde(default)]
+    pub playback: PlaybackDoc,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkeletonDoc {
+    pub joints: Vec<JointDoc>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointDoc {
+    pub name: String,
+    #[serde(default)]
+    pub parent: Option<String>,
+    #[serde(default, skip_serializing_if = "RestDoc::is_identity")]
+    pub rest: RestDoc,
+    /// Column-major 4×4, as glTF stores it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inverse_bind: Option<[f32; 16]>,
+}
+
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RestDoc {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation: Option<[f32; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f32; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<[f32; 3]>,
+}
+
+impl RestDoc {
+    fn is_identity(&self) -> bool {
+        self.translation.is_none() && self.rotation.is_none() && self.scale.is_none()
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackDoc {
+    pub joint: String,
+    pub channel: ChannelDoc,
+    #[serde(default)]
+    pub interpolation: InterpolationDoc,
+    pub times: Vec<f32>,
+    pub values: Vec<Vec<f32>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_tangents: Option<Vec<Vec<f32>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_tangents: Option<Vec<Vec<f32>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ends: Option<EndsDoc>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tension: Option<f32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed: Option<SpeedDoc>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EventDoc {
+    pub time: f32,
+    pub name: String,
+}
+
+macro_rules! wire_enum {
+    ($(#[$m:meta])* $doc:ident => $core:ident { $($(#[$vm:meta])* $variant:ident = $name:literal),+ $(,)? }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+        pub enum $doc { $($(#[$vm])* #[serde(rename = $name)] $variant),+ }
+        impl From<$doc> for $core {
+            fn from(d: $doc) -> $core { match d { $($doc::$variant => $core::$variant),+ } }
+        }
+        impl From<$core> for $doc {
+            fn from(c: $core) -> $doc { match c { $($core::$variant => $doc::$variant),+ } }
+        }
+        impl std::str::FromStr for $doc {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                match s {
+                    $($name => Ok($doc::$variant),)+
+                    _ => Err(format!("expected one of: {}", [$($name),+].join(", "))),
+                }
+            }
+        }
+    };
+}
+
+wire_enum!(ChannelDoc => Channel { Translation = "translation", Rotation = "rotation", Scale = "scale" });
+wire_enum!(
+    #[derive(Default)]
+    InterpolationDoc => Interpolation {
+        Step = "step", #[default] Linear = "linear", CatmullRom = "catmull_rom", CubicHermite = "cubic_hermite"
+    }
+);
+wire_enum!(EndsDoc => Ends { Reflect = "reflect", ZeroSlope = "zero_slope", Wrap = "wrap", Phantom = "phantom" });
+wire_enum!(SpeedDoc => Speed { Keyed = "keyed", Constant = "constant" });
+wire_enum!(#[derive(Default)] PlaybackDoc => Playback { #[default] Once = "once", Loop = "loop", PingPong = "ping_pong" });
+wire_enum!(EaseDoc => Ease { Linear = "linear", EaseIn = "ease_in", EaseOut = "ease_out", EaseInOut = "ease_in_out" });
+wire_enum!(SpaceDoc => Space { Local = "local", Model = "model" });
+
+/// A clip document that cannot be accepted: a stable `code`, the JSON
+/// pointer of the offending field (empty for the whole body) and a message.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{pointer}: {detail}")]
+pub struct DocError {
+    pub code: &'static str,
+    pub pointer: String,
+    pub detail: String,
+}
+
+impl From<ClipError> for DocError {
+    fn from(e: ClipError) -> Self {
+        DocError { code: e.kind.code(), pointer: e.path.to_pointer(), detail: e.kind.to_string() }
+    }
+}
+
+/// Parses a clip document, reporting the JSON pointer of any type error.
+pub fn parse_clip_doc(body: &[u8]) -> Result<ClipDoc, DocError> {
+    let de = &mut serde_json::Deserializer::from_slice(body);
+    let doc: ClipDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+        let pointer = pointer_of(e.path());
+        let inner = e.into_inner();
+        let code = if inner.is_syntax() || inner.is_eof() { "malformed_json" } else { "invalid_field" };
+        DocError { code, pointer, detail: inner.to_string() }
+    })?;
+    Ok(doc)
+}
+
+fn pointer_of(path: &serde_path_to_error::Path) -> String {
+    use serde_path_to_error::Segment;
+    let mut s = String::new();
+    for seg in path.iter() {
+        match seg {
+            Segment::Seq { index } => s.push_str(&format!("/{index}")),
+            Segment::Map { key } => s.push_str(&format!("/{}", key.replace('~', "~0").replace('/', "~1"))),
+            Segment::Enum { variant } => s.push_str(&format!("/{variant}")),
+            Segment::Unknown => {}
+        }
+    }
+    s
+}
+
+fn keys(rows: &[Vec<f32>], width: usize, pointer: &str, channel: Channel) -> Result<Keys, DocError> {
+    if let Some((i, row)) = rows.iter().enumerate().find(|(_, r)| r.len() != width) {
+        return Err(DocError {
+            code: "wrong_width",
+            pointer: format!("{pointer}/{i}"),
+            detail: format!("a {} key has {width} numbers, got {}", channel.as_str(), row.len()),
+        });
+    }
+    Ok(if width == 4 {
+        Keys::Vec4(rows.iter().map(|r| Vec4::from_slice(r)).collect())
+    } else {
+        Keys::Vec3(rows.iter().map(|r| Vec3::from_slice(r)).collect())
+    })
+}
+
+impl ClipDoc {
+    /// The core's authoring form of this document.
+    ///
+    /// # Errors
+    /// Key rows of the wrong width (the only rule the document's shape can
+    /// break that the core cannot see); everything else is
+    /// [`crate::anim::Clip::build`]'s to judge.
+    pub fn to_spec(&self) -> Result<ClipSpec, DocError> {
+        let skeleton = self.skeleton.as_ref().map(|s| SkeletonSpec {
+            joints: s
+                .joints
+                .iter()
+                .map(|j| JointSpec {
+                    name: j.name.clone(),
+                    parent: j.parent.clone(),
+                    rest: Transform {
+                        translation: j.rest.translation.map_or(Vec3::ZERO, Vec3::from),
+                        rotation: j.rest.rotation.map_or(Quat::IDENTITY, Quat::from_array),
+                        scale: j.rest.scale.map_or(Vec3::ONE, Vec3::from),
+                    },
+                    inverse_bind: j.inverse_bind.map(|m| Mat4::from_cols_array(&m)),
+                })
+                .collect(),
+        });
+        let mut tracks = Vec::with_capacity(self.tracks.len());
+        for (i, t) in self.tracks.iter().enumerate() {
+            let channel = Channel::from(t.channel);
+            let width = channel.width();
+            let at = |field: &str| format!("/tracks/{i}/{field}");
+            let tangents = |rows: &Option<Vec<Vec<f32>>>, field| {
+                rows.as_ref().map(|r| keys(r, width, &at(field), channel)).transpose()
+            };
+            tracks.push(TrackSpec {
+                joint: t.joint.clone(),
+                channel,
+                interpolation: t.interpolation.into(),
+                times: t.times.clone(),
+                values: keys(&t.values, width, &at("values"), channel)?,
+                in_tangents: tangents(&t.in_tangents, "in_tangents")?,
+                out_tangents: tangents(&t.out_tangents, "out_tangents")?,
+                ends: t.ends.map(Into::into),
+                tension: t.tension,
+                speed: t.speed.map_or(Speed::Keyed, Into::into),
+            });
+        }
+        Ok(ClipSpec {
+            name: self.name.clone(),
+            skeleton,
+            tracks,
+            events: self.events.iter().map(|e| EventSpec { time: e.time, name: e.name.clone() }).collect(),
+            playback: self.playback.into(),
+        })
+    }
+
+    /// The document for a spec (importers produce specs; clients get JSON).
+    pub fn from_spec(spec: &ClipSpec) -> ClipDoc {
+        let rows = |k: &Keys| -> Vec<Vec<f32>> {
+            match k {
+                Keys::Vec3(v) => v.iter().map(|x| x.to_array().to_vec()).collect(),
+                Keys::Vec4(v) => v.iter().map(|x| x.to_array().to_vec()).collect(),
+            }
+        };
+        let not = |v: bool| if v { None } else { Some(()) };
+        ClipDoc {
+            name: spec.name.clone(),
+            skeleton: spec.skeleton.as_ref().map(|s| SkeletonDoc {
+                joints: s
+                    .joints
+                    .iter()
+                    .map(|j| JointDoc {
+                        name: j.name.clone(),
+                        parent: j.parent.clone(),
+                        rest: RestDoc {
+                            translation: not(j.rest.translation == Vec3::ZERO).map(|_| j.rest.translation.to_array()),
+                            rotation: not(j.rest.rotation == Quat::IDENTITY).map(|_| j.rest.rotation.to_array()),
+                            scale: not(j.rest.scale == Vec3::ONE).map(|_| j.rest.scale.to_array()),
+                        },
+                        inverse_bind: j.inverse_bind.map(|m| m.to_cols_array()),
+                    })
+                    .collect(),
+            }),
+            tracks: spec
+                .tracks
+                .iter()
+                .map(|t| TrackDoc {
+                    joint: t.joint.clone(),
+                    channel: t.channel.into(),
+                    interpolation: t.interpolation.into(),
+                    times: t.times.clone(),
+                    values: rows(&t.values),
+                    in_tangents: t.in_tangents.as_ref().map(rows),
+                    out_tangents: t.out_tangents.as_ref().map(rows),
+                    ends: t.ends.map(Into::into),
+                    tension: t.tension,
+                    speed: (t.speed != Speed::Keyed).then_some(t.speed.into()),
+                })
+                .collect(),
+            events: spec.events.iter().map(|e| EventDoc { time: e.time, name: e.name.clone() }).collect(),
+            playback: spec.playback.into(),
+        }
+    }
+}
+
+/// Parses and converts in one step: body bytes to the core's [`ClipSpec`].
+pub fn parse_clip(body: &[u8]) -> Result<(ClipDoc, ClipSpec), DocError> {
+    let doc = parse_clip_doc(body)?;
+    let spec = doc.to_spec()?;
+    Ok((doc, spec))
+}
+
+/// A pose in the SPEC §3 shape, serialised straight from the core's buffers
+/// (no intermediate per-joint allocation).
+pub struct PoseJson<'a> {
+    pub clip: &'a str,
+    /// The request time.
+    pub time: f64,
+    /// The clip time it mapped to (after playback and ease).
+    pub clip_time: f32,
+    pub space: Space,
+    pub skeleton: &'a Skeleton,
+    pub pose: &'a Pose,
+}
+
+impl Serialize for PoseJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(Some(5))?;
+        m.serialize_entry("clip", self.clip)?;
+        m.serialize_entry("time", &self.time)?;
+        m.serialize_entry("clip_time", &self.clip_time)?;
+        m.serialize_entry("space", self.space.as_str())?;
+        m.serialize_entry("joints", &JointsJson { names: self.skeleton.names(), pose: self.pose })?;
+        m.end()
+    }
+}
+
+struct JointsJson<'a> {
+    names: &'a [String],
+    pose: &'a Pose,
+}
+
+impl Serialize for JointsJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut seq = s.serialize_seq(Some(self.names.len()))?;
+        for (j, name) in self.names.iter().enumerate() {
+            seq.serialize_element(&JointJson {
+                name,
+                translation: self.pose.translations[j].to_array(),
+                rotation: self.pose.rotations[j].to_array(),
+                scale: self.pose.scales[j].to_array(),
+            })?;
+        }
+        seq.end()
+    }
+}
+
+#[derive(Serialize)]
+struct JointJson<'a> {
+    name: &'a str,
+    translation: [f32; 3],
+    rotation: [f32; 4],
+    scale: [f32; 3],
+}
+
+/// Per-joint 4×4 matrices (`format=matrix` or `skinning`), column-major.
+pub struct MatricesJson<'a> {
+    pub clip: &'a str,
+    pub time: f64,
+    pub clip_time: f32,
+    pub format: &'static str,
+    pub skeleton: &'a Skeleton,
+    pub matrices: &'a [Mat4],
+}
+
+impl Serialize for MatricesJson<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        #[derive(Serialize)]
+        struct Joint<'a> {
+            name: &'a str,
+            matrix: [f32; 16],
+        }
+        struct Joints<'a>(&'a [String], &'a [Mat4]);
+        impl Serialize for Joints<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut seq = s.serialize_seq(Some(self.0.len()))?;
+                for (name, m) in self.0.iter().zip(self.1) {
+                    seq.serialize_element(&Joint { name, matrix: m.to_cols_array() })?;
+                }
+                seq.end()
+            }
+        }
+        let mut m = s.serialize_map(Some(6))?;
+        m.serialize_entry("clip", self.clip)?;
+        m.serialize_entry("time", &self.time)?;
+        m.serialize_entry("clip_time", &self.clip_time)?;
+        m.serialize_entry("space", "model")?;
+        m.serialize_entry("format", self.format)?;
+        m.serialize_entry("joints", &Joints(self.skeleton.names(), self.matrices))?;
+        m.end()
+    }
+}

@@ -1,0 +1,4 @@
+//! Wire formats at the edge: each protocol's types and their conversions to
+//! and from the core (`[x, y, z, w]` quaternion order is fixed here).
+
+pub mod json;
