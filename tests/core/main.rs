@@ -11,7 +11,11 @@
 //! disturb each other's counts.
 
 mod accuracy;
+mod behaviour;
+mod lecture;
 mod playback;
+mod properties;
+mod validation;
 mod random;
 mod reference;
 
