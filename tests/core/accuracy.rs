@@ -98,7 +98,7 @@ fn report(sweeps: &[Sweep]) {
             None => println!("accuracy: {:<55} max error {:.3e}", s.label, s.worst),
             Some(r) => println!("accuracy: {:<55} max error {:.3e} ({:.2e}·L)", s.label, s.worst, r),
         }
-        if !(s.worst <= TOLERANCE) {
+        if s.worst.is_nan() || s.worst > TOLERANCE {
             failures.push(format!("{}: error {:.3e} at t = {} in {:?}", s.label, s.worst, s.at, s.spec));
         }
     }
@@ -136,7 +136,8 @@ fn rotation_modes_match_the_reference() {
         kinds.push(Kind::new(Channel::Rotation, Interpolation::Step).max_deg(max_deg));
         kinds.push(Kind::new(Channel::Rotation, Interpolation::Linear).max_deg(max_deg));
         kinds.push(Kind::new(Channel::Rotation, Interpolation::CubicHermite).max_deg(max_deg));
-        kinds.extend(ALL_ENDS.map(|e| Kind::new(Channel::Rotation, Interpolation::CatmullRom).ends(e).max_deg(max_deg)));
+        kinds
+            .extend(ALL_ENDS.map(|e| Kind::new(Channel::Rotation, Interpolation::CatmullRom).ends(e).max_deg(max_deg)));
     }
     report(&run(&kinds, 40, 100, 300));
 }
@@ -171,7 +172,10 @@ fn playback_ease_and_spaces_match_the_reference() {
                         let e = pose_err(sampler.pose(), &expected);
                         let slot = &mut worst[(space == Space::Model) as usize];
                         *slot = slot.max(e);
-                        assert!(e <= TOLERANCE, "error {e:e} at t = {t} ({playback:?}, {ease:?}, {space:?}), clip time {ct}\n{spec:?}");
+                        assert!(
+                            e <= TOLERANCE,
+                            "error {e:e} at t = {t} ({playback:?}, {ease:?}, {space:?}), clip time {ct}\n{spec:?}"
+                        );
                     }
                 }
             }
@@ -206,7 +210,10 @@ fn clip_time_matches_the_reference() {
                     let ulps = (ct - rt).abs() / (f32::EPSILON as f64 * scale);
                     if ulps > worst_ulps {
                         worst_ulps = ulps;
-                        failure = Some(format!("t = {t}, {playback:?}, {ease:?}: {ct} vs {rt}, keys {:?}", spec.tracks[0].times));
+                        failure = Some(format!(
+                            "t = {t}, {playback:?}, {ease:?}: {ct} vs {rt}, keys {:?}",
+                            spec.tracks[0].times
+                        ));
                     }
                 }
             }

@@ -111,7 +111,10 @@ fn tracks_with_different_key_times() {
     for (t, ax, asx, bx) in cases {
         clip.sample_into(t, &mut cursor, &mut pose);
         let got = (pose.translations[0].x, pose.scales[0].x, pose.translations[1].x);
-        assert!((got.0 - ax).abs() < 1e-6 && (got.1 - asx).abs() < 1e-6 && (got.2 - bx).abs() < 1e-6, "t = {t}: {got:?}");
+        assert!(
+            (got.0 - ax).abs() < 1e-6 && (got.1 - asx).abs() < 1e-6 && (got.2 - bx).abs() < 1e-6,
+            "t = {t}: {got:?}"
+        );
         assert_eq!(pose.rotations[0], Quat::IDENTITY, "no rotation track: rest");
     }
 }
@@ -156,7 +159,8 @@ fn rest_values_and_implicit_joints() {
         JointSpec { name: "root".into(), parent: None, rest, inverse_bind: None },
         JointSpec { name: "tip".into(), parent: Some("root".into()), rest: Transform::IDENTITY, inverse_bind: None },
     ];
-    let tracks = vec![v3("tip", Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], vec![[0.0; 3], [1.0, 0.0, 0.0]])];
+    let tracks =
+        vec![v3("tip", Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], vec![[0.0; 3], [1.0, 0.0, 0.0]])];
     let clip = Clip::build(&ClipSpec { skeleton: Some(SkeletonSpec { joints }), ..spec(tracks) }).unwrap();
     let mut pose = Pose::default();
     clip.sample_into(0.5, &mut Cursor::default(), &mut pose);
@@ -213,7 +217,11 @@ fn model_space_matches_a_hand_composition() {
     // tip: mid + Rz90·Rx90·(2·(0,1,0)): Rx90 takes y to z, Rz90 keeps z: (0,2,1) + (0,0,2) = (0,2,3); scale 1.
     let expected = [[0.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 2.0, 3.0]];
     for (j, e) in expected.iter().enumerate() {
-        assert!((pose.translations[j] - Vec3A::from(*e)).abs().max_element() < 1e-6, "joint {j}: {}", pose.translations[j]);
+        assert!(
+            (pose.translations[j] - Vec3A::from(*e)).abs().max_element() < 1e-6,
+            "joint {j}: {}",
+            pose.translations[j]
+        );
     }
     assert_eq!(pose.scales[2], Vec3A::ONE);
     let rz = Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
@@ -228,9 +236,13 @@ fn model_space_matches_a_hand_composition() {
 /// before a key (by one `f32` ulp) it still holds the previous value.
 #[test]
 fn step_holds_until_the_next_key() {
-    for (times, values) in [(vec![0.0, 3.0], vec![[1.0; 3], [2.0; 3]]), (vec![0.0, 0.7, 2.1], vec![[1.0; 3], [2.0; 3], [3.0; 3]])] {
+    for (times, values) in
+        [(vec![0.0, 3.0], vec![[1.0; 3], [2.0; 3]]), (vec![0.0, 0.7, 2.1], vec![[1.0; 3], [2.0; 3], [3.0; 3]])]
+    {
         let n = times.len();
-        let clip = Clip::build(&spec(vec![v3("a", Channel::Translation, Interpolation::Step, times.clone(), values.clone())])).unwrap();
+        let clip =
+            Clip::build(&spec(vec![v3("a", Channel::Translation, Interpolation::Step, times.clone(), values.clone())]))
+                .unwrap();
         let mut pose = Pose::default();
         for i in 1..n {
             let before = f32::from_bits(times[i].to_bits() - 1);
@@ -244,13 +256,15 @@ fn step_holds_until_the_next_key() {
 
 /// Building a constant-speed track is bounded work, whatever its keys: a
 /// track that does not move must not take minutes to build. Equal keys
-/// `x = -0.97972387` are the trap: the linear track's inner control points
+/// `x = -0.9797239` are the trap: the linear track's inner control points
 /// `lerp(c, c, 1/3)` differ from `c` by rounding (1e-16), so the path has a
 /// length of ~1e-16 made of noise, and splitting to a tolerance of 1e-6 of
 /// *that* never converges.
 #[test]
 fn constant_speed_builds_quickly_even_when_nothing_moves() {
-    for values in [vec![[-0.979_723_87, 0.0, 0.0]; 2], vec![[0.1, 0.2, 0.7]; 3], vec![[1.0, 2.0, 3.0], [1.0, 2.0, 3.0 + 1e-6]]] {
+    for values in
+        [vec![[-0.979_723_9, 0.0, 0.0]; 2], vec![[0.1, 0.2, 0.7]; 3], vec![[1.0, 2.0, 3.0], [1.0, 2.0, 3.0 + 1e-6]]]
+    {
         let times = (0..values.len()).map(|i| i as f32).collect();
         let mut t = v3("a", Channel::Translation, Interpolation::Linear, times, values.clone());
         t.speed = Speed::Constant;
@@ -266,7 +280,12 @@ fn constant_speed_builds_quickly_even_when_nothing_moves() {
 #[test]
 fn sample_reports_the_clip_time_it_used() {
     let mut rng = Rng::new(902);
-    let s = crate::random::one_track_clip(track(&mut rng, "j", Kind::new(Channel::Translation, Interpolation::CatmullRom), 5));
+    let s = crate::random::one_track_clip(track(
+        &mut rng,
+        "j",
+        Kind::new(Channel::Translation, Interpolation::CatmullRom),
+        5,
+    ));
     let clip = Clip::build(&s).unwrap();
     let mut sampler = Sampler::new();
     for _ in 0..100 {

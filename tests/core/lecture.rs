@@ -46,7 +46,13 @@ fn rotation_track(joint: &str, interp: Interpolation, times: Vec<f32>, keys: &[D
 }
 
 fn vec3_track(joint: &str, interp: Interpolation, times: Vec<f32>, keys: &[[f32; 3]]) -> TrackSpec {
-    TrackSpec::new(joint, Channel::Translation, interp, times, Keys::Vec3(keys.iter().map(|&k| Vec3::from(k)).collect()))
+    TrackSpec::new(
+        joint,
+        Channel::Translation,
+        interp,
+        times,
+        Keys::Vec3(keys.iter().map(|&k| Vec3::from(k)).collect()),
+    )
 }
 
 fn clip(tracks: Vec<TrackSpec>, skeleton: Option<SkeletonSpec>) -> Clip {
@@ -142,7 +148,8 @@ fn ninety_then_sixty_about_the_same_axis_compose_to_one_fifty() {
 
 #[test]
 fn bezier_endpoints_tangents_and_partition_of_unity() {
-    let p = [Vec3A::new(0.0, 0.0, 0.0), Vec3A::new(1.0, 2.0, 0.0), Vec3A::new(3.0, 2.0, 1.0), Vec3A::new(4.0, 0.0, 2.0)];
+    let p =
+        [Vec3A::new(0.0, 0.0, 0.0), Vec3A::new(1.0, 2.0, 0.0), Vec3A::new(3.0, 2.0, 1.0), Vec3A::new(4.0, 0.0, 2.0)];
     assert_eq!(bezier3(&p, 0.0), p[0], "c(0) = c_0");
     assert_eq!(bezier3(&p, 1.0), p[3], "c(1) = c_1");
     let derivative = |u: f32| (bezier3(&p, u + DELTA) - bezier3(&p, u - DELTA)) / (2.0 * DELTA);
@@ -175,11 +182,7 @@ fn slerp_bezier_interpolates_its_end_keys_and_is_constant_on_equal_points() {
     let c1 = Vec4::from(Quat::from_rotation_y(1.5));
     let xm1 = |p: Vec4, q: Vec4| p.dot(q) - 1.0;
     for exact in [false, true] {
-        let seg = QuatSegment {
-            points: [a, b, d, c1],
-            xm1: Vec4::new(xm1(a, b), xm1(b, d), xm1(d, c1), 0.0),
-            exact,
-        };
+        let seg = QuatSegment { points: [a, b, d, c1], xm1: Vec4::new(xm1(a, b), xm1(b, d), xm1(d, c1), 0.0), exact };
         assert!((Vec4::from(slerp_bezier(&seg, 0.0)) - a).abs().max_element() <= 1e-6);
         assert!((Vec4::from(slerp_bezier(&seg, 1.0)) - c1).abs().max_element() <= 1e-6);
         // On one axis the pyramid is the scalar Bezier of the angles.
@@ -227,7 +230,10 @@ fn uniform_catmull_rom_uses_one_sixth() {
         let ti = i as f32;
         let v = (at(ti + DELTA) - at(ti - DELTA)) / (2.0 * DELTA);
         let expected = ((c[i + 1] - c[i - 1]) / 2.0).as_vec3();
-        assert!((v - Vec3A::from(expected)).abs().max_element() <= DERIVATIVE_TOL, "c'({i}) = {v}, expected {expected}");
+        assert!(
+            (v - Vec3A::from(expected)).abs().max_element() <= DERIVATIVE_TOL,
+            "c'({i}) = {v}, expected {expected}"
+        );
     }
 }
 

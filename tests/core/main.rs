@@ -11,13 +11,15 @@
 //! disturb each other's counts.
 
 mod accuracy;
+mod alloc;
 mod behaviour;
+mod cli;
 mod lecture;
 mod playback;
 mod properties;
-mod validation;
 mod random;
 mod reference;
+mod validation;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

@@ -47,7 +47,8 @@ fn once_clamps_to_the_range() {
 #[test]
 fn loop_wraps_modulo_the_duration() {
     let clip = ramp(1.0, 3.0, Playback::Loop);
-    for (t, x) in [(1.0, 1.0), (2.5, 2.5), (3.0, 1.0), (3.5, 1.5), (4.75, 2.75), (7.25, 1.25), (0.5, 2.5), (-2.0, 2.0)] {
+    for (t, x) in [(1.0, 1.0), (2.5, 2.5), (3.0, 1.0), (3.5, 1.5), (4.75, 2.75), (7.25, 1.25), (0.5, 2.5), (-2.0, 2.0)]
+    {
         check(&clip, t, Playback::Loop, Ease::Linear, x);
     }
 }
@@ -98,7 +99,8 @@ fn the_request_overrides_the_clip_default() {
 #[test]
 fn a_zero_length_clip_maps_everything_to_its_time() {
     let track = TrackSpec::new("j", Channel::Translation, Interpolation::Linear, vec![2.0], Keys::Vec3(vec![Vec3::X]));
-    let spec = ClipSpec { name: "c".into(), skeleton: None, tracks: vec![track], events: vec![], playback: Playback::Loop };
+    let spec =
+        ClipSpec { name: "c".into(), skeleton: None, tracks: vec![track], events: vec![], playback: Playback::Loop };
     let clip = Clip::build(&spec).unwrap();
     for playback in [Playback::Once, Playback::Loop, Playback::PingPong] {
         for t in [-1.0, 2.0, 7.5, f64::NAN, f64::INFINITY] {

@@ -9,9 +9,7 @@
 //! broken `a_i`/`b_i` or phantom key moves a slope by `O(|Δc|/h)`.
 
 use glam::{Quat, Vec3, Vec4};
-use inbetween::anim::{
-    Channel, Clip, ClipSpec, Cursor, Ends, Interpolation, Keys, Playback, Pose, Speed, TrackSpec,
-};
+use inbetween::anim::{Channel, Clip, ClipSpec, Cursor, Ends, Interpolation, Keys, Playback, Pose, Speed, TrackSpec};
 use proptest::prelude::*;
 
 use std::time::Duration;
@@ -350,7 +348,7 @@ proptest! {
             let t = a + (b - a) * k as f64 / 50.0;
             let got = s.at(t as f32);
             let expected = reference.vec3(t).as_vec3();
-            let err = (Vec3::from(got.truncate()) - expected).abs().max_element();
+            let err = (got.truncate() - expected).abs().max_element();
             prop_assert!(err as f64 <= 1e-4 * length, "error {} > 1e-4·L (L = {}) at t = {}", err, length, t);
         }
     }

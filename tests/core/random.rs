@@ -193,12 +193,9 @@ pub fn skeleton_clip(rng: &mut Rng, joints: usize) -> ClipSpec {
             if rng.chance(0.5) {
                 continue;
             }
-            let interpolation = [
-                Interpolation::Step,
-                Interpolation::Linear,
-                Interpolation::CatmullRom,
-                Interpolation::CubicHermite,
-            ][rng.below(4)];
+            let interpolation =
+                [Interpolation::Step, Interpolation::Linear, Interpolation::CatmullRom, Interpolation::CubicHermite]
+                    [rng.below(4)];
             let kind = Kind::new(channel, interpolation);
             let n = 1 + rng.below(6);
             let mut track = track(rng, &name, kind, n);

@@ -213,8 +213,7 @@ impl Path3 {
             Path3::Bezier(s) => {
                 let p = &s[i];
                 let v = 1.0 - u;
-                ((p[1] - p[0]) * (3.0 * v * v) + (p[2] - p[1]) * (6.0 * u * v) + (p[3] - p[2]) * (3.0 * u * u))
-                    .length()
+                ((p[1] - p[0]) * (3.0 * v * v) + (p[2] - p[1]) * (6.0 * u * v) + (p[3] - p[2]) * (3.0 * u * u)).length()
             }
             Path3::Hermite { v, a, b, h } => {
                 let (u2, hh) = (u * u, h[i]);
@@ -440,14 +439,12 @@ pub struct Trs {
 /// A whole clip in `f64`.
 #[derive(Debug, Clone)]
 pub struct RefClip {
-    pub names: Vec<String>,
     pub parents: Vec<Option<usize>>,
     rest: Vec<Trs>,
     /// `(joint, channel, track)`.
     tracks: Vec<(usize, Channel, RefTrack)>,
     pub start: f64,
     pub end: f64,
-    pub playback: Playback,
 }
 
 impl RefClip {
@@ -487,11 +484,7 @@ impl RefClip {
             let j = names.iter().position(|n| n == &t.joint).unwrap();
             tracks.push((j, t.channel, track));
         }
-        RefClip { names, parents, rest, tracks, start, end, playback: spec.playback }
-    }
-
-    pub fn track(&self, k: usize) -> &RefTrack {
-        &self.tracks[k].2
+        RefClip { parents, rest, tracks, start, end }
     }
 
     /// Request time → clip time (SPEC §2.6–2.7).

@@ -4,8 +4,8 @@
 
 use glam::{Mat4, Quat, Vec3, Vec4};
 use inbetween::anim::{
-    Channel, Clip, ClipSpec, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Speed,
-    TrackSpec, Transform,
+    Channel, Clip, ClipSpec, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Speed, TrackSpec,
+    Transform,
 };
 use inbetween::wire::json::{DocError, parse_clip};
 
@@ -117,13 +117,21 @@ fn track_shape_rules() {
     refused(track_with(|t| t.times = vec![0.0, 0.0]), "times_not_increasing", "/tracks/0/times/1");
     refused(track_with(|t| t.times = vec![1.0, 0.5]), "times_not_increasing", "/tracks/0/times/1");
     refused(track_with(|t| t.times = vec![0.0, f32::NAN]), "non_finite", "/tracks/0/times/1");
-    refused(track_with(|t| t.values = Keys::Vec3(vec![Vec3::ZERO, Vec3::INFINITY])), "non_finite", "/tracks/0/values/1");
+    refused(
+        track_with(|t| t.values = Keys::Vec3(vec![Vec3::ZERO, Vec3::INFINITY])),
+        "non_finite",
+        "/tracks/0/values/1",
+    );
     refused(track_with(|t| t.values = Keys::Vec4(vec![Vec4::W, Vec4::W])), "wrong_width", "/tracks/0/values");
     let mut r = rotation(vec![Vec4::W, Vec4::W]);
     r.values = Keys::Vec3(vec![Vec3::X, Vec3::Y]);
     refused(clip(vec![r]), "wrong_width", "/tracks/0/values");
     refused(clip(vec![rotation(vec![Vec4::W, Vec4::splat(1e-7)])]), "zero_quaternion", "/tracks/0/values/1");
-    refused(clip(vec![rotation(vec![Vec4::W, Vec4::new(0.0, f32::NAN, 0.0, 1.0)])]), "non_finite", "/tracks/0/values/1");
+    refused(
+        clip(vec![rotation(vec![Vec4::W, Vec4::new(0.0, f32::NAN, 0.0, 1.0)])]),
+        "non_finite",
+        "/tracks/0/values/1",
+    );
 }
 
 #[test]
@@ -139,8 +147,16 @@ fn mode_option_rules() {
     refused(cr(&|t| t.tension = Some(f32::NAN)), "tension_out_of_range", "/tracks/0/tension");
     refused(track_with(|t| t.ends = Some(Ends::Reflect)), "only_catmull_rom", "/tracks/0/ends");
     refused(track_with(|t| t.tension = Some(0.5)), "only_catmull_rom", "/tracks/0/tension");
-    refused(track_with(|t| t.in_tangents = Some(Keys::Vec3(vec![Vec3::ZERO; 2]))), "only_cubic_hermite", "/tracks/0/in_tangents");
-    refused(track_with(|t| t.out_tangents = Some(Keys::Vec3(vec![Vec3::ZERO; 2]))), "only_cubic_hermite", "/tracks/0/out_tangents");
+    refused(
+        track_with(|t| t.in_tangents = Some(Keys::Vec3(vec![Vec3::ZERO; 2]))),
+        "only_cubic_hermite",
+        "/tracks/0/in_tangents",
+    );
+    refused(
+        track_with(|t| t.out_tangents = Some(Keys::Vec3(vec![Vec3::ZERO; 2]))),
+        "only_cubic_hermite",
+        "/tracks/0/out_tangents",
+    );
     let hermite = |f: &dyn Fn(&mut TrackSpec)| {
         track_with(|t| {
             t.interpolation = Interpolation::CubicHermite;
@@ -151,8 +167,16 @@ fn mode_option_rules() {
     };
     refused(hermite(&|t| t.in_tangents = None), "missing_tangents", "/tracks/0/in_tangents");
     refused(hermite(&|t| t.out_tangents = None), "missing_tangents", "/tracks/0/out_tangents");
-    refused(hermite(&|t| t.out_tangents = Some(Keys::Vec3(vec![Vec3::ZERO]))), "length_mismatch", "/tracks/0/out_tangents");
-    refused(hermite(&|t| t.in_tangents = Some(Keys::Vec4(vec![Vec4::ZERO; 2]))), "wrong_width", "/tracks/0/in_tangents");
+    refused(
+        hermite(&|t| t.out_tangents = Some(Keys::Vec3(vec![Vec3::ZERO]))),
+        "length_mismatch",
+        "/tracks/0/out_tangents",
+    );
+    refused(
+        hermite(&|t| t.in_tangents = Some(Keys::Vec4(vec![Vec4::ZERO; 2]))),
+        "wrong_width",
+        "/tracks/0/in_tangents",
+    );
     refused(
         hermite(&|t| t.in_tangents = Some(Keys::Vec3(vec![Vec3::ZERO, Vec3::NAN]))),
         "non_finite",
