@@ -6,7 +6,7 @@
 use std::sync::mpsc;
 use std::time::Duration;
 
-use glam::{Quat, Vec3, Vec3A, Vec4};
+use glam::{Mat4, Quat, Vec3, Vec3A, Vec4};
 use inbetween::anim::{
     Channel, Clip, ClipError, ClipSpec, Cursor, Ease, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose,
     SampleOptions, Sampler, SkeletonSpec, Space, Speed, TrackSpec, Transform,
@@ -298,4 +298,32 @@ fn sample_reports_the_clip_time_it_used() {
         clip.sample_into(ct, &mut Cursor::default(), &mut pose);
         assert_eq!(sampler.pose(), &pose);
     }
+}
+
+/// `format=skinning`: `M_j · invBind_j`, identity for joints without one.
+#[test]
+fn skinning_matrices_apply_the_inverse_binds() {
+    let bind = Mat4::from_translation(Vec3::new(0.0, -1.0, 0.0));
+    let joints = vec![
+        JointSpec { name: "root".into(), parent: None, rest: Transform::IDENTITY, inverse_bind: None },
+        JointSpec {
+            name: "arm".into(),
+            parent: Some("root".into()),
+            rest: Transform { translation: Vec3::Y, ..Transform::IDENTITY },
+            inverse_bind: Some(bind),
+        },
+    ];
+    let tracks =
+        vec![v3("root", Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], vec![[0.0; 3], [2.0, 0.0, 0.0]])];
+    let clip = Clip::build(&ClipSpec { skeleton: Some(SkeletonSpec { joints }), ..spec(tracks) }).unwrap();
+    assert!(clip.skeleton().has_inverse_binds());
+    let (mut sampler, mut model, mut skin) = (Sampler::new(), Vec::new(), Vec::new());
+    let options = SampleOptions::default();
+    assert!(clip.matrices(0.5, &options, false, &mut sampler, &mut model));
+    assert!(clip.matrices(0.5, &options, true, &mut sampler, &mut skin));
+    assert_eq!(skin[0], model[0], "no inverse bind: identity");
+    assert!(skin[1].abs_diff_eq(model[1] * bind, 1e-6));
+    // The arm sits at root (1, 0, 0) + (0, 1, 0); its skinning matrix moves
+    // the bind-pose point (0, 1, 0) to there.
+    assert!(skin[1].transform_point3(Vec3::Y).abs_diff_eq(Vec3::new(1.0, 1.0, 0.0), 1e-6));
 }
