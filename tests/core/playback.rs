@@ -132,3 +132,20 @@ fn long_loops_do_not_drift() {
         assert!((bounced - expected).abs() <= 1e-6, "ping-pong after {periods} periods: {bounced} vs {expected}");
     }
 }
+
+/// `{start, end, fps}` requests: `start + k/fps` up to and including `end`.
+#[test]
+fn frame_ranges_include_both_ends() {
+    use inbetween::anim::{frame_count, frame_times};
+    assert_eq!(frame_count(0.0, 1.0, 30.0), 31);
+    assert_eq!(frame_count(0.0, 0.3, 10.0), 4, "0.3·10 rounds below 3 in f64; the frame at 0.3 still counts");
+    assert_eq!(frame_count(2.0, 2.0, 60.0), 1);
+    assert_eq!(frame_count(0.0, 1.0, 4.0), 5);
+    for (s, e, f) in
+        [(1.0, 0.0, 30.0), (0.0, 1.0, 0.0), (0.0, 1.0, -5.0), (f64::NAN, 1.0, 30.0), (0.0, f64::INFINITY, 30.0)]
+    {
+        assert_eq!(frame_count(s, e, f), 0, "({s}, {e}, {f})");
+    }
+    let t: Vec<f64> = frame_times(-0.5, 0.5, 4.0).collect();
+    assert_eq!(t, [-0.5, -0.25, 0.0, 0.25, 0.5]);
+}
