@@ -208,7 +208,7 @@ fn versus_splines_crate(c: &mut Criterion) {
             .iter()
             .zip(&values)
             .map(|(&t, v)| {
-                splines::Key::new(t, splines::glam::Vec3::new(v.x, v.y, v.z), splines::Interpolation::CatmullRom)
+                splines::Key::new(t, glam_splines::Vec3::new(v.x, v.y, v.z), splines::Interpolation::CatmullRom)
             })
             .collect(),
     );
