@@ -77,6 +77,7 @@ impl Application {
             config: Arc::new(config),
             metrics: metrics::handle(),
             ready: Arc::new(AtomicBool::new(true)),
+            loads: Arc::default(),
         };
         Ok(Application { listener, state })
     }

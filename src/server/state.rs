@@ -1,9 +1,12 @@
 //! [`AppState`]: what every handler shares, and the clip-loading path that
 //! puts the cache in front of the store.
 
-use std::sync::Arc;
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
+use futures_util::FutureExt;
+use futures_util::future::{BoxFuture, Shared};
 use metrics_exporter_prometheus::PrometheusHandle;
 
 use crate::anim::Clip;
@@ -26,6 +29,8 @@ pub struct AppState {
     pub metrics: PrometheusHandle,
     /// False once shutdown has begun (readiness answers 503).
     pub ready: Arc<AtomicBool>,
+    /// Clip loads in flight, shared by concurrent misses.
+    pub loads: Loads,
 }
 
 impl AppState {
@@ -34,6 +39,8 @@ impl AppState {
     }
 
     /// The compiled clip `id`: from the cache, or loaded and compiled once.
+    /// Concurrent misses on one id share one load (no thundering herd on a
+    /// cold clip).
     ///
     /// # Errors
     /// `clip_not_found`, or a store failure.
@@ -42,25 +49,94 @@ impl AppState {
             metrics::counter!("inbetween_clip_cache_hits_total").increment(1);
             return Ok(hit);
         }
-        metrics::counter!("inbetween_clip_cache_misses_total").increment(1);
-        let seen = self.cache.epoch();
-        let stored = self.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
-        let cached = Arc::new(if stored.doc_json.len() > BLOCKING_THRESHOLD_BYTES {
-            tokio::task::spawn_blocking(move || compile_stored(stored)).await.map_err(ApiError::internal)??
-        } else {
-            compile_stored(stored)?
-        });
-        self.cache.insert_loaded(cached.clone(), seen);
-        metrics::gauge!("inbetween_clip_cache_entries").set(self.cache.len() as f64);
-        Ok(cached)
+        let load = {
+            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            loads.entry(id.to_owned()).or_insert_with(|| self.load(id.to_owned())).clone()
+        };
+        let result = load.clone().await;
+        {
+            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            if loads.get(id).is_some_and(|l| l.ptr_eq(&load)) {
+                loads.remove(id);
+            }
+        }
+        result.map_err(|failure| match failure {
+            LoadFailure::NotFound => ApiError::NotFound { what: "clip" },
+            LoadFailure::Unavailable => ApiError::Unavailable(None),
+            LoadFailure::Internal => ApiError::Internal(anyhow::anyhow!("loading clip {id} failed (logged above)")),
+        })
     }
 
-    /// Write-through after a committed create or replace.
+    /// One shared load: store read, compile, cache insert unless a write raced it.
+    fn load(&self, id: String) -> Load {
+        let state = self.clone();
+        async move {
+            metrics::counter!("inbetween_clip_cache_misses_total").increment(1);
+            let seen = state.cache.epoch();
+            let result = async {
+                let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+                let cached = if stored.doc_json.len() > BLOCKING_THRESHOLD_BYTES {
+                    tokio::task::spawn_blocking(move || compile_stored(stored)).await.map_err(ApiError::internal)??
+                } else {
+                    compile_stored(stored)?
+                };
+                Ok::<_, ApiError>(Arc::new(cached))
+            }
+            .await;
+            match result {
+                Ok(cached) => {
+                    state.cache.insert_loaded(cached.clone(), seen);
+                    metrics::gauge!("inbetween_clip_cache_entries").set(state.cache.len() as f64);
+                    Ok(cached)
+                }
+                Err(ApiError::NotFound { .. }) => Err(LoadFailure::NotFound),
+                Err(e @ ApiError::Unavailable(_)) => {
+                    tracing::warn!(%id, error = %e, "clip load: store unavailable");
+                    Err(LoadFailure::Unavailable)
+                }
+                Err(e) => {
+                    tracing::error!(%id, error = ?e, "clip load failed");
+                    Err(LoadFailure::Internal)
+                }
+            }
+        }
+        .boxed()
+        .shared()
+    }
+
+    /// Write-through after a committed create or replace. In-flight loads of
+    /// the id are forgotten so later requests cannot join a stale one.
     pub fn cache_written(&self, cached: Arc<CachedClip>) {
+        self.forget_load(&cached.meta.id);
         self.cache.insert_written(cached);
         metrics::gauge!("inbetween_clip_cache_entries").set(self.cache.len() as f64);
     }
+
+    /// After a committed delete (or another node's change).
+    pub fn cache_invalidate(&self, id: &str) {
+        self.forget_load(id);
+        self.cache.invalidate(id);
+        metrics::gauge!("inbetween_clip_cache_entries").set(self.cache.len() as f64);
+    }
+
+    fn forget_load(&self, id: &str) {
+        self.loads.lock().unwrap_or_else(|p| p.into_inner()).remove(id);
+    }
 }
+
+/// Why a shared load failed (clonable, for every waiter; the cause is logged once).
+#[derive(Debug, Clone, Copy)]
+pub enum LoadFailure {
+    NotFound,
+    Unavailable,
+    Internal,
+}
+
+/// A load of one clip, awaited by every request that missed on it.
+pub type Load = Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFailure>>>;
+
+/// In-flight loads by clip id.
+pub type Loads = Arc<Mutex<HashMap<String, Load>>>;
 
 /// Compiles a stored document. It was accepted once, so failure here means
 /// the store was corrupted or the rules changed: an internal error.

@@ -157,6 +157,8 @@ async fn every_bad_input_gets_its_status_and_code_and_changes_nothing() {
         ("t overflows", pose("t=1e400"), 400, "bad_number", None),
         ("t missing", pose("space=local"), 400, "missing_parameter", None),
         ("t given twice", pose("t=1&t=2"), 400, "repeated_parameter", None),
+        ("t empty", pose("t="), 400, "bad_number", None),
+        ("query not UTF-8", pose("t=%FF"), 400, "bad_query", None),
         ("unknown space", pose("t=0&space=world"), 400, "bad_parameter", None),
         ("unknown playback", pose("t=0&playback=reverse"), 400, "bad_parameter", None),
         ("unknown format", pose("t=0&format=euler"), 400, "bad_parameter", None),

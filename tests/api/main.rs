@@ -3,6 +3,7 @@
 //! area, one module per concern.
 
 mod bad_inputs;
+mod cache;
 mod clips;
 mod concurrency;
 mod durability;
@@ -23,6 +24,8 @@ pub struct TestApp {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
     pub dir: TempDir,
+    /// The server's shared state, for checks the HTTP surface cannot see.
+    pub state: inbetween::server::AppState,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     server: Option<tokio::task::JoinHandle<anyhow::Result<()>>>,
 }
@@ -98,11 +101,12 @@ pub async fn spawn_app_with(configure: impl FnOnce(&mut Config)) -> TestApp {
     configure(&mut config);
     let app = Application::build(config).await.expect("the server builds");
     let addr = app.local_addr();
+    let state = app.state().clone();
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let server = tokio::spawn(app.run_until_stopped(async move {
         let _ = rx.await;
     }));
-    TestApp { addr, client: reqwest::Client::new(), dir, shutdown: Some(tx), server: Some(server) }
+    TestApp { addr, client: reqwest::Client::new(), dir, state, shutdown: Some(tx), server: Some(server) }
 }
 
 /// The canonical form the server stores for a document: parsed, re-serialised.

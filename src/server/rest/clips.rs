@@ -234,7 +234,7 @@ pub async fn delete_clip(
     let condition = precondition(&headers, IF_MATCH, false)?;
     let expected = expected_version(&state, &id, condition).await?;
     state.store.delete(&id, expected).await?;
-    state.cache.invalidate(&id);
+    state.cache_invalidate(&id);
     tracing::info!(%id, "clip deleted");
     Ok(StatusCode::NO_CONTENT)
 }

@@ -67,7 +67,7 @@ impl QueryParams {
     /// `bad_query` for undecodable text, `unknown_parameter`, `repeated_parameter`.
     pub fn parse(raw: Option<&str>, allowed: &[&str]) -> Result<QueryParams, ApiError> {
         let raw = raw.unwrap_or("");
-        let pairs: Vec<(String, String)> = serde_urlencoded_pairs(raw)?;
+        let pairs = decode_pairs(raw)?;
         for (i, (name, _)) in pairs.iter().enumerate() {
             if !allowed.contains(&name.as_str()) {
                 let detail = format!("unknown query parameter `{name}`; expected one of: {}", allowed.join(", "));
@@ -111,9 +111,20 @@ impl QueryParams {
     }
 }
 
-fn serde_urlencoded_pairs(raw: &str) -> Result<Vec<(String, String)>, ApiError> {
-    let uri: axum::http::Uri = format!("/?{raw}").parse().map_err(|_| bad_query())?;
-    axum::extract::Query::<Vec<(String, String)>>::try_from_uri(&uri).map(|q| q.0).map_err(|_| bad_query())
+/// `application/x-www-form-urlencoded` pairs (`+` is a space, `%XX` a byte;
+/// names and values must decode to UTF-8).
+fn decode_pairs(raw: &str) -> Result<Vec<(String, String)>, ApiError> {
+    let decode = |s: &str| -> Result<String, ApiError> {
+        let s = s.replace('+', " ");
+        percent_encoding::percent_decode_str(&s).decode_utf8().map(|c| c.into_owned()).map_err(|_| bad_query())
+    };
+    raw.split('&')
+        .filter(|pair| !pair.is_empty())
+        .map(|pair| {
+            let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
+            Ok((decode(name)?, decode(value)?))
+        })
+        .collect()
 }
 
 fn bad_query() -> ApiError {
