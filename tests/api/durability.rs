@@ -141,3 +141,30 @@ async fn acknowledged_uploads_survive_kill_9() {
     server.child.kill().unwrap();
     server.child.wait().unwrap();
 }
+
+#[tokio::test]
+async fn sigterm_drains_and_exits_cleanly_keeping_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut server = start(dir.path());
+    let http = reqwest::Client::new();
+    let body = doc(0, 0);
+    let resp = http
+        .post(format!("{}/v1/clips", server.base))
+        .header("content-type", "application/json")
+        .body(body.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let term = Command::new("kill").args(["-TERM", &server.child.id().to_string()]).status().unwrap();
+    assert!(term.success());
+    let status = server.child.wait().unwrap();
+    assert!(status.success(), "exit status after SIGTERM: {status}");
+
+    let mut server = start(dir.path());
+    let got = http.get(format!("{}/v1/clips/{id}", server.base)).send().await.unwrap().text().await.unwrap();
+    assert_eq!(got, body);
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+}

@@ -65,3 +65,19 @@ async fn shutdown_finishes_and_closes_the_listener() {
     app.stop().await;
     assert!(reqwest::get(format!("http://{addr}/healthz")).await.is_err(), "still accepting after shutdown");
 }
+
+#[tokio::test]
+async fn readiness_fails_when_the_store_is_gone_but_liveness_holds() {
+    let app = spawn_app().await;
+    app.state.store.close().await;
+    let resp = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(resp.status(), 503);
+    let problem: Value = resp.json().await.unwrap();
+    assert_eq!(problem["code"], "unavailable");
+    assert!(!problem["detail"].as_str().unwrap().to_lowercase().contains("pool"), "internals leaked: {problem}");
+    assert_eq!(app.client.get(app.url("/healthz")).send().await.unwrap().status(), 200);
+    // A request that needs the store gets a clean 503 too, not a 500 with a database message.
+    let resp = app.client.get(app.url("/v1/clips")).send().await.unwrap();
+    assert_eq!(resp.status(), 503);
+    app.stop().await;
+}
