@@ -24,7 +24,12 @@ struct Server {
 }
 
 fn start(dir: &Path) -> Server {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_inbetween"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_inbetween"));
+    // The flags below are the whole configuration: no INBETWEEN_* from the caller's environment.
+    for (name, _) in std::env::vars().filter(|(n, _)| n.starts_with("INBETWEEN_")) {
+        command.env_remove(name);
+    }
+    let mut child = command
         .args(["serve", "--listen", "127.0.0.1:0", "--data-dir"])
         .arg(dir)
         .env("INBETWEEN_LOG", "warn")
