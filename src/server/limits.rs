@@ -25,7 +25,14 @@ pub struct Admitted {
 /// `malformed_json` (400); a type error, a SPEC rule or a limit (422), each
 /// with the JSON pointer of the offending field.
 pub fn admit(body: &[u8], limits: &Limits) -> Result<Admitted, ApiError> {
-    let doc = parse_clip_doc(body)?;
+    admit_doc(parse_clip_doc(body)?, limits)
+}
+
+/// Validates a parsed document (importers: `ClipDoc::from_spec`, then this).
+///
+/// # Errors
+/// As [`admit`], less the JSON syntax.
+pub fn admit_doc(doc: ClipDoc, limits: &Limits) -> Result<Admitted, ApiError> {
     check(&doc, limits)?;
     let spec = doc.to_spec()?;
     let clip = Clip::build(&spec).map_err(DocError::from)?;
