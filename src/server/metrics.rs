@@ -61,6 +61,34 @@ fn describe() {
     );
 }
 
+/// Handles to the unlabelled metrics the hot paths touch, registered once so
+/// a pose request does no registry lookup for them.
+#[derive(Clone)]
+pub struct Counters {
+    pub cache_hits: metrics::Counter,
+    pub cache_misses: metrics::Counter,
+    pub cache_entries: metrics::Gauge,
+    pub poses: metrics::Counter,
+}
+
+impl Counters {
+    /// Registers the handles (call after [`handle`] installed the recorder).
+    pub fn new() -> Self {
+        Counters {
+            cache_hits: metrics::counter!("inbetween_clip_cache_hits_total"),
+            cache_misses: metrics::counter!("inbetween_clip_cache_misses_total"),
+            cache_entries: metrics::gauge!("inbetween_clip_cache_entries"),
+            poses: metrics::counter!("inbetween_poses_evaluated_total"),
+        }
+    }
+}
+
+impl Default for Counters {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// Middleware: counts and times every request by route template and status.
 pub async fn track(request: Request, next: Next) -> Response {
     let started = Instant::now();

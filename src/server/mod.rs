@@ -76,6 +76,7 @@ impl Application {
             cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
             config: Arc::new(config),
             metrics: metrics::handle(),
+            counters: metrics::Counters::new(),
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
         };

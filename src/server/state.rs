@@ -27,6 +27,7 @@ pub struct AppState {
     pub cache: Arc<ClipCache>,
     pub config: Arc<Config>,
     pub metrics: PrometheusHandle,
+    pub counters: super::metrics::Counters,
     /// False once shutdown has begun (readiness answers 503).
     pub ready: Arc<AtomicBool>,
     /// Clip loads in flight, shared by concurrent misses.
@@ -46,7 +47,7 @@ impl AppState {
     /// `clip_not_found`, or a store failure.
     pub async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, ApiError> {
         if let Some(hit) = self.cache.get(id) {
-            metrics::counter!("inbetween_clip_cache_hits_total").increment(1);
+            self.counters.cache_hits.increment(1);
             return Ok(hit);
         }
         let load = {
@@ -71,7 +72,7 @@ impl AppState {
     fn load(&self, id: String) -> Load {
         let state = self.clone();
         async move {
-            metrics::counter!("inbetween_clip_cache_misses_total").increment(1);
+            state.counters.cache_misses.increment(1);
             let seen = state.cache.epoch();
             let result = async {
                 let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
@@ -86,7 +87,7 @@ impl AppState {
             match result {
                 Ok(cached) => {
                     state.cache.insert_loaded(cached.clone(), seen);
-                    metrics::gauge!("inbetween_clip_cache_entries").set(state.cache.len() as f64);
+                    state.counters.cache_entries.set(state.cache.len() as f64);
                     Ok(cached)
                 }
                 Err(ApiError::NotFound { .. }) => Err(LoadFailure::NotFound),
@@ -109,14 +110,14 @@ impl AppState {
     pub fn cache_written(&self, cached: Arc<CachedClip>) {
         self.forget_load(&cached.meta.id);
         self.cache.insert_written(cached);
-        metrics::gauge!("inbetween_clip_cache_entries").set(self.cache.len() as f64);
+        self.counters.cache_entries.set(self.cache.len() as f64);
     }
 
     /// After a committed delete (or another node's change).
     pub fn cache_invalidate(&self, id: &str) {
         self.forget_load(id);
         self.cache.invalidate(id);
-        metrics::gauge!("inbetween_clip_cache_entries").set(self.cache.len() as f64);
+        self.counters.cache_entries.set(self.cache.len() as f64);
     }
 
     fn forget_load(&self, id: &str) {

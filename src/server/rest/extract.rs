@@ -115,6 +115,9 @@ impl QueryParams {
 /// names and values must decode to UTF-8).
 fn decode_pairs(raw: &str) -> Result<Vec<(String, String)>, ApiError> {
     let decode = |s: &str| -> Result<String, ApiError> {
+        if !s.contains(['+', '%']) {
+            return Ok(s.to_owned());
+        }
         let s = s.replace('+', " ");
         percent_encoding::percent_decode_str(&s).decode_utf8().map(|c| c.into_owned()).map_err(|_| bad_query())
     };

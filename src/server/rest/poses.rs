@@ -27,6 +27,10 @@ use super::extract::{ClipId, JsonBody, QueryParams};
 /// The frame-rate range of `{start, end, fps}` sample requests (the same as streams, SPEC §5).
 pub const FPS_RANGE: std::ops::RangeInclusive<f64> = 1.0..=240.0;
 
+/// Response-size estimates, so a pose body is written without reallocating.
+const POSE_HEADER_BYTES: usize = 128;
+const JOINT_BYTES: usize = 160;
+
 /// Sample requests with more poses than this run on the blocking pool.
 const BLOCKING_POSES: usize = 256;
 
@@ -146,9 +150,9 @@ pub async fn get_pose(
     let format = params.parsed::<Format>("format")?.unwrap_or_default();
     let cached = state.clip(&id).await?;
     check_format(&cached, format, "")?;
-    let mut body = Vec::with_capacity(64 + 120 * cached.clip.joint_count());
+    let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
     write_pose(&mut body, &cached, t, &options, format);
-    metrics::counter!("inbetween_poses_evaluated_total").increment(1);
+    state.counters.poses.increment(1);
     Ok(json_response(body))
 }
 
@@ -273,7 +277,7 @@ pub async fn sample(
     check_format(&cached, format, "/format")?;
     let n = times.len();
     let render = move || {
-        let mut body = Vec::with_capacity(16 + n * (64 + 120 * cached.clip.joint_count()));
+        let mut body = Vec::with_capacity(16 + n * (POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count()));
         body.extend_from_slice(b"{\"poses\":[");
         for (k, &t) in times.iter().enumerate() {
             if k > 0 {
@@ -289,6 +293,6 @@ pub async fn sample(
     } else {
         render()
     };
-    metrics::counter!("inbetween_poses_evaluated_total").increment(n as u64);
+    state.counters.poses.increment(n as u64);
     Ok(json_response(body))
 }
