@@ -3,4 +3,6 @@
 
 pub mod anim;
 pub mod cli;
+pub mod server;
+pub mod store;
 pub mod wire;
