@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod import;
 mod sample;
 
 #[derive(Debug, Parser)]
@@ -17,12 +18,15 @@ pub struct Cli {
 enum Command {
     /// Sample a clip file offline and print its poses as JSON.
     Sample(sample::SampleArgs),
+    /// Import a glTF, GLB or BVH file: print clip documents or upload them.
+    Import(import::ImportArgs),
 }
 
 impl Cli {
     pub fn run(self) -> ExitCode {
         let result = match self.command {
             Command::Sample(args) => sample::run(args),
+            Command::Import(args) => import::run(args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,
