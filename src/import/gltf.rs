@@ -37,6 +37,7 @@ pub(crate) fn import(
     let root: ::gltf::json::Root =
         ::gltf::json::deserialize::from_slice(json).map_err(|e| ImportError::Json(e.to_string()))?;
     let doc = Document::from_json(root).map_err(|e| ImportError::InvalidGltf(validation_message(e)))?;
+    check_channel_targets(&doc)?;
 
     let limits = &options.limits;
     let animation_count = doc.animations().len();
@@ -68,6 +69,24 @@ pub(crate) fn import(
         return Err(ImportError::NoAnimations);
     }
     Ok(Imported { clips, skipped: ctx.skipped })
+}
+
+/// The crate's validation skips animation channel targets, and its
+/// accessors unwrap them: check the node index and the path here first.
+fn check_channel_targets(doc: &Document) -> Result<(), ImportError> {
+    let json = doc.as_json();
+    for (a, animation) in json.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let at = || format!("animations[{a}].channels[{c}].target");
+            if channel.target.node.value() >= json.nodes.len() {
+                return Err(ImportError::InvalidGltf(format!("{}.node: index out of range", at())));
+            }
+            if !matches!(channel.target.path, ::gltf::json::validation::Checked::Valid(_)) {
+                return Err(ImportError::InvalidGltf(format!("{}.path: not a valid target path", at())));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn validation_message(e: ::gltf::Error) -> String {
@@ -244,6 +263,9 @@ impl Ctx<'_, '_, '_> {
                 stack.push(p);
             }
         }
+        if included.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {
+            return Err(ImportError::TooDeep { max: limits.max_depth });
+        }
         if included.len() > limits.max_joints {
             return Err(ImportError::TooLarge {
                 what: "the joints of one clip",
@@ -254,9 +276,6 @@ impl Ctx<'_, '_, '_> {
         self.budget.take(included.len())?;
         let mut nodes: Vec<usize> = included.into_iter().collect();
         nodes.sort_by_key(|&n| self.forest.order[n]);
-        if nodes.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {
-            return Err(ImportError::TooDeep { max: limits.max_depth });
-        }
         let binds = if skinned { Some(self.inverse_binds()?.clone()) } else { None };
         let mut joints = Vec::with_capacity(nodes.len());
         for &node in &nodes {
