@@ -2,7 +2,7 @@
 //!
 //! Built once per track, in `f64`: the path is cut into pieces inside which
 //! the Bezier parameter is linear in arc length to within a tolerance of
-//! `1e-6·L` in position (checked at three points per piece, pieces split
+//! `min(1e-6·L, 1e-6)` in position (checked at three points per piece, pieces split
 //! adaptively, which also handles zero-speed cusps such as `zero_slope`
 //! ends). The piece boundaries become the track's timeline, so sampling is
 //! the ordinary span search plus one Bezier evaluation.
@@ -11,8 +11,10 @@ use glam::DVec3;
 
 use super::curve::ArcPiece;
 
-/// Position tolerance relative to the path length.
+/// Position tolerance: relative to the path length, capped absolutely so
+/// long paths also stay inside SPEC §2.9's 1e-5 (at about f32 resolution).
 const REL_TOLERANCE: f64 = 1e-6;
+const ABS_TOLERANCE: f64 = 1e-6;
 const MAX_DEPTH: u32 = 30;
 
 pub(crate) fn point(p: &[DVec3; 4], u: f64) -> DVec3 {
@@ -88,7 +90,7 @@ pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f3
     if total.is_nan() || total <= 0.0 || !total.is_finite() {
         return None;
     }
-    let tol = REL_TOLERANCE * total;
+    let tol = (REL_TOLERANCE * total).min(ABS_TOLERANCE);
     let quad_tol = tol * 1e-3;
     // (start arc length, piece)
     let mut raw: Vec<(f64, ArcPiece)> = Vec::new();

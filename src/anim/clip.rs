@@ -218,7 +218,7 @@ impl Clip {
     /// warp over normalised time. Computed in `f64` so long-running loops
     /// keep their precision; non-finite `t` maps to the start.
     pub fn clip_time(&self, t: f64, playback: Playback, ease: Ease) -> f32 {
-        let (start, dur) = (self.start as f64, (self.end - self.start) as f64);
+        let (start, dur) = (self.start as f64, self.end as f64 - self.start as f64);
         if dur.is_nan() || dur <= 0.0 || !t.is_finite() {
             return self.start;
         }
