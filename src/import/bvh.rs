@@ -16,11 +16,10 @@
 //! OFFSET for the axes it has not; the local transform is `T·R`.
 
 use std::borrow::Cow;
-use std::collections::HashSet;
 
 use glam::{DQuat, DVec3, Vec3, Vec4};
 
-use super::{Budget, ImportError, ImportOptions, Imported, clip_name, unique_name};
+use super::{Budget, ImportError, ImportOptions, Imported, UniqueNames, clip_name};
 use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,7 +127,7 @@ pub(crate) fn import(bytes: &[u8], options: &ImportOptions) -> Result<Imported, 
             found: track_count as u64,
         });
     }
-    let mut budget = Budget::new(limits);
+    let mut budget = Budget::new(limits, bytes.len());
     budget.take(joints.len())?;
 
     let mut rotations: Vec<Vec<Vec4>> = vec![Vec::new(); joints.len()];
@@ -257,7 +256,7 @@ fn parse_hierarchy(tokens: &[Tok], options: &ImportOptions) -> Result<Vec<Joint>
         return syntax(first.line, format!("expected HIERARCHY, found '{}'", short(first.text)));
     }
     let mut joints: Vec<Joint> = Vec::new();
-    let mut taken: HashSet<String> = HashSet::new();
+    let mut taken = UniqueNames::default();
     // Joints whose `{` is open, innermost last.
     let mut open: Vec<usize> = Vec::new();
     let mut i = 1;
@@ -323,13 +322,7 @@ fn parse_hierarchy(tokens: &[Tok], options: &ImportOptions) -> Result<Vec<Joint>
                 return Err(ImportError::TooDeep { max: limits.max_depth });
             }
             let hint = joints.len();
-            joints.push(Joint {
-                name: unique_name(name, hint, &mut taken),
-                parent,
-                offset: None,
-                channels: Vec::new(),
-                end_site,
-            });
+            joints.push(Joint { name: taken.claim(name, hint), parent, offset: None, channels: Vec::new(), end_site });
             open.push(joints.len() - 1);
         } else if word == "}" {
             if open.pop().is_none() {

@@ -17,7 +17,7 @@ use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 
 use super::accessor::{Expect, read_f32};
 use super::buffers::{Buffers, split_glb};
-use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, clip_name, unique_name};
+use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, UniqueNames, clip_name};
 use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 
 pub(crate) fn import(
@@ -49,14 +49,24 @@ pub(crate) fn import(
         });
     }
     let forest = Forest::new(&doc)?;
+    let mut skins_of: Vec<Vec<usize>> = vec![Vec::new(); doc.nodes().len()];
+    for skin in doc.skins() {
+        for joint in skin.joints() {
+            let of = &mut skins_of[joint.index()];
+            if of.last() != Some(&skin.index()) {
+                of.push(skin.index());
+            }
+        }
+    }
     let mut ctx = Ctx {
         doc: &doc,
         forest,
         buffers: Buffers::new(&doc, bin, resolver),
         options,
-        budget: Budget::new(limits),
+        budget: Budget::new(limits, bytes.len()),
         rest: HashMap::new(),
         inverse_binds: None,
+        skins_of,
         skipped: Vec::new(),
     };
     let mut clips = Vec::new();
@@ -159,7 +169,7 @@ impl Forest {
         if let Some(stuck) = order.iter().position(|&o| o == usize::MAX) {
             return Err(ImportError::NotATree(format!("node {stuck} is on a parent cycle")));
         }
-        let mut taken = HashSet::with_capacity(n);
+        let mut taken = UniqueNames::default();
         let names = doc
             .nodes()
             .map(|node| {
@@ -167,7 +177,7 @@ impl Forest {
                     Some(s) if !s.is_empty() => s.to_owned(),
                     _ => format!("node{}", node.index()),
                 };
-                unique_name(name, node.index(), &mut taken)
+                taken.claim(name, node.index())
             })
             .collect();
         Ok(Forest { parent, depth, order, names })
@@ -183,6 +193,8 @@ struct Ctx<'d, 'a, 'r> {
     rest: HashMap<usize, Transform>,
     /// Node → inverse bind matrix, over every skin (first skin wins).
     inverse_binds: Option<HashMap<usize, Mat4>>,
+    /// Node → the skins it is a joint of.
+    skins_of: Vec<Vec<usize>>,
     skipped: Vec<Skipped>,
 }
 
@@ -245,45 +257,56 @@ impl Ctx<'_, '_, '_> {
             return Ok(None);
         }
 
-        // Skins the animation drives contribute all their joints.
-        let animated_set: HashSet<usize> = animated.iter().copied().collect();
-        let mut included: HashSet<usize> = animated_set.clone();
-        let mut skinned = false;
-        for skin in self.doc.skins() {
-            if skin.joints().any(|j| animated_set.contains(&j.index())) {
-                skinned = true;
-                included.extend(skin.joints().map(|j| j.index()));
+        // Skins the animation drives contribute all their joints; then every
+        // ancestor. Depth and count are checked as the set grows, so the work
+        // per animation stays bounded by the limits, not by the file.
+        let too_many = |found: usize| ImportError::TooLarge {
+            what: "the joints of one clip",
+            max: limits.max_joints as u64,
+            found: found as u64,
+        };
+        let mut included: HashSet<usize> = animated.iter().copied().collect();
+        let mut skins: Vec<usize> = animated.iter().flat_map(|&n| self.skins_of[n].iter().copied()).collect();
+        skins.sort_unstable();
+        skins.dedup();
+        for &skin in &skins {
+            for joint in self.doc.skins().nth(skin).into_iter().flat_map(|s| s.joints()) {
+                included.insert(joint.index());
+                if included.len() > limits.max_joints {
+                    return Err(too_many(included.len()));
+                }
             }
+        }
+        if included.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {
+            return Err(ImportError::TooDeep { max: limits.max_depth });
         }
         let mut stack: Vec<usize> = included.iter().copied().collect();
         while let Some(node) = stack.pop() {
             if let Some(p) = self.forest.parent[node]
                 && included.insert(p)
             {
+                if included.len() > limits.max_joints {
+                    return Err(too_many(included.len()));
+                }
                 stack.push(p);
             }
-        }
-        if included.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {
-            return Err(ImportError::TooDeep { max: limits.max_depth });
-        }
-        if included.len() > limits.max_joints {
-            return Err(ImportError::TooLarge {
-                what: "the joints of one clip",
-                max: limits.max_joints as u64,
-                found: included.len() as u64,
-            });
         }
         self.budget.take(included.len())?;
         let mut nodes: Vec<usize> = included.into_iter().collect();
         nodes.sort_by_key(|&n| self.forest.order[n]);
-        let binds = if skinned { Some(self.inverse_binds()?.clone()) } else { None };
+        let binds: Vec<Option<Mat4>> = if skins.is_empty() {
+            vec![None; nodes.len()]
+        } else {
+            let all = self.inverse_binds()?;
+            nodes.iter().map(|n| all.get(n).copied()).collect()
+        };
         let mut joints = Vec::with_capacity(nodes.len());
-        for &node in &nodes {
+        for (&node, inverse_bind) in nodes.iter().zip(binds) {
             joints.push(JointSpec {
                 name: self.forest.names[node].clone(),
                 parent: self.forest.parent[node].map(|p| self.forest.names[p].clone()),
                 rest: self.rest(node)?,
-                inverse_bind: binds.as_ref().and_then(|b| b.get(&node).copied()),
+                inverse_bind,
             });
         }
         Ok(Some(ClipSpec {

@@ -115,7 +115,8 @@ pub struct ImportLimits {
     /// Clips (glTF animations) of one file.
     pub max_clips: usize,
     /// Keys plus joints over every clip of the import: bounds the output
-    /// even when many channels share one accessor.
+    /// even when many channels share one accessor. The importers also cap
+    /// it at one per input byte (+4096), which no real file comes near.
     pub max_total_keys: u64,
     /// Levels of the joint hierarchy.
     pub max_depth: usize,
@@ -211,15 +212,26 @@ pub fn import_with(
     Ok(imported)
 }
 
-/// Counts what an import produces against [`ImportLimits::max_total_keys`].
+/// Counts what an import produces (keys and joints, over all clips)
+/// against [`ImportLimits::max_total_keys`] and against the input's size.
+///
+/// Real files spend several bytes per key (a BVH value is at least two
+/// characters, a glTF key at least 16 bytes of buffer plus its time), so
+/// one key per input byte, plus a little, never binds them. Only hostile
+/// files reach it: many channels sharing one accessor, or accessors with no
+/// buffer view (all zeros), which would otherwise turn a few hundred bytes
+/// of JSON into gigabytes of keys.
 pub(crate) struct Budget {
     max: u64,
     used: u64,
 }
 
+/// Keys allowed beyond one per input byte, for tiny files.
+const BUDGET_SLACK: u64 = 4096;
+
 impl Budget {
-    pub(crate) fn new(limits: &ImportLimits) -> Self {
-        Budget { max: limits.max_total_keys, used: 0 }
+    pub(crate) fn new(limits: &ImportLimits, input_bytes: usize) -> Self {
+        Budget { max: limits.max_total_keys.min(input_bytes as u64 + BUDGET_SLACK), used: 0 }
     }
 
     /// Reserves `n` more keys (or joints), before they are allocated.
@@ -238,18 +250,33 @@ pub(crate) fn clip_name(name: &str) -> String {
     name.chars().take(MAX_NAME_CHARS).collect()
 }
 
-/// Makes `name` unique among `taken` by appending `#<n>` (`n` = `hint`,
-/// then counting up), and records it.
-pub(crate) fn unique_name(name: String, hint: usize, taken: &mut std::collections::HashSet<String>) -> String {
-    if taken.insert(name.clone()) {
-        return name;
-    }
-    let mut n = hint;
-    loop {
-        let candidate = format!("{name}#{n}");
-        if taken.insert(candidate.clone()) {
+/// Gives out joint names, unique within one file.
+#[derive(Default)]
+pub(crate) struct UniqueNames {
+    taken: std::collections::HashSet<String>,
+    /// Per base name, the next counter suffix to try: amortises the search,
+    /// so names that collide on purpose cannot make it quadratic.
+    next: std::collections::HashMap<String, usize>,
+}
+
+impl UniqueNames {
+    /// `name` itself if free, else `name#<hint>` (the node index or line
+    /// that tells the user which one it was), else `name#<n>` counting up.
+    pub(crate) fn claim(&mut self, name: String, hint: usize) -> String {
+        if self.taken.insert(name.clone()) {
+            return name;
+        }
+        let candidate = format!("{name}#{hint}");
+        if self.taken.insert(candidate.clone()) {
             return candidate;
         }
-        n += 1;
+        let n = self.next.entry(name.clone()).or_insert(2);
+        loop {
+            let candidate = format!("{name}#{n}");
+            *n += 1;
+            if self.taken.insert(candidate.clone()) {
+                return candidate;
+            }
+        }
     }
 }
