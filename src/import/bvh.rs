@@ -19,7 +19,7 @@ use std::borrow::Cow;
 
 use glam::{DQuat, DVec3, Vec3, Vec4};
 
-use super::{Budget, ImportError, ImportOptions, Imported, UniqueNames, clip_name};
+use super::{Budget, ImportError, ImportOptions, Imported, clip_name, unique_names};
 use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -256,7 +256,6 @@ fn parse_hierarchy(tokens: &[Tok], options: &ImportOptions) -> Result<Vec<Joint>
         return syntax(first.line, format!("expected HIERARCHY, found '{}'", short(first.text)));
     }
     let mut joints: Vec<Joint> = Vec::new();
-    let mut taken = UniqueNames::default();
     // Joints whose `{` is open, innermost last.
     let mut open: Vec<usize> = Vec::new();
     let mut i = 1;
@@ -321,8 +320,7 @@ fn parse_hierarchy(tokens: &[Tok], options: &ImportOptions) -> Result<Vec<Joint>
             if open.len() >= limits.max_depth {
                 return Err(ImportError::TooDeep { max: limits.max_depth });
             }
-            let hint = joints.len();
-            joints.push(Joint { name: taken.claim(name, hint), parent, offset: None, channels: Vec::new(), end_site });
+            joints.push(Joint { name, parent, offset: None, channels: Vec::new(), end_site });
             open.push(joints.len() - 1);
         } else if word == "}" {
             if open.pop().is_none() {
@@ -390,6 +388,10 @@ fn parse_hierarchy(tokens: &[Tok], options: &ImportOptions) -> Result<Vec<Joint>
     }
     if joints.is_empty() {
         return syntax(first.line, "the HIERARCHY has no ROOT".into());
+    }
+    let names = unique_names(joints.iter_mut().map(|j| std::mem::take(&mut j.name)).collect());
+    for (joint, name) in joints.iter_mut().zip(names) {
+        joint.name = name;
     }
     Ok(joints)
 }

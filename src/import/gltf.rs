@@ -17,7 +17,7 @@ use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 
 use super::accessor::{Expect, read_f32};
 use super::buffers::{Buffers, split_glb};
-use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, UniqueNames, clip_name};
+use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, clip_name, unique_names};
 use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 
 pub(crate) fn import(
@@ -169,17 +169,14 @@ impl Forest {
         if let Some(stuck) = order.iter().position(|&o| o == usize::MAX) {
             return Err(ImportError::NotATree(format!("node {stuck} is on a parent cycle")));
         }
-        let mut taken = UniqueNames::default();
-        let names = doc
-            .nodes()
-            .map(|node| {
-                let name = match node.name() {
+        let names = unique_names(
+            doc.nodes()
+                .map(|node| match node.name() {
                     Some(s) if !s.is_empty() => s.to_owned(),
                     _ => format!("node{}", node.index()),
-                };
-                taken.claim(name, node.index())
-            })
-            .collect();
+                })
+                .collect(),
+        );
         Ok(Forest { parent, depth, order, names })
     }
 }

@@ -250,33 +250,36 @@ pub(crate) fn clip_name(name: &str) -> String {
     name.chars().take(MAX_NAME_CHARS).collect()
 }
 
-/// Gives out joint names, unique within one file.
-#[derive(Default)]
-pub(crate) struct UniqueNames {
-    taken: std::collections::HashSet<String>,
-    /// Per base name, the next counter suffix to try: amortises the search,
-    /// so names that collide on purpose cannot make it quadratic.
-    next: std::collections::HashMap<String, usize>,
-}
-
-impl UniqueNames {
-    /// `name` itself if free, else `name#<hint>` (the node index or line
-    /// that tells the user which one it was), else `name#<n>` counting up.
-    pub(crate) fn claim(&mut self, name: String, hint: usize) -> String {
-        if self.taken.insert(name.clone()) {
-            return name;
-        }
-        let candidate = format!("{name}#{hint}");
-        if self.taken.insert(candidate.clone()) {
-            return candidate;
-        }
-        let n = self.next.entry(name.clone()).or_insert(2);
-        loop {
-            let candidate = format!("{name}#{n}");
-            *n += 1;
-            if self.taken.insert(candidate.clone()) {
+/// Makes joint names unique within one file, in order: the first holder of
+/// a name keeps it; a later one becomes `name#<i>` (`i` its index: the glTF
+/// node or BVH joint, which tells the user which one it was), or if that is
+/// taken too, `name#<n>` for the smallest free `n` from 2. Every name in the
+/// file is reserved up front, so a suffix never takes a name a later node
+/// has in the file. A per-name counter keeps crafted collisions linear.
+pub(crate) fn unique_names(names: Vec<String>) -> Vec<String> {
+    use std::collections::{HashMap, HashSet};
+    let mut taken: HashSet<String> = names.iter().cloned().collect();
+    let mut kept: HashSet<String> = HashSet::with_capacity(names.len());
+    let mut next: HashMap<String, usize> = HashMap::new();
+    names
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| {
+            if kept.insert(name.clone()) {
+                return name;
+            }
+            let candidate = format!("{name}#{i}");
+            if taken.insert(candidate.clone()) {
                 return candidate;
             }
-        }
-    }
+            let n = next.entry(name.clone()).or_insert(2);
+            loop {
+                let candidate = format!("{name}#{n}");
+                *n += 1;
+                if taken.insert(candidate.clone()) {
+                    return candidate;
+                }
+            }
+        })
+        .collect()
 }

@@ -407,3 +407,23 @@ fn morph_target_weights_are_reported_as_skipped() {
     assert_eq!(imported.skipped.len(), 1);
     assert!(imported.skipped[0].what.contains("weights"), "{:?}", imported.skipped);
 }
+
+#[test]
+fn repeated_names_are_made_unique_with_the_node_index() {
+    // Nodes 0 and 1 are both "bone"; 2 is literally "bone#1", so node 1
+    // cannot take that and counts on from 2.
+    let bytes = gltf(|d| {
+        d["nodes"] = json!([{"name": "bone", "children": [1]}, {"name": "bone", "children": [2]}, {"name": "bone#1"}]);
+        d["animations"][0]["channels"][0]["target"]["node"] = json!(2);
+    });
+    let imported = import(&bytes, Format::Gltf, &ImportOptions::default()).unwrap();
+    let joints = &imported.clips[0].skeleton.as_ref().unwrap().joints;
+    let names: Vec<(&str, Option<&str>)> = joints.iter().map(|j| (j.name.as_str(), j.parent.as_deref())).collect();
+    assert_eq!(names, [("bone", None), ("bone#2", Some("bone")), ("bone#1", Some("bone#2"))]);
+    assert_eq!(imported.clips[0].tracks[0].joint, "bone#1");
+
+    let bvh_bytes = bvh("JOINT spine", "JOINT hips");
+    let imported = import(&bvh_bytes, Format::Bvh, &ImportOptions::default()).unwrap();
+    let names: Vec<_> = imported.clips[0].skeleton.as_ref().unwrap().joints.iter().map(|j| j.name.clone()).collect();
+    assert_eq!(names, ["hips", "hips#1", "hips_end"]);
+}
