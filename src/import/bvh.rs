@@ -208,6 +208,11 @@ pub(crate) fn import(bytes: &[u8], options: &ImportOptions) -> Result<Imported, 
     }
 
     let times: Vec<f32> = (0..frames).map(|k| (k as f64 * frame_time_value) as f32).collect();
+    // A frame time so small (or large) that f32 seconds cannot tell the
+    // frames apart (or hold the last one) is as useless as zero.
+    if times.windows(2).any(|w| w[1] <= w[0]) || !times.last().is_some_and(|t| t.is_finite()) {
+        return Err(ImportError::BadFrameTime { value: short(&frame_time) });
+    }
     let mut tracks = Vec::with_capacity(track_count);
     for &j in &animated {
         let name = &joints[j].name;
