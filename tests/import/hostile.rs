@@ -342,7 +342,7 @@ fn hostile_inputs_are_refused_with_a_reason() {
         ("Frame Time: 0", bvh("Frame Time: 0.5", "Frame Time: 0"), Format::Bvh, "bad_frame_time"),
         ("Frame Time: -1", bvh("Frame Time: 0.5", "Frame Time: -1"), Format::Bvh, "bad_frame_time"),
         ("Frame Time: 1e-50", bvh("Frame Time: 0.5", "Frame Time: 1e-50"), Format::Bvh, "bad_frame_time"),
-        ("Frame Time: 1e38", bvh("Frame Time: 0.5", "Frame Time: 1e38"), Format::Bvh, "bad_frame_time"),
+        ("Frame Time: 1e39", bvh("Frame Time: 0.5", "Frame Time: 1e39"), Format::Bvh, "bad_frame_time"),
         ("Frame Time: nan", bvh("Frame Time: 0.5", "Frame Time: nan"), Format::Bvh, "bad_frame_time"),
         ("Frames: 4000000000 with a tiny body", bvh("Frames: 2", "Frames: 4000000000"), Format::Bvh, "too_large"),
         ("Frames: 999999 with a tiny body", bvh("Frames: 2", "Frames: 999999"), Format::Bvh, "count_mismatch"),
