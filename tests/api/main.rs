@@ -7,6 +7,7 @@ mod cache;
 mod clips;
 mod concurrency;
 mod durability;
+mod import;
 mod operations;
 mod poses;
 mod security;
