@@ -71,7 +71,7 @@ impl Application {
             }
         };
         let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
-        let state = AppState {
+        let state = AppState::new(state::Shared {
             store,
             cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
             config: Arc::new(config),
@@ -79,7 +79,7 @@ impl Application {
             counters: metrics::Counters::new(),
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
-        };
+        });
         Ok(Application { listener, state })
     }
 
