@@ -32,6 +32,7 @@ pub mod cache;
 pub mod config;
 pub mod error;
 pub mod limits;
+mod listen;
 pub mod metrics;
 pub mod rest;
 pub mod state;
@@ -100,7 +101,8 @@ impl Application {
     /// at most the configured drain timeout.
     ///
     /// # Errors
-    /// The listener fails.
+    /// None today (accept errors are logged and retried); the `Result` leaves
+    /// room for protocols served beside REST.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         let Application { listener, state } = self;
         let drain = state.config.drain_timeout;
@@ -114,22 +116,20 @@ impl Application {
             let _ = started_tx.send(());
         };
         let router = rest::router(state.clone());
-        let serve = axum::serve(listener, router).with_graceful_shutdown(signal).into_future();
-        let mut serve = std::pin::pin!(serve);
-        let result = tokio::select! {
-            r = &mut serve => r.map_err(anyhow::Error::from),
-            _ = started_rx => match tokio::time::timeout(drain, &mut serve).await {
-                Ok(r) => r.map_err(anyhow::Error::from),
-                Err(_) => {
+        let header_timeout = state.config.limits.header_read_timeout;
+        let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, signal));
+        tokio::select! {
+            () = &mut serve => {}
+            _ = started_rx => {
+                if tokio::time::timeout(drain, &mut serve).await.is_err() {
                     tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
-                    Ok(())
                 }
-            },
-        };
+            }
+        }
         upkeep.abort();
         state.store.close().await;
         tracing::info!("stopped");
-        result
+        Ok(())
     }
 }
 
