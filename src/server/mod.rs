@@ -9,11 +9,14 @@
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
-//! Prometheus; `rest` the routes.
+//! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
+//! `rest` the routes.
 //!
-//! Shutdown: when the signal fires, readiness flips to 503 first, axum stops
-//! accepting and lets in-flight requests finish; after the drain timeout the
-//! rest are cut off. Then the metrics upkeep task stops and the store closes.
+//! Shutdown: when the signal fires, readiness flips to 503 first, the accept
+//! loop stops accepting and lets in-flight requests finish; after the drain
+//! timeout the rest are cut off. Then the metrics upkeep task stops and the
+//! store closes. Upgraded connections (WebSockets) live in their own tasks and
+//! are not waited for: their owners must watch for shutdown themselves.
 
 use std::future::Future;
 use std::net::SocketAddr;
