@@ -98,13 +98,29 @@ fn skeleton() -> SkeletonSpec {
 
 /// 64 joints, each with the given channels in the given mode.
 fn clip(channels: &[Channel], interpolation: Interpolation, uniform: bool, speed: Speed) -> Clip {
+    clip_with(channels, interpolation, uniform, speed, false)
+}
+
+/// As [`clip`]; `shared_times` gives every track the same key times, as
+/// glTF exports (one sampler input per animation) and BVH (one frame clock) do.
+fn clip_with(
+    channels: &[Channel],
+    interpolation: Interpolation,
+    uniform: bool,
+    speed: Speed,
+    shared_times: bool,
+) -> Clip {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let shared = times(&mut Rng(5), uniform);
     let mut tracks = Vec::new();
     for j in 0..JOINTS {
         for &c in channels {
             let mut t = track(&mut rng, &format!("j{j}"), c, interpolation, uniform);
             if c == Channel::Translation {
                 t.speed = speed;
+            }
+            if shared_times {
+                t.times = shared.clone();
             }
             tracks.push(t);
         }
@@ -166,6 +182,8 @@ fn full_joint(c: &mut Criterion) {
     let cr = clip(&trs, Interpolation::CatmullRom, false, Speed::Keyed);
     let lin = clip(&trs, Interpolation::Linear, false, Speed::Keyed);
     let cr_uniform = clip(&trs, Interpolation::CatmullRom, true, Speed::Keyed);
+    let cr_shared = clip_with(&trs, Interpolation::CatmullRom, false, Speed::Keyed, true);
+    let lin_shared = clip_with(&trs, Interpolation::Linear, false, Speed::Keyed, true);
     let fwd = forward_times(&cr, 4096);
     let rnd = random_times(&cr, 4096);
     run_pose(c, "rbt_64_joints", "catmull_rom_local_forward", &cr, &fwd, false);
@@ -180,6 +198,25 @@ fn full_joint(c: &mut Criterion) {
         &random_times(&cr_uniform, 4096),
         false,
     );
+    run_pose(
+        c,
+        "rbt_64_joints",
+        "catmull_rom_shared_times_forward",
+        &cr_shared,
+        &forward_times(&cr_shared, 4096),
+        false,
+    );
+    run_pose(c, "rbt_64_joints", "catmull_rom_shared_times_random", &cr_shared, &random_times(&cr_shared, 4096), false);
+    run_pose(
+        c,
+        "rbt_64_joints",
+        "catmull_rom_shared_times_model_random",
+        &cr_shared,
+        &random_times(&cr_shared, 4096),
+        true,
+    );
+    run_pose(c, "rbt_64_joints", "linear_shared_times_forward", &lin_shared, &forward_times(&lin_shared, 4096), false);
+    run_pose(c, "rbt_64_joints", "linear_shared_times_random", &lin_shared, &random_times(&lin_shared, 4096), false);
     run_pose(c, "rbt_64_joints", "linear_local_forward", &lin, &forward_times(&lin, 4096), false);
     run_pose(c, "rbt_64_joints", "linear_local_random", &lin, &random_times(&lin, 4096), false);
 }

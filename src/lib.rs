@@ -3,6 +3,7 @@
 
 pub mod anim;
 pub mod cli;
+pub mod import;
 pub mod server;
 pub mod store;
 pub mod wire;

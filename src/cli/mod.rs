@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod import;
 mod sample;
 mod serve;
 
@@ -20,6 +21,8 @@ enum Command {
     Sample(sample::SampleArgs),
     /// Serve the REST API on the embedded clip store (see README, "REST API").
     Serve(Box<serve::ServeArgs>),
+    /// Import a glTF, GLB or BVH file: print clip documents or upload them.
+    Import(import::ImportArgs),
 }
 
 impl Cli {
@@ -27,6 +30,7 @@ impl Cli {
         let result = match self.command {
             Command::Sample(args) => sample::run(args),
             Command::Serve(args) => serve::run(*args),
+            Command::Import(args) => import::run(args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

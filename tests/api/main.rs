@@ -8,6 +8,7 @@ mod cli;
 mod clips;
 mod concurrency;
 mod durability;
+mod import;
 mod operations;
 mod poses;
 mod security;

@@ -25,6 +25,7 @@ use super::state::AppState;
 pub mod clips;
 pub mod extract;
 pub mod health;
+pub mod import;
 pub mod openapi;
 pub mod poses;
 pub mod summary;
@@ -36,6 +37,7 @@ pub fn router(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
     Router::new()
         .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
+        .route("/v1/clips/import", post(import::import_clips))
         .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
