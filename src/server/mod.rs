@@ -9,11 +9,14 @@
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
-//! Prometheus; `rest` the routes.
+//! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
+//! `rest` the routes.
 //!
-//! Shutdown: when the signal fires, readiness flips to 503 first, axum stops
-//! accepting and lets in-flight requests finish; after the drain timeout the
-//! rest are cut off. Then the metrics upkeep task stops and the store closes.
+//! Shutdown: when the signal fires, readiness flips to 503 first, the accept
+//! loop stops accepting and lets in-flight requests finish; after the drain
+//! timeout the rest are cut off. Then the metrics upkeep task stops and the
+//! store closes. Upgraded connections (WebSockets) live in their own tasks and
+//! are not waited for: their owners must watch for shutdown themselves.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -32,6 +35,7 @@ pub mod cache;
 pub mod config;
 pub mod error;
 pub mod limits;
+mod listen;
 pub mod metrics;
 pub mod rest;
 pub mod state;
@@ -71,7 +75,7 @@ impl Application {
             }
         };
         let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
-        let state = AppState {
+        let state = AppState::new(state::Shared {
             store,
             cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
             config: Arc::new(config),
@@ -79,7 +83,7 @@ impl Application {
             counters: metrics::Counters::new(),
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
-        };
+        });
         Ok(Application { listener, state })
     }
 
@@ -100,7 +104,8 @@ impl Application {
     /// at most the configured drain timeout.
     ///
     /// # Errors
-    /// The listener fails.
+    /// None today (accept errors are logged and retried); the `Result` leaves
+    /// room for protocols served beside REST.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         let Application { listener, state } = self;
         let drain = state.config.drain_timeout;
@@ -114,22 +119,20 @@ impl Application {
             let _ = started_tx.send(());
         };
         let router = rest::router(state.clone());
-        let serve = axum::serve(listener, router).with_graceful_shutdown(signal).into_future();
-        let mut serve = std::pin::pin!(serve);
-        let result = tokio::select! {
-            r = &mut serve => r.map_err(anyhow::Error::from),
-            _ = started_rx => match tokio::time::timeout(drain, &mut serve).await {
-                Ok(r) => r.map_err(anyhow::Error::from),
-                Err(_) => {
+        let header_timeout = state.config.limits.header_read_timeout;
+        let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, signal));
+        tokio::select! {
+            () = &mut serve => {}
+            _ = started_rx => {
+                if tokio::time::timeout(drain, &mut serve).await.is_err() {
                     tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
-                    Ok(())
                 }
-            },
-        };
+            }
+        }
         upkeep.abort();
         state.store.close().await;
         tracing::info!("stopped");
-        result
+        Ok(())
     }
 }
 
