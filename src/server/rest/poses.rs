@@ -78,7 +78,8 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                     skeleton: clip.skeleton(),
                     pose: sampler.pose(),
                 };
-                serde_json::to_writer(SmallWrites(&mut *out), &pose)
+                pose.write_to(out);
+                Ok(())
             }
             Format::Matrix | Format::Skinning => {
                 let skinning = format == Format::Skinning;
