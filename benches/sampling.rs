@@ -221,6 +221,46 @@ fn full_joint(c: &mut Criterion) {
     run_pose(c, "rbt_64_joints", "linear_local_random", &lin, &random_times(&lin, 4096), false);
 }
 
+/// Real clips from `../shared/testdata`, imported as a user would: CMU
+/// motion capture (31 joints, 120 fps keys) as Catmull-Rom and as linear,
+/// and glTF walk cycles (linear keys, as exported).
+fn real_clips(c: &mut Criterion) {
+    use inbetween::import::{Format, ImportOptions, import};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata");
+    let load = |file: &str, format: Format, interpolation: Interpolation| -> Option<Clip> {
+        let bytes = std::fs::read(dir.join(file)).ok()?;
+        let options = ImportOptions { bvh_interpolation: interpolation, ..ImportOptions::default() };
+        let spec = import(&bytes, format, &options).ok()?.clips.into_iter().last()?;
+        Clip::build(&spec).ok()
+    };
+    let cases = [
+        ("bvh_131_01_catmull_rom", "bvh/131_01.bvh", Format::Bvh, Interpolation::CatmullRom),
+        ("bvh_131_01_linear", "bvh/131_01.bvh", Format::Bvh, Interpolation::Linear),
+        ("gltf_fox_run_linear", "gltf/Fox/Fox.glb", Format::Glb, Interpolation::Linear),
+        ("gltf_cesium_man_linear", "gltf/CesiumMan/CesiumMan.gltf", Format::Gltf, Interpolation::Linear),
+    ];
+    let mut g = c.benchmark_group("real_clips");
+    for (name, file, format, interpolation) in cases {
+        let Some(clip) = load(file, format, interpolation) else {
+            eprintln!("skipping {name}: ../shared/testdata/{file} not found");
+            continue;
+        };
+        g.throughput(Throughput::Elements(clip.joint_count() as u64));
+        for (mode, times) in [("forward", forward_times(&clip, 4096)), ("random", random_times(&clip, 4096))] {
+            let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
+            let mut k = 0;
+            g.bench_function(format!("{name}_{mode}_{}_joints", clip.joint_count()), |b| {
+                b.iter(|| {
+                    k = (k + 1) % times.len();
+                    clip.sample_into(black_box(times[k]), &mut cursor, &mut pose);
+                    black_box(&pose);
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
 fn versus_splines_crate(c: &mut Criterion) {
     // Uniform keys: the splines crate's Catmull-Rom is the uniform one.
     let mut rng = Rng(7);
@@ -301,6 +341,6 @@ fn versus_glam_slerp(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2)).sample_size(50);
-    targets = per_mode, full_joint, versus_splines_crate, versus_glam_slerp
+    targets = per_mode, full_joint, real_clips, versus_splines_crate, versus_glam_slerp
 }
 criterion_main!(benches);

@@ -5,7 +5,7 @@
 #   scripts/bench_core.sh rbt_64     # a criterion filter
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo bench --bench sampling -- "${1:-}" >/dev/null
+cargo bench --bench sampling -- "${1:-}" >/dev/null 2>&1
 python3 - <<'PY'
 import json, pathlib
 root = pathlib.Path("target/criterion")
@@ -13,7 +13,9 @@ rows = []
 for est in sorted(root.glob("*/*/new/estimates.json")):
     group, bench = est.parts[-4], est.parts[-3]
     median_ns = json.loads(est.read_text())["median"]["point_estimate"]
-    per = 64 if group.endswith("64_joints") or group.startswith("mode_64") else 1
+    import re
+    m = re.search(r"_(\d+)_joints$", bench)
+    per = 64 if group.endswith("64_joints") or group.startswith("mode_64") else int(m.group(1)) if m else 1
     rows.append((group, bench, median_ns, median_ns / per))
 print("| group | benchmark | median per call | per joint |")
 print("|---|---|---|---|")
