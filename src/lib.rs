@@ -3,4 +3,5 @@
 
 pub mod anim;
 pub mod cli;
+pub mod stream;
 pub mod wire;
