@@ -1,1 +1,306 @@
-fn main() {}
+//! Sampling benchmarks for the evaluation core (issue 2; BENCHMARKS.md).
+//!
+//! Every clip here has 64 joints with 32 non-uniformly spaced keys per track
+//! (each channel with its own key times unless said otherwise), so results are
+//! per pose; BENCHMARKS.md divides by 64 for ns per joint-sample. Times are
+//! precomputed so the measured loop is the sampler alone.
+//!
+//! Run: `cargo bench --bench sampling`.
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Quat, Vec3, Vec4};
+use inbetween::anim::{
+    Channel, Clip, ClipSpec, Cursor, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Speed, TrackSpec,
+    Transform, quat,
+};
+
+const JOINTS: usize = 64;
+const KEYS: usize = 32;
+
+/// xorshift64*: deterministic keys without a dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32) / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+fn times(rng: &mut Rng, uniform: bool) -> Vec<f32> {
+    let mut t = 0.0;
+    (0..KEYS)
+        .map(|_| {
+            let now = t;
+            t += if uniform { 1.0 / 30.0 } else { rng.range(0.02, 0.06) };
+            now
+        })
+        .collect()
+}
+
+/// Rotation keys that turn by up to ~40° between keys, as mocap and hand
+/// keys do.
+fn rotations(rng: &mut Rng) -> Vec<Vec4> {
+    let mut q = Quat::IDENTITY;
+    (0..KEYS)
+        .map(|_| {
+            let axis =
+                Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize_or(Vec3::Y);
+            q = (Quat::from_axis_angle(axis, rng.range(0.05, 0.7)) * q).normalize();
+            Vec4::from(q)
+        })
+        .collect()
+}
+
+fn vectors(rng: &mut Rng, base: f32) -> Vec<Vec3> {
+    (0..KEYS).map(|_| Vec3::new(base + rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0))).collect()
+}
+
+fn track(rng: &mut Rng, joint: &str, channel: Channel, interpolation: Interpolation, uniform: bool) -> TrackSpec {
+    let t = times(rng, uniform);
+    let values = match channel {
+        Channel::Rotation => Keys::Vec4(rotations(rng)),
+        Channel::Scale => Keys::Vec3(vectors(rng, 1.5)),
+        Channel::Translation => Keys::Vec3(vectors(rng, 0.0)),
+    };
+    let mut spec = TrackSpec::new(joint, channel, interpolation, t, values.clone());
+    if interpolation == Interpolation::CubicHermite {
+        let tangents = match &values {
+            Keys::Vec3(v) => Keys::Vec3(v.iter().map(|x| *x * 0.5).collect()),
+            Keys::Vec4(v) => Keys::Vec4(v.iter().map(|x| *x * 0.1).collect()),
+        };
+        spec.in_tangents = Some(tangents.clone());
+        spec.out_tangents = Some(tangents);
+    }
+    spec
+}
+
+fn skeleton() -> SkeletonSpec {
+    SkeletonSpec {
+        joints: (0..JOINTS)
+            .map(|j| JointSpec {
+                name: format!("j{j}"),
+                // A chain of short branches, parents first.
+                parent: (j > 0).then(|| format!("j{}", (j - 1) / 2)),
+                rest: Transform { translation: Vec3::new(0.0, 0.1, 0.0), ..Transform::IDENTITY },
+                inverse_bind: None,
+            })
+            .collect(),
+    }
+}
+
+/// 64 joints, each with the given channels in the given mode.
+fn clip(channels: &[Channel], interpolation: Interpolation, uniform: bool, speed: Speed) -> Clip {
+    clip_with(channels, interpolation, uniform, speed, false)
+}
+
+/// As [`clip`]; `shared_times` gives every track the same key times, as
+/// glTF exports (one sampler input per animation) and BVH (one frame clock) do.
+fn clip_with(
+    channels: &[Channel],
+    interpolation: Interpolation,
+    uniform: bool,
+    speed: Speed,
+    shared_times: bool,
+) -> Clip {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let shared = times(&mut Rng(5), uniform);
+    let mut tracks = Vec::new();
+    for j in 0..JOINTS {
+        for &c in channels {
+            let mut t = track(&mut rng, &format!("j{j}"), c, interpolation, uniform);
+            if c == Channel::Translation {
+                t.speed = speed;
+            }
+            if shared_times {
+                t.times = shared.clone();
+            }
+            tracks.push(t);
+        }
+    }
+    let spec =
+        ClipSpec { name: "bench".into(), skeleton: Some(skeleton()), tracks, events: vec![], playback: Playback::Loop };
+    Clip::build(&spec).expect("bench clip builds")
+}
+
+fn random_times(clip: &Clip, n: usize) -> Vec<f32> {
+    let mut rng = Rng(42);
+    (0..n).map(|_| rng.range(clip.start(), clip.end())).collect()
+}
+
+fn forward_times(clip: &Clip, n: usize) -> Vec<f32> {
+    (0..n).map(|k| clip.start() + (k as f32 / 60.0) % clip.duration()).collect()
+}
+
+fn run_pose(c: &mut Criterion, group: &str, id: &str, clip: &Clip, times: &[f32], model: bool) {
+    let mut g = c.benchmark_group(group);
+    g.throughput(Throughput::Elements(JOINTS as u64));
+    let (mut cursor, mut pose, mut out) = (Cursor::default(), Pose::default(), Pose::default());
+    let mut k = 0;
+    g.bench_function(id, |b| {
+        b.iter(|| {
+            k = (k + 1) % times.len();
+            clip.sample_into(black_box(times[k]), &mut cursor, &mut pose);
+            if model {
+                clip.skeleton().to_model(&pose, &mut out);
+            }
+            black_box(&pose);
+        })
+    });
+    g.finish();
+}
+
+fn per_mode(c: &mut Criterion) {
+    use Channel::*;
+    use Interpolation::*;
+    let cases: [(&str, Channel, Interpolation, Speed); 9] = [
+        ("vec3_step", Translation, Step, Speed::Keyed),
+        ("vec3_linear", Translation, Linear, Speed::Keyed),
+        ("vec3_catmull_rom", Translation, CatmullRom, Speed::Keyed),
+        ("vec3_hermite", Translation, CubicHermite, Speed::Keyed),
+        ("vec3_catmull_rom_constant_speed", Translation, CatmullRom, Speed::Constant),
+        ("quat_step", Rotation, Step, Speed::Keyed),
+        ("quat_slerp", Rotation, Linear, Speed::Keyed),
+        ("quat_catmull_rom", Rotation, CatmullRom, Speed::Keyed),
+        ("quat_hermite", Rotation, CubicHermite, Speed::Keyed),
+    ];
+    for (name, channel, interpolation, speed) in cases {
+        let clip = clip(&[channel], interpolation, false, speed);
+        run_pose(c, "mode_64_joints_forward", name, &clip, &forward_times(&clip, 4096), false);
+    }
+}
+
+fn full_joint(c: &mut Criterion) {
+    let trs = [Channel::Translation, Channel::Rotation, Channel::Scale];
+    let cr = clip(&trs, Interpolation::CatmullRom, false, Speed::Keyed);
+    let lin = clip(&trs, Interpolation::Linear, false, Speed::Keyed);
+    let cr_uniform = clip(&trs, Interpolation::CatmullRom, true, Speed::Keyed);
+    let cr_shared = clip_with(&trs, Interpolation::CatmullRom, false, Speed::Keyed, true);
+    let lin_shared = clip_with(&trs, Interpolation::Linear, false, Speed::Keyed, true);
+    let fwd = forward_times(&cr, 4096);
+    let rnd = random_times(&cr, 4096);
+    run_pose(c, "rbt_64_joints", "catmull_rom_local_forward", &cr, &fwd, false);
+    run_pose(c, "rbt_64_joints", "catmull_rom_local_random", &cr, &rnd, false);
+    run_pose(c, "rbt_64_joints", "catmull_rom_model_forward", &cr, &fwd, true);
+    run_pose(c, "rbt_64_joints", "catmull_rom_model_random", &cr, &rnd, true);
+    run_pose(
+        c,
+        "rbt_64_joints",
+        "catmull_rom_uniform_keys_random",
+        &cr_uniform,
+        &random_times(&cr_uniform, 4096),
+        false,
+    );
+    run_pose(
+        c,
+        "rbt_64_joints",
+        "catmull_rom_shared_times_forward",
+        &cr_shared,
+        &forward_times(&cr_shared, 4096),
+        false,
+    );
+    run_pose(c, "rbt_64_joints", "catmull_rom_shared_times_random", &cr_shared, &random_times(&cr_shared, 4096), false);
+    run_pose(
+        c,
+        "rbt_64_joints",
+        "catmull_rom_shared_times_model_random",
+        &cr_shared,
+        &random_times(&cr_shared, 4096),
+        true,
+    );
+    run_pose(c, "rbt_64_joints", "linear_shared_times_forward", &lin_shared, &forward_times(&lin_shared, 4096), false);
+    run_pose(c, "rbt_64_joints", "linear_shared_times_random", &lin_shared, &random_times(&lin_shared, 4096), false);
+    run_pose(c, "rbt_64_joints", "linear_local_forward", &lin, &forward_times(&lin, 4096), false);
+    run_pose(c, "rbt_64_joints", "linear_local_random", &lin, &random_times(&lin, 4096), false);
+}
+
+fn versus_splines_crate(c: &mut Criterion) {
+    // Uniform keys: the splines crate's Catmull-Rom is the uniform one.
+    let mut rng = Rng(7);
+    let values: Vec<Vec3> = vectors(&mut rng, 0.0);
+    let times: Vec<f32> = (0..KEYS).map(|i| i as f32).collect();
+    let ours = Clip::build(&ClipSpec {
+        name: "one".into(),
+        skeleton: None,
+        tracks: vec![TrackSpec::new(
+            "a",
+            Channel::Translation,
+            Interpolation::CatmullRom,
+            times.clone(),
+            Keys::Vec3(values.clone()),
+        )],
+        events: vec![],
+        playback: Playback::Once,
+    })
+    .unwrap();
+    let theirs = splines::Spline::from_vec(
+        times
+            .iter()
+            .zip(&values)
+            .map(|(&t, v)| {
+                splines::Key::new(t, glam_splines::Vec3::new(v.x, v.y, v.z), splines::Interpolation::CatmullRom)
+            })
+            .collect(),
+    );
+    // splines needs a key on each side: sample inside [1, n-2].
+    let mut r = Rng(3);
+    let ts: Vec<f32> = (0..4096).map(|_| r.range(1.0, (KEYS - 2) as f32)).collect();
+    let mut g = c.benchmark_group("vec3_catmull_rom_one_curve_random");
+    g.throughput(Throughput::Elements(1));
+    let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
+    let mut k = 0;
+    g.bench_function("inbetween", |b| {
+        b.iter(|| {
+            k = (k + 1) % ts.len();
+            ours.sample_into(black_box(ts[k]), &mut cursor, &mut pose);
+            black_box(pose.translations[0])
+        })
+    });
+    g.bench_function("splines_crate", |b| {
+        b.iter(|| {
+            k = (k + 1) % ts.len();
+            black_box(theirs.sample(black_box(ts[k])))
+        })
+    });
+    g.finish();
+}
+
+fn versus_glam_slerp(c: &mut Criterion) {
+    let mut rng = Rng(11);
+    let pairs: Vec<(Quat, Quat, f32)> = (0..1024)
+        .map(|_| {
+            let r = rotations(&mut rng);
+            (Quat::from_vec4(r[0]), Quat::from_vec4(r[3]), rng.next())
+        })
+        .collect();
+    let mut g = c.benchmark_group("slerp");
+    g.throughput(Throughput::Elements(1));
+    for (name, f) in [
+        ("inbetween_slerp_fast", quat::slerp_fast as fn(Quat, Quat, f32) -> Quat),
+        ("glam_quat_slerp", |a: Quat, b: Quat, t: f32| a.slerp(b, t)),
+    ] {
+        let mut k = 0;
+        g.bench_with_input(BenchmarkId::from_parameter(name), &pairs, |b, pairs| {
+            b.iter(|| {
+                k = (k + 1) % pairs.len();
+                let (p, q, t) = pairs[k];
+                black_box(f(black_box(p), black_box(q), black_box(t)))
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2)).sample_size(50);
+    targets = per_mode, full_joint, versus_splines_crate, versus_glam_slerp
+}
+criterion_main!(benches);

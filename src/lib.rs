@@ -3,5 +3,8 @@
 
 pub mod anim;
 pub mod cli;
+pub mod import;
+pub mod server;
+pub mod store;
 pub mod stream;
 pub mod wire;

@@ -2,7 +2,7 @@
 //!
 //! Built once per track, in `f64`: the path is cut into pieces inside which
 //! the Bezier parameter is linear in arc length to within a tolerance of
-//! `1e-6·L` in position (checked at three points per piece, pieces split
+//! `min(1e-6·L, 1e-6)` in position (checked at three points per piece, pieces split
 //! adaptively, which also handles zero-speed cusps such as `zero_slope`
 //! ends). The piece boundaries become the track's timeline, so sampling is
 //! the ordinary span search plus one Bezier evaluation.
@@ -11,9 +11,15 @@ use glam::DVec3;
 
 use super::curve::ArcPiece;
 
-/// Position tolerance relative to the path length.
+/// Position tolerance: relative to the path length, capped absolutely so
+/// long paths also stay inside SPEC §2.9's 1e-5 (at about f32 resolution).
 const REL_TOLERANCE: f64 = 1e-6;
-const MAX_DEPTH: u32 = 30;
+const ABS_TOLERANCE: f64 = 1e-6;
+/// Bounds on refinement, so that no input can make a build slow: at depth
+/// 16 a piece is 1/65536 of its segment, already within ~3e-6 of its length
+/// even at a zero-speed cusp; past the budget, pieces stop splitting.
+const MAX_DEPTH: u32 = 16;
+const MAX_PIECES: usize = 1 << 20;
 
 pub(crate) fn point(p: &[DVec3; 4], u: f64) -> DVec3 {
     let v = 1.0 - u;
@@ -85,10 +91,12 @@ fn invert(p: &[DVec3; 4], a: f64, b: f64, target: f64, abs_tol: f64) -> f64 {
 pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
     let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12)).collect();
     let total: f64 = lengths.iter().sum();
-    if total.is_nan() || total <= 0.0 || !total.is_finite() {
+    // A path shorter than the rounding noise of its coordinates does not move.
+    let scale = segments.iter().flatten().map(|p| p.abs().max_element()).fold(1.0, f64::max);
+    if !total.is_finite() || total <= 1e-9 * scale {
         return None;
     }
-    let tol = REL_TOLERANCE * total;
+    let tol = (REL_TOLERANCE * total).min(ABS_TOLERANCE);
     let quad_tol = tol * 1e-3;
     // (start arc length, piece)
     let mut raw: Vec<(f64, ArcPiece)> = Vec::new();
@@ -145,7 +153,7 @@ fn split(
             u_mid = u_true;
         }
     }
-    if worst <= tol || depth >= MAX_DEPTH {
+    if worst <= tol || depth >= MAX_DEPTH || out.len() >= MAX_PIECES {
         out.push((sa, ArcPiece { segment, u0: ua as f32, du: (ub - ua) as f32 }));
     } else {
         let sm = (sa + sb) / 2.0;

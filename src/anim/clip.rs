@@ -3,37 +3,22 @@
 //!
 //! `Clip::build` is the only constructor, so a `Clip` that exists is valid:
 //! sampling cannot fail and does not allocate once the caller's buffers
-//! ([`Cursor`], [`Pose`]) have their size. Tracks are grouped by kind so the
-//! per-track dispatch runs in long predictable stretches.
+//! ([`Cursor`], [`Pose`]) have their size. Tracks are stored by channel and
+//! kind (`tracks`), so sampling is a handful of tight loops.
 
 use std::collections::HashMap;
 
-use glam::{Mat4, Vec3A};
+use glam::Mat4;
 
 use super::compile::{self, Compiled, finite3, unit_quat};
-use super::curve::{QuatCurve, Vec3Curve};
 use super::error::{ClipError, ClipErrorKind as K, Path};
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
 use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
 use super::timeline::{Span, Timeline};
+use super::tracks::{QuatTracks, Vec3Tracks};
 
 /// Longest accepted clip or event name, in characters.
 pub const MAX_NAME_CHARS: usize = 256;
-
-#[derive(Debug, Clone, PartialEq)]
-struct Vec3Track {
-    joint: u32,
-    scale: bool,
-    timeline: u32,
-    curve: Vec3Curve,
-}
-
-#[derive(Debug, Clone, PartialEq)]
-struct QuatTrack {
-    joint: u32,
-    timeline: u32,
-    curve: QuatCurve,
-}
 
 /// A named instant of the clip (a footstep, a sound cue).
 #[derive(Debug, Clone, PartialEq)]
@@ -51,8 +36,13 @@ pub struct Clip {
     end: f32,
     skeleton: Skeleton,
     timelines: Vec<Timeline>,
-    vec3_tracks: Vec<Vec3Track>,
-    quat_tracks: Vec<QuatTrack>,
+    /// The rest pose with constant (single-key) tracks applied: what each
+    /// sample starts from.
+    base: Pose,
+    translations: Vec3Tracks,
+    rotations: QuatTracks,
+    scales: Vec3Tracks,
+    track_count: usize,
     events: Vec<Event>,
 }
 
@@ -111,7 +101,9 @@ impl Clip {
             })
         };
         let mut seen: HashMap<(usize, Channel), ()> = HashMap::new();
-        let (mut vec3_tracks, mut quat_tracks) = (Vec::new(), Vec::new());
+        let mut base = skeleton.rest().clone();
+        let (mut translations, mut rotations, mut scales) =
+            (Vec3Tracks::default(), QuatTracks::default(), Vec3Tracks::default());
         let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
         for (i, track) in spec.tracks.iter().enumerate() {
             let path = Path::root().field("tracks").index(i);
@@ -124,22 +116,24 @@ impl Clip {
                     K::DuplicateTrack { joint: track.joint.clone(), channel: track.channel.as_str() },
                 ));
             }
+            let j = joint;
             let joint = joint as u32;
             let domain = if track.channel == Channel::Rotation {
                 let Compiled { times, curve, domain } = compile::quat_track(track, &path)?;
-                quat_tracks.push(QuatTrack { joint, timeline: intern(times), curve });
+                rotations.push(joint, intern(times), curve, &mut base.rotations[j]);
                 domain
             } else {
                 let Compiled { times, curve, domain } = compile::vec3_track(track, &path)?;
-                let scale = track.channel == Channel::Scale;
-                vec3_tracks.push(Vec3Track { joint, scale, timeline: intern(times), curve });
+                let (list, slot) = match track.channel {
+                    Channel::Scale => (&mut scales, &mut base.scales[j]),
+                    _ => (&mut translations, &mut base.translations[j]),
+                };
+                list.push(joint, intern(times), curve, slot);
                 domain
             };
             start = start.min(domain.0);
             end = end.max(domain.1);
         }
-        vec3_tracks.sort_by_key(|t| vec3_kind(&t.curve));
-        quat_tracks.sort_by_key(|t| quat_kind(&t.curve));
 
         let mut events = Vec::with_capacity(spec.events.len());
         for (i, e) in spec.events.iter().enumerate() {
@@ -162,8 +156,11 @@ impl Clip {
             end,
             skeleton,
             timelines,
-            vec3_tracks,
-            quat_tracks,
+            base,
+            translations,
+            rotations,
+            scales,
+            track_count: spec.tracks.len(),
             events,
         })
     }
@@ -200,7 +197,7 @@ impl Clip {
     }
 
     pub fn track_count(&self) -> usize {
-        self.vec3_tracks.len() + self.quat_tracks.len()
+        self.track_count
     }
 
     /// Distinct key-time arrays; tracks that share times share one search.
@@ -218,7 +215,7 @@ impl Clip {
     /// warp over normalised time. Computed in `f64` so long-running loops
     /// keep their precision; non-finite `t` maps to the start.
     pub fn clip_time(&self, t: f64, playback: Playback, ease: Ease) -> f32 {
-        let (start, dur) = (self.start as f64, (self.end - self.start) as f64);
+        let (start, dur) = (self.start as f64, self.end as f64 - self.start as f64);
         if dur.is_nan() || dur <= 0.0 || !t.is_finite() {
             return self.start;
         }
@@ -245,16 +242,11 @@ impl Clip {
         for ((timeline, hint), span) in self.timelines.iter().zip(&mut cursor.hints).zip(&mut cursor.spans) {
             *span = timeline.locate(t, hint);
         }
-        pose.copy_from(self.skeleton.rest());
+        pose.copy_from(&self.base);
         let spans = &cursor.spans;
-        for track in &self.vec3_tracks {
-            let v: Vec3A = track.curve.eval(spans[track.timeline as usize]);
-            let out = if track.scale { &mut pose.scales } else { &mut pose.translations };
-            out[track.joint as usize] = v;
-        }
-        for track in &self.quat_tracks {
-            pose.rotations[track.joint as usize] = track.curve.eval(spans[track.timeline as usize]);
-        }
+        self.translations.apply(spans, &mut pose.translations);
+        self.rotations.apply(spans, &mut pose.rotations);
+        self.scales.apply(spans, &mut pose.scales);
     }
 
     /// Like [`Clip::sample_into`] but takes a request time and options and
@@ -311,26 +303,6 @@ impl Sampler {
             Space::Local => &self.local,
             Space::Model => &self.model,
         }
-    }
-}
-
-fn vec3_kind(c: &Vec3Curve) -> u8 {
-    match c {
-        Vec3Curve::Constant(_) => 0,
-        Vec3Curve::Step(_) => 1,
-        Vec3Curve::Linear(_) => 2,
-        Vec3Curve::Bezier(_) => 3,
-        Vec3Curve::ConstantSpeed { .. } => 4,
-    }
-}
-
-fn quat_kind(c: &QuatCurve) -> u8 {
-    match c {
-        QuatCurve::Constant(_) => 0,
-        QuatCurve::Step(_) => 1,
-        QuatCurve::Slerp(_) => 2,
-        QuatCurve::SlerpBezier(_) => 3,
-        QuatCurve::Hermite(_) => 4,
     }
 }
 

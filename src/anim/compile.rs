@@ -9,9 +9,11 @@
 use glam::{DQuat, DVec3, DVec4, Quat, Vec3, Vec3A, Vec4};
 
 use super::arc;
-use super::curve::{QuatCurve, QuatSegment, Vec3Curve};
+use super::curve::{QuatCurve, QuatSegment, SlerpTier, Vec3Curve};
 use super::error::{ClipError, ClipErrorKind as K, Path};
-use super::quat::{FAST_SLERP_MIN_COS, align, make_continuous, pow, short};
+use super::quat::{
+    FAST_SLERP_MIN_COS, NARROW_SLERP_MIN_COS, TINY_SLERP_MIN_COS, align, make_continuous, pow, short, sine_ratio_series,
+};
 use super::spec::{Channel, Ends, Interpolation, Keys, Speed, TrackSpec};
 
 /// A validated, compiled track: the times its curve is indexed by and the
@@ -145,9 +147,11 @@ pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<Vec3C
             let keys = values.iter().map(a3).collect();
             return Ok(Compiled { times: times.clone(), curve: Vec3Curve::Linear(keys), domain });
         }
-        // A line is the Bezier with control points at thirds.
+        // A line is the Bezier with control points at thirds
+        // (`a + (b − a)·s` is exact when a = b; glam's lerp is not).
         Interpolation::Linear => {
-            c.windows(2).map(|w| [w[0], w[0].lerp(w[1], 1.0 / 3.0), w[0].lerp(w[1], 2.0 / 3.0), w[1]]).collect()
+            let at = |a: DVec3, b: DVec3, s: f64| a + (b - a) * s;
+            c.windows(2).map(|w| [w[0], at(w[0], w[1], 1.0 / 3.0), at(w[0], w[1], 2.0 / 3.0), w[1]]).collect()
         }
         Interpolation::CubicHermite => {
             let (Some(Keys::Vec3(a)), Some(Keys::Vec3(b))) = (&spec.in_tangents, &spec.out_tangents) else {
@@ -240,22 +244,30 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
 }
 
 /// Aligns each control point to its predecessor's hemisphere (so every
-/// first-level slerp is already the short way) and stores `cos θ − 1`.
-fn quat_segment(p: &[DQuat; 4]) -> QuatSegment {
+/// first-level slerp is already the short way), stores the first-level
+/// weight series and picks the slerp tier from the polygon's total turn.
+pub fn quat_segment(p: &[DQuat; 4]) -> QuatSegment {
     let p0 = p[0];
     let p1 = align(p0, p[1]);
     let p2 = align(p1, p[2]);
     let p3 = align(p2, p[3]);
-    let x = |a: DQuat, b: DQuat| a.dot(b).min(1.0) - 1.0;
-    let v = |q: DQuat| DVec4::from(q).as_vec4();
-    let turn: f64 = [(p0, p1), (p1, p2), (p2, p3)].iter().map(|&(a, b)| a.dot(b).clamp(-1.0, 1.0).acos()).sum();
+    let angles = [(p0, p1), (p1, p2), (p2, p3)].map(|(a, b)| a.dot(b).clamp(-1.0, 1.0).acos());
+    let series = angles.map(sine_ratio_series);
+    let sine = std::array::from_fn(|k| DVec4::new(series[0][k], series[1][k], series[2][k], 0.0).as_vec4());
+    let turn: f64 = angles.iter().sum();
     // A margin for the f32 rounding of the intermediate points.
-    let exact = turn > (FAST_SLERP_MIN_COS as f64).acos() - 1e-3;
-    QuatSegment {
-        points: [v(p0), v(p1), v(p2), v(p3)],
-        xm1: DVec4::new(x(p0, p1), x(p1, p2), x(p2, p3), 0.0).as_vec4(),
-        exact,
-    }
+    let fits = |min_cos: f32| turn <= (min_cos as f64).acos() - 1e-3;
+    let tier = if fits(TINY_SLERP_MIN_COS) {
+        SlerpTier::Tiny
+    } else if fits(NARROW_SLERP_MIN_COS) {
+        SlerpTier::Narrow
+    } else if fits(FAST_SLERP_MIN_COS) {
+        SlerpTier::Wide
+    } else {
+        SlerpTier::Exact
+    };
+    let v = |q: DQuat| DVec4::from(q).as_vec4();
+    QuatSegment { points: [v(p0), v(p1), v(p2), v(p3)], sine, tier }
 }
 
 fn same_vec3(a: DVec3, b: DVec3) -> bool {

@@ -6,27 +6,40 @@
 //! `e = v_{i+1} − h·a_{i+1}/3`, the same cubic) and constant-speed paths
 //! (§2.6). Evaluation is then a fixed, branch-light sequence of arithmetic:
 //! Bernstein weights for vectors, three levels of slerp de Casteljau for
-//! rotations. Nothing here allocates or fails.
+//! rotations. Nothing here allocates or fails. `tracks` stores these by
+//! kind for the sampling loop.
 
 use glam::{Quat, Vec3A, Vec4};
 
-use super::quat::{slerp_fast, slerp_weights, slerp_weights_exact};
+use super::quat::{slerp_weights, slerp_weights_exact, slerp_weights_narrow, slerp_weights_tiny};
 use super::timeline::Span;
 
 /// Bezier control points of one quaternion segment, signs chosen so that
-/// each consecutive pair is its own short way, plus `cos θ − 1` of the three
-/// first-level pairs (constant per segment, so computed once).
-///
-/// `exact` marks a segment whose control polygon turns through more than
-/// `acos(FAST_SLERP_MIN_COS)`: every slerp of its de Casteljau pyramid spans
-/// at most the polygon's total angle, so for all other segments the
-/// polynomial weights are provably in range.
+/// each consecutive pair is its own short way, and the slerp weights of its
+/// three first-level pairs as polynomials in `u` (their angles are fixed, so
+/// `sin(uθ)/sin θ` is a Taylor series computed once: lane k of `sine[i]` is
+/// coefficient i of pair k).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(16))]
 pub struct QuatSegment {
     pub points: [Vec4; 4],
-    pub xm1: Vec4,
-    pub exact: bool,
+    pub sine: [Vec4; 5],
+    pub tier: SlerpTier,
+}
+
+/// How the runtime slerps of a segment are computed. Every slerp of the de
+/// Casteljau pyramid spans at most the control polygon's total turn, so the
+/// turn, known at build time, picks a method that is accurate for all of them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SlerpTier {
+    /// Turn ≤ acos(TINY_SLERP_MIN_COS): 3-term polynomial weights.
+    Tiny,
+    /// Turn ≤ acos(NARROW_SLERP_MIN_COS): 4-term polynomial weights.
+    Narrow,
+    /// Turn ≤ acos(FAST_SLERP_MIN_COS): 6-term polynomial weights.
+    Wide,
+    /// Wider: exact `acos`/`sin` slerps.
+    Exact,
 }
 
 /// Maps a span of a constant-speed track's arc-length timeline back to a
@@ -78,77 +91,56 @@ pub fn bezier3(p: &[Vec3A; 4], u: f32) -> Vec3A {
 }
 
 #[inline(always)]
-fn bezier4(p: &[Vec4; 4], u: f32) -> Vec4 {
+pub fn bezier4(p: &[Vec4; 4], u: f32) -> Vec4 {
     let b = bernstein(u);
     p[0] * b.x + p[1] * b.y + p[2] * b.z + p[3] * b.w
 }
 
+/// SPEC §2.5: `c_i` on `[t_i, t_{i+1})`; at and after the last key, `c_n`.
 #[inline(always)]
-fn step<T: Copy>(keys: &[T], s: Span) -> T {
-    // SPEC §2.5: c_i on [t_i, t_{i+1}); at and after the last key, c_n.
+pub fn step<T: Copy>(keys: &[T], s: Span) -> T {
     let i = s.index as usize;
     if s.u >= 1.0 { keys[i + 1] } else { keys[i] }
 }
 
-impl Vec3Curve {
-    #[inline]
-    pub fn eval(&self, s: Span) -> Vec3A {
-        let i = s.index as usize;
-        match self {
-            Vec3Curve::Constant(v) => *v,
-            Vec3Curve::Step(keys) => step(keys, s),
-            Vec3Curve::Linear(keys) => keys[i].lerp(keys[i + 1], s.u),
-            Vec3Curve::Bezier(segs) => bezier3(&segs[i], s.u),
-            Vec3Curve::ConstantSpeed { segments, pieces } => {
-                let piece = pieces[i];
-                bezier3(&segments[piece.segment as usize], piece.u0 + s.u * piece.du)
-            }
-        }
-    }
-}
-
-impl QuatCurve {
-    #[inline]
-    pub fn eval(&self, s: Span) -> Quat {
-        let i = s.index as usize;
-        match self {
-            QuatCurve::Constant(q) => *q,
-            QuatCurve::Step(keys) => step(keys, s),
-            QuatCurve::Slerp(keys) => slerp_fast(keys[i], keys[i + 1], s.u),
-            QuatCurve::SlerpBezier(segs) => slerp_bezier(&segs[i], s.u),
-            QuatCurve::Hermite(segs) => {
-                let r = bezier4(&segs[i], s.u);
-                Quat::from_vec4(r * r.length_recip())
-            }
-        }
-    }
-}
-
 /// The three-level slerp de Casteljau of SPEC §2.3 (equations 1–6 with
-/// `lerp` replaced by short-way `slerp`), six slerps in four weight calls.
+/// `lerp` replaced by short-way `slerp`): six slerps, whose weights come
+/// from the segment's stored series (level 1) and two polynomial evaluations
+/// of four lanes each (levels 2 and 3).
 #[inline]
 pub fn slerp_bezier(seg: &QuatSegment, u: f32) -> Quat {
-    if seg.exact {
-        return slerp_bezier_exact(seg, u);
+    match seg.tier {
+        SlerpTier::Tiny => pyramid(seg, u, slerp_weights_tiny),
+        SlerpTier::Narrow => pyramid(seg, u, slerp_weights_narrow),
+        SlerpTier::Wide => pyramid(seg, u, slerp_weights),
+        SlerpTier::Exact => slerp_bezier_exact(seg, u),
     }
+}
+
+#[inline(always)]
+fn pyramid(seg: &QuatSegment, u: f32, weights: impl Fn(Vec4, Vec4) -> Vec4) -> Quat {
     let [c, d, e, c1] = seg.points;
     let v = 1.0 - u;
-    // Level 1: f = slerp(c, d), g = slerp(d, e), h = slerp(e, c1); the pairs
-    // are pre-aligned, so their weights come straight from the stored cosines.
-    let wu = slerp_weights(Vec4::splat(u), seg.xm1);
-    let wv = slerp_weights(Vec4::splat(v), seg.xm1);
+    // Level 1: f = slerp(c, d), g = slerp(d, e), h = slerp(e, c1), weights
+    // w(s) = s·Σ c_k·s^(2k) per pair (lanes x, y, z).
+    let series = |s: f32| {
+        let ss = Vec4::splat(s * s);
+        let [c0, c1, c2, c3, c4] = seg.sine;
+        (((c4 * ss + c3) * ss + c2) * ss + c1) * ss * s + c0 * s
+    };
+    let (wu, wv) = (series(u), series(v));
     let f = c * wv.x + d * wu.x;
     let g = d * wv.y + e * wu.y;
     let h = e * wv.z + c1 * wu.z;
     // Level 2: m = slerp(f, g), n = slerp(g, h), short way.
     let (g_m, x_fg) = aligned(f, g);
     let (h_n, x_gh) = aligned(g, h);
-    let w2 = slerp_weights(Vec4::new(v, u, v, u), Vec4::new(x_fg, x_fg, x_gh, x_gh) - Vec4::ONE);
+    let w2 = weights(Vec4::new(v, u, v, u), Vec4::new(x_fg, x_fg, x_gh, x_gh) - Vec4::ONE);
     let m = f * w2.x + g_m * w2.y;
     let n = g * w2.z + h_n * w2.w;
     // Level 3: the point on the curve.
     let (n_r, x_mn) = aligned(m, n);
-    let w3 = slerp_weights(Vec4::new(v, u, 0.0, 0.0), Vec4::splat(x_mn - 1.0));
+    let w3 = weights(Vec4::new(v, u, 0.0, 0.0), Vec4::splat(x_mn - 1.0));
     let r = m * w3.x + n_r * w3.y;
     Quat::from_vec4(r * r.length_recip())
 }
@@ -174,4 +166,50 @@ fn slerp_bezier_exact(seg: &QuatSegment, u: f32) -> Quat {
 fn aligned(p: Vec4, q: Vec4) -> (Vec4, f32) {
     let x = p.dot(q);
     if x < 0.0 { (-q, (-x).min(1.0)) } else { (q, x.min(1.0)) }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DQuat, DVec3};
+
+    use super::*;
+    use crate::anim::Ends;
+    use crate::anim::compile::catmull_rom;
+
+    /// The polynomial pyramid agrees with exact slerps on segments of every
+    /// tier (keys up to ~100° apart).
+    #[test]
+    fn fast_pyramid_matches_exact_slerps() {
+        let mut seed = 0x1234_5678_u64;
+        let mut rnd = move || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        let mut tiers = [0usize; 4];
+        let mut worst = 0.0f32;
+        for case in 0..300 {
+            let spread = 0.02 + 1.8 * (case as f64 / 300.0); // radians of rotation between keys
+            let mut q = DQuat::IDENTITY;
+            let keys: Vec<DQuat> = (0..5)
+                .map(|_| {
+                    let axis = DVec3::new(rnd(), rnd(), rnd()).normalize_or(DVec3::X);
+                    q = (DQuat::from_axis_angle(axis, spread * (0.5 + rnd().abs() / 2.0)) * q).normalize();
+                    q
+                })
+                .collect();
+            let times: Vec<f64> = (0..5).map(|i| i as f64 + 0.3 * rnd()).collect();
+            for seg in catmull_rom(&keys, &times, Ends::Reflect, 0.5) {
+                let built = crate::anim::compile::quat_segment(&seg);
+                tiers[built.tier as usize] += 1;
+                for k in 0..=20 {
+                    let u = k as f32 / 20.0;
+                    let (a, b) = (slerp_bezier(&built, u), slerp_bezier_exact(&built, u));
+                    let d = (Vec4::from(a) - Vec4::from(b)).length().min((Vec4::from(a) + Vec4::from(b)).length());
+                    worst = worst.max(d);
+                }
+            }
+        }
+        assert!(tiers.iter().all(|&n| n > 0), "every tier exercised: {tiers:?}");
+        assert!(worst < 2e-6, "worst difference from exact slerps: {worst}");
+    }
 }

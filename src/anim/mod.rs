@@ -13,7 +13,7 @@
 //! Module map: `spec` the authoring types; `error` why a spec is refused;
 //! `compile` per-track validation and control points; `curve` the runtime
 //! curves and their evaluation; `quat` quaternion tools and fast slerp;
-//! `timeline` the segment search; `arc` constant-speed tables; `skeleton`
+//! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
 //! hierarchy and model space; `clip` the clip and the sampling kernel.
 
 mod arc;
@@ -25,6 +25,7 @@ pub mod quat;
 mod skeleton;
 mod spec;
 mod timeline;
+mod tracks;
 
 pub use clip::{Clip, Cursor, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times};
 pub use error::{ClipError, ClipErrorKind, Path, Step};
@@ -38,6 +39,6 @@ pub use timeline::{Span, Timeline};
 /// Internals exposed for benchmarks and reference tests only.
 #[doc(hidden)]
 pub mod internals {
-    pub use super::compile::{Key, catmull_rom};
-    pub use super::curve::{QuatSegment, bezier3, slerp_bezier};
+    pub use super::compile::{Key, catmull_rom, quat_segment};
+    pub use super::curve::{QuatSegment, SlerpTier, bezier3, slerp_bezier};
 }

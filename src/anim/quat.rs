@@ -10,7 +10,7 @@
 //! [`FAST_SLERP_MIN_COS`]) its error is below 2e-8, far inside the 1e-5
 //! bound of SPEC §2.9; wider pairs take the exact formula.
 
-use glam::{DQuat, DVec4, Quat, Vec4};
+use glam::{DQuat, Quat, Vec4};
 
 /// `q` if `q.w >= 0`, else `-q`: the conditional negation that makes a power
 /// go the short way (SPEC §2.3).
@@ -49,44 +49,58 @@ pub fn make_continuous(keys: &mut [DQuat]) {
     }
 }
 
-/// Converts a stored `f64` quaternion to the sampler's `f32` form.
-#[inline]
-pub fn to_f32(q: DQuat) -> Quat {
-    q.as_quat()
-}
-
-/// `f32` → `f64`, for build-time maths.
-#[inline]
-pub fn to_f64(q: Quat) -> DQuat {
-    q.as_dquat()
-}
-
 /// Flips `q` to `p`'s hemisphere (so `dot(p, q) >= 0`).
 #[inline]
 pub fn align(p: DQuat, q: DQuat) -> DQuat {
     if p.dot(q) < 0.0 { -q } else { q }
 }
 
-// Eberly's series truncated at 6 terms, with the error-balancing factor
-// `1 + μ` on the last term. His paper balances μ over the whole short-way
-// range cos θ ∈ [0, 1]; we only use the series on [FAST_SLERP_MIN_COS, 1]
-// (a fitted μ = 0.154 there gives 1.1e-8 worst error against the exact sine
-// ratio, where 8 terms over [0, 1] only reach 2.6e-5) and fall back to the
-// exact formula outside it.
-const ONE_PLUS_MU: f32 = 1.154;
-const EB_U: [f32; 6] = [
-    1.0 / (1.0 * 3.0),
-    1.0 / (2.0 * 5.0),
-    1.0 / (3.0 * 7.0),
-    1.0 / (4.0 * 9.0),
-    1.0 / (5.0 * 11.0),
-    ONE_PLUS_MU / (6.0 * 13.0),
-];
-const EB_V: [f32; 6] = [1.0 / 3.0, 2.0 / 5.0, 3.0 / 7.0, 4.0 / 9.0, 5.0 / 11.0, ONE_PLUS_MU * 6.0 / 13.0];
+// Eberly's series, truncated. His paper balances an error factor `1 + μ` on
+// the last term over the whole short-way range cos θ ∈ [0, 1], where even 8
+// terms only reach 2.6e-5. We use it on narrower ranges, fitted there:
+// 3 terms on cos θ ∈ [0.98, 1] (1.4e-9 worst error against the exact sine
+// ratio), 4 terms with μ = 0.04 on [0.9, 1] (6e-9) and 6 terms with
+// μ = 0.154 on [0.7, 1] (1.1e-8), and the exact formula outside.
+const fn eberly<const N: usize>(one_plus_mu: f32) -> ([f32; N], [f32; N]) {
+    let (mut u, mut v) = ([0.0; N], [0.0; N]);
+    let mut i = 0;
+    while i < N {
+        let k = (i + 1) as f32;
+        let scale = if i + 1 == N { one_plus_mu } else { 1.0 };
+        u[i] = scale / (k * (2.0 * k + 1.0));
+        v[i] = scale * k / (2.0 * k + 1.0);
+        i += 1;
+    }
+    (u, v)
+}
 
-/// The smallest `cos θ` (θ the angle between two quaternions, 45.6°, a
-/// 91° rotation) for which [`slerp_weights`] holds its accuracy.
+const TINY: ([f32; 3], [f32; 3]) = eberly(1.0);
+const NARROW: ([f32; 4], [f32; 4]) = eberly(1.04);
+const WIDE: ([f32; 6], [f32; 6]) = eberly(1.154);
+
+/// The smallest `cos θ` (11.5°, a 23° rotation) for [`slerp_weights_tiny`]:
+/// dense keys (mocap, baked exports) are nearly all in this range.
+pub const TINY_SLERP_MIN_COS: f32 = 0.98;
+/// The smallest `cos θ` (θ the angle between two quaternions: 25.8°, a
+/// 52° rotation) for [`slerp_weights_narrow`].
+pub const NARROW_SLERP_MIN_COS: f32 = 0.9;
+/// The smallest `cos θ` (45.6°, a 91° rotation) for [`slerp_weights`].
 pub const FAST_SLERP_MIN_COS: f32 = 0.7;
+
+#[inline(always)]
+fn eberly_weights<const N: usize>(s: Vec4, xm1: Vec4, (cu, cv): &([f32; N], [f32; N])) -> Vec4 {
+    let ss = s * s;
+    let mut acc = Vec4::ONE;
+    // Horner from the innermost term outwards: acc = 1 + (U_i·s² − V_i)·(x − 1)·acc.
+    // Plain multiply-add: `Vec4::mul_add` without the `fma` target feature
+    // falls back to a software fmaf per lane (10x slower).
+    let mut i = N;
+    while i > 0 {
+        i -= 1;
+        acc = (ss * cu[i] - Vec4::splat(cv[i])) * xm1 * acc + Vec4::ONE;
+    }
+    s * acc
+}
 
 /// Four slerp weights at once: lane `k` is `sin(s_k·θ_k)/sin θ_k` where
 /// `s` holds the parameters and `xm1` holds `cos θ_k − 1`.
@@ -97,17 +111,62 @@ pub const FAST_SLERP_MIN_COS: f32 = 0.7;
 /// `cos θ_k ∈ [FAST_SLERP_MIN_COS, 1]`; callers guarantee that range.
 #[inline(always)]
 pub fn slerp_weights(s: Vec4, xm1: Vec4) -> Vec4 {
-    let ss = s * s;
-    let mut acc = Vec4::ONE;
-    // Horner from the innermost term outwards:
-    // acc = 1 + (U_i·s² − V_i)·(x − 1)·acc
-    let mut i = EB_U.len();
-    while i > 0 {
-        i -= 1;
-        let b = (ss * EB_U[i] - Vec4::splat(EB_V[i])) * xm1;
-        acc = b.mul_add(acc, Vec4::ONE);
+    eberly_weights(s, xm1, &WIDE)
+}
+
+/// [`slerp_weights`] with fewer terms, for `cos θ_k ∈ [NARROW_SLERP_MIN_COS, 1]`.
+#[inline(always)]
+pub fn slerp_weights_narrow(s: Vec4, xm1: Vec4) -> Vec4 {
+    eberly_weights(s, xm1, &NARROW)
+}
+
+/// [`slerp_weights`] with fewer terms, for `cos θ_k ∈ [TINY_SLERP_MIN_COS, 1]`.
+#[inline(always)]
+pub fn slerp_weights_tiny(s: Vec4, xm1: Vec4) -> Vec4 {
+    eberly_weights(s, xm1, &TINY)
+}
+
+/// Taylor coefficients `c_k` of `sin(uθ)/sin θ = Σ c_k·u^(2k+1)` for a
+/// fixed θ (so the weights of a segment's fixed pairs are a polynomial in
+/// `u`). Five terms leave under 3e-9 for θ ≤ 45.6°.
+pub fn sine_ratio_series(theta: f64) -> [f64; 5] {
+    if theta < 1e-9 {
+        return [1.0, 0.0, 0.0, 0.0, 0.0];
     }
-    s * acc
+    let sin = theta.sin();
+    let mut c = [0.0; 5];
+    let mut term = theta / sin; // θ^(2k+1) / (2k+1)! / sin θ, with sign
+    for (k, ck) in c.iter_mut().enumerate() {
+        *ck = term;
+        let (a, b) = ((2 * k + 2) as f64, (2 * k + 3) as f64);
+        term *= -theta * theta / (a * b);
+    }
+    c
+}
+
+/// Short-way slerp of two unit quaternions, normalised: polynomial weights
+/// when the pair is close enough, the exact ones otherwise.
+#[inline]
+pub fn slerp_fast(p: Quat, q: Quat, u: f32) -> Quat {
+    let (p4, q4) = (Vec4::from(p), Vec4::from(q));
+    let x = p4.dot(q4);
+    let (q4, x) = if x < 0.0 { (-q4, -x) } else { (q4, x) };
+    let s = Vec4::new(1.0 - u, u, 0.0, 0.0);
+    let xm1 = Vec4::splat(x.min(1.0) - 1.0);
+    let (wp, wq) = if x >= TINY_SLERP_MIN_COS {
+        let w = slerp_weights_tiny(s, xm1);
+        (w.x, w.y)
+    } else if x >= NARROW_SLERP_MIN_COS {
+        let w = slerp_weights_narrow(s, xm1);
+        (w.x, w.y)
+    } else if x >= FAST_SLERP_MIN_COS {
+        let w = slerp_weights(s, xm1);
+        (w.x, w.y)
+    } else {
+        slerp_weights_exact(x, u)
+    };
+    let r = p4 * wp + q4 * wq;
+    Quat::from_vec4(r * r.length_recip())
 }
 
 /// Exact short-way slerp weights `(w_p, w_q)` for `cos θ = x ∈ [0, 1]`.
@@ -119,29 +178,6 @@ pub fn slerp_weights_exact(x: f32, u: f32) -> (f32, f32) {
         return (1.0 - u, u);
     }
     (((1.0 - u) * theta).sin() / sin, (u * theta).sin() / sin)
-}
-
-/// Short-way slerp of two unit quaternions, normalised: the polynomial
-/// weights when the pair is close enough, the exact ones otherwise.
-#[inline]
-pub fn slerp_fast(p: Quat, q: Quat, u: f32) -> Quat {
-    let (p4, q4) = (Vec4::from(p), Vec4::from(q));
-    let x = p4.dot(q4);
-    let (q4, x) = if x < 0.0 { (-q4, -x) } else { (q4, x) };
-    let (wp, wq) = if x >= FAST_SLERP_MIN_COS {
-        let w = slerp_weights(Vec4::new(1.0 - u, u, 0.0, 0.0), Vec4::splat(x.min(1.0) - 1.0));
-        (w.x, w.y)
-    } else {
-        slerp_weights_exact(x, u)
-    };
-    let r = p4 * wp + q4 * wq;
-    Quat::from_vec4(r * r.length_recip())
-}
-
-/// `[x, y, z, w]` of a `DQuat` as a `DVec4` (same order as glam).
-#[inline]
-pub fn as_dvec4(q: DQuat) -> DVec4 {
-    DVec4::from(q)
 }
 
 #[cfg(test)]
@@ -164,5 +200,29 @@ mod tests {
             }
         }
         assert!(worst < 2e-7, "worst slerp-weight error {worst}");
+    }
+
+    #[test]
+    fn narrow_weights_and_series_match_sine_ratio() {
+        let mut worst = (0.0f64, 0.0f64);
+        for xi in 0..=200 {
+            let x = FAST_SLERP_MIN_COS as f64 + (1.0 - FAST_SLERP_MIN_COS as f64) * xi as f64 / 200.0;
+            let theta = x.acos();
+            let c = sine_ratio_series(theta);
+            for si in 0..=100 {
+                let s = si as f64 / 100.0;
+                let exact = if theta < 1e-12 { s } else { (s * theta).sin() / theta.sin() };
+                let series: f64 = c.iter().enumerate().map(|(k, ck)| ck * s.powi(2 * k as i32 + 1)).sum();
+                worst.1 = worst.1.max((series - exact).abs());
+                let (sv, xv) = (Vec4::splat(s as f32), Vec4::splat((x - 1.0) as f32));
+                if x >= NARROW_SLERP_MIN_COS as f64 {
+                    worst.0 = worst.0.max((slerp_weights_narrow(sv, xv).x as f64 - exact).abs());
+                }
+                if x >= TINY_SLERP_MIN_COS as f64 {
+                    worst.0 = worst.0.max((slerp_weights_tiny(sv, xv).x as f64 - exact).abs());
+                }
+            }
+        }
+        assert!(worst.0 < 2e-7 && worst.1 < 1e-8, "worst errors (narrow, series): {worst:?}");
     }
 }

@@ -11,8 +11,9 @@
 /// Strictly increasing key times, with each segment's reciprocal length.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Timeline {
-    times: Box<[f32]>,
-    inv_h: Box<[f32]>,
+    /// `[t_i, 1/(t_{i+1} − t_i)]` per key (0 for the last), so the common
+    /// case reads one pair and the next key's time.
+    keys: Box<[[f32; 2]]>,
     /// `(t0, 1/h)` when every key sits at `t0 + i·h` to within f32 rounding.
     uniform: Option<(f32, f32)>,
 }
@@ -31,9 +32,12 @@ impl Timeline {
     pub(crate) fn new(times: &[f32]) -> Self {
         debug_assert!(!times.is_empty());
         debug_assert!(times.windows(2).all(|w| w[0] < w[1]));
-        let inv_h: Box<[f32]> = times.windows(2).map(|w| 1.0 / (w[1] - w[0])).collect();
-        let uniform = Self::detect_uniform(times);
-        Timeline { times: times.into(), inv_h, uniform }
+        let keys = times
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| [t, times.get(i + 1).map_or(0.0, |&next| 1.0 / (next - t))])
+            .collect();
+        Timeline { keys, uniform: Self::detect_uniform(times) }
     }
 
     fn detect_uniform(times: &[f32]) -> Option<(f32, f32)> {
@@ -48,16 +52,25 @@ impl Timeline {
         uniform.then_some((times[0], (1.0 / h) as f32))
     }
 
-    pub fn times(&self) -> &[f32] {
-        &self.times
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// The time of key `i`.
+    pub fn time(&self, i: usize) -> f32 {
+        self.keys[i][0]
     }
 
     pub fn first(&self) -> f32 {
-        self.times[0]
+        self.keys[0][0]
     }
 
     pub fn last(&self) -> f32 {
-        self.times[self.times.len() - 1]
+        self.keys[self.keys.len() - 1][0]
     }
 
     /// The segment holding `t`, clamped outside the keys (SPEC §2: a track
@@ -65,38 +78,60 @@ impl Timeline {
     /// `hint` is the caller's last answer and is updated.
     #[inline]
     pub fn locate(&self, t: f32, hint: &mut u32) -> Span {
-        let times = &*self.times;
-        let n = times.len();
-        if n < 2 || t <= times[0] || t.is_nan() {
+        let keys = &*self.keys;
+        let mut i = *hint as usize;
+        // The common cases: still in the hinted segment, or a few keys on
+        // (forward playback at 60 fps over 120 fps mocap crosses two).
+        if let Some(&[a, _]) = keys.get(i)
+            && a <= t
+        {
+            for _ in 0..4 {
+                match keys.get(i + 1) {
+                    Some(&[b, _]) if t < b => {
+                        *hint = i as u32;
+                        let [a, inv_h] = keys[i];
+                        // t ≥ a makes (t − a) ≥ 0 exactly; rounding can only overshoot 1.
+                        return Span { index: i as u32, u: ((t - a) * inv_h).min(1.0) };
+                    }
+                    Some(_) => i += 1,
+                    None => break,
+                }
+            }
+        }
+        self.locate_slow(t, hint)
+    }
+
+    #[inline(never)]
+    fn locate_slow(&self, t: f32, hint: &mut u32) -> Span {
+        let keys = &*self.keys;
+        let n = keys.len();
+        if n < 2 || t.is_nan() || t <= keys[0][0] {
             *hint = 0;
             return Span { index: 0, u: 0.0 };
         }
         let last = n - 2;
-        if t >= times[n - 1] {
+        if t >= keys[n - 1][0] {
             *hint = last as u32;
             return Span { index: last as u32, u: 1.0 };
         }
-        // Here times[0] < t < times[n-1], so some i in 0..=last holds it.
-        let mut i = (*hint as usize).min(last);
-        if !(times[i] <= t && t < times[i + 1]) {
-            i = if i < last && times[i + 1] <= t && t < times[i + 2] {
-                i + 1
-            } else if let Some((t0, inv_h)) = self.uniform {
-                let mut j = (((t - t0) * inv_h) as usize).min(last);
-                while j > 0 && t < times[j] {
-                    j -= 1;
-                }
-                while j < last && t >= times[j + 1] {
-                    j += 1;
-                }
-                j
-            } else {
-                times.partition_point(|&k| k <= t) - 1
-            };
-        }
+        // Here keys[0] < t < keys[n-1], so some i in 0..=last holds it.
+        let i = (*hint as usize).min(last);
+        let i = if i < last && keys[i + 1][0] <= t && t < keys[i + 2][0] {
+            i + 1
+        } else if let Some((t0, inv_h)) = self.uniform {
+            let mut j = (((t - t0) * inv_h) as usize).min(last);
+            while j > 0 && t < keys[j][0] {
+                j -= 1;
+            }
+            while j < last && t >= keys[j + 1][0] {
+                j += 1;
+            }
+            j
+        } else {
+            keys.partition_point(|k| k[0] <= t) - 1
+        };
         *hint = i as u32;
-        let u = ((t - times[i]) * self.inv_h[i]).clamp(0.0, 1.0);
-        Span { index: i as u32, u }
+        Span { index: i as u32, u: ((t - keys[i][0]) * keys[i][1]).clamp(0.0, 1.0) }
     }
 }
 

@@ -4,7 +4,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod import;
 mod sample;
+mod serve;
 
 #[derive(Debug, Parser)]
 #[command(name = "inbetween", version, about = "Keyframes in, inbetweens out: a keyframe-animation server and tools.")]
@@ -17,12 +19,18 @@ pub struct Cli {
 enum Command {
     /// Sample a clip file offline and print its poses as JSON.
     Sample(sample::SampleArgs),
+    /// Serve the REST API on the embedded clip store (see README, "REST API").
+    Serve(Box<serve::ServeArgs>),
+    /// Import a glTF, GLB or BVH file: print clip documents or upload them.
+    Import(import::ImportArgs),
 }
 
 impl Cli {
     pub fn run(self) -> ExitCode {
         let result = match self.command {
             Command::Sample(args) => sample::run(args),
+            Command::Serve(args) => serve::run(*args),
+            Command::Import(args) => import::run(args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

@@ -15,7 +15,7 @@ use crate::anim::{
     SkeletonSpec, Space, Speed, TrackSpec, Transform,
 };
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClipDoc {
     pub name: String,
@@ -28,13 +28,13 @@ pub struct ClipDoc {
     pub playback: PlaybackDoc,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SkeletonDoc {
     pub joints: Vec<JointDoc>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JointDoc {
     pub name: String,
@@ -47,7 +47,7 @@ pub struct JointDoc {
     pub inverse_bind: Option<[f32; 16]>,
 }
 
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RestDoc {
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -64,7 +64,7 @@ impl RestDoc {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TrackDoc {
     pub joint: String,
@@ -85,7 +85,7 @@ pub struct TrackDoc {
     pub speed: Option<SpeedDoc>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EventDoc {
     pub time: f32,
@@ -95,7 +95,7 @@ pub struct EventDoc {
 macro_rules! wire_enum {
     ($(#[$m:meta])* $doc:ident => $core:ident { $($(#[$vm:meta])* $variant:ident = $name:literal),+ $(,)? }) => {
         $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
         pub enum $doc { $($(#[$vm])* #[serde(rename = $name)] $variant),+ }
         impl From<$doc> for $core {
             fn from(d: $doc) -> $core { match d { $($doc::$variant => $core::$variant),+ } }
@@ -147,12 +147,14 @@ impl From<ClipError> for DocError {
 /// Parses a clip document, reporting the JSON pointer of any type error.
 pub fn parse_clip_doc(body: &[u8]) -> Result<ClipDoc, DocError> {
     let de = &mut serde_json::Deserializer::from_slice(body);
-    let doc: ClipDoc = serde_path_to_error::deserialize(de).map_err(|e| {
+    let doc: ClipDoc = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         let pointer = pointer_of(e.path());
         let inner = e.into_inner();
         let code = if inner.is_syntax() || inner.is_eof() { "malformed_json" } else { "invalid_field" };
         DocError { code, pointer, detail: inner.to_string() }
     })?;
+    // Only whitespace may follow the document: `{...} x` is not a clip.
+    de.end().map_err(|e| DocError { code: "malformed_json", pointer: String::new(), detail: e.to_string() })?;
     Ok(doc)
 }
 

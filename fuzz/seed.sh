@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Seeds fuzz/corpus/<target>/ from ../shared/testdata (copied at run time,
+# never committed: the files are third-party). Large files are cut down so
+# each run stays fast: BVH takes keep their hierarchy and 3 frames, the
+# external-buffer glTF gets its .bin embedded as a data: URI.
+set -euo pipefail
+cd "$(dirname "$0")"
+T=../../shared/testdata
+mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json
+cp "$T"/gltf/AnimatedTriangle/*.gltf "$T"/gltf/BoxAnimated/*.gltf "$T"/gltf/RiggedSimple/*.gltf \
+   "$T"/gltf/Fox/Fox.glb corpus/import_gltf/
+python3 - "$T" <<'PY'
+import base64, json, sys
+t = sys.argv[1]
+d = json.load(open(f"{t}/gltf/InterpolationTest/InterpolationTest.gltf"))
+b = open(f"{t}/gltf/InterpolationTest/interpolation.bin", "rb").read()
+d["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(b).decode()
+json.dump(d, open("corpus/import_gltf/InterpolationTest-embedded.gltf", "w"))
+for name in ["131_01", "131_03", "05_20-mb", "05_20-daz"]:
+    lines = open(f"{t}/bvh/{name}.bvh", "rb").read().split(b"\n")
+    m = next(i for i, l in enumerate(lines) if l.strip().upper() == b"MOTION")
+    head = lines[: m + 1] + [b"Frames: 3", lines[m + 2]] + lines[m + 3 : m + 6]
+    open(f"corpus/import_bvh/{name}-3frames.bvh", "wb").write(b"\n".join(head) + b"\n")
+PY
+cp ../examples/*.json corpus/clip_json/
+BIN=${CARGO_TARGET_DIR:-../target}/debug/inbetween
+if [ -x "$BIN" ]; then
+  for f in "$T"/gltf/AnimatedTriangle/*.gltf "$T"/gltf/BoxAnimated/*.gltf "$T"/gltf/RiggedSimple/*.gltf \
+           corpus/import_gltf/InterpolationTest-embedded.gltf corpus/import_bvh/131_01-3frames.bvh; do
+    "$BIN" import "$f" | python3 -c '
+import json, sys
+d = json.load(sys.stdin)
+for i, c in enumerate(d["clips"]):
+    json.dump(c, open(f"corpus/clip_json/{sys.argv[1]}-{i}.json", "w"))
+' "$(basename "$f")"
+  done
+fi
+ls corpus/* | head -50

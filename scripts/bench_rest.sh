@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# REST throughput: GET /v1/clips/{id}/pose on a 20-joint clip vs GET /healthz,
+# same server, same run, measured with wrk (Debian: apt-get install -y wrk).
+# Traffic goes to 127.0.0.1 only. Usage: scripts/bench_rest.sh [seconds] [connections] [rounds]
+set -euo pipefail
+secs=${1:-10}
+conns=${2:-32}
+rounds=${3:-2}
+root=$(cd "$(dirname "$0")/.." && pwd)
+bin=${CARGO_TARGET_DIR:-$root/target}/release/inbetween
+[ -x "$bin" ] || { echo "build first: cargo build --release" >&2; exit 1; }
+command -v wrk >/dev/null || { echo "wrk is missing: apt-get install -y wrk" >&2; exit 1; }
+
+work=$(mktemp -d)
+trap 'kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; rm -rf "$work"' EXIT
+INBETWEEN_LOG=warn "$bin" serve --listen 127.0.0.1:0 --data-dir "$work/data" >"$work/out" 2>"$work/err" &
+pid=$!
+for _ in $(seq 100); do grep -q listening "$work/out" 2>/dev/null && break; sleep 0.1; done
+base=$(sed -n 's/^inbetween listening on //p' "$work/out")
+
+# A 20-joint chain: every joint has a 31-key Catmull-Rom rotation track, the
+# root also a translation track.
+python3 - >"$work/clip.json" <<'PY'
+import json, math
+joints = [{"name": f"j{i}", "parent": (f"j{i-1}" if i else None), "rest": {"translation": [0, 0.1, 0]}} for i in range(20)]
+times = [i / 10 for i in range(31)]
+def rot(i, k):
+    a = 0.3 * math.sin(k / 5 + i)
+    return [0, 0, math.sin(a / 2), math.cos(a / 2)]
+tracks = [{"joint": f"j{i}", "channel": "rotation", "interpolation": "catmull_rom",
+           "times": times, "values": [rot(i, k) for k in range(31)]} for i in range(20)]
+tracks.append({"joint": "j0", "channel": "translation", "interpolation": "catmull_rom",
+               "times": times, "values": [[k / 10, 0, 0] for k in range(31)]})
+print(json.dumps({"name": "bench20", "skeleton": {"joints": joints}, "tracks": tracks, "playback": "loop"}))
+PY
+id=$(curl -sf -X POST "$base/v1/clips" -H 'Content-Type: application/json' --data-binary @"$work/clip.json" \
+     | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
+pose="$base/v1/clips/$id/pose?t=1.2345"
+curl -sf "$pose" >/dev/null
+
+echo "date: $(date -u +%FT%TZ)  cpus: $(nproc)  wrk -t2 -c$conns -d${secs}s --latency"
+for round in $(seq "$rounds"); do
+  for url in "$base/healthz" "$pose"; do
+    out=$(wrk -t2 -c"$conns" -d"${secs}s" --latency "$url")
+    rps=$(awk '/^Requests\/sec/ {print $2}' <<<"$out")
+    p50=$(awk '$1 == "50%" {print $2}' <<<"$out")
+    p99=$(awk '$1 == "99%" {print $2}' <<<"$out")
+    non2xx=$(awk '/Non-2xx/ {print $NF}' <<<"$out")
+    printf 'round %s %-8s req/s %10s  p50 %8s  p99 %8s  non-2xx %s\n' "$round" \
+      "$([[ $url == *healthz ]] && echo healthz || echo pose)" "$rps" "$p50" "$p99" "${non2xx:-0}"
+  done
+done

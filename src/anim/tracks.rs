@@ -1,0 +1,109 @@
+//! The compiled tracks of a clip, stored in one list per channel and curve
+//! kind, so that sampling runs each list as a tight loop with no dispatch
+//! per track. Constant tracks never reach these lists: `Clip::build` folds
+//! them into the clip's base pose.
+
+use glam::{Quat, Vec3A, Vec4};
+
+use super::curve::{ArcPiece, QuatCurve, QuatSegment, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
+use super::quat::slerp_fast;
+use super::timeline::Span;
+
+/// One track: the joint it writes, the timeline it reads and its curve.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Track<C> {
+    pub joint: u32,
+    pub timeline: u32,
+    pub curve: C,
+}
+
+/// Bezier segments walked at constant speed (SPEC §2.6).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ArcCurve {
+    segments: Box<[[Vec3A; 4]]>,
+    pieces: Box<[ArcPiece]>,
+}
+
+/// Translation or scale tracks by kind.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(crate) struct Vec3Tracks {
+    step: Vec<Track<Box<[Vec3A]>>>,
+    linear: Vec<Track<Box<[Vec3A]>>>,
+    bezier: Vec<Track<Box<[[Vec3A; 4]]>>>,
+    arc: Vec<Track<ArcCurve>>,
+}
+
+/// Rotation tracks by kind.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(crate) struct QuatTracks {
+    step: Vec<Track<Box<[Quat]>>>,
+    slerp: Vec<Track<Box<[Quat]>>>,
+    bezier: Vec<Track<Box<[QuatSegment]>>>,
+    hermite: Vec<Track<Box<[[Vec4; 4]]>>>,
+}
+
+#[inline(always)]
+fn run<C, T>(tracks: &[Track<C>], spans: &[Span], out: &mut [T], eval: impl Fn(&C, Span) -> T) {
+    for t in tracks {
+        out[t.joint as usize] = eval(&t.curve, spans[t.timeline as usize]);
+    }
+}
+
+impl Vec3Tracks {
+    /// Files `curve` under its kind; a constant curve is written to `base`
+    /// (the joint's value in the clip's base pose) instead.
+    pub fn push(&mut self, joint: u32, timeline: u32, curve: Vec3Curve, base: &mut Vec3A) {
+        match curve {
+            Vec3Curve::Constant(v) => *base = v,
+            Vec3Curve::Step(curve) => self.step.push(Track { joint, timeline, curve }),
+            Vec3Curve::Linear(curve) => self.linear.push(Track { joint, timeline, curve }),
+            Vec3Curve::Bezier(curve) => self.bezier.push(Track { joint, timeline, curve }),
+            Vec3Curve::ConstantSpeed { segments, pieces } => {
+                self.arc.push(Track { joint, timeline, curve: ArcCurve { segments, pieces } })
+            }
+        }
+    }
+
+    /// Evaluates every track at its timeline's span into `out`.
+    #[inline]
+    pub fn apply(&self, spans: &[Span], out: &mut [Vec3A]) {
+        run(&self.step, spans, out, |k, s| step(k, s));
+        run(&self.linear, spans, out, |k, s| {
+            let i = s.index as usize;
+            k[i].lerp(k[i + 1], s.u)
+        });
+        run(&self.bezier, spans, out, |segs, s| bezier3(&segs[s.index as usize], s.u));
+        run(&self.arc, spans, out, |a, s| {
+            let piece = a.pieces[s.index as usize];
+            bezier3(&a.segments[piece.segment as usize], piece.u0 + s.u * piece.du)
+        });
+    }
+}
+
+impl QuatTracks {
+    /// Files `curve` under its kind; a constant curve is written to `base`.
+    pub fn push(&mut self, joint: u32, timeline: u32, curve: QuatCurve, base: &mut Quat) {
+        match curve {
+            QuatCurve::Constant(q) => *base = q,
+            QuatCurve::Step(curve) => self.step.push(Track { joint, timeline, curve }),
+            QuatCurve::Slerp(curve) => self.slerp.push(Track { joint, timeline, curve }),
+            QuatCurve::SlerpBezier(curve) => self.bezier.push(Track { joint, timeline, curve }),
+            QuatCurve::Hermite(curve) => self.hermite.push(Track { joint, timeline, curve }),
+        }
+    }
+
+    /// Evaluates every track at its timeline's span into `out`.
+    #[inline]
+    pub fn apply(&self, spans: &[Span], out: &mut [Quat]) {
+        run(&self.step, spans, out, |k, s| step(k, s));
+        run(&self.slerp, spans, out, |k, s| {
+            let i = s.index as usize;
+            slerp_fast(k[i], k[i + 1], s.u)
+        });
+        run(&self.bezier, spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
+        run(&self.hermite, spans, out, |segs, s| {
+            let r = bezier4(&segs[s.index as usize], s.u);
+            Quat::from_vec4(r * r.length_recip())
+        });
+    }
+}

@@ -1,0 +1,213 @@
+//! Reading glTF accessors with every offset checked first (glTF 2.0 §3.6).
+//!
+//! The crate's own readers trust the document; here each accessor's count,
+//! stride and offsets are checked against its buffer view and buffer, with
+//! overflow-checked arithmetic, before a single value is read or a vector
+//! allocated. Sparse accessors are applied on top of their base (or zeros).
+
+use ::gltf::accessor::{Accessor, DataType, Dimensions};
+
+use super::ImportError;
+use super::buffers::Buffers;
+
+/// What the caller expects of an accessor.
+pub(crate) struct Expect<'s> {
+    /// For messages: "animation 2 sampler 0 input".
+    pub what: &'s str,
+    pub dims: Dimensions,
+    /// Accept normalised integer components (rotation outputs, §3.11).
+    pub normalized_ints: bool,
+    pub max_count: usize,
+}
+
+fn dims_name(d: Dimensions) -> &'static str {
+    match d {
+        Dimensions::Scalar => "SCALAR",
+        Dimensions::Vec2 => "VEC2",
+        Dimensions::Vec3 => "VEC3",
+        Dimensions::Vec4 => "VEC4",
+        Dimensions::Mat2 => "MAT2",
+        Dimensions::Mat3 => "MAT3",
+        Dimensions::Mat4 => "MAT4",
+    }
+}
+
+/// The accessor's components as `f32`, flat (`count × components`).
+///
+/// # Errors
+/// A type other than expected, a count over the limit, data outside its
+/// view or buffer, or a non-finite value.
+pub(crate) fn read_f32(acc: &Accessor, buffers: &mut Buffers, expect: &Expect) -> Result<Vec<f32>, ImportError> {
+    let what = || format!("{} (accessor {})", expect.what, acc.index());
+    if acc.dimensions() != expect.dims {
+        return Err(ImportError::InvalidGltf(format!(
+            "{} is {}, expected {}",
+            what(),
+            dims_name(acc.dimensions()),
+            dims_name(expect.dims)
+        )));
+    }
+    let data_type = acc.data_type();
+    let normalized_int = expect.normalized_ints && acc.normalized() && data_type != DataType::U32;
+    if data_type != DataType::F32 && !normalized_int {
+        return Err(ImportError::Unsupported(format!(
+            "{} has component type {data_type:?}; only FLOAT{} is supported here",
+            what(),
+            if expect.normalized_ints { " or normalized BYTE/SHORT" } else { "" }
+        )));
+    }
+    let count = acc.count();
+    if count == 0 {
+        return Err(ImportError::InvalidGltf(format!("{} has count 0", what())));
+    }
+    if count > expect.max_count {
+        return Err(ImportError::TooLarge {
+            what: "the keys of one accessor",
+            max: expect.max_count as u64,
+            found: count as u64,
+        });
+    }
+    let comps = expect.dims.multiplicity();
+    let comp_size = data_type.size();
+    // Matrices of 1- or 2-byte components have padded columns; only float
+    // matrices are read here (checked above: MAT4 is never normalized).
+    let elem = comps * comp_size;
+    let decode = |b: &[u8]| -> f32 {
+        match data_type {
+            DataType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            DataType::I8 => (b[0] as i8 as f32 / 127.0).max(-1.0),
+            DataType::U8 => b[0] as f32 / 255.0,
+            DataType::I16 => (i16::from_le_bytes([b[0], b[1]]) as f32 / 32767.0).max(-1.0),
+            DataType::U16 => u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0,
+            DataType::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
+        }
+    };
+
+    let mut out: Vec<f32>;
+    match acc.view() {
+        Some(view) => {
+            let stride = view.stride().unwrap_or(elem);
+            if stride < elem {
+                return Err(ImportError::InvalidGltf(format!(
+                    "{}: buffer view {} has byteStride {stride}, smaller than one element ({elem} bytes)",
+                    what(),
+                    view.index()
+                )));
+            }
+            let bytes = view_bytes(&view, buffers, &what)?;
+            let start = acc.offset();
+            // Last byte read: start + stride·(count−1) + elem.
+            let end =
+                (count - 1).checked_mul(stride).and_then(|x| x.checked_add(start)).and_then(|x| x.checked_add(elem));
+            match end {
+                Some(end) if end <= bytes.len() => {}
+                _ => {
+                    return Err(ImportError::OutOfBounds {
+                        what: what(),
+                        detail: format!(
+                            "{count} elements of {elem} bytes, stride {stride}, from offset {start} do not fit \
+                             in buffer view {} ({} bytes)",
+                            view.index(),
+                            bytes.len()
+                        ),
+                    });
+                }
+            }
+            out = Vec::with_capacity(count * comps);
+            for i in 0..count {
+                let at = start + i * stride;
+                for c in 0..comps {
+                    let o = at + c * comp_size;
+                    out.push(decode(&bytes[o..o + comp_size]));
+                }
+            }
+        }
+        None => out = vec![0.0; count * comps],
+    }
+    if let Some(sparse) = acc.sparse() {
+        let n = sparse.count();
+        if n > count {
+            return Err(ImportError::InvalidGltf(format!("{}: sparse count {n} exceeds count {count}", what())));
+        }
+        let indices = sparse.indices();
+        let index_size = indices.index_type_size();
+        let ibytes = view_bytes(&indices.view(), buffers, &what)?.to_vec();
+        let ifrom = indices.offset();
+        let fits = |from: usize, size: usize, len: usize| {
+            n.checked_mul(size).and_then(|x| x.checked_add(from)).is_some_and(|e| e <= len)
+        };
+        if !fits(ifrom, index_size, ibytes.len()) {
+            return Err(ImportError::OutOfBounds {
+                what: what(),
+                detail: "its sparse indices overrun their buffer view".into(),
+            });
+        }
+        let values = sparse.values();
+        let vbytes = view_bytes(&values.view(), buffers, &what)?;
+        let vfrom = values.offset();
+        if !fits(vfrom, elem, vbytes.len()) {
+            return Err(ImportError::OutOfBounds {
+                what: what(),
+                detail: "its sparse values overrun their buffer view".into(),
+            });
+        }
+        for k in 0..n {
+            let b = &ibytes[ifrom + k * index_size..];
+            let target = match index_size {
+                1 => b[0] as usize,
+                2 => u16::from_le_bytes([b[0], b[1]]) as usize,
+                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+            };
+            if target >= count {
+                return Err(ImportError::OutOfBounds {
+                    what: what(),
+                    detail: format!("sparse index {target} is not below count {count}"),
+                });
+            }
+            for c in 0..comps {
+                let o = vfrom + k * elem + c * comp_size;
+                out[target * comps + c] = decode(&vbytes[o..o + comp_size]);
+            }
+        }
+    }
+    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+        return Err(ImportError::NonFinite { what: format!("{} element {}", what(), i / comps) });
+    }
+    Ok(out)
+}
+
+/// The bytes of a buffer view, checked against its buffer.
+fn view_bytes<'b>(
+    view: &::gltf::buffer::View,
+    buffers: &'b mut Buffers,
+    what: &dyn Fn() -> String,
+) -> Result<&'b [u8], ImportError> {
+    let buffer = buffers.get(view.buffer().index())?;
+    let (offset, length) = (view.offset(), view.length());
+    match offset.checked_add(length) {
+        Some(end) if end <= buffer.len() => Ok(&buffer[offset..end]),
+        _ => Err(ImportError::OutOfBounds {
+            what: what(),
+            detail: format!(
+                "buffer view {} spans bytes {offset}..+{length} of buffer {}, which has {} bytes",
+                view.index(),
+                view.buffer().index(),
+                buffer.len()
+            ),
+        }),
+    }
+}
+
+trait IndexTypeSize {
+    fn index_type_size(&self) -> usize;
+}
+
+impl IndexTypeSize for ::gltf::accessor::sparse::Indices<'_> {
+    fn index_type_size(&self) -> usize {
+        match self.index_type() {
+            ::gltf::accessor::sparse::IndexType::U8 => 1,
+            ::gltf::accessor::sparse::IndexType::U16 => 2,
+            ::gltf::accessor::sparse::IndexType::U32 => 4,
+        }
+    }
+}

@@ -1,0 +1,491 @@
+//! glTF 2.0 (JSON or GLB) to clips: one clip per animation.
+//!
+//! The JSON is parsed and index-validated by the `gltf` crate; everything
+//! that touches binary data (the container, buffers, accessors) is done by
+//! this module's siblings with bounds checked first. The node graph is
+//! checked to be a forest (one parent per node, no cycles) before any walk,
+//! and every walk is iterative, so neither a cycle nor a deep chain can
+//! hang or overflow the stack.
+
+use std::collections::{HashMap, HashSet};
+
+use ::gltf::Document;
+use ::gltf::accessor::Dimensions;
+use ::gltf::animation::{Interpolation as GltfInterpolation, Property};
+use ::gltf::scene::Transform as GltfTransform;
+use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
+
+use super::accessor::{Expect, read_f32};
+use super::buffers::{Buffers, split_glb};
+use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, clip_name, unique_names};
+use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
+
+pub(crate) fn import(
+    bytes: &[u8],
+    format: Format,
+    options: &ImportOptions,
+    resolver: Option<Resolver<'_>>,
+) -> Result<Imported, ImportError> {
+    // A GLB is recognised by its magic whatever the caller called it.
+    let (json, bin) = if format == Format::Glb || bytes.starts_with(b"glTF") {
+        let glb = split_glb(bytes)?;
+        (glb.json, glb.bin)
+    } else {
+        (bytes, None)
+    };
+    let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(json);
+    let root: ::gltf::json::Root =
+        ::gltf::json::deserialize::from_slice(json).map_err(|e| ImportError::Json(e.to_string()))?;
+    let doc = Document::from_json(root).map_err(|e| ImportError::InvalidGltf(validation_message(e)))?;
+    check_channel_targets(&doc)?;
+
+    let limits = &options.limits;
+    let animation_count = doc.animations().len();
+    if animation_count > limits.max_clips {
+        return Err(ImportError::TooLarge {
+            what: "the animations of one file",
+            max: limits.max_clips as u64,
+            found: animation_count as u64,
+        });
+    }
+    let forest = Forest::new(&doc)?;
+    let mut skins_of: Vec<Vec<usize>> = vec![Vec::new(); doc.nodes().len()];
+    for skin in doc.skins() {
+        for joint in skin.joints() {
+            let of = &mut skins_of[joint.index()];
+            if of.last() != Some(&skin.index()) {
+                of.push(skin.index());
+            }
+        }
+    }
+    let mut ctx = Ctx {
+        doc: &doc,
+        forest,
+        buffers: Buffers::new(&doc, bin, resolver),
+        options,
+        budget: Budget::new(limits, bytes.len()),
+        rest: HashMap::new(),
+        inverse_binds: None,
+        skins_of,
+        skipped: Vec::new(),
+    };
+    let mut clips = Vec::new();
+    for animation in doc.animations() {
+        if let Some(clip) = ctx.animation(&animation, animation_count)? {
+            clips.push(clip);
+        }
+    }
+    if clips.is_empty() {
+        return Err(ImportError::NoAnimations);
+    }
+    Ok(Imported { clips, skipped: ctx.skipped })
+}
+
+/// The crate's validation skips animation channel targets, and its
+/// accessors unwrap them: check the node index and the path here first.
+fn check_channel_targets(doc: &Document) -> Result<(), ImportError> {
+    let json = doc.as_json();
+    for (a, animation) in json.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let at = || format!("animations[{a}].channels[{c}].target");
+            if channel.target.node.value() >= json.nodes.len() {
+                return Err(ImportError::InvalidGltf(format!("{}.node: index out of range", at())));
+            }
+            if !matches!(channel.target.path, ::gltf::json::validation::Checked::Valid(_)) {
+                return Err(ImportError::InvalidGltf(format!("{}.path: not a valid target path", at())));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn validation_message(e: ::gltf::Error) -> String {
+    match e {
+        ::gltf::Error::Validation(errors) => {
+            let shown: Vec<String> = errors.iter().take(5).map(|(path, err)| format!("{path}: {err}")).collect();
+            let more = errors.len().saturating_sub(5);
+            if more > 0 { format!("{} (and {more} more)", shown.join("; ")) } else { shown.join("; ") }
+        }
+        other => other.to_string(),
+    }
+}
+
+/// The node hierarchy, checked to be a forest, with names and an order.
+struct Forest {
+    parent: Vec<Option<usize>>,
+    depth: Vec<usize>,
+    /// Depth-first preorder position (scene roots first): parents first.
+    order: Vec<usize>,
+    names: Vec<String>,
+}
+
+impl Forest {
+    fn new(doc: &Document) -> Result<Self, ImportError> {
+        let n = doc.nodes().len();
+        let mut parent: Vec<Option<usize>> = vec![None; n];
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for node in doc.nodes() {
+            for child in node.children() {
+                let c = child.index();
+                if c == node.index() {
+                    return Err(ImportError::NotATree(format!("node {c} is its own child")));
+                }
+                if let Some(p) = parent[c] {
+                    return Err(ImportError::NotATree(format!(
+                        "node {c} is a child of both node {p} and node {}",
+                        node.index()
+                    )));
+                }
+                parent[c] = Some(node.index());
+                children[node.index()].push(c);
+            }
+        }
+        // Roots: the default (or first) scene's, then any other parentless node.
+        let mut roots: Vec<usize> = Vec::new();
+        let scene = doc.default_scene().or_else(|| doc.scenes().next());
+        if let Some(scene) = scene {
+            roots.extend(scene.nodes().map(|n| n.index()).filter(|&i| parent[i].is_none()));
+        }
+        roots.extend((0..n).filter(|&i| parent[i].is_none()));
+        let (mut order, mut depth) = (vec![usize::MAX; n], vec![0; n]);
+        let mut next = 0;
+        let mut stack: Vec<(usize, usize)> = Vec::new();
+        for root in roots {
+            if order[root] != usize::MAX {
+                continue;
+            }
+            stack.push((root, 0));
+            while let Some((node, d)) = stack.pop() {
+                if order[node] != usize::MAX {
+                    continue;
+                }
+                order[node] = next;
+                depth[node] = d;
+                next += 1;
+                stack.extend(children[node].iter().rev().map(|&c| (c, d + 1)));
+            }
+        }
+        // Nodes not reached from any root sit on a cycle (every node has at most one parent).
+        if let Some(stuck) = order.iter().position(|&o| o == usize::MAX) {
+            return Err(ImportError::NotATree(format!("node {stuck} is on a parent cycle")));
+        }
+        let names = unique_names(
+            doc.nodes()
+                .map(|node| match node.name() {
+                    Some(s) if !s.is_empty() => s.to_owned(),
+                    _ => format!("node{}", node.index()),
+                })
+                .collect(),
+        );
+        Ok(Forest { parent, depth, order, names })
+    }
+}
+
+struct Ctx<'d, 'a, 'r> {
+    doc: &'d Document,
+    forest: Forest,
+    buffers: Buffers<'a, 'r>,
+    options: &'d ImportOptions,
+    budget: Budget,
+    rest: HashMap<usize, Transform>,
+    /// Node → inverse bind matrix, over every skin (first skin wins).
+    inverse_binds: Option<HashMap<usize, Mat4>>,
+    /// Node → the skins it is a joint of.
+    skins_of: Vec<Vec<usize>>,
+    skipped: Vec<Skipped>,
+}
+
+impl Ctx<'_, '_, '_> {
+    fn animation(
+        &mut self,
+        animation: &::gltf::Animation,
+        animation_count: usize,
+    ) -> Result<Option<ClipSpec>, ImportError> {
+        let a = animation.index();
+        let base = animation.name().filter(|s| !s.is_empty()).map_or_else(|| format!("animation{a}"), str::to_owned);
+        let name = match (&self.options.name, animation_count) {
+            (Some(prefix), 1) => prefix.clone(),
+            (Some(prefix), _) => format!("{prefix}/{base}"),
+            (None, _) => base.clone(),
+        };
+        let limits = self.options.limits;
+
+        let mut tracks = Vec::new();
+        let mut animated: Vec<usize> = Vec::new();
+        let mut seen: HashSet<(usize, u8)> = HashSet::new();
+        for channel in animation.channels() {
+            let c = channel.index();
+            let target = channel.target();
+            let node = target.node().index();
+            let channel_kind = match target.property() {
+                Property::Translation => Channel::Translation,
+                Property::Rotation => Channel::Rotation,
+                Property::Scale => Channel::Scale,
+                Property::MorphTargetWeights => {
+                    self.skipped.push(Skipped {
+                        what: format!("animation '{base}' channel {c} (node '{}' weights)", self.forest.names[node]),
+                        why: "morph-target weight animation is not supported".into(),
+                    });
+                    continue;
+                }
+            };
+            if !seen.insert((node, channel_kind as u8)) {
+                return Err(ImportError::InvalidGltf(format!(
+                    "animation {a} has two channels for the {} of node {node}",
+                    channel_kind.as_str()
+                )));
+            }
+            if tracks.len() >= limits.max_tracks {
+                return Err(ImportError::TooLarge {
+                    what: "the tracks of one clip",
+                    max: limits.max_tracks as u64,
+                    found: tracks.len() as u64 + 1,
+                });
+            }
+            let what = format!("animation {a} channel {c}");
+            tracks.push(self.track(&channel.sampler(), channel_kind, &self.forest.names[node].clone(), &what)?);
+            animated.push(node);
+        }
+        if tracks.is_empty() {
+            self.skipped.push(Skipped {
+                what: format!("animation '{base}'"),
+                why: "it animates no translation, rotation or scale".into(),
+            });
+            return Ok(None);
+        }
+
+        // Skins the animation drives contribute all their joints; then every
+        // ancestor. Depth and count are checked as the set grows, so the work
+        // per animation stays bounded by the limits, not by the file.
+        let too_many = |found: usize| ImportError::TooLarge {
+            what: "the joints of one clip",
+            max: limits.max_joints as u64,
+            found: found as u64,
+        };
+        let mut included: HashSet<usize> = animated.iter().copied().collect();
+        let mut skins: Vec<usize> = animated.iter().flat_map(|&n| self.skins_of[n].iter().copied()).collect();
+        skins.sort_unstable();
+        skins.dedup();
+        for &skin in &skins {
+            for joint in self.doc.skins().nth(skin).into_iter().flat_map(|s| s.joints()) {
+                included.insert(joint.index());
+                if included.len() > limits.max_joints {
+                    return Err(too_many(included.len()));
+                }
+            }
+        }
+        if included.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {
+            return Err(ImportError::TooDeep { max: limits.max_depth });
+        }
+        let mut stack: Vec<usize> = included.iter().copied().collect();
+        while let Some(node) = stack.pop() {
+            if let Some(p) = self.forest.parent[node]
+                && included.insert(p)
+            {
+                if included.len() > limits.max_joints {
+                    return Err(too_many(included.len()));
+                }
+                stack.push(p);
+            }
+        }
+        self.budget.take(included.len())?;
+        let mut nodes: Vec<usize> = included.into_iter().collect();
+        nodes.sort_by_key(|&n| self.forest.order[n]);
+        let binds: Vec<Option<Mat4>> = if skins.is_empty() {
+            vec![None; nodes.len()]
+        } else {
+            let all = self.inverse_binds()?;
+            nodes.iter().map(|n| all.get(n).copied()).collect()
+        };
+        let mut joints = Vec::with_capacity(nodes.len());
+        for (&node, inverse_bind) in nodes.iter().zip(binds) {
+            joints.push(JointSpec {
+                name: self.forest.names[node].clone(),
+                parent: self.forest.parent[node].map(|p| self.forest.names[p].clone()),
+                rest: self.rest(node)?,
+                inverse_bind,
+            });
+        }
+        Ok(Some(ClipSpec {
+            name: clip_name(&name),
+            skeleton: Some(SkeletonSpec { joints }),
+            tracks,
+            events: Vec::new(),
+            playback: Playback::Once,
+        }))
+    }
+
+    /// One channel's sampler as a track (glTF 2.0 §3.11, Appendix C).
+    fn track(
+        &mut self,
+        sampler: &::gltf::animation::Sampler,
+        channel: Channel,
+        joint: &str,
+        what: &str,
+    ) -> Result<TrackSpec, ImportError> {
+        let max_keys = self.options.limits.max_keys_per_track;
+        let input = sampler.input();
+        let output = sampler.output();
+        self.budget.take(input.count())?;
+        let times = read_f32(
+            &input,
+            &mut self.buffers,
+            &Expect {
+                what: &format!("{what} input"),
+                dims: Dimensions::Scalar,
+                normalized_ints: false,
+                max_count: max_keys,
+            },
+        )?;
+        for i in 1..times.len() {
+            if times[i] <= times[i - 1] {
+                return Err(ImportError::TimesNotIncreasing {
+                    what: what.to_owned(),
+                    previous: times[i - 1],
+                    current: times[i],
+                });
+            }
+        }
+        let cubic = sampler.interpolation() == GltfInterpolation::CubicSpline;
+        let per_key = if cubic { 3 } else { 1 };
+        let expected = times.len() * per_key;
+        if output.count() != expected {
+            return Err(ImportError::InvalidGltf(format!(
+                "{what}: the output has {} elements, expected {expected} ({} keys{})",
+                output.count(),
+                times.len(),
+                if cubic { " × 3 for CUBICSPLINE" } else { "" }
+            )));
+        }
+        let (dims, width) = if channel == Channel::Rotation { (Dimensions::Vec4, 4) } else { (Dimensions::Vec3, 3) };
+        let flat = read_f32(
+            &output,
+            &mut self.buffers,
+            &Expect {
+                what: &format!("{what} output"),
+                dims,
+                normalized_ints: channel == Channel::Rotation,
+                max_count: max_keys.saturating_mul(3),
+            },
+        )?;
+        let rows = |k: usize| -> Keys {
+            // Key i's row k of its per-key group (CUBICSPLINE: in-tangent, value, out-tangent).
+            let row = |i: usize| &flat[(i * per_key + k) * width..][..width];
+            if width == 4 {
+                Keys::Vec4((0..times.len()).map(|i| Vec4::from_slice(row(i))).collect())
+            } else {
+                Keys::Vec3((0..times.len()).map(|i| Vec3::from_slice(row(i))).collect())
+            }
+        };
+        let interpolation = match sampler.interpolation() {
+            GltfInterpolation::Step => Interpolation::Step,
+            GltfInterpolation::Linear => Interpolation::Linear,
+            GltfInterpolation::CubicSpline => Interpolation::CubicHermite,
+        };
+        let mut track = TrackSpec::new(joint, channel, interpolation, times.clone(), rows(if cubic { 1 } else { 0 }));
+        if cubic {
+            track.in_tangents = Some(rows(0));
+            track.out_tangents = Some(rows(2));
+        }
+        Ok(track)
+    }
+
+    /// The node's local transform as TRS (decomposing a `matrix`).
+    fn rest(&mut self, node: usize) -> Result<Transform, ImportError> {
+        if let Some(t) = self.rest.get(&node) {
+            return Ok(*t);
+        }
+        let n = self.doc.nodes().nth(node).ok_or_else(|| ImportError::InvalidGltf(format!("no node {node}")))?;
+        let t = match n.transform() {
+            GltfTransform::Decomposed { translation, rotation, scale } => {
+                let t = Transform {
+                    translation: Vec3::from(translation),
+                    rotation: Quat::from_array(rotation),
+                    scale: Vec3::from(scale),
+                };
+                if !(t.translation.is_finite() && Vec4::from(t.rotation).is_finite() && t.scale.is_finite()) {
+                    return Err(ImportError::NonFinite { what: format!("node {node}'s transform") });
+                }
+                t
+            }
+            GltfTransform::Matrix { matrix } => decompose(node, Mat4::from_cols_array_2d(&matrix))?,
+        };
+        self.rest.insert(node, t);
+        Ok(t)
+    }
+
+    /// Every skin's inverse bind matrices by joint node, read once.
+    fn inverse_binds(&mut self) -> Result<&HashMap<usize, Mat4>, ImportError> {
+        if self.inverse_binds.is_none() {
+            let mut map: HashMap<usize, Mat4> = HashMap::new();
+            let max_joints = self.options.limits.max_joints;
+            for skin in self.doc.skins() {
+                let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+                let matrices = match skin.inverse_bind_matrices() {
+                    Some(acc) => {
+                        if acc.count() < joints.len() {
+                            return Err(ImportError::InvalidGltf(format!(
+                                "skin {} has {} joints but {} inverse bind matrices",
+                                skin.index(),
+                                joints.len(),
+                                acc.count()
+                            )));
+                        }
+                        let what = format!("skin {} inverseBindMatrices", skin.index());
+                        let expect = Expect {
+                            what: &what,
+                            dims: Dimensions::Mat4,
+                            normalized_ints: false,
+                            max_count: max_joints.max(joints.len()),
+                        };
+                        let flat = read_f32(&acc, &mut self.buffers, &expect)?;
+                        flat.chunks_exact(16).map(Mat4::from_cols_slice).collect()
+                    }
+                    None => vec![Mat4::IDENTITY; joints.len()],
+                };
+                for (&node, m) in joints.iter().zip(matrices) {
+                    match map.get(&node) {
+                        None => {
+                            map.insert(node, m);
+                        }
+                        Some(old) if !old.abs_diff_eq(m, 1e-6) => self.skipped.push(Skipped {
+                            what: format!("skin {}'s inverse bind matrix of node {node}", skin.index()),
+                            why: "the node is a joint of an earlier skin with a different one, which is kept".into(),
+                        }),
+                        Some(_) => {}
+                    }
+                }
+            }
+            self.inverse_binds = Some(map);
+        }
+        Ok(self.inverse_binds.get_or_insert_with(HashMap::new))
+    }
+}
+
+/// A node `matrix` as TRS. glTF requires node matrices to be decomposable;
+/// one that is not (shear, projection, zero scale) is refused, since
+/// importing it as some other TRS would silently change the model.
+fn decompose(node: usize, m: Mat4) -> Result<Transform, ImportError> {
+    if !m.is_finite() {
+        return Err(ImportError::NonFinite { what: format!("node {node}'s matrix") });
+    }
+    let d = m.as_dmat4();
+    let unsupported = |why: &str| Err(ImportError::Unsupported(format!("node {node}'s matrix {why}: it is not a TRS")));
+    if d.row(3).distance(glam::DVec4::W) > 1e-6 {
+        return unsupported("has a projective last row");
+    }
+    let (scale, rotation, translation) = d.to_scale_rotation_translation();
+    if !(scale.is_finite() && rotation.is_finite()) || scale.abs().min_element() < 1e-12 {
+        return unsupported("is singular");
+    }
+    let back = DMat4::from_scale_rotation_translation(scale, rotation, translation);
+    let size = d.to_cols_array().iter().fold(1.0f64, |a, x| a.max(x.abs()));
+    if !back.abs_diff_eq(d, 1e-4 * size) {
+        return unsupported("has shear");
+    }
+    Ok(Transform {
+        translation: translation.as_vec3(),
+        rotation: rotation.normalize().as_quat(),
+        scale: scale.as_vec3(),
+    })
+}

@@ -1,0 +1,285 @@
+//! Importers: the files animators' tools produce (glTF 2.0, GLB, BVH motion
+//! capture) turned into [`ClipSpec`]s the core can build.
+//!
+//! Uploads are untrusted, so every importer reads only the bytes it is
+//! given (no filesystem, no network: a glTF buffer that names an external
+//! file is refused unless the caller supplies a [`Resolver`], which only the
+//! CLI does for local files), checks every count and offset against the data
+//! before it reads or allocates, and bounds everything it produces by
+//! [`ImportLimits`]. Any problem is an [`ImportError`], a client error with a
+//! stable code; no input panics.
+//!
+//! What is imported and how (the decisions a user would ask about):
+//! - glTF: one clip per animation, named after it (`animation<i>` when
+//!   unnamed). The skeleton is the joints of every skin the animation
+//!   drives, plus every animated node, plus all their ancestors up to the
+//!   scene root, parents first, so a joint's model space is its node's
+//!   world transform. Rest poses are the nodes' TRS; `matrix` nodes are
+//!   decomposed, and a matrix that is not a TRS (shear, non-affine) is
+//!   refused rather than silently changed. Joint names are node names or
+//!   `node<i>`; a repeated name gets `#<node index>` appended. Inverse bind
+//!   matrices come from the skin (identity when it has none). Samplers map
+//!   STEP/LINEAR/CUBICSPLINE to `step`/`linear`/`cubic_hermite`; morph
+//!   target weight channels are listed in [`Imported::skipped`].
+//! - BVH: one clip. OFFSET is the rest translation; position channels give
+//!   translation keys (a missing axis keeps its OFFSET value); rotation
+//!   channels multiply in the order listed (`Zrotation Xrotation Yrotation`
+//!   is `Rz·Ry·…` left to right, column vectors); End Sites become leaf
+//!   joints named `<parent>_end`. Frame `k` is at `k · Frame Time`.
+//!
+//! Every clip this module returns has passed [`Clip::build`](crate::anim::Clip::build).
+
+use crate::anim::{Clip, ClipSpec, Interpolation, MAX_NAME_CHARS};
+
+mod accessor;
+mod buffers;
+mod bvh;
+mod error;
+mod gltf;
+
+pub use error::{ErrorClass, ImportError};
+
+/// A file format the importers read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// glTF 2.0 JSON (`.gltf`), buffers embedded as `data:` URIs.
+    Gltf,
+    /// Binary glTF (`.glb`): a JSON chunk and a BIN chunk.
+    Glb,
+    /// BioVision Hierarchy motion capture (`.bvh`), text.
+    Bvh,
+}
+
+impl Format {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Format::Gltf => "gltf",
+            Format::Glb => "glb",
+            Format::Bvh => "bvh",
+        }
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "gltf" => Ok(Format::Gltf),
+            "glb" => Ok(Format::Glb),
+            "bvh" => Ok(Format::Bvh),
+            _ => Err(format!("unknown format '{s}': expected gltf, glb or bvh")),
+        }
+    }
+}
+
+/// Guesses the format of an upload: the magic bytes first (they cannot
+/// lie about a GLB), then the `Content-Type`, then the first text token.
+pub fn sniff(bytes: &[u8], content_type: Option<&str>) -> Option<Format> {
+    if bytes.starts_with(b"glTF") {
+        return Some(Format::Glb);
+    }
+    let media = content_type.map(|c| c.split(';').next().unwrap_or("").trim().to_ascii_lowercase());
+    match media.as_deref() {
+        Some("model/gltf-binary") => return Some(Format::Glb),
+        Some("model/gltf+json") => return Some(Format::Gltf),
+        Some("application/x-bvh" | "model/x-bvh" | "text/x-bvh" | "application/bvh") => return Some(Format::Bvh),
+        _ => {}
+    }
+    let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let start = text.iter().position(|b| !b.is_ascii_whitespace()).map_or(&[][..], |i| &text[i..]);
+    if start.starts_with(b"{") {
+        Some(Format::Gltf)
+    } else if start.len() >= 9 && start[..9].eq_ignore_ascii_case(b"HIERARCHY") {
+        Some(Format::Bvh)
+    } else {
+        None
+    }
+}
+
+/// Bounds on what one import may read and produce. Each is checked before
+/// the corresponding allocation, so a small hostile file cannot make the
+/// importer allocate much more than its own size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImportLimits {
+    /// The upload itself.
+    pub max_bytes: u64,
+    /// Joints of one clip's skeleton.
+    pub max_joints: usize,
+    /// Tracks of one clip.
+    pub max_tracks: usize,
+    /// Keys of one track (glTF accessor counts).
+    pub max_keys_per_track: usize,
+    /// BVH `Frames:`.
+    pub max_frames: usize,
+    /// Clips (glTF animations) of one file.
+    pub max_clips: usize,
+    /// Keys plus joints over every clip of the import: bounds the output
+    /// even when many channels share one accessor. The importers also cap
+    /// it at one per input byte (+4096), which no real file comes near.
+    pub max_total_keys: u64,
+    /// Levels of the joint hierarchy.
+    pub max_depth: usize,
+}
+
+impl Default for ImportLimits {
+    fn default() -> Self {
+        ImportLimits {
+            max_bytes: 64 << 20,
+            max_joints: 4096,
+            max_tracks: 16_384,
+            max_keys_per_track: 1_000_000,
+            max_frames: 1_000_000,
+            max_clips: 1024,
+            max_total_keys: 16_000_000,
+            max_depth: 256,
+        }
+    }
+}
+
+/// How to import.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportOptions {
+    /// BVH frames become keys with this interpolation: `Linear` (default)
+    /// or `CatmullRom` (SPEC §2.2). Other values are refused.
+    pub bvh_interpolation: Interpolation,
+    /// The clip name (BVH), or a prefix `NAME/<animation>` for glTF files
+    /// with several animations (a single animation is named `NAME`).
+    pub name: Option<String>,
+    pub limits: ImportLimits,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions { bvh_interpolation: Interpolation::Linear, name: None, limits: ImportLimits::default() }
+    }
+}
+
+/// Something in the file that was deliberately not imported, and why.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Skipped {
+    pub what: String,
+    pub why: String,
+}
+
+/// The result of an import: clips ready for [`Clip::build`] (each already
+/// passed it once) and what was left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imported {
+    pub clips: Vec<ClipSpec>,
+    pub skipped: Vec<Skipped>,
+}
+
+/// Supplies the bytes of an external glTF buffer URI (exactly as written in
+/// the file, still percent-encoded), or says why it will not. Only the CLI
+/// passes one, for files next to a local `.gltf`.
+pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<Vec<u8>, String>;
+
+/// Imports `bytes` as `format`.
+///
+/// # Errors
+/// Any malformed, hostile, oversized or unsupported input, as an
+/// [`ImportError`]; external glTF buffers are refused.
+pub fn import(bytes: &[u8], format: Format, options: &ImportOptions) -> Result<Imported, ImportError> {
+    import_with(bytes, format, options, None)
+}
+
+/// [`import`] with a resolver for external glTF buffer URIs.
+///
+/// # Errors
+/// As [`import`]; errors from `resolver` are passed through.
+pub fn import_with(
+    bytes: &[u8],
+    format: Format,
+    options: &ImportOptions,
+    resolver: Option<Resolver<'_>>,
+) -> Result<Imported, ImportError> {
+    let limits = &options.limits;
+    if bytes.len() as u64 > limits.max_bytes {
+        return Err(ImportError::TooLarge {
+            what: "the upload (bytes)",
+            max: limits.max_bytes,
+            found: bytes.len() as u64,
+        });
+    }
+    let imported = match format {
+        Format::Gltf | Format::Glb => gltf::import(bytes, format, options, resolver)?,
+        Format::Bvh => bvh::import(bytes, options)?,
+    };
+    for clip in &imported.clips {
+        Clip::build(clip).map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
+    }
+    Ok(imported)
+}
+
+/// Counts what an import produces (keys and joints, over all clips)
+/// against [`ImportLimits::max_total_keys`] and against the input's size.
+///
+/// Real files spend several bytes per key (a BVH value is at least two
+/// characters, a glTF key at least 16 bytes of buffer plus its time), so
+/// one key per input byte, plus a little, never binds them. Only hostile
+/// files reach it: many channels sharing one accessor, or accessors with no
+/// buffer view (all zeros), which would otherwise turn a few hundred bytes
+/// of JSON into gigabytes of keys.
+pub(crate) struct Budget {
+    max: u64,
+    used: u64,
+}
+
+/// Keys allowed beyond one per input byte, for tiny files.
+const BUDGET_SLACK: u64 = 4096;
+
+impl Budget {
+    pub(crate) fn new(limits: &ImportLimits, input_bytes: usize) -> Self {
+        Budget { max: limits.max_total_keys.min(input_bytes as u64 + BUDGET_SLACK), used: 0 }
+    }
+
+    /// Reserves `n` more keys (or joints), before they are allocated.
+    pub(crate) fn take(&mut self, n: usize) -> Result<(), ImportError> {
+        self.used = self.used.saturating_add(n as u64);
+        if self.used > self.max {
+            return Err(ImportError::TooLarge { what: "the keys of all clips", max: self.max, found: self.used });
+        }
+        Ok(())
+    }
+}
+
+/// A clip name within the core's limit (longer names are cut, by character).
+pub(crate) fn clip_name(name: &str) -> String {
+    let name = if name.trim().is_empty() { "clip" } else { name };
+    name.chars().take(MAX_NAME_CHARS).collect()
+}
+
+/// Makes joint names unique within one file, in order: the first holder of
+/// a name keeps it; a later one becomes `name#<i>` (`i` its index: the glTF
+/// node or BVH joint, which tells the user which one it was), or if that is
+/// taken too, `name#<n>` for the smallest free `n` from 2. Every name in the
+/// file is reserved up front, so a suffix never takes a name a later node
+/// has in the file. A per-name counter keeps crafted collisions linear.
+pub(crate) fn unique_names(names: Vec<String>) -> Vec<String> {
+    use std::collections::{HashMap, HashSet};
+    let mut taken: HashSet<String> = names.iter().cloned().collect();
+    let mut kept: HashSet<String> = HashSet::with_capacity(names.len());
+    let mut next: HashMap<String, usize> = HashMap::new();
+    names
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| {
+            if kept.insert(name.clone()) {
+                return name;
+            }
+            let candidate = format!("{name}#{i}");
+            if taken.insert(candidate.clone()) {
+                return candidate;
+            }
+            let n = next.entry(name.clone()).or_insert(2);
+            loop {
+                let candidate = format!("{name}#{n}");
+                *n += 1;
+                if taken.insert(candidate.clone()) {
+                    return candidate;
+                }
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,341 @@
+//! Typed, layered configuration: defaults → TOML file (`--config`) → `INBETWEEN_*`
+//! environment → command-line flags, each layer overriding the one before.
+//!
+//! Parsing happens in two stages. [`RawConfig`] is what a layer may say (every
+//! field optional; the same struct is the TOML schema and the clap flags, so
+//! the two cannot drift apart); [`RawConfig::validate`] turns the merged layers
+//! into a [`Config`], which only holds values the server can run with. Tokens
+//! and database URLs are [`Secret`]s, which never print.
+
+use std::fmt;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use serde::Deserialize;
+
+/// A value that must not reach logs: `Debug` prints `[redacted]`.
+#[derive(Clone, PartialEq, Eq, Deserialize)]
+#[serde(transparent)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn new(s: impl Into<String>) -> Self {
+        Secret(s.into())
+    }
+
+    /// The secret itself, for the one place that compares or uses it.
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Secret([redacted])")
+    }
+}
+
+impl FromStr for Secret {
+    type Err = std::convert::Infallible;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(Secret(s.to_owned()))
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    #[default]
+    Text,
+    Json,
+}
+
+/// One layer of configuration. Every field is optional: absent means "ask
+/// the layer below". Doubles as the clap flag set and the TOML schema.
+#[derive(Debug, Clone, Default, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    /// Address to listen on (port 0 picks a free port) [default: 127.0.0.1:8080].
+    #[arg(long, env = "INBETWEEN_LISTEN", value_name = "ADDR")]
+    pub listen: Option<SocketAddr>,
+    /// Directory of the embedded SQLite store, created if missing [default: ./data].
+    #[arg(long, env = "INBETWEEN_DATA_DIR", value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
+    /// A store URL instead of --data-dir (`sqlite://path/to/file.db`).
+    #[arg(long, env = "INBETWEEN_DATABASE_URL", value_name = "URL", hide_env_values = true)]
+    pub database_url: Option<Secret>,
+    /// Bearer token required by create, replace and delete.
+    #[arg(long, env = "INBETWEEN_API_TOKEN", value_name = "TOKEN", hide_env_values = true)]
+    pub api_token: Option<Secret>,
+    /// Bearer token required to read clips and poses (the write token also works).
+    #[arg(long, env = "INBETWEEN_READ_TOKEN", value_name = "TOKEN", hide_env_values = true)]
+    pub read_token: Option<Secret>,
+    /// Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any) [default: none].
+    #[arg(long = "cors-origin", env = "INBETWEEN_CORS_ORIGINS", value_name = "ORIGIN", value_delimiter = ',')]
+    pub cors_origins: Option<Vec<String>>,
+    /// Log format [default: text]. The filter comes from INBETWEEN_LOG or RUST_LOG.
+    #[arg(long, env = "INBETWEEN_LOG_FORMAT", value_enum)]
+    pub log_format: Option<LogFormat>,
+    /// Seconds to let in-flight requests finish after SIGTERM/Ctrl-C [default: 10].
+    #[arg(long, env = "INBETWEEN_DRAIN_TIMEOUT_SECS", value_name = "SECS")]
+    pub drain_timeout_secs: Option<u64>,
+    #[command(flatten)]
+    #[serde(default)]
+    pub limits: RawLimits,
+}
+
+/// The `[limits]` table / `--max-*` flags.
+#[derive(Debug, Clone, Default, Deserialize, clap::Args)]
+#[serde(deny_unknown_fields)]
+pub struct RawLimits {
+    /// Largest accepted request body, in bytes [default: 16777216].
+    #[arg(long, env = "INBETWEEN_MAX_BODY_BYTES", value_name = "BYTES")]
+    pub max_body_bytes: Option<usize>,
+    /// Most tracks in one clip [default: 4096].
+    #[arg(long, env = "INBETWEEN_MAX_TRACKS", value_name = "N")]
+    pub max_tracks: Option<usize>,
+    /// Most keys in one track [default: 1000000].
+    #[arg(long, env = "INBETWEEN_MAX_KEYS_PER_TRACK", value_name = "N")]
+    pub max_keys_per_track: Option<usize>,
+    /// Most joints in one skeleton [default: 4096].
+    #[arg(long, env = "INBETWEEN_MAX_JOINTS", value_name = "N")]
+    pub max_joints: Option<usize>,
+    /// Most poses one sample request may ask for [default: 10000].
+    #[arg(long, env = "INBETWEEN_MAX_POSES", value_name = "N")]
+    pub max_poses: Option<usize>,
+    /// Seconds a request may take before it is answered 503 [default: 30].
+    #[arg(long, env = "INBETWEEN_REQUEST_TIMEOUT_SECS", value_name = "SECS")]
+    pub request_timeout_secs: Option<u64>,
+    /// Compiled clips kept in memory [default: 1024].
+    #[arg(long, env = "INBETWEEN_CACHE_ENTRIES", value_name = "N")]
+    pub cache_entries: Option<usize>,
+}
+
+impl RawConfig {
+    /// Reads a TOML layer.
+    ///
+    /// # Errors
+    /// The file cannot be read, is not TOML, or names an unknown key.
+    pub fn from_toml_file(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    }
+
+    /// This layer over `lower`: a field set here wins.
+    pub fn over(self, lower: RawConfig) -> RawConfig {
+        let (l, ll) = (self.limits, lower.limits);
+        RawConfig {
+            listen: self.listen.or(lower.listen),
+            data_dir: self.data_dir.or(lower.data_dir),
+            database_url: self.database_url.or(lower.database_url),
+            api_token: self.api_token.or(lower.api_token),
+            read_token: self.read_token.or(lower.read_token),
+            cors_origins: self.cors_origins.or(lower.cors_origins),
+            log_format: self.log_format.or(lower.log_format),
+            drain_timeout_secs: self.drain_timeout_secs.or(lower.drain_timeout_secs),
+            limits: RawLimits {
+                max_body_bytes: l.max_body_bytes.or(ll.max_body_bytes),
+                max_tracks: l.max_tracks.or(ll.max_tracks),
+                max_keys_per_track: l.max_keys_per_track.or(ll.max_keys_per_track),
+                max_joints: l.max_joints.or(ll.max_joints),
+                max_poses: l.max_poses.or(ll.max_poses),
+                request_timeout_secs: l.request_timeout_secs.or(ll.request_timeout_secs),
+                cache_entries: l.cache_entries.or(ll.cache_entries),
+            },
+        }
+    }
+
+    /// Fills defaults and checks every value.
+    ///
+    /// # Errors
+    /// A value the server cannot run with (zero limits, an empty token, an
+    /// unsupported database URL, a malformed CORS origin).
+    pub fn validate(self) -> anyhow::Result<Config> {
+        let d = Limits::default();
+        let l = self.limits;
+        let positive = |name: &str, v: Option<usize>, default: usize| -> anyhow::Result<usize> {
+            match v {
+                Some(0) => bail!("{name} must be at least 1"),
+                Some(v) => Ok(v),
+                None => Ok(default),
+            }
+        };
+        let secs = |name: &str, v: Option<u64>, default: Duration| -> anyhow::Result<Duration> {
+            match v {
+                Some(0) => bail!("{name} must be at least 1 second"),
+                Some(v) => Ok(Duration::from_secs(v)),
+                None => Ok(default),
+            }
+        };
+        let limits = Limits {
+            max_body_bytes: positive("max_body_bytes", l.max_body_bytes, d.max_body_bytes)?,
+            max_tracks: positive("max_tracks", l.max_tracks, d.max_tracks)?,
+            max_keys_per_track: positive("max_keys_per_track", l.max_keys_per_track, d.max_keys_per_track)?,
+            max_joints: positive("max_joints", l.max_joints, d.max_joints)?,
+            max_poses: positive("max_poses", l.max_poses, d.max_poses)?,
+            request_timeout: secs("request_timeout_secs", l.request_timeout_secs, d.request_timeout)?,
+            cache_entries: positive("cache_entries", l.cache_entries, d.cache_entries)?,
+        };
+        let store = match (self.database_url, self.data_dir) {
+            (Some(_), Some(_)) => bail!("give either data_dir or database_url, not both"),
+            (Some(url), None) => {
+                let url = url.expose();
+                if url.starts_with("sqlite:") {
+                    StoreConfig::SqliteUrl(Secret::new(url))
+                } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
+                    bail!("PostgreSQL is not supported yet: use a sqlite: URL or --data-dir")
+                } else {
+                    bail!("database_url must start with sqlite:")
+                }
+            }
+            (None, dir) => StoreConfig::DataDir(dir.unwrap_or_else(|| PathBuf::from("data"))),
+        };
+        let token = |name: &str, t: Option<Secret>| -> anyhow::Result<Option<Secret>> {
+            match t {
+                Some(t) if t.expose().trim().is_empty() => bail!("{name} must not be empty"),
+                Some(t) if t.expose().chars().any(|c| c.is_whitespace() || c.is_control()) => {
+                    bail!("{name} must not contain spaces or control characters")
+                }
+                t => Ok(t),
+            }
+        };
+        let cors = match self.cors_origins.unwrap_or_default() {
+            origins if origins.is_empty() => Cors::Off,
+            origins if origins.iter().any(|o| o == "*") => {
+                if origins.len() > 1 {
+                    bail!("cors origin `*` cannot be combined with other origins");
+                }
+                Cors::Any
+            }
+            origins => {
+                for o in &origins {
+                    let ok = (o.starts_with("http://") || o.starts_with("https://"))
+                        && !o.ends_with('/')
+                        && axum::http::HeaderValue::from_str(o).is_ok();
+                    if !ok {
+                        bail!("cors origin `{o}` must look like https://host[:port], without a path");
+                    }
+                }
+                Cors::Origins(origins)
+            }
+        };
+        Ok(Config {
+            listen: self.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 8080))),
+            store,
+            write_token: token("api_token", self.api_token)?,
+            read_token: token("read_token", self.read_token)?,
+            cors,
+            log_format: self.log_format.unwrap_or_default(),
+            drain_timeout: Duration::from_secs(self.drain_timeout_secs.unwrap_or(10)),
+            limits,
+        })
+    }
+}
+
+/// Where clips are stored.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StoreConfig {
+    /// `DIR/inbetween.db`, the directory created if missing.
+    DataDir(PathBuf),
+    /// A `sqlite:` URL.
+    SqliteUrl(Secret),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Cors {
+    Off,
+    Any,
+    Origins(Vec<String>),
+}
+
+/// Input limits. Everything past one is refused with a 4xx, never
+/// half-processed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Limits {
+    pub max_body_bytes: usize,
+    pub max_tracks: usize,
+    pub max_keys_per_track: usize,
+    pub max_joints: usize,
+    pub max_poses: usize,
+    pub request_timeout: Duration,
+    pub cache_entries: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_body_bytes: 16 * 1024 * 1024,
+            max_tracks: 4096,
+            max_keys_per_track: 1_000_000,
+            max_joints: 4096,
+            max_poses: 10_000,
+            request_timeout: Duration::from_secs(30),
+            cache_entries: 1024,
+        }
+    }
+}
+
+/// A validated configuration: every value is one the server can run with.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub listen: SocketAddr,
+    pub store: StoreConfig,
+    pub write_token: Option<Secret>,
+    pub read_token: Option<Secret>,
+    pub cors: Cors,
+    pub log_format: LogFormat,
+    pub drain_timeout: Duration,
+    pub limits: Limits,
+}
+
+impl Config {
+    /// Defaults with the given listen address and data directory (tests use
+    /// `127.0.0.1:0` and a temporary directory).
+    pub fn new(listen: SocketAddr, data_dir: impl Into<PathBuf>) -> Config {
+        let raw = RawConfig { listen: Some(listen), data_dir: Some(data_dir.into()), ..RawConfig::default() };
+        raw.validate().expect("the defaults are valid")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upper_layers_win_and_defaults_fill_the_rest() {
+        let file: RawConfig = toml::from_str(
+            "listen = \"127.0.0.1:9000\"\napi_token = \"from-file\"\n[limits]\nmax_poses = 5\nmax_tracks = 7\n",
+        )
+        .unwrap();
+        let flags = RawConfig {
+            api_token: Some(Secret::new("from-flag")),
+            limits: RawLimits { max_poses: Some(9), ..RawLimits::default() },
+            ..RawConfig::default()
+        };
+        let c = flags.over(file).validate().unwrap();
+        assert_eq!(c.listen, "127.0.0.1:9000".parse().unwrap());
+        assert_eq!(c.write_token.as_ref().map(Secret::expose), Some("from-flag"));
+        assert_eq!((c.limits.max_poses, c.limits.max_tracks, c.limits.max_joints), (9, 7, 4096));
+        assert_eq!(c.store, StoreConfig::DataDir(PathBuf::from("data")));
+    }
+
+    #[test]
+    fn secrets_never_print() {
+        let c = RawConfig { api_token: Some(Secret::new("hunter2")), ..RawConfig::default() }.validate().unwrap();
+        assert!(!format!("{c:?}").contains("hunter2"));
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused() {
+        assert!(toml::from_str::<RawConfig>("lisen = \"x\"").is_err());
+        let zero = RawConfig { limits: RawLimits { max_poses: Some(0), ..Default::default() }, ..Default::default() };
+        assert!(zero.validate().is_err());
+        let pg = RawConfig { database_url: Some(Secret::new("postgres://x")), ..Default::default() };
+        assert!(pg.validate().is_err());
+        let cors = RawConfig { cors_origins: Some(vec!["*".into(), "https://a.b".into()]), ..Default::default() };
+        assert!(cors.validate().is_err());
+    }
+}

@@ -1,0 +1,203 @@
+//! [`ApiError`]: every way a request can fail, and the only place an HTTP
+//! status is chosen.
+//!
+//! Each variant carries a stable machine `code` (clients switch on it), a
+//! human `detail`, and where it applies the JSON pointer (body fields) or the
+//! name (query parameters, headers) of what was wrong. [`ApiError::status`] and
+//! [`ApiError::code`] are plain functions so another protocol can map the same
+//! errors (gRPC: `ApiError` → `tonic::Status` by matching on the variant, the
+//! way `IntoResponse` below does for problem+json).
+//!
+//! Internal failures keep their cause for the log and show the client only
+//! "internal error": no SQL or file paths ever leave the process. Client
+//! errors are logged at debug level; only 5xx are logged as errors.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+
+use crate::store::StoreError;
+use crate::wire::json::DocError;
+
+/// The media type of every error body (RFC 9457).
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// The body is not JSON at all.
+    #[error("{detail}")]
+    MalformedJson { pointer: String, detail: String },
+    /// A body or clip that parses but breaks a rule (types, SPEC §1–2, limits).
+    #[error("{detail}")]
+    Invalid { code: &'static str, pointer: String, detail: String },
+    /// A query parameter or header that does not parse.
+    #[error("{detail}")]
+    BadParameter { code: &'static str, parameter: String, detail: String },
+    #[error("missing or wrong bearer token")]
+    Unauthorized,
+    #[error("{what} not found")]
+    NotFound { what: &'static str },
+    #[error("method not allowed")]
+    MethodNotAllowed,
+    #[error("the clip is at version {current}; If-Match did not match")]
+    PreconditionFailed { current: u64 },
+    #[error("request body is over the {limit}-byte limit")]
+    PayloadTooLarge { limit: usize },
+    #[error("{detail}")]
+    UnsupportedMediaType { detail: String },
+    #[error("{detail}")]
+    TooMany { code: &'static str, pointer: String, detail: String },
+    #[error("the request took longer than {secs} s")]
+    Timeout { secs: u64 },
+    #[error("service unavailable")]
+    Unavailable(#[source] Option<anyhow::Error>),
+    #[error("internal error")]
+    Internal(#[source] anyhow::Error),
+}
+
+#[derive(Serialize)]
+struct Problem<'a> {
+    #[serde(rename = "type")]
+    type_: String,
+    title: &'a str,
+    status: u16,
+    code: &'a str,
+    detail: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pointer: Option<&'a str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    parameter: Option<&'a str>,
+}
+
+impl ApiError {
+    pub fn status(&self) -> StatusCode {
+        use ApiError::*;
+        match self {
+            MalformedJson { .. } | BadParameter { .. } => StatusCode::BAD_REQUEST,
+            Invalid { .. } | TooMany { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            Unauthorized => StatusCode::UNAUTHORIZED,
+            NotFound { .. } => StatusCode::NOT_FOUND,
+            MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+            PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
+            PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            Timeout { .. } | Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    /// The stable machine-readable code.
+    pub fn code(&self) -> &'static str {
+        use ApiError::*;
+        match self {
+            MalformedJson { .. } => "malformed_json",
+            Invalid { code, .. } | BadParameter { code, .. } | TooMany { code, .. } => code,
+            Unauthorized => "unauthorized",
+            NotFound { what: "route" } => "route_not_found",
+            NotFound { .. } => "clip_not_found",
+            MethodNotAllowed => "method_not_allowed",
+            PreconditionFailed { .. } => "version_mismatch",
+            PayloadTooLarge { .. } => "body_too_large",
+            UnsupportedMediaType { .. } => "unsupported_media_type",
+            Timeout { .. } => "request_timeout",
+            Unavailable(_) => "unavailable",
+            Internal(_) => "internal",
+        }
+    }
+
+    fn pointer(&self) -> Option<&str> {
+        match self {
+            ApiError::MalformedJson { pointer, .. }
+            | ApiError::Invalid { pointer, .. }
+            | ApiError::TooMany { pointer, .. } => Some(pointer),
+            _ => None,
+        }
+    }
+
+    /// A query-parameter error.
+    pub fn parameter(code: &'static str, parameter: &str, detail: impl Into<String>) -> Self {
+        ApiError::BadParameter { code, parameter: parameter.to_owned(), detail: detail.into() }
+    }
+
+    /// A body-field error at a JSON pointer.
+    pub fn invalid(code: &'static str, pointer: impl Into<String>, detail: impl Into<String>) -> Self {
+        ApiError::Invalid { code, pointer: pointer.into(), detail: detail.into() }
+    }
+
+    pub fn internal(e: impl Into<anyhow::Error>) -> Self {
+        ApiError::Internal(e.into())
+    }
+}
+
+impl From<DocError> for ApiError {
+    fn from(e: DocError) -> Self {
+        if e.code == "malformed_json" {
+            ApiError::MalformedJson { pointer: e.pointer, detail: e.detail }
+        } else {
+            ApiError::Invalid { code: e.code, pointer: e.pointer, detail: e.detail }
+        }
+    }
+}
+
+impl From<StoreError> for ApiError {
+    fn from(e: StoreError) -> Self {
+        match e {
+            StoreError::NotFound => ApiError::NotFound { what: "clip" },
+            StoreError::VersionMismatch { current } => ApiError::PreconditionFailed { current },
+            StoreError::Unavailable(cause) => ApiError::Unavailable(Some(anyhow::Error::from_boxed(cause))),
+            StoreError::Backend(cause) => ApiError::Internal(anyhow::Error::from_boxed(cause)),
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let status = self.status();
+        let code = self.code();
+        if status.is_server_error() {
+            tracing::error!(code, error = %ErrorChain(&self), "request failed");
+        } else {
+            tracing::debug!(code, detail = %self, "request refused");
+        }
+        let detail = match &self {
+            ApiError::Internal(_) => "internal error; see the server log".to_owned(),
+            ApiError::Unavailable(_) => "the service is unavailable; try again shortly".to_owned(),
+            other => other.to_string(),
+        };
+        let parameter = match &self {
+            ApiError::BadParameter { parameter, .. } => Some(parameter.as_str()),
+            _ => None,
+        };
+        let problem = Problem {
+            type_: format!("urn:inbetween:problem:{code}"),
+            title: status.canonical_reason().unwrap_or("Error"),
+            status: status.as_u16(),
+            code,
+            detail,
+            pointer: self.pointer(),
+            parameter,
+        };
+        let body = serde_json::to_vec(&problem).unwrap_or_default();
+        let mut response =
+            (status, [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))], body).into_response();
+        if matches!(self, ApiError::Unauthorized) {
+            response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        response
+    }
+}
+
+/// Renders an error with its whole `source()` chain for the log.
+struct ErrorChain<'a>(&'a ApiError);
+
+impl std::fmt::Display for ErrorChain<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.0)?;
+        let mut source = std::error::Error::source(self.0);
+        while let Some(s) = source {
+            write!(f, ": {s}")?;
+            source = s.source();
+        }
+        Ok(())
+    }
+}

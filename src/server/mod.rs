@@ -1,0 +1,143 @@
+//! `inbetween serve`: the HTTP service around the core.
+//!
+//! [`Application::build`] opens the store, binds the listener (port 0 picks a
+//! free one; [`Application::local_addr`] reports it) and assembles the router;
+//! [`Application::run_until_stopped`] serves until the given shutdown future
+//! resolves, then drains. `main` and `cli/serve.rs` only wire flags to this,
+//! and tests build it directly on `127.0.0.1:0` with a temporary store.
+//!
+//! Codemap: `config` layered settings; `error` the one `ApiError` (the only
+//! place statuses are chosen); `state` what handlers share; `cache` compiled
+//! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
+//! Prometheus; `rest` the routes.
+//!
+//! Shutdown: when the signal fires, readiness flips to 503 first, axum stops
+//! accepting and lets in-flight requests finish; after the drain timeout the
+//! rest are cut off. Then the metrics upkeep task stops and the store closes.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::net::TcpListener;
+
+use crate::store::ClipStore;
+use crate::store::sqlite::SqliteStore;
+
+pub mod auth;
+pub mod cache;
+pub mod config;
+pub mod error;
+pub mod limits;
+pub mod metrics;
+pub mod rest;
+pub mod state;
+
+pub use config::Config;
+pub use error::ApiError;
+pub use state::AppState;
+
+/// SQLite connections in the pool: readers run in parallel (WAL), writers
+/// take turns on the database lock.
+const DB_CONNECTIONS: u32 = 8;
+
+/// A built server: store open, listener bound, not yet serving.
+pub struct Application {
+    listener: TcpListener,
+    state: AppState,
+}
+
+impl Application {
+    /// Opens the store (running migrations) and binds the listener.
+    ///
+    /// # Errors
+    /// The data directory or database cannot be opened, or the address
+    /// cannot be bound.
+    pub async fn build(config: Config) -> anyhow::Result<Application> {
+        let store: Arc<dyn ClipStore> = match &config.store {
+            config::StoreConfig::DataDir(dir) => {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating data directory {}", dir.display()))?;
+                let path = dir.join("inbetween.db");
+                let store = SqliteStore::open(&path, DB_CONNECTIONS)
+                    .await
+                    .with_context(|| format!("opening {}", path.display()))?;
+                Arc::new(store)
+            }
+            config::StoreConfig::SqliteUrl(url) => {
+                Arc::new(SqliteStore::open_url(url.expose(), DB_CONNECTIONS).await.context("opening database_url")?)
+            }
+        };
+        let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
+        let state = AppState {
+            store,
+            cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
+            config: Arc::new(config),
+            metrics: metrics::handle(),
+            counters: metrics::Counters::new(),
+            ready: Arc::new(AtomicBool::new(true)),
+            loads: Arc::default(),
+        };
+        Ok(Application { listener, state })
+    }
+
+    /// The bound address (the real port when built with port 0).
+    ///
+    /// # Panics
+    /// If the OS cannot report the socket's address (it always can for a bound TCP listener).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.listener.local_addr().expect("a bound listener has an address")
+    }
+
+    /// The shared state (for tests and for protocols served beside REST).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Serves until `shutdown` resolves, then drains in-flight requests for
+    /// at most the configured drain timeout.
+    ///
+    /// # Errors
+    /// The listener fails.
+    pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
+        let Application { listener, state } = self;
+        let drain = state.config.drain_timeout;
+        let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
+        let (started_tx, started_rx) = tokio::sync::oneshot::channel::<()>();
+        let ready = state.ready.clone();
+        let signal = async move {
+            shutdown.await;
+            ready.store(false, Ordering::Release);
+            tracing::info!("shutting down: draining in-flight requests");
+            let _ = started_tx.send(());
+        };
+        let router = rest::router(state.clone());
+        let serve = axum::serve(listener, router).with_graceful_shutdown(signal).into_future();
+        let mut serve = std::pin::pin!(serve);
+        let result = tokio::select! {
+            r = &mut serve => r.map_err(anyhow::Error::from),
+            _ = started_rx => match tokio::time::timeout(drain, &mut serve).await {
+                Ok(r) => r.map_err(anyhow::Error::from),
+                Err(_) => {
+                    tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
+                    Ok(())
+                }
+            },
+        };
+        upkeep.abort();
+        state.store.close().await;
+        tracing::info!("stopped");
+        result
+    }
+}
+
+/// Runs the Prometheus exporter's upkeep (histogram rotation) until aborted.
+async fn upkeep(handle: metrics_exporter_prometheus::PrometheusHandle) {
+    let mut every = tokio::time::interval(Duration::from_secs(5));
+    loop {
+        every.tick().await;
+        handle.run_upkeep();
+    }
+}

@@ -1,0 +1,240 @@
+//! Clip routes: create, list, get, replace, delete (SPEC §3).
+//!
+//! Every write validates fully ([`admit`]) before the store is touched, and
+//! answers only after the store committed; the cache is updated after the
+//! commit (write-through), never before.
+
+use std::sync::Arc;
+
+use axum::Json;
+use axum::extract::{RawQuery, State};
+use axum::http::header::{CONTENT_TYPE, ETAG, IF_MATCH, IF_NONE_MATCH, LOCATION};
+use axum::http::{HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use crate::server::auth::{ReadAccess, WriteAccess};
+use crate::server::cache::CachedClip;
+use crate::server::error::ApiError;
+use crate::server::limits::{Admitted, admit};
+use crate::server::state::{AppState, BLOCKING_THRESHOLD_BYTES};
+use crate::store::{ClipMeta, ListQuery, is_clip_id};
+
+use super::extract::{ClipId, JsonBody, Precondition, QueryParams, etag, precondition};
+use super::summary::ClipSummary;
+
+/// The default and the largest page size of `GET /v1/clips`.
+pub const DEFAULT_PAGE: u32 = 100;
+pub const MAX_PAGE: u32 = 1000;
+
+/// A page of clips.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ClipList {
+    pub clips: Vec<ClipSummary>,
+    /// Pass as `cursor` for the next page; `null` on the last page.
+    pub next_cursor: Option<String>,
+}
+
+async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
+    let limits = state.config.limits.clone();
+    if body.len() > BLOCKING_THRESHOLD_BYTES {
+        tokio::task::spawn_blocking(move || admit(&body, &limits)).await.map_err(ApiError::internal)?
+    } else {
+        admit(&body, &limits)
+    }
+}
+
+fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::HeaderName, String)>) -> Response {
+    let mut headers = HeaderMap::new();
+    if let Ok(v) = HeaderValue::from_str(&etag(meta.version)) {
+        headers.insert(ETAG, v);
+    }
+    if let Some((name, value)) = extra
+        && let Ok(v) = HeaderValue::from_str(&value)
+    {
+        headers.insert(name, v);
+    }
+    (status, headers, Json(ClipSummary::from(meta))).into_response()
+}
+
+/// Upload a clip.
+#[utoipa::path(
+    post, path = "/v1/clips", tag = "clips",
+    request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
+    responses(
+        (status = 201, description = "Stored; `Location` names the clip", body = ClipSummary),
+        (status = 400, description = "Not JSON", body = super::openapi::Problem),
+        (status = 401, description = "Write token missing or wrong", body = super::openapi::Problem),
+        (status = 413, description = "Body over the limit", body = super::openapi::Problem),
+        (status = 415, description = "Not application/json", body = super::openapi::Problem),
+        (status = 422, description = "Invalid clip (code and pointer say why and where)", body = super::openapi::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn create_clip(
+    State(state): State<AppState>,
+    _: WriteAccess,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let Admitted { new_clip, clip } = admit_body(&state, body).await?;
+    let meta = state.store.create(new_clip).await?;
+    tracing::info!(id = %meta.id, name = %meta.name, "clip created");
+    let response = with_etag(&meta, StatusCode::CREATED, Some((LOCATION, format!("/v1/clips/{}", meta.id))));
+    state.cache_written(Arc::new(CachedClip { meta, clip }));
+    Ok(response)
+}
+
+/// List clips in creation order, a page at a time.
+#[utoipa::path(
+    get, path = "/v1/clips", tag = "clips",
+    params(
+        ("limit" = Option<u32>, Query, description = "Page size, 1..=1000 (default 100)"),
+        ("cursor" = Option<String>, Query, description = "`next_cursor` of the previous page"),
+        ("name" = Option<String>, Query, description = "Only clips with exactly this name"),
+    ),
+    responses((status = 200, body = ClipList), (status = 400, body = super::openapi::Problem)),
+    security((), ("bearer" = []))
+)]
+pub async fn list_clips(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    RawQuery(query): RawQuery,
+) -> Result<Json<ClipList>, ApiError> {
+    let params = QueryParams::parse(query.as_deref(), &["limit", "cursor", "name"])?;
+    let limit = match params.get("limit") {
+        None => DEFAULT_PAGE,
+        Some(text) => text.parse::<u32>().ok().filter(|n| (1..=MAX_PAGE).contains(n)).ok_or_else(|| {
+            ApiError::parameter(
+                "bad_limit",
+                "limit",
+                format!("limit must be an integer in 1..={MAX_PAGE}, got `{text}`"),
+            )
+        })?,
+    };
+    let after = params.get("cursor").map(str::to_owned);
+    if let Some(cursor) = &after
+        && !is_clip_id(cursor)
+    {
+        return Err(ApiError::parameter("bad_cursor", "cursor", "cursor must be a next_cursor from a previous page"));
+    }
+    let name = params.get("name").map(str::to_owned);
+    let mut page = state.store.list(ListQuery { after, name, limit: limit + 1 }).await?;
+    let more = page.len() > limit as usize;
+    page.truncate(limit as usize);
+    let next_cursor = if more { page.last().map(|m| m.id.clone()) } else { None };
+    Ok(Json(ClipList { clips: page.iter().map(ClipSummary::from).collect(), next_cursor }))
+}
+
+/// The stored clip document, exactly as accepted (normalised), with its `ETag`.
+#[utoipa::path(
+    get, path = "/v1/clips/{id}", tag = "clips",
+    params(("id" = String, Path, description = "Clip id")),
+    responses(
+        (status = 200, description = "The clip document", body = crate::wire::json::ClipDoc),
+        (status = 304, description = "`If-None-Match` matched"),
+        (status = 404, body = super::openapi::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn get_clip(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    ClipId(id): ClipId,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let if_none_match = precondition(&headers, IF_NONE_MATCH, true)?;
+    let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+    let tag = HeaderValue::from_str(&etag(stored.meta.version)).map_err(ApiError::internal)?;
+    if if_none_match.is_some_and(|p| p.matches(stored.meta.version)) {
+        return Ok((StatusCode::NOT_MODIFIED, [(ETAG, tag)]).into_response());
+    }
+    let content_type = HeaderValue::from_static("application/json");
+    Ok((StatusCode::OK, [(ETAG, tag), (CONTENT_TYPE, content_type)], stored.doc_json).into_response())
+}
+
+/// The version `expected` must name for a conditional write, resolving a
+/// multi-tag `If-Match` against the current version.
+async fn expected_version(
+    state: &AppState,
+    id: &str,
+    condition: Option<Precondition>,
+) -> Result<Option<u64>, ApiError> {
+    match condition {
+        None | Some(Precondition::Any) => Ok(None),
+        Some(p) => match p.single() {
+            // One tag that cannot be ours (weak or not a version) never matches.
+            Some(None) => {
+                let stored = state.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+                Err(ApiError::PreconditionFailed { current: stored.meta.version })
+            }
+            Some(Some(v)) => Ok(Some(v)),
+            None => {
+                let stored = state.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+                let current = stored.meta.version;
+                if p.matches(current) { Ok(Some(current)) } else { Err(ApiError::PreconditionFailed { current }) }
+            }
+        },
+    }
+}
+
+/// Replace a clip's document; the version goes up by one.
+#[utoipa::path(
+    put, path = "/v1/clips/{id}", tag = "clips",
+    params(
+        ("id" = String, Path, description = "Clip id"),
+        ("If-Match" = Option<String>, Header, description = "Replace only at this version (`\"3\"`) or `*`"),
+    ),
+    request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
+    responses(
+        (status = 200, description = "Replaced", body = ClipSummary),
+        (status = 404, body = super::openapi::Problem),
+        (status = 412, description = "`If-Match` did not match the current version", body = super::openapi::Problem),
+        (status = 422, body = super::openapi::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn replace_clip(
+    State(state): State<AppState>,
+    _: WriteAccess,
+    ClipId(id): ClipId,
+    headers: HeaderMap,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let condition = precondition(&headers, IF_MATCH, false)?;
+    let Admitted { new_clip, clip } = admit_body(&state, body).await?;
+    let expected = expected_version(&state, &id, condition).await?;
+    let meta = state.store.replace(&id, new_clip, expected).await?;
+    tracing::info!(id = %meta.id, version = meta.version, "clip replaced");
+    let response = with_etag(&meta, StatusCode::OK, None);
+    state.cache_written(Arc::new(CachedClip { meta, clip }));
+    Ok(response)
+}
+
+/// Delete a clip (honours `If-Match`).
+#[utoipa::path(
+    delete, path = "/v1/clips/{id}", tag = "clips",
+    params(
+        ("id" = String, Path, description = "Clip id"),
+        ("If-Match" = Option<String>, Header, description = "Delete only at this version"),
+    ),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, body = super::openapi::Problem),
+        (status = 412, body = super::openapi::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn delete_clip(
+    State(state): State<AppState>,
+    _: WriteAccess,
+    ClipId(id): ClipId,
+    headers: HeaderMap,
+) -> Result<StatusCode, ApiError> {
+    let condition = precondition(&headers, IF_MATCH, false)?;
+    let expected = expected_version(&state, &id, condition).await?;
+    state.store.delete(&id, expected).await?;
+    state.cache_invalidate(&id);
+    tracing::info!(%id, "clip deleted");
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -1,0 +1,211 @@
+//! Request parsing at the edge: JSON bodies (media type, size), query
+//! parameters (strict: unknown or repeated names are refused, so a typo like
+//! `?time=1` is an error, not a silently ignored option), path ids and
+//! `If-Match` / `If-None-Match`. Every failure is an [`ApiError`] naming the
+//! parameter or header at fault.
+
+use axum::body::Bytes;
+use axum::extract::{FromRequest, FromRequestParts, Path, Request};
+use axum::http::header::CONTENT_TYPE;
+use axum::http::request::Parts;
+use axum::http::{HeaderMap, HeaderName, StatusCode};
+
+use crate::server::error::ApiError;
+use crate::server::state::AppState;
+
+/// A request body declared as JSON (`application/json` or `application/*+json`),
+/// within the configured size limit. Parsing is the handler's business.
+#[derive(Debug)]
+pub struct JsonBody(pub Bytes);
+
+fn is_json(headers: &HeaderMap) -> bool {
+    let Some(ct) = headers.get(CONTENT_TYPE).and_then(|v| v.to_str().ok()) else { return false };
+    let essence = ct.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
+    essence == "application/json" || (essence.starts_with("application/") && essence.ends_with("+json"))
+}
+
+impl FromRequest<AppState> for JsonBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
+        if !is_json(req.headers()) {
+            return Err(ApiError::UnsupportedMediaType {
+                detail: "the body must be JSON: send Content-Type: application/json".into(),
+            });
+        }
+        match Bytes::from_request(req, state).await {
+            Ok(bytes) => Ok(JsonBody(bytes)),
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                Err(ApiError::PayloadTooLarge { limit: state.config.limits.max_body_bytes })
+            }
+            Err(e) => Err(ApiError::parameter("unreadable_body", "body", e.body_text())),
+        }
+    }
+}
+
+/// The `{id}` path segment of a clip route.
+#[derive(Debug)]
+pub struct ClipId(pub String);
+
+impl<S: Send + Sync> FromRequestParts<S> for ClipId {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        match Path::<String>::from_request_parts(parts, state).await {
+            Ok(Path(id)) => Ok(ClipId(id)),
+            Err(e) => Err(ApiError::parameter("bad_path", "id", e.body_text())),
+        }
+    }
+}
+
+/// Query parameters, each name at most once, from a fixed allowed set.
+#[derive(Debug, Default)]
+pub struct QueryParams(Vec<(String, String)>);
+
+impl QueryParams {
+    /// # Errors
+    /// `bad_query` for undecodable text, `unknown_parameter`, `repeated_parameter`.
+    pub fn parse(raw: Option<&str>, allowed: &[&str]) -> Result<QueryParams, ApiError> {
+        let raw = raw.unwrap_or("");
+        let pairs = decode_pairs(raw)?;
+        for (i, (name, _)) in pairs.iter().enumerate() {
+            if !allowed.contains(&name.as_str()) {
+                let detail = format!("unknown query parameter `{name}`; expected one of: {}", allowed.join(", "));
+                return Err(ApiError::parameter("unknown_parameter", name, detail));
+            }
+            if pairs[..i].iter().any(|(n, _)| n == name) {
+                return Err(ApiError::parameter("repeated_parameter", name, format!("`{name}` is given twice")));
+            }
+        }
+        Ok(QueryParams(pairs))
+    }
+
+    pub fn get(&self, name: &str) -> Option<&str> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_str())
+    }
+
+    /// A finite number, if present.
+    ///
+    /// # Errors
+    /// `bad_number` when present but not a finite number (`abc`, `NaN`, `inf`, `1e400`).
+    pub fn finite(&self, name: &str) -> Result<Option<f64>, ApiError> {
+        let Some(text) = self.get(name) else { return Ok(None) };
+        match text.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(Some(v)),
+            _ => {
+                Err(ApiError::parameter("bad_number", name, format!("`{name}` must be a finite number, got `{text}`")))
+            }
+        }
+    }
+
+    /// A value parsed by `FromStr` (the wire enums), if present.
+    ///
+    /// # Errors
+    /// `bad_parameter` naming the accepted values.
+    pub fn parsed<T: std::str::FromStr<Err = String>>(&self, name: &str) -> Result<Option<T>, ApiError> {
+        self.get(name)
+            .map(|text| {
+                text.parse::<T>().map_err(|e| ApiError::parameter("bad_parameter", name, format!("`{name}`: {e}")))
+            })
+            .transpose()
+    }
+}
+
+/// `application/x-www-form-urlencoded` pairs (`+` is a space, `%XX` a byte;
+/// names and values must decode to UTF-8).
+fn decode_pairs(raw: &str) -> Result<Vec<(String, String)>, ApiError> {
+    let decode = |s: &str| -> Result<String, ApiError> {
+        if !s.contains(['+', '%']) {
+            return Ok(s.to_owned());
+        }
+        let s = s.replace('+', " ");
+        percent_encoding::percent_decode_str(&s).decode_utf8().map(|c| c.into_owned()).map_err(|_| bad_query())
+    };
+    raw.split('&')
+        .filter(|pair| !pair.is_empty())
+        .map(|pair| {
+            let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
+            Ok((decode(name)?, decode(value)?))
+        })
+        .collect()
+}
+
+fn bad_query() -> ApiError {
+    ApiError::parameter("bad_query", "query", "the query string cannot be decoded")
+}
+
+/// An `If-Match` / `If-None-Match` condition.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Precondition {
+    /// `*`: any current version.
+    Any,
+    /// Strong entity tags naming versions; tags that cannot be ours (weak,
+    /// non-numeric) never match and are kept as `None`.
+    Tags(Vec<Option<u64>>),
+}
+
+impl Precondition {
+    pub fn matches(&self, version: u64) -> bool {
+        match self {
+            Precondition::Any => true,
+            Precondition::Tags(tags) => tags.contains(&Some(version)),
+        }
+    }
+
+    /// The single version this condition names, if it names exactly one.
+    pub fn single(&self) -> Option<Option<u64>> {
+        match self {
+            Precondition::Tags(tags) if tags.len() == 1 => Some(tags[0]),
+            _ => None,
+        }
+    }
+}
+
+/// The strong ETag of a clip version.
+pub fn etag(version: u64) -> String {
+    format!("\"{version}\"")
+}
+
+/// Parses a conditional header (RFC 9110 §13.1).
+///
+/// # Errors
+/// `bad_precondition` for a header that is not `*` or a list of quoted tags.
+/// `If-Match` compares strongly (a weak tag never matches); `If-None-Match`
+/// weakly (`weak_matches`).
+pub fn precondition(
+    headers: &HeaderMap,
+    name: HeaderName,
+    weak_matches: bool,
+) -> Result<Option<Precondition>, ApiError> {
+    let mut values = headers.get_all(&name).iter().peekable();
+    if values.peek().is_none() {
+        return Ok(None);
+    }
+    let bad = || {
+        ApiError::parameter(
+            "bad_precondition",
+            name.as_str(),
+            format!("{name} must be `*` or a list of entity tags like \"3\""),
+        )
+    };
+    let mut tags = Vec::new();
+    for value in values {
+        let text = value.to_str().map_err(|_| bad())?;
+        for item in text.split(',').map(str::trim) {
+            if item == "*" {
+                return Ok(Some(Precondition::Any));
+            }
+            let (weak, quoted) = match item.strip_prefix("W/") {
+                Some(rest) => (true, rest),
+                None => (false, item),
+            };
+            let inner = quoted.strip_prefix('"').and_then(|s| s.strip_suffix('"')).ok_or_else(bad)?;
+            if inner.contains('"') {
+                return Err(bad());
+            }
+            let version = if weak && !weak_matches { None } else { inner.parse::<u64>().ok() };
+            tags.push(version);
+        }
+    }
+    if tags.is_empty() { Err(bad()) } else { Ok(Some(Precondition::Tags(tags))) }
+}

@@ -1,0 +1,80 @@
+//! The REST API (SPEC §3): routes, their extractors and the middleware stack.
+//!
+//! `router(state)` is the whole HTTP surface; [`crate::server::Application`]
+//! only binds and serves it, so tests may also drive it with `oneshot`.
+//! Other protocols' routes (WebSocket stream, import) merge in here.
+
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::{HeaderName, HeaderValue, Method, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::trace::TraceLayer;
+
+use super::config::Cors;
+use super::error::ApiError;
+use super::metrics;
+use super::state::AppState;
+
+pub mod clips;
+pub mod extract;
+pub mod health;
+pub mod openapi;
+pub mod poses;
+pub mod summary;
+
+/// Every route, with the middleware stack, bound to `state`.
+pub fn router(state: AppState) -> Router {
+    let limits = &state.config.limits;
+    let cors = cors_layer(&state.config.cors);
+    let request_id = HeaderName::from_static("x-request-id");
+    Router::new()
+        .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
+        .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
+        .route("/v1/clips/{id}/pose", get(poses::get_pose))
+        .route("/v1/clips/{id}/sample", post(poses::sample))
+        .route("/healthz", get(health::healthz))
+        .route("/readyz", get(health::readyz))
+        .route("/metrics", get(health::metrics))
+        .merge(openapi::router())
+        .fallback(|| async { ApiError::NotFound { what: "route" } })
+        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
+        .layer(middleware::from_fn(metrics::track))
+        .layer(CatchPanicLayer::custom(|_| ApiError::internal(anyhow::anyhow!("handler panicked")).into_response()))
+        .layer(TraceLayer::new_for_http())
+        .layer(PropagateRequestIdLayer::new(request_id.clone()))
+        .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
+        .layer(cors)
+        .with_state(state)
+}
+
+/// Answers 503 `request_timeout` when a request takes longer than the limit.
+async fn request_timeout(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let limit = state.config.limits.request_timeout;
+    match tokio::time::timeout(limit, next.run(request)).await {
+        Ok(response) => response,
+        Err(_) => ApiError::Timeout { secs: limit.as_secs() }.into_response(),
+    }
+}
+
+fn cors_layer(cors: &Cors) -> CorsLayer {
+    let origins = match cors {
+        Cors::Off => return CorsLayer::new(),
+        Cors::Any => AllowOrigin::any(),
+        Cors::Origins(list) => AllowOrigin::list(list.iter().filter_map(|o| HeaderValue::from_str(o).ok())),
+    };
+    CorsLayer::new()
+        .allow_origin(origins)
+        .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE])
+        .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, header::IF_MATCH, header::IF_NONE_MATCH])
+        .expose_headers([header::ETAG, header::LOCATION])
+        .max_age(Duration::from_secs(3600))
+}

@@ -1,0 +1,151 @@
+//! [`AppState`]: what every handler shares, and the clip-loading path that
+//! puts the cache in front of the store.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use futures_util::FutureExt;
+use futures_util::future::{BoxFuture, Shared};
+use metrics_exporter_prometheus::PrometheusHandle;
+
+use crate::anim::Clip;
+use crate::store::{ClipStore, StoredClip};
+use crate::wire::json::{DocError, parse_clip};
+
+use super::cache::{CachedClip, ClipCache};
+use super::config::Config;
+use super::error::ApiError;
+
+/// Documents larger than this are parsed and compiled on the blocking pool,
+/// so one big upload cannot stall the async workers.
+pub const BLOCKING_THRESHOLD_BYTES: usize = 64 * 1024;
+
+#[derive(Clone)]
+pub struct AppState {
+    pub store: Arc<dyn ClipStore>,
+    pub cache: Arc<ClipCache>,
+    pub config: Arc<Config>,
+    pub metrics: PrometheusHandle,
+    pub counters: super::metrics::Counters,
+    /// False once shutdown has begun (readiness answers 503).
+    pub ready: Arc<AtomicBool>,
+    /// Clip loads in flight, shared by concurrent misses.
+    pub loads: Loads,
+}
+
+impl AppState {
+    pub fn is_ready(&self) -> bool {
+        self.ready.load(Ordering::Acquire)
+    }
+
+    /// The compiled clip `id`: from the cache, or loaded and compiled once.
+    /// Concurrent misses on one id share one load (no thundering herd on a
+    /// cold clip).
+    ///
+    /// # Errors
+    /// `clip_not_found`, or a store failure.
+    pub async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, ApiError> {
+        if let Some(hit) = self.cache.get(id) {
+            self.counters.cache_hits.increment(1);
+            return Ok(hit);
+        }
+        let load = {
+            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            loads.entry(id.to_owned()).or_insert_with(|| self.load(id.to_owned())).clone()
+        };
+        let result = load.clone().await;
+        {
+            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            if loads.get(id).is_some_and(|l| l.ptr_eq(&load)) {
+                loads.remove(id);
+            }
+        }
+        result.map_err(|failure| match failure {
+            LoadFailure::NotFound => ApiError::NotFound { what: "clip" },
+            LoadFailure::Unavailable => ApiError::Unavailable(None),
+            LoadFailure::Internal => ApiError::Internal(anyhow::anyhow!("loading clip {id} failed (logged above)")),
+        })
+    }
+
+    /// One shared load: store read, compile, cache insert unless a write raced it.
+    fn load(&self, id: String) -> Load {
+        let state = self.clone();
+        async move {
+            state.counters.cache_misses.increment(1);
+            let seen = state.cache.epoch();
+            let result = async {
+                let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+                let cached = if stored.doc_json.len() > BLOCKING_THRESHOLD_BYTES {
+                    tokio::task::spawn_blocking(move || compile_stored(stored)).await.map_err(ApiError::internal)??
+                } else {
+                    compile_stored(stored)?
+                };
+                Ok::<_, ApiError>(Arc::new(cached))
+            }
+            .await;
+            match result {
+                Ok(cached) => {
+                    state.cache.insert_loaded(cached.clone(), seen);
+                    state.counters.cache_entries.set(state.cache.len() as f64);
+                    Ok(cached)
+                }
+                Err(ApiError::NotFound { .. }) => Err(LoadFailure::NotFound),
+                Err(e @ ApiError::Unavailable(_)) => {
+                    tracing::warn!(%id, error = %e, "clip load: store unavailable");
+                    Err(LoadFailure::Unavailable)
+                }
+                Err(e) => {
+                    tracing::error!(%id, error = ?e, "clip load failed");
+                    Err(LoadFailure::Internal)
+                }
+            }
+        }
+        .boxed()
+        .shared()
+    }
+
+    /// Write-through after a committed create or replace. In-flight loads of
+    /// the id are forgotten so later requests cannot join a stale one.
+    pub fn cache_written(&self, cached: Arc<CachedClip>) {
+        self.forget_load(&cached.meta.id);
+        self.cache.insert_written(cached);
+        self.counters.cache_entries.set(self.cache.len() as f64);
+    }
+
+    /// After a committed delete (or another node's change).
+    pub fn cache_invalidate(&self, id: &str) {
+        self.forget_load(id);
+        self.cache.invalidate(id);
+        self.counters.cache_entries.set(self.cache.len() as f64);
+    }
+
+    fn forget_load(&self, id: &str) {
+        self.loads.lock().unwrap_or_else(|p| p.into_inner()).remove(id);
+    }
+}
+
+/// Why a shared load failed (clonable, for every waiter; the cause is logged once).
+#[derive(Debug, Clone, Copy)]
+pub enum LoadFailure {
+    NotFound,
+    Unavailable,
+    Internal,
+}
+
+/// A load of one clip, awaited by every request that missed on it.
+pub type Load = Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFailure>>>;
+
+/// In-flight loads by clip id.
+pub type Loads = Arc<Mutex<HashMap<String, Load>>>;
+
+/// Compiles a stored document. It was accepted once, so failure here means
+/// the store was corrupted or the rules changed: an internal error.
+fn compile_stored(stored: StoredClip) -> Result<CachedClip, ApiError> {
+    let (_, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(|e: DocError| {
+        ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id))
+    })?;
+    let clip = Clip::build(&spec)
+        .map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e}", stored.meta.id)))?;
+    Ok(CachedClip { meta: stored.meta, clip })
+}

@@ -1,0 +1,140 @@
+//! Durable clip storage behind one trait.
+//!
+//! The service talks to a [`ClipStore`]; today the only implementation is
+//! SQLite ([`sqlite::SqliteStore`]), embedded so that `inbetween serve` needs
+//! no setup. PostgreSQL will come behind the same trait: the schema in
+//! `migrations/sqlite` is written in portable SQL for that reason, and nothing
+//! above this module knows which database is underneath.
+//!
+//! **Architecture invariant:** the store knows nothing of clips beyond what a
+//! row holds. It never parses or validates documents: whatever reaches it has
+//! already been accepted by `Clip::build`, and it stores the canonical text
+//! as given. Every write is one atomic statement, durable when it returns
+//! (SQLite `synchronous=FULL` in WAL mode), so a caller that answers `201`
+//! after `create` returns never promises more than the disk holds.
+//!
+//! The trait returns boxed futures so that the service can hold an
+//! `Arc<dyn ClipStore>` and pick the backend at startup.
+
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use futures_util::future::BoxFuture;
+
+use crate::anim::Playback;
+
+pub mod sqlite;
+
+/// The figures of a clip that a listing shows, derived from the compiled
+/// clip when it is written (so listing never reads documents).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClipStats {
+    pub joints: u32,
+    pub tracks: u32,
+    pub events: u32,
+    pub start: f32,
+    pub end: f32,
+    pub playback: Playback,
+}
+
+/// A clip's row without its document.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipMeta {
+    /// Opaque, URL-safe, time-ordered (UUIDv7).
+    pub id: String,
+    pub name: String,
+    /// 1 on create, +1 on each replace.
+    pub version: u64,
+    pub stats: ClipStats,
+    /// Unix milliseconds.
+    pub created_at: i64,
+    pub updated_at: i64,
+}
+
+/// A stored clip: its row and the canonical document, exactly as accepted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredClip {
+    pub meta: ClipMeta,
+    pub doc_json: String,
+}
+
+/// What a create or replace writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewClip {
+    pub name: String,
+    pub doc_json: String,
+    pub stats: ClipStats,
+}
+
+/// A page request: clips with ids after `after`, in id (creation) order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ListQuery {
+    pub after: Option<String>,
+    pub name: Option<String>,
+    pub limit: u32,
+}
+
+/// Why a store operation did not happen. Backend errors carry their cause
+/// for the logs; the service never shows it to clients.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("no clip with that id")]
+    NotFound,
+    #[error("the clip is at version {current}")]
+    VersionMismatch { current: u64 },
+    #[error("the store is unavailable")]
+    Unavailable(#[source] Box<dyn std::error::Error + Send + Sync>),
+    #[error("the store failed")]
+    Backend(#[source] Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// Durable clip storage. Implementations are cheap to share (`Arc<dyn _>`).
+pub trait ClipStore: Send + Sync + 'static {
+    /// Inserts a new clip at version 1 with a fresh id. Durable on `Ok`.
+    fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>>;
+
+    /// The clip and its document, or `None`.
+    fn get<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredClip>, StoreError>>;
+
+    /// One page of clips (without documents), at most `query.limit`.
+    fn list(&self, query: ListQuery) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>>;
+
+    /// Replaces the document and bumps the version, atomically; with
+    /// `expected_version`, only if the clip is at exactly that version.
+    ///
+    /// # Errors
+    /// [`StoreError::NotFound`], [`StoreError::VersionMismatch`] with the
+    /// current version, or a backend failure.
+    fn replace<'a>(
+        &'a self,
+        id: &'a str,
+        clip: NewClip,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<ClipMeta, StoreError>>;
+
+    /// Deletes a clip; with `expected_version`, only at that version.
+    ///
+    /// # Errors
+    /// As [`ClipStore::replace`].
+    fn delete<'a>(&'a self, id: &'a str, expected_version: Option<u64>) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// Succeeds when the store answers a trivial query.
+    fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>>;
+
+    /// Closes connections; later calls fail.
+    fn close(&self) -> BoxFuture<'_, ()>;
+}
+
+/// A fresh clip id: UUIDv7, ordered by creation within this process.
+pub fn new_clip_id() -> String {
+    uuid::Uuid::now_v7().hyphenated().to_string()
+}
+
+/// Whether `s` has the shape of an id this store hands out (used to tell a
+/// malformed cursor from an unknown one).
+pub fn is_clip_id(s: &str) -> bool {
+    uuid::Uuid::try_parse(s).is_ok_and(|u| u.hyphenated().to_string() == s)
+}
+
+pub(crate) fn now_millis() -> i64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
+}

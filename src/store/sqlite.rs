@@ -1,0 +1,269 @@
+//! The embedded store: SQLite through sqlx, one file in the data directory.
+//!
+//! Durability is set per connection, on every connection the pool opens
+//! (`SqliteConnectOptions` applies its pragmas at connect time):
+//! `journal_mode=WAL` so readers never block the writer, `synchronous=FULL`
+//! so a commit is on disk (WAL fsync) before the statement returns, which is
+//! what lets the service promise that a `201` survives `kill -9` and power
+//! loss; `foreign_keys=ON` and a `busy_timeout` so concurrent writers wait
+//! for the lock instead of failing.
+//!
+//! Every write is a single statement (`INSERT`, conditional `UPDATE …
+//! RETURNING`, conditional `DELETE`), hence its own atomic transaction: no
+//! multi-statement transaction ever upgrades a read lock (which in WAL mode
+//! fails with `SQLITE_BUSY` instead of waiting).
+
+use std::path::Path;
+use std::str::FromStr;
+use std::time::{Duration, Instant};
+
+use futures_util::FutureExt;
+use futures_util::future::BoxFuture;
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow, SqliteSynchronous,
+};
+use sqlx::{Row, migrate::Migrator};
+
+use super::{ClipMeta, ClipStats, ClipStore, ListQuery, NewClip, StoreError, StoredClip, new_clip_id, now_millis};
+use crate::anim::Playback;
+use crate::wire::json::PlaybackDoc;
+
+static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
+
+/// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
+macro_rules! meta_columns {
+    () => {
+        "id, name, version, joints, tracks, events, start_time, end_time, playback, created_at, updated_at"
+    };
+}
+
+/// A SQLite-backed [`ClipStore`].
+#[derive(Debug, Clone)]
+pub struct SqliteStore {
+    pool: SqlitePool,
+}
+
+impl SqliteStore {
+    /// Opens (creating if missing) the database file at `path`, applies the
+    /// durability pragmas and runs migrations.
+    ///
+    /// # Errors
+    /// The file cannot be opened or created, or a migration fails.
+    pub async fn open(path: &Path, max_connections: u32) -> anyhow::Result<Self> {
+        let options = SqliteConnectOptions::new().filename(path).create_if_missing(true);
+        Self::open_with(options, max_connections).await
+    }
+
+    /// Opens a `sqlite:` URL (e.g. `sqlite://data/inbetween.db`).
+    ///
+    /// # Errors
+    /// As [`SqliteStore::open`], or the URL does not parse.
+    pub async fn open_url(url: &str, max_connections: u32) -> anyhow::Result<Self> {
+        let options = SqliteConnectOptions::from_str(url)?.create_if_missing(true);
+        Self::open_with(options, max_connections).await
+    }
+
+    async fn open_with(options: SqliteConnectOptions, max_connections: u32) -> anyhow::Result<Self> {
+        let options = options
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(SqliteSynchronous::Full)
+            .foreign_keys(true)
+            .busy_timeout(Duration::from_secs(10));
+        let pool = SqlitePoolOptions::new()
+            .max_connections(max_connections.max(1))
+            .acquire_timeout(Duration::from_secs(10))
+            .connect_with(options)
+            .await?;
+        MIGRATOR.run(&pool).await?;
+        Ok(SqliteStore { pool })
+    }
+}
+
+fn timed<T>(op: &'static str, started: Instant, r: Result<T, sqlx::Error>) -> Result<T, StoreError> {
+    metrics::histogram!("inbetween_store_operation_duration_seconds", "op" => op)
+        .record(started.elapsed().as_secs_f64());
+    r.map_err(|e| match e {
+        sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_) => StoreError::Unavailable(e.into()),
+        other => StoreError::Backend(other.into()),
+    })
+}
+
+fn meta_from_row(row: &SqliteRow) -> Result<ClipMeta, sqlx::Error> {
+    let playback: String = row.try_get("playback")?;
+    let playback: Playback = PlaybackDoc::from_str(&playback)
+        .map_err(|e| sqlx::Error::Decode(format!("playback column: {e}").into()))?
+        .into();
+    let count = |c: &str| -> Result<u32, sqlx::Error> { Ok(row.try_get::<i64, _>(c)? as u32) };
+    Ok(ClipMeta {
+        id: row.try_get("id")?,
+        name: row.try_get("name")?,
+        version: row.try_get::<i64, _>("version")? as u64,
+        stats: ClipStats {
+            joints: count("joints")?,
+            tracks: count("tracks")?,
+            events: count("events")?,
+            start: row.try_get::<f64, _>("start_time")? as f32,
+            end: row.try_get::<f64, _>("end_time")? as f32,
+            playback,
+        },
+        created_at: row.try_get("created_at")?,
+        updated_at: row.try_get("updated_at")?,
+    })
+}
+
+impl SqliteStore {
+    /// The current version of `id`, for telling "not found" from "version
+    /// mismatch" after a conditional write matched no row.
+    async fn current_version(&self, id: &str) -> Result<Option<u64>, sqlx::Error> {
+        let row = sqlx::query("SELECT version FROM clips WHERE id = ?1").bind(id).fetch_optional(&self.pool).await?;
+        row.map(|r| r.try_get::<i64, _>(0).map(|v| v as u64)).transpose()
+    }
+
+    async fn missed(&self, id: &str) -> Result<StoreError, sqlx::Error> {
+        Ok(match self.current_version(id).await? {
+            None => StoreError::NotFound,
+            Some(current) => StoreError::VersionMismatch { current },
+        })
+    }
+}
+
+impl ClipStore for SqliteStore {
+    fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let now = now_millis();
+            let meta = ClipMeta {
+                id: new_clip_id(),
+                name: clip.name,
+                version: 1,
+                stats: clip.stats,
+                created_at: now,
+                updated_at: now,
+            };
+            let s = &meta.stats;
+            let r = sqlx::query(
+                "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, playback, \
+                 created_at, updated_at) VALUES (?1, ?2, 1, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+            )
+            .bind(&meta.id)
+            .bind(&meta.name)
+            .bind(&clip.doc_json)
+            .bind(s.joints as i64)
+            .bind(s.tracks as i64)
+            .bind(s.events as i64)
+            .bind(s.start as f64)
+            .bind(s.end as f64)
+            .bind(s.playback.as_str())
+            .bind(now)
+            .execute(&self.pool)
+            .await;
+            timed("create", started, r)?;
+            Ok(meta)
+        }
+        .boxed()
+    }
+
+    fn get<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredClip>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let sql = concat!("SELECT ", meta_columns!(), ", doc FROM clips WHERE id = ?1");
+                let row = sqlx::query(sql).bind(id).fetch_optional(&self.pool).await?;
+                row.map(|row| Ok(StoredClip { meta: meta_from_row(&row)?, doc_json: row.try_get("doc")? })).transpose()
+            }
+            .await;
+            timed("get", started, r)
+        }
+        .boxed()
+    }
+
+    fn list(&self, query: ListQuery) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let sql = concat!(
+                "SELECT ",
+                meta_columns!(),
+                " FROM clips WHERE (?1 IS NULL OR id > ?1) AND (?2 IS NULL OR name = ?2) ORDER BY id LIMIT ?3"
+            );
+            let r = sqlx::query(sql)
+                .bind(query.after)
+                .bind(query.name)
+                .bind(query.limit as i64)
+                .fetch_all(&self.pool)
+                .await
+                .and_then(|rows| rows.iter().map(meta_from_row).collect());
+            timed("list", started, r)
+        }
+        .boxed()
+    }
+
+    fn replace<'a>(
+        &'a self,
+        id: &'a str,
+        clip: NewClip,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<ClipMeta, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let s = clip.stats;
+            let sql = concat!(
+                "UPDATE clips SET name = ?3, doc = ?4, joints = ?5, tracks = ?6, events = ?7, start_time = ?8, ",
+                "end_time = ?9, playback = ?10, updated_at = ?11, version = version + 1 ",
+                "WHERE id = ?1 AND (?2 IS NULL OR version = ?2) RETURNING ",
+                meta_columns!()
+            );
+            let r = sqlx::query(sql)
+                .bind(id)
+                .bind(expected_version.map(|v| v as i64))
+                .bind(&clip.name)
+                .bind(&clip.doc_json)
+                .bind(s.joints as i64)
+                .bind(s.tracks as i64)
+                .bind(s.events as i64)
+                .bind(s.start as f64)
+                .bind(s.end as f64)
+                .bind(s.playback.as_str())
+                .bind(now_millis())
+                .fetch_optional(&self.pool)
+                .await;
+            let r = match r {
+                Ok(Some(row)) => meta_from_row(&row).map(Ok),
+                Ok(None) => self.missed(id).await.map(Err),
+                Err(e) => Err(e),
+            };
+            timed("replace", started, r)?
+        }
+        .boxed()
+    }
+
+    fn delete<'a>(&'a self, id: &'a str, expected_version: Option<u64>) -> BoxFuture<'a, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query("DELETE FROM clips WHERE id = ?1 AND (?2 IS NULL OR version = ?2)")
+                .bind(id)
+                .bind(expected_version.map(|v| v as i64))
+                .execute(&self.pool)
+                .await;
+            let r = match r {
+                Ok(done) if done.rows_affected() == 1 => Ok(Ok(())),
+                Ok(_) => self.missed(id).await.map(Err),
+                Err(e) => Err(e),
+            };
+            timed("delete", started, r)?
+        }
+        .boxed()
+    }
+
+    fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query("SELECT 1").execute(&self.pool).await.map(|_| ());
+            timed("ping", started, r)
+        }
+        .boxed()
+    }
+
+    fn close(&self) -> BoxFuture<'_, ()> {
+        self.pool.close().boxed()
+    }
+}

@@ -1,0 +1,37 @@
+//! The compiled-clip cache: bounded, write-through, shared misses.
+
+use std::sync::Arc;
+
+use super::{spawn_app_with, uniform_clip};
+
+#[tokio::test]
+async fn concurrent_misses_share_one_load_and_the_cache_stays_bounded() {
+    let app = spawn_app_with(|c| c.limits.cache_entries = 2).await;
+    let mut ids = Vec::new();
+    for k in 0..4 {
+        ids.push(
+            app.create(&uniform_clip(&format!("v{k}"), 3, 4, k as f32), None).await["id"].as_str().unwrap().to_owned(),
+        );
+    }
+    // Write-through filled the cache with the last two; the first two were evicted.
+    assert_eq!(app.state.cache.len(), 2);
+    assert!(app.state.cache.get(&ids[0]).is_none());
+
+    let loads = (0..16).map(|_| app.state.clip(&ids[0]));
+    let clips = futures_util::future::join_all(loads).await;
+    let first = clips[0].as_ref().unwrap();
+    assert_eq!(first.meta.name, "v0");
+    for c in &clips {
+        assert!(Arc::ptr_eq(first, c.as_ref().unwrap()), "each miss compiled its own copy");
+    }
+    assert_eq!(app.state.cache.len(), 2);
+    assert!(Arc::ptr_eq(first, &app.state.cache.get(&ids[0]).unwrap()), "the loaded clip was cached");
+
+    // Every clip still answers poses, whatever was evicted.
+    for (k, id) in ids.iter().enumerate() {
+        let pose: serde_json::Value =
+            app.client.get(app.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap().json().await.unwrap();
+        assert_eq!(pose["joints"][2]["translation"], serde_json::json!([k as f32, k as f32, k as f32]));
+    }
+    app.stop().await;
+}

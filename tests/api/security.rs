@@ -1,0 +1,69 @@
+//! The token matrix: which routes need which token.
+
+use inbetween::server::config::{Cors, Secret};
+use reqwest::StatusCode;
+
+use super::{WAVE, spawn_app_with};
+
+#[tokio::test]
+async fn write_and_read_tokens_guard_their_routes() {
+    let app = spawn_app_with(|c| {
+        c.write_token = Some(Secret::new("w"));
+        c.read_token = Some(Secret::new("r"));
+    })
+    .await;
+    let id = app.create(WAVE, Some("w")).await["id"].as_str().unwrap().to_owned();
+    let clip = app.url(&format!("/v1/clips/{id}"));
+    let c = &app.client;
+
+    // Reads: the read token or the write token; nothing else.
+    for (token, expected) in [(None, 401), (Some("x"), 401), (Some("r"), 200), (Some("w"), 200)] {
+        let with = |r: reqwest::RequestBuilder| match token {
+            Some(t) => r.bearer_auth(t),
+            None => r,
+        };
+        let reqs = [
+            with(c.get(&clip)),
+            with(c.get(app.url("/v1/clips"))),
+            with(c.get(format!("{clip}/pose?t=1"))),
+            with(c.post(format!("{clip}/sample")).json(&serde_json::json!({"times": [0]}))),
+        ];
+        for req in reqs {
+            assert_eq!(req.send().await.unwrap().status().as_u16(), expected, "read with {token:?}");
+        }
+    }
+    // Writes: only the write token.
+    for token in ["r", "x"] {
+        let create = c.post(app.url("/v1/clips")).bearer_auth(token).header("content-type", "application/json");
+        assert_eq!(create.body(WAVE).send().await.unwrap().status(), StatusCode::UNAUTHORIZED);
+        let put = c.put(&clip).bearer_auth(token).header("content-type", "application/json").body(WAVE);
+        assert_eq!(put.send().await.unwrap().status(), StatusCode::UNAUTHORIZED);
+        assert_eq!(c.delete(&clip).bearer_auth(token).send().await.unwrap().status(), StatusCode::UNAUTHORIZED);
+    }
+    let put = c.put(&clip).bearer_auth("w").header("content-type", "application/json").body(WAVE);
+    assert_eq!(put.send().await.unwrap().status(), StatusCode::OK);
+    // Operations endpoints stay open (probes and scrapers carry no tokens).
+    for path in ["/healthz", "/readyz", "/metrics", "/openapi.json"] {
+        assert_eq!(c.get(app.url(path)).send().await.unwrap().status(), StatusCode::OK, "{path}");
+    }
+    assert_eq!(c.delete(&clip).bearer_auth("w").send().await.unwrap().status(), StatusCode::NO_CONTENT);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn cors_allows_only_configured_origins() {
+    let app = spawn_app_with(|c| c.cors = Cors::Origins(vec!["https://viewer.example".into()])).await;
+    let preflight = |origin: &'static str| {
+        app.client
+            .request(reqwest::Method::OPTIONS, app.url("/v1/clips"))
+            .header("origin", origin)
+            .header("access-control-request-method", "POST")
+            .header("access-control-request-headers", "content-type,authorization")
+            .send()
+    };
+    let ok = preflight("https://viewer.example").await.unwrap();
+    assert_eq!(ok.headers()["access-control-allow-origin"], "https://viewer.example");
+    let other = preflight("https://evil.example").await.unwrap();
+    assert!(other.headers().get("access-control-allow-origin").is_none());
+    app.stop().await;
+}
