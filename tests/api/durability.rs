@@ -30,7 +30,7 @@ fn start(dir: &Path) -> Server {
         command.env_remove(name);
     }
     let mut child = command
-        .args(["serve", "--listen", "127.0.0.1:0", "--data-dir"])
+        .args(["serve", "--listen", "127.0.0.1:0", "--grpc-listen", "127.0.0.1:0", "--data-dir"])
         .arg(dir)
         .env("INBETWEEN_LOG", "warn")
         .stdout(Stdio::piped())

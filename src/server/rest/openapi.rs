@@ -8,7 +8,7 @@ use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::{clips, health, poses};
+use super::{clips, health, poses, stream};
 
 /// An error body (RFC 9457 `application/problem+json`).
 #[derive(Serialize, ToSchema)]
@@ -75,7 +75,7 @@ impl Modify for BearerAuth {
     info(title = "inbetween", description = "Keyframe clips in, inbetweens out. See SPEC §3."),
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
-        poses::get_pose, poses::sample,
+        poses::get_pose, poses::sample, stream::stream,
         health::healthz, health::readyz, health::metrics,
     ),
     components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema)),
@@ -83,6 +83,7 @@ impl Modify for BearerAuth {
     tags(
         (name = "clips", description = "Store and fetch keyframe clips"),
         (name = "poses", description = "Evaluate poses"),
+        (name = "streams", description = "Fixed-rate frames over a WebSocket"),
         (name = "operations", description = "Health and metrics"),
     )
 )]
