@@ -203,6 +203,7 @@ impl Animation for GrpcService {
         let cached = self.clip(&req.clip_id).await?;
         check_format(&cached, format)?;
         let pose = pose(&cached, req.time, &options, format, true, &mut Sampler::new(), &mut Vec::new());
+        self.state.counters.poses.increment(1);
         Ok(Response::new(pose))
     }
 
@@ -257,6 +258,7 @@ impl Animation for GrpcService {
         } else {
             build()
         };
+        self.state.counters.poses.increment(batch.poses.len() as u64);
         Ok(Response::new(batch))
     }
 

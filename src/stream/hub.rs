@@ -60,6 +60,9 @@ pub(crate) struct Hub {
     /// Shared playbacks leave the registry before their first tick.
     registry: Option<(Arc<Inner>, HubKey)>,
     shutdown: watch::Receiver<bool>,
+    /// `inbetween_stream_ticks_total`: evaluated and encoded ticks (one per
+    /// playback, however many viewers share it).
+    ticks: metrics::Counter,
 }
 
 impl Hub {
@@ -84,6 +87,7 @@ impl Hub {
             controls,
             registry,
             shutdown,
+            ticks: metrics::counter!("inbetween_stream_ticks_total"),
         }
     }
 
@@ -95,6 +99,7 @@ impl Hub {
     }
 
     pub(crate) async fn run(mut self) {
+        metrics::counter!("inbetween_stream_playbacks_total").increment(1);
         let end = loop {
             let tick = tokio::select! {
                 biased;
@@ -121,6 +126,7 @@ impl Hub {
                 }
             }
             let frame = self.frame(tick.k, tick.skipped, jumped);
+            self.ticks.increment(1);
             // An error only means no viewer is left; the next tick ends it.
             let _ = self.tx.send(Item::Frame(frame));
         };

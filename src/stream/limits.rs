@@ -65,6 +65,7 @@ impl Limits {
             *n += 1;
         }
         c.total += 1;
+        metrics::gauge!("inbetween_streams_active").set(c.total as f64);
         Ok(StreamPermit { limits: Arc::clone(self), client })
     }
 
@@ -101,6 +102,7 @@ impl Drop for StreamPermit {
                 c.per_client.remove(&ip);
             }
         }
+        metrics::gauge!("inbetween_streams_active").set(c.total as f64);
         let idle = c.total == 0;
         drop(c);
         if idle {

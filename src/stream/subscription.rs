@@ -77,6 +77,9 @@ pub struct Subscription {
     last_seq: Option<u64>,
     delivered: u64,
     stopped: bool,
+    /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
+    sent: metrics::Counter,
+    dropped: metrics::Counter,
     _permit: StreamPermit,
 }
 
@@ -109,6 +112,8 @@ impl Subscription {
             last_seq: None,
             delivered: 0,
             stopped: false,
+            sent: metrics::counter!("inbetween_stream_frames_total"),
+            dropped: metrics::counter!("inbetween_stream_frames_dropped_total"),
             _permit: permit,
         }
     }
@@ -148,6 +153,8 @@ impl Subscription {
             let bytes = frame.for_viewer(dropped, names);
             self.last_seq = Some(frame.seq);
             self.delivered += 1;
+            self.sent.increment(1);
+            self.dropped.increment(dropped);
             return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes });
         }
     }

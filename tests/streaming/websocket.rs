@@ -84,6 +84,10 @@ async fn sixty_fps_for_two_seconds_in_both_encodings() {
         }
         ws.close(None).await.unwrap();
     }
+    let metrics = app.http.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    for name in ["inbetween_streams_active", "inbetween_stream_ticks_total", "inbetween_stream_frames_total"] {
+        assert!(metrics.contains(name), "{name} in /metrics");
+    }
 }
 
 #[tokio::test]
