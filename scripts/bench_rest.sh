@@ -38,15 +38,24 @@ id=$(curl -sf -X POST "$base/v1/clips" -H 'Content-Type: application/json' --dat
 pose="$base/v1/clips/$id/pose?t=1.2345"
 curl -sf "$pose" >/dev/null
 
-echo "date: $(date -u +%FT%TZ)  cpus: $(nproc)  wrk -t2 -c$conns -d${secs}s --latency"
+# Server CPU time per request (from /proc, utime+stime) is reported beside
+# wrk's figures: on a shared machine wall-clock throughput swings with other
+# load, while the CPU each request costs the server does not.
+ticks=$(getconf CLK_TCK)
+cpu() { awk '{print $14 + $15}' "/proc/$pid/stat"; }
+echo "date: $(date -u +%FT%TZ)  cpus: $(nproc)  load: $(cut -d' ' -f1-3 /proc/loadavg)  wrk -t2 -c$conns -d${secs}s --latency"
 for round in $(seq "$rounds"); do
   for url in "$base/healthz" "$pose"; do
+    before=$(cpu)
     out=$(wrk -t2 -c"$conns" -d"${secs}s" --latency "$url")
+    after=$(cpu)
     rps=$(awk '/^Requests\/sec/ {print $2}' <<<"$out")
+    reqs=$(awk '/requests in/ {print $1}' <<<"$out")
     p50=$(awk '$1 == "50%" {print $2}' <<<"$out")
     p99=$(awk '$1 == "99%" {print $2}' <<<"$out")
     non2xx=$(awk '/Non-2xx/ {print $NF}' <<<"$out")
-    printf 'round %s %-8s req/s %10s  p50 %8s  p99 %8s  non-2xx %s\n' "$round" \
-      "$([[ $url == *healthz ]] && echo healthz || echo pose)" "$rps" "$p50" "$p99" "${non2xx:-0}"
+    cpu_us=$(awk -v a="$before" -v b="$after" -v n="$reqs" -v hz="$ticks" 'BEGIN {printf "%.1f", (b - a) / hz * 1e6 / n}')
+    printf 'round %s %-8s req/s %10s  p50 %8s  p99 %8s  server-cpu/req %6s us  non-2xx %s\n' "$round" \
+      "$([[ $url == *healthz ]] && echo healthz || echo pose)" "$rps" "$p50" "$p99" "$cpu_us" "${non2xx:-0}"
   done
 done

@@ -112,6 +112,9 @@ pub struct RawLimits {
     /// Seconds a request may take before it is answered 503 [default: 30].
     #[arg(long, env = "INBETWEEN_REQUEST_TIMEOUT_SECS", value_name = "SECS")]
     pub request_timeout_secs: Option<u64>,
+    /// Seconds a client may take to send a request's head [default: 10].
+    #[arg(long, env = "INBETWEEN_HEADER_READ_TIMEOUT_SECS", value_name = "SECS")]
+    pub header_read_timeout_secs: Option<u64>,
     /// Compiled clips kept in memory [default: 1024].
     #[arg(long, env = "INBETWEEN_CACHE_ENTRIES", value_name = "N")]
     pub cache_entries: Option<usize>,
@@ -153,6 +156,7 @@ impl RawConfig {
                 max_joints: l.max_joints.or(ll.max_joints),
                 max_poses: l.max_poses.or(ll.max_poses),
                 request_timeout_secs: l.request_timeout_secs.or(ll.request_timeout_secs),
+                header_read_timeout_secs: l.header_read_timeout_secs.or(ll.header_read_timeout_secs),
                 cache_entries: l.cache_entries.or(ll.cache_entries),
                 max_streams: l.max_streams.or(ll.max_streams),
                 max_streams_per_client: l.max_streams_per_client.or(ll.max_streams_per_client),
@@ -189,6 +193,7 @@ impl RawConfig {
             max_joints: positive("max_joints", l.max_joints, d.max_joints)?,
             max_poses: positive("max_poses", l.max_poses, d.max_poses)?,
             request_timeout: secs("request_timeout_secs", l.request_timeout_secs, d.request_timeout)?,
+            header_read_timeout: secs("header_read_timeout_secs", l.header_read_timeout_secs, d.header_read_timeout)?,
             cache_entries: positive("cache_entries", l.cache_entries, d.cache_entries)?,
             max_streams: positive("max_streams", l.max_streams, d.max_streams)?,
             max_streams_per_client: positive(
@@ -280,6 +285,8 @@ pub struct Limits {
     pub max_joints: usize,
     pub max_poses: usize,
     pub request_timeout: Duration,
+    /// How long a connection may take to send a request head (slowloris guard).
+    pub header_read_timeout: Duration,
     pub cache_entries: usize,
     /// Concurrent streams, all clients together, and per client address.
     pub max_streams: usize,
@@ -295,6 +302,7 @@ impl Default for Limits {
             max_joints: 4096,
             max_poses: 10_000,
             request_timeout: Duration::from_secs(30),
+            header_read_timeout: Duration::from_secs(10),
             cache_entries: 1024,
             max_streams: 1024,
             max_streams_per_client: 64,

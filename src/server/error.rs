@@ -16,6 +16,7 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 
+use crate::import::{ErrorClass, ImportError};
 use crate::store::StoreError;
 use crate::wire::json::DocError;
 
@@ -50,6 +51,11 @@ pub enum ApiError {
     /// The stream caps (global or per client address) are reached.
     #[error("{0}")]
     TooManyStreams(crate::stream::AdmitError),
+    /// An uploaded file that cannot be imported: 400 when it is not a
+    /// well-formed file, 413 over an import limit, 422 when its content
+    /// cannot become a clip.
+    #[error("{detail}")]
+    Import { class: ErrorClass, code: &'static str, pointer: Option<String>, detail: String },
     #[error("the request took longer than {secs} s")]
     Timeout { secs: u64 },
     #[error("service unavailable")]
@@ -86,6 +92,9 @@ impl ApiError {
             UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => StatusCode::SERVICE_UNAVAILABLE,
             TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
+            Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
+            Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Timeout { .. } | Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -96,7 +105,7 @@ impl ApiError {
         use ApiError::*;
         match self {
             MalformedJson { .. } => "malformed_json",
-            Invalid { code, .. } | BadParameter { code, .. } | TooMany { code, .. } => code,
+            Invalid { code, .. } | BadParameter { code, .. } | TooMany { code, .. } | Import { code, .. } => code,
             Unauthorized => "unauthorized",
             NotFound { what: "route" } => "route_not_found",
             NotFound { .. } => "clip_not_found",
@@ -117,6 +126,7 @@ impl ApiError {
             ApiError::MalformedJson { pointer, .. }
             | ApiError::Invalid { pointer, .. }
             | ApiError::TooMany { pointer, .. } => Some(pointer),
+            ApiError::Import { pointer, .. } => pointer.as_deref(),
             _ => None,
         }
     }
@@ -133,6 +143,12 @@ impl ApiError {
 
     pub fn internal(e: impl Into<anyhow::Error>) -> Self {
         ApiError::Internal(e.into())
+    }
+}
+
+impl From<ImportError> for ApiError {
+    fn from(e: ImportError) -> Self {
+        ApiError::Import { class: e.class(), code: e.code(), pointer: e.pointer(), detail: e.to_string() }
     }
 }
 
@@ -221,6 +237,8 @@ impl ApiError {
             MethodNotAllowed => Code::Unimplemented,
             PreconditionFailed { .. } => Code::FailedPrecondition,
             PayloadTooLarge { .. } => Code::ResourceExhausted,
+            Import { class: ErrorClass::TooLarge, .. } => Code::ResourceExhausted,
+            Import { .. } => Code::InvalidArgument,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => Code::Unavailable,
             TooManyStreams(_) => Code::ResourceExhausted,
             Timeout { .. } => Code::DeadlineExceeded,

@@ -10,15 +10,17 @@
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
-//! Prometheus; `rest` the routes; `grpc` the gRPC API, served on its own
-//! port (`--grpc-listen`) beside axum with the same shutdown.
+//! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
+//! `rest` the routes; `grpc` the gRPC API, served on its own port
+//! (`--grpc-listen`) by tonic beside the HTTP server, with the same shutdown.
 //!
 //! Shutdown: when the signal fires, readiness flips to 503 first; the
 //! streaming engine ends every stream with a final status (gRPC
-//! `UNAVAILABLE`, WebSocket close 1001) and waits for them to be delivered;
-//! then axum and tonic stop accepting and let in-flight requests finish;
-//! after the drain timeout the rest are cut off. Then the metrics upkeep
-//! task stops and the store closes.
+//! `UNAVAILABLE`, WebSocket close 1001: upgraded connections live in their
+//! own tasks, which the engine's shutdown reaches) and waits, within the
+//! drain timeout, for them to be delivered; then both servers stop accepting
+//! and let in-flight requests finish; after the drain timeout the rest are
+//! cut off. Then the metrics upkeep task stops and the store closes.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -40,6 +42,7 @@ pub mod config;
 pub mod error;
 pub mod grpc;
 pub mod limits;
+mod listen;
 pub mod metrics;
 pub mod rest;
 pub mod state;
@@ -87,7 +90,7 @@ impl Application {
             max_streams_per_client: config.limits.max_streams_per_client,
             ..EngineConfig::default()
         });
-        let state = AppState {
+        let state = AppState::new(state::Shared {
             store,
             cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
             config: Arc::new(config),
@@ -96,7 +99,7 @@ impl Application {
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
             streams,
-        };
+        });
         Ok(Application { listener, grpc_listener, state })
     }
 
@@ -125,7 +128,8 @@ impl Application {
     /// at most the configured drain timeout.
     ///
     /// # Errors
-    /// The listener fails.
+    /// The gRPC routes cannot be built (the embedded descriptor set does not
+    /// parse: a build defect). Accept errors are logged and retried.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
         let Application { listener, grpc_listener, state } = self;
         let drain = state.config.drain_timeout;
@@ -162,19 +166,17 @@ impl Application {
                     let _ = grpc_stop.wait_for(|stop| *stop).await;
                 }),
         );
-        let router = rest::router(state.clone()).into_make_service_with_connect_info::<SocketAddr>();
-        let serve = axum::serve(listener, router).with_graceful_shutdown(signal).into_future();
-        let mut serve = std::pin::pin!(serve);
-        let result = tokio::select! {
-            r = &mut serve => r.map_err(anyhow::Error::from),
-            _ = started_rx => match tokio::time::timeout(drain, &mut serve).await {
-                Ok(r) => r.map_err(anyhow::Error::from),
-                Err(_) => {
+        let router = rest::router(state.clone());
+        let header_timeout = state.config.limits.header_read_timeout;
+        let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, signal));
+        tokio::select! {
+            () = &mut serve => {}
+            _ = started_rx => {
+                if tokio::time::timeout(drain, &mut serve).await.is_err() {
                     tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
-                    Ok(())
                 }
-            },
-        };
+            }
+        }
         match tokio::time::timeout(drain, grpc).await {
             Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
             Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
@@ -185,7 +187,7 @@ impl Application {
         upkeep.abort();
         state.store.close().await;
         tracing::info!("stopped");
-        result
+        Ok(())
     }
 }
 

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use futures_util::FutureExt;
-use futures_util::future::{BoxFuture, Shared};
+use futures_util::future::{self, BoxFuture};
 use metrics_exporter_prometheus::PrometheusHandle;
 
 use crate::anim::Clip;
@@ -21,8 +21,27 @@ use super::error::ApiError;
 /// so one big upload cannot stall the async workers.
 pub const BLOCKING_THRESHOLD_BYTES: usize = 64 * 1024;
 
+/// What every handler shares. One `Arc` around everything: extractors clone
+/// the state per request, and one reference count is cheaper than ten
+/// (each is an atomic that both cores bounce between them).
 #[derive(Clone)]
-pub struct AppState {
+pub struct AppState(Arc<Shared>);
+
+impl AppState {
+    pub fn new(shared: Shared) -> Self {
+        AppState(Arc::new(shared))
+    }
+}
+
+impl std::ops::Deref for AppState {
+    type Target = Shared;
+    fn deref(&self) -> &Shared {
+        &self.0
+    }
+}
+
+/// The fields of [`AppState`].
+pub struct Shared {
     pub store: Arc<dyn ClipStore>,
     pub cache: Arc<ClipCache>,
     pub config: Arc<Config>,
@@ -136,7 +155,7 @@ pub enum LoadFailure {
 }
 
 /// A load of one clip, awaited by every request that missed on it.
-pub type Load = Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFailure>>>;
+pub type Load = future::Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFailure>>>;
 
 /// In-flight loads by clip id.
 pub type Loads = Arc<Mutex<HashMap<String, Load>>>;

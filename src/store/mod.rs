@@ -92,6 +92,10 @@ pub trait ClipStore: Send + Sync + 'static {
     /// Inserts a new clip at version 1 with a fresh id. Durable on `Ok`.
     fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>>;
 
+    /// Inserts several new clips in one transaction (an imported file's
+    /// animations): all are stored, or none. Durable on `Ok`.
+    fn create_all(&self, clips: Vec<NewClip>) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>>;
+
     /// The clip and its document, or `None`.
     fn get<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredClip>, StoreError>>;
 

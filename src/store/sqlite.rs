@@ -88,6 +88,37 @@ fn timed<T>(op: &'static str, started: Instant, r: Result<T, sqlx::Error>) -> Re
     })
 }
 
+/// Inserts one new clip at version 1 with a fresh id.
+async fn insert<'e>(db: impl sqlx::SqliteExecutor<'e>, clip: NewClip) -> Result<ClipMeta, sqlx::Error> {
+    let now = now_millis();
+    let meta = ClipMeta {
+        id: new_clip_id(),
+        name: clip.name,
+        version: 1,
+        stats: clip.stats,
+        created_at: now,
+        updated_at: now,
+    };
+    let s = &meta.stats;
+    sqlx::query(
+        "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, playback, \
+         created_at, updated_at) VALUES (?1, ?2, 1, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+    )
+    .bind(&meta.id)
+    .bind(&meta.name)
+    .bind(&clip.doc_json)
+    .bind(s.joints as i64)
+    .bind(s.tracks as i64)
+    .bind(s.events as i64)
+    .bind(s.start as f64)
+    .bind(s.end as f64)
+    .bind(s.playback.as_str())
+    .bind(now)
+    .execute(db)
+    .await?;
+    Ok(meta)
+}
+
 fn meta_from_row(row: &SqliteRow) -> Result<ClipMeta, sqlx::Error> {
     let playback: String = row.try_get("playback")?;
     let playback: Playback = PlaybackDoc::from_str(&playback)
@@ -131,34 +162,26 @@ impl ClipStore for SqliteStore {
     fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
         async move {
             let started = Instant::now();
-            let now = now_millis();
-            let meta = ClipMeta {
-                id: new_clip_id(),
-                name: clip.name,
-                version: 1,
-                stats: clip.stats,
-                created_at: now,
-                updated_at: now,
-            };
-            let s = &meta.stats;
-            let r = sqlx::query(
-                "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, playback, \
-                 created_at, updated_at) VALUES (?1, ?2, 1, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
-            )
-            .bind(&meta.id)
-            .bind(&meta.name)
-            .bind(&clip.doc_json)
-            .bind(s.joints as i64)
-            .bind(s.tracks as i64)
-            .bind(s.events as i64)
-            .bind(s.start as f64)
-            .bind(s.end as f64)
-            .bind(s.playback.as_str())
-            .bind(now)
-            .execute(&self.pool)
+            let r = insert(&self.pool, clip).await;
+            timed("create", started, r)
+        }
+        .boxed()
+    }
+
+    fn create_all(&self, clips: Vec<NewClip>) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let mut tx = self.pool.begin().await?;
+                let mut metas = Vec::with_capacity(clips.len());
+                for clip in clips {
+                    metas.push(insert(&mut *tx, clip).await?);
+                }
+                tx.commit().await?;
+                Ok(metas)
+            }
             .await;
-            timed("create", started, r)?;
-            Ok(meta)
+            timed("create_all", started, r)
         }
         .boxed()
     }

@@ -177,6 +177,10 @@ async fn every_bad_input_gets_its_status_and_code_and_changes_nothing() {
         ("list limit 0", c.get(app.url("/v1/clips?limit=0")), 400, "bad_limit", None),
         ("list limit huge", c.get(app.url("/v1/clips?limit=99999999999")), 400, "bad_limit", None),
         ("list cursor garbage", c.get(app.url("/v1/clips?cursor=zzz")), 400, "bad_cursor", None),
+        ("id not UTF-8", c.get(app.url("/v1/clips/%FF")), 400, "bad_path", None),
+        ("pose of an id with a slash", c.get(app.url("/v1/clips/a%2Fb/pose?t=0")), 404, "clip_not_found", None),
+        ("PUT JSON array body", c.put(&seeded_url).bearer_auth(TOKEN).header("content-type", "application/json").body("[]"), 422, "invalid_field", None),
+        ("upload as form data", c.post(app.url("/v1/clips")).bearer_auth(TOKEN).header("content-type", "application/x-www-form-urlencoded").body("name=x"), 415, "unsupported_media_type", None),
         ("unknown route", c.get(app.url("/v2/clips")), 404, "route_not_found", None),
         ("wrong method", c.request(Method::PATCH, app.url("/v1/clips")), 405, "method_not_allowed", None),
     ];

@@ -35,3 +35,23 @@ async fn concurrent_misses_share_one_load_and_the_cache_stays_bounded() {
     }
     app.stop().await;
 }
+
+#[tokio::test]
+async fn a_cached_pose_needs_no_store_round_trip() {
+    let app = spawn_app_with(|_| {}).await;
+    let id = app.create(&uniform_clip("v7", 2, 2, 7.0), None).await["id"].as_str().unwrap().to_owned();
+    app.state.store.close().await; // from here on, any store access fails with 503
+    let pose = app.client.get(app.url(&format!("/v1/clips/{id}/pose?t=0.5"))).send().await.unwrap();
+    assert_eq!(pose.status(), 200, "the pose came from the write-through cache");
+    let sample = app
+        .client
+        .post(app.url(&format!("/v1/clips/{id}/sample")))
+        .json(&serde_json::json!({"times": [0, 1]}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(sample.status(), 200);
+    let get = app.client.get(app.url(&format!("/v1/clips/{id}"))).send().await.unwrap();
+    assert_eq!(get.status(), 503, "the document itself does come from the store");
+    app.stop().await;
+}

@@ -125,3 +125,20 @@ async fn replace_honours_if_match_and_delete_removes() {
     assert!(app.list_all(10, None).await.is_empty());
     app.stop().await;
 }
+
+#[tokio::test]
+async fn the_name_filter_decodes_query_escapes() {
+    let app = spawn_app().await;
+    let name = "walk cycle/ä&b+c=1";
+    let id = app.create(&uniform_clip(name, 1, 2, 0.0), None).await["id"].as_str().unwrap().to_owned();
+    app.create(&uniform_clip("walk cycle", 1, 2, 0.0), None).await;
+    // Percent-encoded (as reqwest's query builder sends it) and with `+` for spaces.
+    let encoded = app.client.get(app.url("/v1/clips")).query(&[("name", name)]).send().await.unwrap();
+    let plus = app.client.get(app.url("/v1/clips?name=walk+cycle%2F%C3%A4%26b%2Bc%3D1")).send().await.unwrap();
+    for resp in [encoded, plus] {
+        let body: Value = resp.json().await.unwrap();
+        let ids: Vec<&str> = body["clips"].as_array().unwrap().iter().map(|c| c["id"].as_str().unwrap()).collect();
+        assert_eq!(ids, [id.as_str()]);
+    }
+    app.stop().await;
+}

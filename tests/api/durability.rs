@@ -4,45 +4,23 @@
 //! in flight; nothing is half-written.
 
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde_json::Value;
 
-use super::canonical;
+use super::{Binary, canonical, spawn_binary};
 
 const CLIENTS: usize = 4;
 /// Kill once this many uploads have been acknowledged.
 const KILL_AFTER: usize = 40;
 
-struct Server {
-    child: Child,
-    base: String,
-}
-
-fn start(dir: &Path) -> Server {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_inbetween"));
-    // The flags below are the whole configuration: no INBETWEEN_* from the caller's environment.
-    for (name, _) in std::env::vars().filter(|(n, _)| n.starts_with("INBETWEEN_")) {
-        command.env_remove(name);
-    }
-    let mut child = command
-        .args(["serve", "--listen", "127.0.0.1:0", "--grpc-listen", "127.0.0.1:0", "--data-dir"])
-        .arg(dir)
-        .env("INBETWEEN_LOG", "warn")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("the binary starts");
-    let stdout = child.stdout.take().unwrap();
-    let mut line = String::new();
-    BufReader::new(stdout).read_line(&mut line).unwrap();
-    let base =
-        line.trim().strip_prefix("inbetween listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}"));
-    Server { base: base.to_owned(), child }
+fn start(dir: &Path) -> Binary {
+    spawn_binary(|c| {
+        c.args(["serve", "--listen", "127.0.0.1:0", "--data-dir"]).arg(dir);
+    })
 }
 
 /// A clip of 12 joints × 3 channels × 30 keys, unique per (client, k).

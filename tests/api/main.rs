@@ -4,14 +4,18 @@
 
 mod bad_inputs;
 mod cache;
+mod cli;
 mod clips;
 mod concurrency;
 mod durability;
+mod import;
 mod operations;
 mod poses;
 mod security;
 
+use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
+use std::process::{Child, Command, Stdio};
 
 use inbetween::server::{Application, Config};
 use serde_json::Value;
@@ -132,4 +136,31 @@ pub fn uniform_clip(name: &str, joints: usize, keys: usize, k: f32) -> String {
 
 pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
     assert!((a - b).abs() <= tol, "{what}: {a} vs {b} (tolerance {tol})");
+}
+
+/// The real `inbetween` binary, serving.
+pub struct Binary {
+    pub child: Child,
+    /// `http://127.0.0.1:PORT`, from the line it prints on startup.
+    pub base: String,
+}
+
+/// Spawns the binary with the arguments `configure` adds (no `INBETWEEN_*`
+/// variables leak in from the caller; logs at `warn` to stderr, discarded
+/// unless `configure` redirects them) and waits for its listening line.
+pub fn spawn_binary(configure: impl FnOnce(&mut Command)) -> Binary {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_inbetween"));
+    for (name, _) in std::env::vars().filter(|(n, _)| n.starts_with("INBETWEEN_")) {
+        command.env_remove(name);
+    }
+    command.env("INBETWEEN_LOG", "warn").stdout(Stdio::piped()).stderr(Stdio::null());
+    // The gRPC port too must not collide between tests running in parallel.
+    command.env("INBETWEEN_GRPC_LISTEN", "127.0.0.1:0");
+    configure(&mut command);
+    let mut child = command.spawn().expect("the binary starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let base =
+        line.trim().strip_prefix("inbetween listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}"));
+    Binary { base: base.to_owned(), child }
 }

@@ -67,3 +67,20 @@ async fn cors_allows_only_configured_origins() {
     assert!(other.headers().get("access-control-allow-origin").is_none());
     app.stop().await;
 }
+
+#[tokio::test]
+async fn a_client_that_trickles_its_request_head_is_cut_off() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let app = spawn_app_with(|c| c.limits.header_read_timeout = std::time::Duration::from_secs(1)).await;
+    let mut slow = tokio::net::TcpStream::connect(app.addr).await.unwrap();
+    slow.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n").await.unwrap(); // and never the final CRLF
+    let started = std::time::Instant::now();
+    let mut rest = Vec::new();
+    // The server closes the connection; the read ends (bounded, should the guard be missing).
+    let read = tokio::time::timeout(std::time::Duration::from_secs(20), slow.read_to_end(&mut rest)).await;
+    assert!(read.is_ok(), "the connection was still open after 20 s");
+    assert!(started.elapsed() >= std::time::Duration::from_millis(900), "closed before the timeout");
+    // Meanwhile a well-behaved client is served.
+    assert_eq!(app.client.get(app.url("/healthz")).send().await.unwrap().status(), StatusCode::OK);
+    app.stop().await;
+}

@@ -25,6 +25,7 @@ use super::state::AppState;
 pub mod clips;
 pub mod extract;
 pub mod health;
+pub mod import;
 pub mod openapi;
 pub mod poses;
 pub mod stream;
@@ -37,6 +38,7 @@ pub fn router(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
     Router::new()
         .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
+        .route("/v1/clips/import", post(import::import_clips))
         .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
@@ -48,7 +50,7 @@ pub fn router(state: AppState) -> Router {
         .fallback(|| async { ApiError::NotFound { what: "route" } })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))
-        .layer(middleware::from_fn_with_state(state.clone(), request_timeout))
+        .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
         .layer(middleware::from_fn(metrics::track))
         .layer(CatchPanicLayer::custom(|_| ApiError::internal(anyhow::anyhow!("handler panicked")).into_response()))
         .layer(TraceLayer::new_for_http())
@@ -59,8 +61,7 @@ pub fn router(state: AppState) -> Router {
 }
 
 /// Answers 503 `request_timeout` when a request takes longer than the limit.
-async fn request_timeout(State(state): State<AppState>, request: Request, next: Next) -> Response {
-    let limit = state.config.limits.request_timeout;
+async fn request_timeout(State(limit): State<Duration>, request: Request, next: Next) -> Response {
     match tokio::time::timeout(limit, next.run(request)).await {
         Ok(response) => response,
         Err(_) => ApiError::Timeout { secs: limit.as_secs() }.into_response(),

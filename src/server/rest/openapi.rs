@@ -8,7 +8,7 @@ use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::{clips, health, poses, stream};
+use super::{clips, health, import, poses, stream};
 
 /// An error body (RFC 9457 `application/problem+json`).
 #[derive(Serialize, ToSchema)]
@@ -75,6 +75,7 @@ impl Modify for BearerAuth {
     info(title = "inbetween", description = "Keyframe clips in, inbetweens out. See SPEC §3."),
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
+        import::import_clips,
         poses::get_pose, poses::sample, stream::stream,
         health::healthz, health::readyz, health::metrics,
     ),
