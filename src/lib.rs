@@ -6,4 +6,5 @@ pub mod cli;
 pub mod import;
 pub mod server;
 pub mod store;
+pub mod stream;
 pub mod wire;

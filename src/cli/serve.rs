@@ -29,7 +29,11 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         let app = Application::build(config).await?;
         // Machine-readable: tests and scripts that spawn the binary parse this line.
         let mut stdout = std::io::stdout();
-        writeln!(stdout, "inbetween listening on http://{}", app.local_addr())?;
+        // One write call (not one per `format!` piece), so a reader that stops
+        // after the first line cannot make the second fail with EPIPE.
+        let (http, grpc) = (app.local_addr(), app.grpc_addr());
+        let lines = format!("inbetween listening on http://{http}\ninbetween gRPC listening on http://{grpc}\n");
+        stdout.write_all(lines.as_bytes())?;
         stdout.flush()?;
         app.run_until_stopped(shutdown_signal()).await
     })

@@ -37,6 +37,13 @@ pub struct CachedClip {
     pub clip: Clip,
 }
 
+/// Streams hold the cache entry they started on (no copy of the clip).
+impl crate::stream::ClipSource for CachedClip {
+    fn clip(&self) -> &Clip {
+        &self.clip
+    }
+}
+
 #[derive(Debug)]
 struct Entry {
     clip: Arc<CachedClip>,

@@ -61,6 +61,9 @@ pub struct RawConfig {
     /// Address to listen on (port 0 picks a free port) [default: 127.0.0.1:8080].
     #[arg(long, env = "INBETWEEN_LISTEN", value_name = "ADDR")]
     pub listen: Option<SocketAddr>,
+    /// Address of the gRPC API (port 0 picks a free port) [default: 127.0.0.1:50051].
+    #[arg(long, env = "INBETWEEN_GRPC_LISTEN", value_name = "ADDR")]
+    pub grpc_listen: Option<SocketAddr>,
     /// Directory of the embedded SQLite store, created if missing [default: ./data].
     #[arg(long, env = "INBETWEEN_DATA_DIR", value_name = "DIR")]
     pub data_dir: Option<PathBuf>,
@@ -115,6 +118,12 @@ pub struct RawLimits {
     /// Compiled clips kept in memory [default: 1024].
     #[arg(long, env = "INBETWEEN_CACHE_ENTRIES", value_name = "N")]
     pub cache_entries: Option<usize>,
+    /// Concurrent streams (gRPC and WebSocket together) [default: 1024].
+    #[arg(long, env = "INBETWEEN_MAX_STREAMS", value_name = "N")]
+    pub max_streams: Option<usize>,
+    /// Concurrent streams per client IP address [default: 64].
+    #[arg(long, env = "INBETWEEN_MAX_STREAMS_PER_CLIENT", value_name = "N")]
+    pub max_streams_per_client: Option<usize>,
 }
 
 impl RawConfig {
@@ -132,6 +141,7 @@ impl RawConfig {
         let (l, ll) = (self.limits, lower.limits);
         RawConfig {
             listen: self.listen.or(lower.listen),
+            grpc_listen: self.grpc_listen.or(lower.grpc_listen),
             data_dir: self.data_dir.or(lower.data_dir),
             database_url: self.database_url.or(lower.database_url),
             api_token: self.api_token.or(lower.api_token),
@@ -148,6 +158,8 @@ impl RawConfig {
                 request_timeout_secs: l.request_timeout_secs.or(ll.request_timeout_secs),
                 header_read_timeout_secs: l.header_read_timeout_secs.or(ll.header_read_timeout_secs),
                 cache_entries: l.cache_entries.or(ll.cache_entries),
+                max_streams: l.max_streams.or(ll.max_streams),
+                max_streams_per_client: l.max_streams_per_client.or(ll.max_streams_per_client),
             },
         }
     }
@@ -183,6 +195,12 @@ impl RawConfig {
             request_timeout: secs("request_timeout_secs", l.request_timeout_secs, d.request_timeout)?,
             header_read_timeout: secs("header_read_timeout_secs", l.header_read_timeout_secs, d.header_read_timeout)?,
             cache_entries: positive("cache_entries", l.cache_entries, d.cache_entries)?,
+            max_streams: positive("max_streams", l.max_streams, d.max_streams)?,
+            max_streams_per_client: positive(
+                "max_streams_per_client",
+                l.max_streams_per_client,
+                d.max_streams_per_client,
+            )?,
         };
         let store = match (self.database_url, self.data_dir) {
             (Some(_), Some(_)) => bail!("give either data_dir or database_url, not both"),
@@ -229,6 +247,7 @@ impl RawConfig {
         };
         Ok(Config {
             listen: self.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 8080))),
+            grpc_listen: self.grpc_listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 50051))),
             store,
             write_token: token("api_token", self.api_token)?,
             read_token: token("read_token", self.read_token)?,
@@ -269,6 +288,9 @@ pub struct Limits {
     /// How long a connection may take to send a request head (slowloris guard).
     pub header_read_timeout: Duration,
     pub cache_entries: usize,
+    /// Concurrent streams, all clients together, and per client address.
+    pub max_streams: usize,
+    pub max_streams_per_client: usize,
 }
 
 impl Default for Limits {
@@ -282,6 +304,8 @@ impl Default for Limits {
             request_timeout: Duration::from_secs(30),
             header_read_timeout: Duration::from_secs(10),
             cache_entries: 1024,
+            max_streams: 1024,
+            max_streams_per_client: 64,
         }
     }
 }
@@ -290,6 +314,8 @@ impl Default for Limits {
 #[derive(Debug, Clone)]
 pub struct Config {
     pub listen: SocketAddr,
+    /// The gRPC API's own port (see `server::grpc`).
+    pub grpc_listen: SocketAddr,
     pub store: StoreConfig,
     pub write_token: Option<Secret>,
     pub read_token: Option<Secret>,
@@ -301,9 +327,15 @@ pub struct Config {
 
 impl Config {
     /// Defaults with the given listen address and data directory (tests use
-    /// `127.0.0.1:0` and a temporary directory).
+    /// `127.0.0.1:0` and a temporary directory). The gRPC API listens on the
+    /// same IP address, on a free port.
     pub fn new(listen: SocketAddr, data_dir: impl Into<PathBuf>) -> Config {
-        let raw = RawConfig { listen: Some(listen), data_dir: Some(data_dir.into()), ..RawConfig::default() };
+        let raw = RawConfig {
+            listen: Some(listen),
+            grpc_listen: Some(SocketAddr::new(listen.ip(), 0)),
+            data_dir: Some(data_dir.into()),
+            ..RawConfig::default()
+        };
         raw.validate().expect("the defaults are valid")
     }
 }

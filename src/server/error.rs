@@ -48,6 +48,9 @@ pub enum ApiError {
     UnsupportedMediaType { detail: String },
     #[error("{detail}")]
     TooMany { code: &'static str, pointer: String, detail: String },
+    /// The stream caps (global or per client address) are reached.
+    #[error("{0}")]
+    TooManyStreams(crate::stream::AdmitError),
     /// An uploaded file that cannot be imported: 400 when it is not a
     /// well-formed file, 413 over an import limit, 422 when its content
     /// cannot become a clip.
@@ -87,6 +90,8 @@ impl ApiError {
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
             PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            TooManyStreams(crate::stream::AdmitError::ShuttingDown) => StatusCode::SERVICE_UNAVAILABLE,
+            TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
             Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
@@ -108,6 +113,8 @@ impl ApiError {
             PreconditionFailed { .. } => "version_mismatch",
             PayloadTooLarge { .. } => "body_too_large",
             UnsupportedMediaType { .. } => "unsupported_media_type",
+            TooManyStreams(crate::stream::AdmitError::ShuttingDown) => "shutting_down",
+            TooManyStreams(_) => "too_many_streams",
             Timeout { .. } => "request_timeout",
             Unavailable(_) => "unavailable",
             Internal(_) => "internal",
@@ -175,11 +182,7 @@ impl IntoResponse for ApiError {
         } else {
             tracing::debug!(code, detail = %self, "request refused");
         }
-        let detail = match &self {
-            ApiError::Internal(_) => "internal error; see the server log".to_owned(),
-            ApiError::Unavailable(_) => "the service is unavailable; try again shortly".to_owned(),
-            other => other.to_string(),
-        };
+        let detail = self.public_detail();
         let parameter = match &self {
             ApiError::BadParameter { parameter, .. } => Some(parameter.as_str()),
             _ => None,
@@ -200,6 +203,73 @@ impl IntoResponse for ApiError {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
         response
+    }
+}
+
+impl From<crate::stream::AdmitError> for ApiError {
+    fn from(e: crate::stream::AdmitError) -> Self {
+        ApiError::TooManyStreams(e)
+    }
+}
+
+impl ApiError {
+    /// The client-facing message: internals never leave the process.
+    fn public_detail(&self) -> String {
+        match self {
+            ApiError::Internal(_) => "internal error; see the server log".to_owned(),
+            ApiError::Unavailable(_) => "the service is unavailable; try again shortly".to_owned(),
+            other => other.to_string(),
+        }
+    }
+
+    /// The gRPC status code of this error (the twin of [`ApiError::status`]).
+    pub fn grpc_code(&self) -> tonic::Code {
+        use ApiError::*;
+        use tonic::Code;
+        match self {
+            MalformedJson { .. } | Invalid { .. } | BadParameter { .. } | UnsupportedMediaType { .. } => {
+                Code::InvalidArgument
+            }
+            // A request over a size limit is still the caller's to fix.
+            TooMany { .. } => Code::InvalidArgument,
+            Unauthorized => Code::Unauthenticated,
+            NotFound { .. } => Code::NotFound,
+            MethodNotAllowed => Code::Unimplemented,
+            PreconditionFailed { .. } => Code::FailedPrecondition,
+            PayloadTooLarge { .. } => Code::ResourceExhausted,
+            Import { class: ErrorClass::TooLarge, .. } => Code::ResourceExhausted,
+            Import { .. } => Code::InvalidArgument,
+            TooManyStreams(crate::stream::AdmitError::ShuttingDown) => Code::Unavailable,
+            TooManyStreams(_) => Code::ResourceExhausted,
+            Timeout { .. } => Code::DeadlineExceeded,
+            Unavailable(_) => Code::Unavailable,
+            Internal(_) => Code::Internal,
+        }
+    }
+}
+
+/// `ApiError` → gRPC status: the code from [`ApiError::grpc_code`], the
+/// message `"<code>: <detail>"` plus `" (at <pointer>)"` for field errors, and
+/// the stable code also in the `x-error-code` metadata.
+impl From<ApiError> for tonic::Status {
+    fn from(e: ApiError) -> Self {
+        let code = e.code();
+        if e.status().is_server_error() {
+            tracing::error!(code, error = %ErrorChain(&e), "gRPC call failed");
+        } else {
+            tracing::debug!(code, detail = %e, "gRPC call refused");
+        }
+        let mut message = format!("{code}: {}", e.public_detail());
+        if let Some(pointer) = e.pointer().filter(|p| !p.is_empty()) {
+            message.push_str(&format!(" (at {pointer})"));
+        } else if let ApiError::BadParameter { parameter, .. } = &e {
+            message.push_str(&format!(" (parameter {parameter})"));
+        }
+        let mut status = tonic::Status::new(e.grpc_code(), message);
+        if let Ok(v) = tonic::metadata::MetadataValue::try_from(code) {
+            status.metadata_mut().insert("x-error-code", v);
+        }
+        status
     }
 }
 

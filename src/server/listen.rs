@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use axum::Router;
 use axum::body::Body;
-use axum::extract::Request;
+use axum::extract::{ConnectInfo, Request};
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto;
@@ -33,7 +33,7 @@ pub async fn serve(
     let mut connections = JoinSet::new();
     let mut shutdown = std::pin::pin!(shutdown);
     loop {
-        let (stream, _peer) = tokio::select! {
+        let (stream, peer) = tokio::select! {
             accepted = listener.accept() => match accepted {
                 Ok(conn) => conn,
                 Err(e) => {
@@ -47,7 +47,13 @@ pub async fn serve(
         };
         while connections.try_join_next().is_some() {}
         let _ = stream.set_nodelay(true);
-        let service = TowerToHyperService::new(router.clone().map_request(|r: Request<Incoming>| r.map(Body::new)));
+        // The peer address, as `axum::serve` provides it (`ConnectInfo`), for
+        // the per-client stream caps.
+        let service = TowerToHyperService::new(router.clone().map_request(move |r: Request<Incoming>| {
+            let mut r = r.map(Body::new);
+            r.extensions_mut().insert(ConnectInfo(peer));
+            r
+        }));
         let mut closing = closing_rx.clone();
         connections.spawn(async move {
             let mut builder = auto::Builder::new(TokioExecutor::new());

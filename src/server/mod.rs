@@ -1,7 +1,8 @@
 //! `inbetween serve`: the HTTP service around the core.
 //!
-//! [`Application::build`] opens the store, binds the listener (port 0 picks a
-//! free one; [`Application::local_addr`] reports it) and assembles the router;
+//! [`Application::build`] opens the store, binds the listeners (port 0 picks a
+//! free one; [`Application::local_addr`] and [`Application::grpc_addr`]
+//! report them) and assembles the router;
 //! [`Application::run_until_stopped`] serves until the given shutdown future
 //! resolves, then drains. `main` and `cli/serve.rs` only wire flags to this,
 //! and tests build it directly on `127.0.0.1:0` with a temporary store.
@@ -10,13 +11,16 @@
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
-//! `rest` the routes.
+//! `rest` the routes; `grpc` the gRPC API, served on its own port
+//! (`--grpc-listen`) by tonic beside the HTTP server, with the same shutdown.
 //!
-//! Shutdown: when the signal fires, readiness flips to 503 first, the accept
-//! loop stops accepting and lets in-flight requests finish; after the drain
-//! timeout the rest are cut off. Then the metrics upkeep task stops and the
-//! store closes. Upgraded connections (WebSockets) live in their own tasks and
-//! are not waited for: their owners must watch for shutdown themselves.
+//! Shutdown: when the signal fires, readiness flips to 503 first; the
+//! streaming engine ends every stream with a final status (gRPC
+//! `UNAVAILABLE`, WebSocket close 1001: upgraded connections live in their
+//! own tasks, which the engine's shutdown reaches) and waits, within the
+//! drain timeout, for them to be delivered; then both servers stop accepting
+//! and let in-flight requests finish; after the drain timeout the rest are
+//! cut off. Then the metrics upkeep task stops and the store closes.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -26,14 +30,17 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::net::TcpListener;
+use tokio_stream::wrappers::TcpListenerStream;
 
 use crate::store::ClipStore;
 use crate::store::sqlite::SqliteStore;
+use crate::stream::{Engine, EngineConfig};
 
 pub mod auth;
 pub mod cache;
 pub mod config;
 pub mod error;
+pub mod grpc;
 pub mod limits;
 mod listen;
 pub mod metrics;
@@ -48,9 +55,10 @@ pub use state::AppState;
 /// take turns on the database lock.
 const DB_CONNECTIONS: u32 = 8;
 
-/// A built server: store open, listener bound, not yet serving.
+/// A built server: store open, listeners bound, not yet serving.
 pub struct Application {
     listener: TcpListener,
+    grpc_listener: TcpListener,
     state: AppState,
 }
 
@@ -75,6 +83,13 @@ impl Application {
             }
         };
         let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
+        let grpc_listener =
+            TcpListener::bind(config.grpc_listen).await.with_context(|| format!("binding {}", config.grpc_listen))?;
+        let streams = Engine::new(EngineConfig {
+            max_streams: config.limits.max_streams,
+            max_streams_per_client: config.limits.max_streams_per_client,
+            ..EngineConfig::default()
+        });
         let state = AppState::new(state::Shared {
             store,
             cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
@@ -83,8 +98,9 @@ impl Application {
             counters: metrics::Counters::new(),
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
+            streams,
         });
-        Ok(Application { listener, state })
+        Ok(Application { listener, grpc_listener, state })
     }
 
     /// The bound address (the real port when built with port 0).
@@ -93,6 +109,14 @@ impl Application {
     /// If the OS cannot report the socket's address (it always can for a bound TCP listener).
     pub fn local_addr(&self) -> SocketAddr {
         self.listener.local_addr().expect("a bound listener has an address")
+    }
+
+    /// The bound gRPC address.
+    ///
+    /// # Panics
+    /// As [`Application::local_addr`].
+    pub fn grpc_addr(&self) -> SocketAddr {
+        self.grpc_listener.local_addr().expect("a bound listener has an address")
     }
 
     /// The shared state (for tests and for protocols served beside REST).
@@ -104,20 +128,44 @@ impl Application {
     /// at most the configured drain timeout.
     ///
     /// # Errors
-    /// None today (accept errors are logged and retried); the `Result` leaves
-    /// room for protocols served beside REST.
+    /// The gRPC routes cannot be built (the embedded descriptor set does not
+    /// parse: a build defect). Accept errors are logged and retried.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        let Application { listener, state } = self;
+        let Application { listener, grpc_listener, state } = self;
         let drain = state.config.drain_timeout;
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
         let (started_tx, started_rx) = tokio::sync::oneshot::channel::<()>();
+        // Streams end first (each with its final status), then both servers
+        // stop accepting and drain.
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
         let ready = state.ready.clone();
-        let signal = async move {
+        let streams = state.streams.clone();
+        let coordinator = tokio::spawn(async move {
             shutdown.await;
             ready.store(false, Ordering::Release);
+            tracing::info!(active = streams.active_streams(), "shutting down: ending streams");
+            streams.shutdown();
+            if !streams.drained(drain).await {
+                tracing::warn!(timeout = ?drain, "streams still open after the drain timeout");
+            }
             tracing::info!("shutting down: draining in-flight requests");
+            let _ = stop_tx.send(true);
+        });
+        let mut http_stop = stop_rx.clone();
+        let signal = async move {
+            let _ = http_stop.wait_for(|stop| *stop).await;
             let _ = started_tx.send(());
         };
+        let mut grpc_stop = stop_rx;
+        let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
+        let grpc = tokio::spawn(
+            tonic::transport::Server::builder()
+                .http2_keepalive_interval(Some(Duration::from_secs(30)))
+                .add_routes(routes)
+                .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_listener), async move {
+                    let _ = grpc_stop.wait_for(|stop| *stop).await;
+                }),
+        );
         let router = rest::router(state.clone());
         let header_timeout = state.config.limits.header_read_timeout;
         let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, signal));
@@ -129,6 +177,13 @@ impl Application {
                 }
             }
         }
+        match tokio::time::timeout(drain, grpc).await {
+            Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
+            Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
+            Ok(Ok(Ok(()))) => {}
+            Err(_) => tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls"),
+        }
+        coordinator.abort();
         upkeep.abort();
         state.store.close().await;
         tracing::info!("stopped");

@@ -51,6 +51,8 @@ pub struct Shared {
     pub ready: Arc<AtomicBool>,
     /// Clip loads in flight, shared by concurrent misses.
     pub loads: Loads,
+    /// The streaming engine behind WebSocket and gRPC streams.
+    pub streams: crate::stream::Engine,
 }
 
 impl AppState {

@@ -2,3 +2,4 @@
 //! and from the core (`[x, y, z, w]` quaternion order is fixed here).
 
 pub mod json;
+pub mod proto;

@@ -154,6 +154,8 @@ pub fn spawn_binary(configure: impl FnOnce(&mut Command)) -> Binary {
         command.env_remove(name);
     }
     command.env("INBETWEEN_LOG", "warn").stdout(Stdio::piped()).stderr(Stdio::null());
+    // The gRPC port too must not collide between tests running in parallel.
+    command.env("INBETWEEN_GRPC_LISTEN", "127.0.0.1:0");
     configure(&mut command);
     let mut child = command.spawn().expect("the binary starts");
     let mut line = String::new();

@@ -2,7 +2,7 @@
 //!
 //! `router(state)` is the whole HTTP surface; [`crate::server::Application`]
 //! only binds and serves it, so tests may also drive it with `oneshot`.
-//! Other protocols' routes (WebSocket stream, import) merge in here.
+//! Other protocols' routes (the WebSocket stream, import) merge in here.
 
 use std::time::Duration;
 
@@ -28,6 +28,7 @@ pub mod health;
 pub mod import;
 pub mod openapi;
 pub mod poses;
+pub mod stream;
 pub mod summary;
 
 /// Every route, with the middleware stack, bound to `state`.
@@ -41,6 +42,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
+        .route("/v1/clips/{id}/stream", get(stream::stream))
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))

@@ -8,7 +8,7 @@ use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::{clips, health, import, poses};
+use super::{clips, health, import, poses, stream};
 
 /// An error body (RFC 9457 `application/problem+json`).
 #[derive(Serialize, ToSchema)]
@@ -76,7 +76,7 @@ impl Modify for BearerAuth {
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
         import::import_clips,
-        poses::get_pose, poses::sample,
+        poses::get_pose, poses::sample, stream::stream,
         health::healthz, health::readyz, health::metrics,
     ),
     components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema)),
@@ -84,6 +84,7 @@ impl Modify for BearerAuth {
     tags(
         (name = "clips", description = "Store and fetch keyframe clips"),
         (name = "poses", description = "Evaluate poses"),
+        (name = "streams", description = "Fixed-rate frames over a WebSocket"),
         (name = "operations", description = "Health and metrics"),
     )
 )]

@@ -1,0 +1,440 @@
+//! The gRPC API (SPEC §4): service `inbetween.v1.Animation`, plus
+//! `grpc.health.v1` and server reflection (v1 and v1alpha).
+//!
+//! Every RPC runs on the same state as REST: the same store, clip cache,
+//! limits, tokens and `ApiError` (mapped to a `tonic::Status` in
+//! `server::error`, beside its problem+json mapping). Writes need the write
+//! token as metadata `authorization: Bearer <token>`; reads the read token
+//! when one is configured. Streams come from the shared streaming engine
+//! (`crate::stream`), so gRPC and WebSocket viewers of the same playback
+//! share one evaluation per tick.
+//!
+//! Served on its own port (`--grpc-listen`, default 127.0.0.1:50051) by
+//! `tonic::transport::Server`, which keeps tonic's HTTP/2 keepalive and
+//! concurrency settings; it shuts down with the HTTP server.
+
+use std::net::IpAddr;
+use std::pin::Pin;
+use std::sync::Arc;
+
+use futures_util::Stream;
+use tokio::sync::oneshot;
+use tonic::metadata::MetadataMap;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::anim::{SampleOptions, Sampler, frame_count, frame_times};
+use crate::server::auth;
+use crate::server::cache::CachedClip;
+use crate::server::error::ApiError;
+use crate::server::limits::admit_doc;
+use crate::server::rest::clips::{DEFAULT_PAGE, MAX_PAGE};
+use crate::server::state::AppState;
+use crate::store::{ClipMeta, ListQuery, is_clip_id};
+use crate::stream::{self, Control, Encoding, Engine, StreamParams, StreamRequest, WireFrame};
+use crate::wire::json::{ClipDoc, parse_clip_doc};
+use crate::wire::proto::server::animation_server::{Animation, AnimationServer};
+use crate::wire::proto::{
+    FILE_DESCRIPTOR_SET, Format, clip_from_pb, clip_to_pb, ease_from_pb, format_from_pb, matrices_to_pb, pb,
+    playback_from_pb, playback_to_pb, pose_to_pb, space_from_pb,
+};
+
+/// The `Animation` service.
+#[derive(Clone)]
+pub struct GrpcService {
+    state: AppState,
+    engine: Engine,
+}
+
+/// The gRPC routes: the service, health and reflection.
+///
+/// # Errors
+/// The embedded descriptor set does not parse (it always does).
+pub async fn routes(state: AppState, engine: Engine) -> anyhow::Result<tonic::service::Routes> {
+    let (reporter, health) = tonic_health::server::health_reporter();
+    reporter.set_serving::<AnimationServer<GrpcService>>().await;
+    let reflection_v1 = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()?;
+    let reflection_v1alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()?;
+    let service = AnimationServer::new(GrpcService { state, engine });
+    Ok(tonic::service::Routes::new(service)
+        .add_service(health)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha))
+}
+
+fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
+    metadata.get("authorization").map(|v| v.as_bytes())
+}
+
+impl GrpcService {
+    fn read<T>(&self, request: &Request<T>) -> Result<(), Status> {
+        auth::check_read(&self.state.config, bearer(request.metadata())).map_err(Status::from)
+    }
+
+    fn write<T>(&self, request: &Request<T>) -> Result<(), Status> {
+        auth::check_write(&self.state.config, bearer(request.metadata())).map_err(Status::from)
+    }
+
+    async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, Status> {
+        if !is_clip_id(id) {
+            return Err(ApiError::NotFound { what: "clip" }.into());
+        }
+        Ok(self.state.clip(id).await?)
+    }
+
+    /// Validates a stream request, loads its clip and admits it.
+    async fn stream_params(
+        &self,
+        req: &pb::StreamRequest,
+        paused: bool,
+        remote: Option<IpAddr>,
+    ) -> Result<(StreamParams, stream::StreamPermit), Status> {
+        let cached = self.clip(&req.clip_id).await?;
+        let request = StreamRequest {
+            fps: req.fps,
+            start: req.start_time,
+            speed: req.speed,
+            playback: playback_from_pb(req.playback, "/playback").map_err(ApiError::from)?,
+            ease: ease_from_pb(req.ease, "/ease").map_err(ApiError::from)?.unwrap_or_default(),
+            space: space_from_pb(req.space, "/space").map_err(ApiError::from)?.unwrap_or_default(),
+            encoding: Encoding::Protobuf,
+            max_frames: req.max_frames,
+            paused,
+        };
+        // The stream holds the cache entry (this version), not a copy.
+        let (id, version) = (cached.meta.id.clone(), cached.meta.version);
+        let params = StreamParams::new(&id, version, cached, request)
+            .map_err(|e| ApiError::invalid("bad_stream", format!("/{}", e.field), e.detail))?;
+        let permit = self.engine.admit(remote).map_err(ApiError::from)?;
+        Ok((params, permit))
+    }
+}
+
+/// Summary of a stored clip, as in REST.
+fn summary(meta: &ClipMeta) -> pb::ClipSummary {
+    let s = &meta.stats;
+    pb::ClipSummary {
+        id: meta.id.clone(),
+        name: meta.name.clone(),
+        version: meta.version,
+        joints: s.joints,
+        tracks: s.tracks,
+        start: s.start,
+        end: s.end,
+        playback: playback_to_pb(s.playback) as i32,
+        events: s.events,
+    }
+}
+
+fn sample_options(space: i32, playback: i32, ease: i32) -> Result<SampleOptions, ApiError> {
+    Ok(SampleOptions {
+        playback: playback_from_pb(playback, "/playback")?,
+        ease: ease_from_pb(ease, "/ease")?.unwrap_or_default(),
+        space: space_from_pb(space, "/space")?.unwrap_or_default(),
+    })
+}
+
+fn check_format(cached: &CachedClip, format: Format) -> Result<(), ApiError> {
+    if format == Format::Skinning && !cached.clip.skeleton().has_inverse_binds() {
+        return Err(ApiError::invalid(
+            "no_inverse_binds",
+            "/format",
+            "format=skinning needs a clip whose skeleton has inverse bind matrices",
+        ));
+    }
+    Ok(())
+}
+
+/// One pose of `cached` at `t`, names included if `names`.
+fn pose(
+    cached: &CachedClip,
+    t: f64,
+    options: &SampleOptions,
+    format: Format,
+    names: bool,
+    sampler: &mut Sampler,
+    matrices: &mut Vec<glam::Mat4>,
+) -> pb::Pose {
+    let clip = &cached.clip;
+    let names = names.then(|| clip.skeleton().names());
+    match format {
+        Format::Trs => {
+            let clip_time = clip.sample(t, options, sampler);
+            pose_to_pb(names, sampler.pose(), t, clip_time, options.space)
+        }
+        Format::Matrix | Format::Skinning => {
+            clip.matrices(t, options, format == Format::Skinning, sampler, matrices);
+            let clip_time = clip.clip_time(t, options.playback.unwrap_or(clip.playback()), options.ease);
+            matrices_to_pb(names, matrices, t, clip_time)
+        }
+    }
+}
+
+type FrameStream = Pin<Box<dyn Stream<Item = Result<WireFrame, Status>> + Send + 'static>>;
+
+fn control_from_pb(op: Option<pb::playback_control::Op>) -> Result<Control, Status> {
+    use pb::playback_control::Op;
+    match op {
+        Some(Op::Play(_)) => Ok(Control::Play),
+        Some(Op::Pause(_)) => Ok(Control::Pause),
+        Some(Op::Seek(s)) => Ok(Control::Seek(s.time)),
+        Some(Op::Speed(s)) => Ok(Control::Speed(s.speed)),
+        Some(Op::Stop(_)) => Ok(Control::Stop),
+        Some(Op::Open(_)) => Err(Status::invalid_argument("`open` is only valid as the first message")),
+        None => Err(Status::invalid_argument("a PlaybackControl needs an op")),
+    }
+}
+
+#[tonic::async_trait]
+impl Animation for GrpcService {
+    async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
+        self.read(&request)?;
+        let req = request.into_inner();
+        if !req.time.is_finite() {
+            return Err(ApiError::invalid("bad_time", "/time", "time must be a finite number of seconds").into());
+        }
+        let options = sample_options(req.space, req.playback, req.ease)?;
+        let format = format_from_pb(req.format, "/format").map_err(ApiError::from)?;
+        let cached = self.clip(&req.clip_id).await?;
+        check_format(&cached, format)?;
+        let pose = pose(&cached, req.time, &options, format, true, &mut Sampler::new(), &mut Vec::new());
+        self.state.counters.poses.increment(1);
+        Ok(Response::new(pose))
+    }
+
+    async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
+        self.read(&request)?;
+        let req = request.into_inner();
+        let max = self.state.config.limits.max_poses;
+        let times: Vec<f64> = match &req.when {
+            Some(pb::sample_batch_request::When::Times(t)) => {
+                if let Some(i) = t.values.iter().position(|x| !x.is_finite()) {
+                    return Err(ApiError::invalid("bad_time", format!("/times/{i}"), "times must be finite").into());
+                }
+                if t.values.len() > max {
+                    let detail = format!("{} times; the limit is {max}", t.values.len());
+                    return Err(ApiError::TooMany { code: "too_many_poses", pointer: "/times".into(), detail }.into());
+                }
+                t.values.clone()
+            }
+            Some(pb::sample_batch_request::When::Range(r)) => {
+                if !(r.start.is_finite() && r.end.is_finite() && r.end >= r.start) {
+                    let detail = "start and end must be finite with end >= start";
+                    return Err(ApiError::invalid("bad_range", "/range", detail).into());
+                }
+                if !(1.0..=240.0).contains(&r.fps) {
+                    return Err(ApiError::invalid("bad_fps", "/range/fps", "fps must be 1..=240").into());
+                }
+                let n = frame_count(r.start, r.end, r.fps);
+                if n > max as u64 {
+                    let detail = format!("{n} frames; the limit is {max}");
+                    return Err(ApiError::TooMany { code: "too_many_poses", pointer: "/range".into(), detail }.into());
+                }
+                frame_times(r.start, r.end, r.fps).collect()
+            }
+            None => return Err(ApiError::invalid("missing_times", "/times", "give `times` or `range`").into()),
+        };
+        let options = sample_options(req.space, req.playback, req.ease)?;
+        let format = format_from_pb(req.format, "/format").map_err(ApiError::from)?;
+        let cached = self.clip(&req.clip_id).await?;
+        check_format(&cached, format)?;
+        let build = move || {
+            let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+            pb::PoseBatch {
+                joint_names: cached.clip.skeleton().names().to_vec(),
+                poses: times
+                    .iter()
+                    .map(|&t| pose(&cached, t, &options, format, false, &mut sampler, &mut matrices))
+                    .collect(),
+            }
+        };
+        let batch = if times_len_is_large(&req) {
+            tokio::task::spawn_blocking(build).await.map_err(|e| Status::from(ApiError::internal(e)))?
+        } else {
+            build()
+        };
+        self.state.counters.poses.increment(batch.poses.len() as u64);
+        Ok(Response::new(batch))
+    }
+
+    type StreamFramesStream = FrameStream;
+
+    async fn stream_frames(
+        &self,
+        request: Request<pb::StreamRequest>,
+    ) -> Result<Response<Self::StreamFramesStream>, Status> {
+        self.read(&request)?;
+        let remote = request.remote_addr().map(|a| a.ip());
+        let (params, permit) = self.stream_params(request.get_ref(), false, remote).await?;
+        let sub = self.engine.watch(params, permit);
+        Ok(Response::new(Box::pin(stream::grpc::frames(sub))))
+    }
+
+    type PlayStream = FrameStream;
+
+    async fn play(
+        &self,
+        request: Request<Streaming<pb::PlaybackControl>>,
+    ) -> Result<Response<Self::PlayStream>, Status> {
+        self.read(&request)?;
+        let remote = request.remote_addr().map(|a| a.ip());
+        let mut inbound = request.into_inner();
+        let open = match inbound.message().await? {
+            Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Open(open)) }) => open,
+            Some(_) => return Err(Status::invalid_argument("the first message of Play must be `open`")),
+            None => return Err(Status::invalid_argument("Play needs an `open` message first")),
+        };
+        let stream_req = open.stream.ok_or_else(|| Status::invalid_argument("`open` needs a `stream`"))?;
+        let (params, permit) = self.stream_params(&stream_req, open.paused, remote).await?;
+        let sub = self.engine.play(params, permit);
+        let controller = sub.controller().expect("a Play subscription is private");
+        let (abort_tx, abort_rx) = oneshot::channel::<Status>();
+        // Reads the client's controls until it half-closes, errs, or the
+        // playback ends (then `closed` resolves); never outlives the stream.
+        tokio::spawn(async move {
+            loop {
+                let message = tokio::select! {
+                    m = inbound.message() => m,
+                    _ = controller.closed() => return,
+                };
+                match message {
+                    Ok(Some(msg)) => {
+                        let sent = control_from_pb(msg.op)
+                            .and_then(|c| controller.send(c).map_err(|e| Status::invalid_argument(e.to_string())));
+                        match sent {
+                            Ok(true) => {}
+                            Ok(false) => return,
+                            Err(status) => {
+                                let _ = abort_tx.send(status);
+                                return;
+                            }
+                        }
+                    }
+                    Ok(None) | Err(_) => return,
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))))
+    }
+
+    async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
+        self.read(&request)?;
+        let id = &request.get_ref().clip_id;
+        if !is_clip_id(id) {
+            return Err(ApiError::NotFound { what: "clip" }.into());
+        }
+        let stored =
+            self.state.store.get(id).await.map_err(ApiError::from)?.ok_or(ApiError::NotFound { what: "clip" })?;
+        let doc: ClipDoc = parse_clip_doc(stored.doc_json.as_bytes())
+            .map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {id} no longer parses: {e}")))?;
+        let spec = doc.to_spec().map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {id}: {e}")))?;
+        Ok(Response::new(pb::ClipRecord { summary: Some(summary(&stored.meta)), clip: Some(clip_to_pb(&spec)) }))
+    }
+
+    async fn list_clips(
+        &self,
+        request: Request<pb::ListClipsRequest>,
+    ) -> Result<Response<pb::ListClipsResponse>, Status> {
+        self.read(&request)?;
+        let req = request.into_inner();
+        let limit = match req.limit {
+            0 => DEFAULT_PAGE,
+            n if n <= MAX_PAGE => n,
+            n => {
+                let detail = format!("limit must be 1..={MAX_PAGE} (or 0 for the default), got {n}");
+                return Err(ApiError::invalid("bad_limit", "/limit", detail).into());
+            }
+        };
+        let after = (!req.cursor.is_empty()).then_some(req.cursor);
+        if after.as_deref().is_some_and(|c| !is_clip_id(c)) {
+            let detail = "cursor must be a next_cursor from a previous page";
+            return Err(ApiError::invalid("bad_cursor", "/cursor", detail).into());
+        }
+        let name = (!req.name.is_empty()).then_some(req.name);
+        let mut page =
+            self.state.store.list(ListQuery { after, name, limit: limit + 1 }).await.map_err(ApiError::from)?;
+        let more = page.len() > limit as usize;
+        page.truncate(limit as usize);
+        let next_cursor = if more { page.last().map(|m| m.id.clone()).unwrap_or_default() } else { String::new() };
+        Ok(Response::new(pb::ListClipsResponse { clips: page.iter().map(summary).collect(), next_cursor }))
+    }
+
+    async fn put_clip(&self, request: Request<pb::PutClipRequest>) -> Result<Response<pb::ClipSummary>, Status> {
+        self.write(&request)?;
+        let req = request.into_inner();
+        let clip = req.clip.ok_or_else(|| ApiError::invalid("missing_clip", "/clip", "a PutClip needs a clip"))?;
+        let spec = clip_from_pb(&clip).map_err(ApiError::from)?;
+        let limits = self.state.config.limits.clone();
+        let admitted = admit_doc(ClipDoc::from_spec(&spec), &limits)?;
+        let meta = if req.clip_id.is_empty() {
+            self.state.store.create(admitted.new_clip).await.map_err(ApiError::from)?
+        } else {
+            if !is_clip_id(&req.clip_id) {
+                return Err(ApiError::NotFound { what: "clip" }.into());
+            }
+            self.state.store.replace(&req.clip_id, admitted.new_clip, req.if_version).await.map_err(ApiError::from)?
+        };
+        tracing::info!(id = %meta.id, version = meta.version, "clip written over gRPC");
+        let reply = summary(&meta);
+        self.state.cache_written(Arc::new(CachedClip { meta, clip: admitted.clip }));
+        Ok(Response::new(reply))
+    }
+
+    async fn delete_clip(
+        &self,
+        request: Request<pb::DeleteClipRequest>,
+    ) -> Result<Response<pb::DeleteClipResponse>, Status> {
+        self.write(&request)?;
+        let id = request.into_inner().clip_id;
+        if !is_clip_id(&id) {
+            return Err(ApiError::NotFound { what: "clip" }.into());
+        }
+        self.state.store.delete(&id, None).await.map_err(ApiError::from)?;
+        self.state.cache_invalidate(&id);
+        tracing::info!(%id, "clip deleted over gRPC");
+        Ok(Response::new(pb::DeleteClipResponse {}))
+    }
+
+    async fn ping(&self, _request: Request<pb::PingRequest>) -> Result<Response<pb::PingResponse>, Status> {
+        Ok(Response::new(pb::PingResponse {
+            server_unix_nanos: stream::unix_nanos(),
+            server_monotonic_nanos: self.engine.uptime().as_nanos() as u64,
+        }))
+    }
+}
+
+/// Large batches are built on the blocking pool (as REST does).
+fn times_len_is_large(req: &pb::SampleBatchRequest) -> bool {
+    match &req.when {
+        Some(pb::sample_batch_request::When::Times(t)) => t.values.len() > 256,
+        Some(pb::sample_batch_request::When::Range(r)) => frame_count(r.start, r.end, r.fps) > 256,
+        None => false,
+    }
+}
+
+/// `frames`, ended early with the status sent on `abort` (a bad control).
+fn with_abort(
+    frames: impl Stream<Item = Result<WireFrame, Status>> + Send + 'static,
+    abort: oneshot::Receiver<Status>,
+) -> impl Stream<Item = Result<WireFrame, Status>> + Send + 'static {
+    use futures_util::StreamExt;
+    futures_util::stream::unfold(Some((Box::pin(frames), Some(abort))), |state| async move {
+        let (mut frames, abort) = state?;
+        let Some(mut abort) = abort else {
+            return frames.next().await.map(|item| (item, Some((frames, None))));
+        };
+        tokio::select! {
+            item = frames.next() => item.map(|item| (item, Some((frames, Some(abort))))),
+            status = &mut abort => match status {
+                Ok(status) => Some((Err(status), None)),
+                // The control reader ended without complaint: frames go on.
+                Err(_) => frames.next().await.map(|item| (item, Some((frames, None)))),
+            },
+        }
+    })
+}

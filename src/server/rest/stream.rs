@@ -1,0 +1,122 @@
+//! `GET /v1/clips/{id}/stream`: fixed-rate frames over a WebSocket
+//! (SPEC §5).
+//!
+//! The query is validated and the clip loaded before the upgrade, so a bad
+//! request is an ordinary 4xx problem. A request over the stream caps is
+//! upgraded and then closed at once with code 1013 ("try again later") and
+//! the reason, because a browser's WebSocket API cannot read the body of a
+//! refused handshake. After the upgrade, `crate::stream::ws::serve` owns the
+//! connection; it is not covered by axum's graceful shutdown, so the
+//! application ends it through the streaming engine's shutdown (close 1001).
+
+use std::net::SocketAddr;
+
+use axum::Extension;
+use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{ConnectInfo, RawQuery, State};
+use axum::response::Response;
+
+use crate::anim::Ease;
+use crate::server::auth::ReadAccess;
+use crate::server::error::ApiError;
+use crate::server::state::AppState;
+use crate::stream::ws::{WsConfig, close};
+use crate::stream::{Encoding, StreamParams, StreamRequest};
+use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
+
+use super::extract::{ClipId, QueryParams};
+
+/// Largest control message a client may send.
+const MAX_CONTROL_BYTES: usize = 4096;
+
+/// Stream a clip: upgrade to a WebSocket of frames.
+#[utoipa::path(
+    get, path = "/v1/clips/{id}/stream", tag = "streams",
+    params(
+        ("id" = String, Path, description = "Clip id"),
+        ("fps" = Option<u32>, Query, description = "Frames per second, 1..=240 (default 30)"),
+        ("speed" = Option<f64>, Query, description = "Request seconds per second, may be negative (default 1)"),
+        ("start" = Option<f64>, Query, description = "Request time of frame 0 (default: the clip's start)"),
+        ("playback" = Option<String>, Query, description = "once | loop | ping_pong (default: the clip's)"),
+        ("space" = Option<String>, Query, description = "local (default) | model"),
+        ("ease" = Option<String>, Query, description = "linear (default) | ease_in | ease_out | ease_in_out"),
+        ("encoding" = Option<String>, Query, description = "json (default, text frames) | protobuf (binary `Frame`)"),
+        ("max_frames" = Option<u64>, Query, description = "End after this many frames (close 1000)"),
+    ),
+    responses(
+        (status = 101, description = "Switching to WebSocket; frames follow"),
+        (status = 400, description = "A bad parameter", body = super::openapi::Problem),
+        (status = 404, body = super::openapi::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn stream(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    ClipId(id): ClipId,
+    connect: Option<Extension<ConnectInfo<SocketAddr>>>,
+    RawQuery(query): RawQuery,
+    upgrade: WebSocketUpgrade,
+) -> Result<Response, ApiError> {
+    let q = QueryParams::parse(
+        query.as_deref(),
+        &["fps", "speed", "start", "playback", "space", "ease", "encoding", "max_frames"],
+    )?;
+    let fps = match q.get("fps") {
+        None => 30,
+        Some(text) => text.parse::<u32>().map_err(|_| {
+            ApiError::parameter("bad_fps", "fps", format!("fps must be an integer in 1..=240, got `{text}`"))
+        })?,
+    };
+    let max_frames = match q.get("max_frames") {
+        None => 0,
+        Some(text) => text.parse::<u64>().ok().filter(|n| *n > 0).ok_or_else(|| {
+            ApiError::parameter(
+                "bad_max_frames",
+                "max_frames",
+                format!("max_frames must be a positive integer, got `{text}`"),
+            )
+        })?,
+    };
+    let encoding = match q.get("encoding") {
+        None | Some("json") => Encoding::Json,
+        Some("protobuf") => Encoding::Protobuf,
+        Some(other) => {
+            let detail = format!("encoding must be json or protobuf, got `{other}`");
+            return Err(ApiError::parameter("bad_parameter", "encoding", detail));
+        }
+    };
+    let request = StreamRequest {
+        fps,
+        start: q.finite("start")?,
+        speed: q.finite("speed")?,
+        playback: q.parsed::<PlaybackDoc>("playback")?.map(Into::into),
+        ease: q.parsed::<EaseDoc>("ease")?.map_or(Ease::Linear, Into::into),
+        space: q.parsed::<SpaceDoc>("space")?.map(Into::into).unwrap_or_default(),
+        encoding,
+        max_frames,
+        paused: false,
+    };
+    let cached = state.clip(&id).await?;
+    // The stream holds the cache entry (this version), not a copy.
+    let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
+    let params = StreamParams::new(&clip_id, version, cached, request)
+        .map_err(|e| ApiError::parameter("bad_parameter", e.field, e.detail))?;
+    let engine = state.streams.clone();
+    // The peer address, when served with connect info (`Application` is).
+    let admitted = engine.admit(connect.map(|Extension(ConnectInfo(addr))| addr.ip()));
+    let upgrade = upgrade.max_message_size(MAX_CONTROL_BYTES).max_frame_size(MAX_CONTROL_BYTES);
+    Ok(upgrade.on_upgrade(move |socket: WebSocket| async move {
+        match admitted {
+            Ok(permit) => {
+                let sub = engine.watch(params, permit);
+                crate::stream::ws::serve(socket, sub, WsConfig::default()).await;
+            }
+            Err(refused) => {
+                let mut socket = socket;
+                let frame = CloseFrame { code: close::TRY_AGAIN_LATER, reason: refused.to_string().into() };
+                let _ = socket.send(Message::Close(Some(frame))).await;
+            }
+        }
+    }))
+}

@@ -1,0 +1,330 @@
+//! Frame encodings: JSON text and protobuf `Frame` bytes (SPEC §5), written
+//! straight from the core's pose buffers into one reusable buffer.
+//!
+//! A playback encodes each tick once for all its viewers. Two things differ
+//! per viewer and are patched in only when they differ, which is rare: the
+//! `dropped` count (a viewer whose buffer overflowed missed frames the
+//! playback sent) and, for protobuf, the joint names a viewer must see in
+//! its first frame. Protobuf makes the patch an append: a singular field
+//! repeated later in a message overrides the earlier value, and a repeated
+//! embedded message field merges, so `shared bytes + [dropped] + [pose with
+//! joint names]` decodes as the patched frame in every conforming decoder.
+//! JSON records where its `dropped` number sits and splices a new one in.
+
+use std::io::Write;
+
+use bytes::{BufMut, Bytes, BytesMut};
+use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
+
+use crate::anim::{Event, Pose, Skeleton, Space};
+use crate::wire::json::PoseJson;
+use crate::wire::proto::space_to_pb;
+
+/// How frames travel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Encoding {
+    /// `{"seq","clip_time","sent_at_unix_nanos","dropped","events","pose"}`.
+    #[default]
+    Json,
+    /// An encoded `inbetween.v1.Frame`.
+    Protobuf,
+}
+
+/// Everything one frame says.
+pub struct FrameData<'a> {
+    pub seq: u64,
+    pub dropped: u64,
+    pub sent_at_unix_nanos: i64,
+    pub clip_id: &'a str,
+    /// The request time shown.
+    pub time: f64,
+    pub clip_time: f32,
+    pub space: Space,
+    pub skeleton: &'a Skeleton,
+    pub pose: &'a Pose,
+    /// Events crossed (all of the clip's events, and indices into them).
+    pub events: &'a [Event],
+    pub crossed: &'a [u32],
+    /// Protobuf only: put the joint names in this frame.
+    pub with_names: bool,
+}
+
+/// One encoded frame, shared by every viewer of its playback.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Encoded {
+    pub seq: u64,
+    pub dropped: u64,
+    pub clip_time: f32,
+    pub encoding: Encoding,
+    pub bytes: Bytes,
+    /// Whether the joint names are in it (protobuf).
+    pub has_names: bool,
+    /// JSON: the byte range of the `dropped` number.
+    dropped_at: (u32, u32),
+}
+
+/// A reusable encoder: the buffer's storage is recycled once viewers drop
+/// their copies, so steady state allocates nothing beyond the bytes sent.
+#[derive(Debug, Default)]
+pub struct FrameEncoder {
+    encoding: Encoding,
+    buf: BytesMut,
+}
+
+impl FrameEncoder {
+    pub fn new(encoding: Encoding) -> Self {
+        FrameEncoder { encoding, buf: BytesMut::new() }
+    }
+
+    pub fn encode(&mut self, f: &FrameData<'_>) -> Encoded {
+        let dropped_at = match self.encoding {
+            Encoding::Json => write_json(&mut self.buf, f),
+            Encoding::Protobuf => {
+                write_protobuf(&mut self.buf, f);
+                (0, 0)
+            }
+        };
+        Encoded {
+            seq: f.seq,
+            dropped: f.dropped,
+            clip_time: f.clip_time,
+            encoding: self.encoding,
+            bytes: self.buf.split().freeze(),
+            has_names: f.with_names || self.encoding == Encoding::Json,
+            dropped_at,
+        }
+    }
+}
+
+impl Encoded {
+    /// These bytes as one viewer must see them: with its own `dropped`
+    /// count, and (protobuf) with `names` added if it has not had them yet.
+    /// Copies only when something differs.
+    pub fn for_viewer(&self, dropped: u64, names: Option<&[String]>) -> Bytes {
+        let names = names.filter(|_| !self.has_names && self.encoding == Encoding::Protobuf);
+        if dropped == self.dropped && names.is_none() {
+            return self.bytes.clone();
+        }
+        let mut out = BytesMut::with_capacity(self.bytes.len() + 32);
+        match self.encoding {
+            Encoding::Json => {
+                let (a, b) = (self.dropped_at.0 as usize, self.dropped_at.1 as usize);
+                out.put_slice(&self.bytes[..a]);
+                write!((&mut out).writer(), "{dropped}").expect("writing to memory");
+                out.put_slice(&self.bytes[b..]);
+            }
+            Encoding::Protobuf => {
+                out.put_slice(&self.bytes);
+                if dropped != self.dropped {
+                    encode_key(4, WireType::Varint, &mut out);
+                    encode_varint(dropped, &mut out);
+                }
+                if let Some(names) = names {
+                    let len = names_len(names);
+                    encode_key(6, WireType::LengthDelimited, &mut out);
+                    encode_varint(len as u64, &mut out);
+                    put_names(names, &mut out);
+                }
+            }
+        }
+        out.freeze()
+    }
+}
+
+fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
+    #[derive(serde::Serialize)]
+    struct EventJson<'a> {
+        time: f32,
+        name: &'a str,
+    }
+    buf.reserve(256 + f.pose.len() * 160);
+    let mut w = buf.writer();
+    let io = "writing to memory";
+    write!(w, "{{\"seq\":{},\"clip_time\":", f.seq).expect(io);
+    serde_json::to_writer(&mut w, &f.clip_time).expect(io);
+    write!(w, ",\"sent_at_unix_nanos\":{},\"dropped\":", f.sent_at_unix_nanos).expect(io);
+    let a = w.get_ref().len() as u32;
+    write!(w, "{}", f.dropped).expect(io);
+    let b = w.get_ref().len() as u32;
+    w.write_all(b",\"events\":[").expect(io);
+    for (i, &e) in f.crossed.iter().enumerate() {
+        if i > 0 {
+            w.write_all(b",").expect(io);
+        }
+        let e = &f.events[e as usize];
+        serde_json::to_writer(&mut w, &EventJson { time: e.time, name: &e.name }).expect(io);
+    }
+    w.write_all(b"],\"pose\":").expect(io);
+    let pose = PoseJson {
+        clip: f.clip_id,
+        time: f.time,
+        clip_time: f.clip_time,
+        space: f.space,
+        skeleton: f.skeleton,
+        pose: f.pose,
+    };
+    serde_json::to_writer(&mut w, &pose).expect(io);
+    w.write_all(b"}").expect(io);
+    (a, b)
+}
+
+fn len_field(tag: u32, len: usize) -> usize {
+    key_len(tag) + encoded_len_varint(len as u64) + len
+}
+
+fn names_len(names: &[String]) -> usize {
+    names.iter().map(|n| len_field(1, n.len())).sum()
+}
+
+fn put_names(names: &[String], buf: &mut BytesMut) {
+    for n in names {
+        encode_key(1, WireType::LengthDelimited, buf);
+        encode_varint(n.len() as u64, buf);
+        buf.put_slice(n.as_bytes());
+    }
+}
+
+/// A packed `repeated float` of `n` joints × `width` components.
+fn put_packed(tag: u32, n: usize, width: usize, values: impl Iterator<Item = f32>, buf: &mut BytesMut) {
+    if n == 0 {
+        return;
+    }
+    encode_key(tag, WireType::LengthDelimited, buf);
+    encode_varint((n * width * 4) as u64, buf);
+    for v in values {
+        buf.put_f32_le(v);
+    }
+}
+
+fn write_protobuf(buf: &mut BytesMut, f: &FrameData<'_>) {
+    let n = f.pose.len();
+    let packed = |width: usize| if n == 0 { 0 } else { len_field(2, n * width * 4) };
+    let names = if f.with_names { names_len(f.skeleton.names()) } else { 0 };
+    let space = space_to_pb(f.space) as u64;
+    let pose_len = names + 2 * packed(3) + packed(4) + (key_len(5) + 8) + (key_len(6) + 4) + key_len(8) + 1;
+    let event_len = |e: &Event| (key_len(1) + 4) + len_field(2, e.name.len());
+    let events: usize = f.crossed.iter().map(|&i| len_field(5, event_len(&f.events[i as usize]))).sum();
+    buf.reserve(40 + events + len_field(6, pose_len));
+
+    encode_key(1, WireType::Varint, buf);
+    encode_varint(f.seq, buf);
+    encode_key(2, WireType::ThirtyTwoBit, buf);
+    buf.put_f32_le(f.clip_time);
+    encode_key(3, WireType::Varint, buf);
+    encode_varint(f.sent_at_unix_nanos as u64, buf);
+    encode_key(4, WireType::Varint, buf);
+    encode_varint(f.dropped, buf);
+    for &i in f.crossed {
+        let e = &f.events[i as usize];
+        encode_key(5, WireType::LengthDelimited, buf);
+        encode_varint(event_len(e) as u64, buf);
+        encode_key(1, WireType::ThirtyTwoBit, buf);
+        buf.put_f32_le(e.time);
+        encode_key(2, WireType::LengthDelimited, buf);
+        encode_varint(e.name.len() as u64, buf);
+        buf.put_slice(e.name.as_bytes());
+    }
+    encode_key(6, WireType::LengthDelimited, buf);
+    encode_varint(pose_len as u64, buf);
+    if f.with_names {
+        put_names(f.skeleton.names(), buf);
+    }
+    let p = f.pose;
+    put_packed(2, n, 3, p.translations.iter().flat_map(|v| v.to_array()), buf);
+    put_packed(3, n, 4, p.rotations.iter().flat_map(|q| q.to_array()), buf);
+    put_packed(4, n, 3, p.scales.iter().flat_map(|v| v.to_array()), buf);
+    encode_key(5, WireType::SixtyFourBit, buf);
+    buf.put_f64_le(f.time);
+    encode_key(6, WireType::ThirtyTwoBit, buf);
+    buf.put_f32_le(f.clip_time);
+    encode_key(8, WireType::Varint, buf);
+    encode_varint(space, buf);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anim::{Clip, SampleOptions, Sampler};
+    use crate::wire::json::parse_clip;
+    use crate::wire::proto::{pb, pose_to_pb};
+    use prost::Message;
+
+    fn wave() -> Clip {
+        let body = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/wave.json")).unwrap();
+        Clip::build(&parse_clip(&body).unwrap().1).unwrap()
+    }
+
+    /// Encodes a frame of `clip` at request time `t` with every event
+    /// crossed, and returns the encoded frame and the expected proto frame
+    /// built independently through the generated types.
+    fn check(encoding: Encoding, t: f64, space: Space, with_names: bool, dropped: u64) -> (Encoded, pb::Frame) {
+        let clip = wave();
+        let mut sampler = Sampler::new();
+        let clip_time = clip.sample(t, &SampleOptions { space, ..Default::default() }, &mut sampler);
+        let crossed = [0u32];
+        let data = FrameData {
+            seq: 7,
+            dropped,
+            sent_at_unix_nanos: 1_700_000_000_123_456_789,
+            clip_id: "c1",
+            time: t,
+            clip_time,
+            space,
+            skeleton: clip.skeleton(),
+            pose: sampler.pose(),
+            events: clip.events(),
+            crossed: &crossed,
+            with_names,
+        };
+        let encoded = FrameEncoder::new(encoding).encode(&data);
+        let names = with_names.then(|| clip.skeleton().names());
+        let expected = pb::Frame {
+            seq: 7,
+            clip_time,
+            sent_at_unix_nanos: 1_700_000_000_123_456_789,
+            dropped,
+            events: vec![pb::Event { time: 1.0, name: "footstep".into() }],
+            pose: Some(pose_to_pb(names, sampler.pose(), t, clip_time, space)),
+        };
+        (encoded, expected)
+    }
+
+    #[test]
+    fn protobuf_frames_decode_to_the_generated_frame() {
+        for (t, space, names) in [(1.25, Space::Local, true), (0.4, Space::Model, false)] {
+            let (encoded, expected) = check(Encoding::Protobuf, t, space, names, 3);
+            assert_eq!(pb::Frame::decode(encoded.bytes.clone()).unwrap(), expected);
+            assert_eq!(encoded.bytes.len(), expected.encoded_len());
+        }
+    }
+
+    #[test]
+    fn a_viewer_patch_overrides_dropped_and_adds_the_names() {
+        let (encoded, mut expected) = check(Encoding::Protobuf, 2.0, Space::Local, false, 0);
+        assert_eq!(encoded.for_viewer(0, None), encoded.bytes, "nothing to patch");
+        let names = wave().skeleton().names().to_vec();
+        let patched = pb::Frame::decode(encoded.for_viewer(5, Some(&names))).unwrap();
+        expected.dropped = 5;
+        expected.pose.as_mut().unwrap().joint_names = names;
+        assert_eq!(patched, expected);
+    }
+
+    #[test]
+    fn json_frames_have_the_spec_shape_and_patch_dropped() {
+        let (encoded, expected) = check(Encoding::Json, 1.25, Space::Local, false, 2);
+        let v: serde_json::Value = serde_json::from_slice(&encoded.bytes).unwrap();
+        assert_eq!(v["seq"], 7);
+        assert_eq!(v["dropped"], 2);
+        assert_eq!(v["sent_at_unix_nanos"], 1_700_000_000_123_456_789i64);
+        assert_eq!(v["clip_time"].as_f64().unwrap() as f32, expected.clip_time);
+        assert_eq!(v["events"], serde_json::json!([{"time": 1.0, "name": "footstep"}]));
+        assert_eq!(v["pose"]["clip"], "c1");
+        assert_eq!(v["pose"]["joints"][1]["name"], "arm");
+        let rot: Vec<f32> = serde_json::from_value(v["pose"]["joints"][1]["rotation"].clone()).unwrap();
+        assert_eq!(rot, expected.pose.unwrap().rotations[4..8]);
+
+        let v: serde_json::Value = serde_json::from_slice(&encoded.for_viewer(12345, None)).unwrap();
+        assert_eq!(v["dropped"], 12345);
+        assert_eq!(v["seq"], 7);
+    }
+}

@@ -1,0 +1,167 @@
+//! A playback: one task that, at each tick of its schedule, evaluates the
+//! pose once, encodes it once and publishes the bytes to its viewers.
+//!
+//! Viewers receive through a `tokio::sync::broadcast` channel of a few
+//! frames. Publishing never waits: when a viewer falls behind, the channel
+//! overwrites its oldest frames, and the viewer later learns how many it
+//! missed (its `dropped`). A stalled viewer therefore costs a fixed amount
+//! of memory and never slows the others. The task sleeps on tokio's timer
+//! wheel between ticks (no busy loop), holds no lock across an await, and
+//! reuses its sampler, event and encoding buffers, so a tick allocates only
+//! the bytes it sends.
+//!
+//! It ends when it has no viewers left (checked each tick), on a `stop`
+//! control, or at shutdown, publishing a final [`EndReason`] that even a
+//! lagging viewer receives (the last item of a broadcast is never dropped).
+
+use std::sync::Arc;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use tokio::sync::{broadcast, mpsc, watch};
+
+use super::encode::{Encoded, Encoding, FrameData, FrameEncoder};
+use super::engine::{HubKey, Inner, StreamParams};
+use super::events::crossed;
+use super::playhead::{Control, Playhead};
+use super::schedule::Schedule;
+use crate::anim::{SampleOptions, Sampler};
+
+/// Why a stream ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndReason {
+    /// `max_frames` frames were delivered.
+    MaxFrames,
+    /// The client sent `stop`.
+    Stopped,
+    /// The server is shutting down.
+    Shutdown,
+    /// The playback ended unexpectedly (a bug; logged).
+    Failed,
+}
+
+/// What a playback publishes.
+#[derive(Debug, Clone)]
+pub enum Item {
+    Frame(Encoded),
+    End(EndReason),
+}
+
+pub(crate) struct Hub {
+    params: StreamParams,
+    schedule: Schedule,
+    playhead: Playhead,
+    sampler: Sampler,
+    prev_time: Option<f64>,
+    crossed: Vec<u32>,
+    encoder: FrameEncoder,
+    with_names: bool,
+    tx: broadcast::Sender<Item>,
+    controls: Option<mpsc::Receiver<Control>>,
+    /// Shared playbacks leave the registry before their first tick.
+    registry: Option<(Arc<Inner>, HubKey)>,
+    shutdown: watch::Receiver<bool>,
+    /// `inbetween_stream_ticks_total`: evaluated and encoded ticks (one per
+    /// playback, however many viewers share it).
+    ticks: metrics::Counter,
+}
+
+impl Hub {
+    pub(crate) fn new(
+        params: &StreamParams,
+        schedule: Schedule,
+        tx: broadcast::Sender<Item>,
+        controls: Option<mpsc::Receiver<Control>>,
+        registry: Option<(Arc<Inner>, HubKey)>,
+        shutdown: watch::Receiver<bool>,
+    ) -> Self {
+        Hub {
+            playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
+            params: params.clone(),
+            schedule,
+            sampler: Sampler::new(),
+            prev_time: None,
+            crossed: Vec::new(),
+            encoder: FrameEncoder::new(params.encoding),
+            with_names: params.encoding == Encoding::Protobuf,
+            tx,
+            controls,
+            registry,
+            shutdown,
+            ticks: metrics::counter!("inbetween_stream_ticks_total"),
+        }
+    }
+
+    /// Continues a playback a viewer was watching elsewhere (a fork): the
+    /// request time of its last frame, and whether it still needs the names.
+    pub(crate) fn resume(&mut self, prev_time: Option<f64>, with_names: bool) {
+        self.prev_time = prev_time;
+        self.with_names = with_names && self.params.encoding == Encoding::Protobuf;
+    }
+
+    pub(crate) async fn run(mut self) {
+        metrics::counter!("inbetween_stream_playbacks_total").increment(1);
+        let end = loop {
+            let tick = tokio::select! {
+                biased;
+                _ = self.shutdown.wait_for(|down| *down) => break EndReason::Shutdown,
+                tick = self.schedule.next() => tick,
+            };
+            if let Some((inner, key)) = self.registry.take() {
+                inner.hubs.lock().expect("hub registry poisoned").remove(&key);
+            }
+            if self.tx.receiver_count() == 0 {
+                return;
+            }
+            let mut jumped = false;
+            if let Some(controls) = &mut self.controls {
+                let mut stop = false;
+                while let Ok(control) = controls.try_recv() {
+                    match control {
+                        Control::Stop => stop = true,
+                        c => jumped |= self.playhead.apply(c, tick.k),
+                    }
+                }
+                if stop {
+                    break EndReason::Stopped;
+                }
+            }
+            let frame = self.frame(tick.k, tick.skipped, jumped);
+            self.ticks.increment(1);
+            // An error only means no viewer is left; the next tick ends it.
+            let _ = self.tx.send(Item::Frame(frame));
+        };
+        let _ = self.tx.send(Item::End(end));
+    }
+
+    /// Evaluates and encodes tick `k`.
+    fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
+        let p = &self.params;
+        let time = self.playhead.time_at(k);
+        let options = SampleOptions { playback: Some(p.playback), ease: p.ease, space: p.space };
+        let clip_time = p.clip().sample(time, &options, &mut self.sampler);
+        let from = if jumped { None } else { self.prev_time };
+        crossed(p.clip(), p.playback, p.ease, from, time, &mut self.crossed);
+        self.prev_time = Some(time);
+        let frame = self.encoder.encode(&FrameData {
+            seq: k,
+            dropped: skipped,
+            sent_at_unix_nanos: unix_nanos(),
+            clip_id: &p.clip_id,
+            time,
+            clip_time,
+            space: p.space,
+            skeleton: p.clip().skeleton(),
+            pose: self.sampler.pose(),
+            events: p.clip().events(),
+            crossed: &self.crossed,
+            with_names: self.with_names,
+        });
+        self.with_names = false;
+        frame
+    }
+}
+
+/// Wall-clock nanoseconds since the Unix epoch (0 if the clock is before it).
+pub fn unix_nanos() -> i64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
+}

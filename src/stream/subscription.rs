@@ -1,0 +1,202 @@
+//! A [`Subscription`]: one stream as its transport sees it — the frames of
+//! its playback, with its own `dropped` count and frame limit, and the way
+//! to send it controls.
+
+use bytes::Bytes;
+use tokio::sync::{broadcast, mpsc};
+
+use super::encode::Encoding;
+use super::engine::{Engine, StreamParams};
+use super::hub::{EndReason, Item};
+use super::limits::StreamPermit;
+use super::playhead::{Control, Playhead};
+use super::schedule::{Grid, Schedule};
+
+/// A frame as this stream's client must receive it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Delivered {
+    pub seq: u64,
+    /// Ticks skipped since this client's previous frame.
+    pub dropped: u64,
+    pub clip_time: f32,
+    pub bytes: Bytes,
+}
+
+/// The next thing to send.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Next {
+    Frame(Delivered),
+    End(EndReason),
+}
+
+/// Why a control was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ControlError {
+    #[error("{0}")]
+    Invalid(&'static str),
+    #[error("too many controls pending; wait for a frame before sending more")]
+    Busy,
+}
+
+/// A sender of controls to a private playback, usable from another task
+/// (gRPC `Play` reads controls and frames on different tasks).
+#[derive(Debug, Clone)]
+pub struct Controller {
+    tx: mpsc::Sender<Control>,
+}
+
+impl Controller {
+    /// Queues `control` for the next tick. Returns `false` if the playback
+    /// has ended.
+    ///
+    /// # Errors
+    /// An invalid control, or too many pending.
+    pub fn send(&self, control: Control) -> Result<bool, ControlError> {
+        let control = control.validate().map_err(ControlError::Invalid)?;
+        match self.tx.try_send(control) {
+            Ok(()) => Ok(true),
+            Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
+            Err(mpsc::error::TrySendError::Closed(_)) => Ok(false),
+        }
+    }
+
+    /// Resolves when the playback has ended.
+    pub async fn closed(&self) {
+        self.tx.closed().await;
+    }
+}
+
+/// One stream. Dropping it leaves the playback (which ends when its last
+/// viewer has gone) and frees its admission slot.
+pub struct Subscription {
+    engine: Engine,
+    params: StreamParams,
+    first_tick: u64,
+    rx: broadcast::Receiver<Item>,
+    controls: Option<mpsc::Sender<Control>>,
+    last_seq: Option<u64>,
+    delivered: u64,
+    stopped: bool,
+    /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
+    sent: metrics::Counter,
+    dropped: metrics::Counter,
+    _permit: StreamPermit,
+}
+
+impl std::fmt::Debug for Subscription {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Subscription")
+            .field("clip_id", &self.params.clip_id)
+            .field("last_seq", &self.last_seq)
+            .field("delivered", &self.delivered)
+            .field("private", &self.controls.is_some())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Subscription {
+    pub(crate) fn new(
+        engine: Engine,
+        params: StreamParams,
+        first_tick: u64,
+        rx: broadcast::Receiver<Item>,
+        controls: Option<mpsc::Sender<Control>>,
+        permit: StreamPermit,
+    ) -> Self {
+        Subscription {
+            engine,
+            params,
+            first_tick,
+            rx,
+            controls,
+            last_seq: None,
+            delivered: 0,
+            stopped: false,
+            sent: metrics::counter!("inbetween_stream_frames_total"),
+            dropped: metrics::counter!("inbetween_stream_frames_dropped_total"),
+            _permit: permit,
+        }
+    }
+
+    pub fn params(&self) -> &StreamParams {
+        &self.params
+    }
+
+    pub fn encoding(&self) -> Encoding {
+        self.params.encoding
+    }
+
+    /// Waits for the next frame or the end. Cancel-safe.
+    pub async fn next(&mut self) -> Next {
+        if self.stopped {
+            return Next::End(EndReason::Stopped);
+        }
+        if self.params.max_frames.is_some_and(|max| self.delivered >= max) {
+            return Next::End(EndReason::MaxFrames);
+        }
+        loop {
+            let frame = match self.rx.recv().await {
+                Ok(Item::Frame(f)) => f,
+                Ok(Item::End(reason)) => return Next::End(reason),
+                // The missed frames show up as a gap in seq.
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => {
+                    tracing::error!(clip = %self.params.clip_id, "a playback ended without a final status");
+                    return Next::End(EndReason::Failed);
+                }
+            };
+            if self.last_seq.is_some_and(|last| frame.seq <= last) {
+                continue;
+            }
+            let dropped = self.last_seq.map_or(frame.seq, |last| frame.seq - last - 1);
+            let names = (self.last_seq.is_none()).then(|| self.params.clip().skeleton().names());
+            let bytes = frame.for_viewer(dropped, names);
+            self.last_seq = Some(frame.seq);
+            self.delivered += 1;
+            self.sent.increment(1);
+            self.dropped.increment(dropped);
+            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes });
+        }
+    }
+
+    /// Applies `control` at the next tick. A viewer of a shared playback
+    /// first forks a private one that continues from its last frame (same
+    /// schedule, same playhead), so other viewers are unaffected. `stop` on
+    /// a shared viewer just ends this stream.
+    ///
+    /// # Errors
+    /// An invalid control (non-finite numbers, speed beyond ±1000), or too
+    /// many pending.
+    pub fn control(&mut self, control: Control) -> Result<(), ControlError> {
+        let control = control.validate().map_err(ControlError::Invalid)?;
+        if self.controls.is_none() {
+            if control == Control::Stop {
+                self.stopped = true;
+                return Ok(());
+            }
+            self.fork();
+        }
+        let tx = self.controls.as_ref().expect("forked above");
+        match tx.try_send(control) {
+            Ok(()) | Err(mpsc::error::TrySendError::Closed(_)) => Ok(()),
+            Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
+        }
+    }
+
+    /// A controller for another task (private playbacks only).
+    pub fn controller(&self) -> Option<Controller> {
+        self.controls.as_ref().map(|tx| Controller { tx: tx.clone() })
+    }
+
+    fn fork(&mut self) {
+        let p = &self.params;
+        let grid = Grid { epoch: self.engine.inner.epoch, fps: p.fps };
+        let next = self.last_seq.map_or(0, |last| last + 1);
+        let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
+        let prev_time = self.last_seq.map(|last| playhead.time_at(last));
+        let schedule = Schedule::new(grid, self.first_tick, next);
+        let (rx, tx) = self.engine.spawn_private(p, schedule, prev_time, self.last_seq.is_none());
+        self.rx = rx;
+        self.controls = Some(tx);
+    }
+}
