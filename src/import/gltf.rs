@@ -34,8 +34,9 @@ pub(crate) fn import(
         (bytes, None)
     };
     let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(json);
-    let root: ::gltf::json::Root =
+    let mut root: ::gltf::json::Root =
         ::gltf::json::deserialize::from_slice(json).map_err(|e| ImportError::Json(e.to_string()))?;
+    strip_to_animation(&mut root);
     let doc = Document::from_json(root).map_err(|e| ImportError::InvalidGltf(validation_message(e)))?;
     check_channel_targets(&doc)?;
 
@@ -79,6 +80,30 @@ pub(crate) fn import(
         return Err(ImportError::NoAnimations);
     }
     Ok(Imported { clips, skipped: ctx.skipped })
+}
+
+/// Drops everything an animation import never reads (meshes, materials,
+/// textures, images, cameras, extensions) before the crate validates the
+/// document: its validation of those parts is not safe on hostile input
+/// (gltf-json 1.4.1 indexes a primitive's POSITION accessor before checking
+/// it: found by fuzzing), and a file whose meshes need an unsupported
+/// extension still has importable animations.
+fn strip_to_animation(root: &mut ::gltf::json::Root) {
+    root.meshes.clear();
+    root.materials.clear();
+    root.textures.clear();
+    root.images.clear();
+    root.samplers.clear();
+    root.cameras.clear();
+    root.extensions = None;
+    root.extensions_used.clear();
+    root.extensions_required.clear();
+    for node in &mut root.nodes {
+        node.mesh = None;
+        node.camera = None;
+        node.weights = None;
+        node.extensions = None;
+    }
 }
 
 /// The crate's validation skips animation channel targets, and its

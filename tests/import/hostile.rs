@@ -41,7 +41,7 @@ fn mini() -> Value {
     })
 }
 
-fn gltf(edit: impl FnOnce(&mut Value)) -> Vec<u8> {
+pub fn gltf(edit: impl FnOnce(&mut Value)) -> Vec<u8> {
     let mut doc = mini();
     edit(&mut doc);
     serde_json::to_vec(&doc).unwrap()

@@ -6,6 +6,7 @@
 mod bvh;
 mod cli;
 mod files;
+mod fuzz_regressions;
 mod gltf_interpolation;
 mod gltf_skinned;
 mod hostile;
