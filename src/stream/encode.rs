@@ -163,7 +163,7 @@ fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
         skeleton: f.skeleton,
         pose: f.pose,
     };
-    serde_json::to_writer(&mut w, &pose).expect(io);
+    pose.write_to(*w.get_mut());
     w.write_all(b"}").expect(io);
     (a, b)
 }

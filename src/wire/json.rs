@@ -6,6 +6,7 @@
 //! `GET /v1/clips/{id}`. Every error carries the JSON pointer of the field at
 //! fault. Quaternions are `[x, y, z, w]` here and everywhere.
 
+use bytes::BufMut;
 use glam::{Mat4, Quat, Vec3, Vec4};
 use serde::ser::{SerializeMap, SerializeSeq};
 use serde::{Deserialize, Serialize, Serializer};
@@ -326,65 +327,65 @@ impl PoseJson<'_> {
     /// Appends exactly the JSON that `serde_json` writes for this pose, but
     /// directly: the pose route and JSON stream frames spend most of their
     /// time here, and serde's per-field plumbing cost more than the floats.
-    pub fn write_to(&self, out: &mut Vec<u8>) {
-        out.extend_from_slice(b"{\"clip\":");
+    pub fn write_to(&self, out: &mut impl BufMut) {
+        out.put_slice(b"{\"clip\":");
         write_json_str(out, self.clip);
-        out.extend_from_slice(b",\"time\":");
+        out.put_slice(b",\"time\":");
         write_float(out, self.time);
-        out.extend_from_slice(b",\"clip_time\":");
+        out.put_slice(b",\"clip_time\":");
         write_float(out, self.clip_time);
-        out.extend_from_slice(b",\"space\":\"");
-        out.extend_from_slice(self.space.as_str().as_bytes());
-        out.extend_from_slice(b"\",\"joints\":[");
+        out.put_slice(b",\"space\":\"");
+        out.put_slice(self.space.as_str().as_bytes());
+        out.put_slice(b"\",\"joints\":[");
         let p = self.pose;
         for (j, name) in self.skeleton.names().iter().enumerate() {
             if j > 0 {
-                out.push(b',');
+                out.put_u8(b',');
             }
-            out.extend_from_slice(b"{\"name\":");
+            out.put_slice(b"{\"name\":");
             write_json_str(out, name);
-            out.extend_from_slice(b",\"translation\":");
+            out.put_slice(b",\"translation\":");
             write_floats(out, &p.translations[j].to_array());
-            out.extend_from_slice(b",\"rotation\":");
+            out.put_slice(b",\"rotation\":");
             write_floats(out, &p.rotations[j].to_array());
-            out.extend_from_slice(b",\"scale\":");
+            out.put_slice(b",\"scale\":");
             write_floats(out, &p.scales[j].to_array());
-            out.push(b'}');
+            out.put_u8(b'}');
         }
-        out.extend_from_slice(b"]}");
+        out.put_slice(b"]}");
     }
 }
 
 /// A JSON string, escaped as serde_json escapes it.
-fn write_json_str(out: &mut Vec<u8>, s: &str) {
+fn write_json_str(out: &mut impl BufMut, s: &str) {
     if s.bytes().all(|b| b >= 0x20 && b != b'"' && b != b'\\') {
-        out.push(b'"');
-        out.extend_from_slice(s.as_bytes());
-        out.push(b'"');
+        out.put_u8(b'"');
+        out.put_slice(s.as_bytes());
+        out.put_u8(b'"');
     } else {
-        // Writing to a Vec cannot fail.
-        let _ = serde_json::to_writer(&mut *out, s);
+        // Writing to memory cannot fail.
+        let _ = serde_json::to_writer(out.writer(), s);
     }
 }
 
 /// A float as serde_json writes it (`null` when not finite).
-fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut Vec<u8>, x: F) {
+fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut impl BufMut, x: F) {
     if x.into().is_finite() {
-        out.extend_from_slice(zmij::Buffer::new().format_finite(x).as_bytes());
+        out.put_slice(zmij::Buffer::new().format_finite(x).as_bytes());
     } else {
-        out.extend_from_slice(b"null");
+        out.put_slice(b"null");
     }
 }
 
-fn write_floats<const N: usize>(out: &mut Vec<u8>, xs: &[f32; N]) {
-    out.push(b'[');
+fn write_floats<const N: usize>(out: &mut impl BufMut, xs: &[f32; N]) {
+    out.put_u8(b'[');
     for (i, &x) in xs.iter().enumerate() {
         if i > 0 {
-            out.push(b',');
+            out.put_u8(b',');
         }
         write_float(out, x);
     }
-    out.push(b']');
+    out.put_u8(b']');
 }
 
 struct JointsJson<'a> {
