@@ -136,3 +136,29 @@ async fn a_file_over_the_body_limit_is_413() {
     assert!(app.list_all(100, None).await.is_empty());
     app.stop().await;
 }
+
+/// A `.gltf` whose buffer is a separate file imports when both travel in one
+/// multipart upload (as a browser sends them); without the buffer it is refused.
+#[tokio::test]
+async fn multipart_uploads_carry_external_gltf_buffers() {
+    use reqwest::multipart::{Form, Part};
+    let app = spawn_app().await;
+    let gltf = testdata("gltf/InterpolationTest/InterpolationTest.gltf");
+    let bin = testdata("gltf/InterpolationTest/interpolation.bin");
+    let document = || Part::bytes(gltf.clone()).file_name("InterpolationTest.gltf");
+    let form = Form::new().part("file", document()).part("buffer", Part::bytes(bin).file_name("interpolation.bin"));
+    let resp = app.client.post(app.url("/v1/clips/import")).multipart(form).send().await.unwrap();
+    assert_eq!(resp.status(), 201, "{}", resp.text().await.unwrap());
+    let body: Value = resp.json().await.unwrap();
+    assert_eq!(body["clips"].as_array().unwrap().len(), 9, "InterpolationTest has 9 animations");
+
+    let alone = Form::new().part("file", document());
+    let resp = app.client.post(app.url("/v1/clips/import")).multipart(alone).send().await.unwrap();
+    assert!(resp.status().is_client_error(), "{}", resp.status());
+    let no_document = Form::new().part("other", Part::bytes(b"x".to_vec()).file_name("notes.txt"));
+    let resp = app.client.post(app.url("/v1/clips/import")).multipart(no_document).send().await.unwrap();
+    assert_eq!(resp.status(), 400);
+    assert_eq!(resp.json::<Value>().await.unwrap()["code"], "bad_upload");
+    assert_eq!(app.list_all(100, None).await.len(), 9, "only the complete upload stored clips");
+    app.stop().await;
+}

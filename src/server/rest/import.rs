@@ -4,20 +4,28 @@
 //! checks as an uploaded JSON clip) before the store is touched; then all of
 //! them are stored in one transaction. A file is imported whole or not at
 //! all, and parsing runs on the blocking pool, off the async workers.
+//!
+//! The body is the file itself, or `multipart/form-data` carrying a `.gltf`
+//! and the buffer files it names (what a browser's file picker sends): the
+//! part named `file`, else the first part whose file name ends in `.gltf`,
+//! `.glb` or `.bvh`, is the document, and the other parts answer its buffer
+//! URIs by plain file name only. Nothing else is ever fetched.
 
 use std::sync::Arc;
 
 use axum::Json;
 use axum::body::Bytes;
-use axum::extract::{RawQuery, State};
+use axum::extract::{FromRequest, Multipart, RawQuery, Request, State};
+use axum::http::StatusCode;
 use axum::http::header::CONTENT_TYPE;
-use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::anim::Interpolation;
-use crate::import::{Format, ImportError, ImportLimits, ImportOptions, Skipped, import, sniff};
+use crate::import::{
+    ErrorClass, Format, ImportError, ImportLimits, ImportOptions, Resolver, Skipped, import_with, sniff,
+};
 use crate::server::auth::WriteAccess;
 use crate::server::cache::CachedClip;
 use crate::server::config::Limits;
@@ -46,7 +54,8 @@ pub struct ImportResult {
         ("interpolation" = Option<String>, Query, description = "BVH keys: linear (default) or catmull_rom"),
         ("name" = Option<String>, Query, description = "Clip name (BVH) or name prefix (glTF with several animations)"),
     ),
-    request_body(content = Vec<u8>, content_type = "application/octet-stream"),
+    request_body(content = Vec<u8>, content_type = "application/octet-stream",
+        description = "The file; or multipart/form-data with the .gltf and the buffer files it names"),
     responses(
         (status = 201, description = "Every clip of the file, stored", body = ImportResult),
         (status = 400, description = "Not a well-formed glTF, GLB or BVH file", body = super::openapi::Problem),
@@ -60,16 +69,22 @@ pub async fn import_clips(
     State(state): State<AppState>,
     _: WriteAccess,
     RawQuery(query): RawQuery,
-    headers: HeaderMap,
-    body: Bytes,
+    request: Request,
 ) -> Result<Response, ApiError> {
     let params = QueryParams::parse(query.as_deref(), &["format", "interpolation", "name"])?;
+    let content_type = request.headers().get(CONTENT_TYPE).and_then(|v| v.to_str().ok()).map(str::to_owned);
+    let (body, siblings) = if content_type.as_deref().is_some_and(|c| c.starts_with("multipart/form-data")) {
+        let multipart =
+            Multipart::from_request(request, &state).await.map_err(|e| rejected(e.status(), e.body_text(), &state))?;
+        read_parts(multipart, &state).await?
+    } else {
+        let body =
+            Bytes::from_request(request, &state).await.map_err(|e| rejected(e.status(), e.body_text(), &state))?;
+        (body, Vec::new())
+    };
     let format = match params.get("format") {
         Some(f) => f.parse::<Format>().map_err(|e| ApiError::parameter("bad_format", "format", e))?,
-        None => {
-            let content_type = headers.get(CONTENT_TYPE).and_then(|v| v.to_str().ok());
-            sniff(&body, content_type).ok_or(ImportError::UnknownFormat)?
-        }
+        None => sniff(&body, content_type.as_deref()).ok_or(ImportError::UnknownFormat)?,
     };
     let bvh_interpolation = match params.get("interpolation") {
         None => Interpolation::Linear,
@@ -88,7 +103,15 @@ pub async fn import_clips(
     };
     let limits = state.config.limits.clone();
     let (admitted, skipped) = tokio::task::spawn_blocking(move || -> Result<_, ApiError> {
-        let imported = import(&body, format, &options)?;
+        let mut resolve = |uri: &str| -> Result<Vec<u8>, String> {
+            siblings
+                .iter()
+                .find(|(name, _)| name == uri)
+                .map(|(_, data)| data.to_vec())
+                .ok_or_else(|| format!("no part named {uri:?} in the upload"))
+        };
+        let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
+        let imported = import_with(&body, format, &options, resolver)?;
         let admitted = imported
             .clips
             .iter()
@@ -107,6 +130,41 @@ pub async fn import_clips(
         state.cache_written(Arc::new(CachedClip { meta, clip }));
     }
     Ok((StatusCode::CREATED, Json(ImportResult { clips: summaries, skipped })).into_response())
+}
+
+/// The document part and the named sibling parts of a multipart upload.
+async fn read_parts(mut multipart: Multipart, state: &AppState) -> Result<(Bytes, Vec<(String, Bytes)>), ApiError> {
+    let mut document: Option<Bytes> = None;
+    let mut siblings = Vec::new();
+    let failed = |e: axum::extract::multipart::MultipartError| rejected(e.status(), e.body_text(), state);
+    while let Some(field) = multipart.next_field().await.map_err(failed)? {
+        let field_name = field.name().unwrap_or_default().to_owned();
+        let file_name = field.file_name().map(str::to_owned);
+        let data = field.bytes().await.map_err(failed)?;
+        let is_document = |n: &str| [".gltf", ".glb", ".bvh"].iter().any(|ext| n.to_ascii_lowercase().ends_with(ext));
+        if document.is_none() && (field_name == "file" || file_name.as_deref().is_some_and(is_document)) {
+            document = Some(data);
+        } else if let Some(name) = file_name.filter(|n| !n.is_empty() && !n.contains(['/', '\\']) && n != "..") {
+            siblings.push((name, data));
+        }
+    }
+    let document = document.ok_or_else(|| {
+        bad_multipart("no document part: name it `file`, or give it a .gltf, .glb or .bvh file name".into())
+    })?;
+    Ok((document, siblings))
+}
+
+/// A body that could not be read: over the size limit (413), else malformed (400).
+fn rejected(status: StatusCode, detail: String, state: &AppState) -> ApiError {
+    if status == StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::PayloadTooLarge { limit: state.config.limits.max_body_bytes }
+    } else {
+        bad_multipart(detail)
+    }
+}
+
+fn bad_multipart(detail: String) -> ApiError {
+    ApiError::Import { class: ErrorClass::Malformed, code: "bad_upload", pointer: None, detail }
 }
 
 /// The importer's bounds, from the server's: a clip an import produces
