@@ -218,9 +218,9 @@ pub fn import_with(
 /// Real files spend several bytes per key (a BVH value is at least two
 /// characters, a glTF key at least 16 bytes of buffer plus its time), so
 /// one key per input byte, plus a little, never binds them. Only hostile
-/// files reach it: many channels sharing one accessor, or accessors with no
-/// buffer view (all zeros), which would otherwise turn a few hundred bytes
-/// of JSON into gigabytes of keys.
+/// files reach it: many channels sharing one accessor, or sparse accessors
+/// with no buffer view (zeros plus a few stored values), which would
+/// otherwise turn a few hundred bytes of JSON into gigabytes of keys.
 pub(crate) struct Budget {
     max: u64,
     used: u64,

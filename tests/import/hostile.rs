@@ -192,6 +192,22 @@ fn hostile_inputs_are_refused_with_a_reason() {
             "out_of_bounds",
         ),
         (
+            "sparse accessors of 10^5 keys from a few bytes",
+            gltf(|d| {
+                for a in 0..2 {
+                    d["accessors"][a].as_object_mut().unwrap().remove("bufferView");
+                    d["accessors"][a]["count"] = json!(100_000);
+                    d["accessors"][a]["sparse"] = json!({
+                        "count": 1,
+                        "indices": {"bufferView": 0, "componentType": 5125},
+                        "values": {"bufferView": 1}
+                    });
+                }
+            }),
+            Format::Gltf,
+            "too_large",
+        ),
+        (
             "huge accessor count",
             gltf(|d| d["accessors"][0]["count"] = json!(4_000_000_000u64)),
             Format::Gltf,
@@ -428,4 +444,26 @@ fn repeated_names_are_made_unique_with_the_node_index() {
     let imported = import(&bvh_bytes, Format::Bvh, &ImportOptions::default()).unwrap();
     let names: Vec<_> = imported.clips[0].skeleton.as_ref().unwrap().joints.iter().map(|j| j.name.clone()).collect();
     assert_eq!(names, ["hips", "hips#1", "hips_end"]);
+}
+
+#[test]
+fn sparse_accessors_are_zeros_with_the_stored_values_substituted() {
+    // The output has no buffer view: zeros, with element 1 replaced by (1, 2, 3)
+    // from a second buffer (index u32 1, then the three floats).
+    let mut sparse_data = 1u32.to_le_bytes().to_vec();
+    sparse_data.extend(floats(&[1.0, 2.0, 3.0]));
+    let bytes = gltf(|d| {
+        d["buffers"].as_array_mut().unwrap().push(json!({"byteLength": 16, "uri": b64(&sparse_data)}));
+        d["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 1, "byteOffset": 0, "byteLength": 4}));
+        d["bufferViews"].as_array_mut().unwrap().push(json!({"buffer": 1, "byteOffset": 4, "byteLength": 12}));
+        d["accessors"][1].as_object_mut().unwrap().remove("bufferView");
+        d["accessors"][1]["sparse"] = json!({
+            "count": 1,
+            "indices": {"bufferView": 2, "componentType": 5125},
+            "values": {"bufferView": 3}
+        });
+    });
+    let imported = import(&bytes, Format::Gltf, &ImportOptions::default()).unwrap();
+    let expected = inbetween::anim::Keys::Vec3(vec![glam::Vec3::ZERO, glam::Vec3::new(1.0, 2.0, 3.0)]);
+    assert_eq!(imported.clips[0].tracks[0].values, expected);
 }
