@@ -4,9 +4,10 @@
 //! samplers often share inputs; every BVH channel shares the frame times),
 //! so a pose does one search per distinct timeline rather than per track.
 //! The search is O(1) for forward playback (the caller's hint is the last
-//! segment, and the next one is tried second), O(1) for uniformly spaced
-//! keys (the index is computed, then checked), and a binary search
-//! otherwise.
+//! segment, and the next few are tried next), O(1) for uniformly spaced
+//! keys (the index is computed, then checked), a bucket index for long
+//! irregular ones (constant-speed arc tables, hand-timed keys), and a binary
+//! search otherwise.
 
 /// Strictly increasing key times, with each segment's reciprocal length.
 #[derive(Debug, Clone, PartialEq)]
@@ -16,7 +17,16 @@ pub struct Timeline {
     keys: Box<[[f32; 2]]>,
     /// `(t0, 1/h)` when every key sits at `t0 + i·h` to within f32 rounding.
     uniform: Option<(f32, f32)>,
+    /// Otherwise, with many keys: `(t0, 1/w, first)` where `first[b]` is the
+    /// segment holding `t0 + b·w` (one bucket per key), so a search starts at
+    /// most a few keys away instead of bisecting the whole array.
+    buckets: Option<(f32, f32, Box<[u32]>)>,
 }
+
+/// Below this many keys a binary search is as quick as a bucket lookup.
+const BUCKET_MIN_KEYS: usize = 64;
+/// Keys walked from a bucket's first segment before bisecting the bucket.
+const BUCKET_WALK: usize = 8;
 
 /// Where a time falls: segment `index` (keys `index` and `index + 1`) at
 /// parameter `u ∈ [0, 1]`. A single-key timeline always gives `(0, 0)`.
@@ -37,7 +47,27 @@ impl Timeline {
             .enumerate()
             .map(|(i, &t)| [t, times.get(i + 1).map_or(0.0, |&next| 1.0 / (next - t))])
             .collect();
-        Timeline { keys, uniform: Self::detect_uniform(times) }
+        let uniform = Self::detect_uniform(times);
+        let buckets = if uniform.is_none() && times.len() >= BUCKET_MIN_KEYS { Self::buckets(times) } else { None };
+        Timeline { keys, uniform, buckets }
+    }
+
+    fn buckets(times: &[f32]) -> Option<(f32, f32, Box<[u32]>)> {
+        let n = times.len();
+        let span = times[n - 1] as f64 - times[0] as f64;
+        let inv_w = (n as f64 / span) as f32;
+        if !inv_w.is_finite() || inv_w <= 0.0 {
+            return None;
+        }
+        // first[b] = the last key at or before the bucket's start, computed
+        // with the same f32 arithmetic the lookup uses.
+        let first = (0..n)
+            .map(|b| {
+                let start = times[0] + b as f32 / inv_w;
+                (times.partition_point(|&k| k <= start).max(1) - 1).min(n - 2) as u32
+            })
+            .collect();
+        Some((times[0], inv_w, first))
     }
 
     fn detect_uniform(times: &[f32]) -> Option<(f32, f32)> {
@@ -127,6 +157,24 @@ impl Timeline {
                 j += 1;
             }
             j
+        } else if let Some((t0, inv_w, first)) = &self.buckets {
+            // Start at the bucket's first segment (at or before t); walk a
+            // few keys, else bisect up to the next bucket's start.
+            let b = (((t - t0) * inv_w) as usize).min(first.len() - 1);
+            let mut j = (first[b] as usize).min(last);
+            while j > 0 && t < keys[j][0] {
+                j -= 1;
+            }
+            let mut walked = 0;
+            while j < last && t >= keys[j + 1][0] && walked < BUCKET_WALK {
+                j += 1;
+                walked += 1;
+            }
+            if j < last && t >= keys[j + 1][0] {
+                j + keys[j..].partition_point(|k| k[0] <= t) - 1
+            } else {
+                j
+            }
         } else {
             keys.partition_point(|k| k[0] <= t) - 1
         };
@@ -152,7 +200,10 @@ mod tests {
     fn every_search_path_finds_the_same_segment() {
         let irregular = [0.0, 0.5, 2.0, 2.5, 4.0];
         let uniform: Vec<f32> = (0..50).map(|i| i as f32 / 24.0).collect();
-        for times in [&irregular[..], &uniform[..]] {
+        // Long and irregular (bucketed): clustered keys, then sparse ones.
+        let mut bucketed: Vec<f32> = (0..60).map(|i| i as f32 * 0.001).collect();
+        bucketed.extend((1..90).map(|i| 0.06 + (i as f32).powf(1.7) * 0.01));
+        for times in [&irregular[..], &uniform[..], &bucketed[..]] {
             let n = times.len();
             for k in 0..n - 1 {
                 let t = 0.25 * times[k] + 0.75 * times[k + 1];
