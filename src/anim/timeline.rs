@@ -170,11 +170,7 @@ impl Timeline {
                 j += 1;
                 walked += 1;
             }
-            if j < last && t >= keys[j + 1][0] {
-                j + keys[j..].partition_point(|k| k[0] <= t) - 1
-            } else {
-                j
-            }
+            if j < last && t >= keys[j + 1][0] { j + keys[j..].partition_point(|k| k[0] <= t) - 1 } else { j }
         } else {
             keys.partition_point(|k| k[0] <= t) - 1
         };
