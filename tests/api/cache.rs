@@ -29,8 +29,7 @@ async fn concurrent_misses_share_one_load_and_the_cache_stays_bounded() {
 
     // Every clip still answers poses, whatever was evicted.
     for (k, id) in ids.iter().enumerate() {
-        let pose: serde_json::Value =
-            app.client.get(app.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap().json().await.unwrap();
+        let pose: serde_json::Value = app.get_json(&format!("/v1/clips/{id}/pose?t=1")).await;
         assert_eq!(pose["joints"][2]["translation"], serde_json::json!([k as f32, k as f32, k as f32]));
     }
     app.stop().await;

@@ -79,7 +79,7 @@ async fn bvh_options_and_morph_free_results() {
     assert_eq!(body["clips"][0]["name"], "walk");
     assert!(body["skipped"].as_array().is_some(), "skipped is always listed");
     let id = body["clips"][0]["id"].as_str().unwrap();
-    let doc: Value = app.client.get(app.url(&format!("/v1/clips/{id}"))).send().await.unwrap().json().await.unwrap();
+    let doc: Value = app.get_json(&format!("/v1/clips/{id}")).await;
     assert!(doc["tracks"].as_array().unwrap().iter().all(|t| t["interpolation"] == "catmull_rom"));
     app.stop().await;
 }

@@ -39,6 +39,11 @@ impl TestApp {
         format!("http://{}{path}", self.addr)
     }
 
+    /// `GET path` without a token, decoded as JSON (panics if the body is not JSON).
+    pub async fn get_json(&self, path: &str) -> Value {
+        self.client.get(self.url(path)).send().await.unwrap().json().await.unwrap()
+    }
+
     /// Uploads `body` (with `token` if given); panics unless 201. Returns the summary.
     pub async fn create(&self, body: &str, token: Option<&str>) -> Value {
         let mut req = self.client.post(self.url("/v1/clips")).header("content-type", "application/json");

@@ -7,9 +7,9 @@ use super::{WAVE, spawn_app};
 #[tokio::test]
 async fn health_readiness_and_metrics_report() {
     let app = spawn_app().await;
-    let health: Value = app.client.get(app.url("/healthz")).send().await.unwrap().json().await.unwrap();
+    let health: Value = app.get_json("/healthz").await;
     assert_eq!(health["status"], "ok");
-    let ready: Value = app.client.get(app.url("/readyz")).send().await.unwrap().json().await.unwrap();
+    let ready: Value = app.get_json("/readyz").await;
     assert_eq!(ready["status"], "ready");
 
     let id = app.create(WAVE, None).await["id"].as_str().unwrap().to_owned();
@@ -36,7 +36,7 @@ async fn health_readiness_and_metrics_report() {
 #[tokio::test]
 async fn the_openapi_document_lists_every_route_and_docs_are_served() {
     let app = spawn_app().await;
-    let doc: Value = app.client.get(app.url("/openapi.json")).send().await.unwrap().json().await.unwrap();
+    let doc: Value = app.get_json("/openapi.json").await;
     assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
     let paths = doc["paths"].as_object().unwrap();
     for path in [

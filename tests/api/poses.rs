@@ -80,24 +80,8 @@ async fn matrices_agree_with_model_space_trs() {
     let app = spawn_app().await;
     let id = app.create(WAVE, None).await["id"].as_str().unwrap().to_owned();
     for t in [0.3, 1.1, 2.9] {
-        let trs: Value = app
-            .client
-            .get(app.url(&format!("/v1/clips/{id}/pose?t={t}&space=model")))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
-        let mats: Value = app
-            .client
-            .get(app.url(&format!("/v1/clips/{id}/pose?t={t}&format=matrix")))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let trs: Value = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&space=model")).await;
+        let mats: Value = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&format=matrix")).await;
         assert_eq!(mats["format"], "matrix");
         for (a, b) in trs["joints"].as_array().unwrap().iter().zip(mats["joints"].as_array().unwrap()) {
             let tr = vec(&a["translation"]);
@@ -167,15 +151,7 @@ async fn skinning_uses_the_inverse_binds() {
         "tracks": [{"joint": "a", "channel": "scale", "times": [0], "values": [[1, 1, 1]]}]
     });
     let id = app.create(&doc.to_string(), None).await["id"].as_str().unwrap().to_owned();
-    let body: Value = app
-        .client
-        .get(app.url(&format!("/v1/clips/{id}/pose?t=0&format=skinning")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let body: Value = app.get_json(&format!("/v1/clips/{id}/pose?t=0&format=skinning")).await;
     assert_eq!(body["format"], "skinning");
     assert_eq!(vec(&body["joints"][0]["matrix"]), Mat4::IDENTITY.to_cols_array().map(f64::from));
     app.stop().await;
