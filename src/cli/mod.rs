@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod import;
 mod sample;
 mod serve;
+mod token;
 
 #[derive(Debug, Parser)]
 #[command(name = "inbetween", version, about = "Keyframes in, inbetweens out: a keyframe-animation server and tools.")]
@@ -23,6 +24,8 @@ enum Command {
     Serve(Box<serve::ServeArgs>),
     /// Import a glTF, GLB or BVH file: print clip documents or upload them.
     Import(import::ImportArgs),
+    /// Make API tokens and the hashes the server's configuration holds.
+    Token(token::TokenArgs),
 }
 
 impl Cli {
@@ -31,6 +34,7 @@ impl Cli {
             Command::Sample(args) => sample::run(args),
             Command::Serve(args) => serve::run(*args),
             Command::Import(args) => import::run(args),
+            Command::Token(args) => token::run(args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

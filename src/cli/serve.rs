@@ -32,7 +32,9 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         // One write call (not one per `format!` piece), so a reader that stops
         // after the first line cannot make the second fail with EPIPE.
         let (http, grpc) = (app.local_addr(), app.grpc_addr());
-        let lines = format!("inbetween listening on http://{http}\ninbetween gRPC listening on http://{grpc}\n");
+        let scheme = if app.serves_tls() { "https" } else { "http" };
+        let lines =
+            format!("inbetween listening on {scheme}://{http}\ninbetween gRPC listening on {scheme}://{grpc}\n");
         stdout.write_all(lines.as_bytes())?;
         stdout.flush()?;
         app.run_until_stopped(shutdown_signal()).await

@@ -16,6 +16,8 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use serde::Deserialize;
 
+use super::auth::{Token, TokenSpec};
+
 /// A value that must not reach logs: `Debug` prints `[redacted]`.
 #[derive(Clone, PartialEq, Eq, Deserialize)]
 #[serde(transparent)]
@@ -76,6 +78,16 @@ pub struct RawConfig {
     /// Bearer token required to read clips and poses (the write token also works).
     #[arg(long, env = "INBETWEEN_READ_TOKEN", value_name = "TOKEN", hide_env_values = true)]
     pub read_token: Option<Secret>,
+    /// A scoped token, as NAME:SCOPE[+SCOPE]:sha256:HEX (repeatable, or comma-separated; TOML:
+    /// `[[tokens]]` tables with name, scopes, hash). `inbetween token new` makes one.
+    #[arg(long = "token", env = "INBETWEEN_TOKENS", value_name = "NAME:SCOPES:HASH", value_delimiter = ',')]
+    pub tokens: Option<Vec<TokenSpec>>,
+    /// PEM certificate chain: serve HTTP and gRPC over TLS (1.2+; needs --tls-key).
+    #[arg(long, env = "INBETWEEN_TLS_CERT", value_name = "FILE", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// PEM private key of --tls-cert.
+    #[arg(long, env = "INBETWEEN_TLS_KEY", value_name = "FILE", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any) [default: none].
     #[arg(long = "cors-origin", env = "INBETWEEN_CORS_ORIGINS", value_name = "ORIGIN", value_delimiter = ',')]
     pub cors_origins: Option<Vec<String>>,
@@ -146,6 +158,9 @@ impl RawConfig {
             database_url: self.database_url.or(lower.database_url),
             api_token: self.api_token.or(lower.api_token),
             read_token: self.read_token.or(lower.read_token),
+            tokens: self.tokens.or(lower.tokens),
+            tls_cert: self.tls_cert.or(lower.tls_cert),
+            tls_key: self.tls_key.or(lower.tls_key),
             cors_origins: self.cors_origins.or(lower.cors_origins),
             log_format: self.log_format.or(lower.log_format),
             drain_timeout_secs: self.drain_timeout_secs.or(lower.drain_timeout_secs),
@@ -225,6 +240,21 @@ impl RawConfig {
                 t => Ok(t),
             }
         };
+        let tokens = self.tokens.unwrap_or_default();
+        let mut names = std::collections::HashSet::new();
+        let mut checked = Vec::with_capacity(tokens.len());
+        for spec in tokens {
+            let t = spec.validate().map_err(anyhow::Error::msg)?;
+            if !names.insert(t.name.clone()) {
+                bail!("two tokens are named `{}`", t.name);
+            }
+            checked.push(t);
+        }
+        let tls = match (self.tls_cert, self.tls_key) {
+            (Some(cert), Some(key)) => Some(TlsFiles { cert, key }),
+            (None, None) => None,
+            _ => bail!("tls_cert and tls_key go together"),
+        };
         let cors = match self.cors_origins.unwrap_or_default() {
             origins if origins.is_empty() => Cors::Off,
             origins if origins.iter().any(|o| o == "*") => {
@@ -251,6 +281,8 @@ impl RawConfig {
             store,
             write_token: token("api_token", self.api_token)?,
             read_token: token("read_token", self.read_token)?,
+            tokens: checked,
+            tls,
             cors,
             log_format: self.log_format.unwrap_or_default(),
             drain_timeout: Duration::from_secs(self.drain_timeout_secs.unwrap_or(10)),
@@ -266,6 +298,13 @@ pub enum StoreConfig {
     DataDir(PathBuf),
     /// A `sqlite:` URL.
     SqliteUrl(Secret),
+}
+
+/// The PEM files of `--tls-cert` / `--tls-key` (read when the server is built).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TlsFiles {
+    pub cert: PathBuf,
+    pub key: PathBuf,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -319,6 +358,10 @@ pub struct Config {
     pub store: StoreConfig,
     pub write_token: Option<Secret>,
     pub read_token: Option<Secret>,
+    /// Scoped tokens (hashes), beside the plain write and read tokens.
+    pub tokens: Vec<Token>,
+    /// Serve both listeners over TLS with these files.
+    pub tls: Option<TlsFiles>,
     pub cors: Cors,
     pub log_format: LogFormat,
     pub drain_timeout: Duration,
@@ -360,6 +403,29 @@ mod tests {
         assert_eq!(c.write_token.as_ref().map(Secret::expose), Some("from-flag"));
         assert_eq!((c.limits.max_poses, c.limits.max_tracks, c.limits.max_joints), (9, 7, 4096));
         assert_eq!(c.store, StoreConfig::DataDir(PathBuf::from("data")));
+    }
+
+    #[test]
+    fn scoped_tokens_come_from_toml_and_flags() {
+        let hash = crate::server::auth::TokenHash::of(b"t");
+        let file: RawConfig = toml::from_str(&format!(
+            "[[tokens]]\nname = \"ci\"\nscopes = [\"write\"]\nhash = \"{hash}\"\n\
+             [[tokens]]\nname = \"ops\"\nscopes = [\"admin\"]\nhash = \"{hash}\"\n"
+        ))
+        .unwrap();
+        let c = file.clone().validate().unwrap();
+        assert_eq!(c.tokens.iter().map(|t| &*t.name).collect::<Vec<_>>(), ["ci", "ops"]);
+        // The flag form replaces the file's list.
+        let flags =
+            RawConfig { tokens: Some(vec![format!("viewer:read:{hash}").parse().unwrap()]), ..Default::default() };
+        let c = flags.over(file).validate().unwrap();
+        assert_eq!(c.tokens.len(), 1);
+        let twice = format!("[[tokens]]\nname = \"a\"\nscopes = [\"read\"]\nhash = \"{hash}\"\n");
+        let dup: RawConfig = toml::from_str(&format!("{twice}{twice}")).unwrap();
+        assert!(dup.validate().is_err(), "duplicate names");
+        assert!(
+            toml::from_str::<RawConfig>("[[tokens]]\nname = \"a\"\nscopes = [\"read\"]\ntoken = \"plain\"\n").is_err()
+        );
     }
 
     #[test]

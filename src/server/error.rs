@@ -36,6 +36,9 @@ pub enum ApiError {
     BadParameter { code: &'static str, parameter: String, detail: String },
     #[error("missing or wrong bearer token")]
     Unauthorized,
+    /// A known token without the scope the route needs.
+    #[error("this token lacks the `{needed}` scope")]
+    Forbidden { needed: &'static str },
     #[error("{what} not found")]
     NotFound { what: &'static str },
     #[error("method not allowed")]
@@ -85,6 +88,7 @@ impl ApiError {
             MalformedJson { .. } | BadParameter { .. } => StatusCode::BAD_REQUEST,
             Invalid { .. } | TooMany { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Unauthorized => StatusCode::UNAUTHORIZED,
+            Forbidden { .. } => StatusCode::FORBIDDEN,
             NotFound { .. } => StatusCode::NOT_FOUND,
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
@@ -107,6 +111,7 @@ impl ApiError {
             MalformedJson { .. } => "malformed_json",
             Invalid { code, .. } | BadParameter { code, .. } | TooMany { code, .. } | Import { code, .. } => code,
             Unauthorized => "unauthorized",
+            Forbidden { .. } => "insufficient_scope",
             NotFound { what: "route" } => "route_not_found",
             NotFound { .. } => "clip_not_found",
             MethodNotAllowed => "method_not_allowed",
@@ -233,6 +238,7 @@ impl ApiError {
             // A request over a size limit is still the caller's to fix.
             TooMany { .. } => Code::InvalidArgument,
             Unauthorized => Code::Unauthenticated,
+            Forbidden { .. } => Code::PermissionDenied,
             NotFound { .. } => Code::NotFound,
             MethodNotAllowed => Code::Unimplemented,
             PreconditionFailed { .. } => Code::FailedPrecondition,

@@ -3,9 +3,9 @@
 //!
 //! Every RPC runs on the same state as REST: the same store, clip cache,
 //! limits, tokens and `ApiError` (mapped to a `tonic::Status` in
-//! `server::error`, beside its problem+json mapping). Writes need the write
-//! token as metadata `authorization: Bearer <token>`; reads the read token
-//! when one is configured. Streams come from the shared streaming engine
+//! `server::error`, beside its problem+json mapping). Writes need a token
+//! with the write scope as metadata `authorization: Bearer <token>`; reads the
+//! read scope when reads are guarded (`server::auth`). Streams come from the shared streaming engine
 //! (`crate::stream`), so gRPC and WebSocket viewers of the same playback
 //! share one evaluation per tick.
 //!
@@ -73,11 +73,11 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 
 impl GrpcService {
     fn read<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        auth::check_read(&self.state.config, bearer(request.metadata())).map_err(Status::from)
+        auth::check_read(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
     }
 
     fn write<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        auth::check_write(&self.state.config, bearer(request.metadata())).map_err(Status::from)
+        auth::check_write(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
     }
 
     async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, Status> {

@@ -18,15 +18,20 @@ use hyper_util::service::TowerToHyperService;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
+use tokio_util::either::Either;
 use tower::ServiceExt;
+
+use super::tls;
 
 /// Serves `router` on `listener` until `shutdown` resolves, then stops
 /// accepting and resolves once every connection has closed (the caller bounds
-/// that wait with the drain timeout).
+/// that wait with the drain timeout). With `tls`, each connection first
+/// completes a TLS handshake within `header_read_timeout`.
 pub async fn serve(
     listener: TcpListener,
     router: Router,
     header_read_timeout: Duration,
+    tls: Option<tls::Acceptor>,
     shutdown: impl Future<Output = ()>,
 ) {
     let (closing_tx, closing_rx) = watch::channel(false);
@@ -55,7 +60,16 @@ pub async fn serve(
             r
         }));
         let mut closing = closing_rx.clone();
+        let tls = tls.clone();
         connections.spawn(async move {
+            let stream = match tls {
+                None => Either::Left(stream),
+                Some(acceptor) => match tokio::time::timeout(header_read_timeout, acceptor.accept(stream)).await {
+                    Ok(Ok(stream)) => Either::Right(stream),
+                    Ok(Err(e)) => return tracing::debug!(error = %e, "TLS handshake failed"),
+                    Err(_) => return tracing::debug!("TLS handshake timed out"),
+                },
+            };
             let mut builder = auto::Builder::new(TokioExecutor::new());
             builder.http1().timer(TokioTimer::new()).header_read_timeout(header_read_timeout);
             let mut conn = std::pin::pin!(builder.serve_connection_with_upgrades(TokioIo::new(stream), service));

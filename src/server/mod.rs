@@ -46,6 +46,7 @@ mod listen;
 pub mod metrics;
 pub mod rest;
 pub mod state;
+pub mod tls;
 
 pub use config::Config;
 pub use error::ApiError;
@@ -60,6 +61,8 @@ pub struct Application {
     listener: TcpListener,
     grpc_listener: TcpListener,
     state: AppState,
+    /// Certificate and key when serving TLS (`--tls-cert`).
+    tls: Option<tls::TlsMaterial>,
 }
 
 impl Application {
@@ -82,6 +85,7 @@ impl Application {
                 Arc::new(SqliteStore::open_url(url.expose(), DB_CONNECTIONS).await.context("opening database_url")?)
             }
         };
+        let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
         let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
         let grpc_listener =
             TcpListener::bind(config.grpc_listen).await.with_context(|| format!("binding {}", config.grpc_listen))?;
@@ -100,7 +104,7 @@ impl Application {
             loads: Arc::default(),
             streams,
         });
-        Ok(Application { listener, grpc_listener, state })
+        Ok(Application { listener, grpc_listener, state, tls })
     }
 
     /// The bound address (the real port when built with port 0).
@@ -119,6 +123,11 @@ impl Application {
         self.grpc_listener.local_addr().expect("a bound listener has an address")
     }
 
+    /// Whether both listeners speak TLS (`--tls-cert`).
+    pub fn serves_tls(&self) -> bool {
+        self.tls.is_some()
+    }
+
     /// The shared state (for tests and for protocols served beside REST).
     pub fn state(&self) -> &AppState {
         &self.state
@@ -131,7 +140,16 @@ impl Application {
     /// The gRPC routes cannot be built (the embedded descriptor set does not
     /// parse: a build defect). Accept errors are logged and retried.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        let Application { listener, grpc_listener, state } = self;
+        let Application { listener, grpc_listener, state, tls } = self;
+        let header_timeout = state.config.limits.header_read_timeout;
+        let http_tls = match &tls {
+            Some(m) => Some(tls::Acceptor::from(m.http_config()?)),
+            None => None,
+        };
+        let mut grpc_server = tonic::transport::Server::builder();
+        if let Some(m) = &tls {
+            grpc_server = grpc_server.tls_config(m.grpc_config(header_timeout))?;
+        }
         let drain = state.config.drain_timeout;
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
         let (started_tx, started_rx) = tokio::sync::oneshot::channel::<()>();
@@ -159,7 +177,7 @@ impl Application {
         let mut grpc_stop = stop_rx;
         let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
         let grpc = tokio::spawn(
-            tonic::transport::Server::builder()
+            grpc_server
                 .http2_keepalive_interval(Some(Duration::from_secs(30)))
                 .add_routes(routes)
                 .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_listener), async move {
@@ -167,8 +185,7 @@ impl Application {
                 }),
         );
         let router = rest::router(state.clone());
-        let header_timeout = state.config.limits.header_read_timeout;
-        let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, signal));
+        let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, http_tls, signal));
         tokio::select! {
             () = &mut serve => {}
             _ = started_rx => {

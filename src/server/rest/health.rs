@@ -15,6 +15,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use crate::server::auth::AdminAccess;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
 
@@ -49,12 +50,17 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Status>, ApiEr
     }
 }
 
-/// Prometheus text exposition of every `inbetween_*` metric.
+/// Prometheus text exposition of every `inbetween_*` metric. Needs the admin
+/// scope once an admin token is configured (the figures describe every
+/// client's traffic).
 #[utoipa::path(
     get, path = "/metrics", tag = "operations",
-    responses((status = 200, description = "Prometheus text format", content_type = "text/plain"))
+    responses(
+        (status = 200, description = "Prometheus text format", content_type = "text/plain"),
+    ),
+    security((), ("bearer" = []))
 )]
-pub async fn metrics(State(state): State<AppState>) -> Response {
+pub async fn metrics(_: AdminAccess, State(state): State<AppState>) -> Response {
     let content_type = HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8");
     ([(CONTENT_TYPE, content_type)], state.metrics.render()).into_response()
 }

@@ -5,6 +5,7 @@
 
 use serde::Serialize;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::openapi::{Content, Ref, RefOr, Response, ResponseBuilder};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
@@ -58,6 +59,9 @@ pub struct PosesSchema {
     pub poses: Vec<PoseSchema>,
 }
 
+/// The bearer scheme, and on every operation that takes it the two answers
+/// a token can draw (401 missing/unknown, 403 lacking the scope), so no
+/// handler has to list them and none can forget.
 struct BearerAuth;
 
 impl Modify for BearerAuth {
@@ -67,7 +71,28 @@ impl Modify for BearerAuth {
             "bearer",
             SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
         );
+        for item in openapi.paths.paths.values_mut() {
+            let operations = [&mut item.get, &mut item.put, &mut item.post, &mut item.delete];
+            for op in operations.into_iter().flatten() {
+                if op.security.as_ref().is_none_or(Vec::is_empty) {
+                    continue;
+                }
+                for (status, what) in [
+                    ("401", "Token missing or unknown (where the route's scope is enforced)"),
+                    ("403", "The token lacks the scope this route needs"),
+                ] {
+                    op.responses.responses.entry(status.to_owned()).or_insert_with(|| problem_response(what));
+                }
+            }
+        }
     }
+}
+
+fn problem_response(description: &str) -> RefOr<Response> {
+    let content = Content::new(Some(RefOr::Ref(Ref::from_schema_name("Problem"))));
+    RefOr::T(
+        ResponseBuilder::new().description(description).content(super::super::error::PROBLEM_JSON, content).build(),
+    )
 }
 
 #[derive(OpenApi)]
