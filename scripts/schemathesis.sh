@@ -50,7 +50,10 @@ for role in none read write admin; do
     echo "== schemathesis as ${role}"
     auth=()
     [[ $role != none ]] && auth=(-H "Authorization: Bearer ${token[$role]}")
-    st run "$base/openapi.json" "${auth[@]}" --max-examples "$MAX_EXAMPLES" --seed "$SEED" \
+    # The WebSocket route answers a plain GET 400 (no upgrade): schemathesis speaks no
+    # WebSocket, so it is left to tests/security's matrix and tests/streaming.
+    st --config-file scripts/schemathesis.toml run "$base/openapi.json" "${auth[@]}" \
+        --exclude-path '/v1/clips/{id}/stream' --max-examples "$MAX_EXAMPLES" --seed "$SEED" \
         --workers 2 --no-color --request-timeout 30 || status=1
 done
 if grep -q "panicked" "$work/server.log"; then

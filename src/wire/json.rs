@@ -45,6 +45,7 @@ pub struct JointDoc {
     pub rest: RestDoc,
     /// Column-major 4×4, as glTF stores it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 16, max_items = 16)]
     pub inverse_bind: Option<[f32; 16]>,
 }
 
@@ -52,10 +53,13 @@ pub struct JointDoc {
 #[serde(deny_unknown_fields)]
 pub struct RestDoc {
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub translation: Option<[f32; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 4, max_items = 4)]
     pub rotation: Option<[f32; 4]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 3, max_items = 3)]
     pub scale: Option<[f32; 3]>,
 }
 
@@ -97,6 +101,9 @@ macro_rules! wire_enum {
     ($(#[$m:meta])* $doc:ident => $core:ident { $($(#[$vm:meta])* $variant:ident = $name:literal),+ $(,)? }) => {
         $(#[$m])*
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+        // Every wire name is its variant in snake_case; said once here so the OpenAPI schema
+        // (utoipa cannot read the per-variant renames through the macro) spells them the same.
+        #[serde(rename_all = "snake_case")]
         pub enum $doc { $($(#[$vm])* #[serde(rename = $name)] $variant),+ }
         impl From<$doc> for $core {
             fn from(d: $doc) -> $core { match d { $($doc::$variant => $core::$variant),+ } }

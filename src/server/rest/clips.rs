@@ -89,8 +89,8 @@ pub async fn create_clip(
 #[utoipa::path(
     get, path = "/v1/clips", tag = "clips",
     params(
-        ("limit" = Option<u32>, Query, description = "Page size, 1..=1000 (default 100)"),
-        ("cursor" = Option<String>, Query, description = "`next_cursor` of the previous page"),
+        ("limit" = Option<u32>, Query, minimum = 1, maximum = 1000, description = "Page size, 1..=1000 (default 100)"),
+        ("cursor" = Option<String>, Query, pattern = "^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$", description = "`next_cursor` of the previous page"),
         ("name" = Option<String>, Query, description = "Only clips with exactly this name"),
     ),
     responses((status = 200, body = ClipList), (status = 400, body = super::openapi::Problem)),
@@ -183,7 +183,7 @@ async fn expected_version(
     put, path = "/v1/clips/{id}", tag = "clips",
     params(
         ("id" = String, Path, description = "Clip id"),
-        ("If-Match" = Option<String>, Header, description = "Replace only at this version (`\"3\"`) or `*`"),
+        ("If-Match" = Option<String>, Header, pattern = r#"^(\*|"[0-9]{1,19}")$"#, description = "Replace only at this version (`\"3\"`) or `*`"),
     ),
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
     responses(
@@ -216,7 +216,7 @@ pub async fn replace_clip(
     delete, path = "/v1/clips/{id}", tag = "clips",
     params(
         ("id" = String, Path, description = "Clip id"),
-        ("If-Match" = Option<String>, Header, description = "Delete only at this version"),
+        ("If-Match" = Option<String>, Header, pattern = r#"^(\*|"[0-9]{1,19}")$"#, description = "Delete only at this version"),
     ),
     responses(
         (status = 204, description = "Deleted"),

@@ -50,11 +50,11 @@ pub struct ImportResult {
 #[utoipa::path(
     post, path = "/v1/clips/import", tag = "clips",
     params(
-        ("format" = Option<String>, Query, description = "gltf | glb | bvh; inferred from Content-Type or the bytes when absent"),
-        ("interpolation" = Option<String>, Query, description = "BVH keys: linear (default) or catmull_rom"),
-        ("name" = Option<String>, Query, description = "Clip name (BVH) or name prefix (glTF with several animations)"),
+        ("format" = Option<String>, Query, pattern = "^(gltf|glb|bvh)$", description = "gltf | glb | bvh; inferred from Content-Type or the bytes when absent"),
+        ("interpolation" = Option<String>, Query, pattern = "^(linear|catmull_rom)$", description = "BVH keys: linear (default) or catmull_rom"),
+        ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "Clip name (BVH) or name prefix (glTF with several animations)"),
     ),
-    request_body(content = Vec<u8>, content_type = "application/octet-stream",
+    request_body(content = super::openapi::FileBytes, content_type = "application/octet-stream",
         description = "The file; or multipart/form-data with the .gltf and the buffer files it names"),
     responses(
         (status = 201, description = "Every clip of the file, stored", body = ImportResult),

@@ -4,12 +4,15 @@
 //! the page needs no download at build or run time).
 
 use serde::Serialize;
+use utoipa::openapi::path::ParameterIn;
+use utoipa::openapi::schema::{Schema, SchemaType, Type};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::openapi::{Content, Ref, RefOr, Response, ResponseBuilder};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
 use super::{clips, health, import, poses, stream};
+use crate::server::error::PROBLEM_JSON;
 
 /// An error body (RFC 9457 `application/problem+json`).
 #[derive(Serialize, ToSchema)]
@@ -71,28 +74,56 @@ impl Modify for BearerAuth {
             "bearer",
             SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
         );
-        for item in openapi.paths.paths.values_mut() {
+        for (path, item) in openapi.paths.paths.iter_mut() {
             let operations = [&mut item.get, &mut item.put, &mut item.post, &mut item.delete];
             for op in operations.into_iter().flatten() {
-                if op.security.as_ref().is_none_or(Vec::is_empty) {
-                    continue;
-                }
-                for (status, what) in [
-                    ("401", "Token missing or unknown (where the route's scope is enforced)"),
-                    ("403", "The token lacks the scope this route needs"),
-                ] {
+                let mut add = |status: &str, what: &str| {
                     op.responses.responses.entry(status.to_owned()).or_insert_with(|| problem_response(what));
+                };
+                if path.starts_with("/v1/") {
+                    // Query parameters and headers are parsed strictly on every API route.
+                    add("400", "A parameter or header that does not parse, or an unknown one");
+                }
+                let json_body =
+                    matches!(&op.request_body, Some(RefOr::T(b)) if b.content.contains_key("application/json"));
+                if json_body {
+                    add("413", "Request body over the size limit");
+                    add("415", "The body is not declared application/json");
+                }
+                if op.security.as_ref().is_some_and(|s| !s.is_empty()) {
+                    add("401", "Token missing or unknown (where the route's scope is enforced)");
+                    add("403", "The token lacks the scope this route needs");
+                }
+                // A header is a string or absent, never JSON null (utoipa makes an optional one nullable).
+                for p in op.parameters.iter_mut().flatten() {
+                    if let RefOr::T(p) = p
+                        && p.parameter_in == ParameterIn::Header
+                        && let Some(RefOr::T(Schema::Object(o))) = p.schema.as_mut()
+                    {
+                        o.schema_type = SchemaType::Type(Type::String);
+                    }
+                }
+                // Every error body is problem+json, whatever the annotation said.
+                for (status, response) in op.responses.responses.iter_mut() {
+                    if let (true, RefOr::T(r)) = (status.starts_with(['4', '5']), response) {
+                        if let Some(content) = r.content.shift_remove("application/json") {
+                            r.content.insert(PROBLEM_JSON.to_owned(), content);
+                        }
+                    }
                 }
             }
         }
     }
 }
 
+/// The raw bytes of an uploaded file (`format: binary` in the document).
+#[derive(ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct FileBytes(pub Vec<u8>);
+
 fn problem_response(description: &str) -> RefOr<Response> {
     let content = Content::new(Some(RefOr::Ref(Ref::from_schema_name("Problem"))));
-    RefOr::T(
-        ResponseBuilder::new().description(description).content(super::super::error::PROBLEM_JSON, content).build(),
-    )
+    RefOr::T(ResponseBuilder::new().description(description).content(PROBLEM_JSON, content).build())
 }
 
 #[derive(OpenApi)]

@@ -153,10 +153,10 @@ fn json_response(body: Vec<u8>) -> Response {
     params(
         ("id" = String, Path, description = "Clip id"),
         ("t" = f64, Query, description = "Request time in seconds (finite)"),
-        ("space" = Option<String>, Query, description = "local (default) | model"),
-        ("playback" = Option<String>, Query, description = "once | loop | ping_pong (default: the clip's)"),
-        ("ease" = Option<String>, Query, description = "linear (default) | ease_in | ease_out | ease_in_out"),
-        ("format" = Option<String>, Query, description = "trs (default) | matrix | skinning"),
+        ("space" = Option<String>, Query, pattern = "^(local|model)$", description = "local (default) | model"),
+        ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "once | loop | ping_pong (default: the clip's)"),
+        ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
+        ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::openapi::PoseSchema),

@@ -12,6 +12,7 @@
 use std::net::SocketAddr;
 
 use axum::Extension;
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, RawQuery, State};
 use axum::response::Response;
@@ -34,14 +35,14 @@ const MAX_CONTROL_BYTES: usize = 4096;
     get, path = "/v1/clips/{id}/stream", tag = "streams",
     params(
         ("id" = String, Path, description = "Clip id"),
-        ("fps" = Option<u32>, Query, description = "Frames per second, 1..=240 (default 30)"),
+        ("fps" = Option<u32>, Query, minimum = 1, maximum = 240, description = "Frames per second, 1..=240 (default 30)"),
         ("speed" = Option<f64>, Query, description = "Request seconds per second, may be negative (default 1)"),
         ("start" = Option<f64>, Query, description = "Request time of frame 0 (default: the clip's start)"),
-        ("playback" = Option<String>, Query, description = "once | loop | ping_pong (default: the clip's)"),
-        ("space" = Option<String>, Query, description = "local (default) | model"),
-        ("ease" = Option<String>, Query, description = "linear (default) | ease_in | ease_out | ease_in_out"),
-        ("encoding" = Option<String>, Query, description = "json (default, text frames) | protobuf (binary `Frame`)"),
-        ("max_frames" = Option<u64>, Query, description = "End after this many frames (close 1000)"),
+        ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "once | loop | ping_pong (default: the clip's)"),
+        ("space" = Option<String>, Query, pattern = "^(local|model)$", description = "local (default) | model"),
+        ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
+        ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
+        ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow"),
@@ -56,8 +57,10 @@ pub async fn stream(
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
     RawQuery(query): RawQuery,
-    upgrade: WebSocketUpgrade,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
+    // A plain GET (no upgrade headers) gets a problem body like every other refusal.
+    let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
     let q = QueryParams::parse(
         query.as_deref(),
         &["fps", "speed", "start", "playback", "space", "ease", "encoding", "max_frames"],
