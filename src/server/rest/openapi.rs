@@ -105,10 +105,10 @@ impl Modify for BearerAuth {
                 }
                 // Every error body is problem+json, whatever the annotation said.
                 for (status, response) in op.responses.responses.iter_mut() {
-                    if let (true, RefOr::T(r)) = (status.starts_with(['4', '5']), response) {
-                        if let Some(content) = r.content.shift_remove("application/json") {
-                            r.content.insert(PROBLEM_JSON.to_owned(), content);
-                        }
+                    if let (true, RefOr::T(r)) = (status.starts_with(['4', '5']), response)
+                        && let Some(content) = r.content.shift_remove("application/json")
+                    {
+                        r.content.insert(PROBLEM_JSON.to_owned(), content);
                     }
                 }
             }
