@@ -12,6 +12,7 @@
 use std::net::SocketAddr;
 
 use axum::Extension;
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, RawQuery, State};
 use axum::response::Response;
@@ -56,8 +57,10 @@ pub async fn stream(
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
     RawQuery(query): RawQuery,
-    upgrade: WebSocketUpgrade,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
+    // A plain GET (or a broken handshake) gets a problem body like every other 4xx.
+    let upgrade = upgrade.map_err(|e| ApiError::parameter("not_websocket", "upgrade", e.body_text()))?;
     let q = QueryParams::parse(
         query.as_deref(),
         &["fps", "speed", "start", "playback", "space", "ease", "encoding", "max_frames"],
