@@ -9,8 +9,11 @@ use crate::anim::{Clip, ClipSpec, Ease, Interpolation, Playback, SampleOptions, 
 use crate::import::{Format, ImportOptions, import, sniff};
 use crate::wire::json::parse_clip;
 
+/// A fuzz target's body: arbitrary bytes in, a panic is a finding.
+pub type Target = fn(&[u8]);
+
 /// The fuzz targets, by the name of their `fuzz/fuzz_targets/<name>.rs`.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+pub const TARGETS: &[(&str, Target)] = &[
     ("import_gltf", import_gltf),
     ("import_bvh", import_bvh),
     ("clip_json", clip_json),
