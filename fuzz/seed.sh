@@ -6,7 +6,19 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 T=../../shared/testdata
-mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json
+mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json corpus/import_evaluate
+# The hardening corpus (committed, our own files) and past findings seed every target too.
+C=../tests/corpus
+for set in valid malformed; do
+  cp "$C/$set"/gltf/* "$C/$set"/glb/* corpus/import_gltf/
+  cp "$C/$set"/bvh/* corpus/import_bvh/
+  cp "$C/$set"/json/* corpus/clip_json/
+  cp "$C/$set"/*/* corpus/import_evaluate/ 2>/dev/null || true
+done
+rm -f corpus/import_evaluate/*.http corpus/import_evaluate/*.bin
+for t in import_gltf import_bvh clip_json import_evaluate; do
+  cp corpus-min/$t/* regressions/$t/* corpus/$t/ 2>/dev/null || true
+done
 cp "$T"/gltf/AnimatedTriangle/*.gltf "$T"/gltf/BoxAnimated/*.gltf "$T"/gltf/RiggedSimple/*.gltf \
    "$T"/gltf/Fox/Fox.glb corpus/import_gltf/
 python3 - "$T" <<'PY'
@@ -35,4 +47,5 @@ for i, c in enumerate(d["clips"]):
 ' "$(basename "$f")"
   done
 fi
-ls corpus/* | head -50
+cp corpus/import_gltf/* corpus/import_bvh/* corpus/clip_json/* corpus/import_evaluate/
+for t in corpus/*; do echo "$t: $(ls "$t" | wc -l) files"; done

@@ -3,6 +3,8 @@
 
 pub mod anim;
 pub mod cli;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod import;
 pub mod server;
 pub mod store;

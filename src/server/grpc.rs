@@ -254,7 +254,9 @@ impl Animation for GrpcService {
             }
         };
         let batch = if times_len_is_large(&req) {
-            tokio::task::spawn_blocking(build).await.map_err(|e| Status::from(ApiError::internal(e)))?
+            tokio::task::spawn_blocking(build)
+                .await
+                .map_err(|e| Status::from(crate::server::metrics::join_failed(e)))?
         } else {
             build()
         };

@@ -59,6 +59,30 @@ fn describe() {
         Unit::Seconds,
         "Store latency by operation (create, get, list, replace, delete, ping)."
     );
+    describe_counter!(
+        "inbetween_panics_total",
+        "Panics caught (source: http handler, grpc handler, blocking task); any is a bug."
+    );
+}
+
+/// Where a caught panic happened (the `source` label of `inbetween_panics_total`).
+pub const PANIC_SOURCES: [&str; 3] = ["http", "grpc", "task"];
+
+/// Counts a caught panic. A panic is always a bug: bad input must become a
+/// 4xx, so `inbetween_panics_total` staying 0 under the malformed corpus is
+/// part of the hardening proof (tests/hardening).
+pub fn panic_caught(source: &'static str) {
+    tracing::error!(source, "a panic was caught");
+    metrics::counter!("inbetween_panics_total", "source" => source).increment(1);
+}
+
+/// A failed blocking task's error: a panic is counted, either way it is an
+/// internal error (the client sees only "internal error").
+pub fn join_failed(e: tokio::task::JoinError) -> super::ApiError {
+    if e.is_panic() {
+        panic_caught("task");
+    }
+    super::ApiError::internal(e)
 }
 
 /// Handles to the unlabelled metrics the hot paths touch, registered once so
@@ -80,6 +104,16 @@ impl Counters {
             cache_entries: metrics::gauge!("inbetween_clip_cache_entries"),
             poses: metrics::counter!("inbetween_poses_evaluated_total"),
         }
+        .with_panic_counters()
+    }
+
+    /// Registers `inbetween_panics_total` at 0 for every source, so it is
+    /// on `/metrics` (and can be watched) before the first panic.
+    fn with_panic_counters(self) -> Self {
+        for source in PANIC_SOURCES {
+            metrics::counter!("inbetween_panics_total", "source" => source).increment(0);
+        }
+        self
     }
 }
 

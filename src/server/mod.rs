@@ -41,6 +41,7 @@ pub mod cache;
 pub mod config;
 pub mod error;
 pub mod grpc;
+pub mod grpc_edge;
 pub mod limits;
 mod listen;
 pub mod metrics;
@@ -179,6 +180,7 @@ impl Application {
         let grpc = tokio::spawn(
             grpc_server
                 .http2_keepalive_interval(Some(Duration::from_secs(30)))
+                .layer(grpc_edge::layer())
                 .add_routes(routes)
                 .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_listener), async move {
                     let _ = grpc_stop.wait_for(|stop| *stop).await;

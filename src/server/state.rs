@@ -98,7 +98,9 @@ impl AppState {
             let result = async {
                 let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
                 let cached = if stored.doc_json.len() > BLOCKING_THRESHOLD_BYTES {
-                    tokio::task::spawn_blocking(move || compile_stored(stored)).await.map_err(ApiError::internal)??
+                    tokio::task::spawn_blocking(move || compile_stored(stored))
+                        .await
+                        .map_err(crate::server::metrics::join_failed)??
                 } else {
                     compile_stored(stored)?
                 };

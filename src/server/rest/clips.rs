@@ -39,7 +39,7 @@ pub struct ClipList {
 async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
     let limits = state.config.limits.clone();
     if body.len() > BLOCKING_THRESHOLD_BYTES {
-        tokio::task::spawn_blocking(move || admit(&body, &limits)).await.map_err(ApiError::internal)?
+        tokio::task::spawn_blocking(move || admit(&body, &limits)).await.map_err(crate::server::metrics::join_failed)?
     } else {
         admit(&body, &limits)
     }

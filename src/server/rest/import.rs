@@ -120,7 +120,7 @@ pub async fn import_clips(
         Ok((admitted, imported.skipped))
     })
     .await
-    .map_err(ApiError::internal)??;
+    .map_err(crate::server::metrics::join_failed)??;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
     let metas = state.store.create_all(new_clips).await?;

@@ -321,7 +321,7 @@ pub async fn sample(
         body
     };
     let body = if n > BLOCKING_POSES {
-        tokio::task::spawn_blocking(render).await.map_err(ApiError::internal)?
+        tokio::task::spawn_blocking(render).await.map_err(crate::server::metrics::join_failed)?
     } else {
         render()
     };

@@ -1,0 +1,120 @@
+//! The bodies of the fuzz targets in `fuzz/`, here so that `cargo test`
+//! replays the committed corpus and every past crash through exactly the
+//! code libFuzzer runs (`tests/hardening/fuzz_replay.rs`), without libFuzzer.
+//!
+//! Each function takes arbitrary bytes: errors are fine, a panic is a
+//! finding (the assertions state what must hold for any input).
+
+use crate::anim::{Clip, ClipSpec, Ease, Interpolation, Playback, SampleOptions, Sampler, Space};
+use crate::import::{Format, ImportOptions, import, sniff};
+use crate::wire::json::parse_clip;
+
+/// A fuzz target's body: arbitrary bytes in, a panic is a finding.
+pub type Target = fn(&[u8]);
+
+/// The fuzz targets, by the name of their `fuzz/fuzz_targets/<name>.rs`.
+pub const TARGETS: &[(&str, Target)] = &[
+    ("import_gltf", import_gltf),
+    ("import_bvh", import_bvh),
+    ("clip_json", clip_json),
+    ("import_evaluate", import_evaluate),
+];
+
+/// glTF/GLB import of arbitrary bytes; whatever imports must build.
+pub fn import_gltf(data: &[u8]) {
+    let format = if data.starts_with(b"glTF") { Format::Glb } else { Format::Gltf };
+    if let Ok(imported) = import(data, format, &ImportOptions::default()) {
+        for clip in &imported.clips {
+            Clip::build(clip).expect("imported clips build");
+        }
+    }
+}
+
+/// BVH import of arbitrary bytes, with linear and Catmull-Rom keys (the
+/// last byte picks, so both are explored); whatever imports must build.
+pub fn import_bvh(data: &[u8]) {
+    let interpolation = match data.last() {
+        Some(b) if b % 2 == 1 => Interpolation::CatmullRom,
+        _ => Interpolation::Linear,
+    };
+    let options = ImportOptions { bvh_interpolation: interpolation, ..ImportOptions::default() };
+    if let Ok(imported) = import(data, Format::Bvh, &options) {
+        for clip in &imported.clips {
+            Clip::build(clip).expect("imported clips build");
+        }
+    }
+}
+
+/// A clip document: parse → build → sample at arbitrary times in every
+/// playback mode and space, and as matrices.
+pub fn clip_json(data: &[u8]) {
+    let Ok((_, spec)) = parse_clip(data) else { return };
+    let Ok(clip) = Clip::build(&spec) else { return };
+    evaluate(&clip, data);
+}
+
+/// The whole upload path in one: sniff the format (glTF, GLB, BVH, else a
+/// JSON clip document) → import or parse → `Clip::build` → sample at times
+/// taken from the input. Every local value must be finite and every
+/// rotation a unit quaternion, whatever the file held.
+pub fn import_evaluate(data: &[u8]) {
+    let format = sniff(data, None);
+    let specs: Vec<ClipSpec> = match format {
+        Some(format) => {
+            let interpolation = if data.len() % 2 == 1 { Interpolation::CatmullRom } else { Interpolation::Linear };
+            let options = ImportOptions { bvh_interpolation: interpolation, ..ImportOptions::default() };
+            match import(data, format, &options) {
+                Ok(imported) => imported.clips,
+                Err(_) => return,
+            }
+        }
+        None => match parse_clip(data) {
+            Ok((_, spec)) => vec![spec],
+            Err(_) => return,
+        },
+    };
+    for spec in &specs {
+        match Clip::build(spec) {
+            Ok(clip) => evaluate(&clip, data),
+            // `import` promised that its clips build; a document may break a rule.
+            Err(e) => assert!(format.is_none(), "an imported clip does not build: {e}"),
+        }
+    }
+}
+
+/// Samples `clip` at its ends, outside them, at extremes and at times the
+/// input chose (its last 8 bytes as an `f64`, and each of its last 16 bytes
+/// as a fraction of the clip's span), in every playback mode and space.
+fn evaluate(clip: &Clip, data: &[u8]) {
+    let (start, end) = (clip.start() as f64, clip.end() as f64);
+    let span = end - start;
+    let tail = data.len().saturating_sub(8);
+    let raw = data.get(tail..).and_then(|b| b.try_into().ok()).map_or(0.0, f64::from_le_bytes);
+    let mut times = vec![start, end, (start + end) / 2.0, start - 1.0, end + 1.0, -1e30, 1e30, f64::NAN, raw];
+    let chosen = data.iter().rev().take(16).map(|&b| start + span * (f64::from(b) / 127.5 - 0.5));
+    times.extend(chosen);
+    let mut sampler = Sampler::new();
+    let mut matrices = Vec::new();
+    for playback in [Playback::Once, Playback::Loop, Playback::PingPong] {
+        for (ease, space) in [(Ease::Linear, Space::Local), (Ease::EaseInOut, Space::Model)] {
+            let options = SampleOptions { playback: Some(playback), ease, space };
+            for &t in &times {
+                let clip_time = clip.sample(t, &options, &mut sampler);
+                assert!(clip_time.is_finite(), "clip time of {t}");
+                let pose = sampler.pose();
+                if space == Space::Local {
+                    // Local values stay finite; model space may overflow f32 legitimately
+                    // (a long chain of large finite offsets), which is not a bug.
+                    assert!(pose.translations.iter().all(|v| v.is_finite()), "translation at {t}");
+                    assert!(pose.scales.iter().all(|v| v.is_finite()), "scale at {t}");
+                    for q in &pose.rotations {
+                        assert!(q.is_finite(), "rotation at {t}");
+                        assert!((q.length() - 1.0).abs() < 1e-3, "rotation {q} at {t} is not unit length");
+                    }
+                }
+            }
+            clip.matrices(times[2], &options, false, &mut sampler, &mut matrices);
+            clip.matrices(times[2], &options, true, &mut sampler, &mut matrices);
+        }
+    }
+}
