@@ -136,6 +136,30 @@ pub struct RawLimits {
     /// Concurrent streams per client IP address [default: 64].
     #[arg(long, env = "INBETWEEN_MAX_STREAMS_PER_CLIENT", value_name = "N")]
     pub max_streams_per_client: Option<usize>,
+    /// Concurrent streams per bearer token [default: 64].
+    #[arg(long, env = "INBETWEEN_MAX_STREAMS_PER_TOKEN", value_name = "N")]
+    pub max_streams_per_token: Option<usize>,
+    /// Seconds a client may take to send a request's body, once its head is in [default: 10].
+    #[arg(long, env = "INBETWEEN_BODY_READ_TIMEOUT_SECS", value_name = "SECS")]
+    pub body_read_timeout_secs: Option<u64>,
+    /// Requests in flight (REST and gRPC each) before new ones are shed with 503 [default: 64 per core].
+    #[arg(long, env = "INBETWEEN_MAX_IN_FLIGHT", value_name = "N")]
+    pub max_in_flight: Option<usize>,
+    /// Sustained writes per second per caller (token, or address when writes are open) [default: 100].
+    #[arg(long, env = "INBETWEEN_WRITE_RATE", value_name = "PER_SEC")]
+    pub write_rate: Option<u32>,
+    /// Writes a caller may make in a burst above the sustained rate [default: 200].
+    #[arg(long, env = "INBETWEEN_WRITE_BURST", value_name = "N")]
+    pub write_burst: Option<u32>,
+    /// Largest WebSocket message a stream viewer may send (controls) [default: 4096].
+    #[arg(long, env = "INBETWEEN_WS_MAX_MESSAGE_BYTES", value_name = "BYTES")]
+    pub ws_max_message_bytes: Option<usize>,
+    /// Bytes of outgoing WebSocket frames buffered before a write is flushed [default: 131072].
+    #[arg(long, env = "INBETWEEN_WS_WRITE_BUFFER_BYTES", value_name = "BYTES")]
+    pub ws_write_buffer_bytes: Option<usize>,
+    /// Most bytes a WebSocket may hold unsent before the stream fails [default: 16777216].
+    #[arg(long, env = "INBETWEEN_WS_MAX_WRITE_BUFFER_BYTES", value_name = "BYTES")]
+    pub ws_max_write_buffer_bytes: Option<usize>,
 }
 
 impl RawConfig {
@@ -175,6 +199,14 @@ impl RawConfig {
                 cache_entries: l.cache_entries.or(ll.cache_entries),
                 max_streams: l.max_streams.or(ll.max_streams),
                 max_streams_per_client: l.max_streams_per_client.or(ll.max_streams_per_client),
+                max_streams_per_token: l.max_streams_per_token.or(ll.max_streams_per_token),
+                body_read_timeout_secs: l.body_read_timeout_secs.or(ll.body_read_timeout_secs),
+                max_in_flight: l.max_in_flight.or(ll.max_in_flight),
+                write_rate: l.write_rate.or(ll.write_rate),
+                write_burst: l.write_burst.or(ll.write_burst),
+                ws_max_message_bytes: l.ws_max_message_bytes.or(ll.ws_max_message_bytes),
+                ws_write_buffer_bytes: l.ws_write_buffer_bytes.or(ll.ws_write_buffer_bytes),
+                ws_max_write_buffer_bytes: l.ws_max_write_buffer_bytes.or(ll.ws_max_write_buffer_bytes),
             },
         }
     }
@@ -216,7 +248,22 @@ impl RawConfig {
                 l.max_streams_per_client,
                 d.max_streams_per_client,
             )?,
+            max_streams_per_token: positive("max_streams_per_token", l.max_streams_per_token, d.max_streams_per_token)?,
+            body_read_timeout: secs("body_read_timeout_secs", l.body_read_timeout_secs, d.body_read_timeout)?,
+            max_in_flight: positive("max_in_flight", l.max_in_flight, d.max_in_flight)?,
+            write_rate: positive("write_rate", l.write_rate.map(|r| r as usize), d.write_rate as usize)? as u32,
+            write_burst: positive("write_burst", l.write_burst.map(|b| b as usize), d.write_burst as usize)? as u32,
+            ws_max_message_bytes: positive("ws_max_message_bytes", l.ws_max_message_bytes, d.ws_max_message_bytes)?,
+            ws_write_buffer_bytes: positive("ws_write_buffer_bytes", l.ws_write_buffer_bytes, d.ws_write_buffer_bytes)?,
+            ws_max_write_buffer_bytes: positive(
+                "ws_max_write_buffer_bytes",
+                l.ws_max_write_buffer_bytes,
+                d.ws_max_write_buffer_bytes,
+            )?,
         };
+        if limits.ws_max_write_buffer_bytes <= limits.ws_write_buffer_bytes {
+            bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        }
         let store = match (self.database_url, self.data_dir) {
             (Some(_), Some(_)) => bail!("give either data_dir or database_url, not both"),
             (Some(url), None) => {
@@ -330,6 +377,21 @@ pub struct Limits {
     /// Concurrent streams, all clients together, and per client address.
     pub max_streams: usize,
     pub max_streams_per_client: usize,
+    /// Concurrent streams per bearer token (keyed by a hash of the token).
+    pub max_streams_per_token: usize,
+    /// How long a request body may take to arrive (slow-body guard): 408.
+    pub body_read_timeout: Duration,
+    /// Requests in flight per protocol before new ones are shed (503 /
+    /// `RESOURCE_EXHAUSTED`), so an overload never queues without bound.
+    pub max_in_flight: usize,
+    /// The per-caller write token bucket: refill per second, and its size.
+    pub write_rate: u32,
+    pub write_burst: u32,
+    /// WebSocket limits: inbound message and frame size, and the outgoing
+    /// buffer (flush threshold, and the most a slow viewer may hold).
+    pub ws_max_message_bytes: usize,
+    pub ws_write_buffer_bytes: usize,
+    pub ws_max_write_buffer_bytes: usize,
 }
 
 impl Default for Limits {
@@ -345,6 +407,14 @@ impl Default for Limits {
             cache_entries: 1024,
             max_streams: 1024,
             max_streams_per_client: 64,
+            max_streams_per_token: 64,
+            body_read_timeout: Duration::from_secs(10),
+            max_in_flight: 64 * std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
+            write_rate: 100,
+            write_burst: 200,
+            ws_max_message_bytes: 4096,
+            ws_write_buffer_bytes: 128 * 1024,
+            ws_max_write_buffer_bytes: 16 * 1024 * 1024,
         }
     }
 }

@@ -61,6 +61,15 @@ pub enum ApiError {
     Import { class: ErrorClass, code: &'static str, pointer: Option<String>, detail: String },
     #[error("the request took longer than {secs} s")]
     Timeout { secs: u64 },
+    /// The body did not arrive within the body-read timeout (slow client).
+    #[error("the request body did not arrive within {secs} s")]
+    BodyTimeout { secs: u64 },
+    /// Too many requests in flight: shed at once instead of queued.
+    #[error("the server is at capacity; retry after {retry_after} s")]
+    Overloaded { retry_after: u64 },
+    /// The caller's write rate limit (token bucket) is used up.
+    #[error("write rate limit reached; retry after {retry_after} s")]
+    RateLimited { retry_after: u64 },
     #[error("service unavailable")]
     Unavailable(#[source] Option<anyhow::Error>),
     #[error("internal error")]
@@ -100,6 +109,9 @@ impl ApiError {
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Timeout { .. } | Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
+            Overloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            RateLimited { .. } => StatusCode::TOO_MANY_REQUESTS,
             Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -122,6 +134,9 @@ impl ApiError {
             TooManyStreams(_) => "too_many_streams",
             Timeout { .. } => "request_timeout",
             Unavailable(_) => "unavailable",
+            BodyTimeout { .. } => "body_timeout",
+            Overloaded { .. } => "overloaded",
+            RateLimited { .. } => "rate_limited",
             Internal(_) => "internal",
         }
     }
@@ -207,6 +222,9 @@ impl IntoResponse for ApiError {
         if matches!(self, ApiError::Unauthorized) {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
+        if let ApiError::Overloaded { retry_after } | ApiError::RateLimited { retry_after } = &self {
+            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after));
+        }
         response
     }
 }
@@ -249,6 +267,8 @@ impl ApiError {
             TooManyStreams(_) => Code::ResourceExhausted,
             Timeout { .. } => Code::DeadlineExceeded,
             Unavailable(_) => Code::Unavailable,
+            BodyTimeout { .. } => Code::DeadlineExceeded,
+            Overloaded { .. } | RateLimited { .. } => Code::ResourceExhausted,
             Internal(_) => Code::Internal,
         }
     }

@@ -71,6 +71,11 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
     metadata.get("authorization").map(|v| v.as_bytes())
 }
 
+/// The key the caller's streams are counted under (per-token stream cap).
+fn caller_key(metadata: &tonic::metadata::MetadataMap) -> Option<u64> {
+    bearer(metadata).and_then(auth::bearer_token).map(stream::token_key)
+}
+
 impl GrpcService {
     fn read<T>(&self, request: &Request<T>) -> Result<(), Status> {
         auth::check_read(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
@@ -92,7 +97,7 @@ impl GrpcService {
         &self,
         req: &pb::StreamRequest,
         paused: bool,
-        remote: Option<IpAddr>,
+        (remote, token): (Option<IpAddr>, Option<u64>),
     ) -> Result<(StreamParams, stream::StreamPermit), Status> {
         let cached = self.clip(&req.clip_id).await?;
         let request = StreamRequest {
@@ -110,7 +115,7 @@ impl GrpcService {
         let (id, version) = (cached.meta.id.clone(), cached.meta.version);
         let params = StreamParams::new(&id, version, cached, request)
             .map_err(|e| ApiError::invalid("bad_stream", format!("/{}", e.field), e.detail))?;
-        let permit = self.engine.admit(remote).map_err(ApiError::from)?;
+        let permit = self.engine.admit_for(remote, token).map_err(ApiError::from)?;
         Ok((params, permit))
     }
 }
@@ -271,7 +276,7 @@ impl Animation for GrpcService {
         request: Request<pb::StreamRequest>,
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
         self.read(&request)?;
-        let remote = request.remote_addr().map(|a| a.ip());
+        let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
         let (params, permit) = self.stream_params(request.get_ref(), false, remote).await?;
         let sub = self.engine.watch(params, permit);
         Ok(Response::new(Box::pin(stream::grpc::frames(sub))))
@@ -284,7 +289,7 @@ impl Animation for GrpcService {
         request: Request<Streaming<pb::PlaybackControl>>,
     ) -> Result<Response<Self::PlayStream>, Status> {
         self.read(&request)?;
-        let remote = request.remote_addr().map(|a| a.ip());
+        let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
         let mut inbound = request.into_inner();
         let open = match inbound.message().await? {
             Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Open(open)) }) => open,

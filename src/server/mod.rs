@@ -17,10 +17,12 @@
 //! Shutdown: when the signal fires, readiness flips to 503 first; the
 //! streaming engine ends every stream with a final status (gRPC
 //! `UNAVAILABLE`, WebSocket close 1001: upgraded connections live in their
-//! own tasks, which the engine's shutdown reaches) and waits, within the
-//! drain timeout, for them to be delivered; then both servers stop accepting
-//! and let in-flight requests finish; after the drain timeout the rest are
-//! cut off. Then the metrics upkeep task stops and the store closes.
+//! own tasks, which the engine's shutdown reaches) and waits for them to be
+//! delivered; then both servers stop accepting and let in-flight requests
+//! finish. One drain deadline (the drain timeout from the signal) bounds all
+//! of it: whatever is still open then (a client that ignores GOAWAY, a
+//! request that never ends) is cut off. Then the metrics upkeep task stops
+//! and the store closes.
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -37,6 +39,7 @@ use crate::store::sqlite::SqliteStore;
 use crate::stream::{Engine, EngineConfig};
 
 pub mod auth;
+pub mod body_guard;
 pub mod cache;
 pub mod config;
 pub mod error;
@@ -45,7 +48,9 @@ pub mod grpc_edge;
 pub mod limits;
 mod listen;
 pub mod metrics;
+pub mod ratelimit;
 pub mod rest;
+pub mod shed;
 pub mod state;
 pub mod tls;
 
@@ -93,6 +98,7 @@ impl Application {
         let streams = Engine::new(EngineConfig {
             max_streams: config.limits.max_streams,
             max_streams_per_client: config.limits.max_streams_per_client,
+            max_streams_per_token: config.limits.max_streams_per_token,
             ..EngineConfig::default()
         });
         let state = AppState::new(state::Shared {
@@ -153,14 +159,15 @@ impl Application {
         }
         let drain = state.config.drain_timeout;
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
-        let (started_tx, started_rx) = tokio::sync::oneshot::channel::<()>();
+        let (started_tx, started_rx) = tokio::sync::oneshot::channel::<tokio::time::Instant>();
         // Streams end first (each with its final status), then both servers
-        // stop accepting and drain.
-        let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+        // stop accepting and drain, all by one deadline (sent on `stop`).
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(None::<tokio::time::Instant>);
         let ready = state.ready.clone();
         let streams = state.streams.clone();
         let coordinator = tokio::spawn(async move {
             shutdown.await;
+            let deadline = tokio::time::Instant::now() + drain;
             ready.store(false, Ordering::Release);
             tracing::info!(active = streams.active_streams(), "shutting down: ending streams");
             streams.shutdown();
@@ -168,39 +175,46 @@ impl Application {
                 tracing::warn!(timeout = ?drain, "streams still open after the drain timeout");
             }
             tracing::info!("shutting down: draining in-flight requests");
-            let _ = stop_tx.send(true);
+            let _ = stop_tx.send(Some(deadline));
         });
         let mut http_stop = stop_rx.clone();
         let signal = async move {
-            let _ = http_stop.wait_for(|stop| *stop).await;
-            let _ = started_tx.send(());
+            let deadline = http_stop.wait_for(Option::is_some).await.ok().and_then(|d| *d);
+            if let Some(deadline) = deadline {
+                let _ = started_tx.send(deadline);
+            }
         };
-        let mut grpc_stop = stop_rx;
+        let mut grpc_stop = stop_rx.clone();
         let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
-        let grpc = tokio::spawn(
+        let mut grpc = tokio::spawn(
             grpc_server
                 .http2_keepalive_interval(Some(Duration::from_secs(30)))
                 .layer(grpc_edge::layer())
+                .layer(shed::GrpcLayer(shed::Gate::new(state.config.limits.max_in_flight)))
                 .add_routes(routes)
                 .serve_with_incoming_shutdown(TcpListenerStream::new(grpc_listener), async move {
-                    let _ = grpc_stop.wait_for(|stop| *stop).await;
+                    let _ = grpc_stop.wait_for(Option::is_some).await;
                 }),
         );
         let router = rest::router(state.clone());
         let mut serve = std::pin::pin!(listen::serve(listener, router, header_timeout, http_tls, signal));
         tokio::select! {
             () = &mut serve => {}
-            _ = started_rx => {
-                if tokio::time::timeout(drain, &mut serve).await.is_err() {
+            Ok(deadline) = started_rx => {
+                if tokio::time::timeout_at(deadline, &mut serve).await.is_err() {
                     tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
                 }
             }
         }
-        match tokio::time::timeout(drain, grpc).await {
+        let deadline = stop_rx.borrow().unwrap_or_else(|| tokio::time::Instant::now() + drain);
+        match tokio::time::timeout_at(deadline, &mut grpc).await {
             Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
             Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
             Ok(Ok(Ok(()))) => {}
-            Err(_) => tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls"),
+            Err(_) => {
+                tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls");
+                grpc.abort();
+            }
         }
         coordinator.abort();
         upkeep.abort();

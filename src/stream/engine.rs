@@ -46,11 +46,13 @@ pub struct EngineConfig {
     pub max_streams: usize,
     /// Concurrent streams per client address.
     pub max_streams_per_client: usize,
+    /// Concurrent streams per bearer token (see [`Engine::admit_for`]).
+    pub max_streams_per_token: usize,
 }
 
 impl Default for EngineConfig {
     fn default() -> Self {
-        EngineConfig { buffer: 8, max_streams: 1024, max_streams_per_client: 64 }
+        EngineConfig { buffer: 8, max_streams: 1024, max_streams_per_client: 64, max_streams_per_token: 64 }
     }
 }
 
@@ -228,7 +230,10 @@ impl Engine {
         Engine {
             inner: Arc::new(Inner {
                 epoch: Instant::now(),
-                limits: Arc::new(Limits::new(config.max_streams, config.max_streams_per_client)),
+                limits: Arc::new(
+                    Limits::new(config.max_streams, config.max_streams_per_client)
+                        .per_token(config.max_streams_per_token),
+                ),
                 config,
                 hubs: Mutex::default(),
                 shutdown: watch::Sender::new(false),
@@ -247,6 +252,15 @@ impl Engine {
     /// The global or per-client cap is reached, or the engine shut down.
     pub fn admit(&self, client: Option<IpAddr>) -> Result<StreamPermit, AdmitError> {
         self.inner.limits.admit(client)
+    }
+
+    /// As [`Engine::admit`], also counting the stream against the caller's
+    /// bearer token (`token`: [`crate::stream::limits::token_key`]).
+    ///
+    /// # Errors
+    /// As [`Engine::admit`], or the per-token cap is reached.
+    pub fn admit_for(&self, client: Option<IpAddr>, token: Option<u64>) -> Result<StreamPermit, AdmitError> {
+        self.inner.limits.admit_for(client, token)
     }
 
     /// Time since the engine started, on the monotonic clock.

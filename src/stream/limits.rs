@@ -1,5 +1,7 @@
-//! Admission: a cap on concurrent streams, global and per client address,
-//! so one client (or a crowd) cannot hold every stream the server can serve.
+//! Admission: a cap on concurrent streams, global, per client address and
+//! per bearer token, so one client (or a crowd, or one leaked token used from
+//! many addresses) cannot hold every stream the server can serve. Tokens are
+//! counted by a hash ([`token_key`]), never kept.
 //!
 //! A [`StreamPermit`] is taken before a stream starts and released when it
 //! is dropped, whatever ended the stream. The counts sit behind a std mutex:
@@ -18,6 +20,8 @@ pub enum AdmitError {
     Global { limit: usize },
     #[error("this client address already has {limit} concurrent streams (the per-client limit)")]
     PerClient { limit: usize },
+    #[error("this token already has {limit} concurrent streams (the per-token limit)")]
+    PerToken { limit: usize },
     #[error("the server is shutting down")]
     ShuttingDown,
 }
@@ -26,6 +30,7 @@ pub enum AdmitError {
 struct Counts {
     total: usize,
     per_client: HashMap<IpAddr, usize>,
+    per_token: HashMap<u64, usize>,
     closed: bool,
 }
 
@@ -33,6 +38,7 @@ struct Counts {
 pub(crate) struct Limits {
     max_total: usize,
     max_per_client: usize,
+    max_per_token: usize,
     counts: Mutex<Counts>,
     idle: Notify,
 }
@@ -42,14 +48,46 @@ pub(crate) struct Limits {
 pub struct StreamPermit {
     limits: Arc<Limits>,
     client: Option<IpAddr>,
+    token: Option<u64>,
+}
+
+/// The key a bearer token's streams are counted under: a hash, so the
+/// limits never hold the secret itself. (`DefaultHasher` with fixed keys is
+/// stable within the process, which is all a count needs.)
+pub fn token_key(token: &[u8]) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    token.hash(&mut h);
+    h.finish()
 }
 
 impl Limits {
     pub(crate) fn new(max_total: usize, max_per_client: usize) -> Self {
-        Limits { max_total, max_per_client, counts: Mutex::default(), idle: Notify::new() }
+        Limits {
+            max_total,
+            max_per_client,
+            max_per_token: max_per_client,
+            counts: Mutex::default(),
+            idle: Notify::new(),
+        }
+    }
+
+    /// The same limits with a per-token cap of `n`.
+    pub(crate) fn per_token(self, n: usize) -> Self {
+        Limits { max_per_token: n, ..self }
     }
 
     pub(crate) fn admit(self: &Arc<Self>, client: Option<IpAddr>) -> Result<StreamPermit, AdmitError> {
+        self.admit_for(client, None)
+    }
+
+    /// Admits a stream of `client` (its address) holding `token` (its
+    /// [`token_key`], if it sent a bearer token).
+    pub(crate) fn admit_for(
+        self: &Arc<Self>,
+        client: Option<IpAddr>,
+        token: Option<u64>,
+    ) -> Result<StreamPermit, AdmitError> {
         let mut c = self.counts.lock().expect("limits lock poisoned");
         if c.closed {
             return Err(AdmitError::ShuttingDown);
@@ -57,16 +95,21 @@ impl Limits {
         if c.total >= self.max_total {
             return Err(AdmitError::Global { limit: self.max_total });
         }
+        if client.is_some_and(|ip| c.per_client.get(&ip).is_some_and(|n| *n >= self.max_per_client)) {
+            return Err(AdmitError::PerClient { limit: self.max_per_client });
+        }
+        if token.is_some_and(|t| c.per_token.get(&t).is_some_and(|n| *n >= self.max_per_token)) {
+            return Err(AdmitError::PerToken { limit: self.max_per_token });
+        }
         if let Some(ip) = client {
-            let n = c.per_client.entry(ip).or_default();
-            if *n >= self.max_per_client {
-                return Err(AdmitError::PerClient { limit: self.max_per_client });
-            }
-            *n += 1;
+            *c.per_client.entry(ip).or_default() += 1;
+        }
+        if let Some(t) = token {
+            *c.per_token.entry(t).or_default() += 1;
         }
         c.total += 1;
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
-        Ok(StreamPermit { limits: Arc::clone(self), client })
+        Ok(StreamPermit { limits: Arc::clone(self), client, token })
     }
 
     /// Refuses new streams from now on.
@@ -102,6 +145,14 @@ impl Drop for StreamPermit {
                 c.per_client.remove(&ip);
             }
         }
+        if let Some(t) = self.token
+            && let Some(n) = c.per_token.get_mut(&t)
+        {
+            *n -= 1;
+            if *n == 0 {
+                c.per_token.remove(&t);
+            }
+        }
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
         let idle = c.total == 0;
         drop(c);
@@ -129,5 +180,22 @@ mod tests {
         assert_eq!(limits.active(), 3);
         limits.close();
         assert_eq!(limits.admit(None).unwrap_err(), AdmitError::ShuttingDown);
+    }
+
+    #[test]
+    fn one_token_is_capped_across_addresses_and_other_tokens_are_not() {
+        let limits = Arc::new(Limits::new(10, 10).per_token(2));
+        let (t, u) = (token_key(b"alpha"), token_key(b"beta"));
+        assert_ne!(t, u);
+        let ips: Vec<IpAddr> = (1..=4).map(|i| format!("10.0.0.{i}").parse().unwrap()).collect();
+        let p1 = limits.admit_for(Some(ips[0]), Some(t)).unwrap();
+        let _p2 = limits.admit_for(Some(ips[1]), Some(t)).unwrap();
+        assert_eq!(limits.admit_for(Some(ips[2]), Some(t)).unwrap_err(), AdmitError::PerToken { limit: 2 });
+        // A refusal takes no slot anywhere.
+        assert_eq!(limits.active(), 2);
+        let _p3 = limits.admit_for(Some(ips[2]), Some(u)).unwrap();
+        drop(p1);
+        let _p4 = limits.admit_for(Some(ips[3]), Some(t)).unwrap();
+        assert_eq!(limits.active(), 3);
     }
 }

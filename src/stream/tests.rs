@@ -36,7 +36,7 @@ fn clip() -> Arc<Clip> {
 }
 
 fn engine(buffer: usize) -> Engine {
-    Engine::new(EngineConfig { buffer, max_streams: 1000, max_streams_per_client: 1000 })
+    Engine::new(EngineConfig { buffer, max_streams: 1000, max_streams_per_client: 1000, ..EngineConfig::default() })
 }
 
 fn req(fps: u32, encoding: Encoding) -> StreamRequest {

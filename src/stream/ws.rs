@@ -31,6 +31,8 @@ pub mod close {
     pub const NORMAL: u16 = 1000;
     pub const GOING_AWAY: u16 = 1001;
     pub const POLICY: u16 = 1008;
+    /// A client message over the inbound size limit.
+    pub const TOO_BIG: u16 = 1009;
     pub const INTERNAL: u16 = 1011;
     /// "Try again later": the stream caps are reached.
     pub const TRY_AGAIN_LATER: u16 = 1013;
@@ -92,6 +94,7 @@ fn error_message(detail: &str) -> Message {
 pub async fn serve<S, E>(mut socket: S, mut sub: Subscription, config: WsConfig)
 where
     S: Sink<Message, Error = E> + Stream<Item = Result<Message, E>> + Unpin,
+    E: std::error::Error + 'static,
 {
     let mut ping = interval_at(Instant::now() + config.keepalive, config.keepalive);
     ping.set_missed_tick_behavior(MissedTickBehavior::Delay);
@@ -112,7 +115,16 @@ where
                 }
             },
             incoming = socket.next() => match incoming {
-                None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
+                None | Some(Ok(Message::Close(_))) => return,
+                Some(Err(e)) => {
+                    // A message over the inbound limit is refused with 1009;
+                    // other read errors leave nothing to answer.
+                    if is_too_big(&e) {
+                        let frame = CloseFrame { code: close::TOO_BIG, reason: Utf8Bytes::from_static("message too big") };
+                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                    }
+                    return;
+                }
                 Some(Ok(Message::Pong(_))) => {
                     awaiting_pong = false;
                     continue;
@@ -142,4 +154,17 @@ where
             Ok(Err(_)) | Err(_) => return,
         }
     }
+}
+
+/// Whether a read error (anywhere in its source chain) is tungstenite's
+/// "message or frame over the configured size".
+fn is_too_big(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause = Some(e);
+    while let Some(err) = cause {
+        if let Some(tokio_tungstenite::tungstenite::Error::Capacity(_)) = err.downcast_ref() {
+            return true;
+        }
+        cause = err.source();
+    }
+    false
 }

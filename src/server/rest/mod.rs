@@ -21,6 +21,7 @@ use super::config::Cors;
 use super::error::ApiError;
 use super::metrics;
 use super::state::AppState;
+use super::{body_guard, ratelimit, shed};
 
 pub mod clips;
 pub mod extract;
@@ -50,7 +51,16 @@ pub fn router(state: AppState) -> Router {
         .fallback(|| async { ApiError::NotFound { what: "route" } })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(middleware::from_fn_with_state(
+            body_guard::BodyGuard { max_bytes: limits.max_body_bytes, read_timeout: limits.body_read_timeout },
+            body_guard::guard,
+        ))
+        .layer(middleware::from_fn_with_state(
+            std::sync::Arc::new(ratelimit::WriteLimiter::new(limits.write_rate, limits.write_burst)),
+            ratelimit::limit_writes,
+        ))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
+        .layer(middleware::from_fn_with_state(shed::Gate::new(limits.max_in_flight), shed::rest))
         .layer(middleware::from_fn(metrics::track))
         .layer(CatchPanicLayer::custom(|_| {
             metrics::panic_caught("http");

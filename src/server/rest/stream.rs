@@ -27,9 +27,6 @@ use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
 
 use super::extract::{ClipId, QueryParams};
 
-/// Largest control message a client may send.
-const MAX_CONTROL_BYTES: usize = 4096;
-
 /// Stream a clip: upgrade to a WebSocket of frames.
 #[utoipa::path(
     get, path = "/v1/clips/{id}/stream", tag = "streams",
@@ -56,6 +53,7 @@ pub async fn stream(
     _: ReadAccess,
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
+    headers: axum::http::HeaderMap,
     RawQuery(query): RawQuery,
     upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
@@ -107,8 +105,20 @@ pub async fn stream(
         .map_err(|e| ApiError::parameter("bad_parameter", e.field, e.detail))?;
     let engine = state.streams.clone();
     // The peer address, when served with connect info (`Application` is).
-    let admitted = engine.admit(connect.map(|Extension(ConnectInfo(addr))| addr.ip()));
-    let upgrade = upgrade.max_message_size(MAX_CONTROL_BYTES).max_frame_size(MAX_CONTROL_BYTES);
+    // Counted per token too (by a hash), so one token cannot take every stream.
+    let token = headers
+        .get(axum::http::header::AUTHORIZATION)
+        .and_then(|v| crate::server::auth::bearer_token(v.as_bytes()))
+        .map(crate::stream::token_key);
+    let admitted = engine.admit_for(connect.map(|Extension(ConnectInfo(addr))| addr.ip()), token);
+    // Inbound messages are small controls; outbound frames are buffered up
+    // to a bound, so a viewer that stops reading cannot grow memory.
+    let l = &state.config.limits;
+    let upgrade = upgrade
+        .max_message_size(l.ws_max_message_bytes)
+        .max_frame_size(l.ws_max_message_bytes)
+        .write_buffer_size(l.ws_write_buffer_bytes)
+        .max_write_buffer_size(l.ws_max_write_buffer_bytes);
     Ok(upgrade.on_upgrade(move |socket: WebSocket| async move {
         match admitted {
             Ok(permit) => {

@@ -1,0 +1,134 @@
+//! The per-caller write rate limit: a token bucket per caller (its bearer
+//! token, by hash, or its address when it sent none), refilled at
+//! `write_rate` per second up to `write_burst`. A write over it is answered
+//! 429 with `Retry-After` before its body is read. Reads are not limited
+//! here (they are cheap and cached; the in-flight budget bounds them).
+
+use std::collections::HashMap;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use axum::extract::{ConnectInfo, Request, State};
+use axum::http::{Method, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+
+use super::auth::bearer_token;
+use super::error::ApiError;
+use crate::stream::token_key;
+
+/// Buckets kept before full (idle) ones are forgotten.
+const PRUNE_AT: usize = 4096;
+
+/// Who a write is counted against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Caller {
+    Token(u64),
+    Addr(IpAddr),
+    Unknown,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Bucket {
+    tokens: f64,
+    at: Instant,
+}
+
+/// Token buckets, one per caller.
+#[derive(Debug)]
+pub struct WriteLimiter {
+    rate: f64,
+    burst: f64,
+    buckets: Mutex<HashMap<Caller, Bucket>>,
+}
+
+impl WriteLimiter {
+    pub fn new(rate_per_sec: u32, burst: u32) -> WriteLimiter {
+        WriteLimiter { rate: f64::from(rate_per_sec), burst: f64::from(burst), buckets: Mutex::default() }
+    }
+
+    /// Takes one token of `caller` at `now`, or says how long until one is
+    /// available.
+    pub fn take(&self, caller: Caller, now: Instant) -> Result<(), Duration> {
+        let mut buckets = self.buckets.lock().expect("rate limiter lock poisoned");
+        if buckets.len() >= PRUNE_AT {
+            let (rate, burst) = (self.rate, self.burst);
+            buckets.retain(|_, b| b.tokens + now.saturating_duration_since(b.at).as_secs_f64() * rate < burst);
+        }
+        let b = buckets.entry(caller).or_insert(Bucket { tokens: self.burst, at: now });
+        b.tokens = (b.tokens + now.saturating_duration_since(b.at).as_secs_f64() * self.rate).min(self.burst);
+        b.at = now;
+        if b.tokens >= 1.0 {
+            b.tokens -= 1.0;
+            Ok(())
+        } else {
+            Err(Duration::from_secs_f64((1.0 - b.tokens) / self.rate))
+        }
+    }
+}
+
+/// Whether a request changes state: every non-GET clip route but the
+/// read-only batch `POST /v1/clips/{id}/sample`.
+fn is_write(method: &Method, path: &str) -> bool {
+    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) && !path.ends_with("/sample")
+}
+
+/// The middleware: limits writes, passes everything else.
+pub async fn limit_writes(State(limiter): State<Arc<WriteLimiter>>, request: Request, next: Next) -> Response {
+    if !is_write(request.method(), request.uri().path()) {
+        return next.run(request).await;
+    }
+    let token = request.headers().get(header::AUTHORIZATION).and_then(|v| bearer_token(v.as_bytes()));
+    let caller = match (token, request.extensions().get::<ConnectInfo<SocketAddr>>()) {
+        (Some(t), _) => Caller::Token(token_key(t)),
+        (None, Some(ConnectInfo(addr))) => Caller::Addr(addr.ip()),
+        (None, None) => Caller::Unknown,
+    };
+    match limiter.take(caller, Instant::now()) {
+        Ok(()) => next.run(request).await,
+        Err(wait) => {
+            metrics::counter!("inbetween_writes_rate_limited_total").increment(1);
+            ApiError::RateLimited { retry_after: wait.as_secs_f64().ceil().max(1.0) as u64 }.into_response()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bucket_allows_its_burst_then_refills_at_the_rate() {
+        let limiter = WriteLimiter::new(2, 3);
+        let (a, b) = (Caller::Token(1), Caller::Token(2));
+        let t0 = Instant::now();
+        for _ in 0..3 {
+            limiter.take(a, t0).unwrap();
+        }
+        let wait = limiter.take(a, t0).unwrap_err();
+        assert!((wait.as_secs_f64() - 0.5).abs() < 1e-9, "{wait:?}");
+        // Another caller has its own bucket.
+        limiter.take(b, t0).unwrap();
+        // Half a second later one token (2/s) is back, and only one.
+        let t1 = t0 + Duration::from_millis(500);
+        limiter.take(a, t1).unwrap();
+        assert!(limiter.take(a, t1).is_err());
+        // Never more than the burst, however long the pause.
+        let t2 = t1 + Duration::from_secs(60);
+        for _ in 0..3 {
+            limiter.take(a, t2).unwrap();
+        }
+        assert!(limiter.take(a, t2).is_err());
+    }
+
+    #[test]
+    fn only_state_changing_routes_are_writes() {
+        assert!(is_write(&Method::POST, "/v1/clips"));
+        assert!(is_write(&Method::POST, "/v1/clips/import"));
+        assert!(is_write(&Method::PUT, "/v1/clips/x"));
+        assert!(is_write(&Method::DELETE, "/v1/clips/x"));
+        assert!(!is_write(&Method::POST, "/v1/clips/x/sample"));
+        assert!(!is_write(&Method::GET, "/v1/clips/x/pose"));
+    }
+}
