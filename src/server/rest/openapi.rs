@@ -8,7 +8,7 @@ use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::{clips, health, import, poses, stream};
+use super::{clips, health, import, poses, stream, viewer};
 
 /// An error body (RFC 9457 `application/problem+json`).
 #[derive(Serialize, ToSchema)]
@@ -78,6 +78,7 @@ impl Modify for BearerAuth {
         import::import_clips,
         poses::get_pose, poses::sample, stream::stream,
         health::healthz, health::readyz, health::metrics,
+        viewer::viewer_page,
     ),
     components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema)),
     modifiers(&BearerAuth),
@@ -86,6 +87,7 @@ impl Modify for BearerAuth {
         (name = "poses", description = "Evaluate poses"),
         (name = "streams", description = "Fixed-rate frames over a WebSocket"),
         (name = "operations", description = "Health and metrics"),
+        (name = "viewer", description = "The browser viewer page"),
     )
 )]
 pub struct ApiDoc;
