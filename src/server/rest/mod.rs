@@ -31,6 +31,7 @@ pub mod openapi;
 pub mod poses;
 pub mod stream;
 pub mod summary;
+pub mod viewer;
 
 /// Every route, with the middleware stack, bound to `state`.
 pub fn router(state: AppState) -> Router {
@@ -48,6 +49,7 @@ pub fn router(state: AppState) -> Router {
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))
         .merge(openapi::router())
+        .merge(viewer::router())
         .fallback(|| async { ApiError::NotFound { what: "route" } })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))

@@ -11,7 +11,7 @@ use utoipa::openapi::{Content, Ref, RefOr, Response, ResponseBuilder};
 use utoipa::{Modify, OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::{clips, health, import, poses, stream};
+use super::{clips, health, import, poses, stream, viewer};
 use crate::server::error::PROBLEM_JSON;
 
 /// An error body (RFC 9457 `application/problem+json`).
@@ -134,6 +134,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
         import::import_clips,
         poses::get_pose, poses::sample, stream::stream,
         health::healthz, health::readyz, health::metrics,
+        viewer::viewer_page,
     ),
     components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema)),
     modifiers(&BearerAuth),
@@ -142,6 +143,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
         (name = "poses", description = "Evaluate poses"),
         (name = "streams", description = "Fixed-rate frames over a WebSocket"),
         (name = "operations", description = "Health and metrics"),
+        (name = "viewer", description = "The browser viewer page"),
     )
 )]
 pub struct ApiDoc;

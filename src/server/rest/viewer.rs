@@ -1,0 +1,146 @@
+//! `GET /viewer`: a browser page that lists clips, plays their WebSocket
+//! stream as a 3D skeleton and plots their curves (issue 8).
+//!
+//! The page is three plain files embedded in the binary, so serving it
+//! needs no build step and no download. Each answer carries a strong
+//! `ETag` (a hash of the file, computed at compile time) and `no-cache`, so
+//! a browser revalidates and gets `304` until the binary changes. The
+//! Content-Security-Policy allows only this origin's script, style and
+//! connections (`'self'` covers the same-origin `ws:` stream), and no inline
+//! code at all.
+
+use axum::Router;
+use axum::http::header::{CACHE_CONTROL, CONTENT_TYPE, ETAG, IF_NONE_MATCH};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+
+/// One embedded file and how to serve it.
+struct Asset {
+    body: &'static str,
+    content_type: &'static str,
+    etag: &'static str,
+}
+
+/// A strong entity tag from the file's bytes: `"v-<fnv1a64 hex>"`.
+macro_rules! asset {
+    ($file:literal, $content_type:literal) => {{
+        const BODY: &str = include_str!($file);
+        const HASH: u64 = fnv1a(BODY.as_bytes());
+        const TAG: [u8; 20] = etag_of(HASH);
+        const ETAG_STR: &str = match std::str::from_utf8(&TAG) {
+            Ok(s) => s,
+            Err(_) => panic!("an entity tag is ASCII"),
+        };
+        Asset { body: BODY, content_type: $content_type, etag: ETAG_STR }
+    }};
+}
+
+const INDEX: Asset = asset!("viewer/index.html", "text/html; charset=utf-8");
+const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
+const STYLE: Asset = asset!("viewer/viewer.css", "text/css; charset=utf-8");
+
+/// Same-origin script, style, images and connections only; no inline code,
+/// no plugins, no framing. `data:` images are the empty favicon.
+pub const CONTENT_SECURITY_POLICY: &str = "default-src 'none'; script-src 'self'; style-src 'self'; \
+    img-src 'self' data:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
+
+/// `/viewer` (and `/viewer/`) with its script and stylesheet.
+pub fn router<S: Clone + Send + Sync + 'static>() -> Router<S> {
+    Router::new()
+        .route("/viewer", get(viewer_page))
+        .route("/viewer/", get(viewer_page))
+        .route("/viewer/viewer.js", get(|headers: HeaderMap| async move { serve(&SCRIPT, &headers) }))
+        .route("/viewer/viewer.css", get(|headers: HeaderMap| async move { serve(&STYLE, &headers) }))
+}
+
+/// The viewer page: pick a clip, play its stream, see its curves.
+#[utoipa::path(
+    get, path = "/viewer", tag = "viewer",
+    responses(
+        (status = 200, description = "The viewer page (HTML; script and style at /viewer/viewer.js, /viewer/viewer.css)",
+            content_type = "text/html"),
+        (status = 304, description = "`If-None-Match` matched"),
+    )
+)]
+pub async fn viewer_page(headers: HeaderMap) -> Response {
+    serve(&INDEX, &headers)
+}
+
+fn serve(asset: &Asset, request: &HeaderMap) -> Response {
+    let tag = HeaderValue::from_static(asset.etag);
+    let common = [
+        (ETAG, tag),
+        (CACHE_CONTROL, HeaderValue::from_static("no-cache")),
+        (HeaderName::from_static("x-content-type-options"), HeaderValue::from_static("nosniff")),
+    ];
+    if matches_etag(request, asset.etag) {
+        return (StatusCode::NOT_MODIFIED, common).into_response();
+    }
+    let own = [
+        (CONTENT_TYPE, HeaderValue::from_static(asset.content_type)),
+        (HeaderName::from_static("content-security-policy"), HeaderValue::from_static(CONTENT_SECURITY_POLICY)),
+        (HeaderName::from_static("referrer-policy"), HeaderValue::from_static("no-referrer")),
+    ];
+    (StatusCode::OK, common, own, asset.body).into_response()
+}
+
+/// Whether `If-None-Match` names `etag` (weak comparison, RFC 9110 §13.1.2).
+fn matches_etag(request: &HeaderMap, etag: &str) -> bool {
+    request
+        .get_all(IF_NONE_MATCH)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .map(str::trim)
+        .any(|item| item == "*" || item.strip_prefix("W/").unwrap_or(item) == etag)
+}
+
+const fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut hash = 0xcbf2_9ce4_8422_2325_u64;
+    let mut i = 0;
+    while i < bytes.len() {
+        hash ^= bytes[i] as u64;
+        hash = hash.wrapping_mul(0x0100_0000_01b3);
+        i += 1;
+    }
+    hash
+}
+
+/// `"v-` + 16 hex digits + `"`.
+const fn etag_of(hash: u64) -> [u8; 20] {
+    const HEX: &[u8; 16] = b"0123456789abcdef";
+    let mut out = *b"\"v-0000000000000000\"";
+    let mut i = 0;
+    while i < 16 {
+        out[3 + i] = HEX[((hash >> (60 - 4 * i)) & 0xf) as usize];
+        i += 1;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn etags_are_quoted_hex_of_the_content() {
+        assert_eq!(INDEX.etag.len(), 20);
+        assert!(INDEX.etag.starts_with("\"v-") && INDEX.etag.ends_with('"'));
+        assert_ne!(INDEX.etag, SCRIPT.etag);
+        // FNV-1a 64 test vector: "a" → af63dc4c8601ec8c.
+        assert_eq!(fnv1a(b"a"), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!(&etag_of(0xaf63_dc4c_8601_ec8c), b"\"v-af63dc4c8601ec8c\"");
+    }
+
+    #[test]
+    fn if_none_match_compares_weakly_and_in_lists() {
+        let mut h = HeaderMap::new();
+        assert!(!matches_etag(&h, STYLE.etag));
+        h.insert(IF_NONE_MATCH, HeaderValue::from_str(&format!("\"x\", W/{}", STYLE.etag)).unwrap());
+        assert!(matches_etag(&h, STYLE.etag));
+        assert!(!matches_etag(&h, SCRIPT.etag));
+        h.insert(IF_NONE_MATCH, HeaderValue::from_static("*"));
+        assert!(matches_etag(&h, SCRIPT.etag));
+    }
+}

@@ -1,0 +1,223 @@
+//! A minimal Chrome DevTools Protocol client: starts the system Chromium
+//! headless with a fresh profile and drives its first page over the
+//! DevTools WebSocket (tokio-tungstenite, already a dependency), so the
+//! browser test needs no WebDriver crate and no download.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use base64::Engine as _;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tempfile::TempDir;
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+/// Set to `1` (CI does) to fail instead of skipping when Chromium is missing.
+pub const REQUIRE_ENV: &str = "INBETWEEN_REQUIRE_BROWSER";
+
+/// The Chromium binary: `$INBETWEEN_CHROMIUM`, else the first of the usual
+/// names on `PATH`.
+pub fn chromium_path() -> Option<PathBuf> {
+    if let Some(path) = std::env::var_os("INBETWEEN_CHROMIUM") {
+        return Some(PathBuf::from(path));
+    }
+    let dirs = std::env::var_os("PATH")?;
+    ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .flat_map(|name| std::env::split_paths(&dirs).map(move |d| d.join(name)))
+        .find(|p| p.is_file())
+}
+
+/// A headless Chromium and the WebSocket of its page; killed on drop.
+pub struct Browser {
+    child: Child,
+    _profile: TempDir,
+    pub page: Page,
+}
+
+impl Browser {
+    /// Starts Chromium, or returns `None` (with a message) when it is not
+    /// installed and [`REQUIRE_ENV`] is not set.
+    pub async fn launch() -> Option<Browser> {
+        let Some(binary) = chromium_path() else {
+            let required = std::env::var(REQUIRE_ENV).is_ok_and(|v| v == "1");
+            assert!(!required, "{REQUIRE_ENV}=1 but no Chromium found (install Debian `chromium`)");
+            eprintln!("SKIPPED: no Chromium on PATH (apt-get install chromium, or set INBETWEEN_CHROMIUM)");
+            return None;
+        };
+        let profile = tempfile::tempdir().unwrap();
+        let child = Command::new(&binary)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--disable-dev-shm-usage",
+                "--remote-debugging-address=127.0.0.1",
+                "--remote-debugging-port=0",
+                "--window-size=1280,860",
+                "about:blank",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {}: {e}", binary.display()));
+        let mut browser = BrowserGuard(Some(child));
+        let port = devtools_port(profile.path()).await;
+        let page_url = page_websocket(port).await;
+        let (ws, _) = tokio_tungstenite::connect_async(page_url.as_str()).await.expect("DevTools WebSocket");
+        let mut page = Page { ws, next_id: 0 };
+        page.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": 1280, "height": 860, "deviceScaleFactor": 1, "mobile": false}),
+        )
+        .await;
+        Some(Browser { child: browser.0.take().unwrap(), _profile: profile, page })
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Kills a half-started Chromium if setup panics.
+struct BrowserGuard(Option<Child>);
+
+impl Drop for BrowserGuard {
+    fn drop(&mut self) {
+        if let Some(child) = &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// Chromium writes its DevTools port into the profile once it listens.
+async fn devtools_port(profile: &Path) -> u16 {
+    let file = profile.join("DevToolsActivePort");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        if let Some(port) = std::fs::read_to_string(&file).ok().and_then(|t| t.lines().next()?.parse().ok()) {
+            return port;
+        }
+        assert!(Instant::now() < deadline, "Chromium did not open its DevTools port within 30 s");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+async fn page_websocket(port: u16) -> String {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let targets: Value = reqwest::get(format!("http://127.0.0.1:{port}/json/list"))
+            .await
+            .expect("DevTools /json/list")
+            .json()
+            .await
+            .unwrap();
+        let page = targets.as_array().into_iter().flatten().find(|t| t["type"] == "page");
+        if let Some(url) = page.and_then(|p| p["webSocketDebuggerUrl"].as_str()) {
+            return url.to_owned();
+        }
+        assert!(Instant::now() < deadline, "Chromium has no page target");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// One page, driven by commands; events are read and ignored.
+pub struct Page {
+    ws: WebSocketStream<MaybeTlsStream<TcpStream>>,
+    next_id: u64,
+}
+
+impl Page {
+    /// Sends a command and waits (at most 30 s) for its result.
+    pub async fn call(&mut self, method: &str, params: Value) -> Value {
+        self.next_id += 1;
+        let id = self.next_id;
+        let command = json!({"id": id, "method": method, "params": params}).to_string();
+        self.ws.send(Message::text(command)).await.expect("sending a DevTools command");
+        let wait = async {
+            while let Some(message) = self.ws.next().await {
+                let Ok(Message::Text(text)) = message else { continue };
+                let reply: Value = serde_json::from_str(&text).unwrap();
+                if reply["id"] == id {
+                    assert!(reply.get("error").is_none(), "{method} failed: {}", reply["error"]);
+                    return reply["result"].clone();
+                }
+            }
+            panic!("the DevTools connection closed during {method}");
+        };
+        tokio::time::timeout(Duration::from_secs(30), wait).await.unwrap_or_else(|_| panic!("{method} timed out"))
+    }
+
+    /// Evaluates `expression` in the page (awaiting a promise) and returns
+    /// its value as JSON; a thrown exception fails the test.
+    pub async fn eval(&mut self, expression: &str) -> Value {
+        let result = self
+            .call("Runtime.evaluate", json!({"expression": expression, "awaitPromise": true, "returnByValue": true}))
+            .await;
+        if let Some(details) = result.get("exceptionDetails") {
+            panic!("`{expression}` threw: {}", details["exception"]["description"].as_str().unwrap_or_default());
+        }
+        result["result"]["value"].clone()
+    }
+
+    /// Polls `expression` until it is truthy; returns its value.
+    pub async fn wait_for(&mut self, expression: &str, secs: u64) -> Value {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            let value = self.eval(expression).await;
+            let truthy = match &value {
+                Value::Null => false,
+                Value::Bool(b) => *b,
+                Value::Number(n) => n.as_f64() != Some(0.0),
+                Value::String(s) => !s.is_empty(),
+                _ => true,
+            };
+            if truthy {
+                return value;
+            }
+            if Instant::now() > deadline {
+                let status = self.eval("document.getElementById('status')?.textContent").await;
+                panic!("timed out after {secs} s waiting for `{expression}` (page status: {status})");
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    pub async fn navigate(&mut self, url: &str) {
+        self.call("Page.navigate", json!({"url": url})).await;
+        self.wait_for(&format!("location.href === {} && document.readyState === 'complete'", json!(url)), 20).await;
+    }
+
+    /// Puts files into an `<input type=file>` as a user's pick would (fires `change`).
+    pub async fn set_files(&mut self, selector: &str, files: &[&Path]) {
+        let root = self.call("DOM.getDocument", json!({"depth": 0})).await;
+        let node =
+            self.call("DOM.querySelector", json!({"nodeId": root["root"]["nodeId"], "selector": selector})).await;
+        let files: Vec<String> = files.iter().map(|p| p.display().to_string()).collect();
+        self.call("DOM.setFileInputFiles", json!({"files": files, "nodeId": node["nodeId"]})).await;
+    }
+
+    /// A PNG of the page, or of the CSS-pixel rectangle `clip`.
+    pub async fn screenshot(&mut self, clip: Option<[f64; 4]>) -> Vec<u8> {
+        let mut params = json!({"format": "png"});
+        if let Some([x, y, width, height]) = clip {
+            params["clip"] = json!({"x": x, "y": y, "width": width, "height": height, "scale": 1});
+        }
+        let shot = self.call("Page.captureScreenshot", params).await;
+        base64::engine::general_purpose::STANDARD.decode(shot["data"].as_str().unwrap()).unwrap()
+    }
+}
