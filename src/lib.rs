@@ -4,6 +4,7 @@
 pub mod anim;
 pub mod cli;
 pub mod import;
+pub mod load;
 pub mod server;
 pub mod store;
 pub mod stream;

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod import;
+mod load;
 mod sample;
 mod serve;
 
@@ -23,6 +24,8 @@ enum Command {
     Serve(Box<serve::ServeArgs>),
     /// Import a glTF, GLB or BVH file: print clip documents or upload them.
     Import(import::ImportArgs),
+    /// Load a running server (loopback only by default) and report throughput, latency and stream lateness.
+    Load(Box<load::LoadArgs>),
 }
 
 impl Cli {
@@ -31,6 +34,7 @@ impl Cli {
             Command::Sample(args) => sample::run(args),
             Command::Serve(args) => serve::run(*args),
             Command::Import(args) => import::run(args),
+            Command::Load(args) => load::run(*args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,
