@@ -124,17 +124,13 @@ impl<const N: usize> Cursor<N> {
                 for side in 0..2 {
                     let key = &ch.keys[self.entries[j][side] as usize];
                     t[side][lane] = key.time;
-                    for c in 0..N {
-                        v[side][c][lane] = key.value[c];
+                    for (component, value) in v[side].iter_mut().zip(key.value) {
+                        component[lane] = value;
                     }
                 }
             }
             self.soa_t[g] = [Vec4::from(t[0]), Vec4::from(t[1])];
-            for side in 0..2 {
-                for c in 0..N {
-                    self.soa_v[g][side][c] = Vec4::from(v[side][c]);
-                }
-            }
+            self.soa_v[g] = v.map(|side| side.map(Vec4::from));
         }
     }
 

@@ -128,7 +128,7 @@ enum Got {
 
 /// An open stream of either transport.
 enum Open {
-    Grpc(tonic::Streaming<FrameHead>),
+    Grpc(Box<tonic::Streaming<FrameHead>>),
     Ws(Box<tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>>, bool),
 }
 
@@ -187,7 +187,7 @@ impl Spec {
                     .server_streaming(tonic::Request::new(req), path, codec)
                     .await
                     .map_err(|s| format!("grpc:{:?}", s.code()))?;
-                Ok(Open::Grpc(resp.into_inner()))
+                Ok(Open::Grpc(Box::new(resp.into_inner())))
             }
             _ => {
                 let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
