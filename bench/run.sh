@@ -5,7 +5,7 @@
 # BENCHMARKS.md (between the `bench/run.sh` marker comments).
 #
 #   bench/run.sh              # standard scenarios, about 10 minutes
-#   bench/run.sh --quick      # 2-second windows (a smoke run of the script)
+#   bench/run.sh --quick      # 2-second windows, a tenth of the streams (a smoke run of the script)
 #   bench/run.sh --long       # adds the 10-minute drift run and the 10-minute soak
 #   bench/run.sh --no-core    # skips the criterion comparison
 #   bench/run.sh --no-write   # prints the tables instead of editing BENCHMARKS.md
@@ -15,10 +15,10 @@
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
-secs=10 long=0 core=1 write=1
+secs=10 scale=1 long=0 core=1 write=1
 for arg in "$@"; do
   case $arg in
-    --quick) secs=2 ;;
+    --quick) secs=2 scale=10 ;;
     --long) long=1 ;;
     --no-core) core=0 ;;
     --no-write) write=0 ;;
@@ -30,9 +30,14 @@ out=${BENCH_OUT:-$(mktemp -d)}
 mkdir -p "$out"
 ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
 
-echo "== building the release binary"
-cargo build --release --quiet
-bin=$target/release/inbetween
+if [ -n "${INBETWEEN_BIN:-}" ]; then
+  bin=$INBETWEEN_BIN # a binary built elsewhere (figures from a debug build mean little)
+else
+  echo "== building the release binary"
+  cargo build --release --quiet
+  bin=$target/release/inbetween
+fi
+n() { echo $(($1 / scale)); }
 
 data=$(mktemp -d)
 pid=
@@ -68,13 +73,13 @@ load grpc-sample-open grpc-sample -c 64 -d "$secs" --rate 5000 --joints 20
 load rest-pose-open rest-pose -c 64 -d "$secs" --rate 5000 --joints 20
 
 # Streams of the 20-joint clip at 60 fps.
-load grpc-stream-1000 grpc-stream -c 1000 -d "$secs" --fps 60
-load ws-stream-1000 ws-stream -c 1000 -d "$secs" --fps 60
-load ws-stream-1000-protobuf ws-stream -c 1000 -d "$secs" --fps 60 --protobuf
-load grpc-stream-shared-20000 grpc-stream -c 20000 -d "$secs" --fps 60 --shared
+load grpc-stream-1000 grpc-stream -c "$(n 1000)" -d "$secs" --fps 60
+load ws-stream-1000 ws-stream -c "$(n 1000)" -d "$secs" --fps 60
+load ws-stream-1000-protobuf ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --protobuf
+load grpc-stream-shared-20000 grpc-stream -c "$(n 20000)" -d "$secs" --fps 60 --shared
 # The knees: step up from 250 streams until p99 receive lateness > 2 ms or > 0.1% frames lost.
-load grpc-stream-ramp grpc-stream -c 250 -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max 8000
-load ws-stream-ramp ws-stream -c 250 -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max 8000 --protobuf
+load grpc-stream-ramp grpc-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)"
+load ws-stream-ramp ws-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)" --protobuf
 
 if [ "$long" = 1 ]; then
   load grpc-stream-drift-10min grpc-stream -c 1000 -d 600 --fps 60

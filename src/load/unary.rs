@@ -143,6 +143,16 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
                 if scheduled >= deadline {
                     break;
                 }
+                // Bounded in time: once the window is over, requests the
+                // server was too slow to let us send are counted, not sent.
+                if let Some(r) = rate
+                    && Instant::now() >= deadline
+                {
+                    let left = ((deadline - start).as_secs_f64() * r) as u64;
+                    let unsent = (left.saturating_sub(w as u64)).div_ceil(workers as u64).saturating_sub(i);
+                    *out.errors.entry("unsent_past_deadline".into()).or_default() += unsent;
+                    break;
+                }
                 i += 1;
                 match tokio::time::timeout(REQUEST_TIMEOUT, caller.call(n)).await {
                     Ok(Ok(())) => {
