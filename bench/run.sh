@@ -9,13 +9,14 @@
 #   bench/run.sh --long       # adds the 10-minute drift run and the 10-minute soak
 #   bench/run.sh --no-core    # skips the criterion comparison
 #   bench/run.sh --no-write   # prints the tables instead of editing BENCHMARKS.md
+#   BENCH_SECS=4 bench/run.sh # shorter windows (default 10 s)
 #
 # Everything talks to 127.0.0.1 only. Results (JSON reports) stay in
 # $BENCH_OUT (default: a temporary directory, printed at the end).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
-secs=10 scale=1 long=0 core=1 write=1
+secs=${BENCH_SECS:-10} scale=1 long=0 core=1 write=1
 for arg in "$@"; do
   case $arg in
     --quick) secs=2 scale=10 ;;
