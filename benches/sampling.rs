@@ -11,6 +11,9 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::{Quat, Vec3, Vec4};
+#[path = "ozz/kernel.rs"]
+mod ozz_kernel;
+
 use inbetween::anim::{
     Channel, Clip, ClipSpec, Cursor, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Speed, TrackSpec,
     Transform, quat,
@@ -110,6 +113,20 @@ fn clip_with(
     speed: Speed,
     shared_times: bool,
 ) -> Clip {
+    let tracks = tracks_with(channels, interpolation, uniform, speed, shared_times);
+    let spec =
+        ClipSpec { name: "bench".into(), skeleton: Some(skeleton()), tracks, events: vec![], playback: Playback::Loop };
+    Clip::build(&spec).expect("bench clip builds")
+}
+
+/// The tracks of [`clip_with`] (the ozz-style kernel is built from the same keys).
+fn tracks_with(
+    channels: &[Channel],
+    interpolation: Interpolation,
+    uniform: bool,
+    speed: Speed,
+    shared_times: bool,
+) -> Vec<TrackSpec> {
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let shared = times(&mut Rng(5), uniform);
     let mut tracks = Vec::new();
@@ -125,9 +142,7 @@ fn clip_with(
             tracks.push(t);
         }
     }
-    let spec =
-        ClipSpec { name: "bench".into(), skeleton: Some(skeleton()), tracks, events: vec![], playback: Playback::Loop };
-    Clip::build(&spec).expect("bench clip builds")
+    tracks
 }
 
 fn random_times(clip: &Clip, n: usize) -> Vec<f32> {
@@ -338,9 +353,72 @@ fn versus_glam_slerp(c: &mut Criterion) {
     g.finish();
 }
 
+/// Our sampling against an ozz-animation-style SoA kernel (benches/ozz/kernel.rs)
+/// on the same keys: 64 joints, translation + rotation + scale, 32 keys per
+/// track with each track's own times, forward at 60 fps and at random times.
+/// ozz samples linear keys only; our linear and Catmull-Rom rows sit beside it.
+fn versus_ozz(c: &mut Criterion) {
+    let trs = [Channel::Translation, Channel::Rotation, Channel::Scale];
+    let tracks = tracks_with(&trs, Interpolation::Linear, false, Speed::Keyed, false);
+    let of = |ch: Channel| tracks.iter().filter(move |t| t.channel == ch);
+    let vec3 = |t: &TrackSpec| match &t.values {
+        Keys::Vec3(v) => (t.times.clone(), v.iter().map(|x| x.to_array()).collect::<Vec<_>>()),
+        Keys::Vec4(_) => unreachable!("vector channel"),
+    };
+    let vec4 = |t: &TrackSpec| match &t.values {
+        Keys::Vec4(v) => (t.times.clone(), v.iter().map(|x| x.to_array()).collect::<Vec<_>>()),
+        Keys::Vec3(_) => unreachable!("rotation channel"),
+    };
+    let ozz = ozz_kernel::Animation::new(
+        &of(Channel::Translation).map(vec3).collect::<Vec<_>>(),
+        &of(Channel::Rotation).map(vec4).collect::<Vec<_>>(),
+        &of(Channel::Scale).map(vec3).collect::<Vec<_>>(),
+    );
+    let lin = clip(&trs, Interpolation::Linear, false, Speed::Keyed);
+    let cr = clip(&trs, Interpolation::CatmullRom, false, Speed::Keyed);
+    // The kernel samples inside the keys' common range only (no looping).
+    let end = tracks.iter().map(|t| *t.times.last().unwrap()).fold(f32::MAX, f32::min);
+    let fwd: Vec<f32> = (0..4096).map(|k| (k as f32 / 60.0) % end).collect();
+    let rnd: Vec<f32> = {
+        let mut rng = Rng(42);
+        (0..4096).map(|_| rng.range(0.0, end)).collect()
+    };
+    // The kernel is checked against our linear translations before it is timed.
+    let (mut ctx, mut soa) = (ozz.context(), vec![ozz_kernel::SoaTransform::default(); JOINTS / 4]);
+    let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
+    for &t in rnd.iter().take(64) {
+        ozz.sample(&mut ctx, t, &mut soa);
+        lin.sample_into(t, &mut cursor, &mut pose);
+        for j in 0..JOINTS {
+            let (g, lane) = (j / 4, j % 4);
+            let ours = Vec3::from(pose.translations[j]);
+            let theirs =
+                Vec3::new(soa[g].translation[0][lane], soa[g].translation[1][lane], soa[g].translation[2][lane]);
+            assert!((ours - theirs).abs().max_element() < 1e-4, "joint {j} at {t}: {ours} vs {theirs}");
+        }
+    }
+    for (id, times) in [("ozz_style_linear_forward", &fwd), ("ozz_style_linear_random", &rnd)] {
+        let mut g = c.benchmark_group("versus_ozz_64_joints");
+        g.throughput(Throughput::Elements(JOINTS as u64));
+        let mut k = 0;
+        g.bench_function(id, |b| {
+            b.iter(|| {
+                k = (k + 1) % times.len();
+                ozz.sample(&mut ctx, black_box(times[k]), &mut soa);
+                black_box(&soa);
+            })
+        });
+        g.finish();
+    }
+    run_pose(c, "versus_ozz_64_joints", "inbetween_linear_forward", &lin, &fwd, false);
+    run_pose(c, "versus_ozz_64_joints", "inbetween_linear_random", &lin, &rnd, false);
+    run_pose(c, "versus_ozz_64_joints", "inbetween_catmull_rom_forward", &cr, &fwd, false);
+    run_pose(c, "versus_ozz_64_joints", "inbetween_catmull_rom_random", &cr, &rnd, false);
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2)).sample_size(50);
-    targets = per_mode, full_joint, real_clips, versus_splines_crate, versus_glam_slerp
+    targets = per_mode, full_joint, real_clips, versus_splines_crate, versus_glam_slerp, versus_ozz
 }
 criterion_main!(benches);

@@ -6,6 +6,7 @@ pub mod cli;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod import;
+pub mod load;
 pub mod server;
 pub mod store;
 pub mod stream;

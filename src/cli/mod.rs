@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod import;
+mod load;
 mod sample;
 mod serve;
 mod token;
@@ -26,6 +27,8 @@ enum Command {
     Import(import::ImportArgs),
     /// Make API tokens and the hashes the server's configuration holds.
     Token(token::TokenArgs),
+    /// Load a running server (loopback only by default) and report throughput, latency and stream lateness.
+    Load(Box<load::LoadArgs>),
 }
 
 impl Cli {
@@ -35,6 +38,7 @@ impl Cli {
             Command::Serve(args) => serve::run(*args),
             Command::Import(args) => import::run(args),
             Command::Token(args) => token::run(args),
+            Command::Load(args) => load::run(*args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

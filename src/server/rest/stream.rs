@@ -27,6 +27,11 @@ use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
 
 use super::extract::{ClipId, QueryParams};
 
+/// The socket's read buffer. tungstenite's default (128 KiB) made a WebSocket
+/// stream cost the server ~125 KiB of RSS (measured by `inbetween load
+/// ws-stream`); clients only send small controls.
+const READ_BUFFER_BYTES: usize = 8 * 1024;
+
 /// Stream a clip: upgrade to a WebSocket of frames.
 #[utoipa::path(
     get, path = "/v1/clips/{id}/stream", tag = "streams",
@@ -118,7 +123,8 @@ pub async fn stream(
         .max_message_size(l.ws_max_message_bytes)
         .max_frame_size(l.ws_max_message_bytes)
         .write_buffer_size(l.ws_write_buffer_bytes)
-        .max_write_buffer_size(l.ws_max_write_buffer_bytes);
+        .max_write_buffer_size(l.ws_max_write_buffer_bytes)
+        .read_buffer_size(READ_BUFFER_BYTES);
     Ok(upgrade.on_upgrade(move |socket: WebSocket| async move {
         match admitted {
             Ok(permit) => {

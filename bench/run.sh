@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# The performance record in one command: builds a release server, starts it
+# on loopback, runs the standard load scenarios with `inbetween load` and the
+# core comparison with criterion, and rewrites the generated tables of
+# BENCHMARKS.md (between the `bench/run.sh` marker comments).
+#
+#   bench/run.sh              # standard scenarios, about 10 minutes
+#   bench/run.sh --quick      # 2-second windows, a tenth of the streams (a smoke run of the script)
+#   bench/run.sh --long       # adds the 10-minute drift run and the 10-minute soak
+#   bench/run.sh --no-core    # skips the criterion comparison
+#   bench/run.sh --no-write   # prints the tables instead of editing BENCHMARKS.md
+#   BENCH_SECS=4 bench/run.sh # shorter windows (default 10 s)
+#
+# Everything talks to 127.0.0.1 only. Results (JSON reports) stay in
+# $BENCH_OUT (default: a temporary directory, printed at the end).
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+secs=${BENCH_SECS:-10} scale=1 long=0 core=1 write=1
+for arg in "$@"; do
+  case $arg in
+    --quick) secs=2 scale=10 ;;
+    --long) long=1 ;;
+    --no-core) core=0 ;;
+    --no-write) write=0 ;;
+    *) echo "unknown option $arg" >&2; exit 2 ;;
+  esac
+done
+target=${CARGO_TARGET_DIR:-$root/target}
+out=${BENCH_OUT:-$(mktemp -d)}
+mkdir -p "$out"
+ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
+
+if [ -n "${INBETWEEN_BIN:-}" ]; then
+  bin=$INBETWEEN_BIN # a binary built elsewhere (figures from a debug build mean little)
+else
+  echo "== building the release binary"
+  cargo build --release --quiet
+  bin=$target/release/inbetween
+fi
+n() { echo $(($1 / scale)); }
+
+data=$(mktemp -d)
+pid=
+cleanup() { [ -n "$pid" ] && kill "$pid" 2>/dev/null && wait "$pid" 2>/dev/null; rm -rf "$data"; }
+trap cleanup EXIT
+# Stream caps raised for the load (every stream comes from 127.0.0.1).
+INBETWEEN_LOG=warn "$bin" serve --listen 127.0.0.1:0 --grpc-listen 127.0.0.1:0 --data-dir "$data" \
+  --max-streams 40000 --max-streams-per-client 40000 >"$data/out" 2>"$data/err" &
+pid=$!
+for _ in $(seq 100); do grep -q "gRPC listening" "$data/out" 2>/dev/null && break; sleep 0.1; done
+http=$(sed -n 's/^inbetween listening on //p' "$data/out")
+grpc=$(sed -n 's/^inbetween gRPC listening on //p' "$data/out")
+[ -n "$http" ] && [ -n "$grpc" ] || { echo "the server did not start:" >&2; cat "$data/err" >&2; exit 1; }
+echo "server pid $pid, $http, $grpc; reports in $out"
+
+load() { # name, then `inbetween load` arguments
+  local name=$1; shift
+  echo "== $name: inbetween load $*"
+  "$bin" load "$@" --http "$http" --grpc "$grpc" --server-pid "$pid" --json >"$out/$name.json" 2>"$out/$name.err" \
+    || { echo "   failed: $(tail -n 3 "$out/$name.err")"; rm -f "$out/$name.json"; return 0; }
+  python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print("   ok %d, %.0f/s, errors %s" % (r["ok"], r["throughput"], r["errors"]))' "$out/$name.json"
+}
+
+# Unary: each pair on the same server, alternating, two rounds.
+for round in 1 2; do
+  load "grpc-ping-$round" grpc-ping -c 32 -d "$secs"
+  load "grpc-sample-$round" grpc-sample -c 32 -d "$secs" --joints 20
+  load "rest-health-$round" rest-health -c 32 -d "$secs"
+  load "rest-pose-$round" rest-pose -c 32 -d "$secs" --joints 20
+done
+# Open loop: latency without coordinated omission at a fixed rate.
+load grpc-sample-open grpc-sample -c 64 -d "$secs" --rate 5000 --joints 20
+load rest-pose-open rest-pose -c 64 -d "$secs" --rate 5000 --joints 20
+
+# Streams of the 20-joint clip at 60 fps.
+load grpc-stream-1000 grpc-stream -c "$(n 1000)" -d "$secs" --fps 60
+load ws-stream-1000 ws-stream -c "$(n 1000)" -d "$secs" --fps 60
+load ws-stream-1000-protobuf ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --protobuf
+load grpc-stream-shared-20000 grpc-stream -c "$(n 20000)" -d "$secs" --fps 60 --shared
+# The knees: step up from 250 streams until p99 receive lateness > 2 ms or > 0.1% frames lost.
+load grpc-stream-ramp grpc-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)"
+load ws-stream-ramp ws-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)" --protobuf
+
+if [ "$long" = 1 ]; then
+  load grpc-stream-drift-10min grpc-stream -c 1000 -d 600 --fps 60
+  # The soak: half of the grpc-sample capacity measured above, open loop, 10 minutes.
+  rate=$(python3 -c 'import json,sys; print(int(json.load(open(sys.argv[1]))["throughput"] / 2))' "$out/grpc-sample-1.json")
+  load soak-grpc-sample-10min grpc-sample -c 64 -d 600 --rate "$rate" --joints 20
+fi
+
+if [ "$core" = 1 ]; then
+  echo "== criterion: our sampling vs the ozz-style kernel"
+  cargo bench --bench sampling -- 'versus_ozz|rbt_64_joints/catmull_rom_shared' >"$out/criterion.txt" 2>&1 || true
+fi
+
+echo "== writing the tables"
+python3 bench/tables.py "$out" "$target/criterion" "$(git rev-parse --short HEAD)" $([ "$write" = 1 ] && echo BENCHMARKS.md)
+echo "reports: $out"

@@ -1,0 +1,140 @@
+//! `inbetween load`: the load generator (`crate::load`). Flags in, a human
+//! summary or a JSON report out.
+
+use std::time::Duration;
+
+use clap::{Args, ValueEnum};
+
+use crate::load::ramp::RampPlan;
+use crate::load::{ClipChoice, Mode, Options};
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ModeArg {
+    /// gRPC `Sample` of one pose.
+    GrpcSample,
+    /// gRPC `Ping`: the no-op baseline of `grpc-sample`.
+    GrpcPing,
+    /// `GET /v1/clips/{id}/pose`.
+    RestPose,
+    /// `GET /healthz`: the no-op baseline of `rest-pose`.
+    RestHealth,
+    /// gRPC `StreamFrames` streams.
+    GrpcStream,
+    /// WebSocket streams (`/v1/clips/{id}/stream`).
+    WsStream,
+}
+
+#[derive(Debug, Args)]
+pub struct LoadArgs {
+    /// What to load.
+    #[arg(value_enum)]
+    mode: ModeArg,
+    /// The server's REST base URL.
+    #[arg(long, default_value = "http://127.0.0.1:8080")]
+    http: String,
+    /// The server's gRPC URL.
+    #[arg(long, default_value = "http://127.0.0.1:50051")]
+    grpc: String,
+    /// Allow a target that is not a loopback address.
+    #[arg(long)]
+    allow_remote: bool,
+    /// Unary: concurrent workers. Streams: concurrent streams.
+    #[arg(long, short = 'c', default_value_t = 32)]
+    concurrency: usize,
+    /// gRPC HTTP/2 connections shared by the workers or streams [default: one per
+    /// worker; one per 100 streams]. REST and WebSocket use one per worker or stream.
+    #[arg(long, default_value_t = 0)]
+    connections: usize,
+    /// Seconds to measure (each ramp stage too).
+    #[arg(long, short = 'd', default_value_t = 10.0)]
+    duration: f64,
+    /// Unary: stop after this many requests (or the duration, whichever first).
+    #[arg(long)]
+    requests: Option<u64>,
+    /// Unary: open loop at this many requests per second (latency from the scheduled time).
+    #[arg(long)]
+    rate: Option<f64>,
+    /// Load this existing clip instead of uploading a generated one.
+    #[arg(long, conflicts_with = "joints")]
+    clip: Option<String>,
+    /// Joints of the generated clip (a chain of Catmull-Rom rotations).
+    #[arg(long, default_value_t = 20)]
+    joints: usize,
+    /// Streams: frames per second.
+    #[arg(long, default_value_t = 60)]
+    fps: u32,
+    /// Streams: viewers of one playback instead of independent playbacks.
+    #[arg(long)]
+    shared: bool,
+    /// WebSocket streams: binary protobuf frames instead of JSON text.
+    #[arg(long)]
+    protobuf: bool,
+    /// Step the load up from --concurrency until the p99 target breaks; report the knee.
+    #[arg(long)]
+    ramp: bool,
+    /// Ramp: multiply the load by this after each passing stage.
+    #[arg(long, default_value_t = 2.0)]
+    ramp_factor: f64,
+    /// Ramp: the largest load to try.
+    #[arg(long, default_value_t = 20_000)]
+    ramp_max: usize,
+    /// Ramp: the p99 target in milliseconds (receive lateness for streams, latency otherwise).
+    #[arg(long, default_value_t = 2.0)]
+    target_p99_ms: f64,
+    /// Ramp: the largest share of lost frames or failed requests a stage may have.
+    #[arg(long, default_value_t = 0.001)]
+    max_loss: f64,
+    /// The server's process id for /proc readings [default: the local process listening on --http].
+    #[arg(long)]
+    server_pid: Option<u32>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: LoadArgs) -> anyhow::Result<()> {
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        anyhow::bail!("--duration must be a positive number of seconds");
+    }
+    let opts = Options {
+        mode: match args.mode {
+            ModeArg::GrpcSample => Mode::GrpcSample,
+            ModeArg::GrpcPing => Mode::GrpcPing,
+            ModeArg::RestPose => Mode::RestPose,
+            ModeArg::RestHealth => Mode::RestHealth,
+            ModeArg::GrpcStream => Mode::GrpcStream,
+            ModeArg::WsStream => Mode::WsStream,
+        },
+        http: args.http,
+        grpc: args.grpc,
+        allow_remote: args.allow_remote,
+        concurrency: args.concurrency,
+        connections: args.connections,
+        duration: Duration::try_from_secs_f64(args.duration)?,
+        requests: args.requests,
+        rate: args.rate,
+        clip: match args.clip {
+            Some(id) => ClipChoice::Existing(id),
+            None => ClipChoice::Generate { joints: args.joints },
+        },
+        fps: args.fps,
+        shared: args.shared,
+        ws_protobuf: args.protobuf,
+        ramp: args.ramp.then_some(RampPlan {
+            start: args.concurrency,
+            factor: args.ramp_factor,
+            max: args.ramp_max,
+            target_p99_us: args.target_p99_ms * 1000.0,
+            max_loss_ratio: args.max_loss,
+        }),
+        server_pid: args.server_pid,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let report = runtime.block_on(crate::load::run(opts))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.human());
+    }
+    Ok(())
+}

@@ -1,0 +1,412 @@
+//! Stream modes: `grpc-stream` (`StreamFrames`) and `ws-stream` (the
+//! WebSocket route), N streams at F fps.
+//!
+//! Independent streams ask for different start times, so each is its own
+//! playback on the server; `--shared` streams ask for the same one, so those
+//! that join within the same tick share one evaluation per tick (the server
+//! matches viewers by their first grid tick; the report shows how many
+//! playbacks it started). Streams are opened at most [`OPENING`] at a time;
+//! the measured window starts once every stream has delivered a frame (or
+//! the opening deadline passed) plus a settling second, and lasts the
+//! duration. Frames received outside the window are not recorded. A stream
+//! that ends or fails inside the run is reopened (a `reconnect`).
+//!
+//! Clients decode only the frame header (`seq`, `sent_at_unix_nanos`,
+//! `dropped`): the gRPC side through a codec for a three-field message
+//! (protobuf skips the pose), the WebSocket side by skipping the pose while
+//! parsing JSON. On a 2-core machine the client's CPU is the server's too.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicI64, AtomicUsize, Ordering};
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use serde::Deserialize;
+use tokio::sync::{Semaphore, watch};
+use tokio::time::Instant;
+use tokio_tungstenite::tungstenite::Message;
+use tonic::codegen::http::uri::PathAndQuery;
+use tonic::transport::Channel;
+
+use super::clock::{ClockSync, unix_now_ns};
+use super::histogram::Latency;
+use super::lateness::StreamTracker;
+use super::report::{Report, ServerUsage, StreamStats};
+use super::{Env, Mode, Options, procstat, setup};
+use crate::wire::proto::pb;
+
+/// Streams being opened at once.
+const OPENING: usize = 64;
+/// gRPC streams per HTTP/2 connection when `--connections` is not given.
+const STREAMS_PER_CONNECTION: usize = 100;
+/// Time given to the server to settle after the last stream opened.
+const SETTLE: Duration = Duration::from_secs(1);
+/// How long opening one stream may take.
+const OPEN_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// The header of a `Frame` (SPEC §4): protobuf skips the other fields.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct FrameHead {
+    #[prost(uint64, tag = "1")]
+    pub seq: u64,
+    #[prost(int64, tag = "3")]
+    pub sent_at_unix_nanos: i64,
+    #[prost(uint64, tag = "4")]
+    pub dropped: u64,
+}
+
+/// The same header of a JSON frame; serde skips the pose and events.
+#[derive(Deserialize)]
+struct JsonHead {
+    seq: u64,
+    sent_at_unix_nanos: i64,
+    dropped: u64,
+}
+
+/// The measured window on the local wall clock (ns; 0 = not set yet).
+struct Window {
+    start: AtomicI64,
+    end: AtomicI64,
+    opened: AtomicUsize,
+}
+
+#[derive(Default)]
+struct StreamResult {
+    frames: u64,
+    send: Latency,
+    receive: Latency,
+    jitter: Latency,
+    first_tenth: Latency,
+    last_tenth: Latency,
+    dropped: u64,
+    gaps: u64,
+    reconnects: u64,
+    opened: bool,
+    errors: BTreeMap<String, u64>,
+}
+
+impl StreamResult {
+    fn error(&mut self, kind: impl Into<String>) {
+        *self.errors.entry(kind.into()).or_default() += 1;
+    }
+
+    fn merge(&mut self, o: &StreamResult) {
+        self.frames += o.frames;
+        self.send.merge(&o.send);
+        self.receive.merge(&o.receive);
+        self.jitter.merge(&o.jitter);
+        self.first_tenth.merge(&o.first_tenth);
+        self.last_tenth.merge(&o.last_tenth);
+        self.dropped += o.dropped;
+        self.gaps += o.gaps;
+        self.reconnects += o.reconnects;
+        for (k, v) in &o.errors {
+            *self.errors.entry(k.clone()).or_default() += v;
+        }
+    }
+}
+
+/// What one stream task needs.
+#[derive(Clone)]
+struct Spec {
+    mode: Mode,
+    ws_base: String,
+    ws_protobuf: bool,
+    clip_id: String,
+    fps: u32,
+    clock: ClockSync,
+    window: Arc<Window>,
+    opening: Arc<Semaphore>,
+}
+
+/// A frame header, or the end of the stream (with why, if it failed).
+enum Got {
+    Frame(u64, i64, u64),
+    End(Option<String>),
+}
+
+/// An open stream of either transport.
+enum Open {
+    Grpc(Box<tonic::Streaming<FrameHead>>),
+    Ws(Box<tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>>, bool),
+}
+
+impl Open {
+    async fn next(&mut self) -> Got {
+        match self {
+            Open::Grpc(s) => match s.message().await {
+                Ok(Some(f)) => Got::Frame(f.seq, f.sent_at_unix_nanos, f.dropped),
+                Ok(None) => Got::End(Some("ended".into())),
+                Err(status) => Got::End(Some(format!("grpc:{:?}", status.code()))),
+            },
+            Open::Ws(ws, protobuf) => loop {
+                match ws.next().await {
+                    Some(Ok(Message::Text(t))) if !*protobuf => match serde_json::from_str::<JsonHead>(&t) {
+                        Ok(h) => return Got::Frame(h.seq, h.sent_at_unix_nanos, h.dropped),
+                        Err(_) => return Got::End(Some("bad_frame".into())),
+                    },
+                    Some(Ok(Message::Binary(b))) if *protobuf => match <FrameHead as prost::Message>::decode(b) {
+                        Ok(h) => return Got::Frame(h.seq, h.sent_at_unix_nanos, h.dropped),
+                        Err(_) => return Got::End(Some("bad_frame".into())),
+                    },
+                    Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
+                    Some(Ok(Message::Close(c))) => {
+                        return Got::End(Some(c.map_or("closed".into(), |c| format!("closed:{}", u16::from(c.code)))));
+                    }
+                    Some(Ok(_)) => return Got::End(Some("unexpected_message".into())),
+                    Some(Err(_)) => return Got::End(Some("ws_error".into())),
+                    None => return Got::End(Some("ended".into())),
+                }
+            },
+        }
+    }
+
+    async fn close(self) {
+        if let Open::Ws(mut ws, _) = self {
+            let _ = tokio::time::timeout(Duration::from_secs(1), ws.close()).await;
+        }
+    }
+}
+
+impl Spec {
+    async fn open(&self, channel: &Channel, start_time: f64) -> Result<Open, String> {
+        match self.mode {
+            Mode::GrpcStream => {
+                let mut grpc = tonic::client::Grpc::new(channel.clone());
+                grpc.ready().await.map_err(|_| "connect".to_string())?;
+                let req = pb::StreamRequest {
+                    clip_id: self.clip_id.clone(),
+                    fps: self.fps,
+                    start_time: Some(start_time),
+                    ..Default::default()
+                };
+                let path = PathAndQuery::from_static("/inbetween.v1.Animation/StreamFrames");
+                let codec = tonic_prost::ProstCodec::<pb::StreamRequest, FrameHead>::default();
+                let resp = grpc
+                    .server_streaming(tonic::Request::new(req), path, codec)
+                    .await
+                    .map_err(|s| format!("grpc:{:?}", s.code()))?;
+                Ok(Open::Grpc(Box::new(resp.into_inner())))
+            }
+            _ => {
+                let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
+                let url = format!(
+                    "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
+                    self.ws_base, self.clip_id, self.fps
+                );
+                let (ws, _) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
+                    tokio_tungstenite::tungstenite::Error::Http(r) => format!("http:{}", r.status().as_u16()),
+                    _ => "connect".to_string(),
+                })?;
+                Ok(Open::Ws(Box::new(ws), self.ws_protobuf))
+            }
+        }
+    }
+
+    /// One stream until `stop`: open, receive, reopen on failure.
+    async fn run(self, channel: Channel, start_time: f64, mut stop: watch::Receiver<bool>) -> StreamResult {
+        let mut out = StreamResult::default();
+        loop {
+            if *stop.borrow_and_update() {
+                return out;
+            }
+            let permit = self.opening.acquire().await.expect("the semaphore is never closed");
+            let opened = tokio::select! {
+                r = tokio::time::timeout(OPEN_TIMEOUT, self.open(&channel, start_time)) => r,
+                _ = stopped(&mut stop) => return out,
+            };
+            drop(permit);
+            let mut stream = match opened {
+                Ok(Ok(s)) => s,
+                Ok(Err(kind)) => {
+                    out.error(kind);
+                    // Bounded retries: a refused stream waits before trying again.
+                    tokio::select! {
+                        _ = tokio::time::sleep(Duration::from_millis(250)) => continue,
+                        _ = stopped(&mut stop) => return out,
+                    }
+                }
+                Err(_) => {
+                    out.error("timeout");
+                    continue;
+                }
+            };
+            let mut tracker = StreamTracker::new(self.clock, self.fps);
+            let mut first = true;
+            loop {
+                let got = tokio::select! {
+                    got = stream.next() => got,
+                    _ = stopped(&mut stop) => {
+                        stream.close().await;
+                        return out;
+                    }
+                };
+                match got {
+                    Got::Frame(seq, sent_at, dropped) => {
+                        let received = unix_now_ns();
+                        if first {
+                            first = false;
+                            if out.opened {
+                                out.reconnects += 1;
+                            } else {
+                                out.opened = true;
+                                self.window.opened.fetch_add(1, Ordering::Relaxed);
+                            }
+                        }
+                        let o = tracker.observe(seq, sent_at, received);
+                        let (start, end) =
+                            (self.window.start.load(Ordering::Relaxed), self.window.end.load(Ordering::Relaxed));
+                        if start == 0 || received < start || received >= end {
+                            continue;
+                        }
+                        out.frames += 1;
+                        out.send.record_ns(o.send_late_ns);
+                        out.receive.record_ns(o.receive_late_ns);
+                        if let Some(j) = o.jitter_ns {
+                            out.jitter.record_ns(j);
+                        }
+                        out.dropped += dropped;
+                        out.gaps += o.gap;
+                        let tenth = (end - start) / 10;
+                        if received < start + tenth {
+                            out.first_tenth.record_ns(o.receive_late_ns);
+                        } else if received >= end - tenth {
+                            out.last_tenth.record_ns(o.receive_late_ns);
+                        }
+                    }
+                    Got::End(why) => {
+                        if let Some(kind) = why {
+                            out.error(kind);
+                        }
+                        break;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Resolves once the run is over (the guard `wait_for` returns is not `Send`).
+async fn stopped(stop: &mut watch::Receiver<bool>) {
+    let _ = stop.wait_for(|s| *s).await;
+}
+
+pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<Report> {
+    let connections = match opts.mode {
+        Mode::GrpcStream if opts.connections == 0 => n.div_ceil(STREAMS_PER_CONNECTION),
+        Mode::GrpcStream => opts.connections.min(n),
+        _ => n, // a WebSocket is its own connection
+    };
+    // The clock sync always goes over gRPC (the `Ping` RPC); WebSocket
+    // streams use one extra channel for it.
+    let channels = setup::channels(&env.grpc, if opts.mode == Mode::GrpcStream { connections } else { 1 }).await?;
+    let clock = setup::clock_sync(channels[0].clone()).await?;
+    let mut ws_base = env.http.clone();
+    ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
+    let window =
+        Arc::new(Window { start: AtomicI64::new(0), end: AtomicI64::new(i64::MAX), opened: AtomicUsize::new(0) });
+    let spec = Spec {
+        mode: opts.mode,
+        ws_base: ws_base.to_string(),
+        ws_protobuf: opts.ws_protobuf,
+        clip_id: env.clip_id.clone(),
+        fps: opts.fps,
+        clock,
+        window: Arc::clone(&window),
+        opening: Arc::new(Semaphore::new(OPENING)),
+    };
+
+    let server_before = env.server_pid.and_then(procstat::sample);
+    let counters_before_open = setup::stream_counters(&env.http).await;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let mut tasks = Vec::with_capacity(n);
+    for i in 0..n {
+        // Independent streams differ in start time (1 ms apart), so the
+        // server cannot merge them; shared ones all start at 0.
+        let start_time = if opts.shared { 0.0 } else { i as f64 * 0.001 };
+        let channel = channels[i % channels.len()].clone();
+        tasks.push(tokio::spawn(spec.clone().run(channel, start_time, stop_rx.clone())));
+    }
+    let open_deadline = Instant::now() + Duration::from_secs(10) + Duration::from_millis(n as u64 * 2);
+    while window.opened.load(Ordering::Relaxed) < n && Instant::now() < open_deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    tokio::time::sleep(SETTLE).await;
+
+    let counters_before = setup::stream_counters(&env.http).await;
+    let server_start = env.server_pid.and_then(procstat::sample);
+    let client_start = procstat::sample_self();
+    let start = unix_now_ns();
+    window.end.store(start + opts.duration.as_nanos() as i64, Ordering::Relaxed);
+    window.start.store(start, Ordering::Relaxed);
+    tokio::time::sleep(opts.duration).await;
+    let elapsed = (unix_now_ns() - start) as f64 / 1e9;
+    let server_end = env.server_pid.and_then(procstat::sample);
+    let client_end = procstat::sample_self();
+    let counters_after = setup::stream_counters(&env.http).await;
+    stop_tx.send_replace(true);
+
+    let mut total = StreamResult::default();
+    let mut opened = 0;
+    for task in tasks {
+        let r = task.await?;
+        opened += usize::from(r.opened);
+        total.merge(&r);
+    }
+    let n_f = n as f64;
+    let stats = StreamStats {
+        streams: n,
+        opened,
+        fps: opts.fps,
+        shared: opts.shared,
+        encoding: match (opts.mode, opts.ws_protobuf) {
+            (Mode::WsStream, false) => "json",
+            _ => "protobuf",
+        },
+        frames_per_stream_per_sec: total.frames as f64 / n_f / elapsed,
+        send_lateness: total.send.summary(),
+        receive_lateness: total.receive.summary(),
+        jitter: total.jitter.summary(),
+        drift_p50_us: (total.last_tenth.quantile_ns(0.5) as f64 - total.first_tenth.quantile_ns(0.5) as f64) / 1000.0,
+        dropped: total.dropped,
+        gaps: total.gaps,
+        loss_ratio: if total.gaps == 0 { 0.0 } else { total.gaps as f64 / (total.frames + total.gaps) as f64 },
+        reconnects: total.reconnects,
+        clock,
+        playbacks_started: counters_before_open.zip(counters_after).map(|(b, a)| a.0.saturating_sub(b.0)),
+        ticks_evaluated: counters_before.zip(counters_after).map(|(b, a)| a.1.saturating_sub(b.1)),
+    };
+    let server = match (env.server_pid, server_before, server_start, server_end) {
+        (Some(pid), Some(b), Some(s), Some(e)) => Some(ServerUsage {
+            pid,
+            rss_before_bytes: b.rss_bytes,
+            rss_end_bytes: e.rss_bytes,
+            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / n_f),
+            cpu_cores: (e.cpu_secs - s.cpu_secs) / elapsed,
+            cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / total.frames.max(1) as f64,
+        }),
+        _ => None,
+    };
+    Ok(Report {
+        mode: opts.mode.as_str(),
+        started_unix: start as f64 / 1e9,
+        http: env.http.to_string(),
+        grpc: env.grpc.to_string(),
+        clip_id: env.clip_id.clone(),
+        joints: None,
+        concurrency: n,
+        connections,
+        rate: None,
+        elapsed_secs: elapsed,
+        ok: total.frames,
+        throughput: total.frames as f64 / elapsed,
+        latency: None,
+        streams: Some(stats),
+        errors: total.errors,
+        server,
+        client_cpu_cores: client_start.zip(client_end).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / elapsed),
+        loadavg: None,
+        ramp: None,
+    })
+}
