@@ -25,7 +25,7 @@ use std::time::Instant;
 use futures_util::FutureExt;
 use futures_util::future::BoxFuture;
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions, PgRow};
-use sqlx::{Row, migrate::Migrator};
+use sqlx::{Connection, Row, migrate::Migrator};
 
 use super::retry::{Retry, Transience, with_retry};
 use super::{
@@ -70,6 +70,11 @@ impl PgStore {
             options = options.application_name(DEFAULT_APPLICATION_NAME);
         }
         let durability = settings.durability;
+        // One connection checked up front, so a refusal reports its reason
+        // (the pool would only time out retrying).
+        let mut first = sqlx::PgConnection::connect_with(&options).await?;
+        check_durability(&mut first, durability).await?;
+        first.close().await?;
         let pool = PgPoolOptions::new()
             .max_connections(settings.max_connections.max(1))
             .acquire_timeout(settings.acquire_timeout)

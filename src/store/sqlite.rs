@@ -27,7 +27,7 @@ use futures_util::future::BoxFuture;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow, SqliteSynchronous,
 };
-use sqlx::{Row, migrate::Migrator};
+use sqlx::{Connection, Row, migrate::Migrator};
 
 use super::{
     ClipMeta, ClipStats, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id,
@@ -82,6 +82,11 @@ impl SqliteStore {
             .synchronous(synchronous)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
+        // One connection checked up front, so a refusal reports its reason
+        // (the pool would only time out retrying).
+        let mut first = sqlx::SqliteConnection::connect_with(&options).await?;
+        check_durability(&mut first, durability).await?;
+        first.close().await?;
         let pool = SqlitePoolOptions::new()
             .max_connections(settings.max_connections.max(1))
             .acquire_timeout(settings.acquire_timeout)
