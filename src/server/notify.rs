@@ -61,6 +61,7 @@ pub fn parse(payload: &str) -> Option<Change<'_>> {
 
 /// Applies one change to this node's cache (idempotent).
 pub fn apply(state: &AppState, change: &Change<'_>) {
+    tracing::debug!(?change, "clip change heard");
     match *change {
         Change::Written { id, version } => {
             if state.cache.version_of(id).is_some_and(|cached| cached >= version) {

@@ -105,7 +105,7 @@ async fn served(http: &reqwest::Client, node: &Node, id: &str) -> Option<u32> {
     match resp.status().as_u16() {
         200 => {
             let pose: Value = resp.json().await.unwrap();
-            Some(pose["joints"][0]["translation"][0].as_f64().unwrap() as u32)
+            Some(pose["joints"][0]["translation"][0].as_f64().unwrap().round() as u32)
         }
         404 => None,
         s => panic!("{}: pose answered {s}", node.name),
@@ -162,7 +162,6 @@ async fn changes_on_any_node_reach_every_node_within_a_second() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-#[ignore = "KNOWN FAILING: a change made more than ~2 s after the nodes start is not seen by the other nodes; under investigation"]
 async fn a_killed_node_leaves_the_others_serving_and_streaming() {
     let Some(schema) = Schema::create("kill").await else { return };
     let [mut a, b, c] = ["node-a", "node-b", "node-c"].map(|n| Node::start(&schema, n));
@@ -201,7 +200,6 @@ async fn a_killed_node_leaves_the_others_serving_and_streaming() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-#[ignore = "KNOWN FAILING: a change made more than ~2 s after the nodes start is not seen by the other nodes; under investigation"]
 async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version() {
     let Some(schema) = Schema::create("cut").await else { return };
     let [a, b] = ["node-a", "node-b"].map(|n| Node::start(&schema, n));
@@ -217,9 +215,7 @@ async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version()
     let cut = schema.terminate("node-b").await;
     assert!(cut >= 2, "B's pool and listener connections were found ({cut})");
     replace(&http, &a, &id, 3).await;
-    // At worst the heartbeat's silence limit tells B its listener is gone.
-    let limit = inbetween::server::notify::SILENCE_LIMIT + Duration::from_secs(3);
-    until_served(&http, &b, &id, Some(3), limit).await;
+    until_served(&http, &b, &id, Some(3), Duration::from_secs(3)).await;
     keeps_serving(&http, &b, &id, Some(3), Duration::from_millis(500)).await;
 
     // B listens again: later changes reach it within the second.
