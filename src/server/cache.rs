@@ -15,9 +15,12 @@
 //!   `epoch`, is compared under the lock), so a slow miss can never resurrect
 //!   a deleted clip or reinstate an old version.
 //!
-//! The multi-node seam: another node's writes would arrive as invalidations
-//! ([`ClipCache::invalidate`], e.g. from PostgreSQL `LISTEN/NOTIFY`); they bump
-//! the epoch exactly like local writes do.
+//! Several nodes (`server::notify`): another node's writes arrive as
+//! invalidations ([`ClipCache::invalidate`], from PostgreSQL `LISTEN/NOTIFY`);
+//! they bump the epoch exactly like local writes do. While a node cannot hear
+//! them (before its first subscription, after a lost connection) the cache
+//! is *suspended*: emptied, and nothing goes in, so every request reads the
+//! store; [`ClipCache::resume`] empties it again once the node listens.
 //!
 //! Eviction is least-recently-used by a scan at insert time: inserts happen
 //! only on writes and misses, capacities are small (default 1024), and the
@@ -57,6 +60,8 @@ struct Inner {
     epoch: u64,
     /// Logical clock for recency.
     tick: u64,
+    /// True while invalidations may be missed: nothing is cached.
+    suspended: bool,
 }
 
 /// The clip cache; see the module docs for its consistency rules.
@@ -103,6 +108,9 @@ impl ClipCache {
     pub fn insert_written(&self, clip: Arc<CachedClip>) {
         let mut inner = self.lock();
         inner.epoch += 1;
+        if inner.suspended {
+            return;
+        }
         Self::put(&mut inner, self.capacity, clip);
     }
 
@@ -110,7 +118,7 @@ impl ClipCache {
     /// taken (the loaded version may then be stale). Returns whether it went in.
     pub fn insert_loaded(&self, clip: Arc<CachedClip>, seen: Epoch) -> bool {
         let mut inner = self.lock();
-        if inner.epoch != seen.0 {
+        if inner.epoch != seen.0 || inner.suspended {
             return false;
         }
         Self::put(&mut inner, self.capacity, clip);
@@ -122,6 +130,29 @@ impl ClipCache {
         let mut inner = self.lock();
         inner.epoch += 1;
         inner.entries.remove(id);
+    }
+
+    /// Stops caching and drops every entry: invalidations may be missed
+    /// from now on (the node lost, or does not yet have, its subscription).
+    pub fn suspend(&self) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        inner.suspended = true;
+        inner.entries.clear();
+    }
+
+    /// Caches again, from empty: called once invalidations are heard again,
+    /// so nothing loaded before that moment is kept.
+    pub fn resume(&self) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        inner.suspended = false;
+        inner.entries.clear();
+    }
+
+    /// The cached version of `id`, without touching its recency.
+    pub fn version_of(&self, id: &str) -> Option<u64> {
+        self.lock().entries.get(id).map(|e| e.clip.meta.version)
     }
 
     pub fn len(&self) -> usize {
@@ -197,6 +228,22 @@ mod tests {
         assert!(cache.get("a").is_none());
         let seen = cache.epoch();
         assert!(cache.insert_loaded(cached("a", 1), seen));
+    }
+
+    #[test]
+    fn a_suspended_cache_holds_nothing_until_resumed() {
+        let cache = ClipCache::new(4);
+        cache.insert_written(cached("a", 1));
+        let seen = cache.epoch();
+        cache.suspend();
+        assert!(cache.get("a").is_none());
+        cache.insert_written(cached("b", 1));
+        assert!(!cache.insert_loaded(cached("c", 1), cache.epoch()));
+        assert!(cache.is_empty());
+        cache.resume();
+        assert!(!cache.insert_loaded(cached("a", 1), seen), "a load from before the resume is stale");
+        assert!(cache.insert_loaded(cached("a", 2), cache.epoch()));
+        assert_eq!(cache.version_of("a"), Some(2));
     }
 
     #[test]

@@ -69,9 +69,24 @@ pub struct RawConfig {
     /// Directory of the embedded SQLite store, created if missing [default: ./data].
     #[arg(long, env = "INBETWEEN_DATA_DIR", value_name = "DIR")]
     pub data_dir: Option<PathBuf>,
-    /// A store URL instead of --data-dir (`sqlite://path/to/file.db`).
+    /// A store URL instead of --data-dir (`sqlite://path/to/file.db`, or `postgres://user@host/db` for
+    /// several nodes sharing one database).
     #[arg(long, env = "INBETWEEN_DATABASE_URL", value_name = "URL", hide_env_values = true)]
     pub database_url: Option<Secret>,
+    /// Most database connections this node opens [default: 8].
+    #[arg(long, env = "INBETWEEN_DB_MAX_CONNECTIONS", value_name = "N")]
+    pub db_max_connections: Option<u32>,
+    /// Seconds a request waits for a free database connection before it fails with 503 [default: 10].
+    #[arg(long, env = "INBETWEEN_DB_ACQUIRE_TIMEOUT_SECS", value_name = "SECS")]
+    pub db_acquire_timeout_secs: Option<u64>,
+    /// Retries of a transiently failed database operation, with exponential backoff from 50 ms [default: 3].
+    #[arg(long, env = "INBETWEEN_DB_RETRIES", value_name = "N")]
+    pub db_retries: Option<u32>,
+    /// Start even if the database would acknowledge writes before they are durable (SQLite then runs
+    /// with synchronous=NORMAL): a crash or power loss may lose acknowledged clips [default: false].
+    #[arg(long, env = "INBETWEEN_UNSAFE_FAST_WRITES", num_args = 0..=1, default_missing_value = "true",
+          value_parser = clap::builder::BoolishValueParser::new())]
+    pub unsafe_fast_writes: Option<bool>,
     /// Bearer token required by create, replace and delete.
     #[arg(long, env = "INBETWEEN_API_TOKEN", value_name = "TOKEN", hide_env_values = true)]
     pub api_token: Option<Secret>,
@@ -180,6 +195,10 @@ impl RawConfig {
             grpc_listen: self.grpc_listen.or(lower.grpc_listen),
             data_dir: self.data_dir.or(lower.data_dir),
             database_url: self.database_url.or(lower.database_url),
+            db_max_connections: self.db_max_connections.or(lower.db_max_connections),
+            db_acquire_timeout_secs: self.db_acquire_timeout_secs.or(lower.db_acquire_timeout_secs),
+            db_retries: self.db_retries.or(lower.db_retries),
+            unsafe_fast_writes: self.unsafe_fast_writes.or(lower.unsafe_fast_writes),
             api_token: self.api_token.or(lower.api_token),
             read_token: self.read_token.or(lower.read_token),
             tokens: self.tokens.or(lower.tokens),
@@ -271,12 +290,28 @@ impl RawConfig {
                 if url.starts_with("sqlite:") {
                     StoreConfig::SqliteUrl(Secret::new(url))
                 } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
-                    bail!("PostgreSQL is not supported yet: use a sqlite: URL or --data-dir")
+                    StoreConfig::Postgres(Secret::new(url))
                 } else {
-                    bail!("database_url must start with sqlite:")
+                    bail!("database_url must start with sqlite: or postgres:")
                 }
             }
             (None, dir) => StoreConfig::DataDir(dir.unwrap_or_else(|| PathBuf::from("data"))),
+        };
+        let db = {
+            let d = crate::store::PoolSettings::default();
+            crate::store::PoolSettings {
+                max_connections: match self.db_max_connections {
+                    Some(0) => bail!("db_max_connections must be at least 1"),
+                    n => n.unwrap_or(d.max_connections),
+                },
+                acquire_timeout: secs("db_acquire_timeout_secs", self.db_acquire_timeout_secs, d.acquire_timeout)?,
+                retry: crate::store::RetryPolicy { retries: self.db_retries.unwrap_or(d.retry.retries), ..d.retry },
+                durability: if self.unsafe_fast_writes.unwrap_or(false) {
+                    crate::store::Durability::UnsafeFast
+                } else {
+                    crate::store::Durability::Required
+                },
+            }
         };
         let token = |name: &str, t: Option<Secret>| -> anyhow::Result<Option<Secret>> {
             match t {
@@ -326,6 +361,7 @@ impl RawConfig {
             listen: self.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 8080))),
             grpc_listen: self.grpc_listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 50051))),
             store,
+            db,
             write_token: token("api_token", self.api_token)?,
             read_token: token("read_token", self.read_token)?,
             tokens: checked,
@@ -345,6 +381,8 @@ pub enum StoreConfig {
     DataDir(PathBuf),
     /// A `sqlite:` URL.
     SqliteUrl(Secret),
+    /// A `postgres:` URL: the shared store of a multi-node deployment.
+    Postgres(Secret),
 }
 
 /// The PEM files of `--tls-cert` / `--tls-key` (read when the server is built).
@@ -426,6 +464,8 @@ pub struct Config {
     /// The gRPC API's own port (see `server::grpc`).
     pub grpc_listen: SocketAddr,
     pub store: StoreConfig,
+    /// Pool size, retries and the durability requirement of the store.
+    pub db: crate::store::PoolSettings,
     pub write_token: Option<Secret>,
     pub read_token: Option<Secret>,
     /// Scoped tokens (hashes), beside the plain write and read tokens.
@@ -509,9 +549,34 @@ mod tests {
         assert!(toml::from_str::<RawConfig>("lisen = \"x\"").is_err());
         let zero = RawConfig { limits: RawLimits { max_poses: Some(0), ..Default::default() }, ..Default::default() };
         assert!(zero.validate().is_err());
-        let pg = RawConfig { database_url: Some(Secret::new("postgres://x")), ..Default::default() };
-        assert!(pg.validate().is_err());
+        let mysql = RawConfig { database_url: Some(Secret::new("mysql://x")), ..Default::default() };
+        assert!(mysql.validate().is_err());
+        let pool = RawConfig { db_max_connections: Some(0), ..Default::default() };
+        assert!(pool.validate().is_err());
         let cors = RawConfig { cors_origins: Some(vec!["*".into(), "https://a.b".into()]), ..Default::default() };
         assert!(cors.validate().is_err());
+    }
+
+    #[test]
+    fn store_settings_come_from_the_layers() {
+        let pg = RawConfig {
+            database_url: Some(Secret::new("postgres://u@h/db")),
+            db_max_connections: Some(3),
+            db_retries: Some(0),
+            unsafe_fast_writes: Some(true),
+            ..Default::default()
+        };
+        let c = pg.validate().unwrap();
+        assert_eq!(c.store, StoreConfig::Postgres(Secret::new("postgres://u@h/db")));
+        assert_eq!((c.db.max_connections, c.db.retry.retries), (3, 0));
+        assert_eq!(c.db.durability, crate::store::Durability::UnsafeFast);
+        let d = RawConfig::default().validate().unwrap();
+        assert_eq!(d.db.durability, crate::store::Durability::Required);
+        let file: RawConfig = toml::from_str("unsafe_fast_writes = true\ndb_acquire_timeout_secs = 2\n").unwrap();
+        let c = file.validate().unwrap();
+        assert_eq!(
+            (c.db.durability, c.db.acquire_timeout),
+            (crate::store::Durability::UnsafeFast, Duration::from_secs(2))
+        );
     }
 }

@@ -35,6 +35,7 @@ use tokio::net::TcpListener;
 use tokio_stream::wrappers::TcpListenerStream;
 
 use crate::store::ClipStore;
+use crate::store::postgres::PgStore;
 use crate::store::sqlite::SqliteStore;
 use crate::stream::{Engine, EngineConfig};
 
@@ -48,6 +49,7 @@ pub mod grpc_edge;
 pub mod limits;
 mod listen;
 pub mod metrics;
+pub mod notify;
 pub mod ratelimit;
 pub mod rest;
 pub mod shed;
@@ -58,10 +60,6 @@ pub use config::Config;
 pub use error::ApiError;
 pub use state::AppState;
 
-/// SQLite connections in the pool: readers run in parallel (WAL), writers
-/// take turns on the database lock.
-const DB_CONNECTIONS: u32 = 8;
-
 /// A built server: store open, listeners bound, not yet serving.
 pub struct Application {
     listener: TcpListener,
@@ -69,6 +67,9 @@ pub struct Application {
     state: AppState,
     /// Certificate and key when serving TLS (`--tls-cert`).
     tls: Option<tls::TlsMaterial>,
+    /// The shared PostgreSQL store, whose change notifications keep the cache
+    /// in step with other nodes (`notify`); `None` for SQLite.
+    shared_store: Option<PgStore>,
 }
 
 impl Application {
@@ -78,20 +79,31 @@ impl Application {
     /// The data directory or database cannot be opened, or the address
     /// cannot be bound.
     pub async fn build(config: Config) -> anyhow::Result<Application> {
+        let mut shared_store = None;
         let store: Arc<dyn ClipStore> = match &config.store {
             config::StoreConfig::DataDir(dir) => {
                 std::fs::create_dir_all(dir).with_context(|| format!("creating data directory {}", dir.display()))?;
                 let path = dir.join("inbetween.db");
-                let store = SqliteStore::open(&path, DB_CONNECTIONS)
+                let store = SqliteStore::open(&path, &config.db)
                     .await
                     .with_context(|| format!("opening {}", path.display()))?;
                 Arc::new(store)
             }
             config::StoreConfig::SqliteUrl(url) => {
-                Arc::new(SqliteStore::open_url(url.expose(), DB_CONNECTIONS).await.context("opening database_url")?)
+                Arc::new(SqliteStore::open_url(url.expose(), &config.db).await.context("opening database_url")?)
+            }
+            config::StoreConfig::Postgres(url) => {
+                let store = PgStore::open(url.expose(), &config.db).await.context("opening the PostgreSQL database")?;
+                shared_store = Some(store.clone());
+                Arc::new(store)
             }
         };
         let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
+        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries));
+        if shared_store.is_some() {
+            // Nothing is cached until this node hears other nodes' changes.
+            cache.suspend();
+        }
         let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
         let grpc_listener =
             TcpListener::bind(config.grpc_listen).await.with_context(|| format!("binding {}", config.grpc_listen))?;
@@ -103,7 +115,7 @@ impl Application {
         });
         let state = AppState::new(state::Shared {
             store,
-            cache: Arc::new(cache::ClipCache::new(config.limits.cache_entries)),
+            cache,
             config: Arc::new(config),
             metrics: metrics::handle(),
             counters: metrics::Counters::new(),
@@ -111,7 +123,7 @@ impl Application {
             loads: Arc::default(),
             streams,
         });
-        Ok(Application { listener, grpc_listener, state, tls })
+        Ok(Application { listener, grpc_listener, state, tls, shared_store })
     }
 
     /// The bound address (the real port when built with port 0).
@@ -147,7 +159,7 @@ impl Application {
     /// The gRPC routes cannot be built (the embedded descriptor set does not
     /// parse: a build defect). Accept errors are logged and retried.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        let Application { listener, grpc_listener, state, tls } = self;
+        let Application { listener, grpc_listener, state, tls, shared_store } = self;
         let header_timeout = state.config.limits.header_read_timeout;
         let http_tls = match &tls {
             Some(m) => Some(tls::Acceptor::from(m.http_config()?)),
@@ -158,6 +170,7 @@ impl Application {
             grpc_server = grpc_server.tls_config(m.grpc_config(header_timeout))?;
         }
         let drain = state.config.drain_timeout;
+        let notify = shared_store.map(|store| tokio::spawn(notify::run(store, state.clone())));
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
         let (started_tx, started_rx) = tokio::sync::oneshot::channel::<tokio::time::Instant>();
         // Streams end first (each with its final status), then both servers
@@ -218,6 +231,9 @@ impl Application {
         }
         coordinator.abort();
         upkeep.abort();
+        if let Some(notify) = notify {
+            notify.abort();
+        }
         state.store.close().await;
         tracing::info!("stopped");
         Ok(())

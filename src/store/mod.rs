@@ -1,28 +1,68 @@
 //! Durable clip storage behind one trait.
 //!
-//! The service talks to a [`ClipStore`]; today the only implementation is
-//! SQLite ([`sqlite::SqliteStore`]), embedded so that `inbetween serve` needs
-//! no setup. PostgreSQL will come behind the same trait: the schema in
-//! `migrations/sqlite` is written in portable SQL for that reason, and nothing
-//! above this module knows which database is underneath.
+//! The service talks to a [`ClipStore`]. SQLite ([`sqlite::SqliteStore`]) is
+//! embedded so that `inbetween serve` needs no setup; PostgreSQL
+//! ([`postgres::PgStore`]) is for several nodes sharing one database. Both
+//! run their own migrations (`migrations/sqlite`, `migrations/postgres`, the
+//! same table), and nothing above this module knows which one is underneath.
 //!
 //! **Architecture invariant:** the store knows nothing of clips beyond what a
 //! row holds. It never parses or validates documents: whatever reaches it has
 //! already been accepted by `Clip::build`, and it stores the canonical text
 //! as given. Every write is one atomic statement, durable when it returns
-//! (SQLite `synchronous=FULL` in WAL mode), so a caller that answers `201`
+//! (SQLite `synchronous=FULL` in WAL mode; PostgreSQL with `fsync`,
+//! `full_page_writes` and `synchronous_commit` on; both checked as read back
+//! from every pooled connection, see [`Durability`]), so a caller that answers `201`
 //! after `create` returns never promises more than the disk holds.
 //!
 //! The trait returns boxed futures so that the service can hold an
 //! `Arc<dyn ClipStore>` and pick the backend at startup.
 
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use futures_util::future::BoxFuture;
 
 use crate::anim::Playback;
 
+pub mod postgres;
+pub mod retry;
 pub mod sqlite;
+
+pub use retry::RetryPolicy;
+
+/// Whether the store insists on durable commits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Durability {
+    /// Every pooled connection is checked as it opens (settings read back
+    /// from the database); one that would acknowledge a write before it is
+    /// on disk fails to open, so the server refuses to start.
+    #[default]
+    Required,
+    /// `--unsafe-fast-writes`: no check (a warning is logged), and SQLite
+    /// runs with `synchronous=NORMAL` (a commit may be lost on power loss).
+    UnsafeFast,
+}
+
+/// How a store pools its connections and retries transient failures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoolSettings {
+    pub max_connections: u32,
+    /// How long a request waits for a free connection before it fails (503).
+    pub acquire_timeout: Duration,
+    pub retry: RetryPolicy,
+    pub durability: Durability,
+}
+
+impl Default for PoolSettings {
+    fn default() -> Self {
+        PoolSettings {
+            max_connections: 8,
+            acquire_timeout: Duration::from_secs(10),
+            retry: RetryPolicy::default(),
+            durability: Durability::Required,
+        }
+    }
+}
 
 /// The figures of a clip that a listing shows, derived from the compiled
 /// clip when it is written (so listing never reads documents).

@@ -1,7 +1,12 @@
 //! The embedded store: SQLite through sqlx, one file in the data directory.
 //!
 //! Durability is set per connection, on every connection the pool opens
-//! (`SqliteConnectOptions` applies its pragmas at connect time):
+//! (`SqliteConnectOptions` applies its pragmas at connect time), and read
+//! back in the pool's `after_connect` hook: a connection that does not
+//! report `journal_mode=wal` and `synchronous` FULL or EXTRA (an in-memory
+//! database, a filesystem without WAL support) fails to open, so the
+//! server refuses to start, unless `--unsafe-fast-writes` was given (which
+//! also relaxes `synchronous` to NORMAL):
 //! `journal_mode=WAL` so readers never block the writer, `synchronous=FULL`
 //! so a commit is on disk (WAL fsync) before the statement returns, which is
 //! what lets the service promise that a `201` survives `kill -9` and power
@@ -22,9 +27,12 @@ use futures_util::future::BoxFuture;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow, SqliteSynchronous,
 };
-use sqlx::{Row, migrate::Migrator};
+use sqlx::{Connection, Row, migrate::Migrator};
 
-use super::{ClipMeta, ClipStats, ClipStore, ListQuery, NewClip, StoreError, StoredClip, new_clip_id, now_millis};
+use super::{
+    ClipMeta, ClipStats, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id,
+    now_millis,
+};
 use crate::anim::Playback;
 use crate::wire::json::PlaybackDoc;
 
@@ -49,33 +57,75 @@ impl SqliteStore {
     ///
     /// # Errors
     /// The file cannot be opened or created, or a migration fails.
-    pub async fn open(path: &Path, max_connections: u32) -> anyhow::Result<Self> {
+    pub async fn open(path: &Path, settings: &PoolSettings) -> anyhow::Result<Self> {
         let options = SqliteConnectOptions::new().filename(path).create_if_missing(true);
-        Self::open_with(options, max_connections).await
+        Self::open_with(options, settings).await
     }
 
     /// Opens a `sqlite:` URL (e.g. `sqlite://data/inbetween.db`).
     ///
     /// # Errors
     /// As [`SqliteStore::open`], or the URL does not parse.
-    pub async fn open_url(url: &str, max_connections: u32) -> anyhow::Result<Self> {
+    pub async fn open_url(url: &str, settings: &PoolSettings) -> anyhow::Result<Self> {
         let options = SqliteConnectOptions::from_str(url)?.create_if_missing(true);
-        Self::open_with(options, max_connections).await
+        Self::open_with(options, settings).await
     }
 
-    async fn open_with(options: SqliteConnectOptions, max_connections: u32) -> anyhow::Result<Self> {
+    async fn open_with(options: SqliteConnectOptions, settings: &PoolSettings) -> anyhow::Result<Self> {
+        let durability = settings.durability;
+        let synchronous = match durability {
+            Durability::Required => SqliteSynchronous::Full,
+            Durability::UnsafeFast => SqliteSynchronous::Normal,
+        };
         let options = options
             .journal_mode(SqliteJournalMode::Wal)
-            .synchronous(SqliteSynchronous::Full)
+            .synchronous(synchronous)
             .foreign_keys(true)
             .busy_timeout(Duration::from_secs(10));
+        // One connection checked up front, so a refusal reports its reason
+        // (the pool would only time out retrying).
+        let mut first = sqlx::SqliteConnection::connect_with(&options).await?;
+        check_durability(&mut first, durability).await?;
+        first.close().await?;
         let pool = SqlitePoolOptions::new()
-            .max_connections(max_connections.max(1))
-            .acquire_timeout(Duration::from_secs(10))
+            .max_connections(settings.max_connections.max(1))
+            .acquire_timeout(settings.acquire_timeout)
+            .after_connect(move |conn, _| Box::pin(async move { check_durability(conn, durability).await }))
             .connect_with(options)
             .await?;
         MIGRATOR.run(&pool).await?;
         Ok(SqliteStore { pool })
+    }
+
+    /// The pool, for tests that read settings back from its connections.
+    pub fn pool(&self) -> &SqlitePool {
+        &self.pool
+    }
+}
+
+/// Refuses a connection whose commits would not be on disk when they return.
+async fn check_durability(conn: &mut sqlx::SqliteConnection, durability: Durability) -> Result<(), sqlx::Error> {
+    let journal: String = sqlx::query_scalar("PRAGMA journal_mode").fetch_one(&mut *conn).await?;
+    let synchronous: i64 = sqlx::query_scalar("PRAGMA synchronous").fetch_one(&mut *conn).await?;
+    // 2 = FULL, 3 = EXTRA.
+    if journal.eq_ignore_ascii_case("wal") && synchronous >= 2 {
+        return Ok(());
+    }
+    let found = format!("journal_mode={journal}, synchronous={synchronous}");
+    match durability {
+        Durability::Required => Err(sqlx::Error::Configuration(
+            format!(
+                "SQLite is not durable ({found}; want journal_mode=wal, synchronous=2 (FULL)): a committed clip \
+                 could be lost in a crash. Use a file on a local disk, or start with --unsafe-fast-writes"
+            )
+            .into(),
+        )),
+        Durability::UnsafeFast => {
+            if !journal.eq_ignore_ascii_case("wal") {
+                tracing::warn!(%found, "unsafe fast writes: SQLite is not in WAL mode");
+            }
+            Ok(())
+        }
     }
 }
 

@@ -1,0 +1,193 @@
+//! Cross-node cache consistency: each node listens on the PostgreSQL
+//! channel its schema's trigger announces clip changes on
+//! (`migrations/postgres`), and drops what another node changed from its
+//! cache of compiled clips. No broker beyond the database.
+//!
+//! The payload is `<op> <version> <id>`. Handling is idempotent, so a node
+//! hears its own writes too and ignores them: a `create` or `replace` at a
+//! version the cache already holds (the write-through of a local write)
+//! changes nothing; anything newer, and every `delete`, invalidates the id,
+//! which also bumps the cache's epoch so a load that was reading the old row
+//! cannot put it back.
+//!
+//! Notifications are not queued for a disconnected listener: whatever is
+//! announced while the connection is down is lost. So the cache is
+//! *suspended* (empty, every request reads the store) from the moment the
+//! connection is known lost (or before the first subscription) until
+//! `LISTEN` is in place again, and resuming empties it once more: whatever
+//! it then holds was read after the node could hear changes. A silently
+//! dead connection (no reset, no error) is caught by a heartbeat: every node
+//! sends a `ping` on the channel every [`HEARTBEAT`], and a listener that has
+//! heard nothing for [`SILENCE_LIMIT`] treats its connection as lost.
+//!
+//! Streams are not touched: each holds the compiled clip it started on
+//! (`Arc<CachedClip>`) until it ends, exactly as after a local replace.
+
+use std::time::Duration;
+
+use sqlx::postgres::{PgListener, PgPoolOptions};
+use tokio::time::Instant;
+
+use super::state::AppState;
+use crate::store::postgres::PgStore;
+
+/// How often each node proves the channel alive.
+pub const HEARTBEAT: Duration = Duration::from_secs(2);
+/// Silence after which the listener's connection is presumed dead.
+pub const SILENCE_LIMIT: Duration = Duration::from_secs(7);
+/// The longest wait between reconnection attempts.
+const MAX_RECONNECT_WAIT: Duration = Duration::from_secs(2);
+
+/// One announced change.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Change<'a> {
+    Written { id: &'a str, version: u64 },
+    Deleted { id: &'a str },
+    Ping,
+}
+
+/// Parses a payload; `None` for anything malformed (ignored, and logged).
+pub fn parse(payload: &str) -> Option<Change<'_>> {
+    let mut parts = payload.splitn(3, ' ');
+    let (op, version, id) = (parts.next()?, parts.next()?, parts.next()?);
+    let version: u64 = version.parse().ok()?;
+    match op {
+        "create" | "replace" => Some(Change::Written { id, version }),
+        "delete" => Some(Change::Deleted { id }),
+        "ping" => Some(Change::Ping),
+        _ => None,
+    }
+}
+
+/// Applies one change to this node's cache (idempotent).
+pub fn apply(state: &AppState, change: &Change<'_>) {
+    tracing::debug!(?change, "clip change heard");
+    match *change {
+        Change::Written { id, version } => {
+            if state.cache.version_of(id).is_some_and(|cached| cached >= version) {
+                return;
+            }
+            state.cache_invalidate(id);
+        }
+        Change::Deleted { id } => state.cache_invalidate(id),
+        Change::Ping => return,
+    }
+    metrics::counter!("inbetween_cache_remote_invalidations_total").increment(1);
+}
+
+/// Listens until aborted: subscribe, resume the cache, apply changes; on a
+/// lost connection suspend the cache and subscribe again, with backoff.
+/// Runs beside the server (spawned by `Application::run_until_stopped`).
+pub async fn run(store: PgStore, state: AppState) {
+    let heartbeat = tokio::spawn(heartbeat(store.clone()));
+    let _stop_heartbeat = AbortOnDrop(heartbeat);
+    let mut failures = 0u32;
+    loop {
+        state.cache.suspend();
+        metrics::gauge!("inbetween_notify_subscribed").set(0.0);
+        match subscribe(&store).await {
+            Ok(listener) => {
+                failures = 0;
+                state.cache.resume();
+                metrics::gauge!("inbetween_notify_subscribed").set(1.0);
+                tracing::info!(channel = store.channel(), "listening for clip changes");
+                listen(listener, &state).await;
+                tracing::warn!("lost the clip-change subscription: serving from the store until it is back");
+            }
+            Err(e) => {
+                let wait = store_backoff(failures);
+                failures = failures.saturating_add(1);
+                tracing::warn!(error = %e, ?wait, "cannot subscribe to clip changes: retrying");
+                tokio::time::sleep(wait).await;
+            }
+        }
+    }
+}
+
+/// A fresh connection of its own (not one of the store's pool), with `LISTEN` issued.
+async fn subscribe(store: &PgStore) -> Result<PgListener, sqlx::Error> {
+    let pool = PgPoolOptions::new()
+        .max_connections(1)
+        .acquire_timeout(Duration::from_secs(5))
+        .idle_timeout(None)
+        .max_lifetime(None)
+        .connect_with(store.connect_options().clone())
+        .await?;
+    let mut listener = PgListener::connect_with(&pool).await?;
+    listener.eager_reconnect(false);
+    listener.ignore_pool_close_event(true);
+    listener.listen(store.channel()).await?;
+    Ok(listener)
+}
+
+/// Applies notifications until the connection fails or falls silent.
+async fn listen(mut listener: PgListener, state: &AppState) {
+    let mut deadline = Instant::now() + SILENCE_LIMIT;
+    loop {
+        tokio::select! {
+            received = listener.try_recv() => match received {
+                Ok(Some(n)) => {
+                    deadline = Instant::now() + SILENCE_LIMIT;
+                    match parse(n.payload()) {
+                        Some(change) => apply(state, &change),
+                        None => tracing::warn!(payload = n.payload(), "ignoring a malformed clip-change notification"),
+                    }
+                }
+                Ok(None) => return,
+                Err(e) => {
+                    tracing::warn!(error = %e, "clip-change listener failed");
+                    return;
+                }
+            },
+            // The listener is dropped after this, never polled again, so
+            // cancelling its receive midway is harmless.
+            () = tokio::time::sleep_until(deadline) => {
+                tracing::warn!(silence = ?SILENCE_LIMIT, "no clip-change notification or heartbeat heard");
+                return;
+            }
+        }
+    }
+}
+
+/// Sends a `ping` on the channel every [`HEARTBEAT`], so listeners can tell
+/// a quiet channel from a dead connection.
+async fn heartbeat(store: PgStore) {
+    let mut every = tokio::time::interval(HEARTBEAT);
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        every.tick().await;
+        let sent = sqlx::query("SELECT pg_notify($1, 'ping 0 -')").bind(store.channel()).execute(store.pool()).await;
+        if let Err(e) = sent {
+            tracing::debug!(error = %e, "heartbeat not sent");
+        }
+    }
+}
+
+fn store_backoff(failures: u32) -> Duration {
+    (Duration::from_millis(100) * 2u32.saturating_pow(failures.min(8))).min(MAX_RECONNECT_WAIT)
+}
+
+struct AbortOnDrop(tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn payloads_parse_and_junk_is_refused() {
+        let id = "0190a1b2-c3d4-7e5f-8a9b-0c1d2e3f4a5b";
+        assert_eq!(parse(&format!("replace 7 {id}")), Some(Change::Written { id, version: 7 }));
+        assert_eq!(parse(&format!("create 1 {id}")), Some(Change::Written { id, version: 1 }));
+        assert_eq!(parse(&format!("delete 3 {id}")), Some(Change::Deleted { id }));
+        assert_eq!(parse("ping 0 -"), Some(Change::Ping));
+        for junk in ["", "replace", "replace x id", "drop 1 id", "replace 1"] {
+            assert_eq!(parse(junk), None, "{junk:?}");
+        }
+    }
+}
