@@ -101,7 +101,7 @@ fn glb_file(target: usize, seed: usize) -> Upload {
     let n = (target / 16).max(2);
     let (times, mut bin) = gltf_bytes(n, seed);
     let mut json = serde_json::to_vec(&gltf_doc(n, &times, None, &format!("crash-glb-{seed}"))).unwrap();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     while bin.len() % 4 != 0 {
@@ -258,7 +258,8 @@ async fn kill_9_loses_no_acknowledged_clip_and_leaves_no_partial_one() {
         assert!(server.ready_after < Duration::from_secs(2), "ready after {:?}", server.ready_after);
         let base = format!("http://{}", server.http);
         // Everything acknowledged so far is there, unaltered.
-        for (id, file) in acked.lock().unwrap().clone() {
+        let acked_now = acked.lock().unwrap().clone();
+        for (id, file) in acked_now {
             let got = stored_hash(&http, &base, &id).await;
             assert!(got.is_some(), "cycle {cycle}: acknowledged clip {id} is lost");
             assert_eq!(expected.get(&got.unwrap()), Some(&file), "cycle {cycle}: clip {id} is altered");

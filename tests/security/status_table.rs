@@ -25,7 +25,10 @@ fn grpc_codes_for(status: u16) -> &'static [Code] {
         413 | 429 => &[Code::ResourceExhausted],
         500 => &[Code::Internal],
         // Overloaded or stopping, or a request past its deadline.
-        503 => &[Code::Unavailable, Code::DeadlineExceeded],
+        // Shed under overload (RESOURCE_EXHAUSTED, as the hardening issue allows) too.
+        503 => &[Code::Unavailable, Code::DeadlineExceeded, Code::ResourceExhausted],
+        // A body that did not arrive in time.
+        408 => &[Code::DeadlineExceeded],
         _ => &[],
     }
 }
@@ -48,11 +51,15 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::TooMany { code: "too_many_poses", pointer: "/times".into(), detail: "x".into() },
         ApiError::TooManyStreams(AdmitError::Global { limit: 1 }),
         ApiError::TooManyStreams(AdmitError::PerClient { limit: 1 }),
+        ApiError::TooManyStreams(AdmitError::PerToken { limit: 1 }),
         ApiError::TooManyStreams(AdmitError::ShuttingDown),
         ApiError::Import { class: ErrorClass::Malformed, code: "bad_glb", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::TooLarge, code: "too_many_keys", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::Unprocessable, code: "no_animations", pointer: None, detail: "x".into() },
         ApiError::Timeout { secs: 30 },
+        ApiError::BodyTimeout { secs: 10 },
+        ApiError::Overloaded { retry_after: 1 },
+        ApiError::RateLimited { retry_after: 1 },
         ApiError::Unavailable(None),
         ApiError::internal(anyhow::anyhow!("disk on fire")),
     ]
@@ -76,6 +83,9 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::Timeout { .. } => 13,
         ApiError::Unavailable(_) => 14,
         ApiError::Internal(_) => 15,
+        ApiError::BodyTimeout { .. } => 16,
+        ApiError::Overloaded { .. } => 17,
+        ApiError::RateLimited { .. } => 18,
     }
 }
 
@@ -83,7 +93,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 16, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 19, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));
