@@ -27,6 +27,8 @@ const ROUTES: &[(&str, &str, Need, u16)] = &[
     ("get", "/healthz", Need::Open, 200),
     ("get", "/readyz", Need::Open, 200),
     ("get", "/metrics", Need::Scope(Scope::Admin), 200),
+    // The viewer page is public; it asks for a token only when an upload answers 401.
+    ("get", "/viewer", Need::Open, 200),
 ];
 
 /// The (method, path) of every operation in `/openapi.json`, with whether it
