@@ -182,3 +182,36 @@ pub fn is_clip_id(s: &str) -> bool {
 pub(crate) fn now_millis() -> i64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64)
 }
+
+/// A clip row as [`ClipMeta`]: one mapping for both backends, whose schemas
+/// share column names and types (`migrations/*/0001_clips.sql`).
+pub(crate) fn meta_from_row<'r, R>(row: &'r R) -> Result<ClipMeta, sqlx::Error>
+where
+    R: sqlx::Row,
+    &'static str: sqlx::ColumnIndex<R>,
+    String: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+    i64: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+    f64: sqlx::Decode<'r, R::Database> + sqlx::Type<R::Database>,
+{
+    use std::str::FromStr;
+    let playback: String = row.try_get("playback")?;
+    let playback: Playback = crate::wire::json::PlaybackDoc::from_str(&playback)
+        .map_err(|e| sqlx::Error::Decode(format!("playback column: {e}").into()))?
+        .into();
+    let count = |c: &'static str| -> Result<u32, sqlx::Error> { Ok(row.try_get::<i64, _>(c)? as u32) };
+    Ok(ClipMeta {
+        id: row.try_get("id")?,
+        name: row.try_get("name")?,
+        version: row.try_get::<i64, _>("version")? as u64,
+        stats: ClipStats {
+            joints: count("joints")?,
+            tracks: count("tracks")?,
+            events: count("events")?,
+            start: row.try_get::<f64, _>("start_time")? as f32,
+            end: row.try_get::<f64, _>("end_time")? as f32,
+            playback,
+        },
+        created_at: row.try_get("created_at")?,
+        updated_at: row.try_get("updated_at")?,
+    })
+}

@@ -24,16 +24,13 @@ use std::time::Instant;
 
 use futures_util::FutureExt;
 use futures_util::future::BoxFuture;
-use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions, PgRow};
+use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::{Connection, Row, migrate::Migrator};
 
 use super::retry::{Retry, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStats, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id,
-    now_millis,
+    ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
 };
-use crate::anim::Playback;
-use crate::wire::json::PlaybackDoc;
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/postgres");
 
@@ -217,29 +214,6 @@ async fn insert<'e>(db: impl sqlx::PgExecutor<'e>, meta: &ClipMeta, doc_json: &s
     Ok(())
 }
 
-fn meta_from_row(row: &PgRow) -> Result<ClipMeta, sqlx::Error> {
-    let playback: String = row.try_get("playback")?;
-    let playback: Playback = PlaybackDoc::from_str(&playback)
-        .map_err(|e| sqlx::Error::Decode(format!("playback column: {e}").into()))?
-        .into();
-    let count = |c: &str| -> Result<u32, sqlx::Error> { Ok(row.try_get::<i64, _>(c)? as u32) };
-    Ok(ClipMeta {
-        id: row.try_get("id")?,
-        name: row.try_get("name")?,
-        version: row.try_get::<i64, _>("version")? as u64,
-        stats: ClipStats {
-            joints: count("joints")?,
-            tracks: count("tracks")?,
-            events: count("events")?,
-            start: row.try_get::<f64, _>("start_time")? as f32,
-            end: row.try_get::<f64, _>("end_time")? as f32,
-            playback,
-        },
-        created_at: row.try_get("created_at")?,
-        updated_at: row.try_get("updated_at")?,
-    })
-}
-
 impl PgStore {
     /// Tells "not found" from "version mismatch" after a conditional write matched no row.
     async fn missed(&self, id: &str) -> Result<StoreError, sqlx::Error> {
@@ -303,7 +277,8 @@ impl ClipStore for PgStore {
             self.run("get", Retry::Always, |_| async move {
                 let sql = concat!("SELECT ", meta_columns!(), ", doc FROM clips WHERE id = $1");
                 let row = sqlx::query(sql).bind(id).fetch_optional(&self.pool).await?;
-                row.map(|row| Ok(StoredClip { meta: meta_from_row(&row)?, doc_json: row.try_get("doc")? })).transpose()
+                row.map(|row| Ok(StoredClip { meta: super::meta_from_row(&row)?, doc_json: row.try_get("doc")? }))
+                    .transpose()
             })
             .await
         }
@@ -326,7 +301,7 @@ impl ClipStore for PgStore {
                     .bind(query.limit as i64)
                     .fetch_all(&self.pool)
                     .await?;
-                rows.iter().map(meta_from_row).collect()
+                rows.iter().map(super::meta_from_row).collect()
             })
             .await
         }
@@ -365,7 +340,7 @@ impl ClipStore for PgStore {
                     .fetch_optional(&self.pool)
                     .await?;
                 match row {
-                    Some(row) => meta_from_row(&row).map(Ok),
+                    Some(row) => super::meta_from_row(&row).map(Ok),
                     None => self.missed(id).await.map(Err),
                 }
             })

@@ -24,17 +24,12 @@ use std::time::{Duration, Instant};
 
 use futures_util::FutureExt;
 use futures_util::future::BoxFuture;
-use sqlx::sqlite::{
-    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow, SqliteSynchronous,
-};
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::{Connection, Row, migrate::Migrator};
 
 use super::{
-    ClipMeta, ClipStats, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id,
-    now_millis,
+    ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
 };
-use crate::anim::Playback;
-use crate::wire::json::PlaybackDoc;
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
 
@@ -169,29 +164,6 @@ async fn insert<'e>(db: impl sqlx::SqliteExecutor<'e>, clip: NewClip) -> Result<
     Ok(meta)
 }
 
-fn meta_from_row(row: &SqliteRow) -> Result<ClipMeta, sqlx::Error> {
-    let playback: String = row.try_get("playback")?;
-    let playback: Playback = PlaybackDoc::from_str(&playback)
-        .map_err(|e| sqlx::Error::Decode(format!("playback column: {e}").into()))?
-        .into();
-    let count = |c: &str| -> Result<u32, sqlx::Error> { Ok(row.try_get::<i64, _>(c)? as u32) };
-    Ok(ClipMeta {
-        id: row.try_get("id")?,
-        name: row.try_get("name")?,
-        version: row.try_get::<i64, _>("version")? as u64,
-        stats: ClipStats {
-            joints: count("joints")?,
-            tracks: count("tracks")?,
-            events: count("events")?,
-            start: row.try_get::<f64, _>("start_time")? as f32,
-            end: row.try_get::<f64, _>("end_time")? as f32,
-            playback,
-        },
-        created_at: row.try_get("created_at")?,
-        updated_at: row.try_get("updated_at")?,
-    })
-}
-
 impl SqliteStore {
     /// The current version of `id`, for telling "not found" from "version
     /// mismatch" after a conditional write matched no row.
@@ -242,7 +214,8 @@ impl ClipStore for SqliteStore {
             let r = async {
                 let sql = concat!("SELECT ", meta_columns!(), ", doc FROM clips WHERE id = ?1");
                 let row = sqlx::query(sql).bind(id).fetch_optional(&self.pool).await?;
-                row.map(|row| Ok(StoredClip { meta: meta_from_row(&row)?, doc_json: row.try_get("doc")? })).transpose()
+                row.map(|row| Ok(StoredClip { meta: super::meta_from_row(&row)?, doc_json: row.try_get("doc")? }))
+                    .transpose()
             }
             .await;
             timed("get", started, r)
@@ -264,7 +237,7 @@ impl ClipStore for SqliteStore {
                 .bind(query.limit as i64)
                 .fetch_all(&self.pool)
                 .await
-                .and_then(|rows| rows.iter().map(meta_from_row).collect());
+                .and_then(|rows| rows.iter().map(super::meta_from_row).collect());
             timed("list", started, r)
         }
         .boxed()
@@ -300,7 +273,7 @@ impl ClipStore for SqliteStore {
                 .fetch_optional(&self.pool)
                 .await;
             let r = match r {
-                Ok(Some(row)) => meta_from_row(&row).map(Ok),
+                Ok(Some(row)) => super::meta_from_row(&row).map(Ok),
                 Ok(None) => self.missed(id).await.map(Err),
                 Err(e) => Err(e),
             };
