@@ -56,21 +56,25 @@ impl ClockSync {
         local_unix_ns + self.offset_ns
     }
 
-    /// The server wall-clock time at which grid tick `n` of rate `fps` is due.
-    pub fn due(&self, fps: u32, n: u64) -> i64 {
-        self.grid_epoch_unix_ns + (u128::from(n) * 1_000_000_000 / u128::from(fps)) as i64
+    /// The server wall-clock time at which grid tick `n` of rate `fps` and
+    /// phase `phase_ms` is due.
+    pub fn due(&self, fps: u32, phase_ms: u32, n: u64) -> i64 {
+        self.grid_epoch_unix_ns
+            + i64::from(phase_ms) * 1_000_000
+            + (u128::from(n) * 1_000_000_000 / u128::from(fps)) as i64
     }
 
-    /// The last grid tick of rate `fps` due at or before server time `t` (0
-    /// before the epoch).
-    pub fn tick_at_or_before(&self, fps: u32, t: i64) -> u64 {
-        let elapsed = u128::try_from(t - self.grid_epoch_unix_ns).unwrap_or(0);
+    /// The last grid tick of rate `fps` and phase `phase_ms` due at or
+    /// before server time `t` (0 before tick 0).
+    pub fn tick_at_or_before(&self, fps: u32, phase_ms: u32, t: i64) -> u64 {
+        let origin = self.grid_epoch_unix_ns + i64::from(phase_ms) * 1_000_000;
+        let elapsed = u128::try_from(t - origin).unwrap_or(0);
         let mut n = (elapsed * u128::from(fps) / 1_000_000_000) as u64;
         // Integer rounding in `due` can put the estimate one off either way.
-        while n > 0 && self.due(fps, n) > t {
+        while n > 0 && self.due(fps, phase_ms, n) > t {
             n -= 1;
         }
-        while self.due(fps, n + 1) <= t {
+        while self.due(fps, phase_ms, n + 1) <= t {
             n += 1;
         }
         n
@@ -112,14 +116,18 @@ mod tests {
     fn grid_ticks_are_floor_of_n_billion_over_fps() {
         let sync = ClockSync { offset_ns: 0, rtt_ns: 0, grid_epoch_unix_ns: 1_000 };
         // 60 fps: tick 1 at 16_666_666 ns, tick 3 at exactly 50 ms.
-        assert_eq!(sync.due(60, 1), 1_000 + 16_666_666);
-        assert_eq!(sync.due(60, 3), 1_000 + 50_000_000);
-        assert_eq!(sync.tick_at_or_before(60, 1_000 + 50_000_000), 3);
-        assert_eq!(sync.tick_at_or_before(60, 1_000 + 49_999_999), 2);
-        assert_eq!(sync.tick_at_or_before(60, 0), 0);
+        assert_eq!(sync.due(60, 0, 1), 1_000 + 16_666_666);
+        assert_eq!(sync.due(60, 0, 3), 1_000 + 50_000_000);
+        assert_eq!(sync.tick_at_or_before(60, 0, 1_000 + 50_000_000), 3);
+        assert_eq!(sync.tick_at_or_before(60, 0, 1_000 + 49_999_999), 2);
+        assert_eq!(sync.tick_at_or_before(60, 0, 0), 0);
         // Far from the epoch (a day at 240 fps) the estimate stays exact.
         let day = 86_400_000_000_000i64;
-        let n = sync.tick_at_or_before(240, 1_000 + day + 1);
+        let n = sync.tick_at_or_before(240, 0, 1_000 + day + 1);
         assert_eq!(n, 86_400 * 240);
+        // A phase shifts every tick by whole milliseconds.
+        assert_eq!(sync.due(60, 7, 3), 1_000 + 7_000_000 + 50_000_000);
+        assert_eq!(sync.tick_at_or_before(60, 7, 1_000 + 57_000_000), 3);
+        assert_eq!(sync.tick_at_or_before(60, 7, 1_000 + 56_999_999), 2);
     }
 }

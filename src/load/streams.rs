@@ -34,6 +34,7 @@ use super::histogram::Latency;
 use super::lateness::StreamTracker;
 use super::report::{Report, ServerUsage, StreamStats};
 use super::{Env, Mode, Options, procstat, setup};
+use crate::stream::PHASE_HEADER;
 use crate::wire::proto::pb;
 
 /// Streams being opened at once.
@@ -170,7 +171,8 @@ impl Open {
 }
 
 impl Spec {
-    async fn open(&self, channel: &Channel, start_time: f64) -> Result<Open, String> {
+    /// Opens a stream; with it, the grid phase the server announced.
+    async fn open(&self, channel: &Channel, start_time: f64) -> Result<(Open, Option<u32>), String> {
         match self.mode {
             Mode::GrpcStream => {
                 let mut grpc = tonic::client::Grpc::new(channel.clone());
@@ -187,7 +189,8 @@ impl Spec {
                     .server_streaming(tonic::Request::new(req), path, codec)
                     .await
                     .map_err(|s| format!("grpc:{:?}", s.code()))?;
-                Ok(Open::Grpc(Box::new(resp.into_inner())))
+                let phase = resp.metadata().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
+                Ok((Open::Grpc(Box::new(resp.into_inner())), phase))
             }
             _ => {
                 let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
@@ -195,11 +198,12 @@ impl Spec {
                     "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
                     self.ws_base, self.clip_id, self.fps
                 );
-                let (ws, _) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
+                let (ws, resp) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
                     tokio_tungstenite::tungstenite::Error::Http(r) => format!("http:{}", r.status().as_u16()),
                     _ => "connect".to_string(),
                 })?;
-                Ok(Open::Ws(Box::new(ws), self.ws_protobuf))
+                let phase = resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
+                Ok((Open::Ws(Box::new(ws), self.ws_protobuf), phase))
             }
         }
     }
@@ -217,7 +221,7 @@ impl Spec {
                 _ = stopped(&mut stop) => return out,
             };
             drop(permit);
-            let mut stream = match opened {
+            let (mut stream, phase) = match opened {
                 Ok(Ok(s)) => s,
                 Ok(Err(kind)) => {
                     out.error(kind);
@@ -232,7 +236,7 @@ impl Spec {
                     continue;
                 }
             };
-            let mut tracker = StreamTracker::new(self.clock, self.fps);
+            let mut tracker = StreamTracker::new(self.clock, self.fps, phase);
             let mut first = true;
             loop {
                 let got = tokio::select! {

@@ -27,6 +27,7 @@ use crate::server::auth;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::limits::admit_doc;
+use crate::server::ratelimit::Caller;
 use crate::server::rest::clips::{DEFAULT_PAGE, MAX_PAGE};
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, ListQuery, is_clip_id};
@@ -81,8 +82,11 @@ impl GrpcService {
         auth::check_read(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
     }
 
+    /// Checks the write scope, then the caller's write rate (shared with REST).
     fn write<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        auth::check_write(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
+        auth::check_write(&self.state.config, bearer(request.metadata())).map_err(Status::from)?;
+        let caller = Caller::of(bearer(request.metadata()), request.remote_addr().map(|a| a.ip()));
+        self.state.writes.admit(caller).map_err(Status::from)
     }
 
     async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, Status> {
@@ -279,7 +283,8 @@ impl Animation for GrpcService {
         let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
         let (params, permit) = self.stream_params(request.get_ref(), false, remote).await?;
         let sub = self.engine.watch(params, permit);
-        Ok(Response::new(Box::pin(stream::grpc::frames(sub))))
+        let phase_ms = sub.grid().phase_ms;
+        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), phase_ms))
     }
 
     type PlayStream = FrameStream;
@@ -299,11 +304,12 @@ impl Animation for GrpcService {
         let stream_req = open.stream.ok_or_else(|| Status::invalid_argument("`open` needs a `stream`"))?;
         let (params, permit) = self.stream_params(&stream_req, open.paused, remote).await?;
         let sub = self.engine.play(params, permit);
+        let phase_ms = sub.grid().phase_ms;
         let controller = sub.controller().expect("a Play subscription is private");
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
         // Reads the client's controls until it half-closes, errs, or the
         // playback ends (then `closed` resolves); never outlives the stream.
-        tokio::spawn(async move {
+        crate::panics::spawn_guarded("grpc_play_controls", async move {
             loop {
                 let message = tokio::select! {
                     m = inbound.message() => m,
@@ -326,7 +332,7 @@ impl Animation for GrpcService {
                 }
             }
         });
-        Ok(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))))
+        Ok(with_phase(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))), phase_ms))
     }
 
     async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
@@ -444,4 +450,11 @@ fn with_abort(
             },
         }
     })
+}
+
+/// Tells the client its stream's grid phase in the response headers (see
+/// [`stream::PHASE_HEADER`]).
+fn with_phase<T>(mut response: Response<T>, phase_ms: u32) -> Response<T> {
+    response.metadata_mut().insert(stream::PHASE_HEADER, phase_ms.into());
+    response
 }

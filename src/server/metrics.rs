@@ -68,12 +68,9 @@ fn describe() {
 /// Where a caught panic happened (the `source` label of `inbetween_panics_total`).
 pub const PANIC_SOURCES: [&str; 3] = ["http", "grpc", "task"];
 
-/// Counts a caught panic. A panic is always a bug: bad input must become a
-/// 4xx, so `inbetween_panics_total` staying 0 under the malformed corpus is
-/// part of the hardening proof (tests/hardening).
+/// Counts a caught panic (see [`crate::panics`]).
 pub fn panic_caught(source: &'static str) {
-    tracing::error!(source, "a panic was caught");
-    metrics::counter!("inbetween_panics_total", "source" => source).increment(1);
+    crate::panics::caught(source);
 }
 
 /// A failed blocking task's error: a panic is counted, either way it is an

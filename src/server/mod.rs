@@ -111,11 +111,14 @@ impl Application {
             max_streams: config.limits.max_streams,
             max_streams_per_client: config.limits.max_streams_per_client,
             max_streams_per_token: config.limits.max_streams_per_token,
+            precise_timer: true,
             ..EngineConfig::default()
         });
+        let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
         let state = AppState::new(state::Shared {
             store,
             cache,
+            writes,
             config: Arc::new(config),
             metrics: metrics::handle(),
             counters: metrics::Counters::new(),

@@ -1,7 +1,9 @@
 //! The per-caller write rate limit: a token bucket per caller (its bearer
 //! token, by hash, or its address when it sent none), refilled at
 //! `write_rate` per second up to `write_burst`. A write over it is answered
-//! 429 with `Retry-After` before its body is read. Reads are not limited
+//! 429 with `Retry-After` before its body is read, or `RESOURCE_EXHAUSTED`
+//! on gRPC (`PutClip`, `DeleteClip`). One limiter serves both transports,
+//! so a caller cannot double its budget by switching. Reads are not limited
 //! here (they are cheap and cached; the in-flight budget bounds them).
 
 use std::collections::HashMap;
@@ -35,6 +37,18 @@ struct Bucket {
     at: Instant,
 }
 
+impl Caller {
+    /// The caller of a request: its bearer token (the `Authorization`
+    /// header value) if it sent one, else its address.
+    pub fn of(authorization: Option<&[u8]>, addr: Option<IpAddr>) -> Caller {
+        match (authorization.and_then(bearer_token), addr) {
+            (Some(t), _) => Caller::Token(token_key(t)),
+            (None, Some(ip)) => Caller::Addr(ip),
+            (None, None) => Caller::Unknown,
+        }
+    }
+}
+
 /// Token buckets, one per caller.
 #[derive(Debug)]
 pub struct WriteLimiter {
@@ -66,6 +80,18 @@ impl WriteLimiter {
             Err(Duration::from_secs_f64((1.0 - b.tokens) / self.rate))
         }
     }
+
+    /// Admits one write of `caller` now, or says when to retry (counted in
+    /// `inbetween_writes_rate_limited_total`).
+    ///
+    /// # Errors
+    /// [`ApiError::RateLimited`] with the whole seconds until a token is back.
+    pub fn admit(&self, caller: Caller) -> Result<(), ApiError> {
+        self.take(caller, Instant::now()).map_err(|wait| {
+            metrics::counter!("inbetween_writes_rate_limited_total").increment(1);
+            ApiError::RateLimited { retry_after: wait.as_secs_f64().ceil().max(1.0) as u64 }
+        })
+    }
 }
 
 /// Whether a request changes state: every non-GET clip route but the
@@ -79,18 +105,13 @@ pub async fn limit_writes(State(limiter): State<Arc<WriteLimiter>>, request: Req
     if !is_write(request.method(), request.uri().path()) {
         return next.run(request).await;
     }
-    let token = request.headers().get(header::AUTHORIZATION).and_then(|v| bearer_token(v.as_bytes()));
-    let caller = match (token, request.extensions().get::<ConnectInfo<SocketAddr>>()) {
-        (Some(t), _) => Caller::Token(token_key(t)),
-        (None, Some(ConnectInfo(addr))) => Caller::Addr(addr.ip()),
-        (None, None) => Caller::Unknown,
-    };
-    match limiter.take(caller, Instant::now()) {
+    let caller = Caller::of(
+        request.headers().get(header::AUTHORIZATION).map(|v| v.as_bytes()),
+        request.extensions().get::<ConnectInfo<SocketAddr>>().map(|ConnectInfo(addr)| addr.ip()),
+    );
+    match limiter.admit(caller) {
         Ok(()) => next.run(request).await,
-        Err(wait) => {
-            metrics::counter!("inbetween_writes_rate_limited_total").increment(1);
-            ApiError::RateLimited { retry_after: wait.as_secs_f64().ceil().max(1.0) as u64 }.into_response()
-        }
+        Err(limited) => limited.into_response(),
     }
 }
 

@@ -53,6 +53,8 @@ pub struct Shared {
     pub loads: Loads,
     /// The streaming engine behind WebSocket and gRPC streams.
     pub streams: crate::stream::Engine,
+    /// The per-caller write rate limit, shared by REST and gRPC.
+    pub writes: Arc<super::ratelimit::WriteLimiter>,
 }
 
 impl AppState {

@@ -19,7 +19,9 @@
 //! an await. Shutdown is a `watch` flag every playback selects on.
 
 use std::collections::HashMap;
+use std::hash::{Hash, Hasher};
 use std::net::IpAddr;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -48,11 +50,21 @@ pub struct EngineConfig {
     pub max_streams_per_client: usize,
     /// Concurrent streams per bearer token (see [`Engine::admit_for`]).
     pub max_streams_per_token: usize,
+    /// Wake playbacks with the precise tick timer thread (`ticker`) rather
+    /// than tokio's millisecond timer. The server turns it on; the default
+    /// is off so that tests can drive the engine with a paused tokio clock.
+    pub precise_timer: bool,
 }
 
 impl Default for EngineConfig {
     fn default() -> Self {
-        EngineConfig { buffer: 8, max_streams: 1024, max_streams_per_client: 64, max_streams_per_token: 64 }
+        EngineConfig {
+            buffer: 8,
+            max_streams: 1024,
+            max_streams_per_client: 64,
+            max_streams_per_token: 64,
+            precise_timer: false,
+        }
     }
 }
 
@@ -209,6 +221,8 @@ pub(crate) struct Inner {
     pub(crate) hubs: Mutex<HashMap<HubKey, broadcast::Sender<Item>>>,
     pub(crate) shutdown: watch::Sender<bool>,
     limits: Arc<Limits>,
+    /// Round-robin phases for private playbacks.
+    next_phase: AtomicU32,
 }
 
 /// The streaming engine: cheap to clone, one per server.
@@ -237,6 +251,7 @@ impl Engine {
                 config,
                 hubs: Mutex::default(),
                 shutdown: watch::Sender::new(false),
+                next_phase: AtomicU32::new(0),
             }),
         }
     }
@@ -273,12 +288,22 @@ impl Engine {
         self.inner.limits.active()
     }
 
+    /// The phase (ms) of the grid a viewer of `params` plays on: a hash of
+    /// what it asks for, so identical requests meet on one grid (and can
+    /// share a playback) while different ones spread over the period.
+    pub fn phase_of(params: &StreamParams) -> u32 {
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        params.key(0).hash(&mut h);
+        (h.finish() % u64::from(Grid::phases(params.fps))) as u32
+    }
+
     /// A viewer of `params`: joins the matching playback starting on the
     /// next grid tick, or starts one. Controls fork it (see
     /// [`Subscription::control`]).
     pub fn watch(&self, params: StreamParams, permit: StreamPermit) -> Subscription {
-        let grid = Grid { epoch: self.inner.epoch, fps: params.fps };
+        let grid = Grid { epoch: self.inner.epoch, fps: params.fps, phase_ms: Self::phase_of(&params) };
         let first = grid.next_at_or_after(Instant::now());
+        let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
         let key = params.key(first);
         let mut hubs = self.inner.hubs.lock().expect("hub registry poisoned");
         let rx = match hubs.get(&key) {
@@ -288,26 +313,29 @@ impl Engine {
                 hubs.insert(key.clone(), tx.clone());
                 let hub = Hub::new(
                     &params,
-                    Schedule::new(grid, first, 0),
+                    schedule.clone(),
                     tx,
                     None,
                     Some((Arc::clone(&self.inner), key)),
                     self.inner.shutdown.subscribe(),
                 );
-                tokio::spawn(hub.run());
+                crate::panics::spawn_guarded("playback", hub.run());
                 rx
             }
         };
         drop(hubs);
-        Subscription::new(self.clone(), params, first, rx, None, permit)
+        Subscription::new(self.clone(), params, schedule, rx, None, permit)
     }
 
     /// A private, controllable playback of `params` (gRPC `Play`).
+    /// Private playbacks take the phases in turn, which spreads them evenly.
     pub fn play(&self, params: StreamParams, permit: StreamPermit) -> Subscription {
-        let grid = Grid { epoch: self.inner.epoch, fps: params.fps };
+        let phase_ms = self.inner.next_phase.fetch_add(1, Ordering::Relaxed) % Grid::phases(params.fps);
+        let grid = Grid { epoch: self.inner.epoch, fps: params.fps, phase_ms };
         let first = grid.next_at_or_after(Instant::now());
-        let (rx, controls) = self.spawn_private(&params, Schedule::new(grid, first, 0), None, true);
-        Subscription::new(self.clone(), params, first, rx, Some(controls), permit)
+        let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
+        let (rx, controls) = self.spawn_private(&params, schedule.clone(), None, true);
+        Subscription::new(self.clone(), params, schedule, rx, Some(controls), permit)
     }
 
     /// Starts a private playback on `schedule`; `prev_time` is the request
@@ -324,7 +352,7 @@ impl Engine {
         let (ctl_tx, ctl_rx) = mpsc::channel(CONTROL_QUEUE);
         let mut hub = Hub::new(params, schedule, tx, Some(ctl_rx), None, self.inner.shutdown.subscribe());
         hub.resume(prev_time, with_names);
-        tokio::spawn(hub.run());
+        crate::panics::spawn_guarded("playback", hub.run());
         (rx, ctl_tx)
     }
 

@@ -24,12 +24,15 @@ pub fn end_status(reason: EndReason) -> Option<Status> {
 
 /// The frames of `sub` until it ends; ends with OK after `max_frames` or a
 /// `stop`, with UNAVAILABLE at shutdown.
+/// A panic while producing a frame is counted and ends the stream with
+/// INTERNAL instead of taking the HTTP/2 connection down.
 pub fn frames(sub: Subscription) -> impl Stream<Item = Result<WireFrame, Status>> + Send + 'static {
     futures_util::stream::unfold(Some(sub), |sub| async move {
         let mut sub = sub?;
-        match sub.next().await {
-            Next::Frame(f) => Some((Ok(WireFrame(f.bytes)), Some(sub))),
-            Next::End(reason) => end_status(reason).map(|status| (Err(status), None)),
+        match crate::panics::guarded("grpc_stream", sub.next()).await {
+            Some(Next::Frame(f)) => Some((Ok(WireFrame(f.bytes)), Some(sub))),
+            Some(Next::End(reason)) => end_status(reason).map(|status| (Err(status), None)),
+            None => Some((Err(Status::internal("the stream failed")), None)),
         }
     })
 }

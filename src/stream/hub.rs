@@ -100,10 +100,15 @@ impl Hub {
 
     pub(crate) async fn run(mut self) {
         metrics::counter!("inbetween_stream_playbacks_total").increment(1);
+        // One shutdown future for the playback's life: it registers with the
+        // watch channel once, not on every tick.
+        let mut shutdown = self.shutdown.clone();
+        let shutdown = shutdown.wait_for(|down| *down);
+        tokio::pin!(shutdown);
         let end = loop {
             let tick = tokio::select! {
                 biased;
-                _ = self.shutdown.wait_for(|down| *down) => break EndReason::Shutdown,
+                _ = &mut shutdown => break EndReason::Shutdown,
                 tick = self.schedule.next() => tick,
             };
             if let Some((inner, key)) = self.registry.take() {

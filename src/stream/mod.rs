@@ -35,6 +35,7 @@ mod limits;
 mod playhead;
 mod schedule;
 mod subscription;
+mod ticker;
 mod wire_frame;
 pub mod ws;
 
@@ -47,6 +48,13 @@ pub use playhead::{Control, MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};
 pub use subscription::{ControlError, Controller, Delivered, Next, Subscription};
 pub use wire_frame::WireFrame;
+
+/// The response header (WebSocket upgrade) and gRPC response metadata key
+/// that tells a stream's client the phase of its grid, in whole ms: frame
+/// `seq` is due `phase + ⌊(first + seq)·10⁹/fps⌋` ns after the engine's
+/// epoch (`Ping`'s monotonic clock), for the stream's first grid tick
+/// `first` (see [`schedule`]). Clients that measure lateness need it.
+pub const PHASE_HEADER: &str = "inbetween-grid-phase-ms";
 
 #[cfg(test)]
 mod tests;

@@ -2,11 +2,14 @@
 //! clock (SPEC §5).
 //!
 //! Every due instant is computed from its index with integer nanoseconds
-//! (`⌊n·10⁹/fps⌋` after the engine's epoch), never by adding periods, so the
-//! schedule cannot drift however long it runs. Ticks sit on a grid shared by
-//! every stream of the same rate (grid tick `n` of an engine is the same
-//! instant for all of them), which is what lets streams that start on the
-//! same grid tick share one playback (see `hub`). A stream whose task wakes
+//! (`phase + ⌊n·10⁹/fps⌋` after the engine's epoch), never by adding
+//! periods, so the schedule cannot drift however long it runs. Ticks sit on
+//! a grid shared by every stream of the same rate and phase, which is what
+//! lets streams that start on the same grid tick share one playback (see
+//! `hub`). The phase, a whole number of milliseconds within one period,
+//! spreads unrelated streams over the period: were every 60 fps stream due
+//! at the same instant, each tick would be one burst of thousands of frames
+//! whose last ones leave milliseconds late. A stream whose task wakes
 //! late does not burst to catch up: [`Schedule::next`] jumps to the latest
 //! due tick and reports how many it skipped.
 
@@ -14,17 +17,30 @@ use std::time::Duration;
 
 use tokio::time::{Instant, sleep_until};
 
-/// The grid of one rate: tick `n` at `epoch + ⌊n·10⁹/fps⌋ ns`.
+/// The grid of one rate and phase: tick `n` at
+/// `epoch + phase_ms·10⁶ + ⌊n·10⁹/fps⌋ ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Grid {
     pub epoch: Instant,
     pub fps: u32,
+    /// Whole milliseconds, below [`Grid::phases`]`(fps)`.
+    pub phase_ms: u32,
 }
 
 impl Grid {
+    /// How many whole-millisecond phases fit in one period of `fps`
+    /// (`⌈1000/fps⌉`: 17 at 60 fps, phases 0..=16 ms).
+    pub fn phases(fps: u32) -> u32 {
+        1000u32.div_ceil(fps.max(1))
+    }
+
+    fn origin(&self) -> Instant {
+        self.epoch + Duration::from_millis(u64::from(self.phase_ms))
+    }
+
     /// The instant of grid tick `n`.
     pub fn at(&self, n: u64) -> Instant {
-        self.epoch + Duration::from_nanos((u128::from(n) * 1_000_000_000 / u128::from(self.fps)) as u64)
+        self.origin() + Duration::from_nanos((u128::from(n) * 1_000_000_000 / u128::from(self.fps)) as u64)
     }
 
     /// The first grid tick at or after `now`.
@@ -36,9 +52,9 @@ impl Grid {
         n
     }
 
-    /// The last grid tick at or before `now` (0 if `now` is before the epoch).
+    /// The last grid tick at or before `now` (0 if `now` is before tick 0).
     pub fn latest_at_or_before(&self, now: Instant) -> u64 {
-        let elapsed = now.saturating_duration_since(self.epoch).as_nanos();
+        let elapsed = now.saturating_duration_since(self.origin()).as_nanos();
         let mut n = (elapsed * u128::from(self.fps) / 1_000_000_000) as u64;
         // Integer rounding in `at` can put the estimate one off either way.
         while n > 0 && self.at(n) > now {
@@ -57,6 +73,8 @@ pub struct Schedule {
     grid: Grid,
     first: u64,
     next: u64,
+    /// Wait on the precise tick timer (`ticker`) rather than tokio's.
+    precise: bool,
 }
 
 /// One tick to produce: its index in the stream, and how many scheduled
@@ -71,12 +89,30 @@ impl Schedule {
     /// A schedule whose tick 0 is grid tick `first` and whose next tick to
     /// produce is `next`.
     pub fn new(grid: Grid, first: u64, next: u64) -> Self {
-        Schedule { grid, first, next }
+        Schedule { grid, first, next, precise: false }
+    }
+
+    /// Waits on the precise tick timer thread instead of tokio's timer
+    /// (which a test's paused clock controls; the precise one it does not).
+    #[must_use]
+    pub fn precise(self, precise: bool) -> Self {
+        Schedule { precise, ..self }
+    }
+
+    /// The same schedule (grid, tick 0, timer) with `next` as its next tick.
+    #[must_use]
+    pub fn resumed_at(&self, next: u64) -> Self {
+        Schedule { next, ..self.clone() }
     }
 
     /// The grid tick of this stream's tick 0.
     pub fn first(&self) -> u64 {
         self.first
+    }
+
+    /// The grid this schedule's ticks sit on.
+    pub fn grid(&self) -> Grid {
+        self.grid
     }
 
     /// When the next tick is due.
@@ -88,7 +124,11 @@ impl Schedule {
     /// due tick instead and counts the ones in between as skipped: never a
     /// burst of stale frames. Cancel-safe (nothing changes until it returns).
     pub async fn next(&mut self) -> Tick {
-        sleep_until(self.due()).await;
+        if self.precise {
+            super::ticker::sleep_until(self.due().into_std()).await;
+        } else {
+            sleep_until(self.due()).await;
+        }
         self.take(Instant::now())
     }
 
@@ -107,12 +147,12 @@ mod tests {
     use tokio::time::advance;
 
     fn grid(fps: u32) -> Grid {
-        Grid { epoch: Instant::now(), fps }
+        Grid { epoch: Instant::now(), fps, phase_ms: 0 }
     }
 
     #[test]
     fn due_instants_come_from_the_index_and_never_drift() {
-        let g = Grid { epoch: Instant::now(), fps: 60 };
+        let g = Grid { epoch: Instant::now(), fps: 60, phase_ms: 0 };
         // 60 fps does not divide 10⁹ ns: summing a rounded period would
         // drift by 40 ns/s; computing from the index keeps tick 60·3600 at
         // exactly one hour.
@@ -124,6 +164,26 @@ mod tests {
             assert_eq!(g.latest_at_or_before(g.at(n + 1) - Duration::from_nanos(1)), n);
             assert_eq!(g.next_at_or_after(g.at(n)), n);
             assert_eq!(g.next_at_or_after(g.at(n) + Duration::from_nanos(1)), n + 1);
+        }
+    }
+
+    #[test]
+    fn phases_shift_the_grid_by_whole_milliseconds_within_one_period() {
+        assert_eq!(Grid::phases(60), 17);
+        assert_eq!(Grid::phases(50), 20);
+        assert_eq!(Grid::phases(240), 5);
+        assert_eq!(Grid::phases(1), 1000);
+        for fps in [1, 7, 24, 30, 50, 60, 144, 240] {
+            let base = Grid { epoch: Instant::now(), fps, phase_ms: 0 };
+            let last = Grid { phase_ms: Grid::phases(fps) - 1, ..base };
+            // The last phase still falls before the next tick of phase 0.
+            assert!(last.at(0) < base.at(1), "{fps} fps");
+            assert_eq!(last.at(5) - base.at(5), Duration::from_millis(u64::from(last.phase_ms)));
+            for n in [0, 1, 59, 1_000_003] {
+                assert_eq!(last.latest_at_or_before(last.at(n)), n);
+                assert_eq!(last.latest_at_or_before(last.at(n + 1) - Duration::from_nanos(1)), n);
+                assert_eq!(last.next_at_or_after(last.at(n) + Duration::from_nanos(1)), n + 1);
+            }
         }
     }
 

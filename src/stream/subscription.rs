@@ -71,7 +71,8 @@ impl Controller {
 pub struct Subscription {
     engine: Engine,
     params: StreamParams,
-    first_tick: u64,
+    /// The schedule the stream started on (its tick 0 and grid).
+    schedule: Schedule,
     rx: broadcast::Receiver<Item>,
     controls: Option<mpsc::Sender<Control>>,
     last_seq: Option<u64>,
@@ -98,7 +99,7 @@ impl Subscription {
     pub(crate) fn new(
         engine: Engine,
         params: StreamParams,
-        first_tick: u64,
+        schedule: Schedule,
         rx: broadcast::Receiver<Item>,
         controls: Option<mpsc::Sender<Control>>,
         permit: StreamPermit,
@@ -106,7 +107,7 @@ impl Subscription {
         Subscription {
             engine,
             params,
-            first_tick,
+            schedule,
             rx,
             controls,
             last_seq: None,
@@ -124,6 +125,17 @@ impl Subscription {
 
     pub fn encoding(&self) -> Encoding {
         self.params.encoding
+    }
+
+    /// The grid this stream's ticks sit on.
+    pub fn grid(&self) -> Grid {
+        self.schedule.grid()
+    }
+
+    /// The grid tick of this stream's frame 0 (frame `seq` is due at
+    /// `grid().at(first_tick() + seq)`).
+    pub fn first_tick(&self) -> u64 {
+        self.schedule.first()
     }
 
     /// Waits for the next frame or the end. Cancel-safe.
@@ -154,7 +166,9 @@ impl Subscription {
             self.last_seq = Some(frame.seq);
             self.delivered += 1;
             self.sent.increment(1);
-            self.dropped.increment(dropped);
+            if dropped > 0 {
+                self.dropped.increment(dropped);
+            }
             return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes });
         }
     }
@@ -190,11 +204,10 @@ impl Subscription {
 
     fn fork(&mut self) {
         let p = &self.params;
-        let grid = Grid { epoch: self.engine.inner.epoch, fps: p.fps };
         let next = self.last_seq.map_or(0, |last| last + 1);
         let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
         let prev_time = self.last_seq.map(|last| playhead.time_at(last));
-        let schedule = Schedule::new(grid, self.first_tick, next);
+        let schedule = self.schedule.resumed_at(next);
         let (rx, tx) = self.engine.spawn_private(p, schedule, prev_time, self.last_seq.is_none());
         self.rx = rx;
         self.controls = Some(tx);

@@ -70,9 +70,9 @@ fn proto(f: &Delivered) -> pb::Frame {
     pb::Frame::decode(f.bytes.clone()).unwrap()
 }
 
-/// The instant grid tick `n` of `fps` is due on `e`'s clock.
-fn due(e: &Engine, fps: u32, n: u64) -> Instant {
-    Grid { epoch: e.inner.epoch, fps }.at(n)
+/// The instant frame `seq` of `sub` is due.
+fn due(sub: &Subscription, seq: u64) -> Instant {
+    sub.grid().at(sub.first_tick() + seq)
 }
 
 /// Now is `due`, give or take the timer wheel's 1 ms resolution (tokio
@@ -92,8 +92,7 @@ fn close(a: f32, b: f64) -> bool {
 async fn sixty_fps_for_two_seconds_is_120_frames_on_schedule_with_contiguous_seq() {
     let e = engine(4);
     let mut sub = watch(&e, StreamRequest { speed: Some(0.5), ..req(60, Encoding::Json) });
-    let first = Grid { epoch: e.inner.epoch, fps: 60 }.next_at_or_after(Instant::now());
-    let t0 = due(&e, 60, first);
+    let t0 = due(&sub, 0);
     let mut n = 0u64;
     loop {
         let f = frame(&mut sub).await;
@@ -101,7 +100,7 @@ async fn sixty_fps_for_two_seconds_is_120_frames_on_schedule_with_contiguous_seq
             break;
         }
         assert_eq!((f.seq, f.dropped), (n, 0));
-        assert_on_time(due(&e, 60, first + n));
+        assert_on_time(due(&sub, n));
         assert!(close(f.clip_time, n as f64 * 0.5 / 60.0), "frame {n}: clip time {}", f.clip_time);
         let v = json(&f);
         assert_eq!(v["seq"], n);
@@ -146,14 +145,19 @@ async fn a_stalled_viewer_drops_its_oldest_frames_and_never_delays_the_others() 
     let mut steady = watch(&e, req(60, Encoding::Json));
     let mut other = watch(&e, StreamRequest { speed: Some(2.0), ..req(60, Encoding::Json) });
     let mut stalled = watch(&e, req(60, Encoding::Json)); // shares `steady`'s playback
-    let first = Grid { epoch: e.inner.epoch, fps: 60 }.next_at_or_after(Instant::now());
+    assert_eq!(due(&stalled, 0), due(&steady, 0), "one playback, one grid");
     assert_eq!(frame(&mut stalled).await.seq, 0);
-    // `stalled` reads nothing for two seconds while the others read.
+    // `stalled` reads nothing for two seconds while the others read, each
+    // frame at its due instant (`other` may sit on another phase).
     for k in 0..120 {
-        let f = frame(&mut steady).await;
-        assert_eq!((f.seq, f.dropped), (k, 0));
-        assert_on_time(due(&e, 60, first + k)); // no lateness for the other viewers
-        assert_eq!(frame(&mut other).await.seq, k);
+        let mut pair = [&mut steady, &mut other];
+        pair.sort_by_key(|s| due(s, k));
+        for sub in pair {
+            let at = due(sub, k);
+            let f = frame(sub).await;
+            assert_eq!((f.seq, f.dropped), (k, 0));
+            assert_on_time(at); // no lateness for the other viewers
+        }
     }
     // It resumes with the oldest frame its 4-frame buffer still holds.
     let f = frame(&mut stalled).await;

@@ -1,6 +1,6 @@
 //! Overload: the in-flight budget sheds at once (503 + Retry-After, gRPC
 //! RESOURCE_EXHAUSTED) while health stays up; the per-caller write rate
-//! limit answers 429; one token cannot hold more than its stream cap.
+//! limit answers 429 (gRPC writes: RESOURCE_EXHAUSTED, same budget); one token cannot hold more than its stream cap.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -56,7 +56,8 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
     let dir = tempfile::tempdir().unwrap();
     let server = Server::start(&dir.path().join("data"), &["--write-rate", "1", "--write-burst", "3"]).await;
     let http = reqwest::Client::new();
-    for _ in 0..3 {
+    let id = server.create(&http, WAVE).await;
+    for _ in 0..2 {
         server.create(&http, WAVE).await;
     }
     let post = || http.post(server.url("/v1/clips")).header("content-type", "application/json").body(WAVE);
@@ -66,6 +67,11 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
     assert!((1..=2).contains(&retry), "retry-after {retry}");
     let body: serde_json::Value = r.json().await.unwrap();
     assert_eq!(body["code"], "rate_limited");
+    // gRPC writes draw on the same budget: a DeleteClip is refused and deletes nothing.
+    let mut client = AnimationClient::connect(format!("http://{}", server.grpc)).await.unwrap();
+    let status = client.delete_clip(pb::DeleteClipRequest { clip_id: id.clone() }).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
+    assert_eq!(http.get(server.url(&format!("/v1/clips/{id}"))).send().await.unwrap().status(), 200);
     // Reads are not writes.
     let list = http.get(server.url("/v1/clips")).send().await.unwrap();
     assert_eq!(list.status(), 200);

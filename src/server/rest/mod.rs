@@ -57,10 +57,7 @@ pub fn router(state: AppState) -> Router {
             body_guard::BodyGuard { max_bytes: limits.max_body_bytes, read_timeout: limits.body_read_timeout },
             body_guard::guard,
         ))
-        .layer(middleware::from_fn_with_state(
-            std::sync::Arc::new(ratelimit::WriteLimiter::new(limits.write_rate, limits.write_burst)),
-            ratelimit::limit_writes,
-        ))
+        .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
         .layer(middleware::from_fn_with_state(shed::Gate::new(limits.max_in_flight), shed::rest))
         .layer(middleware::from_fn(metrics::track))

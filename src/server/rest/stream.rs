@@ -125,11 +125,12 @@ pub async fn stream(
         .write_buffer_size(l.ws_write_buffer_bytes)
         .max_write_buffer_size(l.ws_max_write_buffer_bytes)
         .read_buffer_size(READ_BUFFER_BYTES);
-    Ok(upgrade.on_upgrade(move |socket: WebSocket| async move {
+    let phase_ms = crate::stream::Engine::phase_of(&params);
+    let mut response = upgrade.on_upgrade(move |socket: WebSocket| async move {
         match admitted {
             Ok(permit) => {
                 let sub = engine.watch(params, permit);
-                crate::stream::ws::serve(socket, sub, WsConfig::default()).await;
+                crate::panics::guarded("websocket", crate::stream::ws::serve(socket, sub, WsConfig::default())).await;
             }
             Err(refused) => {
                 let mut socket = socket;
@@ -137,5 +138,7 @@ pub async fn stream(
                 let _ = socket.send(Message::Close(Some(frame))).await;
             }
         }
-    }))
+    });
+    response.headers_mut().insert(crate::stream::PHASE_HEADER, phase_ms.into());
+    Ok(response)
 }
