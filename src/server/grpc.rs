@@ -281,8 +281,9 @@ impl Animation for GrpcService {
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
         self.read(&request)?;
         let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
+        let lane = lane(&request);
         let (params, permit) = self.stream_params(request.get_ref(), false, remote).await?;
-        let sub = self.engine.watch(params, permit);
+        let sub = self.engine.watch(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), phase_ms))
     }
@@ -295,6 +296,7 @@ impl Animation for GrpcService {
     ) -> Result<Response<Self::PlayStream>, Status> {
         self.read(&request)?;
         let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
+        let lane = lane(&request);
         let mut inbound = request.into_inner();
         let open = match inbound.message().await? {
             Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Open(open)) }) => open,
@@ -303,7 +305,7 @@ impl Animation for GrpcService {
         };
         let stream_req = open.stream.ok_or_else(|| Status::invalid_argument("`open` needs a `stream`"))?;
         let (params, permit) = self.stream_params(&stream_req, open.paused, remote).await?;
-        let sub = self.engine.play(params, permit);
+        let sub = self.engine.play(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         let controller = sub.controller().expect("a Play subscription is private");
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
@@ -450,6 +452,13 @@ fn with_abort(
             },
         }
     })
+}
+
+/// The stream's lane for the engine (its phase, see `Engine::watch`): the
+/// client's port, which tells its HTTP/2 connections apart, so the streams
+/// of one connection fall due together.
+fn lane<T>(request: &Request<T>) -> Option<u64> {
+    request.remote_addr().map(|a| u64::from(a.port()))
 }
 
 /// Tells the client its stream's grid phase in the response headers (see

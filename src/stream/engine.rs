@@ -25,7 +25,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use tokio::sync::{broadcast, mpsc, watch};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::time::Instant;
 
 use super::encode::Encoding;
@@ -186,8 +186,8 @@ impl StreamParams {
         self.source.clip()
     }
 
-    /// What makes two streams the same playback (with the first tick).
-    fn key(&self, first_tick: u64) -> HubKey {
+    /// What makes two streams the same playback (if they start together).
+    fn key(&self) -> HubKey {
         HubKey {
             clip_id: Arc::clone(&self.clip_id),
             version: self.version,
@@ -197,7 +197,6 @@ impl StreamParams {
             modes: [self.playback.as_str(), self.ease.as_str(), self.space.as_str()],
             encoding: self.encoding,
             paused: self.paused,
-            first_tick,
         }
     }
 }
@@ -212,13 +211,19 @@ pub(crate) struct HubKey {
     modes: [&'static str; 3],
     encoding: Encoding,
     paused: bool,
-    first_tick: u64,
+}
+
+/// A shared playback that has not produced its first tick yet: viewers
+/// asking for the same thing join it (on its schedule).
+pub(crate) struct Pending {
+    tx: broadcast::Sender<Item>,
+    schedule: Schedule,
 }
 
 pub(crate) struct Inner {
     pub(crate) epoch: Instant,
     pub(crate) config: EngineConfig,
-    pub(crate) hubs: Mutex<HashMap<HubKey, broadcast::Sender<Item>>>,
+    pub(crate) hubs: Mutex<HashMap<HubKey, Pending>>,
     pub(crate) shutdown: watch::Sender<bool>,
     limits: Arc<Limits>,
     /// Round-robin phases for private playbacks.
@@ -288,30 +293,41 @@ impl Engine {
         self.inner.limits.active()
     }
 
-    /// The phase (ms) of the grid a viewer of `params` plays on: a hash of
-    /// what it asks for, so identical requests meet on one grid (and can
-    /// share a playback) while different ones spread over the period.
-    pub fn phase_of(params: &StreamParams) -> u32 {
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        params.key(0).hash(&mut h);
-        (h.finish() % u64::from(Grid::phases(params.fps))) as u32
+    /// The phase (ms) of the grid a new playback of `params` plays on.
+    ///
+    /// Phases spread playbacks over the period (see `schedule`). A stream
+    /// that names its `lane` (its connection: the gRPC transport passes the
+    /// peer's address) gets the lane's phase, so all streams of one HTTP/2
+    /// connection fall due together and the connection writes their frames
+    /// with one system call instead of one each. Otherwise the phase is a
+    /// hash of the request.
+    fn phase_for(params: &StreamParams, lane: Option<u64>) -> u32 {
+        let lane = lane.unwrap_or_else(|| {
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            params.key().hash(&mut h);
+            h.finish()
+        });
+        (lane % u64::from(Grid::phases(params.fps))) as u32
     }
 
-    /// A viewer of `params`: joins the matching playback starting on the
-    /// next grid tick, or starts one. Controls fork it (see
+    /// A viewer of `params` on `lane` (see [`Engine::phase_for`]): joins
+    /// the matching playback if one has not produced its first frame yet,
+    /// or starts one on the next tick of its grid. Controls fork it (see
     /// [`Subscription::control`]).
-    pub fn watch(&self, params: StreamParams, permit: StreamPermit) -> Subscription {
-        let grid = Grid { epoch: self.inner.epoch, fps: params.fps, phase_ms: Self::phase_of(&params) };
-        let first = grid.next_at_or_after(Instant::now());
-        let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
-        let key = params.key(first);
+    pub fn watch(&self, params: StreamParams, permit: StreamPermit, lane: Option<u64>) -> Subscription {
+        let key = params.key();
         let mut hubs = self.inner.hubs.lock().expect("hub registry poisoned");
-        let rx = match hubs.get(&key) {
-            Some(tx) => tx.subscribe(),
+        let (schedule, rx, handback) = match hubs.get(&key) {
+            Some(pending) => (pending.schedule.clone(), pending.tx.subscribe(), None),
             None => {
+                let phase_ms = Self::phase_for(&params, lane);
+                let grid = Grid { epoch: self.inner.epoch, fps: params.fps, phase_ms };
+                let first = grid.next_at_or_after(Instant::now());
+                let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
                 let (tx, rx) = broadcast::channel(self.inner.config.buffer);
-                hubs.insert(key.clone(), tx.clone());
-                let hub = Hub::new(
+                hubs.insert(key.clone(), Pending { tx: tx.clone(), schedule: schedule.clone() });
+                let (back_tx, back_rx) = oneshot::channel();
+                let mut hub = Hub::new(
                     &params,
                     schedule.clone(),
                     tx,
@@ -319,41 +335,43 @@ impl Engine {
                     Some((Arc::clone(&self.inner), key)),
                     self.inner.shutdown.subscribe(),
                 );
+                hub.hand_back_to(back_tx);
                 crate::panics::spawn_guarded("playback", hub.run());
-                rx
+                (schedule, rx, Some(back_rx))
             }
         };
         drop(hubs);
-        Subscription::new(self.clone(), params, schedule, rx, None, permit)
+        Subscription::new(self.clone(), params, schedule, rx, None, handback, None, permit)
     }
 
-    /// A private, controllable playback of `params` (gRPC `Play`).
-    /// Private playbacks take the phases in turn, which spreads them evenly.
-    pub fn play(&self, params: StreamParams, permit: StreamPermit) -> Subscription {
-        let phase_ms = self.inner.next_phase.fetch_add(1, Ordering::Relaxed) % Grid::phases(params.fps);
+    /// A private, controllable playback of `params` (gRPC `Play`) on
+    /// `lane`; without one, private playbacks take the phases in turn.
+    pub fn play(&self, params: StreamParams, permit: StreamPermit, lane: Option<u64>) -> Subscription {
+        let lane = lane.unwrap_or_else(|| u64::from(self.inner.next_phase.fetch_add(1, Ordering::Relaxed)));
+        let phase_ms = Self::phase_for(&params, Some(lane));
         let grid = Grid { epoch: self.inner.epoch, fps: params.fps, phase_ms };
         let first = grid.next_at_or_after(Instant::now());
         let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
-        let (rx, controls) = self.spawn_private(&params, schedule.clone(), None, true);
-        Subscription::new(self.clone(), params, schedule, rx, Some(controls), permit)
+        let (hub, rx, controls) = self.private(&params, schedule.clone(), None, true);
+        Subscription::new(self.clone(), params, schedule, rx, Some(hub), None, Some(controls), permit)
     }
 
-    /// Starts a private playback on `schedule`; `prev_time` is the request
-    /// time of the viewer's last frame (for event continuity), `first_control`
-    /// a control to apply at its first tick.
-    pub(crate) fn spawn_private(
+    /// A private playback on `schedule`, for its one viewer to drive;
+    /// `prev_time` is the request time of the viewer's last frame (for
+    /// event continuity), `with_names` whether its next frame must carry
+    /// the joint names.
+    pub(crate) fn private(
         &self,
         params: &StreamParams,
         schedule: Schedule,
         prev_time: Option<f64>,
         with_names: bool,
-    ) -> (broadcast::Receiver<Item>, mpsc::Sender<Control>) {
-        let (tx, rx) = broadcast::channel(self.inner.config.buffer);
+    ) -> (Hub, broadcast::Receiver<Item>, mpsc::Sender<Control>) {
+        let (tx, rx) = broadcast::channel(1);
         let (ctl_tx, ctl_rx) = mpsc::channel(CONTROL_QUEUE);
         let mut hub = Hub::new(params, schedule, tx, Some(ctl_rx), None, self.inner.shutdown.subscribe());
         hub.resume(prev_time, with_names);
-        crate::panics::spawn_guarded("playback", hub.run());
-        (rx, ctl_tx)
+        (hub, rx, ctl_tx)
     }
 
     /// Ends every stream: each playback sends a final "shutting down" end at

@@ -13,11 +13,22 @@
 //! It ends when it has no viewers left (checked each tick), on a `stop`
 //! control, or at shutdown, publishing a final [`EndReason`] that even a
 //! lagging viewer receives (the last item of a broadcast is never dropped).
+//!
+//! Most playbacks have one viewer (every private one, and every shared one
+//! that nobody joined before its first tick). Such a playback needs no task
+//! of its own: its viewer's [`Subscription`](super::Subscription) drives it
+//! with [`Hub::step`] and takes each frame directly, saving a task wake-up
+//! and a channel hand-over per frame. A shared playback runs as its own
+//! task until its first tick (so a viewer that joins is never at the mercy
+//! of how often the first one is polled); if by then it has one viewer, it
+//! hands itself to that viewer and the task ends.
 
+use std::future::Future;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use tokio::sync::{broadcast, mpsc, watch};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 use super::encode::{Encoded, Encoding, FrameData, FrameEncoder};
 use super::engine::{HubKey, Inner, StreamParams};
@@ -59,7 +70,12 @@ pub(crate) struct Hub {
     controls: Option<mpsc::Receiver<Control>>,
     /// Shared playbacks leave the registry before their first tick.
     registry: Option<(Arc<Inner>, HubKey)>,
-    shutdown: watch::Receiver<bool>,
+    /// Where to hand the playback after its first tick if it has one viewer.
+    handback: Option<oneshot::Sender<Box<Hub>>>,
+    /// Resolves at shutdown; one future for the playback's life, so it
+    /// registers with the watch channel once, not on every tick. `None`
+    /// once it has fired.
+    shutdown: Option<Pin<Box<dyn Future<Output = ()> + Send>>>,
     /// `inbetween_stream_ticks_total`: evaluated and encoded ticks (one per
     /// playback, however many viewers share it).
     ticks: metrics::Counter,
@@ -74,6 +90,7 @@ impl Hub {
         registry: Option<(Arc<Inner>, HubKey)>,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
+        metrics::counter!("inbetween_stream_playbacks_total").increment(1);
         Hub {
             playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
             params: params.clone(),
@@ -86,7 +103,11 @@ impl Hub {
             tx,
             controls,
             registry,
-            shutdown,
+            handback: None,
+            shutdown: Some(Box::pin(async move {
+                let mut shutdown = shutdown;
+                let _ = shutdown.wait_for(|down| *down).await;
+            })),
             ticks: metrics::counter!("inbetween_stream_ticks_total"),
         }
     }
@@ -98,44 +119,78 @@ impl Hub {
         self.with_names = with_names && self.params.encoding == Encoding::Protobuf;
     }
 
-    pub(crate) async fn run(mut self) {
-        metrics::counter!("inbetween_stream_playbacks_total").increment(1);
-        // One shutdown future for the playback's life: it registers with the
-        // watch channel once, not on every tick.
-        let mut shutdown = self.shutdown.clone();
-        let shutdown = shutdown.wait_for(|down| *down);
-        tokio::pin!(shutdown);
-        let end = loop {
-            let tick = tokio::select! {
-                biased;
-                _ = &mut shutdown => break EndReason::Shutdown,
-                tick = self.schedule.next() => tick,
-            };
-            if let Some((inner, key)) = self.registry.take() {
-                inner.hubs.lock().expect("hub registry poisoned").remove(&key);
-            }
-            if self.tx.receiver_count() == 0 {
-                return;
-            }
-            let mut jumped = false;
-            if let Some(controls) = &mut self.controls {
-                let mut stop = false;
-                while let Ok(control) = controls.try_recv() {
-                    match control {
-                        Control::Stop => stop = true,
-                        c => jumped |= self.playhead.apply(c, tick.k),
-                    }
-                }
-                if stop {
-                    break EndReason::Stopped;
-                }
-            }
-            let frame = self.frame(tick.k, tick.skipped, jumped);
-            self.ticks.increment(1);
-            // An error only means no viewer is left; the next tick ends it.
-            let _ = self.tx.send(Item::Frame(frame));
+    /// After its first tick, a playback with a single viewer goes to it
+    /// through `to` (see the module doc).
+    pub(crate) fn hand_back_to(&mut self, to: oneshot::Sender<Box<Hub>>) {
+        self.handback = Some(to);
+    }
+
+    /// Publishes `item` to the broadcast's viewers.
+    pub(crate) fn publish(&self, item: Item) {
+        // An error only means no viewer is left; the next tick ends it.
+        let _ = self.tx.send(item);
+    }
+
+    /// Waits for the next tick and produces it: a frame, the end, or
+    /// `None` when `require_viewers` and nobody watches any more.
+    /// Cancel-safe: nothing changes until the tick is due.
+    pub(crate) async fn step(&mut self, require_viewers: bool) -> Option<Item> {
+        let Some(shutdown) = self.shutdown.as_mut() else {
+            return Some(Item::End(EndReason::Shutdown));
         };
-        let _ = self.tx.send(Item::End(end));
+        let tick = tokio::select! {
+            biased;
+            () = shutdown => {
+                self.shutdown = None;
+                return Some(Item::End(EndReason::Shutdown));
+            }
+            tick = self.schedule.next() => tick,
+        };
+        if let Some((inner, key)) = self.registry.take() {
+            inner.hubs.lock().expect("hub registry poisoned").remove(&key);
+        }
+        if require_viewers && self.tx.receiver_count() == 0 {
+            return None;
+        }
+        let mut jumped = false;
+        if let Some(controls) = &mut self.controls {
+            let mut stop = false;
+            while let Ok(control) = controls.try_recv() {
+                match control {
+                    Control::Stop => stop = true,
+                    c => jumped |= self.playhead.apply(c, tick.k),
+                }
+            }
+            if stop {
+                return Some(Item::End(EndReason::Stopped));
+            }
+        }
+        let frame = self.frame(tick.k, tick.skipped, jumped);
+        self.ticks.increment(1);
+        Some(Item::Frame(frame))
+    }
+
+    /// The playback as its own task: publishes every tick to its viewers
+    /// until it ends or none is left.
+    pub(crate) async fn run(mut self) {
+        loop {
+            match self.step(true).await {
+                Some(item @ Item::Frame(_)) => {
+                    self.publish(item);
+                    if self.tx.receiver_count() == 1
+                        && let Some(to) = self.handback.take()
+                    {
+                        // Nobody can join any more (the first tick took it
+                        // out of the registry): the one viewer drives it.
+                        let _ = to.send(Box::new(self));
+                        return;
+                    }
+                    self.handback = None;
+                }
+                Some(end @ Item::End(_)) => return self.publish(end),
+                None => return,
+            }
+        }
     }
 
     /// Evaluates and encodes tick `k`.
@@ -147,7 +202,7 @@ impl Hub {
         let from = if jumped { None } else { self.prev_time };
         crossed(p.clip(), p.playback, p.ease, from, time, &mut self.crossed);
         self.prev_time = Some(time);
-        let frame = self.encoder.encode(&FrameData {
+        self.encoder.encode(&FrameData {
             seq: k,
             dropped: skipped,
             sent_at_unix_nanos: unix_nanos(),
@@ -159,10 +214,8 @@ impl Hub {
             pose: self.sampler.pose(),
             events: p.clip().events(),
             crossed: &self.crossed,
-            with_names: self.with_names,
-        });
-        self.with_names = false;
-        frame
+            with_names: std::mem::take(&mut self.with_names),
+        })
     }
 }
 

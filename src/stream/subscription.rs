@@ -3,11 +3,11 @@
 //! to send it controls.
 
 use bytes::Bytes;
-use tokio::sync::{broadcast, mpsc};
+use tokio::sync::{broadcast, mpsc, oneshot};
 
 use super::encode::Encoding;
 use super::engine::{Engine, StreamParams};
-use super::hub::{EndReason, Item};
+use super::hub::{EndReason, Hub, Item};
 use super::limits::StreamPermit;
 use super::playhead::{Control, Playhead};
 use super::schedule::{Grid, Schedule};
@@ -74,6 +74,12 @@ pub struct Subscription {
     /// The schedule the stream started on (its tick 0 and grid).
     schedule: Schedule,
     rx: broadcast::Receiver<Item>,
+    /// The playback this viewer drives itself (see `hub`): a private one,
+    /// or a shared one nobody joined. `None`: it reads `rx`.
+    driver: Option<Box<Hub>>,
+    /// Where a shared playback this viewer started comes back to it after
+    /// its first tick if nobody else joined.
+    handback: Option<oneshot::Receiver<Box<Hub>>>,
     controls: Option<mpsc::Sender<Control>>,
     last_seq: Option<u64>,
     delivered: u64,
@@ -101,6 +107,8 @@ impl Subscription {
         params: StreamParams,
         schedule: Schedule,
         rx: broadcast::Receiver<Item>,
+        driver: Option<Hub>,
+        handback: Option<oneshot::Receiver<Box<Hub>>>,
         controls: Option<mpsc::Sender<Control>>,
         permit: StreamPermit,
     ) -> Self {
@@ -109,6 +117,8 @@ impl Subscription {
             params,
             schedule,
             rx,
+            driver: driver.map(Box::new),
+            handback,
             controls,
             last_seq: None,
             delivered: 0,
@@ -147,7 +157,23 @@ impl Subscription {
             return Next::End(EndReason::MaxFrames);
         }
         loop {
-            let frame = match self.rx.recv().await {
+            let item = if let Some(hub) = self.driver.as_mut() {
+                Ok(hub.step(false).await.expect("a driven playback always has its viewer"))
+            } else if let Some(handback) = self.handback.as_mut() {
+                tokio::select! {
+                    biased;
+                    item = self.rx.recv() => item,
+                    hub = handback => {
+                        // Alone after the first tick: drive it from now on.
+                        self.handback = None;
+                        self.driver = hub.ok();
+                        continue;
+                    }
+                }
+            } else {
+                self.rx.recv().await
+            };
+            let frame = match item {
                 Ok(Item::Frame(f)) => f,
                 Ok(Item::End(reason)) => return Next::End(reason),
                 // The missed frames show up as a gap in seq.
@@ -208,8 +234,12 @@ impl Subscription {
         let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
         let prev_time = self.last_seq.map(|last| playhead.time_at(last));
         let schedule = self.schedule.resumed_at(next);
-        let (rx, tx) = self.engine.spawn_private(p, schedule, prev_time, self.last_seq.is_none());
+        let (hub, rx, tx) = self.engine.private(p, schedule, prev_time, self.last_seq.is_none());
+        // The shared playback goes on for its other viewers (or, if this
+        // viewer drove it alone, ends here).
         self.rx = rx;
+        self.handback = None;
+        self.driver = Some(Box::new(hub));
         self.controls = Some(tx);
     }
 }

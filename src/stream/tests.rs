@@ -48,11 +48,11 @@ fn params(req: StreamRequest) -> StreamParams {
 }
 
 fn watch(e: &Engine, req: StreamRequest) -> Subscription {
-    e.watch(params(req), e.admit(None).unwrap())
+    e.watch(params(req), e.admit(None).unwrap(), None)
 }
 
 fn play(e: &Engine, req: StreamRequest) -> Subscription {
-    e.play(params(req), e.admit(None).unwrap())
+    e.play(params(req), e.admit(None).unwrap(), None)
 }
 
 async fn frame(sub: &mut Subscription) -> Delivered {
@@ -304,7 +304,7 @@ async fn a_playback_keeps_the_clip_version_it_started_on() {
     let e = engine(4);
     let c = clip();
     let weak = Arc::downgrade(&c);
-    let sub = e.watch(StreamParams::new("c1", 1, c, req(30, Encoding::Json)).unwrap(), e.admit(None).unwrap());
+    let sub = e.watch(StreamParams::new("c1", 1, c, req(30, Encoding::Json)).unwrap(), e.admit(None).unwrap(), None);
     assert!(weak.upgrade().is_some(), "alive while streamed although the caller dropped it");
     drop(sub);
     // The playback notices at its next tick that nobody watches and ends.

@@ -115,7 +115,13 @@ pub async fn stream(
         .get(axum::http::header::AUTHORIZATION)
         .and_then(|v| crate::server::auth::bearer_token(v.as_bytes()))
         .map(crate::stream::token_key);
-    let admitted = engine.admit_for(connect.map(|Extension(ConnectInfo(addr))| addr.ip()), token);
+    let peer = connect.map(|Extension(ConnectInfo(addr))| addr);
+    // The playback is chosen now, so that the response can say its phase;
+    // each WebSocket has its own connection, whose port is its lane.
+    let watched = engine
+        .admit_for(peer.map(|a| a.ip()), token)
+        .map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
+    let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
     // Inbound messages are small controls; outbound frames are buffered up
     // to a bound, so a viewer that stops reading cannot grow memory.
     let l = &state.config.limits;
@@ -125,11 +131,9 @@ pub async fn stream(
         .write_buffer_size(l.ws_write_buffer_bytes)
         .max_write_buffer_size(l.ws_max_write_buffer_bytes)
         .read_buffer_size(READ_BUFFER_BYTES);
-    let phase_ms = crate::stream::Engine::phase_of(&params);
     let mut response = upgrade.on_upgrade(move |socket: WebSocket| async move {
-        match admitted {
-            Ok(permit) => {
-                let sub = engine.watch(params, permit);
+        match watched {
+            Ok(sub) => {
                 crate::panics::guarded("websocket", crate::stream::ws::serve(socket, sub, WsConfig::default())).await;
             }
             Err(refused) => {
@@ -139,6 +143,8 @@ pub async fn stream(
             }
         }
     });
-    response.headers_mut().insert(crate::stream::PHASE_HEADER, phase_ms.into());
+    if let Some(phase_ms) = phase_ms {
+        response.headers_mut().insert(crate::stream::PHASE_HEADER, phase_ms.into());
+    }
     Ok(response)
 }
