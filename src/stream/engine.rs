@@ -33,7 +33,7 @@ use super::hub::{Hub, Item};
 use super::limits::{AdmitError, Limits, StreamPermit};
 use super::playhead::{Control, MAX_SPEED};
 use super::schedule::{Grid, Schedule};
-use super::subscription::Subscription;
+use super::subscription::{Source, Subscription};
 use crate::anim::{Clip, Ease, Playback, Space};
 
 /// The highest accepted frame rate.
@@ -341,7 +341,7 @@ impl Engine {
             }
         };
         drop(hubs);
-        Subscription::new(self.clone(), params, schedule, rx, None, handback, None, permit)
+        Subscription::new(self.clone(), params, schedule, Source::Shared { rx, handback }, permit)
     }
 
     /// A private, controllable playback of `params` (gRPC `Play`) on
@@ -353,7 +353,7 @@ impl Engine {
         let first = grid.next_at_or_after(Instant::now());
         let schedule = Schedule::new(grid, first, 0).precise(self.inner.config.precise_timer);
         let (hub, rx, controls) = self.private(&params, schedule.clone(), None, true);
-        Subscription::new(self.clone(), params, schedule, rx, Some(hub), None, Some(controls), permit)
+        Subscription::new(self.clone(), params, schedule, Source::Private { hub, rx, controls }, permit)
     }
 
     /// A private playback on `schedule`, for its one viewer to drive;
@@ -366,12 +366,12 @@ impl Engine {
         schedule: Schedule,
         prev_time: Option<f64>,
         with_names: bool,
-    ) -> (Hub, broadcast::Receiver<Item>, mpsc::Sender<Control>) {
+    ) -> (Box<Hub>, broadcast::Receiver<Item>, mpsc::Sender<Control>) {
         let (tx, rx) = broadcast::channel(1);
         let (ctl_tx, ctl_rx) = mpsc::channel(CONTROL_QUEUE);
         let mut hub = Hub::new(params, schedule, tx, Some(ctl_rx), None, self.inner.shutdown.subscribe());
         hub.resume(prev_time, with_names);
-        (hub, rx, ctl_tx)
+        (Box::new(hub), rx, ctl_tx)
     }
 
     /// Ends every stream: each playback sends a final "shutting down" end at

@@ -101,23 +101,33 @@ impl std::fmt::Debug for Subscription {
     }
 }
 
+/// Where a new subscription's frames come from.
+pub(crate) enum Source {
+    /// A shared playback's broadcast, and the channel it comes back on if
+    /// this viewer started it and nobody joins (see `hub`).
+    Shared { rx: broadcast::Receiver<Item>, handback: Option<oneshot::Receiver<Box<Hub>>> },
+    /// A private playback for this viewer to drive, and its controls.
+    Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Control> },
+}
+
 impl Subscription {
     pub(crate) fn new(
         engine: Engine,
         params: StreamParams,
         schedule: Schedule,
-        rx: broadcast::Receiver<Item>,
-        driver: Option<Hub>,
-        handback: Option<oneshot::Receiver<Box<Hub>>>,
-        controls: Option<mpsc::Sender<Control>>,
+        source: Source,
         permit: StreamPermit,
     ) -> Self {
+        let (rx, driver, handback, controls) = match source {
+            Source::Shared { rx, handback } => (rx, None, handback, None),
+            Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
+        };
         Subscription {
             engine,
             params,
             schedule,
             rx,
-            driver: driver.map(Box::new),
+            driver,
             handback,
             controls,
             last_seq: None,
@@ -239,7 +249,7 @@ impl Subscription {
         // viewer drove it alone, ends here).
         self.rx = rx;
         self.handback = None;
-        self.driver = Some(Box::new(hub));
+        self.driver = Some(hub);
         self.controls = Some(tx);
     }
 }
