@@ -78,6 +78,8 @@ load grpc-stream-1000 grpc-stream -c "$(n 1000)" -d "$secs" --fps 60
 load ws-stream-1000 ws-stream -c "$(n 1000)" -d "$secs" --fps 60
 load ws-stream-1000-protobuf ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --protobuf
 load grpc-stream-shared-20000 grpc-stream -c "$(n 20000)" -d "$secs" --fps 60 --shared
+# The same 20,000 shared viewers at 10 fps: what one playback's fan-out sustains when 60 fps is more than the cores can send.
+load grpc-stream-shared-20000-10fps grpc-stream -c "$(n 20000)" -d "$secs" --fps 10 --shared
 # The knees: step up from 250 streams until p99 receive lateness > 2 ms or > 0.1% frames lost.
 load grpc-stream-ramp grpc-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)"
 load ws-stream-ramp ws-stream -c "$(n 250)" -d "$secs" --fps 60 --ramp --ramp-factor 2 --ramp-max "$(n 8000)" --protobuf

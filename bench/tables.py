@@ -90,19 +90,19 @@ if any(opens):
 
 # ---- streams
 stream_names = ["grpc-stream-1000", "ws-stream-1000", "ws-stream-1000-protobuf", "grpc-stream-shared-20000",
-                "grpc-stream-drift-10min"]
+                "grpc-stream-shared-20000-10fps", "grpc-stream-drift-10min"]
 streams = [(n, report(n)) for n in stream_names if report(n)]
 if streams:
-    w("**Streams** of the 20-joint clip at 60 fps (`inbetween load grpc-stream|ws-stream -c N --fps 60`):")
+    w("**Streams** of the 20-joint clip (`inbetween load grpc-stream|ws-stream -c N --fps F`):")
     w("")
-    w("| scenario | opened | frames/s per stream | send late p50 / p99 | receive late p50 / p99 / p99.9 | jitter p99 | "
+    w("| scenario | opened | fps | frames/s per stream | send late p50 / p99 | receive late p50 / p99 / p99.9 | jitter p99 | "
       "loss | drift | server cores | client cores | server RSS per stream | playbacks |")
-    w("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    w("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n, r in streams:
         s = r["streams"]
         sv = r.get("server") or {}
         per = sv.get("rss_per_stream_bytes")
-        w(f"| {n} ({s['encoding']}) | {s['opened']}/{s['streams']} | {s['frames_per_stream_per_sec']:.1f} | "
+        w(f"| {n} ({s['encoding']}) | {s['opened']}/{s['streams']} | {s['fps']} | {s['frames_per_stream_per_sec']:.1f} | "
           f"{ms(s['send_lateness']['p50_us'])} / {ms(s['send_lateness']['p99_us'])} | "
           f"{ms(s['receive_lateness']['p50_us'])} / {ms(s['receive_lateness']['p99_us'])} / "
           f"{ms(s['receive_lateness']['p999_us'])} | {ms(s['jitter']['p99_us'])} | {s['loss_ratio'] * 100:.2f}% | "
@@ -137,6 +137,13 @@ if shared:
     ok = s["opened"] == 20000 and s["receive_lateness"]["p99_us"] <= 2000 and s["loss_ratio"] <= 0.001
     verdicts.append(("≥ 20,000 viewers sharing one playback", f"{s['opened']} opened, p99 {ms(s['receive_lateness']['p99_us'])}, "
                      f"{s.get('playbacks_started')} playbacks", "met" if ok else "**missed**"))
+drift = report("grpc-stream-drift-10min")
+if drift:
+    s = drift["streams"]
+    d = s["drift_p50_us"]
+    verdicts.append((f"no drift over 10 minutes ({s['opened']} gRPC streams at {s['fps']} fps)",
+                     f"median receive lateness {'+' if d >= 0 else '-'}{ms(abs(d))} from the first to the last minute, "
+                     f"loss {s['loss_ratio'] * 100:.3f}%", "met" if abs(d) <= 1000 else "**missed**"))
 per = [(n, r["server"]["rss_per_stream_bytes"]) for n, r in streams if r.get("server") and not r["streams"]["shared"]]
 if per:
     worst = max(p for _, p in per)

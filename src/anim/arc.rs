@@ -15,6 +15,8 @@ use super::curve::ArcPiece;
 /// long paths also stay inside SPEC §2.9's 1e-5 (at about f32 resolution).
 const REL_TOLERANCE: f64 = 1e-6;
 const ABS_TOLERANCE: f64 = 1e-6;
+/// A sixth of an `f32` ulp, relative: finer positions cannot be output.
+const F32_RESOLUTION: f64 = 1e-8;
 /// Bounds on refinement, so that no input can make a build slow: at depth
 /// 16 a piece is 1/65536 of its segment, already within ~3e-6 of its length
 /// even at a zero-speed cusp; past the budget, pieces stop splitting.
@@ -46,18 +48,38 @@ fn gauss5(p: &[DVec3; 4], a: f64, b: f64) -> f64 {
     half * X.iter().zip(W).map(|(x, w)| w * velocity(p, mid + half * x).length()).sum::<f64>()
 }
 
-/// Arc length of `p` over `[a, b]`, adaptively to `abs_tol`.
+/// Quadrature evaluations one [`length`] may spend: far more than any
+/// curve representable in `f32` needs at the tolerances asked for here, and
+/// a bound on the work a hostile curve can cause.
+const LENGTH_BUDGET: u32 = 1 << 12;
+
+/// Arc length of `p` over `[a, b]`, adaptively to `abs_tol`, or to the
+/// length's own rounding noise (a few ulps) when that is coarser: asking a
+/// 1e22-long path for 1e-12 cannot converge, it only recurses (the fuzzer
+/// found such a clip: 2⁴⁰ evaluations).
 pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64) -> f64 {
-    fn go(p: &[DVec3; 4], a: f64, b: f64, whole: f64, tol: f64, depth: u32) -> f64 {
+    fn go(
+        p: &[DVec3; 4],
+        (a, b): (f64, f64),
+        whole: f64,
+        (tol, floor): (f64, f64),
+        depth: u32,
+        budget: &mut u32,
+    ) -> f64 {
         let m = (a + b) / 2.0;
         let (l, r) = (gauss5(p, a, m), gauss5(p, m, b));
-        if depth >= 40 || (l + r - whole).abs() <= tol {
+        *budget = budget.saturating_sub(2);
+        if depth >= 40 || *budget == 0 || (l + r - whole).abs() <= tol.max(floor) {
             l + r
         } else {
-            go(p, a, m, l, tol / 2.0, depth + 1) + go(p, m, b, r, tol / 2.0, depth + 1)
+            go(p, (a, m), l, (tol / 2.0, floor), depth + 1, budget)
+                + go(p, (m, b), r, (tol / 2.0, floor), depth + 1, budget)
         }
     }
-    go(p, a, b, gauss5(p, a, b), abs_tol.max(1e-300), 0)
+    let whole = gauss5(p, a, b);
+    let floor = (whole.abs() * 64.0 * f64::EPSILON).max(1e-300);
+    let mut budget = LENGTH_BUDGET;
+    go(p, (a, b), whole, (abs_tol, floor), 0, &mut budget)
 }
 
 /// The parameter in `[a, b]` whose arc length from `a` is `target`.
@@ -67,7 +89,8 @@ fn invert(p: &[DVec3; 4], a: f64, b: f64, target: f64, abs_tol: f64) -> f64 {
     for _ in 0..60 {
         let s = length(p, a, u, abs_tol);
         let err = s - target;
-        if err.abs() <= abs_tol * 0.01 {
+        // Not finer than the lengths' own rounding (a few ulps).
+        if err.abs() <= (abs_tol * 0.01).max(s.abs().max(target.abs()) * 64.0 * f64::EPSILON) {
             break;
         }
         if err > 0.0 {
@@ -96,7 +119,9 @@ pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f3
     if !total.is_finite() || total <= 1e-9 * scale {
         return None;
     }
-    let tol = (REL_TOLERANCE * total).min(ABS_TOLERANCE);
+    // Not finer than the output can resolve: poses are f32, whose ulp is
+    // 6e-8 of a coordinate (this changes nothing for coordinates ≤ 100).
+    let tol = (REL_TOLERANCE * total).min(ABS_TOLERANCE).max(scale * F32_RESOLUTION);
     let quad_tol = tol * 1e-3;
     // (start arc length, piece)
     let mut raw: Vec<(f64, ArcPiece)> = Vec::new();
@@ -159,5 +184,35 @@ fn split(
         let sm = (sa + sb) / 2.0;
         split(p, segment, (ua, u_mid), (sa, sm), tol, quad_tol, depth + 1, out);
         split(p, segment, (u_mid, ub), (sm, sb), tol, quad_tol, depth + 1, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lengths_are_exact_on_ordinary_curves() {
+        // A straight segment with evenly spaced control points: length 5.
+        let line =
+            [DVec3::ZERO, DVec3::new(1.0, 4.0 / 3.0, 0.0), DVec3::new(2.0, 8.0 / 3.0, 0.0), DVec3::new(3.0, 4.0, 0.0)];
+        assert!((length(&line, 0.0, 1.0, 1e-12) - 5.0).abs() < 1e-12);
+        // A quarter-circle-like arc of radius 1 (the classic 0.5523 handles): π/2 within 3e-4.
+        let k = 0.552_284_749_8;
+        let arc = [DVec3::X, DVec3::new(1.0, k, 0.0), DVec3::new(k, 1.0, 0.0), DVec3::Y];
+        assert!((length(&arc, 0.0, 1.0, 1e-12) - std::f64::consts::FRAC_PI_2).abs() < 3e-4);
+    }
+
+    #[test]
+    fn a_path_near_the_float_range_builds_a_bounded_table() {
+        // From a fuzzer timeout (fuzz/regressions/clip_json): one control point
+        // at 2.2e22. An absolute tolerance of 1e-12 on such a length is below
+        // its ulp, and the quadrature recursed 2^40 times.
+        let far = [DVec3::X, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.0, 2.222_220_017_222_415e22, 2.0)];
+        let (times, pieces) = build(&[far], 0.0, 3.0).expect("the path moves");
+        assert_eq!(times.len(), pieces.len() + 1);
+        assert!(pieces.len() <= MAX_PIECES);
+        assert!(times.windows(2).all(|w| w[0] < w[1]), "piece times increase");
+        assert_eq!((times[0], *times.last().unwrap()), (0.0, 3.0));
     }
 }
