@@ -47,5 +47,6 @@ for i, c in enumerate(d["clips"]):
 ' "$(basename "$f")"
   done
 fi
-cp corpus/import_gltf/* corpus/import_bvh/* corpus/clip_json/* corpus/import_evaluate/
+# One cp per source: files named by their content hash may be in several.
+for d in import_gltf import_bvh clip_json; do cp -f corpus/$d/* corpus/import_evaluate/; done
 for t in corpus/*; do echo "$t: $(ls "$t" | wc -l) files"; done

@@ -10,6 +10,8 @@
 #[path = "../store/pg.rs"]
 mod pg;
 
+mod balancer;
+
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -28,6 +30,8 @@ const PROPAGATION: Duration = Duration::from_secs(1);
 struct Node {
     name: String,
     base: String,
+    /// The gRPC listener, `host:port`.
+    grpc: String,
     child: Child,
 }
 
@@ -46,14 +50,19 @@ impl Node {
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit());
         let mut child = c.spawn().expect("the binary starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let base = line
-            .trim()
-            .strip_prefix("inbetween listening on ")
-            .unwrap_or_else(|| panic!("{name}: unexpected first line {line:?}"))
-            .to_owned();
-        Node { name: name.to_owned(), base, child }
+        let mut out = BufReader::new(child.stdout.take().unwrap());
+        let mut line = |prefix: &str| {
+            let mut line = String::new();
+            out.read_line(&mut line).unwrap();
+            line.trim()
+                .strip_prefix(prefix)
+                .unwrap_or_else(|| panic!("{name}: expected {prefix:?}, got {line:?}"))
+                .to_owned()
+        };
+        let base = line("inbetween listening on ");
+        let grpc = line("inbetween gRPC listening on ");
+        let grpc = grpc.trim_start_matches("http://").trim_end_matches('/').to_owned();
+        Node { name: name.to_owned(), base, grpc, child }
     }
 
     fn url(&self, path: &str) -> String {
