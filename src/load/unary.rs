@@ -26,6 +26,8 @@ use super::{Env, Mode, Options, procstat, setup};
 use crate::wire::proto::pb;
 use crate::wire::proto::pb::animation_client::AnimationClient;
 
+/// How long after the window requests scheduled inside it are still sent.
+const DEADLINE_GRACE: Duration = Duration::from_secs(1);
 /// A request that takes longer counts as a `timeout` error.
 const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -143,10 +145,12 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
                 if scheduled >= deadline {
                     break;
                 }
-                // Bounded in time: once the window is over, requests the
-                // server was too slow to let us send are counted, not sent.
+                // Bounded in time: a request scheduled inside the window is
+                // still sent (and its wait counted) for a grace second after
+                // it; past that, those the server was too slow to let us
+                // send are counted, not sent.
                 if let Some(r) = rate
-                    && Instant::now() >= deadline
+                    && Instant::now() >= deadline + DEADLINE_GRACE
                 {
                     let left = ((deadline - start).as_secs_f64() * r) as u64;
                     let unsent = (left.saturating_sub(w as u64)).div_ceil(workers as u64).saturating_sub(i);
