@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Load shedding at 4x capacity (release build): --max-in-flight C (default 4);
+# Load shedding at 4x capacity (release build): --max-in-flight C (default 2);
 # measures the capacity for a 500-pose batch sample closed loop, then offers
 # 4x that rate open loop for N seconds (default 30) and prints p50/p99 of the
 # admitted requests and the share shed. Usage: scripts/overload.sh [seconds] [C]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-OVERLOAD_SECS=${1:-30} OVERLOAD_CAPACITY=${2:-4} exec cargo test --release --test ops overload_p99 -- --ignored --nocapture
+OVERLOAD_SECS=${1:-30} OVERLOAD_CAPACITY=${2:-2} exec cargo test --release --test ops overload_p99 -- --ignored --nocapture

@@ -128,7 +128,7 @@ async fn one_token_cannot_hold_more_than_its_stream_cap() {
 #[ignore = "a measurement; run with --ignored"]
 async fn overload_p99_of_admitted_requests_at_four_times_capacity() {
     let secs: u64 = std::env::var("OVERLOAD_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(30);
-    let capacity: usize = std::env::var("OVERLOAD_CAPACITY").ok().and_then(|s| s.parse().ok()).unwrap_or(4);
+    let capacity: usize = std::env::var("OVERLOAD_CAPACITY").ok().and_then(|s| s.parse().ok()).unwrap_or(2);
     let dir = tempfile::tempdir().unwrap();
     let cap = capacity.to_string();
     let server = Server::start(&dir.path().join("data"), &["--max-in-flight", &cap]).await;
