@@ -90,34 +90,24 @@ impl Nginx {
         let (http_port, grpc_port) = (free_port(), free_port());
         let conf = dir.path().join("nginx.conf");
         std::fs::write(&conf, config(nodes, http_port, grpc_port, dir.path(), version)).unwrap();
-        let check = Command::new("nginx")
-            .arg("-t")
-            .arg("-p")
-            .arg(dir.path())
-            .arg("-c")
-            .arg(&conf)
-            .arg("-e")
-            .arg(dir.path().join("error.log"))
-            .arg("-g")
-            .arg(format!("pid {}/nginx.pid;", dir.path().display()))
-            .output()
-            .unwrap();
+        // nginx with everything (prefix, config, log, pid) under `dir`.
+        let nginx = |globals: &str| {
+            let mut c = Command::new("nginx");
+            c.arg("-p")
+                .arg(dir.path())
+                .arg("-c")
+                .arg(&conf)
+                .arg("-e")
+                .arg(dir.path().join("error.log"))
+                .arg("-g")
+                .arg(format!("{globals} pid {}/nginx.pid;", dir.path().display()));
+            c
+        };
+        let check = nginx("").arg("-t").output().unwrap();
         let log_path = dir.path().join("error.log");
         let log = move || std::fs::read_to_string(&log_path).unwrap_or_default();
         assert!(check.status.success(), "nginx -t: {}{}", String::from_utf8_lossy(&check.stderr), log());
-        let child = Command::new("nginx")
-            .arg("-p")
-            .arg(dir.path())
-            .arg("-c")
-            .arg(&conf)
-            .arg("-e")
-            .arg(dir.path().join("error.log"))
-            .arg("-g")
-            .arg(format!("daemon off; pid {}/nginx.pid;", dir.path().display()))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let child = nginx("daemon off;").stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
         let lb = Nginx {
             child,
             http: format!("http://127.0.0.1:{http_port}"),
