@@ -310,7 +310,7 @@ impl Engine {
         (lane % u64::from(Grid::phases(params.fps))) as u32
     }
 
-    /// A viewer of `params` on `lane` (see [`Engine::phase_for`]): joins
+    /// A viewer of `params` on `lane` (see `Engine::phase_for`): joins
     /// the matching playback if one has not produced its first frame yet,
     /// or starts one on the next tick of its grid. Controls fork it (see
     /// [`Subscription::control`]).

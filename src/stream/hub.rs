@@ -1,12 +1,13 @@
-//! A playback: one task that, at each tick of its schedule, evaluates the
-//! pose once, encodes it once and publishes the bytes to its viewers.
+//! A playback: at each tick of its schedule it evaluates the pose once,
+//! encodes it once and publishes the bytes to its viewers (or hands them to
+//! its one viewer directly; see below).
 //!
 //! Viewers receive through a `tokio::sync::broadcast` channel of a few
 //! frames. Publishing never waits: when a viewer falls behind, the channel
 //! overwrites its oldest frames, and the viewer later learns how many it
 //! missed (its `dropped`). A stalled viewer therefore costs a fixed amount
-//! of memory and never slows the others. The task sleeps on tokio's timer
-//! wheel between ticks (no busy loop), holds no lock across an await, and
+//! of memory and never slows the others. A playback sleeps on the tick timer
+//! (`ticker`) between ticks (no busy loop), holds no lock across an await, and
 //! reuses its sampler, event and encoding buffers, so a tick allocates only
 //! the bytes it sends.
 //!

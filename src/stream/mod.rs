@@ -5,10 +5,11 @@
 //! [`StreamParams`] (bound to the `Arc` of the compiled clip version it
 //! starts on), takes a [`StreamPermit`] from the [`Engine`] (the stream
 //! caps), and asks for a [`Subscription`]. The engine matches it to a
-//! playback (`hub`): one task per distinct playback that wakes on its
-//! schedule (`schedule`: tick `k` due at `start + k/fps`, computed, never
-//! accumulated; late wake-ups skip to the latest tick and count the rest as
-//! dropped), moves its playhead (`playhead`: controls act on the next tick),
+//! playback (`hub`), which wakes on its schedule (`schedule`: tick `k` due
+//! at `start + k/fps` on a grid with a millisecond phase, computed, never
+//! accumulated; `ticker` wakes it; late wake-ups skip to the latest tick and
+//! count the rest as dropped) — as its own task while it is shared, driven
+//! by its viewer when it has only one —, moves its playhead (`playhead`: controls act on the next tick),
 //! samples the clip once, collects the events crossed since the previous
 //! frame (`events`), encodes once (`encode`: JSON or protobuf) and
 //! publishes the bytes to a small broadcast buffer. Each subscription
@@ -53,7 +54,7 @@ pub use wire_frame::WireFrame;
 /// that tells a stream's client the phase of its grid, in whole ms: frame
 /// `seq` is due `phase + ⌊(first + seq)·10⁹/fps⌋` ns after the engine's
 /// epoch (`Ping`'s monotonic clock), for the stream's first grid tick
-/// `first` (see [`schedule`]). Clients that measure lateness need it.
+/// `first` (see `schedule`). Clients that measure lateness need it.
 pub const PHASE_HEADER: &str = "inbetween-grid-phase-ms";
 
 #[cfg(test)]
