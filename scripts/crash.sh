@@ -4,4 +4,4 @@
 # Usage: scripts/crash.sh [cycles] ; CRASH_SEED=<n> repeats a run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-CRASH_CYCLES=${1:-50} exec cargo test --test ops crash -- --nocapture
+CRASH_CYCLES=${1:-50} exec cargo test --test system crash -- --nocapture

@@ -5,4 +5,4 @@
 # admitted requests and the share shed. Usage: scripts/overload.sh [seconds] [C]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-OVERLOAD_SECS=${1:-30} OVERLOAD_CAPACITY=${2:-2} exec cargo test --release --test ops overload_p99 -- --ignored --nocapture
+INBETWEEN_SLOW=1 OVERLOAD_SECS=${1:-30} OVERLOAD_CAPACITY=${2:-2} exec cargo test --release --test system overload_p99 -- --nocapture

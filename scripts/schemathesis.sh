@@ -51,7 +51,7 @@ for role in none read write admin; do
     auth=()
     [[ $role != none ]] && auth=(-H "Authorization: Bearer ${token[$role]}")
     # The WebSocket route answers a plain GET 400 (no upgrade): schemathesis speaks no
-    # WebSocket, so it is left to tests/security's matrix and tests/streaming.
+    # WebSocket, so it is left to tests/service/security's matrix and tests/service/streaming.
     st --config-file scripts/schemathesis.toml run "$base/openapi.json" "${auth[@]}" \
         --exclude-path '/v1/clips/{id}/stream' --max-examples "$MAX_EXAMPLES" --seed "$SEED" \
         --workers 2 --no-color --request-timeout 30 || status=1

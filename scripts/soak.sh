@@ -4,4 +4,4 @@
 # Usage: scripts/soak.sh [seconds]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SOAK_SECS=${1:-1800} exec cargo test --test ops soak -- --ignored --nocapture
+INBETWEEN_SLOW=1 SOAK_SECS=${1:-1800} exec cargo test --test system soak -- --nocapture

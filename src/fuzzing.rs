@@ -1,6 +1,6 @@
 //! The bodies of the fuzz targets in `fuzz/`, here so that `cargo test`
 //! replays the committed corpus and every past crash through exactly the
-//! code libFuzzer runs (`tests/hardening/fuzz_replay.rs`), without libFuzzer.
+//! code libFuzzer runs (`tests/service/hardening/fuzz_replay.rs`), without libFuzzer.
 //!
 //! Each function takes arbitrary bytes: errors are fine, a panic is a
 //! finding (the assertions state what must hold for any input).

@@ -1,7 +1,7 @@
 //! Counting panics wherever they are caught: `inbetween_panics_total`,
 //! labelled by where. A panic is always a bug (bad input must become a 4xx),
 //! so the counter staying 0 under the malformed corpus is part of the
-//! hardening proof (tests/hardening). Request handlers are guarded by a tower
+//! hardening proof (tests/service/hardening). Request handlers are guarded by a tower
 //! layer; the tasks that outlive a request (playbacks, WebSocket streams,
 //! gRPC stream bodies and control readers) are guarded here.
 

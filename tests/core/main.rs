@@ -4,7 +4,8 @@
 //! evaluator written from SPEC §2 alone; `accuracy` holds the core to it;
 //! `lecture` checks the lecture's worked examples; `properties` states what
 //! must hold for any keys; `validation` pins each error code and path;
-//! `alloc` proves the hot path allocation-free; `cli` runs the real binary.
+//! `alloc` proves the hot path allocation-free; `cli` runs the real binary;
+//! `import` checks the importers against real third-party files.
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
 //! per binary. It counts per thread, so tests running in parallel do not
@@ -14,6 +15,7 @@ mod accuracy;
 mod alloc;
 mod behaviour;
 mod cli;
+mod import;
 mod lecture;
 mod playback;
 mod properties;

@@ -1,0 +1,44 @@
+//! The one integration-test harness, shared by the `service` and `system`
+//! test binaries (each says `mod common;`).
+//!
+//! - [`TestApp`]: the real `Application` in this process on 127.0.0.1:0,
+//!   with ready-made HTTP, gRPC and WebSocket clients; `stop()` joins the
+//!   server and fails the test if it returned an error or panicked.
+//! - [`ServerProcess`]: the real `inbetween` binary, for what only a process
+//!   can show (signals, `kill -9`, flags and environment, several nodes).
+//! - [`pg`]: a fresh PostgreSQL schema per test.
+//!
+//! Each binary uses a different part of it, hence the `dead_code` allowance.
+#![allow(dead_code)]
+
+pub mod app;
+pub mod pg;
+pub mod process;
+
+use std::time::Duration;
+
+pub use app::TestApp;
+pub use process::ServerProcess;
+
+/// The SPEC §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
+pub const WAVE: &str = include_str!("../../examples/wave.json");
+
+/// Bounds a wait: a server that stops answering fails the test instead of hanging it.
+pub async fn within<T>(secs: u64, what: &str, f: impl std::future::Future<Output = T>) -> T {
+    tokio::time::timeout(Duration::from_secs(secs), f).await.unwrap_or_else(|_| panic!("timed out: {what}"))
+}
+
+pub fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
+    assert!((a - b).abs() <= tol, "{what}: {a} vs {b} (tolerance {tol})");
+}
+
+/// Whether the slow runs (soak, overload measurement, the full crash test,
+/// figures for BENCHMARKS.md) are asked for: `INBETWEEN_SLOW=1`. Without it
+/// they return at once after saying how to run them.
+pub fn slow_runs(what: &str) -> bool {
+    let on = std::env::var("INBETWEEN_SLOW").is_ok_and(|v| v == "1");
+    if !on {
+        eprintln!("SKIPPED: {what} is a slow run; set INBETWEEN_SLOW=1 to run it");
+    }
+    on
+}

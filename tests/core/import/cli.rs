@@ -1,0 +1,141 @@
+//! `inbetween import` as a user runs it: the real binary, on the real files.
+
+use std::process::{Command, Output};
+use std::sync::{Arc, Mutex};
+
+use axum::Json;
+use axum::http::{HeaderMap, StatusCode};
+use axum::routing::post;
+use inbetween::anim::Clip;
+use inbetween::wire::json::parse_clip;
+use serde_json::{Value, json};
+
+use super::reference::testdata;
+
+fn inbetween(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_inbetween")).args(args).output().expect("run inbetween")
+}
+
+/// Runs `inbetween import` and returns its parsed stdout.
+fn import_ok(args: &[&str]) -> Value {
+    let out = inbetween(&[&["import"], args].concat());
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
+}
+
+#[test]
+fn prints_clip_documents_that_parse_and_build() {
+    for (rel, clips) in
+        [("gltf/InterpolationTest/InterpolationTest.gltf", 9), ("gltf/Fox/Fox.glb", 3), ("bvh/05_20-daz.bvh", 1)]
+    {
+        let path = testdata(rel);
+        let out = import_ok(&[path.to_str().unwrap()]);
+        let docs = out["clips"].as_array().unwrap();
+        assert_eq!(docs.len(), clips, "{rel}");
+        assert_eq!(out["skipped"], json!([]));
+        for doc in docs {
+            let (_, spec) = parse_clip(&serde_json::to_vec(doc).unwrap()).unwrap();
+            Clip::build(&spec).unwrap();
+        }
+    }
+    let bvh = import_ok(&[testdata("bvh/131_01.bvh").to_str().unwrap(), "--interpolation", "catmull_rom"]);
+    assert_eq!(bvh["clips"][0]["name"], "131_01", "BVH clips are named after the file");
+    assert_eq!(bvh["clips"][0]["tracks"][0]["interpolation"], "catmull_rom");
+}
+
+#[test]
+fn reads_only_plain_sibling_buffers() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = std::fs::read_to_string(testdata("gltf/InterpolationTest/InterpolationTest.gltf")).unwrap();
+    std::fs::copy(testdata("gltf/InterpolationTest/interpolation.bin"), dir.path().join("interpolation.bin")).unwrap();
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    for (uri, ok) in [
+        ("interpolation.bin", true),
+        ("interpolation%2Ebin", true),
+        ("../interpolation.bin", false),
+        ("%2E%2E%2Finterpolation.bin", false),
+        ("file:///etc/passwd", false),
+        ("/etc/passwd", false),
+        ("%FF", false),
+    ] {
+        let file = sub.join("model.gltf");
+        if uri.contains("..") || uri.contains("%2E%2E") {
+            // The .bin sits one level up: reachable only through `..`.
+            std::fs::write(&file, source.replace("\"interpolation.bin\"", &format!("\"{uri}\""))).unwrap();
+        } else {
+            std::fs::copy(dir.path().join("interpolation.bin"), sub.join("interpolation.bin")).unwrap();
+            std::fs::write(&file, source.replace("\"interpolation.bin\"", &format!("\"{uri}\""))).unwrap();
+        }
+        let out = inbetween(&["import", file.to_str().unwrap()]);
+        assert_eq!(out.status.success(), ok, "{uri}: {}", String::from_utf8_lossy(&out.stderr));
+        if !ok {
+            assert!(String::from_utf8_lossy(&out.stderr).contains("external_uri"), "{uri}");
+        }
+    }
+}
+
+#[test]
+fn reports_bad_files_on_stderr_with_the_code() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("broken.bvh");
+    std::fs::write(
+        &file,
+        "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\nMOTION\nFrames: 1\nFrame Time: 0\n0\n",
+    )
+    .unwrap();
+    let out = inbetween(&["import", file.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad_frame_time"));
+}
+
+/// `--server`: each clip is POSTed to `/v1/clips` with the bearer token, and
+/// the server's summaries are printed. A stand-in server records requests.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_each_clip_with_the_token() {
+    // (Authorization header, body) per request.
+    type Requests = Arc<Mutex<Vec<(Option<String>, Value)>>>;
+    let received: Requests = Arc::default();
+    let seen = received.clone();
+    let app = axum::Router::new().route(
+        "/v1/clips",
+        post(move |headers: HeaderMap, Json(doc): Json<Value>| {
+            let seen = seen.clone();
+            async move {
+                let auth = headers.get("authorization").and_then(|v| v.to_str().ok()).map(str::to_owned);
+                let name = doc["name"].clone();
+                let mut seen = seen.lock().unwrap();
+                seen.push((auth, doc));
+                (StatusCode::CREATED, Json(json!({"id": format!("c{}", seen.len()), "name": name, "version": 1})))
+            }
+        }),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    let server = tokio::spawn(async move { axum::serve(listener, app).await });
+
+    let fox = testdata("gltf/Fox/Fox.glb");
+    let out = tokio::task::spawn_blocking(move || {
+        inbetween(&["import", fox.to_str().unwrap(), "--server", &url, "--token", "s3cret"])
+    })
+    .await
+    .unwrap();
+    server.abort();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let printed: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        printed["clips"],
+        json!([
+            {"id": "c1", "name": "Survey", "version": 1},
+            {"id": "c2", "name": "Walk", "version": 1},
+            {"id": "c3", "name": "Run", "version": 1}
+        ])
+    );
+    let received = received.lock().unwrap();
+    assert_eq!(received.len(), 3);
+    for (auth, doc) in received.iter() {
+        assert_eq!(auth.as_deref(), Some("Bearer s3cret"));
+        Clip::build(&parse_clip(&serde_json::to_vec(doc).unwrap()).unwrap().1).unwrap();
+    }
+}

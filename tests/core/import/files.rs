@@ -1,0 +1,74 @@
+//! Every test file imports into clips that build and survive the JSON
+//! document round trip; format sniffing.
+
+use inbetween::anim::{Clip, Space};
+use inbetween::import::{Format, ImportOptions, sniff};
+use inbetween::wire::json::{ClipDoc, parse_clip};
+
+use super::reference::read;
+use super::{import_file, sample};
+
+const FILES: [&str; 10] = [
+    "gltf/AnimatedTriangle/AnimatedTriangle.gltf",
+    "gltf/BoxAnimated/BoxAnimated.gltf",
+    "gltf/CesiumMan/CesiumMan.gltf",
+    "gltf/RiggedSimple/RiggedSimple.gltf",
+    "gltf/InterpolationTest/InterpolationTest.gltf",
+    "gltf/Fox/Fox.glb",
+    "bvh/131_01.bvh",
+    "bvh/131_03.bvh",
+    "bvh/05_20-mb.bvh",
+    "bvh/05_20-daz.bvh",
+];
+
+#[test]
+fn every_file_imports_into_clips_that_build_and_round_trip_as_json() {
+    for rel in FILES {
+        let imported = import_file(rel, &ImportOptions::default());
+        assert!(!imported.clips.is_empty(), "{rel}");
+        assert!(imported.skipped.is_empty(), "{rel}: {:?}", imported.skipped);
+        for spec in &imported.clips {
+            let clip = Clip::build(spec).unwrap_or_else(|e| panic!("{rel} {}: {e}", spec.name));
+            // What the CLI prints is what POST /v1/clips accepts, unchanged.
+            let json = serde_json::to_vec(&ClipDoc::from_spec(spec)).unwrap();
+            let (_, back) = parse_clip(&json).unwrap_or_else(|e| panic!("{rel}: {e}"));
+            assert_eq!(&back, spec, "{rel} {}", spec.name);
+            let again = Clip::build(&back).unwrap();
+            let t = (clip.start() + clip.end()) as f64 / 2.0;
+            assert_eq!(sample(&clip, t, Space::Model).pose(), sample(&again, t, Space::Model).pose());
+        }
+    }
+}
+
+#[test]
+fn names_come_from_the_option_as_a_prefix_for_several_animations() {
+    let named = |name: &str| ImportOptions { name: Some(name.into()), ..ImportOptions::default() };
+    let fox = import_file("gltf/Fox/Fox.glb", &named("fox"));
+    let names: Vec<_> = fox.clips.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["fox/Survey", "fox/Walk", "fox/Run"]);
+    let one = import_file("gltf/CesiumMan/CesiumMan.gltf", &named("walk"));
+    assert_eq!(one.clips[0].name, "walk");
+    let bvh = import_file("bvh/131_01.bvh", &named("mj"));
+    assert_eq!(bvh.clips[0].name, "mj");
+}
+
+#[test]
+fn sniff_uses_magic_bytes_then_content_type_then_text() {
+    let cases: [(&[u8], Option<&str>, Option<Format>); 9] = [
+        (b"glTF\x02\0\0\0", None, Some(Format::Glb)),
+        (b"glTF\x02\0\0\0", Some("model/gltf+json"), Some(Format::Glb)),
+        (b"{\"asset\":{}}", None, Some(Format::Gltf)),
+        (b"\xEF\xBB\xBF  {", None, Some(Format::Gltf)),
+        (b"\r\nHIERARCHY\r\nROOT", None, Some(Format::Bvh)),
+        (b"hierarchy", None, Some(Format::Bvh)),
+        (b"whatever", Some("model/gltf-binary; foo=bar"), Some(Format::Glb)),
+        (b"whatever", Some("application/octet-stream"), None),
+        (b"", None, None),
+    ];
+    for (bytes, content_type, expected) in cases {
+        assert_eq!(sniff(bytes, content_type), expected, "{:?} {content_type:?}", String::from_utf8_lossy(bytes));
+    }
+    assert_eq!(sniff(&read("gltf/Fox/Fox.glb"), None), Some(Format::Glb));
+    assert_eq!(sniff(&read("bvh/05_20-daz.bvh"), None), Some(Format::Bvh));
+    assert_eq!(sniff(&read("gltf/CesiumMan/CesiumMan.gltf"), Some("application/octet-stream")), Some(Format::Gltf));
+}

@@ -1,0 +1,38 @@
+//! REST API tests: the real `Application` on 127.0.0.1:0 with its own SQLite
+//! file, driven by a real HTTP client (reqwest). One module per concern.
+
+mod bad_inputs;
+mod cache;
+mod cli;
+mod clips;
+mod concurrency;
+mod durability;
+mod import;
+mod operations;
+mod poses;
+mod security;
+
+use serde_json::Value;
+
+pub use crate::common::{TestApp, WAVE, assert_close, within};
+
+/// The canonical form the server stores for a document: parsed, re-serialised.
+pub fn canonical(doc: &str) -> String {
+    let parsed = inbetween::wire::json::parse_clip_doc(doc.as_bytes()).unwrap();
+    serde_json::to_string(&parsed).unwrap()
+}
+
+/// A clip with `joints` root joints, each with a linear translation track of
+/// `keys` keys whose every value is `[k, k, k]`, named `name`.
+pub fn uniform_clip(name: &str, joints: usize, keys: usize, k: f32) -> String {
+    let times: Vec<f32> = (0..keys).map(|i| i as f32).collect();
+    let tracks: Vec<Value> = (0..joints)
+        .map(|j| {
+            serde_json::json!({
+                "joint": format!("j{j}"), "channel": "translation", "interpolation": "linear",
+                "times": times, "values": vec![[k, k, k]; keys],
+            })
+        })
+        .collect();
+    serde_json::json!({"name": name, "tracks": tracks}).to_string()
+}

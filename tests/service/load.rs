@@ -1,0 +1,176 @@
+//! The load generator against a real server: every mode for about a second
+//! against `Application` on 127.0.0.1:0, checking that each report is
+//! complete and agrees with what the run must have produced (a 30 fps stream
+//! delivers ≈ 30 frames a second, a request budget is spent exactly, an open
+//! loop sends at its rate). Timing figures themselves are never asserted
+//! beyond sanity: speed is measured by `bench/run.sh`, not tested.
+
+use std::time::Duration;
+
+use inbetween::load::{self, ClipChoice, Mode, Options, Report, ramp::RampPlan};
+
+use crate::common::TestApp;
+
+async fn spawn_app() -> TestApp {
+    TestApp::builder()
+        .configure(|c| {
+            c.limits.max_streams = 4096;
+            c.limits.max_streams_per_client = 4096;
+        })
+        .start()
+        .await
+}
+
+fn options(app: &TestApp, mode: Mode) -> Options {
+    Options {
+        mode,
+        http: app.url(""),
+        grpc: app.grpc_url(),
+        allow_remote: false,
+        concurrency: 4,
+        connections: 0,
+        duration: Duration::from_secs(1),
+        requests: None,
+        rate: None,
+        clip: ClipChoice::Generate { joints: 20 },
+        fps: 30,
+        shared: false,
+        ws_protobuf: false,
+        ramp: None,
+        server_pid: None,
+    }
+}
+
+async fn run(opts: Options) -> Report {
+    tokio::time::timeout(Duration::from_secs(60), load::run(opts)).await.expect("the run is bounded").expect("runs")
+}
+
+/// What every report must hold, whatever the mode.
+fn check_common(r: &Report, mode: &str) {
+    assert_eq!(r.mode, mode);
+    assert!(r.errors.is_empty(), "{mode}: errors {:?}", r.errors);
+    assert!(r.ok > 0 && r.throughput > 0.0, "{mode}: {r:?}");
+    assert!((r.throughput - r.ok as f64 / r.elapsed_secs).abs() < 1e-6 * r.throughput.max(1.0));
+    // The server is this process, found by its listening port.
+    let server = r.server.as_ref().expect("the local server is measured");
+    assert_eq!(server.pid, std::process::id());
+    assert!(server.rss_end_bytes > 1 << 20 && server.cpu_cores >= 0.0, "{server:?}");
+    assert!(r.loadavg.is_some());
+    let json: serde_json::Value = serde_json::to_value(r).unwrap();
+    for key in ["mode", "throughput", "errors", "server", "elapsed_secs"] {
+        assert!(json.get(key).is_some(), "{key} missing from the JSON report");
+    }
+}
+
+fn check_unary(r: &Report, mode: &str) {
+    check_common(r, mode);
+    let l = r.latency.expect("unary reports latency");
+    assert_eq!(l.count, r.ok);
+    assert!(l.p50_us > 0.0 && l.p50_us <= l.p90_us && l.p90_us <= l.p99_us && l.p99_us <= l.max_us, "{l:?}");
+    assert!(r.streams.is_none());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unary_modes_report_latency_and_throughput() {
+    let app = spawn_app().await;
+    for mode in [Mode::GrpcPing, Mode::GrpcSample, Mode::RestHealth, Mode::RestPose] {
+        let r = run(options(&app, mode)).await;
+        check_unary(&r, mode.as_str());
+        assert_eq!(r.clip_id.is_empty(), matches!(mode, Mode::GrpcPing | Mode::RestHealth));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_budget_is_spent_exactly_and_an_open_loop_keeps_its_rate() {
+    let app = spawn_app().await;
+    let r =
+        run(Options { requests: Some(57), duration: Duration::from_secs(30), ..options(&app, Mode::GrpcSample) }).await;
+    check_unary(&r, "grpc-sample");
+    assert_eq!(r.ok, 57);
+    // 100 requests a second for a second: 100 scheduled, each sent (latency
+    // from its schedule) or, if the server fell too far behind, counted unsent.
+    let mut r = run(Options { rate: Some(100.0), concurrency: 16, ..options(&app, Mode::RestPose) }).await;
+    let unsent = r.errors.remove("unsent_past_deadline").unwrap_or(0);
+    check_unary(&r, "rest-pose");
+    assert!((98..=100).contains(&(r.ok + unsent)), "{} sent + {unsent} unsent at 100/s for 1 s", r.ok);
+    assert!(r.ok >= 50, "{} of 100 sent", r.ok);
+}
+
+async fn check_stream(app: &TestApp, mode: Mode, shared: bool, ws_protobuf: bool) {
+    let r = run(Options { shared, ws_protobuf, ..options(app, mode) }).await;
+    check_common(&r, mode.as_str());
+    let s = r.streams.as_ref().expect("stream reports");
+    assert_eq!((s.streams, s.opened, s.fps, s.shared), (4, 4, 30, shared));
+    // 30 fps for a second: ≈ 30 ticks per stream, each a frame or a counted
+    // drop. The window counts frames by arrival, so on a busy machine a burst
+    // still in flight at its end is missed: the lower bound is loose, the
+    // upper one is not (nothing may be counted twice).
+    let ticks = (r.ok + s.gaps) as f64 / 4.0 / r.elapsed_secs;
+    assert!((20.0..=33.0).contains(&ticks), "{ticks} ticks/s per stream at 30 fps");
+    assert!(s.frames_per_stream_per_sec >= 15.0, "{}", s.frames_per_stream_per_sec);
+    assert_eq!(s.receive_lateness.count, r.ok);
+    // A frame cannot arrive before it is sent, nor be sent before it is due
+    // (to within the clock sync's error, a few µs on loopback).
+    assert!(s.send_lateness.min_us >= 0.0 && s.receive_lateness.p50_us >= s.send_lateness.p50_us - 50.0, "{s:?}");
+    assert!(s.send_lateness.p50_us < 33_333.0, "a frame is sent within its tick: {s:?}");
+    assert!(s.clock.rtt_ns > 0);
+    assert_eq!(s.dropped, s.gaps, "every missing tick is one the server counted");
+    assert!(r.server.as_ref().unwrap().rss_per_stream_bytes.is_some());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stream_modes_deliver_the_asked_rate_and_measure_lateness() {
+    let app = spawn_app().await;
+    check_stream(&app, Mode::GrpcStream, false, false).await;
+    check_stream(&app, Mode::GrpcStream, true, false).await;
+    check_stream(&app, Mode::WsStream, false, false).await;
+    check_stream(&app, Mode::WsStream, true, true).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ramp_climbs_to_its_cap_or_stops_at_the_first_failing_stage() {
+    let app = spawn_app().await;
+    let plan = RampPlan { start: 1, factor: 2.0, max: 4, target_p99_us: 1e9, max_loss_ratio: 0.01 };
+    let opts = Options { ramp: Some(plan), duration: Duration::from_millis(300), ..options(&app, Mode::GrpcPing) };
+    let r = run(opts.clone()).await;
+    let ramp = r.ramp.as_ref().expect("a ramp report");
+    assert_eq!(ramp.stages.iter().map(|s| s.n).collect::<Vec<_>>(), [1, 2, 4]);
+    assert_eq!((ramp.knee, ramp.broke_at), (Some(4), None));
+    assert_eq!(r.concurrency, 4, "the report's body is the last stage");
+    // No ping answers within a nanosecond: the first stage fails and the ramp stops.
+    let strict = RampPlan { target_p99_us: 0.001, ..plan };
+    let r = run(Options { ramp: Some(strict), ..opts }).await;
+    let ramp = r.ramp.as_ref().unwrap();
+    assert_eq!((ramp.stages.len(), ramp.knee, ramp.broke_at), (1, None, Some(1)));
+}
+
+#[tokio::test]
+async fn remote_targets_are_refused_without_allow_remote() {
+    let app = spawn_app().await;
+    let opts = Options { http: "http://192.0.2.1:8080".into(), ..options(&app, Mode::RestHealth) };
+    let err = load::run(opts).await.unwrap_err();
+    assert!(format!("{err:#}").contains("--allow-remote"), "{err:#}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_cli_prints_a_json_report() {
+    let app = spawn_app().await;
+    let bin = env!("CARGO_BIN_EXE_inbetween");
+    let (http, grpc) = (app.url(""), app.grpc_url());
+    let args = ["load", "grpc-ping", "-c", "2", "-d", "0.5", "--json", "--http", &http, "--grpc", &grpc];
+    let out = tokio::process::Command::new(bin).args(args).output().await.unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(v["mode"], "grpc-ping");
+    assert!(v["ok"].as_u64().unwrap() > 0);
+    assert!(v["latency"]["p99_us"].as_f64().unwrap() > 0.0);
+    let human = tokio::process::Command::new(bin)
+        .args(&args[..args.len() - 4])
+        .arg("--http")
+        .arg("http://example.com")
+        .output()
+        .await
+        .unwrap();
+    assert!(!human.status.success());
+    assert!(String::from_utf8_lossy(&human.stderr).contains("--allow-remote"));
+}

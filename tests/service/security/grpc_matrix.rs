@@ -1,0 +1,123 @@
+//! Every RPC of `inbetween.v1.Animation` (read from the embedded descriptor
+//! set, so a new RPC without a matrix entry fails) × {none, invalid, read,
+//! write, admin}: allowed calls succeed, the rest end UNAUTHENTICATED or
+//! PERMISSION_DENIED, and no refused write changes the store.
+
+use std::collections::BTreeSet;
+
+use inbetween::server::auth::Scope;
+use inbetween::wire::proto::{FILE_DESCRIPTOR_SET, pb};
+use prost::Message;
+use tonic::Code;
+
+use super::{ADMIN, Need, Outcome, Role, TestApp, WAVE, expected, scoped_tokens, snapshot, wave_pb, with_token};
+
+const RPCS: &[(&str, Need)] = &[
+    ("Sample", Need::Scope(Scope::Read)),
+    ("SampleBatch", Need::Scope(Scope::Read)),
+    ("StreamFrames", Need::Scope(Scope::Read)),
+    ("Play", Need::Scope(Scope::Read)),
+    ("GetClip", Need::Scope(Scope::Read)),
+    ("ListClips", Need::Scope(Scope::Read)),
+    ("PutClip", Need::Scope(Scope::Write)),
+    ("DeleteClip", Need::Scope(Scope::Write)),
+    ("Ping", Need::Open),
+];
+
+fn service_methods() -> BTreeSet<String> {
+    let set = prost_types::FileDescriptorSet::decode(FILE_DESCRIPTOR_SET).unwrap();
+    let service = set
+        .file
+        .iter()
+        .flat_map(|f| f.service.iter())
+        .find(|s| s.name() == "Animation")
+        .expect("the Animation service");
+    service.method.iter().map(|m| m.name().to_owned()).collect()
+}
+
+fn stream_request(id: &str) -> pb::StreamRequest {
+    pb::StreamRequest { clip_id: id.to_owned(), fps: 60, max_frames: 1, ..Default::default() }
+}
+
+/// Calls `rpc` as `role` on a fresh clip; `Ok` when the call (and, for
+/// streams, its first frame) succeeded.
+async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status> {
+    let id = app.create_id(WAVE, Some(ADMIN)).await;
+    let mut grpc = app.grpc().await;
+    let t = role.token();
+    match rpc {
+        "Sample" => grpc
+            .sample(with_token(pb::SampleRequest { clip_id: id, time: 0.5, ..Default::default() }, t))
+            .await
+            .map(drop),
+        "SampleBatch" => {
+            let when = pb::sample_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
+            let req = pb::SampleBatchRequest { clip_id: id, when: Some(when), ..Default::default() };
+            grpc.sample_batch(with_token(req, t)).await.map(drop)
+        }
+        "StreamFrames" => {
+            let mut frames = grpc.stream_frames(with_token(stream_request(&id), t)).await?.into_inner();
+            frames.message().await?.expect("a first frame");
+            Ok(())
+        }
+        "Play" => {
+            let open = pb::PlaybackControl {
+                op: Some(pb::playback_control::Op::Open(pb::Open { stream: Some(stream_request(&id)), paused: false })),
+            };
+            // The request stream stays open until the first frame has come.
+            let (tx, rx) = tokio::sync::mpsc::channel(1);
+            tx.send(open).await.unwrap();
+            let inbound = tokio_stream::wrappers::ReceiverStream::new(rx);
+            let mut frames = grpc.play(with_token(inbound, t)).await?.into_inner();
+            frames.message().await?.expect("a first frame");
+            drop(tx);
+            Ok(())
+        }
+        "GetClip" => grpc.get_clip(with_token(pb::GetClipRequest { clip_id: id }, t)).await.map(drop),
+        "ListClips" => grpc.list_clips(with_token(pb::ListClipsRequest::default(), t)).await.map(drop),
+        "PutClip" => {
+            let req = pb::PutClipRequest { clip_id: id, clip: Some(wave_pb()), if_version: None };
+            grpc.put_clip(with_token(req, t)).await.map(drop)
+        }
+        "DeleteClip" => grpc.delete_clip(with_token(pb::DeleteClipRequest { clip_id: id }, t)).await.map(drop),
+        "Ping" => grpc.ping(with_token(pb::PingRequest::default(), t)).await.map(drop),
+        other => panic!("no call for {other}"),
+    }
+}
+
+#[tokio::test]
+async fn every_rpc_checks_its_scope() {
+    let listed: BTreeSet<String> = RPCS.iter().map(|(name, _)| name.to_string()).collect();
+    assert_eq!(service_methods(), listed, "every RPC needs a matrix entry, and only those");
+
+    let app = TestApp::builder().configure(scoped_tokens).start().await;
+    let mut refused_writes = 0;
+    for &(rpc, need) in RPCS {
+        for role in Role::ALL {
+            let before = snapshot(&app).await;
+            let result = call(&app, rpc, role).await;
+            let after = snapshot(&app).await;
+            let what = format!("{rpc} as {role:?}");
+            match expected(need, role) {
+                Outcome::Allowed => assert!(result.is_ok(), "{what}: {result:?}"),
+                refused => {
+                    let status = result.expect_err(&what);
+                    let (code, stable) = match refused {
+                        Outcome::Unauthenticated => (Code::Unauthenticated, "unauthorized"),
+                        _ => (Code::PermissionDenied, "insufficient_scope"),
+                    };
+                    assert_eq!(status.code(), code, "{what}: {status:?}");
+                    assert_eq!(status.metadata().get("x-error-code").unwrap(), stable, "{what}");
+                    let created: Vec<_> = after.iter().filter(|c| !before.contains(c)).collect();
+                    assert!(created.len() <= 1, "{what} created a clip: {created:?}");
+                    assert!(before.iter().all(|c| after.contains(c)), "{what} changed or deleted a clip");
+                    if need == Need::Scope(Scope::Write) {
+                        refused_writes += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(refused_writes, 2 * 3);
+    app.stop().await;
+}

@@ -1,0 +1,187 @@
+//! Every REST operation of the OpenAPI document × {none, invalid, read,
+//! write, admin}: allowed calls succeed, the rest get 401/403 with a problem
+//! body, and no refused write changes the store.
+
+use std::collections::BTreeSet;
+
+use inbetween::server::auth::Scope;
+use reqwest::Method;
+use serde_json::Value;
+use tokio_tungstenite::tungstenite;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+use super::{ADMIN, Need, Outcome, Role, TINY_BVH, TestApp, WAVE, expected, scoped_tokens, snapshot};
+
+/// What each operation needs, and the status it answers when allowed. A route
+/// added to the OpenAPI document without a line here fails the test.
+const ROUTES: &[(&str, &str, Need, u16)] = &[
+    ("post", "/v1/clips", Need::Scope(Scope::Write), 201),
+    ("get", "/v1/clips", Need::Scope(Scope::Read), 200),
+    ("post", "/v1/clips/import", Need::Scope(Scope::Write), 201),
+    ("get", "/v1/clips/{id}", Need::Scope(Scope::Read), 200),
+    ("put", "/v1/clips/{id}", Need::Scope(Scope::Write), 200),
+    ("delete", "/v1/clips/{id}", Need::Scope(Scope::Write), 204),
+    ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
+    ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
+    ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
+    ("get", "/healthz", Need::Open, 200),
+    ("get", "/readyz", Need::Open, 200),
+    ("get", "/metrics", Need::Scope(Scope::Admin), 200),
+    // The viewer page is public; it asks for a token only when an upload answers 401.
+    ("get", "/viewer", Need::Open, 200),
+];
+
+/// The (method, path) of every operation in `/openapi.json`, with whether it
+/// declares the bearer scheme.
+async fn documented_operations(app: &TestApp) -> Vec<(String, String, bool)> {
+    let doc: Value = app.http.get(app.url("/openapi.json")).send().await.unwrap().json().await.unwrap();
+    let mut ops = Vec::new();
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            if !["get", "put", "post", "delete", "patch", "head", "options"].contains(&method.as_str()) {
+                continue;
+            }
+            let secured = op["security"].as_array().is_some_and(|s| s.iter().any(|r| r.get("bearer").is_some()));
+            if secured {
+                for status in ["401", "403"] {
+                    assert!(op["responses"].get(status).is_some(), "{method} {path} does not document {status}");
+                }
+            }
+            ops.push((method.clone(), path.clone(), secured));
+        }
+    }
+    ops
+}
+
+/// Sends one request of the operation as `role`; returns the status and, for
+/// refusals, the problem body.
+async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
+    // Each call gets its own clip, so a delete or replace cannot disturb the next one.
+    let id = app.create_id(WAVE, Some(ADMIN)).await;
+    let path = path.replace("{id}", &id);
+    if path.ends_with("/stream") {
+        return websocket(app, &path, role).await;
+    }
+    let mut req = app.http.request(method.to_uppercase().parse::<Method>().unwrap(), app.url(&path));
+    req = match (method, path.as_str()) {
+        ("post", "/v1/clips") | ("put", _) => req.header("content-type", "application/json").body(WAVE),
+        ("post", "/v1/clips/import") => {
+            req.query(&[("format", "bvh")]).header("content-type", "application/octet-stream").body(TINY_BVH)
+        }
+        ("post", p) if p.ends_with("/sample") => req.json(&serde_json::json!({"times": [0.0, 0.5]})),
+        ("get", p) if p.ends_with("/pose") => req.query(&[("t", "0.25")]),
+        _ => req,
+    };
+    if let Some(t) = role.token() {
+        req = req.bearer_auth(t);
+    }
+    let resp = req.send().await.unwrap();
+    let status = resp.status().as_u16();
+    if resp.status().is_success() {
+        return (status, None);
+    }
+    let ct = resp.headers().get("content-type").map(|v| v.to_str().unwrap().to_owned()).unwrap_or_default();
+    let www = resp.headers().get("www-authenticate").map(|v| v.to_str().unwrap().to_owned());
+    let body: Value = resp.json().await.unwrap_or(Value::Null);
+    if status == 401 {
+        assert_eq!(www.as_deref(), Some("Bearer"), "401 without WWW-Authenticate");
+    }
+    (status, Some((ct, body)))
+}
+
+async fn websocket(app: &TestApp, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
+    let mut req = format!("ws://{}{path}?max_frames=1", app.addr).into_client_request().unwrap();
+    if let Some(t) = role.token() {
+        req.headers_mut().insert("authorization", format!("Bearer {t}").parse().unwrap());
+    }
+    match tokio_tungstenite::connect_async(req).await {
+        Ok((mut ws, resp)) => {
+            use futures_util::StreamExt;
+            // Allowed: the first frame arrives.
+            let first = ws.next().await.expect("a frame").expect("a frame");
+            assert!(matches!(first, tungstenite::Message::Text(_)), "{first:?}");
+            (resp.status().as_u16(), None)
+        }
+        Err(tungstenite::Error::Http(resp)) => {
+            let ct = resp.headers().get("content-type").map(|v| v.to_str().unwrap().to_owned()).unwrap_or_default();
+            let body = resp.body().as_deref().and_then(|b| serde_json::from_slice(b).ok()).unwrap_or(Value::Null);
+            (resp.status().as_u16(), Some((ct, body)))
+        }
+        Err(e) => panic!("websocket {path}: {e}"),
+    }
+}
+
+#[tokio::test]
+async fn every_rest_route_checks_its_scope() {
+    let app = TestApp::builder().configure(scoped_tokens).start().await;
+
+    // The matrix covers exactly the documented operations, and the document
+    // declares the bearer scheme on exactly the guarded ones.
+    let documented = documented_operations(&app).await;
+    let listed: BTreeSet<(String, String)> = ROUTES.iter().map(|(m, p, ..)| (m.to_string(), p.to_string())).collect();
+    let in_doc: BTreeSet<(String, String)> = documented.iter().map(|(m, p, _)| (m.clone(), p.clone())).collect();
+    assert_eq!(in_doc, listed, "every documented operation needs a matrix entry, and only those");
+    for (method, path, secured) in &documented {
+        let need = ROUTES.iter().find(|(m, p, ..)| m == method && p == path).unwrap().2;
+        assert_eq!(*secured, need != Need::Open, "{method} {path}: bearer scheme in the document");
+    }
+
+    let mut cells = 0;
+    let mut refused_writes = 0;
+    for &(method, path, need, ok_status) in ROUTES {
+        for role in Role::ALL {
+            let before = snapshot(&app).await;
+            let (status, problem) = call(&app, method, path, role).await;
+            let after = snapshot(&app).await;
+            let what = format!("{method} {path} as {role:?}");
+            match expected(need, role) {
+                Outcome::Allowed => assert_eq!(status, ok_status, "{what}: {problem:?}"),
+                refused => {
+                    let (status_wanted, code) = match refused {
+                        Outcome::Unauthenticated => (401, "unauthorized"),
+                        _ => (403, "insufficient_scope"),
+                    };
+                    assert_eq!(status, status_wanted, "{what}");
+                    let (ct, body) = problem.unwrap();
+                    assert_eq!(ct, "application/problem+json", "{what}");
+                    assert_eq!(
+                        (body["status"].as_u64(), body["code"].as_str()),
+                        (Some(u64::from(status_wanted)), Some(code))
+                    );
+                    // Only the clip `call` created for this request is new; nothing else moved.
+                    let created: Vec<_> = after.iter().filter(|c| !before.contains(c)).collect();
+                    assert!(created.len() <= 1, "{what} changed the store: {created:?}");
+                    assert!(before.iter().all(|c| after.contains(c)), "{what} changed or deleted a clip");
+                    if need == Need::Scope(Scope::Write) {
+                        refused_writes += 1;
+                    }
+                }
+            }
+            cells += 1;
+        }
+    }
+    assert_eq!(cells, ROUTES.len() * Role::ALL.len());
+    // write routes × {none, invalid, read}
+    assert_eq!(refused_writes, 4 * 3);
+    app.stop().await;
+}
+
+/// Without any token configured the server is open; with only the plain
+/// `--api-token`, reads stay public and `/metrics` stays open.
+#[tokio::test]
+async fn guards_follow_the_configured_tokens() {
+    let open = TestApp::start().await;
+    for (method, path, _, ok) in ROUTES {
+        let (status, _) = call(&open, method, path, Role::None).await;
+        assert_eq!(status, *ok, "open server: {method} {path}");
+    }
+    open.stop().await;
+
+    let app = TestApp::builder().write_token(ADMIN).start().await;
+    for (method, path, need, ok) in ROUTES {
+        let (status, _) = call(&app, method, path, Role::None).await;
+        let guarded = *need == Need::Scope(Scope::Write);
+        assert_eq!(status, if guarded { 401 } else { *ok }, "write token only: {method} {path}");
+    }
+    app.stop().await;
+}

@@ -1,0 +1,200 @@
+//! The storage suite: every behaviour of the `ClipStore` trait, run against
+//! a real SQLite file and a real PostgreSQL schema (fresh per test). Then
+//! what is particular to each backend: durability read back from the
+//! database and refused when off, PostgreSQL's change notifications and its
+//! recovery from terminated connections.
+
+mod backend;
+
+use std::sync::Arc;
+
+use inbetween::anim::Playback;
+use inbetween::store::{ClipStats, ClipStore, ListQuery, NewClip, StoreError};
+
+/// Runs each listed test once per backend: `sqlite::name` and `postgres::name`.
+macro_rules! for_both_backends {
+    ($($name:ident),* $(,)?) => {
+        mod sqlite {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+                async fn $name() {
+                    let backend = super::backend::Sqlite::open().await;
+                    super::$name(backend.store.clone()).await;
+                }
+            )*
+        }
+        mod postgres {
+            $(
+                #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+                async fn $name() {
+                    let Some(backend) = super::backend::Postgres::open(stringify!($name)).await else { return };
+                    super::$name(backend.store.clone()).await;
+                    backend.finish().await;
+                }
+            )*
+        }
+    };
+}
+
+for_both_backends!(
+    a_created_clip_reads_back_exactly,
+    an_unknown_id_is_none_and_writes_to_it_are_not_found,
+    listing_pages_in_creation_order_and_filters_by_name,
+    replace_bumps_the_version_and_honours_the_expected_one,
+    delete_honours_the_expected_version,
+    create_all_stores_every_clip_in_order,
+    concurrent_conditional_replaces_let_exactly_one_win,
+    concurrent_creates_all_land,
+    ping_answers_until_closed,
+);
+
+pub fn stats(joints: u32, playback: Playback) -> ClipStats {
+    ClipStats { joints, tracks: joints * 3, events: 2, start: 0.25, end: 1.5, playback }
+}
+
+pub fn new_clip(name: &str, doc: &str) -> NewClip {
+    NewClip { name: name.to_owned(), doc_json: doc.to_owned(), stats: stats(4, Playback::Loop) }
+}
+
+async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
+    // The store keeps text as given, multi-byte characters and all.
+    let doc = format!("{{\"name\":\"wave ✓\",\"pad\":\"{}\"}}", "é".repeat(50_000));
+    let clip = NewClip { name: "wave ✓".into(), doc_json: doc.clone(), stats: stats(7, Playback::PingPong) };
+    let meta = store.create(clip).await.unwrap();
+    assert_eq!(meta.version, 1);
+    assert!(inbetween::store::is_clip_id(&meta.id));
+    assert_eq!(meta.created_at, meta.updated_at);
+    let got = store.get(&meta.id).await.unwrap().expect("the clip is there");
+    assert_eq!(got.doc_json, doc);
+    assert_eq!(got.meta, meta);
+    assert_eq!(got.meta.stats, stats(7, Playback::PingPong));
+}
+
+async fn an_unknown_id_is_none_and_writes_to_it_are_not_found(store: Arc<dyn ClipStore>) {
+    let id = inbetween::store::new_clip_id();
+    assert!(store.get(&id).await.unwrap().is_none());
+    assert!(matches!(store.replace(&id, new_clip("x", "{}"), None).await, Err(StoreError::NotFound)));
+    assert!(matches!(store.replace(&id, new_clip("x", "{}"), Some(1)).await, Err(StoreError::NotFound)));
+    assert!(matches!(store.delete(&id, None).await, Err(StoreError::NotFound)));
+}
+
+async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn ClipStore>) {
+    let mut ids = Vec::new();
+    for i in 0..7 {
+        let name = if i % 2 == 0 { "even" } else { "odd" };
+        ids.push(store.create(new_clip(name, &format!("{{\"i\":{i}}}"))).await.unwrap().id);
+    }
+    let mut seen = Vec::new();
+    let mut after = None;
+    loop {
+        let page = store.list(ListQuery { after: after.clone(), name: None, limit: 3 }).await.unwrap();
+        assert!(page.len() <= 3);
+        if page.is_empty() {
+            break;
+        }
+        after = Some(page.last().unwrap().id.clone());
+        seen.extend(page.into_iter().map(|m| m.id));
+    }
+    assert_eq!(seen, ids, "every clip once, in creation order");
+    let odd = store.list(ListQuery { after: None, name: Some("odd".into()), limit: 100 }).await.unwrap();
+    assert_eq!(
+        odd.iter().map(|m| m.id.clone()).collect::<Vec<_>>(),
+        vec![ids[1].clone(), ids[3].clone(), ids[5].clone()]
+    );
+    let after_first_odd =
+        store.list(ListQuery { after: Some(ids[1].clone()), name: Some("odd".into()), limit: 1 }).await.unwrap();
+    assert_eq!(after_first_odd.len(), 1);
+    assert_eq!(after_first_odd[0].id, ids[3]);
+}
+
+async fn replace_bumps_the_version_and_honours_the_expected_one(store: Arc<dyn ClipStore>) {
+    let v1 = store.create(new_clip("a", "{\"v\":1}")).await.unwrap();
+    let replacement = NewClip { name: "b".into(), doc_json: "{\"v\":2}".into(), stats: stats(9, Playback::Once) };
+    let v2 = store.replace(&v1.id, replacement, Some(1)).await.unwrap();
+    assert_eq!((v2.id.as_str(), v2.version, v2.name.as_str()), (v1.id.as_str(), 2, "b"));
+    assert_eq!(v2.created_at, v1.created_at);
+    assert!(v2.updated_at >= v1.updated_at);
+    assert_eq!(v2.stats, stats(9, Playback::Once));
+    match store.replace(&v1.id, new_clip("c", "{\"v\":3}"), Some(1)).await {
+        Err(StoreError::VersionMismatch { current }) => assert_eq!(current, 2),
+        other => panic!("a stale expected version must be refused, got {other:?}"),
+    }
+    let got = store.get(&v1.id).await.unwrap().unwrap();
+    assert_eq!((got.doc_json.as_str(), got.meta.version), ("{\"v\":2}", 2), "the refused replace changed nothing");
+    let v3 = store.replace(&v1.id, new_clip("c", "{\"v\":3}"), None).await.unwrap();
+    assert_eq!(v3.version, 3);
+}
+
+async fn delete_honours_the_expected_version(store: Arc<dyn ClipStore>) {
+    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    store.replace(&meta.id, new_clip("a", "{\"v\":2}"), None).await.unwrap();
+    match store.delete(&meta.id, Some(1)).await {
+        Err(StoreError::VersionMismatch { current }) => assert_eq!(current, 2),
+        other => panic!("a stale expected version must be refused, got {other:?}"),
+    }
+    assert!(store.get(&meta.id).await.unwrap().is_some());
+    store.delete(&meta.id, Some(2)).await.unwrap();
+    assert!(store.get(&meta.id).await.unwrap().is_none());
+    assert!(matches!(store.delete(&meta.id, None).await, Err(StoreError::NotFound)));
+}
+
+async fn create_all_stores_every_clip_in_order(store: Arc<dyn ClipStore>) {
+    let clips: Vec<NewClip> = (0..5).map(|i| new_clip(&format!("anim{i}"), &format!("{{\"i\":{i}}}"))).collect();
+    let metas = store.create_all(clips).await.unwrap();
+    assert_eq!(metas.len(), 5);
+    let listed = store.list(ListQuery { after: None, name: None, limit: 10 }).await.unwrap();
+    assert_eq!(listed, metas, "listed in creation order, exactly as returned");
+    for (i, m) in metas.iter().enumerate() {
+        assert_eq!(store.get(&m.id).await.unwrap().unwrap().doc_json, format!("{{\"i\":{i}}}"));
+    }
+}
+
+async fn concurrent_conditional_replaces_let_exactly_one_win(store: Arc<dyn ClipStore>) {
+    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    let tasks: Vec<_> = (0..8)
+        .map(|i| {
+            let (store, id) = (store.clone(), meta.id.clone());
+            tokio::spawn(async move { store.replace(&id, new_clip("a", &format!("{{\"w\":{i}}}")), Some(1)).await })
+        })
+        .collect();
+    let mut wins = 0;
+    for t in tasks {
+        match t.await.unwrap() {
+            Ok(m) => {
+                assert_eq!(m.version, 2);
+                wins += 1;
+            }
+            Err(StoreError::VersionMismatch { current }) => assert_eq!(current, 2),
+            Err(e) => panic!("unexpected {e:?}"),
+        }
+    }
+    assert_eq!(wins, 1);
+    assert_eq!(store.get(&meta.id).await.unwrap().unwrap().meta.version, 2);
+}
+
+async fn concurrent_creates_all_land(store: Arc<dyn ClipStore>) {
+    let tasks: Vec<_> = (0..16)
+        .map(|i| {
+            let store = store.clone();
+            tokio::spawn(async move { store.create(new_clip("c", &format!("{{\"i\":{i}}}"))).await.unwrap().id })
+        })
+        .collect();
+    let mut ids = Vec::new();
+    for t in tasks {
+        ids.push(t.await.unwrap());
+    }
+    let listed = store.list(ListQuery { after: None, name: Some("c".into()), limit: 100 }).await.unwrap();
+    let mut listed: Vec<String> = listed.into_iter().map(|m| m.id).collect();
+    listed.sort();
+    ids.sort();
+    assert_eq!(listed, ids);
+}
+
+async fn ping_answers_until_closed(store: Arc<dyn ClipStore>) {
+    store.ping().await.unwrap();
+    store.close().await;
+    assert!(store.ping().await.is_err());
+}
+
+mod durability;
+mod postgres_only;

@@ -1,0 +1,13 @@
+//! The system suite: the real `inbetween` binary (`common::ServerProcess`),
+//! spawned on free ports and driven over loopback: signals and draining,
+//! connection limits, overload, `kill -9` crashes, several nodes on one
+//! PostgreSQL schema behind nginx.
+//!
+//! The slow runs (the soak, the overload measurement, the invalidation-delay
+//! figures) return at once unless `INBETWEEN_SLOW=1`; the scripts in
+//! `scripts/` set it.
+
+mod common;
+
+mod multinode;
+mod ops;

@@ -1,0 +1,244 @@
+//! Several real `inbetween` processes on one PostgreSQL schema, as behind a
+//! load balancer: a change on any node reaches every other node's cache
+//! within a second (LISTEN/NOTIFY), a node killed with `kill -9` leaves the
+//! others serving and streaming, and a node whose database connections are
+//! terminated recovers without ever serving a stale version afterwards.
+//!
+//! Skips (with a message) without PostgreSQL, unless
+//! `INBETWEEN_REQUIRE_POSTGRES=1`.
+
+mod balancer;
+
+use std::time::Duration;
+
+use futures_util::StreamExt;
+use serde_json::Value;
+use tokio::time::Instant;
+use tokio_tungstenite::tungstenite::Message;
+
+use crate::common::ServerProcess;
+use crate::common::pg::Schema;
+
+/// The bound the issue sets for a change to reach every node.
+const PROPAGATION: Duration = Duration::from_secs(1);
+
+/// A node: one `inbetween serve` process, killed (SIGKILL) when dropped.
+type Node = ServerProcess;
+
+/// Starts node `name` on `schema`, ready; its database connections carry
+/// `application_name=<name>` so a test can find and cut them.
+async fn start(schema: &Schema, name: &str) -> Node {
+    ServerProcess::serve()
+        .name(name)
+        .args(["--db-max-connections", "4", "--database-url"])
+        .arg(schema.url(&format!("application_name={name}")))
+        .start()
+        .await
+}
+
+/// Starts the named nodes one after the other.
+async fn start_all<const N: usize>(schema: &Schema, names: [&str; N]) -> [Node; N] {
+    let mut nodes = Vec::with_capacity(N);
+    for name in names {
+        nodes.push(start(schema, name).await);
+    }
+    let Ok(nodes) = nodes.try_into() else { unreachable!("N names, N nodes") };
+    nodes
+}
+
+/// A clip whose only joint sits at x = `marker` at every time: a pose tells
+/// which version a node served.
+fn marker_doc(marker: u32) -> String {
+    serde_json::json!({"name": "marker", "tracks": [{"joint": "j", "channel": "translation",
+        "interpolation": "linear", "times": [0.0, 10.0], "values": [[marker, 0, 0], [marker, 0, 0]]}]})
+    .to_string()
+}
+
+async fn create(http: &reqwest::Client, node: &Node, marker: u32) -> String {
+    let resp = http
+        .post(node.url("/v1/clips"))
+        .header("content-type", "application/json")
+        .body(marker_doc(marker))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 201, "{}: create", node.name);
+    resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+}
+
+async fn replace(http: &reqwest::Client, node: &Node, id: &str, marker: u32) {
+    let resp = http
+        .put(node.url(&format!("/v1/clips/{id}")))
+        .header("content-type", "application/json")
+        .body(marker_doc(marker))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200, "{}: replace", node.name);
+}
+
+/// What `node` serves for `id`: `Some(marker)` from the pose, `None` on 404.
+async fn served(http: &reqwest::Client, node: &Node, id: &str) -> Option<u32> {
+    let resp = http.get(node.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
+    match resp.status().as_u16() {
+        200 => {
+            let pose: Value = resp.json().await.unwrap();
+            Some(pose["joints"][0]["translation"][0].as_f64().unwrap().round() as u32)
+        }
+        404 => None,
+        s => panic!("{}: pose answered {s}", node.name),
+    }
+}
+
+/// Polls `node` until it serves `want`; returns how long that took, or
+/// panics after `limit`.
+async fn until_served(http: &reqwest::Client, node: &Node, id: &str, want: Option<u32>, limit: Duration) -> Duration {
+    let started = Instant::now();
+    loop {
+        let got = served(http, node, id).await;
+        if got == want {
+            return started.elapsed();
+        }
+        assert!(started.elapsed() < limit, "{} still serves {got:?}, not {want:?}, after {limit:?}", node.name);
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// Then it keeps serving `want` for `period` (no stale version comes back).
+async fn keeps_serving(http: &reqwest::Client, node: &Node, id: &str, want: Option<u32>, period: Duration) {
+    let started = Instant::now();
+    while started.elapsed() < period {
+        assert_eq!(served(http, node, id).await, want, "{} went back to a stale version", node.name);
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn changes_on_any_node_reach_every_node_within_a_second() {
+    let Some(schema) = Schema::create("spread").await else { return };
+    let [a, b, c] = start_all(&schema, ["node-a", "node-b", "node-c"]).await;
+    let http = reqwest::Client::new();
+
+    let id = create(&http, &a, 1).await;
+    for node in [&a, &b, &c] {
+        assert_eq!(served(&http, node, &id).await, Some(1), "{} serves the upload", node.name);
+    }
+    // Every node now has version 1 cached. Replace on C: A must drop it.
+    replace(&http, &c, &id, 2).await;
+    for node in [&a, &b] {
+        until_served(&http, node, &id, Some(2), PROPAGATION).await;
+    }
+    assert_eq!(served(&http, &c, &id).await, Some(2));
+    // Delete on B: every node answers 404 within the second.
+    let resp = http.delete(b.url(&format!("/v1/clips/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    for node in [&a, &b, &c] {
+        until_served(&http, node, &id, None, PROPAGATION).await;
+    }
+    drop((a, b, c));
+    schema.drop_now().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_killed_node_leaves_the_others_serving_and_streaming() {
+    let Some(schema) = Schema::create("kill").await else { return };
+    let [mut a, b, c] = start_all(&schema, ["node-a", "node-b", "node-c"]).await;
+    let http = reqwest::Client::new();
+    let id = create(&http, &a, 5).await;
+    let mut streams = Vec::new();
+    for node in [&b, &c] {
+        let url = node.url(&format!("/v1/clips/{id}/stream?fps=30")).replacen("http://", "ws://", 1);
+        let (ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        streams.push(ws);
+    }
+    a.kill(); // SIGKILL
+    // The survivors stream on (30 more frames each, in order) and serve poses and writes.
+    for ws in &mut streams {
+        let mut last_seq = None;
+        for _ in 0..30 {
+            let frame = loop {
+                let msg = tokio::time::timeout(Duration::from_secs(5), ws.next()).await.unwrap().unwrap().unwrap();
+                if let Message::Text(t) = msg {
+                    break serde_json::from_str::<Value>(&t).unwrap();
+                }
+            };
+            let seq = frame["seq"].as_u64().unwrap();
+            assert!(last_seq.is_none_or(|l| seq > l));
+            let x = frame["pose"]["joints"][0]["translation"][0].as_f64().unwrap();
+            assert!((x - 5.0).abs() < 1e-5, "{x}");
+            last_seq = Some(seq);
+        }
+    }
+    assert_eq!(served(&http, &b, &id).await, Some(5));
+    replace(&http, &c, &id, 6).await;
+    until_served(&http, &b, &id, Some(6), PROPAGATION).await;
+    drop((a, b, c));
+    schema.drop_now().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version() {
+    let Some(schema) = Schema::create("cut").await else { return };
+    let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
+    let http = reqwest::Client::new();
+    let id = create(&http, &a, 1).await;
+    assert_eq!(served(&http, &b, &id).await, Some(1), "B has version 1 cached");
+    // Wait for B's listener to be up, so the cut below hits a subscribed node.
+    replace(&http, &a, &id, 2).await;
+    until_served(&http, &b, &id, Some(2), PROPAGATION).await;
+
+    // Cut every connection of B (pool and listener), and change the clip
+    // while B cannot hear it: that notification is lost to B.
+    let cut = schema.terminate("node-b").await;
+    assert!(cut >= 2, "B's pool and listener connections were found ({cut})");
+    replace(&http, &a, &id, 3).await;
+    until_served(&http, &b, &id, Some(3), Duration::from_secs(3)).await;
+    keeps_serving(&http, &b, &id, Some(3), Duration::from_millis(500)).await;
+
+    // B listens again: later changes reach it within the second.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    replace(&http, &a, &id, 4).await;
+    until_served(&http, &b, &id, Some(4), PROPAGATION).await;
+    let resp = http.get(b.url("/readyz")).send().await.unwrap();
+    assert_eq!(resp.status(), 200);
+    drop((a, b));
+    schema.drop_now().await;
+}
+
+/// The figures in BENCHMARKS.md ("Several nodes"): the delay from a
+/// replace's `200` on node A to node B serving the new version, over 100
+/// updates. `INBETWEEN_SLOW=1 cargo test --release --test system invalidation_delay -- --nocapture`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn invalidation_delay_figures() {
+    if !crate::common::slow_runs("the invalidation-delay figures") {
+        return;
+    }
+    let Some(schema) = Schema::create("delay").await else { return };
+    let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
+    let http = reqwest::Client::new();
+    let id = create(&http, &a, 0).await;
+    until_served(&http, &b, &id, Some(0), PROPAGATION).await;
+    let mut delays = Vec::new();
+    for v in 1..=100 {
+        replace(&http, &a, &id, v).await;
+        let started = Instant::now();
+        loop {
+            if served(&http, &b, &id).await == Some(v) {
+                break;
+            }
+            assert!(started.elapsed() < Duration::from_secs(5));
+        }
+        delays.push(started.elapsed());
+    }
+    delays.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "invalidation delay over {} updates: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        delays.len(),
+        ms(delays[delays.len() / 2]),
+        ms(delays[delays.len() * 99 / 100 - 1]),
+        ms(delays[delays.len() - 1])
+    );
+    drop((a, b));
+    schema.drop_now().await;
+}
