@@ -8,8 +8,8 @@
 //!   can show (signals, `kill -9`, flags and environment, several nodes).
 //! - [`pg`]: a fresh PostgreSQL schema per test.
 //!
-//! Each binary uses a different part of it, hence the `dead_code` allowance.
-#![allow(dead_code)]
+//! Each binary uses a different part of it, hence the allowances below.
+#![allow(dead_code, unused_imports)]
 
 pub mod app;
 pub mod pg;

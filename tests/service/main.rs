@@ -8,6 +8,7 @@
 //! PostgreSQL tests skip without a server unless `INBETWEEN_REQUIRE_POSTGRES=1`;
 //! the browser tests skip without Chromium unless `INBETWEEN_REQUIRE_BROWSER=1`.
 
+#[path = "../common/mod.rs"]
 mod common;
 
 mod api;

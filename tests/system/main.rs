@@ -7,6 +7,7 @@
 //! figures) return at once unless `INBETWEEN_SLOW=1`; the scripts in
 //! `scripts/` set it.
 
+#[path = "../common/mod.rs"]
 mod common;
 
 mod multinode;

@@ -67,14 +67,16 @@ async fn check(
 
 #[tokio::test]
 async fn every_bad_input_gets_its_status_and_code_and_changes_nothing() {
-    let app = TestApp::builder().configure(|c| {
-        c.write_token = Some(inbetween::server::config::Secret::new(TOKEN));
-        c.limits.max_body_bytes = 64 * 1024;
-        c.limits.max_tracks = 8;
-        c.limits.max_keys_per_track = 100;
-        c.limits.max_poses = 50;
-    }).start()
-    .await;
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.write_token = Some(inbetween::server::config::Secret::new(TOKEN));
+            c.limits.max_body_bytes = 64 * 1024;
+            c.limits.max_tracks = 8;
+            c.limits.max_keys_per_track = 100;
+            c.limits.max_poses = 50;
+        })
+        .start()
+        .await;
     let seeded = app.create(WAVE, Some(TOKEN)).await;
     let id = seeded["id"].as_str().unwrap().to_owned();
     let seeded_url = app.url(&format!("/v1/clips/{id}"));

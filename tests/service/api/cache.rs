@@ -43,7 +43,7 @@ async fn a_cached_pose_needs_no_store_round_trip() {
     let pose = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=0.5"))).send().await.unwrap();
     assert_eq!(pose.status(), 200, "the pose came from the write-through cache");
     let sample = app
-        .client
+        .http
         .post(app.url(&format!("/v1/clips/{id}/sample")))
         .json(&serde_json::json!({"times": [0, 1]}))
         .send()

@@ -7,14 +7,8 @@ use super::{TestApp, WAVE, canonical, uniform_clip};
 #[tokio::test]
 async fn an_uploaded_clip_comes_back_as_accepted() {
     let app = TestApp::start().await;
-    let resp = app
-        .client
-        .post(app.url("/v1/clips"))
-        .header("content-type", "application/json")
-        .body(WAVE)
-        .send()
-        .await
-        .unwrap();
+    let resp =
+        app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(WAVE).send().await.unwrap();
     assert_eq!(resp.status(), 201);
     let location = resp.headers()["location"].to_str().unwrap().to_owned();
     assert_eq!(resp.headers()["etag"], "\"1\"");

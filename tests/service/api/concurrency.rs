@@ -39,7 +39,7 @@ async fn writer(app: &TestApp, ids: &[String], w: usize) -> Vec<(usize, u64, Str
         let k = (w * 100 + i + 1) as f32;
         let body = uniform_clip(&format!("v{k}"), 2, 2, k);
         let resp = app
-            .client
+            .http
             .put(app.url(&format!("/v1/clips/{}", ids[c])))
             .header("content-type", "application/json")
             .body(body.clone())

@@ -6,7 +6,7 @@ use inbetween::anim::{Clip, SampleOptions, Sampler, Space};
 use inbetween::import::{ErrorClass, Format, ImportOptions, import};
 use serde_json::Value;
 
-use super::{TestApp};
+use super::TestApp;
 
 fn testdata(rel: &str) -> Vec<u8> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel);

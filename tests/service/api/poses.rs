@@ -107,7 +107,7 @@ async fn sample_returns_one_pose_per_time_or_frame() {
     let id = app.create(WAVE, None).await["id"].as_str().unwrap().to_owned();
     let url = app.url(&format!("/v1/clips/{id}/sample"));
     let body: Value = app
-        .client
+        .http
         .post(&url)
         .json(&serde_json::json!({"times": [0, 1, 2], "playback": "once"}))
         .send()
@@ -121,7 +121,7 @@ async fn sample_returns_one_pose_per_time_or_frame() {
     assert_eq!(root, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]);
     // 0..=1 s at 4 fps: frames at 0, 0.25, 0.5, 0.75, 1.
     let body: Value = app
-        .client
+        .http
         .post(&url)
         .json(&serde_json::json!({"start": 0, "end": 1, "fps": 4, "space": "model", "ease": "ease_in_out"}))
         .send()

@@ -7,11 +7,13 @@ use super::{TestApp, WAVE};
 
 #[tokio::test]
 async fn write_and_read_tokens_guard_their_routes() {
-    let app = TestApp::builder().configure(|c| {
-        c.write_token = Some(Secret::new("w"));
-        c.read_token = Some(Secret::new("r"));
-    }).start()
-    .await;
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.write_token = Some(Secret::new("w"));
+            c.read_token = Some(Secret::new("r"));
+        })
+        .start()
+        .await;
     let id = app.create(WAVE, Some("w")).await["id"].as_str().unwrap().to_owned();
     let clip = app.url(&format!("/v1/clips/{id}"));
     let c = &app.http;
@@ -53,7 +55,8 @@ async fn write_and_read_tokens_guard_their_routes() {
 
 #[tokio::test]
 async fn cors_allows_only_configured_origins() {
-    let app = TestApp::builder().configure(|c| c.cors = Cors::Origins(vec!["https://viewer.example".into()])).start().await;
+    let app =
+        TestApp::builder().configure(|c| c.cors = Cors::Origins(vec!["https://viewer.example".into()])).start().await;
     let preflight = |origin: &'static str| {
         app.http
             .request(reqwest::Method::OPTIONS, app.url("/v1/clips"))
@@ -72,7 +75,10 @@ async fn cors_allows_only_configured_origins() {
 #[tokio::test]
 async fn a_client_that_trickles_its_request_head_is_cut_off() {
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let app = TestApp::builder().configure(|c| c.limits.header_read_timeout = std::time::Duration::from_secs(1)).start().await;
+    let app = TestApp::builder()
+        .configure(|c| c.limits.header_read_timeout = std::time::Duration::from_secs(1))
+        .start()
+        .await;
     let mut slow = tokio::net::TcpStream::connect(app.addr).await.unwrap();
     slow.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n").await.unwrap(); // and never the final CRLF
     let started = std::time::Instant::now();

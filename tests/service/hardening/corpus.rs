@@ -70,11 +70,13 @@ impl Server {
 
     /// Every stored clip: id, version and document, to prove nothing changed.
     async fn snapshot(&self) -> Vec<(String, u64, String)> {
-        let list: Value = self.app.http.get(self.url("/v1/clips?limit=1000")).send().await.unwrap().json().await.unwrap();
+        let list: Value =
+            self.app.http.get(self.url("/v1/clips?limit=1000")).send().await.unwrap().json().await.unwrap();
         let mut all = Vec::new();
         for clip in list["clips"].as_array().unwrap() {
             let id = clip["id"].as_str().unwrap().to_owned();
-            let doc = self.app.http.get(self.url(&format!("/v1/clips/{id}"))).send().await.unwrap().text().await.unwrap();
+            let doc =
+                self.app.http.get(self.url(&format!("/v1/clips/{id}"))).send().await.unwrap().text().await.unwrap();
             all.push((id, clip["version"].as_u64().unwrap(), doc));
         }
         all

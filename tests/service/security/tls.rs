@@ -31,14 +31,16 @@ fn make_pki() -> TestPki {
 }
 
 async fn spawn_tls_app(pki: &TestPki) -> TestApp {
-    TestApp::builder().configure_in(|c, dir| {
-        scoped_tokens(c);
-        let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
-        std::fs::write(&cert, &pki.cert_pem).unwrap();
-        std::fs::write(&key, &pki.key_pem).unwrap();
-        c.tls = Some(TlsFiles { cert, key });
-    }).start()
-    .await
+    TestApp::builder()
+        .configure_in(|c, dir| {
+            scoped_tokens(c);
+            let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
+            std::fs::write(&cert, &pki.cert_pem).unwrap();
+            std::fs::write(&key, &pki.key_pem).unwrap();
+            c.tls = Some(TlsFiles { cert, key });
+        })
+        .start()
+        .await
 }
 
 /// A rustls client that trusts only the test CA and speaks only `versions`.

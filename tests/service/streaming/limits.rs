@@ -7,11 +7,13 @@ use super::{TestApp, WAVE, stream_request, within};
 
 #[tokio::test]
 async fn too_many_streams_get_resource_exhausted_and_a_close_with_a_reason() {
-    let app = TestApp::builder().configure(|c| {
-        c.limits.max_streams = 3;
-        c.limits.max_streams_per_client = 2;
-    }).start()
-    .await;
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.max_streams = 3;
+            c.limits.max_streams_per_client = 2;
+        })
+        .start()
+        .await;
     let id = app.create_id(WAVE, None).await;
     let mut grpc = app.grpc().await;
     let mut a = grpc.stream_frames(stream_request(&id, 10, 1.0)).await.unwrap().into_inner();

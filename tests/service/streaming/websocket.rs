@@ -9,8 +9,8 @@ use tokio_tungstenite::connect_async;
 use tokio_tungstenite::tungstenite::Message;
 
 use super::grpc_streams::check_schedule;
-use crate::common::app::Ws;
 use super::{TestApp, WAVE, line_clip, within};
+use crate::common::app::Ws;
 
 /// The next data message: a JSON text frame or a binary protobuf frame,
 /// both as (seq, dropped, clip_time, events, whole message).
@@ -52,8 +52,7 @@ async fn sixty_fps_for_two_seconds_in_both_encodings() {
     let id = app.create_id(WAVE, None).await;
     for encoding in ["json", "protobuf"] {
         let mut ws =
-            app.ws(&format!("/v1/clips/{id}/stream?fps=60&speed=0.5&start=0&playback=once&encoding={encoding}"))
-                .await;
+            app.ws(&format!("/v1/clips/{id}/stream?fps=60&speed=0.5&start=0&playback=once&encoding={encoding}")).await;
         let first = next_frame(&mut ws).await;
         let t0 = Instant::now();
         let mut frames = vec![(first.0, first.1, first.2)];

@@ -7,7 +7,7 @@ use futures_util::{SinkExt, StreamExt};
 use tokio::io::AsyncWriteExt;
 use tokio_tungstenite::tungstenite::Message;
 
-use super::{start, WAVE, raw_http, read_to_close};
+use super::{WAVE, raw_http, read_to_close, start};
 
 /// 40 connections trickling heads and 40 trickling bodies (one byte every
 /// 300 ms), plus an idle keep-alive connection, are all closed within the
@@ -17,8 +17,7 @@ use super::{start, WAVE, raw_http, read_to_close};
 async fn slow_heads_slow_bodies_and_idle_connections_are_closed_while_others_are_served() {
     let dir = tempfile::tempdir().unwrap();
     let server =
-        start(&dir.path().join("data"), &["--header-read-timeout-secs", "5", "--body-read-timeout-secs", "5"])
-            .await;
+        start(&dir.path().join("data"), &["--header-read-timeout-secs", "5", "--body-read-timeout-secs", "5"]).await;
     let http = reqwest::Client::new();
     let id = server.create(&http, WAVE).await;
     let addr = server.http;

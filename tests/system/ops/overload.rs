@@ -10,7 +10,7 @@ use inbetween::wire::proto::pb;
 use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use super::{start, WAVE, raw_grpc_call, raw_http};
+use super::{WAVE, raw_grpc_call, raw_http, start};
 
 #[tokio::test(flavor = "multi_thread")]
 async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
@@ -84,8 +84,7 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
 async fn one_token_cannot_hold_more_than_its_stream_cap() {
     let dir = tempfile::tempdir().unwrap();
     let server =
-        start(&dir.path().join("data"), &["--max-streams-per-token", "1", "--max-streams-per-client", "100"])
-            .await;
+        start(&dir.path().join("data"), &["--max-streams-per-token", "1", "--max-streams-per-client", "100"]).await;
     let http = reqwest::Client::new();
     let id = server.create(&http, WAVE).await;
     let open = |token: &str| {

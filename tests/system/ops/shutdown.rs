@@ -11,7 +11,7 @@ use inbetween::wire::proto::pb;
 use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use tokio_tungstenite::tungstenite::Message;
 
-use super::{start, WAVE, raw_grpc_call, raw_http, read_to_close};
+use super::{WAVE, raw_grpc_call, raw_http, read_to_close, start};
 
 const DRAIN_SECS: u64 = 3;
 
@@ -102,7 +102,10 @@ async fn sigterm_drains_streams_and_uploads_and_exits_by_the_deadline() {
     let exited = term.elapsed();
     let status = status.unwrap_or_else(|| panic!("still running {exited:?} after SIGTERM"));
     assert!(status.success(), "a drained shutdown exits 0, not {status}");
-    assert!(exited >= Duration::from_secs(DRAIN_SECS) - Duration::from_millis(100), "the stuck clients held it to the deadline: {exited:?}");
+    assert!(
+        exited >= Duration::from_secs(DRAIN_SECS) - Duration::from_millis(100),
+        "the stuck clients held it to the deadline: {exited:?}"
+    );
     for u in uploaders {
         u.await.unwrap();
     }

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use futures_util::StreamExt;
 
-use super::{start, WAVE};
+use super::{WAVE, start};
 
 const VIEWERS: usize = 200;
 /// Frame rates in the mix: viewers with one rate share a playback.
