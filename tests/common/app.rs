@@ -12,6 +12,7 @@ use std::net::SocketAddr;
 use std::path::Path;
 use std::time::Duration;
 
+use futures_util::FutureExt;
 use inbetween::server::auth::Token;
 use inbetween::server::config::Secret;
 use inbetween::server::{AppState, Application, Config};
@@ -202,9 +203,20 @@ impl TestApp {
 }
 
 impl Drop for TestApp {
+    /// Signals shutdown without waiting; a server that already ended on its
+    /// own (an error or a panic while the test ran) still fails the test.
     fn drop(&mut self) {
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
+        }
+        let Some(server) = self.server.take() else { return };
+        if !server.is_finished() || std::thread::panicking() {
+            return;
+        }
+        match server.now_or_never() {
+            Some(Err(join)) => panic!("the server task failed during the test: {join}"),
+            Some(Ok(Err(e))) => panic!("the server returned an error during the test: {e:#}"),
+            _ => {}
         }
     }
 }
