@@ -11,4 +11,5 @@ pub mod panics;
 pub mod server;
 pub mod store;
 pub mod stream;
+mod sync;
 pub mod wire;
