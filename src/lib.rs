@@ -7,7 +7,7 @@ pub mod cli;
 pub mod fuzzing;
 pub mod import;
 pub mod load;
-pub mod panics;
+mod panics;
 pub mod server;
 pub mod store;
 pub mod stream;
