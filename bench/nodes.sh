@@ -10,38 +10,30 @@
 #
 #   bench/nodes.sh [seconds] [total concurrency] [mode]
 #   DATABASE_URL=postgres://postgres@127.0.0.1:5432/test (default)
+#   INBETWEEN_BIN=path: a binary built elsewhere instead of `cargo build --release`
+#   bench/nodes.sh --help: this text
 set -euo pipefail
-root=$(cd "$(dirname "$0")/.." && pwd)
-cd "$root"
+source "$(dirname "$0")/../scripts/lib.sh"
+ib_help "$@"
+cd "$IB_ROOT"
 secs=${1:-10} conc=${2:-48} mode=${3:-rest-pose}
 db=${DATABASE_URL:-postgres://postgres@127.0.0.1:5432/test}
-target=${CARGO_TARGET_DIR:-$root/target}
-bin=${INBETWEEN_BIN:-}
-if [ -z "$bin" ]; then
-  cargo build --release --quiet
-  bin=$target/release/inbetween
-fi
+ib_bin release
+bin=$IB_BIN
 schema=bench_nodes_$$
 psql -q "$db" -c "CREATE SCHEMA $schema" >/dev/null
-work=$(mktemp -d)
-pids=()
+ib_workdir
+work=$IB_WORK
 cleanup() {
-  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
+  ib_cleanup
   psql -q "$db" -c "DROP SCHEMA $schema CASCADE" >/dev/null 2>&1 || true
-  rm -rf "$work"
 }
 trap cleanup EXIT
 url="$db?options=-csearch_path%3D$schema"
-https=() grpcs=()
+pids=() https=() grpcs=()
 for i in 1 2 3; do
-  INBETWEEN_LOG=warn "$bin" serve --listen 127.0.0.1:0 --grpc-listen 127.0.0.1:0 --database-url "$url" \
-    --db-max-connections 4 >"$work/out$i" 2>"$work/err$i" &
-  pids+=($!)
-  for _ in $(seq 100); do grep -q "gRPC listening" "$work/out$i" 2>/dev/null && break; sleep 0.1; done
-  https+=("$(sed -n 's/^inbetween listening on //p' "$work/out$i")")
-  grpcs+=("$(sed -n 's/^inbetween gRPC listening on //p' "$work/out$i")")
-  [ -n "${https[$((i - 1))]}" ] || { echo "node $i did not start" >&2; cat "$work/err$i" >&2; exit 1; }
+  ib_serve "node$i" --database-url "$url" --db-max-connections 4
+  pids+=("$IB_PID") https+=("$IB_HTTP") grpcs+=("$IB_GRPC")
 done
 # The clip, uploaded through node 1 (a 1-second run uploads it and reports its id).
 clip=$("$bin" load "$mode" -c 1 -d 1 --http "${https[0]}" --grpc "${grpcs[0]}" --json 2>/dev/null \

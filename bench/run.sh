@@ -10,48 +10,40 @@
 #   bench/run.sh --no-core    # skips the criterion comparison
 #   bench/run.sh --no-write   # prints the tables instead of editing BENCHMARKS.md
 #   BENCH_SECS=4 bench/run.sh # shorter windows (default 10 s)
+#   INBETWEEN_BIN=path bench/run.sh  # a binary built elsewhere instead of `cargo build --release`
+#   bench/run.sh --help       # this text
 #
 # Everything talks to 127.0.0.1 only. Results (JSON reports) stay in
 # $BENCH_OUT (default: a temporary directory, printed at the end).
 set -euo pipefail
-root=$(cd "$(dirname "$0")/.." && pwd)
-cd "$root"
+source "$(dirname "$0")/../scripts/lib.sh"
+cd "$IB_ROOT"
 secs=${BENCH_SECS:-10} scale=1 long=0 core=1 write=1
 for arg in "$@"; do
   case $arg in
+    -h | --help) ib_usage; exit 0 ;;
     --quick) secs=2 scale=10 ;;
     --long) long=1 ;;
     --no-core) core=0 ;;
     --no-write) write=0 ;;
-    *) echo "unknown option $arg" >&2; exit 2 ;;
+    *) echo "unknown option $arg (see --help)" >&2; exit 2 ;;
   esac
 done
-target=${CARGO_TARGET_DIR:-$root/target}
+target=${CARGO_TARGET_DIR:-$IB_ROOT/target}
 out=${BENCH_OUT:-$(mktemp -d)}
 mkdir -p "$out"
 ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
 
-if [ -n "${INBETWEEN_BIN:-}" ]; then
-  bin=$INBETWEEN_BIN # a binary built elsewhere (figures from a debug build mean little)
-else
-  echo "== building the release binary"
-  cargo build --release --quiet
-  bin=$target/release/inbetween
-fi
+# INBETWEEN_BIN: a binary built elsewhere (figures from a debug build mean little).
+[ -n "${INBETWEEN_BIN:-}" ] || echo "== building the release binary"
+ib_bin release
+bin=$IB_BIN
 n() { echo $(($1 / scale)); }
 
-data=$(mktemp -d)
-pid=
-cleanup() { [ -n "$pid" ] && kill "$pid" 2>/dev/null && wait "$pid" 2>/dev/null; rm -rf "$data"; }
-trap cleanup EXIT
 # Stream caps raised for the load (every stream comes from 127.0.0.1).
-INBETWEEN_LOG=warn "$bin" serve --listen 127.0.0.1:0 --grpc-listen 127.0.0.1:0 --data-dir "$data" \
-  --max-streams 40000 --max-streams-per-client 40000 >"$data/out" 2>"$data/err" &
-pid=$!
-for _ in $(seq 100); do grep -q "gRPC listening" "$data/out" 2>/dev/null && break; sleep 0.1; done
-http=$(sed -n 's/^inbetween listening on //p' "$data/out")
-grpc=$(sed -n 's/^inbetween gRPC listening on //p' "$data/out")
-[ -n "$http" ] && [ -n "$grpc" ] || { echo "the server did not start:" >&2; cat "$data/err" >&2; exit 1; }
+ib_workdir
+ib_serve server --data-dir "$IB_WORK/data" --max-streams 40000 --max-streams-per-client 40000
+pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
 echo "server pid $pid, $http, $grpc; reports in $out"
 
 load() { # name, then `inbetween load` arguments

@@ -3,11 +3,16 @@
 generated tables of BENCHMARKS.md.
 
 usage: tables.py REPORT_DIR CRITERION_DIR COMMIT [BENCHMARKS.md]
+       tables.py --help
 Without the last argument the tables are printed; with it, the text between
 the `bench/run.sh` marker comments is replaced (appended if absent)."""
 import json, os, pathlib, platform, re, statistics, subprocess, sys, time
 
 BEGIN, END = "<!-- bench/run.sh:begin -->", "<!-- bench/run.sh:end -->"
+if any(a in ("-h", "--help") for a in sys.argv[1:]):
+    sys.exit(print(__doc__))
+if len(sys.argv) < 4:
+    sys.exit(__doc__)
 rep_dir, crit_dir, commit = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2]), sys.argv[3]
 target = sys.argv[4] if len(sys.argv) > 4 else None
 

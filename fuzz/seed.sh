@@ -3,8 +3,13 @@
 # never committed: the files are third-party). Large files are cut down so
 # each run stays fast: BVH takes keep their hierarchy and 3 frames, the
 # external-buffer glTF gets its .bin embedded as a data: URI.
+#
+#   fuzz/seed.sh            # uses $CARGO_TARGET_DIR/debug/inbetween (or ../target) if built
+#   fuzz/seed.sh --help     # this text
 set -euo pipefail
-cd "$(dirname "$0")"
+source "$(dirname "$0")/../scripts/lib.sh"
+ib_help "$@"
+cd "$IB_ROOT/fuzz"
 T=../../shared/testdata
 mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json corpus/import_evaluate
 # The hardening corpus (committed, our own files) and past findings seed every target too.

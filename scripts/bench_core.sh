@@ -3,8 +3,11 @@
 # criterion's median per 64-joint pose, and per joint (÷ 64).
 #   scripts/bench_core.sh            # all benchmarks (about 2 minutes)
 #   scripts/bench_core.sh rbt_64     # a criterion filter
+#   scripts/bench_core.sh --help     # this text
 set -euo pipefail
-cd "$(dirname "$0")/.."
+source "$(dirname "$0")/lib.sh"
+ib_help "$@"
+cd "$IB_ROOT"
 cargo bench --bench sampling -- "${1:-}" >/dev/null 2>&1
 python3 - <<'PY'
 import json, pathlib

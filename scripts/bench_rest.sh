@@ -1,22 +1,22 @@
 #!/usr/bin/env bash
 # REST throughput: GET /v1/clips/{id}/pose on a 20-joint clip vs GET /healthz,
 # same server, same run, measured with wrk (Debian: apt-get install -y wrk).
-# Traffic goes to 127.0.0.1 only. Usage: scripts/bench_rest.sh [seconds] [connections] [rounds]
+# Traffic goes to 127.0.0.1 only. Builds the release binary unless
+# INBETWEEN_BIN names one.
+#   scripts/bench_rest.sh [seconds] [connections] [rounds]   # defaults 10 32 2
+#   scripts/bench_rest.sh --help                             # this text
 set -euo pipefail
+source "$(dirname "$0")/lib.sh"
+ib_help "$@"
 secs=${1:-10}
 conns=${2:-32}
 rounds=${3:-2}
-root=$(cd "$(dirname "$0")/.." && pwd)
-bin=${CARGO_TARGET_DIR:-$root/target}/release/inbetween
-[ -x "$bin" ] || { echo "build first: cargo build --release" >&2; exit 1; }
 command -v wrk >/dev/null || { echo "wrk is missing: apt-get install -y wrk" >&2; exit 1; }
-
-work=$(mktemp -d)
-trap 'kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; rm -rf "$work"' EXIT
-INBETWEEN_LOG=warn "$bin" serve --listen 127.0.0.1:0 --data-dir "$work/data" >"$work/out" 2>"$work/err" &
-pid=$!
-for _ in $(seq 100); do grep -q listening "$work/out" 2>/dev/null && break; sleep 0.1; done
-base=$(sed -n 's/^inbetween listening on //p' "$work/out")
+ib_bin release
+ib_workdir
+work=$IB_WORK
+ib_serve server --data-dir "$work/data"
+pid=$IB_PID base=$IB_HTTP
 
 # A 20-joint chain: every joint has a 31-key Catmull-Rom rotation track, the
 # root also a translation track.

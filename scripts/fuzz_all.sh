@@ -4,8 +4,11 @@
 # final stats per target. Seeds first (fuzz/seed.sh). A crash stops the
 # script with the artifact in fuzz/artifacts/<target>/.
 #   scripts/fuzz_all.sh [seconds_each] [targets...]
+#   scripts/fuzz_all.sh --help  # this text
 set -euo pipefail
-cd "$(dirname "$0")/../fuzz"
+source "$(dirname "$0")/lib.sh"
+ib_help "$@"
+cd "$IB_ROOT/fuzz"
 EACH=${1:-600}
 shift || true
 TARGETS=${*:-import_gltf import_bvh clip_json import_evaluate}

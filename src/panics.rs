@@ -11,14 +11,14 @@ use std::panic::AssertUnwindSafe;
 use futures_util::FutureExt;
 
 /// Counts (and logs) one caught panic.
-pub fn caught(source: &'static str) {
+pub(crate) fn caught(source: &'static str) {
     tracing::error!(source, "a panic was caught");
     metrics::counter!("inbetween_panics_total", "source" => source).increment(1);
 }
 
 /// Runs `fut`, counting a panic instead of letting it unwind further.
 /// Returns `None` if it panicked.
-pub async fn guarded<T>(source: &'static str, fut: impl Future<Output = T>) -> Option<T> {
+pub(crate) async fn guarded<T>(source: &'static str, fut: impl Future<Output = T>) -> Option<T> {
     match AssertUnwindSafe(fut).catch_unwind().await {
         Ok(value) => Some(value),
         Err(_) => {
@@ -29,7 +29,7 @@ pub async fn guarded<T>(source: &'static str, fut: impl Future<Output = T>) -> O
 }
 
 /// `tokio::spawn` of a task whose panic is counted.
-pub fn spawn_guarded(source: &'static str, fut: impl Future<Output = ()> + Send + 'static) {
+pub(crate) fn spawn_guarded(source: &'static str, fut: impl Future<Output = ()> + Send + 'static) {
     tokio::spawn(async move {
         guarded(source, fut).await;
     });

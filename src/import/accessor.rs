@@ -39,41 +39,77 @@ fn dims_name(d: Dimensions) -> &'static str {
 /// view or buffer, or a non-finite value.
 pub(crate) fn read_f32(acc: &Accessor, buffers: &mut Buffers, expect: &Expect) -> Result<Vec<f32>, ImportError> {
     let what = || format!("{} (accessor {})", expect.what, acc.index());
-    if acc.dimensions() != expect.dims {
-        return Err(ImportError::InvalidGltf(format!(
-            "{} is {}, expected {}",
-            what(),
-            dims_name(acc.dimensions()),
-            dims_name(expect.dims)
-        )));
+    let layout = Layout::check(acc, expect, &what)?;
+    let mut out = match acc.view() {
+        Some(view) => read_dense(acc, &view, buffers, &layout, &what)?,
+        None => vec![0.0; layout.count * layout.comps],
+    };
+    if let Some(sparse) = acc.sparse() {
+        apply_sparse(&sparse, buffers, &layout, &mut out, &what)?;
     }
-    let data_type = acc.data_type();
-    let normalized_int = expect.normalized_ints && acc.normalized() && data_type != DataType::U32;
-    if data_type != DataType::F32 && !normalized_int {
-        return Err(ImportError::Unsupported(format!(
-            "{} has component type {data_type:?}; only FLOAT{} is supported here",
-            what(),
-            if expect.normalized_ints { " or normalized BYTE/SHORT" } else { "" }
-        )));
+    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+        return Err(ImportError::NonFinite { what: format!("{} element {}", what(), i / layout.comps) });
     }
-    let count = acc.count();
-    if count == 0 {
-        return Err(ImportError::InvalidGltf(format!("{} has count 0", what())));
+    Ok(out)
+}
+
+/// An accessor's elements as checked against what the caller expects:
+/// everything the readers need before they touch a byte.
+struct Layout {
+    data_type: DataType,
+    /// Elements (at least 1, at most the caller's `max_count`).
+    count: usize,
+    /// Components per element.
+    comps: usize,
+    /// Bytes per component.
+    comp_size: usize,
+    /// Bytes per element, unpadded.
+    elem: usize,
+}
+
+impl Layout {
+    /// Refuses an accessor of other dimensions, an unsupported component
+    /// type, or a count of 0 or over the limit.
+    fn check(acc: &Accessor, expect: &Expect, what: &dyn Fn() -> String) -> Result<Layout, ImportError> {
+        if acc.dimensions() != expect.dims {
+            return Err(ImportError::InvalidGltf(format!(
+                "{} is {}, expected {}",
+                what(),
+                dims_name(acc.dimensions()),
+                dims_name(expect.dims)
+            )));
+        }
+        let data_type = acc.data_type();
+        let normalized_int = expect.normalized_ints && acc.normalized() && data_type != DataType::U32;
+        if data_type != DataType::F32 && !normalized_int {
+            return Err(ImportError::Unsupported(format!(
+                "{} has component type {data_type:?}; only FLOAT{} is supported here",
+                what(),
+                if expect.normalized_ints { " or normalized BYTE/SHORT" } else { "" }
+            )));
+        }
+        let count = acc.count();
+        if count == 0 {
+            return Err(ImportError::InvalidGltf(format!("{} has count 0", what())));
+        }
+        if count > expect.max_count {
+            return Err(ImportError::TooLarge {
+                what: "the keys of one accessor",
+                max: expect.max_count as u64,
+                found: count as u64,
+            });
+        }
+        let comps = expect.dims.multiplicity();
+        let comp_size = data_type.size();
+        // Matrices of 1- or 2-byte components have padded columns; only float
+        // matrices are read here (checked above: MAT4 is never normalized).
+        Ok(Layout { data_type, count, comps, comp_size, elem: comps * comp_size })
     }
-    if count > expect.max_count {
-        return Err(ImportError::TooLarge {
-            what: "the keys of one accessor",
-            max: expect.max_count as u64,
-            found: count as u64,
-        });
-    }
-    let comps = expect.dims.multiplicity();
-    let comp_size = data_type.size();
-    // Matrices of 1- or 2-byte components have padded columns; only float
-    // matrices are read here (checked above: MAT4 is never normalized).
-    let elem = comps * comp_size;
-    let decode = |b: &[u8]| -> f32 {
-        match data_type {
+
+    /// One component from its little-endian bytes; normalised integers
+    /// map to [-1, 1] or [0, 1] (glTF 2.0 §3.11).
+    fn decode(&self, b: &[u8]) -> f32 {
+        match self.data_type {
             DataType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
             DataType::I8 => (b[0] as i8 as f32 / 127.0).max(-1.0),
             DataType::U8 => b[0] as f32 / 255.0,
@@ -81,99 +117,112 @@ pub(crate) fn read_f32(acc: &Accessor, buffers: &mut Buffers, expect: &Expect) -
             DataType::U16 => u16::from_le_bytes([b[0], b[1]]) as f32 / 65535.0,
             DataType::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
         }
-    };
+    }
+}
 
-    let mut out: Vec<f32>;
-    match acc.view() {
-        Some(view) => {
-            let stride = view.stride().unwrap_or(elem);
-            if stride < elem {
-                return Err(ImportError::InvalidGltf(format!(
-                    "{}: buffer view {} has byteStride {stride}, smaller than one element ({elem} bytes)",
-                    what(),
-                    view.index()
-                )));
-            }
-            let bytes = view_bytes(&view, buffers, &what)?;
-            let start = acc.offset();
-            // Last byte read: start + stride·(count−1) + elem.
-            let end =
-                (count - 1).checked_mul(stride).and_then(|x| x.checked_add(start)).and_then(|x| x.checked_add(elem));
-            match end {
-                Some(end) if end <= bytes.len() => {}
-                _ => {
-                    return Err(ImportError::OutOfBounds {
-                        what: what(),
-                        detail: format!(
-                            "{count} elements of {elem} bytes, stride {stride}, from offset {start} do not fit \
-                             in buffer view {} ({} bytes)",
-                            view.index(),
-                            bytes.len()
-                        ),
-                    });
-                }
-            }
-            out = Vec::with_capacity(count * comps);
-            for i in 0..count {
-                let at = start + i * stride;
-                for c in 0..comps {
-                    let o = at + c * comp_size;
-                    out.push(decode(&bytes[o..o + comp_size]));
-                }
-            }
-        }
-        None => out = vec![0.0; count * comps],
+/// The elements stored in the accessor's buffer view, after checking that
+/// its stride holds an element and that the last element ends inside it.
+fn read_dense(
+    acc: &Accessor,
+    view: &::gltf::buffer::View,
+    buffers: &mut Buffers,
+    layout: &Layout,
+    what: &dyn Fn() -> String,
+) -> Result<Vec<f32>, ImportError> {
+    let Layout { count, comps, comp_size, elem, .. } = *layout;
+    let stride = view.stride().unwrap_or(elem);
+    if stride < elem {
+        return Err(ImportError::InvalidGltf(format!(
+            "{}: buffer view {} has byteStride {stride}, smaller than one element ({elem} bytes)",
+            what(),
+            view.index()
+        )));
     }
-    if let Some(sparse) = acc.sparse() {
-        let n = sparse.count();
-        if n > count {
-            return Err(ImportError::InvalidGltf(format!("{}: sparse count {n} exceeds count {count}", what())));
-        }
-        let indices = sparse.indices();
-        let index_size = indices.index_type_size();
-        let ibytes = view_bytes(&indices.view(), buffers, &what)?.to_vec();
-        let ifrom = indices.offset();
-        let fits = |from: usize, size: usize, len: usize| {
-            n.checked_mul(size).and_then(|x| x.checked_add(from)).is_some_and(|e| e <= len)
-        };
-        if !fits(ifrom, index_size, ibytes.len()) {
+    let bytes = view_bytes(view, buffers, what)?;
+    let start = acc.offset();
+    // Last byte read: start + stride·(count−1) + elem.
+    let end = (count - 1).checked_mul(stride).and_then(|x| x.checked_add(start)).and_then(|x| x.checked_add(elem));
+    match end {
+        Some(end) if end <= bytes.len() => {}
+        _ => {
             return Err(ImportError::OutOfBounds {
                 what: what(),
-                detail: "its sparse indices overrun their buffer view".into(),
+                detail: format!(
+                    "{count} elements of {elem} bytes, stride {stride}, from offset {start} do not fit \
+                     in buffer view {} ({} bytes)",
+                    view.index(),
+                    bytes.len()
+                ),
             });
-        }
-        let values = sparse.values();
-        let vbytes = view_bytes(&values.view(), buffers, &what)?;
-        let vfrom = values.offset();
-        if !fits(vfrom, elem, vbytes.len()) {
-            return Err(ImportError::OutOfBounds {
-                what: what(),
-                detail: "its sparse values overrun their buffer view".into(),
-            });
-        }
-        for k in 0..n {
-            let b = &ibytes[ifrom + k * index_size..];
-            let target = match index_size {
-                1 => b[0] as usize,
-                2 => u16::from_le_bytes([b[0], b[1]]) as usize,
-                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
-            };
-            if target >= count {
-                return Err(ImportError::OutOfBounds {
-                    what: what(),
-                    detail: format!("sparse index {target} is not below count {count}"),
-                });
-            }
-            for c in 0..comps {
-                let o = vfrom + k * elem + c * comp_size;
-                out[target * comps + c] = decode(&vbytes[o..o + comp_size]);
-            }
         }
     }
-    if let Some(i) = out.iter().position(|x| !x.is_finite()) {
-        return Err(ImportError::NonFinite { what: format!("{} element {}", what(), i / comps) });
+    let mut out = Vec::with_capacity(count * comps);
+    for i in 0..count {
+        let at = start + i * stride;
+        for c in 0..comps {
+            let o = at + c * comp_size;
+            out.push(layout.decode(&bytes[o..o + comp_size]));
+        }
     }
     Ok(out)
+}
+
+/// Overwrites the elements a sparse accessor names (glTF 2.0 §3.6.2.3),
+/// after checking both its index and value arrays fit their views and
+/// before each write that its index is below the count.
+fn apply_sparse(
+    sparse: &::gltf::accessor::sparse::Sparse,
+    buffers: &mut Buffers,
+    layout: &Layout,
+    out: &mut [f32],
+    what: &dyn Fn() -> String,
+) -> Result<(), ImportError> {
+    let Layout { count, comps, comp_size, elem, .. } = *layout;
+    let n = sparse.count();
+    if n > count {
+        return Err(ImportError::InvalidGltf(format!("{}: sparse count {n} exceeds count {count}", what())));
+    }
+    let indices = sparse.indices();
+    let index_size = indices.index_type_size();
+    let ibytes = view_bytes(&indices.view(), buffers, what)?.to_vec();
+    let ifrom = indices.offset();
+    let fits = |from: usize, size: usize, len: usize| {
+        n.checked_mul(size).and_then(|x| x.checked_add(from)).is_some_and(|e| e <= len)
+    };
+    if !fits(ifrom, index_size, ibytes.len()) {
+        return Err(ImportError::OutOfBounds {
+            what: what(),
+            detail: "its sparse indices overrun their buffer view".into(),
+        });
+    }
+    let values = sparse.values();
+    let vbytes = view_bytes(&values.view(), buffers, what)?;
+    let vfrom = values.offset();
+    if !fits(vfrom, elem, vbytes.len()) {
+        return Err(ImportError::OutOfBounds {
+            what: what(),
+            detail: "its sparse values overrun their buffer view".into(),
+        });
+    }
+    for k in 0..n {
+        let b = &ibytes[ifrom + k * index_size..];
+        let target = match index_size {
+            1 => b[0] as usize,
+            2 => u16::from_le_bytes([b[0], b[1]]) as usize,
+            _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+        };
+        if target >= count {
+            return Err(ImportError::OutOfBounds {
+                what: what(),
+                detail: format!("sparse index {target} is not below count {count}"),
+            });
+        }
+        for c in 0..comps {
+            let o = vfrom + k * elem + c * comp_size;
+            out[target * comps + c] = layout.decode(&vbytes[o..o + comp_size]);
+        }
+    }
+    Ok(())
 }
 
 /// The bytes of a buffer view, checked against its buffer.

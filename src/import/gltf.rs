@@ -221,6 +221,8 @@ struct Ctx<'d, 'a, 'r> {
 }
 
 impl Ctx<'_, '_, '_> {
+    /// One animation as a clip, or `None` (listed in `skipped`) when it
+    /// animates no translation, rotation or scale.
     fn animation(
         &mut self,
         animation: &::gltf::Animation,
@@ -233,8 +235,35 @@ impl Ctx<'_, '_, '_> {
             (Some(prefix), _) => format!("{prefix}/{base}"),
             (None, _) => base.clone(),
         };
-        let limits = self.options.limits;
+        let (tracks, animated) = self.channel_tracks(animation, &base)?;
+        if tracks.is_empty() {
+            self.skipped.push(Skipped {
+                what: format!("animation '{base}'"),
+                why: "it animates no translation, rotation or scale".into(),
+            });
+            return Ok(None);
+        }
+        let (nodes, skinned) = self.clip_nodes(&animated)?;
+        let joints = self.joints(&nodes, skinned)?;
+        Ok(Some(ClipSpec {
+            name: clip_name(&name),
+            skeleton: Some(SkeletonSpec { joints }),
+            tracks,
+            events: Vec::new(),
+            playback: Playback::Once,
+        }))
+    }
 
+    /// The animation's channels as tracks, each with the node it animates;
+    /// morph-target weights are skipped, a second channel for the same
+    /// property of a node is refused, and the track count is capped.
+    fn channel_tracks(
+        &mut self,
+        animation: &::gltf::Animation,
+        base: &str,
+    ) -> Result<(Vec<TrackSpec>, Vec<usize>), ImportError> {
+        let a = animation.index();
+        let max_tracks = self.options.limits.max_tracks;
         let mut tracks = Vec::new();
         let mut animated: Vec<usize> = Vec::new();
         let mut seen: HashSet<(usize, u8)> = HashSet::new();
@@ -260,10 +289,10 @@ impl Ctx<'_, '_, '_> {
                     channel_kind.as_str()
                 )));
             }
-            if tracks.len() >= limits.max_tracks {
+            if tracks.len() >= max_tracks {
                 return Err(ImportError::TooLarge {
                     what: "the tracks of one clip",
-                    max: limits.max_tracks as u64,
+                    max: max_tracks as u64,
                     found: tracks.len() as u64 + 1,
                 });
             }
@@ -271,17 +300,16 @@ impl Ctx<'_, '_, '_> {
             tracks.push(self.track(&channel.sampler(), channel_kind, &self.forest.names[node].clone(), &what)?);
             animated.push(node);
         }
-        if tracks.is_empty() {
-            self.skipped.push(Skipped {
-                what: format!("animation '{base}'"),
-                why: "it animates no translation, rotation or scale".into(),
-            });
-            return Ok(None);
-        }
+        Ok((tracks, animated))
+    }
 
-        // Skins the animation drives contribute all their joints; then every
-        // ancestor. Depth and count are checked as the set grows, so the work
-        // per animation stays bounded by the limits, not by the file.
+    /// The nodes of the clip's skeleton, parents first, and whether a skin
+    /// is among them: the animated nodes, every joint of the skins they
+    /// belong to, then every ancestor. Depth and count are checked as the
+    /// set grows, so the work per animation stays bounded by the limits,
+    /// not by the file.
+    fn clip_nodes(&mut self, animated: &[usize]) -> Result<(Vec<usize>, bool), ImportError> {
+        let limits = self.options.limits;
         let too_many = |found: usize| ImportError::TooLarge {
             what: "the joints of one clip",
             max: limits.max_joints as u64,
@@ -316,11 +344,17 @@ impl Ctx<'_, '_, '_> {
         self.budget.take(included.len())?;
         let mut nodes: Vec<usize> = included.into_iter().collect();
         nodes.sort_by_key(|&n| self.forest.order[n]);
-        let binds: Vec<Option<Mat4>> = if skins.is_empty() {
-            vec![None; nodes.len()]
-        } else {
+        Ok((nodes, !skins.is_empty()))
+    }
+
+    /// The skeleton's joints for `nodes`: names, parents and rest poses,
+    /// with inverse bind matrices only when a skin is involved.
+    fn joints(&mut self, nodes: &[usize], skinned: bool) -> Result<Vec<JointSpec>, ImportError> {
+        let binds: Vec<Option<Mat4>> = if skinned {
             let all = self.inverse_binds()?;
             nodes.iter().map(|n| all.get(n).copied()).collect()
+        } else {
+            vec![None; nodes.len()]
         };
         let mut joints = Vec::with_capacity(nodes.len());
         for (&node, inverse_bind) in nodes.iter().zip(binds) {
@@ -331,13 +365,7 @@ impl Ctx<'_, '_, '_> {
                 inverse_bind,
             });
         }
-        Ok(Some(ClipSpec {
-            name: clip_name(&name),
-            skeleton: Some(SkeletonSpec { joints }),
-            tracks,
-            events: Vec::new(),
-            playback: Playback::Once,
-        }))
+        Ok(joints)
     }
 
     /// One channel's sampler as a track (glTF 2.0 §3.11, Appendix C).

@@ -52,7 +52,7 @@ impl ClockSync {
     }
 
     /// A local wall-clock time on the server's wall clock.
-    pub fn to_server(&self, local_unix_ns: i64) -> i64 {
+    pub fn to_server(self, local_unix_ns: i64) -> i64 {
         local_unix_ns + self.offset_ns
     }
 

@@ -46,10 +46,6 @@ impl Latency {
         self.hist.add(&other.hist).expect("histograms of the same bounds merge");
     }
 
-    pub fn count(&self) -> u64 {
-        self.hist.len()
-    }
-
     /// The value at quantile `q` (0..=1), in nanoseconds; 0 when empty.
     pub fn quantile_ns(&self, q: f64) -> u64 {
         if self.hist.is_empty() { 0 } else { self.hist.value_at_quantile(q) }
@@ -156,7 +152,7 @@ mod tests {
         h.record_ns(-5);
         h.record_ns(0);
         h.record_ns(i64::MAX);
-        assert_eq!(h.count(), 3);
+        assert_eq!(h.summary().count, 3);
         assert_eq!(h.quantile_ns(0.0), 1);
         assert!(h.quantile_ns(1.0) >= MAX_NS);
         assert_eq!(Latency::new().summary().count, 0);

@@ -18,12 +18,12 @@
 //! `histogram`, `clock`, `lateness` and `ramp` are pure (unit-tested);
 //! `unary` and `streams` drive the network; `procstat` reads `/proc`.
 
-pub mod clock;
-pub mod histogram;
-pub mod lateness;
-pub mod procstat;
+mod clock;
+mod histogram;
+mod lateness;
+mod procstat;
 pub mod ramp;
-pub mod report;
+mod report;
 mod setup;
 mod streams;
 mod unary;
@@ -58,15 +58,15 @@ impl Mode {
         }
     }
 
-    pub fn is_stream(self) -> bool {
+    pub(crate) fn is_stream(self) -> bool {
         matches!(self, Mode::GrpcStream | Mode::WsStream)
     }
 }
 
 /// The most workers or streams one run may open.
-pub const MAX_CONCURRENCY: usize = 100_000;
+pub(crate) const MAX_CONCURRENCY: usize = 100_000;
 /// The longest window one run (or one ramp stage) may measure.
-pub const MAX_DURATION: Duration = Duration::from_secs(3600);
+pub(crate) const MAX_DURATION: Duration = Duration::from_secs(3600);
 
 /// Which clip the load uses.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -192,7 +192,7 @@ fn check_options(o: &Options) -> anyhow::Result<()> {
 /// Parses `url` and refuses a host that is not loopback unless allowed.
 /// Host names other than `localhost` are refused too: what they resolve
 /// to is not known here.
-pub fn checked_url(url: &str, allow_remote: bool) -> anyhow::Result<Url> {
+pub(crate) fn checked_url(url: &str, allow_remote: bool) -> anyhow::Result<Url> {
     let parsed = Url::parse(url).with_context(|| format!("`{url}` is not a URL"))?;
     if parsed.scheme() != "http" {
         bail!("`{url}`: only http:// targets are supported");

@@ -30,24 +30,24 @@ pub struct Stage {
 
 /// The walk through the stages.
 #[derive(Debug, Clone)]
-pub struct Ramp {
+pub(crate) struct Ramp {
     plan: RampPlan,
     next: Option<usize>,
     stages: Vec<Stage>,
 }
 
 impl Ramp {
-    pub fn new(plan: RampPlan) -> Self {
+    pub(crate) fn new(plan: RampPlan) -> Self {
         Ramp { next: (plan.start >= 1 && plan.start <= plan.max).then_some(plan.start), plan, stages: Vec::new() }
     }
 
     /// The load of the next stage to run; `None` once the ramp is over.
-    pub fn current(&self) -> Option<usize> {
+    pub(crate) fn current(&self) -> Option<usize> {
         self.next
     }
 
     /// Records the stage just run at `current()` and picks the next.
-    pub fn record(&mut self, p99_us: f64, loss_ratio: f64, errors: u64) {
+    pub(crate) fn record(&mut self, p99_us: f64, loss_ratio: f64, errors: u64) {
         let Some(n) = self.next else { return };
         let plan = &self.plan;
         let passed = p99_us <= plan.target_p99_us && loss_ratio <= plan.max_loss_ratio && errors == 0;
@@ -60,17 +60,17 @@ impl Ramp {
         };
     }
 
-    pub fn stages(&self) -> &[Stage] {
+    pub(crate) fn stages(&self) -> &[Stage] {
         &self.stages
     }
 
     /// The last load that passed (`None` if the first stage failed).
-    pub fn knee(&self) -> Option<usize> {
+    pub(crate) fn knee(&self) -> Option<usize> {
         self.stages.iter().take_while(|s| s.passed).last().map(|s| s.n)
     }
 
     /// The load that broke the target (`None` if the cap was reached first).
-    pub fn broke_at(&self) -> Option<usize> {
+    pub(crate) fn broke_at(&self) -> Option<usize> {
         self.stages.iter().find(|s| !s.passed).map(|s| s.n)
     }
 }

@@ -100,7 +100,7 @@ pub struct RampReport {
 
 impl Report {
     /// The p99 a ramp judges: receive lateness for streams, latency otherwise.
-    pub fn p99_us(&self) -> f64 {
+    pub(crate) fn p99_us(&self) -> f64 {
         match (&self.streams, &self.latency) {
             (Some(s), _) => s.receive_lateness.p99_us,
             (None, Some(l)) => l.p99_us,
@@ -109,7 +109,7 @@ impl Report {
     }
 
     /// Lost frames (streams) or failed requests, as a share of all.
-    pub fn loss_ratio(&self) -> f64 {
+    pub(crate) fn loss_ratio(&self) -> f64 {
         match &self.streams {
             Some(s) => s.loss_ratio,
             None => {
@@ -119,12 +119,12 @@ impl Report {
         }
     }
 
-    pub fn error_count(&self) -> u64 {
+    pub(crate) fn error_count(&self) -> u64 {
         self.errors.values().sum()
     }
 
     /// The human summary.
-    pub fn human(&self) -> String {
+    pub(crate) fn human(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "mode {}  clip {}  http {}  grpc {}", self.mode, self.clip_id, self.http, self.grpc);
         let rate = self.rate.map(|r| format!("  open loop at {r:.0}/s")).unwrap_or_default();

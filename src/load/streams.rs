@@ -35,6 +35,7 @@ use super::lateness::StreamTracker;
 use super::report::{Report, ServerUsage, StreamStats};
 use super::{Env, Mode, Options, procstat, setup};
 use crate::stream::PHASE_HEADER;
+use crate::sync::lock;
 use crate::wire::proto::pb;
 
 /// Streams being opened at once.
@@ -290,7 +291,7 @@ impl Spec {
                         out.dropped += dropped;
                         out.gaps += o.gap;
                         let tenth = (end - start) / 10;
-                        let mut h = hists.lock().expect("histogram lock poisoned");
+                        let mut h = lock(&hists);
                         h.send.record_ns(o.send_late_ns);
                         h.receive.record_ns(o.receive_late_ns);
                         if let Some(j) = o.jitter_ns {
@@ -329,26 +330,14 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
     // streams use one extra channel for it.
     let channels = setup::channels(&env.grpc, if opts.mode == Mode::GrpcStream { connections } else { 1 }).await?;
     let clock = setup::clock_sync(channels[0].clone()).await?;
-    let mut ws_base = env.http.clone();
-    ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
-    let window =
-        Arc::new(Window { start: AtomicI64::new(0), end: AtomicI64::new(i64::MAX), opened: AtomicUsize::new(0) });
-    let spec = Spec {
-        mode: opts.mode,
-        ws_base: ws_base.to_string(),
-        ws_protobuf: opts.ws_protobuf,
-        clip_id: env.clip_id.clone(),
-        fps: opts.fps,
-        clock,
-        window: Arc::clone(&window),
-        opening: Arc::new(Semaphore::new(OPENING)),
-    };
+    let spec = Spec::new(opts, env, clock)?;
+    let window = Arc::clone(&spec.window);
 
     let server_before = env.server_pid.and_then(procstat::sample);
     let counters_before_open = setup::stream_counters(&env.http).await;
     let (stop_tx, stop_rx) = watch::channel(false);
-    let mut tasks = Vec::with_capacity(n);
     let groups: Vec<Arc<Mutex<Hists>>> = (0..n.div_ceil(GROUP)).map(|_| Arc::default()).collect();
+    let mut tasks = Vec::with_capacity(n);
     for i in 0..n {
         // Independent streams differ in start time (1 ms apart), so the
         // server cannot merge them; shared ones all start at 0.
@@ -357,11 +346,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
         let hists = Arc::clone(&groups[i / GROUP]);
         tasks.push(tokio::spawn(spec.clone().run(channel, start_time, hists, stop_rx.clone())));
     }
-    let open_deadline = Instant::now() + Duration::from_secs(10) + Duration::from_millis(n as u64 * 2);
-    while window.opened.load(Ordering::Relaxed) < n && Instant::now() < open_deadline {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-    tokio::time::sleep(SETTLE).await;
+    wait_until_open(&window, n).await;
 
     let counters_before = setup::stream_counters(&env.http).await;
     let server_start = env.server_pid.and_then(procstat::sample);
@@ -376,48 +361,16 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
     let counters_after = setup::stream_counters(&env.http).await;
     stop_tx.send_replace(true);
 
-    let mut total = StreamResult::default();
-    let mut opened = 0;
-    for task in tasks {
-        let r = task.await?;
-        opened += usize::from(r.opened);
-        total.merge(&r);
-    }
-    let mut hists = Hists::default();
-    for group in &groups {
-        hists.merge(&group.lock().expect("histogram lock poisoned"));
-    }
-    let n_f = n as f64;
-    let stats = StreamStats {
-        streams: n,
-        opened,
-        fps: opts.fps,
-        shared: opts.shared,
-        encoding: match (opts.mode, opts.ws_protobuf) {
-            (Mode::WsStream, false) => "json",
-            _ => "protobuf",
-        },
-        frames_per_stream_per_sec: total.frames as f64 / n_f / elapsed,
-        send_lateness: hists.send.summary(),
-        receive_lateness: hists.receive.summary(),
-        jitter: hists.jitter.summary(),
-        drift_p50_us: (hists.last_tenth.quantile_ns(0.5) as f64 - hists.first_tenth.quantile_ns(0.5) as f64) / 1000.0,
-        dropped: total.dropped,
-        gaps: total.gaps,
-        loss_ratio: if total.gaps == 0 { 0.0 } else { total.gaps as f64 / (total.frames + total.gaps) as f64 },
-        reconnects: total.reconnects,
-        clock,
-        playbacks_started: counters_before_open.zip(counters_after).map(|(b, a)| a.0.saturating_sub(b.0)),
-        ticks_evaluated: counters_before.zip(counters_after).map(|(b, a)| a.1.saturating_sub(b.1)),
-    };
+    let done = Collected::gather(tasks, &groups).await?;
+    let stats = done.stats(opts, n, elapsed, clock, [counters_before_open, counters_before, counters_after]);
     let server = match (env.server_pid, server_before, server_start, server_end) {
         (Some(pid), Some(b), Some(s), Some(e)) => Some(ServerUsage {
             pid,
             rss_before_bytes: b.rss_bytes,
             rss_end_bytes: e.rss_bytes,
-            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / n_f),
+            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / n as f64),
             cpu_cores: (e.cpu_secs - s.cpu_secs) / elapsed,
-            cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / total.frames.max(1) as f64,
+            cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / done.total.frames.max(1) as f64,
         }),
         _ => None,
     };
@@ -432,14 +385,110 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
         connections,
         rate: None,
         elapsed_secs: elapsed,
-        ok: total.frames,
-        throughput: total.frames as f64 / elapsed,
+        ok: done.total.frames,
+        throughput: done.total.frames as f64 / elapsed,
         latency: None,
         streams: Some(stats),
-        errors: total.errors,
+        errors: done.total.errors,
         server,
         client_cpu_cores: client_start.zip(client_end).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / elapsed),
         loadavg: None,
         ramp: None,
     })
+}
+
+impl Spec {
+    /// What every stream of this run shares; the window is not open yet.
+    fn new(opts: &Options, env: &Env, clock: ClockSync) -> anyhow::Result<Spec> {
+        let mut ws_base = env.http.clone();
+        ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
+        let window =
+            Arc::new(Window { start: AtomicI64::new(0), end: AtomicI64::new(i64::MAX), opened: AtomicUsize::new(0) });
+        Ok(Spec {
+            mode: opts.mode,
+            ws_base: ws_base.to_string(),
+            ws_protobuf: opts.ws_protobuf,
+            clip_id: env.clip_id.clone(),
+            fps: opts.fps,
+            clock,
+            window,
+            opening: Arc::new(Semaphore::new(OPENING)),
+        })
+    }
+}
+
+/// Waits until every stream has delivered a frame (or a deadline that grows
+/// with their number), then lets the server settle, so the window measures
+/// steady streaming and not the opening.
+async fn wait_until_open(window: &Window, n: usize) {
+    let open_deadline = Instant::now() + Duration::from_secs(10) + Duration::from_millis(n as u64 * 2);
+    while window.opened.load(Ordering::Relaxed) < n && Instant::now() < open_deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    tokio::time::sleep(SETTLE).await;
+}
+
+/// Every stream's results, merged once the run has stopped them.
+struct Collected {
+    total: StreamResult,
+    /// Streams that delivered at least one frame.
+    opened: usize,
+    hists: Hists,
+}
+
+impl Collected {
+    async fn gather(
+        tasks: Vec<tokio::task::JoinHandle<StreamResult>>,
+        groups: &[Arc<Mutex<Hists>>],
+    ) -> anyhow::Result<Collected> {
+        let mut total = StreamResult::default();
+        let mut opened = 0;
+        for task in tasks {
+            let r = task.await?;
+            opened += usize::from(r.opened);
+            total.merge(&r);
+        }
+        let mut hists = Hists::default();
+        for group in groups {
+            hists.merge(&lock(group));
+        }
+        Ok(Collected { total, opened, hists })
+    }
+
+    /// The report's stream figures; `counters` are the server's (playbacks,
+    /// ticks) before the streams opened, at the window's start and at its end.
+    fn stats(
+        &self,
+        opts: &Options,
+        n: usize,
+        elapsed: f64,
+        clock: ClockSync,
+        counters: [Option<(u64, u64)>; 3],
+    ) -> StreamStats {
+        let [before_open, before, after] = counters;
+        let (total, hists) = (&self.total, &self.hists);
+        StreamStats {
+            streams: n,
+            opened: self.opened,
+            fps: opts.fps,
+            shared: opts.shared,
+            encoding: match (opts.mode, opts.ws_protobuf) {
+                (Mode::WsStream, false) => "json",
+                _ => "protobuf",
+            },
+            frames_per_stream_per_sec: total.frames as f64 / n as f64 / elapsed,
+            send_lateness: hists.send.summary(),
+            receive_lateness: hists.receive.summary(),
+            jitter: hists.jitter.summary(),
+            drift_p50_us: (hists.last_tenth.quantile_ns(0.5) as f64 - hists.first_tenth.quantile_ns(0.5) as f64)
+                / 1000.0,
+            dropped: total.dropped,
+            gaps: total.gaps,
+            loss_ratio: if total.gaps == 0 { 0.0 } else { total.gaps as f64 / (total.frames + total.gaps) as f64 },
+            reconnects: total.reconnects,
+            clock,
+            playbacks_started: before_open.zip(after).map(|(b, a)| a.0.saturating_sub(b.0)),
+            ticks_evaluated: before.zip(after).map(|(b, a)| a.1.saturating_sub(b.1)),
+        }
+    }
 }

@@ -79,36 +79,23 @@ struct WorkerResult {
     errors: BTreeMap<String, u64>,
 }
 
+impl WorkerResult {
+    fn merge(&mut self, o: WorkerResult) {
+        self.latency.merge(&o.latency);
+        self.ok += o.ok;
+        for (k, v) in o.errors {
+            *self.errors.entry(k).or_default() += v;
+        }
+    }
+}
+
 pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Result<Report> {
     let connections = match opts.mode {
         Mode::RestPose | Mode::RestHealth => workers,
         _ if opts.connections == 0 => workers,
         _ => opts.connections.min(workers),
     };
-    let mut callers = Vec::with_capacity(workers);
-    match opts.mode {
-        Mode::GrpcSample | Mode::GrpcPing => {
-            let channels = setup::channels(&env.grpc, connections).await?;
-            for w in 0..workers {
-                let client = AnimationClient::new(channels[w % connections].clone());
-                callers.push(match opts.mode {
-                    Mode::GrpcSample => Caller::GrpcSample(client, env.clip_id.clone()),
-                    _ => Caller::GrpcPing(client),
-                });
-            }
-        }
-        _ => {
-            let url = match opts.mode {
-                Mode::RestPose => format!("{}v1/clips/{}/pose?t=", env.http, env.clip_id),
-                _ => format!("{}healthz", env.http),
-            };
-            for _ in 0..workers {
-                // One client per worker: one keep-alive connection each.
-                let client = reqwest::Client::builder().pool_max_idle_per_host(1).build()?;
-                callers.push(Caller::Rest(client, url.clone()));
-            }
-        }
-    }
+    let mut callers = callers(opts, env, workers, connections).await?;
     // One request per worker before the clock starts: connections are open
     // and the clip is in the server's cache.
     for (w, caller) in callers.iter_mut().enumerate() {
@@ -120,64 +107,19 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
     let server_before = env.server_pid.and_then(procstat::sample);
     let client_before = procstat::sample_self();
     let start = Instant::now();
-    let deadline = start + opts.duration;
-    let issued = Arc::new(AtomicU64::new(0));
-    let mut tasks = Vec::with_capacity(workers);
-    for (w, mut caller) in callers.into_iter().enumerate() {
-        let issued = Arc::clone(&issued);
-        let (limit, rate) = (opts.requests, opts.rate);
-        tasks.push(tokio::spawn(async move {
-            let mut out = WorkerResult::default();
-            let mut i = 0u64;
-            loop {
-                let n = issued.fetch_add(1, Ordering::Relaxed);
-                if limit.is_some_and(|max| n >= max) {
-                    break;
-                }
-                let scheduled = match rate {
-                    Some(r) => {
-                        let at = start + Duration::from_secs_f64((w as f64 + (i * workers as u64) as f64) / r);
-                        tokio::time::sleep_until(at).await;
-                        at
-                    }
-                    None => Instant::now(),
-                };
-                if scheduled >= deadline {
-                    break;
-                }
-                // Bounded in time: a request scheduled inside the window is
-                // still sent (and its wait counted) for a grace second after
-                // it; past that, those the server was too slow to let us
-                // send are counted, not sent.
-                if let Some(r) = rate
-                    && Instant::now() >= deadline + DEADLINE_GRACE
-                {
-                    let left = ((deadline - start).as_secs_f64() * r) as u64;
-                    let unsent = (left.saturating_sub(w as u64)).div_ceil(workers as u64).saturating_sub(i);
-                    *out.errors.entry("unsent_past_deadline".into()).or_default() += unsent;
-                    break;
-                }
-                i += 1;
-                match tokio::time::timeout(REQUEST_TIMEOUT, caller.call(n)).await {
-                    Ok(Ok(())) => {
-                        out.latency.record(scheduled.elapsed());
-                        out.ok += 1;
-                    }
-                    Ok(Err(kind)) => *out.errors.entry(kind).or_default() += 1,
-                    Err(_) => *out.errors.entry("timeout".into()).or_default() += 1,
-                }
-            }
-            out
-        }));
-    }
+    let plan = Plan {
+        start,
+        deadline: start + opts.duration,
+        workers,
+        limit: opts.requests,
+        rate: opts.rate,
+        issued: Arc::new(AtomicU64::new(0)),
+    };
+    let tasks: Vec<_> =
+        callers.into_iter().enumerate().map(|(w, caller)| tokio::spawn(worker(w, caller, plan.clone()))).collect();
     let mut total = WorkerResult::default();
     for task in tasks {
-        let r = task.await?;
-        total.latency.merge(&r.latency);
-        total.ok += r.ok;
-        for (k, v) in r.errors {
-            *total.errors.entry(k).or_default() += v;
-        }
+        total.merge(task.await?);
     }
     let elapsed = start.elapsed().as_secs_f64();
     let server_after = env.server_pid.and_then(procstat::sample);
@@ -215,4 +157,96 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
         loadavg: None,
         ramp: None,
     })
+}
+
+/// One caller per worker: gRPC workers share `connections` channels
+/// round-robin; each REST worker has its own keep-alive connection.
+async fn callers(opts: &Options, env: &Env, workers: usize, connections: usize) -> anyhow::Result<Vec<Caller>> {
+    let mut callers = Vec::with_capacity(workers);
+    match opts.mode {
+        Mode::GrpcSample | Mode::GrpcPing => {
+            let channels = setup::channels(&env.grpc, connections).await?;
+            for w in 0..workers {
+                let client = AnimationClient::new(channels[w % connections].clone());
+                callers.push(match opts.mode {
+                    Mode::GrpcSample => Caller::GrpcSample(client, env.clip_id.clone()),
+                    _ => Caller::GrpcPing(client),
+                });
+            }
+        }
+        _ => {
+            let url = match opts.mode {
+                Mode::RestPose => format!("{}v1/clips/{}/pose?t=", env.http, env.clip_id),
+                _ => format!("{}healthz", env.http),
+            };
+            for _ in 0..workers {
+                // One client per worker: one keep-alive connection each.
+                let client = reqwest::Client::builder().pool_max_idle_per_host(1).build()?;
+                callers.push(Caller::Rest(client, url.clone()));
+            }
+        }
+    }
+    Ok(callers)
+}
+
+/// The schedule every worker shares: the window, the request budget and,
+/// in open loop, the rate.
+#[derive(Clone)]
+struct Plan {
+    start: Instant,
+    deadline: Instant,
+    workers: usize,
+    /// `--requests`: the total over all workers.
+    limit: Option<u64>,
+    /// `--rate`: open loop.
+    rate: Option<f64>,
+    /// Requests taken so far, over all workers.
+    issued: Arc<AtomicU64>,
+}
+
+/// Worker `w`'s loop: requests until the window or the budget ends,
+/// timed from their scheduled instant (see the module doc).
+async fn worker(w: usize, mut caller: Caller, plan: Plan) -> WorkerResult {
+    let Plan { start, deadline, workers, limit, rate, issued } = plan;
+    let mut out = WorkerResult::default();
+    let mut i = 0u64;
+    loop {
+        let n = issued.fetch_add(1, Ordering::Relaxed);
+        if limit.is_some_and(|max| n >= max) {
+            break;
+        }
+        let scheduled = match rate {
+            Some(r) => {
+                let at = start + Duration::from_secs_f64((w as f64 + (i * workers as u64) as f64) / r);
+                tokio::time::sleep_until(at).await;
+                at
+            }
+            None => Instant::now(),
+        };
+        if scheduled >= deadline {
+            break;
+        }
+        // Bounded in time: a request scheduled inside the window is
+        // still sent (and its wait counted) for a grace second after
+        // it; past that, those the server was too slow to let us
+        // send are counted, not sent.
+        if let Some(r) = rate
+            && Instant::now() >= deadline + DEADLINE_GRACE
+        {
+            let left = ((deadline - start).as_secs_f64() * r) as u64;
+            let unsent = (left.saturating_sub(w as u64)).div_ceil(workers as u64).saturating_sub(i);
+            *out.errors.entry("unsent_past_deadline".into()).or_default() += unsent;
+            break;
+        }
+        i += 1;
+        match tokio::time::timeout(REQUEST_TIMEOUT, caller.call(n)).await {
+            Ok(Ok(())) => {
+                out.latency.record(scheduled.elapsed());
+                out.ok += 1;
+            }
+            Ok(Err(kind)) => *out.errors.entry(kind).or_default() += 1,
+            Err(_) => *out.errors.entry("timeout".into()).or_default() += 1,
+        }
+    }
+    out
 }

@@ -84,9 +84,7 @@ impl ClipCache {
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
-        // A panic while holding this lock cannot leave the map inconsistent
-        // (every mutation is a single map operation), so poison is ignored.
-        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+        crate::sync::lock(&self.inner)
     }
 
     pub fn get(&self, id: &str) -> Option<Arc<CachedClip>> {

@@ -68,7 +68,7 @@ fn describe() {
 /// Where a caught panic happened (the `source` label of `inbetween_panics_total`).
 pub const PANIC_SOURCES: [&str; 3] = ["http", "grpc", "task"];
 
-/// Counts a caught panic (see [`crate::panics`]).
+/// Counts a caught panic (see `crate::panics`).
 pub fn panic_caught(source: &'static str) {
     crate::panics::caught(source);
 }

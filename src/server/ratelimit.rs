@@ -65,7 +65,7 @@ impl WriteLimiter {
     /// Takes one token of `caller` at `now`, or says how long until one is
     /// available.
     pub fn take(&self, caller: Caller, now: Instant) -> Result<(), Duration> {
-        let mut buckets = self.buckets.lock().expect("rate limiter lock poisoned");
+        let mut buckets = crate::sync::lock(&self.buckets);
         if buckets.len() >= PRUNE_AT {
             let (rate, burst) = (self.rate, self.burst);
             buckets.retain(|_, b| b.tokens + now.saturating_duration_since(b.at).as_secs_f64() * rate < burst);

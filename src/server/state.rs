@@ -74,12 +74,12 @@ impl AppState {
             return Ok(hit);
         }
         let load = {
-            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            let mut loads = crate::sync::lock(&self.loads);
             loads.entry(id.to_owned()).or_insert_with(|| self.load(id.to_owned())).clone()
         };
         let result = load.clone().await;
         {
-            let mut loads = self.loads.lock().unwrap_or_else(|p| p.into_inner());
+            let mut loads = crate::sync::lock(&self.loads);
             if loads.get(id).is_some_and(|l| l.ptr_eq(&load)) {
                 loads.remove(id);
             }
@@ -146,7 +146,7 @@ impl AppState {
     }
 
     fn forget_load(&self, id: &str) {
-        self.loads.lock().unwrap_or_else(|p| p.into_inner()).remove(id);
+        crate::sync::lock(&self.loads).remove(id);
     }
 }
 

@@ -25,7 +25,7 @@ use futures_util::future::BoxFuture;
 use crate::anim::Playback;
 
 pub mod postgres;
-pub mod retry;
+mod retry;
 pub mod sqlite;
 
 pub use retry::RetryPolicy;

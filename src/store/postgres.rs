@@ -14,7 +14,7 @@
 //! chose [`Durability::UnsafeFast`].
 //!
 //! Transient failures (a reset connection, a terminated backend, a
-//! serialization failure) are retried with backoff ([`super::retry`]):
+//! serialization failure) are retried with backoff (`store::retry`, [`super::RetryPolicy`]):
 //! reads and inserts always (an insert carries its id, so a retry after an
 //! attempt that did commit finds its own row), a replace or delete only when
 //! the failure proves the statement did not run.
@@ -36,7 +36,7 @@ static MIGRATOR: Migrator = sqlx::migrate!("./migrations/postgres");
 
 /// The `application_name` connections carry unless the URL sets one, so an
 /// operator can find them in `pg_stat_activity`.
-pub const DEFAULT_APPLICATION_NAME: &str = "inbetween";
+const DEFAULT_APPLICATION_NAME: &str = "inbetween";
 
 macro_rules! meta_columns {
     () => {
@@ -90,7 +90,7 @@ impl PgStore {
 
     /// The options this store connects with (the listener opens its own
     /// connection with the same ones).
-    pub fn connect_options(&self) -> &PgConnectOptions {
+    pub(crate) fn connect_options(&self) -> &PgConnectOptions {
         &self.options
     }
 

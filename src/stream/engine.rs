@@ -316,7 +316,7 @@ impl Engine {
     /// [`Subscription::control`]).
     pub fn watch(&self, params: StreamParams, permit: StreamPermit, lane: Option<u64>) -> Subscription {
         let key = params.key();
-        let mut hubs = self.inner.hubs.lock().expect("hub registry poisoned");
+        let mut hubs = crate::sync::lock(&self.inner.hubs);
         let (schedule, rx, handback) = match hubs.get(&key) {
             Some(pending) => (pending.schedule.clone(), pending.tx.subscribe(), None),
             None => {
@@ -390,7 +390,7 @@ impl Engine {
 
     /// Playbacks waiting for their first tick (for tests and metrics).
     pub fn pending_playbacks(&self) -> usize {
-        self.inner.hubs.lock().expect("hub registry poisoned").len()
+        crate::sync::lock(&self.inner.hubs).len()
     }
 }
 

@@ -148,7 +148,7 @@ impl Hub {
             tick = self.schedule.next() => tick,
         };
         if let Some((inner, key)) = self.registry.take() {
-            inner.hubs.lock().expect("hub registry poisoned").remove(&key);
+            crate::sync::lock(&inner.hubs).remove(&key);
         }
         if require_viewers && self.tx.receiver_count() == 0 {
             return None;

@@ -88,7 +88,7 @@ impl Limits {
         client: Option<IpAddr>,
         token: Option<u64>,
     ) -> Result<StreamPermit, AdmitError> {
-        let mut c = self.counts.lock().expect("limits lock poisoned");
+        let mut c = crate::sync::lock(&self.counts);
         if c.closed {
             return Err(AdmitError::ShuttingDown);
         }
@@ -114,11 +114,11 @@ impl Limits {
 
     /// Refuses new streams from now on.
     pub(crate) fn close(&self) {
-        self.counts.lock().expect("limits lock poisoned").closed = true;
+        crate::sync::lock(&self.counts).closed = true;
     }
 
     pub(crate) fn active(&self) -> usize {
-        self.counts.lock().expect("limits lock poisoned").total
+        crate::sync::lock(&self.counts).total
     }
 
     /// Resolves once no stream holds a permit.
@@ -135,7 +135,7 @@ impl Limits {
 
 impl Drop for StreamPermit {
     fn drop(&mut self) {
-        let mut c = self.limits.counts.lock().expect("limits lock poisoned");
+        let mut c = crate::sync::lock(&self.limits.counts);
         c.total -= 1;
         if let Some(ip) = self.client
             && let Some(n) = c.per_client.get_mut(&ip)

@@ -44,7 +44,7 @@ fn run() {
     loop {
         let now = Instant::now();
         let next = {
-            let mut due = shared.due.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let mut due = crate::sync::lock(&shared.due);
             while let Some(entry) = due.first_entry() {
                 if *entry.key() > now {
                     break;
@@ -88,7 +88,7 @@ impl Future for TickSleep {
         }
         let shared = shared();
         let earliest = {
-            let mut due = shared.due.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let mut due = crate::sync::lock(&shared.due);
             due.entry(self.due).or_default().push(cx.waker().clone());
             due.keys().next() == Some(&self.due)
         };

@@ -202,7 +202,7 @@ impl ClipDoc {
     /// Key rows of the wrong width (the only rule the document's shape can
     /// break that the core cannot see); everything else is
     /// [`crate::anim::Clip::build`]'s to judge.
-    pub fn to_spec(&self) -> Result<ClipSpec, DocError> {
+    pub(crate) fn to_spec(&self) -> Result<ClipSpec, DocError> {
         let skeleton = self.skeleton.as_ref().map(|s| SkeletonSpec {
             joints: s
                 .joints
@@ -307,7 +307,7 @@ pub fn parse_clip(body: &[u8]) -> Result<(ClipDoc, ClipSpec), DocError> {
 
 /// A pose in the SPEC §3 shape, serialised straight from the core's buffers
 /// (no intermediate per-joint allocation).
-pub struct PoseJson<'a> {
+pub(crate) struct PoseJson<'a> {
     pub clip: &'a str,
     /// The request time.
     pub time: f64,
@@ -334,7 +334,7 @@ impl PoseJson<'_> {
     /// Appends exactly the JSON that `serde_json` writes for this pose, but
     /// directly: the pose route and JSON stream frames spend most of their
     /// time here, and serde's per-field plumbing cost more than the floats.
-    pub fn write_to(&self, out: &mut impl BufMut) {
+    pub(crate) fn write_to(&self, out: &mut impl BufMut) {
         out.put_slice(b"{\"clip\":");
         write_json_str(out, self.clip);
         out.put_slice(b",\"time\":");
@@ -424,7 +424,7 @@ struct JointJson<'a> {
 }
 
 /// Per-joint 4×4 matrices (`format=matrix` or `skinning`), column-major.
-pub struct MatricesJson<'a> {
+pub(crate) struct MatricesJson<'a> {
     pub clip: &'a str,
     pub time: f64,
     pub clip_time: f32,

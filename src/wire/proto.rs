@@ -17,7 +17,7 @@ use crate::anim::{
     Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Space,
     Speed, TrackSpec, Transform,
 };
-use crate::wire::json::{ClipDoc, DocError};
+use crate::wire::json::DocError;
 
 /// Messages and the client generated from the proto.
 #[allow(clippy::all, missing_docs)]
@@ -33,9 +33,6 @@ pub mod server {
 
 /// The encoded `FileDescriptorSet` of `proto/`, for server reflection.
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/inbetween_descriptor.bin"));
-
-/// The fully qualified service name, as health checks and reflection list it.
-pub const SERVICE_NAME: &str = "inbetween.v1.Animation";
 
 fn invalid(pointer: String, detail: impl Into<String>) -> DocError {
     DocError { code: "invalid_field", pointer, detail: detail.into() }
@@ -91,7 +88,7 @@ pub enum Format {
 
 /// # Errors
 /// A number the proto does not define.
-pub fn format_from_pb(value: i32, pointer: &str) -> Result<Format, DocError> {
+pub(crate) fn format_from_pb(value: i32, pointer: &str) -> Result<Format, DocError> {
     match pb::Format::try_from(value) {
         Ok(pb::Format::Unspecified | pb::Format::Trs) => Ok(Format::Trs),
         Ok(pb::Format::Matrix) => Ok(Format::Matrix),
@@ -130,7 +127,7 @@ fn part<const N: usize>(flat: &[f32], pointer: String) -> Result<Option<[f32; N]
 /// # Errors
 /// Flat arrays of the wrong width, enum numbers the proto does not define,
 /// a track without a channel; each with its JSON pointer.
-pub fn clip_from_pb(clip: &pb::Clip) -> Result<ClipSpec, DocError> {
+pub(crate) fn clip_from_pb(clip: &pb::Clip) -> Result<ClipSpec, DocError> {
     let skeleton = match &clip.skeleton {
         None => None,
         Some(s) => {
@@ -192,7 +189,7 @@ pub fn clip_from_pb(clip: &pb::Clip) -> Result<ClipSpec, DocError> {
     })
 }
 
-/// The proto form of a clip spec (the inverse of [`clip_from_pb`]).
+/// The proto form of a clip spec (the inverse of `clip_from_pb`).
 pub fn clip_to_pb(spec: &ClipSpec) -> pb::Clip {
     let flat = |k: &Keys| -> Vec<f32> {
         match k {
@@ -240,27 +237,9 @@ pub fn clip_to_pb(spec: &ClipSpec) -> pb::Clip {
     }
 }
 
-/// A proto clip as the JSON document the store keeps.
-///
-/// # Errors
-/// As [`clip_from_pb`].
-pub fn clip_doc_from_pb(clip: &pb::Clip) -> Result<(ClipDoc, ClipSpec), DocError> {
-    let spec = clip_from_pb(clip)?;
-    Ok((ClipDoc::from_spec(&spec), spec))
-}
-
-/// A stored JSON document as a proto clip.
-///
-/// # Errors
-/// A stored document with key rows of the wrong width (it could not have
-/// been stored).
-pub fn clip_doc_to_pb(doc: &ClipDoc) -> Result<pb::Clip, DocError> {
-    Ok(clip_to_pb(&doc.to_spec()?))
-}
-
 /// A pose as packed floats. `names` only when the reply is the first (or
 /// only) pose of its call or stream.
-pub fn pose_to_pb(names: Option<&[String]>, pose: &Pose, time: f64, clip_time: f32, space: Space) -> pb::Pose {
+pub(crate) fn pose_to_pb(names: Option<&[String]>, pose: &Pose, time: f64, clip_time: f32, space: Space) -> pb::Pose {
     pb::Pose {
         joint_names: names.map(<[String]>::to_vec).unwrap_or_default(),
         translations: pose.translations.iter().flat_map(|v| v.to_array()).collect(),
@@ -275,7 +254,7 @@ pub fn pose_to_pb(names: Option<&[String]>, pose: &Pose, time: f64, clip_time: f
 
 /// Column-major 4×4 matrices per joint (`FORMAT_MATRIX`/`FORMAT_SKINNING`),
 /// always in model space.
-pub fn matrices_to_pb(names: Option<&[String]>, matrices: &[Mat4], time: f64, clip_time: f32) -> pb::Pose {
+pub(crate) fn matrices_to_pb(names: Option<&[String]>, matrices: &[Mat4], time: f64, clip_time: f32) -> pb::Pose {
     pb::Pose {
         joint_names: names.map(<[String]>::to_vec).unwrap_or_default(),
         matrices: matrices.iter().flat_map(|m| m.to_cols_array()).collect(),
@@ -290,7 +269,7 @@ pub fn matrices_to_pb(names: Option<&[String]>, matrices: &[Mat4], time: f64, cl
 mod tests {
     use super::*;
     use crate::anim::Clip;
-    use crate::wire::json::parse_clip;
+    use crate::wire::json::{ClipDoc, parse_clip};
 
     fn wave() -> ClipSpec {
         let body = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/wave.json")).unwrap();
@@ -309,8 +288,8 @@ mod tests {
     fn the_proto_document_survives_the_json_document() {
         let spec = wave();
         let doc = ClipDoc::from_spec(&spec);
-        let (doc2, _) = clip_doc_from_pb(&clip_doc_to_pb(&doc).unwrap()).unwrap();
-        assert_eq!(doc2, doc);
+        let back = clip_from_pb(&clip_to_pb(&doc.to_spec().unwrap())).unwrap();
+        assert_eq!(ClipDoc::from_spec(&back), doc);
     }
 
     fn check_error(edit: impl FnOnce(&mut pb::Clip), code: &str, pointer: &str) {
