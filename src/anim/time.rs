@@ -91,7 +91,7 @@ impl TimeRange {
     #[inline]
     pub fn clip_time(self, t: f64, playback: Playback, ease: Ease) -> f32 {
         let duration = self.duration();
-        if !(duration > 0.0) || !t.is_finite() {
+        if duration.is_nan() || duration <= 0.0 || !t.is_finite() {
             return self.start;
         }
         let x = self.offset(t);
