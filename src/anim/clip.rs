@@ -14,6 +14,7 @@ use super::compile::{self, Compiled, finite3, unit_quat};
 use super::error::{ClipError, ClipErrorKind as K, Path};
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
 use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
+use super::time::TimeRange;
 use super::timeline::{Span, Timeline};
 use super::tracks::{QuatTracks, Vec3Tracks};
 
@@ -210,26 +211,18 @@ impl Clip {
         &self.events
     }
 
+    /// The clip's time range and the map from request times into it
+    /// (SPEC §2.7's rule at the seams; see [`TimeRange`]).
+    pub fn range(&self) -> TimeRange {
+        TimeRange::new(self.start, self.end)
+    }
+
     /// Maps a request time to clip time (SPEC §2.6–2.7): playback first
     /// (`once` clamps, `loop` wraps, `ping_pong` reflects), then the ease
-    /// warp over normalised time. Computed in `f64` so long-running loops
-    /// keep their precision; non-finite `t` maps to the start.
+    /// warp; a time that rounds to the start or end is exactly there.
+    /// Non-finite `t` maps to the start. See [`TimeRange::clip_time`].
     pub fn clip_time(&self, t: f64, playback: Playback, ease: Ease) -> f32 {
-        let (start, dur) = (self.start as f64, self.end as f64 - self.start as f64);
-        if dur.is_nan() || dur <= 0.0 || !t.is_finite() {
-            return self.start;
-        }
-        let x = t - start;
-        let x = match playback {
-            Playback::Once => x.clamp(0.0, dur),
-            Playback::Loop => x.rem_euclid(dur),
-            Playback::PingPong => {
-                let p = x.rem_euclid(2.0 * dur);
-                if p > dur { 2.0 * dur - p } else { p }
-            }
-        };
-        let x = ease.apply((x / dur).clamp(0.0, 1.0)) * dur;
-        ((start + x) as f32).clamp(self.start, self.end)
+        self.range().clip_time(t, playback, ease)
     }
 
     /// The local pose at clip time `t` (already mapped by

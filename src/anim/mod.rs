@@ -13,6 +13,7 @@
 //! Module map: `spec` the authoring types; `error` why a spec is refused;
 //! `compile` per-track validation and control points; `curve` the runtime
 //! curves and their evaluation; `quat` quaternion tools and fast slerp;
+//! `time` request time → clip time (playback, ease, the seams);
 //! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
 //! hierarchy and model space; `clip` the clip and the sampling kernel.
 
@@ -24,6 +25,7 @@ mod error;
 pub mod quat;
 mod skeleton;
 mod spec;
+mod time;
 mod timeline;
 mod tracks;
 
@@ -34,6 +36,7 @@ pub use spec::{
     Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Space, Speed,
     TrackSpec, Transform,
 };
+pub use time::TimeRange;
 pub use timeline::{Span, Timeline};
 
 /// Internals exposed for benchmarks and reference tests only.

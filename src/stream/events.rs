@@ -52,11 +52,15 @@ pub fn crossed(clip: &Clip, playback: Playback, ease: Ease, from: Option<f64>, t
         out.extend((lo..hi).take(MAX_EVENTS_PER_FRAME).map(|i| i as u32));
         return;
     };
-    let (start, duration) = (f64::from(clip.start()), f64::from(clip.duration()));
-    if from == to || duration.is_nan() || duration <= 0.0 {
+    let range = clip.range();
+    let duration = range.duration();
+    // Offsets from the start, and clip times, as sampling computes them
+    // (SPEC §2.7's seam rule included), so a frame's events match its pose.
+    let (xa, xb) = (range.offset(from), range.offset(to));
+    if xa == xb || duration.is_nan() || duration <= 0.0 {
         return;
     }
-    let clip_time = |p: f64| start + ease.apply((p / duration).clamp(0.0, 1.0)) * duration;
+    let clip_time = |p: f64| f64::from(range.at(p, ease));
     let mut emit = |piece: Piece| {
         let (a, b) = (clip_time(piece.from), clip_time(piece.to));
         if a <= b {
@@ -82,7 +86,6 @@ pub fn crossed(clip: &Clip, playback: Playback, ease: Ease, from: Option<f64>, t
         }
         true
     };
-    let (xa, xb) = (from - start, to - start);
     let forward = xb > xa;
     match playback {
         Playback::Once => {
@@ -92,22 +95,15 @@ pub fn crossed(clip: &Clip, playback: Playback, ease: Ease, from: Option<f64>, t
             }
         }
         Playback::Loop => {
-            let (ca, cb) = ((xa / duration).floor(), (xb / duration).floor());
-            let cycles = cycle_range(ca, cb, forward);
-            for c in cycles {
-                let base = c * duration;
-                let piece = if forward {
-                    Piece {
-                        from: if c == ca { xa - base } else { 0.0 },
-                        from_included: c != ca,
-                        to: if c == cb { xb - base } else { duration },
-                    }
-                } else {
-                    Piece {
-                        from: if c == ca { xa - base } else { duration },
-                        from_included: c != ca,
-                        to: if c == cb { xb - base } else { 0.0 },
-                    }
+            // (cycle, position) as sampling wraps them: a position that
+            // rounds to the end is the next cycle's start.
+            let ((ca, pa), (cb, pb)) = (range.cycle(xa), range.cycle(xb));
+            for c in cycle_range(ca, cb, forward) {
+                let (near, far) = if forward { (0.0, duration) } else { (duration, 0.0) };
+                let piece = Piece {
+                    from: if c == ca { pa } else { near },
+                    from_included: c != ca,
+                    to: if c == cb { pb } else { far },
                 };
                 if !emit(piece) {
                     break;

@@ -26,15 +26,15 @@
 
 use std::future::Future;
 use std::pin::Pin;
-use std::sync::Arc;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 use super::encode::{Encoded, Encoding, FrameData, FrameEncoder};
-use super::engine::{HubKey, Inner, StreamParams};
 use super::events::crossed;
+use super::params::StreamParams;
 use super::playhead::{Control, Playhead};
+use super::registry::Listing;
 use super::schedule::Schedule;
 use crate::anim::{SampleOptions, Sampler};
 
@@ -69,8 +69,9 @@ pub(crate) struct Hub {
     with_names: bool,
     tx: broadcast::Sender<Item>,
     controls: Option<mpsc::Receiver<Control>>,
-    /// Shared playbacks leave the registry before their first tick.
-    registry: Option<(Arc<Inner>, HubKey)>,
+    /// A shared playback's entry in the registry, dropped (unlisting it)
+    /// before its first tick.
+    listing: Option<Listing<Item>>,
     /// Where to hand the playback after its first tick if it has one viewer.
     handback: Option<oneshot::Sender<Box<Hub>>>,
     /// Resolves at shutdown; one future for the playback's life, so it
@@ -88,7 +89,7 @@ impl Hub {
         schedule: Schedule,
         tx: broadcast::Sender<Item>,
         controls: Option<mpsc::Receiver<Control>>,
-        registry: Option<(Arc<Inner>, HubKey)>,
+        listing: Option<Listing<Item>>,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
         metrics::counter!("inbetween_stream_playbacks_total").increment(1);
@@ -103,7 +104,7 @@ impl Hub {
             with_names: params.encoding == Encoding::Protobuf,
             tx,
             controls,
-            registry,
+            listing,
             handback: None,
             shutdown: Some(Box::pin(async move {
                 let mut shutdown = shutdown;
@@ -147,9 +148,8 @@ impl Hub {
             }
             tick = self.schedule.next() => tick,
         };
-        if let Some((inner, key)) = self.registry.take() {
-            crate::sync::lock(&inner.hubs).remove(&key);
-        }
+        // Nobody joins after the first tick, so frame 0 reaches every viewer.
+        drop(self.listing.take());
         if require_viewers && self.tx.receiver_count() == 0 {
             return None;
         }
@@ -218,6 +218,21 @@ impl Hub {
             with_names: std::mem::take(&mut self.with_names),
         })
     }
+}
+
+/// Controls queued for a playback before the client is told to slow down.
+const CONTROL_QUEUE: usize = 32;
+
+/// A private playback of `params` on `schedule`, for its one viewer to
+/// drive: the playback, its (one-frame) broadcast and its control sender.
+pub(crate) fn private(
+    params: &StreamParams,
+    schedule: Schedule,
+    shutdown: watch::Receiver<bool>,
+) -> (Box<Hub>, broadcast::Receiver<Item>, mpsc::Sender<Control>) {
+    let (tx, rx) = broadcast::channel(1);
+    let (ctl_tx, ctl_rx) = mpsc::channel(CONTROL_QUEUE);
+    (Box::new(Hub::new(params, schedule, tx, Some(ctl_rx), None, shutdown)), rx, ctl_tx)
 }
 
 /// Wall-clock nanoseconds since the Unix epoch (0 if the clock is before it).

@@ -5,7 +5,8 @@
 //! [`StreamParams`] (bound to the `Arc` of the compiled clip version it
 //! starts on), takes a [`StreamPermit`] from the [`Engine`] (the stream
 //! caps), and asks for a [`Subscription`]. The engine matches it to a
-//! playback (`hub`), which wakes on its schedule (`schedule`: tick `k` due
+//! playback (`hub`; joinable ones are listed in `registry`
+//! until their first tick), which wakes on its schedule (`schedule`: tick `k` due
 //! at `start + k/fps` on a grid with a millisecond phase, computed, never
 //! accumulated; `ticker` wakes it; late wake-ups skip to the latest tick and
 //! count the rest as dropped) — as its own task while it is shared, driven
@@ -33,7 +34,9 @@ mod events;
 pub mod grpc;
 mod hub;
 mod limits;
+mod params;
 mod playhead;
+mod registry;
 mod schedule;
 mod subscription;
 mod ticker;
@@ -41,10 +44,11 @@ mod wire_frame;
 pub mod ws;
 
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder};
-pub use engine::{ClipSource, Engine, EngineConfig, MAX_FPS, ParamError, StreamParams, StreamRequest};
+pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use hub::{EndReason, unix_nanos};
 pub use limits::{AdmitError, StreamPermit, token_key};
+pub use params::{ClipSource, MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use playhead::{Control, MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};
 pub use subscription::{ControlError, Controller, Delivered, Next, Subscription};

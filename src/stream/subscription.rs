@@ -3,12 +3,12 @@
 //! to send it controls.
 
 use bytes::Bytes;
-use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 use super::encode::Encoding;
-use super::engine::{Engine, StreamParams};
-use super::hub::{EndReason, Hub, Item};
+use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
+use super::params::StreamParams;
 use super::playhead::{Control, Playhead};
 use super::schedule::{Grid, Schedule};
 
@@ -69,7 +69,6 @@ impl Controller {
 /// One stream. Dropping it leaves the playback (which ends when its last
 /// viewer has gone) and frees its admission slot.
 pub struct Subscription {
-    engine: Engine,
     params: StreamParams,
     /// The schedule the stream started on (its tick 0 and grid).
     schedule: Schedule,
@@ -81,6 +80,8 @@ pub struct Subscription {
     /// its first tick if nobody else joined.
     handback: Option<oneshot::Receiver<Box<Hub>>>,
     controls: Option<mpsc::Sender<Control>>,
+    /// The engine's shutdown flag, for a playback this viewer forks.
+    shutdown: watch::Receiver<bool>,
     last_seq: Option<u64>,
     delivered: u64,
     stopped: bool,
@@ -112,10 +113,10 @@ pub(crate) enum Source {
 
 impl Subscription {
     pub(crate) fn new(
-        engine: Engine,
         params: StreamParams,
         schedule: Schedule,
         source: Source,
+        shutdown: watch::Receiver<bool>,
         permit: StreamPermit,
     ) -> Self {
         let (rx, driver, handback, controls) = match source {
@@ -123,13 +124,13 @@ impl Subscription {
             Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
         };
         Subscription {
-            engine,
             params,
             schedule,
             rx,
             driver,
             handback,
             controls,
+            shutdown,
             last_seq: None,
             delivered: 0,
             stopped: false,
@@ -244,7 +245,8 @@ impl Subscription {
         let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
         let prev_time = self.last_seq.map(|last| playhead.time_at(last));
         let schedule = self.schedule.resumed_at(next);
-        let (hub, rx, tx) = self.engine.private(p, schedule, prev_time, self.last_seq.is_none());
+        let (mut hub, rx, tx) = hub::private(p, schedule, self.shutdown.clone());
+        hub.resume(prev_time, self.last_seq.is_none());
         // The shared playback goes on for its other viewers (or, if this
         // viewer drove it alone, ends here).
         self.rx = rx;

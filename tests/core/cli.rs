@@ -19,7 +19,7 @@ fn wave() -> Clip {
     Clip::build(&spec).unwrap()
 }
 
-fn run(args: &[&str]) -> Output {
+pub fn run(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_inbetween")).args(args).output().expect("the binary runs")
 }
 

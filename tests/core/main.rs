@@ -21,6 +21,7 @@ mod playback;
 mod properties;
 mod random;
 mod reference;
+mod seam;
 mod validation;
 
 use std::alloc::{GlobalAlloc, Layout, System};

@@ -9,6 +9,7 @@
 mod grpc_api;
 mod grpc_streams;
 mod limits;
+mod seam;
 mod websocket;
 
 use inbetween::wire::proto::pb;
