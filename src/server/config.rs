@@ -16,7 +16,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use serde::Deserialize;
 
-use super::auth::{Token, TokenSpec};
+use super::tokens::{Token, TokenSpec};
 
 /// A value that must not reach logs: `Debug` prints `[redacted]`.
 #[derive(Clone, PartialEq, Eq, Deserialize)]
@@ -517,7 +517,7 @@ mod tests {
 
     #[test]
     fn scoped_tokens_come_from_toml_and_flags() {
-        let hash = crate::server::auth::TokenHash::of(b"t");
+        let hash = crate::server::tokens::TokenHash::of(b"t");
         let file: RawConfig = toml::from_str(&format!(
             "[[tokens]]\nname = \"ci\"\nscopes = [\"write\"]\nhash = \"{hash}\"\n\
              [[tokens]]\nname = \"ops\"\nscopes = [\"admin\"]\nhash = \"{hash}\"\n"

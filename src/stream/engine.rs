@@ -274,12 +274,12 @@ impl Engine {
         self.inner.limits.admit(client)
     }
 
-    /// As [`Engine::admit`], also counting the stream against the caller's
-    /// bearer token (`token`: [`crate::stream::limits::token_key`]).
+    /// As [`Engine::admit`], also counting the stream against `token`: the
+    /// name of the configured token that identified the caller, if any.
     ///
     /// # Errors
     /// As [`Engine::admit`], or the per-token cap is reached.
-    pub fn admit_for(&self, client: Option<IpAddr>, token: Option<u64>) -> Result<StreamPermit, AdmitError> {
+    pub fn admit_for(&self, client: Option<IpAddr>, token: Option<Arc<str>>) -> Result<StreamPermit, AdmitError> {
         self.inner.limits.admit_for(client, token)
     }
 

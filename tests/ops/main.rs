@@ -4,6 +4,7 @@
 //! (`soak`, the full crash test, the overload measurement) are `#[ignore]`d
 //! and have one command each in RELIABILITY.md.
 
+mod caller;
 mod connections;
 mod crash;
 mod overload;
