@@ -1,7 +1,7 @@
 //! Typed, layered configuration: defaults → TOML file (`--config`) → `INBETWEEN_*`
 //! environment → command-line flags, each layer overriding the one before.
 //!
-//! Every setting is one row of a [`settings!`] table: its name and value
+//! Every setting is one row of a `settings!` table: its name and value
 //! type, its default, the check it must pass, its TOML key, flag, environment
 //! variable, value name and help. From the rows come the layer struct
 //! ([`RawConfig`], [`RawLimits`]: every field optional, absent meaning "ask

@@ -48,7 +48,7 @@ pub struct EngineConfig {
     pub max_streams: usize,
     /// Concurrent streams per client address.
     pub max_streams_per_client: usize,
-    /// Concurrent streams per bearer token (see [`Engine::admit_for`]).
+    /// Concurrent streams per configured token, by its name (see [`Engine::admit_for`]).
     pub max_streams_per_token: usize,
     /// Wake playbacks with the precise tick timer thread (`ticker`) rather
     /// than tokio's millisecond timer. The server turns it on; the default
