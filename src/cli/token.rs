@@ -1,12 +1,12 @@
 //! `inbetween token`: make a token and the hash the server's configuration
-//! holds instead of it (`server::auth`). The token is printed once and
+//! holds instead of it (`server::tokens`). The token is printed once and
 //! never stored; only its hash goes into `[[tokens]]` or `--token`.
 
 use std::io::{BufRead, Write};
 
 use clap::{Args, Subcommand};
 
-use crate::server::auth::{Scope, TokenHash, TokenSpec, new_token};
+use crate::server::tokens::{Scope, TokenHash, TokenSpec, new_token};
 
 #[derive(Debug, Args)]
 pub struct TokenArgs {

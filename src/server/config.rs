@@ -1,12 +1,20 @@
 //! Typed, layered configuration: defaults → TOML file (`--config`) → `INBETWEEN_*`
 //! environment → command-line flags, each layer overriding the one before.
 //!
-//! Parsing happens in two stages. [`RawConfig`] is what a layer may say (every
-//! field optional; the same struct is the TOML schema and the clap flags, so
-//! the two cannot drift apart); [`RawConfig::validate`] turns the merged layers
-//! into a [`Config`], which only holds values the server can run with. Tokens
-//! and database URLs are [`Secret`]s, which never print.
+//! Every setting is one row of a `settings!` table: its name and value
+//! type, its default, the check it must pass, its TOML key, flag, environment
+//! variable, value name and help. From the rows come the layer struct
+//! ([`RawConfig`], [`RawLimits`]: every field optional, absent meaning "ask
+//! the layer below"; at once the clap flags and the TOML schema, so the two
+//! cannot drift apart), the merge of two layers ([`RawConfig::over`]), and
+//! the checked values with their defaults filled in. What several settings
+//! decide together (the store, its pool, TLS, tokens) is checked after that,
+//! one short function per concern, into a [`Config`], which only holds values
+//! the server can run with. Tokens and database URLs are [`Secret`]s, which
+//! never print. Plain data: nothing here imports another server module but
+//! the token types (`server::tokens`).
 
+use std::collections::HashSet;
 use std::fmt;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -16,7 +24,413 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use serde::Deserialize;
 
-use super::auth::{Token, TokenSpec};
+use super::tokens::{Token, TokenSpec};
+use crate::store::{Durability, PoolSettings, RetryPolicy};
+
+/// Declares a table of settings, one row each:
+///
+/// ```text
+/// #[arg(extra clap attributes)]
+/// name: Type [= default] => check -> Checked,
+///     "toml_key", "flag", "INBETWEEN_VAR", "VALUE", [shown "default as text",] "help";
+/// ```
+///
+/// and generates the layer struct (`Option<Type>` fields, renamed to the
+/// TOML key, with the flag, variable and help — the default appended — for
+/// clap), `over` (merge two layers), the checked struct (`Checked` fields,
+/// documented by the help) and `checked`, which fills in each default and
+/// runs `check(toml_key, value)`. A row without a default checks an
+/// `Option<Type>`. One nested table (`[limits]`) may follow the rows.
+macro_rules! settings {
+    (
+        layer: $(#[$raw_meta:meta])* $raw_vis:vis struct $Raw:ident,
+        checked: $(#[$checked_meta:meta])* $checked_vis:vis struct $Checked:ident,
+        $(nested: $sub:ident: $SubRaw:ident => $SubChecked:ident,)?
+        rows: {
+            $(
+                $(#[$arg:meta])*
+                $name:ident: $ty:ty $(= $default:expr)? => $check:ident -> $out:ty,
+                $toml:literal, $flag:literal, $env:literal, $value:literal, $(shown $shown:literal,)? $help:literal;
+            )*
+        }
+    ) => {
+        $(#[$raw_meta])*
+        #[derive(Debug, Clone, Default, Deserialize, clap::Args)]
+        #[serde(deny_unknown_fields)]
+        $raw_vis struct $Raw {
+            $(
+                #[serde(rename = $toml)]
+                #[arg(long = $flag, env = $env, value_name = $value)]
+                #[arg(help = setting_help!($help $(, shown $shown)? $(, default $default)?))]
+                $(#[$arg])*
+                pub $name: Option<$ty>,
+            )*
+            $(
+                #[command(flatten)]
+                #[serde(default)]
+                pub $sub: $SubRaw,
+            )?
+        }
+
+        $(#[$checked_meta])*
+        $checked_vis struct $Checked {
+            $(
+                #[doc = $help]
+                pub $name: $out,
+            )*
+            $(pub $sub: $SubChecked,)?
+        }
+
+        impl $Raw {
+            /// This layer over `lower`: a setting given here wins.
+            pub fn over(self, lower: $Raw) -> $Raw {
+                $Raw {
+                    $($name: self.$name.or(lower.$name),)*
+                    $($sub: self.$sub.over(lower.$sub),)?
+                }
+            }
+
+            /// Fills in the defaults and checks each setting on its own.
+            fn checked(self) -> anyhow::Result<$Checked> {
+                Ok($Checked {
+                    $($name: $check($toml, setting_value!(self.$name $(, $default)?))?,)*
+                    $($sub: self.$sub.checked()?,)?
+                })
+            }
+
+            /// The TOML key, flag and environment variable of every row.
+            #[cfg(test)]
+            const NAMES: &'static [[&'static str; 3]] = &[$([$toml, $flag, $env]),*];
+        }
+    };
+}
+
+/// A row's help, with its default when it has one.
+macro_rules! setting_help {
+    ($help:literal, shown $shown:literal $(, default $default:expr)?) => {
+        concat!($help, " [default: ", $shown, "]")
+    };
+    ($help:literal, default $default:expr) => {
+        format!("{} [default: {}]", $help, $default)
+    };
+    ($help:literal) => {
+        $help
+    };
+}
+
+/// A layer's value of a row, or the row's default.
+macro_rules! setting_value {
+    ($value:expr, $default:expr) => {
+        $value.unwrap_or_else(|| $default)
+    };
+    ($value:expr) => {
+        $value
+    };
+}
+
+settings! {
+    layer:
+    /// One layer of configuration (flags, environment, or the TOML file).
+    pub struct RawConfig,
+    checked:
+    /// [`RawConfig`] with defaults filled in and each value checked.
+    struct Settings,
+    nested: limits: RawLimits => Limits,
+    rows: {
+        listen: SocketAddr = SocketAddr::from(([127, 0, 0, 1], 8080)) => as_given -> SocketAddr,
+            "listen", "listen", "INBETWEEN_LISTEN", "ADDR",
+            "Address to listen on (port 0 picks a free port)";
+        grpc_listen: SocketAddr = SocketAddr::from(([127, 0, 0, 1], 50051)) => as_given -> SocketAddr,
+            "grpc_listen", "grpc-listen", "INBETWEEN_GRPC_LISTEN", "ADDR",
+            "Address of the gRPC API (port 0 picks a free port)";
+        data_dir: PathBuf => as_given -> Option<PathBuf>,
+            "data_dir", "data-dir", "INBETWEEN_DATA_DIR", "DIR", shown "./data",
+            "Directory of the embedded SQLite store, created if missing";
+        #[arg(hide_env_values = true)]
+        database_url: Secret => as_given -> Option<Secret>,
+            "database_url", "database-url", "INBETWEEN_DATABASE_URL", "URL",
+            "A store URL instead of --data-dir (`sqlite://path/to/file.db`, or `postgres://user@host/db` for \
+             several nodes sharing one database)";
+        db_max_connections: u32 = PoolSettings::default().max_connections => positive -> u32,
+            "db_max_connections", "db-max-connections", "INBETWEEN_DB_MAX_CONNECTIONS", "N",
+            "Most database connections this node opens";
+        db_acquire_timeout: u64 = PoolSettings::default().acquire_timeout.as_secs() => seconds -> Duration,
+            "db_acquire_timeout_secs", "db-acquire-timeout-secs", "INBETWEEN_DB_ACQUIRE_TIMEOUT_SECS", "SECS",
+            "Seconds a request waits for a free database connection before it fails with 503";
+        db_retries: u32 = RetryPolicy::default().retries => as_given -> u32,
+            "db_retries", "db-retries", "INBETWEEN_DB_RETRIES", "N",
+            "Retries of a transiently failed database operation, with exponential backoff from 50 ms";
+        #[arg(num_args = 0..=1, default_missing_value = "true")]
+        #[arg(value_parser = clap::builder::BoolishValueParser::new())]
+        unsafe_fast_writes: bool = false => as_given -> bool,
+            "unsafe_fast_writes", "unsafe-fast-writes", "INBETWEEN_UNSAFE_FAST_WRITES", "BOOL",
+            "Start even if the database would acknowledge writes before they are durable (SQLite then runs \
+             with synchronous=NORMAL): a crash or power loss may lose acknowledged clips";
+        #[arg(hide_env_values = true)]
+        api_token: Secret => plain_token -> Option<Secret>,
+            "api_token", "api-token", "INBETWEEN_API_TOKEN", "TOKEN",
+            "Bearer token required by create, replace and delete";
+        #[arg(hide_env_values = true)]
+        read_token: Secret => plain_token -> Option<Secret>,
+            "read_token", "read-token", "INBETWEEN_READ_TOKEN", "TOKEN",
+            "Bearer token required to read clips and poses (the write token also works)";
+        #[arg(value_delimiter = ',')]
+        tokens: Vec<TokenSpec> => scoped_tokens -> Vec<Token>,
+            "tokens", "token", "INBETWEEN_TOKENS", "NAME:SCOPES:HASH",
+            "A scoped token, as NAME:SCOPE[+SCOPE]:sha256:HEX (repeatable, or comma-separated; TOML: \
+             `[[tokens]]` tables with name, scopes, hash). `inbetween token new` makes one";
+        #[arg(requires = "tls_key")]
+        tls_cert: PathBuf => as_given -> Option<PathBuf>,
+            "tls_cert", "tls-cert", "INBETWEEN_TLS_CERT", "FILE",
+            "PEM certificate chain: serve HTTP and gRPC over TLS (1.2+; needs --tls-key)";
+        #[arg(requires = "tls_cert")]
+        tls_key: PathBuf => as_given -> Option<PathBuf>,
+            "tls_key", "tls-key", "INBETWEEN_TLS_KEY", "FILE",
+            "PEM private key of --tls-cert";
+        #[arg(value_delimiter = ',')]
+        cors_origins: Vec<String> => cors -> Cors,
+            "cors_origins", "cors-origin", "INBETWEEN_CORS_ORIGINS", "ORIGIN", shown "none",
+            "Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any)";
+        #[arg(value_enum)]
+        log_format: LogFormat = LogFormat::Text => as_given -> LogFormat,
+            "log_format", "log-format", "INBETWEEN_LOG_FORMAT", "FORMAT",
+            "Log format; the filter comes from INBETWEEN_LOG or RUST_LOG";
+        drain_timeout: u64 = 10 => seconds_or_none -> Duration,
+            "drain_timeout_secs", "drain-timeout-secs", "INBETWEEN_DRAIN_TIMEOUT_SECS", "SECS",
+            "Seconds to let in-flight requests finish after SIGTERM/Ctrl-C";
+    }
+}
+
+settings! {
+    layer:
+    /// The `[limits]` table / `--max-*` flags.
+    pub struct RawLimits,
+    checked:
+    /// Input and resource limits. Everything past one is refused with a 4xx
+    /// (or shed with a 503), never half-processed.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Limits,
+    rows: {
+        max_body_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
+            "max_body_bytes", "max-body-bytes", "INBETWEEN_MAX_BODY_BYTES", "BYTES",
+            "Largest accepted request body, in bytes";
+        max_tracks: usize = 4096 => positive -> usize,
+            "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
+            "Most tracks in one clip";
+        max_keys_per_track: usize = 1_000_000 => positive -> usize,
+            "max_keys_per_track", "max-keys-per-track", "INBETWEEN_MAX_KEYS_PER_TRACK", "N",
+            "Most keys in one track";
+        max_joints: usize = 4096 => positive -> usize,
+            "max_joints", "max-joints", "INBETWEEN_MAX_JOINTS", "N",
+            "Most joints in one skeleton";
+        max_poses: usize = 10_000 => positive -> usize,
+            "max_poses", "max-poses", "INBETWEEN_MAX_POSES", "N",
+            "Most poses one sample request may ask for";
+        request_timeout: u64 = 30 => seconds -> Duration,
+            "request_timeout_secs", "request-timeout-secs", "INBETWEEN_REQUEST_TIMEOUT_SECS", "SECS",
+            "Seconds a request may take before it is answered 503";
+        header_read_timeout: u64 = 10 => seconds -> Duration,
+            "header_read_timeout_secs", "header-read-timeout-secs", "INBETWEEN_HEADER_READ_TIMEOUT_SECS", "SECS",
+            "Seconds a client may take to send a request's head (slowloris guard)";
+        cache_entries: usize = 1024 => positive -> usize,
+            "cache_entries", "cache-entries", "INBETWEEN_CACHE_ENTRIES", "N",
+            "Compiled clips kept in memory";
+        max_streams: usize = 1024 => positive -> usize,
+            "max_streams", "max-streams", "INBETWEEN_MAX_STREAMS", "N",
+            "Concurrent streams (gRPC and WebSocket together)";
+        max_streams_per_client: usize = 64 => positive -> usize,
+            "max_streams_per_client", "max-streams-per-client", "INBETWEEN_MAX_STREAMS_PER_CLIENT", "N",
+            "Concurrent streams per client IP address";
+        max_streams_per_token: usize = 64 => positive -> usize,
+            "max_streams_per_token", "max-streams-per-token", "INBETWEEN_MAX_STREAMS_PER_TOKEN", "N",
+            "Concurrent streams per configured token (by its name)";
+        body_read_timeout: u64 = 10 => seconds -> Duration,
+            "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
+            "Seconds a client may take to send a request's body, once its head is in (answered 408)";
+        max_in_flight: usize = 64 * cores() => positive -> usize,
+            "max_in_flight", "max-in-flight", "INBETWEEN_MAX_IN_FLIGHT", "N", shown "64 per core",
+            "Requests in flight (REST and gRPC each) before new ones are shed with 503";
+        write_rate: u32 = 100 => positive -> u32,
+            "write_rate", "write-rate", "INBETWEEN_WRITE_RATE", "PER_SEC",
+            "Sustained writes per second per caller (its token's name, or its address without one)";
+        write_burst: u32 = 200 => positive -> u32,
+            "write_burst", "write-burst", "INBETWEEN_WRITE_BURST", "N",
+            "Writes a caller may make in a burst above the sustained rate";
+        ws_max_message_bytes: usize = 4096 => positive -> usize,
+            "ws_max_message_bytes", "ws-max-message-bytes", "INBETWEEN_WS_MAX_MESSAGE_BYTES", "BYTES",
+            "Largest WebSocket message a stream viewer may send (controls)";
+        ws_write_buffer_bytes: usize = 128 * 1024 => positive -> usize,
+            "ws_write_buffer_bytes", "ws-write-buffer-bytes", "INBETWEEN_WS_WRITE_BUFFER_BYTES", "BYTES",
+            "Bytes of outgoing WebSocket frames buffered before a write is flushed";
+        ws_max_write_buffer_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
+            "ws_max_write_buffer_bytes", "ws-max-write-buffer-bytes", "INBETWEEN_WS_MAX_WRITE_BUFFER_BYTES", "BYTES",
+            "Most bytes a WebSocket may hold unsent before the stream fails";
+    }
+}
+
+/// The machine's cores, for defaults that scale with them.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
+}
+
+// The checks of single settings: `check(toml_key, value)`.
+
+fn as_given<T>(_: &str, value: T) -> anyhow::Result<T> {
+    Ok(value)
+}
+
+fn positive<T: PartialEq + Default>(name: &str, value: T) -> anyhow::Result<T> {
+    if value == T::default() {
+        bail!("{name} must be at least 1");
+    }
+    Ok(value)
+}
+
+fn seconds(name: &str, secs: u64) -> anyhow::Result<Duration> {
+    if secs == 0 {
+        bail!("{name} must be at least 1 second");
+    }
+    Ok(Duration::from_secs(secs))
+}
+
+/// A duration in seconds where 0 means "do not wait".
+fn seconds_or_none(_: &str, secs: u64) -> anyhow::Result<Duration> {
+    Ok(Duration::from_secs(secs))
+}
+
+fn plain_token(name: &str, token: Option<Secret>) -> anyhow::Result<Option<Secret>> {
+    match token {
+        Some(t) if t.expose().trim().is_empty() => bail!("{name} must not be empty"),
+        Some(t) if t.expose().chars().any(|c| c.is_whitespace() || c.is_control()) => {
+            bail!("{name} must not contain spaces or control characters")
+        }
+        t => Ok(t),
+    }
+}
+
+fn scoped_tokens(_: &str, specs: Option<Vec<TokenSpec>>) -> anyhow::Result<Vec<Token>> {
+    let mut names = HashSet::new();
+    let mut checked = Vec::new();
+    for spec in specs.unwrap_or_default() {
+        let token = spec.validate().map_err(anyhow::Error::msg)?;
+        if !names.insert(token.name.clone()) {
+            bail!("two tokens are named `{}`", token.name);
+        }
+        checked.push(token);
+    }
+    Ok(checked)
+}
+
+fn cors(_: &str, origins: Option<Vec<String>>) -> anyhow::Result<Cors> {
+    let origins = origins.unwrap_or_default();
+    if origins.is_empty() {
+        return Ok(Cors::Off);
+    }
+    if origins.iter().any(|o| o == "*") {
+        if origins.len() > 1 {
+            bail!("cors origin `*` cannot be combined with other origins");
+        }
+        return Ok(Cors::Any);
+    }
+    for o in &origins {
+        let ok = (o.starts_with("http://") || o.starts_with("https://"))
+            && !o.ends_with('/')
+            && axum::http::HeaderValue::from_str(o).is_ok();
+        if !ok {
+            bail!("cors origin `{o}` must look like https://host[:port], without a path");
+        }
+    }
+    Ok(Cors::Origins(origins))
+}
+
+impl RawConfig {
+    /// Reads a TOML layer.
+    ///
+    /// # Errors
+    /// The file cannot be read, is not TOML, or names an unknown key.
+    pub fn from_toml_file(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    }
+
+    /// Fills defaults and checks every value, alone and together.
+    ///
+    /// # Errors
+    /// A value the server cannot run with (zero limits, an empty token, an
+    /// unsupported database URL, a malformed CORS origin, settings that
+    /// contradict each other).
+    pub fn validate(self) -> anyhow::Result<Config> {
+        let s = self.checked()?;
+        s.limits.check_buffers()?;
+        check_token_names(&s)?;
+        Ok(Config {
+            store: store(s.data_dir, s.database_url)?,
+            db: PoolSettings {
+                max_connections: s.db_max_connections,
+                acquire_timeout: s.db_acquire_timeout,
+                retry: RetryPolicy { retries: s.db_retries, ..RetryPolicy::default() },
+                durability: if s.unsafe_fast_writes { Durability::UnsafeFast } else { Durability::Required },
+            },
+            tls: tls(s.tls_cert, s.tls_key)?,
+            listen: s.listen,
+            grpc_listen: s.grpc_listen,
+            write_token: s.api_token,
+            read_token: s.read_token,
+            tokens: s.tokens,
+            cors: s.cors_origins,
+            log_format: s.log_format,
+            drain_timeout: s.drain_timeout,
+            limits: s.limits,
+        })
+    }
+}
+
+impl Limits {
+    fn check_buffers(&self) -> anyhow::Result<()> {
+        if self.ws_max_write_buffer_bytes <= self.ws_write_buffer_bytes {
+            bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        }
+        Ok(())
+    }
+}
+
+/// The plain tokens are callers named `api-token` and `read-token`
+/// (`server::auth`); a scoped token may not take a name one of them holds,
+/// or the two would share per-caller limits.
+fn check_token_names(s: &Settings) -> anyhow::Result<()> {
+    let plain = [("api-token", &s.api_token), ("read-token", &s.read_token)];
+    for (name, _) in plain.iter().filter(|(_, secret)| secret.is_some()) {
+        if s.tokens.iter().any(|t| &*t.name == *name) {
+            bail!("a scoped token cannot be named `{name}`: that is the name of the plain {name}");
+        }
+    }
+    Ok(())
+}
+
+/// Where clips are stored: `database_url`, or `data_dir` (default `data`).
+fn store(data_dir: Option<PathBuf>, database_url: Option<Secret>) -> anyhow::Result<StoreConfig> {
+    let url = match (database_url, data_dir) {
+        (Some(_), Some(_)) => bail!("give either data_dir or database_url, not both"),
+        (None, dir) => return Ok(StoreConfig::DataDir(dir.unwrap_or_else(|| PathBuf::from("data")))),
+        (Some(url), None) => url,
+    };
+    let text = url.expose();
+    if text.starts_with("sqlite:") {
+        Ok(StoreConfig::SqliteUrl(url))
+    } else if text.starts_with("postgres:") || text.starts_with("postgresql:") {
+        Ok(StoreConfig::Postgres(url))
+    } else {
+        bail!("database_url must start with sqlite: or postgres:")
+    }
+}
+
+fn tls(cert: Option<PathBuf>, key: Option<PathBuf>) -> anyhow::Result<Option<TlsFiles>> {
+    match (cert, key) {
+        (Some(cert), Some(key)) => Ok(Some(TlsFiles { cert, key })),
+        (None, None) => Ok(None),
+        _ => bail!("tls_cert and tls_key go together"),
+    }
+}
 
 /// A value that must not reach logs: `Debug` prints `[redacted]`.
 #[derive(Clone, PartialEq, Eq, Deserialize)]
@@ -55,321 +469,11 @@ pub enum LogFormat {
     Json,
 }
 
-/// One layer of configuration. Every field is optional: absent means "ask
-/// the layer below". Doubles as the clap flag set and the TOML schema.
-#[derive(Debug, Clone, Default, Deserialize, clap::Args)]
-#[serde(deny_unknown_fields)]
-pub struct RawConfig {
-    /// Address to listen on (port 0 picks a free port) [default: 127.0.0.1:8080].
-    #[arg(long, env = "INBETWEEN_LISTEN", value_name = "ADDR")]
-    pub listen: Option<SocketAddr>,
-    /// Address of the gRPC API (port 0 picks a free port) [default: 127.0.0.1:50051].
-    #[arg(long, env = "INBETWEEN_GRPC_LISTEN", value_name = "ADDR")]
-    pub grpc_listen: Option<SocketAddr>,
-    /// Directory of the embedded SQLite store, created if missing [default: ./data].
-    #[arg(long, env = "INBETWEEN_DATA_DIR", value_name = "DIR")]
-    pub data_dir: Option<PathBuf>,
-    /// A store URL instead of --data-dir (`sqlite://path/to/file.db`, or `postgres://user@host/db` for
-    /// several nodes sharing one database).
-    #[arg(long, env = "INBETWEEN_DATABASE_URL", value_name = "URL", hide_env_values = true)]
-    pub database_url: Option<Secret>,
-    /// Most database connections this node opens [default: 8].
-    #[arg(long, env = "INBETWEEN_DB_MAX_CONNECTIONS", value_name = "N")]
-    pub db_max_connections: Option<u32>,
-    /// Seconds a request waits for a free database connection before it fails with 503 [default: 10].
-    #[arg(long, env = "INBETWEEN_DB_ACQUIRE_TIMEOUT_SECS", value_name = "SECS")]
-    pub db_acquire_timeout_secs: Option<u64>,
-    /// Retries of a transiently failed database operation, with exponential backoff from 50 ms [default: 3].
-    #[arg(long, env = "INBETWEEN_DB_RETRIES", value_name = "N")]
-    pub db_retries: Option<u32>,
-    /// Start even if the database would acknowledge writes before they are durable (SQLite then runs
-    /// with synchronous=NORMAL): a crash or power loss may lose acknowledged clips [default: false].
-    #[arg(long, env = "INBETWEEN_UNSAFE_FAST_WRITES", num_args = 0..=1, default_missing_value = "true",
-          value_parser = clap::builder::BoolishValueParser::new())]
-    pub unsafe_fast_writes: Option<bool>,
-    /// Bearer token required by create, replace and delete.
-    #[arg(long, env = "INBETWEEN_API_TOKEN", value_name = "TOKEN", hide_env_values = true)]
-    pub api_token: Option<Secret>,
-    /// Bearer token required to read clips and poses (the write token also works).
-    #[arg(long, env = "INBETWEEN_READ_TOKEN", value_name = "TOKEN", hide_env_values = true)]
-    pub read_token: Option<Secret>,
-    /// A scoped token, as NAME:SCOPE[+SCOPE]:sha256:HEX (repeatable, or comma-separated; TOML:
-    /// `[[tokens]]` tables with name, scopes, hash). `inbetween token new` makes one.
-    #[arg(long = "token", env = "INBETWEEN_TOKENS", value_name = "NAME:SCOPES:HASH", value_delimiter = ',')]
-    pub tokens: Option<Vec<TokenSpec>>,
-    /// PEM certificate chain: serve HTTP and gRPC over TLS (1.2+; needs --tls-key).
-    #[arg(long, env = "INBETWEEN_TLS_CERT", value_name = "FILE", requires = "tls_key")]
-    pub tls_cert: Option<PathBuf>,
-    /// PEM private key of --tls-cert.
-    #[arg(long, env = "INBETWEEN_TLS_KEY", value_name = "FILE", requires = "tls_cert")]
-    pub tls_key: Option<PathBuf>,
-    /// Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any) [default: none].
-    #[arg(long = "cors-origin", env = "INBETWEEN_CORS_ORIGINS", value_name = "ORIGIN", value_delimiter = ',')]
-    pub cors_origins: Option<Vec<String>>,
-    /// Log format [default: text]. The filter comes from INBETWEEN_LOG or RUST_LOG.
-    #[arg(long, env = "INBETWEEN_LOG_FORMAT", value_enum)]
-    pub log_format: Option<LogFormat>,
-    /// Seconds to let in-flight requests finish after SIGTERM/Ctrl-C [default: 10].
-    #[arg(long, env = "INBETWEEN_DRAIN_TIMEOUT_SECS", value_name = "SECS")]
-    pub drain_timeout_secs: Option<u64>,
-    #[command(flatten)]
-    #[serde(default)]
-    pub limits: RawLimits,
-}
-
-/// The `[limits]` table / `--max-*` flags.
-#[derive(Debug, Clone, Default, Deserialize, clap::Args)]
-#[serde(deny_unknown_fields)]
-pub struct RawLimits {
-    /// Largest accepted request body, in bytes [default: 16777216].
-    #[arg(long, env = "INBETWEEN_MAX_BODY_BYTES", value_name = "BYTES")]
-    pub max_body_bytes: Option<usize>,
-    /// Most tracks in one clip [default: 4096].
-    #[arg(long, env = "INBETWEEN_MAX_TRACKS", value_name = "N")]
-    pub max_tracks: Option<usize>,
-    /// Most keys in one track [default: 1000000].
-    #[arg(long, env = "INBETWEEN_MAX_KEYS_PER_TRACK", value_name = "N")]
-    pub max_keys_per_track: Option<usize>,
-    /// Most joints in one skeleton [default: 4096].
-    #[arg(long, env = "INBETWEEN_MAX_JOINTS", value_name = "N")]
-    pub max_joints: Option<usize>,
-    /// Most poses one sample request may ask for [default: 10000].
-    #[arg(long, env = "INBETWEEN_MAX_POSES", value_name = "N")]
-    pub max_poses: Option<usize>,
-    /// Seconds a request may take before it is answered 503 [default: 30].
-    #[arg(long, env = "INBETWEEN_REQUEST_TIMEOUT_SECS", value_name = "SECS")]
-    pub request_timeout_secs: Option<u64>,
-    /// Seconds a client may take to send a request's head [default: 10].
-    #[arg(long, env = "INBETWEEN_HEADER_READ_TIMEOUT_SECS", value_name = "SECS")]
-    pub header_read_timeout_secs: Option<u64>,
-    /// Compiled clips kept in memory [default: 1024].
-    #[arg(long, env = "INBETWEEN_CACHE_ENTRIES", value_name = "N")]
-    pub cache_entries: Option<usize>,
-    /// Concurrent streams (gRPC and WebSocket together) [default: 1024].
-    #[arg(long, env = "INBETWEEN_MAX_STREAMS", value_name = "N")]
-    pub max_streams: Option<usize>,
-    /// Concurrent streams per client IP address [default: 64].
-    #[arg(long, env = "INBETWEEN_MAX_STREAMS_PER_CLIENT", value_name = "N")]
-    pub max_streams_per_client: Option<usize>,
-    /// Concurrent streams per bearer token [default: 64].
-    #[arg(long, env = "INBETWEEN_MAX_STREAMS_PER_TOKEN", value_name = "N")]
-    pub max_streams_per_token: Option<usize>,
-    /// Seconds a client may take to send a request's body, once its head is in [default: 10].
-    #[arg(long, env = "INBETWEEN_BODY_READ_TIMEOUT_SECS", value_name = "SECS")]
-    pub body_read_timeout_secs: Option<u64>,
-    /// Requests in flight (REST and gRPC each) before new ones are shed with 503 [default: 64 per core].
-    #[arg(long, env = "INBETWEEN_MAX_IN_FLIGHT", value_name = "N")]
-    pub max_in_flight: Option<usize>,
-    /// Sustained writes per second per caller (token, or address when writes are open) [default: 100].
-    #[arg(long, env = "INBETWEEN_WRITE_RATE", value_name = "PER_SEC")]
-    pub write_rate: Option<u32>,
-    /// Writes a caller may make in a burst above the sustained rate [default: 200].
-    #[arg(long, env = "INBETWEEN_WRITE_BURST", value_name = "N")]
-    pub write_burst: Option<u32>,
-    /// Largest WebSocket message a stream viewer may send (controls) [default: 4096].
-    #[arg(long, env = "INBETWEEN_WS_MAX_MESSAGE_BYTES", value_name = "BYTES")]
-    pub ws_max_message_bytes: Option<usize>,
-    /// Bytes of outgoing WebSocket frames buffered before a write is flushed [default: 131072].
-    #[arg(long, env = "INBETWEEN_WS_WRITE_BUFFER_BYTES", value_name = "BYTES")]
-    pub ws_write_buffer_bytes: Option<usize>,
-    /// Most bytes a WebSocket may hold unsent before the stream fails [default: 16777216].
-    #[arg(long, env = "INBETWEEN_WS_MAX_WRITE_BUFFER_BYTES", value_name = "BYTES")]
-    pub ws_max_write_buffer_bytes: Option<usize>,
-}
-
-impl RawConfig {
-    /// Reads a TOML layer.
-    ///
-    /// # Errors
-    /// The file cannot be read, is not TOML, or names an unknown key.
-    pub fn from_toml_file(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-    }
-
-    /// This layer over `lower`: a field set here wins.
-    pub fn over(self, lower: RawConfig) -> RawConfig {
-        let (l, ll) = (self.limits, lower.limits);
-        RawConfig {
-            listen: self.listen.or(lower.listen),
-            grpc_listen: self.grpc_listen.or(lower.grpc_listen),
-            data_dir: self.data_dir.or(lower.data_dir),
-            database_url: self.database_url.or(lower.database_url),
-            db_max_connections: self.db_max_connections.or(lower.db_max_connections),
-            db_acquire_timeout_secs: self.db_acquire_timeout_secs.or(lower.db_acquire_timeout_secs),
-            db_retries: self.db_retries.or(lower.db_retries),
-            unsafe_fast_writes: self.unsafe_fast_writes.or(lower.unsafe_fast_writes),
-            api_token: self.api_token.or(lower.api_token),
-            read_token: self.read_token.or(lower.read_token),
-            tokens: self.tokens.or(lower.tokens),
-            tls_cert: self.tls_cert.or(lower.tls_cert),
-            tls_key: self.tls_key.or(lower.tls_key),
-            cors_origins: self.cors_origins.or(lower.cors_origins),
-            log_format: self.log_format.or(lower.log_format),
-            drain_timeout_secs: self.drain_timeout_secs.or(lower.drain_timeout_secs),
-            limits: RawLimits {
-                max_body_bytes: l.max_body_bytes.or(ll.max_body_bytes),
-                max_tracks: l.max_tracks.or(ll.max_tracks),
-                max_keys_per_track: l.max_keys_per_track.or(ll.max_keys_per_track),
-                max_joints: l.max_joints.or(ll.max_joints),
-                max_poses: l.max_poses.or(ll.max_poses),
-                request_timeout_secs: l.request_timeout_secs.or(ll.request_timeout_secs),
-                header_read_timeout_secs: l.header_read_timeout_secs.or(ll.header_read_timeout_secs),
-                cache_entries: l.cache_entries.or(ll.cache_entries),
-                max_streams: l.max_streams.or(ll.max_streams),
-                max_streams_per_client: l.max_streams_per_client.or(ll.max_streams_per_client),
-                max_streams_per_token: l.max_streams_per_token.or(ll.max_streams_per_token),
-                body_read_timeout_secs: l.body_read_timeout_secs.or(ll.body_read_timeout_secs),
-                max_in_flight: l.max_in_flight.or(ll.max_in_flight),
-                write_rate: l.write_rate.or(ll.write_rate),
-                write_burst: l.write_burst.or(ll.write_burst),
-                ws_max_message_bytes: l.ws_max_message_bytes.or(ll.ws_max_message_bytes),
-                ws_write_buffer_bytes: l.ws_write_buffer_bytes.or(ll.ws_write_buffer_bytes),
-                ws_max_write_buffer_bytes: l.ws_max_write_buffer_bytes.or(ll.ws_max_write_buffer_bytes),
-            },
-        }
-    }
-
-    /// Fills defaults and checks every value.
-    ///
-    /// # Errors
-    /// A value the server cannot run with (zero limits, an empty token, an
-    /// unsupported database URL, a malformed CORS origin).
-    pub fn validate(self) -> anyhow::Result<Config> {
-        let d = Limits::default();
-        let l = self.limits;
-        let positive = |name: &str, v: Option<usize>, default: usize| -> anyhow::Result<usize> {
-            match v {
-                Some(0) => bail!("{name} must be at least 1"),
-                Some(v) => Ok(v),
-                None => Ok(default),
-            }
-        };
-        let secs = |name: &str, v: Option<u64>, default: Duration| -> anyhow::Result<Duration> {
-            match v {
-                Some(0) => bail!("{name} must be at least 1 second"),
-                Some(v) => Ok(Duration::from_secs(v)),
-                None => Ok(default),
-            }
-        };
-        let limits = Limits {
-            max_body_bytes: positive("max_body_bytes", l.max_body_bytes, d.max_body_bytes)?,
-            max_tracks: positive("max_tracks", l.max_tracks, d.max_tracks)?,
-            max_keys_per_track: positive("max_keys_per_track", l.max_keys_per_track, d.max_keys_per_track)?,
-            max_joints: positive("max_joints", l.max_joints, d.max_joints)?,
-            max_poses: positive("max_poses", l.max_poses, d.max_poses)?,
-            request_timeout: secs("request_timeout_secs", l.request_timeout_secs, d.request_timeout)?,
-            header_read_timeout: secs("header_read_timeout_secs", l.header_read_timeout_secs, d.header_read_timeout)?,
-            cache_entries: positive("cache_entries", l.cache_entries, d.cache_entries)?,
-            max_streams: positive("max_streams", l.max_streams, d.max_streams)?,
-            max_streams_per_client: positive(
-                "max_streams_per_client",
-                l.max_streams_per_client,
-                d.max_streams_per_client,
-            )?,
-            max_streams_per_token: positive("max_streams_per_token", l.max_streams_per_token, d.max_streams_per_token)?,
-            body_read_timeout: secs("body_read_timeout_secs", l.body_read_timeout_secs, d.body_read_timeout)?,
-            max_in_flight: positive("max_in_flight", l.max_in_flight, d.max_in_flight)?,
-            write_rate: positive("write_rate", l.write_rate.map(|r| r as usize), d.write_rate as usize)? as u32,
-            write_burst: positive("write_burst", l.write_burst.map(|b| b as usize), d.write_burst as usize)? as u32,
-            ws_max_message_bytes: positive("ws_max_message_bytes", l.ws_max_message_bytes, d.ws_max_message_bytes)?,
-            ws_write_buffer_bytes: positive("ws_write_buffer_bytes", l.ws_write_buffer_bytes, d.ws_write_buffer_bytes)?,
-            ws_max_write_buffer_bytes: positive(
-                "ws_max_write_buffer_bytes",
-                l.ws_max_write_buffer_bytes,
-                d.ws_max_write_buffer_bytes,
-            )?,
-        };
-        if limits.ws_max_write_buffer_bytes <= limits.ws_write_buffer_bytes {
-            bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
-        }
-        let store = match (self.database_url, self.data_dir) {
-            (Some(_), Some(_)) => bail!("give either data_dir or database_url, not both"),
-            (Some(url), None) => {
-                let url = url.expose();
-                if url.starts_with("sqlite:") {
-                    StoreConfig::SqliteUrl(Secret::new(url))
-                } else if url.starts_with("postgres:") || url.starts_with("postgresql:") {
-                    StoreConfig::Postgres(Secret::new(url))
-                } else {
-                    bail!("database_url must start with sqlite: or postgres:")
-                }
-            }
-            (None, dir) => StoreConfig::DataDir(dir.unwrap_or_else(|| PathBuf::from("data"))),
-        };
-        let db = {
-            let d = crate::store::PoolSettings::default();
-            crate::store::PoolSettings {
-                max_connections: match self.db_max_connections {
-                    Some(0) => bail!("db_max_connections must be at least 1"),
-                    n => n.unwrap_or(d.max_connections),
-                },
-                acquire_timeout: secs("db_acquire_timeout_secs", self.db_acquire_timeout_secs, d.acquire_timeout)?,
-                retry: crate::store::RetryPolicy { retries: self.db_retries.unwrap_or(d.retry.retries), ..d.retry },
-                durability: if self.unsafe_fast_writes.unwrap_or(false) {
-                    crate::store::Durability::UnsafeFast
-                } else {
-                    crate::store::Durability::Required
-                },
-            }
-        };
-        let token = |name: &str, t: Option<Secret>| -> anyhow::Result<Option<Secret>> {
-            match t {
-                Some(t) if t.expose().trim().is_empty() => bail!("{name} must not be empty"),
-                Some(t) if t.expose().chars().any(|c| c.is_whitespace() || c.is_control()) => {
-                    bail!("{name} must not contain spaces or control characters")
-                }
-                t => Ok(t),
-            }
-        };
-        let tokens = self.tokens.unwrap_or_default();
-        let mut names = std::collections::HashSet::new();
-        let mut checked = Vec::with_capacity(tokens.len());
-        for spec in tokens {
-            let t = spec.validate().map_err(anyhow::Error::msg)?;
-            if !names.insert(t.name.clone()) {
-                bail!("two tokens are named `{}`", t.name);
-            }
-            checked.push(t);
-        }
-        let tls = match (self.tls_cert, self.tls_key) {
-            (Some(cert), Some(key)) => Some(TlsFiles { cert, key }),
-            (None, None) => None,
-            _ => bail!("tls_cert and tls_key go together"),
-        };
-        let cors = match self.cors_origins.unwrap_or_default() {
-            origins if origins.is_empty() => Cors::Off,
-            origins if origins.iter().any(|o| o == "*") => {
-                if origins.len() > 1 {
-                    bail!("cors origin `*` cannot be combined with other origins");
-                }
-                Cors::Any
-            }
-            origins => {
-                for o in &origins {
-                    let ok = (o.starts_with("http://") || o.starts_with("https://"))
-                        && !o.ends_with('/')
-                        && axum::http::HeaderValue::from_str(o).is_ok();
-                    if !ok {
-                        bail!("cors origin `{o}` must look like https://host[:port], without a path");
-                    }
-                }
-                Cors::Origins(origins)
-            }
-        };
-        Ok(Config {
-            listen: self.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 8080))),
-            grpc_listen: self.grpc_listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 50051))),
-            store,
-            db,
-            write_token: token("api_token", self.api_token)?,
-            read_token: token("read_token", self.read_token)?,
-            tokens: checked,
-            tls,
-            cors,
-            log_format: self.log_format.unwrap_or_default(),
-            drain_timeout: Duration::from_secs(self.drain_timeout_secs.unwrap_or(10)),
-            limits,
+impl fmt::Display for LogFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            LogFormat::Text => "text",
+            LogFormat::Json => "json",
         })
     }
 }
@@ -399,64 +503,6 @@ pub enum Cors {
     Origins(Vec<String>),
 }
 
-/// Input limits. Everything past one is refused with a 4xx, never
-/// half-processed.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Limits {
-    pub max_body_bytes: usize,
-    pub max_tracks: usize,
-    pub max_keys_per_track: usize,
-    pub max_joints: usize,
-    pub max_poses: usize,
-    pub request_timeout: Duration,
-    /// How long a connection may take to send a request head (slowloris guard).
-    pub header_read_timeout: Duration,
-    pub cache_entries: usize,
-    /// Concurrent streams, all clients together, and per client address.
-    pub max_streams: usize,
-    pub max_streams_per_client: usize,
-    /// Concurrent streams per bearer token (keyed by a hash of the token).
-    pub max_streams_per_token: usize,
-    /// How long a request body may take to arrive (slow-body guard): 408.
-    pub body_read_timeout: Duration,
-    /// Requests in flight per protocol before new ones are shed (503 /
-    /// `RESOURCE_EXHAUSTED`), so an overload never queues without bound.
-    pub max_in_flight: usize,
-    /// The per-caller write token bucket: refill per second, and its size.
-    pub write_rate: u32,
-    pub write_burst: u32,
-    /// WebSocket limits: inbound message and frame size, and the outgoing
-    /// buffer (flush threshold, and the most a slow viewer may hold).
-    pub ws_max_message_bytes: usize,
-    pub ws_write_buffer_bytes: usize,
-    pub ws_max_write_buffer_bytes: usize,
-}
-
-impl Default for Limits {
-    fn default() -> Self {
-        Limits {
-            max_body_bytes: 16 * 1024 * 1024,
-            max_tracks: 4096,
-            max_keys_per_track: 1_000_000,
-            max_joints: 4096,
-            max_poses: 10_000,
-            request_timeout: Duration::from_secs(30),
-            header_read_timeout: Duration::from_secs(10),
-            cache_entries: 1024,
-            max_streams: 1024,
-            max_streams_per_client: 64,
-            max_streams_per_token: 64,
-            body_read_timeout: Duration::from_secs(10),
-            max_in_flight: 64 * std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
-            write_rate: 100,
-            write_burst: 200,
-            ws_max_message_bytes: 4096,
-            ws_write_buffer_bytes: 128 * 1024,
-            ws_max_write_buffer_bytes: 16 * 1024 * 1024,
-        }
-    }
-}
-
 /// A validated configuration: every value is one the server can run with.
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -465,7 +511,7 @@ pub struct Config {
     pub grpc_listen: SocketAddr,
     pub store: StoreConfig,
     /// Pool size, retries and the durability requirement of the store.
-    pub db: crate::store::PoolSettings,
+    pub db: PoolSettings,
     pub write_token: Option<Secret>,
     pub read_token: Option<Secret>,
     /// Scoped tokens (hashes), beside the plain write and read tokens.
@@ -517,7 +563,7 @@ mod tests {
 
     #[test]
     fn scoped_tokens_come_from_toml_and_flags() {
-        let hash = crate::server::auth::TokenHash::of(b"t");
+        let hash = crate::server::tokens::TokenHash::of(b"t");
         let file: RawConfig = toml::from_str(&format!(
             "[[tokens]]\nname = \"ci\"\nscopes = [\"write\"]\nhash = \"{hash}\"\n\
              [[tokens]]\nname = \"ops\"\nscopes = [\"admin\"]\nhash = \"{hash}\"\n"
@@ -578,5 +624,131 @@ mod tests {
             (c.db.durability, c.db.acquire_timeout),
             (crate::store::Durability::UnsafeFast, Duration::from_secs(2))
         );
+    }
+
+    #[test]
+    fn the_defaults_are_the_documented_ones() {
+        let c = RawConfig::default().validate().unwrap();
+        assert_eq!((c.listen, c.grpc_listen), ("127.0.0.1:8080".parse().unwrap(), "127.0.0.1:50051".parse().unwrap()));
+        assert_eq!((c.db.max_connections, c.db.acquire_timeout, c.db.retry.retries), (8, Duration::from_secs(10), 3));
+        assert_eq!((c.cors, c.log_format, c.drain_timeout), (Cors::Off, LogFormat::Text, Duration::from_secs(10)));
+        assert!(c.tls.is_none() && c.tokens.is_empty() && c.write_token.is_none() && c.read_token.is_none());
+        let cores = std::thread::available_parallelism().unwrap().get();
+        let expected = Limits {
+            max_body_bytes: 16_777_216,
+            max_tracks: 4096,
+            max_keys_per_track: 1_000_000,
+            max_joints: 4096,
+            max_poses: 10_000,
+            request_timeout: Duration::from_secs(30),
+            header_read_timeout: Duration::from_secs(10),
+            cache_entries: 1024,
+            max_streams: 1024,
+            max_streams_per_client: 64,
+            max_streams_per_token: 64,
+            body_read_timeout: Duration::from_secs(10),
+            max_in_flight: 64 * cores,
+            write_rate: 100,
+            write_burst: 200,
+            ws_max_message_bytes: 4096,
+            ws_write_buffer_bytes: 131_072,
+            ws_max_write_buffer_bytes: 16_777_216,
+        };
+        assert_eq!(c.limits, expected);
+    }
+
+    /// The flags as `inbetween serve` parses them.
+    fn parse_flags(args: &[&str]) -> RawConfig {
+        use clap::{Args, FromArgMatches};
+        let command = RawConfig::augment_args(clap::Command::new("serve").no_binary_name(true));
+        RawConfig::from_arg_matches(&command.try_get_matches_from(args).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn each_flag_sets_its_own_setting() {
+        let hash = crate::server::tokens::TokenHash::of(b"t");
+        let raw = parse_flags(&[
+            "--request-timeout-secs",
+            "5",
+            "--drain-timeout-secs",
+            "0",
+            "--db-acquire-timeout-secs",
+            "2",
+            "--token",
+            &format!("a:read:{hash},b:write:{hash}"),
+            "--cors-origin",
+            "https://a.example,https://b.example:8443",
+            "--unsafe-fast-writes",
+            "--max-in-flight",
+            "7",
+        ]);
+        let c = raw.validate().unwrap();
+        assert_eq!((c.limits.request_timeout, c.drain_timeout), (Duration::from_secs(5), Duration::ZERO));
+        assert_eq!((c.db.acquire_timeout, c.db.durability), (Duration::from_secs(2), Durability::UnsafeFast));
+        assert_eq!(c.tokens.iter().map(|t| &*t.name).collect::<Vec<_>>(), ["a", "b"]);
+        assert_eq!(c.cors, Cors::Origins(vec!["https://a.example".into(), "https://b.example:8443".into()]));
+        assert_eq!(c.limits.max_in_flight, 7);
+        assert_eq!(c.limits.max_poses, 10_000, "untouched settings keep their defaults");
+        // The same settings under their TOML keys.
+        let file: RawConfig =
+            toml::from_str("drain_timeout_secs = 0\n[limits]\nrequest_timeout_secs = 5\nmax_in_flight = 7\n").unwrap();
+        let c = file.validate().unwrap();
+        assert_eq!(
+            (c.limits.request_timeout, c.drain_timeout, c.limits.max_in_flight),
+            (Duration::from_secs(5), Duration::ZERO, 7)
+        );
+    }
+
+    #[test]
+    fn errors_name_the_toml_key() {
+        let err = |raw: RawConfig| raw.validate().unwrap_err().to_string();
+        let zero_timeout: RawConfig = toml::from_str("[limits]\nheader_read_timeout_secs = 0\n").unwrap();
+        assert_eq!(err(zero_timeout), "header_read_timeout_secs must be at least 1 second");
+        let zero_rate: RawConfig = toml::from_str("[limits]\nwrite_rate = 0\n").unwrap();
+        assert_eq!(err(zero_rate), "write_rate must be at least 1");
+        let buffers = parse_flags(&["--ws-write-buffer-bytes", "10", "--ws-max-write-buffer-bytes", "10"]);
+        assert_eq!(err(buffers), "ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        let blank = parse_flags(&["--api-token", " "]);
+        assert_eq!(err(blank), "api_token must not be empty");
+    }
+
+    #[test]
+    fn a_scoped_token_cannot_take_a_plain_tokens_name() {
+        let hash = crate::server::tokens::TokenHash::of(b"t");
+        let taken = parse_flags(&["--api-token", "w", "--token", &format!("api-token:read:{hash}")]);
+        assert!(taken.validate().is_err());
+        let free = parse_flags(&["--token", &format!("api-token:read:{hash}")]);
+        assert!(free.validate().is_ok(), "without the plain token the name is free");
+    }
+
+    #[test]
+    fn help_shows_each_flag_with_its_variable_and_default() {
+        use clap::Args;
+        let mut command = RawConfig::augment_args(clap::Command::new("serve"));
+        let help = command.render_help().to_string();
+        for [_, flag, env] in RawConfig::NAMES.iter().chain(RawLimits::NAMES) {
+            assert!(help.contains(&format!("--{flag} ")), "--{flag} in\n{help}");
+            assert!(help.contains(&format!("[env: {env}")), "{env} in\n{help}");
+        }
+        for shown in ["[default: 127.0.0.1:8080]", "[default: ./data]", "[default: 8]", "[default: text]"] {
+            assert!(help.contains(shown), "{shown} in\n{help}");
+        }
+        for shown in ["[default: 16777216]", "[default: 64 per core]", "[default: 131072]", "[default: 30]"] {
+            assert!(help.contains(shown), "{shown} in\n{help}");
+        }
+    }
+
+    /// The README's settings table names every setting: one line with its
+    /// flag, its variable and its TOML key.
+    #[test]
+    fn every_setting_is_in_the_readme() {
+        let readme = include_str!("../../README.md");
+        let rows: Vec<&str> = readme.lines().filter(|l| l.starts_with("| `--")).collect();
+        for [toml, flag, env] in RawConfig::NAMES.iter().chain(RawLimits::NAMES) {
+            let documented = rows.iter().any(|row| {
+                row.contains(&format!("`--{flag} ")) && row.contains(&format!("`{env}`")) && row.contains(toml)
+            });
+            assert!(documented, "README's configuration table lacks --{flag} / {env} / {toml}");
+        }
     }
 }

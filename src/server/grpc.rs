@@ -13,7 +13,6 @@
 //! `tonic::transport::Server`, which keeps tonic's HTTP/2 keepalive and
 //! concurrency settings; it shuts down with the HTTP server.
 
-use std::net::IpAddr;
 use std::pin::Pin;
 use std::sync::Arc;
 
@@ -23,11 +22,10 @@ use tonic::metadata::MetadataMap;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::anim::{SampleOptions, Sampler, frame_count, frame_times};
-use crate::server::auth;
+use crate::server::auth::{Caller, Scope};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::limits::admit_doc;
-use crate::server::ratelimit::Caller;
 use crate::server::rest::clips::{DEFAULT_PAGE, MAX_PAGE};
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, ListQuery, is_clip_id};
@@ -72,21 +70,22 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
     metadata.get("authorization").map(|v| v.as_bytes())
 }
 
-/// The key the caller's streams are counted under (per-token stream cap).
-fn caller_key(metadata: &tonic::metadata::MetadataMap) -> Option<u64> {
-    bearer(metadata).and_then(auth::bearer_token).map(stream::token_key)
-}
-
 impl GrpcService {
-    fn read<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        auth::check_read(&self.state.config, bearer(request.metadata())).map(drop).map_err(Status::from)
+    /// The RPC's caller (worked out once per call, as REST's middleware
+    /// does), if it may act with `scope`.
+    fn caller<T>(&self, request: &Request<T>, scope: Scope) -> Result<Caller, Status> {
+        let addr = request.remote_addr().map(|a| a.ip());
+        Ok(self.state.auth.identify(bearer(request.metadata()), addr).authorize(scope)?)
+    }
+
+    fn read<T>(&self, request: &Request<T>) -> Result<Caller, Status> {
+        self.caller(request, Scope::Read)
     }
 
     /// Checks the write scope, then the caller's write rate (shared with REST).
     fn write<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        auth::check_write(&self.state.config, bearer(request.metadata())).map_err(Status::from)?;
-        let caller = Caller::of(bearer(request.metadata()), request.remote_addr().map(|a| a.ip()));
-        self.state.writes.admit(caller).map_err(Status::from)
+        let caller = self.caller(request, Scope::Write)?;
+        Ok(self.state.writes.admit(&caller)?)
     }
 
     async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, Status> {
@@ -101,7 +100,7 @@ impl GrpcService {
         &self,
         req: &pb::StreamRequest,
         paused: bool,
-        (remote, token): (Option<IpAddr>, Option<u64>),
+        caller: Caller,
     ) -> Result<(StreamParams, stream::StreamPermit), Status> {
         let cached = self.clip(&req.clip_id).await?;
         let request = StreamRequest {
@@ -119,7 +118,7 @@ impl GrpcService {
         let (id, version) = (cached.meta.id.clone(), cached.meta.version);
         let params = StreamParams::new(&id, version, cached, request)
             .map_err(|e| ApiError::invalid("bad_stream", format!("/{}", e.field), e.detail))?;
-        let permit = self.engine.admit_for(remote, token).map_err(ApiError::from)?;
+        let permit = self.engine.admit_for(caller.addr, caller.token).map_err(ApiError::from)?;
         Ok((params, permit))
     }
 }
@@ -279,10 +278,9 @@ impl Animation for GrpcService {
         &self,
         request: Request<pb::StreamRequest>,
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
-        self.read(&request)?;
-        let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
+        let caller = self.read(&request)?;
         let lane = lane(&request);
-        let (params, permit) = self.stream_params(request.get_ref(), false, remote).await?;
+        let (params, permit) = self.stream_params(request.get_ref(), false, caller).await?;
         let sub = self.engine.watch(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), phase_ms))
@@ -294,8 +292,7 @@ impl Animation for GrpcService {
         &self,
         request: Request<Streaming<pb::PlaybackControl>>,
     ) -> Result<Response<Self::PlayStream>, Status> {
-        self.read(&request)?;
-        let remote = (request.remote_addr().map(|a| a.ip()), caller_key(request.metadata()));
+        let caller = self.read(&request)?;
         let lane = lane(&request);
         let mut inbound = request.into_inner();
         let open = match inbound.message().await? {
@@ -304,7 +301,7 @@ impl Animation for GrpcService {
             None => return Err(Status::invalid_argument("Play needs an `open` message first")),
         };
         let stream_req = open.stream.ok_or_else(|| Status::invalid_argument("`open` needs a `stream`"))?;
-        let (params, permit) = self.stream_params(&stream_req, open.paused, remote).await?;
+        let (params, permit) = self.stream_params(&stream_req, open.paused, caller).await?;
         let sub = self.engine.play(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         let controller = sub.controller().expect("a Play subscription is private");

@@ -9,7 +9,7 @@
 //!
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
-//! clips; `auth` bearer tokens; `limits` admission of uploads; `metrics`
+//! clips; `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `rest` the routes; `grpc` the gRPC API, served on its own port
 //! (`--grpc-listen`) by tonic beside the HTTP server, with the same shutdown.
@@ -55,6 +55,7 @@ pub mod rest;
 pub mod shed;
 pub mod state;
 pub mod tls;
+pub mod tokens;
 
 pub use config::Config;
 pub use error::ApiError;
@@ -115,11 +116,13 @@ impl Application {
             ..EngineConfig::default()
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
+        let config = Arc::new(config);
         let state = AppState::new(state::Shared {
             store,
             cache,
             writes,
-            config: Arc::new(config),
+            auth: auth::Auth::new(Arc::clone(&config)),
+            config,
             metrics: metrics::handle(),
             counters: metrics::Counters::new(),
             ready: Arc::new(AtomicBool::new(true)),

@@ -13,6 +13,7 @@ use crate::anim::Clip;
 use crate::store::{ClipStore, StoredClip};
 use crate::wire::json::{DocError, parse_clip};
 
+use super::auth::Auth;
 use super::cache::{CachedClip, ClipCache};
 use super::config::Config;
 use super::error::ApiError;
@@ -45,6 +46,8 @@ pub struct Shared {
     pub store: Arc<dyn ClipStore>,
     pub cache: Arc<ClipCache>,
     pub config: Arc<Config>,
+    /// Identifies callers from the configured tokens (REST and gRPC).
+    pub auth: Auth,
     pub metrics: PrometheusHandle,
     pub counters: super::metrics::Counters,
     /// False once shutdown has begun (readiness answers 503).

@@ -43,7 +43,7 @@ pub struct EngineConfig {
     pub max_streams: usize,
     /// Concurrent streams per client address.
     pub max_streams_per_client: usize,
-    /// Concurrent streams per bearer token (see [`Engine::admit_for`]).
+    /// Concurrent streams per configured token, by its name (see [`Engine::admit_for`]).
     pub max_streams_per_token: usize,
     /// Wake playbacks with the precise tick timer thread (`ticker`) rather
     /// than tokio's millisecond timer. The server turns it on; the default
@@ -117,12 +117,12 @@ impl Engine {
         self.inner.limits.admit(client)
     }
 
-    /// As [`Engine::admit`], also counting the stream against the caller's
-    /// bearer token (`token`: [`crate::stream::limits::token_key`]).
+    /// As [`Engine::admit`], also counting the stream against `token`: the
+    /// name of the configured token that identified the caller, if any.
     ///
     /// # Errors
     /// As [`Engine::admit`], or the per-token cap is reached.
-    pub fn admit_for(&self, client: Option<IpAddr>, token: Option<u64>) -> Result<StreamPermit, AdmitError> {
+    pub fn admit_for(&self, client: Option<IpAddr>, token: Option<Arc<str>>) -> Result<StreamPermit, AdmitError> {
         self.inner.limits.admit_for(client, token)
     }
 

@@ -1,7 +1,9 @@
 //! Admission: a cap on concurrent streams, global, per client address and
-//! per bearer token, so one client (or a crowd, or one leaked token used from
-//! many addresses) cannot hold every stream the server can serve. Tokens are
-//! counted by a hash ([`token_key`]), never kept.
+//! per token, so one client (or a crowd, or one leaked token used from many
+//! addresses) cannot hold every stream the server can serve. The transport
+//! says who is asking: the caller's address and, when a configured token
+//! identified it, the token's name (the server's `auth::Caller`; the engine
+//! knows nothing of how it was found).
 //!
 //! A [`StreamPermit`] is taken before a stream starts and released when it
 //! is dropped, whatever ended the stream. The counts sit behind a std mutex:
@@ -30,7 +32,7 @@ pub enum AdmitError {
 struct Counts {
     total: usize,
     per_client: HashMap<IpAddr, usize>,
-    per_token: HashMap<u64, usize>,
+    per_token: HashMap<Arc<str>, usize>,
     closed: bool,
 }
 
@@ -48,17 +50,7 @@ pub(crate) struct Limits {
 pub struct StreamPermit {
     limits: Arc<Limits>,
     client: Option<IpAddr>,
-    token: Option<u64>,
-}
-
-/// The key a bearer token's streams are counted under: a hash, so the
-/// limits never hold the secret itself. (`DefaultHasher` with fixed keys is
-/// stable within the process, which is all a count needs.)
-pub fn token_key(token: &[u8]) -> u64 {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    token.hash(&mut h);
-    h.finish()
+    token: Option<Arc<str>>,
 }
 
 impl Limits {
@@ -81,12 +73,12 @@ impl Limits {
         self.admit_for(client, None)
     }
 
-    /// Admits a stream of `client` (its address) holding `token` (its
-    /// [`token_key`], if it sent a bearer token).
+    /// Admits a stream of `client` (its address) identified by `token` (the
+    /// name of its token, if one identified it).
     pub(crate) fn admit_for(
         self: &Arc<Self>,
         client: Option<IpAddr>,
-        token: Option<u64>,
+        token: Option<Arc<str>>,
     ) -> Result<StreamPermit, AdmitError> {
         let mut c = crate::sync::lock(&self.counts);
         if c.closed {
@@ -98,14 +90,14 @@ impl Limits {
         if client.is_some_and(|ip| c.per_client.get(&ip).is_some_and(|n| *n >= self.max_per_client)) {
             return Err(AdmitError::PerClient { limit: self.max_per_client });
         }
-        if token.is_some_and(|t| c.per_token.get(&t).is_some_and(|n| *n >= self.max_per_token)) {
+        if token.as_ref().is_some_and(|t| c.per_token.get(t).is_some_and(|n| *n >= self.max_per_token)) {
             return Err(AdmitError::PerToken { limit: self.max_per_token });
         }
         if let Some(ip) = client {
             *c.per_client.entry(ip).or_default() += 1;
         }
-        if let Some(t) = token {
-            *c.per_token.entry(t).or_default() += 1;
+        if let Some(t) = &token {
+            *c.per_token.entry(Arc::clone(t)).or_default() += 1;
         }
         c.total += 1;
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
@@ -145,12 +137,12 @@ impl Drop for StreamPermit {
                 c.per_client.remove(&ip);
             }
         }
-        if let Some(t) = self.token
-            && let Some(n) = c.per_token.get_mut(&t)
+        if let Some(t) = &self.token
+            && let Some(n) = c.per_token.get_mut(t)
         {
             *n -= 1;
             if *n == 0 {
-                c.per_token.remove(&t);
+                c.per_token.remove(t);
             }
         }
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
@@ -185,12 +177,11 @@ mod tests {
     #[test]
     fn one_token_is_capped_across_addresses_and_other_tokens_are_not() {
         let limits = Arc::new(Limits::new(10, 10).per_token(2));
-        let (t, u) = (token_key(b"alpha"), token_key(b"beta"));
-        assert_ne!(t, u);
+        let (t, u): (Arc<str>, Arc<str>) = (Arc::from("alpha"), Arc::from("beta"));
         let ips: Vec<IpAddr> = (1..=4).map(|i| format!("10.0.0.{i}").parse().unwrap()).collect();
-        let p1 = limits.admit_for(Some(ips[0]), Some(t)).unwrap();
-        let _p2 = limits.admit_for(Some(ips[1]), Some(t)).unwrap();
-        assert_eq!(limits.admit_for(Some(ips[2]), Some(t)).unwrap_err(), AdmitError::PerToken { limit: 2 });
+        let p1 = limits.admit_for(Some(ips[0]), Some(t.clone())).unwrap();
+        let _p2 = limits.admit_for(Some(ips[1]), Some(t.clone())).unwrap();
+        assert_eq!(limits.admit_for(Some(ips[2]), Some(t.clone())).unwrap_err(), AdmitError::PerToken { limit: 2 });
         // A refusal takes no slot anywhere.
         assert_eq!(limits.active(), 2);
         let _p3 = limits.admit_for(Some(ips[2]), Some(u)).unwrap();

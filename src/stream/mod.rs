@@ -47,7 +47,7 @@ pub use encode::{Encoded, Encoding, FrameData, FrameEncoder};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use hub::{EndReason, unix_nanos};
-pub use limits::{AdmitError, StreamPermit, token_key};
+pub use limits::{AdmitError, StreamPermit};
 pub use params::{ClipSource, MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use playhead::{Control, MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};

@@ -21,7 +21,7 @@ use super::config::Cors;
 use super::error::ApiError;
 use super::metrics;
 use super::state::AppState;
-use super::{body_guard, ratelimit, shed};
+use super::{auth, body_guard, ratelimit, shed};
 
 pub mod clips;
 pub mod extract;
@@ -58,6 +58,7 @@ pub fn router(state: AppState) -> Router {
             body_guard::guard,
         ))
         .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
+        .layer(middleware::from_fn_with_state(state.auth.clone(), auth::identify_requests))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
         .layer(middleware::from_fn_with_state(shed::Gate::new(limits.max_in_flight), shed::rest))
         .layer(middleware::from_fn(metrics::track))

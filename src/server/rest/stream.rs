@@ -55,10 +55,9 @@ const READ_BUFFER_BYTES: usize = 8 * 1024;
 )]
 pub async fn stream(
     State(state): State<AppState>,
-    _: ReadAccess,
+    ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
-    headers: axum::http::HeaderMap,
     RawQuery(query): RawQuery,
     upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
@@ -109,18 +108,12 @@ pub async fn stream(
     let params = StreamParams::new(&clip_id, version, cached, request)
         .map_err(|e| ApiError::parameter("bad_parameter", e.field, e.detail))?;
     let engine = state.streams.clone();
-    // The peer address, when served with connect info (`Application` is).
-    // Counted per token too (by a hash), so one token cannot take every stream.
-    let token = headers
-        .get(axum::http::header::AUTHORIZATION)
-        .and_then(|v| crate::server::auth::bearer_token(v.as_bytes()))
-        .map(crate::stream::token_key);
-    let peer = connect.map(|Extension(ConnectInfo(addr))| addr);
-    // The playback is chosen now, so that the response can say its phase;
-    // each WebSocket has its own connection, whose port is its lane.
-    let watched = engine
-        .admit_for(peer.map(|a| a.ip()), token)
-        .map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
+    // Counted against the caller's address and its token (auth's `Caller`),
+    // so one token cannot take every stream. The playback is chosen now, so
+    // that the response can say its phase; each WebSocket has its own
+    // connection, whose port is its lane.
+    let lane = connect.map(|Extension(ConnectInfo(addr))| u64::from(addr.port()));
+    let watched = engine.admit_for(caller.addr, caller.token).map(|permit| engine.watch(params, permit, lane));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
     // Inbound messages are small controls; outbound frames are buffered up
     // to a bound, so a viewer that stops reading cannot grow memory.

@@ -83,8 +83,13 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
 #[tokio::test(flavor = "multi_thread")]
 async fn one_token_cannot_hold_more_than_its_stream_cap() {
     let dir = tempfile::tempdir().unwrap();
-    let server =
-        start(&dir.path().join("data"), &["--max-streams-per-token", "1", "--max-streams-per-client", "100"]).await;
+    // Two configured read tokens (an unconfigured one would be refused, and
+    // on a server without tokens every caller is its address).
+    let token = |name: &str| format!("{name}:read:{}", inbetween::server::tokens::TokenHash::of(name.as_bytes()));
+    let (alpha, beta) = (token("alpha"), token("beta"));
+    let flags =
+        ["--max-streams-per-token", "1", "--max-streams-per-client", "100", "--token", &alpha, "--token", &beta];
+    let server = start(&dir.path().join("data"), &flags).await;
     let http = reqwest::Client::new();
     let id = server.create(&http, WAVE).await;
     let open = |token: &str| {
