@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use axum::Json;
-use axum::extract::{RawQuery, State};
+use axum::extract::State;
 use axum::http::header::{CONTENT_TYPE, ETAG, IF_MATCH, IF_NONE_MATCH, LOCATION};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -21,7 +21,8 @@ use crate::server::limits::{Admitted, admit};
 use crate::server::state::{AppState, BLOCKING_THRESHOLD_BYTES};
 use crate::store::{ClipMeta, ListQuery, is_clip_id};
 
-use super::extract::{ClipId, JsonBody, Precondition, QueryParams, etag, precondition};
+use super::extract::{ClipId, JsonBody, Precondition, etag, precondition};
+use super::query::Query;
 use super::summary::ClipSummary;
 
 /// The default and the largest page size of `GET /v1/clips`.
@@ -99,9 +100,8 @@ pub async fn create_clip(
 pub async fn list_clips(
     State(state): State<AppState>,
     _: ReadAccess,
-    RawQuery(query): RawQuery,
+    Query(params): Query,
 ) -> Result<Json<ClipList>, ApiError> {
-    let params = QueryParams::parse(query.as_deref(), &["limit", "cursor", "name"])?;
     let limit = match params.get("limit") {
         None => DEFAULT_PAGE,
         Some(text) => text.parse::<u32>().ok().filter(|n| (1..=MAX_PAGE).contains(n)).ok_or_else(|| {

@@ -29,6 +29,7 @@ pub mod health;
 pub mod import;
 pub mod openapi;
 pub mod poses;
+pub mod query;
 pub mod stream;
 pub mod summary;
 pub mod viewer;
@@ -38,7 +39,9 @@ pub fn router(state: AppState) -> Router {
     let limits = &state.config.limits;
     let cors = cors_layer(&state.config.cors);
     let request_id = HeaderName::from_static("x-request-id");
-    Router::new()
+    // The API and operations routes take exactly the query parameters they document.
+    let allowed = query::Allowed::from_openapi(&<openapi::ApiDoc as utoipa::OpenApi>::openapi());
+    let strict = Router::new()
         .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
         .route("/v1/clips/import", post(import::import_clips))
         .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
@@ -48,6 +51,9 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))
+        .route_layer(middleware::from_fn_with_state(allowed, query::strict));
+    Router::new()
+        .merge(strict)
         .merge(openapi::router())
         .merge(viewer::router())
         .fallback(|| async { ApiError::NotFound { what: "route" } })
