@@ -12,6 +12,7 @@ mod import;
 mod operations;
 mod poses;
 mod security;
+mod strict;
 
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
