@@ -105,7 +105,7 @@ impl GrpcService {
             // gRPC frames are always protobuf `Frame`s.
             encoding: Some(Raw::Text("protobuf")),
             // 0: no limit.
-            max_frames: (req.max_frames > 0).then(|| Raw::Number(req.max_frames as f64)),
+            max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
             at: stream_at,
         };

@@ -24,7 +24,10 @@ use crate::server::request::{Raw, RawModes};
 
 /// The query parameters each operation accepts, by route and method.
 #[derive(Debug, Clone, Default)]
-pub struct Allowed(Arc<HashMap<String, Vec<(Method, Vec<String>)>>>);
+pub struct Allowed(Arc<HashMap<String, Vec<MethodParams>>>);
+
+/// One method of a route and the query parameters it accepts.
+type MethodParams = (Method, Vec<String>);
 
 impl Allowed {
     /// Every operation's documented query parameters (and its path's).
