@@ -28,11 +28,10 @@ use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::ratelimit::Caller;
 use crate::server::request::{
-    Field, Format, Opening, Raw, RawBatch, RawModes, RawPose, RawStream, StreamCaller, evaluate, in_body,
+    Field, Format, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream, StreamCaller, evaluate, in_body,
 };
-use crate::server::rest::clips::{DEFAULT_PAGE, MAX_PAGE};
 use crate::server::state::AppState;
-use crate::store::{ClipMeta, ListQuery, is_clip_id};
+use crate::store::{ClipMeta, is_clip_id};
 use crate::stream::{self, Control, Engine, StreamParams, WireFrame};
 use crate::wire::json::{ClipDoc, parse_clip_doc};
 use crate::wire::proto::server::animation_server::{Animation, AnimationServer};
@@ -344,26 +343,16 @@ impl Animation for GrpcService {
     ) -> Result<Response<pb::ListClipsResponse>, Status> {
         self.read(&request)?;
         let req = request.into_inner();
-        let limit = match req.limit {
-            0 => DEFAULT_PAGE,
-            n if n <= MAX_PAGE => n,
-            n => {
-                let detail = format!("limit must be 1..={MAX_PAGE} (or 0 for the default), got {n}");
-                return Err(ApiError::invalid("bad_limit", "/limit", detail).into());
-            }
+        let raw = RawPage {
+            // 0: the default.
+            limit: (req.limit > 0).then_some(Raw::Number(f64::from(req.limit))),
+            cursor: (!req.cursor.is_empty()).then_some(req.cursor.as_str()),
+            name: (!req.name.is_empty()).then_some(req.name.as_str()),
+            at: in_body,
         };
-        let after = (!req.cursor.is_empty()).then_some(req.cursor);
-        if after.as_deref().is_some_and(|c| !is_clip_id(c)) {
-            let detail = "cursor must be a next_cursor from a previous page";
-            return Err(ApiError::invalid("bad_cursor", "/cursor", detail).into());
-        }
-        let name = (!req.name.is_empty()).then_some(req.name);
-        let mut page =
-            self.state.store.list(ListQuery { after, name, limit: limit + 1 }).await.map_err(ApiError::from)?;
-        let more = page.len() > limit as usize;
-        page.truncate(limit as usize);
-        let next_cursor = if more { page.last().map(|m| m.id.clone()).unwrap_or_default() } else { String::new() };
-        Ok(Response::new(pb::ListClipsResponse { clips: page.iter().map(summary).collect(), next_cursor }))
+        let Page { clips, next_cursor } = raw.read(&self.state).await?;
+        let clips = clips.iter().map(summary).collect();
+        Ok(Response::new(pb::ListClipsResponse { clips, next_cursor: next_cursor.unwrap_or_default() }))
     }
 
     async fn put_clip(&self, request: Request<pb::PutClipRequest>) -> Result<Response<pb::ClipSummary>, Status> {

@@ -33,6 +33,7 @@ enum Rpc {
     Sample(pb::SampleRequest),
     Batch(pb::SampleBatchRequest),
     Stream(pb::StreamRequest),
+    List(pb::ListClipsRequest),
 }
 
 struct Case {
@@ -106,6 +107,20 @@ fn cases(id: &str) -> Vec<Case> {
         ),
         case("stream bad playback", ws("playback=sideways"), stream(id, |r| r.playback = 9), "bad_parameter", 400),
         case("stream bad space", ws("space=world"), stream(id, |r| r.space = 7), "bad_parameter", 400),
+        case(
+            "page size over the limit",
+            Rest::Get("/v1/clips?limit=5000".into()),
+            Rpc::List(pb::ListClipsRequest { limit: 5000, ..Default::default() }),
+            "bad_limit",
+            400,
+        ),
+        case(
+            "page cursor not a clip id",
+            Rest::Get("/v1/clips?cursor=zzz".into()),
+            Rpc::List(pb::ListClipsRequest { cursor: "zzz".into(), ..Default::default() }),
+            "bad_cursor",
+            400,
+        ),
         // Well-formed but wrong: 422.
         case("missing times", post(json!({})), batch(id, None, |_| {}), "times_or_range", 422),
         // The protobuf oneof cannot carry both; its nearest mistake is neither.
@@ -222,6 +237,7 @@ async fn rpc_refusal(grpc: &mut AnimationClient<Channel>, rpc: Rpc) -> tonic::St
         Rpc::Sample(req) => grpc.sample(req).await.map(drop),
         Rpc::Batch(req) => grpc.sample_batch(req).await.map(drop),
         Rpc::Stream(req) => grpc.stream_frames(req).await.map(drop),
+        Rpc::List(req) => grpc.list_clips(req).await.map(drop),
     };
     result.expect_err("the call should be refused")
 }

@@ -1,5 +1,5 @@
-//! The request layer: what a sample or a stream may ask for, checked once
-//! for every transport.
+//! The request layer: what a sample, a stream or a page of the clip list
+//! may ask for, checked once for every transport.
 //!
 //! REST and gRPC only decode and render. Each decodes its wire form (a query
 //! string, a JSON body, a protobuf message) into the raw inputs here — every
@@ -10,7 +10,8 @@
 //!
 //! - 400 (`ApiError::BadParameter`), the value does not parse: `bad_number`
 //!   (not a finite number, or not a whole one where a count is asked),
-//!   `bad_parameter` (outside an enum's names or numbers), `missing_parameter`;
+//!   `bad_parameter` (outside an enum's names or numbers), `missing_parameter`,
+//!   and the list's `bad_limit`, `bad_cursor`;
 //! - 422 (`ApiError::Invalid`), it parses but breaks a rule:
 //!   `fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`,
 //!   `times_or_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`.
@@ -19,6 +20,7 @@
 //! clip is looked up (`clip_not_found`), except the stream rules that need
 //! the clip (its start is the default start).
 
+mod list;
 mod sample;
 mod stream;
 
@@ -32,6 +34,7 @@ use crate::store::is_clip_id;
 use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
 use crate::wire::proto::{ease_from_pb, playback_from_pb, space_from_pb};
 
+pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
 pub use sample::{BLOCKING_POSES, FPS_RANGE, Format, PoseRequest, RawBatch, RawPose, Sampling, evaluate};
 pub use stream::{DEFAULT_FPS, Opening, RawStream, StreamCaller};
 
@@ -57,6 +60,9 @@ pub enum Field {
     Speed,
     Encoding,
     MaxFrames,
+    /// A page of the clip list: its size and where it starts.
+    Limit,
+    Cursor,
 }
 
 impl Field {
@@ -76,6 +82,8 @@ impl Field {
             Field::Speed => "speed",
             Field::Encoding => "encoding",
             Field::MaxFrames => "max_frames",
+            Field::Limit => "limit",
+            Field::Cursor => "cursor",
         }
     }
 }
