@@ -3,7 +3,9 @@
 //!
 //! Every RPC runs on the same state as REST: the same store, clip cache,
 //! limits, tokens and `ApiError` (mapped to a `tonic::Status` in
-//! `server::error`, beside its problem+json mapping). Writes need a token
+//! `server::error`, beside its problem+json mapping). Sample, stream and list
+//! requests are only decoded here and checked by `server::request`, so they
+//! fail with REST's codes. Writes need a token
 //! with the write scope as metadata `authorization: Bearer <token>`; reads the
 //! read scope when reads are guarded (`server::auth`). Streams come from the shared streaming engine
 //! (`crate::stream`), so gRPC and WebSocket viewers of the same playback

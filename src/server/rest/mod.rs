@@ -3,6 +3,8 @@
 //! `router(state)` is the whole HTTP surface; [`crate::server::Application`]
 //! only binds and serves it, so tests may also drive it with `oneshot`.
 //! Other protocols' routes (the WebSocket stream, import) merge in here.
+//! Every API and operations route sits behind `query::strict`: it takes
+//! exactly the query parameters its OpenAPI operation lists.
 
 use std::time::Duration;
 
