@@ -28,12 +28,13 @@ pub enum ApiError {
     /// The body is not JSON at all.
     #[error("{detail}")]
     MalformedJson { pointer: String, detail: String },
-    /// A body or clip that parses but breaks a rule (types, SPEC §1–2, limits).
+    /// A body, clip or request value that parses but breaks a rule (types,
+    /// SPEC §1–2, limits, the request rules of `server::request`).
     #[error("{detail}")]
-    Invalid { code: &'static str, pointer: String, detail: String },
-    /// A query parameter or header that does not parse.
+    Invalid { code: &'static str, at: At, detail: String },
+    /// A query parameter, header or request value that does not parse.
     #[error("{detail}")]
-    BadParameter { code: &'static str, parameter: String, detail: String },
+    BadParameter { code: &'static str, at: At, detail: String },
     #[error("missing or wrong bearer token")]
     Unauthorized,
     /// A known token without the scope the route needs.
@@ -74,6 +75,16 @@ pub enum ApiError {
     Unavailable(#[source] Option<anyhow::Error>),
     #[error("internal error")]
     Internal(#[source] anyhow::Error),
+}
+
+/// Where a refused value sits in the request: problem+json says `parameter`
+/// or `pointer`, gRPC `(parameter …)` or `(at …)` in the message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum At {
+    /// A query parameter or header, by name.
+    Parameter(String),
+    /// A body or protobuf message field, by JSON pointer (`""`: the whole request).
+    Pointer(String),
 }
 
 #[derive(Serialize)]
@@ -143,22 +154,31 @@ impl ApiError {
 
     fn pointer(&self) -> Option<&str> {
         match self {
-            ApiError::MalformedJson { pointer, .. }
-            | ApiError::Invalid { pointer, .. }
-            | ApiError::TooMany { pointer, .. } => Some(pointer),
+            ApiError::MalformedJson { pointer, .. } | ApiError::TooMany { pointer, .. } => Some(pointer),
+            ApiError::Invalid { at: At::Pointer(pointer), .. }
+            | ApiError::BadParameter { at: At::Pointer(pointer), .. } => Some(pointer),
             ApiError::Import { pointer, .. } => pointer.as_deref(),
             _ => None,
         }
     }
 
-    /// A query-parameter error.
-    pub fn parameter(code: &'static str, parameter: &str, detail: impl Into<String>) -> Self {
-        ApiError::BadParameter { code, parameter: parameter.to_owned(), detail: detail.into() }
+    /// The query parameter or header at fault, if that is where the error is.
+    fn parameter_name(&self) -> Option<&str> {
+        match self {
+            ApiError::Invalid { at: At::Parameter(name), .. }
+            | ApiError::BadParameter { at: At::Parameter(name), .. } => Some(name),
+            _ => None,
+        }
     }
 
-    /// A body-field error at a JSON pointer.
+    /// A query parameter or header that does not parse (400).
+    pub fn parameter(code: &'static str, parameter: &str, detail: impl Into<String>) -> Self {
+        ApiError::BadParameter { code, at: At::Parameter(parameter.to_owned()), detail: detail.into() }
+    }
+
+    /// A body field that breaks a rule, at a JSON pointer (422).
     pub fn invalid(code: &'static str, pointer: impl Into<String>, detail: impl Into<String>) -> Self {
-        ApiError::Invalid { code, pointer: pointer.into(), detail: detail.into() }
+        ApiError::Invalid { code, at: At::Pointer(pointer.into()), detail: detail.into() }
     }
 
     pub fn internal(e: impl Into<anyhow::Error>) -> Self {
@@ -177,7 +197,7 @@ impl From<DocError> for ApiError {
         if e.code == "malformed_json" {
             ApiError::MalformedJson { pointer: e.pointer, detail: e.detail }
         } else {
-            ApiError::Invalid { code: e.code, pointer: e.pointer, detail: e.detail }
+            ApiError::Invalid { code: e.code, at: At::Pointer(e.pointer), detail: e.detail }
         }
     }
 }
@@ -203,10 +223,6 @@ impl IntoResponse for ApiError {
             tracing::debug!(code, detail = %self, "request refused");
         }
         let detail = self.public_detail();
-        let parameter = match &self {
-            ApiError::BadParameter { parameter, .. } => Some(parameter.as_str()),
-            _ => None,
-        };
         let problem = Problem {
             type_: format!("urn:inbetween:problem:{code}"),
             title: status.canonical_reason().unwrap_or("Error"),
@@ -214,7 +230,7 @@ impl IntoResponse for ApiError {
             code,
             detail,
             pointer: self.pointer(),
-            parameter,
+            parameter: self.parameter_name(),
         };
         let body = serde_json::to_vec(&problem).unwrap_or_default();
         let mut response =
@@ -288,7 +304,7 @@ impl From<ApiError> for tonic::Status {
         let mut message = format!("{code}: {}", e.public_detail());
         if let Some(pointer) = e.pointer().filter(|p| !p.is_empty()) {
             message.push_str(&format!(" (at {pointer})"));
-        } else if let ApiError::BadParameter { parameter, .. } = &e {
+        } else if let Some(parameter) = e.parameter_name() {
             message.push_str(&format!(" (parameter {parameter})"));
         }
         let mut status = tonic::Status::new(e.grpc_code(), message);

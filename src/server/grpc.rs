@@ -3,7 +3,9 @@
 //!
 //! Every RPC runs on the same state as REST: the same store, clip cache,
 //! limits, tokens and `ApiError` (mapped to a `tonic::Status` in
-//! `server::error`, beside its problem+json mapping). Writes need a token
+//! `server::error`, beside its problem+json mapping). Sample, stream and list
+//! requests are only decoded here and checked by `server::request`, so they
+//! fail with REST's codes. Writes need a token
 //! with the write scope as metadata `authorization: Bearer <token>`; reads the
 //! read scope when reads are guarded (`server::auth`). Streams come from the shared streaming engine
 //! (`crate::stream`), so gRPC and WebSocket viewers of the same playback
@@ -21,20 +23,21 @@ use tokio::sync::oneshot;
 use tonic::metadata::MetadataMap;
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::anim::{SampleOptions, Sampler, frame_count, frame_times};
+use crate::anim::{SampleOptions, Sampler};
 use crate::server::auth::{Caller, Scope};
 use crate::server::cache::CachedClip;
-use crate::server::error::ApiError;
+use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
-use crate::server::rest::clips::{DEFAULT_PAGE, MAX_PAGE};
+use crate::server::request::{
+    Field, Format, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream, evaluate, in_body,
+};
 use crate::server::state::AppState;
-use crate::store::{ClipMeta, ListQuery, is_clip_id};
-use crate::stream::{self, Control, Encoding, Engine, StreamParams, StreamRequest, WireFrame};
+use crate::store::{ClipMeta, is_clip_id};
+use crate::stream::{self, Control, Engine, StreamParams, WireFrame};
 use crate::wire::json::{ClipDoc, parse_clip_doc};
 use crate::wire::proto::server::animation_server::{Animation, AnimationServer};
 use crate::wire::proto::{
-    FILE_DESCRIPTOR_SET, Format, clip_from_pb, clip_to_pb, ease_from_pb, format_from_pb, matrices_to_pb, pb,
-    playback_from_pb, playback_to_pb, pose_to_pb, space_from_pb,
+    FILE_DESCRIPTOR_SET, clip_from_pb, clip_to_pb, matrices_to_pb, pb, playback_to_pb, pose_to_pb,
 };
 
 /// The `Animation` service.
@@ -88,38 +91,56 @@ impl GrpcService {
         Ok(self.state.writes.admit(&caller)?)
     }
 
-    async fn clip(&self, id: &str) -> Result<Arc<CachedClip>, Status> {
-        if !is_clip_id(id) {
-            return Err(ApiError::NotFound { what: "clip" }.into());
-        }
-        Ok(self.state.clip(id).await?)
-    }
-
-    /// Validates a stream request, loads its clip and admits it.
+    /// Checks a stream request, binds it to its clip and admits it.
     async fn stream_params(
         &self,
         req: &pb::StreamRequest,
         paused: bool,
-        caller: Caller,
+        caller: &Caller,
     ) -> Result<(StreamParams, stream::StreamPermit), Status> {
-        let cached = self.clip(&req.clip_id).await?;
-        let request = StreamRequest {
-            fps: req.fps,
-            start: req.start_time,
-            speed: req.speed,
-            playback: playback_from_pb(req.playback, "/playback").map_err(ApiError::from)?,
-            ease: ease_from_pb(req.ease, "/ease").map_err(ApiError::from)?.unwrap_or_default(),
-            space: space_from_pb(req.space, "/space").map_err(ApiError::from)?.unwrap_or_default(),
-            encoding: Encoding::Protobuf,
-            max_frames: req.max_frames,
+        let raw = RawStream {
+            fps: Some(Raw::Number(f64::from(req.fps))),
+            start: req.start_time.map(Raw::Number),
+            speed: req.speed.map(Raw::Number),
+            modes: modes(req.space, req.playback, req.ease),
+            // gRPC frames are always protobuf `Frame`s.
+            encoding: Some(Raw::Text("protobuf")),
+            // 0: no limit.
+            max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
+            at: stream_at,
         };
-        // The stream holds the cache entry (this version), not a copy.
-        let (id, version) = (cached.meta.id.clone(), cached.meta.version);
-        let params = StreamParams::new(&id, version, cached, request)
-            .map_err(|e| ApiError::invalid("bad_stream", format!("/{}", e.field), e.detail))?;
-        let permit = self.engine.admit_for(caller.addr, caller.token).map_err(ApiError::from)?;
-        Ok((params, permit))
+        let Opening { params, permit } = raw.open(&self.state, &req.clip_id, caller).await?;
+        Ok((params, permit.map_err(ApiError::from)?))
+    }
+}
+
+/// The modes of a request message, for the request layer.
+fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
+    RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
+}
+
+/// Where the fields of `SampleRequest` sit, for error messages.
+fn sample_at(field: Field) -> At {
+    match field {
+        Field::Time => At::Pointer("/time".into()),
+        other => in_body(other),
+    }
+}
+
+/// Where the fields of `SampleBatchRequest` sit: the range's in `/range`.
+fn batch_at(field: Field) -> At {
+    match field {
+        Field::Start | Field::End | Field::Fps => At::Pointer(format!("/range/{}", field.name())),
+        other => in_body(other),
+    }
+}
+
+/// Where the fields of `StreamRequest` sit.
+fn stream_at(field: Field) -> At {
+    match field {
+        Field::Start => At::Pointer("/start_time".into()),
+        other => in_body(other),
     }
 }
 
@@ -139,25 +160,6 @@ fn summary(meta: &ClipMeta) -> pb::ClipSummary {
     }
 }
 
-fn sample_options(space: i32, playback: i32, ease: i32) -> Result<SampleOptions, ApiError> {
-    Ok(SampleOptions {
-        playback: playback_from_pb(playback, "/playback")?,
-        ease: ease_from_pb(ease, "/ease")?.unwrap_or_default(),
-        space: space_from_pb(space, "/space")?.unwrap_or_default(),
-    })
-}
-
-fn check_format(cached: &CachedClip, format: Format) -> Result<(), ApiError> {
-    if format == Format::Skinning && !cached.clip.skeleton().has_inverse_binds() {
-        return Err(ApiError::invalid(
-            "no_inverse_binds",
-            "/format",
-            "format=skinning needs a clip whose skeleton has inverse bind matrices",
-        ));
-    }
-    Ok(())
-}
-
 /// One pose of `cached` at `t`, names included if `names`.
 fn pose(
     cached: &CachedClip,
@@ -170,16 +172,10 @@ fn pose(
 ) -> pb::Pose {
     let clip = &cached.clip;
     let names = names.then(|| clip.skeleton().names());
+    let clip_time = evaluate(clip, t, options, format, sampler, matrices);
     match format {
-        Format::Trs => {
-            let clip_time = clip.sample(t, options, sampler);
-            pose_to_pb(names, sampler.pose(), t, clip_time, options.space)
-        }
-        Format::Matrix | Format::Skinning => {
-            clip.matrices(t, options, format == Format::Skinning, sampler, matrices);
-            let clip_time = clip.clip_time(t, options.playback.unwrap_or(clip.playback()), options.ease);
-            matrices_to_pb(names, matrices, t, clip_time)
-        }
+        Format::Trs => pose_to_pb(names, sampler.pose(), t, clip_time, options.space),
+        Format::Matrix | Format::Skinning => matrices_to_pb(names, matrices, t, clip_time),
     }
 }
 
@@ -193,9 +189,14 @@ fn control_from_pb(op: Option<pb::playback_control::Op>) -> Result<Control, Stat
         Some(Op::Seek(s)) => Ok(Control::Seek(s.time)),
         Some(Op::Speed(s)) => Ok(Control::Speed(s.speed)),
         Some(Op::Stop(_)) => Ok(Control::Stop),
-        Some(Op::Open(_)) => Err(Status::invalid_argument("`open` is only valid as the first message")),
-        None => Err(Status::invalid_argument("a PlaybackControl needs an op")),
+        Some(Op::Open(_)) => Err(bad_control("`open` is only valid as the first message")),
+        None => Err(bad_control("a PlaybackControl needs an op")),
     }
+}
+
+/// A `Play` message that cannot be obeyed: `bad_control`, as on the WebSocket.
+fn bad_control(detail: impl Into<String>) -> Status {
+    ApiError::invalid("bad_control", "", detail).into()
 }
 
 #[tonic::async_trait]
@@ -203,14 +204,15 @@ impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
         self.read(&request)?;
         let req = request.into_inner();
-        if !req.time.is_finite() {
-            return Err(ApiError::invalid("bad_time", "/time", "time must be a finite number of seconds").into());
-        }
-        let options = sample_options(req.space, req.playback, req.ease)?;
-        let format = format_from_pb(req.format, "/format").map_err(ApiError::from)?;
-        let cached = self.clip(&req.clip_id).await?;
-        check_format(&cached, format)?;
-        let pose = pose(&cached, req.time, &options, format, true, &mut Sampler::new(), &mut Vec::new());
+        let raw = RawPose {
+            t: Some(Raw::Number(req.time)),
+            modes: modes(req.space, req.playback, req.ease),
+            format: Some(Raw::Enum(req.format)),
+            at: sample_at,
+        };
+        let (sample, cached) = raw.resolve(&self.state, &req.clip_id).await?;
+        let (t, options, format) = (sample.t, sample.options, sample.format);
+        let pose = pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
         self.state.counters.poses.increment(1);
         Ok(Response::new(pose))
     }
@@ -218,50 +220,37 @@ impl Animation for GrpcService {
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
         self.read(&request)?;
         let req = request.into_inner();
-        let max = self.state.config.limits.max_poses;
-        let times: Vec<f64> = match &req.when {
-            Some(pb::sample_batch_request::When::Times(t)) => {
-                if let Some(i) = t.values.iter().position(|x| !x.is_finite()) {
-                    return Err(ApiError::invalid("bad_time", format!("/times/{i}"), "times must be finite").into());
-                }
-                if t.values.len() > max {
-                    let detail = format!("{} times; the limit is {max}", t.values.len());
-                    return Err(ApiError::TooMany { code: "too_many_poses", pointer: "/times".into(), detail }.into());
-                }
-                t.values.clone()
-            }
-            Some(pb::sample_batch_request::When::Range(r)) => {
-                if !(r.start.is_finite() && r.end.is_finite() && r.end >= r.start) {
-                    let detail = "start and end must be finite with end >= start";
-                    return Err(ApiError::invalid("bad_range", "/range", detail).into());
-                }
-                if !(1.0..=240.0).contains(&r.fps) {
-                    return Err(ApiError::invalid("bad_fps", "/range/fps", "fps must be 1..=240").into());
-                }
-                let n = frame_count(r.start, r.end, r.fps);
-                if n > max as u64 {
-                    let detail = format!("{n} frames; the limit is {max}");
-                    return Err(ApiError::TooMany { code: "too_many_poses", pointer: "/range".into(), detail }.into());
-                }
-                frame_times(r.start, r.end, r.fps).collect()
-            }
-            None => return Err(ApiError::invalid("missing_times", "/times", "give `times` or `range`").into()),
+        let range = match &req.when {
+            Some(pb::sample_batch_request::When::Range(r)) => Some(r),
+            _ => None,
         };
-        let options = sample_options(req.space, req.playback, req.ease)?;
-        let format = format_from_pb(req.format, "/format").map_err(ApiError::from)?;
-        let cached = self.clip(&req.clip_id).await?;
-        check_format(&cached, format)?;
+        let raw = RawBatch {
+            times: match &req.when {
+                Some(pb::sample_batch_request::When::Times(t)) => Some(&t.values),
+                _ => None,
+            },
+            start: range.map(|r| r.start),
+            end: range.map(|r| r.end),
+            fps: range.map(|r| r.fps),
+            modes: modes(req.space, req.playback, req.ease),
+            format: Some(Raw::Enum(req.format)),
+            at: batch_at,
+        };
+        let (sampling, cached) = raw.resolve(&self.state, &req.clip_id).await?;
+        let blocking = sampling.is_blocking();
         let build = move || {
             let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+            let (options, format) = (sampling.options, sampling.format);
             pb::PoseBatch {
                 joint_names: cached.clip.skeleton().names().to_vec(),
-                poses: times
+                poses: sampling
+                    .times
                     .iter()
                     .map(|&t| pose(&cached, t, &options, format, false, &mut sampler, &mut matrices))
                     .collect(),
             }
         };
-        let batch = if times_len_is_large(&req) {
+        let batch = if blocking {
             tokio::task::spawn_blocking(build)
                 .await
                 .map_err(|e| Status::from(crate::server::metrics::join_failed(e)))?
@@ -280,7 +269,7 @@ impl Animation for GrpcService {
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
         let caller = self.read(&request)?;
         let lane = lane(&request);
-        let (params, permit) = self.stream_params(request.get_ref(), false, caller).await?;
+        let (params, permit) = self.stream_params(request.get_ref(), false, &caller).await?;
         let sub = self.engine.watch(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), phase_ms))
@@ -297,11 +286,11 @@ impl Animation for GrpcService {
         let mut inbound = request.into_inner();
         let open = match inbound.message().await? {
             Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Open(open)) }) => open,
-            Some(_) => return Err(Status::invalid_argument("the first message of Play must be `open`")),
-            None => return Err(Status::invalid_argument("Play needs an `open` message first")),
+            Some(_) => return Err(bad_control("the first message of Play must be `open`")),
+            None => return Err(bad_control("Play needs an `open` message first")),
         };
-        let stream_req = open.stream.ok_or_else(|| Status::invalid_argument("`open` needs a `stream`"))?;
-        let (params, permit) = self.stream_params(&stream_req, open.paused, caller).await?;
+        let stream_req = open.stream.ok_or_else(|| bad_control("`open` needs a `stream`"))?;
+        let (params, permit) = self.stream_params(&stream_req, open.paused, &caller).await?;
         let sub = self.engine.play(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
         let controller = sub.controller().expect("a Play subscription is private");
@@ -317,7 +306,7 @@ impl Animation for GrpcService {
                 match message {
                     Ok(Some(msg)) => {
                         let sent = control_from_pb(msg.op)
-                            .and_then(|c| controller.send(c).map_err(|e| Status::invalid_argument(e.to_string())));
+                            .and_then(|c| controller.send(c).map_err(|e| bad_control(e.to_string())));
                         match sent {
                             Ok(true) => {}
                             Ok(false) => return,
@@ -354,26 +343,16 @@ impl Animation for GrpcService {
     ) -> Result<Response<pb::ListClipsResponse>, Status> {
         self.read(&request)?;
         let req = request.into_inner();
-        let limit = match req.limit {
-            0 => DEFAULT_PAGE,
-            n if n <= MAX_PAGE => n,
-            n => {
-                let detail = format!("limit must be 1..={MAX_PAGE} (or 0 for the default), got {n}");
-                return Err(ApiError::invalid("bad_limit", "/limit", detail).into());
-            }
+        let raw = RawPage {
+            // 0: the default.
+            limit: (req.limit > 0).then_some(Raw::Number(f64::from(req.limit))),
+            cursor: (!req.cursor.is_empty()).then_some(req.cursor.as_str()),
+            name: (!req.name.is_empty()).then_some(req.name.as_str()),
+            at: in_body,
         };
-        let after = (!req.cursor.is_empty()).then_some(req.cursor);
-        if after.as_deref().is_some_and(|c| !is_clip_id(c)) {
-            let detail = "cursor must be a next_cursor from a previous page";
-            return Err(ApiError::invalid("bad_cursor", "/cursor", detail).into());
-        }
-        let name = (!req.name.is_empty()).then_some(req.name);
-        let mut page =
-            self.state.store.list(ListQuery { after, name, limit: limit + 1 }).await.map_err(ApiError::from)?;
-        let more = page.len() > limit as usize;
-        page.truncate(limit as usize);
-        let next_cursor = if more { page.last().map(|m| m.id.clone()).unwrap_or_default() } else { String::new() };
-        Ok(Response::new(pb::ListClipsResponse { clips: page.iter().map(summary).collect(), next_cursor }))
+        let Page { clips, next_cursor } = raw.read(&self.state).await?;
+        let clips = clips.iter().map(summary).collect();
+        Ok(Response::new(pb::ListClipsResponse { clips, next_cursor: next_cursor.unwrap_or_default() }))
     }
 
     async fn put_clip(&self, request: Request<pb::PutClipRequest>) -> Result<Response<pb::ClipSummary>, Status> {
@@ -417,15 +396,6 @@ impl Animation for GrpcService {
             server_unix_nanos: stream::unix_nanos(),
             server_monotonic_nanos: self.engine.uptime().as_nanos() as u64,
         }))
-    }
-}
-
-/// Large batches are built on the blocking pool (as REST does).
-fn times_len_is_large(req: &pb::SampleBatchRequest) -> bool {
-    match &req.when {
-        Some(pb::sample_batch_request::When::Times(t)) => t.values.len() > 256,
-        Some(pb::sample_batch_request::When::Range(r)) => frame_count(r.start, r.end, r.fps) > 256,
-        None => false,
     }
 }
 

@@ -11,7 +11,8 @@
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
-//! `rest` the routes; `grpc` the gRPC API, served on its own port
+//! `request` the sampling and stream rules both transports share, with their
+//! stable codes; `rest` the routes; `grpc` the gRPC API, served on its own port
 //! (`--grpc-listen`) by tonic beside the HTTP server, with the same shutdown.
 //!
 //! Shutdown: when the signal fires, readiness flips to 503 first; the
@@ -51,6 +52,7 @@ mod listen;
 pub mod metrics;
 pub mod notify;
 pub mod ratelimit;
+pub mod request;
 pub mod rest;
 pub mod shed;
 pub mod state;

@@ -77,26 +77,6 @@ proto_enum!(ease_from_pb, ease_to_pb, Ease => Ease {
 });
 proto_enum!(space_from_pb, space_to_pb, Space => Space { Local = Local, Model = Model });
 
-/// What a unary sample returns (`format`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Format {
-    #[default]
-    Trs,
-    Matrix,
-    Skinning,
-}
-
-/// # Errors
-/// A number the proto does not define.
-pub(crate) fn format_from_pb(value: i32, pointer: &str) -> Result<Format, DocError> {
-    match pb::Format::try_from(value) {
-        Ok(pb::Format::Unspecified | pb::Format::Trs) => Ok(Format::Trs),
-        Ok(pb::Format::Matrix) => Ok(Format::Matrix),
-        Ok(pb::Format::Skinning) => Ok(Format::Skinning),
-        Err(_) => Err(invalid(pointer.to_owned(), format!("{value} is not a valid Format"))),
-    }
-}
-
 /// Splits a flat float array into keys of `width` numbers.
 fn keys(flat: &[f32], width: usize, pointer: String, channel: Channel) -> Result<Keys, DocError> {
     if !flat.len().is_multiple_of(width) {

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use axum::Json;
-use axum::extract::{RawQuery, State};
+use axum::extract::State;
 use axum::http::header::{CONTENT_TYPE, ETAG, IF_MATCH, IF_NONE_MATCH, LOCATION};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -18,15 +18,13 @@ use crate::server::auth::{ReadAccess, WriteAccess};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::limits::{Admitted, admit};
+use crate::server::request::{Page, RawPage, in_query};
 use crate::server::state::{AppState, BLOCKING_THRESHOLD_BYTES};
-use crate::store::{ClipMeta, ListQuery, is_clip_id};
+use crate::store::ClipMeta;
 
-use super::extract::{ClipId, JsonBody, Precondition, QueryParams, etag, precondition};
+use super::extract::{ClipId, JsonBody, Precondition, etag, precondition};
+use super::query::Query;
 use super::summary::ClipSummary;
-
-/// The default and the largest page size of `GET /v1/clips`.
-pub const DEFAULT_PAGE: u32 = 100;
-pub const MAX_PAGE: u32 = 1000;
 
 /// A page of clips.
 #[derive(Debug, Serialize, ToSchema)]
@@ -99,31 +97,11 @@ pub async fn create_clip(
 pub async fn list_clips(
     State(state): State<AppState>,
     _: ReadAccess,
-    RawQuery(query): RawQuery,
+    Query(q): Query,
 ) -> Result<Json<ClipList>, ApiError> {
-    let params = QueryParams::parse(query.as_deref(), &["limit", "cursor", "name"])?;
-    let limit = match params.get("limit") {
-        None => DEFAULT_PAGE,
-        Some(text) => text.parse::<u32>().ok().filter(|n| (1..=MAX_PAGE).contains(n)).ok_or_else(|| {
-            ApiError::parameter(
-                "bad_limit",
-                "limit",
-                format!("limit must be an integer in 1..={MAX_PAGE}, got `{text}`"),
-            )
-        })?,
-    };
-    let after = params.get("cursor").map(str::to_owned);
-    if let Some(cursor) = &after
-        && !is_clip_id(cursor)
-    {
-        return Err(ApiError::parameter("bad_cursor", "cursor", "cursor must be a next_cursor from a previous page"));
-    }
-    let name = params.get("name").map(str::to_owned);
-    let mut page = state.store.list(ListQuery { after, name, limit: limit + 1 }).await?;
-    let more = page.len() > limit as usize;
-    page.truncate(limit as usize);
-    let next_cursor = if more { page.last().map(|m| m.id.clone()) } else { None };
-    Ok(Json(ClipList { clips: page.iter().map(ClipSummary::from).collect(), next_cursor }))
+    let raw = RawPage { limit: q.raw("limit"), cursor: q.get("cursor"), name: q.get("name"), at: in_query };
+    let Page { clips, next_cursor } = raw.read(&state).await?;
+    Ok(Json(ClipList { clips: clips.iter().map(ClipSummary::from).collect(), next_cursor }))
 }
 
 /// The stored clip document, exactly as accepted (normalised), with its `ETag`.

@@ -1,8 +1,6 @@
-//! Request parsing at the edge: JSON bodies (media type, size), query
-//! parameters (strict: unknown or repeated names are refused, so a typo like
-//! `?time=1` is an error, not a silently ignored option), path ids and
-//! `If-Match` / `If-None-Match`. Every failure is an [`ApiError`] naming the
-//! parameter or header at fault.
+//! Request parsing at the edge: JSON bodies (media type, size), path ids and
+//! `If-Match` / `If-None-Match` (query strings: `rest::query`). Every failure
+//! is an [`ApiError`] naming the parameter or header at fault.
 
 use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Path, Request};
@@ -56,82 +54,6 @@ impl<S: Send + Sync> FromRequestParts<S> for ClipId {
             Err(e) => Err(ApiError::parameter("bad_path", "id", e.body_text())),
         }
     }
-}
-
-/// Query parameters, each name at most once, from a fixed allowed set.
-#[derive(Debug, Default)]
-pub struct QueryParams(Vec<(String, String)>);
-
-impl QueryParams {
-    /// # Errors
-    /// `bad_query` for undecodable text, `unknown_parameter`, `repeated_parameter`.
-    pub fn parse(raw: Option<&str>, allowed: &[&str]) -> Result<QueryParams, ApiError> {
-        let raw = raw.unwrap_or("");
-        let pairs = decode_pairs(raw)?;
-        for (i, (name, _)) in pairs.iter().enumerate() {
-            if !allowed.contains(&name.as_str()) {
-                let detail = format!("unknown query parameter `{name}`; expected one of: {}", allowed.join(", "));
-                return Err(ApiError::parameter("unknown_parameter", name, detail));
-            }
-            if pairs[..i].iter().any(|(n, _)| n == name) {
-                return Err(ApiError::parameter("repeated_parameter", name, format!("`{name}` is given twice")));
-            }
-        }
-        Ok(QueryParams(pairs))
-    }
-
-    pub fn get(&self, name: &str) -> Option<&str> {
-        self.0.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_str())
-    }
-
-    /// A finite number, if present.
-    ///
-    /// # Errors
-    /// `bad_number` when present but not a finite number (`abc`, `NaN`, `inf`, `1e400`).
-    pub fn finite(&self, name: &str) -> Result<Option<f64>, ApiError> {
-        let Some(text) = self.get(name) else { return Ok(None) };
-        match text.trim().parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(Some(v)),
-            _ => {
-                Err(ApiError::parameter("bad_number", name, format!("`{name}` must be a finite number, got `{text}`")))
-            }
-        }
-    }
-
-    /// A value parsed by `FromStr` (the wire enums), if present.
-    ///
-    /// # Errors
-    /// `bad_parameter` naming the accepted values.
-    pub fn parsed<T: std::str::FromStr<Err = String>>(&self, name: &str) -> Result<Option<T>, ApiError> {
-        self.get(name)
-            .map(|text| {
-                text.parse::<T>().map_err(|e| ApiError::parameter("bad_parameter", name, format!("`{name}`: {e}")))
-            })
-            .transpose()
-    }
-}
-
-/// `application/x-www-form-urlencoded` pairs (`+` is a space, `%XX` a byte;
-/// names and values must decode to UTF-8).
-fn decode_pairs(raw: &str) -> Result<Vec<(String, String)>, ApiError> {
-    let decode = |s: &str| -> Result<String, ApiError> {
-        if !s.contains(['+', '%']) {
-            return Ok(s.to_owned());
-        }
-        let s = s.replace('+', " ");
-        percent_encoding::percent_decode_str(&s).decode_utf8().map(|c| c.into_owned()).map_err(|_| bad_query())
-    };
-    raw.split('&')
-        .filter(|pair| !pair.is_empty())
-        .map(|pair| {
-            let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
-            Ok((decode(name)?, decode(value)?))
-        })
-        .collect()
-}
-
-fn bad_query() -> ApiError {
-    ApiError::parameter("bad_query", "query", "the query string cannot be decoded")
 }
 
 /// An `If-Match` / `If-None-Match` condition.

@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use axum::Json;
 use axum::body::Bytes;
-use axum::extract::{FromRequest, Multipart, RawQuery, Request, State};
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::StatusCode;
 use axum::http::header::CONTENT_TYPE;
 use axum::response::{IntoResponse, Response};
@@ -34,7 +34,7 @@ use crate::server::limits::{Admitted, admit_doc};
 use crate::server::state::AppState;
 use crate::wire::json::{ClipDoc, InterpolationDoc};
 
-use super::extract::QueryParams;
+use super::query::Query;
 use super::summary::ClipSummary;
 
 /// What an import created, and what in the file it left out.
@@ -68,10 +68,9 @@ pub struct ImportResult {
 pub async fn import_clips(
     State(state): State<AppState>,
     _: WriteAccess,
-    RawQuery(query): RawQuery,
+    Query(params): Query,
     request: Request,
 ) -> Result<Response, ApiError> {
-    let params = QueryParams::parse(query.as_deref(), &["format", "interpolation", "name"])?;
     let content_type = request.headers().get(CONTENT_TYPE).and_then(|v| v.to_str().ok()).map(str::to_owned);
     let (body, siblings) = if content_type.as_deref().is_some_and(|c| c.starts_with("multipart/form-data")) {
         let multipart =

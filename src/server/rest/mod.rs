@@ -3,6 +3,8 @@
 //! `router(state)` is the whole HTTP surface; [`crate::server::Application`]
 //! only binds and serves it, so tests may also drive it with `oneshot`.
 //! Other protocols' routes (the WebSocket stream, import) merge in here.
+//! Every API and operations route sits behind `query::strict`: it takes
+//! exactly the query parameters its OpenAPI operation lists.
 
 use std::time::Duration;
 
@@ -29,6 +31,7 @@ pub mod health;
 pub mod import;
 pub mod openapi;
 pub mod poses;
+pub mod query;
 pub mod stream;
 pub mod summary;
 pub mod viewer;
@@ -38,7 +41,9 @@ pub fn router(state: AppState) -> Router {
     let limits = &state.config.limits;
     let cors = cors_layer(&state.config.cors);
     let request_id = HeaderName::from_static("x-request-id");
-    Router::new()
+    // The API and operations routes take exactly the query parameters they document.
+    let allowed = query::Allowed::from_openapi(&<openapi::ApiDoc as utoipa::OpenApi>::openapi());
+    let strict = Router::new()
         .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
         .route("/v1/clips/import", post(import::import_clips))
         .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
@@ -48,6 +53,9 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))
+        .route_layer(middleware::from_fn_with_state(allowed, query::strict));
+    Router::new()
+        .merge(strict)
         .merge(openapi::router())
         .merge(viewer::router())
         .fallback(|| async { ApiError::NotFound { what: "route" } })

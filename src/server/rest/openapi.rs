@@ -80,9 +80,14 @@ impl Modify for BearerAuth {
                 let mut add = |status: &str, what: &str| {
                     op.responses.responses.entry(status.to_owned()).or_insert_with(|| problem_response(what));
                 };
-                if path.starts_with("/v1/") {
-                    // Query parameters and headers are parsed strictly on every API route.
-                    add("400", "A parameter or header that does not parse, or an unknown one");
+                // Query parameters (`rest::query`) and headers are parsed strictly on every
+                // API and operations route; the viewer page is a static file.
+                if path != "/viewer" {
+                    add(
+                        "400",
+                        "A parameter or header that does not parse, or a query parameter the route does not list \
+                         or gives twice (`unknown_parameter`, `repeated_parameter`)",
+                    );
                 }
                 let json_body =
                     matches!(&op.request_body, Some(RefOr::T(b)) if b.content.contains_key("application/json"));

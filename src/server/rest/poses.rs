@@ -1,13 +1,14 @@
 //! Pose routes: one pose (`GET …/pose`) and many (`POST …/sample`).
 //!
-//! The clip comes from the cache (compiled once per version); sampling uses a
+//! The query or body is decoded here and checked by `server::request` (the
+//! rules and codes gRPC shares); this module renders the JSON. The clip comes from the cache (compiled once per version); sampling uses a
 //! per-thread [`Sampler`] and matrix buffer, so a request allocates only its
 //! response body, and poses are serialised straight from the core's buffers
 //! into it. Large sample requests run on the blocking pool.
 
 use std::cell::RefCell;
 
-use axum::extract::{RawQuery, State};
+use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
 use axum::http::{HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -15,49 +16,20 @@ use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::anim::{Ease, SampleOptions, Sampler, Space, frame_count, frame_times};
+use crate::anim::{SampleOptions, Sampler};
 use crate::server::auth::ReadAccess;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
+use crate::server::request::{Format, Raw, RawBatch, RawModes, RawPose, evaluate, in_body, in_query};
 use crate::server::state::AppState;
 use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
 
-use super::extract::{ClipId, JsonBody, QueryParams};
-
-/// The frame-rate range of `{start, end, fps}` sample requests (the same as streams, SPEC §5).
-pub const FPS_RANGE: std::ops::RangeInclusive<f64> = 1.0..=240.0;
+use super::extract::{ClipId, JsonBody};
+use super::query::Query;
 
 /// Response-size estimates, so a pose body is written without reallocating.
 const POSE_HEADER_BYTES: usize = 128;
 const JOINT_BYTES: usize = 160;
-
-/// Sample requests with more poses than this run on the blocking pool.
-const BLOCKING_POSES: usize = 256;
-
-/// How each pose is rendered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum Format {
-    /// Translation, rotation `[x,y,z,w]`, scale per joint, in the requested space.
-    #[default]
-    Trs,
-    /// Column-major 4×4 model matrices (model space).
-    Matrix,
-    /// `M_j · invBind_j`, for clips with inverse bind matrices.
-    Skinning,
-}
-
-impl std::str::FromStr for Format {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "trs" => Ok(Format::Trs),
-            "matrix" => Ok(Format::Matrix),
-            "skinning" => Ok(Format::Skinning),
-            _ => Err("expected one of: trs, matrix, skinning".into()),
-        }
-    }
-}
 
 thread_local! {
     static SCRATCH: RefCell<(Sampler, Vec<Mat4>)> = RefCell::new((Sampler::new(), Vec::new()));
@@ -67,9 +39,9 @@ thread_local! {
 fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOptions, format: Format) {
     let clip = &cached.clip;
     SCRATCH.with_borrow_mut(|(sampler, matrices)| {
+        let clip_time = evaluate(clip, t, options, format, sampler, matrices);
         let written = match format {
             Format::Trs => {
-                let clip_time = clip.sample(t, options, sampler);
                 let pose = PoseJson {
                     clip: &cached.meta.id,
                     time: t,
@@ -82,14 +54,11 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                 Ok(())
             }
             Format::Matrix | Format::Skinning => {
-                let skinning = format == Format::Skinning;
-                clip.matrices(t, options, skinning, sampler, matrices);
-                let clip_time = clip.clip_time(t, options.playback.unwrap_or(clip.playback()), options.ease);
                 let doc = MatricesJson {
                     clip: &cached.meta.id,
                     time: t,
                     clip_time,
-                    format: if skinning { "skinning" } else { "matrix" },
+                    format: if format == Format::Skinning { "skinning" } else { "matrix" },
                     skeleton: clip.skeleton(),
                     matrices: matrices.as_slice(),
                 };
@@ -132,17 +101,6 @@ impl std::io::Write for SmallWrites<'_> {
     }
 }
 
-fn check_format(cached: &CachedClip, format: Format, pointer: &str) -> Result<(), ApiError> {
-    if format == Format::Skinning && !cached.clip.skeleton().has_inverse_binds() {
-        return Err(ApiError::invalid(
-            "no_inverse_binds",
-            pointer,
-            "format=skinning needs a clip whose skeleton has inverse bind matrices",
-        ));
-    }
-    Ok(())
-}
-
 fn json_response(body: Vec<u8>) -> Response {
     (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
 }
@@ -160,9 +118,9 @@ fn json_response(body: Vec<u8>) -> Response {
     ),
     responses(
         (status = 200, description = "The pose", body = super::openapi::PoseSchema),
-        (status = 400, description = "A parameter does not parse", body = super::openapi::Problem),
+        (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::openapi::Problem),
         (status = 404, body = super::openapi::Problem),
-        (status = 422, description = "format=skinning without inverse binds", body = super::openapi::Problem),
+        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`)", body = super::openapi::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -170,20 +128,12 @@ pub async fn get_pose(
     State(state): State<AppState>,
     _: ReadAccess,
     ClipId(id): ClipId,
-    RawQuery(query): RawQuery,
+    Query(q): Query,
 ) -> Result<Response, ApiError> {
-    let params = QueryParams::parse(query.as_deref(), &["t", "space", "playback", "ease", "format"])?;
-    let t = params.finite("t")?.ok_or_else(|| ApiError::parameter("missing_parameter", "t", "`t` is required"))?;
-    let options = SampleOptions {
-        playback: params.parsed::<PlaybackDoc>("playback")?.map(Into::into),
-        ease: params.parsed::<EaseDoc>("ease")?.map_or(Ease::Linear, Into::into),
-        space: params.parsed::<SpaceDoc>("space")?.map_or(Space::Local, Into::into),
-    };
-    let format = params.parsed::<Format>("format")?.unwrap_or_default();
-    let cached = state.clip(&id).await?;
-    check_format(&cached, format, "")?;
+    let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
+    let (req, cached) = raw.resolve(&state, &id).await?;
     let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
-    write_pose(&mut body, &cached, t, &options, format);
+    write_pose(&mut body, &cached, req.t, &req.options, req.format);
     state.counters.poses.increment(1);
     Ok(json_response(body))
 }
@@ -204,14 +154,37 @@ pub struct SampleRequest {
     /// Frames per second, 1..=240.
     #[serde(default)]
     pub fps: Option<f64>,
+    // The enums stay text here so that the request layer decodes them, with
+    // the same code (`bad_parameter`) as a query parameter or a gRPC field.
     #[serde(default)]
-    pub space: Option<SpaceDoc>,
+    #[schema(value_type = Option<SpaceDoc>)]
+    pub space: Option<String>,
     #[serde(default)]
-    pub playback: Option<PlaybackDoc>,
+    #[schema(value_type = Option<PlaybackDoc>)]
+    pub playback: Option<String>,
     #[serde(default)]
-    pub ease: Option<EaseDoc>,
+    #[schema(value_type = Option<EaseDoc>)]
+    pub ease: Option<String>,
     #[serde(default)]
-    pub format: Option<Format>,
+    #[schema(value_type = Option<Format>)]
+    pub format: Option<String>,
+}
+
+impl SampleRequest {
+    fn raw(&self) -> RawBatch<'_> {
+        fn text(v: &Option<String>) -> Option<Raw<'_>> {
+            v.as_deref().map(Raw::Text)
+        }
+        RawBatch {
+            times: self.times.as_deref(),
+            start: self.start,
+            end: self.end,
+            fps: self.fps,
+            modes: RawModes { space: text(&self.space), playback: text(&self.playback), ease: text(&self.ease) },
+            format: text(&self.format),
+            at: in_body,
+        }
+    }
 }
 
 fn parse_sample(body: &[u8]) -> Result<SampleRequest, ApiError> {
@@ -239,45 +212,6 @@ fn parse_sample(body: &[u8]) -> Result<SampleRequest, ApiError> {
     Ok(req)
 }
 
-/// The request times, bounded by `max_poses`.
-fn times_of(req: &SampleRequest, max_poses: usize) -> Result<Vec<f64>, ApiError> {
-    let too_many = |n: u64, pointer: &str| ApiError::TooMany {
-        code: "too_many_poses",
-        pointer: pointer.to_owned(),
-        detail: format!("{n} poses requested; the limit is {max_poses} per request"),
-    };
-    match (&req.times, req.start, req.end, req.fps) {
-        (Some(times), None, None, None) => {
-            if times.len() > max_poses {
-                return Err(too_many(times.len() as u64, "/times"));
-            }
-            Ok(times.clone())
-        }
-        (None, Some(start), Some(end), Some(fps)) => {
-            if !FPS_RANGE.contains(&fps) {
-                return Err(ApiError::invalid(
-                    "fps_out_of_range",
-                    "/fps",
-                    format!("fps must be in 1..=240, got {fps}"),
-                ));
-            }
-            if end < start {
-                return Err(ApiError::invalid("bad_range", "/end", format!("end {end} is before start {start}")));
-            }
-            let n = frame_count(start, end, fps);
-            if n > max_poses as u64 {
-                return Err(too_many(n, ""));
-            }
-            Ok(frame_times(start, end, fps).collect())
-        }
-        _ => Err(ApiError::invalid(
-            "times_or_range",
-            "",
-            "give either `times` or all of `start`, `end` and `fps`, not both",
-        )),
-    }
-}
-
 /// Many poses in one request.
 #[utoipa::path(
     post, path = "/v1/clips/{id}/sample", tag = "poses",
@@ -285,9 +219,9 @@ fn times_of(req: &SampleRequest, max_poses: usize) -> Result<Vec<f64>, ApiError>
     request_body(content = SampleRequest, content_type = "application/json"),
     responses(
         (status = 200, description = "`{\"poses\": [pose, ...]}`", body = super::openapi::PosesSchema),
-        (status = 400, body = super::openapi::Problem),
+        (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::openapi::Problem),
         (status = 404, body = super::openapi::Problem),
-        (status = 422, description = "Bad times, range or fps; too many poses", body = super::openapi::Problem),
+        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`", body = super::openapi::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -298,29 +232,22 @@ pub async fn sample(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req = parse_sample(&body)?;
-    let times = times_of(&req, state.config.limits.max_poses)?;
-    let options = SampleOptions {
-        playback: req.playback.map(Into::into),
-        ease: req.ease.map_or(Ease::Linear, Into::into),
-        space: req.space.map_or(Space::Local, Into::into),
-    };
-    let format = req.format.unwrap_or_default();
-    let cached = state.clip(&id).await?;
-    check_format(&cached, format, "/format")?;
-    let n = times.len();
+    let (sampling, cached) = req.raw().resolve(&state, &id).await?;
+    let n = sampling.times.len();
+    let blocking = sampling.is_blocking();
     let render = move || {
         let mut body = Vec::with_capacity(16 + n * (POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count()));
         body.extend_from_slice(b"{\"poses\":[");
-        for (k, &t) in times.iter().enumerate() {
+        for (k, &t) in sampling.times.iter().enumerate() {
             if k > 0 {
                 body.push(b',');
             }
-            write_pose(&mut body, &cached, t, &options, format);
+            write_pose(&mut body, &cached, t, &sampling.options, sampling.format);
         }
         body.extend_from_slice(b"]}");
         body
     };
-    let body = if n > BLOCKING_POSES {
+    let body = if blocking {
         tokio::task::spawn_blocking(render).await.map_err(crate::server::metrics::join_failed)?
     } else {
         render()

@@ -14,18 +14,17 @@ use std::net::SocketAddr;
 use axum::Extension;
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{ConnectInfo, RawQuery, State};
+use axum::extract::{ConnectInfo, State};
 use axum::response::Response;
 
-use crate::anim::Ease;
 use crate::server::auth::ReadAccess;
 use crate::server::error::ApiError;
+use crate::server::request::{Opening, RawStream, in_query};
 use crate::server::state::AppState;
 use crate::stream::ws::{WsConfig, close};
-use crate::stream::{Encoding, StreamParams, StreamRequest};
-use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
 
-use super::extract::{ClipId, QueryParams};
+use super::extract::ClipId;
+use super::query::Query;
 
 /// The socket's read buffer. tungstenite's default (128 KiB) made a WebSocket
 /// stream cost the server ~125 KiB of RSS (measured by `inbetween load
@@ -48,8 +47,9 @@ const READ_BUFFER_BYTES: usize = 8 * 1024;
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow"),
-        (status = 400, description = "A bad parameter", body = super::openapi::Problem),
+        (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::openapi::Problem),
         (status = 404, body = super::openapi::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`", body = super::openapi::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -58,62 +58,29 @@ pub async fn stream(
     ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
-    RawQuery(query): RawQuery,
+    Query(q): Query,
     upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     // A plain GET (no upgrade headers) gets a problem body like every other refusal.
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
-    let q = QueryParams::parse(
-        query.as_deref(),
-        &["fps", "speed", "start", "playback", "space", "ease", "encoding", "max_frames"],
-    )?;
-    let fps = match q.get("fps") {
-        None => 30,
-        Some(text) => text.parse::<u32>().map_err(|_| {
-            ApiError::parameter("bad_fps", "fps", format!("fps must be an integer in 1..=240, got `{text}`"))
-        })?,
-    };
-    let max_frames = match q.get("max_frames") {
-        None => 0,
-        Some(text) => text.parse::<u64>().ok().filter(|n| *n > 0).ok_or_else(|| {
-            ApiError::parameter(
-                "bad_max_frames",
-                "max_frames",
-                format!("max_frames must be a positive integer, got `{text}`"),
-            )
-        })?,
-    };
-    let encoding = match q.get("encoding") {
-        None | Some("json") => Encoding::Json,
-        Some("protobuf") => Encoding::Protobuf,
-        Some(other) => {
-            let detail = format!("encoding must be json or protobuf, got `{other}`");
-            return Err(ApiError::parameter("bad_parameter", "encoding", detail));
-        }
-    };
-    let request = StreamRequest {
-        fps,
-        start: q.finite("start")?,
-        speed: q.finite("speed")?,
-        playback: q.parsed::<PlaybackDoc>("playback")?.map(Into::into),
-        ease: q.parsed::<EaseDoc>("ease")?.map_or(Ease::Linear, Into::into),
-        space: q.parsed::<SpaceDoc>("space")?.map(Into::into).unwrap_or_default(),
-        encoding,
-        max_frames,
+    let raw = RawStream {
+        fps: q.raw("fps"),
+        start: q.raw("start"),
+        speed: q.raw("speed"),
+        modes: q.modes(),
+        encoding: q.raw("encoding"),
+        max_frames: q.raw("max_frames"),
         paused: false,
+        at: in_query,
     };
-    let cached = state.clip(&id).await?;
-    // The stream holds the cache entry (this version), not a copy.
-    let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
-    let params = StreamParams::new(&clip_id, version, cached, request)
-        .map_err(|e| ApiError::parameter("bad_parameter", e.field, e.detail))?;
-    let engine = state.streams.clone();
-    // Counted against the caller's address and its token (auth's `Caller`),
-    // so one token cannot take every stream. The playback is chosen now, so
-    // that the response can say its phase; each WebSocket has its own
-    // connection, whose port is its lane.
-    let lane = connect.map(|Extension(ConnectInfo(addr))| u64::from(addr.port()));
-    let watched = engine.admit_for(caller.addr, caller.token).map(|permit| engine.watch(params, permit, lane));
+    // The peer address, when served with connect info (`Application` is);
+    // the caps count the caller (auth's `Caller`: its address and its token).
+    let peer = connect.map(|Extension(ConnectInfo(addr))| addr);
+    let Opening { params, permit } = raw.open(&state, &id, &caller).await?;
+    // The playback is chosen now, so that the response can say its phase;
+    // each WebSocket has its own connection, whose port is its lane.
+    let engine = &state.streams;
+    let watched = permit.map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
     // Inbound messages are small controls; outbound frames are buffered up
     // to a bound, so a viewer that stops reading cannot grow memory.

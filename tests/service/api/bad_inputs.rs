@@ -175,7 +175,7 @@ async fn every_bad_input_gets_its_status_and_code_and_changes_nothing() {
         ("sample too many frames", sample(json!({"start": 0, "end": 10, "fps": 30})), 422, "too_many_poses", None),
         ("sample time is a string", sample(json!({"times": [0, "1"]})), 422, "invalid_field", Some("/times/1")),
         ("sample unknown field", sample(json!({"times": [0], "speed": 2})), 422, "invalid_field", None),
-        ("sample bad space", sample(json!({"times": [0], "space": "world"})), 422, "invalid_field", Some("/space")),
+        ("sample bad space", sample(json!({"times": [0], "space": "world"})), 400, "bad_parameter", Some("/space")),
         ("list limit 0", c.get(app.url("/v1/clips?limit=0")), 400, "bad_limit", None),
         ("list limit huge", c.get(app.url("/v1/clips?limit=99999999999")), 400, "bad_limit", None),
         ("list cursor garbage", c.get(app.url("/v1/clips?cursor=zzz")), 400, "bad_cursor", None),

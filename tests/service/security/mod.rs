@@ -3,6 +3,7 @@
 //! `Application` on 127.0.0.1:0 with its own SQLite file, real clients
 //! (reqwest, tonic, tokio-tungstenite, tokio-rustls) over loopback.
 
+mod codes;
 mod grpc_matrix;
 mod rest_matrix;
 mod status_table;

@@ -13,7 +13,7 @@ use tonic::Code;
 use super::{ADMIN, READER, TestApp, WAVE, WRITER, scoped_tokens, wave_pb, with_token};
 
 /// The gRPC codes an HTTP status may pair with.
-fn grpc_codes_for(status: u16) -> &'static [Code] {
+pub fn grpc_codes_for(status: u16) -> &'static [Code] {
     match status {
         // Malformed (400), unsupported media (415) and rule-breaking (422) input alike.
         400 | 415 | 422 => &[Code::InvalidArgument],
@@ -113,11 +113,12 @@ async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     }
 }
 
-/// The same failing request on both protocols.
+/// The same failing request on both protocols, and the stable code both must carry.
 struct Case {
     what: &'static str,
     status: u16,
     grpc: Code,
+    code: &'static str,
 }
 
 #[tokio::test]
@@ -138,12 +139,22 @@ async fn real_failures_agree_on_both_protocols() {
     };
 
     let cases = [
-        Case { what: "write without a token", status: 401, grpc: Code::Unauthenticated },
-        Case { what: "write with a read token", status: 403, grpc: Code::PermissionDenied },
-        Case { what: "read a missing clip", status: 404, grpc: Code::NotFound },
-        Case { what: "replace at a stale version", status: 412, grpc: Code::FailedPrecondition },
-        Case { what: "replace with keys out of order", status: 422, grpc: Code::InvalidArgument },
-        Case { what: "too many poses", status: 422, grpc: Code::InvalidArgument },
+        Case { what: "write without a token", status: 401, grpc: Code::Unauthenticated, code: "unauthorized" },
+        Case { what: "write with a read token", status: 403, grpc: Code::PermissionDenied, code: "insufficient_scope" },
+        Case { what: "read a missing clip", status: 404, grpc: Code::NotFound, code: "clip_not_found" },
+        Case {
+            what: "replace at a stale version",
+            status: 412,
+            grpc: Code::FailedPrecondition,
+            code: "version_mismatch",
+        },
+        Case {
+            what: "replace with keys out of order",
+            status: 422,
+            grpc: Code::InvalidArgument,
+            code: "times_not_increasing",
+        },
+        Case { what: "too many poses", status: 422, grpc: Code::InvalidArgument, code: "too_many_poses" },
     ];
     for (k, case) in cases.iter().enumerate() {
         let put = |token: Option<&str>| {
@@ -194,10 +205,11 @@ async fn real_failures_agree_on_both_protocols() {
         let err = rpc.expect_err(case.what);
         assert_eq!((status, err.code()), (case.status, case.grpc), "{}: {problem} / {err:?}", case.what);
         assert!(grpc_codes_for(status).contains(&err.code()), "{}", case.what);
+        assert_eq!(problem["code"], case.code, "{}: REST code", case.what);
         assert_eq!(
             err.metadata().get("x-error-code").unwrap().to_str().unwrap(),
-            problem["code"].as_str().unwrap(),
-            "{}: the same stable code",
+            case.code,
+            "{}: the same stable code over gRPC",
             case.what
         );
     }

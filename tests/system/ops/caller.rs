@@ -11,7 +11,7 @@ use inbetween::server::tokens::{TokenHash, new_token};
 use inbetween::wire::proto::pb;
 use inbetween::wire::proto::pb::animation_client::AnimationClient;
 
-use super::{WAVE, start};
+use super::{ServerProcess, WAVE, start};
 
 /// The write budget of these servers: a burst of 3, then one per second.
 const LIMIT: [&str; 4] = ["--write-rate", "1", "--write-burst", "3"];
@@ -22,7 +22,7 @@ fn client_from(last_octet: u8) -> reqwest::Client {
 }
 
 /// `POST /v1/clips` of the wave clip with `Authorization: Bearer <token>`.
-async fn post_with(server: &Server, http: &reqwest::Client, token: &str) -> reqwest::Response {
+async fn post_with(server: &ServerProcess, http: &reqwest::Client, token: &str) -> reqwest::Response {
     http.post(server.url("/v1/clips"))
         .header("content-type", "application/json")
         .bearer_auth(token)

@@ -1,0 +1,233 @@
+//! Sampling requests: one pose (`GET …/pose`, `Sample`) and many
+//! (`POST …/sample`, `SampleBatch`), checked and bound to their clip.
+
+use std::ops::RangeInclusive;
+use std::sync::Arc;
+
+use glam::Mat4;
+use serde::Deserialize;
+use utoipa::ToSchema;
+
+use super::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
+use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
+use crate::server::cache::CachedClip;
+use crate::server::error::ApiError;
+use crate::server::state::AppState;
+use crate::stream::MAX_FPS;
+use crate::wire::proto::pb;
+
+/// Sample requests with more poses than this are evaluated on the blocking
+/// pool, so a big batch does not hold up the async workers.
+pub const BLOCKING_POSES: usize = 256;
+
+/// The frame rates of a `{start, end, fps}` range: a stream's (SPEC §5).
+pub const FPS_RANGE: RangeInclusive<f64> = 1.0..=MAX_FPS as f64;
+
+/// How each pose is rendered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Format {
+    /// Translation, rotation `[x,y,z,w]`, scale per joint, in the requested space.
+    #[default]
+    Trs,
+    /// Column-major 4×4 model matrices (model space).
+    Matrix,
+    /// `M_j · invBind_j`, for clips with inverse bind matrices.
+    Skinning,
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "trs" => Ok(Format::Trs),
+            "matrix" => Ok(Format::Matrix),
+            "skinning" => Ok(Format::Skinning),
+            _ => Err("expected one of: trs, matrix, skinning".into()),
+        }
+    }
+}
+
+impl Format {
+    /// # Errors
+    /// `bad_parameter`.
+    fn decode(raw: Option<Raw<'_>>, at: Locate) -> Result<Format, ApiError> {
+        let by_number = |n: i32| match pb::Format::try_from(n) {
+            Ok(pb::Format::Unspecified) => Ok(None),
+            Ok(pb::Format::Trs) => Ok(Some(Format::Trs)),
+            Ok(pb::Format::Matrix) => Ok(Some(Format::Matrix)),
+            Ok(pb::Format::Skinning) => Ok(Some(Format::Skinning)),
+            Err(_) => Err(format!("{n} is not a valid Format")),
+        };
+        Ok(choice(raw, Field::Format, at, str::parse, by_number)?.unwrap_or_default())
+    }
+
+    /// # Errors
+    /// `no_inverse_binds`: skinning matrices of a clip without inverse binds.
+    fn check_clip(self, clip: &Clip, at: Locate) -> Result<(), ApiError> {
+        if self == Format::Skinning && !clip.skeleton().has_inverse_binds() {
+            let detail = "format=skinning needs a clip whose skeleton has inverse bind matrices".to_owned();
+            return Err(unprocessable("no_inverse_binds", Field::Format, at, detail));
+        }
+        Ok(())
+    }
+}
+
+/// The clip `id`, checked to render `format`.
+async fn clip_for(state: &AppState, id: &str, format: Format, at: Locate) -> Result<Arc<CachedClip>, ApiError> {
+    let cached = super::clip(state, id).await?;
+    format.check_clip(&cached.clip, at)?;
+    Ok(cached)
+}
+
+/// Samples `clip` at request time `t`: the pose into `sampler` (TRS), or
+/// the model (skinning) matrices into `matrices`. Returns the clip time. The
+/// one evaluation every renderer reads from.
+pub fn evaluate(
+    clip: &Clip,
+    t: f64,
+    options: &SampleOptions,
+    format: Format,
+    sampler: &mut Sampler,
+    matrices: &mut Vec<Mat4>,
+) -> f32 {
+    match format {
+        Format::Trs => clip.sample(t, options, sampler),
+        Format::Matrix | Format::Skinning => {
+            clip.matrices(t, options, format == Format::Skinning, sampler, matrices);
+            clip.clip_time(t, options.playback.unwrap_or(clip.playback()), options.ease)
+        }
+    }
+}
+
+/// One pose, as a transport decoded it.
+#[derive(Debug, Clone, Copy)]
+pub struct RawPose<'a> {
+    pub t: Option<Raw<'a>>,
+    pub modes: RawModes<'a>,
+    pub format: Option<Raw<'a>>,
+    pub at: Locate,
+}
+
+/// A checked one-pose request.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseRequest {
+    pub t: f64,
+    pub options: SampleOptions,
+    pub format: Format,
+}
+
+impl RawPose<'_> {
+    /// # Errors
+    /// `missing_parameter`, `bad_number`, `bad_parameter`.
+    pub fn check(&self) -> Result<PoseRequest, ApiError> {
+        let t = self.t.ok_or_else(|| malformed("missing_parameter", Field::Time, self.at, "`t` is required".into()))?;
+        let t = finite(t, Field::Time, self.at)?;
+        let options = self.modes.check(self.at)?;
+        let format = Format::decode(self.format, self.at)?;
+        Ok(PoseRequest { t, options, format })
+    }
+
+    /// Checks the request, then binds it to the clip `id` at its current version.
+    ///
+    /// # Errors
+    /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`.
+    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
+        let request = self.check()?;
+        let cached = clip_for(state, id, request.format, self.at).await?;
+        Ok((request, cached))
+    }
+}
+
+/// Many poses, as a transport decoded them: `times`, or a range of
+/// `start`, `end` and `fps` (a JSON body may carry any mix; a protobuf
+/// message one or the other, or neither).
+#[derive(Debug, Clone, Copy)]
+pub struct RawBatch<'a> {
+    pub times: Option<&'a [f64]>,
+    pub start: Option<f64>,
+    pub end: Option<f64>,
+    pub fps: Option<f64>,
+    pub modes: RawModes<'a>,
+    pub format: Option<Raw<'a>>,
+    pub at: Locate,
+}
+
+/// A checked many-pose request.
+#[derive(Debug, Clone)]
+pub struct Sampling {
+    pub times: Vec<f64>,
+    pub options: SampleOptions,
+    pub format: Format,
+}
+
+impl Sampling {
+    /// Whether to evaluate it on the blocking pool.
+    pub fn is_blocking(&self) -> bool {
+        self.times.len() > BLOCKING_POSES
+    }
+}
+
+impl RawBatch<'_> {
+    /// # Errors
+    /// `bad_parameter`, `bad_number`; `times_or_range`, `fps_out_of_range`,
+    /// `bad_range`, `too_many_poses` (over `max_poses`).
+    pub fn check(&self, max_poses: usize) -> Result<Sampling, ApiError> {
+        let options = self.modes.check(self.at)?;
+        let format = Format::decode(self.format, self.at)?;
+        let times = self.times(max_poses)?;
+        Ok(Sampling { times, options, format })
+    }
+
+    /// Checks the request against the configured pose limit, then binds it to
+    /// the clip `id` at its current version.
+    ///
+    /// # Errors
+    /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`.
+    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
+        let sampling = self.check(state.config.limits.max_poses)?;
+        let cached = clip_for(state, id, sampling.format, self.at).await?;
+        Ok((sampling, cached))
+    }
+
+    fn times(&self, max_poses: usize) -> Result<Vec<f64>, ApiError> {
+        let at = self.at;
+        let too_many = |n: u64, field: Field| {
+            let detail = format!("{n} poses requested; the limit is {max_poses} per request");
+            unprocessable("too_many_poses", field, at, detail)
+        };
+        match (self.times, self.start, self.end, self.fps) {
+            (Some(times), None, None, None) => {
+                for (i, &t) in times.iter().enumerate() {
+                    finite(Raw::Number(t), Field::TimeAt(i), at)?;
+                }
+                if times.len() > max_poses {
+                    return Err(too_many(times.len() as u64, Field::Times));
+                }
+                Ok(times.to_vec())
+            }
+            (None, Some(start), Some(end), Some(fps)) => {
+                let start = finite(Raw::Number(start), Field::Start, at)?;
+                let end = finite(Raw::Number(end), Field::End, at)?;
+                let fps = finite(Raw::Number(fps), Field::Fps, at)?;
+                if !FPS_RANGE.contains(&fps) {
+                    let detail = format!("fps must be in 1..={MAX_FPS}, got {fps}");
+                    return Err(unprocessable("fps_out_of_range", Field::Fps, at, detail));
+                }
+                if end < start {
+                    let detail = format!("end {end} is before start {start}");
+                    return Err(unprocessable("bad_range", Field::End, at, detail));
+                }
+                let n = frame_count(start, end, fps);
+                if n > max_poses as u64 {
+                    return Err(too_many(n, Field::When));
+                }
+                Ok(frame_times(start, end, fps).collect())
+            }
+            _ => {
+                let detail = "give either `times` or a range (`start`, `end` and `fps`), not both".to_owned();
+                Err(unprocessable("times_or_range", Field::When, at, detail))
+            }
+        }
+    }
+}
