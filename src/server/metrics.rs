@@ -75,11 +75,11 @@ pub fn panic_caught(source: &'static str) {
 
 /// A failed blocking task's error: a panic is counted, either way it is an
 /// internal error (the client sees only "internal error").
-pub fn join_failed(e: tokio::task::JoinError) -> super::ApiError {
+pub fn join_failed(e: tokio::task::JoinError) -> crate::server::error::ApiError {
     if e.is_panic() {
         panic_caught("task");
     }
-    super::ApiError::internal(e)
+    crate::server::error::ApiError::internal(e)
 }
 
 /// Handles to the unlabelled metrics the hot paths touch, registered once so

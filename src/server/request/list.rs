@@ -1,6 +1,6 @@
 //! Listing clips a page at a time (`GET /v1/clips`, `ListClips`).
 
-use super::{Field, Locate, Raw, malformed, whole};
+use super::raw::{Field, Locate, Raw, malformed, whole};
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, ListQuery, is_clip_id};

@@ -8,7 +8,7 @@ use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use super::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
+use super::raw::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
 use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
@@ -75,7 +75,7 @@ impl Format {
 
 /// The clip `id`, checked to render `format`.
 async fn clip_for(state: &AppState, id: &str, format: Format, at: Locate) -> Result<Arc<CachedClip>, ApiError> {
-    let cached = super::clip(state, id).await?;
+    let cached = super::raw::clip(state, id).await?;
     format.check_clip(&cached.clip, at)?;
     Ok(cached)
 }

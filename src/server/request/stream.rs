@@ -6,7 +6,7 @@
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
-use super::{Field, Locate, Raw, RawModes, choice, finite, unprocessable, whole};
+use super::raw::{Field, Locate, Raw, RawModes, choice, finite, unprocessable, whole};
 use crate::server::auth::Caller;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
@@ -83,7 +83,7 @@ impl RawStream<'_> {
     /// rules: `fps_out_of_range`, `speed_out_of_range`.
     pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Opening, ApiError> {
         let request = self.check()?;
-        let cached = super::clip(state, id).await?;
+        let cached = super::raw::clip(state, id).await?;
         let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
         let params = StreamParams::new(&clip_id, version, cached, request).map_err(|e| self.refused(e))?;
         let permit = state.streams.admit_for(caller.addr, caller.token.clone());

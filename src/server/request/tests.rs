@@ -1,7 +1,9 @@
 //! The request rules on their own: each input, its code, class and place.
 
+use super::raw::*;
 use super::*;
 use crate::anim::{Ease, Playback, Space};
+use crate::server::error::{ApiError, At};
 use crate::stream::Encoding;
 
 /// (HTTP status, code, where) of a refusal.
