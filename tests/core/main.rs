@@ -22,6 +22,7 @@ mod properties;
 mod random;
 mod reference;
 mod seam;
+mod tidy;
 mod validation;
 
 use std::alloc::{GlobalAlloc, Layout, System};

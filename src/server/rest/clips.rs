@@ -62,11 +62,11 @@ fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::Hea
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
     responses(
         (status = 201, description = "Stored; `Location` names the clip", body = ClipSummary),
-        (status = 400, description = "Not JSON", body = super::openapi::Problem),
-        (status = 401, description = "Write token missing or wrong", body = super::openapi::Problem),
-        (status = 413, description = "Body over the limit", body = super::openapi::Problem),
-        (status = 415, description = "Not application/json", body = super::openapi::Problem),
-        (status = 422, description = "Invalid clip (code and pointer say why and where)", body = super::openapi::Problem),
+        (status = 400, description = "Not JSON", body = super::schemas::Problem),
+        (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
+        (status = 413, description = "Body over the limit", body = super::schemas::Problem),
+        (status = 415, description = "Not application/json", body = super::schemas::Problem),
+        (status = 422, description = "Invalid clip (code and pointer say why and where)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -91,7 +91,7 @@ pub async fn create_clip(
         ("cursor" = Option<String>, Query, pattern = "^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$", description = "`next_cursor` of the previous page"),
         ("name" = Option<String>, Query, description = "Only clips with exactly this name"),
     ),
-    responses((status = 200, body = ClipList), (status = 400, body = super::openapi::Problem)),
+    responses((status = 200, body = ClipList), (status = 400, body = super::schemas::Problem)),
     security((), ("bearer" = []))
 )]
 pub async fn list_clips(
@@ -111,7 +111,7 @@ pub async fn list_clips(
     responses(
         (status = 200, description = "The clip document", body = crate::wire::json::ClipDoc),
         (status = 304, description = "`If-None-Match` matched"),
-        (status = 404, body = super::openapi::Problem),
+        (status = 404, body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -166,9 +166,9 @@ async fn expected_version(
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
     responses(
         (status = 200, description = "Replaced", body = ClipSummary),
-        (status = 404, body = super::openapi::Problem),
-        (status = 412, description = "`If-Match` did not match the current version", body = super::openapi::Problem),
-        (status = 422, body = super::openapi::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 412, description = "`If-Match` did not match the current version", body = super::schemas::Problem),
+        (status = 422, body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -198,8 +198,8 @@ pub async fn replace_clip(
     ),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 404, body = super::openapi::Problem),
-        (status = 412, body = super::openapi::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 412, body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]

@@ -37,7 +37,7 @@ pub async fn healthz() -> Json<Status> {
 /// Readiness: the store answers and the server is not shutting down.
 #[utoipa::path(
     get, path = "/readyz", tag = "operations",
-    responses((status = 200, body = Status), (status = 503, body = super::openapi::Problem))
+    responses((status = 200, body = Status), (status = 503, body = super::schemas::Problem))
 )]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Status>, ApiError> {
     if !state.is_ready() {

@@ -54,14 +54,14 @@ pub struct ImportResult {
         ("interpolation" = Option<String>, Query, pattern = "^(linear|catmull_rom)$", description = "BVH keys: linear (default) or catmull_rom"),
         ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "Clip name (BVH) or name prefix (glTF with several animations)"),
     ),
-    request_body(content = super::openapi::FileBytes, content_type = "application/octet-stream",
+    request_body(content = super::schemas::FileBytes, content_type = "application/octet-stream",
         description = "The file; or multipart/form-data with the .gltf and the buffer files it names"),
     responses(
         (status = 201, description = "Every clip of the file, stored", body = ImportResult),
-        (status = 400, description = "Not a well-formed glTF, GLB or BVH file", body = super::openapi::Problem),
-        (status = 401, description = "Write token missing or wrong", body = super::openapi::Problem),
-        (status = 413, description = "Body or file content over a limit", body = super::openapi::Problem),
-        (status = 422, description = "Well-formed but not importable (code says why)", body = super::openapi::Problem),
+        (status = 400, description = "Not a well-formed glTF, GLB or BVH file", body = super::schemas::Problem),
+        (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
+        (status = 413, description = "Body or file content over a limit", body = super::schemas::Problem),
+        (status = 422, description = "Well-formed but not importable (code says why)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]

@@ -32,6 +32,7 @@ pub mod import;
 pub mod openapi;
 pub mod poses;
 pub mod query;
+pub mod schemas;
 pub mod stream;
 pub mod summary;
 pub mod viewer;

@@ -3,64 +3,16 @@
 //! `/openapi.json`, with Swagger UI at `/docs` (vendored into the binary:
 //! the page needs no download at build or run time).
 
-use serde::Serialize;
 use utoipa::openapi::path::ParameterIn;
 use utoipa::openapi::schema::{Schema, SchemaType, Type};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::openapi::{Content, Ref, RefOr, Response, ResponseBuilder};
-use utoipa::{Modify, OpenApi, ToSchema};
+use utoipa::{Modify, OpenApi};
 use utoipa_swagger_ui::SwaggerUi;
 
+use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem};
 use super::{clips, health, import, poses, stream, viewer};
 use crate::server::error::PROBLEM_JSON;
-
-/// An error body (RFC 9457 `application/problem+json`).
-#[derive(Serialize, ToSchema)]
-pub struct Problem {
-    /// `urn:inbetween:problem:<code>`.
-    #[serde(rename = "type")]
-    pub type_: String,
-    pub title: String,
-    pub status: u16,
-    /// Stable machine-readable code, e.g. `times_not_increasing`.
-    pub code: String,
-    /// Human explanation.
-    pub detail: String,
-    /// JSON pointer of the offending body field (validation errors).
-    pub pointer: Option<String>,
-    /// Name of the offending query parameter or header.
-    pub parameter: Option<String>,
-}
-
-/// One joint of a `format=trs` pose.
-#[derive(Serialize, ToSchema)]
-pub struct JointPoseSchema {
-    pub name: String,
-    pub translation: [f32; 3],
-    /// `[x, y, z, w]`.
-    pub rotation: [f32; 4],
-    pub scale: [f32; 3],
-}
-
-/// A pose (`format=trs`); `format=matrix|skinning` gives `joints: [{name, matrix: [16]}]`
-/// (column-major) with `format` set, in model space.
-#[derive(Serialize, ToSchema)]
-pub struct PoseSchema {
-    /// The clip id.
-    pub clip: String,
-    /// The request time.
-    pub time: f64,
-    /// The clip time it mapped to after playback and ease.
-    pub clip_time: f32,
-    /// `local` or `model`.
-    pub space: String,
-    pub joints: Vec<JointPoseSchema>,
-}
-
-#[derive(Serialize, ToSchema)]
-pub struct PosesSchema {
-    pub poses: Vec<PoseSchema>,
-}
 
 /// The bearer scheme, and on every operation that takes it the two answers
 /// a token can draw (401 missing/unknown, 403 lacking the scope), so no
@@ -120,11 +72,6 @@ impl Modify for BearerAuth {
         }
     }
 }
-
-/// The raw bytes of an uploaded file (`format: binary` in the document).
-#[derive(ToSchema)]
-#[schema(value_type = String, format = Binary)]
-pub struct FileBytes(pub Vec<u8>);
 
 fn problem_response(description: &str) -> RefOr<Response> {
     let content = Content::new(Some(RefOr::Ref(Ref::from_schema_name("Problem"))));

@@ -117,10 +117,10 @@ fn json_response(body: Vec<u8>) -> Response {
         ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
     ),
     responses(
-        (status = 200, description = "The pose", body = super::openapi::PoseSchema),
-        (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::openapi::Problem),
-        (status = 404, body = super::openapi::Problem),
-        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`)", body = super::openapi::Problem),
+        (status = 200, description = "The pose", body = super::schemas::PoseSchema),
+        (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::schemas::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -218,10 +218,10 @@ fn parse_sample(body: &[u8]) -> Result<SampleRequest, ApiError> {
     params(("id" = String, Path, description = "Clip id")),
     request_body(content = SampleRequest, content_type = "application/json"),
     responses(
-        (status = 200, description = "`{\"poses\": [pose, ...]}`", body = super::openapi::PosesSchema),
-        (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::openapi::Problem),
-        (status = 404, body = super::openapi::Problem),
-        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`", body = super::openapi::Problem),
+        (status = 200, description = "`{\"poses\": [pose, ...]}`", body = super::schemas::PosesSchema),
+        (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::schemas::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]

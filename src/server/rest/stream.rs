@@ -47,9 +47,9 @@ const READ_BUFFER_BYTES: usize = 8 * 1024;
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow"),
-        (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::openapi::Problem),
-        (status = 404, body = super::openapi::Problem),
-        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`", body = super::openapi::Problem),
+        (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::schemas::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
