@@ -145,6 +145,11 @@ impl TestApp {
         self.http.get(self.url(path)).send().await.unwrap().json().await.unwrap()
     }
 
+    /// `POST path` with a JSON body and no token, the answer decoded as JSON.
+    pub async fn post_json(&self, path: &str, body: &Value) -> Value {
+        self.http.post(self.url(path)).json(body).send().await.unwrap().json().await.unwrap()
+    }
+
     /// Uploads a JSON clip document (with `token` if given); panics unless
     /// 201. Returns the clip's summary.
     pub async fn create(&self, body: &str, token: Option<&str>) -> Value {

@@ -5,7 +5,7 @@ Deterministic (no randomness, no clock): running it again rewrites the same
 bytes. The files are committed, so the replay (`cargo test --test
 hardening`) never depends on this script; it is here so the corpus can be
 read, reviewed and extended. The expected outcome of each malformed file is
-in `index.tsv`; `INBETWEEN_CORPUS_RECORD=1 cargo test --test hardening
+in `index.tsv`; `INBETWEEN_CORPUS_RECORD=1 cargo test --test service hardening
 corpus` fills in the exact statuses the server gave, for review, keeping
 the class this script wrote (a 4xx, or a gRPC client-error code).
 

@@ -28,15 +28,8 @@ async fn sample_and_sample_batch_equal_the_rest_poses() {
     for (space, space_pb) in [("local", pb::Space::Local), ("model", pb::Space::Model)] {
         let times = [0.0, 0.4, 1.25, 2.999, 4.5];
         let rest: Value = app
-            .http
-            .post(app.url(&format!("/v1/clips/{id}/sample")))
-            .json(&serde_json::json!({"times": times, "space": space}))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+            .post_json(&format!("/v1/clips/{id}/sample"), &serde_json::json!({"times": times, "space": space}))
+            .await;
         let batch = grpc
             .sample_batch(pb::SampleBatchRequest {
                 clip_id: id.clone(),
