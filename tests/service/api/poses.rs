@@ -106,15 +106,14 @@ async fn sample_returns_one_pose_per_time_or_frame() {
     let app = TestApp::start().await;
     let id = app.create(WAVE, None).await["id"].as_str().unwrap().to_owned();
     let path = format!("/v1/clips/{id}/sample");
-    let body: Value = app.post_json(&path, &serde_json::json!({"times": [0, 1, 2], "playback": "once"}));
+    let body: Value = app.post_json(&path, &serde_json::json!({"times": [0, 1, 2], "playback": "once"})).await;
     let poses = body["poses"].as_array().unwrap();
     let root: Vec<Vec<f64>> = poses.iter().map(|p| vec(&p["joints"][0]["translation"])).collect();
     assert_eq!(root, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]);
     // 0..=1 s at 4 fps: frames at 0, 0.25, 0.5, 0.75, 1.
-    let body: Value = app.post_json(
-        &path,
-        &serde_json::json!({"start": 0, "end": 1, "fps": 4, "space": "model", "ease": "ease_in_out"}),
-    );
+    let body: Value = app
+        .post_json(&path, &serde_json::json!({"start": 0, "end": 1, "fps": 4, "space": "model", "ease": "ease_in_out"}))
+        .await;
     let times: Vec<f64> = body["poses"].as_array().unwrap().iter().map(|p| p["time"].as_f64().unwrap()).collect();
     assert_eq!(times, [0.0, 0.25, 0.5, 0.75, 1.0]);
     let clip = wave_clip();
