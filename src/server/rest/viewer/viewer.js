@@ -221,6 +221,9 @@
   function openStream() {
     const ws = new WebSocket(streamUrl());
     state.ws = ws;
+    // The readout counts this stream's ticks: each frame's `dropped` is the
+    // ticks skipped since the previous frame, so the total is their sum.
+    Object.assign(state, { frames: 0, seq: null, dropped: 0 });
     ws.onmessage = (message) => {
       if (typeof message.data !== "string") return;
       const frame = JSON.parse(message.data);
@@ -228,7 +231,7 @@
       const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
       state.frames += 1;
       state.seq = frame.seq;
-      state.dropped = frame.dropped;
+      state.dropped += frame.dropped;
       state.latencyMs = (nowNanos - frame.sent_at_unix_nanos) / 1e6;
       if (frame.events?.length) setStatus(`event: ${frame.events.map((e) => e.name).join(", ")}`);
       applyPose(frame.pose);
