@@ -109,8 +109,9 @@ fn format_of(path: &Path, bytes: &[u8]) -> anyhow::Result<Format> {
 }
 
 /// Reads an external buffer named by `uri` if it is a plain file name in
-/// `dir`: percent-decoded, no separators, no `..`, no scheme.
-fn sibling(dir: &Path, uri: &str, max_bytes: u64) -> Result<Vec<u8>, String> {
+/// `dir`: percent-decoded, no separators, no `..`, no scheme. The importer
+/// asks once per URI and shares the bytes between buffers naming it.
+fn sibling(dir: &Path, uri: &str, max_bytes: u64) -> Result<bytes::Bytes, String> {
     let name = percent_encoding::percent_decode_str(uri)
         .decode_utf8()
         .map_err(|_| "the URI is not valid percent-encoded UTF-8".to_owned())?;
@@ -127,7 +128,7 @@ fn sibling(dir: &Path, uri: &str, max_bytes: u64) -> Result<Vec<u8>, String> {
     if size > max_bytes {
         return Err(format!("{} is {size} bytes; the limit is {max_bytes}", path.display()));
     }
-    std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))
+    std::fs::read(&path).map(bytes::Bytes::from).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// POSTs each document to `server/v1/clips`, returning the created summaries.

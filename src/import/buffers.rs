@@ -6,13 +6,22 @@
 //! the BIN chunk or a `data:` URI, and any other URI goes to the caller's
 //! [`Resolver`] or is refused. Buffers are decoded lazily, so a texture
 //! buffer that no animation reads is never touched.
+//!
+//! A resolved URI is asked for once and its bytes are shared: every buffer
+//! naming it holds a [`Bytes`] slice of the same allocation, never a copy.
+//! Every buffer's `byteLength` still counts against
+//! [`ImportLimits::max_resolved_bytes`](super::ImportLimits), so a file whose
+//! thousands of buffers all name one large part is refused, not scanned.
 
 use std::borrow::Cow;
+use std::collections::HashMap;
+use std::ops::Deref;
 
 use base64::Engine as _;
 use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
+use bytes::Bytes;
 
-use super::{ImportError, Resolver};
+use super::{ImportError, ImportLimits, Resolver};
 
 /// The chunks of a GLB file.
 pub(crate) struct Glb<'a> {
@@ -74,20 +83,49 @@ pub(crate) fn split_glb(bytes: &[u8]) -> Result<Glb<'_>, ImportError> {
     Ok(Glb { json, bin })
 }
 
+/// The bytes of one loaded buffer: a slice of the GLB's BIN chunk, or a
+/// shared slice of a decoded `data:` URI or a resolved part.
+enum Held<'a> {
+    Borrowed(&'a [u8]),
+    Shared(Bytes),
+}
+
+impl Deref for Held<'_> {
+    type Target = [u8];
+
+    fn deref(&self) -> &[u8] {
+        match self {
+            Held::Borrowed(b) => b,
+            Held::Shared(b) => b,
+        }
+    }
+}
+
 /// Lazily resolved buffers of one document.
 pub(crate) struct Buffers<'a, 'r> {
     /// `(uri, byteLength)` per buffer.
     decl: Vec<(Option<String>, u64)>,
     bin: Option<&'a [u8]>,
-    cache: Vec<Option<Cow<'a, [u8]>>>,
+    cache: Vec<Option<Held<'a>>>,
+    /// What the resolver answered, by URI: each is asked for once.
+    resolved: HashMap<String, Bytes>,
     resolver: Option<Resolver<'r>>,
+    /// `byteLength`s of the buffers loaded so far, and their bound.
+    held_bytes: u64,
+    max_held_bytes: u64,
 }
 
 impl<'a, 'r> Buffers<'a, 'r> {
-    pub(crate) fn new(doc: &::gltf::Document, bin: Option<&'a [u8]>, resolver: Option<Resolver<'r>>) -> Self {
+    pub(crate) fn new(
+        doc: &::gltf::Document,
+        bin: Option<&'a [u8]>,
+        resolver: Option<Resolver<'r>>,
+        limits: &ImportLimits,
+    ) -> Self {
         let decl: Vec<_> = doc.as_json().buffers.iter().map(|b| (b.uri.clone(), b.byte_length.0)).collect();
         let cache = (0..decl.len()).map(|_| None).collect();
-        Buffers { decl, bin, cache, resolver }
+        let max_held_bytes = limits.max_resolved_bytes;
+        Buffers { decl, bin, cache, resolved: HashMap::new(), resolver, held_bytes: 0, max_held_bytes }
     }
 
     /// The bytes of buffer `index`, exactly `byteLength` long.
@@ -99,11 +137,11 @@ impl<'a, 'r> Buffers<'a, 'r> {
         Ok(self.cache[index].as_deref().unwrap_or(&[]))
     }
 
-    fn load(&mut self, index: usize) -> Result<Cow<'a, [u8]>, ImportError> {
+    fn load(&mut self, index: usize) -> Result<Held<'a>, ImportError> {
         let (uri, declared) = self.decl[index].clone();
-        let data: Cow<'a, [u8]> = match uri {
+        let data = match uri {
             None if index == 0 => match self.bin {
-                Some(bin) => Cow::Borrowed(bin),
+                Some(bin) => Held::Borrowed(bin),
                 None => {
                     return Err(ImportError::InvalidGltf(
                         "buffer 0 has no uri and the file has no GLB BIN chunk".into(),
@@ -112,16 +150,10 @@ impl<'a, 'r> Buffers<'a, 'r> {
             },
             None => return Err(ImportError::InvalidGltf(format!("buffer {index} has no uri (only buffer 0 may)"))),
             Some(uri) if uri.as_bytes().get(..5).is_some_and(|p| p.eq_ignore_ascii_case(b"data:")) => {
-                Cow::Owned(decode_data_uri(&uri).map_err(|detail| ImportError::DataUri { buffer: index, detail })?)
+                let decoded = decode_data_uri(&uri).map_err(|detail| ImportError::DataUri { buffer: index, detail })?;
+                Held::Shared(Bytes::from(decoded))
             }
-            Some(uri) => match self.resolver.as_mut() {
-                Some(resolve) => Cow::Owned(resolve(&uri).map_err(|reason| ImportError::UnreadableUri {
-                    buffer: index,
-                    uri: shorten(&uri),
-                    reason,
-                })?),
-                None => return Err(ImportError::ExternalUri { buffer: index, uri: shorten(&uri) }),
-            },
+            Some(uri) => Held::Shared(self.resolve(index, uri)?),
         };
         if (data.len() as u64) < declared {
             return Err(ImportError::OutOfBounds {
@@ -129,13 +161,36 @@ impl<'a, 'r> Buffers<'a, 'r> {
                 detail: format!("it declares byteLength {declared} but holds {} bytes", data.len()),
             });
         }
+        self.count(declared)?;
         Ok(match data {
-            Cow::Borrowed(b) => Cow::Borrowed(&b[..declared as usize]),
-            Cow::Owned(mut v) => {
-                v.truncate(declared as usize);
-                Cow::Owned(v)
-            }
+            Held::Borrowed(b) => Held::Borrowed(&b[..declared as usize]),
+            Held::Shared(b) => Held::Shared(b.slice(..declared as usize)),
         })
+    }
+
+    /// The bytes behind an external URI: from the cache, else from the
+    /// resolver (once per URI), else refused.
+    fn resolve(&mut self, index: usize, uri: String) -> Result<Bytes, ImportError> {
+        if let Some(bytes) = self.resolved.get(&uri) {
+            return Ok(bytes.clone());
+        }
+        let Some(resolve) = self.resolver.as_mut() else {
+            return Err(ImportError::ExternalUri { buffer: index, uri: shorten(&uri) });
+        };
+        let bytes =
+            resolve(&uri).map_err(|reason| ImportError::UnreadableUri { buffer: index, uri: shorten(&uri), reason })?;
+        self.resolved.insert(uri, bytes.clone());
+        Ok(bytes)
+    }
+
+    /// Counts a loaded buffer's `byteLength` against the import's bound,
+    /// even when its bytes are shared with another buffer's.
+    fn count(&mut self, declared: u64) -> Result<(), ImportError> {
+        self.held_bytes = self.held_bytes.saturating_add(declared);
+        if self.held_bytes > self.max_held_bytes {
+            return Err(ImportError::ResolvedTooLarge { max: self.max_held_bytes, found: self.held_bytes });
+        }
+        Ok(())
     }
 }
 
@@ -167,5 +222,63 @@ fn decode_data_uri(uri: &str) -> Result<Vec<u8>, String> {
         ENGINE.decode(&payload).map_err(|e| format!("invalid base64: {e}"))
     } else {
         Ok(payload.into_owned())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A document whose `count` buffers all name `part.bin`, each declaring
+    /// `byte_length` bytes.
+    fn shared_part_doc(count: usize, byte_length: u64) -> ::gltf::Document {
+        let buffers: Vec<String> =
+            (0..count).map(|_| format!(r#"{{"uri": "part.bin", "byteLength": {byte_length}}}"#)).collect();
+        let json = format!(r#"{{"asset": {{"version": "2.0"}}, "buffers": [{}]}}"#, buffers.join(","));
+        ::gltf::Document::from_json(::gltf::json::deserialize::from_str(&json).unwrap()).unwrap()
+    }
+
+    fn limits(max_resolved_bytes: u64) -> ImportLimits {
+        ImportLimits { max_resolved_bytes, ..ImportLimits::default() }
+    }
+
+    #[test]
+    fn buffers_naming_one_part_share_its_bytes_and_ask_once() {
+        let part = Bytes::from((0..=255u8).cycle().take(1000).collect::<Vec<u8>>());
+        let mut calls = Vec::new();
+        let mut resolve = |uri: &str| {
+            calls.push(uri.to_owned());
+            Ok(part.clone())
+        };
+        let doc = shared_part_doc(64, 600);
+        let mut buffers = Buffers::new(&doc, None, Some(&mut resolve), &limits(64 * 600));
+        let starts: Vec<(*const u8, usize)> = (0..64)
+            .map(|i| {
+                let b = buffers.get(i).unwrap();
+                (b.as_ptr(), b.len())
+            })
+            .collect();
+        drop(buffers);
+        assert_eq!(calls, ["part.bin"], "the resolver is asked once per distinct name");
+        // Every buffer is the part's own allocation, cut to its byteLength.
+        assert!(starts.iter().all(|&s| s == (part.as_ptr(), 600)), "{starts:?}");
+    }
+
+    #[test]
+    fn every_buffers_byte_length_counts_even_when_shared() {
+        let part = Bytes::from(vec![7u8; 1000]);
+        let mut resolve = |_: &str| Ok(part.clone());
+        let doc = shared_part_doc(64, 600);
+        // 63 buffers of 600 bytes fit in 63·600; the 64th does not.
+        let mut buffers = Buffers::new(&doc, None, Some(&mut resolve), &limits(63 * 600));
+        for i in 0..63 {
+            buffers.get(i).unwrap();
+        }
+        let refused = buffers.get(63).map(<[u8]>::len).unwrap_err();
+        assert_eq!(refused, ImportError::ResolvedTooLarge { max: 63 * 600, found: 64 * 600 });
+        assert_eq!(
+            (refused.code(), refused.class()),
+            ("resolved_bytes_too_large", crate::import::ErrorClass::TooLarge)
+        );
     }
 }

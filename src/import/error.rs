@@ -26,6 +26,11 @@ pub enum ImportError {
     UnknownFormat,
     #[error("too large: {what} is {found}, the limit is {max}")]
     TooLarge { what: &'static str, max: u64, found: u64 },
+    #[error(
+        "too large: the buffers read hold {found} bytes (each buffer's byteLength, \
+         even when several name the same part), the limit is {max}"
+    )]
+    ResolvedTooLarge { max: u64, found: u64 },
     #[error("not a valid GLB container: {0}")]
     Container(String),
     #[error("the glTF JSON cannot be read: {0}")]
@@ -72,6 +77,7 @@ impl ImportError {
         match self {
             UnknownFormat => "unknown_format",
             TooLarge { .. } => "too_large",
+            ResolvedTooLarge { .. } => "resolved_bytes_too_large",
             Container(_) => "bad_container",
             Json(_) => "bad_json",
             InvalidGltf(_) => "invalid_gltf",
@@ -95,7 +101,7 @@ impl ImportError {
     pub fn class(&self) -> ErrorClass {
         use ImportError::*;
         match self {
-            TooLarge { .. } | TooDeep { .. } => ErrorClass::TooLarge,
+            TooLarge { .. } | ResolvedTooLarge { .. } | TooDeep { .. } => ErrorClass::TooLarge,
             UnknownFormat | Container(_) | Json(_) | DataUri { .. } | BvhSyntax { .. } => ErrorClass::Malformed,
             _ => ErrorClass::Unprocessable,
         }

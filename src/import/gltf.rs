@@ -62,7 +62,7 @@ pub(crate) fn import(
     let mut ctx = Ctx {
         doc: &doc,
         forest,
-        buffers: Buffers::new(&doc, bin, resolver),
+        buffers: Buffers::new(&doc, bin, resolver, limits),
         options,
         budget: Budget::new(limits, bytes.len()),
         rest: HashMap::new(),

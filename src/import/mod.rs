@@ -120,6 +120,10 @@ pub struct ImportLimits {
     pub max_total_keys: u64,
     /// Levels of the joint hierarchy.
     pub max_depth: usize,
+    /// Bytes of glTF buffers read: every loaded buffer's `byteLength`,
+    /// counted once per buffer even when several name the same part or
+    /// file (whose bytes are then shared, not copied).
+    pub max_resolved_bytes: u64,
 }
 
 impl Default for ImportLimits {
@@ -133,6 +137,7 @@ impl Default for ImportLimits {
             max_clips: 1024,
             max_total_keys: 16_000_000,
             max_depth: 256,
+            max_resolved_bytes: 4 * (64 << 20),
         }
     }
 }
@@ -171,9 +176,11 @@ pub struct Imported {
 }
 
 /// Supplies the bytes of an external glTF buffer URI (exactly as written in
-/// the file, still percent-encoded), or says why it will not. Only the CLI
-/// passes one, for files next to a local `.gltf`.
-pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<Vec<u8>, String>;
+/// the file, still percent-encoded), or says why it will not: the CLI for
+/// files next to a local `.gltf`, the server for the parts of a multipart
+/// upload. It is called once per distinct URI; buffers naming the same URI
+/// share the [`Bytes`](bytes::Bytes) it returns.
+pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<bytes::Bytes, String>;
 
 /// Imports `bytes` as `format`.
 ///

@@ -214,6 +214,9 @@ settings! {
         max_body_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
             "max_body_bytes", "max-body-bytes", "INBETWEEN_MAX_BODY_BYTES", "BYTES",
             "Largest accepted request body, in bytes";
+        max_import_resolved_bytes: usize = 64 * 1024 * 1024 => positive -> usize,
+            "max_import_resolved_bytes", "max-import-resolved-bytes", "INBETWEEN_MAX_IMPORT_RESOLVED_BYTES", "BYTES",
+            "Bytes of glTF buffers one import may read (every buffer's byteLength, even when shared)";
         max_tracks: usize = 4096 => positive -> usize,
             "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
             "Most tracks in one clip";
@@ -636,6 +639,7 @@ mod tests {
         let cores = std::thread::available_parallelism().unwrap().get();
         let expected = Limits {
             max_body_bytes: 16_777_216,
+            max_import_resolved_bytes: 67_108_864,
             max_tracks: 4096,
             max_keys_per_track: 1_000_000,
             max_joints: 4096,

@@ -565,6 +565,33 @@ def multipart(parts, close=True):
     return out
 
 
+def shared_part(size):
+    """Times [0, 1], translations [0,0,0] and [1,2,3], then zeros up to `size` bytes."""
+    return floats([0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0]).ljust(size, b"\0")
+
+
+def shared_part_gltf(nodes, size):
+    """`nodes` animated nodes whose 2 * `nodes` buffers all name anim.bin, whole."""
+    return dumps({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": list(range(nodes))}],
+        "nodes": [{"name": f"n{i}"} for i in range(nodes)],
+        "buffers": [{"uri": "anim.bin", "byteLength": size} for _ in range(2 * nodes)],
+        "bufferViews": [v for i in range(nodes) for v in (
+            {"buffer": 2 * i, "byteOffset": 0, "byteLength": 8},
+            {"buffer": 2 * i + 1, "byteOffset": 8, "byteLength": 24})],
+        "accessors": [a for i in range(nodes) for a in (
+            {"bufferView": 2 * i, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0.0], "max": [1.0]},
+            {"bufferView": 2 * i + 1, "componentType": 5126, "count": 2, "type": "VEC3"})],
+        "animations": [{
+            "name": "shared",
+            "channels": [{"sampler": i, "target": {"node": i, "path": "translation"}} for i in range(nodes)],
+            "samplers": [{"input": 2 * i, "output": 2 * i + 1, "interpolation": "LINEAR"} for i in range(nodes)],
+        }],
+    })
+
+
 MP = f"Content-Type: multipart/form-data; boundary={B}"
 FILE_PART = ['Content-Disposition: form-data; name="file"; filename="mini.gltf"', "Content-Type: model/gltf+json"]
 HTTP_CASES = [
@@ -650,6 +677,10 @@ HTTP_CASES = [
     ("import-multipart-sibling-short", http("POST", "/v1/clips/import", [MP], multipart([
         (FILE_PART, gltf(setp(["buffers", 0, "uri"], "anim.bin"))),
         (['Content-Disposition: form-data; name="bin"; filename="anim.bin"'], b"\0\0\0\0")]))),
+    # 64 buffers all naming one 64 KiB part: 4 MiB of buffers read, over the replay's 1 MiB (413).
+    ("import-multipart-shared-part-over-limit", http("POST", "/v1/clips/import", [MP], multipart([
+        (FILE_PART, shared_part_gltf(32, 64 * 1024)),
+        (['Content-Disposition: form-data; name="bin"; filename="anim.bin"'], shared_part(64 * 1024))]))),
 ]
 for name, data in HTTP_CASES:
     bad("http", name + ".http", data)

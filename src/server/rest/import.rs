@@ -9,7 +9,9 @@
 //! and the buffer files it names (what a browser's file picker sends): the
 //! part named `file`, else the first part whose file name ends in `.gltf`,
 //! `.glb` or `.bvh`, is the document, and the other parts answer its buffer
-//! URIs by plain file name only. Nothing else is ever fetched.
+//! URIs by plain file name only. Nothing else is ever fetched. Buffers that
+//! name the same part share its bytes, and the bytes they declare count
+//! against `max_import_resolved_bytes` (413 `resolved_bytes_too_large`).
 
 use std::sync::Arc;
 
@@ -102,11 +104,13 @@ pub async fn import_clips(
     };
     let limits = state.config.limits.clone();
     let (admitted, skipped) = tokio::task::spawn_blocking(move || -> Result<_, ApiError> {
-        let mut resolve = |uri: &str| -> Result<Vec<u8>, String> {
+        // A shared handle on the part, never a copy: the importer asks once
+        // per name and slices it per buffer.
+        let mut resolve = |uri: &str| -> Result<Bytes, String> {
             siblings
                 .iter()
                 .find(|(name, _)| name == uri)
-                .map(|(_, data)| data.to_vec())
+                .map(|(_, data)| data.clone())
                 .ok_or_else(|| format!("no part named {uri:?} in the upload"))
         };
         let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
@@ -175,6 +179,7 @@ fn import_limits(limits: &Limits) -> ImportLimits {
         max_tracks: limits.max_tracks,
         max_keys_per_track: limits.max_keys_per_track,
         max_frames: limits.max_keys_per_track,
+        max_resolved_bytes: limits.max_import_resolved_bytes as u64,
         ..ImportLimits::default()
     }
 }

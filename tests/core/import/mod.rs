@@ -26,7 +26,7 @@ pub fn import_file(rel: &str, options: &ImportOptions) -> Imported {
         _ => Format::Gltf,
     };
     let dir = path.parent().unwrap().to_path_buf();
-    let mut resolve = |uri: &str| std::fs::read(dir.join(uri)).map_err(|e| e.to_string());
+    let mut resolve = |uri: &str| std::fs::read(dir.join(uri)).map(bytes::Bytes::from).map_err(|e| e.to_string());
     let imported = if format == Format::Gltf && bytes.windows(5).any(|w| w == b".bin\"") {
         import_with(&bytes, format, options, Some(&mut resolve))
     } else {

@@ -11,6 +11,7 @@ mod import;
 mod operations;
 mod poses;
 mod security;
+mod shared_parts;
 mod strict;
 
 use serde_json::Value;

@@ -32,6 +32,7 @@ fn limits(config: &mut Config) {
     config.limits.max_tracks = 64;
     config.limits.max_joints = 64;
     config.limits.max_keys_per_track = 1000;
+    config.limits.max_import_resolved_bytes = 1024 * 1024;
     // Hundreds of writes in a few seconds over REST and gRPC (one budget):
     // the rate limit has its own test (tests/ops), it is not under test here.
     config.limits.write_rate = 1_000_000;
