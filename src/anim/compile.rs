@@ -56,6 +56,11 @@ fn check_common(spec: &TrackSpec, path: &Path) -> Result<(), ClipError> {
                 K::TimesNotIncreasing { previous: times[i - 1], current: t },
             );
         }
+        // Sampling divides by each gap (`Timeline`); a subnormal gap's
+        // reciprocal is infinite and would turn poses into NaN.
+        if i > 0 && !(1.0 / (t - times[i - 1])).is_finite() {
+            return err(path.clone().field("times").index(i), K::KeysTooClose { previous: times[i - 1], current: t });
+        }
     }
     check_finite(&spec.values, &path.clone().field("values"))?;
     let hermite = spec.interpolation == Interpolation::CubicHermite;
@@ -176,6 +181,10 @@ pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<Vec3C
     let (t_in, inner) =
         if spec.ends == Some(Ends::Phantom) { (&t[1..n - 1], &times[1..n - 1]) } else { (&t[..], &times[..]) };
     let domain = (inner[0], inner[inner.len() - 1]);
+    // Control points are computed in f64 and may overshoot the keys past f32.
+    if let Some(k) = segments.iter().position(|s| !s.iter().all(|p| p.as_vec3().is_finite())) {
+        return Err(ClipError::new(path.clone().field("values").index(k), K::CurveOverflow));
+    }
     let f32_segments = || segments.iter().map(|s| s.map(|p| p.as_vec3().into())).collect::<Box<[[Vec3A; 4]]>>();
     if spec.speed == Speed::Constant
         && let Some((arc_times, pieces)) = arc::build(&segments, t_in[0], t_in[t_in.len() - 1])
