@@ -113,8 +113,6 @@ pub enum ClipErrorKind {
     PhantomTooFewKeys { provided: usize },
     #[error("constant speed applies only to translation tracks that are not step")]
     SpeedNotApplicable,
-    #[error("key times {previous:e} and {current:e} are too close: 1/(their gap) overflows f32")]
-    KeysTooClose { previous: f32, current: f32 },
     #[error("the clip's duration, from {start:e} to {end:e}, overflows f32")]
     TimeRangeTooLarge { start: f32, end: f32 },
     #[error("scales and translations down the joint chain reach {bound:e} in model space, over {limit:e}")]
@@ -150,7 +148,6 @@ impl ClipErrorKind {
             WrapEndsDiffer => "wrap_ends_differ",
             PhantomTooFewKeys { .. } => "phantom_too_few_keys",
             SpeedNotApplicable => "speed_not_applicable",
-            KeysTooClose { .. } => "keys_too_close",
             TimeRangeTooLarge { .. } => "time_range_too_large",
             ModelSpaceOverflow { .. } => "model_space_overflow",
             CurveOverflow => "curve_overflow",
