@@ -329,21 +329,30 @@ impl JointBounds {
     /// scale bound multiplies and the translation bound grows by the
     /// parent's scale times the local offset's length (≤ √3 × its largest
     /// coordinate; rotations keep lengths). A root's model transform is its
-    /// local one, already a finite f32, so roots are not limited.
+    /// local one, already a finite f32, so roots are not limited. A
+    /// skinning matrix `M_j · invBind_j` has entries at most 4 × the
+    /// largest of each, which must stay under `f32::MAX`.
     fn check(&self, skeleton: &Skeleton) -> Result<(), ClipError> {
         let n = skeleton.len();
         let (mut scale, mut reach) = (vec![0.0f64; n], vec![0.0f64; n]);
+        let overflow =
+            |path: Path, bound: f64, limit: f64| Err(ClipError::new(path, K::ModelSpaceOverflow { bound, limit }));
+        let joint = |j: usize| Path::root().field("skeleton").field("joints").index(j);
         for j in 0..n {
             let local = self.translations[j] * 3f64.sqrt();
-            let Some(p) = skeleton.parent(j) else {
-                (scale[j], reach[j]) = (self.scales[j], local);
-                continue;
+            (scale[j], reach[j]) = match skeleton.parent(j) {
+                None => (self.scales[j], local),
+                Some(p) => (scale[p] * self.scales[j], reach[p] + scale[p] * local),
             };
-            (scale[j], reach[j]) = (scale[p] * self.scales[j], reach[p] + scale[p] * local);
             let bound = scale[j].max(reach[j]);
-            if bound.is_nan() || bound > MAX_MODEL_MAGNITUDE {
-                let path = Path::root().field("skeleton").field("joints").index(j);
-                return Err(ClipError::new(path, K::ModelSpaceOverflow { bound, limit: MAX_MODEL_MAGNITUDE }));
+            if skeleton.parent(j).is_some() && (bound.is_nan() || bound > MAX_MODEL_MAGNITUDE) {
+                return overflow(joint(j), bound, MAX_MODEL_MAGNITUDE);
+            }
+            if let Some(bind) = skeleton.inverse_bind(j) {
+                let skin = 4.0 * bound.max(1.0) * bind.abs().to_cols_array().into_iter().fold(0.0f32, f32::max) as f64;
+                if skin > f32::MAX as f64 {
+                    return overflow(joint(j).field("inverse_bind"), skin, f32::MAX as f64);
+                }
             }
         }
         Ok(())
@@ -576,6 +585,21 @@ mod numeric_edges {
         assert!(all_finite(sampler.pose()));
         let mut matrices = Vec::new();
         clip.matrices(0.5, &model, false, &mut sampler, &mut matrices);
+        assert!(matrices.iter().all(|m| m.is_finite()));
+    }
+
+    #[test]
+    fn an_inverse_bind_that_overflows_skinning_is_refused() {
+        let track = translation(vec![0.0, 1.0], vec![Vec3::ZERO, Vec3::X]);
+        let mut skeleton = chain(2, 2.0);
+        // Scale 4 × entries 1e38 (× up to 4 terms) is past f32::MAX; 1e36 is not.
+        skeleton.joints[1].inverse_bind = Some(glam::Mat4::from_diagonal(glam::Vec4::splat(1e38)));
+        let refused = refusal(clip(vec![track.clone()], Some(skeleton.clone())));
+        assert_eq!(refused, ("model_space_overflow", "/skeleton/joints/1/inverse_bind".into()));
+        skeleton.joints[1].inverse_bind = Some(glam::Mat4::from_diagonal(glam::Vec4::splat(1e36)));
+        let clip = clip(vec![track], Some(skeleton)).expect("a bounded skin builds");
+        let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+        assert!(clip.matrices(1.0, &SampleOptions::default(), true, &mut sampler, &mut matrices));
         assert!(matrices.iter().all(|m| m.is_finite()));
     }
 
