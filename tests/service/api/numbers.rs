@@ -9,14 +9,19 @@ use tonic::Code;
 
 use super::{TestApp, WAVE};
 
-/// The attack clips: (what, document, code, JSON pointer prefix).
-fn overflowing_clips() -> Vec<(&'static str, Value, &'static str, &'static str)> {
-    let joints: Vec<Value> = (0..1200)
+/// `depth` joints j0 → j1 → …, each offset by 1 and scaled by 1.1.
+fn chain(depth: usize) -> Vec<Value> {
+    (0..depth)
         .map(|j| {
             let parent = if j == 0 { Value::Null } else { json!(format!("j{}", j - 1)) };
             json!({"name": format!("j{j}"), "parent": parent, "rest": {"translation": [1, 0, 0], "scale": [1.1, 1.1, 1.1]}})
         })
-        .collect();
+        .collect()
+}
+
+/// The attack clips: (what, document, code, JSON pointer prefix).
+fn overflowing_clips() -> Vec<(&'static str, Value, &'static str, &'static str)> {
+    let joints = chain(1200);
     let track = |joint: &str, times: Value| json!({"joint": joint, "channel": "translation", "interpolation": "linear", "times": times, "values": [[0,0,0],[1,0,0]]});
     vec![
         (
@@ -106,12 +111,7 @@ async fn poses_and_summaries_near_the_f32_edges_have_no_nulls() {
     // Keys 1e-45 s apart, constant speed over times whose arc-length pieces
     // fall at subnormal spacing, a clip half as wide as f32 allows, and a
     // 300-deep scale chain.
-    let joints: Vec<Value> = (0..300)
-        .map(|j| {
-            let parent = if j == 0 { Value::Null } else { json!(format!("j{}", j - 1)) };
-            json!({"name": format!("j{j}"), "parent": parent, "rest": {"translation": [1, 0, 0], "scale": [1.1, 1.1, 1.1]}})
-        })
-        .collect();
+    let joints = chain(300);
     let docs = [
         json!({"name": "subnormal", "tracks": [{"joint": "a", "channel": "translation", "interpolation": "linear",
             "speed": "constant", "times": [0, 1e-45, 3e-45, 1], "values": [[0,0,0],[1,0,0],[1,1,0],[0,0,1]]}]}),
