@@ -603,6 +603,26 @@ mod numeric_edges {
         assert!(matrices.iter().all(|m| m.is_finite()));
     }
 
+    fn hermite_rotation(values: Vec<glam::Vec4>, out_tangent: glam::Vec4) -> TrackSpec {
+        let mut track =
+            TrackSpec::new("a", Channel::Rotation, Interpolation::CubicHermite, vec![0.0, 100.0], Keys::Vec4(values));
+        track.in_tangents = Some(Keys::Vec4(vec![glam::Vec4::ZERO; 2]));
+        track.out_tangents = Some(Keys::Vec4(vec![out_tangent, glam::Vec4::ZERO]));
+        track
+    }
+
+    #[test]
+    fn a_hermite_rotation_through_zero_holds_its_key() {
+        // q and −q with zero tangents: the cubic is exactly zero at u = ½.
+        let track = hermite_rotation(vec![glam::Vec4::W, -glam::Vec4::W], glam::Vec4::ZERO);
+        let built = clip(vec![track], None).expect("valid keys");
+        let mut sampler = Sampler::new();
+        built.sample(50.0, &SampleOptions::default(), &mut sampler);
+        assert_eq!(sampler.pose().rotations[0], Quat::IDENTITY);
+        let tangent = hermite_rotation(vec![glam::Vec4::W; 2], glam::Vec4::splat(3e38));
+        assert_eq!(refusal(clip(vec![tangent], None)), ("curve_overflow", "/tracks/0/values/0".into()));
+    }
+
     #[test]
     fn a_curve_overshooting_f32_is_refused() {
         // Hermite control point `c + h·b/3` = 100·3e38/3 = 1e40 leaves f32.

@@ -210,12 +210,15 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
             let q = unit_quat(values[0], &vpath)?;
             return Ok(Compiled { times: times.clone(), curve: QuatCurve::Constant(q.as_quat()), domain });
         }
-        let segs = (0..n - 1)
+        let segs: Box<[[Vec4; 4]]> = (0..n - 1)
             .map(|i| {
                 let h = times[i + 1] - times[i];
                 [values[i], values[i] + b[i] * (h / 3.0), values[i + 1] - a[i + 1] * (h / 3.0), values[i + 1]]
             })
             .collect();
+        if let Some(k) = segs.iter().position(|s| !s.iter().all(|p| p.is_finite())) {
+            return Err(ClipError::new(vpath.index(k), K::CurveOverflow));
+        }
         return Ok(Compiled { times: times.clone(), curve: QuatCurve::Hermite(segs), domain });
     }
     let mut c = values
