@@ -137,15 +137,16 @@ pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f3
     let mut pieces = Vec::with_capacity(raw.len());
     for (s, piece) in raw {
         let t = (t0 + s * scale) as f32;
-        // Pieces shorter than f32 time resolution merge into their neighbour.
-        if times.last().is_some_and(|&last| t <= last) {
+        // Pieces shorter than f32 time resolution (or so short that the
+        // timeline's reciprocal gap overflows) merge into their neighbour.
+        if times.last().is_some_and(|&last| too_close(last, t)) {
             continue;
         }
         times.push(t);
         pieces.push(piece);
     }
     let end = t1 as f32;
-    if times.last().is_some_and(|&last| end <= last) {
+    if times.last().is_some_and(|&last| too_close(last, end)) {
         times.pop();
         pieces.pop();
     }
@@ -154,6 +155,12 @@ pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f3
     }
     times.push(end);
     Some((times, pieces))
+}
+
+/// Whether `t` cannot follow `last` on a timeline: not after it, or after
+/// it by a gap whose reciprocal is not a finite f32 (subnormal spacing).
+fn too_close(last: f32, t: f32) -> bool {
+    t <= last || !(1.0 / (t - last)).is_finite()
 }
 
 #[allow(clippy::too_many_arguments)]

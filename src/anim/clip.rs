@@ -21,6 +21,11 @@ use super::tracks::{QuatTracks, Vec3Tracks};
 /// Longest accepted clip or event name, in characters.
 pub const MAX_NAME_CHARS: usize = 256;
 
+/// The largest model-space scale or translation magnitude a joint below a
+/// root may reach: 1/340 of `f32::MAX`, so matrix products (and a skinning
+/// matrix's inverse bind) keep headroom.
+pub const MAX_MODEL_MAGNITUDE: f64 = 1e36;
+
 /// A named instant of the clip (a footstep, a sound cue).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Event {
@@ -106,6 +111,7 @@ impl Clip {
         let (mut translations, mut rotations, mut scales) =
             (Vec3Tracks::default(), QuatTracks::default(), Vec3Tracks::default());
         let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
+        let mut bounds = JointBounds::of_rest(skeleton.rest());
         for (i, track) in spec.tracks.iter().enumerate() {
             let path = Path::root().field("tracks").index(i);
             let joint = skeleton.index_of(&track.joint).ok_or_else(|| {
@@ -125,16 +131,22 @@ impl Clip {
                 domain
             } else {
                 let Compiled { times, curve, domain } = compile::vec3_track(track, &path)?;
-                let (list, slot) = match track.channel {
-                    Channel::Scale => (&mut scales, &mut base.scales[j]),
-                    _ => (&mut translations, &mut base.translations[j]),
+                let (list, slot, bound) = match track.channel {
+                    Channel::Scale => (&mut scales, &mut base.scales[j], &mut bounds.scales[j]),
+                    _ => (&mut translations, &mut base.translations[j], &mut bounds.translations[j]),
                 };
+                *bound = curve.max_abs() as f64;
                 list.push(joint, intern(times), curve, slot);
                 domain
             };
             start = start.min(domain.0);
             end = end.max(domain.1);
+            // Durations and clip-time arithmetic are f32 (the summary's `duration`).
+            if !(end - start).is_finite() {
+                return Err(ClipError::new(path.field("times"), K::TimeRangeTooLarge { start, end }));
+            }
         }
+        bounds.check(&skeleton)?;
 
         let mut events = Vec::with_capacity(spec.events.len());
         for (i, e) in spec.events.iter().enumerate() {
@@ -299,6 +311,54 @@ impl Sampler {
     }
 }
 
+/// Per joint, the largest coordinate magnitude of its local translation
+/// and scale over the whole clip (rest value, or its track's curve).
+struct JointBounds {
+    translations: Vec<f64>,
+    scales: Vec<f64>,
+}
+
+impl JointBounds {
+    fn of_rest(rest: &Pose) -> Self {
+        let max = |v: &Vec<glam::Vec3A>| v.iter().map(|x| x.abs().max_element() as f64).collect();
+        JointBounds { translations: max(&rest.translations), scales: max(&rest.scales) }
+    }
+
+    /// Refuses a clip whose model-space transforms could overflow f32
+    /// (a 1,200-deep chain of scale 1.1 reaches 1e49): down each chain, the
+    /// scale bound multiplies and the translation bound grows by the
+    /// parent's scale times the local offset's length (≤ √3 × its largest
+    /// coordinate; rotations keep lengths). A root's model transform is its
+    /// local one, already a finite f32, so roots are not limited. A
+    /// skinning matrix `M_j · invBind_j` has entries at most 4 × the
+    /// largest of each, which must stay under `f32::MAX`.
+    fn check(&self, skeleton: &Skeleton) -> Result<(), ClipError> {
+        let n = skeleton.len();
+        let (mut scale, mut reach) = (vec![0.0f64; n], vec![0.0f64; n]);
+        let overflow =
+            |path: Path, bound: f64, limit: f64| Err(ClipError::new(path, K::ModelSpaceOverflow { bound, limit }));
+        let joint = |j: usize| Path::root().field("skeleton").field("joints").index(j);
+        for j in 0..n {
+            let local = self.translations[j] * 3f64.sqrt();
+            (scale[j], reach[j]) = match skeleton.parent(j) {
+                None => (self.scales[j], local),
+                Some(p) => (scale[p] * self.scales[j], reach[p] + scale[p] * local),
+            };
+            let bound = scale[j].max(reach[j]);
+            if skeleton.parent(j).is_some() && (bound.is_nan() || bound > MAX_MODEL_MAGNITUDE) {
+                return overflow(joint(j), bound, MAX_MODEL_MAGNITUDE);
+            }
+            if let Some(bind) = skeleton.inverse_bind(j) {
+                let skin = 4.0 * bound.max(1.0) * bind.abs().to_cols_array().into_iter().fold(0.0f32, f32::max) as f64;
+                if skin > f32::MAX as f64 {
+                    return overflow(joint(j).field("inverse_bind"), skin, f32::MAX as f64);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The skeleton of `spec`, or one root joint per animated joint in order of
 /// first appearance when it has none (SPEC §1).
 fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
@@ -386,11 +446,190 @@ pub fn frame_times(start: f64, end: f64, fps: f64) -> impl Iterator<Item = f64> 
     (0..frame_count(start, end, fps)).map(move |k| start + k as f64 / fps)
 }
 
-/// How many frames [`frame_times`] yields (0 for an empty or invalid range).
+/// How many frames [`frame_times`] yields (0 for an empty or invalid
+/// range), saturating at `u64::MAX`: a range of 1e20 frames must count as
+/// too many, not wrap to none.
 pub fn frame_count(start: f64, end: f64, fps: f64) -> u64 {
     if !(start.is_finite() && end.is_finite() && fps.is_finite() && fps > 0.0 && end >= start) {
         return 0;
     }
-    // A tolerance so that e.g. 0..1 at 30 fps includes t = 1.
-    ((end - start) * fps + 1e-9).floor() as u64 + 1
+    // A tolerance so that e.g. 0..1 at 30 fps includes t = 1. The float
+    // cast saturates; the `+ 1` must too.
+    (((end - start) * fps + 1e-9).floor() as u64).saturating_add(1)
+}
+
+/// The numeric edge cases of issue 15: each derived value either stays a
+/// finite f32 or the clip is refused with a code naming the field.
+#[cfg(test)]
+mod numeric_edges {
+    use glam::{Quat, Vec3};
+
+    use super::*;
+    use crate::anim::spec::{Interpolation, JointSpec, Keys, SkeletonSpec, Speed, TrackSpec, Transform};
+
+    fn clip(tracks: Vec<TrackSpec>, skeleton: Option<SkeletonSpec>) -> Result<Clip, ClipError> {
+        Clip::build(&ClipSpec { name: "edge".into(), skeleton, tracks, events: vec![], playback: Playback::Once })
+    }
+
+    fn translation(times: Vec<f32>, values: Vec<Vec3>) -> TrackSpec {
+        TrackSpec::new("a", Channel::Translation, Interpolation::Linear, times, Keys::Vec3(values))
+    }
+
+    fn refusal(result: Result<Clip, ClipError>) -> (&'static str, String) {
+        let e = result.expect_err("the clip must be refused");
+        (e.kind.code(), e.path.to_pointer())
+    }
+
+    fn all_finite(pose: &Pose) -> bool {
+        pose.translations.iter().chain(&pose.scales).all(|v| v.is_finite())
+            && pose.rotations.iter().all(|q| q.is_finite())
+    }
+
+    #[test]
+    fn frame_counts_saturate_instead_of_wrapping() {
+        // (1e20 − 0)·1 + 1 frames is past u64::MAX; it used to wrap to 0.
+        assert_eq!(frame_count(0.0, 1e20, 1.0), u64::MAX);
+        assert_eq!(frame_count(0.0, f64::MAX, 240.0), u64::MAX);
+        // Exactly the default pose limit: 0, 1/30, …, 9999/30.
+        assert_eq!(frame_count(0.0, 9999.0 / 30.0, 30.0), 10_000);
+        assert_eq!(frame_times(0.0, 9999.0 / 30.0, 30.0).count(), 10_000);
+        assert_eq!(frame_count(0.0, 10_000.0 / 30.0, 30.0), 10_001);
+    }
+
+    #[test]
+    fn subnormal_key_gaps_sample_finite_poses() {
+        // 1/1.4e-45 overflows f32: the span search computed (t − t_i)·∞,
+        // NaN at t = t_i (a BVH `Frame Time: 1e-45` gives such keys).
+        let times = vec![0.0, 1e-45, 3e-45, 1.0];
+        let values = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        for speed in [Speed::Keyed, Speed::Constant] {
+            let mut track = translation(times.clone(), values.clone());
+            track.speed = speed;
+            let clip = clip(vec![track], None).expect("tiny gaps build");
+            let mut sampler = Sampler::new();
+            for t in [3e-45, 1e-45, 0.0, 2e-45, 0.5, 1.0] {
+                clip.sample(t, &SampleOptions::default(), &mut sampler);
+                assert!(all_finite(sampler.pose()), "{speed:?} at t = {t:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn constant_speed_over_tiny_times_samples_finite_poses() {
+        // Normal gaps (1/gap fits f32) whose arc-length pieces fall at
+        // subnormal spacing: those pieces merge, and every pose is finite.
+        let times = vec![0.0, 1e-37, 2e-37, 4e-37];
+        let values = vec![Vec3::ZERO, Vec3::new(1000.0, 5.0, 0.0), Vec3::new(-900.0, 0.0, 2.0), Vec3::ZERO];
+        for interpolation in [Interpolation::Linear, Interpolation::CatmullRom] {
+            let mut track = translation(times.clone(), values.clone());
+            (track.interpolation, track.speed) = (interpolation, Speed::Constant);
+            let clip = clip(vec![track], None).expect("normal gaps build");
+            let mut sampler = Sampler::new();
+            // At every arc-length breakpoint (where `t − t_i` is 0 and a
+            // gap's infinite reciprocal made 0·∞ = NaN) and between them.
+            let timeline = &clip.timelines[0];
+            let breaks = (0..timeline.len()).map(|i| timeline.time(i) as f64);
+            let between = (0..=400).map(|k| 4e-37 * k as f64 / 400.0);
+            for t in breaks.rev().chain(between) {
+                clip.sample(t, &SampleOptions::default(), &mut sampler);
+                assert!(all_finite(sampler.pose()), "{interpolation:?} at t = {t:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_duration_past_f32_is_refused() {
+        let wide = translation(vec![-3.4e38, 3.4e38], vec![Vec3::ZERO, Vec3::X]);
+        assert_eq!(refusal(clip(vec![wide], None)), ("time_range_too_large", "/tracks/0/times".into()));
+        // Each track fits; together they do not: the second one is named.
+        let early = translation(vec![-3.4e38, 0.0], vec![Vec3::ZERO, Vec3::X]);
+        let mut late = translation(vec![0.0, 3.4e38], vec![Vec3::ZERO, Vec3::X]);
+        late.joint = "b".into();
+        assert_eq!(refusal(clip(vec![early, late], None)), ("time_range_too_large", "/tracks/1/times".into()));
+        // Half the range still builds, with a finite duration.
+        let half = translation(vec![-1.7e38, 1.7e38], vec![Vec3::ZERO, Vec3::X]);
+        assert_eq!(clip(vec![half], None).unwrap().duration(), 3.4e38);
+    }
+
+    fn chain(depth: usize, scale: f32) -> SkeletonSpec {
+        let rest = Transform { translation: Vec3::X, rotation: Quat::IDENTITY, scale: Vec3::splat(scale) };
+        let joints = (0..depth)
+            .map(|j| JointSpec {
+                name: if j == 0 { "a".into() } else { format!("j{j}") },
+                parent: (j > 0).then(|| if j == 1 { "a".into() } else { format!("j{}", j - 1) }),
+                rest,
+                inverse_bind: None,
+            })
+            .collect();
+        SkeletonSpec { joints }
+    }
+
+    #[test]
+    fn a_deep_scale_chain_past_f32_is_refused() {
+        let track = translation(vec![0.0, 1.0], vec![Vec3::ZERO, Vec3::X]);
+        // Joint j's model scale is 1.1^(j+1); its offset of length ≤ √3
+        // per joint, scaled by the parents, reaches √3·(1.1^(j+1) − 1)/0.1.
+        let reach = |j: i32| 3f64.sqrt() * (1.1f64.powi(j + 1) - 1.0) / 0.1;
+        let first_over = (0..1200).find(|&j| reach(j) > MAX_MODEL_MAGNITUDE).unwrap() as usize;
+        assert!((830..850).contains(&first_over), "√3·1.1^840/0.1 ≈ 1e36");
+        let (code, pointer) = refusal(clip(vec![track.clone()], Some(chain(1200, 1.1))));
+        assert_eq!(code, "model_space_overflow");
+        assert!(pointer.starts_with("/skeleton/joints/"), "{pointer}");
+        let at: usize = pointer.rsplit('/').next().unwrap().parse().unwrap();
+        assert!(at.abs_diff(first_over) <= 2, "refused at joint {at}, expected about {first_over}");
+        // A 300-deep chain (1.1^300 ≈ 2.6e12) builds and its model space is finite.
+        let clip = clip(vec![track], Some(chain(300, 1.1))).expect("a bounded chain builds");
+        let mut sampler = Sampler::new();
+        let model = SampleOptions { space: Space::Model, ..SampleOptions::default() };
+        clip.sample(0.5, &model, &mut sampler);
+        assert!(all_finite(sampler.pose()));
+        let mut matrices = Vec::new();
+        clip.matrices(0.5, &model, false, &mut sampler, &mut matrices);
+        assert!(matrices.iter().all(|m| m.is_finite()));
+    }
+
+    #[test]
+    fn an_inverse_bind_that_overflows_skinning_is_refused() {
+        let track = translation(vec![0.0, 1.0], vec![Vec3::ZERO, Vec3::X]);
+        let mut skeleton = chain(2, 2.0);
+        // Scale 4 × entries 1e38 (× up to 4 terms) is past f32::MAX; 1e36 is not.
+        skeleton.joints[1].inverse_bind = Some(glam::Mat4::from_diagonal(glam::Vec4::splat(1e38)));
+        let refused = refusal(clip(vec![track.clone()], Some(skeleton.clone())));
+        assert_eq!(refused, ("model_space_overflow", "/skeleton/joints/1/inverse_bind".into()));
+        skeleton.joints[1].inverse_bind = Some(glam::Mat4::from_diagonal(glam::Vec4::splat(1e36)));
+        let clip = clip(vec![track], Some(skeleton)).expect("a bounded skin builds");
+        let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+        assert!(clip.matrices(1.0, &SampleOptions::default(), true, &mut sampler, &mut matrices));
+        assert!(matrices.iter().all(|m| m.is_finite()));
+    }
+
+    fn hermite_rotation(values: Vec<glam::Vec4>, out_tangent: glam::Vec4) -> TrackSpec {
+        let mut track =
+            TrackSpec::new("a", Channel::Rotation, Interpolation::CubicHermite, vec![0.0, 100.0], Keys::Vec4(values));
+        track.in_tangents = Some(Keys::Vec4(vec![glam::Vec4::ZERO; 2]));
+        track.out_tangents = Some(Keys::Vec4(vec![out_tangent, glam::Vec4::ZERO]));
+        track
+    }
+
+    #[test]
+    fn a_hermite_rotation_through_zero_holds_its_key() {
+        // q and −q with zero tangents: the cubic is exactly zero at u = ½.
+        let track = hermite_rotation(vec![glam::Vec4::W, -glam::Vec4::W], glam::Vec4::ZERO);
+        let built = clip(vec![track], None).expect("valid keys");
+        let mut sampler = Sampler::new();
+        built.sample(50.0, &SampleOptions::default(), &mut sampler);
+        assert_eq!(sampler.pose().rotations[0], Quat::IDENTITY);
+        let tangent = hermite_rotation(vec![glam::Vec4::W; 2], glam::Vec4::splat(3e38));
+        assert_eq!(refusal(clip(vec![tangent], None)), ("curve_overflow", "/tracks/0/values/0".into()));
+    }
+
+    #[test]
+    fn a_curve_overshooting_f32_is_refused() {
+        // Hermite control point `c + h·b/3` = 100·3e38/3 = 1e40 leaves f32.
+        let mut track = translation(vec![0.0, 100.0], vec![Vec3::ZERO, Vec3::ZERO]);
+        track.interpolation = Interpolation::CubicHermite;
+        track.in_tangents = Some(Keys::Vec3(vec![Vec3::ZERO; 2]));
+        track.out_tangents = Some(Keys::Vec3(vec![Vec3::splat(3e38), Vec3::ZERO]));
+        assert_eq!(refusal(clip(vec![track], None)), ("curve_overflow", "/tracks/0/values/0".into()));
+    }
 }

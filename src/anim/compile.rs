@@ -176,6 +176,10 @@ pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<Vec3C
     let (t_in, inner) =
         if spec.ends == Some(Ends::Phantom) { (&t[1..n - 1], &times[1..n - 1]) } else { (&t[..], &times[..]) };
     let domain = (inner[0], inner[inner.len() - 1]);
+    // Control points are computed in f64 and may overshoot the keys past f32.
+    if let Some(k) = segments.iter().position(|s| !s.iter().all(|p| p.as_vec3().is_finite())) {
+        return Err(ClipError::new(path.clone().field("values").index(k), K::CurveOverflow));
+    }
     let f32_segments = || segments.iter().map(|s| s.map(|p| p.as_vec3().into())).collect::<Box<[[Vec3A; 4]]>>();
     if spec.speed == Speed::Constant
         && let Some((arc_times, pieces)) = arc::build(&segments, t_in[0], t_in[t_in.len() - 1])
@@ -206,12 +210,15 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
             let q = unit_quat(values[0], &vpath)?;
             return Ok(Compiled { times: times.clone(), curve: QuatCurve::Constant(q.as_quat()), domain });
         }
-        let segs = (0..n - 1)
+        let segs: Box<[[Vec4; 4]]> = (0..n - 1)
             .map(|i| {
                 let h = times[i + 1] - times[i];
                 [values[i], values[i] + b[i] * (h / 3.0), values[i + 1] - a[i + 1] * (h / 3.0), values[i + 1]]
             })
             .collect();
+        if let Some(k) = segs.iter().position(|s| !s.iter().all(|p| p.is_finite())) {
+            return Err(ClipError::new(vpath.index(k), K::CurveOverflow));
+        }
         return Ok(Compiled { times: times.clone(), curve: QuatCurve::Hermite(segs), domain });
     }
     let mut c = values

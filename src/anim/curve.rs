@@ -66,6 +66,21 @@ pub enum Vec3Curve {
     },
 }
 
+impl Vec3Curve {
+    /// The largest coordinate magnitude the curve can take: each Bezier
+    /// stays inside its control points' hull, so their largest bounds it.
+    pub fn max_abs(&self) -> f32 {
+        let of = |points: &mut dyn Iterator<Item = &Vec3A>| points.map(|p| p.abs().max_element()).fold(0.0, f32::max);
+        match self {
+            Vec3Curve::Constant(v) => v.abs().max_element(),
+            Vec3Curve::Step(keys) | Vec3Curve::Linear(keys) => of(&mut keys.iter()),
+            Vec3Curve::Bezier(segments) | Vec3Curve::ConstantSpeed { segments, .. } => {
+                of(&mut segments.iter().flatten())
+            }
+        }
+    }
+}
+
 /// A rotation curve.
 #[derive(Debug, Clone, PartialEq)]
 pub enum QuatCurve {

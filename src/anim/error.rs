@@ -113,6 +113,12 @@ pub enum ClipErrorKind {
     PhantomTooFewKeys { provided: usize },
     #[error("constant speed applies only to translation tracks that are not step")]
     SpeedNotApplicable,
+    #[error("the clip's duration, from {start:e} to {end:e}, overflows f32")]
+    TimeRangeTooLarge { start: f32, end: f32 },
+    #[error("scales and translations down the joint chain reach {bound:e} in model space, over {limit:e}")]
+    ModelSpaceOverflow { bound: f64, limit: f64 },
+    #[error("a curve control point overflows f32")]
+    CurveOverflow,
 }
 
 impl ClipErrorKind {
@@ -142,6 +148,9 @@ impl ClipErrorKind {
             WrapEndsDiffer => "wrap_ends_differ",
             PhantomTooFewKeys { .. } => "phantom_too_few_keys",
             SpeedNotApplicable => "speed_not_applicable",
+            TimeRangeTooLarge { .. } => "time_range_too_large",
+            ModelSpaceOverflow { .. } => "model_space_overflow",
+            CurveOverflow => "curve_overflow",
         }
     }
 }

@@ -84,6 +84,11 @@ impl Skeleton {
         &self.rest
     }
 
+    /// Joint `j`'s inverse bind matrix, when the clip has a skin.
+    pub fn inverse_bind(&self, j: usize) -> Option<&Mat4> {
+        self.inverse_binds.as_ref().map(|b| &b[j])
+    }
+
     pub fn has_inverse_binds(&self) -> bool {
         self.inverse_binds.is_some()
     }

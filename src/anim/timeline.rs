@@ -28,6 +28,13 @@ const BUCKET_MIN_KEYS: usize = 64;
 /// Keys walked from a bucket's first segment before bisecting the bucket.
 const BUCKET_WALK: usize = 8;
 
+/// `1/h`, saturated at `f32::MAX`: a subnormal gap (keys 1e-45 s apart,
+/// which a BVH `Frame Time` can give) has an infinite reciprocal, and
+/// `(t − t_i)·∞` is NaN at `t = t_i`. Saturated, `u` stays in `[0, 1]`.
+fn reciprocal(h: f32) -> f32 {
+    (1.0 / h).min(f32::MAX)
+}
+
 /// Where a time falls: segment `index` (keys `index` and `index + 1`) at
 /// parameter `u ∈ [0, 1]`. A single-key timeline always gives `(0, 0)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -45,7 +52,7 @@ impl Timeline {
         let keys = times
             .iter()
             .enumerate()
-            .map(|(i, &t)| [t, times.get(i + 1).map_or(0.0, |&next| 1.0 / (next - t))])
+            .map(|(i, &t)| [t, times.get(i + 1).map_or(0.0, |&next| reciprocal(next - t))])
             .collect();
         let uniform = Self::detect_uniform(times);
         let buckets = if uniform.is_none() && times.len() >= BUCKET_MIN_KEYS { Self::buckets(times) } else { None };
@@ -79,7 +86,7 @@ impl Timeline {
         let h = (times[n - 1] as f64 - t0) / (n - 1) as f64;
         let tolerance = 1e-3 * h;
         let uniform = times.iter().enumerate().all(|(i, &t)| (t as f64 - (t0 + i as f64 * h)).abs() <= tolerance);
-        uniform.then_some((times[0], (1.0 / h) as f32))
+        uniform.then_some((times[0], reciprocal(h as f32)))
     }
 
     pub fn len(&self) -> usize {

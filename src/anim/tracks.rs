@@ -102,8 +102,10 @@ impl QuatTracks {
         });
         run(&self.bezier, spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
         run(&self.hermite, spans, out, |segs, s| {
-            let r = bezier4(&segs[s.index as usize], s.u);
-            Quat::from_vec4(r * r.length_recip())
+            let seg = &segs[s.index as usize];
+            // The cubic can pass through zero (a key and its negation with
+            // zero tangents): no direction there, so hold the segment's key.
+            Quat::from_vec4(bezier4(seg, s.u).normalize_or(seg[0].normalize()))
         });
     }
 }

@@ -129,4 +129,8 @@ fn a_bad_clip_exits_non_zero_with_the_validation_error() {
         assert!(!out.status.success(), "{args:?} must be refused");
         assert!(!out.stderr.is_empty());
     }
+    // 1e20 frames are counted without wrapping: too many, not none.
+    let out = run(&["sample", wave.to_str().unwrap(), "--start", "0", "--end", "1e20", "--fps", "1"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("frames requested; the limit is"), "stderr: {stderr}");
 }

@@ -231,6 +231,27 @@ bad("json", "joints-over-limit.json", dumps({"name": "joints", "skeleton": {"joi
     {"name": f"j{i}", "parent": None} for i in range(65)]},
     "tracks": [{"joint": "j0", "channel": "scale", "interpolation": "step", "times": [0], "values": [[1, 1, 1]]}]}))
 
+
+# Numbers that would overflow f32 (issue 15): refused at build with a code naming the field.
+def line(times, joint="a"):
+    return {"joint": joint, "channel": "translation", "interpolation": "linear", "times": times,
+            "values": [[0, 0, 0], [1, 0, 0]]}
+
+
+good("json", "subnormal-constant-speed.json", dumps({"name": "subnormal", "tracks": [
+    {"joint": "a", "channel": "translation", "interpolation": "linear", "speed": "constant",
+     "times": [0, 1e-45, 3e-45, 1], "values": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 0, 1]]}]}))
+bad("json", "duration-past-f32.json", dumps({"name": "wide", "tracks": [line([-3.4e38, 3.4e38])]}), "422")
+bad("json", "scale-chain-past-f32.json", dumps({"name": "deep", "skeleton": {"joints": [
+    {"name": f"j{i}", "parent": f"j{i - 1}" if i else None, "rest": {"translation": [1, 0, 0], "scale": [1.1] * 3}}
+    for i in range(60)] + [
+    {"name": f"k{i}", "parent": f"k{i - 1}" if i else "j59", "rest": {"scale": [1e30] * 3}} for i in range(2)]},
+    "tracks": [line([0, 1], "j0")]}), "422")
+bad("json", "hermite-tangent-past-f32.json", dumps({"name": "steep", "tracks": [
+    {"joint": "a", "channel": "translation", "interpolation": "cubic_hermite", "times": [0, 100],
+     "values": [[0, 0, 0], [0, 0, 0]], "in_tangents": [[0, 0, 0], [0, 0, 0]],
+     "out_tangents": [[3e38, 3e38, 3e38], [0, 0, 0]]}]}), "422")
+
 # ---------------------------------------------------------------- glTF
 
 
@@ -684,6 +705,9 @@ HTTP_CASES = [
 ]
 for name, data in HTTP_CASES:
     bad("http", name + ".http", data)
+# A frame range of 1e20 frames: counted without wrapping, so too many poses (issue 15).
+bad("http", "sample-range-1e20-frames.http", http("POST", f"/v1/clips/{CLIP_ID}/sample",
+    ["Content-Type: application/json"], '{"start":0,"end":1e20,"fps":1}'), "422")
 
 # ---------------------------------------------------------------- gRPC framing
 

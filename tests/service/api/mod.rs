@@ -8,6 +8,7 @@ mod clips;
 mod concurrency;
 mod durability;
 mod import;
+mod numbers;
 mod operations;
 mod poses;
 mod security;
