@@ -277,18 +277,7 @@ async fn every_malformed_input_is_refused_and_every_valid_one_accepted() {
     let record = std::env::var_os("INBETWEEN_CORPUS_RECORD").is_some();
     let server = Server::start().await;
     let wave = std::fs::read(root().join("examples/wave.json")).unwrap();
-    let created: Value = server
-        .app
-        .http
-        .post(server.url("/v1/clips"))
-        .header("content-type", "application/json")
-        .body(wave)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let created = server.app.create(std::str::from_utf8(&wave).unwrap(), None).await;
     let clip_id = created["id"].as_str().unwrap().to_owned();
     assert_eq!(clip_id.len(), CLIP_ID_PLACEHOLDER.len());
     assert_eq!(panics(&server).await, Some(0), "inbetween_panics_total is on /metrics at 0");

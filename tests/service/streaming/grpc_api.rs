@@ -43,15 +43,7 @@ async fn sample_and_sample_batch_equal_the_rest_poses() {
         assert_eq!(batch.joint_names, ["root", "arm"]);
         assert_eq!(batch.poses.len(), times.len());
         for (k, &t) in times.iter().enumerate() {
-            let one: Value = app
-                .http
-                .get(app.url(&format!("/v1/clips/{id}/pose?t={t}&space={space}")))
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap();
+            let one = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&space={space}")).await;
             let unary = grpc
                 .sample(pb::SampleRequest {
                     clip_id: id.clone(),
