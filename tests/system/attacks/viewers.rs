@@ -30,8 +30,8 @@ async fn viewers_that_never_read_are_closed_in_bounded_memory() {
     let n = VIEWERS.to_string();
     let mut target = target(&["--max-streams", "2048", "--max-streams-per-client", "2048"]).await;
     let http = reqwest::Client::new();
-    let id = target.server.create(&http, &wide_clip(64, 256)).await;
-    let path = format!("/v1/clips/{id}/stream?fps=30&playback=loop");
+    let id = target.server.create(&http, &wide_clip(1024, 128)).await;
+    let path = format!("/v1/clips/{id}/stream?fps=10&playback=loop");
     let probes = target.probes().await;
     let (mut reader, _) = tokio_tungstenite::connect_async(target.server.ws_url(&path)).await.unwrap();
     let mut deaf = Vec::with_capacity(VIEWERS);
@@ -45,9 +45,11 @@ async fn viewers_that_never_read_are_closed_in_bounded_memory() {
     while started.elapsed() < Duration::from_secs(40) {
         let message = tokio::time::timeout(Duration::from_secs(2), reader.next()).await;
         let message = message.expect("the reading viewer keeps getting frames").unwrap().unwrap();
-        assert!(message.is_text(), "{message:?}");
+        if !message.is_text() {
+            continue; // the server's keepalive pings
+        }
         frames += 1;
-        if frames % 30 == 0 {
+        if frames.is_multiple_of(10) {
             active = target.metric("inbetween_streams_active").await.unwrap_or(f64::MAX);
             if active <= 1.0 {
                 break;
