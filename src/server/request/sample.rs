@@ -8,6 +8,7 @@ use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
+use super::cost::{Cost, Estimate, Wire};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
 use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
 use crate::server::cache::CachedClip;
@@ -128,13 +129,23 @@ impl RawPose<'_> {
         Ok(PoseRequest { t, options, format })
     }
 
-    /// Checks the request, then binds it to the clip `id` at its current version.
+    /// Checks the request, then binds it to the clip `id` at its current
+    /// version and checks what its answer, sent as `wire`, would cost.
     ///
     /// # Errors
-    /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`.
-    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
+    /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`,
+    /// `answer_too_large`.
+    pub async fn resolve(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+    ) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
         let request = self.check()?;
         let cached = clip_for(state, id, request.format, self.at).await?;
+        let estimate = Estimate::pose(&cached.clip, &cached.meta.id, request.format, wire);
+        let cost = Cost { poses: 1, joints: cached.clip.joint_count() as u64, bytes: estimate.total(1) };
+        cost.check(&state.config.limits, Field::Time, self.at)?;
         Ok((request, cached))
     }
 }
@@ -159,6 +170,8 @@ pub struct Sampling {
     pub times: Vec<f64>,
     pub options: SampleOptions,
     pub format: Format,
+    /// The answer's size bound, once bound to a clip (0 before).
+    pub answer_bytes: u64,
 }
 
 impl Sampling {
@@ -166,7 +179,17 @@ impl Sampling {
     pub fn is_blocking(&self) -> bool {
         self.times.len() > BLOCKING_POSES
     }
+
+    /// Whether its answer is big enough to be streamed in pieces (chunked
+    /// REST, `SampleStream`) rather than built whole.
+    pub fn is_large(&self) -> bool {
+        self.answer_bytes > STREAM_ABOVE_BYTES
+    }
 }
+
+/// Answers whose size bound is over this are sent in pieces as they are
+/// evaluated, so a request's memory is a piece, not its answer.
+pub const STREAM_ABOVE_BYTES: u64 = 1024 * 1024;
 
 impl RawBatch<'_> {
     /// # Errors
@@ -176,17 +199,30 @@ impl RawBatch<'_> {
         let options = self.modes.check(self.at)?;
         let format = Format::decode(self.format, self.at)?;
         let times = self.times(max_poses)?;
-        Ok(Sampling { times, options, format })
+        Ok(Sampling { times, options, format, answer_bytes: 0 })
     }
 
     /// Checks the request against the configured pose limit, then binds it to
-    /// the clip `id` at its current version.
+    /// the clip `id` at its current version and checks what its answer, sent
+    /// as `wire`, would cost (before anything is evaluated).
     ///
     /// # Errors
-    /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`.
-    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
-        let sampling = self.check(state.config.limits.max_poses)?;
+    /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`,
+    /// then `too_many_poses` (over `max_joint_poses`), `answer_too_large`.
+    pub async fn resolve(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+    ) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
+        let mut sampling = self.check(state.config.limits.max_poses)?;
         let cached = clip_for(state, id, sampling.format, self.at).await?;
+        let estimate = Estimate::batch(&cached.clip, &cached.meta.id, sampling.format, wire);
+        let poses = sampling.times.len() as u64;
+        let cost = Cost { poses, joints: cached.clip.joint_count() as u64, bytes: estimate.total(poses) };
+        let field = if self.times.is_some() { Field::Times } else { Field::When };
+        cost.check(&state.config.limits, field, self.at)?;
+        sampling.answer_bytes = cost.bytes;
         Ok((sampling, cached))
     }
 
