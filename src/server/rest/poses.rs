@@ -5,7 +5,7 @@
 //! per-thread [`Sampler`] and matrix buffer, so a request allocates only its
 //! response body, and poses are serialised straight from the core's buffers
 //! into it. Large sample requests run on the blocking pool; answers whose
-//! size bound is over [`STREAM_ABOVE_BYTES`] are sent chunked, a piece at a
+//! size bound is over [`crate::server::request::STREAM_ABOVE_BYTES`] are sent chunked, a piece at a
 //! time as the client reads (see [`Pieces`]).
 
 use std::cell::RefCell;
@@ -25,7 +25,7 @@ use crate::server::auth::ReadAccess;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::request::{
-    Format, Raw, RawBatch, RawModes, RawPose, STREAM_ABOVE_BYTES, Sampling, Wire, evaluate, in_body, in_query,
+    Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query,
 };
 use crate::server::state::AppState;
 use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};

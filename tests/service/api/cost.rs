@@ -6,7 +6,6 @@
 
 use std::time::{Duration, Instant};
 
-use futures_util::StreamExt;
 use inbetween::wire::proto::pb;
 use inbetween::wire::proto::pb::sample_batch_request::When;
 use serde_json::{Value, json};
@@ -127,9 +126,9 @@ async fn a_client_that_hangs_up_stops_the_evaluation() {
     let body = json!({"start": 0, "end": end, "fps": 240});
     let resp = app.http.post(app.url(&format!("/v1/clips/{id}/sample"))).json(&body).send().await.unwrap();
     assert_eq!(resp.status(), 200);
-    let mut chunks = resp.bytes_stream();
-    chunks.next().await.unwrap().unwrap();
-    drop(chunks);
+    let mut resp = resp;
+    resp.chunk().await.unwrap().expect("a first piece");
+    drop(resp);
     let after_rest = abandoned_beyond(&app, before, POSES / 2).await;
 
     let mut grpc = app.grpc().await;
