@@ -185,10 +185,10 @@ async fn sample_batch_points_large_answers_to_sample_stream() {
     app.stop().await;
 }
 
-/// Streams are admitted by their frame size and byte rate: a 4,096-joint
-/// clip (~1 MB JSON frames) streams at 30 fps, not at 240; with a smaller
-/// frame limit it does not stream at all. The WebSocket refuses before the
-/// upgrade, gRPC with the same code.
+/// Streams are admitted by their frame size and byte rate, per encoding: a
+/// 4,096-joint clip (~1 MB JSON frames) streams JSON at 30 fps, not at 240,
+/// and protobuf at 240; with lower limits gRPC refuses too, with the same
+/// code. The WebSocket refuses before the upgrade.
 #[tokio::test]
 async fn streams_are_admitted_by_frame_size_and_byte_rate() {
     let app = TestApp::start().await;
@@ -205,14 +205,25 @@ async fn streams_are_admitted_by_frame_size_and_byte_rate() {
     app.ws(&format!("/v1/clips/{id}/stream?fps=30&max_frames=1")).await;
     let mut grpc = app.grpc().await;
     let request = |fps| pb::StreamRequest { clip_id: id.clone(), fps, max_frames: 1, ..Default::default() };
-    let refused = grpc.stream_frames(request(240)).await.unwrap_err();
+    // Protobuf frames are a quarter of JSON's (~215 KB here): 240 of them a second fit in 64 MiB/s.
+    let mut frames = grpc.stream_frames(request(240)).await.unwrap().into_inner();
+    assert!(frames.message().await.unwrap().is_some());
+    app.stop().await;
+
+    let app = TestApp::builder().configure(|c| c.limits.max_stream_bytes_per_sec = 8 * 1024 * 1024).start().await;
+    let id = app.create_id(&uniform_clip("big", 4096, 2, 0.5), None).await;
+    let mut grpc = app.grpc().await;
+    let request = |fps| pb::StreamRequest { clip_id: id.clone(), fps, max_frames: 1, ..Default::default() };
+    let refused = grpc.stream_frames(request(60)).await.unwrap_err();
     assert_eq!((refused.code(), grpc_error_code(&refused).as_str()), (Code::InvalidArgument, "stream_rate_too_high"));
+    assert!(refused.message().contains("--max-stream-bytes-per-sec"), "{}", refused.message());
     let mut frames = grpc.stream_frames(request(30)).await.unwrap().into_inner();
     assert!(frames.message().await.unwrap().is_some());
     app.stop().await;
 
     let app = TestApp::builder().configure(|c| c.limits.max_frame_bytes = 64 * 1024).start().await;
-    let id = app.create_id(&uniform_clip("big", 1000, 2, 0.5), None).await;
+    // 2,000 joints: ~100 KB protobuf frames.
+    let id = app.create_id(&uniform_clip("big", 2000, 2, 0.5), None).await;
     let mut grpc = app.grpc().await;
     let request = pb::StreamRequest { clip_id: id, fps: 1, max_frames: 1, ..Default::default() };
     let refused = grpc.stream_frames(request).await.unwrap_err();
