@@ -9,8 +9,7 @@
 //! against the bytes really written. Typical poses come out at a half to a
 //! third of the bound (short floats such as `0.0`).
 
-use super::raw::{Field, Locate, unprocessable};
-use super::sample::Format;
+use super::raw::{Field, Format, Locate, unprocessable};
 use crate::anim::Clip;
 use crate::server::config::Limits;
 use crate::server::error::ApiError;
@@ -243,7 +242,7 @@ mod tests {
             if k > 0 {
                 json.push(b',');
             }
-            let clip_time = super::super::evaluate(clip, t, &options, format, &mut sampler, &mut matrices);
+            let clip_time = crate::server::request::evaluate(clip, t, &options, format, &mut sampler, &mut matrices);
             if format == Format::Trs {
                 let (skeleton, pose) = (clip.skeleton(), sampler.pose());
                 PoseJson { clip: ID, time: t, clip_time, space: options.space, skeleton, pose }.write_to(&mut json);

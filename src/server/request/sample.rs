@@ -5,17 +5,14 @@ use std::ops::RangeInclusive;
 use std::sync::Arc;
 
 use glam::Mat4;
-use serde::Deserialize;
-use utoipa::ToSchema;
 
 use super::cost::{Cost, Estimate, Wire};
-use super::raw::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
+use super::raw::{Field, Format, Locate, Raw, RawModes, finite, malformed, unprocessable};
 use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
 use crate::stream::MAX_FPS;
-use crate::wire::proto::pb;
 
 /// Sample requests with more poses than this are evaluated on the blocking
 /// pool, so a big batch does not hold up the async workers.
@@ -24,60 +21,20 @@ pub const BLOCKING_POSES: usize = 256;
 /// The frame rates of a `{start, end, fps}` range: a stream's (SPEC §5).
 pub const FPS_RANGE: RangeInclusive<f64> = 1.0..=MAX_FPS as f64;
 
-/// How each pose is rendered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum Format {
-    /// Translation, rotation `[x,y,z,w]`, scale per joint, in the requested space.
-    #[default]
-    Trs,
-    /// Column-major 4×4 model matrices (model space).
-    Matrix,
-    /// `M_j · invBind_j`, for clips with inverse bind matrices.
-    Skinning,
-}
-
-impl std::str::FromStr for Format {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "trs" => Ok(Format::Trs),
-            "matrix" => Ok(Format::Matrix),
-            "skinning" => Ok(Format::Skinning),
-            _ => Err("expected one of: trs, matrix, skinning".into()),
-        }
+/// # Errors
+/// `no_inverse_binds`: skinning matrices of a clip without inverse binds.
+fn check_format(format: Format, clip: &Clip, at: Locate) -> Result<(), ApiError> {
+    if format == Format::Skinning && !clip.skeleton().has_inverse_binds() {
+        let detail = "format=skinning needs a clip whose skeleton has inverse bind matrices".to_owned();
+        return Err(unprocessable("no_inverse_binds", Field::Format, at, detail));
     }
-}
-
-impl Format {
-    /// # Errors
-    /// `bad_parameter`.
-    fn decode(raw: Option<Raw<'_>>, at: Locate) -> Result<Format, ApiError> {
-        let by_number = |n: i32| match pb::Format::try_from(n) {
-            Ok(pb::Format::Unspecified) => Ok(None),
-            Ok(pb::Format::Trs) => Ok(Some(Format::Trs)),
-            Ok(pb::Format::Matrix) => Ok(Some(Format::Matrix)),
-            Ok(pb::Format::Skinning) => Ok(Some(Format::Skinning)),
-            Err(_) => Err(format!("{n} is not a valid Format")),
-        };
-        Ok(choice(raw, Field::Format, at, str::parse, by_number)?.unwrap_or_default())
-    }
-
-    /// # Errors
-    /// `no_inverse_binds`: skinning matrices of a clip without inverse binds.
-    fn check_clip(self, clip: &Clip, at: Locate) -> Result<(), ApiError> {
-        if self == Format::Skinning && !clip.skeleton().has_inverse_binds() {
-            let detail = "format=skinning needs a clip whose skeleton has inverse bind matrices".to_owned();
-            return Err(unprocessable("no_inverse_binds", Field::Format, at, detail));
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 /// The clip `id`, checked to render `format`.
 async fn clip_for(state: &AppState, id: &str, format: Format, at: Locate) -> Result<Arc<CachedClip>, ApiError> {
     let cached = super::raw::clip(state, id).await?;
-    format.check_clip(&cached.clip, at)?;
+    check_format(format, &cached.clip, at)?;
     Ok(cached)
 }
 
