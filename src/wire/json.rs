@@ -540,14 +540,23 @@ mod tests {
         let keys = vec![Vec3::new(0.1, -2e-30, 3e30), Vec3::new(1.0 / 3.0, 2e20, -5.5)];
         let tracks = ["a", "b \"q\""]
             .iter()
-            .map(|n| TrackSpec::new(n, Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], Keys::Vec3(keys.clone())))
+            .map(|n| {
+                TrackSpec::new(n, Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], Keys::Vec3(keys.clone()))
+            })
             .collect();
         let spec = ClipSpec { name: "c".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once };
         let clip = Clip::build(&spec).unwrap();
         let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
         for (t, format) in [(0.25, "matrix"), (0.75, "skinning")] {
             clip.matrices(t, &SampleOptions::default(), false, &mut sampler, &mut matrices);
-            let doc = MatricesJson { clip: "id", time: t, clip_time: t as f32, format, skeleton: clip.skeleton(), matrices: &matrices };
+            let doc = MatricesJson {
+                clip: "id",
+                time: t,
+                clip_time: t as f32,
+                format,
+                skeleton: clip.skeleton(),
+                matrices: &matrices,
+            };
             let mut direct = Vec::new();
             doc.write_to(&mut direct);
             assert_eq!(String::from_utf8(direct).unwrap(), serde_json::to_string(&doc).unwrap());

@@ -105,7 +105,11 @@ fn skeleton_rules() {
     refused(clip(vec![translation(&long)]), "joint_name_too_long", "/tracks/0/joint");
     let at_cap = "é".repeat(256);
     Clip::build(&with_skeleton(vec![joint(&at_cap, None)], vec![translation(&at_cap)])).expect("256 characters");
-    refused(with_skeleton(vec![joint("a", None), joint(&long, None)], t()), "joint_name_too_long", "/skeleton/joints/1/name");
+    refused(
+        with_skeleton(vec![joint("a", None), joint(&long, None)], t()),
+        "joint_name_too_long",
+        "/skeleton/joints/1/name",
+    );
 }
 
 #[test]

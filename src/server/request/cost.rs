@@ -248,7 +248,14 @@ mod tests {
                 PoseJson { clip: ID, time: t, clip_time, space: options.space, skeleton, pose }.write_to(&mut json);
                 batch.poses.push(pose_to_pb(None, pose, t, clip_time, options.space));
             } else {
-                let doc = MatricesJson { clip: ID, time: t, clip_time, format: "skinning", skeleton: clip.skeleton(), matrices: &matrices };
+                let doc = MatricesJson {
+                    clip: ID,
+                    time: t,
+                    clip_time,
+                    format: "skinning",
+                    skeleton: clip.skeleton(),
+                    matrices: &matrices,
+                };
                 doc.write_to(&mut json);
                 batch.poses.push(matrices_to_pb(None, &matrices, t, clip_time));
             }

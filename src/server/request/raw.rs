@@ -12,8 +12,8 @@ use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::state::AppState;
 use crate::store::is_clip_id;
-use crate::wire::proto::pb;
 use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
+use crate::wire::proto::pb;
 use crate::wire::proto::{ease_from_pb, playback_from_pb, space_from_pb};
 
 /// A request field, named once for every transport.

@@ -24,9 +24,7 @@ use crate::anim::{SampleOptions, Sampler};
 use crate::server::auth::ReadAccess;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
-use crate::server::request::{
-    Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query,
-};
+use crate::server::request::{Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query};
 use crate::server::state::AppState;
 use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
 

@@ -193,7 +193,8 @@ async fn sample_batch_points_large_answers_to_sample_stream() {
 async fn streams_are_admitted_by_frame_size_and_byte_rate() {
     let app = TestApp::start().await;
     let id = app.create_id(&uniform_clip("big", 4096, 2, 0.5), None).await;
-    let refusal = |status: u16, body: Vec<u8>| (status, serde_json::from_slice::<Value>(&body).unwrap()["code"].clone());
+    let refusal =
+        |status: u16, body: Vec<u8>| (status, serde_json::from_slice::<Value>(&body).unwrap()["code"].clone());
     let ws = |q: &str| tokio_tungstenite::connect_async(app.ws_url(&format!("/v1/clips/{id}/stream?{q}")));
     match ws("fps=240").await {
         Err(tokio_tungstenite::tungstenite::Error::Http(resp)) => {
@@ -242,7 +243,10 @@ async fn joint_names_over_256_characters_are_refused() {
     let resp = app.http.post(app.url("/v1/clips")).json(&doc).send().await.unwrap();
     assert_eq!(resp.status(), 422);
     let problem: Value = resp.json().await.unwrap();
-    assert_eq!((problem["code"].as_str(), problem["pointer"].as_str()), (Some("joint_name_too_long"), Some("/tracks/0/joint")));
+    assert_eq!(
+        (problem["code"].as_str(), problem["pointer"].as_str()),
+        (Some("joint_name_too_long"), Some("/tracks/0/joint"))
+    );
 
     let doc = json!({"name": "long", "skeleton": {"joints": [{"name": long}]}, "tracks": [
         {"joint": long, "channel": "translation", "times": [0, 1], "values": [[0, 0, 0], [1, 1, 1]]}

@@ -310,7 +310,13 @@ async fn the_cost_refusals_have_one_code_on_both_protocols() {
     let app = TestApp::builder().configure(|c| c.limits.max_stream_bytes_per_sec = 1000).start().await;
     let id = app.create_id(WAVE, None).await;
     let ws = Rest::Ws(format!("/v1/clips/{id}/stream?fps=30"));
-    let rate = Case { what: "stream over its byte rate", rest: ws, rpc: stream(&id, |_| {}), code: "stream_rate_too_high", status: 422 };
+    let rate = Case {
+        what: "stream over its byte rate",
+        rest: ws,
+        rpc: stream(&id, |_| {}),
+        code: "stream_rate_too_high",
+        status: 422,
+    };
     check_both_ways(&app, vec![rate]).await;
     app.stop().await;
 }
@@ -323,6 +329,11 @@ async fn check_both_ways(app: &TestApp, cases: Vec<Case>) {
         let refused = rpc_refusal(&mut grpc, case.rpc).await;
         let grpc_code = refused.metadata().get("x-error-code").map(|v| v.to_str().unwrap().to_owned());
         assert_eq!(grpc_code.as_deref(), Some(case.code), "{}: gRPC {refused:?}", case.what);
-        assert!(grpc_codes_for(status).contains(&refused.code()), "{}: HTTP {status} but gRPC {:?}", case.what, refused.code());
+        assert!(
+            grpc_codes_for(status).contains(&refused.code()),
+            "{}: HTTP {status} but gRPC {:?}",
+            case.what,
+            refused.code()
+        );
     }
 }
