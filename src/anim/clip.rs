@@ -361,13 +361,23 @@ impl JointBounds {
 
 /// The skeleton of `spec`, or one root joint per animated joint in order of
 /// first appearance when it has none (SPEC §1).
+/// A joint name: 1 to [`MAX_NAME_CHARS`] characters, as clip names.
+fn check_joint_name(name: &str, path: Path) -> Result<(), ClipError> {
+    if name.is_empty() {
+        return Err(ClipError::new(path, K::EmptyJointName));
+    }
+    let chars = name.chars().count();
+    if chars > MAX_NAME_CHARS {
+        return Err(ClipError::new(path, K::JointNameTooLong { max: MAX_NAME_CHARS, chars }));
+    }
+    Ok(())
+}
+
 fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
     let Some(skel) = &spec.skeleton else {
         let mut names: Vec<String> = Vec::new();
         for (i, t) in spec.tracks.iter().enumerate() {
-            if t.joint.is_empty() {
-                return Err(ClipError::new(Path::root().field("tracks").index(i).field("joint"), K::EmptyJointName));
-            }
+            check_joint_name(&t.joint, Path::root().field("tracks").index(i).field("joint"))?;
             if !names.contains(&t.joint) {
                 names.push(t.joint.clone());
             }
@@ -379,9 +389,7 @@ fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
     let mut index: HashMap<&str, usize> = HashMap::with_capacity(joints.len());
     for (j, joint) in joints.iter().enumerate() {
         let path = Path::root().field("skeleton").field("joints").index(j);
-        if joint.name.is_empty() {
-            return Err(ClipError::new(path.field("name"), K::EmptyJointName));
-        }
+        check_joint_name(&joint.name, path.clone().field("name"))?;
         if index.insert(joint.name.as_str(), j).is_some() {
             return Err(ClipError::new(path.field("name"), K::DuplicateJoint { name: joint.name.clone() }));
         }

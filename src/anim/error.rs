@@ -75,6 +75,9 @@ pub enum ClipErrorKind {
     NoTracks,
     #[error("joint name must not be empty")]
     EmptyJointName,
+    /// Every answer repeats joint names, so their length is part of its cost.
+    #[error("a joint name may have at most {max} characters, this one has {chars}")]
+    JointNameTooLong { max: usize, chars: usize },
     #[error("joint '{name}' is defined twice")]
     DuplicateJoint { name: String },
     #[error("parent '{parent}' is not a joint of the skeleton")]
@@ -129,6 +132,7 @@ impl ClipErrorKind {
             BadName { .. } => "bad_name",
             NoTracks => "no_tracks",
             EmptyJointName => "empty_joint_name",
+            JointNameTooLong { .. } => "joint_name_too_long",
             DuplicateJoint { .. } => "duplicate_joint",
             UnknownParent { .. } => "unknown_parent",
             ParentCycle { .. } => "parent_cycle",

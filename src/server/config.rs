@@ -229,6 +229,19 @@ settings! {
         max_poses: usize = 10_000 => positive -> usize,
             "max_poses", "max-poses", "INBETWEEN_MAX_POSES", "N",
             "Most poses one sample request may ask for";
+        max_joint_poses: usize = 16 * 1024 * 1024 => positive -> usize,
+            "max_joint_poses", "max-joint-poses", "INBETWEEN_MAX_JOINT_POSES", "N",
+            "Most poses × joints one sample request may ask for (the evaluation work it costs)";
+        max_answer_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
+            "max_answer_bytes", "max-answer-bytes", "INBETWEEN_MAX_ANSWER_BYTES", "BYTES",
+            "Largest encoded answer (joint names included) one pose request may produce, estimated before \
+             anything is evaluated";
+        max_frame_bytes: usize = 1024 * 1024 => positive -> usize,
+            "max_frame_bytes", "max-frame-bytes", "INBETWEEN_MAX_FRAME_BYTES", "BYTES",
+            "Largest encoded stream frame, estimated when the stream opens";
+        max_stream_bytes_per_sec: usize = 64 * 1024 * 1024 => positive -> usize,
+            "max_stream_bytes_per_sec", "max-stream-bytes-per-sec", "INBETWEEN_MAX_STREAM_BYTES_PER_SEC", "BYTES",
+            "Most bytes per second one stream may send (fps × the frame estimate)";
         request_timeout: u64 = 30 => seconds -> Duration,
             "request_timeout_secs", "request-timeout-secs", "INBETWEEN_REQUEST_TIMEOUT_SECS", "SECS",
             "Seconds a request may take before it is answered 503";
@@ -644,6 +657,10 @@ mod tests {
             max_keys_per_track: 1_000_000,
             max_joints: 4096,
             max_poses: 10_000,
+            max_joint_poses: 16_777_216,
+            max_answer_bytes: 268_435_456,
+            max_frame_bytes: 1_048_576,
+            max_stream_bytes_per_sec: 67_108_864,
             request_timeout: Duration::from_secs(30),
             header_read_timeout: Duration::from_secs(10),
             cache_entries: 1024,

@@ -71,6 +71,10 @@ pub enum ApiError {
     /// The caller's write rate limit (token bucket) is used up.
     #[error("write rate limit reached; retry after {retry_after} s")]
     RateLimited { retry_after: u64 },
+    /// A unary answer (gRPC `SampleBatch`) whose size bound is over the
+    /// largest message this server sends: the streaming RPC serves it.
+    #[error("the answer may take {bytes} bytes, over the {limit}-byte limit of one message; ask {stream} instead")]
+    AnswerTooLargeForUnary { bytes: u64, limit: u64, stream: &'static str },
     #[error("service unavailable")]
     Unavailable(#[source] Option<anyhow::Error>),
     #[error("internal error")]
@@ -112,7 +116,7 @@ impl ApiError {
             NotFound { .. } => StatusCode::NOT_FOUND,
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
-            PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => StatusCode::SERVICE_UNAVAILABLE,
             TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
@@ -140,6 +144,7 @@ impl ApiError {
             MethodNotAllowed => "method_not_allowed",
             PreconditionFailed { .. } => "version_mismatch",
             PayloadTooLarge { .. } => "body_too_large",
+            AnswerTooLargeForUnary { .. } => "use_sample_stream",
             UnsupportedMediaType { .. } => "unsupported_media_type",
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => "shutting_down",
             TooManyStreams(_) => "too_many_streams",
@@ -276,7 +281,7 @@ impl ApiError {
             NotFound { .. } => Code::NotFound,
             MethodNotAllowed => Code::Unimplemented,
             PreconditionFailed { .. } => Code::FailedPrecondition,
-            PayloadTooLarge { .. } => Code::ResourceExhausted,
+            PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => Code::ResourceExhausted,
             Import { class: ErrorClass::TooLarge, .. } => Code::ResourceExhausted,
             Import { .. } => Code::InvalidArgument,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => Code::Unavailable,

@@ -29,7 +29,8 @@ use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::request::{
-    Field, Format, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream, evaluate, in_body,
+    Field, Format, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream, Sampling, Wire, evaluate,
+    in_body,
 };
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
@@ -74,6 +75,29 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 }
 
 impl GrpcService {
+    /// A `SampleBatchRequest` checked and bound to its clip (`SampleBatch`
+    /// and `SampleStream` alike).
+    async fn sampling(&self, req: &pb::SampleBatchRequest) -> Result<(Sampling, Arc<CachedClip>), Status> {
+        use pb::sample_batch_request::When;
+        let range = match &req.when {
+            Some(When::Range(r)) => Some(r),
+            _ => None,
+        };
+        let raw = RawBatch {
+            times: match &req.when {
+                Some(When::Times(t)) => Some(&t.values),
+                _ => None,
+            },
+            start: range.map(|r| r.start),
+            end: range.map(|r| r.end),
+            fps: range.map(|r| r.fps),
+            modes: modes(req.space, req.playback, req.ease),
+            format: Some(Raw::Enum(req.format)),
+            at: batch_at,
+        };
+        Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?)
+    }
+
     /// The RPC's caller (worked out once per call, as REST's middleware
     /// does), if it may act with `scope`.
     fn caller<T>(&self, request: &Request<T>, scope: Scope) -> Result<Caller, Status> {
@@ -112,6 +136,85 @@ impl GrpcService {
         };
         let Opening { params, permit } = raw.open(&self.state, &req.clip_id, caller).await?;
         Ok((params, permit.map_err(ApiError::from)?))
+    }
+}
+
+/// The largest unary answer (`SampleBatch`) sent; larger ones are
+/// `SampleStream`'s. Clients' default receive limit is 4 MiB: this is what
+/// a client that raised it may get in one message.
+pub const MAX_UNARY_ANSWER_BYTES: u64 = 16 * 1024 * 1024;
+
+/// Bytes of poses per `SampleStream` message (at least one pose).
+const STREAM_BATCH_BYTES: u64 = 1024 * 1024;
+
+/// The poses `range` of `sampling` as one `PoseBatch`, names if `names`.
+fn batch(cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>, names: bool) -> pb::PoseBatch {
+    let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+    let (options, format) = (sampling.options, sampling.format);
+    pb::PoseBatch {
+        joint_names: if names { cached.clip.skeleton().names().to_vec() } else { Vec::new() },
+        poses: sampling.times[range]
+            .iter()
+            .map(|&t| pose(cached, t, &options, format, false, &mut sampler, &mut matrices))
+            .collect(),
+    }
+}
+
+/// A `SampleStream` answer, evaluated a message at a time: the next
+/// message is evaluated (on the blocking pool) only when tonic asks for it,
+/// which HTTP/2 flow control holds back while the client does not read; a
+/// client that goes away (or a cancelled call) drops the stream and the
+/// rest of the work with it (counted as abandoned).
+struct Batches {
+    state: AppState,
+    job: Arc<(Sampling, Arc<CachedClip>)>,
+    per_batch: usize,
+    next: usize,
+    done: bool,
+}
+
+impl Batches {
+    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>) -> Batches {
+        let per_pose = sampling.answer_bytes / sampling.times.len().max(1) as u64;
+        let per_batch = (STREAM_BATCH_BYTES / per_pose.max(1)).max(1) as usize;
+        Batches { state, job: Arc::new((sampling, cached)), per_batch, next: 0, done: false }
+    }
+
+    /// The next message, `None` after the last. An empty request is one
+    /// message with the names and no poses.
+    async fn next(&mut self) -> Option<Result<pb::PoseBatch, Status>> {
+        if self.done {
+            return None;
+        }
+        let n = self.job.0.times.len();
+        let range = self.next..(self.next + self.per_batch).min(n);
+        let job = Arc::clone(&self.job);
+        let built = tokio::task::spawn_blocking(move || {
+            let names = range.start == 0;
+            batch(&job.1, &job.0, range, names)
+        })
+        .await;
+        Some(match built {
+            Ok(batch) => {
+                self.state.counters.poses.increment(batch.poses.len() as u64);
+                self.next += batch.poses.len();
+                self.done = self.next == n;
+                Ok(batch)
+            }
+            Err(e) => {
+                self.done = true;
+                Err(Status::from(crate::server::metrics::join_failed(e)))
+            }
+        })
+    }
+}
+
+impl Drop for Batches {
+    fn drop(&mut self) {
+        if !self.done {
+            self.state.counters.answers_abandoned.increment(1);
+            self.state.counters.poses_abandoned.increment((self.job.0.times.len() - self.next) as u64);
+        }
     }
 }
 
@@ -210,7 +313,7 @@ impl Animation for GrpcService {
             format: Some(Raw::Enum(req.format)),
             at: sample_at,
         };
-        let (sample, cached) = raw.resolve(&self.state, &req.clip_id).await?;
+        let (sample, cached) = raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?;
         let (t, options, format) = (sample.t, sample.options, sample.format);
         let pose = pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
         self.state.counters.poses.increment(1);
@@ -219,37 +322,14 @@ impl Animation for GrpcService {
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
         self.read(&request)?;
-        let req = request.into_inner();
-        let range = match &req.when {
-            Some(pb::sample_batch_request::When::Range(r)) => Some(r),
-            _ => None,
-        };
-        let raw = RawBatch {
-            times: match &req.when {
-                Some(pb::sample_batch_request::When::Times(t)) => Some(&t.values),
-                _ => None,
-            },
-            start: range.map(|r| r.start),
-            end: range.map(|r| r.end),
-            fps: range.map(|r| r.fps),
-            modes: modes(req.space, req.playback, req.ease),
-            format: Some(Raw::Enum(req.format)),
-            at: batch_at,
-        };
-        let (sampling, cached) = raw.resolve(&self.state, &req.clip_id).await?;
+        let (sampling, cached) = self.sampling(&request.into_inner()).await?;
+        if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
+            let (bytes, limit) = (sampling.answer_bytes, MAX_UNARY_ANSWER_BYTES);
+            return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "SampleStream" }.into());
+        }
+        let n = sampling.times.len();
         let blocking = sampling.is_blocking();
-        let build = move || {
-            let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
-            let (options, format) = (sampling.options, sampling.format);
-            pb::PoseBatch {
-                joint_names: cached.clip.skeleton().names().to_vec(),
-                poses: sampling
-                    .times
-                    .iter()
-                    .map(|&t| pose(&cached, t, &options, format, false, &mut sampler, &mut matrices))
-                    .collect(),
-            }
-        };
+        let build = move || batch(&cached, &sampling, 0..n, true);
         let batch = if blocking {
             tokio::task::spawn_blocking(build)
                 .await
@@ -257,8 +337,24 @@ impl Animation for GrpcService {
         } else {
             build()
         };
-        self.state.counters.poses.increment(batch.poses.len() as u64);
+        self.state.counters.poses.increment(n as u64);
         Ok(Response::new(batch))
+    }
+
+    type SampleStreamStream = Pin<Box<dyn Stream<Item = Result<pb::PoseBatch, Status>> + Send + 'static>>;
+
+    async fn sample_stream(
+        &self,
+        request: Request<pb::SampleBatchRequest>,
+    ) -> Result<Response<Self::SampleStreamStream>, Status> {
+        self.read(&request)?;
+        let (sampling, cached) = self.sampling(&request.into_inner()).await?;
+        let batches = Batches::new(self.state.clone(), sampling, cached);
+        let stream = futures_util::stream::unfold(batches, |mut batches| async move {
+            let next = batches.next().await?;
+            Some((next, batches))
+        });
+        Ok(Response::new(Box::pin(stream)))
     }
 
     type StreamFramesStream = FrameStream;

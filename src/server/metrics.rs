@@ -90,6 +90,10 @@ pub struct Counters {
     pub cache_misses: metrics::Counter,
     pub cache_entries: metrics::Gauge,
     pub poses: metrics::Counter,
+    /// Streamed answers whose client went away before the end (their
+    /// evaluation stopped with them), and the poses left unevaluated.
+    pub answers_abandoned: metrics::Counter,
+    pub poses_abandoned: metrics::Counter,
 }
 
 impl Counters {
@@ -100,6 +104,8 @@ impl Counters {
             cache_misses: metrics::counter!("inbetween_clip_cache_misses_total"),
             cache_entries: metrics::gauge!("inbetween_clip_cache_entries"),
             poses: metrics::counter!("inbetween_poses_evaluated_total"),
+            answers_abandoned: metrics::counter!("inbetween_answers_abandoned_total"),
+            poses_abandoned: metrics::counter!("inbetween_poses_abandoned_total"),
         }
         .with_panic_counters()
     }

@@ -375,13 +375,23 @@ fn write_json_str(out: &mut impl BufMut, s: &str) {
     }
 }
 
-/// A float as serde_json writes it (`null` when not finite).
+/// A float as serde_json writes a finite one. Never `null`: the build
+/// invariants make every sampled value finite (`anim::Clip::build` refuses
+/// what would overflow), and should one slip through it is written as the
+/// nearest finite number (NaN as 0), so a client's number is always a number.
 fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut impl BufMut, x: F) {
     if x.into().is_finite() {
         out.put_slice(zmij::Buffer::new().format_finite(x).as_bytes());
     } else {
-        out.put_slice(b"null");
+        write_finite_stand_in(out, x.into());
     }
+}
+
+/// The nearest finite `f32` to a non-finite `x` (±`f32::MAX`; 0 for NaN).
+#[cold]
+fn write_finite_stand_in(out: &mut impl BufMut, x: f64) {
+    let stand_in = if x.is_nan() { 0.0 } else { f32::MAX.copysign(x as f32) };
+    out.put_slice(zmij::Buffer::new().format_finite(stand_in).as_bytes());
 }
 
 fn write_floats<const N: usize>(out: &mut impl BufMut, xs: &[f32; N]) {
@@ -431,6 +441,33 @@ pub(crate) struct MatricesJson<'a> {
     pub format: &'static str,
     pub skeleton: &'a Skeleton,
     pub matrices: &'a [Mat4],
+}
+
+impl MatricesJson<'_> {
+    /// Appends exactly the JSON `serde_json` writes for these matrices
+    /// (finite floats), directly, and never a `null` (see `write_float`).
+    pub(crate) fn write_to(&self, out: &mut impl BufMut) {
+        out.put_slice(b"{\"clip\":");
+        write_json_str(out, self.clip);
+        out.put_slice(b",\"time\":");
+        write_float(out, self.time);
+        out.put_slice(b",\"clip_time\":");
+        write_float(out, self.clip_time);
+        out.put_slice(b",\"space\":\"model\",\"format\":");
+        write_json_str(out, self.format);
+        out.put_slice(b",\"joints\":[");
+        for (j, (name, m)) in self.skeleton.names().iter().zip(self.matrices).enumerate() {
+            if j > 0 {
+                out.put_u8(b',');
+            }
+            out.put_slice(b"{\"name\":");
+            write_json_str(out, name);
+            out.put_slice(b",\"matrix\":");
+            write_floats(out, &m.to_cols_array());
+            out.put_u8(b'}');
+        }
+        out.put_slice(b"]}");
+    }
 }
 
 impl Serialize for MatricesJson<'_> {
@@ -494,6 +531,48 @@ mod tests {
             let mut direct = Vec::new();
             pose.write_to(&mut direct);
             assert_eq!(String::from_utf8(direct).unwrap(), serde_json::to_string(&pose).unwrap());
+        }
+    }
+
+    /// The matrix writer and serde agree byte for byte.
+    #[test]
+    fn direct_matrix_writer_matches_serde() {
+        let keys = vec![Vec3::new(0.1, -2e-30, 3e30), Vec3::new(1.0 / 3.0, 2e20, -5.5)];
+        let tracks = ["a", "b \"q\""]
+            .iter()
+            .map(|n| {
+                TrackSpec::new(n, Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], Keys::Vec3(keys.clone()))
+            })
+            .collect();
+        let spec = ClipSpec { name: "c".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once };
+        let clip = Clip::build(&spec).unwrap();
+        let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
+        for (t, format) in [(0.25, "matrix"), (0.75, "skinning")] {
+            clip.matrices(t, &SampleOptions::default(), false, &mut sampler, &mut matrices);
+            let doc = MatricesJson {
+                clip: "id",
+                time: t,
+                clip_time: t as f32,
+                format,
+                skeleton: clip.skeleton(),
+                matrices: &matrices,
+            };
+            let mut direct = Vec::new();
+            doc.write_to(&mut direct);
+            assert_eq!(String::from_utf8(direct).unwrap(), serde_json::to_string(&doc).unwrap());
+        }
+    }
+
+    /// A number is always written as a number, even one that should never
+    /// reach the writer.
+    #[test]
+    fn non_finite_numbers_are_never_null() {
+        for (x, expected) in [(f64::NAN, 0.0), (f64::INFINITY, f32::MAX), (f64::NEG_INFINITY, -f32::MAX)] {
+            let mut out = Vec::new();
+            write_float(&mut out, x);
+            let text = String::from_utf8(out).unwrap();
+            let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+            assert_eq!(value.as_f64().map(|v| v as f32), Some(expected), "{x} was written as {text}");
         }
     }
 }

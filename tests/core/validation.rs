@@ -100,6 +100,16 @@ fn skeleton_rules() {
     refused(with_skeleton(vec![bad], t()), "non_finite", "/skeleton/joints/0/inverse_bind");
     // Without a skeleton, the track's own joint name is checked.
     refused(clip(vec![translation("")]), "empty_joint_name", "/tracks/0/joint");
+    // Joint names are capped as clip names are: 256 characters (not bytes).
+    let long = "é".repeat(257);
+    refused(clip(vec![translation(&long)]), "joint_name_too_long", "/tracks/0/joint");
+    let at_cap = "é".repeat(256);
+    Clip::build(&with_skeleton(vec![joint(&at_cap, None)], vec![translation(&at_cap)])).expect("256 characters");
+    refused(
+        with_skeleton(vec![joint("a", None), joint(&long, None)], t()),
+        "joint_name_too_long",
+        "/skeleton/joints/1/name",
+    );
 }
 
 #[test]

@@ -251,6 +251,10 @@ bad("json", "hermite-tangent-past-f32.json", dumps({"name": "steep", "tracks": [
     {"joint": "a", "channel": "translation", "interpolation": "cubic_hermite", "times": [0, 100],
      "values": [[0, 0, 0], [0, 0, 0]], "in_tangents": [[0, 0, 0], [0, 0, 0]],
      "out_tangents": [[3e38, 3e38, 3e38], [0, 0, 0]]}]}), "422")
+# Joint names are capped at 256 characters (issue 15: every answer repeats them).
+bad("json", "joint-name-257-chars.json", dumps({"name": "long", "tracks": [line([0, 1], "ü" * 257)]}), "422")
+bad("json", "skeleton-joint-name-257-chars.json", dumps({"name": "long", "skeleton": {"joints": [
+    {"name": "j" * 257}]}, "tracks": [line([0, 1], "j" * 257)]}), "422")
 
 # ---------------------------------------------------------------- glTF
 
@@ -863,6 +867,11 @@ GRPC_CASES = [
     ("GetClip", "bad-id", frame(field(1, 2, "%FF"))),
     ("DeleteClip", "unknown-clip", frame(field(1, 2, MISSING_ID))),
     ("ListClips", "cursor-garbage", frame(field(1, 2, "\x00\x01"))),
+    # Issue 15: joint names over 256 characters, and the streaming batch's rules.
+    ("PutClip", "joint-name-257-chars", frame(put(pb_clip(tracks=[pb_track(joint="j" * 257)])))),
+    ("SampleStream", "no-when", frame(field(1, 2, CLIP_ID))),
+    ("SampleStream", "range-too-many-frames", frame(field(1, 2, CLIP_ID) + field(3, 2, field(2, 1, 1e9)
+                                                                                    + field(3, 1, 240.0)))),
 ]
 for method, name, data in GRPC_CASES:
     bad("grpc", f"{method}.{name}.bin", data)

@@ -14,20 +14,25 @@
 //!   and the list's `bad_limit`, `bad_cursor`;
 //! - 422 (`ApiError::Invalid`), it parses but breaks a rule:
 //!   `fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`,
-//!   `times_or_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`.
+//!   `times_or_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`;
+//!   and the cost model's (`cost`, checked once the clip is known, before
+//!   anything is evaluated): `too_many_poses` (over `max_joint_poses`),
+//!   `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
 //!
 //! Malformed values are reported before broken rules, and both before the
 //! clip is looked up (`clip_not_found`), except the stream rules that need
 //! the clip (its start is the default start).
 
+mod cost;
 mod list;
 mod raw;
 mod sample;
 mod stream;
 
+pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
-pub use raw::{Field, Locate, Raw, RawModes, clip, in_body, in_query};
-pub use sample::{BLOCKING_POSES, FPS_RANGE, Format, PoseRequest, RawBatch, RawPose, Sampling, evaluate};
+pub use raw::{Field, Format, Locate, Raw, RawModes, clip, in_body, in_query};
+pub use sample::{BLOCKING_POSES, FPS_RANGE, PoseRequest, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{DEFAULT_FPS, Opening, RawStream};
 
 #[cfg(test)]

@@ -4,12 +4,16 @@
 
 use std::sync::Arc;
 
+use serde::Deserialize;
+use utoipa::ToSchema;
+
 use crate::anim::{Ease, Playback, SampleOptions, Space};
 use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::state::AppState;
 use crate::store::is_clip_id;
 use crate::wire::json::{EaseDoc, PlaybackDoc, SpaceDoc};
+use crate::wire::proto::pb;
 use crate::wire::proto::{ease_from_pb, playback_from_pb, space_from_pb};
 
 /// A request field, named once for every transport.
@@ -77,6 +81,46 @@ pub fn in_body(field: Field) -> At {
         Field::When => At::Pointer(String::new()),
         Field::TimeAt(i) => At::Pointer(format!("/times/{i}")),
         other => At::Pointer(format!("/{}", other.name())),
+    }
+}
+
+/// How each pose is rendered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Format {
+    /// Translation, rotation `[x,y,z,w]`, scale per joint, in the requested space.
+    #[default]
+    Trs,
+    /// Column-major 4×4 model matrices (model space).
+    Matrix,
+    /// `M_j · invBind_j`, for clips with inverse bind matrices.
+    Skinning,
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "trs" => Ok(Format::Trs),
+            "matrix" => Ok(Format::Matrix),
+            "skinning" => Ok(Format::Skinning),
+            _ => Err("expected one of: trs, matrix, skinning".into()),
+        }
+    }
+}
+
+impl Format {
+    /// # Errors
+    /// `bad_parameter`.
+    pub(super) fn decode(raw: Option<Raw<'_>>, at: Locate) -> Result<Format, ApiError> {
+        let by_number = |n: i32| match pb::Format::try_from(n) {
+            Ok(pb::Format::Unspecified) => Ok(None),
+            Ok(pb::Format::Trs) => Ok(Some(Format::Trs)),
+            Ok(pb::Format::Matrix) => Ok(Some(Format::Matrix)),
+            Ok(pb::Format::Skinning) => Ok(Some(Format::Skinning)),
+            Err(_) => Err(format!("{n} is not a valid Format")),
+        };
+        Ok(choice(raw, Field::Format, at, str::parse, by_number)?.unwrap_or_default())
     }
 }
 

@@ -5,16 +5,14 @@ use std::ops::RangeInclusive;
 use std::sync::Arc;
 
 use glam::Mat4;
-use serde::Deserialize;
-use utoipa::ToSchema;
 
-use super::raw::{Field, Locate, Raw, RawModes, choice, finite, malformed, unprocessable};
+use super::cost::{Cost, Estimate, Wire};
+use super::raw::{Field, Format, Locate, Raw, RawModes, finite, malformed, unprocessable};
 use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
 use crate::stream::MAX_FPS;
-use crate::wire::proto::pb;
 
 /// Sample requests with more poses than this are evaluated on the blocking
 /// pool, so a big batch does not hold up the async workers.
@@ -23,60 +21,20 @@ pub const BLOCKING_POSES: usize = 256;
 /// The frame rates of a `{start, end, fps}` range: a stream's (SPEC §5).
 pub const FPS_RANGE: RangeInclusive<f64> = 1.0..=MAX_FPS as f64;
 
-/// How each pose is rendered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum Format {
-    /// Translation, rotation `[x,y,z,w]`, scale per joint, in the requested space.
-    #[default]
-    Trs,
-    /// Column-major 4×4 model matrices (model space).
-    Matrix,
-    /// `M_j · invBind_j`, for clips with inverse bind matrices.
-    Skinning,
-}
-
-impl std::str::FromStr for Format {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "trs" => Ok(Format::Trs),
-            "matrix" => Ok(Format::Matrix),
-            "skinning" => Ok(Format::Skinning),
-            _ => Err("expected one of: trs, matrix, skinning".into()),
-        }
+/// # Errors
+/// `no_inverse_binds`: skinning matrices of a clip without inverse binds.
+fn check_format(format: Format, clip: &Clip, at: Locate) -> Result<(), ApiError> {
+    if format == Format::Skinning && !clip.skeleton().has_inverse_binds() {
+        let detail = "format=skinning needs a clip whose skeleton has inverse bind matrices".to_owned();
+        return Err(unprocessable("no_inverse_binds", Field::Format, at, detail));
     }
-}
-
-impl Format {
-    /// # Errors
-    /// `bad_parameter`.
-    fn decode(raw: Option<Raw<'_>>, at: Locate) -> Result<Format, ApiError> {
-        let by_number = |n: i32| match pb::Format::try_from(n) {
-            Ok(pb::Format::Unspecified) => Ok(None),
-            Ok(pb::Format::Trs) => Ok(Some(Format::Trs)),
-            Ok(pb::Format::Matrix) => Ok(Some(Format::Matrix)),
-            Ok(pb::Format::Skinning) => Ok(Some(Format::Skinning)),
-            Err(_) => Err(format!("{n} is not a valid Format")),
-        };
-        Ok(choice(raw, Field::Format, at, str::parse, by_number)?.unwrap_or_default())
-    }
-
-    /// # Errors
-    /// `no_inverse_binds`: skinning matrices of a clip without inverse binds.
-    fn check_clip(self, clip: &Clip, at: Locate) -> Result<(), ApiError> {
-        if self == Format::Skinning && !clip.skeleton().has_inverse_binds() {
-            let detail = "format=skinning needs a clip whose skeleton has inverse bind matrices".to_owned();
-            return Err(unprocessable("no_inverse_binds", Field::Format, at, detail));
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 /// The clip `id`, checked to render `format`.
 async fn clip_for(state: &AppState, id: &str, format: Format, at: Locate) -> Result<Arc<CachedClip>, ApiError> {
     let cached = super::raw::clip(state, id).await?;
-    format.check_clip(&cached.clip, at)?;
+    check_format(format, &cached.clip, at)?;
     Ok(cached)
 }
 
@@ -128,13 +86,23 @@ impl RawPose<'_> {
         Ok(PoseRequest { t, options, format })
     }
 
-    /// Checks the request, then binds it to the clip `id` at its current version.
+    /// Checks the request, then binds it to the clip `id` at its current
+    /// version and checks what its answer, sent as `wire`, would cost.
     ///
     /// # Errors
-    /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`.
-    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
+    /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`,
+    /// `answer_too_large`.
+    pub async fn resolve(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+    ) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
         let request = self.check()?;
         let cached = clip_for(state, id, request.format, self.at).await?;
+        let estimate = Estimate::pose(&cached.clip, &cached.meta.id, request.format, wire);
+        let cost = Cost { poses: 1, joints: cached.clip.joint_count() as u64, bytes: estimate.total(1) };
+        cost.check(&state.config.limits, Field::Time, self.at)?;
         Ok((request, cached))
     }
 }
@@ -159,6 +127,8 @@ pub struct Sampling {
     pub times: Vec<f64>,
     pub options: SampleOptions,
     pub format: Format,
+    /// The answer's size bound, once bound to a clip (0 before).
+    pub answer_bytes: u64,
 }
 
 impl Sampling {
@@ -166,7 +136,17 @@ impl Sampling {
     pub fn is_blocking(&self) -> bool {
         self.times.len() > BLOCKING_POSES
     }
+
+    /// Whether its answer is big enough to be streamed in pieces (chunked
+    /// REST, `SampleStream`) rather than built whole.
+    pub fn is_large(&self) -> bool {
+        self.answer_bytes > STREAM_ABOVE_BYTES
+    }
 }
+
+/// Answers whose size bound is over this are sent in pieces as they are
+/// evaluated, so a request's memory is a piece, not its answer.
+pub const STREAM_ABOVE_BYTES: u64 = 1024 * 1024;
 
 impl RawBatch<'_> {
     /// # Errors
@@ -176,17 +156,30 @@ impl RawBatch<'_> {
         let options = self.modes.check(self.at)?;
         let format = Format::decode(self.format, self.at)?;
         let times = self.times(max_poses)?;
-        Ok(Sampling { times, options, format })
+        Ok(Sampling { times, options, format, answer_bytes: 0 })
     }
 
     /// Checks the request against the configured pose limit, then binds it to
-    /// the clip `id` at its current version.
+    /// the clip `id` at its current version and checks what its answer, sent
+    /// as `wire`, would cost (before anything is evaluated).
     ///
     /// # Errors
-    /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`.
-    pub async fn resolve(&self, state: &AppState, id: &str) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
-        let sampling = self.check(state.config.limits.max_poses)?;
+    /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`,
+    /// then `too_many_poses` (over `max_joint_poses`), `answer_too_large`.
+    pub async fn resolve(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+    ) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
+        let mut sampling = self.check(state.config.limits.max_poses)?;
         let cached = clip_for(state, id, sampling.format, self.at).await?;
+        let estimate = Estimate::batch(&cached.clip, &cached.meta.id, sampling.format, wire);
+        let poses = sampling.times.len() as u64;
+        let cost = Cost { poses, joints: cached.clip.joint_count() as u64, bytes: estimate.total(poses) };
+        let field = if self.times.is_some() { Field::Times } else { Field::When };
+        cost.check(&state.config.limits, field, self.at)?;
+        sampling.answer_bytes = cost.bytes;
         Ok((sampling, cached))
     }
 

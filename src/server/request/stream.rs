@@ -6,6 +6,7 @@
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
+use super::cost::{Estimate, check_stream};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, unprocessable, whole};
 use crate::server::auth::Caller;
 use crate::server::error::ApiError;
@@ -80,12 +81,16 @@ impl RawStream<'_> {
     ///
     /// # Errors
     /// As [`RawStream::check`], then `clip_not_found`, then the stream
-    /// rules: `fps_out_of_range`, `speed_out_of_range`.
+    /// rules: `fps_out_of_range`, `speed_out_of_range`; then the cost
+    /// model's `frame_too_large`, `stream_rate_too_high`.
     pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Opening, ApiError> {
         let request = self.check()?;
         let cached = super::raw::clip(state, id).await?;
         let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
+        let frame = Estimate::frame(&cached.clip, &clip_id, request.encoding.into());
+        let (fps, limits) = (request.fps, &state.config.limits);
         let params = StreamParams::new(&clip_id, version, cached, request).map_err(|e| self.refused(e))?;
+        check_stream(frame, fps, limits, self.at)?;
         let permit = state.streams.admit_for(caller.addr, caller.token.clone());
         Ok(Opening { params, permit })
     }

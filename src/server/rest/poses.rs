@@ -4,10 +4,14 @@
 //! rules and codes gRPC shares); this module renders the JSON. The clip comes from the cache (compiled once per version); sampling uses a
 //! per-thread [`Sampler`] and matrix buffer, so a request allocates only its
 //! response body, and poses are serialised straight from the core's buffers
-//! into it. Large sample requests run on the blocking pool.
+//! into it. Large sample requests run on the blocking pool; answers whose
+//! size bound is over [`crate::server::request::STREAM_ABOVE_BYTES`] are sent chunked, a piece at a
+//! time as the client reads (see [`Pieces`]).
 
 use std::cell::RefCell;
+use std::sync::Arc;
 
+use axum::body::Body;
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
 use axum::http::{HeaderValue, StatusCode};
@@ -20,7 +24,7 @@ use crate::anim::{SampleOptions, Sampler};
 use crate::server::auth::ReadAccess;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
-use crate::server::request::{Format, Raw, RawBatch, RawModes, RawPose, evaluate, in_body, in_query};
+use crate::server::request::{Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query};
 use crate::server::state::AppState;
 use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
 
@@ -40,7 +44,7 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
     let clip = &cached.clip;
     SCRATCH.with_borrow_mut(|(sampler, matrices)| {
         let clip_time = evaluate(clip, t, options, format, sampler, matrices);
-        let written = match format {
+        match format {
             Format::Trs => {
                 let pose = PoseJson {
                     clip: &cached.meta.id,
@@ -51,7 +55,6 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                     pose: sampler.pose(),
                 };
                 pose.write_to(out);
-                Ok(())
             }
             Format::Matrix | Format::Skinning => {
                 let doc = MatricesJson {
@@ -62,43 +65,10 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                     skeleton: clip.skeleton(),
                     matrices: matrices.as_slice(),
                 };
-                serde_json::to_writer(SmallWrites(&mut *out), &doc)
+                doc.write_to(out);
             }
-        };
-        // Writing into a Vec cannot fail, and every float is finite.
-        debug_assert!(written.is_ok());
-    });
-}
-
-/// A `Vec<u8>` writer that copies short slices byte by byte. serde_json
-/// writes a pose as hundreds of tiny pieces (a float, a comma); through
-/// `Vec::extend_from_slice` each becomes a call to libc `memmove`, which
-/// showed up at ~6% of a pose request's CPU time in `perf`.
-struct SmallWrites<'a>(&'a mut Vec<u8>);
-
-impl std::io::Write for SmallWrites<'_> {
-    #[inline]
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.write_all(buf)?;
-        Ok(buf.len())
-    }
-
-    #[inline]
-    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
-        if buf.len() <= 32 {
-            self.0.reserve(buf.len());
-            for &b in buf {
-                self.0.push(b);
-            }
-        } else {
-            self.0.extend_from_slice(buf);
         }
-        Ok(())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
+    });
 }
 
 fn json_response(body: Vec<u8>) -> Response {
@@ -120,7 +90,7 @@ fn json_response(body: Vec<u8>) -> Response {
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
         (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`)", body = super::schemas::Problem),
+        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`); an answer over `max_answer_bytes` (`answer_too_large`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -131,7 +101,7 @@ pub async fn get_pose(
     Query(q): Query,
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
-    let (req, cached) = raw.resolve(&state, &id).await?;
+    let (req, cached) = raw.resolve(&state, &id, Wire::Json).await?;
     let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
     write_pose(&mut body, &cached, req.t, &req.options, req.format);
     state.counters.poses.increment(1);
@@ -218,10 +188,10 @@ fn parse_sample(body: &[u8]) -> Result<SampleRequest, ApiError> {
     params(("id" = String, Path, description = "Clip id")),
     request_body(content = SampleRequest, content_type = "application/json"),
     responses(
-        (status = 200, description = "`{\"poses\": [pose, ...]}`", body = super::schemas::PosesSchema),
+        (status = 200, description = "`{\"poses\": [pose, ...]}`; sent chunked, as it is evaluated, when the answer may exceed 1 MiB", body = super::schemas::PosesSchema),
         (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses` (over `max_poses`, or poses × joints over `max_joint_poses`), `answer_too_large` (the answer's size bound over `max_answer_bytes`), `no_inverse_binds`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -232,18 +202,16 @@ pub async fn sample(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req = parse_sample(&body)?;
-    let (sampling, cached) = req.raw().resolve(&state, &id).await?;
+    let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
+    if sampling.is_large() {
+        return Ok(json_stream(Pieces::new(state, sampling, cached)));
+    }
     let n = sampling.times.len();
     let blocking = sampling.is_blocking();
     let render = move || {
-        let mut body = Vec::with_capacity(16 + n * (POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count()));
+        let mut body = Vec::with_capacity(sampling.answer_bytes as usize);
         body.extend_from_slice(b"{\"poses\":[");
-        for (k, &t) in sampling.times.iter().enumerate() {
-            if k > 0 {
-                body.push(b',');
-            }
-            write_pose(&mut body, &cached, t, &sampling.options, sampling.format);
-        }
+        write_poses(&mut body, &cached, &sampling, 0..n);
         body.extend_from_slice(b"]}");
         body
     };
@@ -254,4 +222,90 @@ pub async fn sample(
     };
     state.counters.poses.increment(n as u64);
     Ok(json_response(body))
+}
+
+/// Appends the poses `range` of `sampling`, comma-separated as inside
+/// `{"poses":[…]}`.
+fn write_poses(out: &mut Vec<u8>, cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>) {
+    for k in range {
+        if k > 0 {
+            out.push(b',');
+        }
+        write_pose(out, cached, sampling.times[k], &sampling.options, sampling.format);
+    }
+}
+
+/// Bytes of JSON per piece of a streamed answer (at least one pose).
+const PIECE_BYTES: u64 = 64 * 1024;
+
+/// A large answer, evaluated a piece at a time: the next piece is
+/// evaluated (on the blocking pool) only when the client has taken the last
+/// one, so the memory a request holds is a piece, not its answer, and no
+/// thread waits on a slow reader. A client that goes away drops the body,
+/// and with it the rest of the work (counted as abandoned).
+struct Pieces {
+    state: AppState,
+    job: Arc<(Sampling, Arc<CachedClip>)>,
+    /// Poses per piece.
+    per_piece: usize,
+    /// The next pose to evaluate.
+    next: usize,
+    done: bool,
+}
+
+impl Pieces {
+    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>) -> Pieces {
+        let n = sampling.times.len().max(1) as u64;
+        let per_pose = sampling.answer_bytes / n;
+        let per_piece = (PIECE_BYTES / per_pose.max(1)).max(1) as usize;
+        Pieces { state, job: Arc::new((sampling, cached)), per_piece, next: 0, done: false }
+    }
+
+    /// The next piece of the document, `None` after its end.
+    async fn piece(&mut self) -> Option<Result<Vec<u8>, ApiError>> {
+        let n = self.job.0.times.len();
+        if self.done {
+            return None;
+        }
+        let range = self.next..(self.next + self.per_piece).min(n);
+        let job = Arc::clone(&self.job);
+        let render = move || {
+            let (sampling, cached) = &*job;
+            let mut out = Vec::with_capacity(PIECE_BYTES as usize + 64);
+            if range.start == 0 {
+                out.extend_from_slice(b"{\"poses\":[");
+            }
+            write_poses(&mut out, cached, sampling, range.clone());
+            if range.end == sampling.times.len() {
+                out.extend_from_slice(b"]}");
+            }
+            (out, range.len())
+        };
+        let piece = tokio::task::spawn_blocking(render).await.map_err(crate::server::metrics::join_failed);
+        Some(piece.map(|(out, evaluated)| {
+            self.state.counters.poses.increment(evaluated as u64);
+            self.next += evaluated;
+            self.done = self.next == n;
+            out
+        }))
+    }
+}
+
+impl Drop for Pieces {
+    fn drop(&mut self) {
+        if !self.done {
+            self.state.counters.answers_abandoned.increment(1);
+            self.state.counters.poses_abandoned.increment((self.job.0.times.len() - self.next) as u64);
+        }
+    }
+}
+
+/// A 200 whose JSON body is `pieces`, sent as the client reads it.
+fn json_stream(pieces: Pieces) -> Response {
+    let stream = futures_util::stream::unfold(pieces, |mut pieces| async move {
+        let piece = pieces.piece().await?;
+        Some((piece, pieces))
+    });
+    let body = Body::from_stream(stream);
+    (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
 }

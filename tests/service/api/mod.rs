@@ -6,6 +6,7 @@ mod cache;
 mod cli;
 mod clips;
 mod concurrency;
+mod cost;
 mod durability;
 mod import;
 mod numbers;

@@ -265,3 +265,75 @@ async fn every_shared_failure_has_one_code_on_both_protocols() {
     }
     app.stop().await;
 }
+
+/// The cost model's refusals (issue 15), one code on both protocols:
+/// checked on servers whose limits the small example clip can reach.
+#[tokio::test]
+async fn the_cost_refusals_have_one_code_on_both_protocols() {
+    let cost_cases = |id: &str| {
+        let post = |body: Value| Rest::Post(format!("/v1/clips/{id}/sample"), body);
+        let ws = |q: &str| Rest::Ws(format!("/v1/clips/{id}/stream?{q}"));
+        let case = |what, rest, rpc, code, status| Case { what, rest, rpc, code, status };
+        vec![
+            // 10,000 poses × 2 joints: over max_joint_poses (10,000).
+            case(
+                "poses × joints over the work limit",
+                post(json!({"start": 0, "end": 9999, "fps": 1})),
+                batch(id, range(0.0, 9999.0, 1.0), |_| {}),
+                "too_many_poses",
+                422,
+            ),
+            // 200 poses: over 4 KiB as JSON (~100 KB) and as protobuf (~16 KB).
+            case(
+                "answer over max_answer_bytes",
+                post(json!({"start": 0, "end": 199, "fps": 1})),
+                batch(id, range(0.0, 199.0, 1.0), |_| {}),
+                "answer_too_large",
+                422,
+            ),
+            case("frame over max_frame_bytes", ws("fps=1"), stream(id, |r| r.fps = 1), "frame_too_large", 422),
+        ]
+    };
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.max_joint_poses = 10_000;
+            c.limits.max_answer_bytes = 4096;
+            c.limits.max_frame_bytes = 64;
+        })
+        .start()
+        .await;
+    let id = app.create_id(WAVE, None).await;
+    check_both_ways(&app, cost_cases(&id)).await;
+    app.stop().await;
+
+    // A frame of the example clip is a few hundred bytes: 30 of them a second are over 1,000 bytes/s.
+    let app = TestApp::builder().configure(|c| c.limits.max_stream_bytes_per_sec = 1000).start().await;
+    let id = app.create_id(WAVE, None).await;
+    let ws = Rest::Ws(format!("/v1/clips/{id}/stream?fps=30"));
+    let rate = Case {
+        what: "stream over its byte rate",
+        rest: ws,
+        rpc: stream(&id, |_| {}),
+        code: "stream_rate_too_high",
+        status: 422,
+    };
+    check_both_ways(&app, vec![rate]).await;
+    app.stop().await;
+}
+
+async fn check_both_ways(app: &TestApp, cases: Vec<Case>) {
+    let mut grpc = app.grpc().await;
+    for case in cases {
+        let (status, code) = rest_refusal(app, &case.rest).await;
+        assert_eq!((status, code.as_str()), (case.status, case.code), "{}: REST", case.what);
+        let refused = rpc_refusal(&mut grpc, case.rpc).await;
+        let grpc_code = refused.metadata().get("x-error-code").map(|v| v.to_str().unwrap().to_owned());
+        assert_eq!(grpc_code.as_deref(), Some(case.code), "{}: gRPC {refused:?}", case.what);
+        assert!(
+            grpc_codes_for(status).contains(&refused.code()),
+            "{}: HTTP {status} but gRPC {:?}",
+            case.what,
+            refused.code()
+        );
+    }
+}

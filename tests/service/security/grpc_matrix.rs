@@ -15,6 +15,7 @@ use super::{ADMIN, Need, Outcome, Role, TestApp, WAVE, expected, scoped_tokens, 
 const RPCS: &[(&str, Need)] = &[
     ("Sample", Need::Scope(Scope::Read)),
     ("SampleBatch", Need::Scope(Scope::Read)),
+    ("SampleStream", Need::Scope(Scope::Read)),
     ("StreamFrames", Need::Scope(Scope::Read)),
     ("Play", Need::Scope(Scope::Read)),
     ("GetClip", Need::Scope(Scope::Read)),
@@ -54,6 +55,13 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             let when = pb::sample_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
             let req = pb::SampleBatchRequest { clip_id: id, when: Some(when), ..Default::default() };
             grpc.sample_batch(with_token(req, t)).await.map(drop)
+        }
+        "SampleStream" => {
+            let when = pb::sample_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
+            let req = pb::SampleBatchRequest { clip_id: id, when: Some(when), ..Default::default() };
+            let mut batches = grpc.sample_stream(with_token(req, t)).await?.into_inner();
+            batches.message().await?.expect("a first batch");
+            Ok(())
         }
         "StreamFrames" => {
             let mut frames = grpc.stream_frames(with_token(stream_request(&id), t)).await?.into_inner();
