@@ -17,6 +17,7 @@ mod behaviour;
 mod cli;
 mod import;
 mod lecture;
+mod motion;
 mod playback;
 mod properties;
 mod random;
