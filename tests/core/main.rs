@@ -22,6 +22,7 @@ mod playback;
 mod properties;
 mod random;
 mod reference;
+mod root_motion;
 mod seam;
 mod tidy;
 mod validation;

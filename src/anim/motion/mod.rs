@@ -17,6 +17,7 @@
 mod error;
 mod layering;
 mod mask;
+pub mod root;
 mod sampler;
 mod spec;
 mod sync;
@@ -24,10 +25,12 @@ mod sync;
 use std::sync::Arc;
 
 pub use error::{MotionError, MotionErrorKind};
-pub use sampler::{MotionOptions, MotionSampler};
+pub use root::Planar;
+pub use sampler::{MotionOptions, MotionSampler, RootMotion};
 pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
 
 use self::error::MotionErrorKind as K;
+use self::root::motion_transform;
 use self::sync::SyncGroup;
 use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
 
@@ -72,6 +75,24 @@ pub struct Motion<C> {
     durations: Vec<f64>,
     /// The layer weights the motion was built with.
     weights: Vec<f32>,
+    root: Option<RootSetup>,
+}
+
+/// Root motion as built: the output skeleton's root-motion joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RootSetup {
+    joint: usize,
+    mode: RootMode,
+    up: UpAxis,
+}
+
+/// A layer's root-motion joint (in its clip) and its clip's `M(start)` and
+/// whole cycle `W = M(start)⁻¹·M(end)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LayerRoot {
+    joint: usize,
+    start: Planar,
+    whole: Planar,
 }
 
 #[derive(Debug, Clone)]
@@ -85,6 +106,8 @@ struct Layer<C> {
     time: LayerTime,
     /// Additive layers: the reference pose, in the layer clip's joints.
     reference: Option<Pose>,
+    /// With root motion, when the layer's clip has the root joint.
+    root: Option<LayerRoot>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -124,10 +147,18 @@ impl<C: ClipSource> Motion<C> {
                 reference: (layer.mode == LayerMode::Additive)
                     .then(|| reference_pose(layer.clip.clip(), layer.reference_time)),
                 mode: layer.mode,
+                root: None,
                 clip: layer.clip,
             });
         }
-        Ok(Motion { layers, groups, durations, weights })
+        let root = root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?;
+        if let Some(setup) = root {
+            let name = layers[0].clip.clip().skeleton().names()[setup.joint].clone();
+            for layer in &mut layers {
+                layer.root = layer_root(layer.clip.clip(), &name, setup.up);
+            }
+        }
+        Ok(Motion { layers, groups, durations, weights, root })
     }
 
     /// The output skeleton: the first layer's clip's.
@@ -201,6 +232,35 @@ fn layer_time<C: ClipSource>(layer: &LayerSpec<C>, index: usize, groups: &mut Ve
     let phase0 = if duration > 0.0 { (layer.offset - f64::from(range.start())) / duration } else { 0.0 };
     groups.push(SyncGroup { name: name.clone(), members: vec![index], phase0, speed: layer.speed });
     LayerTime::Synced { group: groups.len() - 1 }
+}
+
+/// The root-motion joint of the output skeleton: the named one, or the
+/// first root joint with a translation track.
+fn root_setup(spec: Option<&RootMotionSpec>, first: &Clip) -> Result<Option<RootSetup>, MotionError> {
+    let Some(spec) = spec else { return Ok(None) };
+    let skeleton = first.skeleton();
+    let joint = match &spec.joint {
+        Some(name) => skeleton.index_of(name).ok_or_else(|| {
+            MotionError::new(Path::root().field("root_motion").field("joint"), K::UnknownJoint { joint: name.clone() })
+        })?,
+        None => (0..skeleton.len())
+            .find(|&j| skeleton.parent(j).is_none() && first.has_translation_track(j))
+            .ok_or_else(|| MotionError::new(Path::root().field("root_motion"), K::NoRootJoint))?,
+    };
+    Ok(Some(RootSetup { joint, mode: spec.mode, up: spec.up }))
+}
+
+/// `clip`'s joint `name` with its `M(start)` and whole cycle, if it has one.
+fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
+    let joint = clip.skeleton().index_of(name)?;
+    let range = clip.range();
+    let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
+    let mut at = |t: f32| {
+        clip.sample_into(t, &mut cursor, &mut pose);
+        motion_transform(up, pose.translations[joint], pose.rotations[joint])
+    };
+    let (start, end) = (at(range.start()), at(range.end()));
+    Some(LayerRoot { joint, start, whole: start.inverse(up).then(end, up) })
 }
 
 /// Per output joint, the same-named joint of `layer` (or `UNMAPPED`).
