@@ -10,6 +10,35 @@ pub struct MotionSpec<C> {
     pub root_motion: Option<RootMotionSpec>,
 }
 
+impl<C> MotionSpec<C> {
+    /// The same motion with each layer's clip replaced by `f(layer index,
+    /// clip)`: how the edge swaps clip ids for the clips it looked up.
+    ///
+    /// # Errors
+    /// The first error `f` returns.
+    pub fn try_map<D, E>(self, mut f: impl FnMut(usize, C) -> Result<D, E>) -> Result<MotionSpec<D>, E> {
+        let layers = self
+            .layers
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                Ok(LayerSpec {
+                    clip: f(i, l.clip)?,
+                    weight: l.weight,
+                    mode: l.mode,
+                    mask: l.mask,
+                    offset: l.offset,
+                    speed: l.speed,
+                    playback: l.playback,
+                    sync: l.sync,
+                    reference_time: l.reference_time,
+                })
+            })
+            .collect::<Result<_, E>>()?;
+        Ok(MotionSpec { layers, root_motion: self.root_motion })
+    }
+}
+
 /// One layer: a clip (already looked up, at the version it is pinned to)
 /// and how it contributes.
 #[derive(Debug, Clone)]
