@@ -49,6 +49,8 @@ pub struct Clip {
     rotations: QuatTracks,
     scales: Vec3Tracks,
     track_count: usize,
+    /// Joints with a translation track, in track order (root motion's default joint).
+    translated: Vec<u32>,
     events: Vec<Event>,
 }
 
@@ -112,6 +114,7 @@ impl Clip {
             (Vec3Tracks::default(), QuatTracks::default(), Vec3Tracks::default());
         let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut bounds = JointBounds::of_rest(skeleton.rest());
+        let mut translated = Vec::new();
         for (i, track) in spec.tracks.iter().enumerate() {
             let path = Path::root().field("tracks").index(i);
             let joint = skeleton.index_of(&track.joint).ok_or_else(|| {
@@ -125,6 +128,9 @@ impl Clip {
             }
             let j = joint;
             let joint = joint as u32;
+            if track.channel == Channel::Translation {
+                translated.push(joint);
+            }
             let domain = if track.channel == Channel::Rotation {
                 let Compiled { times, curve, domain } = compile::quat_track(track, &path)?;
                 rotations.push(joint, intern(times), curve, &mut base.rotations[j]);
@@ -174,6 +180,7 @@ impl Clip {
             rotations,
             scales,
             track_count: spec.tracks.len(),
+            translated,
             events,
         })
     }
@@ -207,6 +214,11 @@ impl Clip {
 
     pub fn joint_count(&self) -> usize {
         self.skeleton.len()
+    }
+
+    /// Whether joint `j` has a translation track (even a constant one).
+    pub fn has_translation_track(&self, j: usize) -> bool {
+        self.translated.contains(&(j as u32))
     }
 
     pub fn track_count(&self) -> usize {

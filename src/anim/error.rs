@@ -11,6 +11,8 @@ use std::fmt;
 pub enum Step {
     Field(&'static str),
     Index(usize),
+    /// A key of a JSON object given by the user (a mask's joint name).
+    Key(String),
 }
 
 /// A place in a clip document, outermost first.
@@ -32,6 +34,11 @@ impl Path {
         self
     }
 
+    pub fn key(mut self, key: &str) -> Self {
+        self.0.push(Step::Key(key.to_owned()));
+        self
+    }
+
     /// `/tracks/3/times/5` (RFC 6901).
     pub fn to_pointer(&self) -> String {
         let mut s = String::new();
@@ -40,6 +47,8 @@ impl Path {
             match step {
                 Step::Field(f) => s.push_str(f),
                 Step::Index(i) => s.push_str(&i.to_string()),
+                // RFC 6901: `~` is `~0`, `/` is `~1`.
+                Step::Key(k) => s.push_str(&k.replace('~', "~0").replace('/', "~1")),
             }
         }
         s

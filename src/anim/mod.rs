@@ -15,13 +15,15 @@
 //! curves and their evaluation; `quat` quaternion tools and fast slerp;
 //! `time` request time → clip time (playback, ease, the seams);
 //! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
-//! hierarchy and model space; `clip` the clip and the sampling kernel.
+//! hierarchy and model space; `clip` the clip and the sampling kernel; `motion` composition (SPEC §6): layers,
+//! masks, sync groups, over clips.
 
 mod arc;
 mod clip;
 mod compile;
 mod curve;
 mod error;
+pub mod motion;
 pub mod quat;
 mod skeleton;
 mod spec;
@@ -31,6 +33,7 @@ mod tracks;
 
 pub use clip::{Clip, Cursor, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times};
 pub use error::{ClipError, ClipErrorKind, Path, Step};
+pub use motion::{ClipSource, Motion, MotionError, MotionSampler};
 pub use skeleton::{Pose, Skeleton};
 pub use spec::{
     Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Space, Speed,

@@ -2,4 +2,5 @@
 //! and from the core (`[x, y, z, w]` quaternion order is fixed here).
 
 pub mod json;
+pub mod motion;
 pub mod proto;

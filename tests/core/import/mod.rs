@@ -10,7 +10,7 @@ mod fuzz_regressions;
 mod gltf_interpolation;
 mod gltf_skinned;
 mod hostile;
-mod reference;
+pub mod reference;
 
 use inbetween::anim::{Clip, ClipSpec, Playback, SampleOptions, Sampler, Space};
 use inbetween::import::{Format, ImportOptions, Imported, import, import_with};

@@ -1,0 +1,223 @@
+//! Sampling a [`Motion`]: each layer's clip time, its local pose, then the
+//! layering of every output joint, bottom to top, over the rest pose; with
+//! root motion, each layer's motion transform, the layered delta since the
+//! previous sample and the running total.
+
+use super::layering::{self, Joint};
+use super::root::{self, Planar, motion_transform};
+use super::sync::position;
+use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode, UNMAPPED};
+use crate::anim::{Clip, Cursor, Ease, Playback, Pose, Space};
+
+/// How a request samples a motion.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MotionOptions {
+    /// Applied to every layer's clip time after its playback.
+    pub ease: Ease,
+    pub space: Space,
+}
+
+/// Root motion of one sample: the layered delta since the previous sample
+/// of this sampler (0 for the first) and the total since the first.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RootMotion {
+    pub delta: Planar,
+    pub total: Planar,
+}
+
+/// Reusable buffers: one per playback or per worker. It remembers each
+/// layer's root position between samples, so consecutive samples report
+/// the root's travel between them.
+#[derive(Debug, Clone, Default)]
+pub struct MotionSampler {
+    cursors: Vec<Cursor>,
+    layer: Pose,
+    local: Pose,
+    model: Pose,
+    space: Space,
+    phases: Vec<f64>,
+    clip_times: Vec<f32>,
+    /// Per layer: its loop cycle and root motion transform, now and at the
+    /// previous sample (`None`: no root in that layer, or no previous).
+    roots: Vec<Option<(i64, Planar)>>,
+    previous: Vec<Option<(i64, Planar)>>,
+    root_motion: Option<RootMotion>,
+}
+
+impl MotionSampler {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The pose of the last sample, in the space it asked for.
+    pub fn pose(&self) -> &Pose {
+        match self.space {
+            Space::Local => &self.local,
+            Space::Model => &self.model,
+        }
+    }
+
+    /// The local pose of the last sample, whatever space was asked for.
+    pub fn local(&self) -> &Pose {
+        &self.local
+    }
+
+    /// Each layer's clip time in the last sample.
+    pub fn clip_times(&self) -> &[f32] {
+        &self.clip_times
+    }
+
+    /// The last sample's root motion, for motions that ask for it.
+    pub fn root_motion(&self) -> Option<RootMotion> {
+        self.root_motion
+    }
+
+    /// The next sample's delta is 0 (a jump: a seek), the total carries on.
+    pub fn rebase_root(&mut self) {
+        self.previous.clear();
+    }
+
+    /// The next sample starts the root motion afresh: delta and total 0.
+    pub fn restart_root(&mut self) {
+        self.previous.clear();
+        self.root_motion = None;
+    }
+}
+
+impl<C: ClipSource> Motion<C> {
+    /// The pose at motion time `tau` with the motion's own weights (a
+    /// request's answer). Returns the first layer's clip time.
+    pub fn sample(&self, tau: f64, options: &MotionOptions, sampler: &mut MotionSampler) -> f32 {
+        let mut phases = std::mem::take(&mut sampler.phases);
+        self.phases_at(tau, &self.weights, &mut phases);
+        let clip_time = self.sample_with(tau, &phases, &self.weights, options, sampler);
+        sampler.phases = phases;
+        clip_time
+    }
+
+    /// The pose at motion time `tau` with sync-group `phases` (from
+    /// [`Motion::phases_at`] or kept by a stream) and live layer
+    /// `weights`. Returns the first layer's clip time.
+    pub fn sample_with(
+        &self,
+        tau: f64,
+        phases: &[f64],
+        weights: &[f32],
+        options: &MotionOptions,
+        sampler: &mut MotionSampler,
+    ) -> f32 {
+        let MotionSampler { cursors, layer: scratch, local, clip_times, roots, .. } = sampler;
+        cursors.resize_with(self.layers.len(), Cursor::default);
+        roots.clear();
+        clip_times.clear();
+        for (i, layer) in self.layers.iter().enumerate() {
+            let clip = layer.clip.clip();
+            let (t, cycle) = self.layer_time(i, tau, phases, options.ease);
+            clip_times.push(t);
+            let direct =
+                i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.mask.iter().all(|m| *m >= 1.0);
+            if direct {
+                // The common case, and the bit-for-bit promise: the first
+                // full-weight layer is the clip's own pose.
+                clip.sample_into(t, &mut cursors[0], local);
+                roots.push(self.take_root(layer, cycle, local));
+                continue;
+            }
+            if i == 0 {
+                local.copy_from(self.skeleton().rest());
+            }
+            clip.sample_into(t, &mut cursors[i], scratch);
+            roots.push(self.take_root(layer, cycle, scratch));
+            layer.apply(scratch, weights[i], local);
+        }
+        if self.root.is_some() {
+            self.layer_root_motion(weights, sampler);
+        }
+        if options.space == Space::Model {
+            self.skeleton().to_model(&sampler.local, &mut sampler.model);
+        }
+        sampler.space = options.space;
+        sampler.clip_times[0]
+    }
+
+    /// Layer `i`'s clip time at `tau` and its loop cycle (0 unless it loops).
+    fn layer_time(&self, i: usize, tau: f64, phases: &[f64], ease: Ease) -> (f32, i64) {
+        let clip: &Clip = self.layers[i].clip.clip();
+        let range = clip.range();
+        let looping = range.duration() > 0.0;
+        match self.layers[i].time {
+            LayerTime::Free { offset, speed, playback } => {
+                let x = offset + speed * tau;
+                let cycle = if playback == Playback::Loop && looping { range.cycle(range.offset(x)).0 } else { 0.0 };
+                (clip.clip_time(x, playback, ease), cycle as i64)
+            }
+            LayerTime::Synced { group } => {
+                let x = position(phases[group], self.durations[i]);
+                let cycle = if looping { phases[group].floor() + range.cycle(x).0 } else { 0.0 };
+                (range.clip_time(f64::from(range.start()) + x, Playback::Loop, ease), cycle as i64)
+            }
+        }
+    }
+
+    /// The layer's root motion transform in `pose` (its clip's joints) and
+    /// its cycle; with `extract`, a blend layer's root is put back at its
+    /// clip's start position and heading.
+    fn take_root(&self, layer: &super::Layer<C>, cycle: i64, pose: &mut Pose) -> Option<(i64, Planar)> {
+        let (setup, root) = (self.root?, layer.root?);
+        let (t, q) = (pose.translations[root.joint], pose.rotations[root.joint]);
+        let m = motion_transform(setup.up, t, q);
+        if setup.mode == RootMode::Extract && layer.mode == LayerMode::Blend {
+            let in_place = root.start.then(m.inverse(setup.up), setup.up);
+            (pose.translations[root.joint], pose.rotations[root.joint]) = in_place.apply(setup.up, t, q);
+        }
+        Some((cycle, m))
+    }
+
+    /// The blend layers' deltas since the previous sample, layered like the
+    /// pose (lerped by weight times the root's mask, from a zero delta), and
+    /// the total.
+    fn layer_root_motion(&self, weights: &[f32], sampler: &mut MotionSampler) {
+        let Some(setup) = self.root else { return };
+        let mut delta = Planar::IDENTITY;
+        if sampler.previous.len() == self.layers.len() {
+            for (i, layer) in self.layers.iter().enumerate() {
+                let (Some(root), Some(from), Some(to)) = (layer.root, sampler.previous[i], sampler.roots[i]) else {
+                    continue;
+                };
+                if layer.mode == LayerMode::Blend {
+                    let w = f64::from(weights[i] * layer.mask[setup.joint]);
+                    delta = delta.lerp(root::delta(from, to, root.start, root.whole, setup.up), w);
+                }
+            }
+        }
+        let total = sampler.root_motion.map_or(Planar::IDENTITY, |r| r.total).then(delta, setup.up);
+        sampler.root_motion = Some(RootMotion { delta, total });
+        sampler.previous.clone_from(&sampler.roots);
+    }
+}
+
+impl<C> super::Layer<C> {
+    /// Layers this layer's `pose` (in its clip's joints) onto `out` (in the
+    /// output skeleton's) at layer weight `weight`.
+    fn apply(&self, pose: &Pose, weight: f32, out: &mut Pose) {
+        for (j, (&source, &mask)) in self.map.iter().zip(&self.mask).enumerate() {
+            let w = weight * mask;
+            if source == UNMAPPED || w <= 0.0 {
+                continue;
+            }
+            let layer = joint(pose, source as usize);
+            let mut joint_now = joint(out, j);
+            match &self.reference {
+                None => layering::blend(&mut joint_now, &layer, w),
+                Some(reference) => layering::add(&mut joint_now, &layer, &joint(reference, source as usize), w),
+            }
+            out.translations[j] = joint_now.t;
+            out.rotations[j] = joint_now.q;
+            out.scales[j] = joint_now.s;
+        }
+    }
+}
+
+fn joint(pose: &Pose, j: usize) -> Joint {
+    Joint { t: pose.translations[j], q: pose.rotations[j], s: pose.scales[j] }
+}

@@ -1,0 +1,198 @@
+//! The JSON motion (SPEC §6): layers of clips by id, masks, sync groups and
+//! root motion, parsed strictly (unknown fields refused) into the core's
+//! [`MotionSpec`] with the clip ids still to be looked up.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::json::PlaybackDoc;
+use crate::anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MotionDoc {
+    /// Bottom to top; the first layer's clip gives the output skeleton.
+    pub layers: Vec<LayerDoc>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub root_motion: Option<RootMotionDoc>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LayerDoc {
+    /// A clip id; the version is pinned when the request or stream starts.
+    pub clip: String,
+    /// In [0, 1].
+    #[serde(default = "one")]
+    pub weight: f32,
+    #[serde(default)]
+    pub mode: LayerModeDoc,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<MaskDoc>,
+    /// Clip time at motion time 0.
+    #[serde(default)]
+    pub offset: f64,
+    #[serde(default = "one_f64")]
+    pub speed: f64,
+    /// Default: the clip's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub playback: Option<PlaybackDoc>,
+    /// A sync group's name: its layers share one normalised phase.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sync: Option<String>,
+    /// Additive layers: the clip time of the reference pose (default the clip's start).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_time: Option<f64>,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+fn one_f64() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LayerModeDoc {
+    #[default]
+    Blend,
+    Additive,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MaskDoc {
+    /// Joint names and their weights in [0, 1].
+    #[serde(default)]
+    pub joints: BTreeMap<String, f32>,
+    /// A named joint's weight extends to its descendants (the nearest named ancestor wins).
+    #[serde(default)]
+    pub descendants: bool,
+    /// Joints not covered: default 0 when `joints` names any, else 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub default: Option<f32>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RootMotionDoc {
+    /// Default: the first root joint with a translation track.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<String>,
+    #[serde(default)]
+    pub mode: RootModeDoc,
+    #[serde(default)]
+    pub up: UpAxisDoc,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum RootModeDoc {
+    #[default]
+    Report,
+    Extract,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum UpAxisDoc {
+    #[default]
+    Y,
+    Z,
+}
+
+impl MotionDoc {
+    /// The core's authoring form, with clip ids in place of clips.
+    pub fn to_spec(&self) -> MotionSpec<String> {
+        MotionSpec {
+            layers: self.layers.iter().map(LayerDoc::to_spec).collect(),
+            root_motion: self.root_motion.as_ref().map(|r| RootMotionSpec {
+                joint: r.joint.clone(),
+                mode: match r.mode {
+                    RootModeDoc::Report => RootMode::Report,
+                    RootModeDoc::Extract => RootMode::Extract,
+                },
+                up: match r.up {
+                    UpAxisDoc::Y => UpAxis::Y,
+                    UpAxisDoc::Z => UpAxis::Z,
+                },
+            }),
+        }
+    }
+
+    /// A plain clip request as a motion: one full-weight layer.
+    pub fn of_clip(id: &str) -> MotionDoc {
+        MotionDoc { layers: vec![LayerDoc::default_for(id)], root_motion: None }
+    }
+}
+
+impl LayerDoc {
+    fn default_for(clip: &str) -> LayerDoc {
+        LayerDoc {
+            clip: clip.to_owned(),
+            weight: 1.0,
+            mode: LayerModeDoc::Blend,
+            mask: None,
+            offset: 0.0,
+            speed: 1.0,
+            playback: None,
+            sync: None,
+            reference_time: None,
+        }
+    }
+
+    fn to_spec(&self) -> LayerSpec<String> {
+        LayerSpec {
+            clip: self.clip.clone(),
+            weight: self.weight,
+            mode: match self.mode {
+                LayerModeDoc::Blend => LayerMode::Blend,
+                LayerModeDoc::Additive => LayerMode::Additive,
+            },
+            mask: self.mask.as_ref().map(|m| MaskSpec {
+                joints: m.joints.iter().map(|(name, w)| (name.clone(), *w)).collect(),
+                descendants: m.descendants,
+                default: m.default,
+            }),
+            offset: self.offset,
+            speed: self.speed,
+            playback: self.playback.map(Into::into),
+            sync: self.sync.clone(),
+            reference_time: self.reference_time,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_spec_example_parses_with_its_defaults() {
+        let doc: MotionDoc = serde_json::from_str(
+            r#"{"layers": [
+                {"clip": "walk", "weight": 1.0, "sync": "locomotion"},
+                {"clip": "run", "weight": 0.3, "sync": "locomotion"},
+                {"clip": "wave", "mask": {"joints": {"spine": 1, "arm_l": 1}, "descendants": true}},
+                {"clip": "breathe", "mode": "additive", "weight": 0.5, "reference_time": 0}
+            ], "root_motion": {"joint": "hips", "mode": "extract"}}"#,
+        )
+        .unwrap();
+        let spec = doc.to_spec();
+        assert_eq!(spec.layers.len(), 4);
+        assert_eq!((spec.layers[2].weight, spec.layers[2].speed, spec.layers[2].offset), (1.0, 1.0, 0.0));
+        assert_eq!(spec.layers[2].mask.as_ref().unwrap().joints, vec![("arm_l".into(), 1.0), ("spine".into(), 1.0)]);
+        assert_eq!(spec.layers[3].mode, LayerMode::Additive);
+        let root = spec.root_motion.unwrap();
+        assert_eq!((root.joint.as_deref(), root.mode, root.up), (Some("hips"), RootMode::Extract, UpAxis::Y));
+    }
+
+    #[test]
+    fn unknown_fields_are_refused() {
+        assert!(serde_json::from_str::<MotionDoc>(r#"{"layers": [{"clip": "a", "wieght": 1}]}"#).is_err());
+        assert!(serde_json::from_str::<MotionDoc>(r#"{"layers": [], "ik2": []}"#).is_err());
+    }
+}
