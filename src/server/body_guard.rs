@@ -22,12 +22,15 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
+use super::shed::Arrivals;
 
 /// The limits the middleware applies.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct BodyGuard {
     pub max_bytes: usize,
     pub read_timeout: Duration,
+    /// The budget of bodies held at once (`max_arriving_bytes`).
+    pub arrivals: Arrivals,
 }
 
 /// The middleware (see the module doc).
@@ -42,8 +45,13 @@ pub async fn guard(State(g): State<BodyGuard>, request: Request, next: Next) -> 
     }
     let (parts, body) = request.into_parts();
     let deadline = tokio::time::Instant::now() + g.read_timeout;
-    match tokio::time::timeout_at(deadline, read_whole(body, g.max_bytes)).await {
-        Ok(Ok(bytes)) => next.run(Request::from_parts(parts, Body::from(bytes))).await,
+    let mut held = None;
+    match tokio::time::timeout_at(deadline, read_whole(body, &g, &mut held)).await {
+        Ok(Ok(bytes)) => {
+            let response = next.run(Request::from_parts(parts, Body::from(bytes))).await;
+            drop(held);
+            response
+        }
         Ok(Err(e)) => closing(e),
         Err(_) => {
             metrics::counter!("inbetween_body_timeouts_total").increment(1);
@@ -52,16 +60,22 @@ pub async fn guard(State(g): State<BodyGuard>, request: Request, next: Next) -> 
     }
 }
 
-/// The whole body, or 413 once it passes `max_bytes` (400 if the client
-/// breaks the stream off).
-async fn read_whole(mut body: Body, max_bytes: usize) -> Result<Bytes, ApiError> {
+/// The whole body, counted into `held` against the arrival budget as it
+/// comes; 413 once it passes `max_bytes`, 503 past the budget (400 if the
+/// client breaks the stream off).
+async fn read_whole(
+    mut body: Body,
+    g: &BodyGuard,
+    held: &mut Option<tokio::sync::OwnedSemaphorePermit>,
+) -> Result<Bytes, ApiError> {
     let mut whole = bytes::BytesMut::new();
     while let Some(frame) = std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await {
         let frame = frame.map_err(|e| ApiError::parameter("body_incomplete", "body", format!("{e}")))?;
         let Ok(data) = frame.into_data() else { continue };
-        if whole.len() + data.len() > max_bytes {
-            return Err(ApiError::PayloadTooLarge { limit: max_bytes });
+        if whole.len() + data.len() > g.max_bytes {
+            return Err(ApiError::PayloadTooLarge { limit: g.max_bytes });
         }
+        g.arrivals.take(held, data.len())?;
         whole.extend_from_slice(&data);
     }
     Ok(whole.freeze())

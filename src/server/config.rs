@@ -294,6 +294,10 @@ settings! {
         stream_buffer_bytes: usize = 256 * 1024 => positive -> usize,
             "stream_buffer_bytes", "stream-buffer-bytes", "INBETWEEN_STREAM_BUFFER_BYTES", "BYTES",
             "Bytes of frames a stream viewer may leave unread before its stream is closed (slow consumer)";
+        max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
+            "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
+            "Bytes of request bodies and first gRPC messages held at once, all requests together, from arrival \
+             until the request ends; a request that would pass it is answered 503 `overloaded`";
     }
 }
 
@@ -424,6 +428,9 @@ impl Limits {
     fn check_buffers(&self) -> anyhow::Result<()> {
         if self.ws_max_write_buffer_bytes <= self.ws_write_buffer_bytes {
             bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        }
+        if self.max_arriving_bytes < self.max_body_bytes {
+            bail!("max_arriving_bytes must be at least max_body_bytes");
         }
         Ok(())
     }
@@ -754,6 +761,7 @@ mod tests {
             idle_timeout: Duration::from_secs(60),
             max_connections: 4096,
             stream_buffer_bytes: 262_144,
+            max_arriving_bytes: 268_435_456,
         };
         assert_eq!(c.limits, expected);
     }

@@ -124,6 +124,7 @@ impl Application {
             cache,
             writes,
             in_flight: shed::Clients::new(config.limits.max_in_flight_per_client),
+            arrivals: shed::Arrivals::new(config.limits.max_arriving_bytes),
             auth: auth::Auth::new(Arc::clone(&config)),
             config,
             metrics: metrics::handle(),
@@ -214,6 +215,7 @@ impl Application {
                 gate: shed::Gate::new(limits.max_in_flight),
                 clients: Arc::clone(&state.in_flight),
             },
+            arrivals: state.arrivals.clone(),
             auth: state.auth.clone(),
             message_timeout: limits.request_message_timeout,
         };

@@ -50,6 +50,36 @@ impl Gate {
     }
 }
 
+/// The bytes of request bodies (and first gRPC messages) held at once, from
+/// their arrival until their request ends (`max_arriving_bytes`): arrival
+/// comes before admission, so this is what bounds the memory of many
+/// requests sending at once.
+#[derive(Debug, Clone)]
+pub struct Arrivals(Arc<Semaphore>);
+
+impl Arrivals {
+    pub fn new(max_bytes: usize) -> Arrivals {
+        Arrivals(Arc::new(Semaphore::new(max_bytes.min(Semaphore::MAX_PERMITS))))
+    }
+
+    /// Counts `bytes` more into `held`, or refuses (503) past the budget.
+    ///
+    /// # Errors
+    /// [`ApiError::Overloaded`] when the budget cannot take them now.
+    pub fn take(&self, held: &mut Option<OwnedSemaphorePermit>, bytes: usize) -> Result<(), ApiError> {
+        if bytes == 0 {
+            return Ok(());
+        }
+        let permits = u32::try_from(bytes).map_err(|_| shed("arrival"))?;
+        let more = Arc::clone(&self.0).try_acquire_many_owned(permits).map_err(|_| shed("arrival"))?;
+        match held {
+            Some(permit) => permit.merge(more),
+            None => *held = Some(more),
+        }
+        Ok(())
+    }
+}
+
 /// Requests in flight per caller (REST and gRPC together).
 #[derive(Debug)]
 pub struct Clients {
@@ -153,6 +183,7 @@ pub async fn rest(State(admission): State<Admission>, request: Request, next: Ne
 #[derive(Debug, Clone)]
 pub struct GrpcLayer {
     pub admission: Admission,
+    pub arrivals: Arrivals,
     pub auth: Auth,
     pub message_timeout: Duration,
 }
@@ -199,14 +230,14 @@ where
         std::mem::swap(&mut inner, &mut self.inner);
         let layer = self.layer.clone();
         Box::pin(async move {
-            let request = match first_message(request, layer.message_timeout).await {
-                Ok(request) => request,
+            let (request, held) = match first_message(request, layer.message_timeout, &layer.arrivals).await {
+                Ok(arrived) => arrived,
                 Err(e) => return Ok(tonic::Status::from(e).into_http()),
             };
             match layer.admission.admit(key_of(Some(&identity)), "grpc") {
                 Ok(slots) => {
                     let response = inner.call(request).await;
-                    drop(slots);
+                    drop((slots, held));
                     response
                 }
                 Err(e) => Ok(tonic::Status::from(e).into_http()),
@@ -227,25 +258,37 @@ fn identify(auth: &Auth, request: &GrpcRequest) -> Identity {
 /// `request` once its first gRPC message has fully arrived (or its body
 /// ended, or the message is too long to wait for: tonic then answers),
 /// with the bytes read so far put back in front of the body.
-async fn first_message(request: GrpcRequest, timeout: Duration) -> Result<GrpcRequest, ApiError> {
+async fn first_message(
+    request: GrpcRequest,
+    timeout: Duration,
+    arrivals: &Arrivals,
+) -> Result<(GrpcRequest, Option<OwnedSemaphorePermit>), ApiError> {
     let (parts, mut body) = request.into_parts();
     let mut head = bytes::BytesMut::new();
+    let mut held = None;
     let read = async {
         while !message_complete(&head) {
             let Some(frame) = std::future::poll_fn(|cx| Pin::new(&mut body).poll_frame(cx)).await else { break };
             match frame.map(Frame::into_data) {
-                Ok(Ok(data)) => head.extend_from_slice(&data),
+                Ok(Ok(data)) => {
+                    arrivals.take(&mut held, data.len())?;
+                    head.extend_from_slice(&data);
+                }
                 // Trailers, or a broken stream: tonic reports it.
                 _ => break,
             }
         }
+        Ok::<(), ApiError>(())
     };
-    if tokio::time::timeout(timeout, read).await.is_err() {
-        metrics::counter!("inbetween_message_timeouts_total").increment(1);
-        return Err(ApiError::BodyTimeout { secs: timeout.as_secs() });
+    match tokio::time::timeout(timeout, read).await {
+        Ok(read) => read?,
+        Err(_) => {
+            metrics::counter!("inbetween_message_timeouts_total").increment(1);
+            return Err(ApiError::BodyTimeout { secs: timeout.as_secs() });
+        }
     }
     let body = tonic::body::Body::new(Prefixed { head: Some(head.freeze()).filter(|h| !h.is_empty()), body });
-    Ok(GrpcRequest::from_parts(parts, body))
+    Ok((GrpcRequest::from_parts(parts, body), held))
 }
 
 /// Whether `head` holds a whole gRPC message (5-byte prefix, then the
@@ -300,6 +343,19 @@ mod tests {
         assert!(!message_complete(&[0, 0, 0, 0, 3, 1, 2]));
         assert!(message_complete(&[0, 0, 0, 0, 3, 1, 2, 3]));
         assert!(message_complete(&[0, 0x01, 0, 0, 0]), "16 MiB: passed on for tonic to refuse");
+    }
+
+    #[test]
+    fn arriving_bytes_are_bounded_together_and_come_back() {
+        let arrivals = Arrivals::new(100);
+        let (mut a, mut b) = (None, None);
+        arrivals.take(&mut a, 60).unwrap();
+        arrivals.take(&mut a, 30).unwrap();
+        assert!(matches!(arrivals.take(&mut b, 20), Err(ApiError::Overloaded { .. })));
+        arrivals.take(&mut b, 10).unwrap();
+        drop(a);
+        arrivals.take(&mut b, 80).unwrap();
+        assert_eq!(b.map(|p| p.num_permits()), Some(90));
     }
 
     #[test]

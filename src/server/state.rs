@@ -60,6 +60,8 @@ pub struct Shared {
     pub writes: Arc<super::ratelimit::WriteLimiter>,
     /// Requests in flight per caller, shared by REST and gRPC (`shed`).
     pub in_flight: Arc<super::shed::Clients>,
+    /// Request bodies and first gRPC messages held at once, in bytes (`shed::Arrivals`).
+    pub arrivals: super::shed::Arrivals,
 }
 
 impl AppState {

@@ -71,7 +71,11 @@ pub fn router(state: AppState) -> Router {
             shed::rest,
         ))
         .layer(middleware::from_fn_with_state(
-            body_guard::BodyGuard { max_bytes: limits.max_body_bytes, read_timeout: limits.body_read_timeout },
+            body_guard::BodyGuard {
+                max_bytes: limits.max_body_bytes,
+                read_timeout: limits.body_read_timeout,
+                arrivals: state.arrivals.clone(),
+            },
             body_guard::guard,
         ))
         .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))

@@ -343,3 +343,38 @@ async fn a_websocket_viewer_that_never_reads_is_closed_and_others_keep_their_fra
     assert!(bytes < 12 * 1024 * 1024, "the stalled viewer was sent {bytes} bytes");
     app.stop().await;
 }
+
+/// Bodies still arriving count against `max_arriving_bytes` together: past
+/// it a request is answered 503 at once, and the budget comes back when the
+/// held body is done with.
+#[tokio::test(flavor = "multi_thread")]
+async fn bodies_arriving_at_once_are_bounded_in_bytes() {
+    use tokio::io::AsyncWriteExt;
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.max_body_bytes = 64 * 1024;
+            c.limits.max_arriving_bytes = 64 * 1024;
+            c.limits.body_read_timeout = Duration::from_secs(2);
+        })
+        .start()
+        .await;
+    // 40 KB of a 60 KB body, then silence: held until its 408.
+    let mut stalled = TcpStream::connect(app.addr).await.unwrap();
+    let head = "POST /v1/clips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 60000\r\n\r\n";
+    stalled.write_all(head.as_bytes()).await.unwrap();
+    stalled.write_all(&[b' '; 40_000]).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let body = format!("{WAVE}{}", " ".repeat(40_000));
+    let post = || app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(body.clone());
+    let refused = post().send().await.unwrap();
+    assert_eq!(refused.status(), 503);
+    assert_eq!(refused.json::<serde_json::Value>().await.unwrap()["code"], "overloaded");
+    // Bodies-less requests need no budget.
+    assert_eq!(app.http.get(app.url("/v1/clips")).send().await.unwrap().status(), 200);
+    // Once the stalled body has timed out, its bytes are free again.
+    let mut answer = Vec::new();
+    let _ = within(5, "the stalled body's 408", stalled.read_to_end(&mut answer)).await;
+    assert!(String::from_utf8_lossy(&answer).starts_with("HTTP/1.1 408"), "{}", String::from_utf8_lossy(&answer));
+    assert_eq!(post().send().await.unwrap().status(), 201);
+    app.stop().await;
+}
