@@ -46,9 +46,9 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, LazyLock};
 
 use axum::extract::{ConnectInfo, FromRequestParts, Request, State};
-use axum::http::{HeaderMap, HeaderName};
 use axum::http::header::{AUTHORIZATION, FORWARDED};
 use axum::http::request::Parts;
+use axum::http::{HeaderMap, HeaderName};
 use axum::middleware::Next;
 use axum::response::Response;
 use subtle::ConstantTimeEq;
@@ -216,12 +216,17 @@ fn forwarded_hops(headers: &HeaderMap) -> Vec<Option<IpAddr>> {
         values(FORWARDED)
             .flat_map(|v| v.split(','))
             .filter_map(|element| {
-                let pair = element.split(';').find_map(|p| p.trim().split_once('=').filter(|(k, _)| k.eq_ignore_ascii_case("for")));
+                let pair = element
+                    .split(';')
+                    .find_map(|p| p.trim().split_once('=').filter(|(k, _)| k.eq_ignore_ascii_case("for")));
                 pair.map(|(_, node)| forwarded_node(node))
             })
             .collect()
     } else {
-        values(HeaderName::from_static("x-forwarded-for")).flat_map(|v| v.split(',')).map(|hop| forwarded_node(hop.trim())).collect()
+        values(HeaderName::from_static("x-forwarded-for"))
+            .flat_map(|v| v.split(','))
+            .map(|hop| forwarded_node(hop.trim()))
+            .collect()
     }
 }
 
@@ -429,7 +434,10 @@ mod tests {
         // A trusted proxy: the rightmost hop that is not a trusted proxy.
         assert_eq!(at([10, 0, 0, 9], &xff), "198.51.100.7");
         assert_eq!(at([10, 0, 0, 9], &[("x-forwarded-for", "203.0.113.5, 10.0.0.3")]), "203.0.113.5");
-        assert_eq!(at([10, 0, 0, 9], &[("x-forwarded-for", "203.0.113.5"), ("x-forwarded-for", "10.0.0.4")]), "203.0.113.5");
+        assert_eq!(
+            at([10, 0, 0, 9], &[("x-forwarded-for", "203.0.113.5"), ("x-forwarded-for", "10.0.0.4")]),
+            "203.0.113.5"
+        );
         assert_eq!(at([10, 0, 0, 9], &[]), "10.0.0.9", "no header: the proxy itself");
         assert_eq!(at([10, 0, 0, 9], &[("x-forwarded-for", "nonsense")]), "10.0.0.9");
         // Forwarded wins over X-Forwarded-For; ports, brackets and quotes are stripped.

@@ -35,8 +35,7 @@ pub struct BodyGuard {
 
 /// The middleware (see the module doc).
 pub async fn guard(State(g): State<BodyGuard>, request: Request, next: Next) -> Response {
-    let declared =
-        request.headers().get(header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+    let declared = request.headers().get(header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
     if declared.is_some_and(|n| n > g.max_bytes as u64) {
         return closing(ApiError::PayloadTooLarge { limit: g.max_bytes });
     }

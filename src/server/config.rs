@@ -377,7 +377,8 @@ fn cors(_: &str, origins: Option<Vec<String>>) -> anyhow::Result<Cors> {
 }
 
 fn trusted_proxies(name: &str, entries: Option<Vec<String>>) -> anyhow::Result<TrustedProxies> {
-    let nets = entries.unwrap_or_default().into_iter().map(|e| Net::parse(&e).with_context(|| format!("{name}: `{e}`")));
+    let nets =
+        entries.unwrap_or_default().into_iter().map(|e| Net::parse(&e).with_context(|| format!("{name}: `{e}`")));
     Ok(TrustedProxies(nets.collect::<anyhow::Result<_>>()?))
 }
 

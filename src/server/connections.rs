@@ -16,7 +16,8 @@
 //! fixed kernel send buffer of `stream_buffer_bytes` instead of Linux's
 //! autotuned one (up to 4 MiB each, charged to the server's memory cgroup):
 //! a viewer that stops reading then holds at most that much in the kernel
-//! beside its bounded user-space buffer.
+//! beside its bounded user-space buffer, and when it is given up on, its
+//! connection is reset so the kernel frees that at once.
 
 use std::future::Future;
 use std::io;
@@ -109,11 +110,13 @@ impl Drop for Active {
 }
 
 /// An accepted socket with its connection permit and idle timeout.
-pub struct Tracked<IO> {
-    io: IO,
+pub struct Tracked {
+    io: TcpStream,
     activity: Arc<Activity>,
-    /// The send buffer to set once the connection is upgraded (0: done or never).
-    upgraded_send_buffer: usize,
+    /// `stream_buffer_bytes`, for a connection that carries streams.
+    stream_buffer: usize,
+    /// Whether the stream bounds are in force (gRPC: from the start; REST: once upgraded).
+    bounded: bool,
     peer: Option<SocketAddr>,
     idle_timeout: Duration,
     timer: Pin<Box<Sleep>>,
@@ -121,21 +124,42 @@ pub struct Tracked<IO> {
     _permit: OwnedSemaphorePermit,
 }
 
-impl<IO> Tracked<IO> {
-    pub fn new(io: IO, peer: Option<SocketAddr>, permit: OwnedSemaphorePermit, idle_timeout: Duration) -> Self {
+impl Tracked {
+    pub fn new(io: TcpStream, peer: Option<SocketAddr>, permit: OwnedSemaphorePermit, idle_timeout: Duration) -> Self {
         let timer = Box::pin(tokio::time::sleep(idle_timeout));
         let activity = Activity::new();
-        Tracked { io, activity, upgraded_send_buffer: 0, peer, idle_timeout, timer, expired: false, _permit: permit }
+        let (stream_buffer, bounded, expired) = (0, false, false);
+        Tracked { io, activity, stream_buffer, bounded, peer, idle_timeout, timer, expired, _permit: permit }
     }
 
-    /// Once upgraded, the socket's kernel send buffer becomes `bytes`.
-    pub fn with_upgraded_send_buffer(mut self, bytes: usize) -> Self {
-        self.upgraded_send_buffer = bytes;
+    /// Bounds the connection as a stream carrier now (`upgraded_only`:
+    /// once it is upgraded): see [`Tracked::bound_streams`].
+    pub fn with_stream_buffer(mut self, bytes: usize, upgraded_only: bool) -> Self {
+        self.stream_buffer = bytes;
+        if !upgraded_only {
+            self.bound_streams();
+        }
         self
     }
 
     pub fn activity(&self) -> &Arc<Activity> {
         &self.activity
+    }
+
+    /// A fixed kernel send buffer of `stream_buffer` bytes (Linux doubles
+    /// what it is given), instead of the autotuned one.
+    fn bound_streams(&mut self) {
+        if !self.bounded && self.stream_buffer > 0 {
+            let _ = socket2::SockRef::from(&self.io).set_send_buffer_size((self.stream_buffer / 2).max(4096));
+            self.bounded = true;
+        }
+    }
+
+    /// Applies the stream bounds once the connection has been upgraded.
+    fn bound_if_upgraded(&mut self) {
+        if !self.bounded && self.activity.upgraded.load(Ordering::Acquire) {
+            self.bound_streams();
+        }
     }
 
     /// Whether the connection has been idle for the timeout; otherwise the
@@ -162,7 +186,36 @@ impl<IO> Tracked<IO> {
     }
 }
 
-impl<IO: AsyncRead + Unpin> AsyncRead for Tracked<IO> {
+/// A stream connection closed with more than a quarter of its buffer still
+/// unsent is a peer that stopped reading: it is reset rather than closed, so
+/// the kernel frees its queue at once instead of keeping an orphaned socket
+/// probing a closed window for minutes (its memory charged to the server).
+impl Drop for Tracked {
+    fn drop(&mut self) {
+        if self.bounded && unsent_bytes(&self.io) > self.stream_buffer / 4 {
+            metrics::counter!("inbetween_abandoned_connections_reset_total").increment(1);
+            let _ = socket2::SockRef::from(&self.io).set_linger(Some(Duration::ZERO));
+        }
+    }
+}
+
+/// Bytes the kernel still holds to send on `socket` (`SIOCOUTQ`).
+#[cfg(target_os = "linux")]
+fn unsent_bytes(socket: &TcpStream) -> usize {
+    use std::os::fd::AsRawFd;
+    let mut unsent: libc::c_int = 0;
+    // SAFETY: SIOCOUTQ writes one c_int through the pointer, which points at
+    // a live, aligned c_int; the descriptor is this live socket's.
+    let ok = unsafe { libc::ioctl(socket.as_raw_fd(), libc::TIOCOUTQ, &raw mut unsent) } == 0;
+    if ok { usize::try_from(unsent).unwrap_or(0) } else { 0 }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn unsent_bytes(_: &TcpStream) -> usize {
+    0
+}
+
+impl AsyncRead for Tracked {
     fn poll_read(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
         let this = self.get_mut();
         if this.idle_expired(cx) {
@@ -173,20 +226,10 @@ impl<IO: AsyncRead + Unpin> AsyncRead for Tracked<IO> {
     }
 }
 
-impl<IO: std::os::fd::AsFd> Tracked<IO> {
-    /// Fixes the send buffer of an upgraded connection, once.
-    fn bound_upgraded(&mut self) {
-        if self.upgraded_send_buffer > 0 && self.activity.upgraded.load(Ordering::Acquire) {
-            let _ = socket2::SockRef::from(&self.io).set_send_buffer_size(self.upgraded_send_buffer);
-            self.upgraded_send_buffer = 0;
-        }
-    }
-}
-
-impl<IO: AsyncWrite + std::os::fd::AsFd + Unpin> AsyncWrite for Tracked<IO> {
+impl AsyncWrite for Tracked {
     fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
-        this.bound_upgraded();
+        this.bound_if_upgraded();
         Pin::new(&mut this.io).poll_write(cx, buf)
     }
 
@@ -196,7 +239,7 @@ impl<IO: AsyncWrite + std::os::fd::AsFd + Unpin> AsyncWrite for Tracked<IO> {
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
-        this.bound_upgraded();
+        this.bound_if_upgraded();
         Pin::new(&mut this.io).poll_write_vectored(cx, bufs)
     }
 
@@ -222,7 +265,7 @@ pub struct ConnInfo {
     activity: Arc<Activity>,
 }
 
-impl Connected for Tracked<TcpStream> {
+impl Connected for Tracked {
     type ConnectInfo = ConnInfo;
 
     fn connect_info(&self) -> ConnInfo {
@@ -242,16 +285,15 @@ pub fn tracked_incoming(
     listener: tokio::net::TcpListener,
     gate: ConnGate,
     idle_timeout: Duration,
-    send_buffer: usize,
-) -> impl futures_util::Stream<Item = io::Result<Tracked<TcpStream>>> {
+    stream_buffer: usize,
+) -> impl futures_util::Stream<Item = io::Result<Tracked>> {
     use futures_util::StreamExt;
     tokio_stream::wrappers::TcpListenerStream::new(listener).filter_map(move |accepted| {
         let tracked = match accepted {
             Ok(stream) => gate.admit().map(|permit| {
                 let _ = stream.set_nodelay(true);
-                let _ = socket2::SockRef::from(&stream).set_send_buffer_size(send_buffer);
                 let peer = stream.peer_addr().ok();
-                Ok(Tracked::new(stream, peer, permit, idle_timeout))
+                Ok(Tracked::new(stream, peer, permit, idle_timeout).with_stream_buffer(stream_buffer, false))
             }),
             Err(e) => Some(Err(e)),
         };

@@ -69,7 +69,7 @@ pub async fn serve(
         let Some(permit) = limits.connections.admit() else { continue };
         let _ = stream.set_nodelay(true);
         let stream = Tracked::new(stream, Some(peer), permit, limits.idle_timeout)
-            .with_upgraded_send_buffer(limits.stream_buffer_bytes);
+            .with_stream_buffer(limits.stream_buffer_bytes, true);
         let activity = std::sync::Arc::clone(stream.activity());
         // The peer address, as `axum::serve` provides it (`ConnectInfo`), for
         // the per-client caps; each request counted on its connection from

@@ -51,10 +51,7 @@ fn never() -> (Sender, ReqBody) {
 }
 
 /// A request on `conn` answered in the background: (status, grpc-status, x-error-code).
-fn spawn_request(
-    conn: &H2,
-    request: hyper::Request<ReqBody>,
-) -> JoinHandle<(u16, Option<String>, Option<String>)> {
+fn spawn_request(conn: &H2, request: hyper::Request<ReqBody>) -> JoinHandle<(u16, Option<String>, Option<String>)> {
     let mut send = conn.send.clone();
     tokio::spawn(async move {
         let response = send.send_request(request).await.expect("an answer");
@@ -64,7 +61,10 @@ fn spawn_request(
 }
 
 fn rest_post(addr: SocketAddr, body: ReqBody) -> hyper::Request<ReqBody> {
-    hyper::Request::post(format!("http://{addr}/v1/clips")).header("content-type", "application/json").body(body).unwrap()
+    hyper::Request::post(format!("http://{addr}/v1/clips"))
+        .header("content-type", "application/json")
+        .body(body)
+        .unwrap()
 }
 
 fn grpc_post(addr: SocketAddr, method: &str, body: ReqBody) -> hyper::Request<ReqBody> {

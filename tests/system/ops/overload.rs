@@ -14,7 +14,11 @@ use super::{WAVE, raw_grpc_call, raw_http, start};
 
 /// Bursts of 16 heavy sample requests (10,000 poses each) against a budget
 /// of 2 until one is shed; health, readiness and metrics answer meanwhile.
-async fn shed_rest_answer(server: &crate::common::ServerProcess, http: &reqwest::Client, id: &str) -> serde_json::Value {
+async fn shed_rest_answer(
+    server: &crate::common::ServerProcess,
+    http: &reqwest::Client,
+    id: &str,
+) -> serde_json::Value {
     let times: Vec<f64> = (0..10_000).map(|i| f64::from(i) / 5_000.0).collect();
     let url = server.url(&format!("/v1/clips/{id}/sample"));
     for _ in 0..20 {
