@@ -261,7 +261,34 @@ async fn one_caller_cannot_hold_more_than_its_share_of_slots() {
     let (retry, problem) = refused.expect("16 concurrent requests of one caller met its cap of 2");
     assert_eq!((retry.as_deref(), problem["code"].as_str()), (Some("1"), Some("client_in_flight_limit")));
     assert!(problem["detail"].as_str().unwrap().contains("max_in_flight_per_client"), "{problem}");
+    // The same cap and code over gRPC (the cap counts both protocols).
+    let status = grpc_client_cap_status(&app, &id, &times).await;
+    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "client_in_flight_limit");
     app.stop().await;
+}
+
+/// Bursts of `SampleBatch` calls with the heavy token until one is refused.
+async fn grpc_client_cap_status(app: &TestApp, id: &str, times: &[f64]) -> tonic::Status {
+    let client = app.grpc().await;
+    for _ in 0..30 {
+        let burst = (0..16).map(|_| {
+            let mut client = client.clone();
+            let mut req = tonic::Request::new(pb::SampleBatchRequest {
+                clip_id: id.to_owned(),
+                when: Some(pb::sample_batch_request::When::Times(pb::Times { values: times.to_vec() })),
+                ..Default::default()
+            });
+            req.metadata_mut().insert("authorization", format!("Bearer {HEAVY}").parse().unwrap());
+            async move { client.sample_batch(req).await }
+        });
+        for result in futures_util::future::join_all(burst).await {
+            if let Err(status) = result {
+                return status;
+            }
+        }
+    }
+    panic!("16 concurrent calls of one caller never met its cap of 2");
 }
 
 /// Two creates from "different clients" as X-Forwarded-For names them, with
