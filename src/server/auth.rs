@@ -33,6 +33,12 @@
 //! [`Auth::identify`] once per RPC. Everything that counts per caller — the
 //! write rate limit and the stream caps — keys on that `Caller`, never on the
 //! raw header, so a client cannot become someone new by inventing tokens.
+//!
+//! **The client's address** is the peer's, except when the peer is one of
+//! the configured `trusted_proxies`: then it is the rightmost address of
+//! `Forwarded: for=` (or, without that header, `X-Forwarded-For`) that is not
+//! itself a trusted proxy ([`Auth::client_addr`]). From any other peer those
+//! headers are ignored, so a client cannot choose its own address.
 //! Handlers state the scope they need with the extractors [`ReadAccess`],
 //! [`WriteAccess`] and [`AdminAccess`], each carrying the `Caller`.
 
@@ -40,8 +46,9 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, LazyLock};
 
 use axum::extract::{ConnectInfo, FromRequestParts, Request, State};
-use axum::http::header::AUTHORIZATION;
+use axum::http::header::{AUTHORIZATION, FORWARDED};
 use axum::http::request::Parts;
+use axum::http::{HeaderMap, HeaderName};
 use axum::middleware::Next;
 use axum::response::Response;
 use subtle::ConstantTimeEq;
@@ -158,6 +165,23 @@ impl Auth {
         Identity { caller, enforced: self.enforced }
     }
 
+    /// The client's address: `peer`, or what a trusted proxy says (module doc).
+    pub fn client_addr(&self, peer: Option<IpAddr>, headers: &HeaderMap) -> Option<IpAddr> {
+        let trusted = &self.config.trusted_proxies;
+        let Some(peer) = peer.filter(|p| trusted.contains(*p)) else { return peer };
+        let hops = forwarded_hops(headers);
+        for hop in hops.iter().rev() {
+            match hop {
+                Some(ip) if trusted.contains(*ip) => {}
+                Some(ip) => return Some(*ip),
+                // A hop that names no address (`unknown`, garbage): go no further than the proxy.
+                None => return Some(peer),
+            }
+        }
+        // Every hop is a trusted proxy: the leftmost is the nearest thing to a client.
+        hops.first().copied().flatten().or(Some(peer))
+    }
+
     /// The configured token equal to `token`, compared in constant time
     /// against every candidate (no early exit).
     fn lookup(&self, token: &[u8], addr: Option<IpAddr>) -> Option<Caller> {
@@ -181,6 +205,39 @@ impl Auth {
         }
         found
     }
+}
+
+/// The hops a proxy chain reports, client first: `Forwarded`'s `for=`
+/// values if it is present, else `X-Forwarded-For`'s (every header line, in
+/// order). `None` marks a hop that names no IP address.
+fn forwarded_hops(headers: &HeaderMap) -> Vec<Option<IpAddr>> {
+    let values = |name: HeaderName| headers.get_all(name).iter().filter_map(|v| v.to_str().ok());
+    if headers.contains_key(FORWARDED) {
+        values(FORWARDED)
+            .flat_map(|v| v.split(','))
+            .filter_map(|element| {
+                let pair = element
+                    .split(';')
+                    .find_map(|p| p.trim().split_once('=').filter(|(k, _)| k.eq_ignore_ascii_case("for")));
+                pair.map(|(_, node)| forwarded_node(node))
+            })
+            .collect()
+    } else {
+        values(HeaderName::from_static("x-forwarded-for"))
+            .flat_map(|v| v.split(','))
+            .map(|hop| forwarded_node(hop.trim()))
+            .collect()
+    }
+}
+
+/// The IP address of one hop: `1.2.3.4`, `1.2.3.4:80`, `"[2001:db8::1]:443"`, `2001:db8::1`.
+fn forwarded_node(node: &str) -> Option<IpAddr> {
+    let node = node.trim().trim_matches('"');
+    if let Some(rest) = node.strip_prefix('[') {
+        return rest.split(']').next()?.parse().ok();
+    }
+    let with_port = || node.rsplit_once(':')?.0.parse::<std::net::Ipv4Addr>().ok().map(IpAddr::V4);
+    node.parse::<IpAddr>().ok().or_else(with_port)
 }
 
 /// What auth found out about one request: its caller, or that the token it
@@ -221,7 +278,8 @@ impl Identity {
 /// access extractors. It refuses nothing itself: routes that take no token
 /// (probes, the OpenAPI document) answer whatever the header says.
 pub async fn identify_requests(State(auth): State<Auth>, mut request: Request, next: Next) -> Response {
-    let addr = request.extensions().get::<ConnectInfo<SocketAddr>>().map(|ConnectInfo(a)| a.ip());
+    let peer = request.extensions().get::<ConnectInfo<SocketAddr>>().map(|ConnectInfo(a)| a.ip());
+    let addr = auth.client_addr(peer, request.headers());
     let identity = auth.identify(request.headers().get(AUTHORIZATION).map(|v| v.as_bytes()), addr);
     request.extensions_mut().insert(identity);
     next.run(request).await
@@ -348,6 +406,45 @@ mod tests {
         assert!(matches!(reader.authorize(Scope::Write), Err(ApiError::Forbidden { needed: "write" })));
         let admin = auth.identify(Some(&bearer("ib_a")), ip(1));
         assert!(admin.authorize(Scope::Admin).is_ok() && admin.authorize(Scope::Read).is_ok());
+    }
+
+    fn headers(pairs: &[(&str, &str)]) -> HeaderMap {
+        let mut map = HeaderMap::new();
+        for (name, value) in pairs {
+            map.append(axum::http::HeaderName::from_bytes(name.as_bytes()).unwrap(), value.parse().unwrap());
+        }
+        map
+    }
+
+    #[test]
+    fn forwarding_headers_count_only_from_a_trusted_proxy() {
+        let mut config = Config::new(SocketAddr::from(([127, 0, 0, 1], 0)), "unused");
+        let raw = crate::server::config::RawConfig {
+            trusted_proxies: Some(vec!["10.0.0.0/24".into()]),
+            ..Default::default()
+        };
+        config.trusted_proxies = raw.validate().unwrap().trusted_proxies;
+        let auth = Auth::new(Arc::new(config));
+        let at = |peer: [u8; 4], pairs: &[(&str, &str)]| {
+            auth.client_addr(Some(IpAddr::from(peer)), &headers(pairs)).unwrap().to_string()
+        };
+        let xff = [("x-forwarded-for", "203.0.113.5, 198.51.100.7")];
+        // An untrusted peer is itself, whatever it claims.
+        assert_eq!(at([192, 0, 2, 1], &xff), "192.0.2.1");
+        // A trusted proxy: the rightmost hop that is not a trusted proxy.
+        assert_eq!(at([10, 0, 0, 9], &xff), "198.51.100.7");
+        assert_eq!(at([10, 0, 0, 9], &[("x-forwarded-for", "203.0.113.5, 10.0.0.3")]), "203.0.113.5");
+        assert_eq!(
+            at([10, 0, 0, 9], &[("x-forwarded-for", "203.0.113.5"), ("x-forwarded-for", "10.0.0.4")]),
+            "203.0.113.5"
+        );
+        assert_eq!(at([10, 0, 0, 9], &[]), "10.0.0.9", "no header: the proxy itself");
+        assert_eq!(at([10, 0, 0, 9], &[("x-forwarded-for", "nonsense")]), "10.0.0.9");
+        // Forwarded wins over X-Forwarded-For; ports, brackets and quotes are stripped.
+        let fwd = [("forwarded", "for=198.51.100.1;proto=https, for=\"[2001:db8::7]:4711\""), xff[0]];
+        assert_eq!(at([10, 0, 0, 9], &fwd), "2001:db8::7");
+        assert_eq!(at([10, 0, 0, 9], &[("forwarded", "for=\"192.0.2.60:8080\"")]), "192.0.2.60");
+        assert_eq!(at([10, 0, 0, 9], &[("forwarded", "For=unknown")]), "10.0.0.9");
     }
 
     #[test]

@@ -16,7 +16,7 @@
 
 use std::collections::HashSet;
 use std::fmt;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::time::Duration;
@@ -198,6 +198,11 @@ settings! {
         drain_timeout: u64 = 10 => seconds_or_none -> Duration,
             "drain_timeout_secs", "drain-timeout-secs", "INBETWEEN_DRAIN_TIMEOUT_SECS", "SECS",
             "Seconds to let in-flight requests finish after SIGTERM/Ctrl-C";
+        #[arg(value_delimiter = ',')]
+        trusted_proxies: Vec<String> => trusted_proxies -> TrustedProxies,
+            "trusted_proxies", "trusted-proxy", "INBETWEEN_TRUSTED_PROXIES", "IP_OR_CIDR", shown "none",
+            "Reverse proxy address or CIDR (repeatable, or comma-separated) whose X-Forwarded-For / Forwarded \
+             header names the client; from any other peer those headers are ignored";
     }
 }
 
@@ -280,7 +285,32 @@ settings! {
             "Bytes of outgoing WebSocket frames buffered before a write is flushed";
         ws_max_write_buffer_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
             "ws_max_write_buffer_bytes", "ws-max-write-buffer-bytes", "INBETWEEN_WS_MAX_WRITE_BUFFER_BYTES", "BYTES",
-            "Most bytes a WebSocket may hold unsent before the stream fails";
+            "Most bytes a WebSocket may hold unsent before the stream fails (at most stream_buffer_bytes is used)";
+        request_message_timeout: u64 = 10 => seconds -> Duration,
+            "request_message_timeout_secs", "request-message-timeout-secs", "INBETWEEN_REQUEST_MESSAGE_TIMEOUT_SECS",
+            "SECS",
+            "Seconds a gRPC call may take to send its first message (a Play its `open`); answered DEADLINE_EXCEEDED";
+        http2_max_concurrent_streams: u32 = 256 => positive -> u32,
+            "http2_max_concurrent_streams", "http2-max-concurrent-streams", "INBETWEEN_HTTP2_MAX_CONCURRENT_STREAMS",
+            "N",
+            "Requests and streams one HTTP/2 connection may have open at once (advertised on both ports)";
+        max_in_flight_per_client: usize = 32 => positive -> usize,
+            "max_in_flight_per_client", "max-in-flight-per-client", "INBETWEEN_MAX_IN_FLIGHT_PER_CLIENT", "N",
+            "Requests one caller (its token's name, or its address) may have in flight, REST and gRPC together \
+             (answered 429 `client_in_flight_limit`)";
+        idle_timeout: u64 = 60 => seconds -> Duration,
+            "idle_timeout_secs", "idle-timeout-secs", "INBETWEEN_IDLE_TIMEOUT_SECS", "SECS",
+            "Seconds a connection (either port) may stay open with no request or stream before it is closed";
+        max_connections: usize = 4096 => positive -> usize,
+            "max_connections", "max-connections", "INBETWEEN_MAX_CONNECTIONS", "N",
+            "Open connections per port; connections over it are closed at accept";
+        stream_buffer_bytes: usize = 256 * 1024 => positive -> usize,
+            "stream_buffer_bytes", "stream-buffer-bytes", "INBETWEEN_STREAM_BUFFER_BYTES", "BYTES",
+            "Bytes of frames a stream viewer may leave unread before its stream is closed (slow consumer)";
+        max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
+            "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
+            "Bytes of request bodies and first gRPC messages held at once, all requests together, from arrival \
+             until the request ends; a request that would pass it is answered 503 `overloaded`";
     }
 }
 
@@ -359,6 +389,12 @@ fn cors(_: &str, origins: Option<Vec<String>>) -> anyhow::Result<Cors> {
     Ok(Cors::Origins(origins))
 }
 
+fn trusted_proxies(name: &str, entries: Option<Vec<String>>) -> anyhow::Result<TrustedProxies> {
+    let nets =
+        entries.unwrap_or_default().into_iter().map(|e| Net::parse(&e).with_context(|| format!("{name}: `{e}`")));
+    Ok(TrustedProxies(nets.collect::<anyhow::Result<_>>()?))
+}
+
 impl RawConfig {
     /// Reads a TOML layer.
     ///
@@ -396,6 +432,7 @@ impl RawConfig {
             cors: s.cors_origins,
             log_format: s.log_format,
             drain_timeout: s.drain_timeout,
+            trusted_proxies: s.trusted_proxies,
             limits: s.limits,
         })
     }
@@ -405,6 +442,9 @@ impl Limits {
     fn check_buffers(&self) -> anyhow::Result<()> {
         if self.ws_max_write_buffer_bytes <= self.ws_write_buffer_bytes {
             bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        }
+        if self.max_arriving_bytes < self.max_body_bytes {
+            bail!("max_arriving_bytes must be at least max_body_bytes");
         }
         Ok(())
     }
@@ -519,6 +559,62 @@ pub enum Cors {
     Origins(Vec<String>),
 }
 
+/// The reverse proxies whose forwarding headers are believed (`trusted_proxies`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct TrustedProxies(Vec<Net>);
+
+impl TrustedProxies {
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn contains(&self, ip: IpAddr) -> bool {
+        self.0.iter().any(|net| net.contains(ip))
+    }
+}
+
+/// One address or CIDR block (`10.0.0.0/8`, `::1`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Net {
+    base: IpAddr,
+    prefix: u8,
+}
+
+impl Net {
+    fn parse(text: &str) -> anyhow::Result<Net> {
+        let (ip, prefix) = match text.trim().split_once('/') {
+            Some((ip, prefix)) => (ip, Some(prefix)),
+            None => (text.trim(), None),
+        };
+        let base: IpAddr = ip.parse().context("not an IP address")?;
+        let bits = if base.is_ipv4() { 32 } else { 128 };
+        let prefix = match prefix {
+            Some(p) => p.parse::<u8>().ok().filter(|p| *p <= bits).context("not a prefix length")?,
+            None => bits,
+        };
+        Ok(Net { base, prefix })
+    }
+
+    fn contains(self, ip: IpAddr) -> bool {
+        let ip = match ip {
+            IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+            v4 => v4,
+        };
+        let shift = |bits: u32| (self.prefix as u32).min(bits);
+        match (self.base, ip) {
+            (IpAddr::V4(net), IpAddr::V4(ip)) => {
+                let mask = u32::MAX.checked_shl(32 - shift(32)).unwrap_or(0);
+                u32::from(net) & mask == u32::from(ip) & mask
+            }
+            (IpAddr::V6(net), IpAddr::V6(ip)) => {
+                let mask = u128::MAX.checked_shl(128 - shift(128)).unwrap_or(0);
+                u128::from(net) & mask == u128::from(ip) & mask
+            }
+            _ => false,
+        }
+    }
+}
+
 /// A validated configuration: every value is one the server can run with.
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -537,6 +633,8 @@ pub struct Config {
     pub cors: Cors,
     pub log_format: LogFormat,
     pub drain_timeout: Duration,
+    /// Peers whose `X-Forwarded-For` / `Forwarded` name the client (`server::auth`).
+    pub trusted_proxies: TrustedProxies,
     pub limits: Limits,
 }
 
@@ -649,6 +747,7 @@ mod tests {
         assert_eq!((c.db.max_connections, c.db.acquire_timeout, c.db.retry.retries), (8, Duration::from_secs(10), 3));
         assert_eq!((c.cors, c.log_format, c.drain_timeout), (Cors::Off, LogFormat::Text, Duration::from_secs(10)));
         assert!(c.tls.is_none() && c.tokens.is_empty() && c.write_token.is_none() && c.read_token.is_none());
+        assert!(c.trusted_proxies.is_empty());
         let cores = std::thread::available_parallelism().unwrap().get();
         let expected = Limits {
             max_body_bytes: 16_777_216,
@@ -674,6 +773,13 @@ mod tests {
             ws_max_message_bytes: 4096,
             ws_write_buffer_bytes: 131_072,
             ws_max_write_buffer_bytes: 16_777_216,
+            request_message_timeout: Duration::from_secs(10),
+            http2_max_concurrent_streams: 256,
+            max_in_flight_per_client: 32,
+            idle_timeout: Duration::from_secs(60),
+            max_connections: 4096,
+            stream_buffer_bytes: 262_144,
+            max_arriving_bytes: 268_435_456,
         };
         assert_eq!(c.limits, expected);
     }
@@ -731,6 +837,22 @@ mod tests {
         assert_eq!(err(buffers), "ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
         let blank = parse_flags(&["--api-token", " "]);
         assert_eq!(err(blank), "api_token must not be empty");
+    }
+
+    #[test]
+    fn trusted_proxies_are_addresses_and_cidr_blocks() {
+        let c = parse_flags(&["--trusted-proxy", "10.1.0.0/16,192.168.7.7", "--trusted-proxy", "fd00::/8"])
+            .validate()
+            .unwrap();
+        let trusts = |ip: &str| c.trusted_proxies.contains(ip.parse().unwrap());
+        assert!(trusts("10.1.255.3") && trusts("192.168.7.7") && trusts("fd12::1") && trusts("::ffff:10.1.0.9"));
+        assert!(!trusts("10.2.0.1") && !trusts("192.168.7.8") && !trusts("fe80::1") && !trusts("127.0.0.1"));
+        let all: RawConfig = toml::from_str("trusted_proxies = [\"0.0.0.0/0\"]").unwrap();
+        assert!(all.validate().unwrap().trusted_proxies.contains("203.0.113.9".parse().unwrap()));
+        for bad in ["10.0.0.0/33", "nginx", "10.0.0.1/", "::/129"] {
+            let raw = RawConfig { trusted_proxies: Some(vec![bad.into()]), ..Default::default() };
+            assert!(raw.validate().is_err(), "{bad}");
+        }
     }
 
     #[test]

@@ -75,6 +75,12 @@ pub enum ApiError {
     /// largest message this server sends: the streaming RPC serves it.
     #[error("the answer may take {bytes} bytes, over the {limit}-byte limit of one message; ask {stream} instead")]
     AnswerTooLargeForUnary { bytes: u64, limit: u64, stream: &'static str },
+    /// The caller already has `limit` requests in flight (`max_in_flight_per_client`).
+    #[error(
+        "this caller already has {limit} requests in flight (max_in_flight_per_client, --max-in-flight-per-client); \
+         retry after {retry_after} s"
+    )]
+    ClientInFlight { limit: usize, retry_after: u64 },
     #[error("service unavailable")]
     Unavailable(#[source] Option<anyhow::Error>),
     #[error("internal error")]
@@ -126,7 +132,7 @@ impl ApiError {
             Timeout { .. } | Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
             Overloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
-            RateLimited { .. } => StatusCode::TOO_MANY_REQUESTS,
+            RateLimited { .. } | ClientInFlight { .. } => StatusCode::TOO_MANY_REQUESTS,
             Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -153,6 +159,7 @@ impl ApiError {
             BodyTimeout { .. } => "body_timeout",
             Overloaded { .. } => "overloaded",
             RateLimited { .. } => "rate_limited",
+            ClientInFlight { .. } => "client_in_flight_limit",
             Internal(_) => "internal",
         }
     }
@@ -243,7 +250,10 @@ impl IntoResponse for ApiError {
         if matches!(self, ApiError::Unauthorized) {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
-        if let ApiError::Overloaded { retry_after } | ApiError::RateLimited { retry_after } = &self {
+        if let ApiError::Overloaded { retry_after }
+        | ApiError::RateLimited { retry_after }
+        | ApiError::ClientInFlight { retry_after, .. } = &self
+        {
             response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after));
         }
         response
@@ -289,7 +299,7 @@ impl ApiError {
             Timeout { .. } => Code::DeadlineExceeded,
             Unavailable(_) => Code::Unavailable,
             BodyTimeout { .. } => Code::DeadlineExceeded,
-            Overloaded { .. } | RateLimited { .. } => Code::ResourceExhausted,
+            Overloaded { .. } | RateLimited { .. } | ClientInFlight { .. } => Code::ResourceExhausted,
             Internal(_) => Code::Internal,
         }
     }

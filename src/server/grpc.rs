@@ -24,7 +24,7 @@ use tonic::metadata::MetadataMap;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::anim::{SampleOptions, Sampler};
-use crate::server::auth::{Caller, Scope};
+use crate::server::auth::{Caller, Identity, Scope};
 use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
@@ -100,7 +100,12 @@ impl GrpcService {
 
     /// The RPC's caller (worked out once per call, as REST's middleware
     /// does), if it may act with `scope`.
+    /// The admission layer (`shed::GrpcLayer`) has identified it already;
+    /// without that layer, the peer address alone counts.
     fn caller<T>(&self, request: &Request<T>, scope: Scope) -> Result<Caller, Status> {
+        if let Some(identity) = request.extensions().get::<Identity>() {
+            return Ok(identity.authorize(scope)?);
+        }
         let addr = request.remote_addr().map(|a| a.ip());
         Ok(self.state.auth.identify(bearer(request.metadata()), addr).authorize(scope)?)
     }

@@ -1,7 +1,10 @@
 //! The accept loop: hyper driven directly, so that every connection gets a
 //! header-read timeout (a client that opens a connection and trickles its
 //! request head is cut off instead of holding a task forever, the
-//! "slowloris" attack), which `axum::serve` does not expose. Otherwise it
+//! "slowloris" attack), which `axum::serve` does not expose, and the
+//! connection bounds of `connections`: at most `max_connections` open (more
+//! are closed at accept), each closed after `idle_timeout` with nothing in
+//! flight, HTTP/2 (h2c) advertising `max_concurrent_streams`. Otherwise it
 //! does what `axum::serve` does: HTTP/1.1 with upgrades (WebSockets), and on
 //! shutdown every connection finishes its in-flight request and closes.
 
@@ -14,14 +17,25 @@ use axum::extract::{ConnectInfo, Request};
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto;
-use hyper_util::service::TowerToHyperService;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinSet;
 use tokio_util::either::Either;
 use tower::ServiceExt;
 
+use super::connections::{ConnGate, Held, Tracked};
 use super::tls;
+
+/// How each connection is bounded.
+#[derive(Debug, Clone)]
+pub struct Listening {
+    pub header_read_timeout: Duration,
+    pub idle_timeout: Duration,
+    pub max_concurrent_streams: u32,
+    pub connections: ConnGate,
+    /// The kernel send buffer of an upgraded (WebSocket) connection.
+    pub stream_buffer_bytes: usize,
+}
 
 /// Serves `router` on `listener` until `shutdown` resolves, then stops
 /// accepting and resolves once every connection has closed (the caller bounds
@@ -30,10 +44,11 @@ use super::tls;
 pub async fn serve(
     listener: TcpListener,
     router: Router,
-    header_read_timeout: Duration,
+    limits: Listening,
     tls: Option<tls::Acceptor>,
     shutdown: impl Future<Output = ()>,
 ) {
+    let header_read_timeout = limits.header_read_timeout;
     let (closing_tx, closing_rx) = watch::channel(false);
     let mut connections = JoinSet::new();
     let mut shutdown = std::pin::pin!(shutdown);
@@ -51,15 +66,30 @@ pub async fn serve(
             () = &mut shutdown => break,
         };
         while connections.try_join_next().is_some() {}
+        let Some(permit) = limits.connections.admit() else { continue };
         let _ = stream.set_nodelay(true);
+        let stream = Tracked::new(stream, Some(peer), permit, limits.idle_timeout)
+            .with_stream_buffer(limits.stream_buffer_bytes, true);
+        let activity = std::sync::Arc::clone(stream.activity());
         // The peer address, as `axum::serve` provides it (`ConnectInfo`), for
-        // the per-client stream caps.
-        let service = TowerToHyperService::new(router.clone().map_request(move |r: Request<Incoming>| {
+        // the per-client caps; each request counted on its connection from
+        // its head until its response body ends (an upgrade: for good).
+        let router = router.clone();
+        let service = hyper::service::service_fn(move |r: Request<Incoming>| {
+            let active = activity.enter();
             let mut r = r.map(Body::new);
             r.extensions_mut().insert(ConnectInfo(peer));
-            r
-        }));
+            let (router, activity) = (router.clone(), std::sync::Arc::clone(&activity));
+            async move {
+                let response = router.oneshot(r).await?;
+                if response.status() == axum::http::StatusCode::SWITCHING_PROTOCOLS {
+                    activity.upgraded();
+                }
+                Ok::<_, std::convert::Infallible>(response.map(|body| Body::new(Held::new(body, Some(active)))))
+            }
+        });
         let mut closing = closing_rx.clone();
+        let max_streams = limits.max_concurrent_streams;
         let tls = tls.clone();
         connections.spawn(async move {
             let stream = match tls {
@@ -72,6 +102,7 @@ pub async fn serve(
             };
             let mut builder = auto::Builder::new(TokioExecutor::new());
             builder.http1().timer(TokioTimer::new()).header_read_timeout(header_read_timeout);
+            builder.http2().timer(TokioTimer::new()).max_concurrent_streams(max_streams);
             let mut conn = std::pin::pin!(builder.serve_connection_with_upgrades(TokioIo::new(stream), service));
             tokio::select! {
                 result = conn.as_mut() => {

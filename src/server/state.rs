@@ -58,6 +58,10 @@ pub struct Shared {
     pub streams: crate::stream::Engine,
     /// The per-caller write rate limit, shared by REST and gRPC.
     pub writes: Arc<super::ratelimit::WriteLimiter>,
+    /// Requests in flight per caller, shared by REST and gRPC (`shed`).
+    pub in_flight: Arc<super::shed::Clients>,
+    /// Request bodies and first gRPC messages held at once, in bytes (`shed::Arrivals`).
+    pub arrivals: super::shed::Arrivals,
 }
 
 impl AppState {

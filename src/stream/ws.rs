@@ -7,7 +7,8 @@
 //! stream; it owns its [`Subscription`] and ends (with a close frame saying
 //! why) on `max_frames`, `stop`, shutdown, a client that goes away, one that
 //! stops answering pings, or one that does not accept a frame for a whole
-//! keepalive period.
+//! keepalive period (a slow consumer: close 1008 `slow_consumer` if that still
+//! fits; its unsent bytes are bounded by `stream_buffer_bytes` meanwhile).
 //!
 //! Control messages are JSON text: `{"op":"pause"}`, `{"op":"play"}`,
 //! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`.
@@ -151,9 +152,22 @@ where
         };
         match timeout(config.keepalive, socket.send(outgoing)).await {
             Ok(Ok(())) => {}
-            Ok(Err(_)) | Err(_) => return,
+            Ok(Err(_)) => return,
+            Err(_) => return close_slow_consumer(&mut socket).await,
         }
     }
+}
+
+/// A viewer that accepted nothing for a whole keepalive period: its bounded
+/// buffers are full. It is told why (1008) if the close frame still fits in
+/// within a second, then dropped either way.
+async fn close_slow_consumer<S, E>(socket: &mut S)
+where
+    S: Sink<Message, Error = E> + Unpin,
+{
+    metrics::counter!("inbetween_slow_consumers_closed_total").increment(1);
+    let frame = CloseFrame { code: close::POLICY, reason: Utf8Bytes::from_static("slow_consumer: frames not read") };
+    let _ = timeout(Duration::from_secs(1), socket.send(Message::Close(Some(frame)))).await;
 }
 
 /// Whether a read error (anywhere in its source chain) is tungstenite's

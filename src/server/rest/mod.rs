@@ -62,14 +62,25 @@ pub fn router(state: AppState) -> Router {
         .fallback(|| async { ApiError::NotFound { what: "route" } })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        // Admission after arrival: the in-flight slots are taken once the body guard has read the body.
         .layer(middleware::from_fn_with_state(
-            body_guard::BodyGuard { max_bytes: limits.max_body_bytes, read_timeout: limits.body_read_timeout },
+            shed::Admission {
+                gate: shed::Gate::new(limits.max_in_flight),
+                clients: std::sync::Arc::clone(&state.in_flight),
+            },
+            shed::rest,
+        ))
+        .layer(middleware::from_fn_with_state(
+            body_guard::BodyGuard {
+                max_bytes: limits.max_body_bytes,
+                read_timeout: limits.body_read_timeout,
+                arrivals: state.arrivals.clone(),
+            },
             body_guard::guard,
         ))
         .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
         .layer(middleware::from_fn_with_state(state.auth.clone(), auth::identify_requests))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
-        .layer(middleware::from_fn_with_state(shed::Gate::new(limits.max_in_flight), shed::rest))
         .layer(middleware::from_fn(metrics::track))
         .layer(CatchPanicLayer::custom(|_| {
             metrics::panic_caught("http");

@@ -18,6 +18,7 @@ use axum::extract::{ConnectInfo, State};
 use axum::response::Response;
 
 use crate::server::auth::ReadAccess;
+use crate::server::config::Limits;
 use crate::server::error::ApiError;
 use crate::server::request::{Opening, RawStream, in_query};
 use crate::server::state::AppState;
@@ -30,6 +31,17 @@ use super::query::Query;
 /// stream cost the server ~125 KiB of RSS (measured by `inbetween load
 /// ws-stream`); clients only send small controls.
 const READ_BUFFER_BYTES: usize = 8 * 1024;
+
+/// Most bytes a viewer may leave unsent in user space: `stream_buffer_bytes`,
+/// or the older `ws_max_write_buffer_bytes` when that is smaller.
+fn ws_max_write_buffer(l: &Limits) -> usize {
+    l.stream_buffer_bytes.min(l.ws_max_write_buffer_bytes)
+}
+
+/// Bytes gathered before a write: below the bound above, as tungstenite needs.
+fn ws_write_buffer(l: &Limits) -> usize {
+    l.ws_write_buffer_bytes.min(ws_max_write_buffer(l) / 2)
+}
 
 /// Stream a clip: upgrade to a WebSocket of frames.
 #[utoipa::path(
@@ -88,8 +100,8 @@ pub async fn stream(
     let upgrade = upgrade
         .max_message_size(l.ws_max_message_bytes)
         .max_frame_size(l.ws_max_message_bytes)
-        .write_buffer_size(l.ws_write_buffer_bytes)
-        .max_write_buffer_size(l.ws_max_write_buffer_bytes)
+        .write_buffer_size(ws_write_buffer(l))
+        .max_write_buffer_size(ws_max_write_buffer(l))
         .read_buffer_size(READ_BUFFER_BYTES);
     let mut response = upgrade.on_upgrade(move |socket: WebSocket| async move {
         match watched {

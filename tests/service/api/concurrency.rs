@@ -79,7 +79,8 @@ async fn reader(app: &TestApp, ids: &[String], r: usize) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn concurrent_writers_and_readers_see_whole_monotonic_versions() {
-    let app = TestApp::start().await;
+    // 50 clients on one address: above the default per-caller in-flight cap (32), which is not what this tests.
+    let app = TestApp::builder().configure(|c| c.limits.max_in_flight_per_client = 64).start().await;
     let mut ids = Vec::new();
     for c in 0..CLIPS {
         ids.push(app.create(&uniform_clip("v0", 2, 2, 0.0), None).await["id"].as_str().unwrap().to_owned());

@@ -2,6 +2,7 @@
 //! against the real server over real HTTP and gRPC, and the fuzz corpus and
 //! past crashes replayed through the fuzz targets' own code.
 
+mod admission;
 mod corpus;
 mod fuzz_replay;
 

@@ -12,42 +12,84 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use super::{WAVE, raw_grpc_call, raw_http, start};
 
+/// Bursts of 16 heavy sample requests (10,000 poses each) against a budget
+/// of 2 until one is shed; health, readiness and metrics answer meanwhile.
+async fn shed_rest_answer(
+    server: &crate::common::ServerProcess,
+    http: &reqwest::Client,
+    id: &str,
+) -> serde_json::Value {
+    let times: Vec<f64> = (0..10_000).map(|i| f64::from(i) / 5_000.0).collect();
+    let url = server.url(&format!("/v1/clips/{id}/sample"));
+    for _ in 0..20 {
+        let burst = (0..16).map(|_| http.post(&url).json(&serde_json::json!({ "times": times })).send());
+        let (answers, health) = futures_util::join!(futures_util::future::join_all(burst), async {
+            let mut statuses = Vec::new();
+            for path in ["/healthz", "/readyz", "/metrics"] {
+                statuses.push(http.get(server.url(path)).send().await.unwrap().status().as_u16());
+            }
+            statuses
+        });
+        assert_eq!(health, [200, 200, 200], "probes during the burst");
+        for r in answers {
+            let r = r.unwrap();
+            if r.status() == 503 {
+                assert_eq!(r.headers()["retry-after"], "1");
+                assert_eq!(r.headers()["content-type"], "application/problem+json");
+                return r.json().await.unwrap();
+            }
+            assert_eq!(r.status(), 200);
+        }
+    }
+    panic!("20 bursts of 16 heavy requests never met a budget of 2");
+}
+
+/// The same on gRPC: `SampleBatch` of 10,000 times until one is shed.
+async fn shed_grpc_status(client: &AnimationClient<tonic::transport::Channel>, id: &str) -> tonic::Status {
+    let times = pb::Times { values: (0..10_000).map(|i| f64::from(i) / 5_000.0).collect() };
+    for _ in 0..20 {
+        let burst = (0..16).map(|_| {
+            let mut client = client.clone();
+            let req = pb::SampleBatchRequest {
+                clip_id: id.to_owned(),
+                when: Some(pb::sample_batch_request::When::Times(times.clone())),
+                ..Default::default()
+            };
+            async move { client.sample_batch(req).await }
+        });
+        for result in futures_util::future::join_all(burst).await {
+            if let Err(status) = result {
+                return status;
+            }
+        }
+    }
+    panic!("20 bursts of 16 heavy calls never met a budget of 2");
+}
+
 #[tokio::test(flavor = "multi_thread")]
 async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &["--max-in-flight", "2"]).await;
     let http = reqwest::Client::new();
     let id = server.create(&http, WAVE).await;
-    // Two requests whose bodies never come hold both REST slots.
-    let head = "POST /v1/clips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n";
-    let _held = [raw_http(server.http, head).await, raw_http(server.http, head).await];
-    tokio::time::sleep(Duration::from_millis(300)).await;
-    let r = http.get(server.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
-    assert_eq!(r.status(), 503);
-    assert_eq!(r.headers()["retry-after"], "1");
-    assert_eq!(r.headers()["content-type"], "application/problem+json");
-    let body: serde_json::Value = r.json().await.unwrap();
+    let body = shed_rest_answer(&server, &http, &id).await;
     assert_eq!(body["code"], "overloaded");
-    for path in ["/healthz", "/readyz", "/metrics"] {
-        assert_eq!(http.get(server.url(path)).send().await.unwrap().status(), 200, "{path}");
-    }
     let metrics = http.get(server.url("/metrics")).send().await.unwrap().text().await.unwrap();
     assert!(metrics.contains("inbetween_requests_shed_total"), "the shed counter is exported");
+    let client = AnimationClient::connect(format!("http://{}", server.grpc)).await.unwrap();
+    let status = shed_grpc_status(&client, &id).await;
+    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
+    assert!(status.message().starts_with("overloaded"), "{status:?}");
 
-    // gRPC: two calls that never send their message hold both slots.
+    // Requests whose body (or first message) never comes hold no slot (issue 15).
+    let head = "POST /v1/clips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n";
+    let _held = [raw_http(server.http, head).await, raw_http(server.http, head).await];
     let path = "/inbetween.v1.Animation/Sample";
     let _calls = [raw_grpc_call(server.grpc, path).await, raw_grpc_call(server.grpc, path).await];
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let mut client = AnimationClient::connect(format!("http://{}", server.grpc)).await.unwrap();
-    let status =
-        client.sample(pb::SampleRequest { clip_id: id.clone(), time: 1.0, ..Default::default() }).await.unwrap_err();
-    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
-    drop(_calls);
-    // Once the holders go, requests are admitted again.
-    drop(_held);
-    tokio::time::sleep(Duration::from_millis(300)).await;
     let r = http.get(server.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
     assert_eq!(r.status(), 200);
+    let mut client = client;
     client.sample(pb::SampleRequest { clip_id: id, time: 1.0, ..Default::default() }).await.unwrap();
 }
 
