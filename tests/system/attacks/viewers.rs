@@ -30,7 +30,7 @@ async fn viewers_that_never_read_are_closed_in_bounded_memory() {
     let n = VIEWERS.to_string();
     let mut target = target(&["--max-streams", "2048", "--max-streams-per-client", "2048"]).await;
     let http = reqwest::Client::new();
-    let id = target.server.create(&http, &wide_clip(1024, 128)).await;
+    let id = target.server.create(&http, &wide_clip(128, 128)).await;
     let path = format!("/v1/clips/{id}/stream?fps=10&playback=loop");
     let probes = target.probes().await;
     let (mut reader, _) = tokio_tungstenite::connect_async(target.server.ws_url(&path)).await.unwrap();
