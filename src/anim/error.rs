@@ -119,6 +119,11 @@ pub enum ClipErrorKind {
     ModelSpaceOverflow { bound: f64, limit: f64 },
     #[error("a curve control point overflows f32")]
     CurveOverflow,
+    #[error(
+        "building the clip's constant-speed tables takes more than {limit} units of work (arc-length pieces plus \
+         quadrature evaluations, over the whole clip): {spent} were spent by this track"
+    )]
+    BuildBudgetExceeded { limit: u64, spent: u64 },
 }
 
 impl ClipErrorKind {
@@ -151,6 +156,7 @@ impl ClipErrorKind {
             TimeRangeTooLarge { .. } => "time_range_too_large",
             ModelSpaceOverflow { .. } => "model_space_overflow",
             CurveOverflow => "curve_overflow",
+            BuildBudgetExceeded { .. } => "build_budget_exceeded",
         }
     }
 }

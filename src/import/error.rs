@@ -6,7 +6,7 @@
 //! messages name the offending object by its glTF index or BVH line so a
 //! user can find it in their file.
 
-use crate::anim::ClipError;
+use crate::anim::{ClipError, ClipErrorKind};
 
 /// How an edge should treat an [`ImportError`] (HTTP: 400, 413, 422).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -93,6 +93,10 @@ impl ImportError {
             BvhSyntax { .. } => "bvh_syntax",
             CountMismatch { .. } => "count_mismatch",
             BadFrameTime { .. } => "bad_frame_time",
+            // A limit, not a defect of the file: the same code as an upload.
+            InvalidClip { error, .. } if matches!(error.kind, ClipErrorKind::BuildBudgetExceeded { .. }) => {
+                "build_budget_exceeded"
+            }
             InvalidClip { .. } => "invalid_clip",
         }
     }

@@ -5,7 +5,7 @@
 //! the parsed [`ClipDoc`] re-serialised: `GET` returns exactly what was
 //! accepted, normalised (defaults spelled out, numbers in shortest form).
 
-use crate::anim::Clip;
+use crate::anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
 use crate::store::{ClipStats, NewClip};
 use crate::wire::json::{ClipDoc, DocError, parse_clip_doc};
 
@@ -35,7 +35,7 @@ pub fn admit(body: &[u8], limits: &Limits) -> Result<Admitted, ApiError> {
 pub fn admit_doc(doc: ClipDoc, limits: &Limits) -> Result<Admitted, ApiError> {
     check(&doc, limits)?;
     let spec = doc.to_spec()?;
-    let clip = Clip::build(&spec).map_err(DocError::from)?;
+    let clip = build(&spec, limits.max_build_work)?;
     if clip.joint_count() > limits.max_joints {
         return Err(too_many("too_many_joints", "/tracks", "joints", clip.joint_count(), limits.max_joints));
     }
@@ -49,6 +49,21 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits) -> Result<Admitted, ApiError> {
         playback: clip.playback(),
     };
     Ok(Admitted { new_clip: NewClip { name: doc.name, doc_json, stats }, clip })
+}
+
+/// `Clip::build_within` `max_work`, the budget refusal naming its setting.
+///
+/// # Errors
+/// A SPEC rule (422 with the rule's code), or `build_budget_exceeded` (422).
+pub fn build(spec: &ClipSpec, max_work: u64) -> Result<Clip, ApiError> {
+    Clip::build_within(spec, max_work).map_err(|e| match e {
+        ClipError { kind: kind @ ClipErrorKind::BuildBudgetExceeded { .. }, path } => ApiError::TooMany {
+            code: kind.code(),
+            pointer: path.to_pointer(),
+            detail: format!("{kind}; the limit is max_build_work (--max-build-work)"),
+        },
+        e => DocError::from(e).into(),
+    })
 }
 
 fn too_many(code: &'static str, pointer: &str, what: &str, got: usize, max: usize) -> ApiError {

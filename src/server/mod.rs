@@ -42,6 +42,7 @@ use crate::stream::{Engine, EngineConfig};
 
 pub mod auth;
 pub mod body_guard;
+pub mod builds;
 pub mod cache;
 pub mod config;
 pub mod error;
@@ -102,7 +103,7 @@ impl Application {
             }
         };
         let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
-        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries));
+        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, config.limits.cache_bytes));
         if shared_store.is_some() {
             // Nothing is cached until this node hears other nodes' changes.
             cache.suspend();
@@ -118,6 +119,9 @@ impl Application {
             ..EngineConfig::default()
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
+        let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
+        let counters = metrics::Counters::new();
+        counters.cache_limit(config.limits.cache_bytes);
         let config = Arc::new(config);
         let state = AppState::new(state::Shared {
             store,
@@ -126,10 +130,11 @@ impl Application {
             auth: auth::Auth::new(Arc::clone(&config)),
             config,
             metrics: metrics::handle(),
-            counters: metrics::Counters::new(),
+            counters,
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
             streams,
+            builds,
         });
         Ok(Application { listener, grpc_listener, state, tls, shared_store })
     }

@@ -103,7 +103,7 @@ pub async fn import_clips(
         limits: import_limits(&state.config.limits),
     };
     let limits = state.config.limits.clone();
-    let (admitted, skipped) = tokio::task::spawn_blocking(move || -> Result<_, ApiError> {
+    let (admitted, skipped) = state.builds.run(move || -> Result<_, ApiError> {
         // A shared handle on the part, never a copy: the importer asks once
         // per name and slices it per buffer.
         let mut resolve = |uri: &str| -> Result<Bytes, String> {
@@ -122,8 +122,7 @@ pub async fn import_clips(
             .collect::<Result<Vec<Admitted>, ApiError>>()?;
         Ok((admitted, imported.skipped))
     })
-    .await
-    .map_err(crate::server::metrics::join_failed)??;
+    .await?;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
     let metas = state.store.create_all(new_clips).await?;
@@ -180,6 +179,7 @@ fn import_limits(limits: &Limits) -> ImportLimits {
         max_keys_per_track: limits.max_keys_per_track,
         max_frames: limits.max_keys_per_track,
         max_resolved_bytes: limits.max_import_resolved_bytes as u64,
+        max_build_work: limits.max_build_work,
         ..ImportLimits::default()
     }
 }

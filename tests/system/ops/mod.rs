@@ -5,6 +5,7 @@
 //! test `CRASH_CYCLES=50`; each has a script in `scripts/` and a row in
 //! RELIABILITY.md.
 
+mod builds;
 mod caller;
 mod connections;
 mod crash;
