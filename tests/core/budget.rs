@@ -78,8 +78,6 @@ fn a_hostile_clip_stops_at_the_budget_not_after_its_work() {
     assert!((100_001..100_010).contains(&spent), "spent {spent}");
     assert!(pointer.starts_with("/tracks/"), "{pointer}");
     assert!(started.elapsed().as_secs_f64() < 5.0, "{:?}", started.elapsed());
-    let (code, ..) = refusal(Clip::build(&spec));
-    assert_eq!(code, "build_budget_exceeded", "the default budget refuses it too");
 }
 
 #[test]
