@@ -9,7 +9,8 @@
 //!
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
-//! clips; `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
+//! clips (bounded in entries and bytes); `builds` where clips are built (blocking threads, a few at once);
+//! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `request` the sampling and stream rules both transports share, with their
 //! stable codes; `rest` the routes; `grpc` the gRPC API, served on its own port
@@ -120,6 +121,8 @@ impl Application {
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
         let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
+        // The recorder first: handles registered before it would count nothing.
+        let prometheus = metrics::handle();
         let counters = metrics::Counters::new();
         counters.cache_limit(config.limits.cache_bytes);
         let config = Arc::new(config);
@@ -129,7 +132,7 @@ impl Application {
             writes,
             auth: auth::Auth::new(Arc::clone(&config)),
             config,
-            metrics: metrics::handle(),
+            metrics: prometheus,
             counters,
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
