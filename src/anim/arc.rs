@@ -162,12 +162,7 @@ fn invert(p: &[DVec3; 4], (a, b): (f64, f64), target: f64, abs_tol: f64, meter: 
 /// Returns `None` for a path of zero length (nothing moves). The work is
 /// charged to `meter`; when it goes over, the result is meaningless and the
 /// caller refuses the clip.
-pub(crate) fn build(
-    segments: &[[DVec3; 4]],
-    t0: f64,
-    t1: f64,
-    meter: &mut Meter,
-) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
+pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64, meter: &mut Meter) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
     let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12, meter)).collect();
     let total: f64 = lengths.iter().sum();
     // A path shorter than the rounding noise of its coordinates does not move.

@@ -29,7 +29,9 @@ mod time;
 mod timeline;
 mod tracks;
 
-pub use clip::{Clip, Cursor, DEFAULT_BUILD_WORK, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times};
+pub use clip::{
+    Clip, Cursor, DEFAULT_BUILD_WORK, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times,
+};
 pub use error::{ClipError, ClipErrorKind, Path, Step};
 pub use skeleton::{Pose, Skeleton};
 pub use spec::{

@@ -4,7 +4,9 @@
 //! with what the allocator saw it keep.
 
 use glam::Vec3;
-use inbetween::anim::{Channel, Clip, ClipError, ClipSpec, DEFAULT_BUILD_WORK, Interpolation, Keys, Playback, Speed, TrackSpec};
+use inbetween::anim::{
+    Channel, Clip, ClipError, ClipSpec, DEFAULT_BUILD_WORK, Interpolation, Keys, Playback, Speed, TrackSpec,
+};
 
 use crate::live_bytes;
 use crate::random::{Kind, Rng, skeleton_clip, track};
@@ -116,4 +118,3 @@ fn heap_bytes_is_what_the_allocator_saw_the_clip_keep() {
         );
     }
 }
-

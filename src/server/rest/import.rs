@@ -103,26 +103,28 @@ pub async fn import_clips(
         limits: import_limits(&state.config.limits),
     };
     let limits = state.config.limits.clone();
-    let (admitted, skipped) = state.builds.run(move || -> Result<_, ApiError> {
-        // A shared handle on the part, never a copy: the importer asks once
-        // per name and slices it per buffer.
-        let mut resolve = |uri: &str| -> Result<Bytes, String> {
-            siblings
+    let (admitted, skipped) = state
+        .builds
+        .run(move || -> Result<_, ApiError> {
+            // A shared handle on the part, never a copy: the importer asks once
+            // per name and slices it per buffer.
+            let mut resolve = |uri: &str| -> Result<Bytes, String> {
+                siblings
+                    .iter()
+                    .find(|(name, _)| name == uri)
+                    .map(|(_, data)| data.clone())
+                    .ok_or_else(|| format!("no part named {uri:?} in the upload"))
+            };
+            let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
+            let imported = import_with(&body, format, &options, resolver)?;
+            let admitted = imported
+                .clips
                 .iter()
-                .find(|(name, _)| name == uri)
-                .map(|(_, data)| data.clone())
-                .ok_or_else(|| format!("no part named {uri:?} in the upload"))
-        };
-        let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
-        let imported = import_with(&body, format, &options, resolver)?;
-        let admitted = imported
-            .clips
-            .iter()
-            .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits))
-            .collect::<Result<Vec<Admitted>, ApiError>>()?;
-        Ok((admitted, imported.skipped))
-    })
-    .await?;
+                .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits))
+                .collect::<Result<Vec<Admitted>, ApiError>>()?;
+            Ok((admitted, imported.skipped))
+        })
+        .await?;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
     let metas = state.store.create_all(new_clips).await?;

@@ -26,7 +26,7 @@ async fn the_cache_reports_its_bytes_under_the_bound_on_metrics() {
         let bytes = metric(&text, "inbetween_cache_bytes").expect("inbetween_cache_bytes");
         let entries = metric(&text, "inbetween_cache_entries").expect("inbetween_cache_entries");
         assert!(bytes <= 3e6, "after {} uploads: {bytes} B cached", k + 1);
-        assert!(entries >= 1.0 && entries <= 16.0);
+        assert!((1.0..=16.0).contains(&entries));
         peak = peak.max(bytes);
     }
     let text = metrics(&server, &http).await;
@@ -101,7 +101,8 @@ async fn build_budget_figures() {
     let probe = {
         let (http, url, grpc_url) = (http.clone(), server.url("/healthz"), server.grpc_url());
         tokio::spawn(async move {
-            let mut grpc = inbetween::wire::proto::pb::animation_client::AnimationClient::connect(grpc_url).await.unwrap();
+            let mut grpc =
+                inbetween::wire::proto::pb::animation_client::AnimationClient::connect(grpc_url).await.unwrap();
             let (mut healthz, mut ping) = (Vec::new(), Vec::new());
             while !*done_rx.borrow() {
                 let started = Instant::now();
@@ -115,7 +116,8 @@ async fn build_budget_figures() {
             (healthz, ping)
         })
     };
-    let upload = |body: String| http.post(server.url("/v1/clips")).header("content-type", "application/json").body(body).send();
+    let upload =
+        |body: String| http.post(server.url("/v1/clips")).header("content-type", "application/json").body(body).send();
     let started = Instant::now();
     let (a, b) = tokio::join!(upload(doc.clone()), upload(doc.clone()));
     let took = started.elapsed();
