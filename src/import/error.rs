@@ -120,3 +120,19 @@ impl ImportError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anim::Path;
+
+    /// Importers produce no constant-speed tracks today, but a clip over the
+    /// build budget must read as the limit it is, as on every other route.
+    #[test]
+    fn an_imported_clip_over_the_build_budget_has_the_upload_code() {
+        let invalid = |kind| ImportError::InvalidClip { clip: "c".into(), error: ClipError::new(Path::root(), kind) };
+        let over = invalid(ClipErrorKind::BuildBudgetExceeded { limit: 10, spent: 11 });
+        assert_eq!((over.code(), over.class()), ("build_budget_exceeded", ErrorClass::Unprocessable));
+        assert_eq!(invalid(ClipErrorKind::NoTracks).code(), "invalid_clip");
+    }
+}
