@@ -13,6 +13,8 @@
 //! after at most the limit's worth of work, however its curves are split
 //! into tracks.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use glam::DVec3;
 
 use super::curve::ArcPiece;
@@ -30,25 +32,31 @@ const MAX_DEPTH: u32 = 16;
 const MAX_PIECES: usize = 1 << 20;
 
 /// The build work of one clip: quadrature evaluations (one five-point
-/// Gauss-Legendre rule each) plus arc-length pieces, counted against a limit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Meter {
+/// Gauss-Legendre rule each) plus arc-length pieces, counted against a limit,
+/// and a flag the caller may raise to abandon the build.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Meter<'a> {
     spent: u64,
     limit: u64,
+    cancel: &'a AtomicBool,
 }
 
-impl Meter {
-    pub fn new(limit: u64) -> Self {
-        Meter { spent: 0, limit }
+impl<'a> Meter<'a> {
+    pub fn new(limit: u64, cancel: &'a AtomicBool) -> Self {
+        Meter { spent: 0, limit, cancel }
     }
 
     fn charge(&mut self, units: u64) {
         self.spent = self.spent.saturating_add(units);
     }
 
-    /// Past the limit: everything still to do is skipped.
+    /// Past the limit, or cancelled: everything still to do is skipped.
     pub fn over(&self) -> bool {
-        self.spent > self.limit
+        self.spent > self.limit || self.cancelled()
+    }
+
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
     }
 
     pub fn spent(&self) -> u64 {
@@ -95,14 +103,14 @@ const LENGTH_BUDGET: u32 = 1 << 12;
 /// 1e22-long path for 1e-12 cannot converge, it only recurses (the fuzzer
 /// found such a clip: 2⁴⁰ evaluations).
 /// Each evaluation is charged to `meter`; once it is over, no more are made.
-pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64, meter: &mut Meter) -> f64 {
+pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64, meter: &mut Meter<'_>) -> f64 {
     fn go(
         p: &[DVec3; 4],
         (a, b): (f64, f64),
         whole: f64,
         (tol, floor): (f64, f64),
         depth: u32,
-        (budget, meter): (&mut u32, &mut Meter),
+        (budget, meter): (&mut u32, &mut Meter<'_>),
     ) -> f64 {
         if meter.over() {
             return whole;
@@ -129,7 +137,7 @@ pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64, meter: &mut M
 }
 
 /// The parameter in `[a, b]` whose arc length from `a` is `target`.
-fn invert(p: &[DVec3; 4], (a, b): (f64, f64), target: f64, abs_tol: f64, meter: &mut Meter) -> f64 {
+fn invert(p: &[DVec3; 4], (a, b): (f64, f64), target: f64, abs_tol: f64, meter: &mut Meter<'_>) -> f64 {
     let (mut lo, mut hi) = (a, b);
     let mut u = a + (b - a) * 0.5;
     for _ in 0..60 {
@@ -162,7 +170,12 @@ fn invert(p: &[DVec3; 4], (a, b): (f64, f64), target: f64, abs_tol: f64, meter: 
 /// Returns `None` for a path of zero length (nothing moves). The work is
 /// charged to `meter`; when it goes over, the result is meaningless and the
 /// caller refuses the clip.
-pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64, meter: &mut Meter) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
+pub(crate) fn build(
+    segments: &[[DVec3; 4]],
+    t0: f64,
+    t1: f64,
+    meter: &mut Meter<'_>,
+) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
     let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12, meter)).collect();
     let total: f64 = lengths.iter().sum();
     // A path shorter than the rounding noise of its coordinates does not move.
@@ -221,7 +234,7 @@ fn split(
     (sa, sb): (f64, f64),
     (tol, quad_tol): (f64, f64),
     depth: u32,
-    (out, meter): (&mut Vec<(f64, ArcPiece)>, &mut Meter),
+    (out, meter): (&mut Vec<(f64, ArcPiece)>, &mut Meter<'_>),
 ) {
     if meter.over() {
         return;
@@ -256,7 +269,8 @@ mod tests {
         // A straight segment with evenly spaced control points: length 5.
         let line =
             [DVec3::ZERO, DVec3::new(1.0, 4.0 / 3.0, 0.0), DVec3::new(2.0, 8.0 / 3.0, 0.0), DVec3::new(3.0, 4.0, 0.0)];
-        let meter = &mut Meter::new(u64::MAX);
+        let never = AtomicBool::new(false);
+        let meter = &mut Meter::new(u64::MAX, &never);
         assert!((length(&line, 0.0, 1.0, 1e-12, meter) - 5.0).abs() < 1e-12);
         // A quarter-circle-like arc of radius 1 (the classic 0.5523 handles): π/2 within 3e-4.
         let k = 0.552_284_749_8;
@@ -270,7 +284,8 @@ mod tests {
         // at 2.2e22. An absolute tolerance of 1e-12 on such a length is below
         // its ulp, and the quadrature recursed 2^40 times.
         let far = [DVec3::X, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.0, 2.222_220_017_222_415e22, 2.0)];
-        let (times, pieces) = build(&[far], 0.0, 3.0, &mut Meter::new(u64::MAX)).expect("the path moves");
+        let (times, pieces) =
+            build(&[far], 0.0, 3.0, &mut Meter::new(u64::MAX, &AtomicBool::new(false))).expect("the path moves");
         assert_eq!(times.len(), pieces.len() + 1);
         assert!(pieces.len() <= MAX_PIECES);
         assert!(times.windows(2).all(|w| w[0] < w[1]), "piece times increase");

@@ -7,6 +7,7 @@
 //! kind (`tracks`), so sampling is a handful of tight loops.
 
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 
 use glam::Mat4;
 
@@ -116,6 +117,16 @@ impl Clip {
     /// As [`Clip::build`]; `build_budget_exceeded` (at the track that went
     /// over) past `max_work`.
     pub fn build_within(spec: &ClipSpec, max_work: u64) -> Result<Clip, ClipError> {
+        Clip::build_cancellable(spec, max_work, &AtomicBool::new(false))
+    }
+
+    /// [`Clip::build_within`] that stops soon after `cancel` is raised (its
+    /// caller gave up: a client gone, a timeout), instead of finishing work
+    /// nobody will use.
+    ///
+    /// # Errors
+    /// As [`Clip::build_within`]; `build_cancelled` once `cancel` is raised.
+    pub fn build_cancellable(spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<Clip, ClipError> {
         let chars = spec.name.chars().count();
         if chars == 0 || chars > MAX_NAME_CHARS {
             return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
@@ -140,7 +151,7 @@ impl Clip {
             (Vec3Tracks::default(), QuatTracks::default(), Vec3Tracks::default());
         let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut bounds = JointBounds::of_rest(skeleton.rest());
-        let mut meter = Meter::new(max_work);
+        let mut meter = Meter::new(max_work, cancel);
         for (i, track) in spec.tracks.iter().enumerate() {
             let path = Path::root().field("tracks").index(i);
             let joint = skeleton.index_of(&track.joint).ok_or_else(|| {

@@ -127,7 +127,11 @@ pub(crate) fn unit_quat(v: Vec4, path: &Path) -> Result<DQuat, ClipError> {
 
 /// Compiles a translation or scale track; a constant-speed table's work is
 /// charged to `meter` (the whole clip's), and refused once it is over.
-pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path, meter: &mut Meter) -> Result<Compiled<Vec3Curve>, ClipError> {
+pub(crate) fn vec3_track(
+    spec: &TrackSpec,
+    path: &Path,
+    meter: &mut Meter<'_>,
+) -> Result<Compiled<Vec3Curve>, ClipError> {
     check_common(spec, path)?;
     let Keys::Vec3(values) = &spec.values else { unreachable!("width checked") };
     let times = &spec.times;
@@ -184,6 +188,9 @@ pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path, meter: &mut Meter) -> Re
     let f32_segments = || segments.iter().map(|s| s.map(|p| p.as_vec3().into())).collect::<Box<[[Vec3A; 4]]>>();
     let table = if spec.speed == Speed::Constant {
         let table = arc::build(&segments, t_in[0], t_in[t_in.len() - 1], meter);
+        if meter.cancelled() {
+            return Err(ClipError::new(path.clone(), K::BuildCancelled));
+        }
         if meter.over() {
             let kind = K::BuildBudgetExceeded { limit: meter.limit(), spent: meter.spent() };
             return Err(ClipError::new(path.clone(), kind));

@@ -124,6 +124,8 @@ pub enum ClipErrorKind {
          quadrature evaluations, over the whole clip): {spent} were spent by this track"
     )]
     BuildBudgetExceeded { limit: u64, spent: u64 },
+    #[error("the build was abandoned by its caller")]
+    BuildCancelled,
 }
 
 impl ClipErrorKind {
@@ -157,6 +159,7 @@ impl ClipErrorKind {
             ModelSpaceOverflow { .. } => "model_space_overflow",
             CurveOverflow => "curve_overflow",
             BuildBudgetExceeded { .. } => "build_budget_exceeded",
+            BuildCancelled => "build_cancelled",
         }
     }
 }

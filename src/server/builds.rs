@@ -7,8 +7,13 @@
 //! (`/healthz`, gRPC `Ping`, pose requests) for that long. On the blocking
 //! pool the probes keep answering, and the semaphore keeps many concurrent
 //! uploads from taking every core: the rest wait, asynchronously, holding
-//! nothing but their body. A waiter whose client goes away is dropped before
-//! it starts; a started build runs to its end (bounded by its budget).
+//! nothing but their body. A waiter whose client goes away (or whose request
+//! times out) is dropped before it starts; a started build is handed a
+//! cancel flag that is raised when its caller stops waiting, so it stops
+//! within a few units of work instead of finishing in the background.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use tokio::sync::Semaphore;
 
@@ -18,7 +23,16 @@ use super::metrics::join_failed;
 /// The build gate (see the module docs).
 #[derive(Debug)]
 pub struct Builds {
-    permits: Semaphore,
+    permits: Arc<Semaphore>,
+}
+
+/// Raises its flag when dropped: the awaiting side of a build went away.
+struct CancelOnDrop(Arc<AtomicBool>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
 }
 
 impl Builds {
@@ -26,21 +40,32 @@ impl Builds {
     /// If `concurrency` is 0 (the configuration refuses it).
     pub fn new(concurrency: usize) -> Self {
         assert!(concurrency > 0, "builds need at least one permit");
-        Builds { permits: Semaphore::new(concurrency) }
+        Builds { permits: Arc::new(Semaphore::new(concurrency)) }
     }
 
-    /// Runs `build` on a blocking thread once a permit is free.
+    /// Runs `build` on a blocking thread once a permit is free, with a flag
+    /// raised if this future is dropped first (for `Clip::build_cancellable`).
+    /// The thread holds the permit until it is done, so a cancelled build
+    /// keeps its place until it has noticed.
     ///
     /// # Errors
     /// Whatever `build` returns; `internal` if it panicked (counted).
     pub async fn run<T, F>(&self, build: F) -> Result<T, ApiError>
     where
-        F: FnOnce() -> Result<T, ApiError> + Send + 'static,
+        F: FnOnce(&AtomicBool) -> Result<T, ApiError> + Send + 'static,
         T: Send + 'static,
     {
         // Never closed, so acquiring fails only if that changes.
-        let _permit = self.permits.acquire().await.map_err(ApiError::internal)?;
-        tokio::task::spawn_blocking(build).await.map_err(join_failed)?
+        let permit = self.permits.clone().acquire_owned().await.map_err(ApiError::internal)?;
+        let cancel = CancelOnDrop(Arc::new(AtomicBool::new(false)));
+        let flag = cancel.0.clone();
+        let result = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            build(&flag)
+        })
+        .await;
+        drop(cancel);
+        result.map_err(join_failed)?
     }
 
     /// Builds that could start now without waiting.
@@ -65,7 +90,7 @@ mod tests {
                 let (builds, running, peak) = (builds.clone(), running.clone(), peak.clone());
                 tokio::spawn(async move {
                     builds
-                        .run(move || {
+                        .run(move |_| {
                             assert_ne!(std::thread::current().id(), caller, "a build on the async worker");
                             let now = running.fetch_add(1, Ordering::SeqCst) + 1;
                             peak.fetch_max(now, Ordering::SeqCst);
@@ -82,5 +107,30 @@ mod tests {
         }
         assert_eq!(peak.load(Ordering::SeqCst), 2, "the two permits were both used, and never more");
         assert_eq!(builds.available(), 2);
+    }
+
+    #[tokio::test]
+    async fn a_build_whose_caller_stops_waiting_sees_its_flag_raised() {
+        let builds = Arc::new(Builds::new(1));
+        let (seen_tx, seen_rx) = std::sync::mpsc::channel();
+        let (started_tx, started_rx) = tokio::sync::oneshot::channel();
+        let waiting = builds.run(move |cancel| {
+            started_tx.send(()).unwrap();
+            let since = std::time::Instant::now();
+            while !cancel.load(Ordering::Relaxed) && since.elapsed().as_secs() < 10 {
+                std::thread::yield_now();
+            }
+            seen_tx.send(cancel.load(Ordering::Relaxed)).unwrap();
+            Ok(())
+        });
+        tokio::select! {
+            _ = waiting => panic!("the build ended on its own"),
+            _ = started_rx => {}
+        }
+        // The future was dropped by select!: the build sees the flag.
+        let seen = tokio::task::spawn_blocking(move || seen_rx.recv().unwrap()).await.unwrap();
+        assert!(seen, "the flag was raised");
+        let ok = builds.run(|_| Ok(7)).await.unwrap();
+        assert_eq!((ok, builds.available()), (7, 1), "the permit came back once the thread was done");
     }
 }

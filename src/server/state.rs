@@ -102,7 +102,7 @@ impl AppState {
             let result = async {
                 let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
                 let max_work = state.config.limits.max_build_work;
-                let cached = state.builds.run(move || compile_stored(stored, max_work)).await?;
+                let cached = state.builds.run(move |cancel| compile_stored(stored, max_work, cancel)).await?;
                 Ok::<_, ApiError>(Arc::new(cached))
             }
             .await;
@@ -176,11 +176,11 @@ pub type Loads = Arc<Mutex<HashMap<String, Load>>>;
 /// Compiles a stored document within `max_work`. It was accepted once, so
 /// failure here means the store was corrupted or the rules changed: an
 /// internal error, unless the build budget was lowered since (422).
-fn compile_stored(stored: StoredClip, max_work: u64) -> Result<CachedClip, ApiError> {
+fn compile_stored(stored: StoredClip, max_work: u64, cancel: &AtomicBool) -> Result<CachedClip, ApiError> {
     let (_, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(|e: DocError| {
         ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id))
     })?;
-    let clip = super::limits::build(&spec, max_work).map_err(|e| match e {
+    let clip = super::limits::build(&spec, max_work, cancel).map_err(|e| match e {
         e @ ApiError::TooMany { .. } => e,
         e => ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e:?}", stored.meta.id)),
     })?;

@@ -118,3 +118,14 @@ fn heap_bytes_is_what_the_allocator_saw_the_clip_keep() {
         );
     }
 }
+
+#[test]
+fn a_raised_cancel_flag_stops_the_build_at_once() {
+    let spec = clip(vec![hermite("a", 0, 3), hermite("b", 3, 6)]);
+    let lowered = std::sync::atomic::AtomicBool::new(false);
+    let clip = Clip::build_cancellable(&spec, DEFAULT_BUILD_WORK, &lowered).unwrap();
+    assert_eq!(clip, Clip::build(&spec).unwrap());
+    let raised = std::sync::atomic::AtomicBool::new(true);
+    let e = Clip::build_cancellable(&spec, DEFAULT_BUILD_WORK, &raised).unwrap_err();
+    assert_eq!((e.kind.code(), e.path.to_pointer()), ("build_cancelled", "/tracks/0".to_owned()));
+}

@@ -38,7 +38,7 @@ pub struct ClipList {
 /// the async workers, whatever its size).
 async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
     let limits = state.config.limits.clone();
-    state.builds.run(move || admit(&body, &limits)).await
+    state.builds.run(move |cancel| admit(&body, &limits, cancel)).await
 }
 
 fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::HeaderName, String)>) -> Response {

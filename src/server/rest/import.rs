@@ -105,7 +105,7 @@ pub async fn import_clips(
     let limits = state.config.limits.clone();
     let (admitted, skipped) = state
         .builds
-        .run(move || -> Result<_, ApiError> {
+        .run(move |cancel| -> Result<_, ApiError> {
             // A shared handle on the part, never a copy: the importer asks once
             // per name and slices it per buffer.
             let mut resolve = |uri: &str| -> Result<Bytes, String> {
@@ -120,7 +120,7 @@ pub async fn import_clips(
             let admitted = imported
                 .clips
                 .iter()
-                .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits))
+                .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits, cancel))
                 .collect::<Result<Vec<Admitted>, ApiError>>()?;
             Ok((admitted, imported.skipped))
         })
