@@ -173,3 +173,26 @@ async fn a_stored_clip_over_a_lowered_budget_is_refused_not_a_500() {
     assert_eq!(problem["code"], "build_budget_exceeded", "{problem}");
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_timed_out_upload_stops_its_build_instead_of_finishing_it() {
+    // A budget that would take minutes of debug build; a 1 s request timeout.
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.max_build_work = 1_000_000_000;
+            c.limits.request_timeout = Duration::from_secs(1);
+        })
+        .start()
+        .await;
+    let upload = app.http.post(app.url("/v1/clips")).header("content-type", "application/json");
+    let response = upload.body(looping_hermite("slow", 40, 17, 3000.0)).send().await.unwrap();
+    assert_eq!(response.status(), 503, "the request timed out");
+    let started = Instant::now();
+    let permits = app.state.config.limits.max_concurrent_builds;
+    while app.state.builds.available() < permits {
+        assert!(started.elapsed() < Duration::from_secs(5), "the abandoned build is still running");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    eprintln!("the abandoned build stopped {:?} after the 503", started.elapsed());
+    app.stop().await;
+}
