@@ -48,8 +48,9 @@ fn p99(mut latencies: Vec<Duration>) -> Duration {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_concurrent_hostile_uploads_are_refused_while_the_probes_answer() {
     // A smaller budget than the default 16M units: this is a debug build,
-    // many times slower than release (the default's time is in RELIABILITY.md).
-    let app = TestApp::builder().configure(|c| c.limits.max_build_work = 2_000_000).start().await;
+    // ~75 times slower than release (the default's time is in RELIABILITY.md),
+    // and other tests in this binary time their frames.
+    let app = TestApp::builder().configure(|c| c.limits.max_build_work = 200_000).start().await;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let probes = probe(&app, stop_rx);
     let uploads = async {
@@ -68,7 +69,7 @@ async fn two_concurrent_hostile_uploads_are_refused_while_the_probes_answer() {
         let problem: Value = response.json().await.unwrap();
         assert_eq!(problem["code"], "build_budget_exceeded", "{problem}");
         let detail = problem["detail"].as_str().unwrap();
-        assert!(detail.contains("2000000") && detail.contains("--max-build-work"), "{detail}");
+        assert!(detail.contains("200000") && detail.contains("--max-build-work"), "{detail}");
     }
     let (n, worst) = (latencies.len(), p99(latencies));
     eprintln!("two hostile uploads refused in {took:?}; {n} probes, p99 {worst:?}");
@@ -78,9 +79,9 @@ async fn two_concurrent_hostile_uploads_are_refused_while_the_probes_answer() {
     app.stop().await;
 }
 
-/// A clip its budget admits with room to spare, and its cache weight.
+/// A clip with arc-length tables (37k units of work), and its cache weight.
 fn heavy_clip(name: &str) -> (String, usize) {
-    let doc = looping_hermite(name, 3, 4, 30.0);
+    let doc = looping_hermite(name, 1, 2, 1.0);
     let clip = Clip::build(&parse_clip(doc.as_bytes()).unwrap().1).unwrap();
     (doc, clip.heap_bytes())
 }
@@ -94,12 +95,12 @@ async fn gauge(app: &TestApp, name: &str) -> f64 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sixteen_heavy_clips_leave_the_cache_under_its_byte_bound() {
     let (_, one) = heavy_clip("probe");
-    assert!(one > 256 * 1024, "a heavy clip weighs {one} B");
+    assert!(one > 8 * 1024, "a heavy clip weighs {one} B");
     let limit = one * 7 / 2;
     let app = TestApp::builder().configure(|c| c.limits.cache_bytes = limit).start().await;
     let mut ids = Vec::new();
     for k in 0..16 {
-        let doc = looping_hermite(&format!("heavy{k}"), 3, 4, 30.0);
+        let (doc, _) = heavy_clip(&format!("heavy{k}"));
         ids.push(app.create(&doc, None).await["id"].as_str().unwrap().to_owned());
         let (entries, bytes) = (app.state.cache.len(), app.state.cache.bytes());
         assert!(bytes <= limit, "after {} uploads: {bytes} B cached, over {limit}", k + 1);
@@ -114,7 +115,7 @@ async fn sixteen_heavy_clips_leave_the_cache_under_its_byte_bound() {
     assert!(gauge(&app, "inbetween_cache_limit_bytes").await > 0.0);
     // Evicted clips still answer: the miss rebuilds them through the gate.
     let pose = app.get_json(&format!("/v1/clips/{}/pose?t=1.5", ids[0])).await;
-    assert_eq!(pose["joints"].as_array().unwrap().len(), 3);
+    assert_eq!(pose["joints"].as_array().unwrap().len(), 1);
     assert!(app.state.cache.bytes() <= limit);
     app.stop().await;
 }
@@ -122,7 +123,7 @@ async fn sixteen_heavy_clips_leave_the_cache_under_its_byte_bound() {
 #[tokio::test]
 async fn put_clip_over_the_budget_gets_the_rest_code() {
     let app = TestApp::builder().configure(|c| c.limits.max_build_work = 50_000).start().await;
-    let doc = looping_hermite("over", 2, 6, 30.0);
+    let doc = looping_hermite("over", 1, 3, 30.0);
     let rest = app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(doc.clone());
     let response = rest.send().await.unwrap();
     assert_eq!(response.status(), 422);
@@ -152,7 +153,7 @@ async fn put_clip_over_the_budget_gets_the_rest_code() {
 #[tokio::test]
 async fn a_stored_clip_over_a_lowered_budget_is_refused_not_a_500() {
     let dir = tempfile::tempdir().unwrap();
-    let doc = looping_hermite("stored", 2, 6, 30.0);
+    let doc = looping_hermite("stored", 1, 2, 1.0);
     let id = {
         let store = StoreConfig::DataDir(dir.path().to_owned());
         let app = TestApp::builder().configure(|c| c.store = store).start().await;

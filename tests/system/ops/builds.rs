@@ -16,23 +16,23 @@ async fn metrics(server: &super::ServerProcess, http: &reqwest::Client) -> Strin
 async fn the_cache_reports_its_bytes_under_the_bound_on_metrics() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
-    // One heavy clip weighs about 850 KB; the bound holds three.
-    let server = start(&data, &["--cache-bytes", "3000000"]).await;
+    // One clip with arc-length tables weighs about 18 KB; the bound holds three.
+    let server = start(&data, &["--cache-bytes", "60000"]).await;
     let http = reqwest::Client::new();
     let mut peak = 0.0f64;
     for k in 0..16 {
-        server.create(&http, &looping_hermite(&format!("heavy{k}"), 3, 4, 30.0)).await;
+        server.create(&http, &looping_hermite(&format!("heavy{k}"), 1, 2, 1.0)).await;
         let text = metrics(&server, &http).await;
         let bytes = metric(&text, "inbetween_cache_bytes").expect("inbetween_cache_bytes");
         let entries = metric(&text, "inbetween_cache_entries").expect("inbetween_cache_entries");
-        assert!(bytes <= 3e6, "after {} uploads: {bytes} B cached", k + 1);
+        assert!(bytes <= 6e4, "after {} uploads: {bytes} B cached", k + 1);
         assert!((1.0..=16.0).contains(&entries));
         peak = peak.max(bytes);
     }
     let text = metrics(&server, &http).await;
-    assert_eq!(metric(&text, "inbetween_cache_limit_bytes"), Some(3e6));
+    assert_eq!(metric(&text, "inbetween_cache_limit_bytes"), Some(6e4));
     assert!(metric(&text, "inbetween_cache_entries").unwrap() < 16.0, "some clips were evicted by bytes");
-    assert!(peak > 2e6, "the cache filled towards its bound: peak {peak} B");
+    assert!(peak > 4e4, "the cache filled towards its bound: peak {peak} B");
     let rss = server.rss_bytes();
     eprintln!("16 heavy clips: cache peak {peak} B, RSS {} MiB", rss >> 20);
 }
@@ -41,7 +41,7 @@ async fn the_cache_reports_its_bytes_under_the_bound_on_metrics() {
 async fn a_hostile_upload_is_refused_and_healthz_keeps_answering() {
     let dir = tempfile::tempdir().unwrap();
     // The debug binary is many times slower than release: a smaller budget.
-    let server = start(&dir.path().join("data"), &["--max-build-work", "2000000"]).await;
+    let server = start(&dir.path().join("data"), &["--max-build-work", "200000"]).await;
     let http = reqwest::Client::new();
     let doc = looping_hermite("attack", 40, 17, 3000.0);
     let (done_tx, done_rx) = tokio::sync::watch::channel(false);
