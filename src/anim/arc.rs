@@ -6,6 +6,14 @@
 //! adaptively, which also handles zero-speed cusps such as `zero_slope`
 //! ends). The piece boundaries become the track's timeline, so sampling is
 //! the ordinary span search plus one Bezier evaluation.
+//!
+//! The whole clip's tables share one [`Meter`]: every quadrature evaluation
+//! and every piece is charged to it, and once it is over its limit the
+//! tables stop refining at once, so the clip is refused (by `Clip::build`)
+//! after at most the limit's worth of work, however its curves are split
+//! into tracks.
+
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::DVec3;
 
@@ -22,6 +30,43 @@ const F32_RESOLUTION: f64 = 1e-8;
 /// even at a zero-speed cusp; past the budget, pieces stop splitting.
 const MAX_DEPTH: u32 = 16;
 const MAX_PIECES: usize = 1 << 20;
+
+/// The build work of one clip: quadrature evaluations (one five-point
+/// Gauss-Legendre rule each) plus arc-length pieces, counted against a limit,
+/// and a flag the caller may raise to abandon the build.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Meter<'a> {
+    spent: u64,
+    limit: u64,
+    cancel: &'a AtomicBool,
+}
+
+impl<'a> Meter<'a> {
+    pub fn new(limit: u64, cancel: &'a AtomicBool) -> Self {
+        Meter { spent: 0, limit, cancel }
+    }
+
+    fn charge(&mut self, units: u64) {
+        self.spent = self.spent.saturating_add(units);
+    }
+
+    /// Past the limit, or cancelled: everything still to do is skipped.
+    pub fn over(&self) -> bool {
+        self.spent > self.limit || self.cancelled()
+    }
+
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+
+    pub fn spent(&self) -> u64 {
+        self.spent
+    }
+
+    pub fn limit(&self) -> u64 {
+        self.limit
+    }
+}
 
 pub(crate) fn point(p: &[DVec3; 4], u: f64) -> DVec3 {
     let v = 1.0 - u;
@@ -57,37 +102,49 @@ const LENGTH_BUDGET: u32 = 1 << 12;
 /// length's own rounding noise (a few ulps) when that is coarser: asking a
 /// 1e22-long path for 1e-12 cannot converge, it only recurses (the fuzzer
 /// found such a clip: 2⁴⁰ evaluations).
-pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64) -> f64 {
+/// Each evaluation is charged to `meter`; once it is over, no more are made.
+pub(crate) fn length(p: &[DVec3; 4], a: f64, b: f64, abs_tol: f64, meter: &mut Meter<'_>) -> f64 {
     fn go(
         p: &[DVec3; 4],
         (a, b): (f64, f64),
         whole: f64,
         (tol, floor): (f64, f64),
         depth: u32,
-        budget: &mut u32,
+        (budget, meter): (&mut u32, &mut Meter<'_>),
     ) -> f64 {
+        if meter.over() {
+            return whole;
+        }
         let m = (a + b) / 2.0;
         let (l, r) = (gauss5(p, a, m), gauss5(p, m, b));
         *budget = budget.saturating_sub(2);
+        meter.charge(2);
         if depth >= 40 || *budget == 0 || (l + r - whole).abs() <= tol.max(floor) {
             l + r
         } else {
-            go(p, (a, m), l, (tol / 2.0, floor), depth + 1, budget)
-                + go(p, (m, b), r, (tol / 2.0, floor), depth + 1, budget)
+            go(p, (a, m), l, (tol / 2.0, floor), depth + 1, (&mut *budget, &mut *meter))
+                + go(p, (m, b), r, (tol / 2.0, floor), depth + 1, (budget, meter))
         }
     }
+    if meter.over() {
+        return 0.0;
+    }
     let whole = gauss5(p, a, b);
+    meter.charge(1);
     let floor = (whole.abs() * 64.0 * f64::EPSILON).max(1e-300);
     let mut budget = LENGTH_BUDGET;
-    go(p, (a, b), whole, (abs_tol, floor), 0, &mut budget)
+    go(p, (a, b), whole, (abs_tol, floor), 0, (&mut budget, meter))
 }
 
 /// The parameter in `[a, b]` whose arc length from `a` is `target`.
-fn invert(p: &[DVec3; 4], a: f64, b: f64, target: f64, abs_tol: f64) -> f64 {
+fn invert(p: &[DVec3; 4], (a, b): (f64, f64), target: f64, abs_tol: f64, meter: &mut Meter<'_>) -> f64 {
     let (mut lo, mut hi) = (a, b);
     let mut u = a + (b - a) * 0.5;
     for _ in 0..60 {
-        let s = length(p, a, u, abs_tol);
+        if meter.over() {
+            break;
+        }
+        let s = length(p, a, u, abs_tol, meter);
         let err = s - target;
         // Not finer than the lengths' own rounding (a few ulps).
         if err.abs() <= (abs_tol * 0.01).max(s.abs().max(target.abs()) * 64.0 * f64::EPSILON) {
@@ -110,9 +167,16 @@ fn invert(p: &[DVec3; 4], a: f64, b: f64, target: f64, abs_tol: f64) -> f64 {
 
 /// The arc-length breakpoints of a path of Bezier segments spanning
 /// `[t0, t1]`: piece start times (plus the end time) and the pieces.
-/// Returns `None` for a path of zero length (nothing moves).
-pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
-    let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12)).collect();
+/// Returns `None` for a path of zero length (nothing moves). The work is
+/// charged to `meter`; when it goes over, the result is meaningless and the
+/// caller refuses the clip.
+pub(crate) fn build(
+    segments: &[[DVec3; 4]],
+    t0: f64,
+    t1: f64,
+    meter: &mut Meter<'_>,
+) -> Option<(Vec<f32>, Vec<ArcPiece>)> {
+    let lengths: Vec<f64> = segments.iter().map(|p| length(p, 0.0, 1.0, 1e-12, meter)).collect();
     let total: f64 = lengths.iter().sum();
     // A path shorter than the rounding noise of its coordinates does not move.
     let scale = segments.iter().flatten().map(|p| p.abs().max_element()).fold(1.0, f64::max);
@@ -128,7 +192,7 @@ pub(crate) fn build(segments: &[[DVec3; 4]], t0: f64, t1: f64) -> Option<(Vec<f3
     let mut s0 = 0.0;
     for (k, (p, &len)) in segments.iter().zip(&lengths).enumerate() {
         if len > 0.0 {
-            split(p, k as u32, (0.0, 1.0), (s0, s0 + len), tol, quad_tol, 0, &mut raw);
+            split(p, k as u32, (0.0, 1.0), (s0, s0 + len), (tol, quad_tol), 0, (&mut raw, &mut *meter));
         }
         s0 += len;
     }
@@ -163,34 +227,36 @@ fn too_close(last: f32, t: f32) -> bool {
     t <= last || !(1.0 / (t - last)).is_finite()
 }
 
-#[allow(clippy::too_many_arguments)]
 fn split(
     p: &[DVec3; 4],
     segment: u32,
     (ua, ub): (f64, f64),
     (sa, sb): (f64, f64),
-    tol: f64,
-    quad_tol: f64,
+    (tol, quad_tol): (f64, f64),
     depth: u32,
-    out: &mut Vec<(f64, ArcPiece)>,
+    (out, meter): (&mut Vec<(f64, ArcPiece)>, &mut Meter<'_>),
 ) {
+    if meter.over() {
+        return;
+    }
     let mut worst = 0.0f64;
     let mut u_mid = (ua + ub) / 2.0;
     for w in [0.25, 0.5, 0.75] {
         let target = w * (sb - sa);
-        let u_true = invert(p, ua, ub, target, quad_tol);
+        let u_true = invert(p, (ua, ub), target, quad_tol, meter);
         let u_lin = ua + w * (ub - ua);
         worst = worst.max((point(p, u_true) - point(p, u_lin)).length());
         if w == 0.5 {
             u_mid = u_true;
         }
     }
-    if worst <= tol || depth >= MAX_DEPTH || out.len() >= MAX_PIECES {
+    if worst <= tol || depth >= MAX_DEPTH || out.len() >= MAX_PIECES || meter.over() {
+        meter.charge(1);
         out.push((sa, ArcPiece { segment, u0: ua as f32, du: (ub - ua) as f32 }));
     } else {
         let sm = (sa + sb) / 2.0;
-        split(p, segment, (ua, u_mid), (sa, sm), tol, quad_tol, depth + 1, out);
-        split(p, segment, (u_mid, ub), (sm, sb), tol, quad_tol, depth + 1, out);
+        split(p, segment, (ua, u_mid), (sa, sm), (tol, quad_tol), depth + 1, (&mut *out, &mut *meter));
+        split(p, segment, (u_mid, ub), (sm, sb), (tol, quad_tol), depth + 1, (out, meter));
     }
 }
 
@@ -203,11 +269,13 @@ mod tests {
         // A straight segment with evenly spaced control points: length 5.
         let line =
             [DVec3::ZERO, DVec3::new(1.0, 4.0 / 3.0, 0.0), DVec3::new(2.0, 8.0 / 3.0, 0.0), DVec3::new(3.0, 4.0, 0.0)];
-        assert!((length(&line, 0.0, 1.0, 1e-12) - 5.0).abs() < 1e-12);
+        let never = AtomicBool::new(false);
+        let meter = &mut Meter::new(u64::MAX, &never);
+        assert!((length(&line, 0.0, 1.0, 1e-12, meter) - 5.0).abs() < 1e-12);
         // A quarter-circle-like arc of radius 1 (the classic 0.5523 handles): π/2 within 3e-4.
         let k = 0.552_284_749_8;
         let arc = [DVec3::X, DVec3::new(1.0, k, 0.0), DVec3::new(k, 1.0, 0.0), DVec3::Y];
-        assert!((length(&arc, 0.0, 1.0, 1e-12) - std::f64::consts::FRAC_PI_2).abs() < 3e-4);
+        assert!((length(&arc, 0.0, 1.0, 1e-12, meter) - std::f64::consts::FRAC_PI_2).abs() < 3e-4);
     }
 
     #[test]
@@ -216,7 +284,8 @@ mod tests {
         // at 2.2e22. An absolute tolerance of 1e-12 on such a length is below
         // its ulp, and the quadrature recursed 2^40 times.
         let far = [DVec3::X, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::new(0.0, 2.222_220_017_222_415e22, 2.0)];
-        let (times, pieces) = build(&[far], 0.0, 3.0).expect("the path moves");
+        let (times, pieces) =
+            build(&[far], 0.0, 3.0, &mut Meter::new(u64::MAX, &AtomicBool::new(false))).expect("the path moves");
         assert_eq!(times.len(), pieces.len() + 1);
         assert!(pieces.len() <= MAX_PIECES);
         assert!(times.windows(2).all(|w| w[0] < w[1]), "piece times increase");

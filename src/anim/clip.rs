@@ -7,9 +7,11 @@
 //! kind (`tracks`), so sampling is a handful of tight loops.
 
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 
 use glam::Mat4;
 
+use super::arc::Meter;
 use super::compile::{self, Compiled, finite3, unit_quat};
 use super::error::{ClipError, ClipErrorKind as K, Path};
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
@@ -25,6 +27,14 @@ pub const MAX_NAME_CHARS: usize = 256;
 /// root may reach: 1/340 of `f32::MAX`, so matrix products (and a skinning
 /// matrix's inverse bind) keep headroom.
 pub const MAX_MODEL_MAGNITUDE: f64 = 1e36;
+
+/// The build work [`Clip::build`] allows a clip: quadrature evaluations
+/// plus arc-length pieces of its constant-speed tables, summed over the
+/// whole clip. A unit is about 25 ns of one core (release build) and leaves
+/// about half a byte of tables, so this is at most ~0.4 s and ~8 MB: room for
+/// a constant-speed path of ~150 smooth segments (each ~100k units at the
+/// 1e-6 tolerance). The server's `max_build_work` setting replaces it.
+pub const DEFAULT_BUILD_WORK: u64 = 16_000_000;
 
 /// A named instant of the clip (a footstep, a sound cue).
 #[derive(Debug, Clone, PartialEq)]
@@ -52,6 +62,13 @@ pub struct Clip {
     /// Joints with a translation track, in track order (root motion's default joint).
     translated: Vec<u32>,
     events: Vec<Event>,
+    /// What the build spent (see [`DEFAULT_BUILD_WORK`]).
+    build_work: u64,
+}
+
+/// Bytes of a vector's allocation (its capacity, not its length).
+pub(crate) fn vec_bytes<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
 }
 
 /// Per-caller search state: the last span of each timeline, which makes
@@ -85,11 +102,33 @@ pub struct SampleOptions {
 }
 
 impl Clip {
-    /// Validates `spec` and compiles it (SPEC §1–2).
+    /// Validates `spec` and compiles it (SPEC §1–2) within
+    /// [`DEFAULT_BUILD_WORK`].
     ///
     /// # Errors
     /// The first rule `spec` breaks, with the path of the offending field.
     pub fn build(spec: &ClipSpec) -> Result<Clip, ClipError> {
+        Clip::build_within(spec, DEFAULT_BUILD_WORK)
+    }
+
+    /// [`Clip::build`] with a budget of `max_work` units of build work for
+    /// the whole clip, however it is split into tracks; the build stops as
+    /// soon as it is spent.
+    ///
+    /// # Errors
+    /// As [`Clip::build`]; `build_budget_exceeded` (at the track that went
+    /// over) past `max_work`.
+    pub fn build_within(spec: &ClipSpec, max_work: u64) -> Result<Clip, ClipError> {
+        Clip::build_cancellable(spec, max_work, &AtomicBool::new(false))
+    }
+
+    /// [`Clip::build_within`] that stops soon after `cancel` is raised (its
+    /// caller gave up: a client gone, a timeout), instead of finishing work
+    /// nobody will use.
+    ///
+    /// # Errors
+    /// As [`Clip::build_within`]; `build_cancelled` once `cancel` is raised.
+    pub fn build_cancellable(spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<Clip, ClipError> {
         let chars = spec.name.chars().count();
         if chars == 0 || chars > MAX_NAME_CHARS {
             return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
@@ -115,6 +154,7 @@ impl Clip {
         let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut bounds = JointBounds::of_rest(skeleton.rest());
         let mut translated = Vec::new();
+        let mut meter = Meter::new(max_work, cancel);
         for (i, track) in spec.tracks.iter().enumerate() {
             let path = Path::root().field("tracks").index(i);
             let joint = skeleton.index_of(&track.joint).ok_or_else(|| {
@@ -136,7 +176,7 @@ impl Clip {
                 rotations.push(joint, intern(times), curve, &mut base.rotations[j]);
                 domain
             } else {
-                let Compiled { times, curve, domain } = compile::vec3_track(track, &path)?;
+                let Compiled { times, curve, domain } = compile::vec3_track(track, &path, &mut meter)?;
                 let (list, slot, bound) = match track.channel {
                     Channel::Scale => (&mut scales, &mut base.scales[j], &mut bounds.scales[j]),
                     _ => (&mut translations, &mut base.translations[j], &mut bounds.translations[j]),
@@ -182,7 +222,31 @@ impl Clip {
             track_count: spec.tracks.len(),
             translated,
             events,
+            build_work: meter.spent(),
         })
+    }
+
+    /// The build work this clip took (quadrature evaluations plus
+    /// arc-length pieces): what [`Clip::build_within`] checks.
+    pub fn build_work(&self) -> u64 {
+        self.build_work
+    }
+
+    /// Bytes the clip holds on the heap (its tables, names and curves), from
+    /// the capacities it allocated: what a cache of clips should count.
+    pub fn heap_bytes(&self) -> usize {
+        let events = self.events.iter().map(|e| e.name.capacity()).sum::<usize>();
+        let timelines = self.timelines.iter().map(Timeline::heap_bytes).sum::<usize>();
+        self.name.capacity()
+            + self.skeleton.heap_bytes()
+            + vec_bytes(&self.timelines)
+            + timelines
+            + self.base.heap_bytes()
+            + self.translations.heap_bytes()
+            + self.rotations.heap_bytes()
+            + self.scales.heap_bytes()
+            + vec_bytes(&self.events)
+            + events
     }
 
     pub fn name(&self) -> &str {

@@ -8,7 +8,7 @@
 
 use glam::{DQuat, DVec3, DVec4, Quat, Vec3, Vec3A, Vec4};
 
-use super::arc;
+use super::arc::{self, Meter};
 use super::curve::{QuatCurve, QuatSegment, SlerpTier, Vec3Curve};
 use super::error::{ClipError, ClipErrorKind as K, Path};
 use super::quat::{
@@ -125,8 +125,13 @@ pub(crate) fn unit_quat(v: Vec4, path: &Path) -> Result<DQuat, ClipError> {
     Ok(DQuat::from_vec4(d / norm))
 }
 
-/// Compiles a translation or scale track.
-pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<Vec3Curve>, ClipError> {
+/// Compiles a translation or scale track; a constant-speed table's work is
+/// charged to `meter` (the whole clip's), and refused once it is over.
+pub(crate) fn vec3_track(
+    spec: &TrackSpec,
+    path: &Path,
+    meter: &mut Meter<'_>,
+) -> Result<Compiled<Vec3Curve>, ClipError> {
     check_common(spec, path)?;
     let Keys::Vec3(values) = &spec.values else { unreachable!("width checked") };
     let times = &spec.times;
@@ -181,9 +186,20 @@ pub(crate) fn vec3_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<Vec3C
         return Err(ClipError::new(path.clone().field("values").index(k), K::CurveOverflow));
     }
     let f32_segments = || segments.iter().map(|s| s.map(|p| p.as_vec3().into())).collect::<Box<[[Vec3A; 4]]>>();
-    if spec.speed == Speed::Constant
-        && let Some((arc_times, pieces)) = arc::build(&segments, t_in[0], t_in[t_in.len() - 1])
-    {
+    let table = if spec.speed == Speed::Constant {
+        let table = arc::build(&segments, t_in[0], t_in[t_in.len() - 1], meter);
+        if meter.cancelled() {
+            return Err(ClipError::new(path.clone(), K::BuildCancelled));
+        }
+        if meter.over() {
+            let kind = K::BuildBudgetExceeded { limit: meter.limit(), spent: meter.spent() };
+            return Err(ClipError::new(path.clone(), kind));
+        }
+        table
+    } else {
+        None
+    };
+    if let Some((arc_times, pieces)) = table {
         let curve = Vec3Curve::ConstantSpeed { segments: f32_segments(), pieces: pieces.into() };
         return Ok(Compiled { times: arc_times, curve, domain });
     }

@@ -131,6 +131,13 @@ pub enum ClipErrorKind {
     ModelSpaceOverflow { bound: f64, limit: f64 },
     #[error("a curve control point overflows f32")]
     CurveOverflow,
+    #[error(
+        "building the clip's constant-speed tables takes more than {limit} units of work (arc-length pieces plus \
+         quadrature evaluations, over the whole clip): {spent} were spent by this track"
+    )]
+    BuildBudgetExceeded { limit: u64, spent: u64 },
+    #[error("the build was abandoned by its caller")]
+    BuildCancelled,
 }
 
 impl ClipErrorKind {
@@ -164,6 +171,8 @@ impl ClipErrorKind {
             TimeRangeTooLarge { .. } => "time_range_too_large",
             ModelSpaceOverflow { .. } => "model_space_overflow",
             CurveOverflow => "curve_overflow",
+            BuildBudgetExceeded { .. } => "build_budget_exceeded",
+            BuildCancelled => "build_cancelled",
         }
     }
 }

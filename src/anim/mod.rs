@@ -31,7 +31,9 @@ mod time;
 mod timeline;
 mod tracks;
 
-pub use clip::{Clip, Cursor, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times};
+pub use clip::{
+    Clip, Cursor, DEFAULT_BUILD_WORK, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times,
+};
 pub use error::{ClipError, ClipErrorKind, Path, Step};
 pub use motion::{ClipSource, Motion, MotionError, MotionSampler};
 pub use skeleton::{Pose, Skeleton};

@@ -29,6 +29,12 @@ impl Pose {
         self.translations.is_empty()
     }
 
+    /// Bytes of the three arrays' allocations.
+    pub fn heap_bytes(&self) -> usize {
+        use super::clip::vec_bytes;
+        vec_bytes(&self.translations) + vec_bytes(&self.rotations) + vec_bytes(&self.scales)
+    }
+
     /// Copies `other` into `self`, reusing `self`'s storage.
     #[inline]
     pub fn copy_from(&mut self, other: &Pose) {
@@ -60,6 +66,17 @@ impl Skeleton {
 
     pub fn len(&self) -> usize {
         self.names.len()
+    }
+
+    /// Bytes of its names, parents, rest pose and inverse binds.
+    pub fn heap_bytes(&self) -> usize {
+        use super::clip::vec_bytes;
+        let names = self.names.iter().map(String::capacity).sum::<usize>();
+        vec_bytes(&self.names)
+            + names
+            + vec_bytes(&self.parents)
+            + self.rest.heap_bytes()
+            + self.inverse_binds.as_ref().map_or(0, vec_bytes)
     }
 
     pub fn is_empty(&self) -> bool {

@@ -93,6 +93,11 @@ impl Timeline {
         self.keys.len()
     }
 
+    /// Bytes of its key table and bucket index.
+    pub fn heap_bytes(&self) -> usize {
+        std::mem::size_of_val(&*self.keys) + self.buckets.as_ref().map_or(0, |(_, _, b)| std::mem::size_of_val(&**b))
+    }
+
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
     }

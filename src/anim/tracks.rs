@@ -42,6 +42,15 @@ pub(crate) struct QuatTracks {
     hermite: Vec<Track<Box<[[Vec4; 4]]>>>,
 }
 
+/// Bytes of a track list: the list, and each track's curve arrays.
+fn list_bytes<C>(tracks: &Vec<Track<C>>, curve: impl Fn(&C) -> usize) -> usize {
+    super::clip::vec_bytes(tracks) + tracks.iter().map(|t| curve(&t.curve)).sum::<usize>()
+}
+
+fn slice_bytes<T>(s: &[T]) -> usize {
+    std::mem::size_of_val(s)
+}
+
 #[inline(always)]
 fn run<C, T>(tracks: &[Track<C>], spans: &[Span], out: &mut [T], eval: impl Fn(&C, Span) -> T) {
     for t in tracks {
@@ -62,6 +71,14 @@ impl Vec3Tracks {
                 self.arc.push(Track { joint, timeline, curve: ArcCurve { segments, pieces } })
             }
         }
+    }
+
+    /// Bytes of every list and curve.
+    pub fn heap_bytes(&self) -> usize {
+        list_bytes(&self.step, |c| slice_bytes(c))
+            + list_bytes(&self.linear, |c| slice_bytes(c))
+            + list_bytes(&self.bezier, |c| slice_bytes(c))
+            + list_bytes(&self.arc, |c| slice_bytes(&c.segments) + slice_bytes(&c.pieces))
     }
 
     /// Evaluates every track at its timeline's span into `out`.
@@ -90,6 +107,14 @@ impl QuatTracks {
             QuatCurve::SlerpBezier(curve) => self.bezier.push(Track { joint, timeline, curve }),
             QuatCurve::Hermite(curve) => self.hermite.push(Track { joint, timeline, curve }),
         }
+    }
+
+    /// Bytes of every list and curve.
+    pub fn heap_bytes(&self) -> usize {
+        list_bytes(&self.step, |c| slice_bytes(c))
+            + list_bytes(&self.slerp, |c| slice_bytes(c))
+            + list_bytes(&self.bezier, |c| slice_bytes(c))
+            + list_bytes(&self.hermite, |c| slice_bytes(c))
     }
 
     /// Evaluates every track at its timeline's span into `out`.

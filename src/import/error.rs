@@ -6,7 +6,7 @@
 //! messages name the offending object by its glTF index or BVH line so a
 //! user can find it in their file.
 
-use crate::anim::ClipError;
+use crate::anim::{ClipError, ClipErrorKind};
 
 /// How an edge should treat an [`ImportError`] (HTTP: 400, 413, 422).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -93,6 +93,10 @@ impl ImportError {
             BvhSyntax { .. } => "bvh_syntax",
             CountMismatch { .. } => "count_mismatch",
             BadFrameTime { .. } => "bad_frame_time",
+            // A limit, not a defect of the file: the same code as an upload.
+            InvalidClip { error, .. } if matches!(error.kind, ClipErrorKind::BuildBudgetExceeded { .. }) => {
+                "build_budget_exceeded"
+            }
             InvalidClip { .. } => "invalid_clip",
         }
     }
@@ -114,5 +118,21 @@ impl ImportError {
             ImportError::InvalidClip { error, .. } => Some(error.path.to_pointer()),
             _ => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anim::Path;
+
+    /// Importers produce no constant-speed tracks today, but a clip over the
+    /// build budget must read as the limit it is, as on every other route.
+    #[test]
+    fn an_imported_clip_over_the_build_budget_has_the_upload_code() {
+        let invalid = |kind| ImportError::InvalidClip { clip: "c".into(), error: ClipError::new(Path::root(), kind) };
+        let over = invalid(ClipErrorKind::BuildBudgetExceeded { limit: 10, spent: 11 });
+        assert_eq!((over.code(), over.class()), ("build_budget_exceeded", ErrorClass::Unprocessable));
+        assert_eq!(invalid(ClipErrorKind::NoTracks).code(), "invalid_clip");
     }
 }

@@ -124,6 +124,8 @@ pub struct ImportLimits {
     /// counted once per buffer even when several name the same part or
     /// file (whose bytes are then shared, not copied).
     pub max_resolved_bytes: u64,
+    /// Build work of one produced clip (see [`Clip::build_within`]).
+    pub max_build_work: u64,
 }
 
 impl Default for ImportLimits {
@@ -138,6 +140,7 @@ impl Default for ImportLimits {
             max_total_keys: 16_000_000,
             max_depth: 256,
             max_resolved_bytes: 4 * (64 << 20),
+            max_build_work: crate::anim::DEFAULT_BUILD_WORK,
         }
     }
 }
@@ -214,7 +217,8 @@ pub fn import_with(
         Format::Bvh => bvh::import(bytes, options)?,
     };
     for clip in &imported.clips {
-        Clip::build(clip).map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
+        Clip::build_within(clip, limits.max_build_work)
+            .map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
     }
     Ok(imported)
 }

@@ -22,9 +22,13 @@
 //! is *suspended*: emptied, and nothing goes in, so every request reads the
 //! store; [`ClipCache::resume`] empties it again once the node listens.
 //!
+//! The cache is bounded twice: by entries (`cache_entries`) and by the heap
+//! bytes of the compiled clips (`cache_bytes`, from [`CachedClip::bytes`]),
+//! since one clip's tables can weigh anything from a kilobyte to tens of
+//! megabytes. A clip larger than the whole byte bound is not cached at all.
 //! Eviction is least-recently-used by a scan at insert time: inserts happen
-//! only on writes and misses, capacities are small (default 1024), and the
-//! hit path stays one lock, one hash lookup and one counter store.
+//! only on writes and misses, entry capacities are small (default 1024), and
+//! the hit path stays one lock, one hash lookup and one counter store.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -40,6 +44,14 @@ pub struct CachedClip {
     pub clip: Clip,
 }
 
+impl CachedClip {
+    /// The bytes this entry keeps alive: itself, its row's strings and the
+    /// compiled clip's heap.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.meta.id.capacity() + self.meta.name.capacity() + self.clip.heap_bytes()
+    }
+}
+
 /// Streams hold the cache entry they started on (no copy of the clip).
 impl crate::stream::ClipSource for CachedClip {
     fn clip(&self) -> &Clip {
@@ -50,12 +62,16 @@ impl crate::stream::ClipSource for CachedClip {
 #[derive(Debug)]
 struct Entry {
     clip: Arc<CachedClip>,
+    /// `clip.bytes()`, computed once.
+    bytes: usize,
     last_used: u64,
 }
 
 #[derive(Debug, Default)]
 struct Inner {
     entries: HashMap<String, Entry>,
+    /// The sum of the entries' `bytes`.
+    bytes: usize,
     /// Bumped by every write and invalidation.
     epoch: u64,
     /// Logical clock for recency.
@@ -68,6 +84,7 @@ struct Inner {
 #[derive(Debug)]
 pub struct ClipCache {
     capacity: usize,
+    capacity_bytes: usize,
     inner: Mutex<Inner>,
 }
 
@@ -76,11 +93,13 @@ pub struct ClipCache {
 pub struct Epoch(u64);
 
 impl ClipCache {
+    /// A cache of at most `capacity` clips weighing at most `capacity_bytes`.
+    ///
     /// # Panics
     /// If `capacity` is 0.
-    pub fn new(capacity: usize) -> Self {
+    pub fn new(capacity: usize, capacity_bytes: usize) -> Self {
         assert!(capacity > 0, "a cache needs room for one clip");
-        ClipCache { capacity, inner: Mutex::new(Inner::default()) }
+        ClipCache { capacity, capacity_bytes, inner: Mutex::new(Inner::default()) }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -109,7 +128,7 @@ impl ClipCache {
         if inner.suspended {
             return;
         }
-        Self::put(&mut inner, self.capacity, clip);
+        self.put(&mut inner, clip);
     }
 
     /// Inserts what a miss loaded, unless a write happened since `seen` was
@@ -119,7 +138,7 @@ impl ClipCache {
         if inner.epoch != seen.0 || inner.suspended {
             return false;
         }
-        Self::put(&mut inner, self.capacity, clip);
+        self.put(&mut inner, clip);
         true
     }
 
@@ -127,7 +146,7 @@ impl ClipCache {
     pub fn invalidate(&self, id: &str) {
         let mut inner = self.lock();
         inner.epoch += 1;
-        inner.entries.remove(id);
+        Self::remove(&mut inner, id);
     }
 
     /// Stops caching and drops every entry: invalidations may be missed
@@ -137,6 +156,7 @@ impl ClipCache {
         inner.epoch += 1;
         inner.suspended = true;
         inner.entries.clear();
+        inner.bytes = 0;
     }
 
     /// Caches again, from empty: called once invalidations are heard again,
@@ -146,6 +166,7 @@ impl ClipCache {
         inner.epoch += 1;
         inner.suspended = false;
         inner.entries.clear();
+        inner.bytes = 0;
     }
 
     /// The cached version of `id`, without touching its recency.
@@ -161,23 +182,49 @@ impl ClipCache {
         self.len() == 0
     }
 
-    fn put(inner: &mut Inner, capacity: usize, clip: Arc<CachedClip>) {
+    /// Heap bytes of the cached clips (see [`CachedClip::bytes`]).
+    pub fn bytes(&self) -> usize {
+        self.lock().bytes
+    }
+
+    /// The byte bound.
+    pub fn capacity_bytes(&self) -> usize {
+        self.capacity_bytes
+    }
+
+    /// Puts `clip` in, unless a newer version of it is cached; then evicts
+    /// the least recently used others until both bounds hold. A clip over
+    /// the whole byte bound is not cached, and takes its older version out.
+    fn put(&self, inner: &mut Inner, clip: Arc<CachedClip>) {
         inner.tick += 1;
         let tick = inner.tick;
-        if let Some(e) = inner.entries.get_mut(&clip.meta.id) {
-            if e.clip.meta.version <= clip.meta.version {
-                e.clip = clip;
-            }
+        let id = clip.meta.id.clone();
+        if let Some(e) = inner.entries.get_mut(&id) {
             e.last_used = tick;
+            if e.clip.meta.version >= clip.meta.version {
+                return;
+            }
+            Self::remove(inner, &id);
+        }
+        let bytes = clip.bytes();
+        if bytes > self.capacity_bytes {
             return;
         }
-        if inner.entries.len() >= capacity {
+        while inner.entries.len() >= self.capacity || inner.bytes + bytes > self.capacity_bytes {
             let oldest = inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(id, _)| id.clone());
-            if let Some(id) = oldest {
-                inner.entries.remove(&id);
+            match oldest {
+                Some(id) => Self::remove(inner, &id),
+                None => break,
             }
         }
-        inner.entries.insert(clip.meta.id.clone(), Entry { clip, last_used: tick });
+        inner.bytes += bytes;
+        inner.entries.insert(id, Entry { clip, bytes, last_used: tick });
+    }
+
+    fn remove(inner: &mut Inner, id: &str) {
+        if let Some(e) = inner.entries.remove(id) {
+            inner.bytes -= e.bytes;
+        }
     }
 }
 
@@ -188,6 +235,11 @@ mod tests {
     use crate::store::ClipStats;
 
     fn cached(id: &str, version: u64) -> Arc<CachedClip> {
+        cached_keys(id, version, 1)
+    }
+
+    /// A clip of one linear track with `keys` keys (12 bytes of curve each).
+    fn cached_keys(id: &str, version: u64, keys: usize) -> Arc<CachedClip> {
         let spec = ClipSpec {
             name: "c".into(),
             skeleton: None,
@@ -195,8 +247,8 @@ mod tests {
                 "j",
                 Channel::Translation,
                 Interpolation::Linear,
-                vec![0.0],
-                Keys::Vec3(vec![glam::Vec3::ZERO]),
+                (0..keys).map(|k| k as f32).collect(),
+                Keys::Vec3((0..keys).map(|k| glam::Vec3::splat(k as f32)).collect()),
             )],
             events: vec![],
             playback: Playback::Once,
@@ -208,7 +260,7 @@ mod tests {
 
     #[test]
     fn an_older_version_never_replaces_a_newer_one() {
-        let cache = ClipCache::new(4);
+        let cache = ClipCache::new(4, usize::MAX);
         cache.insert_written(cached("a", 3));
         cache.insert_written(cached("a", 2));
         assert_eq!(cache.get("a").unwrap().meta.version, 3);
@@ -218,7 +270,7 @@ mod tests {
 
     #[test]
     fn a_miss_that_raced_a_write_is_not_cached() {
-        let cache = ClipCache::new(4);
+        let cache = ClipCache::new(4, usize::MAX);
         cache.insert_written(cached("a", 1));
         let seen = cache.epoch();
         cache.invalidate("a"); // a delete committed while the miss was loading
@@ -230,7 +282,7 @@ mod tests {
 
     #[test]
     fn a_suspended_cache_holds_nothing_until_resumed() {
-        let cache = ClipCache::new(4);
+        let cache = ClipCache::new(4, usize::MAX);
         cache.insert_written(cached("a", 1));
         let seen = cache.epoch();
         cache.suspend();
@@ -246,12 +298,33 @@ mod tests {
 
     #[test]
     fn the_least_recently_used_entry_is_evicted() {
-        let cache = ClipCache::new(2);
+        let cache = ClipCache::new(2, usize::MAX);
         cache.insert_written(cached("a", 1));
         cache.insert_written(cached("b", 1));
         cache.get("a");
         cache.insert_written(cached("c", 1));
         assert_eq!(cache.len(), 2);
         assert!(cache.get("a").is_some() && cache.get("c").is_some() && cache.get("b").is_none());
+    }
+
+    #[test]
+    fn the_byte_bound_evicts_the_least_recently_used_and_skips_a_clip_over_it() {
+        let (a, b, c) = (cached_keys("a", 1, 1000), cached_keys("b", 1, 1000), cached_keys("c", 1, 1000));
+        let one = a.bytes();
+        assert!(one > 1000 * 12, "the curve's keys are counted: {one}");
+        let cache = ClipCache::new(100, 2 * one + one / 2);
+        cache.insert_written(a);
+        cache.insert_written(b);
+        assert_eq!((cache.len(), cache.bytes()), (2, 2 * one));
+        cache.get("a");
+        cache.insert_written(c);
+        assert_eq!((cache.len(), cache.bytes()), (2, 2 * one), "b left to make room");
+        assert!(cache.get("b").is_none() && cache.get("a").is_some() && cache.get("c").is_some());
+        // Too big for the whole cache: not cached, and its old version goes.
+        cache.insert_written(cached_keys("a", 2, 4000));
+        assert!(cache.get("a").is_none());
+        assert_eq!((cache.len(), cache.bytes()), (1, one));
+        cache.invalidate("c");
+        assert_eq!((cache.len(), cache.bytes()), (0, 0));
     }
 }

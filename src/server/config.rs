@@ -256,6 +256,17 @@ settings! {
         cache_entries: usize = 1024 => positive -> usize,
             "cache_entries", "cache-entries", "INBETWEEN_CACHE_ENTRIES", "N",
             "Compiled clips kept in memory";
+        cache_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
+            "cache_bytes", "cache-bytes", "INBETWEEN_CACHE_BYTES", "BYTES",
+            "Heap bytes of the compiled clips kept in memory (least recently used leave first)";
+        max_build_work: u64 = crate::anim::DEFAULT_BUILD_WORK => positive -> u64,
+            "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
+            "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
+             tables, over the whole clip (over it: 422 build_budget_exceeded)";
+        max_concurrent_builds: usize = cores() => positive -> usize,
+            "max_concurrent_builds", "max-concurrent-builds", "INBETWEEN_MAX_CONCURRENT_BUILDS", "N",
+            shown "one per core",
+            "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait";
         max_streams: usize = 1024 => positive -> usize,
             "max_streams", "max-streams", "INBETWEEN_MAX_STREAMS", "N",
             "Concurrent streams (gRPC and WebSocket together)";
@@ -763,6 +774,9 @@ mod tests {
             request_timeout: Duration::from_secs(30),
             header_read_timeout: Duration::from_secs(10),
             cache_entries: 1024,
+            cache_bytes: 268_435_456,
+            max_build_work: 16_000_000,
+            max_concurrent_builds: cores,
             max_streams: 1024,
             max_streams_per_client: 64,
             max_streams_per_token: 64,

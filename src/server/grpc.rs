@@ -462,7 +462,8 @@ impl Animation for GrpcService {
         let clip = req.clip.ok_or_else(|| ApiError::invalid("missing_clip", "/clip", "a PutClip needs a clip"))?;
         let spec = clip_from_pb(&clip).map_err(ApiError::from)?;
         let limits = self.state.config.limits.clone();
-        let admitted = admit_doc(ClipDoc::from_spec(&spec), &limits)?;
+        let admitted =
+            self.state.builds.run(move |cancel| admit_doc(ClipDoc::from_spec(&spec), &limits, cancel)).await?;
         let meta = if req.clip_id.is_empty() {
             self.state.store.create(admitted.new_clip).await.map_err(ApiError::from)?
         } else {

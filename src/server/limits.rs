@@ -5,7 +5,9 @@
 //! the parsed [`ClipDoc`] re-serialised: `GET` returns exactly what was
 //! accepted, normalised (defaults spelled out, numbers in shortest form).
 
-use crate::anim::Clip;
+use std::sync::atomic::AtomicBool;
+
+use crate::anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
 use crate::store::{ClipStats, NewClip};
 use crate::wire::json::{ClipDoc, DocError, parse_clip_doc};
 
@@ -24,18 +26,19 @@ pub struct Admitted {
 /// # Errors
 /// `malformed_json` (400); a type error, a SPEC rule or a limit (422), each
 /// with the JSON pointer of the offending field.
-pub fn admit(body: &[u8], limits: &Limits) -> Result<Admitted, ApiError> {
-    admit_doc(parse_clip_doc(body)?, limits)
+pub fn admit(body: &[u8], limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
+    admit_doc(parse_clip_doc(body)?, limits, cancel)
 }
 
 /// Validates a parsed document (importers: `ClipDoc::from_spec`, then this).
+/// The build stops early once `cancel` is raised (its caller gave up).
 ///
 /// # Errors
 /// As [`admit`], less the JSON syntax.
-pub fn admit_doc(doc: ClipDoc, limits: &Limits) -> Result<Admitted, ApiError> {
+pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
     check(&doc, limits)?;
     let spec = doc.to_spec()?;
-    let clip = Clip::build(&spec).map_err(DocError::from)?;
+    let clip = build(&spec, limits.max_build_work, cancel)?;
     if clip.joint_count() > limits.max_joints {
         return Err(too_many("too_many_joints", "/tracks", "joints", clip.joint_count(), limits.max_joints));
     }
@@ -49,6 +52,22 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits) -> Result<Admitted, ApiError> {
         playback: clip.playback(),
     };
     Ok(Admitted { new_clip: NewClip { name: doc.name, doc_json, stats }, clip })
+}
+
+/// `Clip::build_cancellable` within `max_work`, the budget refusal naming
+/// its setting.
+///
+/// # Errors
+/// A SPEC rule (422 with the rule's code), or `build_budget_exceeded` (422).
+pub fn build(spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<Clip, ApiError> {
+    Clip::build_cancellable(spec, max_work, cancel).map_err(|e| match e {
+        ClipError { kind: kind @ ClipErrorKind::BuildBudgetExceeded { .. }, path } => ApiError::TooMany {
+            code: kind.code(),
+            pointer: path.to_pointer(),
+            detail: format!("{kind}; the limit is max_build_work (--max-build-work)"),
+        },
+        e => DocError::from(e).into(),
+    })
 }
 
 fn too_many(code: &'static str, pointer: &str, what: &str, got: usize, max: usize) -> ApiError {

@@ -53,7 +53,10 @@ fn describe() {
     describe_counter!("inbetween_poses_evaluated_total", "Poses evaluated for REST requests.");
     describe_counter!("inbetween_clip_cache_hits_total", "Pose and sample requests served from the clip cache.");
     describe_counter!("inbetween_clip_cache_misses_total", "Clip loads that had to read and compile from the store.");
-    describe_gauge!("inbetween_clip_cache_entries", "Compiled clips held in memory.");
+    describe_gauge!("inbetween_clip_cache_entries", "Compiled clips held in memory (as inbetween_cache_entries).");
+    describe_gauge!("inbetween_cache_entries", "Compiled clips held in memory.");
+    describe_gauge!("inbetween_cache_bytes", Unit::Bytes, "Heap bytes of the compiled clips held in memory.");
+    describe_gauge!("inbetween_cache_limit_bytes", Unit::Bytes, "The cache's byte bound (cache_bytes).");
     describe_histogram!(
         "inbetween_store_operation_duration_seconds",
         Unit::Seconds,
@@ -89,6 +92,8 @@ pub struct Counters {
     pub cache_hits: metrics::Counter,
     pub cache_misses: metrics::Counter,
     pub cache_entries: metrics::Gauge,
+    pub cache_entries_total: metrics::Gauge,
+    pub cache_bytes: metrics::Gauge,
     pub poses: metrics::Counter,
     /// Streamed answers whose client went away before the end (their
     /// evaluation stopped with them), and the poses left unevaluated.
@@ -103,11 +108,25 @@ impl Counters {
             cache_hits: metrics::counter!("inbetween_clip_cache_hits_total"),
             cache_misses: metrics::counter!("inbetween_clip_cache_misses_total"),
             cache_entries: metrics::gauge!("inbetween_clip_cache_entries"),
+            cache_entries_total: metrics::gauge!("inbetween_cache_entries"),
+            cache_bytes: metrics::gauge!("inbetween_cache_bytes"),
             poses: metrics::counter!("inbetween_poses_evaluated_total"),
             answers_abandoned: metrics::counter!("inbetween_answers_abandoned_total"),
             poses_abandoned: metrics::counter!("inbetween_poses_abandoned_total"),
         }
         .with_panic_counters()
+    }
+
+    /// The clip cache's size.
+    pub fn cache_gauges(&self, entries: usize, bytes: usize) {
+        self.cache_entries.set(entries as f64);
+        self.cache_entries_total.set(entries as f64);
+        self.cache_bytes.set(bytes as f64);
+    }
+
+    /// The cache's byte bound, set once at startup.
+    pub fn cache_limit(&self, bytes: usize) {
+        metrics::gauge!("inbetween_cache_limit_bytes").set(bytes as f64);
     }
 
     /// Registers `inbetween_panics_total` at 0 for every source, so it is

@@ -9,7 +9,8 @@
 //!
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
-//! clips; `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
+//! clips (bounded in entries and bytes); `builds` where clips are built (blocking threads, a few at once);
+//! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `request` the sampling and stream rules both transports share, with their
 //! stable codes; `rest` the routes; `grpc` the gRPC API, served on its own port
@@ -41,6 +42,7 @@ use crate::stream::{Engine, EngineConfig};
 
 pub mod auth;
 pub mod body_guard;
+pub mod builds;
 pub mod cache;
 pub mod config;
 pub mod connections;
@@ -102,7 +104,7 @@ impl Application {
             }
         };
         let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
-        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries));
+        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, config.limits.cache_bytes));
         if shared_store.is_some() {
             // Nothing is cached until this node hears other nodes' changes.
             cache.suspend();
@@ -118,6 +120,11 @@ impl Application {
             ..EngineConfig::default()
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
+        let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
+        // The recorder first: handles registered before it would count nothing.
+        let prometheus = metrics::handle();
+        let counters = metrics::Counters::new();
+        counters.cache_limit(config.limits.cache_bytes);
         let config = Arc::new(config);
         let state = AppState::new(state::Shared {
             store,
@@ -127,11 +134,12 @@ impl Application {
             arrivals: shed::Arrivals::new(config.limits.max_arriving_bytes),
             auth: auth::Auth::new(Arc::clone(&config)),
             config,
-            metrics: metrics::handle(),
-            counters: metrics::Counters::new(),
+            metrics: prometheus,
+            counters,
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
             streams,
+            builds,
         });
         Ok(Application { listener, grpc_listener, state, tls, shared_store })
     }

@@ -9,18 +9,14 @@ use futures_util::FutureExt;
 use futures_util::future::{self, BoxFuture};
 use metrics_exporter_prometheus::PrometheusHandle;
 
-use crate::anim::Clip;
 use crate::store::{ClipStore, StoredClip};
 use crate::wire::json::{DocError, parse_clip};
 
 use super::auth::Auth;
+use super::builds::Builds;
 use super::cache::{CachedClip, ClipCache};
 use super::config::Config;
 use super::error::ApiError;
-
-/// Documents larger than this are parsed and compiled on the blocking pool,
-/// so one big upload cannot stall the async workers.
-pub const BLOCKING_THRESHOLD_BYTES: usize = 64 * 1024;
 
 /// What every handler shares. One `Arc` around everything: extractors clone
 /// the state per request, and one reference count is cheaper than ten
@@ -62,6 +58,8 @@ pub struct Shared {
     pub in_flight: Arc<super::shed::Clients>,
     /// Request bodies and first gRPC messages held at once, in bytes (`shed::Arrivals`).
     pub arrivals: super::shed::Arrivals,
+    /// Where every clip build runs (off the async workers, a few at once).
+    pub builds: Arc<Builds>,
 }
 
 impl AppState {
@@ -94,6 +92,7 @@ impl AppState {
         result.map_err(|failure| match failure {
             LoadFailure::NotFound => ApiError::NotFound { what: "clip" },
             LoadFailure::Unavailable => ApiError::Unavailable(None),
+            LoadFailure::OverBudget => over_budget_stored(id, self.config.limits.max_build_work),
             LoadFailure::Internal => ApiError::Internal(anyhow::anyhow!("loading clip {id} failed (logged above)")),
         })
     }
@@ -106,21 +105,21 @@ impl AppState {
             let seen = state.cache.epoch();
             let result = async {
                 let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
-                let cached = if stored.doc_json.len() > BLOCKING_THRESHOLD_BYTES {
-                    tokio::task::spawn_blocking(move || compile_stored(stored))
-                        .await
-                        .map_err(crate::server::metrics::join_failed)??
-                } else {
-                    compile_stored(stored)?
-                };
+                let max_work = state.config.limits.max_build_work;
+                let cached = state.builds.run(move |cancel| compile_stored(stored, max_work, cancel)).await?;
                 Ok::<_, ApiError>(Arc::new(cached))
             }
             .await;
             match result {
                 Ok(cached) => {
                     state.cache.insert_loaded(cached.clone(), seen);
-                    state.counters.cache_entries.set(state.cache.len() as f64);
+                    state.cache_gauges();
                     Ok(cached)
+                }
+                Err(ApiError::TooMany { code, detail, .. }) => {
+                    // Stored under a larger budget than the one configured now.
+                    tracing::warn!(%id, code, detail, "clip load: over the build budget");
+                    Err(LoadFailure::OverBudget)
                 }
                 Err(ApiError::NotFound { .. }) => Err(LoadFailure::NotFound),
                 Err(e @ ApiError::Unavailable(_)) => {
@@ -142,14 +141,19 @@ impl AppState {
     pub fn cache_written(&self, cached: Arc<CachedClip>) {
         self.forget_load(&cached.meta.id);
         self.cache.insert_written(cached);
-        self.counters.cache_entries.set(self.cache.len() as f64);
+        self.cache_gauges();
     }
 
     /// After a committed delete (or another node's change).
     pub fn cache_invalidate(&self, id: &str) {
         self.forget_load(id);
         self.cache.invalidate(id);
-        self.counters.cache_entries.set(self.cache.len() as f64);
+        self.cache_gauges();
+    }
+
+    /// The cache's size on `/metrics` (entries and bytes).
+    pub fn cache_gauges(&self) {
+        self.counters.cache_gauges(self.cache.len(), self.cache.bytes());
     }
 
     fn forget_load(&self, id: &str) {
@@ -162,6 +166,8 @@ impl AppState {
 pub enum LoadFailure {
     NotFound,
     Unavailable,
+    /// A stored clip costs more to build than `max_build_work` now allows.
+    OverBudget,
     Internal,
 }
 
@@ -171,13 +177,26 @@ pub type Load = future::Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFa
 /// In-flight loads by clip id.
 pub type Loads = Arc<Mutex<HashMap<String, Load>>>;
 
-/// Compiles a stored document. It was accepted once, so failure here means
-/// the store was corrupted or the rules changed: an internal error.
-fn compile_stored(stored: StoredClip) -> Result<CachedClip, ApiError> {
+/// Compiles a stored document within `max_work`. It was accepted once, so
+/// failure here means the store was corrupted or the rules changed: an
+/// internal error, unless the build budget was lowered since (422).
+fn compile_stored(stored: StoredClip, max_work: u64, cancel: &AtomicBool) -> Result<CachedClip, ApiError> {
     let (_, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(|e: DocError| {
         ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id))
     })?;
-    let clip = Clip::build(&spec)
-        .map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e}", stored.meta.id)))?;
+    let clip = super::limits::build(&spec, max_work, cancel).map_err(|e| match e {
+        e @ ApiError::TooMany { .. } => e,
+        e => ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e:?}", stored.meta.id)),
+    })?;
     Ok(CachedClip { meta: stored.meta, clip })
+}
+
+/// A stored clip whose build is over the configured budget: refused like
+/// an upload would be, so the caller learns which limit (never a 500).
+fn over_budget_stored(id: &str, max_work: u64) -> ApiError {
+    let detail = format!(
+        "clip {id} was stored under a larger build budget than the current max_build_work ({max_work}); \
+         raise it with --max-build-work to sample it"
+    );
+    ApiError::TooMany { code: "build_budget_exceeded", pointer: String::new(), detail }
 }

@@ -42,3 +42,27 @@ pub fn slow_runs(what: &str) -> bool {
     }
     on
 }
+
+/// A clip of `tracks` constant-speed Hermite translation tracks of `keys`
+/// keys each, whose tangents (`±reach`) throw every segment into a loop:
+/// long arc-length tables from a small document (issue 15's build attack).
+pub fn looping_hermite(name: &str, tracks: usize, keys: usize, reach: f32) -> String {
+    let tracks: Vec<serde_json::Value> = (0..tracks)
+        .map(|j| {
+            let values: Vec<[f32; 3]> = (0..keys).map(|k| [k as f32, (k % 2) as f32, 0.0]).collect();
+            let tangents: Vec<[f32; 3]> =
+                (0..keys).map(|k| if k % 2 == 0 { [reach, -reach, reach] } else { [-reach, reach, reach] }).collect();
+            serde_json::json!({
+                "joint": format!("j{j}"), "channel": "translation", "interpolation": "cubic_hermite",
+                "speed": "constant", "times": (0..keys).map(|k| k as f32).collect::<Vec<_>>(),
+                "values": values, "in_tangents": tangents, "out_tangents": tangents,
+            })
+        })
+        .collect();
+    serde_json::json!({"name": name, "tracks": tracks}).to_string()
+}
+
+/// A gauge's or counter's value in a Prometheus text rendering.
+pub fn metric(text: &str, name: &str) -> Option<f64> {
+    text.lines().find(|l| l.split(' ').next() == Some(name))?.split(' ').nth(1)?.parse().ok()
+}

@@ -4,7 +4,8 @@
 //! evaluator written from SPEC §2 alone; `accuracy` holds the core to it;
 //! `lecture` checks the lecture's worked examples; `properties` states what
 //! must hold for any keys; `validation` pins each error code and path;
-//! `alloc` proves the hot path allocation-free; `cli` runs the real binary;
+//! `alloc` proves the hot path allocation-free; `budget` holds builds to
+//! their work budget and clips to their byte estimate; `cli` runs the real binary;
 //! `import` checks the importers against real third-party files.
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
@@ -14,6 +15,7 @@
 mod accuracy;
 mod alloc;
 mod behaviour;
+mod budget;
 mod cli;
 mod import;
 mod lecture;
@@ -34,6 +36,12 @@ struct Counting;
 
 thread_local! {
     static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    /// Bytes allocated minus bytes freed by this thread (as requested).
+    static LIVE_BYTES: Cell<i64> = const { Cell::new(0) };
+}
+
+fn live(delta: i64) {
+    let _ = LIVE_BYTES.try_with(|c| c.set(c.get() + delta));
 }
 
 // SAFETY: every call is forwarded to `System` unchanged; counting touches
@@ -42,23 +50,33 @@ thread_local! {
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        live(layout.size() as i64);
         unsafe { System.alloc(layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        live(layout.size() as i64);
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        live(new_size as i64 - layout.size() as i64);
         unsafe { System.realloc(ptr, layout, new_size) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        live(-(layout.size() as i64));
         unsafe { System.dealloc(ptr, layout) }
     }
 }
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
+
+/// Bytes the calling thread has allocated and not freed (frees of memory
+/// another thread allocated count here too, so measure on one thread).
+pub fn live_bytes() -> i64 {
+    LIVE_BYTES.with(Cell::get)
+}
 
 /// Allocations (including reallocations) made so far by the calling thread.
 pub fn allocations() -> u64 {

@@ -19,7 +19,7 @@ use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::limits::{Admitted, admit};
 use crate::server::request::{Page, RawPage, in_query};
-use crate::server::state::{AppState, BLOCKING_THRESHOLD_BYTES};
+use crate::server::state::AppState;
 use crate::store::ClipMeta;
 
 use super::extract::{ClipId, JsonBody, Precondition, etag, precondition};
@@ -34,13 +34,11 @@ pub struct ClipList {
     pub next_cursor: Option<String>,
 }
 
+/// Parses, checks and builds an upload through the build gate (never on
+/// the async workers, whatever its size).
 async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
     let limits = state.config.limits.clone();
-    if body.len() > BLOCKING_THRESHOLD_BYTES {
-        tokio::task::spawn_blocking(move || admit(&body, &limits)).await.map_err(crate::server::metrics::join_failed)?
-    } else {
-        admit(&body, &limits)
-    }
+    state.builds.run(move |cancel| admit(&body, &limits, cancel)).await
 }
 
 fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::HeaderName, String)>) -> Response {

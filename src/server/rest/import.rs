@@ -103,27 +103,28 @@ pub async fn import_clips(
         limits: import_limits(&state.config.limits),
     };
     let limits = state.config.limits.clone();
-    let (admitted, skipped) = tokio::task::spawn_blocking(move || -> Result<_, ApiError> {
-        // A shared handle on the part, never a copy: the importer asks once
-        // per name and slices it per buffer.
-        let mut resolve = |uri: &str| -> Result<Bytes, String> {
-            siblings
+    let (admitted, skipped) = state
+        .builds
+        .run(move |cancel| -> Result<_, ApiError> {
+            // A shared handle on the part, never a copy: the importer asks once
+            // per name and slices it per buffer.
+            let mut resolve = |uri: &str| -> Result<Bytes, String> {
+                siblings
+                    .iter()
+                    .find(|(name, _)| name == uri)
+                    .map(|(_, data)| data.clone())
+                    .ok_or_else(|| format!("no part named {uri:?} in the upload"))
+            };
+            let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
+            let imported = import_with(&body, format, &options, resolver)?;
+            let admitted = imported
+                .clips
                 .iter()
-                .find(|(name, _)| name == uri)
-                .map(|(_, data)| data.clone())
-                .ok_or_else(|| format!("no part named {uri:?} in the upload"))
-        };
-        let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
-        let imported = import_with(&body, format, &options, resolver)?;
-        let admitted = imported
-            .clips
-            .iter()
-            .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits))
-            .collect::<Result<Vec<Admitted>, ApiError>>()?;
-        Ok((admitted, imported.skipped))
-    })
-    .await
-    .map_err(crate::server::metrics::join_failed)??;
+                .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits, cancel))
+                .collect::<Result<Vec<Admitted>, ApiError>>()?;
+            Ok((admitted, imported.skipped))
+        })
+        .await?;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
     let metas = state.store.create_all(new_clips).await?;
@@ -180,6 +181,7 @@ fn import_limits(limits: &Limits) -> ImportLimits {
         max_keys_per_track: limits.max_keys_per_track,
         max_frames: limits.max_keys_per_track,
         max_resolved_bytes: limits.max_import_resolved_bytes as u64,
+        max_build_work: limits.max_build_work,
         ..ImportLimits::default()
     }
 }

@@ -2,6 +2,7 @@
 //! file, driven by a real HTTP client (reqwest). One module per concern.
 
 mod bad_inputs;
+mod budget;
 mod cache;
 mod cli;
 mod clips;

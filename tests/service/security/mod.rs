@@ -6,7 +6,7 @@
 mod codes;
 mod grpc_matrix;
 mod rest_matrix;
-mod status_table;
+pub mod status_table;
 mod tls;
 
 use inbetween::server::Config;

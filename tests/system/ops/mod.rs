@@ -6,6 +6,7 @@
 //! RELIABILITY.md.
 
 mod answers;
+mod builds;
 mod caller;
 mod connections;
 mod crash;
