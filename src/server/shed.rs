@@ -171,15 +171,52 @@ pub async fn rest(State(admission): State<Admission>, request: Request, next: Ne
     }
     let key = key_of(request.extensions().get::<Identity>());
     match admission.admit(key, "http") {
-        Ok(_slots) => next.run(request).await,
+        // A chunked answer counts as in flight until its last piece is sent.
+        Ok(slots) => next.run(request).await.map(|body| axum::body::Body::new(holding(body, slots))),
         Err(e) => e.into_response(),
     }
 }
 
+/// `body`, keeping `held` until it has been sent (or dropped).
+fn holding<B, H>(body: B, held: H) -> Holding<B, H> {
+    Holding { body, _held: held }
+}
+
+/// A body that holds something (in-flight slots) for as long as it lives;
+/// size and end are the inner body's, so `Content-Length` is kept.
+struct Holding<B, H> {
+    body: B,
+    _held: H,
+}
+
+impl<B: Body + Unpin, H: Unpin> Body for Holding<B, H> {
+    type Data = B::Data;
+    type Error = B::Error;
+
+    fn poll_frame(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<Result<Frame<B::Data>, B::Error>>> {
+        Pin::new(&mut self.body).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        self.body.size_hint()
+    }
+}
+
+/// Streams of frames (`StreamFrames`, `Play`) give their slots back once
+/// they start: the stream caps govern them. Every other call, `SampleStream`
+/// included, is in flight until its last message is sent.
+fn is_frame_stream(path: &str) -> bool {
+    matches!(path, "/inbetween.v1.Animation/StreamFrames" | "/inbetween.v1.Animation/Play")
+}
+
 /// The same budgets as a tower layer for tonic's server, which also
 /// identifies each call's caller once (left in its extensions for the
-/// handlers). Slots are held until the response head is ready (a stream's
-/// frames are governed by the stream caps, not by this).
+/// handlers). Slots are held until the response has been sent, but for
+/// streams of frames, which the stream caps govern once they start.
 #[derive(Debug, Clone)]
 pub struct GrpcLayer {
     pub admission: Admission,
@@ -229,16 +266,21 @@ where
         let mut inner = self.inner.clone();
         std::mem::swap(&mut inner, &mut self.inner);
         let layer = self.layer.clone();
+        let frames = is_frame_stream(request.uri().path());
         Box::pin(async move {
             let (request, held) = match first_message(request, layer.message_timeout, &layer.arrivals).await {
                 Ok(arrived) => arrived,
                 Err(e) => return Ok(tonic::Status::from(e).into_http()),
             };
             match layer.admission.admit(key_of(Some(&identity)), "grpc") {
-                Ok(slots) => {
+                Ok(slots) if frames => {
                     let response = inner.call(request).await;
                     drop((slots, held));
                     response
+                }
+                Ok(slots) => {
+                    let response = inner.call(request).await?;
+                    Ok(response.map(|body| tonic::body::Body::new(holding(body, (slots, held)))))
                 }
                 Err(e) => Ok(tonic::Status::from(e).into_http()),
             }
