@@ -335,12 +335,7 @@ impl PoseJson<'_> {
     /// directly: the pose route and JSON stream frames spend most of their
     /// time here, and serde's per-field plumbing cost more than the floats.
     pub(crate) fn write_to(&self, out: &mut impl BufMut) {
-        out.put_slice(b"{\"clip\":");
-        write_json_str(out, self.clip);
-        out.put_slice(b",\"time\":");
-        write_float(out, self.time);
-        out.put_slice(b",\"clip_time\":");
-        write_float(out, self.clip_time);
+        write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"");
         out.put_slice(self.space.as_str().as_bytes());
         out.put_slice(b"\",\"joints\":[");
@@ -433,6 +428,16 @@ struct JointJson<'a> {
     scale: [f32; 3],
 }
 
+/// `{"clip":…,"time":…,"clip_time":…`: how every pose document starts.
+fn write_head(out: &mut impl BufMut, clip: &str, time: f64, clip_time: f32) {
+    out.put_slice(b"{\"clip\":");
+    write_json_str(out, clip);
+    out.put_slice(b",\"time\":");
+    write_float(out, time);
+    out.put_slice(b",\"clip_time\":");
+    write_float(out, clip_time);
+}
+
 /// Per-joint 4×4 matrices (`format=matrix` or `skinning`), column-major.
 pub(crate) struct MatricesJson<'a> {
     pub clip: &'a str,
@@ -447,12 +452,7 @@ impl MatricesJson<'_> {
     /// Appends exactly the JSON `serde_json` writes for these matrices
     /// (finite floats), directly, and never a `null` (see `write_float`).
     pub(crate) fn write_to(&self, out: &mut impl BufMut) {
-        out.put_slice(b"{\"clip\":");
-        write_json_str(out, self.clip);
-        out.put_slice(b",\"time\":");
-        write_float(out, self.time);
-        out.put_slice(b",\"clip_time\":");
-        write_float(out, self.clip_time);
+        write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"model\",\"format\":");
         write_json_str(out, self.format);
         out.put_slice(b",\"joints\":[");

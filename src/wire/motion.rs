@@ -122,28 +122,9 @@ impl MotionDoc {
             }),
         }
     }
-
-    /// A plain clip request as a motion: one full-weight layer.
-    pub fn of_clip(id: &str) -> MotionDoc {
-        MotionDoc { layers: vec![LayerDoc::default_for(id)], root_motion: None }
-    }
 }
 
 impl LayerDoc {
-    fn default_for(clip: &str) -> LayerDoc {
-        LayerDoc {
-            clip: clip.to_owned(),
-            weight: 1.0,
-            mode: LayerModeDoc::Blend,
-            mask: None,
-            offset: 0.0,
-            speed: 1.0,
-            playback: None,
-            sync: None,
-            reference_time: None,
-        }
-    }
-
     fn to_spec(&self) -> LayerSpec<String> {
         LayerSpec {
             clip: self.clip.clone(),
