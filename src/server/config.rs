@@ -312,6 +312,10 @@ settings! {
         idle_timeout: u64 = 60 => seconds -> Duration,
             "idle_timeout_secs", "idle-timeout-secs", "INBETWEEN_IDLE_TIMEOUT_SECS", "SECS",
             "Seconds a connection (either port) may stay open with no request or stream before it is closed";
+        write_stall_timeout: u64 = 30 => seconds -> Duration,
+            "write_stall_timeout_secs", "write-stall-timeout-secs", "INBETWEEN_WRITE_STALL_TIMEOUT_SECS", "SECS",
+            "Seconds a write to a client may make no progress (it stopped reading an answer or a stream) before its \
+             connection is closed";
         max_connections: usize = 4096 => positive -> usize,
             "max_connections", "max-connections", "INBETWEEN_MAX_CONNECTIONS", "N",
             "Open connections per port; connections over it are closed at accept";
@@ -791,6 +795,7 @@ mod tests {
             http2_max_concurrent_streams: 256,
             max_in_flight_per_client: 32,
             idle_timeout: Duration::from_secs(60),
+            write_stall_timeout: Duration::from_secs(30),
             max_connections: 4096,
             stream_buffer_bytes: 262_144,
             max_arriving_bytes: 268_435_456,

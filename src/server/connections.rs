@@ -12,6 +12,11 @@
 //! its next read reports end of stream and hyper closes it. An upgraded
 //! connection (a WebSocket) is never idle: its stream has its own keepalive.
 //!
+//! A write that makes no progress for `write_stall_timeout` fails, and hyper
+//! closes the connection: a peer that stops reading a chunked answer, a
+//! `SampleStream` or a stream's frames holds its slots and buffers for that
+//! long, not for as long as it keeps the socket open.
+//!
 //! Stream connections (an upgraded WebSocket; every gRPC connection) get a
 //! fixed kernel send buffer of `stream_buffer_bytes` instead of Linux's
 //! autotuned one (up to 4 MiB each, charged to the server's memory cgroup):
@@ -121,6 +126,9 @@ pub struct Tracked {
     idle_timeout: Duration,
     timer: Pin<Box<Sleep>>,
     expired: bool,
+    write_stall_timeout: Duration,
+    /// Armed while a write cannot proceed.
+    stall: Option<Pin<Box<Sleep>>>,
     _permit: OwnedSemaphorePermit,
 }
 
@@ -129,7 +137,44 @@ impl Tracked {
         let timer = Box::pin(tokio::time::sleep(idle_timeout));
         let activity = Activity::new();
         let (stream_buffer, bounded, expired) = (0, false, false);
-        Tracked { io, activity, stream_buffer, bounded, peer, idle_timeout, timer, expired, _permit: permit }
+        // Until `with_write_stall` says otherwise: as long as the idle timeout.
+        let (write_stall_timeout, stall) = (idle_timeout, None);
+        Tracked {
+            io,
+            activity,
+            stream_buffer,
+            bounded,
+            peer,
+            idle_timeout,
+            timer,
+            expired,
+            write_stall_timeout,
+            stall,
+            _permit: permit,
+        }
+    }
+
+    /// Fails a write that has made no progress for `timeout`.
+    pub fn with_write_stall(mut self, timeout: Duration) -> Self {
+        self.write_stall_timeout = timeout;
+        self
+    }
+
+    /// `written`, unless the write has been stuck for the stall timeout: a
+    /// pending write arms the stall timer, progress disarms it, and a write
+    /// still pending when it fires fails (hyper then closes the connection).
+    fn unless_stalled(&mut self, cx: &mut Context<'_>, written: Poll<io::Result<usize>>) -> Poll<io::Result<usize>> {
+        if written.is_ready() {
+            self.stall = None;
+            return written;
+        }
+        let timeout = self.write_stall_timeout;
+        let timer = self.stall.get_or_insert_with(|| Box::pin(tokio::time::sleep(timeout)));
+        if timer.as_mut().poll(cx).is_pending() {
+            return Poll::Pending;
+        }
+        metrics::counter!("inbetween_write_stalls_total").increment(1);
+        Poll::Ready(Err(io::Error::new(io::ErrorKind::TimedOut, "the peer stopped reading")))
     }
 
     /// Bounds the connection as a stream carrier now (`upgraded_only`:
@@ -230,7 +275,8 @@ impl AsyncWrite for Tracked {
     fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
         this.bound_if_upgraded();
-        Pin::new(&mut this.io).poll_write(cx, buf)
+        let written = Pin::new(&mut this.io).poll_write(cx, buf);
+        this.unless_stalled(cx, written)
     }
 
     fn poll_write_vectored(
@@ -240,7 +286,8 @@ impl AsyncWrite for Tracked {
     ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
         this.bound_if_upgraded();
-        Pin::new(&mut this.io).poll_write_vectored(cx, bufs)
+        let written = Pin::new(&mut this.io).poll_write_vectored(cx, bufs);
+        this.unless_stalled(cx, written)
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -284,7 +331,7 @@ impl Connected for Tracked {
 pub fn tracked_incoming(
     listener: tokio::net::TcpListener,
     gate: ConnGate,
-    idle_timeout: Duration,
+    (idle_timeout, write_stall_timeout): (Duration, Duration),
     stream_buffer: usize,
 ) -> impl futures_util::Stream<Item = io::Result<Tracked>> {
     use futures_util::StreamExt;
@@ -293,7 +340,9 @@ pub fn tracked_incoming(
             Ok(stream) => gate.admit().map(|permit| {
                 let _ = stream.set_nodelay(true);
                 let peer = stream.peer_addr().ok();
-                Ok(Tracked::new(stream, peer, permit, idle_timeout).with_stream_buffer(stream_buffer, false))
+                Ok(Tracked::new(stream, peer, permit, idle_timeout)
+                    .with_write_stall(write_stall_timeout)
+                    .with_stream_buffer(stream_buffer, false))
             }),
             Err(e) => Some(Err(e)),
         };

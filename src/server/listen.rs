@@ -31,6 +31,8 @@ use super::tls;
 pub struct Listening {
     pub header_read_timeout: Duration,
     pub idle_timeout: Duration,
+    /// How long a write may make no progress before the connection is closed.
+    pub write_stall_timeout: Duration,
     pub max_concurrent_streams: u32,
     pub connections: ConnGate,
     /// The kernel send buffer of an upgraded (WebSocket) connection.
@@ -69,6 +71,7 @@ pub async fn serve(
         let Some(permit) = limits.connections.admit() else { continue };
         let _ = stream.set_nodelay(true);
         let stream = Tracked::new(stream, Some(peer), permit, limits.idle_timeout)
+            .with_write_stall(limits.write_stall_timeout)
             .with_stream_buffer(limits.stream_buffer_bytes, true);
         let activity = std::sync::Arc::clone(stream.activity());
         // The peer address, as `axum::serve` provides it (`ConnectInfo`), for

@@ -230,7 +230,7 @@ impl Application {
         let incoming = connections::tracked_incoming(
             grpc_listener,
             connections::ConnGate::new(limits.max_connections, "grpc"),
-            limits.idle_timeout,
+            (limits.idle_timeout, limits.write_stall_timeout),
             limits.stream_buffer_bytes,
         );
         let mut grpc = tokio::spawn(
@@ -249,6 +249,7 @@ impl Application {
         let listening = listen::Listening {
             header_read_timeout: header_timeout,
             idle_timeout: limits.idle_timeout,
+            write_stall_timeout: limits.write_stall_timeout,
             max_concurrent_streams: limits.http2_max_concurrent_streams,
             connections: connections::ConnGate::new(limits.max_connections, "http"),
             stream_buffer_bytes: limits.stream_buffer_bytes,

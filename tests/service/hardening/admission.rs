@@ -405,3 +405,48 @@ async fn bodies_arriving_at_once_are_bounded_in_bytes() {
     assert_eq!(post().send().await.unwrap().status(), 201);
     app.stop().await;
 }
+
+/// A client that stops reading a large (chunked) answer holds its in-flight
+/// slot only until the write-stall timeout: then its connection is closed
+/// and the slot comes back.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_client_that_stops_reading_an_answer_is_cut_off_and_frees_its_slot() {
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.max_in_flight_per_client = 1;
+            c.limits.write_stall_timeout = Duration::from_secs(2);
+        })
+        .start()
+        .await;
+    let id = app.create_id(&crate::api::uniform_clip("wide", 200, 4, 0.25), None).await;
+    // 1,000 poses of 200 joints: tens of MB, sent chunked; the client reads none of it.
+    let body = json!({"start": 0, "end": 999.0 / 240.0, "fps": 240}).to_string();
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    let mut stuck = socket.connect(app.addr).await.unwrap();
+    let head = format!(
+        "POST /v1/clips/{id}/sample HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    tokio::io::AsyncWriteExt::write_all(&mut stuck, format!("{head}{body}").as_bytes()).await.unwrap();
+    let started = Instant::now();
+    let pose = app.url(&format!("/v1/clips/{id}/pose?t=1"));
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let held = app.http.get(&pose).send().await.unwrap();
+    assert_eq!(held.status(), 429, "the stuck answer holds the caller's one slot");
+    let freed_after = within(10, "the stalled answer is cut off", async {
+        loop {
+            if app.http.get(&pose).send().await.unwrap().status() == 200 {
+                return started.elapsed();
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    })
+    .await;
+    assert!(freed_after >= Duration::from_millis(1500), "freed after {freed_after:?}, before the stall timeout");
+    // The server closed the stuck connection: reading it to the end finishes.
+    let mut sink = Vec::new();
+    let read = tokio::time::timeout(Duration::from_secs(5), stuck.read_to_end(&mut sink)).await;
+    assert!(read.is_ok(), "the stalled connection was closed");
+    app.stop().await;
+}
