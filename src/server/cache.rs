@@ -52,6 +52,13 @@ impl CachedClip {
     }
 }
 
+/// Motions hold the cache entries of their layers (no copy of the clips).
+impl crate::anim::ClipSource for CachedClip {
+    fn clip(&self) -> &Clip {
+        &self.clip
+    }
+}
+
 /// Streams hold the cache entry they started on (no copy of the clip).
 impl crate::stream::ClipSource for CachedClip {
     fn clip(&self) -> &Clip {

@@ -11,6 +11,7 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use serde::ser::{SerializeMap, SerializeSeq};
 use serde::{Deserialize, Serialize, Serializer};
 
+use crate::anim::motion::{Planar, RootMotion};
 use crate::anim::{
     Channel, ClipError, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, Skeleton,
     SkeletonSpec, Space, Speed, TrackSpec, Transform,
@@ -335,17 +336,22 @@ impl PoseJson<'_> {
     /// directly: the pose route and JSON stream frames spend most of their
     /// time here, and serde's per-field plumbing cost more than the floats.
     pub(crate) fn write_to(&self, out: &mut impl BufMut) {
+        self.write_with(out, Extras::default());
+    }
+
+    /// [`PoseJson::write_to`] with a composed answer's joint subset and root motion.
+    pub(crate) fn write_with(&self, out: &mut impl BufMut, extras: Extras<'_>) {
         write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"");
         out.put_slice(self.space.as_str().as_bytes());
         out.put_slice(b"\",\"joints\":[");
-        let p = self.pose;
-        for (j, name) in self.skeleton.names().iter().enumerate() {
-            if j > 0 {
+        let (p, names) = (self.pose, self.skeleton.names());
+        for (k, j) in extras.indices(names.len()).enumerate() {
+            if k > 0 {
                 out.put_u8(b',');
             }
             out.put_slice(b"{\"name\":");
-            write_json_str(out, name);
+            write_json_str(out, &names[j]);
             out.put_slice(b",\"translation\":");
             write_floats(out, &p.translations[j].to_array());
             out.put_slice(b",\"rotation\":");
@@ -354,8 +360,52 @@ impl PoseJson<'_> {
             write_floats(out, &p.scales[j].to_array());
             out.put_u8(b'}');
         }
-        out.put_slice(b"]}");
+        out.put_u8(b']');
+        extras.write_root_motion(out);
+        out.put_u8(b'}');
     }
+}
+
+/// What a composed answer (SPEC §6) adds to a pose document: only some
+/// joints (in skeleton order), and the root motion.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Extras<'a> {
+    pub joints: Option<&'a [usize]>,
+    pub root_motion: Option<RootMotion>,
+}
+
+impl Extras<'_> {
+    fn indices(&self, all: usize) -> impl Iterator<Item = usize> + '_ {
+        let (every, some) = match self.joints {
+            Some(joints) => (0..0, joints.iter()),
+            None => (0..all, [].iter()),
+        };
+        every.chain(some.copied())
+    }
+
+    /// `,"root_motion":{"delta":{…},"total":{…}}` when there is one.
+    fn write_root_motion(&self, out: &mut impl BufMut) {
+        let Some(root) = self.root_motion else { return };
+        out.put_slice(b",\"root_motion\":{\"delta\":");
+        write_planar(out, root.delta);
+        out.put_slice(b",\"total\":");
+        write_planar(out, root.total);
+        out.put_u8(b'}');
+    }
+}
+
+/// `{"translation":[x,y,z],"yaw":r}`.
+fn write_planar(out: &mut impl BufMut, p: Planar) {
+    out.put_slice(b"{\"translation\":[");
+    for (i, x) in p.translation.to_array().into_iter().enumerate() {
+        if i > 0 {
+            out.put_u8(b',');
+        }
+        write_float(out, x);
+    }
+    out.put_slice(b"],\"yaw\":");
+    write_float(out, p.yaw);
+    out.put_u8(b'}');
 }
 
 /// A JSON string, escaped as serde_json escapes it.
@@ -452,21 +502,29 @@ impl MatricesJson<'_> {
     /// Appends exactly the JSON `serde_json` writes for these matrices
     /// (finite floats), directly, and never a `null` (see `write_float`).
     pub(crate) fn write_to(&self, out: &mut impl BufMut) {
+        self.write_with(out, Extras::default());
+    }
+
+    /// [`MatricesJson::write_to`] with a composed answer's joint subset and root motion.
+    pub(crate) fn write_with(&self, out: &mut impl BufMut, extras: Extras<'_>) {
         write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"model\",\"format\":");
         write_json_str(out, self.format);
         out.put_slice(b",\"joints\":[");
-        for (j, (name, m)) in self.skeleton.names().iter().zip(self.matrices).enumerate() {
-            if j > 0 {
+        let names = self.skeleton.names();
+        for (k, j) in extras.indices(names.len().min(self.matrices.len())).enumerate() {
+            if k > 0 {
                 out.put_u8(b',');
             }
             out.put_slice(b"{\"name\":");
-            write_json_str(out, name);
+            write_json_str(out, &names[j]);
             out.put_slice(b",\"matrix\":");
-            write_floats(out, &m.to_cols_array());
+            write_floats(out, &self.matrices[j].to_cols_array());
             out.put_u8(b'}');
         }
-        out.put_slice(b"]}");
+        out.put_u8(b']');
+        extras.write_root_motion(out);
+        out.put_u8(b'}');
     }
 }
 

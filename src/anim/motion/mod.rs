@@ -171,6 +171,16 @@ impl<C: ClipSource> Motion<C> {
         &self.layers[0].clip
     }
 
+    /// Each layer's clip, bottom to top.
+    pub fn layers(&self) -> impl Iterator<Item = &C> {
+        self.layers.iter().map(|l| &l.clip)
+    }
+
+    /// Whether samples report root motion.
+    pub fn has_root_motion(&self) -> bool {
+        self.root.is_some()
+    }
+
     pub fn layer_count(&self) -> usize {
         self.layers.len()
     }

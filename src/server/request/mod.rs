@@ -19,18 +19,24 @@
 //!   anything is evaluated): `too_many_poses` (over `max_joint_poses`),
 //!   `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
 //!
+//! Composed requests (`motion`, SPEC §6) look up every layer's clip, build
+//! the motion (its refusals pointed at `/motion/…`) and price the answer the
+//! same way.
+//!
 //! Malformed values are reported before broken rules, and both before the
 //! clip is looked up (`clip_not_found`), except the stream rules that need
 //! the clip (its start is the default start).
 
 mod cost;
 mod list;
+mod motion;
 mod raw;
 mod sample;
 mod stream;
 
 pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
+pub use motion::{Composed, RawMotion};
 pub use raw::{Field, Format, Locate, Raw, RawModes, clip, in_body, in_query};
 pub use sample::{BLOCKING_POSES, FPS_RANGE, PoseRequest, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{DEFAULT_FPS, Opening, RawStream};

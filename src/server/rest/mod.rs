@@ -29,7 +29,9 @@ pub mod clips;
 pub mod extract;
 pub mod health;
 pub mod import;
+pub mod motions;
 pub mod openapi;
+pub mod pieces;
 pub mod poses;
 pub mod query;
 pub mod schemas;
@@ -51,6 +53,8 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
         .route("/v1/clips/{id}/stream", get(stream::stream))
+        .route("/v1/poses", post(motions::pose))
+        .route("/v1/samples", post(motions::samples))
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/metrics", get(health::metrics))

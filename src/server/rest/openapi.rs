@@ -11,7 +11,7 @@ use utoipa::{Modify, OpenApi};
 use utoipa_swagger_ui::SwaggerUi;
 
 use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem};
-use super::{clips, health, import, poses, stream, viewer};
+use super::{clips, health, import, motions, poses, stream, viewer};
 use crate::server::error::PROBLEM_JSON;
 
 /// The bearer scheme, and on every operation that takes it the two answers
@@ -84,7 +84,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
         import::import_clips,
-        poses::get_pose, poses::sample, stream::stream,
+        poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream,
         health::healthz, health::readyz, health::metrics,
         viewer::viewer_page,
     ),

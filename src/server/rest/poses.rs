@@ -11,7 +11,6 @@
 use std::cell::RefCell;
 use std::sync::Arc;
 
-use axum::body::Body;
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
 use axum::http::{HeaderValue, StatusCode};
@@ -29,6 +28,7 @@ use crate::server::state::AppState;
 use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
 
 use super::extract::{ClipId, JsonBody};
+use super::pieces::{self, Pieces, PoseWriter};
 use super::query::Query;
 
 /// Response-size estimates, so a pose body is written without reallocating.
@@ -71,7 +71,7 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
     });
 }
 
-fn json_response(body: Vec<u8>) -> Response {
+pub(super) fn json_response(body: Vec<u8>) -> Response {
     (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
 }
 
@@ -157,7 +157,8 @@ impl SampleRequest {
     }
 }
 
-fn parse_sample(body: &[u8]) -> Result<SampleRequest, ApiError> {
+/// A JSON request body, its type errors pointed at the field.
+pub(super) fn parse_json<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
     let de = &mut serde_json::Deserializer::from_slice(body);
     let req = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         use serde_path_to_error::Segment;
@@ -201,20 +202,14 @@ pub async fn sample(
     ClipId(id): ClipId,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
-    let req = parse_sample(&body)?;
+    let req: SampleRequest = parse_json(&body)?;
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
-    if sampling.is_large() {
-        return Ok(json_stream(Pieces::new(state, sampling, cached)));
+    let (large, blocking, n) = (sampling.is_large(), sampling.is_blocking(), sampling.times.len());
+    let mut writer = ClipPoses { sampling, cached };
+    if large {
+        return Ok(Pieces::new(state, Box::new(writer)).into_response());
     }
-    let n = sampling.times.len();
-    let blocking = sampling.is_blocking();
-    let render = move || {
-        let mut body = Vec::with_capacity(sampling.answer_bytes as usize);
-        body.extend_from_slice(b"{\"poses\":[");
-        write_poses(&mut body, &cached, &sampling, 0..n);
-        body.extend_from_slice(b"]}");
-        body
-    };
+    let mut render = move || pieces::whole(&mut writer);
     let body = if blocking {
         tokio::task::spawn_blocking(render).await.map_err(crate::server::metrics::join_failed)?
     } else {
@@ -224,88 +219,28 @@ pub async fn sample(
     Ok(json_response(body))
 }
 
-/// Appends the poses `range` of `sampling`, comma-separated as inside
-/// `{"poses":[…]}`.
-fn write_poses(out: &mut Vec<u8>, cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>) {
-    for k in range {
-        if k > 0 {
-            out.push(b',');
-        }
-        write_pose(out, cached, sampling.times[k], &sampling.options, sampling.format);
-    }
+/// A clip's poses at a request's times, for [`pieces`](super::pieces).
+struct ClipPoses {
+    sampling: Sampling,
+    cached: Arc<CachedClip>,
 }
 
-/// Bytes of JSON per piece of a streamed answer (at least one pose).
-const PIECE_BYTES: u64 = 64 * 1024;
-
-/// A large answer, evaluated a piece at a time: the next piece is
-/// evaluated (on the blocking pool) only when the client has taken the last
-/// one, so the memory a request holds is a piece, not its answer, and no
-/// thread waits on a slow reader. A client that goes away drops the body,
-/// and with it the rest of the work (counted as abandoned).
-struct Pieces {
-    state: AppState,
-    job: Arc<(Sampling, Arc<CachedClip>)>,
-    /// Poses per piece.
-    per_piece: usize,
-    /// The next pose to evaluate.
-    next: usize,
-    done: bool,
-}
-
-impl Pieces {
-    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>) -> Pieces {
-        let n = sampling.times.len().max(1) as u64;
-        let per_pose = sampling.answer_bytes / n;
-        let per_piece = (PIECE_BYTES / per_pose.max(1)).max(1) as usize;
-        Pieces { state, job: Arc::new((sampling, cached)), per_piece, next: 0, done: false }
+impl PoseWriter for ClipPoses {
+    fn count(&self) -> usize {
+        self.sampling.times.len()
     }
 
-    /// The next piece of the document, `None` after its end.
-    async fn piece(&mut self) -> Option<Result<Vec<u8>, ApiError>> {
-        let n = self.job.0.times.len();
-        if self.done {
-            return None;
-        }
-        let range = self.next..(self.next + self.per_piece).min(n);
-        let job = Arc::clone(&self.job);
-        let render = move || {
-            let (sampling, cached) = &*job;
-            let mut out = Vec::with_capacity(PIECE_BYTES as usize + 64);
-            if range.start == 0 {
-                out.extend_from_slice(b"{\"poses\":[");
+    fn bound(&self) -> u64 {
+        self.sampling.answer_bytes
+    }
+
+    fn write(&mut self, out: &mut Vec<u8>, range: std::ops::Range<usize>) {
+        for k in range {
+            if k > 0 {
+                out.push(b',');
             }
-            write_poses(&mut out, cached, sampling, range.clone());
-            if range.end == sampling.times.len() {
-                out.extend_from_slice(b"]}");
-            }
-            (out, range.len())
-        };
-        let piece = tokio::task::spawn_blocking(render).await.map_err(crate::server::metrics::join_failed);
-        Some(piece.map(|(out, evaluated)| {
-            self.state.counters.poses.increment(evaluated as u64);
-            self.next += evaluated;
-            self.done = self.next == n;
-            out
-        }))
-    }
-}
-
-impl Drop for Pieces {
-    fn drop(&mut self) {
-        if !self.done {
-            self.state.counters.answers_abandoned.increment(1);
-            self.state.counters.poses_abandoned.increment((self.job.0.times.len() - self.next) as u64);
+            let sampling = &self.sampling;
+            write_pose(out, &self.cached, sampling.times[k], &sampling.options, sampling.format);
         }
     }
-}
-
-/// A 200 whose JSON body is `pieces`, sent as the client reads it.
-fn json_stream(pieces: Pieces) -> Response {
-    let stream = futures_util::stream::unfold(pieces, |mut pieces| async move {
-        let piece = pieces.piece().await?;
-        Some((piece, pieces))
-    });
-    let body = Body::from_stream(stream);
-    (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
 }

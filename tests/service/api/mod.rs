@@ -10,6 +10,7 @@ mod concurrency;
 mod cost;
 mod durability;
 mod import;
+mod motions;
 mod numbers;
 mod operations;
 mod poses;

@@ -24,6 +24,8 @@ const ROUTES: &[(&str, &str, Need, u16)] = &[
     ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
     ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
     ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
+    ("post", "/v1/poses", Need::Scope(Scope::Read), 200),
+    ("post", "/v1/samples", Need::Scope(Scope::Read), 200),
     ("get", "/healthz", Need::Open, 200),
     ("get", "/readyz", Need::Open, 200),
     ("get", "/metrics", Need::Scope(Scope::Admin), 200),
@@ -69,6 +71,10 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
             req.query(&[("format", "bvh")]).header("content-type", "application/octet-stream").body(TINY_BVH)
         }
         ("post", p) if p.ends_with("/sample") => req.json(&serde_json::json!({"times": [0.0, 0.5]})),
+        ("post", "/v1/poses") => req.json(&serde_json::json!({"motion": {"layers": [{"clip": id}]}, "time": 0.25})),
+        ("post", "/v1/samples") => {
+            req.json(&serde_json::json!({"motion": {"layers": [{"clip": id}]}, "times": [0.0, 0.5]}))
+        }
         ("get", p) if p.ends_with("/pose") => req.query(&[("t", "0.25")]),
         _ => req,
     };

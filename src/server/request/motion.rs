@@ -1,0 +1,99 @@
+//! Composed requests (SPEC §6): a motion's clips looked up at their current
+//! versions and pinned, the motion built (its refusals pointed at
+//! `/motion/…`), the joint subset checked, and the answer priced before any
+//! pose is evaluated. REST's `POST /v1/poses` and `/v1/samples` use it.
+
+use std::sync::Arc;
+
+use super::cost::{Cost, Estimate, F64_TEXT, Wire};
+use super::raw::{Field, Format, Locate};
+use crate::anim::Motion;
+use crate::server::cache::CachedClip;
+use crate::server::error::ApiError;
+use crate::server::state::AppState;
+use crate::wire::motion::MotionDoc;
+
+/// A motion and the joints asked for, as a transport decoded them.
+#[derive(Debug, Clone, Copy)]
+pub struct RawMotion<'a> {
+    pub doc: &'a MotionDoc,
+    /// Joint names; `None`: every joint.
+    pub joints: Option<&'a [String]>,
+    pub format: Format,
+    pub at: Locate,
+}
+
+/// A built motion over pinned clips, and the output joints to send.
+pub struct Composed {
+    pub motion: Motion<Arc<CachedClip>>,
+    /// Output joint indices, in skeleton order; `None`: all.
+    pub joints: Option<Vec<usize>>,
+}
+
+/// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
+const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
+
+impl Composed {
+    /// The first layer's clip id (what a composed pose names).
+    pub fn clip_id(&self) -> &str {
+        &self.motion.first_clip().meta.id
+    }
+
+    /// What `poses` poses of this motion cost, sent as `format` over `wire`:
+    /// work counts every layer's joints; the size bound is the first clip's
+    /// (a subset only shrinks it) plus the root motion.
+    pub fn cost(&self, poses: u64, format: Format, wire: Wire) -> Cost {
+        let first = &self.motion.first_clip().clip;
+        let mut estimate = Estimate::batch(first, self.clip_id(), format, wire);
+        if self.motion.has_root_motion() {
+            estimate.per_pose += ROOT_MOTION_BYTES;
+        }
+        let joints = self.motion.layers().map(|c| c.clip.joint_count() as u64).sum();
+        Cost { poses, joints, bytes: estimate.total(poses) }
+    }
+}
+
+impl RawMotion<'_> {
+    /// Looks up each layer's clip, builds the motion and checks the subset.
+    ///
+    /// # Errors
+    /// `clip_not_found` for a layer's clip; the core's refusals
+    /// (`weight_out_of_range`, `unknown_joint`, …) at `/motion/…`;
+    /// `unknown_joint` at `/joints/{i}`; `no_inverse_binds` for skinning
+    /// matrices of a skeleton without them.
+    pub async fn resolve(&self, state: &AppState) -> Result<Composed, ApiError> {
+        let spec = self.doc.to_spec();
+        let mut clips = Vec::with_capacity(spec.layers.len());
+        for layer in &spec.layers {
+            clips.push(super::raw::clip(state, &layer.clip).await?);
+        }
+        let mut clips = clips.into_iter();
+        let spec = spec.try_map(|_, _| clips.next().ok_or(()));
+        let spec = spec.map_err(|()| ApiError::internal(anyhow::anyhow!("a layer lost its clip")))?;
+        let motion = Motion::build(spec).map_err(|e| {
+            ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string())
+        })?;
+        if self.format == Format::Skinning && !motion.skeleton().has_inverse_binds() {
+            let detail = "format=skinning needs inverse bind matrices, which the first layer's clip has not";
+            return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
+        }
+        let joints = self.joints.map(|names| subset(&motion, names)).transpose()?;
+        Ok(Composed { motion, joints })
+    }
+}
+
+/// The output skeleton's indices of `names`, in skeleton order.
+fn subset(motion: &Motion<Arc<CachedClip>>, names: &[String]) -> Result<Vec<usize>, ApiError> {
+    let skeleton = motion.skeleton();
+    let mut indices = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let j = skeleton.index_of(name).ok_or_else(|| {
+            let detail = format!("joint '{name}' is not in the output skeleton (the first layer's clip)");
+            ApiError::invalid("unknown_joint", format!("/joints/{i}"), detail)
+        })?;
+        indices.push(j);
+    }
+    indices.sort_unstable();
+    indices.dedup();
+    Ok(indices)
+}

@@ -1,0 +1,131 @@
+//! Composed poses over REST (SPEC §6): `POST /v1/poses` and `/v1/samples`.
+//! A one-layer motion answers exactly what the clip routes answer; blends,
+//! subsets and root motion against hand-computed values; refusals with
+//! their codes and pointers.
+
+use serde_json::{Value, json};
+
+use super::{TestApp, WAVE, assert_close};
+
+/// `hips` (moving along x from 0 to `to` over 1 s, looping) with `arm` under it.
+fn walk(name: &str, to: f32) -> String {
+    json!({
+        "name": name,
+        "skeleton": {"joints": [
+            {"name": "hips", "parent": null},
+            {"name": "arm", "parent": "hips", "rest": {"translation": [0, 1, 0]}}
+        ]},
+        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
+                    "times": [0, 1], "values": [[0, 0, 0], [to, 0, 0]]}],
+        "playback": "loop"
+    })
+    .to_string()
+}
+
+async fn post(app: &TestApp, path: &str, body: &Value) -> (u16, Value) {
+    let resp = app.http.post(app.url(path)).json(body).send().await.unwrap();
+    (resp.status().as_u16(), resp.json().await.unwrap())
+}
+
+#[tokio::test]
+async fn a_one_layer_motion_answers_exactly_what_the_clip_routes_answer() {
+    let app = TestApp::start().await;
+    let id = app.create_id(WAVE, None).await;
+    for (space, format) in [("local", "trs"), ("model", "trs"), ("model", "matrix")] {
+        for t in [0.0, 0.37, 1.25, 2.9, 7.5] {
+            let clip = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&space={space}&format={format}")).await;
+            let body = json!({"motion": {"layers": [{"clip": id}]}, "time": t, "space": space, "format": format});
+            let (status, composed) = post(&app, "/v1/poses", &body).await;
+            assert_eq!(status, 200, "{composed}");
+            assert_eq!(composed, clip, "t = {t}, {space}, {format}");
+        }
+    }
+    let times = json!([0.0, 0.5, 1.0, 2.75]);
+    let (_, clip) = post(&app, &format!("/v1/clips/{id}/sample"), &json!({"times": times, "space": "model"})).await;
+    let body = json!({"motion": {"layers": [{"clip": id}]}, "times": times, "space": "model"});
+    let (status, composed) = post(&app, "/v1/samples", &body).await;
+    assert_eq!((status, composed), (200, clip));
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn layers_blend_by_weight_and_a_subset_returns_only_its_joints() {
+    let app = TestApp::start().await;
+    let (walk_id, run_id) =
+        (app.create_id(&walk("walk", 2.0), None).await, app.create_id(&walk("run", 6.0), None).await);
+    let motion = json!({"layers": [{"clip": walk_id}, {"clip": run_id, "weight": 0.3}]});
+    let (status, pose) = post(&app, "/v1/poses", &json!({"motion": motion, "time": 0.5, "space": "model"})).await;
+    assert_eq!(status, 200, "{pose}");
+    assert_eq!(pose["clip"], walk_id, "a composed pose names the first layer's clip");
+    // hips: walk at x = 1, run at x = 3 → 0.7·1 + 0.3·3 = 1.6; arm one unit above it in model space.
+    assert_close(pose["joints"][0]["translation"][0].as_f64().unwrap(), 1.6, 1e-6, "hips x");
+    assert_close(pose["joints"][1]["translation"][0].as_f64().unwrap(), 1.6, 1e-6, "arm x");
+    assert_close(pose["joints"][1]["translation"][1].as_f64().unwrap(), 1.0, 1e-6, "arm y");
+    let subset = json!({"motion": motion, "time": 0.5, "space": "model", "joints": ["arm"]});
+    let (status, only) = post(&app, "/v1/poses", &subset).await;
+    assert_eq!(status, 200);
+    assert_eq!(only["joints"].as_array().unwrap().len(), 1);
+    assert_eq!(only["joints"][0], pose["joints"][1], "model space still goes through the hips");
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn samples_carry_root_motion_across_loop_seams_and_extract_keeps_the_root_in_place() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&walk("walk", 2.0), None).await;
+    let body = |mode: &str| json!({"motion": {"layers": [{"clip": id}], "root_motion": {"mode": mode}}, "start": 0, "end": 2.5, "fps": 10});
+    let (status, answer) = post(&app, "/v1/samples", &body("report")).await;
+    assert_eq!(status, 200, "{answer}");
+    let poses = answer["poses"].as_array().unwrap();
+    assert_eq!(poses.len(), 26);
+    assert_eq!(poses[0]["root_motion"]["delta"], json!({"translation": [0.0, 0.0, 0.0], "yaw": 0.0}));
+    for (k, pose) in poses.iter().enumerate().skip(1) {
+        let dx = pose["root_motion"]["delta"]["translation"][0].as_f64().unwrap();
+        assert_close(dx, 0.2, 1e-5, &format!("frame {k}'s delta, across the seams too"));
+    }
+    let total = poses[25]["root_motion"]["total"]["translation"][0].as_f64().unwrap();
+    assert_close(total, 5.0, 1e-4, "two and a half cycles of 2 m");
+    let (_, extracted) = post(&app, "/v1/samples", &body("extract")).await;
+    for pose in extracted["poses"].as_array().unwrap() {
+        assert_close(pose["joints"][0]["translation"][0].as_f64().unwrap(), 0.0, 1e-6, "hips in place");
+    }
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn bad_motions_are_refused_with_their_codes_and_pointers() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&walk("walk", 2.0), None).await;
+    let layer = json!({"clip": id});
+    let cases = [
+        (
+            json!({"layers": [layer, {"clip": id, "weight": 2}]}),
+            None,
+            422,
+            "weight_out_of_range",
+            "/motion/layers/1/weight",
+        ),
+        (
+            json!({"layers": [layer, {"clip": id, "mask": {"joints": {"tail": 1}}}]}),
+            None,
+            422,
+            "unknown_joint",
+            "/motion/layers/1/mask/joints/tail",
+        ),
+        (json!({"layers": [layer]}), Some(json!(["arm", "tail"])), 422, "unknown_joint", "/joints/1"),
+        (json!({"layers": []}), None, 422, "no_layers", "/motion/layers"),
+        (json!({"layers": [{"clip": id, "wieght": 1}]}), None, 422, "invalid_field", "/motion/layers/0"),
+    ];
+    for (motion, joints, status, code, pointer) in cases {
+        let mut body = json!({"motion": motion, "time": 0.5});
+        if let Some(joints) = joints {
+            body["joints"] = joints;
+        }
+        let (got, problem) = post(&app, "/v1/poses", &body).await;
+        assert_eq!((got, problem["code"].as_str()), (status, Some(code)), "{problem}");
+        assert!(problem["pointer"].as_str().unwrap_or("").starts_with(pointer), "{problem}");
+    }
+    let missing = json!({"motion": {"layers": [{"clip": "0190f0c2-0000-7000-8000-000000000000"}]}, "time": 0});
+    assert_eq!(post(&app, "/v1/poses", &missing).await.0, 404);
+    app.stop().await;
+}
