@@ -29,8 +29,8 @@ use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::request::{
-    Field, Format, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream, Sampling, Wire, evaluate,
-    in_body,
+    Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
+    Sampling, Wire, evaluate, in_body,
 };
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
@@ -143,11 +143,6 @@ impl GrpcService {
         Ok((params, permit.map_err(ApiError::from)?))
     }
 }
-
-/// The largest unary answer (`SampleBatch`) sent; larger ones are
-/// `SampleStream`'s. Clients' default receive limit is 4 MiB: this is what
-/// a client that raised it may get in one message.
-pub const MAX_UNARY_ANSWER_BYTES: u64 = 16 * 1024 * 1024;
 
 /// Bytes of poses per `SampleStream` message (at least one pose).
 const STREAM_BATCH_BYTES: u64 = 1024 * 1024;
@@ -323,6 +318,19 @@ impl Animation for GrpcService {
         let pose = pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
         self.state.counters.poses.increment(1);
         Ok(Response::new(pose))
+    }
+
+    async fn sample_motion(&self, request: Request<pb::SampleMotionRequest>) -> Result<Response<pb::Pose>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_motion::sample(&self.state, request.into_inner()).await?))
+    }
+
+    async fn sample_motion_batch(
+        &self,
+        request: Request<pb::SampleMotionBatchRequest>,
+    ) -> Result<Response<pb::PoseBatch>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_motion::sample_batch(&self.state, request.into_inner()).await?))
     }
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {

@@ -49,6 +49,7 @@ pub mod connections;
 pub mod error;
 pub mod grpc;
 pub mod grpc_edge;
+pub mod grpc_motion;
 pub mod limits;
 mod listen;
 pub mod metrics;

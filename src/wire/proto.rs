@@ -13,6 +13,9 @@
 
 use glam::{Mat4, Quat, Vec3, Vec4};
 
+use crate::anim::motion::{
+    LayerMode, LayerSpec, MaskSpec, MotionSpec, Planar, RootMode, RootMotion, RootMotionSpec, UpAxis,
+};
 use crate::anim::{
     Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Space,
     Speed, TrackSpec, Transform,
@@ -76,6 +79,72 @@ proto_enum!(ease_from_pb, ease_to_pb, Ease => Ease {
     Linear = Linear, In = EaseIn, Out = EaseOut, InOut = EaseInOut,
 });
 proto_enum!(space_from_pb, space_to_pb, Space => Space { Local = Local, Model = Model });
+proto_enum!(layer_mode_from_pb, layer_mode_to_pb, LayerMode => LayerMode { Blend = Blend, Additive = Additive });
+proto_enum!(root_mode_from_pb, root_mode_to_pb, RootMode => RootMode { Report = Report, Extract = Extract });
+proto_enum!(up_axis_from_pb, up_axis_to_pb, UpAxis => UpAxis { Y = Y, Z = Z });
+
+/// A protobuf motion → the core's authoring form, clip ids still to be
+/// looked up; enum numbers the proto does not define are refused at their
+/// pointer (`/motion/layers/1/mode`).
+///
+/// # Errors
+/// An undefined enum number.
+pub(crate) fn motion_from_pb(motion: &pb::Motion) -> Result<MotionSpec<String>, DocError> {
+    let layers = motion
+        .layers
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let at = |field: &str| format!("/motion/layers/{i}/{field}");
+            Ok(LayerSpec {
+                clip: l.clip_id.clone(),
+                weight: l.weight.unwrap_or(1.0),
+                mode: layer_mode_from_pb(l.mode, &at("mode"))?.unwrap_or_default(),
+                mask: l.mask.as_ref().map(|m| MaskSpec {
+                    joints: m.joints.iter().map(|(name, w)| (name.clone(), *w)).collect(),
+                    descendants: m.descendants,
+                    default: m.default_weight,
+                }),
+                offset: l.offset,
+                speed: l.speed.unwrap_or(1.0),
+                playback: playback_from_pb(l.playback, &at("playback"))?,
+                sync: (!l.sync.is_empty()).then(|| l.sync.clone()),
+                reference_time: l.reference_time,
+            })
+        })
+        .collect::<Result<Vec<_>, DocError>>()?;
+    let root_motion = match &motion.root_motion {
+        None => None,
+        Some(r) => Some(RootMotionSpec {
+            joint: (!r.joint.is_empty()).then(|| r.joint.clone()),
+            mode: root_mode_from_pb(r.mode, "/motion/root_motion/mode")?.unwrap_or_default(),
+            up: up_axis_from_pb(r.up, "/motion/root_motion/up")?.unwrap_or_default(),
+        }),
+    };
+    Ok(MotionSpec { layers, root_motion })
+}
+
+/// A composed pose's root motion on the wire.
+pub(crate) fn root_motion_to_pb(root: RootMotion) -> pb::RootMotion {
+    let planar = |p: Planar| pb::Planar { x: p.translation.x, y: p.translation.y, z: p.translation.z, yaw: p.yaw };
+    pb::RootMotion { delta: Some(planar(root.delta)), total: Some(planar(root.total)) }
+}
+
+/// `pose` keeping only `joints` (indices, in order): names, and 3/4/3 or 16
+/// floats per joint.
+pub(crate) fn select_joints(pose: pb::Pose, joints: &[usize]) -> pb::Pose {
+    fn pick<T: Clone>(all: &[T], width: usize, joints: &[usize]) -> Vec<T> {
+        joints.iter().flat_map(|&j| all.get(j * width..(j + 1) * width).unwrap_or_default().iter().cloned()).collect()
+    }
+    pb::Pose {
+        joint_names: if pose.joint_names.is_empty() { Vec::new() } else { pick(&pose.joint_names, 1, joints) },
+        translations: pick(&pose.translations, 3, joints),
+        rotations: pick(&pose.rotations, 4, joints),
+        scales: pick(&pose.scales, 3, joints),
+        matrices: pick(&pose.matrices, 16, joints),
+        ..pose
+    }
+}
 
 /// Splits a flat float array into keys of `width` numbers.
 fn keys(flat: &[f32], width: usize, pointer: String, channel: Channel) -> Result<Keys, DocError> {
@@ -229,6 +298,7 @@ pub(crate) fn pose_to_pb(names: Option<&[String]>, pose: &Pose, time: f64, clip_
         clip_time,
         matrices: Vec::new(),
         space: space_to_pb(space) as i32,
+        root_motion: None,
     }
 }
 

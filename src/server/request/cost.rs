@@ -22,6 +22,11 @@ pub const F64_TEXT: u64 = 24;
 /// The widest varint length prefix this server writes (any `u32` length).
 const VARINT: u64 = 5;
 
+/// The largest unary answer (`SampleBatch`) sent; larger ones are
+/// `SampleStream`'s. Clients' default receive limit is 4 MiB: this is what
+/// a client that raised it may get in one message.
+pub const MAX_UNARY_ANSWER_BYTES: u64 = 16 * 1024 * 1024;
+
 /// How an answer travels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Wire {

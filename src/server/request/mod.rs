@@ -34,7 +34,7 @@ mod raw;
 mod sample;
 mod stream;
 
-pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
+pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, MAX_UNARY_ANSWER_BYTES, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
 pub use motion::{Composed, RawMotion};
 pub use raw::{Field, Format, Locate, Raw, RawModes, clip, in_body, in_query};

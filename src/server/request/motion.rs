@@ -8,15 +8,16 @@ use std::sync::Arc;
 use super::cost::{Cost, Estimate, F64_TEXT, Wire};
 use super::raw::{Field, Format, Locate};
 use crate::anim::Motion;
+use crate::anim::motion::MotionSpec;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
-use crate::wire::motion::MotionDoc;
 
 /// A motion and the joints asked for, as a transport decoded them.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct RawMotion<'a> {
-    pub doc: &'a MotionDoc,
+    /// Clip ids still to be looked up.
+    pub spec: MotionSpec<String>,
     /// Joint names; `None`: every joint.
     pub joints: Option<&'a [String]>,
     pub format: Format,
@@ -61,8 +62,8 @@ impl RawMotion<'_> {
     /// (`weight_out_of_range`, `unknown_joint`, …) at `/motion/…`;
     /// `unknown_joint` at `/joints/{i}`; `no_inverse_binds` for skinning
     /// matrices of a skeleton without them.
-    pub async fn resolve(&self, state: &AppState) -> Result<Composed, ApiError> {
-        let spec = self.doc.to_spec();
+    pub async fn resolve(self, state: &AppState) -> Result<Composed, ApiError> {
+        let spec = self.spec;
         let mut clips = Vec::with_capacity(spec.layers.len());
         for layer in &spec.layers {
             clips.push(super::raw::clip(state, &layer.clip).await?);

@@ -100,7 +100,8 @@ pub async fn pose(
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
-    let motion = RawMotion { doc: &req.motion, joints: req.joints.as_deref(), format: checked.format, at: in_body };
+    let motion =
+        RawMotion { spec: req.motion.to_spec(), joints: req.joints.as_deref(), format: checked.format, at: in_body };
     let composed = motion.resolve(&state).await?;
     let cost = composed.cost(1, checked.format, Wire::Json);
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
@@ -139,7 +140,8 @@ pub async fn samples(
         at: in_body,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let motion = RawMotion { doc: &req.motion, joints: req.joints.as_deref(), format: sampling.format, at: in_body };
+    let motion =
+        RawMotion { spec: req.motion.to_spec(), joints: req.joints.as_deref(), format: sampling.format, at: in_body };
     let composed = motion.resolve(&state).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Json);

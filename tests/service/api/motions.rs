@@ -3,6 +3,7 @@
 //! subsets and root motion against hand-computed values; refusals with
 //! their codes and pointers.
 
+use inbetween::wire::proto::pb;
 use serde_json::{Value, json};
 
 use super::{TestApp, WAVE, assert_close};
@@ -127,5 +128,56 @@ async fn bad_motions_are_refused_with_their_codes_and_pointers() {
     }
     let missing = json!({"motion": {"layers": [{"clip": "0190f0c2-0000-7000-8000-000000000000"}]}, "time": 0});
     assert_eq!(post(&app, "/v1/poses", &missing).await.0, 404);
+    app.stop().await;
+}
+
+fn one_layer(id: &str) -> pb::Motion {
+    pb::Motion { layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }], root_motion: None }
+}
+
+#[tokio::test]
+async fn grpc_sample_motion_mirrors_the_clip_rpcs_and_the_rest_routes() {
+    let app = TestApp::start().await;
+    let id = app.create_id(WAVE, None).await;
+    let mut grpc = app.grpc().await;
+    for (space, format) in [(pb::Space::Local, pb::Format::Trs), (pb::Space::Model, pb::Format::Matrix)] {
+        for t in [0.0, 0.37, 2.9] {
+            let (space, format) = (space as i32, format as i32);
+            let clip = pb::SampleRequest { clip_id: id.clone(), time: t, space, format, ..Default::default() };
+            let clip = grpc.sample(clip).await.unwrap().into_inner();
+            let req = pb::SampleMotionRequest { motion: Some(one_layer(&id)), time: t, space, format, joints: vec![] };
+            assert_eq!(grpc.sample_motion(req).await.unwrap().into_inner(), clip, "t = {t}");
+        }
+    }
+    // Root motion and a subset, as REST answers them.
+    let walk_id = app.create_id(&walk("walk", 2.0), None).await;
+    let root = pb::RootMotionOptions::default();
+    let motion = pb::Motion { root_motion: Some(root), ..one_layer(&walk_id) };
+    let when = pb::sample_motion_batch_request::When::Range(pb::FrameRange { start: 0.0, end: 2.5, fps: 10.0 });
+    let req = pb::SampleMotionBatchRequest {
+        motion: Some(motion),
+        when: Some(when),
+        joints: vec!["hips".into()],
+        ..Default::default()
+    };
+    let batch = grpc.sample_motion_batch(req).await.unwrap().into_inner();
+    assert_eq!(batch.joint_names, ["hips"]);
+    assert_eq!(batch.poses.len(), 26);
+    assert_eq!(batch.poses[1].translations.len(), 3, "one joint");
+    let total = batch.poses[25].root_motion.as_ref().unwrap().total.as_ref().unwrap();
+    assert_close(total.x, 5.0, 1e-4, "two and a half cycles of 2 m");
+    // The same refusals and codes as REST.
+    let bad = pb::Motion {
+        layers: vec![pb::Layer { clip_id: id.clone(), weight: Some(2.0), ..Default::default() }],
+        root_motion: None,
+    };
+    let req = pb::SampleMotionRequest { motion: Some(bad), time: 0.0, ..Default::default() };
+    let status = grpc.sample_motion(req).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "weight_out_of_range");
+    assert!(status.message().contains("/motion/layers/0/weight"), "{}", status.message());
+    let missing = one_layer("0190f0c2-0000-7000-8000-000000000000");
+    let req = pb::SampleMotionRequest { motion: Some(missing), time: 0.0, ..Default::default() };
+    assert_eq!(grpc.sample_motion(req).await.unwrap_err().code(), tonic::Code::NotFound);
     app.stop().await;
 }

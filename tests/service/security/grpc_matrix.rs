@@ -16,6 +16,8 @@ const RPCS: &[(&str, Need)] = &[
     ("Sample", Need::Scope(Scope::Read)),
     ("SampleBatch", Need::Scope(Scope::Read)),
     ("SampleStream", Need::Scope(Scope::Read)),
+    ("SampleMotion", Need::Scope(Scope::Read)),
+    ("SampleMotionBatch", Need::Scope(Scope::Read)),
     ("StreamFrames", Need::Scope(Scope::Read)),
     ("Play", Need::Scope(Scope::Read)),
     ("GetClip", Need::Scope(Scope::Read)),
@@ -62,6 +64,19 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             let mut batches = grpc.sample_stream(with_token(req, t)).await?.into_inner();
             batches.message().await?.expect("a first batch");
             Ok(())
+        }
+        "SampleMotion" => {
+            let motion =
+                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], root_motion: None };
+            let req = pb::SampleMotionRequest { motion: Some(motion), time: 0.5, ..Default::default() };
+            grpc.sample_motion(with_token(req, t)).await.map(drop)
+        }
+        "SampleMotionBatch" => {
+            let motion =
+                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], root_motion: None };
+            let when = pb::sample_motion_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
+            let req = pb::SampleMotionBatchRequest { motion: Some(motion), when: Some(when), ..Default::default() };
+            grpc.sample_motion_batch(with_token(req, t)).await.map(drop)
         }
         "StreamFrames" => {
             let mut frames = grpc.stream_frames(with_token(stream_request(&id), t)).await?.into_inner();

@@ -1,0 +1,157 @@
+//! The composed-motion RPCs (SPEC §6): `SampleMotion` and
+//! `SampleMotionBatch`, the gRPC mirror of `POST /v1/poses` and
+//! `/v1/samples`. The motion message is converted in `wire::proto`, checked
+//! and priced by `server::request` (`RawPose`, `RawBatch`, `RawMotion`) with
+//! the same codes as REST, and each pose is packed from the motion
+//! sampler's buffers with its joint subset and root motion.
+
+use glam::Mat4;
+
+use crate::anim::motion::MotionOptions;
+use crate::anim::{MotionSampler, Space};
+use crate::server::error::{ApiError, At};
+use crate::server::request::{
+    Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body,
+};
+use crate::server::state::AppState;
+use crate::wire::proto::{matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints};
+
+/// Where the fields of `SampleMotionRequest` sit.
+fn pose_at(field: Field) -> At {
+    match field {
+        Field::Time => At::Pointer("/time".into()),
+        other => in_body(other),
+    }
+}
+
+/// Where the fields of `SampleMotionBatchRequest` sit: the range's in `/range`.
+fn batch_at(field: Field) -> At {
+    match field {
+        Field::Start | Field::End | Field::Fps => At::Pointer(format!("/range/{}", field.name())),
+        other => in_body(other),
+    }
+}
+
+/// The request's motion and joints, looked up and built.
+async fn compose(
+    state: &AppState,
+    motion: Option<&pb::Motion>,
+    joints: &[String],
+    format: Format,
+) -> Result<Composed, ApiError> {
+    let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
+    let joints = (!joints.is_empty()).then_some(joints);
+    RawMotion { spec, joints, format, at: in_body }.resolve(state).await
+}
+
+/// `SampleMotion`: one pose, with its names.
+///
+/// # Errors
+/// As `POST /v1/poses`, with the same codes.
+pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb::Pose, ApiError> {
+    let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
+    let checked =
+        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: pose_at }.check()?;
+    let composed = compose(state, req.motion.as_ref(), &req.joints, checked.format).await?;
+    composed.cost(1, checked.format, Wire::Protobuf).check(&state.config.limits, Field::Time, pose_at)?;
+    let mut packer = Packer::new(&composed, checked.options.space, checked.format);
+    state.counters.poses.increment(1);
+    Ok(packer.pose(checked.t, true))
+}
+
+/// `SampleMotionBatch`: many poses, the names once.
+///
+/// # Errors
+/// As `POST /v1/samples`, and `use_sample_stream`-like refusal of an answer
+/// over the unary limit (REST's `/v1/samples` sends any size).
+pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -> Result<pb::PoseBatch, ApiError> {
+    use pb::sample_motion_batch_request::When;
+    let range = match &req.when {
+        Some(When::Range(r)) => Some(r),
+        _ => None,
+    };
+    let raw = RawBatch {
+        times: match &req.when {
+            Some(When::Times(t)) => Some(&t.values),
+            _ => None,
+        },
+        start: range.map(|r| r.start),
+        end: range.map(|r| r.end),
+        fps: range.map(|r| r.fps),
+        modes: RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() },
+        format: Some(Raw::Enum(req.format)),
+        at: batch_at,
+    };
+    let sampling = raw.check(state.config.limits.max_poses)?;
+    let composed = compose(state, req.motion.as_ref(), &req.joints, sampling.format).await?;
+    let n = sampling.times.len();
+    let cost = composed.cost(n as u64, sampling.format, Wire::Protobuf);
+    let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };
+    cost.check(&state.config.limits, field, batch_at)?;
+    if cost.bytes > MAX_UNARY_ANSWER_BYTES {
+        let (bytes, limit) = (cost.bytes, MAX_UNARY_ANSWER_BYTES);
+        return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });
+    }
+    let (space, format) = (sampling.options.space, sampling.format);
+    let pack = move || {
+        let mut packer = Packer::new(&composed, space, format);
+        let poses: Vec<pb::Pose> = sampling.times.iter().map(|&t| packer.pose(t, false)).collect();
+        pb::PoseBatch { joint_names: packer.names(), poses }
+    };
+    let batch = if n > crate::server::request::BLOCKING_POSES {
+        tokio::task::spawn_blocking(pack).await.map_err(crate::server::metrics::join_failed)?
+    } else {
+        pack()
+    };
+    state.counters.poses.increment(n as u64);
+    Ok(batch)
+}
+
+/// Packs a motion's poses in order (root motion runs from each to the next).
+struct Packer<'a> {
+    composed: &'a Composed,
+    space: Space,
+    format: Format,
+    sampler: MotionSampler,
+    matrices: Vec<Mat4>,
+}
+
+impl<'a> Packer<'a> {
+    fn new(composed: &'a Composed, space: Space, format: Format) -> Packer<'a> {
+        Packer { composed, space, format, sampler: MotionSampler::new(), matrices: Vec::new() }
+    }
+
+    /// The joint names sent (the subset's, in skeleton order).
+    fn names(&self) -> Vec<String> {
+        let names = self.composed.motion.skeleton().names();
+        match &self.composed.joints {
+            Some(joints) => joints.iter().map(|&j| names[j].clone()).collect(),
+            None => names.to_vec(),
+        }
+    }
+
+    /// The pose at `t`, with its names when `named`.
+    fn pose(&mut self, t: f64, named: bool) -> pb::Pose {
+        let motion = &self.composed.motion;
+        let skeleton = motion.skeleton();
+        let space = if self.format == Format::Trs { self.space } else { Space::Local };
+        let clip_time = motion.sample(t, &MotionOptions { space, ..MotionOptions::default() }, &mut self.sampler);
+        let names = named.then(|| skeleton.names());
+        let mut pose = match self.format {
+            Format::Trs => pose_to_pb(names, self.sampler.pose(), t, clip_time, space),
+            Format::Matrix => {
+                skeleton.model_matrices(self.sampler.local(), &mut self.matrices);
+                matrices_to_pb(names, &self.matrices, t, clip_time)
+            }
+            Format::Skinning => {
+                skeleton.skinning_matrices(self.sampler.local(), &mut self.matrices);
+                matrices_to_pb(names, &self.matrices, t, clip_time)
+            }
+        };
+        pose.root_motion = self.sampler.root_motion().map(root_motion_to_pb);
+        match &self.composed.joints {
+            Some(joints) => select_joints(pose, joints),
+            None => pose,
+        }
+    }
+}
