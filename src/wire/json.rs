@@ -501,11 +501,7 @@ pub(crate) struct MatricesJson<'a> {
 impl MatricesJson<'_> {
     /// Appends exactly the JSON `serde_json` writes for these matrices
     /// (finite floats), directly, and never a `null` (see `write_float`).
-    pub(crate) fn write_to(&self, out: &mut impl BufMut) {
-        self.write_with(out, Extras::default());
-    }
-
-    /// [`MatricesJson::write_to`] with a composed answer's joint subset and root motion.
+    /// Every joint, or `extras`' subset, and its root motion.
     pub(crate) fn write_with(&self, out: &mut impl BufMut, extras: Extras<'_>) {
         write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"model\",\"format\":");
@@ -616,7 +612,7 @@ mod tests {
                 matrices: &matrices,
             };
             let mut direct = Vec::new();
-            doc.write_to(&mut direct);
+            doc.write_with(&mut direct, Extras::default());
             assert_eq!(String::from_utf8(direct).unwrap(), serde_json::to_string(&doc).unwrap());
         }
     }

@@ -261,7 +261,7 @@ mod tests {
                     skeleton: clip.skeleton(),
                     matrices: &matrices,
                 };
-                doc.write_to(&mut json);
+                doc.write_with(&mut json, crate::wire::json::Extras::default());
                 batch.poses.push(matrices_to_pb(None, &matrices, t, clip_time));
             }
         }

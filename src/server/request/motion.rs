@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use super::cost::{Cost, Estimate, F64_TEXT, Wire};
-use super::raw::{Field, Format, Locate};
+use super::raw::{Field, Format, Locate, joint_subset};
 use crate::anim::Motion;
 use crate::anim::motion::MotionSpec;
 use crate::server::cache::CachedClip;
@@ -78,23 +78,7 @@ impl RawMotion<'_> {
             let detail = "format=skinning needs inverse bind matrices, which the first layer's clip has not";
             return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
-        let joints = self.joints.map(|names| subset(&motion, names)).transpose()?;
+        let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
         Ok(Composed { motion, joints })
     }
-}
-
-/// The output skeleton's indices of `names`, in skeleton order.
-fn subset(motion: &Motion<Arc<CachedClip>>, names: &[String]) -> Result<Vec<usize>, ApiError> {
-    let skeleton = motion.skeleton();
-    let mut indices = Vec::with_capacity(names.len());
-    for (i, name) in names.iter().enumerate() {
-        let j = skeleton.index_of(name).ok_or_else(|| {
-            let detail = format!("joint '{name}' is not in the output skeleton (the first layer's clip)");
-            ApiError::invalid("unknown_joint", format!("/joints/{i}"), detail)
-        })?;
-        indices.push(j);
-    }
-    indices.sort_unstable();
-    indices.dedup();
-    Ok(indices)
 }

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::anim::{Ease, Playback, SampleOptions, Space};
+use crate::anim::{Ease, Playback, SampleOptions, Skeleton, Space};
 use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::state::AppState;
@@ -41,6 +41,8 @@ pub enum Field {
     /// A page of the clip list: its size and where it starts.
     Limit,
     Cursor,
+    /// One of the joint names of a subset (SPEC §6).
+    JointAt(usize),
 }
 
 impl Field {
@@ -62,6 +64,7 @@ impl Field {
             Field::MaxFrames => "max_frames",
             Field::Limit => "limit",
             Field::Cursor => "cursor",
+            Field::JointAt(_) => "joints",
         }
     }
 }
@@ -80,6 +83,7 @@ pub fn in_body(field: Field) -> At {
     match field {
         Field::When => At::Pointer(String::new()),
         Field::TimeAt(i) => At::Pointer(format!("/times/{i}")),
+        Field::JointAt(i) => At::Pointer(format!("/joints/{i}")),
         other => At::Pointer(format!("/{}", other.name())),
     }
 }
@@ -168,6 +172,26 @@ pub async fn clip(state: &AppState, id: &str) -> Result<Arc<CachedClip>, ApiErro
         return Err(ApiError::NotFound { what: "clip" });
     }
     state.clip(id).await
+}
+
+/// The indices of the joints `names` in `skeleton`, in skeleton order
+/// (a subset's joints; SPEC §6).
+///
+/// # Errors
+/// `unknown_joint` at the first name the skeleton lacks.
+pub fn joint_subset<S: AsRef<str>>(skeleton: &Skeleton, names: &[S], at: Locate) -> Result<Vec<usize>, ApiError> {
+    let mut indices = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let name = name.as_ref();
+        let j = skeleton.index_of(name).ok_or_else(|| {
+            let detail = format!("joint '{name}' is not in the skeleton");
+            unprocessable("unknown_joint", Field::JointAt(i), at, detail)
+        })?;
+        indices.push(j);
+    }
+    indices.sort_unstable();
+    indices.dedup();
+    Ok(indices)
 }
 
 pub(super) fn malformed(code: &'static str, field: Field, at: Locate, detail: String) -> ApiError {

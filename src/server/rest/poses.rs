@@ -23,9 +23,11 @@ use crate::anim::{SampleOptions, Sampler};
 use crate::server::auth::ReadAccess;
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
-use crate::server::request::{Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query};
+use crate::server::request::{
+    Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
+};
 use crate::server::state::AppState;
-use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
+use crate::wire::json::{EaseDoc, Extras, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
 
 use super::extract::{ClipId, JsonBody};
 use super::pieces::{self, Pieces, PoseWriter};
@@ -39,8 +41,16 @@ thread_local! {
     static SCRATCH: RefCell<(Sampler, Vec<Mat4>)> = RefCell::new((Sampler::new(), Vec::new()));
 }
 
-/// Appends the pose of `cached` at request time `t` to `out` as JSON.
-fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOptions, format: Format) {
+/// Appends the pose of `cached` at request time `t` to `out` as JSON (only
+/// `joints`, when given).
+fn write_pose(
+    out: &mut Vec<u8>,
+    cached: &CachedClip,
+    t: f64,
+    (options, format): (&SampleOptions, Format),
+    joints: Option<&[usize]>,
+) {
+    let extras = Extras { joints, root_motion: None };
     let clip = &cached.clip;
     SCRATCH.with_borrow_mut(|(sampler, matrices)| {
         let clip_time = evaluate(clip, t, options, format, sampler, matrices);
@@ -54,7 +64,7 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                     skeleton: clip.skeleton(),
                     pose: sampler.pose(),
                 };
-                pose.write_to(out);
+                pose.write_with(out, extras);
             }
             Format::Matrix | Format::Skinning => {
                 let doc = MatricesJson {
@@ -65,7 +75,7 @@ fn write_pose(out: &mut Vec<u8>, cached: &CachedClip, t: f64, options: &SampleOp
                     skeleton: clip.skeleton(),
                     matrices: matrices.as_slice(),
                 };
-                doc.write_to(out);
+                doc.write_with(out, extras);
             }
         }
     });
@@ -85,6 +95,7 @@ pub(super) fn json_response(body: Vec<u8>) -> Response {
         ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "once | loop | ping_pong (default: the clip's)"),
         ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
         ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
+        ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
@@ -102,8 +113,13 @@ pub async fn get_pose(
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
     let (req, cached) = raw.resolve(&state, &id, Wire::Json).await?;
+    let names: Option<Vec<&str>> = q.raw("joints").map(|raw| match raw {
+        Raw::Text(text) => text.split(',').collect(),
+        _ => Vec::new(),
+    });
+    let joints = names.map(|names| joint_subset(cached.clip.skeleton(), &names, in_query)).transpose()?;
     let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
-    write_pose(&mut body, &cached, req.t, &req.options, req.format);
+    write_pose(&mut body, &cached, req.t, (&req.options, req.format), joints.as_deref());
     state.counters.poses.increment(1);
     Ok(json_response(body))
 }
@@ -138,6 +154,9 @@ pub struct SampleRequest {
     #[serde(default)]
     #[schema(value_type = Option<Format>)]
     pub format: Option<String>,
+    /// Only these joints, in skeleton order (model space still goes through the whole hierarchy).
+    #[serde(default)]
+    pub joints: Option<Vec<String>>,
 }
 
 impl SampleRequest {
@@ -204,8 +223,9 @@ pub async fn sample(
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
+    let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;
     let (large, blocking, n) = (sampling.is_large(), sampling.is_blocking(), sampling.times.len());
-    let mut writer = ClipPoses { sampling, cached };
+    let mut writer = ClipPoses { sampling, cached, joints };
     if large {
         return Ok(Pieces::new(state, Box::new(writer)).into_response());
     }
@@ -223,6 +243,7 @@ pub async fn sample(
 struct ClipPoses {
     sampling: Sampling,
     cached: Arc<CachedClip>,
+    joints: Option<Vec<usize>>,
 }
 
 impl PoseWriter for ClipPoses {
@@ -240,7 +261,8 @@ impl PoseWriter for ClipPoses {
                 out.push(b',');
             }
             let sampling = &self.sampling;
-            write_pose(out, &self.cached, sampling.times[k], &sampling.options, sampling.format);
+            let how = (&sampling.options, sampling.format);
+            write_pose(out, &self.cached, sampling.times[k], how, self.joints.as_deref());
         }
     }
 }

@@ -181,3 +181,27 @@ async fn grpc_sample_motion_mirrors_the_clip_rpcs_and_the_rest_routes() {
     assert_eq!(grpc.sample_motion(req).await.unwrap_err().code(), tonic::Code::NotFound);
     app.stop().await;
 }
+
+#[tokio::test]
+async fn the_clip_routes_take_a_joint_subset_too() {
+    let app = TestApp::start().await;
+    let id = app.create_id(WAVE, None).await;
+    let full = app.get_json(&format!("/v1/clips/{id}/pose?t=1.2&space=model")).await;
+    let only = app.get_json(&format!("/v1/clips/{id}/pose?t=1.2&space=model&joints=arm")).await;
+    assert_eq!(only["joints"], json!([full["joints"][1]]), "the arm alone, in model space through the root");
+    let matrices = app.get_json(&format!("/v1/clips/{id}/pose?t=1.2&format=matrix&joints=arm,root")).await;
+    let names: Vec<&str> = matrices["joints"].as_array().unwrap().iter().map(|j| j["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["root", "arm"], "skeleton order, whatever the order asked");
+    let body = json!({"times": [0.5, 1.5], "joints": ["root"]});
+    let (status, answer) = post(&app, &format!("/v1/clips/{id}/sample"), &body).await;
+    assert_eq!(status, 200);
+    assert!(answer["poses"].as_array().unwrap().iter().all(|p| p["joints"].as_array().unwrap().len() == 1));
+    let resp = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1&joints=tail"))).send().await.unwrap();
+    assert_eq!(resp.status(), 422);
+    let problem: Value = resp.json().await.unwrap();
+    assert_eq!((problem["code"].as_str(), problem["parameter"].as_str()), (Some("unknown_joint"), Some("joints")));
+    let (status, problem) =
+        post(&app, &format!("/v1/clips/{id}/sample"), &json!({"times": [0], "joints": ["x"]})).await;
+    assert_eq!((status, problem["pointer"].as_str()), (422, Some("/joints/0")));
+    app.stop().await;
+}
