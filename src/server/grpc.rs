@@ -30,7 +30,7 @@ use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
-    Sampling, Wire, evaluate, in_body,
+    Sampling, Wire, evaluate, in_batch_message, in_body, in_pose_body,
 };
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
@@ -93,7 +93,7 @@ impl GrpcService {
             fps: range.map(|r| r.fps),
             modes: modes(req.space, req.playback, req.ease),
             format: Some(Raw::Enum(req.format)),
-            at: batch_at,
+            at: in_batch_message,
         };
         Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?)
     }
@@ -223,22 +223,6 @@ fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
     RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
 }
 
-/// Where the fields of `SampleRequest` sit, for error messages.
-fn sample_at(field: Field) -> At {
-    match field {
-        Field::Time => At::Pointer("/time".into()),
-        other => in_body(other),
-    }
-}
-
-/// Where the fields of `SampleBatchRequest` sit: the range's in `/range`.
-fn batch_at(field: Field) -> At {
-    match field {
-        Field::Start | Field::End | Field::Fps => At::Pointer(format!("/range/{}", field.name())),
-        other => in_body(other),
-    }
-}
-
 /// Where the fields of `StreamRequest` sit.
 fn stream_at(field: Field) -> At {
     match field {
@@ -311,7 +295,7 @@ impl Animation for GrpcService {
             t: Some(Raw::Number(req.time)),
             modes: modes(req.space, req.playback, req.ease),
             format: Some(Raw::Enum(req.format)),
-            at: sample_at,
+            at: in_pose_body,
         };
         let (sample, cached) = raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?;
         let (t, options, format) = (sample.t, sample.options, sample.format);

@@ -9,28 +9,13 @@ use glam::Mat4;
 
 use crate::anim::motion::MotionOptions;
 use crate::anim::{MotionSampler, Space};
-use crate::server::error::{ApiError, At};
+use crate::server::error::ApiError;
 use crate::server::request::{
-    Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body,
+    Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire,
+    in_batch_message, in_body, in_pose_body,
 };
 use crate::server::state::AppState;
 use crate::wire::proto::{matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints};
-
-/// Where the fields of `SampleMotionRequest` sit.
-fn pose_at(field: Field) -> At {
-    match field {
-        Field::Time => At::Pointer("/time".into()),
-        other => in_body(other),
-    }
-}
-
-/// Where the fields of `SampleMotionBatchRequest` sit: the range's in `/range`.
-fn batch_at(field: Field) -> At {
-    match field {
-        Field::Start | Field::End | Field::Fps => At::Pointer(format!("/range/{}", field.name())),
-        other => in_body(other),
-    }
-}
 
 /// The request's motion and joints, looked up and built.
 async fn compose(
@@ -51,9 +36,10 @@ async fn compose(
 pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb::Pose, ApiError> {
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let checked =
-        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: pose_at }.check()?;
+        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
+            .check()?;
     let composed = compose(state, req.motion.as_ref(), &req.joints, checked.format).await?;
-    composed.cost(1, checked.format, Wire::Protobuf).check(&state.config.limits, Field::Time, pose_at)?;
+    composed.cost(1, checked.format, Wire::Protobuf).check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut packer = Packer::new(&composed, checked.options.space, checked.format);
     state.counters.poses.increment(1);
     Ok(packer.pose(checked.t, true))
@@ -80,14 +66,14 @@ pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -
         fps: range.map(|r| r.fps),
         modes: RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() },
         format: Some(Raw::Enum(req.format)),
-        at: batch_at,
+        at: in_batch_message,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
     let composed = compose(state, req.motion.as_ref(), &req.joints, sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Protobuf);
     let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };
-    cost.check(&state.config.limits, field, batch_at)?;
+    cost.check(&state.config.limits, field, in_batch_message)?;
     if cost.bytes > MAX_UNARY_ANSWER_BYTES {
         let (bytes, limit) = (cost.bytes, MAX_UNARY_ANSWER_BYTES);
         return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });

@@ -37,7 +37,9 @@ mod stream;
 pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, MAX_UNARY_ANSWER_BYTES, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
 pub use motion::{Composed, RawMotion};
-pub use raw::{Field, Format, Locate, Raw, RawModes, clip, in_body, in_query, joint_subset};
+pub use raw::{
+    Field, Format, Locate, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
+};
 pub use sample::{BLOCKING_POSES, FPS_RANGE, PoseRequest, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{DEFAULT_FPS, Opening, RawStream};
 

@@ -88,6 +88,24 @@ pub fn in_body(field: Field) -> At {
     }
 }
 
+/// A one-pose body or message whose time is `time` (REST `POST /v1/poses`,
+/// gRPC `Sample` and `SampleMotion`).
+pub fn in_pose_body(field: Field) -> At {
+    match field {
+        Field::Time => At::Pointer("/time".into()),
+        other => in_body(other),
+    }
+}
+
+/// A many-pose message whose range sits in `range` (gRPC `SampleBatch`,
+/// `SampleStream`, `SampleMotionBatch`).
+pub fn in_batch_message(field: Field) -> At {
+    match field {
+        Field::Start | Field::End | Field::Fps => At::Pointer(format!("/range/{}", field.name())),
+        other => in_body(other),
+    }
+}
+
 /// How each pose is rendered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]

@@ -16,8 +16,10 @@ use utoipa::ToSchema;
 use crate::anim::motion::MotionOptions;
 use crate::anim::{MotionSampler, Space};
 use crate::server::auth::ReadAccess;
-use crate::server::error::{ApiError, At};
-use crate::server::request::{Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body};
+use crate::server::error::ApiError;
+use crate::server::request::{
+    Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body,
+};
 use crate::server::state::AppState;
 use crate::wire::json::{Extras, MatricesJson, PoseJson, SpaceDoc};
 use crate::wire::motion::MotionDoc;
@@ -69,14 +71,6 @@ pub struct SamplesOfMotion {
 
 fn text(v: &Option<String>) -> Option<Raw<'_>> {
     v.as_deref().map(Raw::Text)
-}
-
-/// Body pointers for `POST /v1/poses`, whose time is `time`.
-fn in_pose_body(field: Field) -> At {
-    match field {
-        Field::Time => At::Pointer("/time".into()),
-        other => in_body(other),
-    }
 }
 
 /// One pose of a motion.
