@@ -34,6 +34,7 @@ enum Rpc {
     Batch(pb::SampleBatchRequest),
     Stream(pb::StreamRequest),
     List(pb::ListClipsRequest),
+    Motion(pb::SampleMotionRequest),
 }
 
 struct Case {
@@ -238,6 +239,7 @@ async fn rpc_refusal(grpc: &mut AnimationClient<Channel>, rpc: Rpc) -> tonic::St
         Rpc::Batch(req) => grpc.sample_batch(req).await.map(drop),
         Rpc::Stream(req) => grpc.stream_frames(req).await.map(drop),
         Rpc::List(req) => grpc.list_clips(req).await.map(drop),
+        Rpc::Motion(req) => grpc.sample_motion(req).await.map(drop),
     };
     result.expect_err("the call should be refused")
 }
@@ -318,6 +320,48 @@ async fn the_cost_refusals_have_one_code_on_both_protocols() {
         status: 422,
     };
     check_both_ways(&app, vec![rate]).await;
+    app.stop().await;
+}
+
+/// Composed motions (SPEC §6): `POST /v1/poses` and `SampleMotion` refuse
+/// the same mistakes with the same codes.
+#[tokio::test]
+async fn the_motion_refusals_have_one_code_on_both_protocols() {
+    let app = TestApp::start().await;
+    let id = app.create_id(WAVE, None).await;
+    let layer = |weight: Option<f32>, mask: Option<(&str, f32)>, clip: &str| {
+        let rest = json!({"clip": clip, "weight": weight.unwrap_or(1.0),
+                          "mask": mask.map(|(j, w)| json!({"joints": {j: w}})).unwrap_or(json!({"default": 1}))});
+        let mask = mask.map(|(j, w)| pb::Mask { joints: [(j.to_owned(), w)].into(), ..Default::default() });
+        let rpc = pb::Layer { clip_id: clip.to_owned(), weight, mask, ..Default::default() };
+        (rest, rpc)
+    };
+    let case = |what, layers: Vec<(Value, pb::Layer)>, joints: Vec<&str>, code, status| {
+        let (rest_layers, rpc_layers): (Vec<Value>, Vec<pb::Layer>) = layers.into_iter().unzip();
+        let body = json!({"motion": {"layers": rest_layers}, "time": 0.5, "joints": joints});
+        let req = pb::SampleMotionRequest {
+            motion: Some(pb::Motion { layers: rpc_layers, root_motion: None }),
+            time: 0.5,
+            joints: joints.iter().map(|j| (*j).to_owned()).collect(),
+            ..Default::default()
+        };
+        Case { what, rest: Rest::Post("/v1/poses".into(), body), rpc: Rpc::Motion(req), code, status }
+    };
+    let all = vec!["root", "arm"];
+    let cases = vec![
+        case("a weight over 1", vec![layer(Some(1.5), None, &id)], all.clone(), "weight_out_of_range", 422),
+        case(
+            "a mask joint not in the skeleton",
+            vec![layer(None, Some(("tail", 1.0)), &id)],
+            all.clone(),
+            "unknown_joint",
+            422,
+        ),
+        case("a subset joint not in the skeleton", vec![layer(None, None, &id)], vec!["tail"], "unknown_joint", 422),
+        case("no layers", vec![], all.clone(), "no_layers", 422),
+        case("a layer's clip that does not exist", vec![layer(None, None, MISSING)], all, "clip_not_found", 404),
+    ];
+    check_both_ways(&app, cases).await;
     app.stop().await;
 }
 
