@@ -30,7 +30,7 @@ use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
-    Sampling, Wire, evaluate, in_batch_message, in_body, in_pose_body,
+    Sampling, Wire, evaluate, in_body, in_pose_body,
 };
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
@@ -79,22 +79,12 @@ impl GrpcService {
     /// and `SampleStream` alike).
     async fn sampling(&self, req: &pb::SampleBatchRequest) -> Result<(Sampling, Arc<CachedClip>), Status> {
         use pb::sample_batch_request::When;
-        let range = match &req.when {
-            Some(When::Range(r)) => Some(r),
-            _ => None,
+        let (times, range) = match &req.when {
+            Some(When::Times(t)) => (Some(t), None),
+            Some(When::Range(r)) => (None, Some(r)),
+            None => (None, None),
         };
-        let raw = RawBatch {
-            times: match &req.when {
-                Some(When::Times(t)) => Some(&t.values),
-                _ => None,
-            },
-            start: range.map(|r| r.start),
-            end: range.map(|r| r.end),
-            fps: range.map(|r| r.fps),
-            modes: modes(req.space, req.playback, req.ease),
-            format: Some(Raw::Enum(req.format)),
-            at: in_batch_message,
-        };
+        let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
         Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?)
     }
 

@@ -52,22 +52,13 @@ pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb
 /// over the unary limit (REST's `/v1/samples` sends any size).
 pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
-    let range = match &req.when {
-        Some(When::Range(r)) => Some(r),
-        _ => None,
+    let (times, range) = match &req.when {
+        Some(When::Times(t)) => (Some(t), None),
+        Some(When::Range(r)) => (None, Some(r)),
+        None => (None, None),
     };
-    let raw = RawBatch {
-        times: match &req.when {
-            Some(When::Times(t)) => Some(&t.values),
-            _ => None,
-        },
-        start: range.map(|r| r.start),
-        end: range.map(|r| r.end),
-        fps: range.map(|r| r.fps),
-        modes: RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() },
-        format: Some(Raw::Enum(req.format)),
-        at: in_batch_message,
-    };
+    let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
+    let raw = RawBatch::of_message(times, range, modes, req.format);
     let sampling = raw.check(state.config.limits.max_poses)?;
     let composed = compose(state, req.motion.as_ref(), &req.joints, sampling.format).await?;
     let n = sampling.times.len();

@@ -13,6 +13,7 @@ use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
 use crate::stream::MAX_FPS;
+use crate::wire::proto::pb;
 
 /// Sample requests with more poses than this are evaluated on the blocking
 /// pool, so a big batch does not hold up the async workers.
@@ -147,6 +148,28 @@ impl Sampling {
 /// Answers whose size bound is over this are sent in pieces as they are
 /// evaluated, so a request's memory is a piece, not its answer.
 pub const STREAM_ABOVE_BYTES: u64 = 1024 * 1024;
+
+impl<'a> RawBatch<'a> {
+    /// A protobuf batch message's `times` or `range` (whichever its `when`
+    /// holds), its modes and its format number; the range's fields are
+    /// located in `/range`.
+    pub fn of_message(
+        times: Option<&'a pb::Times>,
+        range: Option<&pb::FrameRange>,
+        modes: RawModes<'a>,
+        format: i32,
+    ) -> RawBatch<'a> {
+        RawBatch {
+            times: times.map(|t| t.values.as_slice()),
+            start: range.map(|r| r.start),
+            end: range.map(|r| r.end),
+            fps: range.map(|r| r.fps),
+            modes,
+            format: Some(Raw::Enum(format)),
+            at: super::raw::in_batch_message,
+        }
+    }
+}
 
 impl RawBatch<'_> {
     /// # Errors
