@@ -92,6 +92,14 @@ impl Skeleton {
     }
 
     /// The parent of joint `j`, if any.
+    /// Whether `other` has the same joints, by name and parent, in the same
+    /// order: poses of one fit the other.
+    pub fn same_joints(&self, other: &Skeleton) -> bool {
+        self.len() == other.len()
+            && self.names() == other.names()
+            && (0..self.len()).all(|j| self.parent(j) == other.parent(j))
+    }
+
     pub fn parent(&self, j: usize) -> Option<usize> {
         let p = self.parents[j];
         (p != NO_PARENT).then_some(p as usize)

@@ -12,11 +12,14 @@
 //!
 //! Module map: `spec` the authoring types; `error` why a motion is refused;
 //! `mask` masks to per-joint weights; `sync` sync-group phases; `layering`
-//! the per-joint blend and additive rules; `sampler` the sampling loop.
+//! the per-joint blend and additive rules; `sampler` the sampling loop;
+//! `root` root motion; `player` a stream's live motions, weight ramps and
+//! crossfades.
 
 mod error;
 mod layering;
 mod mask;
+mod player;
 pub mod root;
 mod sampler;
 mod spec;
@@ -25,6 +28,7 @@ mod sync;
 use std::sync::Arc;
 
 pub use error::{MotionError, MotionErrorKind};
+pub use player::{LayerPosition, MAX_FADES, Player, PlayerError};
 pub use root::Planar;
 pub use sampler::{MotionOptions, MotionSampler, RootMotion};
 pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
@@ -174,6 +178,11 @@ impl<C: ClipSource> Motion<C> {
     /// Each layer's clip, bottom to top.
     pub fn layers(&self) -> impl Iterator<Item = &C> {
         self.layers.iter().map(|l| &l.clip)
+    }
+
+    /// The up axis of the motion's root motion, if it has one.
+    pub fn root_up(&self) -> Option<UpAxis> {
+        self.root.map(|r| r.up)
     }
 
     /// Whether samples report root motion.

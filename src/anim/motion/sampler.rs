@@ -140,6 +140,19 @@ impl<C: ClipSource> Motion<C> {
         sampler.clip_times[0]
     }
 
+    /// Layer `i`'s unwrapped position at `tau` and the playback that maps
+    /// it to a clip time: `offset + speed·τ` unsynced, `start + φ·D` (looping)
+    /// synced.
+    pub fn layer_position(&self, i: usize, tau: f64, phases: &[f64]) -> (f64, Playback) {
+        let clip: &Clip = self.layers[i].clip.clip();
+        match self.layers[i].time {
+            LayerTime::Free { offset, speed, playback } => (offset + speed * tau, playback),
+            LayerTime::Synced { group } => {
+                (f64::from(clip.range().start()) + phases[group] * self.durations[i], Playback::Loop)
+            }
+        }
+    }
+
     /// Layer `i`'s clip time at `tau` and its loop cycle (0 unless it loops).
     fn layer_time(&self, i: usize, tau: f64, phases: &[f64], ease: Ease) -> (f32, i64) {
         let clip: &Clip = self.layers[i].clip.clip();
