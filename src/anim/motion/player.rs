@@ -3,8 +3,9 @@
 //!
 //! A [`Player`] is driven by *stream time* `s`, which the stream's playhead
 //! computes (pause, speed, reverse); each motion it holds (a `Deck`) shows
-//! motion time `τ = s − origin`, its origin being the stream time at which
-//! it started. A crossfade to B puts a new deck on top whose origin is the
+//! motion time `τ = s − origin`. The first motion's origin is 0 (stream
+//! time is its motion time, as a clip stream's request time is its clip's);
+//! a crossfade target's is the stream time at which it started. A crossfade to B puts a new deck on top whose origin is the
 //! next tick's `s` (so B starts at motion time 0) and keeps the whole
 //! previous player, still advancing, underneath; at `α = ease(elapsed /
 //! duration)` every joint is the short-way blend of the two sides' layered
@@ -153,11 +154,11 @@ impl<C: ClipSource> Deck<C> {
 }
 
 impl<C: ClipSource> Player<C> {
-    /// A player of `motion`, whose motion time 0 is the first tick's stream time.
+    /// A player of `motion`, whose motion time is the stream time.
     pub fn new(motion: Arc<Motion<C>>) -> Self {
         let up = motion.root_up().unwrap_or_default();
         Player {
-            top: Deck::new(motion),
+            top: Deck { origin: Some(0.0), ..Deck::new(motion) },
             fade: None,
             seek: None,
             last_s: None,
