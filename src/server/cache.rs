@@ -66,6 +66,22 @@ impl crate::stream::ClipSource for CachedClip {
     }
 }
 
+/// Motions (requests and streams alike) hold their layers' cache entries,
+/// pinned at the version they were built on.
+impl crate::stream::PinnedClip for CachedClip {
+    fn id(&self) -> &str {
+        &self.meta.id
+    }
+
+    fn version(&self) -> u64 {
+        self.meta.version
+    }
+
+    fn clip(&self) -> &Clip {
+        &self.clip
+    }
+}
+
 #[derive(Debug)]
 struct Entry {
     clip: Arc<CachedClip>,

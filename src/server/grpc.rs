@@ -376,7 +376,7 @@ impl Animation for GrpcService {
         let (params, permit) = self.stream_params(&stream_req, open.paused, &caller).await?;
         let sub = self.engine.play(params, permit, lane);
         let phase_ms = sub.grid().phase_ms;
-        let controller = sub.controller().expect("a Play subscription is private");
+        let mut controller = sub.controller().expect("a Play subscription is private");
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
         // Reads the client's controls until it half-closes, errs, or the
         // playback ends (then `closed` resolves); never outlives the stream.

@@ -16,8 +16,9 @@ use std::io::Write;
 use bytes::{BufMut, Bytes, BytesMut};
 use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
 
+use crate::anim::motion::{Planar, RootMotion};
 use crate::anim::{Event, Pose, Skeleton, Space};
-use crate::wire::json::PoseJson;
+use crate::wire::json::{Extras, PoseJson};
 use crate::wire::proto::space_to_pb;
 
 /// How frames travel.
@@ -42,6 +43,10 @@ pub struct FrameData<'a> {
     pub space: Space,
     pub skeleton: &'a Skeleton,
     pub pose: &'a Pose,
+    /// The joints to send (skeleton order); `None`: all.
+    pub joints: Option<&'a [usize]>,
+    /// The frame's root motion, for motions that report it.
+    pub root_motion: Option<RootMotion>,
     /// Events crossed (all of the clip's events, and indices into them).
     pub events: &'a [Event],
     pub crossed: &'a [u32],
@@ -120,10 +125,10 @@ impl Encoded {
                     encode_varint(dropped, &mut out);
                 }
                 if let Some(names) = names {
-                    let len = names_len(names);
+                    let len = names_len(names.iter());
                     encode_key(6, WireType::LengthDelimited, &mut out);
                     encode_varint(len as u64, &mut out);
-                    put_names(names, &mut out);
+                    put_names(names.iter(), &mut out);
                 }
             }
         }
@@ -163,7 +168,7 @@ fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
         skeleton: f.skeleton,
         pose: f.pose,
     };
-    pose.write_to(*w.get_mut());
+    pose.write_with(*w.get_mut(), Extras { joints: f.joints, root_motion: f.root_motion });
     w.write_all(b"}").expect(io);
     (a, b)
 }
@@ -172,11 +177,11 @@ fn len_field(tag: u32, len: usize) -> usize {
     key_len(tag) + encoded_len_varint(len as u64) + len
 }
 
-fn names_len(names: &[String]) -> usize {
-    names.iter().map(|n| len_field(1, n.len())).sum()
+fn names_len<'a>(names: impl Iterator<Item = &'a String>) -> usize {
+    names.map(|n| len_field(1, n.len())).sum()
 }
 
-fn put_names(names: &[String], buf: &mut BytesMut) {
+fn put_names<'a>(names: impl Iterator<Item = &'a String>, buf: &mut BytesMut) {
     for n in names {
         encode_key(1, WireType::LengthDelimited, buf);
         encode_varint(n.len() as u64, buf);
@@ -196,12 +201,45 @@ fn put_packed(tag: u32, n: usize, width: usize, values: impl Iterator<Item = f32
     }
 }
 
+/// The frame's joints: the subset, or all of them.
+fn joints<'a>(f: &'a FrameData<'_>) -> impl Iterator<Item = usize> + Clone + 'a {
+    let (all, some) = match f.joints {
+        Some(joints) => (0..0, joints.iter()),
+        None => (0..f.pose.len(), [].iter()),
+    };
+    all.chain(some.copied())
+}
+
+/// `inbetween.v1.Planar` (x, y, z, yaw as doubles; zeros omitted as proto3 does).
+fn planar_len(p: &Planar) -> usize {
+    let [x, y, z] = p.translation.to_array();
+    [x, y, z, p.yaw].iter().filter(|v| **v != 0.0).count() * 9
+}
+
+fn put_planar(tag: u32, p: &Planar, buf: &mut BytesMut) {
+    encode_key(tag, WireType::LengthDelimited, buf);
+    encode_varint(planar_len(p) as u64, buf);
+    let [x, y, z] = p.translation.to_array();
+    for (field, v) in [(1, x), (2, y), (3, z), (4, p.yaw)] {
+        if v != 0.0 {
+            encode_key(field, WireType::SixtyFourBit, buf);
+            buf.put_f64_le(v);
+        }
+    }
+}
+
+fn root_motion_len(r: &RootMotion) -> usize {
+    len_field(1, planar_len(&r.delta)) + len_field(2, planar_len(&r.total))
+}
+
 fn write_protobuf(buf: &mut BytesMut, f: &FrameData<'_>) {
-    let n = f.pose.len();
+    let n = f.joints.map_or(f.pose.len(), <[usize]>::len);
     let packed = |width: usize| if n == 0 { 0 } else { len_field(2, n * width * 4) };
-    let names = if f.with_names { names_len(f.skeleton.names()) } else { 0 };
+    let all_names = f.skeleton.names();
+    let names = if f.with_names { names_len(joints(f).map(|j| &all_names[j])) } else { 0 };
     let space = space_to_pb(f.space) as u64;
-    let pose_len = names + 2 * packed(3) + packed(4) + (key_len(5) + 8) + (key_len(6) + 4) + key_len(8) + 1;
+    let root = f.root_motion.as_ref().map_or(0, |r| len_field(9, root_motion_len(r)));
+    let pose_len = names + 2 * packed(3) + packed(4) + (key_len(5) + 8) + (key_len(6) + 4) + key_len(8) + 1 + root;
     let event_len = |e: &Event| (key_len(1) + 4) + len_field(2, e.name.len());
     let events: usize = f.crossed.iter().map(|&i| len_field(5, event_len(&f.events[i as usize]))).sum();
     buf.reserve(40 + events + len_field(6, pose_len));
@@ -227,18 +265,24 @@ fn write_protobuf(buf: &mut BytesMut, f: &FrameData<'_>) {
     encode_key(6, WireType::LengthDelimited, buf);
     encode_varint(pose_len as u64, buf);
     if f.with_names {
-        put_names(f.skeleton.names(), buf);
+        put_names(joints(f).map(|j| &all_names[j]), buf);
     }
     let p = f.pose;
-    put_packed(2, n, 3, p.translations.iter().flat_map(|v| v.to_array()), buf);
-    put_packed(3, n, 4, p.rotations.iter().flat_map(|q| q.to_array()), buf);
-    put_packed(4, n, 3, p.scales.iter().flat_map(|v| v.to_array()), buf);
+    put_packed(2, n, 3, joints(f).flat_map(|j| p.translations[j].to_array()), buf);
+    put_packed(3, n, 4, joints(f).flat_map(|j| p.rotations[j].to_array()), buf);
+    put_packed(4, n, 3, joints(f).flat_map(|j| p.scales[j].to_array()), buf);
     encode_key(5, WireType::SixtyFourBit, buf);
     buf.put_f64_le(f.time);
     encode_key(6, WireType::ThirtyTwoBit, buf);
     buf.put_f32_le(f.clip_time);
     encode_key(8, WireType::Varint, buf);
     encode_varint(space, buf);
+    if let Some(r) = &f.root_motion {
+        encode_key(9, WireType::LengthDelimited, buf);
+        encode_varint(root_motion_len(r) as u64, buf);
+        put_planar(1, &r.delta, buf);
+        put_planar(2, &r.total, buf);
+    }
 }
 
 #[cfg(test)]
@@ -272,6 +316,8 @@ mod tests {
             space,
             skeleton: clip.skeleton(),
             pose: sampler.pose(),
+            joints: None,
+            root_motion: None,
             events: clip.events(),
             crossed: &crossed,
             with_names,

@@ -36,7 +36,11 @@ use super::params::StreamParams;
 use super::playhead::{Control, Playhead};
 use super::registry::Listing;
 use super::schedule::Schedule;
-use crate::anim::{SampleOptions, Sampler};
+use std::sync::Arc;
+
+use super::params::StreamMotion;
+use super::playhead::Crossfade;
+use crate::anim::motion::{MotionOptions, Player};
 
 /// Why a stream ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,8 +66,10 @@ pub(crate) struct Hub {
     params: StreamParams,
     schedule: Schedule,
     playhead: Playhead,
-    sampler: Sampler,
-    prev_time: Option<f64>,
+    player: Player<Arc<dyn super::params::PinnedClip>>,
+    /// The current motion's first-layer position at the previous frame
+    /// (for the events crossed), and which motion that was.
+    prev: Option<(f64, Arc<StreamMotion>)>,
     crossed: Vec<u32>,
     encoder: FrameEncoder,
     with_names: bool,
@@ -97,8 +103,8 @@ impl Hub {
             playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
             params: params.clone(),
             schedule,
-            sampler: Sampler::new(),
-            prev_time: None,
+            player: Player::new(Arc::clone(&params.motion)),
+            prev: None,
             crossed: Vec::new(),
             encoder: FrameEncoder::new(params.encoding),
             with_names: params.encoding == Encoding::Protobuf,
@@ -115,9 +121,16 @@ impl Hub {
     }
 
     /// Continues a playback a viewer was watching elsewhere (a fork): the
-    /// request time of its last frame, and whether it still needs the names.
+    /// stream time of its last frame, and whether it still needs the names.
+    /// A fork is of a playback nobody controlled, so its player is the
+    /// motion at that time.
     pub(crate) fn resume(&mut self, prev_time: Option<f64>, with_names: bool) {
-        self.prev_time = prev_time;
+        if let Some(t) = prev_time {
+            let options = MotionOptions { ease: self.params.ease, space: self.params.space };
+            self.player.sample(t, &options);
+            let position = self.player.first_layer_position().x;
+            self.prev = Some((position, Arc::clone(&self.params.motion)));
+        }
         self.with_names = with_names && self.params.encoding == Encoding::Protobuf;
     }
 
@@ -159,6 +172,21 @@ impl Hub {
             while let Ok(control) = controls.try_recv() {
                 match control {
                     Control::Stop => stop = true,
+                    Control::Seek(tau) => {
+                        self.player.seek(tau);
+                        jumped = true;
+                    }
+                    Control::Crossfade(Crossfade { to, duration, ease }) => {
+                        // Checked by the subscription; a refusal here is a bug.
+                        if let Err(e) = self.player.crossfade(to, duration, ease) {
+                            tracing::error!(error = %e, "a crossfade the subscription accepted was refused");
+                        }
+                    }
+                    Control::Layer { index, weight, duration } => {
+                        if let Err(e) = self.player.ramp(index, weight, duration) {
+                            tracing::error!(error = %e, "a weight ramp the subscription accepted was refused");
+                        }
+                    }
                     c => jumped |= self.playhead.apply(c, tick.k),
                 }
             }
@@ -197,23 +225,28 @@ impl Hub {
     /// Evaluates and encodes tick `k`.
     fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
         let p = &self.params;
-        let time = self.playhead.time_at(k);
-        let options = SampleOptions { playback: Some(p.playback), ease: p.ease, space: p.space };
-        let clip_time = p.clip().sample(time, &options, &mut self.sampler);
-        let from = if jumped { None } else { self.prev_time };
-        crossed(p.clip(), p.playback, p.ease, from, time, &mut self.crossed);
-        self.prev_time = Some(time);
+        let options = MotionOptions { ease: p.ease, space: p.space };
+        let clip_time = self.player.sample(self.playhead.time_at(k), &options);
+        let motion = self.player.motion();
+        let first = motion.first_clip();
+        let position = self.player.first_layer_position();
+        // Events continue only along one motion's first layer, without a jump.
+        let from = self.prev.as_ref().filter(|(_, m)| !jumped && Arc::ptr_eq(m, motion)).map(|(x, _)| *x);
+        crossed(first.clip(), position.playback, p.ease, from, position.x, &mut self.crossed);
+        self.prev = Some((position.x, Arc::clone(motion)));
         self.encoder.encode(&FrameData {
             seq: k,
             dropped: skipped,
             sent_at_unix_nanos: unix_nanos(),
-            clip_id: &p.clip_id,
-            time,
+            clip_id: first.id(),
+            time: self.player.motion_time(),
             clip_time,
             space: p.space,
-            skeleton: p.clip().skeleton(),
-            pose: self.sampler.pose(),
-            events: p.clip().events(),
+            skeleton: motion.skeleton(),
+            pose: self.player.pose(),
+            joints: p.joints.as_deref(),
+            root_motion: self.player.root_motion(),
+            events: first.clip().events(),
             crossed: &self.crossed,
             with_names: std::mem::take(&mut self.with_names),
         })

@@ -1,12 +1,14 @@
 //! [`StreamParams`]: a stream request checked against the rules of SPEC §5
-//! and bound to the compiled clip version it plays. The transports build
+//! and bound to the motion (a clip is a one-layer motion) and the compiled
+//! clip versions it plays. The transports build
 //! them (REST and gRPC alike); everything else in the engine reads them.
 
 use std::sync::Arc;
 
 use super::encode::Encoding;
 use super::playhead::MAX_SPEED;
-use crate::anim::{Clip, Ease, Playback, Space};
+use crate::anim::motion::{LayerSpec, MotionSpec};
+use crate::anim::{Clip, Ease, Motion, Playback, Space};
 
 /// The highest accepted frame rate.
 pub const MAX_FPS: u32 = 240;
@@ -50,34 +52,83 @@ pub struct ParamError {
     pub detail: String,
 }
 
-/// A validated stream request, bound to the clip version it plays.
+/// A clip pinned at the version a stream plays: its id and version name
+/// the frames and the shared playbacks.
+pub trait PinnedClip: Send + Sync + 'static {
+    fn id(&self) -> &str;
+    fn version(&self) -> u64;
+    fn clip(&self) -> &Clip;
+}
+
+impl std::fmt::Debug for dyn PinnedClip {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}@{}", self.id(), self.version())
+    }
+}
+
+impl crate::anim::ClipSource for dyn PinnedClip {
+    fn clip(&self) -> &Clip {
+        PinnedClip::clip(self)
+    }
+}
+
+/// What a stream plays: a motion over pinned clips (SPEC §6). A clip
+/// stream plays a motion of one full-weight layer, which is the clip's own
+/// pose bit for bit.
+pub type StreamMotion = Motion<Arc<dyn PinnedClip>>;
+
+/// A [`ClipSource`] with the id and version it was loaded at.
+struct Pinned {
+    id: Arc<str>,
+    version: u64,
+    source: Arc<dyn ClipSource>,
+}
+
+impl PinnedClip for Pinned {
+    fn id(&self) -> &str {
+        &self.id
+    }
+
+    fn version(&self) -> u64 {
+        self.version
+    }
+
+    fn clip(&self) -> &Clip {
+        self.source.clip()
+    }
+}
+
+/// A validated stream request, bound to the motion (and so the clip
+/// versions) it plays.
 #[derive(Clone)]
 pub struct StreamParams {
+    /// The clip id frames name at first: the first layer's.
     pub clip_id: Arc<str>,
-    pub version: u64,
-    /// The compiled clip the stream started on; it keeps playing this
-    /// version even if the clip is replaced or deleted meanwhile.
-    pub source: Arc<dyn ClipSource>,
+    /// What makes two playbacks the same program: the clip and version for a
+    /// clip stream, the motion's cache key for a motion.
+    pub identity: Arc<str>,
+    /// The compiled clips the stream started on; it keeps playing these
+    /// versions even if a clip is replaced or deleted meanwhile.
+    pub motion: Arc<StreamMotion>,
     pub fps: u32,
     pub start: f64,
     pub speed: f64,
-    pub playback: Playback,
     pub ease: Ease,
     pub space: Space,
     pub encoding: Encoding,
     pub max_frames: Option<u64>,
     pub paused: bool,
+    /// The output joints frames carry (skeleton order); `None`: all.
+    pub joints: Option<Arc<[usize]>>,
 }
 
 impl std::fmt::Debug for StreamParams {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("StreamParams")
-            .field("clip_id", &self.clip_id)
-            .field("version", &self.version)
+            .field("identity", &self.identity)
             .field("fps", &self.fps)
             .field("start", &self.start)
             .field("speed", &self.speed)
-            .field("playback", &self.playback)
             .field("encoding", &self.encoding)
             .field("max_frames", &self.max_frames)
             .finish_non_exhaustive()
@@ -85,7 +136,9 @@ impl std::fmt::Debug for StreamParams {
 }
 
 impl StreamParams {
-    /// Validates `req` against the stream rules (SPEC §5).
+    /// A stream of one clip: validates `req` against the stream rules
+    /// (SPEC §5) and plays the clip as a one-layer motion with the
+    /// request's playback.
     ///
     /// # Errors
     /// `fps` outside 1..=240, a non-finite start, a speed that is not finite
@@ -96,11 +149,26 @@ impl StreamParams {
         source: Arc<dyn ClipSource>,
         req: StreamRequest,
     ) -> Result<Self, ParamError> {
-        let clip = source.clip();
+        let playback = req.playback.unwrap_or(source.clip().playback());
+        let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned { id: clip_id.into(), version, source });
+        let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
+        let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None })
+            .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;
+        let identity = format!("clip {clip_id}@{version} {}", playback.as_str());
+        Self::of_motion(Arc::new(motion), identity.into(), req)
+    }
+
+    /// A stream of a built motion whose program is called `identity`
+    /// (equal identities play equal poses).
+    ///
+    /// # Errors
+    /// As [`StreamParams::new`].
+    pub fn of_motion(motion: Arc<StreamMotion>, identity: Arc<str>, req: StreamRequest) -> Result<Self, ParamError> {
         if !(1..=MAX_FPS).contains(&req.fps) {
             return Err(ParamError { field: "fps", detail: format!("must be 1..={MAX_FPS}, got {}", req.fps) });
         }
-        let start = req.start.unwrap_or(f64::from(clip.start()));
+        let first = motion.first_clip();
+        let start = req.start.unwrap_or(f64::from(first.clip().start()));
         if !start.is_finite() {
             return Err(ParamError { field: "start", detail: "must be a finite number of seconds".into() });
         }
@@ -109,10 +177,8 @@ impl StreamParams {
             return Err(ParamError { field: "speed", detail: format!("must be finite and within ±{MAX_SPEED}") });
         }
         Ok(StreamParams {
-            clip_id: clip_id.into(),
-            version,
-            playback: req.playback.unwrap_or(clip.playback()),
-            source,
+            clip_id: first.id().into(),
+            identity,
             fps: req.fps,
             start,
             speed,
@@ -121,11 +187,28 @@ impl StreamParams {
             encoding: req.encoding,
             max_frames: (req.max_frames > 0).then_some(req.max_frames),
             paused: req.paused,
+            joints: None,
+            motion,
         })
     }
 
-    /// The compiled clip.
+    /// The same stream carrying only `joints` (output joint indices, in
+    /// skeleton order).
+    pub fn with_joints(self, joints: Option<Vec<usize>>) -> Self {
+        StreamParams { joints: joints.map(Into::into), ..self }
+    }
+
+    /// The first layer's compiled clip.
     pub fn clip(&self) -> &Clip {
-        self.source.clip()
+        self.motion.first_clip().clip()
+    }
+
+    /// The names of the joints frames carry.
+    pub fn joint_names(&self) -> Vec<String> {
+        let names = self.motion.skeleton().names();
+        match &self.joints {
+            Some(joints) => joints.iter().map(|&j| names[j].clone()).collect(),
+            None => names.to_vec(),
+        }
     }
 }

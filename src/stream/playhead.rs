@@ -1,4 +1,4 @@
-//! The playhead: which request time each tick shows, and how playback
+//! The playhead: which stream time each tick shows, and how playback
 //! controls change it.
 //!
 //! While playing, tick `k` shows `t_k = t_{k-1} + speed/fps`; while paused,
@@ -7,22 +7,56 @@
 //! `seek` makes `t_k` the given time. The time is computed from an anchor
 //! `(k_a, t_a)` as `t_a + speed·(k - k_a)/fps` rather than accumulated, so a
 //! stream hours long shows the same times a fresh computation would.
+//!
+//! The motions on a stream's player (`anim::motion::Player`) show their
+//! own motion times, offset from the stream time; a `seek` names the
+//! current motion's time and is the player's to apply.
+
+use std::sync::Arc;
+
+use super::params::StreamMotion;
+use crate::anim::Ease;
 
 /// A change asked of a playback, applied at its next tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Control {
     Play,
     Pause,
-    /// Show this request time at the next tick.
+    /// Show this motion time of the current motion at the next tick.
     Seek(f64),
-    /// Request seconds per real second (negative plays backwards).
+    /// Stream seconds per real second (negative plays backwards).
     Speed(f64),
     /// End the stream cleanly.
     Stop,
+    /// Fade to another motion (SPEC §6).
+    Crossfade(Crossfade),
+    /// Ramp a layer of the current motion to a weight.
+    Layer {
+        index: usize,
+        weight: f32,
+        duration: f64,
+    },
+}
+
+/// A crossfade asked for: its target, already built over pinned clips.
+#[derive(Debug, Clone)]
+pub struct Crossfade {
+    pub to: Arc<StreamMotion>,
+    pub duration: f64,
+    pub ease: Ease,
+}
+
+impl PartialEq for Crossfade {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.to, &other.to) && self.duration == other.duration && self.ease == other.ease
+    }
 }
 
 /// The largest accepted `|speed|`.
 pub const MAX_SPEED: f64 = 1000.0;
+
+/// The longest crossfade or weight ramp, seconds.
+pub const MAX_FADE_SECONDS: f64 = 3600.0;
 
 impl Control {
     /// Checks the numbers a client sent.
@@ -31,11 +65,19 @@ impl Control {
     /// A non-finite seek time, or a speed that is not finite or exceeds
     /// [`MAX_SPEED`] in magnitude.
     pub fn validate(self) -> Result<Self, &'static str> {
+        let long = |d: f64| !(0.0..=MAX_FADE_SECONDS).contains(&d);
         match self {
             Control::Seek(t) if !t.is_finite() => Err("seek time must be a finite number of seconds"),
             Control::Speed(v) if !v.is_finite() || v.abs() > MAX_SPEED => {
                 Err("speed must be a finite number between -1000 and 1000")
             }
+            Control::Crossfade(Crossfade { duration, .. }) if long(duration) => {
+                Err("a crossfade's duration must be between 0 and 3600 seconds")
+            }
+            Control::Layer { duration, .. } if long(duration) => {
+                Err("a weight ramp's duration must be between 0 and 3600 seconds")
+            }
+            Control::Layer { weight, .. } if !(0.0..=1.0).contains(&weight) => Err("a layer weight must be in [0, 1]"),
             c => Ok(c),
         }
     }
@@ -93,7 +135,7 @@ impl Playhead {
                 (self.anchor_k, self.anchor_t) = (k, t);
                 return true;
             }
-            Control::Stop => {}
+            Control::Stop | Control::Crossfade(_) | Control::Layer { .. } => {}
         }
         false
     }
@@ -109,9 +151,8 @@ mod tests {
         let mut p = Playhead::new(1.0, speed, 10, false);
         (0..ticks)
             .map(|k| {
-                for &(at, c) in controls.iter().filter(|(at, _)| *at == k) {
-                    let _ = at;
-                    p.apply(c, k);
+                for (_, c) in controls.iter().filter(|(at, _)| *at == k) {
+                    p.apply(c.clone(), k);
                 }
                 (p.time_at(k) * 1e9).round() / 1e9
             })

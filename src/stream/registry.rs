@@ -22,12 +22,12 @@ use super::schedule::Schedule;
 /// What makes two streams the same playback (if they start together).
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub(crate) struct PlaybackKey {
-    clip_id: Arc<str>,
-    version: u64,
+    identity: Arc<str>,
+    joints: Option<Arc<[usize]>>,
     fps: u32,
     start: u64,
     speed: u64,
-    modes: [&'static str; 3],
+    modes: [&'static str; 2],
     encoding: Encoding,
     paused: bool,
 }
@@ -35,12 +35,12 @@ pub(crate) struct PlaybackKey {
 impl PlaybackKey {
     pub(crate) fn of(params: &StreamParams) -> Self {
         PlaybackKey {
-            clip_id: Arc::clone(&params.clip_id),
-            version: params.version,
+            identity: Arc::clone(&params.identity),
+            joints: params.joints.clone(),
             fps: params.fps,
             start: params.start.to_bits(),
             speed: params.speed.to_bits(),
-            modes: [params.playback.as_str(), params.ease.as_str(), params.space.as_str()],
+            modes: [params.ease.as_str(), params.space.as_str()],
             encoding: params.encoding,
             paused: params.paused,
         }

@@ -8,7 +8,7 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use super::encode::Encoding;
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
-use super::params::StreamParams;
+use super::params::{StreamMotion, StreamParams};
 use super::playhead::{Control, Playhead};
 use super::schedule::{Grid, Schedule};
 
@@ -38,11 +38,47 @@ pub enum ControlError {
     Busy,
 }
 
+/// Checks controls against the stream's motions: numbers in range, a
+/// crossfade target with the stream's skeleton, a ramp of a layer the
+/// motion playing has.
+#[derive(Debug, Clone)]
+struct ControlCheck {
+    skeleton: std::sync::Arc<StreamMotion>,
+    /// Layers of the motion the latest accepted control left playing.
+    layers: usize,
+}
+
+impl ControlCheck {
+    fn new(params: &StreamParams) -> Self {
+        ControlCheck { skeleton: std::sync::Arc::clone(&params.motion), layers: params.motion.layer_count() }
+    }
+
+    fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        let control = control.validate().map_err(ControlError::Invalid)?;
+        match &control {
+            Control::Crossfade(fade) => {
+                if !fade.to.skeleton().same_joints(self.skeleton.skeleton()) {
+                    return Err(ControlError::Invalid(
+                        "the crossfade's motion has another skeleton: its first layer's clip must have the stream's joints in the same order",
+                    ));
+                }
+                self.layers = fade.to.layer_count();
+            }
+            Control::Layer { index, .. } if *index >= self.layers => {
+                return Err(ControlError::Invalid("no such layer in the motion playing"));
+            }
+            _ => {}
+        }
+        Ok(control)
+    }
+}
+
 /// A sender of controls to a private playback, usable from another task
 /// (gRPC `Play` reads controls and frames on different tasks).
 #[derive(Debug, Clone)]
 pub struct Controller {
     tx: mpsc::Sender<Control>,
+    check: ControlCheck,
 }
 
 impl Controller {
@@ -51,8 +87,8 @@ impl Controller {
     ///
     /// # Errors
     /// An invalid control, or too many pending.
-    pub fn send(&self, control: Control) -> Result<bool, ControlError> {
-        let control = control.validate().map_err(ControlError::Invalid)?;
+    pub fn send(&mut self, control: Control) -> Result<bool, ControlError> {
+        let control = self.check.check(control)?;
         match self.tx.try_send(control) {
             Ok(()) => Ok(true),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
@@ -80,6 +116,9 @@ pub struct Subscription {
     /// its first tick if nobody else joined.
     handback: Option<oneshot::Receiver<Box<Hub>>>,
     controls: Option<mpsc::Sender<Control>>,
+    /// The names of the joints frames carry, for a protobuf viewer's first frame.
+    names: Vec<String>,
+    check: ControlCheck,
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
     last_seq: Option<u64>,
@@ -94,7 +133,7 @@ pub struct Subscription {
 impl std::fmt::Debug for Subscription {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Subscription")
-            .field("clip_id", &self.params.clip_id)
+            .field("identity", &self.params.identity)
             .field("last_seq", &self.last_seq)
             .field("delivered", &self.delivered)
             .field("private", &self.controls.is_some())
@@ -124,6 +163,8 @@ impl Subscription {
             Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
         };
         Subscription {
+            names: params.joint_names(),
+            check: ControlCheck::new(&params),
             params,
             schedule,
             rx,
@@ -198,7 +239,7 @@ impl Subscription {
                 continue;
             }
             let dropped = self.last_seq.map_or(frame.seq, |last| frame.seq - last - 1);
-            let names = (self.last_seq.is_none()).then(|| self.params.clip().skeleton().names());
+            let names = (self.last_seq.is_none()).then_some(self.names.as_slice());
             let bytes = frame.for_viewer(dropped, names);
             self.last_seq = Some(frame.seq);
             self.delivered += 1;
@@ -216,10 +257,11 @@ impl Subscription {
     /// a shared viewer just ends this stream.
     ///
     /// # Errors
-    /// An invalid control (non-finite numbers, speed beyond ±1000), or too
+    /// An invalid control (non-finite numbers, speed beyond ±1000, a
+    /// crossfade to another skeleton, a layer the motion lacks), or too
     /// many pending.
     pub fn control(&mut self, control: Control) -> Result<(), ControlError> {
-        let control = control.validate().map_err(ControlError::Invalid)?;
+        let control = self.check.check(control)?;
         if self.controls.is_none() {
             if control == Control::Stop {
                 self.stopped = true;
@@ -236,7 +278,7 @@ impl Subscription {
 
     /// A controller for another task (private playbacks only).
     pub fn controller(&self) -> Option<Controller> {
-        self.controls.as_ref().map(|tx| Controller { tx: tx.clone() })
+        self.controls.as_ref().map(|tx| Controller { tx: tx.clone(), check: self.check.clone() })
     }
 
     fn fork(&mut self) {

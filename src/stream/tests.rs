@@ -212,7 +212,7 @@ async fn clip_times(sub: &mut Subscription, n: u64, controls: &[(u64, Control)])
     let mut out = Vec::new();
     for k in 0..n {
         for (_, c) in controls.iter().filter(|(at, _)| *at == k) {
-            sub.control(*c).unwrap();
+            sub.control(c.clone()).unwrap();
         }
         let f = frame(sub).await;
         assert_eq!((f.seq, f.dropped), (k, 0));

@@ -333,13 +333,9 @@ impl Serialize for PoseJson<'_> {
 
 impl PoseJson<'_> {
     /// Appends exactly the JSON that `serde_json` writes for this pose, but
-    /// directly: the pose route and JSON stream frames spend most of their
-    /// time here, and serde's per-field plumbing cost more than the floats.
-    pub(crate) fn write_to(&self, out: &mut impl BufMut) {
-        self.write_with(out, Extras::default());
-    }
-
-    /// [`PoseJson::write_to`] with a composed answer's joint subset and root motion.
+    /// directly (the pose route and JSON stream frames spend most of their
+    /// time here, and serde's per-field plumbing cost more than the floats),
+    /// with a composed answer's joint subset and root motion.
     pub(crate) fn write_with(&self, out: &mut impl BufMut, extras: Extras<'_>) {
         write_head(out, self.clip, self.time, self.clip_time);
         out.put_slice(b",\"space\":\"");
@@ -583,7 +579,7 @@ mod tests {
                 pose: sampler.pose(),
             };
             let mut direct = Vec::new();
-            pose.write_to(&mut direct);
+            pose.write_with(&mut direct, Extras::default());
             assert_eq!(String::from_utf8(direct).unwrap(), serde_json::to_string(&pose).unwrap());
         }
     }

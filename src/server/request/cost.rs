@@ -250,7 +250,8 @@ mod tests {
             let clip_time = crate::server::request::evaluate(clip, t, &options, format, &mut sampler, &mut matrices);
             if format == Format::Trs {
                 let (skeleton, pose) = (clip.skeleton(), sampler.pose());
-                PoseJson { clip: ID, time: t, clip_time, space: options.space, skeleton, pose }.write_to(&mut json);
+                PoseJson { clip: ID, time: t, clip_time, space: options.space, skeleton, pose }
+                    .write_with(&mut json, crate::wire::json::Extras::default());
                 batch.poses.push(pose_to_pb(None, pose, t, clip_time, options.space));
             } else {
                 let doc = MatricesJson {
@@ -314,6 +315,8 @@ mod tests {
                 space: crate::anim::Space::Local,
                 skeleton: clip.skeleton(),
                 pose: sampler.pose(),
+                joints: None,
+                root_motion: None,
                 events: clip.events(),
                 crossed: &[0; MAX_EVENTS_PER_FRAME],
                 with_names: true,

@@ -9,9 +9,9 @@ use super::cost::{Cost, Estimate, F64_TEXT, Wire};
 use super::raw::{Field, Format, Locate, joint_subset};
 use crate::anim::Motion;
 use crate::anim::motion::MotionSpec;
-use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
+use crate::stream::{PinnedClip, StreamMotion};
 
 /// A motion and the joints asked for, as a transport decoded them.
 #[derive(Debug, Clone)]
@@ -26,7 +26,7 @@ pub struct RawMotion<'a> {
 
 /// A built motion over pinned clips, and the output joints to send.
 pub struct Composed {
-    pub motion: Motion<Arc<CachedClip>>,
+    pub motion: Arc<StreamMotion>,
     /// Output joint indices, in skeleton order; `None`: all.
     pub joints: Option<Vec<usize>>,
 }
@@ -37,19 +37,19 @@ const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
 impl Composed {
     /// The first layer's clip id (what a composed pose names).
     pub fn clip_id(&self) -> &str {
-        &self.motion.first_clip().meta.id
+        self.motion.first_clip().id()
     }
 
     /// What `poses` poses of this motion cost, sent as `format` over `wire`:
     /// work counts every layer's joints; the size bound is the first clip's
     /// (a subset only shrinks it) plus the root motion.
     pub fn cost(&self, poses: u64, format: Format, wire: Wire) -> Cost {
-        let first = &self.motion.first_clip().clip;
+        let first = self.motion.first_clip().clip();
         let mut estimate = Estimate::batch(first, self.clip_id(), format, wire);
         if self.motion.has_root_motion() {
             estimate.per_pose += ROOT_MOTION_BYTES;
         }
-        let joints = self.motion.layers().map(|c| c.clip.joint_count() as u64).sum();
+        let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
         Cost { poses, joints, bytes: estimate.total(poses) }
     }
 }
@@ -66,7 +66,8 @@ impl RawMotion<'_> {
         let spec = self.spec;
         let mut clips = Vec::with_capacity(spec.layers.len());
         for layer in &spec.layers {
-            clips.push(super::raw::clip(state, &layer.clip).await?);
+            let clip: Arc<dyn PinnedClip> = super::raw::clip(state, &layer.clip).await?;
+            clips.push(clip);
         }
         let mut clips = clips.into_iter();
         let spec = spec.try_map(|_, _| clips.next().ok_or(()));
@@ -79,6 +80,6 @@ impl RawMotion<'_> {
             return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
-        Ok(Composed { motion, joints })
+        Ok(Composed { motion: Arc::new(motion), joints })
     }
 }
