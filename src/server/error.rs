@@ -225,26 +225,57 @@ impl From<StoreError> for ApiError {
     }
 }
 
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
+impl ApiError {
+    /// The problem document (RFC 9457) this error answers with; logged once.
+    fn problem(&self) -> Problem<'_> {
         let status = self.status();
         let code = self.code();
         if status.is_server_error() {
-            tracing::error!(code, error = %ErrorChain(&self), "request failed");
+            tracing::error!(code, error = %ErrorChain(self), "request failed");
         } else {
             tracing::debug!(code, detail = %self, "request refused");
         }
-        let detail = self.public_detail();
-        let problem = Problem {
+        Problem {
             type_: format!("urn:inbetween:problem:{code}"),
             title: status.canonical_reason().unwrap_or("Error"),
             status: status.as_u16(),
             code,
-            detail,
+            detail: self.public_detail(),
             pointer: self.pointer(),
             parameter: self.parameter_name(),
+        }
+    }
+
+    /// The same error with a JSON pointer under `from` moved under `to`
+    /// (a motion checked as a request's `/motion`, sent as a control's `/to`).
+    pub fn moved(self, from: &str, to: &str) -> ApiError {
+        let shift = |p: String| match p.strip_prefix(from) {
+            Some(rest) if rest.is_empty() || rest.starts_with('/') => format!("{to}{rest}"),
+            _ => p,
         };
-        let body = serde_json::to_vec(&problem).unwrap_or_default();
+        match self {
+            ApiError::Invalid { code, at: At::Pointer(p), detail } => {
+                ApiError::Invalid { code, at: At::Pointer(shift(p)), detail }
+            }
+            ApiError::BadParameter { code, at: At::Pointer(p), detail } => {
+                ApiError::BadParameter { code, at: At::Pointer(shift(p)), detail }
+            }
+            ApiError::MalformedJson { pointer, detail } => ApiError::MalformedJson { pointer: shift(pointer), detail },
+            other => other,
+        }
+    }
+
+    /// The problem as JSON text, for transports that carry it in a message
+    /// (a WebSocket stream's `{"error": problem}`).
+    pub fn problem_json(&self) -> serde_json::Value {
+        serde_json::to_value(self.problem()).unwrap_or_default()
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let status = self.status();
+        let body = serde_json::to_vec(&self.problem()).unwrap_or_default();
         let mut response =
             (status, [(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON))], body).into_response();
         if matches!(self, ApiError::Unauthorized) {

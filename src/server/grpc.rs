@@ -127,9 +127,24 @@ impl GrpcService {
             // 0: no limit.
             max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
+            joints: (!req.joints.is_empty()).then_some(req.joints.as_slice()),
             at: stream_at,
         };
-        let Opening { params, permit } = raw.open(&self.state, &req.clip_id, caller).await?;
+        let opening = match &req.motion {
+            None => raw.open(&self.state, &req.clip_id, caller).await?,
+            Some(_) if !req.clip_id.is_empty() => {
+                let detail = "give `clip_id` or `motion`, not both";
+                return Err(ApiError::invalid("clip_or_motion", "/motion", detail).into());
+            }
+            Some(motion) => {
+                let motion = super::grpc_motion::raw_motion(motion)?;
+                // Unspecified (0) is no playback; any other is refused as on the WebSocket.
+                let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
+                let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
+                raw.open_motion(&self.state, motion, caller).await?
+            }
+        };
+        let Opening { params, permit } = opening;
         Ok((params, permit.map_err(ApiError::from)?))
     }
 }
@@ -258,7 +273,9 @@ fn pose(
 
 type FrameStream = Pin<Box<dyn Stream<Item = Result<WireFrame, Status>> + Send + 'static>>;
 
-fn control_from_pb(op: Option<pb::playback_control::Op>) -> Result<Control, Status> {
+/// A `Play` control; a crossfade's motion is looked up (and pinned) here,
+/// its refusals carrying their own codes (`clip_not_found` …) at `/to/…`.
+async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>) -> Result<Control, Status> {
     use pb::playback_control::Op;
     match op {
         Some(Op::Play(_)) => Ok(Control::Play),
@@ -266,6 +283,13 @@ fn control_from_pb(op: Option<pb::playback_control::Op>) -> Result<Control, Stat
         Some(Op::Seek(s)) => Ok(Control::Seek(s.time)),
         Some(Op::Speed(s)) => Ok(Control::Speed(s.speed)),
         Some(Op::Stop(_)) => Ok(Control::Stop),
+        Some(Op::Layer(l)) => Ok(Control::Layer { index: l.index as usize, weight: l.weight, duration: l.duration }),
+        Some(Op::Crossfade(fade)) => {
+            let ease =
+                crate::wire::proto::ease_from_pb(fade.ease, "/ease").map_err(ApiError::from)?.unwrap_or_default();
+            let to = super::grpc_motion::crossfade_target(state, fade.to.as_ref()).await?;
+            Ok(Control::Crossfade(stream::Crossfade { to, duration: fade.duration, ease }))
+        }
         Some(Op::Open(_)) => Err(bad_control("`open` is only valid as the first message")),
         None => Err(bad_control("a PlaybackControl needs an op")),
     }
@@ -378,6 +402,7 @@ impl Animation for GrpcService {
         let phase_ms = sub.grid().phase_ms;
         let mut controller = sub.controller().expect("a Play subscription is private");
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
+        let state = self.state.clone();
         // Reads the client's controls until it half-closes, errs, or the
         // playback ends (then `closed` resolves); never outlives the stream.
         crate::panics::spawn_guarded("grpc_play_controls", async move {
@@ -388,7 +413,8 @@ impl Animation for GrpcService {
                 };
                 match message {
                     Ok(Some(msg)) => {
-                        let sent = control_from_pb(msg.op)
+                        let sent = control_from_pb(&state, msg.op)
+                            .await
                             .and_then(|c| controller.send(c).map_err(|e| bad_control(e.to_string())));
                         match sent {
                             Ok(true) => {}

@@ -15,6 +15,9 @@ use crate::server::request::{
     in_batch_message, in_body, in_pose_body,
 };
 use crate::server::state::AppState;
+use std::sync::Arc;
+
+use crate::stream::StreamMotion;
 use crate::wire::proto::{matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints};
 
 /// The request's motion and joints, looked up and built.
@@ -27,6 +30,23 @@ async fn compose(
     let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
     let joints = (!joints.is_empty()).then_some(joints);
     RawMotion { spec, joints, format, at: in_body }.resolve(state).await
+}
+
+/// A stream's motion (`StreamRequest.motion`), still to be looked up.
+///
+/// # Errors
+/// The message's enums or numbers out of range, at `/motion/…`.
+pub fn raw_motion(motion: &pb::Motion) -> Result<RawMotion<'static>, ApiError> {
+    Ok(RawMotion { spec: motion_from_pb(motion)?, joints: None, format: Format::Trs, at: in_body })
+}
+
+/// A `Play` crossfade's target, looked up and built; pointers under `/to`.
+///
+/// # Errors
+/// As [`raw_motion`] and `RawMotion::resolve`, at `/to/…`.
+pub async fn crossfade_target(state: &AppState, to: Option<&pb::Motion>) -> Result<Arc<StreamMotion>, ApiError> {
+    let built = async { raw_motion(to.unwrap_or(&pb::Motion::default()))?.resolve(state).await };
+    built.await.map(|composed| composed.motion).map_err(|e| e.moved("/motion", "/to"))
 }
 
 /// `SampleMotion`: one pose, with its names.

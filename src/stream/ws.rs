@@ -11,10 +11,19 @@
 //! fits; its unsent bytes are bounded by `stream_buffer_bytes` meanwhile).
 //!
 //! Control messages are JSON text: `{"op":"pause"}`, `{"op":"play"}`,
-//! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`.
-//! A bad one is answered with a text message
-//! `{"error":{"code":"bad_control","detail":"..."}}` and the stream goes on.
+//! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`,
+//! and for composition (SPEC §6) `{"op":"crossfade","to":motion,
+//! "duration":0.4,"ease":"ease_in_out"}` and `{"op":"layer","index":1,
+//! "weight":0.3,"duration":0.5}`. A crossfade's motion names clips the
+//! transport must look up ([`MotionResolver`]); while it does, the frames go
+//! on and later controls wait behind it, so they apply in the order sent.
+//! A bad control is answered with a text message
+//! `{"error":{"code":"bad_control","detail":"..."}}` (a crossfade's motion
+//! with the problem of its lookup: `clip_not_found` at `/to/layers/1/clip`)
+//! and the stream goes on.
 
+use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
@@ -22,10 +31,24 @@ use futures_util::{Sink, SinkExt, Stream, StreamExt};
 use serde::Deserialize;
 use tokio::time::{Instant, MissedTickBehavior, interval_at, timeout};
 
+use futures_util::future::BoxFuture;
+
 use super::encode::Encoding;
 use super::hub::EndReason;
-use super::playhead::Control;
+use super::params::StreamMotion;
+use super::playhead::{Control, Crossfade};
 use super::subscription::{Next, Subscription};
+use crate::wire::json::EaseDoc;
+
+/// Builds the motion a control names (a crossfade's `to`): the transport's
+/// lookup of its clips. A refusal is the problem document to send back, its
+/// pointer relative to the control message.
+pub trait MotionResolver: Send + Sync + 'static {
+    fn resolve(&self, motion: serde_json::Value) -> BoxFuture<'static, Result<Arc<StreamMotion>, serde_json::Value>>;
+}
+
+/// Controls waiting behind a crossfade's lookup, at most.
+const QUEUED_CONTROLS: usize = 32;
 
 /// WebSocket close codes (RFC 6455 §7.4.1).
 pub mod close {
@@ -53,25 +76,129 @@ impl Default for WsConfig {
 }
 
 /// A control message from a client.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
 enum ControlMsg {
     Play,
     Pause,
-    Seek { time: f64 },
-    Speed { speed: f64 },
+    Seek {
+        time: f64,
+    },
+    Speed {
+        speed: f64,
+    },
     Stop,
+    Crossfade {
+        to: serde_json::Value,
+        duration: f64,
+        #[serde(default = "linear")]
+        ease: EaseDoc,
+    },
+    Layer {
+        index: usize,
+        weight: f32,
+        #[serde(default)]
+        duration: f64,
+    },
 }
 
-impl From<ControlMsg> for Control {
-    fn from(m: ControlMsg) -> Control {
-        match m {
+fn linear() -> EaseDoc {
+    EaseDoc::Linear
+}
+
+impl ControlMsg {
+    /// The control, unless it is a crossfade (whose motion needs a lookup).
+    fn simple(self) -> Result<Control, (serde_json::Value, f64, EaseDoc)> {
+        Ok(match self {
             ControlMsg::Play => Control::Play,
             ControlMsg::Pause => Control::Pause,
             ControlMsg::Seek { time } => Control::Seek(time),
             ControlMsg::Speed { speed } => Control::Speed(speed),
             ControlMsg::Stop => Control::Stop,
+            ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
+            ControlMsg::Crossfade { to, duration, ease } => return Err((to, duration, ease)),
+        })
+    }
+}
+
+/// A crossfade whose motion is being looked up, and the controls sent after it.
+type Lookup = BoxFuture<'static, (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc)>;
+
+/// The controls of one WebSocket stream: applied in the order sent, each
+/// crossfade's lookup holding back the ones after it.
+struct Controls {
+    motions: Option<Arc<dyn MotionResolver>>,
+    lookup: Option<Lookup>,
+    queued: VecDeque<ControlMsg>,
+}
+
+impl Controls {
+    /// Takes a control message's text; returns the error message to send, if any.
+    fn receive(&mut self, text: &str, sub: &mut Subscription) -> Option<Message> {
+        let msg = match serde_json::from_str::<ControlMsg>(text) {
+            Ok(msg) => msg,
+            Err(e) => {
+                return Some(error_message(&format!(
+                    "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\"|\"crossfade\"|\"layer\", ...}}: {e}"
+                )));
+            }
+        };
+        if self.lookup.is_some() {
+            if self.queued.len() >= QUEUED_CONTROLS {
+                return Some(error_message("too many controls pending; wait for a frame before sending more"));
+            }
+            self.queued.push_back(msg);
+            return None;
         }
+        self.apply(msg, sub)
+    }
+
+    /// Applies `msg` now, or starts its motion's lookup.
+    fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
+        match msg.simple() {
+            Ok(control) => sub.control(control).err().map(|e| error_message(&e.to_string())),
+            Err((to, duration, ease)) => {
+                let Some(motions) = &self.motions else {
+                    return Some(error_message("this stream cannot resolve motions"));
+                };
+                let lookup = motions.resolve(to);
+                self.lookup = Some(Box::pin(async move { (lookup.await, duration, ease) }));
+                None
+            }
+        }
+    }
+
+    /// A lookup finished: the crossfade goes to the playback (or its refusal
+    /// back to the client), then the controls queued behind it, up to the
+    /// next crossfade. Returns the error messages to send.
+    fn looked_up(
+        &mut self,
+        (motion, duration, ease): (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc),
+        sub: &mut Subscription,
+    ) -> Vec<Message> {
+        self.lookup = None;
+        let mut errors = Vec::new();
+        match motion {
+            Ok(to) => {
+                let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into() });
+                errors.extend(sub.control(fade).err().map(|e| error_message(&e.to_string())));
+            }
+            Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
+        }
+        while self.lookup.is_none()
+            && let Some(msg) = self.queued.pop_front()
+        {
+            errors.extend(self.apply(msg, sub));
+        }
+        errors
+    }
+}
+
+/// Waits for a pending lookup; never resolves without one.
+async fn lookup_done(lookup: &mut Option<Lookup>) -> (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc) {
+    match lookup.as_mut() {
+        Some(lookup) => lookup.await,
+        None => std::future::pending().await,
     }
 }
 
@@ -91,63 +218,75 @@ fn error_message(detail: &str) -> Message {
     Message::Text(body.to_string().into())
 }
 
-/// Streams `sub` over `socket` until the stream ends (see the module doc).
-pub async fn serve<S, E>(mut socket: S, mut sub: Subscription, config: WsConfig)
-where
+/// Streams `sub` over `socket` until the stream ends (see the module doc);
+/// `motions` looks up a crossfade's motion (`None`: crossfades are refused).
+pub async fn serve<S, E>(
+    mut socket: S,
+    mut sub: Subscription,
+    config: WsConfig,
+    motions: Option<Arc<dyn MotionResolver>>,
+) where
     S: Sink<Message, Error = E> + Stream<Item = Result<Message, E>> + Unpin,
     E: std::error::Error + 'static,
 {
     let mut ping = interval_at(Instant::now() + config.keepalive, config.keepalive);
     ping.set_missed_tick_behavior(MissedTickBehavior::Delay);
     let mut awaiting_pong = false;
+    let mut controls = Controls { motions, lookup: None, queued: VecDeque::new() };
+    let mut outbox: VecDeque<Message> = VecDeque::new();
     loop {
-        let outgoing = tokio::select! {
-            next = sub.next() => match next {
-                Next::Frame(f) => match sub.encoding() {
-                    Encoding::Json => match Utf8Bytes::try_from(f.bytes) {
-                        Ok(text) => Message::Text(text),
-                        Err(_) => continue, // the JSON encoder writes UTF-8 only
+        let outgoing = if let Some(message) = outbox.pop_front() {
+            message
+        } else {
+            tokio::select! {
+                next = sub.next() => match next {
+                    Next::Frame(f) => match sub.encoding() {
+                        Encoding::Json => match Utf8Bytes::try_from(f.bytes) {
+                            Ok(text) => Message::Text(text),
+                            Err(_) => continue, // the JSON encoder writes UTF-8 only
+                        },
+                        Encoding::Protobuf => Message::Binary(f.bytes),
                     },
-                    Encoding::Protobuf => Message::Binary(f.bytes),
-                },
-                Next::End(reason) => {
-                    let _ = timeout(config.keepalive, socket.send(Message::Close(Some(close_frame(reason))))).await;
-                    return;
-                }
-            },
-            incoming = socket.next() => match incoming {
-                None | Some(Ok(Message::Close(_))) => return,
-                Some(Err(e)) => {
-                    // A message over the inbound limit is refused with 1009;
-                    // other read errors leave nothing to answer.
-                    if is_too_big(&e) {
-                        let frame = CloseFrame { code: close::TOO_BIG, reason: Utf8Bytes::from_static("message too big") };
-                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                    Next::End(reason) => {
+                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(close_frame(reason))))).await;
+                        return;
                     }
-                    return;
-                }
-                Some(Ok(Message::Pong(_))) => {
-                    awaiting_pong = false;
+                },
+                incoming = socket.next() => match incoming {
+                    None | Some(Ok(Message::Close(_))) => return,
+                    Some(Err(e)) => {
+                        // A message over the inbound limit is refused with 1009;
+                        // other read errors leave nothing to answer.
+                        if is_too_big(&e) {
+                            let frame = CloseFrame { code: close::TOO_BIG, reason: Utf8Bytes::from_static("message too big") };
+                            let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                        }
+                        return;
+                    }
+                    Some(Ok(Message::Pong(_))) => {
+                        awaiting_pong = false;
+                        continue;
+                    }
+                    Some(Ok(Message::Ping(_))) => continue, // the socket answers pings itself
+                    Some(Ok(Message::Binary(_))) => error_message("control messages are JSON text"),
+                    Some(Ok(Message::Text(text))) => match controls.receive(&text, &mut sub) {
+                        Some(error) => error,
+                        None => continue,
+                    },
+                },
+                done = lookup_done(&mut controls.lookup) => {
+                    outbox.extend(controls.looked_up(done, &mut sub));
                     continue;
                 }
-                Some(Ok(Message::Ping(_))) => continue, // the socket answers pings itself
-                Some(Ok(Message::Binary(_))) => error_message("control messages are JSON text"),
-                Some(Ok(Message::Text(text))) => match serde_json::from_str::<ControlMsg>(&text) {
-                    Ok(msg) => match sub.control(msg.into()) {
-                        Ok(()) => continue,
-                        Err(e) => error_message(&e.to_string()),
-                    },
-                    Err(e) => error_message(&format!("expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\", ...}}: {e}")),
-                },
-            },
-            _ = ping.tick() => {
-                if awaiting_pong {
-                    let frame = CloseFrame { code: close::POLICY, reason: Utf8Bytes::from_static("keepalive timeout") };
-                    let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
-                    return;
+                _ = ping.tick() => {
+                    if awaiting_pong {
+                        let frame = CloseFrame { code: close::POLICY, reason: Utf8Bytes::from_static("keepalive timeout") };
+                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                        return;
+                    }
+                    awaiting_pong = true;
+                    Message::Ping(bytes::Bytes::new())
                 }
-                awaiting_pong = true;
-                Message::Ping(bytes::Bytes::new())
             }
         };
         match timeout(config.keepalive, socket.send(outgoing)).await {

@@ -32,7 +32,7 @@ pub struct Composed {
 }
 
 /// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
-const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
+pub(super) const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
 
 impl Composed {
     /// The first layer's clip id (what a composed pose names).

@@ -6,8 +6,11 @@
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
+use std::sync::Arc;
+
 use super::cost::{Estimate, check_stream};
-use super::raw::{Field, Locate, Raw, RawModes, choice, finite, unprocessable, whole};
+use super::motion::{ROOT_MOTION_BYTES, RawMotion};
+use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, unprocessable, whole};
 use crate::server::auth::Caller;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
@@ -33,6 +36,8 @@ pub struct RawStream<'a> {
     pub max_frames: Option<Raw<'a>>,
     /// Start paused (private playbacks only).
     pub paused: bool,
+    /// Only these joints in every frame (SPEC §6); `None`: all.
+    pub joints: Option<&'a [String]>,
     pub at: Locate,
 }
 
@@ -88,9 +93,47 @@ impl RawStream<'_> {
         let cached = super::raw::clip(state, id).await?;
         let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
         let frame = Estimate::frame(&cached.clip, &clip_id, request.encoding.into());
-        let (fps, limits) = (request.fps, &state.config.limits);
         let params = StreamParams::new(&clip_id, version, cached, request).map_err(|e| self.refused(e))?;
-        check_stream(frame, fps, limits, self.at)?;
+        self.admit(params, frame, state, caller)
+    }
+
+    /// As [`RawStream::open`] for a composed motion (SPEC §6): its clips
+    /// looked up and pinned, the motion built, the stream bound to it. A
+    /// repeated composition is the same built motion (the motion cache), so
+    /// its viewers can share a playback like a clip's.
+    ///
+    /// # Errors
+    /// As [`RawStream::check`]; `playback` is refused (each layer has its
+    /// own); the motion's refusals at `/motion/…` ([`RawMotion::resolve`]);
+    /// then as [`RawStream::open`].
+    pub async fn open_motion(
+        &self,
+        state: &AppState,
+        motion: RawMotion<'_>,
+        caller: &Caller,
+    ) -> Result<Opening, ApiError> {
+        if self.modes.playback.is_some() {
+            let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
+            return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
+        }
+        let request = self.check()?;
+        let composed = motion.resolve(state).await?;
+        let mut frame =
+            Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());
+        if composed.motion.has_root_motion() {
+            frame += ROOT_MOTION_BYTES;
+        }
+        let identity = format!("motion {:p}", Arc::as_ptr(&composed.motion));
+        let params = StreamParams::of_motion(composed.motion, identity.into(), request).map_err(|e| self.refused(e))?;
+        self.admit(params, frame, state, caller)
+    }
+
+    /// The joint subset applied, the stream priced (a frame at most `frame`
+    /// bytes) and a permit asked of the caps.
+    fn admit(&self, params: StreamParams, frame: u64, state: &AppState, caller: &Caller) -> Result<Opening, ApiError> {
+        let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
+        let params = params.with_joints(joints);
+        check_stream(frame, params.fps, &state.config.limits, self.at)?;
         let permit = state.streams.admit_for(caller.addr, caller.token.clone());
         Ok(Opening { params, permit })
     }

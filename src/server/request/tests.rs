@@ -117,6 +117,7 @@ fn stream(fps: Option<Raw<'static>>) -> RawStream<'static> {
         encoding: None,
         max_frames: None,
         paused: false,
+        joints: None,
         at: in_query,
     }
 }

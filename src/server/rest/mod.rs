@@ -53,6 +53,7 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
         .route("/v1/clips/{id}/stream", get(stream::stream))
+        .route("/v1/stream", get(stream::motion_stream))
         .route("/v1/poses", post(motions::pose))
         .route("/v1/samples", post(motions::samples))
         .route("/healthz", get(health::healthz))

@@ -84,7 +84,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
         import::import_clips,
-        poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream,
+        poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream, stream::motion_stream,
         health::healthz, health::readyz, health::metrics,
         viewer::viewer_page,
     ),

@@ -1,8 +1,12 @@
-//! `GET /v1/clips/{id}/stream`: fixed-rate frames over a WebSocket
-//! (SPEC §5).
+//! WebSocket streams (SPEC §5, §6): `GET /v1/clips/{id}/stream` plays a
+//! clip (a one-layer motion) and `GET /v1/stream` a composed motion named
+//! in the client's first message, `{"op":"open","motion":…}`.
 //!
-//! The query is validated and the clip loaded before the upgrade, so a bad
-//! request is an ordinary 4xx problem. A request over the stream caps is
+//! On the clip route the query is validated and the clip loaded before the
+//! upgrade, so a bad request is an ordinary 4xx problem. The motion route
+//! upgrades first (a browser cannot send a body with the handshake) and
+//! answers a bad `open` with `{"error": problem}` and close 1008; a good one
+//! with `{"opened":{"grid_phase_ms","clip","joints"}}` before the frames. A request over the stream caps is
 //! upgraded and then closed at once with code 1013 ("try again later") and
 //! the reason, because a browser's WebSocket API cannot read the body of a
 //! refused handshake. After the upgrade, `crate::stream::ws::serve` owns the
@@ -17,12 +21,20 @@ use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{ConnectInfo, State};
 use axum::response::Response;
 
-use crate::server::auth::ReadAccess;
+use std::sync::Arc;
+
+use axum::extract::ws::Utf8Bytes;
+use futures_util::future::BoxFuture;
+use serde::Deserialize;
+
+use crate::server::auth::{Caller, ReadAccess};
 use crate::server::config::Limits;
 use crate::server::error::ApiError;
-use crate::server::request::{Opening, RawStream, in_query};
+use crate::server::request::{Format, Opening, Raw, RawModes, RawMotion, RawStream, in_body, in_query};
 use crate::server::state::AppState;
-use crate::stream::ws::{WsConfig, close};
+use crate::stream::ws::{MotionResolver, WsConfig, close};
+use crate::stream::{StreamMotion, Subscription};
+use crate::wire::motion::MotionDoc;
 
 use super::extract::ClipId;
 use super::query::Query;
@@ -56,12 +68,13 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
         ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
+        ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
     ),
     responses(
-        (status = 101, description = "Switching to WebSocket; frames follow"),
+        (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
         (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`", body = super::schemas::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -75,6 +88,10 @@ pub async fn stream(
 ) -> Result<Response, ApiError> {
     // A plain GET (no upgrade headers) gets a problem body like every other refusal.
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
+    let joints: Option<Vec<String>> = q.raw("joints").map(|raw| match raw {
+        Raw::Text(text) => text.split(',').map(str::to_owned).collect(),
+        _ => Vec::new(),
+    });
     let raw = RawStream {
         fps: q.raw("fps"),
         start: q.raw("start"),
@@ -83,6 +100,7 @@ pub async fn stream(
         encoding: q.raw("encoding"),
         max_frames: q.raw("max_frames"),
         paused: false,
+        joints: joints.as_deref(),
         at: in_query,
     };
     // The peer address, when served with connect info (`Application` is);
@@ -94,29 +112,184 @@ pub async fn stream(
     let engine = &state.streams;
     let watched = permit.map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
-    // Inbound messages are small controls; outbound frames are buffered up
-    // to a bound, so a viewer that stops reading cannot grow memory.
-    let l = &state.config.limits;
-    let upgrade = upgrade
-        .max_message_size(l.ws_max_message_bytes)
-        .max_frame_size(l.ws_max_message_bytes)
-        .write_buffer_size(ws_write_buffer(l))
-        .max_write_buffer_size(ws_max_write_buffer(l))
-        .read_buffer_size(READ_BUFFER_BYTES);
-    let mut response = upgrade.on_upgrade(move |socket: WebSocket| async move {
+    let motions = resolver(&state);
+    let mut response = configured(upgrade, &state.config.limits).on_upgrade(move |socket: WebSocket| async move {
         match watched {
-            Ok(sub) => {
-                crate::panics::guarded("websocket", crate::stream::ws::serve(socket, sub, WsConfig::default())).await;
-            }
-            Err(refused) => {
-                let mut socket = socket;
-                let frame = CloseFrame { code: close::TRY_AGAIN_LATER, reason: refused.to_string().into() };
-                let _ = socket.send(Message::Close(Some(frame))).await;
-            }
+            Ok(sub) => serve(socket, sub, motions).await,
+            Err(refused) => refuse(socket, close::TRY_AGAIN_LATER, refused.to_string()).await,
         }
     });
     if let Some(phase_ms) = phase_ms {
         response.headers_mut().insert(crate::stream::PHASE_HEADER, phase_ms.into());
     }
     Ok(response)
+}
+
+/// Stream a composed motion: upgrade, then `{"op":"open","motion":…}`.
+#[utoipa::path(
+    get, path = "/v1/stream", tag = "streams",
+    responses(
+        (status = 101, description = "Switching to WebSocket. The client's first text message is `{\"op\":\"open\",\"motion\":{…},\"fps\",\"start\",\"speed\",\"space\",\"ease\",\"encoding\",\"max_frames\",\"joints\",\"paused\"}` (the fields of the clip stream's query, but `playback`, which each layer has); the server answers `{\"opened\":{\"grid_phase_ms\",\"clip\",\"joints\"}}` and frames follow, or `{\"error\":problem}` (pointers into the message: `/motion/layers/1/clip`) and close 1008. Controls as on the clip stream."),
+        (status = 400, description = "Not a WebSocket upgrade (`websocket_upgrade_required`)", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn motion_stream(
+    State(state): State<AppState>,
+    ReadAccess(caller): ReadAccess,
+    connect: Option<Extension<ConnectInfo<SocketAddr>>>,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+) -> Result<Response, ApiError> {
+    let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
+    let lane = connect.map(|Extension(ConnectInfo(addr))| u64::from(addr.port()));
+    let limits = state.config.limits.clone();
+    Ok(configured(upgrade, &limits).on_upgrade(move |socket: WebSocket| async move {
+        let mut socket = socket;
+        let wait = limits.request_message_timeout;
+        let opened = match tokio::time::timeout(wait, first_text(&mut socket)).await {
+            Ok(Some(text)) => open(&state, &caller, &text, lane).await,
+            Ok(None) => return,
+            Err(_) => Err(ApiError::BodyTimeout { secs: wait.as_secs() }),
+        };
+        match opened {
+            Ok(Ok(sub)) => {
+                let hello = serde_json::json!({"opened": {
+                    "grid_phase_ms": sub.grid().phase_ms,
+                    "clip": &*sub.params().clip_id,
+                    "joints": sub.params().joint_names(),
+                }});
+                if socket.send(Message::Text(hello.to_string().into())).await.is_ok() {
+                    serve(socket, sub, resolver(&state)).await;
+                }
+            }
+            Ok(Err(refused)) => refuse(socket, close::TRY_AGAIN_LATER, refused.to_string()).await,
+            Err(e) => {
+                let error = serde_json::json!({ "error": e.problem_json() });
+                let _ = socket.send(Message::Text(error.to_string().into())).await;
+                refuse(socket, close::POLICY, e.code().to_owned()).await;
+            }
+        }
+    }))
+}
+
+/// The `open` message of `GET /v1/stream`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OpenMsg {
+    #[allow(dead_code)]
+    op: OpenOp,
+    motion: MotionDoc,
+    fps: Option<serde_json::Number>,
+    start: Option<serde_json::Number>,
+    speed: Option<serde_json::Number>,
+    space: Option<String>,
+    ease: Option<String>,
+    encoding: Option<String>,
+    max_frames: Option<serde_json::Number>,
+    joints: Option<Vec<String>>,
+    #[serde(default)]
+    paused: bool,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum OpenOp {
+    Open,
+}
+
+/// The client's first text message (`None`: it left first).
+async fn first_text(socket: &mut WebSocket) -> Option<String> {
+    loop {
+        match socket.recv().await? {
+            Ok(Message::Text(text)) => return Some(text.to_string()),
+            Ok(Message::Close(_)) | Err(_) => return None,
+            Ok(_) => {}
+        }
+    }
+}
+
+/// Opens the stream an `open` message asks for: the outer error is the
+/// request's problem, the inner one a refusal of the stream caps.
+async fn open(
+    state: &AppState,
+    caller: &Caller,
+    text: &str,
+    lane: Option<u64>,
+) -> Result<Result<Subscription, crate::stream::AdmitError>, ApiError> {
+    let msg: OpenMsg = super::poses::parse_json(text.as_bytes())?;
+    let number = |n: &Option<serde_json::Number>| n.as_ref().and_then(serde_json::Number::as_f64).map(Raw::Number);
+    let raw = RawStream {
+        fps: number(&msg.fps),
+        start: number(&msg.start),
+        speed: number(&msg.speed),
+        modes: RawModes {
+            space: msg.space.as_deref().map(Raw::Text),
+            playback: None,
+            ease: msg.ease.as_deref().map(Raw::Text),
+        },
+        encoding: msg.encoding.as_deref().map(Raw::Text),
+        max_frames: number(&msg.max_frames),
+        paused: msg.paused,
+        joints: msg.joints.as_deref(),
+        at: in_body,
+    };
+    let motion = RawMotion { spec: msg.motion.to_spec(), joints: None, format: Format::Trs, at: in_body };
+    let Opening { params, permit } = raw.open_motion(state, motion, caller).await?;
+    let engine = &state.streams;
+    Ok(permit.map(
+        |permit| {
+            if params.paused { engine.play(params, permit, lane) } else { engine.watch(params, permit, lane) }
+        },
+    ))
+}
+
+/// Inbound messages are small controls; outbound frames are buffered up
+/// to a bound, so a viewer that stops reading cannot grow memory.
+fn configured(upgrade: WebSocketUpgrade, l: &Limits) -> WebSocketUpgrade {
+    upgrade
+        .max_message_size(l.ws_max_message_bytes)
+        .max_frame_size(l.ws_max_message_bytes)
+        .write_buffer_size(ws_write_buffer(l))
+        .max_write_buffer_size(ws_max_write_buffer(l))
+        .read_buffer_size(READ_BUFFER_BYTES)
+}
+
+async fn serve(socket: WebSocket, sub: Subscription, motions: Arc<dyn MotionResolver>) {
+    let served = crate::stream::ws::serve(socket, sub, WsConfig::default(), Some(motions));
+    crate::panics::guarded("websocket", served).await;
+}
+
+async fn refuse(mut socket: WebSocket, code: u16, reason: String) {
+    let frame = CloseFrame { code, reason: Utf8Bytes::from(reason) };
+    let _ = socket.send(Message::Close(Some(frame))).await;
+}
+
+/// Crossfade targets, looked up like a composed request's motion.
+struct StateMotions(AppState);
+
+fn resolver(state: &AppState) -> Arc<dyn MotionResolver> {
+    Arc::new(StateMotions(state.clone()))
+}
+
+impl MotionResolver for StateMotions {
+    fn resolve(&self, motion: serde_json::Value) -> BoxFuture<'static, Result<Arc<StreamMotion>, serde_json::Value>> {
+        let state = self.0.clone();
+        Box::pin(async move {
+            let built = async {
+                let doc: MotionDoc = super::poses::parse_json(motion.to_string().as_bytes())?;
+                let raw = RawMotion { spec: doc.to_spec(), joints: None, format: Format::Trs, at: in_body };
+                Ok::<_, ApiError>(raw.resolve(&state).await?.motion)
+            };
+            built.await.map_err(|e| under_to(e.problem_json()))
+        })
+    }
+}
+
+/// A crossfade motion's problem, its pointer moved under the control's `to`.
+fn under_to(mut problem: serde_json::Value) -> serde_json::Value {
+    if let Some(serde_json::Value::String(pointer)) = problem.get_mut("pointer") {
+        let inner = pointer.strip_prefix("/motion").unwrap_or(pointer);
+        *pointer = format!("/to{inner}");
+    }
+    problem
 }
