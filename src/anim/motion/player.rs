@@ -57,6 +57,8 @@ struct Deck<C> {
 #[derive(Debug)]
 struct Fade<C> {
     under: Player<C>,
+    /// Whether its first tick is still to come (where `α = 0`).
+    fresh: bool,
     elapsed: f64,
     duration: f64,
     ease: Ease,
@@ -214,7 +216,7 @@ impl<C: ClipSource> Player<C> {
             up: self.up,
         };
         self.up = self.top.motion.root_up().unwrap_or(self.up);
-        self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
+        self.fade = Some(Box::new(Fade { under, fresh: true, elapsed: 0.0, duration, ease }));
         Ok(())
     }
 
@@ -297,7 +299,9 @@ impl<C: ClipSource> Player<C> {
             return;
         };
         fade.under.advance(s, ds, ease);
-        fade.elapsed += ds.abs();
+        if !std::mem::take(&mut fade.fresh) {
+            fade.elapsed += ds.abs();
+        }
         let progress = if fade.duration > 0.0 { (fade.elapsed / fade.duration).min(1.0) } else { 1.0 };
         self.alpha = fade.ease.apply(progress) as f32;
         if progress >= 1.0 {

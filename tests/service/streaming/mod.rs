@@ -9,6 +9,7 @@
 mod grpc_api;
 mod grpc_streams;
 mod limits;
+mod motions;
 mod seam;
 mod websocket;
 
