@@ -52,15 +52,11 @@ async fn next_json(ws: &mut Ws) -> Value {
     }
 }
 
-/// The next frame (skipping error messages, which are returned separately by [`next_error`]).
+/// The next message, which must be a frame.
 async fn next_frame(ws: &mut Ws) -> Value {
-    loop {
-        let v = next_json(ws).await;
-        if v.get("seq").is_some() {
-            return v;
-        }
-        panic!("expected a frame, got {v}");
-    }
+    let v = next_json(ws).await;
+    assert!(v.get("seq").is_some(), "expected a frame, got {v}");
+    v
 }
 
 /// The next error message, frames before it skipped.
