@@ -26,6 +26,8 @@ enum Rest {
     Post(String, Value),
     /// A WebSocket upgrade (the stream route refuses before upgrading).
     Ws(String),
+    /// `GET /v1/stream` and this `open` message (refused in an error message).
+    WsOpen(Value),
 }
 
 /// Its gRPC twin.
@@ -227,6 +229,16 @@ async fn rest_refusal(app: &TestApp, rest: &Rest) -> (u16, String) {
                 other => panic!("{path}: the upgrade should be refused, got {:?}", other.map(drop)),
             }
         }
+        Rest::WsOpen(open) => {
+            use futures_util::{SinkExt, StreamExt};
+            use tokio_tungstenite::tungstenite::Message;
+            let mut ws = app.ws("/v1/stream").await;
+            ws.send(Message::Text(open.to_string().into())).await.unwrap();
+            let Some(Ok(Message::Text(text))) = ws.next().await else { panic!("{open}: no error message") };
+            let error: Value = serde_json::from_str(&text).unwrap();
+            let status = error["error"]["status"].as_u64().unwrap_or_default() as u16;
+            (status, serde_json::to_vec(&error["error"]).unwrap())
+        }
     };
     let problem: Value = serde_json::from_slice(&body).unwrap_or_else(|_| panic!("not problem+json: {body:?}"));
     (status, problem["code"].as_str().unwrap_or_default().to_owned())
@@ -336,16 +348,21 @@ async fn the_motion_refusals_have_one_code_on_both_protocols() {
         let rpc = pb::Layer { clip_id: clip.to_owned(), weight, mask, ..Default::default() };
         (rest, rpc)
     };
+    // Each mistake three ways: a pose (POST /v1/poses, SampleMotion) and a
+    // stream (the WebSocket's open message, StreamFrames).
     let case = |what, layers: Vec<(Value, pb::Layer)>, joints: Vec<&str>, code, status| {
         let (rest_layers, rpc_layers): (Vec<Value>, Vec<pb::Layer>) = layers.into_iter().unzip();
         let body = json!({"motion": {"layers": rest_layers}, "time": 0.5, "joints": joints});
-        let req = pb::SampleMotionRequest {
-            motion: Some(pb::Motion { layers: rpc_layers, root_motion: None }),
-            time: 0.5,
-            joints: joints.iter().map(|j| (*j).to_owned()).collect(),
-            ..Default::default()
-        };
-        Case { what, rest: Rest::Post("/v1/poses".into(), body), rpc: Rpc::Motion(req), code, status }
+        let motion = Some(pb::Motion { layers: rpc_layers, root_motion: None });
+        let joints: Vec<String> = joints.iter().map(|j| (*j).to_owned()).collect();
+        let req =
+            pb::SampleMotionRequest { motion: motion.clone(), time: 0.5, joints: joints.clone(), ..Default::default() };
+        let open = json!({"op": "open", "motion": body["motion"], "joints": body["joints"], "max_frames": 1});
+        let stream = pb::StreamRequest { fps: 30, max_frames: 1, motion, joints, ..Default::default() };
+        [
+            Case { what, rest: Rest::Post("/v1/poses".into(), body), rpc: Rpc::Motion(req), code, status },
+            Case { what, rest: Rest::WsOpen(open), rpc: Rpc::Stream(stream), code, status },
+        ]
     };
     let all = vec!["root", "arm"];
     let cases = vec![
@@ -361,7 +378,7 @@ async fn the_motion_refusals_have_one_code_on_both_protocols() {
         case("no layers", vec![], all.clone(), "no_layers", 422),
         case("a layer's clip that does not exist", vec![layer(None, None, MISSING)], all, "clip_not_found", 404),
     ];
-    check_both_ways(&app, cases).await;
+    check_both_ways(&app, cases.into_iter().flatten().collect()).await;
     app.stop().await;
 }
 
