@@ -18,6 +18,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("import_bvh", import_bvh),
     ("clip_json", clip_json),
     ("import_evaluate", import_evaluate),
+    ("motion_json", motion_json),
 ];
 
 /// glTF/GLB import of arbitrary bytes; whatever imports must build.
@@ -82,17 +83,87 @@ pub fn import_evaluate(data: &[u8]) {
     }
 }
 
-/// Samples `clip` at its ends, outside them, at extremes and at times the
-/// input chose (its last 8 bytes as an `f64`, and each of its last 16 bytes
-/// as a fraction of the clip's span), in every playback mode and space.
-fn evaluate(clip: &Clip, data: &[u8]) {
-    let (start, end) = (clip.start() as f64, clip.end() as f64);
+/// A motion document (SPEC §6) over three fixed clips (two of one skeleton,
+/// one of another; layer `clip` names pick them by their length), built and
+/// sampled at times from the input, then played as a stream would: weight
+/// ramps and crossfades (nested) at input-chosen durations. Every local
+/// value must stay finite and every rotation a unit quaternion.
+pub fn motion_json(data: &[u8]) {
+    use crate::anim::motion::{MotionOptions, MotionSampler, Player};
+    use std::sync::Arc;
+    let Ok(doc) = serde_json::from_slice::<crate::wire::motion::MotionDoc>(data) else { return };
+    let clips = motion_clips();
+    let spec = doc.to_spec().try_map(|_, id: String| Ok::<_, ()>(&clips[id.len() % clips.len()]));
+    let Ok(spec) = spec else { return };
+    let Ok(motion) = crate::anim::Motion::build(spec) else { return };
+    let motion = Arc::new(motion);
+    let times = chosen_times(data, 0.0, 2.0);
+    let mut sampler = MotionSampler::new();
+    for (i, &t) in times.iter().enumerate() {
+        let space = if i % 2 == 0 { Space::Local } else { Space::Model };
+        motion.sample(t, &MotionOptions { ease: Ease::Linear, space }, &mut sampler);
+        check_local(sampler.local(), t);
+    }
+    let mut player = Player::new(Arc::clone(&motion));
+    for (k, &b) in data.iter().rev().take(24).enumerate() {
+        let duration = f64::from(b % 16) / 8.0;
+        match b % 4 {
+            0 => drop(player.crossfade(Arc::clone(&motion), duration, Ease::EaseInOut)),
+            1 => drop(player.ramp(usize::from(b) % motion.layer_count(), f32::from(b) / 255.0, duration)),
+            2 => player.seek(f64::from(b) / 10.0),
+            _ => {}
+        }
+        player.sample(k as f64 / 30.0, &MotionOptions::default());
+        check_local(player.pose(), k as f64);
+    }
+}
+
+/// The clips [`motion_json`] composes: the wave example and two synthetic
+/// clips, built once.
+fn motion_clips() -> &'static [Clip] {
+    static CLIPS: std::sync::OnceLock<Vec<Clip>> = std::sync::OnceLock::new();
+    CLIPS.get_or_init(|| {
+        let wave = include_bytes!("../examples/wave.json");
+        let build = |doc: &[u8]| Clip::build(&parse_clip(doc).expect("a fixed clip parses").1).expect("and builds");
+        let mover = |rate: f32, end: f32| {
+            let doc = serde_json::json!({"name": "m", "skeleton": {"joints": [
+                    {"name": "root", "parent": null}, {"name": "arm", "parent": "root"}]},
+                "tracks": [{"joint": "root", "channel": "translation", "interpolation": "catmull_rom",
+                    "times": [0, end / 2.0, end], "values": [[0, 0, 0], [rate, 0.5, 0], [2.0 * rate, 0, 0]]},
+                    {"joint": "arm", "channel": "rotation", "times": [0, end],
+                    "values": [[0, 0, 0, 1], [0, 0.7071068, 0, 0.7071068]]}],
+                "playback": "loop"});
+            build(doc.to_string().as_bytes())
+        };
+        vec![build(wave), mover(1.0, 1.0), mover(3.0, 0.6)]
+    })
+}
+
+/// Times to sample: fixed extremes, the input's last 8 bytes as an `f64`,
+/// and its last 16 bytes as fractions of `[start, end]`.
+fn chosen_times(data: &[u8], start: f64, end: f64) -> Vec<f64> {
     let span = end - start;
     let tail = data.len().saturating_sub(8);
     let raw = data.get(tail..).and_then(|b| b.try_into().ok()).map_or(0.0, f64::from_le_bytes);
     let mut times = vec![start, end, (start + end) / 2.0, start - 1.0, end + 1.0, -1e30, 1e30, f64::NAN, raw];
-    let chosen = data.iter().rev().take(16).map(|&b| start + span * (f64::from(b) / 127.5 - 0.5));
-    times.extend(chosen);
+    times.extend(data.iter().rev().take(16).map(|&b| start + span * (f64::from(b) / 127.5 - 0.5)));
+    times
+}
+
+/// A local pose's values are finite and its rotations unit quaternions.
+fn check_local(pose: &crate::anim::Pose, t: f64) {
+    assert!(pose.translations.iter().all(|v| v.is_finite()), "translation at {t}");
+    assert!(pose.scales.iter().all(|v| v.is_finite()), "scale at {t}");
+    for q in &pose.rotations {
+        assert!(q.is_finite() && (q.length() - 1.0).abs() < 1e-3, "rotation {q} at {t}");
+    }
+}
+
+/// Samples `clip` at its ends, outside them, at extremes and at times the
+/// input chose (its last 8 bytes as an `f64`, and each of its last 16 bytes
+/// as a fraction of the clip's span), in every playback mode and space.
+fn evaluate(clip: &Clip, data: &[u8]) {
+    let times = chosen_times(data, clip.start() as f64, clip.end() as f64);
     let mut sampler = Sampler::new();
     let mut matrices = Vec::new();
     for playback in [Playback::Once, Playback::Loop, Playback::PingPong] {
@@ -102,15 +173,10 @@ fn evaluate(clip: &Clip, data: &[u8]) {
                 let clip_time = clip.sample(t, &options, &mut sampler);
                 assert!(clip_time.is_finite(), "clip time of {t}");
                 let pose = sampler.pose();
+                // Local values stay finite; model space may overflow f32 legitimately
+                // (a long chain of large finite offsets), which is not a bug.
                 if space == Space::Local {
-                    // Local values stay finite; model space may overflow f32 legitimately
-                    // (a long chain of large finite offsets), which is not a bug.
-                    assert!(pose.translations.iter().all(|v| v.is_finite()), "translation at {t}");
-                    assert!(pose.scales.iter().all(|v| v.is_finite()), "scale at {t}");
-                    for q in &pose.rotations {
-                        assert!(q.is_finite(), "rotation at {t}");
-                        assert!((q.length() - 1.0).abs() < 1e-3, "rotation {q} at {t} is not unit length");
-                    }
+                    check_local(pose, t);
                 }
             }
             clip.matrices(times[2], &options, false, &mut sampler, &mut matrices);

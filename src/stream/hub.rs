@@ -38,7 +38,7 @@ use super::registry::Listing;
 use super::schedule::Schedule;
 use std::sync::Arc;
 
-use super::params::StreamMotion;
+use super::pinned::StreamMotion;
 use super::playhead::Crossfade;
 use crate::anim::motion::{MotionOptions, Player};
 
@@ -66,7 +66,7 @@ pub(crate) struct Hub {
     params: StreamParams,
     schedule: Schedule,
     playhead: Playhead,
-    player: Player<Arc<dyn super::params::PinnedClip>>,
+    player: Player<Arc<dyn super::pinned::PinnedClip>>,
     /// The current motion's first-layer position at the previous frame
     /// (for the events crossed), and which motion that was.
     prev: Option<(f64, Arc<StreamMotion>)>,

@@ -6,24 +6,13 @@
 use std::sync::Arc;
 
 use super::encode::Encoding;
+use super::pinned::{ClipSource, Pinned, PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
 use crate::anim::motion::{LayerSpec, MotionSpec};
 use crate::anim::{Clip, Ease, Motion, Playback, Space};
 
 /// The highest accepted frame rate.
 pub const MAX_FPS: u32 = 240;
-
-/// Whatever holds a compiled clip (the server's cache entry, or a bare
-/// [`Clip`]), so a stream can keep it alive without copying it.
-pub trait ClipSource: Send + Sync + 'static {
-    fn clip(&self) -> &Clip;
-}
-
-impl ClipSource for Clip {
-    fn clip(&self) -> &Clip {
-        self
-    }
-}
 
 /// What a client asked for, before validation.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -50,52 +39,6 @@ pub struct StreamRequest {
 pub struct ParamError {
     pub field: &'static str,
     pub detail: String,
-}
-
-/// A clip pinned at the version a stream plays: its id and version name
-/// the frames and the shared playbacks.
-pub trait PinnedClip: Send + Sync + 'static {
-    fn id(&self) -> &str;
-    fn version(&self) -> u64;
-    fn clip(&self) -> &Clip;
-}
-
-impl std::fmt::Debug for dyn PinnedClip {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}@{}", self.id(), self.version())
-    }
-}
-
-impl crate::anim::ClipSource for dyn PinnedClip {
-    fn clip(&self) -> &Clip {
-        PinnedClip::clip(self)
-    }
-}
-
-/// What a stream plays: a motion over pinned clips (SPEC §6). A clip
-/// stream plays a motion of one full-weight layer, which is the clip's own
-/// pose bit for bit.
-pub type StreamMotion = Motion<Arc<dyn PinnedClip>>;
-
-/// A [`ClipSource`] with the id and version it was loaded at.
-struct Pinned {
-    id: Arc<str>,
-    version: u64,
-    source: Arc<dyn ClipSource>,
-}
-
-impl PinnedClip for Pinned {
-    fn id(&self) -> &str {
-        &self.id
-    }
-
-    fn version(&self) -> u64 {
-        self.version
-    }
-
-    fn clip(&self) -> &Clip {
-        self.source.clip()
-    }
 }
 
 /// A validated stream request, bound to the motion (and so the clip
@@ -150,7 +93,7 @@ impl StreamParams {
         req: StreamRequest,
     ) -> Result<Self, ParamError> {
         let playback = req.playback.unwrap_or(source.clip().playback());
-        let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned { id: clip_id.into(), version, source });
+        let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new(clip_id, version, source));
         let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
         let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None })
             .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;

@@ -14,7 +14,7 @@
 
 use std::sync::Arc;
 
-use super::params::StreamMotion;
+use super::pinned::StreamMotion;
 use crate::anim::Ease;
 
 /// A change asked of a playback, applied at its next tick.

@@ -8,7 +8,8 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use super::encode::Encoding;
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
-use super::params::{StreamMotion, StreamParams};
+use super::params::StreamParams;
+use super::pinned::StreamMotion;
 use super::playhead::{Control, Playhead};
 use super::schedule::{Grid, Schedule};
 

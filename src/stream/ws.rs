@@ -35,7 +35,7 @@ use futures_util::future::BoxFuture;
 
 use super::encode::Encoding;
 use super::hub::EndReason;
-use super::params::StreamMotion;
+use super::pinned::StreamMotion;
 use super::playhead::{Control, Crossfade};
 use super::subscription::{Next, Subscription};
 use crate::wire::json::EaseDoc;
