@@ -29,6 +29,12 @@
 //! Eviction is least-recently-used by a scan at insert time: inserts happen
 //! only on writes and misses, entry capacities are small (default 1024), and
 //! the hit path stays one lock, one hash lookup and one counter store.
+//!
+//! Built motions (`server::motion_cache`) hold the entries of their layers.
+//! So that they never keep alive what this cache let go, every id whose
+//! entry leaves (replaced by a newer version, deleted, invalidated, evicted)
+//! is noted; the caller takes the notes after each insert or invalidation
+//! ([`ClipCache::take_departed`]) and drops the motions over those ids.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -101,6 +107,8 @@ struct Inner {
     tick: u64,
     /// True while invalidations may be missed: nothing is cached.
     suspended: bool,
+    /// Ids whose entry left since [`ClipCache::take_departed`] last ran.
+    departed: Vec<String>,
 }
 
 /// The clip cache; see the module docs for its consistency rules.
@@ -178,8 +186,7 @@ impl ClipCache {
         let mut inner = self.lock();
         inner.epoch += 1;
         inner.suspended = true;
-        inner.entries.clear();
-        inner.bytes = 0;
+        Self::clear(&mut inner);
     }
 
     /// Caches again, from empty: called once invalidations are heard again,
@@ -188,8 +195,19 @@ impl ClipCache {
         let mut inner = self.lock();
         inner.epoch += 1;
         inner.suspended = false;
-        inner.entries.clear();
-        inner.bytes = 0;
+        Self::clear(&mut inner);
+    }
+
+    /// Whether `clip` is the very entry cached for its id (not merely the
+    /// same version of it), without touching its recency.
+    pub fn holds(&self, clip: &Arc<CachedClip>) -> bool {
+        self.lock().entries.get(&clip.meta.id).is_some_and(|e| Arc::ptr_eq(&e.clip, clip))
+    }
+
+    /// The ids whose entry left the cache since the last call (each once;
+    /// a suspension or resumption notes nothing: it empties the whole cache).
+    pub fn take_departed(&self) -> Vec<String> {
+        std::mem::take(&mut self.lock().departed)
     }
 
     /// The cached version of `id`, without touching its recency.
@@ -247,7 +265,14 @@ impl ClipCache {
     fn remove(inner: &mut Inner, id: &str) {
         if let Some(e) = inner.entries.remove(id) {
             inner.bytes -= e.bytes;
+            inner.departed.push(e.clip.meta.id.clone());
         }
+    }
+
+    fn clear(inner: &mut Inner) {
+        inner.entries.clear();
+        inner.bytes = 0;
+        inner.departed.clear();
     }
 }
 
@@ -317,6 +342,24 @@ mod tests {
         assert!(!cache.insert_loaded(cached("a", 1), seen), "a load from before the resume is stale");
         assert!(cache.insert_loaded(cached("a", 2), cache.epoch()));
         assert_eq!(cache.version_of("a"), Some(2));
+    }
+
+    #[test]
+    fn every_entry_that_leaves_is_noted_once_and_holds_knows_the_very_entry() {
+        let cache = ClipCache::new(2, usize::MAX);
+        let a1 = cached("a", 1);
+        cache.insert_written(a1.clone());
+        assert!(cache.holds(&a1) && !cache.holds(&cached("a", 1)), "the same version, another copy");
+        cache.insert_written(cached("b", 1));
+        assert!(cache.take_departed().is_empty(), "nothing left yet");
+        cache.insert_written(cached("a", 2)); // replaces a@1
+        cache.insert_written(cached("c", 1)); // evicts b, the least recently used
+        cache.invalidate("c");
+        cache.invalidate("zz"); // not cached: nothing leaves
+        assert_eq!(cache.take_departed(), ["a", "b", "c"]);
+        assert!(cache.take_departed().is_empty() && !cache.holds(&a1));
+        cache.suspend();
+        assert!(cache.take_departed().is_empty(), "a suspension empties everything, noting nothing");
     }
 
     #[test]

@@ -259,6 +259,10 @@ settings! {
         cache_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "cache_bytes", "cache-bytes", "INBETWEEN_CACHE_BYTES", "BYTES",
             "Heap bytes of the compiled clips kept in memory (least recently used leave first)";
+        motion_cache_entries: usize = 1024 => positive -> usize,
+            "motion_cache_entries", "motion-cache-entries", "INBETWEEN_MOTION_CACHE_ENTRIES", "N",
+            "Built motions (composed requests' layer stacks) kept in memory, keyed by the motion and its clip \
+             versions (least recently used leave first)";
         max_build_work: u64 = crate::anim::DEFAULT_BUILD_WORK => positive -> u64,
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
@@ -779,6 +783,7 @@ mod tests {
             header_read_timeout: Duration::from_secs(10),
             cache_entries: 1024,
             cache_bytes: 268_435_456,
+            motion_cache_entries: 1024,
             max_build_work: 16_000_000,
             max_concurrent_builds: cores,
             max_streams: 1024,
@@ -852,6 +857,9 @@ mod tests {
         assert_eq!(err(zero_timeout), "header_read_timeout_secs must be at least 1 second");
         let zero_rate: RawConfig = toml::from_str("[limits]\nwrite_rate = 0\n").unwrap();
         assert_eq!(err(zero_rate), "write_rate must be at least 1");
+        assert_eq!(err(parse_flags(&["--motion-cache-entries", "0"])), "motion_cache_entries must be at least 1");
+        let motions = parse_flags(&["--motion-cache-entries", "3"]).validate().unwrap();
+        assert_eq!((motions.limits.motion_cache_entries, motions.limits.cache_entries), (3, 1024));
         let buffers = parse_flags(&["--ws-write-buffer-bytes", "10", "--ws-max-write-buffer-bytes", "10"]);
         assert_eq!(err(buffers), "ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
         let blank = parse_flags(&["--api-token", " "]);

@@ -57,6 +57,15 @@ fn describe() {
     describe_gauge!("inbetween_cache_entries", "Compiled clips held in memory.");
     describe_gauge!("inbetween_cache_bytes", Unit::Bytes, "Heap bytes of the compiled clips held in memory.");
     describe_gauge!("inbetween_cache_limit_bytes", Unit::Bytes, "The cache's byte bound (cache_bytes).");
+    describe_counter!(
+        "inbetween_motion_cache_hits_total",
+        "Composed requests whose motion was found built in the motion cache."
+    );
+    describe_counter!(
+        "inbetween_motion_cache_misses_total",
+        "Composed requests whose motion had to be built (not cached for these clip versions)."
+    );
+    describe_gauge!("inbetween_motion_cache_entries", "Built motions held in memory.");
     describe_histogram!(
         "inbetween_store_operation_duration_seconds",
         Unit::Seconds,
@@ -94,6 +103,9 @@ pub struct Counters {
     pub cache_entries: metrics::Gauge,
     pub cache_entries_total: metrics::Gauge,
     pub cache_bytes: metrics::Gauge,
+    pub motion_cache_hits: metrics::Counter,
+    pub motion_cache_misses: metrics::Counter,
+    pub motion_cache_entries: metrics::Gauge,
     pub poses: metrics::Counter,
     /// Streamed answers whose client went away before the end (their
     /// evaluation stopped with them), and the poses left unevaluated.
@@ -110,6 +122,9 @@ impl Counters {
             cache_entries: metrics::gauge!("inbetween_clip_cache_entries"),
             cache_entries_total: metrics::gauge!("inbetween_cache_entries"),
             cache_bytes: metrics::gauge!("inbetween_cache_bytes"),
+            motion_cache_hits: metrics::counter!("inbetween_motion_cache_hits_total"),
+            motion_cache_misses: metrics::counter!("inbetween_motion_cache_misses_total"),
+            motion_cache_entries: metrics::gauge!("inbetween_motion_cache_entries"),
             poses: metrics::counter!("inbetween_poses_evaluated_total"),
             answers_abandoned: metrics::counter!("inbetween_answers_abandoned_total"),
             poses_abandoned: metrics::counter!("inbetween_poses_abandoned_total"),
@@ -122,6 +137,11 @@ impl Counters {
         self.cache_entries.set(entries as f64);
         self.cache_entries_total.set(entries as f64);
         self.cache_bytes.set(bytes as f64);
+    }
+
+    /// The motion cache's size.
+    pub fn motion_cache_gauge(&self, entries: usize) {
+        self.motion_cache_entries.set(entries as f64);
     }
 
     /// The cache's byte bound, set once at startup.

@@ -9,7 +9,8 @@
 //!
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
-//! clips (bounded in entries and bytes); `builds` where clips are built (blocking threads, a few at once);
+//! clips (bounded in entries and bytes); `motion_cache` built motions over
+//! them; `builds` where clips are built (blocking threads, a few at once);
 //! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `request` the sampling and stream rules both transports share, with their
@@ -53,6 +54,7 @@ pub mod grpc_motion;
 pub mod limits;
 mod listen;
 pub mod metrics;
+pub mod motion_cache;
 pub mod notify;
 pub mod ratelimit;
 pub mod request;
@@ -130,6 +132,7 @@ impl Application {
         let state = AppState::new(state::Shared {
             store,
             cache,
+            motions: motion_cache::MotionCache::new(config.limits.motion_cache_entries),
             writes,
             in_flight: shed::Clients::new(config.limits.max_in_flight_per_client),
             arrivals: shed::Arrivals::new(config.limits.max_arriving_bytes),

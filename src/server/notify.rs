@@ -83,14 +83,12 @@ pub async fn run(store: PgStore, state: AppState) {
     let _stop_heartbeat = AbortOnDrop(heartbeat);
     let mut failures = 0u32;
     loop {
-        state.cache.suspend();
-        state.cache_gauges();
+        state.cache_suspend();
         metrics::gauge!("inbetween_notify_subscribed").set(0.0);
         match subscribe(&store).await {
             Ok(listener) => {
                 failures = 0;
-                state.cache.resume();
-                state.cache_gauges();
+                state.cache_resume();
                 metrics::gauge!("inbetween_notify_subscribed").set(1.0);
                 tracing::info!(channel = store.channel(), "listening for clip changes");
                 listen(listener, &state).await;

@@ -1,5 +1,6 @@
-//! [`AppState`]: what every handler shares, and the clip-loading path that
-//! puts the cache in front of the store.
+//! [`AppState`]: what every handler shares, the clip-loading path that puts
+//! the cache in front of the store, and the upkeep that keeps the motion
+//! cache over exactly what the clip cache holds.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -17,6 +18,8 @@ use super::builds::Builds;
 use super::cache::{CachedClip, ClipCache};
 use super::config::Config;
 use super::error::ApiError;
+use super::motion_cache::{MotionCache, MotionKey};
+use crate::stream::StreamMotion;
 
 /// What every handler shares. One `Arc` around everything: extractors clone
 /// the state per request, and one reference count is cheaper than ten
@@ -41,6 +44,8 @@ impl std::ops::Deref for AppState {
 pub struct Shared {
     pub store: Arc<dyn ClipStore>,
     pub cache: Arc<ClipCache>,
+    /// Built motions over the clip cache's entries (`server::motion_cache`).
+    pub motions: MotionCache,
     pub config: Arc<Config>,
     /// Identifies callers from the configured tokens (REST and gRPC).
     pub auth: Auth,
@@ -113,6 +118,7 @@ impl AppState {
             match result {
                 Ok(cached) => {
                     state.cache.insert_loaded(cached.clone(), seen);
+                    state.forget_departed_motions();
                     state.cache_gauges();
                     Ok(cached)
                 }
@@ -141,19 +147,60 @@ impl AppState {
     pub fn cache_written(&self, cached: Arc<CachedClip>) {
         self.forget_load(&cached.meta.id);
         self.cache.insert_written(cached);
+        self.forget_departed_motions();
         self.cache_gauges();
     }
 
-    /// After a committed delete (or another node's change).
+    /// After a committed delete (or another node's change): the clip and
+    /// every built motion with a layer of it.
     pub fn cache_invalidate(&self, id: &str) {
         self.forget_load(id);
         self.cache.invalidate(id);
+        self.motions.invalidate(&[id]);
+        self.forget_departed_motions();
         self.cache_gauges();
     }
 
-    /// The cache's size on `/metrics` (entries and bytes).
+    /// Stops caching clips and motions: changes may go unheard from now on.
+    pub fn cache_suspend(&self) {
+        self.cache.suspend();
+        self.motions.clear();
+        self.cache_gauges();
+    }
+
+    /// Caches again, from empty, once changes are heard again.
+    pub fn cache_resume(&self) {
+        self.cache.resume();
+        self.motions.clear();
+        self.cache_gauges();
+    }
+
+    /// The built motion cached under `key`, counted as a hit or a miss.
+    pub fn cached_motion(&self, key: &MotionKey) -> Option<Arc<StreamMotion>> {
+        let hit = self.motions.get(key);
+        let counter = if hit.is_some() { &self.counters.motion_cache_hits } else { &self.counters.motion_cache_misses };
+        counter.increment(1);
+        hit
+    }
+
+    /// Caches a motion just built over `clips`, unless one of them is no
+    /// longer the clip cache's entry (replaced, deleted, evicted, or never
+    /// cached): the motion would keep a clip alive that the cache let go.
+    pub fn cache_motion(&self, key: MotionKey, motion: Arc<StreamMotion>, clips: &[Arc<CachedClip>]) {
+        if self.motions.insert_if(key, motion, || clips.iter().all(|c| self.cache.holds(c))) {
+            self.counters.motion_cache_gauge(self.motions.len());
+        }
+    }
+
+    /// The caches' sizes on `/metrics` (clips: entries and bytes; motions: entries).
     pub fn cache_gauges(&self) {
         self.counters.cache_gauges(self.cache.len(), self.cache.bytes());
+        self.counters.motion_cache_gauge(self.motions.len());
+    }
+
+    /// Drops the motions over clips that left the clip cache.
+    fn forget_departed_motions(&self) {
+        self.motions.invalidate(&self.cache.take_departed());
     }
 
     fn forget_load(&self, id: &str) {

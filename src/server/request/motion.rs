@@ -1,7 +1,9 @@
 //! Composed requests (SPEC §6): a motion's clips looked up at their current
 //! versions and pinned, the motion built (its refusals pointed at
-//! `/motion/…`), the joint subset checked, and the answer priced before any
-//! pose is evaluated. REST's `POST /v1/poses` and `/v1/samples` use it.
+//! `/motion/…`) or found built for those versions in the motion cache
+//! (`server::motion_cache`), the joint subset checked, and the answer priced
+//! before any pose is evaluated. REST's `POST /v1/poses` and `/v1/samples`
+//! and gRPC's `SampleMotion*` use it.
 
 use std::sync::Arc;
 
@@ -9,7 +11,9 @@ use super::cost::{Cost, Estimate, F64_TEXT, Wire};
 use super::raw::{Field, Format, Locate, joint_subset};
 use crate::anim::Motion;
 use crate::anim::motion::MotionSpec;
+use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
+use crate::server::motion_cache::MotionKey;
 use crate::server::state::AppState;
 use crate::stream::{PinnedClip, StreamMotion};
 
@@ -55,7 +59,8 @@ impl Composed {
 }
 
 impl RawMotion<'_> {
-    /// Looks up each layer's clip, builds the motion and checks the subset.
+    /// Looks up each layer's clip, finds the motion built over those
+    /// versions (or builds and caches it) and checks the subset.
     ///
     /// # Errors
     /// `clip_not_found` for a layer's clip; the core's refusals
@@ -66,20 +71,36 @@ impl RawMotion<'_> {
         let spec = self.spec;
         let mut clips = Vec::with_capacity(spec.layers.len());
         for layer in &spec.layers {
-            let clip: Arc<dyn PinnedClip> = super::raw::clip(state, &layer.clip).await?;
-            clips.push(clip);
+            clips.push(super::raw::clip(state, &layer.clip).await?);
         }
-        let mut clips = clips.into_iter();
-        let spec = spec.try_map(|_, _| clips.next().ok_or(()));
-        let spec = spec.map_err(|()| ApiError::internal(anyhow::anyhow!("a layer lost its clip")))?;
-        let motion = Motion::build(spec).map_err(|e| {
-            ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string())
-        })?;
+        let pinned = pin(spec, &clips)?;
+        let key = MotionKey::of(&pinned);
+        let motion = match state.cached_motion(&key) {
+            Some(hit) => hit,
+            None => {
+                let motion = Arc::new(build(pinned)?);
+                state.cache_motion(key, Arc::clone(&motion), &clips);
+                motion
+            }
+        };
         if self.format == Format::Skinning && !motion.skeleton().has_inverse_binds() {
             let detail = "format=skinning needs inverse bind matrices, which the first layer's clip has not";
             return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
-        Ok(Composed { motion: Arc::new(motion), joints })
+        Ok(Composed { motion, joints })
     }
+}
+
+/// `spec` with each layer's clip id swapped for the clip looked up for it.
+fn pin(spec: MotionSpec<String>, clips: &[Arc<CachedClip>]) -> Result<MotionSpec<Arc<dyn PinnedClip>>, ApiError> {
+    let mut clips = clips.iter();
+    let spec = spec.try_map(|_, _| clips.next().map(|c| Arc::clone(c) as Arc<dyn PinnedClip>).ok_or(()));
+    spec.map_err(|()| ApiError::internal(anyhow::anyhow!("a layer lost its clip")))
+}
+
+/// Builds the motion, its refusals pointed into the request's `/motion`.
+fn build(spec: MotionSpec<Arc<dyn PinnedClip>>) -> Result<StreamMotion, ApiError> {
+    Motion::build(spec)
+        .map_err(|e| ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string()))
 }

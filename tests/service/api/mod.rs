@@ -10,6 +10,7 @@ mod concurrency;
 mod cost;
 mod durability;
 mod import;
+mod motion_cache;
 mod motions;
 mod numbers;
 mod operations;

@@ -2,7 +2,8 @@
 //! load balancer: a change on any node reaches every other node's cache
 //! within a second (LISTEN/NOTIFY), a node killed with `kill -9` leaves the
 //! others serving and streaming, and a node whose database connections are
-//! terminated recovers without ever serving a stale version afterwards.
+//! terminated recovers without ever serving a stale version afterwards. A
+//! composed motion cached on one node follows a clip replaced on another.
 //!
 //! Skips (with a message) without PostgreSQL, unless
 //! `INBETWEEN_REQUIRE_POSTGRES=1`.
@@ -136,6 +137,72 @@ async fn changes_on_any_node_reach_every_node_within_a_second() {
         until_served(&http, node, &id, None, PROPAGATION).await;
     }
     drop((a, b, c));
+    schema.drop_now().await;
+}
+
+/// The x of a composed pose on `node`: `base` under `top` at weight ½
+/// (`Some(x)`), or `None` on 404.
+async fn composed(http: &reqwest::Client, node: &Node, base: &str, top: &str) -> Option<f64> {
+    let motion = serde_json::json!({"layers": [{"clip": base}, {"clip": top, "weight": 0.5}]});
+    let body = serde_json::json!({"motion": motion, "time": 1});
+    let resp = http.post(node.url("/v1/poses")).json(&body).send().await.unwrap();
+    match resp.status().as_u16() {
+        200 => Some(resp.json::<Value>().await.unwrap()["joints"][0]["translation"][0].as_f64().unwrap()),
+        404 => None,
+        s => panic!("{}: composed pose answered {s}", node.name),
+    }
+}
+
+/// A metric of `node`'s own `/metrics` (one process: no other test's counts).
+async fn node_metric(http: &reqwest::Client, node: &Node, name: &str) -> f64 {
+    let text = http.get(node.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    crate::common::metric(&text, name).unwrap_or_else(|| panic!("{}: {name} in\n{text}", node.name))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
+    let Some(schema) = Schema::create("motion").await else { return };
+    let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
+    let http = reqwest::Client::new();
+    let (base, top) = (create(&http, &a, 1).await, create(&http, &a, 10).await);
+    // B caches nothing until it listens: wait for that, so the motion below is cached.
+    let started = Instant::now();
+    while node_metric(&http, &b, "inbetween_notify_subscribed").await < 1.0 {
+        assert!(started.elapsed() < Duration::from_secs(5), "node-b never subscribed");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    // lerp(1, 10, ½) = 5.5, built once on B and then found built.
+    for _ in 0..2 {
+        assert_eq!(composed(&http, &b, &base, &top).await, Some(5.5));
+    }
+    let (misses, hits) = ("inbetween_motion_cache_misses_total", "inbetween_motion_cache_hits_total");
+    assert_eq!((node_metric(&http, &b, misses).await, node_metric(&http, &b, hits).await), (1.0, 1.0));
+
+    // Replaced on A: B's next composed pose is built on the new version, lerp(1, 20, ½).
+    replace(&http, &a, &top, 20).await;
+    let started = Instant::now();
+    while composed(&http, &b, &base, &top).await != Some(10.5) {
+        assert!(started.elapsed() < PROPAGATION, "node-b still composes the old version after {PROPAGATION:?}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    assert!(node_metric(&http, &b, misses).await >= 2.0, "built again on the new version");
+    for _ in 0..5 {
+        assert_eq!(composed(&http, &b, &base, &top).await, Some(10.5), "no stale motion comes back");
+    }
+    // Deleted on A: B answers 404 within the second.
+    let resp = http.delete(a.url(&format!("/v1/clips/{top}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let started = Instant::now();
+    while composed(&http, &b, &base, &top).await.is_some() {
+        assert!(started.elapsed() < PROPAGATION, "node-b still composes a deleted clip after {PROPAGATION:?}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    // The motion goes with the clip (the gauge is set just after the clip is dropped).
+    while node_metric(&http, &b, "inbetween_motion_cache_entries").await > 0.0 {
+        assert!(started.elapsed() < PROPAGATION, "node-b keeps the motion over a deleted clip");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    drop((a, b));
     schema.drop_now().await;
 }
 
