@@ -42,6 +42,9 @@ pub enum ApiError {
     Forbidden { needed: &'static str },
     #[error("{what} not found")]
     NotFound { what: &'static str },
+    /// A motion layer's clip that does not exist: `clip_not_found` at the layer.
+    #[error("{detail}")]
+    LayerClipNotFound { pointer: String, detail: String },
     #[error("method not allowed")]
     MethodNotAllowed,
     #[error("the clip is at version {current}; If-Match did not match")]
@@ -119,7 +122,7 @@ impl ApiError {
             Invalid { .. } | TooMany { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Unauthorized => StatusCode::UNAUTHORIZED,
             Forbidden { .. } => StatusCode::FORBIDDEN,
-            NotFound { .. } => StatusCode::NOT_FOUND,
+            NotFound { .. } | LayerClipNotFound { .. } => StatusCode::NOT_FOUND,
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => StatusCode::PAYLOAD_TOO_LARGE,
@@ -146,7 +149,7 @@ impl ApiError {
             Unauthorized => "unauthorized",
             Forbidden { .. } => "insufficient_scope",
             NotFound { what: "route" } => "route_not_found",
-            NotFound { .. } => "clip_not_found",
+            NotFound { .. } | LayerClipNotFound { .. } => "clip_not_found",
             MethodNotAllowed => "method_not_allowed",
             PreconditionFailed { .. } => "version_mismatch",
             PayloadTooLarge { .. } => "body_too_large",
@@ -166,7 +169,9 @@ impl ApiError {
 
     fn pointer(&self) -> Option<&str> {
         match self {
-            ApiError::MalformedJson { pointer, .. } | ApiError::TooMany { pointer, .. } => Some(pointer),
+            ApiError::MalformedJson { pointer, .. }
+            | ApiError::TooMany { pointer, .. }
+            | ApiError::LayerClipNotFound { pointer, .. } => Some(pointer),
             ApiError::Invalid { at: At::Pointer(pointer), .. }
             | ApiError::BadParameter { at: At::Pointer(pointer), .. } => Some(pointer),
             ApiError::Import { pointer, .. } => pointer.as_deref(),
@@ -261,6 +266,9 @@ impl ApiError {
                 ApiError::BadParameter { code, at: At::Pointer(shift(p)), detail }
             }
             ApiError::MalformedJson { pointer, detail } => ApiError::MalformedJson { pointer: shift(pointer), detail },
+            ApiError::LayerClipNotFound { pointer, detail } => {
+                ApiError::LayerClipNotFound { pointer: shift(pointer), detail }
+            }
             other => other,
         }
     }
@@ -319,7 +327,7 @@ impl ApiError {
             TooMany { .. } => Code::InvalidArgument,
             Unauthorized => Code::Unauthenticated,
             Forbidden { .. } => Code::PermissionDenied,
-            NotFound { .. } => Code::NotFound,
+            NotFound { .. } | LayerClipNotFound { .. } => Code::NotFound,
             MethodNotAllowed => Code::Unimplemented,
             PreconditionFailed { .. } => Code::FailedPrecondition,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => Code::ResourceExhausted,

@@ -70,8 +70,14 @@ impl RawMotion<'_> {
     pub async fn resolve(self, state: &AppState) -> Result<Composed, ApiError> {
         let spec = self.spec;
         let mut clips = Vec::with_capacity(spec.layers.len());
-        for layer in &spec.layers {
-            clips.push(super::raw::clip(state, &layer.clip).await?);
+        for (i, layer) in spec.layers.iter().enumerate() {
+            clips.push(super::raw::clip(state, &layer.clip).await.map_err(|e| match e {
+                ApiError::NotFound { .. } => ApiError::LayerClipNotFound {
+                    pointer: format!("/motion/layers/{i}/clip"),
+                    detail: format!("layer {i}'s clip `{}` does not exist", layer.clip),
+                },
+                other => other,
+            })?);
         }
         let pinned = pin(spec, &clips)?;
         let key = MotionKey::of(&pinned);

@@ -126,8 +126,11 @@ async fn bad_motions_are_refused_with_their_codes_and_pointers() {
         assert_eq!((got, problem["code"].as_str()), (status, Some(code)), "{problem}");
         assert!(problem["pointer"].as_str().unwrap_or("").starts_with(pointer), "{problem}");
     }
-    let missing = json!({"motion": {"layers": [{"clip": "0190f0c2-0000-7000-8000-000000000000"}]}, "time": 0});
-    assert_eq!(post(&app, "/v1/poses", &missing).await.0, 404);
+    let missing =
+        json!({"motion": {"layers": [{"clip": id}, {"clip": "0190f0c2-0000-7000-8000-000000000000"}]}, "time": 0});
+    let (status, problem) = post(&app, "/v1/poses", &missing).await;
+    assert_eq!((status, problem["code"].as_str()), (404, Some("clip_not_found")), "{problem}");
+    assert_eq!(problem["pointer"], "/motion/layers/1/clip", "the 404 names the layer");
     app.stop().await;
 }
 

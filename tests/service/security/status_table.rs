@@ -62,6 +62,7 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::RateLimited { retry_after: 1 },
         ApiError::AnswerTooLargeForUnary { bytes: 20, limit: 10, stream: "SampleStream" },
         ApiError::ClientInFlight { limit: 32, retry_after: 1 },
+        ApiError::LayerClipNotFound { pointer: "/motion/layers/1/clip".into(), detail: "x".into() },
         ApiError::Unavailable(None),
         ApiError::internal(anyhow::anyhow!("disk on fire")),
     ]
@@ -90,6 +91,7 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::RateLimited { .. } => 18,
         ApiError::AnswerTooLargeForUnary { .. } => 19,
         ApiError::ClientInFlight { .. } => 20,
+        ApiError::LayerClipNotFound { .. } => 21,
     }
 }
 
@@ -97,7 +99,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 21, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 22, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));

@@ -207,6 +207,7 @@ async fn layer_ramps_and_bad_controls_on_a_motion_stream() {
         .await;
     let error = next_error(&mut ws).await;
     assert_eq!(error["code"], "clip_not_found", "{error}");
+    assert_eq!(error["pointer"], "/to/layers/1/clip", "the refusal names the layer");
     let bad_mask = json!({"layers": [{"clip": c.run, "mask": {"joints": {"tail": 1}}}]});
     send(&mut ws, json!({"op": "crossfade", "to": bad_mask, "duration": 1})).await;
     let error = next_error(&mut ws).await;
@@ -243,7 +244,7 @@ async fn a_bad_open_gets_its_problem_and_close_1008() {
         ),
         (json!({"op": "open", "motion": {"layers": [{"clip": c.walk}]}, "playback": "loop"}), "invalid_field", ""),
         (json!({"op": "open", "motion": {"layers": []}}), "no_layers", "/motion/layers"),
-        (json!({"op": "open", "motion": {"layers": [{"clip": unknown}]}}), "clip_not_found", ""),
+        (json!({"op": "open", "motion": {"layers": [{"clip": unknown}]}}), "clip_not_found", "/motion/layers/0/clip"),
     ] {
         let mut ws = app.ws("/v1/stream").await;
         send(&mut ws, open.clone()).await;
