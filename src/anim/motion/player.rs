@@ -57,6 +57,7 @@ struct Deck<C> {
 #[derive(Debug)]
 struct Fade<C> {
     under: Player<C>,
+    /// Stream time moved (`Σ|Δs|`) since the fade's first tick.
     elapsed: f64,
     duration: f64,
     ease: Ease,
@@ -291,13 +292,19 @@ impl<C: ClipSource> Player<C> {
     /// Samples the decks at `s`, then mixes the fade into `local`.
     fn advance(&mut self, s: f64, ds: f64, ease: Ease) {
         self.last_s = Some(s);
+        // A fade starts at its target's first tick (B at motion time 0,
+        // α = 0, the pose still A's): the interval before it is not part
+        // of it.
+        let fade_starts = self.top.origin.is_none();
         self.top.sample(s, ds, ease);
         let Some(fade) = self.fade.as_mut() else {
             self.alpha = 1.0;
             return;
         };
         fade.under.advance(s, ds, ease);
-        fade.elapsed += ds.abs();
+        if !fade_starts {
+            fade.elapsed += ds.abs();
+        }
         let progress = if fade.duration > 0.0 { (fade.elapsed / fade.duration).min(1.0) } else { 1.0 };
         self.alpha = fade.ease.apply(progress) as f32;
         if progress >= 1.0 {
