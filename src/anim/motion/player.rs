@@ -220,7 +220,8 @@ impl<C: ClipSource> Player<C> {
     }
 
     /// Ramps layer `index` of the current motion to `weight` over `duration`
-    /// seconds, from the weight it has at the next tick.
+    /// seconds, from its weight at the last tick and counted from that tick
+    /// (the next tick already shows that interval's progress).
     ///
     /// # Errors
     /// No such layer, a weight outside `[0, 1]`, a bad duration.
