@@ -17,6 +17,8 @@ mod alloc;
 mod behaviour;
 mod budget;
 mod cli;
+mod composition_reference;
+mod crossfade;
 mod import;
 mod lecture;
 mod motion;

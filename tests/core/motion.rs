@@ -19,7 +19,7 @@ fn motion(layers: Vec<LayerSpec<&Clip>>) -> Motion<&Clip> {
 /// `hips → spine → arm`, plus `leg` under `hips`; `hips` moves linearly
 /// along x from `from` to `to` over `[0, duration]`; `arm` turns about z
 /// by `turn` radians at every time.
-fn body(name: &str, duration: f32, from: f32, to: f32, turn: f32) -> Clip {
+pub fn body(name: &str, duration: f32, from: f32, to: f32, turn: f32) -> Clip {
     let joint = |name: &str, parent: Option<&str>| JointSpec {
         name: name.into(),
         parent: parent.map(Into::into),

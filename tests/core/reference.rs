@@ -440,7 +440,7 @@ pub struct Trs {
 #[derive(Debug, Clone)]
 pub struct RefClip {
     pub parents: Vec<Option<usize>>,
-    rest: Vec<Trs>,
+    pub rest: Vec<Trs>,
     /// `(joint, channel, track)`.
     tracks: Vec<(usize, Channel, RefTrack)>,
     pub start: f64,

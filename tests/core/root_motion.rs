@@ -16,17 +16,17 @@ use crate::import::reference::read;
 
 /// A planar transform in f64, y up: ground `(x, z)` and yaw.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Ground {
-    x: f64,
-    z: f64,
-    yaw: f64,
+pub struct Ground {
+    pub x: f64,
+    pub z: f64,
+    pub yaw: f64,
 }
 
 impl Ground {
-    const ID: Ground = Ground { x: 0.0, z: 0.0, yaw: 0.0 };
+    pub const ID: Ground = Ground { x: 0.0, z: 0.0, yaw: 0.0 };
 
     /// `self · b`: a rotation about +y by θ maps (x, z) to (x cos θ + z sin θ, −x sin θ + z cos θ).
-    fn then(self, b: Ground) -> Ground {
+    pub fn then(self, b: Ground) -> Ground {
         let (s, c) = self.yaw.sin_cos();
         Ground { x: self.x + b.x * c + b.z * s, z: self.z - b.x * s + b.z * c, yaw: self.yaw + b.yaw }
     }
@@ -53,7 +53,7 @@ fn assert_ground(total: inbetween::anim::motion::Planar, expected: Ground, tol: 
 
 /// The root `hips` over one cycle of `duration`: linear from `from` to
 /// `to`, turning about y from 0 to `turn` radians.
-fn travel(duration: f32, to: Vec3, turn: f32) -> Clip {
+pub fn travel(duration: f32, to: Vec3, turn: f32) -> Clip {
     let hips = JointSpec { name: "hips".into(), parent: None, rest: Transform::IDENTITY, inverse_bind: None };
     let leg = JointSpec { name: "leg".into(), parent: Some("hips".into()), ..hips.clone() };
     let t = TrackSpec::new(

@@ -57,8 +57,7 @@ struct Deck<C> {
 #[derive(Debug)]
 struct Fade<C> {
     under: Player<C>,
-    /// Whether its first tick is still to come (where `α = 0`).
-    fresh: bool,
+    /// Stream time moved (`Σ|Δs|`) since the fade's first tick.
     elapsed: f64,
     duration: f64,
     ease: Ease,
@@ -216,12 +215,13 @@ impl<C: ClipSource> Player<C> {
             up: self.up,
         };
         self.up = self.top.motion.root_up().unwrap_or(self.up);
-        self.fade = Some(Box::new(Fade { under, fresh: true, elapsed: 0.0, duration, ease }));
+        self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
         Ok(())
     }
 
     /// Ramps layer `index` of the current motion to `weight` over `duration`
-    /// seconds, from the weight it has at the next tick.
+    /// seconds, from its weight at the last tick and counted from that tick
+    /// (the next tick already shows that interval's progress).
     ///
     /// # Errors
     /// No such layer, a weight outside `[0, 1]`, a bad duration.
@@ -293,13 +293,17 @@ impl<C: ClipSource> Player<C> {
     /// Samples the decks at `s`, then mixes the fade into `local`.
     fn advance(&mut self, s: f64, ds: f64, ease: Ease) {
         self.last_s = Some(s);
+        // A fade starts at its target's first tick (B at motion time 0,
+        // α = 0, the pose still A's): the interval before it is not part
+        // of it.
+        let fade_starts = self.top.origin.is_none();
         self.top.sample(s, ds, ease);
         let Some(fade) = self.fade.as_mut() else {
             self.alpha = 1.0;
             return;
         };
         fade.under.advance(s, ds, ease);
-        if !std::mem::take(&mut fade.fresh) {
+        if !fade_starts {
             fade.elapsed += ds.abs();
         }
         let progress = if fade.duration > 0.0 { (fade.elapsed / fade.duration).min(1.0) } else { 1.0 };
