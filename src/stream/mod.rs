@@ -1,9 +1,10 @@
-//! The streaming engine: fixed-rate frames of a clip for gRPC server
-//! streaming and WebSocket viewers alike (SPEC §5).
+//! The streaming engine: fixed-rate frames of a motion (SPEC §6; a clip is
+//! a one-layer motion) for gRPC server streaming and WebSocket viewers
+//! alike (SPEC §5).
 //!
 //! The flow of a stream: a transport validates a request into
-//! [`StreamParams`] (bound to the `Arc` of the compiled clip version it
-//! starts on), takes a [`StreamPermit`] from the [`Engine`] (the stream
+//! [`StreamParams`] (bound to the motion over the pinned clip versions it
+//! starts on, `pinned`), takes a [`StreamPermit`] from the [`Engine`] (the stream
 //! caps), and asks for a [`Subscription`]. The engine matches it to a
 //! playback (`hub`; joinable ones are listed in `registry`
 //! until their first tick), which wakes on its schedule (`schedule`: tick `k` due
@@ -11,7 +12,7 @@
 //! accumulated; `ticker` wakes it; late wake-ups skip to the latest tick and
 //! count the rest as dropped) — as its own task while it is shared, driven
 //! by its viewer when it has only one —, moves its playhead (`playhead`: controls act on the next tick),
-//! samples the clip once, collects the events crossed since the previous
+//! samples its `anim::motion::Player` once (crossfades and weight ramps live there), collects the events crossed since the previous
 //! frame (`events`), encodes once (`encode`: JSON or protobuf) and
 //! publishes the bytes to a small broadcast buffer. Each subscription
 //! reads from that buffer, turning overwritten frames into its own
@@ -20,8 +21,8 @@
 //! messages.
 //!
 //! **Architecture invariants.** Nothing here knows about HTTP routes, the
-//! store or authentication: transports hand in a compiled clip and get
-//! bytes out. No lock is held across an await. A slow client costs a fixed
+//! store or authentication: transports hand in a motion over pinned clips
+//! (and resolve a crossfade's motion for it) and get bytes out. No lock is held across an await. A slow client costs a fixed
 //! amount of memory and never delays a playback: publishing never waits.
 //! Every task started here ends on shutdown, when its last viewer leaves,
 //! or on `stop`. A playback never changes clip version mid-stream: replacing
