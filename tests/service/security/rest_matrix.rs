@@ -24,6 +24,8 @@ const ROUTES: &[(&str, &str, Need, u16)] = &[
     ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
     ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
     ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
+    // Checked at the upgrade; the motion comes in the first message.
+    ("get", "/v1/stream", Need::Scope(Scope::Read), 101),
     ("post", "/v1/poses", Need::Scope(Scope::Read), 200),
     ("post", "/v1/samples", Need::Scope(Scope::Read), 200),
     ("get", "/healthz", Need::Open, 200),
@@ -96,7 +98,8 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
 }
 
 async fn websocket(app: &TestApp, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
-    let mut req = format!("ws://{}{path}?max_frames=1", app.addr).into_client_request().unwrap();
+    let query = if path == "/v1/stream" { "" } else { "?max_frames=1" };
+    let mut req = format!("ws://{}{path}{query}", app.addr).into_client_request().unwrap();
     if let Some(t) = role.token() {
         req.headers_mut().insert("authorization", format!("Bearer {t}").parse().unwrap());
     }
