@@ -172,11 +172,20 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     // lerp(1, 10, ½) = 5.5, built once on B and then found built.
-    for _ in 0..2 {
+    // The creates' notifications may still reach B after its first load (each
+    // evicts the clip B loaded, and a motion is cached only over held
+    // clips), so compose until one is found built; from then on every one is.
+    let (misses, hits) = ("inbetween_motion_cache_misses_total", "inbetween_motion_cache_hits_total");
+    let started = Instant::now();
+    while node_metric(&http, &b, hits).await < 1.0 {
+        assert!(started.elapsed() < PROPAGATION, "node-b never found the motion built");
         assert_eq!(composed(&http, &b, &base, &top).await, Some(5.5));
     }
-    let (misses, hits) = ("inbetween_motion_cache_misses_total", "inbetween_motion_cache_hits_total");
-    assert_eq!((node_metric(&http, &b, misses).await, node_metric(&http, &b, hits).await), (1.0, 1.0));
+    let built = node_metric(&http, &b, misses).await;
+    for k in 2..5 {
+        assert_eq!(composed(&http, &b, &base, &top).await, Some(5.5));
+        assert_eq!((node_metric(&http, &b, misses).await, node_metric(&http, &b, hits).await), (built, f64::from(k)));
+    }
 
     // Replaced on A: B's next composed pose is built on the new version, lerp(1, 20, ½).
     replace(&http, &a, &top, 20).await;
@@ -185,7 +194,7 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
         assert!(started.elapsed() < PROPAGATION, "node-b still composes the old version after {PROPAGATION:?}");
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
-    assert!(node_metric(&http, &b, misses).await >= 2.0, "built again on the new version");
+    assert!(node_metric(&http, &b, misses).await > built, "built again on the new version");
     for _ in 0..5 {
         assert_eq!(composed(&http, &b, &base, &top).await, Some(10.5), "no stale motion comes back");
     }
