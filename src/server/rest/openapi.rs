@@ -88,7 +88,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
         health::healthz, health::readyz, health::metrics,
         viewer::viewer_page,
     ),
-    components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema)),
+    components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema, super::stream::StreamOpen)),
     modifiers(&BearerAuth),
     tags(
         (name = "clips", description = "Store and fetch keyframe clips"),

@@ -129,7 +129,7 @@ pub async fn stream(
 #[utoipa::path(
     get, path = "/v1/stream", tag = "streams",
     responses(
-        (status = 101, description = "Switching to WebSocket. The client's first text message is `{\"op\":\"open\",\"motion\":{…},\"fps\",\"start\",\"speed\",\"space\",\"ease\",\"encoding\",\"max_frames\",\"joints\",\"paused\"}` (the fields of the clip stream's query, but `playback`, which each layer has); the server answers `{\"opened\":{\"grid_phase_ms\",\"clip\",\"joints\"}}` and frames follow, or `{\"error\":problem}` (pointers into the message: `/motion/layers/1/clip`) and close 1008. Controls as on the clip stream."),
+        (status = 101, description = "Switching to WebSocket. The client's first text message is a `StreamOpen` (the fields of the clip stream's query, but `playback`, which each layer has); the server answers `{\"opened\":{\"grid_phase_ms\",\"clip\",\"joints\"}}` and frames follow, or `{\"error\":problem}` (pointers into the message: `/motion/layers/1/clip`) and close 1008. Controls as on the clip stream."),
         (status = 400, description = "Not a WebSocket upgrade (`websocket_upgrade_required`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
@@ -172,26 +172,37 @@ pub async fn motion_stream(
     }))
 }
 
-/// The `open` message of `GET /v1/stream`.
-#[derive(Debug, Deserialize)]
+/// The first message of `GET /v1/stream`: what to play and how.
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
-struct OpenMsg {
+pub struct StreamOpen {
+    /// Always `open`.
     #[allow(dead_code)]
     op: OpenOp,
+    /// The composed motion (SPEC §6); its clips are pinned at their current versions.
     motion: MotionDoc,
-    fps: Option<serde_json::Number>,
-    start: Option<serde_json::Number>,
-    speed: Option<serde_json::Number>,
+    /// Frames per second, 1..=240 (default 30).
+    fps: Option<f64>,
+    /// The motion time of frame 0 (default: the first layer's clip's start).
+    start: Option<f64>,
+    /// Motion seconds per second, within ±1000 (default 1; negative plays backwards).
+    speed: Option<f64>,
+    /// `local` (default) or `model`.
     space: Option<String>,
+    /// Applied to every layer's clip time: `linear` (default), `ease_in`, `ease_out`, `ease_in_out`.
     ease: Option<String>,
+    /// `json` (default, text frames) or `protobuf` (binary `Frame`s).
     encoding: Option<String>,
-    max_frames: Option<serde_json::Number>,
+    /// End after this many frames (close 1000).
+    max_frames: Option<f64>,
+    /// Only these joints in every frame, in skeleton order (default: all).
     joints: Option<Vec<String>>,
+    /// Start paused (a private playback; `play` resumes it).
     #[serde(default)]
     paused: bool,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 enum OpenOp {
     Open,
@@ -216,19 +227,18 @@ async fn open(
     text: &str,
     lane: Option<u64>,
 ) -> Result<Result<Subscription, crate::stream::AdmitError>, ApiError> {
-    let msg: OpenMsg = super::poses::parse_json(text.as_bytes())?;
-    let number = |n: &Option<serde_json::Number>| n.as_ref().and_then(serde_json::Number::as_f64).map(Raw::Number);
+    let msg: StreamOpen = super::poses::parse_json(text.as_bytes())?;
     let raw = RawStream {
-        fps: number(&msg.fps),
-        start: number(&msg.start),
-        speed: number(&msg.speed),
+        fps: msg.fps.map(Raw::Number),
+        start: msg.start.map(Raw::Number),
+        speed: msg.speed.map(Raw::Number),
         modes: RawModes {
             space: msg.space.as_deref().map(Raw::Text),
             playback: None,
             ease: msg.ease.as_deref().map(Raw::Text),
         },
         encoding: msg.encoding.as_deref().map(Raw::Text),
-        max_frames: number(&msg.max_frames),
+        max_frames: msg.max_frames.map(Raw::Number),
         paused: msg.paused,
         joints: msg.joints.as_deref(),
         at: in_body,
