@@ -123,10 +123,12 @@ impl Hub {
     /// Continues a playback a viewer was watching elsewhere (a fork): the
     /// stream time of its last frame, and whether it still needs the names.
     /// A fork is of a playback nobody controlled, so its player is the
-    /// motion at that time.
+    /// motion at that time, and its root-motion total the travel from frame
+    /// 0's time to it (sampled in one step: deltas count whole loop cycles).
     pub(crate) fn resume(&mut self, prev_time: Option<f64>, with_names: bool) {
         if let Some(t) = prev_time {
             let options = MotionOptions { ease: self.params.ease, space: self.params.space };
+            self.player.sample(self.params.start, &options);
             self.player.sample(t, &options);
             let position = self.player.first_layer_position().x;
             self.prev = Some((position, Arc::clone(&self.params.motion)));

@@ -322,3 +322,35 @@ fn stream_requests_are_validated() {
     assert_eq!(check(StreamRequest { speed: Some(-1000.0), ..req(1, Encoding::Json) }), Ok(()));
     assert_eq!(check(StreamRequest { start: Some(f64::INFINITY), ..req(1, Encoding::Json) }), Err("start"));
 }
+
+/// A one-layer motion of the test clip with root motion reported, looping.
+fn root_motion_params(req: StreamRequest) -> StreamParams {
+    use crate::anim::motion::{LayerSpec, MotionSpec, RootMotionSpec};
+    let pinned: Arc<dyn PinnedClip> = Arc::new(super::pinned::Pinned::new("c1", 1, clip()));
+    let spec = MotionSpec { layers: vec![LayerSpec::new(pinned)], root_motion: Some(RootMotionSpec::default()) };
+    let motion = Arc::new(crate::anim::Motion::build(spec).unwrap());
+    StreamParams::of_motion(motion, "motion under test".into(), req).unwrap()
+}
+
+fn root_total_x(f: &Delivered) -> f64 {
+    json(f)["pose"]["root_motion"]["total"]["translation"][0].as_f64().unwrap()
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_fork_carries_the_root_motion_total_on_across_loop_seams() {
+    let e = engine(4);
+    // 10 s loops at speed 4 and 2 fps: 2 units per frame, a seam every 5 frames.
+    let req = StreamRequest { speed: Some(4.0), ..req(2, Encoding::Json) };
+    let mut sub = e.watch(root_motion_params(req), e.admit(None).unwrap(), None);
+    for k in 0..7 {
+        let f = frame(&mut sub).await;
+        assert!((root_total_x(&f) - 2.0 * k as f64).abs() < 1e-9, "frame {k}: {}", root_total_x(&f));
+    }
+    // A control forks a private playback from frame 6; the total goes on from 12.
+    sub.control(Control::Speed(4.0)).unwrap();
+    for k in 7..13 {
+        let f = frame(&mut sub).await;
+        assert_eq!(f.seq, k);
+        assert!((root_total_x(&f) - 2.0 * k as f64).abs() < 1e-9, "frame {k}: {}", root_total_x(&f));
+    }
+}
