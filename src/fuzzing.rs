@@ -131,7 +131,7 @@ fn motion_clips() -> &'static [Clip] {
                 "tracks": [{"joint": "root", "channel": "translation", "interpolation": "catmull_rom",
                     "times": [0, end / 2.0, end], "values": [[0, 0, 0], [rate, 0.5, 0], [2.0 * rate, 0, 0]]},
                     {"joint": "arm", "channel": "rotation", "times": [0, end],
-                    "values": [[0, 0, 0, 1], [0, 0.7071068, 0, 0.7071068]]}],
+                    "values": [[0, 0, 0, 1], [0, 0.6, 0, 0.8]]}],
                 "playback": "loop"});
             build(doc.to_string().as_bytes())
         };

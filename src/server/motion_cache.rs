@@ -245,25 +245,7 @@ mod tests {
     use super::*;
     use crate::anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Motion, TrackSpec};
 
-    /// A clip pinned at a version: a joint `j` and a joint `k` under it.
-    struct Pinned {
-        id: String,
-        version: u64,
-        clip: Clip,
-    }
-
-    impl PinnedClip for Pinned {
-        fn id(&self) -> &str {
-            &self.id
-        }
-        fn version(&self) -> u64 {
-            self.version
-        }
-        fn clip(&self) -> &Clip {
-            &self.clip
-        }
-    }
-
+    /// A clip pinned at a version: joints `j` and `k`.
     fn pinned(id: &str, version: u64) -> Arc<dyn PinnedClip> {
         let track = |joint: &str| {
             TrackSpec::new(
@@ -281,7 +263,7 @@ mod tests {
             events: vec![],
             playback: Playback::Loop,
         };
-        Arc::new(Pinned { id: id.into(), version, clip: Clip::build(&spec).unwrap() })
+        Arc::new(crate::stream::Pinned::new(id, version, Arc::new(Clip::build(&spec).unwrap())))
     }
 
     /// A motion of one full layer per clip.

@@ -43,15 +43,16 @@ impl crate::anim::ClipSource for dyn PinnedClip {
 /// pose bit for bit.
 pub type StreamMotion = Motion<Arc<dyn PinnedClip>>;
 
-/// A [`ClipSource`] with the id and version it was loaded at.
-pub(super) struct Pinned {
+/// A [`ClipSource`] with the id and version it was loaded at (the clip
+/// streams' and the tests' pinned clip; the server pins its cache entries).
+pub struct Pinned {
     id: Arc<str>,
     version: u64,
     source: Arc<dyn ClipSource>,
 }
 
 impl Pinned {
-    pub(super) fn new(id: &str, version: u64, source: Arc<dyn ClipSource>) -> Self {
+    pub fn new(id: &str, version: u64, source: Arc<dyn ClipSource>) -> Self {
         Pinned { id: id.into(), version, source }
     }
 }

@@ -63,6 +63,23 @@ pub fn looping_hermite(name: &str, tracks: usize, keys: usize, reach: f32) -> St
 }
 
 /// A gauge's or counter's value in a Prometheus text rendering.
+/// A two-joint clip document: `hips` translating along x from 0 to `to`
+/// over `duration` seconds with `playback`, and `arm` above it at rest —
+/// motion tests compute its poses by hand.
+pub fn hips_mover(name: &str, to: f32, duration: f32, playback: &str) -> String {
+    serde_json::json!({
+        "name": name,
+        "skeleton": {"joints": [
+            {"name": "hips", "parent": null},
+            {"name": "arm", "parent": "hips", "rest": {"translation": [0, 1, 0]}}
+        ]},
+        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
+                    "times": [0, duration], "values": [[0, 0, 0], [to, 0, 0]]}],
+        "playback": playback
+    })
+    .to_string()
+}
+
 pub fn metric(text: &str, name: &str) -> Option<f64> {
     text.lines().find(|l| l.split(' ').next() == Some(name))?.split(' ').nth(1)?.parse().ok()
 }

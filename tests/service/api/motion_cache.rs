@@ -12,17 +12,7 @@ use crate::common::{ServerProcess, TestApp, assert_close, metric};
 
 /// `hips` moving along x from 0 to `to` over 1 s (looping), `arm` above it.
 fn walk(name: &str, to: f32) -> String {
-    json!({
-        "name": name,
-        "skeleton": {"joints": [
-            {"name": "hips", "parent": null},
-            {"name": "arm", "parent": "hips", "rest": {"translation": [0, 1, 0]}}
-        ]},
-        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
-                    "times": [0, 1], "values": [[0, 0, 0], [to, 0, 0]]}],
-        "playback": "loop"
-    })
-    .to_string()
+    crate::common::hips_mover(name, to, 1.0, "loop")
 }
 
 struct Server {

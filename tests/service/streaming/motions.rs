@@ -19,17 +19,7 @@ use crate::common::app::Ws;
 
 /// `hips` moving along x at `rate` units/s over [0, 10] s, `arm` under it.
 fn mover(name: &str, rate: f32) -> String {
-    json!({
-        "name": name,
-        "skeleton": {"joints": [
-            {"name": "hips", "parent": null},
-            {"name": "arm", "parent": "hips", "rest": {"translation": [0, 1, 0]}}
-        ]},
-        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
-                    "times": [0, 10], "values": [[0, 0, 0], [10.0 * rate, 0, 0]]}],
-        "playback": "once"
-    })
-    .to_string()
+    crate::common::hips_mover(name, 10.0 * rate, 10.0, "once")
 }
 
 struct Clips {
