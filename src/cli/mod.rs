@@ -9,6 +9,7 @@ mod load;
 mod sample;
 mod serve;
 mod token;
+mod watch;
 
 #[derive(Debug, Parser)]
 #[command(name = "inbetween", version, about = "Keyframes in, inbetweens out: a keyframe-animation server and tools.")]
@@ -29,6 +30,8 @@ enum Command {
     Token(token::TokenArgs),
     /// Load a running server (loopback only by default) and report throughput, latency and stream lateness.
     Load(Box<load::LoadArgs>),
+    /// Watch a WebSocket stream of a clip or a composed motion; send controls from stdin or `--at`.
+    Watch(Box<watch::WatchArgs>),
 }
 
 impl Cli {
@@ -39,6 +42,7 @@ impl Cli {
             Command::Import(args) => import::run(args),
             Command::Token(args) => token::run(args),
             Command::Load(args) => load::run(*args),
+            Command::Watch(args) => watch::run(*args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

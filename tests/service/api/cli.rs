@@ -1,9 +1,10 @@
 //! `inbetween serve` wiring: the TOML file, environment and flags reach the
-//! server in that order of precedence; JSON logs are JSON.
+//! server in that order of precedence; JSON logs are JSON. `inbetween watch`
+//! streams the README's example motion files from a real server.
 
-use serde_json::Value;
+use serde_json::{Value, json};
 
-use super::WAVE;
+use super::{WAVE, within};
 use crate::common::ServerProcess;
 
 #[tokio::test]
@@ -57,4 +58,67 @@ async fn file_env_and_flags_layer_and_json_logs_are_json() {
         serde_json::from_str::<Value>(line).unwrap_or_else(|e| panic!("not JSON ({e}): {line}"));
     }
     assert!(!logs.contains("from-env"), "a token reached the logs");
+}
+
+/// `key=value` of a `watch` frame line.
+fn field<'a>(line: &'a str, key: &str) -> &'a str {
+    let prefix = format!("{key}=");
+    line.split(' ').find_map(|word| word.strip_prefix(prefix.as_str())).unwrap_or_else(|| panic!("no {key} in {line}"))
+}
+
+fn numbers(text: &str) -> Vec<f64> {
+    text.trim_matches(['[', ']']).split(',').map(|x| x.parse().unwrap()).collect()
+}
+
+#[tokio::test]
+async fn watch_streams_a_motion_file_by_clip_names_and_sends_a_crossfade_at_its_frame() {
+    let server = ServerProcess::serve().start().await;
+    let http = reqwest::Client::new();
+    let fox = std::fs::read("examples/gltf/Fox/Fox.glb").unwrap();
+    let imported: Value =
+        http.post(server.url("/v1/clips/import")).body(fox).send().await.unwrap().json().await.unwrap();
+    let id = |name: &str| {
+        let clips = imported["clips"].as_array().unwrap();
+        clips.iter().find(|c| c["name"] == name).unwrap()["id"].as_str().unwrap().to_owned()
+    };
+    let fps = 5.0;
+    let mut watch = tokio::process::Command::from(ServerProcess::command());
+    watch.args(["watch", "--server", &server.base(), "--motion", "examples/motions/walk-run.json", "--fps", "5"]);
+    watch.args(["--max-frames", "4", "--joints", "b_Hip_01", "--at", "1=@examples/motions/crossfade-to-run.json"]);
+    let out = within(30, "watch", watch.stdin(std::process::Stdio::null()).output()).await.unwrap();
+    let (stdout, stderr) = (String::from_utf8(out.stdout).unwrap(), String::from_utf8(out.stderr).unwrap());
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.starts_with(&format!("opened {{\"clip\":\"{}\"", id("Walk"))), "{stderr}");
+    assert!(stderr.contains("closed 1000 max_frames reached after 4 frames"), "{stderr}");
+    assert!(!stderr.contains("error"), "the crossfade was accepted: {stderr}");
+
+    let lines: Vec<&str> = stdout.lines().collect();
+    let seqs: Vec<&str> = lines.iter().map(|l| field(l, "seq")).collect();
+    assert_eq!(seqs, ["0", "1", "2", "3"]);
+    // The file names clips by name; the same motion by id is what POST /v1/poses answers.
+    let walk_run = json!({"layers": [{"clip": id("Walk"), "sync": "locomotion"},
+                                     {"clip": id("Run"), "weight": 0.3, "sync": "locomotion"}]});
+    let hips_at = |t: f64| {
+        let body = json!({"motion": walk_run, "time": t, "joints": ["b_Hip_01"]});
+        let request = http.post(server.url("/v1/poses")).json(&body).send();
+        async move { request.await.unwrap().json::<Value>().await.unwrap()["joints"][0]["translation"].clone() }
+    };
+    let close = |printed: &str, expected: &Value, what: &str| {
+        let expected: Vec<f64> = (0..3).map(|i| expected[i].as_f64().unwrap()).collect();
+        let printed = numbers(printed);
+        assert!(
+            printed.iter().zip(&expected).all(|(a, b)| (a - b).abs() <= 1e-4),
+            "{what}: {printed:?} vs {expected:?}"
+        );
+    };
+    // Frames 0 and 1 play walk/run; the crossfade sent on frame 1 starts at
+    // a later tick, where Run is at motion time 0 and α = 0 shows A's pose.
+    let fade = lines.iter().position(|l| field(l, "time") == "0.0000" && field(l, "seq") != "0").expect("the fade");
+    assert!(fade >= 2, "{stdout}");
+    for (k, line) in lines[..fade].iter().enumerate() {
+        let t = k as f64 / fps;
+        assert_eq!(numbers(field(line, "time")), [t], "{line}");
+        close(field(line, "b_Hip_01"), &hips_at(t).await, line);
+    }
+    close(field(lines[fade], "b_Hip_01"), &hips_at(fade as f64 / fps).await, "the fade's first frame is A's pose");
 }
