@@ -15,8 +15,8 @@ use glam::{Quat, Vec3, Vec4};
 mod ozz_kernel;
 
 use inbetween::anim::{
-    Channel, Clip, ClipSpec, Cursor, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Speed, TrackSpec,
-    Transform, quat,
+    Channel, Clip, ClipSpec, Cursor, Ease, Interpolation, JointSpec, Keys, Playback, Pose, SkeletonSpec, Speed,
+    TrackSpec, Transform, quat,
 };
 
 const JOINTS: usize = 64;
@@ -113,7 +113,11 @@ fn clip_with(
     speed: Speed,
     shared_times: bool,
 ) -> Clip {
-    let tracks = tracks_with(channels, interpolation, uniform, speed, shared_times);
+    bench_clip(tracks_with(channels, interpolation, uniform, speed, shared_times))
+}
+
+/// A looping clip of `tracks` on the 64-joint skeleton.
+fn bench_clip(tracks: Vec<TrackSpec>) -> Clip {
     let spec =
         ClipSpec { name: "bench".into(), skeleton: Some(skeleton()), tracks, events: vec![], playback: Playback::Loop };
     // Unbounded: 64 constant-speed tracks of 32 keys need far more than the server's default build budget, and
@@ -130,7 +134,19 @@ fn tracks_with(
     speed: Speed,
     shared_times: bool,
 ) -> Vec<TrackSpec> {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    tracks_seeded(channels, interpolation, uniform, speed, shared_times, 0x9e37_79b9_7f4a_7c15)
+}
+
+/// [`tracks_with`] from the key generator seeded with `seed` (other keys, same shape).
+fn tracks_seeded(
+    channels: &[Channel],
+    interpolation: Interpolation,
+    uniform: bool,
+    speed: Speed,
+    shared_times: bool,
+    seed: u64,
+) -> Vec<TrackSpec> {
+    let mut rng = Rng(seed);
     let shared = times(&mut Rng(5), uniform);
     let mut tracks = Vec::new();
     for j in 0..JOINTS {
@@ -422,13 +438,17 @@ fn versus_ozz(c: &mut Criterion) {
 /// Composition (SPEC §6): the same 64-joint Catmull-Rom clips (translation,
 /// rotation, scale) sampled forward as a clip, as a one-layer motion (its
 /// fast path), as two blended layers, as two synced layers plus an additive
-/// one, and as one layer with root motion: the cost of each layer.
+/// one, as one layer with root motion, as three layers (two synced blends
+/// and a masked upper body) through `Motion::sample` and through a stream's
+/// `Player`, and as a `Player` crossfading between two such motions: the
+/// cost of each layer and of a fade.
 fn composition(c: &mut Criterion) {
     use inbetween::anim::motion::{LayerMode, LayerSpec, MotionOptions, MotionSpec, RootMotionSpec};
     use inbetween::anim::{Motion, MotionSampler, SampleOptions, Sampler};
     let trs = [Channel::Translation, Channel::Rotation, Channel::Scale];
     let walk = clip(&trs, Interpolation::CatmullRom, false, Speed::Keyed);
     let run = clip_with(&trs, Interpolation::CatmullRom, true, Speed::Keyed, true);
+    let wave = bench_clip(tracks_seeded(&trs, Interpolation::CatmullRom, false, Speed::Keyed, false, 0x5eed_0016));
     let times: Vec<f64> = forward_times(&walk, 4096).into_iter().map(f64::from).collect();
     let mut g = c.benchmark_group("composition_64_joints_forward");
     g.throughput(Throughput::Elements(JOINTS as u64));
@@ -464,6 +484,7 @@ fn composition(c: &mut Criterion) {
             "one_layer_root_motion",
             MotionSpec { layers: vec![LayerSpec::new(&walk)], root_motion: Some(RootMotionSpec::default()) },
         ),
+        ("three_layers", three_layers(&walk, &run, &wave, 0.3, 0.0)),
     ];
     for (name, spec) in cases {
         let motion = Motion::build(spec).expect("bench motion builds");
@@ -475,7 +496,75 @@ fn composition(c: &mut Criterion) {
             })
         });
     }
+    player_cases(&mut g, &walk, &run, &wave);
     g.finish();
+}
+
+/// Walk (weight 1) and run (`run_weight`) in one sync group, then `wave`
+/// at `wave_offset` masked to `j1` and its descendants: 32 of the 64
+/// joints, half the binary tree.
+fn three_layers<'a>(
+    walk: &'a Clip,
+    run: &'a Clip,
+    wave: &'a Clip,
+    run_weight: f32,
+    wave_offset: f64,
+) -> inbetween::anim::motion::MotionSpec<&'a Clip> {
+    use inbetween::anim::motion::{LayerSpec, MaskSpec, MotionSpec};
+    let synced = |clip| LayerSpec { sync: Some("locomotion".into()), ..LayerSpec::new(clip) };
+    let upper = MaskSpec { joints: vec![("j1".into(), 1.0)], descendants: true, default: None };
+    MotionSpec {
+        layers: vec![
+            synced(walk),
+            LayerSpec { weight: run_weight, ..synced(run) },
+            LayerSpec { mask: Some(upper), offset: wave_offset, ..LayerSpec::new(wave) },
+        ],
+        root_motion: None,
+    }
+}
+
+/// The three-layer motion through a stream's `Player` (stream times 1/60
+/// apart, the phase advanced per tick), and a `Player` held mid-way through
+/// a crossfade between two three-layer motions.
+fn player_cases(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    walk: &Clip,
+    run: &Clip,
+    wave: &Clip,
+) {
+    use std::sync::Arc;
+
+    use inbetween::anim::Motion;
+    use inbetween::anim::motion::{MotionOptions, Player};
+    let build = |run_weight, wave_offset| {
+        Arc::new(Motion::build(three_layers(walk, run, wave, run_weight, wave_offset)).expect("bench motion builds"))
+    };
+    let options = MotionOptions::default();
+    let mut player = Player::new(build(0.3, 0.0));
+    let mut s = 0.0;
+    g.bench_function("three_layers_player", |b| {
+        b.iter(|| {
+            s += 1.0 / 60.0;
+            black_box(player.sample(black_box(s), &options));
+        })
+    });
+    // A fade of 1e9 s, moved to its middle by one long tick: α stays near
+    // 0.5 however many ticks criterion runs (1/60 s each).
+    const FADE: f64 = 1e9;
+    let mut fading = Player::new(build(0.3, 0.0));
+    fading.sample(0.0, &options);
+    fading.crossfade(build(0.6, 0.4), FADE, Ease::Linear).expect("same skeleton");
+    fading.sample(1.0 / 60.0, &options);
+    let mut s = FADE / 2.0;
+    fading.sample(s, &options);
+    g.bench_function("crossfade_three_layers", |b| {
+        b.iter(|| {
+            s += 1.0 / 60.0;
+            black_box(fading.sample(black_box(s), &options));
+        })
+    });
+    let alpha = fading.alpha();
+    assert!(fading.fades() == 1 && alpha > 0.0 && alpha < 1.0, "still mid-fade after the measurement: α = {alpha}");
 }
 
 criterion_group! {

@@ -18,7 +18,7 @@ use super::skeleton::{NO_PARENT, Pose, Skeleton};
 use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
 use super::time::TimeRange;
 use super::timeline::{Span, Timeline};
-use super::tracks::{QuatTracks, Vec3Tracks};
+use super::tracks::{QuatTracks, Spans, Vec3Tracks};
 
 /// Longest accepted clip or event name, in characters.
 pub const MAX_NAME_CHARS: usize = 256;
@@ -78,6 +78,10 @@ pub(crate) fn vec_bytes<T>(v: &Vec<T>) -> usize {
 pub struct Cursor {
     hints: Vec<u32>,
     spans: Vec<Span>,
+    /// Per timeline, the pass of [`Clip::sample_joints_into`] that located
+    /// its span (that sampling locates only the timelines it reads).
+    stamps: Vec<u32>,
+    pass: u32,
 }
 
 impl Cursor {
@@ -88,7 +92,45 @@ impl Cursor {
             self.hints.resize(timelines, 0);
             self.spans.clear();
             self.spans.resize(timelines, Span::default());
+            self.stamps.clear();
+            self.stamps.resize(timelines, 0);
         }
+    }
+
+    /// A new pass: every span is stale until located again.
+    #[inline]
+    fn next_pass(&mut self) {
+        self.pass = self.pass.wrapping_add(1);
+        if self.pass == 0 {
+            self.stamps.fill(0);
+            self.pass = 1;
+        }
+    }
+}
+
+/// The spans of one [`Clip::sample_joints_into`]: located on first use,
+/// for the joints `keep` accepts.
+struct LazySpans<'a, K> {
+    timelines: &'a [Timeline],
+    cursor: &'a mut Cursor,
+    t: f32,
+    keep: K,
+}
+
+impl<K: Fn(u32) -> bool> Spans for LazySpans<'_, K> {
+    #[inline(always)]
+    fn keeps(&self, joint: u32) -> bool {
+        (self.keep)(joint)
+    }
+
+    #[inline(always)]
+    fn span(&mut self, timeline: u32) -> Span {
+        let (i, cursor) = (timeline as usize, &mut *self.cursor);
+        if cursor.stamps[i] != cursor.pass {
+            cursor.stamps[i] = cursor.pass;
+            cursor.spans[i] = self.timelines[i].locate(self.t, &mut cursor.hints[i]);
+        }
+        cursor.spans[i]
     }
 }
 
@@ -324,7 +366,23 @@ impl Clip {
             *span = timeline.locate(t, hint);
         }
         pose.copy_from(&self.base);
-        let spans = &cursor.spans;
+        let spans = &mut &cursor.spans[..];
+        self.translations.apply(spans, &mut pose.translations);
+        self.rotations.apply(spans, &mut pose.rotations);
+        self.scales.apply(spans, &mut pose.scales);
+    }
+
+    /// [`Clip::sample_into`] for the joints `keep` accepts (by index in this
+    /// clip's skeleton); every other joint holds the clip's base pose (its
+    /// rest with constant tracks). The tracks of the joints left out are not
+    /// evaluated and timelines only they read are not searched: how a motion
+    /// layer skips the joints its mask leaves out or a layer above hides.
+    #[inline]
+    pub(crate) fn sample_joints_into(&self, t: f32, cursor: &mut Cursor, pose: &mut Pose, keep: impl Fn(u32) -> bool) {
+        cursor.fit(self.timelines.len());
+        cursor.next_pass();
+        pose.copy_from(&self.base);
+        let spans = &mut LazySpans { timelines: &self.timelines, cursor, t, keep };
         self.translations.apply(spans, &mut pose.translations);
         self.rotations.apply(spans, &mut pose.rotations);
         self.scales.apply(spans, &mut pose.scales);

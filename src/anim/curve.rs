@@ -121,8 +121,9 @@ pub fn step<T: Copy>(keys: &[T], s: Span) -> T {
 /// The three-level slerp de Casteljau of SPEC §2.3 (equations 1–6 with
 /// `lerp` replaced by short-way `slerp`): six slerps, whose weights come
 /// from the segment's stored series (level 1) and two polynomial evaluations
-/// of four lanes each (levels 2 and 3).
-#[inline]
+/// of four lanes each (levels 2 and 3). Always inlined: it is the body of
+/// the rotation loop, whole-pose and part-pose sampling alike.
+#[inline(always)]
 pub fn slerp_bezier(seg: &QuatSegment, u: f32) -> Quat {
     match seg.tier {
         SlerpTier::Tiny => pyramid(seg, u, slerp_weights_tiny),

@@ -51,10 +51,33 @@ fn slice_bytes<T>(s: &[T]) -> usize {
     std::mem::size_of_val(s)
 }
 
+/// Where each track's timeline stands, and which joints to write: a whole
+/// pose reads spans located up front for every joint; a part of a pose
+/// (`Clip::sample_joints_into`) locates a timeline only when a kept track
+/// needs it.
+pub(crate) trait Spans {
+    fn keeps(&self, joint: u32) -> bool;
+    fn span(&mut self, timeline: u32) -> Span;
+}
+
+/// Every joint, spans already located.
+impl Spans for &[Span] {
+    #[inline(always)]
+    fn keeps(&self, _joint: u32) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn span(&mut self, timeline: u32) -> Span {
+        self[timeline as usize]
+    }
+}
+
 #[inline(always)]
-fn run<C, T>(tracks: &[Track<C>], spans: &[Span], out: &mut [T], eval: impl Fn(&C, Span) -> T) {
+fn run<C, T>(tracks: &[Track<C>], spans: &mut impl Spans, out: &mut [T], eval: impl Fn(&C, Span) -> T) {
     for t in tracks {
-        out[t.joint as usize] = eval(&t.curve, spans[t.timeline as usize]);
+        if spans.keeps(t.joint) {
+            out[t.joint as usize] = eval(&t.curve, spans.span(t.timeline));
+        }
     }
 }
 
@@ -81,9 +104,9 @@ impl Vec3Tracks {
             + list_bytes(&self.arc, |c| slice_bytes(&c.segments) + slice_bytes(&c.pieces))
     }
 
-    /// Evaluates every track at its timeline's span into `out`.
+    /// Evaluates every track `spans` keeps at its timeline's span into `out`.
     #[inline]
-    pub fn apply(&self, spans: &[Span], out: &mut [Vec3A]) {
+    pub fn apply(&self, spans: &mut impl Spans, out: &mut [Vec3A]) {
         run(&self.step, spans, out, |k, s| step(k, s));
         run(&self.linear, spans, out, |k, s| {
             let i = s.index as usize;
@@ -117,9 +140,9 @@ impl QuatTracks {
             + list_bytes(&self.hermite, |c| slice_bytes(c))
     }
 
-    /// Evaluates every track at its timeline's span into `out`.
+    /// Evaluates every track `spans` keeps at its timeline's span into `out`.
     #[inline]
-    pub fn apply(&self, spans: &[Span], out: &mut [Quat]) {
+    pub fn apply(&self, spans: &mut impl Spans, out: &mut [Quat]) {
         run(&self.step, spans, out, |k, s| step(k, s));
         run(&self.slerp, spans, out, |k, s| {
             let i = s.index as usize;

@@ -2,11 +2,14 @@
 //! buffers). Counted with the per-thread counting allocator of `main.rs`,
 //! so tests on other threads cannot disturb the count.
 
-use glam::Mat4;
-use inbetween::anim::{Clip, Cursor, Ease, Playback, Pose, SampleOptions, Sampler, Space};
+use std::sync::Arc;
 
-use crate::allocations;
+use glam::Mat4;
+use inbetween::anim::motion::{LayerSpec, MaskSpec, MotionOptions, MotionSpec, Player};
+use inbetween::anim::{Clip, Cursor, Ease, Motion, Playback, Pose, SampleOptions, Sampler, Space};
+
 use crate::random::{Rng, skeleton_clip};
+use crate::{allocations, live_bytes};
 
 /// Clips with every interpolation mode, some with hierarchies.
 fn clips() -> Vec<Clip> {
@@ -85,4 +88,48 @@ fn matrices_allocate_nothing_once_warm() {
         });
         assert_eq!(n, 0, "matrices allocated {n} times");
     }
+}
+
+/// Walk and run (`run_weight`) in one sync group under a wave masked to
+/// `j1` and its descendants: issue 16's three layers.
+fn three_layers(clips: &[Clip], run_weight: f32, wave_offset: f64) -> Arc<Motion<&Clip>> {
+    let synced = |clip| LayerSpec { sync: Some("locomotion".into()), ..LayerSpec::new(clip) };
+    let upper = MaskSpec { joints: vec![("j1".into(), 1.0)], descendants: true, default: None };
+    let layers = vec![
+        synced(&clips[0]),
+        LayerSpec { weight: run_weight, ..synced(&clips[1]) },
+        LayerSpec { mask: Some(upper), offset: wave_offset, ..LayerSpec::new(&clips[2]) },
+    ];
+    Arc::new(Motion::build(MotionSpec { layers, root_motion: None }).unwrap())
+}
+
+/// Allocations and bytes still held after `ticks` ticks of `player` 1/60 s
+/// apart from `from`, alternating local and model space.
+fn count_ticks(player: &mut Player<&Clip>, from: f64, ticks: u32) -> (u64, i64) {
+    let (before, bytes) = (allocations(), live_bytes());
+    for k in 0..ticks {
+        let space = if k % 2 == 0 { Space::Local } else { Space::Model };
+        player.sample(from + f64::from(k) / 60.0, &MotionOptions { ease: Ease::Linear, space });
+        std::hint::black_box(player.pose());
+    }
+    (allocations() - before, live_bytes() - bytes)
+}
+
+#[test]
+fn a_warm_player_allocates_nothing_per_tick_through_a_ramp_and_mid_crossfade() {
+    let mut rng = Rng::new(1616);
+    let clips: Vec<Clip> = (0..3).map(|_| Clip::build(&skeleton_clip(&mut rng, 16)).unwrap()).collect();
+    let mut player = Player::new(three_layers(&clips, 0.3, 0.0));
+    count_ticks(&mut player, 0.0, 3); // warm: buffers take their size
+    player.ramp(1, 0.9, 1.0).unwrap();
+    let ramping = count_ticks(&mut player, 3.0 / 60.0, 30);
+    assert_eq!(ramping, (0, 0), "a three-layer motion mid-ramp: (allocations, bytes) over 30 ticks");
+
+    // The crossfade itself may allocate (the new motion's buffers); its first ticks size them.
+    player.crossfade(three_layers(&clips, 0.6, 0.4), 10.0, Ease::EaseInOut).unwrap();
+    count_ticks(&mut player, 33.0 / 60.0, 3);
+    let fading = count_ticks(&mut player, 36.0 / 60.0, 30);
+    assert_eq!(fading, (0, 0), "mid-crossfade: (allocations, bytes) over 30 ticks");
+    assert_eq!(player.fades(), 1);
+    assert!(player.alpha() > 0.0 && player.alpha() < 1.0, "still mid-fade: α = {}", player.alpha());
 }

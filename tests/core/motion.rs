@@ -1,12 +1,16 @@
 //! Composition in the core (SPEC §6): one full-weight layer is the clip bit
 //! for bit; blends, masks, additive layers and sync groups against values
-//! computed by hand; refusals with their paths; no allocation once warm.
+//! computed by hand; a full-weight masked layer is its clip where it covers
+//! and the layers beneath elsewhere, bit for bit (the layers it hides are
+//! not sampled there); refusals with their paths; no allocation once warm.
 
 use glam::{Quat, Vec3, Vec4};
-use inbetween::anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionOptions, MotionSpec};
+use std::sync::Arc;
+
+use inbetween::anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionOptions, MotionSpec, Player};
 use inbetween::anim::{
-    Channel, Clip, ClipSpec, Ease, Interpolation, JointSpec, Keys, Motion, MotionSampler, Playback, SampleOptions,
-    Sampler, SkeletonSpec, Space, TrackSpec, Transform,
+    Channel, Clip, ClipSpec, Cursor, Ease, Interpolation, JointSpec, Keys, Motion, MotionSampler, Playback, Pose,
+    SampleOptions, Sampler, Skeleton, SkeletonSpec, Space, TrackSpec, Transform,
 };
 
 use crate::allocations;
@@ -151,6 +155,125 @@ fn a_weight_change_mid_stream_carries_the_phase_on() {
     m.advance_phases(&mut phases, 0.25, &[1.0, 0.0]); // walk only: D = 1, phase 0.25
     m.advance_phases(&mut phases, 0.125, &[1.0, 1.0]); // run only: D = 0.5, phase + 0.25
     assert!((phases[0] - 0.5).abs() < 1e-12, "{phases:?}");
+}
+
+/// Whether joint `j` of `skeleton` is `named` or one of its descendants.
+fn under(skeleton: &Skeleton, named: usize, j: usize) -> bool {
+    let mut at = Some(j);
+    while let Some(k) = at {
+        if k == named {
+            return true;
+        }
+        at = skeleton.parent(k);
+    }
+    false
+}
+
+/// Three random 12-joint clips (the same joint names, their own
+/// hierarchies; the second and third name their joints in a shuffled
+/// order, so layers map onto the output skeleton by name, not by index)
+/// and the joint a top layer's mask names.
+fn hiding_case(rng: &mut Rng) -> (Vec<Clip>, usize) {
+    let clips = (0..3)
+        .map(|i| {
+            let mut spec = skeleton_clip(rng, 12);
+            if i > 0 {
+                shuffle_names(&mut spec, rng);
+            }
+            Clip::build(&spec).unwrap()
+        })
+        .collect();
+    (clips, rng.below(12))
+}
+
+/// Renames `spec`'s joints `j0..` by a random permutation of their names.
+fn shuffle_names(spec: &mut ClipSpec, rng: &mut Rng) {
+    let mut names: Vec<usize> = (0..12).collect();
+    for i in (1..names.len()).rev() {
+        names.swap(i, rng.below(i + 1));
+    }
+    let rename = |name: &mut String| *name = format!("j{}", names[name[1..].parse::<usize>().unwrap()]);
+    for joint in &mut spec.skeleton.as_mut().unwrap().joints {
+        rename(&mut joint.name);
+        joint.parent.as_mut().map(rename);
+    }
+    spec.tracks.iter_mut().for_each(|t| rename(&mut t.joint));
+}
+
+/// Walk and run at 0.3, synced.
+fn beneath(clips: &[Clip]) -> Vec<LayerSpec<&Clip>> {
+    let synced = |clip| LayerSpec { sync: Some("g".into()), ..LayerSpec::new(clip) };
+    vec![synced(&clips[0]), LayerSpec { weight: 0.3, ..synced(&clips[1]) }]
+}
+
+/// [`beneath`] with the third clip on top at weight 1, masked to `named`
+/// and its descendants.
+fn with_top(clips: &[Clip], named: usize) -> Vec<LayerSpec<&Clip>> {
+    let mask = MaskSpec { joints: vec![(format!("j{named}"), 1.0)], descendants: true, default: None };
+    let mut layers = beneath(clips);
+    layers.push(LayerSpec { mask: Some(mask), offset: 0.37, ..LayerSpec::new(&clips[2]) });
+    layers
+}
+
+#[test]
+fn a_full_weight_masked_layer_is_its_clip_where_it_covers_and_leaves_the_rest_as_beneath() {
+    // Bit for bit: where the top layer covers, the layers beneath it are not
+    // sampled at all, and where its mask is 0 it is not sampled; neither may show.
+    let mut rng = Rng::new(1616);
+    for _ in 0..10 {
+        let (clips, named) = hiding_case(&mut rng);
+        let (whole, lower) = (motion(with_top(&clips, named)), motion(beneath(&clips)));
+        let skeleton = clips[0].skeleton();
+        let (mut a, mut b) = (MotionSampler::new(), MotionSampler::new());
+        let (mut top, mut cursor) = (Pose::default(), Cursor::default());
+        let mut covered = 0;
+        for k in 0..40 {
+            let tau = f64::from(k) * 0.093 - 0.5;
+            whole.sample(tau, &MotionOptions::default(), &mut a);
+            lower.sample(tau, &MotionOptions::default(), &mut b);
+            clips[2].sample_into(a.clip_times()[2], &mut cursor, &mut top);
+            for j in 0..skeleton.len() {
+                let (expected, e) = if under(skeleton, named, j) {
+                    (&top, clips[2].skeleton().index_of(&skeleton.names()[j]).unwrap())
+                } else {
+                    (b.pose(), j)
+                };
+                covered += usize::from(under(skeleton, named, j));
+                let got = a.pose();
+                assert_eq!(
+                    (got.translations[j], got.rotations[j], got.scales[j]),
+                    (expected.translations[e], expected.rotations[e], expected.scales[e]),
+                    "joint {j} at {tau} (mask on j{named}: {})",
+                    under(skeleton, named, j)
+                );
+            }
+        }
+        assert!(covered > 0);
+    }
+}
+
+#[test]
+fn a_ramp_that_lowers_a_hiding_layer_shows_the_layers_beneath_again() {
+    let (clips, named) = hiding_case(&mut Rng::new(1617));
+    let (whole, lower) = (Arc::new(motion(with_top(&clips, named))), motion(beneath(&clips)));
+    let skeleton = clips[0].skeleton();
+    let mut player = Player::new(whole);
+    let options = MotionOptions::default();
+    for k in 0..10 {
+        player.sample(f64::from(k) / 60.0, &options);
+    }
+    player.ramp(2, 0.0, 0.0).unwrap();
+    let s = 10.0 / 60.0;
+    player.sample(s, &options);
+    let mut reference = MotionSampler::new();
+    lower.sample(s, &options, &mut reference);
+    for j in 0..skeleton.len() {
+        let (got, expected) = (player.pose(), reference.pose());
+        // The player's phase is advanced tick by tick: equal to rounding.
+        assert!((got.translations[j] - expected.translations[j]).length() < 1e-4, "joint {j}");
+        assert!(got.rotations[j].dot(expected.rotations[j]).abs() > 1.0 - 1e-5, "joint {j}");
+        assert!((got.scales[j] - expected.scales[j]).length() < 1e-4, "joint {j}");
+    }
 }
 
 #[test]

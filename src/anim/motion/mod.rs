@@ -12,10 +12,13 @@
 //!
 //! Module map: `spec` the authoring types; `error` why a motion is refused;
 //! `mask` masks to per-joint weights; `sync` sync-group phases; `layering`
-//! the per-joint blend and additive rules; `sampler` the sampling loop;
+//! the per-joint blend and additive rules; `coverage` which joints each
+//! layer must sample (its mask, and the layers above that hide it);
+//! `sampler` the sampling loop;
 //! `root` root motion; `player` a stream's live motions, weight ramps and
 //! crossfades.
 
+mod coverage;
 mod error;
 mod layering;
 mod mask;
@@ -33,6 +36,7 @@ pub use root::Planar;
 pub use sampler::{MotionOptions, MotionSampler, RootMotion};
 pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
 
+use self::coverage::Reach;
 use self::error::MotionErrorKind as K;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
@@ -107,6 +111,11 @@ struct Layer<C> {
     mask: Vec<f32>,
     /// Per output joint, the layer clip's joint index (or `UNMAPPED`).
     map: Vec<u32>,
+    /// Whether every mask weight is 1 (a first layer at weight 1 is then
+    /// the clip's own pose).
+    unmasked: bool,
+    /// The joints it reaches and hides (see `coverage`).
+    reach: Reach,
     time: LayerTime,
     /// Additive layers: the reference pose, in the layer clip's joints.
     reference: Option<Pose>,
@@ -144,9 +153,13 @@ impl<C: ClipSource> Motion<C> {
             let output = layers.first().map_or(layer.clip.clip().skeleton(), |l: &Layer<C>| l.clip.clip().skeleton());
             let time = layer_time(&layer, i, &mut groups);
             durations.push(layer.clip.clip().range().duration());
+            let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
+            let map = joint_map(output, layer.clip.clip().skeleton());
             layers.push(Layer {
-                mask: mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?,
-                map: joint_map(output, layer.clip.clip().skeleton()),
+                reach: Reach::new(layer.mode, &map, &mask, layer.clip.clip().joint_count()),
+                unmasked: mask.iter().all(|m| *m >= 1.0),
+                mask,
+                map,
                 time,
                 reference: (layer.mode == LayerMode::Additive)
                     .then(|| reference_pose(layer.clip.clip(), layer.reference_time)),

@@ -381,9 +381,13 @@ impl<C: ClipSource> Player<C> {
     }
 }
 
-/// `out = blend(a, b, α)` joint by joint (lerp, short-way slerp).
+/// `out = blend(a, b, α)` joint by joint (lerp, short-way slerp), written
+/// straight into `out` (a crossfade's sides have the same joints; `a`'s
+/// are copied first only if they did not).
 fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
-    out.copy_from(a);
+    if a.len() != b.len() || out.len() != a.len() {
+        out.copy_from(a);
+    }
     for j in 0..b.len().min(a.len()) {
         let mut joint = Joint { t: a.translations[j], q: a.rotations[j], s: a.scales[j] };
         let other = Joint { t: b.translations[j], q: b.rotations[j], s: b.scales[j] };

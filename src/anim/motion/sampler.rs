@@ -1,8 +1,10 @@
 //! Sampling a [`Motion`]: each layer's clip time, its local pose, then the
 //! layering of every output joint, bottom to top, over the rest pose; with
 //! root motion, each layer's motion transform, the layered delta since the
-//! previous sample and the running total.
+//! previous sample and the running total. A layer samples and layers only
+//! the joints it can still change (`coverage`): the pose is the same.
 
+use super::coverage;
 use super::layering::{self, Joint};
 use super::root::{self, Planar, motion_transform};
 use super::sync::position;
@@ -37,6 +39,12 @@ pub struct MotionSampler {
     space: Space,
     phases: Vec<f64>,
     clip_times: Vec<f32>,
+    /// Per layer, the output joints it must sample (see `coverage`), and
+    /// scratch for working them out and for one layer's joints to sample
+    /// in its clip's numbering.
+    needs: Vec<u64>,
+    hidden: Vec<u64>,
+    kept: Vec<u64>,
     /// Per layer: its loop cycle and root motion transform, now and at the
     /// previous sample (`None`: no root in that layer, or no previous).
     roots: Vec<Option<(i64, Planar)>>,
@@ -106,29 +114,35 @@ impl<C: ClipSource> Motion<C> {
         options: &MotionOptions,
         sampler: &mut MotionSampler,
     ) -> f32 {
-        let MotionSampler { cursors, layer: scratch, local, clip_times, roots, .. } = sampler;
+        let MotionSampler { cursors, layer: scratch, local, clip_times, roots, needs, hidden, kept, .. } = sampler;
+        let words = coverage::words(self.skeleton().len());
+        coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
         cursors.resize_with(self.layers.len(), Cursor::default);
         roots.clear();
         clip_times.clear();
         for (i, layer) in self.layers.iter().enumerate() {
-            let clip = layer.clip.clip();
             let (t, cycle) = self.layer_time(i, tau, phases, options.ease);
             clip_times.push(t);
-            let direct =
-                i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.mask.iter().all(|m| *m >= 1.0);
+            let need = &needs[i * words..(i + 1) * words];
+            let direct = i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.unmasked;
             if direct {
                 // The common case, and the bit-for-bit promise: the first
                 // full-weight layer is the clip's own pose.
-                clip.sample_into(t, &mut cursors[0], local);
+                layer.sample_needed(t, need, kept, &mut cursors[0], local);
                 roots.push(self.take_root(layer, cycle, local));
                 continue;
             }
             if i == 0 {
                 local.copy_from(self.skeleton().rest());
             }
-            clip.sample_into(t, &mut cursors[i], scratch);
+            if layer.root.is_none() && need.iter().all(|w| *w == 0) {
+                // Weight 0, or hidden everywhere: nothing to sample.
+                roots.push(None);
+                continue;
+            }
+            layer.sample_needed(t, need, kept, &mut cursors[i], scratch);
             roots.push(self.take_root(layer, cycle, scratch));
-            layer.apply(scratch, weights[i], local);
+            layer.apply(scratch, weights[i], need, local);
         }
         if self.root.is_some() {
             self.layer_root_motion(weights, sampler);
@@ -209,28 +223,57 @@ impl<C: ClipSource> Motion<C> {
     }
 }
 
+impl<C: ClipSource> super::Layer<C> {
+    /// Samples the layer's clip at clip time `t` into `pose` (its clip's
+    /// joints) for the output joints in `need` and its root-motion joint;
+    /// the whole clip when that is every joint it has. `kept` is scratch.
+    fn sample_needed(&self, t: f32, need: &[u64], kept: &mut Vec<u64>, cursor: &mut Cursor, pose: &mut Pose) {
+        let clip = self.clip.clip();
+        if self.reach.whole && *need == *self.reach.reaches {
+            clip.sample_into(t, cursor, pose);
+            return;
+        }
+        // The needed joints in the clip's own numbering, so each track's
+        // test is one bit.
+        kept.clear();
+        kept.resize(coverage::words(clip.joint_count()), 0);
+        coverage::for_each(need, |j| coverage::insert(kept, self.map[j] as usize));
+        if let Some(root) = self.root {
+            coverage::insert(kept, root.joint);
+        }
+        clip.sample_joints_into(t, cursor, pose, |j| coverage::has(kept, j as usize));
+    }
+}
+
 impl<C> super::Layer<C> {
     /// Layers this layer's `pose` (in its clip's joints) onto `out` (in the
-    /// output skeleton's) at layer weight `weight`.
-    fn apply(&self, pose: &Pose, weight: f32, out: &mut Pose) {
-        for (j, (&source, &mask)) in self.map.iter().zip(&self.mask).enumerate() {
-            let w = weight * mask;
-            if source == UNMAPPED || w <= 0.0 {
-                continue;
-            }
-            let layer = joint(pose, source as usize);
-            let mut joint_now = joint(out, j);
-            match &self.reference {
-                None => layering::blend(&mut joint_now, &layer, w),
-                Some(reference) => layering::add(&mut joint_now, &layer, &joint(reference, source as usize), w),
-            }
-            out.translations[j] = joint_now.t;
-            out.rotations[j] = joint_now.q;
-            out.scales[j] = joint_now.s;
+    /// output skeleton's) at layer weight `weight`, for the output joints in
+    /// `need` (all mapped, with a positive mask).
+    fn apply(&self, pose: &Pose, weight: f32, need: &[u64], out: &mut Pose) {
+        let source = |j: usize| {
+            debug_assert_ne!(self.map[j], UNMAPPED, "a needed joint is mapped");
+            self.map[j] as usize
+        };
+        match &self.reference {
+            None => coverage::for_each(need, |j| {
+                let mut now = joint(out, j);
+                layering::blend(&mut now, &joint(pose, source(j)), weight * self.mask[j]);
+                set_joint(out, j, now);
+            }),
+            Some(reference) => coverage::for_each(need, |j| {
+                let mut now = joint(out, j);
+                let s = source(j);
+                layering::add(&mut now, &joint(pose, s), &joint(reference, s), weight * self.mask[j]);
+                set_joint(out, j, now);
+            }),
         }
     }
 }
 
 fn joint(pose: &Pose, j: usize) -> Joint {
     Joint { t: pose.translations[j], q: pose.rotations[j], s: pose.scales[j] }
+}
+
+fn set_joint(pose: &mut Pose, j: usize, joint: Joint) {
+    (pose.translations[j], pose.rotations[j], pose.scales[j]) = (joint.t, joint.q, joint.s);
 }
