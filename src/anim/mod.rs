@@ -16,13 +16,14 @@
 //! `time` request time → clip time (playback, ease, the seams);
 //! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
 //! hierarchy and model space; `clip` the clip and the sampling kernel; `motion` composition (SPEC §6): layers,
-//! masks, sync groups, over clips.
+//! masks, sync groups, over clips; `ik` inverse kinematics (SPEC §7) on local poses.
 
 mod arc;
 mod clip;
 mod compile;
 mod curve;
 mod error;
+pub mod ik;
 pub mod motion;
 pub mod quat;
 mod skeleton;

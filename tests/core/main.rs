@@ -6,7 +6,9 @@
 //! must hold for any keys; `validation` pins each error code and path;
 //! `alloc` proves the hot path allocation-free; `budget` holds builds to
 //! their work budget and clips to their byte estimate; `cli` runs the real binary;
-//! `import` checks the importers against real third-party files.
+//! `import` checks the importers against real third-party files; `ik`
+//! holds the IK solvers to SPEC §7 (and the chain to seed 003's own
+//! algorithm).
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
 //! per binary. It counts per thread, so tests running in parallel do not
@@ -19,6 +21,7 @@ mod budget;
 mod cli;
 mod composition_reference;
 mod crossfade;
+mod ik;
 mod import;
 mod lecture;
 mod motion;

@@ -1,0 +1,139 @@
+//! Inverse kinematics (SPEC §7): "specify where the character should go,
+//! then deduce joint motion" (seed 003).
+//!
+//! Constraints ([`IkConstraint`]: `two_bone`, `aim`, `chain`) are checked
+//! once by [`IkConstraint::validate`]; an [`IkSolver`] then applies a list
+//! of them in order to a local pose, with targets in model space. Only
+//! rotations change; positions are model positions, scales included
+//! (SPEC §2.8's composition). Each constraint's solved rotations are
+//! `slerp`ed from the unsolved ones by its weight, and each writes an
+//! [`IkReport`] (`residual`: the end joint's distance to its target, the
+//! aim angle, or `√E`).
+//!
+//! Solves are deterministic and, once an [`IkSolver`] has seen a list of
+//! the same shape, allocate nothing. A stream keeps one solver and asks for
+//! [`ChainStart::Warm`] so each chain starts from the previous frame's
+//! angles.
+//!
+//! Module map: `constraint` the constraint types and their validation;
+//! `error` why one is refused; `model` model space along one ancestry and
+//! the shared rotation tools; `two_bone`, `aim`, `chain` the three solvers;
+//! `linalg` the chain's small `f64` systems.
+
+mod aim;
+mod chain;
+mod constraint;
+mod error;
+mod linalg;
+mod model;
+mod two_bone;
+
+use glam::Quat;
+
+pub use self::aim::AIM_TOLERANCE;
+pub use self::chain::DEFAULT_RELATIVE_TOLERANCE;
+pub use self::constraint::{
+    Aim, Chain, DEFAULT_MAX_ITERATIONS, Effector, IkConstraint, IkKind, IkLimits, JointLimits, TwoBone,
+    validate_constraints,
+};
+pub use self::error::{IkError, IkErrorKind};
+pub use self::two_bone::TWO_BONE_TOLERANCE;
+
+use self::chain::{ChainSolver, WarmChain};
+use self::model::Xform;
+use super::{Pose, Skeleton};
+
+/// How one constraint's solve went (SPEC §7's `{kind, residual,
+/// iterations, converged}`), measured on the pose written, weight
+/// included. Analytic solvers report 0 iterations; `two_bone` converges
+/// when the end meets the target within [`TWO_BONE_TOLERANCE`]·(l1 + l2),
+/// `aim` within [`AIM_TOLERANCE`] rad, `chain` when `√E ≤ tolerance`
+/// before weighting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IkReport {
+    pub kind: IkKind,
+    pub residual: f32,
+    pub iterations: u32,
+    pub converged: bool,
+}
+
+/// Where chain solves start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ChainStart {
+    /// From the animated pose (`a = 0`): the same request, the same answer.
+    #[default]
+    Cold,
+    /// From this solver's last angles for the chain at the same place in
+    /// the list, when it moved the same joints (else cold).
+    Warm,
+}
+
+/// Applies constraint lists to poses, keeping its buffers (and each
+/// chain's last angles) between calls.
+#[derive(Debug, Clone, Default)]
+pub struct IkSolver {
+    path: Vec<usize>,
+    model: Vec<Xform>,
+    chain: ChainSolver,
+    /// Per constraint index: a chain's last angles (empty for other kinds).
+    warm: Vec<WarmChain>,
+}
+
+impl IkSolver {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Applies `constraints` in order to `local` and writes one report per
+    /// constraint into `reports` (cleared first).
+    ///
+    /// # Panics
+    /// If a constraint names a joint `skeleton` does not have: validate
+    /// constraints against the skeleton first ([`validate_constraints`]).
+    pub fn solve(
+        &mut self,
+        skeleton: &Skeleton,
+        local: &mut Pose,
+        constraints: &[IkConstraint],
+        start: ChainStart,
+        reports: &mut Vec<IkReport>,
+    ) {
+        if self.warm.len() < constraints.len() {
+            self.warm.resize_with(constraints.len(), WarmChain::default);
+        }
+        reports.clear();
+        for (constraint, warm) in constraints.iter().zip(&mut self.warm) {
+            let report = match constraint {
+                IkConstraint::TwoBone(c) => two_bone::solve(c, skeleton, local, &mut self.path, &mut self.model),
+                IkConstraint::Aim(c) => aim::solve(c, skeleton, local, &mut self.path, &mut self.model),
+                IkConstraint::Chain(c) => self.chain.solve(c, skeleton, local, warm, start == ChainStart::Warm),
+            };
+            if report.kind != IkKind::Chain {
+                warm.joints.clear();
+                warm.angles.clear();
+            }
+            reports.push(report);
+        }
+    }
+
+    /// The angles the last solve found for the chain at `index` in its
+    /// list, with the joints they belong to (three angles per joint, in
+    /// radians, before weighting); `None` if that was not a chain or it
+    /// moved no joint.
+    pub fn chain_angles(&self, index: usize) -> Option<(&[usize], &[f32])> {
+        let warm = self.warm.get(index)?;
+        (!warm.joints.is_empty() || !warm.angles.is_empty()).then_some((&warm.joints, &warm.angles))
+    }
+}
+
+/// `slerp(before, solved, weight)`, exact at the ends.
+#[inline]
+fn blend(before: Quat, solved: Quat, weight: f32) -> Quat {
+    if weight >= 1.0 {
+        solved
+    } else if weight <= 0.0 {
+        before
+    } else {
+        before.slerp(solved, weight).normalize()
+    }
+}
