@@ -251,4 +251,37 @@ mod tests {
         assert!(checked_url("https://127.0.0.1", false).is_err());
         assert!(checked_url("not a url", true).is_err());
     }
+
+    fn stream_options(mode: Mode, clip: ClipChoice) -> Options {
+        Options {
+            mode,
+            http: String::new(),
+            grpc: String::new(),
+            allow_remote: false,
+            concurrency: 1,
+            connections: 0,
+            duration: Duration::from_secs(1),
+            requests: None,
+            rate: None,
+            clip,
+            fps: 60,
+            shared: false,
+            motion: Some(MotionChoice::ThreeLayers),
+            ws_protobuf: false,
+            ramp: None,
+            server_pid: None,
+        }
+    }
+
+    #[test]
+    fn a_motion_is_for_streams_of_generated_clips() {
+        let generated = ClipChoice::Generate { joints: 64 };
+        for mode in [Mode::GrpcStream, Mode::WsStream] {
+            assert!(check_options(&stream_options(mode, generated.clone())).is_ok(), "{mode:?}");
+        }
+        let err = check_options(&stream_options(Mode::RestPose, generated)).unwrap_err().to_string();
+        assert!(err.contains("stream modes"), "{err}");
+        let err = check_options(&stream_options(Mode::WsStream, ClipChoice::Existing("x".into()))).unwrap_err();
+        assert!(err.to_string().contains("--clip"), "{err}");
+    }
 }
