@@ -6,7 +6,7 @@ use std::time::Duration;
 use clap::{Args, ValueEnum};
 
 use crate::load::ramp::RampPlan;
-use crate::load::{ClipChoice, Mode, Options};
+use crate::load::{ClipChoice, Mode, MotionChoice, Options};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ModeArg {
@@ -20,8 +20,14 @@ enum ModeArg {
     RestHealth,
     /// gRPC `StreamFrames` streams.
     GrpcStream,
-    /// WebSocket streams (`/v1/clips/{id}/stream`).
+    /// WebSocket streams (`/v1/clips/{id}/stream`; `/v1/stream` with --motion).
     WsStream,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum MotionArg {
+    /// Walk and run (weights 1 and 0.3, one sync group) under an upper-body layer masked to the chain's upper half.
+    ThreeLayers,
 }
 
 #[derive(Debug, Args)]
@@ -63,6 +69,9 @@ pub struct LoadArgs {
     /// Streams: frames per second.
     #[arg(long, default_value_t = 60)]
     fps: u32,
+    /// Streams: play this motion of generated clips (--joints each) instead of one clip.
+    #[arg(long, value_enum, conflicts_with = "clip")]
+    motion: Option<MotionArg>,
     /// Streams: viewers of one playback instead of independent playbacks.
     #[arg(long)]
     shared: bool,
@@ -119,6 +128,9 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         },
         fps: args.fps,
         shared: args.shared,
+        motion: args.motion.map(|m| match m {
+            MotionArg::ThreeLayers => MotionChoice::ThreeLayers,
+        }),
         ws_protobuf: args.protobuf,
         ramp: args.ramp.then_some(RampPlan {
             start: args.concurrency,

@@ -8,19 +8,21 @@
 //! scheduled time so a stalled server cannot hide its queue — no coordinated
 //! omission); `grpc-stream` and `ws-stream` (N streams at F fps, independent
 //! playbacks or `--shared` viewers of one, measuring per-frame lateness
-//! against the server's tick grid after a `Ping` clock sync). `--ramp` steps
+//! against the server's tick grid after a `Ping` clock sync; with
+//! `--motion` every stream plays a composed motion instead of the clip). `--ramp` steps
 //! the load up until a p99 target breaks and reports the knee.
 //!
 //! Every run is bounded in count and time, and only loopback targets are
 //! accepted unless the caller says `allow_remote`: a load generator pointed
 //! at someone else's server by a typo is an attack.
 //!
-//! `histogram`, `clock`, `lateness` and `ramp` are pure (unit-tested);
+//! `histogram`, `clock`, `lateness`, `ramp` and `motion` are pure (unit-tested);
 //! `unary` and `streams` drive the network; `procstat` reads `/proc`.
 
 mod clock;
 mod histogram;
 mod lateness;
+mod motion;
 mod procstat;
 pub mod ramp;
 mod report;
@@ -33,6 +35,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use reqwest::Url;
 
+pub use motion::MotionChoice;
 pub use report::Report;
 
 /// What to load.
@@ -99,6 +102,8 @@ pub struct Options {
     pub clip: ClipChoice,
     pub fps: u32,
     pub shared: bool,
+    /// Streams: play this motion of generated clips instead of the clip.
+    pub motion: Option<MotionChoice>,
     /// WebSocket frames as protobuf instead of JSON.
     pub ws_protobuf: bool,
     pub ramp: Option<ramp::RampPlan>,
@@ -117,12 +122,16 @@ pub async fn run(opts: Options) -> anyhow::Result<Report> {
     let http = checked_url(&opts.http, opts.allow_remote).context("--http")?;
     let grpc = checked_url(&opts.grpc, opts.allow_remote).context("--grpc")?;
     let server_pid = opts.server_pid.or_else(|| local_listener(&http));
-    let clip_id = match (&opts.clip, opts.mode) {
-        (_, Mode::GrpcPing | Mode::RestHealth) => String::new(),
-        (ClipChoice::Existing(id), _) => id.clone(),
-        (ClipChoice::Generate { joints }, _) => setup::upload_chain(&http, *joints).await?,
+    let (clip_id, motion) = match (&opts.clip, opts.mode, opts.motion) {
+        (_, Mode::GrpcPing | Mode::RestHealth, _) => (String::new(), None),
+        (ClipChoice::Generate { joints }, _, Some(choice)) => {
+            let clips = setup::upload_layer_clips(&http, *joints).await?;
+            (clips.walk.clone(), Some(motion::Playable::new(choice, &clips, *joints)))
+        }
+        (ClipChoice::Existing(id), _, _) => (id.clone(), None),
+        (ClipChoice::Generate { joints }, _, None) => (setup::upload_chain(&http, *joints).await?, None),
     };
-    let env = Env { http, grpc, clip_id, server_pid };
+    let env = Env { http, grpc, clip_id, motion, server_pid };
     let Some(plan) = opts.ramp else {
         return run_once(&opts, &env, opts.concurrency).await;
     };
@@ -143,7 +152,9 @@ pub async fn run(opts: Options) -> anyhow::Result<Report> {
 pub(crate) struct Env {
     pub http: Url,
     pub grpc: Url,
+    /// The first layer's clip when streams play a motion.
     pub clip_id: String,
+    pub motion: Option<motion::Playable>,
     pub server_pid: Option<u32>,
 }
 
@@ -154,6 +165,7 @@ async fn run_once(opts: &Options, env: &Env, n: usize) -> anyhow::Result<Report>
         ClipChoice::Generate { joints } => Some(joints),
         ClipChoice::Existing(_) => None,
     };
+    report.motion = opts.motion.map(MotionChoice::as_str);
     report.loadavg = std::fs::read_to_string("/proc/loadavg").ok().map(|s| s.trim().to_owned());
     Ok(report)
 }
@@ -180,6 +192,12 @@ fn check_options(o: &Options) -> anyhow::Result<()> {
         && !(1..=4096).contains(&joints)
     {
         bail!("--joints must be 1..=4096");
+    }
+    if o.motion.is_some() && !o.mode.is_stream() {
+        bail!("--motion is for the stream modes (grpc-stream, ws-stream)");
+    }
+    if o.motion.is_some() && matches!(o.clip, ClipChoice::Existing(_)) {
+        bail!("--motion plays generated clips: it cannot be given with --clip");
     }
     if let Some(p) = &o.ramp
         && !(p.start >= 1 && p.start <= p.max && p.max <= MAX_CONCURRENCY && p.factor >= 1.0)
@@ -232,5 +250,38 @@ mod tests {
         }
         assert!(checked_url("https://127.0.0.1", false).is_err());
         assert!(checked_url("not a url", true).is_err());
+    }
+
+    fn stream_options(mode: Mode, clip: ClipChoice) -> Options {
+        Options {
+            mode,
+            http: String::new(),
+            grpc: String::new(),
+            allow_remote: false,
+            concurrency: 1,
+            connections: 0,
+            duration: Duration::from_secs(1),
+            requests: None,
+            rate: None,
+            clip,
+            fps: 60,
+            shared: false,
+            motion: Some(MotionChoice::ThreeLayers),
+            ws_protobuf: false,
+            ramp: None,
+            server_pid: None,
+        }
+    }
+
+    #[test]
+    fn a_motion_is_for_streams_of_generated_clips() {
+        let generated = ClipChoice::Generate { joints: 64 };
+        for mode in [Mode::GrpcStream, Mode::WsStream] {
+            assert!(check_options(&stream_options(mode, generated.clone())).is_ok(), "{mode:?}");
+        }
+        let err = check_options(&stream_options(Mode::RestPose, generated)).unwrap_err().to_string();
+        assert!(err.contains("stream modes"), "{err}");
+        let err = check_options(&stream_options(Mode::WsStream, ClipChoice::Existing("x".into()))).unwrap_err();
+        assert!(err.to_string().contains("--clip"), "{err}");
     }
 }

@@ -17,7 +17,10 @@ pub struct Report {
     pub started_unix: f64,
     pub http: String,
     pub grpc: String,
+    /// The clip streamed, or the first layer's clip of the motion.
     pub clip_id: String,
+    /// Streams: the motion played instead of the clip (`three-layers`).
+    pub motion: Option<&'static str>,
     pub joints: Option<usize>,
     /// Unary workers, or streams.
     pub concurrency: usize,
@@ -126,7 +129,11 @@ impl Report {
     /// The human summary.
     pub(crate) fn human(&self) -> String {
         let mut s = String::new();
-        let _ = writeln!(s, "mode {}  clip {}  http {}  grpc {}", self.mode, self.clip_id, self.http, self.grpc);
+        let playing = match self.motion {
+            Some(m) => format!("motion {m} (first clip {})", self.clip_id),
+            None => format!("clip {}", self.clip_id),
+        };
+        let _ = writeln!(s, "mode {}  {playing}  http {}  grpc {}", self.mode, self.http, self.grpc);
         let rate = self.rate.map(|r| format!("  open loop at {r:.0}/s")).unwrap_or_default();
         let _ = writeln!(
             s,

@@ -7,25 +7,58 @@ use serde_json::{Value, json};
 use tonic::transport::Channel;
 
 use super::clock::{ClockSync, PingSample, unix_now_ns};
+use super::motion::{LayerClips, clip_docs};
 use crate::wire::proto::pb;
 use crate::wire::proto::pb::animation_client::AnimationClient;
 
+/// How a generated chain clip moves: `joints` joints `j0`..`j{n-1}`, each
+/// the parent of the next, with a 31-key Catmull-Rom rotation track each
+/// (joint `i`'s angle at key `k` is `amplitude · sin(k / period + i)`) and a
+/// root translation track moving `stride` per second, `duration` s long,
+/// looping. Clips of one size differ only in these numbers, so the clip and
+/// motion runs stream the same joints in frames of the same size.
+#[derive(Debug, Clone)]
+pub struct Chain {
+    pub name: String,
+    pub joints: usize,
+    pub duration: f64,
+    pub amplitude: f64,
+    /// Keys per radian of the swing.
+    pub period: f64,
+    pub stride: f64,
+}
+
+/// Keys per track of a chain clip.
+const CHAIN_KEYS: u32 = 31;
+
 /// The standard load clip (the one `scripts/bench_rest.sh` uses): a chain of
-/// `joints` joints, each with a 31-key Catmull-Rom rotation track, the root
-/// also a translation track, 3 s long, looping.
+/// `joints` joints, 3 s long (see [`Chain`]).
 pub fn chain_clip(joints: usize) -> Value {
-    let skeleton: Vec<Value> = (0..joints)
+    chain(&Chain {
+        name: format!("load-chain-{joints}"),
+        joints,
+        duration: 3.0,
+        amplitude: 0.3,
+        period: 5.0,
+        stride: 1.0,
+    })
+}
+
+/// The clip document of a [`Chain`].
+pub fn chain(c: &Chain) -> Value {
+    let skeleton: Vec<Value> = (0..c.joints)
         .map(|i| {
             let parent = (i > 0).then(|| format!("j{}", i - 1));
             json!({"name": format!("j{i}"), "parent": parent, "rest": {"translation": [0.0, 0.1, 0.0]}})
         })
         .collect();
-    let times: Vec<f64> = (0..31).map(|k| f64::from(k) / 10.0).collect();
-    let mut tracks: Vec<Value> = (0..joints)
+    let last = f64::from(CHAIN_KEYS - 1);
+    let times: Vec<f64> = (0..CHAIN_KEYS).map(|k| f64::from(k) * c.duration / last).collect();
+    let mut tracks: Vec<Value> = (0..c.joints)
         .map(|i| {
-            let values: Vec<[f64; 4]> = (0..31)
+            let values: Vec<[f64; 4]> = (0..CHAIN_KEYS)
                 .map(|k| {
-                    let a = 0.3 * (f64::from(k) / 5.0 + i as f64).sin();
+                    let a = c.amplitude * (f64::from(k) / c.period + i as f64).sin();
                     [0.0, 0.0, (a / 2.0).sin(), (a / 2.0).cos()]
                 })
                 .collect();
@@ -33,19 +66,33 @@ pub fn chain_clip(joints: usize) -> Value {
                    "times": times, "values": values})
         })
         .collect();
-    let path: Vec<[f64; 3]> = (0..31).map(|k| [f64::from(k) / 10.0, 0.0, 0.0]).collect();
+    let path: Vec<[f64; 3]> = times.iter().map(|t| [t * c.stride, 0.0, 0.0]).collect();
     tracks.push(json!({"joint": "j0", "channel": "translation", "interpolation": "catmull_rom",
                        "times": times, "values": path}));
-    json!({"name": format!("load-chain-{joints}"), "skeleton": {"joints": skeleton}, "tracks": tracks,
-           "playback": "loop"})
+    json!({"name": c.name, "skeleton": {"joints": skeleton}, "tracks": tracks, "playback": "loop"})
 }
 
 /// Uploads [`chain_clip`] and returns its id.
 pub async fn upload_chain(http: &Url, joints: usize) -> anyhow::Result<String> {
+    upload_clip(http, &chain_clip(joints)).await
+}
+
+/// Uploads the clips of the three-layer motion (`motion::clip_docs`).
+pub async fn upload_layer_clips(http: &Url, joints: usize) -> anyhow::Result<LayerClips> {
+    let [walk, run, upper] = clip_docs(joints);
+    Ok(LayerClips {
+        walk: upload_clip(http, &walk).await?,
+        run: upload_clip(http, &run).await?,
+        upper: upload_clip(http, &upper).await?,
+    })
+}
+
+/// Uploads a clip document and returns its id.
+pub async fn upload_clip(http: &Url, clip: &Value) -> anyhow::Result<String> {
     let url = http.join("/v1/clips")?;
     let resp = reqwest::Client::new()
         .post(url.clone())
-        .json(&chain_clip(joints))
+        .json(clip)
         .send()
         .await
         .with_context(|| format!("uploading the load clip to {url}"))?;

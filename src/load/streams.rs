@@ -11,6 +11,11 @@
 //! duration. Frames received outside the window are not recorded. A stream
 //! that ends or fails inside the run is reopened (a `reconnect`).
 //!
+//! With a motion, gRPC streams send it in `StreamRequest.motion`; WebSocket
+//! streams open `GET /v1/stream` and send it in the `open` message, and
+//! read the grid phase from the server's `opened` answer (the upgrade's
+//! headers are sent before the motion is known).
+//!
 //! Clients decode only the frame header (`seq`, `sent_at_unix_nanos`,
 //! `dropped`): the gRPC side through a codec for a three-field message
 //! (protobuf skips the pose), the WebSocket side by skipping the pose while
@@ -32,6 +37,7 @@ use tonic::transport::Channel;
 use super::clock::{ClockSync, unix_now_ns};
 use super::histogram::Latency;
 use super::lateness::StreamTracker;
+use super::motion::Playable;
 use super::report::{Report, ServerUsage, StreamStats};
 use super::{Env, Mode, Options, procstat, setup};
 use crate::stream::PHASE_HEADER;
@@ -132,6 +138,7 @@ struct Spec {
     ws_base: String,
     ws_protobuf: bool,
     clip_id: String,
+    motion: Option<Arc<Playable>>,
     fps: u32,
     clock: ClockSync,
     window: Arc<Window>,
@@ -144,10 +151,30 @@ enum Got {
     End(Option<String>),
 }
 
+/// The server's first message on `GET /v1/stream`: its grid phase, or
+/// why it refused the motion.
+#[derive(Deserialize)]
+struct OpenAnswer {
+    opened: Option<Opened>,
+    error: Option<OpenProblem>,
+}
+
+#[derive(Deserialize)]
+struct Opened {
+    grid_phase_ms: u32,
+}
+
+#[derive(Deserialize)]
+struct OpenProblem {
+    code: String,
+}
+
+type WebSocket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
 /// An open stream of either transport.
 enum Open {
     Grpc(Box<tonic::Streaming<FrameHead>>),
-    Ws(Box<tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>>, bool),
+    Ws(Box<WebSocket>, bool),
 }
 
 impl Open {
@@ -191,38 +218,51 @@ impl Spec {
     /// Opens a stream; with it, the grid phase the server announced.
     async fn open(&self, channel: &Channel, start_time: f64) -> Result<(Open, Option<u32>), String> {
         match self.mode {
-            Mode::GrpcStream => {
-                let mut grpc = tonic::client::Grpc::new(channel.clone());
-                grpc.ready().await.map_err(|_| "connect".to_string())?;
-                let req = pb::StreamRequest {
-                    clip_id: self.clip_id.clone(),
-                    fps: self.fps,
-                    start_time: Some(start_time),
-                    ..Default::default()
-                };
-                let path = PathAndQuery::from_static("/inbetween.v1.Animation/StreamFrames");
-                let codec = tonic_prost::ProstCodec::<pb::StreamRequest, FrameHead>::default();
-                let resp = grpc
-                    .server_streaming(tonic::Request::new(req), path, codec)
-                    .await
-                    .map_err(|s| format!("grpc:{:?}", s.code()))?;
-                let phase = resp.metadata().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
-                Ok((Open::Grpc(Box::new(resp.into_inner())), phase))
-            }
+            Mode::GrpcStream => self.open_grpc(channel, start_time).await,
             _ => {
                 let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
-                let url = format!(
-                    "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
-                    self.ws_base, self.clip_id, self.fps
-                );
-                let (ws, resp) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
+                let url = match self.motion {
+                    None => format!(
+                        "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
+                        self.ws_base, self.clip_id, self.fps
+                    ),
+                    Some(_) => format!("{}v1/stream", self.ws_base),
+                };
+                let (mut ws, resp) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
                     tokio_tungstenite::tungstenite::Error::Http(r) => format!("http:{}", r.status().as_u16()),
                     _ => "connect".to_string(),
                 })?;
-                let phase = resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
+                let phase = match &self.motion {
+                    None => resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok()),
+                    Some(motion) => {
+                        let open = serde_json::json!({"op": "open", "motion": motion.json, "fps": self.fps,
+                                                      "start": start_time, "encoding": encoding});
+                        Some(open_motion(&mut ws, open.to_string()).await?)
+                    }
+                };
                 Ok((Open::Ws(Box::new(ws), self.ws_protobuf), phase))
             }
         }
+    }
+
+    async fn open_grpc(&self, channel: &Channel, start_time: f64) -> Result<(Open, Option<u32>), String> {
+        let mut grpc = tonic::client::Grpc::new(channel.clone());
+        grpc.ready().await.map_err(|_| "connect".to_string())?;
+        let req = pb::StreamRequest {
+            clip_id: if self.motion.is_some() { String::new() } else { self.clip_id.clone() },
+            motion: self.motion.as_ref().map(|m| m.pb.clone()),
+            fps: self.fps,
+            start_time: Some(start_time),
+            ..Default::default()
+        };
+        let path = PathAndQuery::from_static("/inbetween.v1.Animation/StreamFrames");
+        let codec = tonic_prost::ProstCodec::<pb::StreamRequest, FrameHead>::default();
+        let resp = grpc
+            .server_streaming(tonic::Request::new(req), path, codec)
+            .await
+            .map_err(|s| format!("grpc:{:?}", s.code()))?;
+        let phase = resp.metadata().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
+        Ok((Open::Grpc(Box::new(resp.into_inner())), phase))
     }
 
     /// One stream until `stop`: open, receive, reopen on failure.
@@ -315,6 +355,31 @@ impl Spec {
     }
 }
 
+/// Sends the `open` message of a motion stream and returns the grid phase
+/// of the server's `opened` answer; a refusal is an error kind
+/// (`open:clip_not_found`, `closed:1013`).
+async fn open_motion(ws: &mut WebSocket, open: String) -> Result<u32, String> {
+    ws.send(Message::Text(open.into())).await.map_err(|_| "ws_error".to_string())?;
+    loop {
+        match ws.next().await {
+            Some(Ok(Message::Text(t))) => {
+                return match serde_json::from_str::<OpenAnswer>(&t) {
+                    Ok(OpenAnswer { opened: Some(o), .. }) => Ok(o.grid_phase_ms),
+                    Ok(OpenAnswer { error: Some(e), .. }) => Err(format!("open:{}", e.code)),
+                    _ => Err("bad_opened".into()),
+                };
+            }
+            Some(Ok(Message::Ping(_) | Message::Pong(_))) => continue,
+            Some(Ok(Message::Close(c))) => {
+                return Err(c.map_or("closed".into(), |c| format!("closed:{}", u16::from(c.code))));
+            }
+            Some(Ok(_)) => return Err("unexpected_message".into()),
+            Some(Err(_)) => return Err("ws_error".into()),
+            None => return Err("ended".into()),
+        }
+    }
+}
+
 /// Resolves once the run is over (the guard `wait_for` returns is not `Send`).
 async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|s| *s).await;
@@ -380,6 +445,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
         http: env.http.to_string(),
         grpc: env.grpc.to_string(),
         clip_id: env.clip_id.clone(),
+        motion: None,
         joints: None,
         concurrency: n,
         connections,
@@ -409,6 +475,7 @@ impl Spec {
             ws_base: ws_base.to_string(),
             ws_protobuf: opts.ws_protobuf,
             clip_id: env.clip_id.clone(),
+            motion: env.motion.clone().map(Arc::new),
             fps: opts.fps,
             clock,
             window,

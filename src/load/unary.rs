@@ -142,6 +142,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
         http: env.http.to_string(),
         grpc: env.grpc.to_string(),
         clip_id: env.clip_id.clone(),
+        motion: None,
         joints: None,
         concurrency: workers,
         connections,

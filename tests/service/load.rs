@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use inbetween::load::{self, ClipChoice, Mode, Options, Report, ramp::RampPlan};
+use inbetween::load::{self, ClipChoice, Mode, MotionChoice, Options, Report, ramp::RampPlan};
 
 use crate::common::TestApp;
 
@@ -35,6 +35,7 @@ fn options(app: &TestApp, mode: Mode) -> Options {
         clip: ClipChoice::Generate { joints: 20 },
         fps: 30,
         shared: false,
+        motion: None,
         ws_protobuf: false,
         ramp: None,
         server_pid: None,
@@ -96,9 +97,12 @@ async fn a_request_budget_is_spent_exactly_and_an_open_loop_keeps_its_rate() {
     assert!(r.ok >= 50, "{} of 100 sent", r.ok);
 }
 
-async fn check_stream(app: &TestApp, mode: Mode, shared: bool, ws_protobuf: bool) {
-    let r = run(Options { shared, ws_protobuf, ..options(app, mode) }).await;
+async fn check_stream(opts: Options) -> Report {
+    let (mode, shared) = (opts.mode, opts.shared);
+    let motion = opts.motion.map(MotionChoice::as_str);
+    let r = run(opts).await;
     check_common(&r, mode.as_str());
+    assert_eq!(r.motion, motion);
     let s = r.streams.as_ref().expect("stream reports");
     assert_eq!((s.streams, s.opened, s.fps, s.shared), (4, 4, 30, shared));
     // 30 fps for a second: ≈ 30 ticks per stream, each a frame or a counted
@@ -116,15 +120,43 @@ async fn check_stream(app: &TestApp, mode: Mode, shared: bool, ws_protobuf: bool
     assert!(s.clock.rtt_ns > 0);
     assert_eq!(s.dropped, s.gaps, "every missing tick is one the server counted");
     assert!(r.server.as_ref().unwrap().rss_per_stream_bytes.is_some());
+    r
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stream_modes_deliver_the_asked_rate_and_measure_lateness() {
     let app = spawn_app().await;
-    check_stream(&app, Mode::GrpcStream, false, false).await;
-    check_stream(&app, Mode::GrpcStream, true, false).await;
-    check_stream(&app, Mode::WsStream, false, false).await;
-    check_stream(&app, Mode::WsStream, true, true).await;
+    for (mode, shared, ws_protobuf) in [
+        (Mode::GrpcStream, false, false),
+        (Mode::GrpcStream, true, false),
+        (Mode::WsStream, false, false),
+        (Mode::WsStream, true, true),
+    ] {
+        let r = check_stream(Options { shared, ws_protobuf, ..options(&app, mode) }).await;
+        assert_eq!(r.motion, None);
+    }
+}
+
+/// Streams of the three-layer motion: the load uploads its three clips and
+/// every stream opens with the motion (the WebSocket on `/v1/stream` with
+/// its phase from the `opened` answer, gRPC in `StreamRequest.motion`,
+/// whose `clip_id` is empty: a stream that did not play the motion would
+/// have been refused); frames come at the rate and the report says which
+/// motion played.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn motion_streams_play_three_layers_at_the_asked_rate() {
+    let app = spawn_app().await;
+    for (mode, shared, ws_protobuf) in
+        [(Mode::GrpcStream, false, false), (Mode::WsStream, false, false), (Mode::WsStream, true, true)]
+    {
+        let opts = Options { motion: Some(MotionChoice::ThreeLayers), ..options(&app, mode) };
+        check_stream(Options { shared, ws_protobuf, ..opts }).await;
+    }
+    let listed = app.list_all(100, None).await;
+    let names: Vec<&str> = listed.iter().filter_map(|c| c["name"].as_str()).collect();
+    for name in ["load-chain-20", "load-run-20", "load-upper-20"] {
+        assert_eq!(names.iter().filter(|n| **n == name).count(), 3, "{name} uploaded once per run: {names:?}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
