@@ -72,7 +72,8 @@ fn numbers(text: &str) -> Vec<f64> {
 
 #[tokio::test]
 async fn watch_streams_a_motion_file_by_clip_names_and_sends_a_crossfade_at_its_frame() {
-    let server = ServerProcess::serve().start().await;
+    let dir = tempfile::tempdir().unwrap();
+    let server = ServerProcess::serve().data_dir(dir.path()).start().await;
     let http = reqwest::Client::new();
     let fox = std::fs::read("examples/gltf/Fox/Fox.glb").unwrap();
     let imported: Value =
