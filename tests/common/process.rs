@@ -30,6 +30,51 @@ pub struct ServerProcess {
     pub ready_after: Duration,
     /// Holds the log file when the test did not choose one.
     _log_dir: Option<tempfile::TempDir>,
+    /// Its place among the binary's servers (see [`ProcessBuilder::alone`]).
+    _slot: Slot,
+}
+
+/// The servers the test binary runs now, and whether one of them runs alone.
+struct Machine {
+    live: usize,
+    alone: bool,
+}
+
+static MACHINE: std::sync::Mutex<Machine> = std::sync::Mutex::new(Machine { live: 0, alone: false });
+
+/// A server's place on the machine, given back when dropped (also when a
+/// start fails).
+struct Slot {
+    alone: bool,
+}
+
+impl Slot {
+    /// Waits until this binary may start a server: an `alone` one when no
+    /// other runs, any other while none runs alone.
+    async fn take(alone: bool) -> Slot {
+        loop {
+            {
+                let mut m = MACHINE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                let free = if alone { m.live == 0 } else { !m.alone };
+                if free {
+                    m.live += 1;
+                    m.alone |= alone;
+                    return Slot { alone };
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        let mut m = MACHINE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        m.live -= 1;
+        if self.alone {
+            m.alone = false;
+        }
+    }
 }
 
 /// What to run: `inbetween serve --listen 127.0.0.1:0 --grpc-listen 127.0.0.1:0`
@@ -40,9 +85,19 @@ pub struct ProcessBuilder {
     command: Command,
     name: String,
     log: Option<PathBuf>,
+    alone: bool,
 }
 
 impl ProcessBuilder {
+    /// Runs this server alone: it starts once no other server of this test
+    /// binary runs, and none starts until it is dropped. The attacks measure
+    /// probe latencies against budgets, which a neighbour's load on a 2-core
+    /// machine would decide instead of the server.
+    pub fn alone(mut self) -> Self {
+        self.alone = true;
+        self
+    }
+
     pub fn name(mut self, name: &str) -> Self {
         name.clone_into(&mut self.name);
         self
@@ -76,8 +131,8 @@ impl ProcessBuilder {
 
     /// Spawns the process and reads its two address lines, without waiting
     /// for readiness.
-    pub fn spawn(self) -> ServerProcess {
-        let ProcessBuilder { mut command, name, log } = self;
+    fn spawn(self, slot: Slot) -> ServerProcess {
+        let ProcessBuilder { mut command, name, log, alone: _ } = self;
         let (log, log_dir) = match log {
             Some(path) => (path, None),
             None => {
@@ -98,13 +153,14 @@ impl ProcessBuilder {
         };
         let http = addr("inbetween listening on http://");
         let grpc = addr("inbetween gRPC listening on http://");
-        ServerProcess { child, name, http, grpc, log, ready_after: Duration::ZERO, _log_dir: log_dir }
+        ServerProcess { child, name, http, grpc, log, ready_after: Duration::ZERO, _log_dir: log_dir, _slot: slot }
     }
 
     /// Spawns the process and waits (at most 10 s) until `/readyz` answers 200.
     pub async fn start(self) -> ServerProcess {
+        let slot = Slot::take(self.alone).await;
         let started = Instant::now();
-        let mut server = tokio::task::spawn_blocking(move || self.spawn()).await.unwrap();
+        let mut server = tokio::task::spawn_blocking(move || self.spawn(slot)).await.unwrap();
         let client = reqwest::Client::new();
         loop {
             let ready = client.get(server.url("/readyz")).send().await.is_ok_and(|r| r.status() == 200);
@@ -124,7 +180,7 @@ impl ServerProcess {
     pub fn serve() -> ProcessBuilder {
         let mut command = ServerProcess::command();
         command.args(["serve", "--listen", "127.0.0.1:0", "--grpc-listen", "127.0.0.1:0"]);
-        ProcessBuilder { command, name: "inbetween".to_owned(), log: None }
+        ProcessBuilder { command, name: "inbetween".to_owned(), log: None, alone: false }
     }
 
     /// The binary with a clean environment (no `INBETWEEN_*` from the

@@ -60,6 +60,7 @@ pub async fn target(extra: &[&str]) -> Target {
     let serial = SERIAL.lock().await;
     let dir = tempfile::tempdir().unwrap();
     let server = ServerProcess::serve()
+        .alone()
         .data_dir(&dir.path().join("data"))
         .args(extra)
         .log_to(&dir.path().join("server.log"))
