@@ -146,3 +146,57 @@ async fn a_motion_over_a_clip_too_large_to_cache_is_not_cached_either() {
     assert!(app.state.cache.is_empty() && app.state.motions.is_empty());
     app.stop().await;
 }
+
+/// `inbetween_stream_playbacks_total` of `server`.
+async fn playbacks(server: &Server) -> f64 {
+    let text = server.http.get(server.process.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    metric(&text, "inbetween_stream_playbacks_total").unwrap_or(0.0)
+}
+
+/// Opens `GET /v1/stream` on `motion` at 1 fps and reads its first frame's seq.
+async fn first_frame(server: &Server, motion: &Value) -> u64 {
+    use futures_util::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+    let (mut ws, _) = tokio_tungstenite::connect_async(server.process.ws_url("/v1/stream")).await.unwrap();
+    let open = json!({"op": "open", "motion": motion, "fps": 1, "max_frames": 1});
+    ws.send(Message::Text(open.to_string().into())).await.unwrap();
+    loop {
+        let Some(Ok(Message::Text(text))) = crate::common::within(5, "a message", ws.next()).await else {
+            panic!("the stream ended early")
+        };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        if let Some(seq) = v["seq"].as_u64() {
+            return seq;
+        }
+        assert!(v.get("opened").is_some(), "{v}");
+    }
+}
+
+#[tokio::test]
+async fn viewers_of_one_composition_share_a_playback_and_another_composition_has_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let process = ServerProcess::serve().data_dir(dir.path()).start().await;
+    let server = Server { process, http: reqwest::Client::new() };
+    let walk_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("walk", 2.0)).await["id"].clone();
+    let run_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("run", 6.0)).await["id"].clone();
+    let blend = |run_weight: f32| json!({"layers": [{"clip": walk_id}, {"clip": run_id, "weight": run_weight}]});
+    // Viewers opening within one 1 s tick of each other join the first one's
+    // playback (the cached motion is one program); a tick falling between two
+    // opens splits them, so a few tries are allowed.
+    let mut shared = false;
+    for _ in 0..3 {
+        let before = playbacks(&server).await;
+        let motion = blend(0.25);
+        let seqs = futures_util::future::join_all((0..3).map(|_| first_frame(&server, &motion))).await;
+        if playbacks(&server).await - before == 1.0 {
+            assert_eq!(seqs, [0, 0, 0], "every viewer of a shared playback sees its frame 0");
+            shared = true;
+            break;
+        }
+    }
+    assert!(shared, "three viewers of one composition never shared a playback");
+    let before = playbacks(&server).await;
+    let (a, b) = (blend(0.25), blend(0.5));
+    futures_util::future::join(first_frame(&server, &a), first_frame(&server, &b)).await;
+    assert_eq!(playbacks(&server).await - before, 2.0, "another weight is another playback");
+}
