@@ -14,7 +14,7 @@ use serde_json::Value;
 
 use super::setup::{Chain, chain, chain_clip};
 use crate::anim::motion::MotionSpec;
-use crate::wire::motion::{LayerDoc, LayerModeDoc, MaskDoc, MotionDoc};
+use crate::wire::motion::{LayerDoc, MaskDoc, MotionDoc};
 use crate::wire::proto::{self, pb};
 
 /// What every stream of a run plays instead of the clip.
@@ -67,17 +67,7 @@ pub fn upper_body_root(joints: usize) -> String {
 /// group, then the upper-body clip at full weight masked to
 /// [`upper_body_root`] and its descendants.
 pub fn three_layers(clips: &LayerClips, joints: usize) -> MotionDoc {
-    let layer = |clip: &str, weight: f32| LayerDoc {
-        clip: clip.to_owned(),
-        weight,
-        mode: LayerModeDoc::Blend,
-        mask: None,
-        offset: 0.0,
-        speed: 1.0,
-        playback: None,
-        sync: None,
-        reference_time: None,
-    };
+    let layer = |clip: &str, weight: f32| LayerDoc { weight, ..LayerDoc::new(clip) };
     let synced = |clip: &str, weight: f32| LayerDoc { sync: Some(SYNC_GROUP.to_owned()), ..layer(clip, weight) };
     let mask = MaskDoc { joints: BTreeMap::from([(upper_body_root(joints), 1.0)]), descendants: true, default: None };
     MotionDoc {

@@ -58,22 +58,9 @@ impl CachedClip {
     }
 }
 
-/// Motions hold the cache entries of their layers (no copy of the clips).
-impl crate::anim::ClipSource for CachedClip {
-    fn clip(&self) -> &Clip {
-        &self.clip
-    }
-}
-
-/// Streams hold the cache entry they started on (no copy of the clip).
-impl crate::stream::ClipSource for CachedClip {
-    fn clip(&self) -> &Clip {
-        &self.clip
-    }
-}
-
-/// Motions (requests and streams alike) hold their layers' cache entries,
-/// pinned at the version they were built on.
+/// Motions (requests and streams alike; a clip stream is a one-layer
+/// motion) hold their layers' cache entries, pinned at the version they
+/// were built on: no copy of the clip.
 impl crate::stream::PinnedClip for CachedClip {
     fn id(&self) -> &str {
         &self.meta.id

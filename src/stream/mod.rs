@@ -51,7 +51,7 @@ pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use hub::{EndReason, unix_nanos};
 pub use limits::{AdmitError, StreamPermit};
 pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
-pub use pinned::{ClipSource, Pinned, PinnedClip, StreamMotion};
+pub use pinned::{Pinned, PinnedClip, StreamMotion};
 pub use playhead::{Control, Crossfade, MAX_FADE_SECONDS, MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};
 pub use subscription::{ControlError, Controller, Delivered, Next, Subscription};

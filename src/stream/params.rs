@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use super::encode::Encoding;
-use super::pinned::{ClipSource, Pinned, PinnedClip, StreamMotion};
+use super::pinned::{PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
 use crate::anim::motion::{LayerSpec, MotionSpec};
 use crate::anim::{Clip, Ease, Motion, Playback, Space};
@@ -86,18 +86,12 @@ impl StreamParams {
     /// # Errors
     /// `fps` outside 1..=240, a non-finite start, a speed that is not finite
     /// or exceeds ±1000.
-    pub fn new(
-        clip_id: &str,
-        version: u64,
-        source: Arc<dyn ClipSource>,
-        req: StreamRequest,
-    ) -> Result<Self, ParamError> {
-        let playback = req.playback.unwrap_or(source.clip().playback());
-        let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new(clip_id, version, source));
+    pub fn new(pinned: Arc<dyn PinnedClip>, req: StreamRequest) -> Result<Self, ParamError> {
+        let playback = req.playback.unwrap_or(pinned.clip().playback());
+        let identity = format!("clip {}@{} {}", pinned.id(), pinned.version(), playback.as_str());
         let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
         let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None })
             .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;
-        let identity = format!("clip {clip_id}@{version} {}", playback.as_str());
         Self::of_motion(Arc::new(motion), identity.into(), req)
     }
 

@@ -6,18 +6,6 @@ use std::sync::Arc;
 
 use crate::anim::{Clip, Motion};
 
-/// Whatever holds a compiled clip (the server's cache entry, or a bare
-/// [`Clip`]), so a stream can keep it alive without copying it.
-pub trait ClipSource: Send + Sync + 'static {
-    fn clip(&self) -> &Clip;
-}
-
-impl ClipSource for Clip {
-    fn clip(&self) -> &Clip {
-        self
-    }
-}
-
 /// A clip pinned at the version a stream plays: its id and version name
 /// the frames and the shared playbacks.
 pub trait PinnedClip: Send + Sync + 'static {
@@ -43,17 +31,17 @@ impl crate::anim::ClipSource for dyn PinnedClip {
 /// pose bit for bit.
 pub type StreamMotion = Motion<Arc<dyn PinnedClip>>;
 
-/// A [`ClipSource`] with the id and version it was loaded at (the clip
-/// streams' and the tests' pinned clip; the server pins its cache entries).
+/// A bare compiled clip with the id and version it stands for (tests and
+/// tools; the server pins its cache entries, which are [`PinnedClip`]s).
 pub struct Pinned {
     id: Arc<str>,
     version: u64,
-    source: Arc<dyn ClipSource>,
+    clip: Arc<Clip>,
 }
 
 impl Pinned {
-    pub fn new(id: &str, version: u64, source: Arc<dyn ClipSource>) -> Self {
-        Pinned { id: id.into(), version, source }
+    pub fn new(id: &str, version: u64, clip: Arc<Clip>) -> Self {
+        Pinned { id: id.into(), version, clip }
     }
 }
 
@@ -67,6 +55,6 @@ impl PinnedClip for Pinned {
     }
 
     fn clip(&self) -> &Clip {
-        self.source.clip()
+        &self.clip
     }
 }

@@ -139,7 +139,11 @@ mod tests {
             playback: Playback::Once,
         };
         let clip: Arc<Clip> = Arc::new(Clip::build(&spec).unwrap());
-        let params = StreamParams::new("c", 1, clip, StreamRequest { fps, ..Default::default() }).unwrap();
+        let params = StreamParams::new(
+            std::sync::Arc::new(crate::stream::Pinned::new("c", 1, clip)),
+            StreamRequest { fps, ..Default::default() },
+        )
+        .unwrap();
         PlaybackKey::of(&params)
     }
 

@@ -35,6 +35,11 @@ fn clip() -> Arc<Clip> {
     Arc::new(Clip::build(&spec).unwrap())
 }
 
+/// `clip` pinned as version 1 of `id`.
+pub(super) fn pinned(id: &str, clip: Arc<Clip>) -> Arc<dyn PinnedClip> {
+    Arc::new(Pinned::new(id, 1, clip))
+}
+
 fn engine(buffer: usize) -> Engine {
     Engine::new(EngineConfig { buffer, max_streams: 1000, max_streams_per_client: 1000, ..EngineConfig::default() })
 }
@@ -44,7 +49,7 @@ fn req(fps: u32, encoding: Encoding) -> StreamRequest {
 }
 
 fn params(req: StreamRequest) -> StreamParams {
-    StreamParams::new("c1", 1, clip(), req).unwrap()
+    StreamParams::new(pinned("c1", clip()), req).unwrap()
 }
 
 fn watch(e: &Engine, req: StreamRequest) -> Subscription {
@@ -304,7 +309,8 @@ async fn a_playback_keeps_the_clip_version_it_started_on() {
     let e = engine(4);
     let c = clip();
     let weak = Arc::downgrade(&c);
-    let sub = e.watch(StreamParams::new("c1", 1, c, req(30, Encoding::Json)).unwrap(), e.admit(None).unwrap(), None);
+    let sub =
+        e.watch(StreamParams::new(pinned("c1", c), req(30, Encoding::Json)).unwrap(), e.admit(None).unwrap(), None);
     assert!(weak.upgrade().is_some(), "alive while streamed although the caller dropped it");
     drop(sub);
     // The playback notices at its next tick that nobody watches and ends.
@@ -314,7 +320,7 @@ async fn a_playback_keeps_the_clip_version_it_started_on() {
 
 #[test]
 fn stream_requests_are_validated() {
-    let check = |r: StreamRequest| StreamParams::new("c", 1, clip(), r).map(|_| ()).map_err(|e| e.field);
+    let check = |r: StreamRequest| StreamParams::new(pinned("c", clip()), r).map(|_| ()).map_err(|e| e.field);
     assert_eq!(check(req(0, Encoding::Json)), Err("fps"));
     assert_eq!(check(req(241, Encoding::Json)), Err("fps"));
     assert_eq!(check(req(240, Encoding::Json)), Ok(()));
@@ -326,8 +332,8 @@ fn stream_requests_are_validated() {
 /// A one-layer motion of the test clip with root motion reported, looping.
 fn root_motion_params(req: StreamRequest) -> StreamParams {
     use crate::anim::motion::{LayerSpec, MotionSpec, RootMotionSpec};
-    let pinned: Arc<dyn PinnedClip> = Arc::new(super::pinned::Pinned::new("c1", 1, clip()));
-    let spec = MotionSpec { layers: vec![LayerSpec::new(pinned)], root_motion: Some(RootMotionSpec::default()) };
+    let spec =
+        MotionSpec { layers: vec![LayerSpec::new(pinned("c1", clip()))], root_motion: Some(RootMotionSpec::default()) };
     let motion = Arc::new(crate::anim::Motion::build(spec).unwrap());
     StreamParams::of_motion(motion, "motion under test".into(), req).unwrap()
 }

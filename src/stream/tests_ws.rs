@@ -96,7 +96,7 @@ fn clip() -> Arc<Clip> {
 fn connect(engine: &Engine, req: StreamRequest, config: WsConfig) -> Client {
     let (out_tx, out_rx) = mpsc::unbounded_channel();
     let (in_tx, in_rx) = mpsc::unbounded_channel();
-    let params = StreamParams::new("c1", 1, clip(), req).unwrap();
+    let params = StreamParams::new(super::tests::pinned("c1", clip()), req).unwrap();
     let sub = engine.watch(params, engine.admit(None).unwrap(), None);
     let task = tokio::spawn(serve(MemSocket { out: out_tx, inc: in_rx }, sub, config, None));
     Client { to_server: in_tx, from_server: out_rx, task }

@@ -46,6 +46,24 @@ pub struct LayerDoc {
     pub reference_time: Option<f64>,
 }
 
+impl LayerDoc {
+    /// A full-weight blend layer of `clip` with every default (what a
+    /// document that names only `clip` parses to).
+    pub fn new(clip: &str) -> Self {
+        LayerDoc {
+            clip: clip.to_owned(),
+            weight: one(),
+            mode: LayerModeDoc::Blend,
+            mask: None,
+            offset: 0.0,
+            speed: one_f64(),
+            playback: None,
+            sync: None,
+            reference_time: None,
+        }
+    }
+}
+
 fn one() -> f32 {
     1.0
 }

@@ -91,9 +91,8 @@ impl RawStream<'_> {
     pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Opening, ApiError> {
         let request = self.check()?;
         let cached = super::raw::clip(state, id).await?;
-        let (clip_id, version) = (cached.meta.id.clone(), cached.meta.version);
-        let frame = Estimate::frame(&cached.clip, &clip_id, request.encoding.into());
-        let params = StreamParams::new(&clip_id, version, cached, request).map_err(|e| self.refused(e))?;
+        let frame = Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into());
+        let params = StreamParams::new(cached, request).map_err(|e| self.refused(e))?;
         self.admit(params, frame, state, caller)
     }
 
