@@ -118,8 +118,14 @@ fn clip_with(
 
 /// A looping clip of `tracks` on the 64-joint skeleton.
 fn bench_clip(tracks: Vec<TrackSpec>) -> Clip {
-    let spec =
-        ClipSpec { name: "bench".into(), skeleton: Some(skeleton()), tracks, events: vec![], playback: Playback::Loop };
+    let spec = ClipSpec {
+        name: "bench".into(),
+        skeleton: Some(skeleton()),
+        tracks,
+        events: vec![],
+        playback: Playback::Loop,
+        ..Default::default()
+    };
     // Unbounded: 64 constant-speed tracks of 32 keys need far more than the server's default build budget, and
     // this measures sampling, not building.
     // (The constant-speed one costs about 77 M units; the default budget is 16 M.)
@@ -312,6 +318,7 @@ fn versus_splines_crate(c: &mut Criterion) {
         )],
         events: vec![],
         playback: Playback::Once,
+        ..Default::default()
     })
     .unwrap();
     let theirs = splines::Spline::from_vec(
@@ -461,12 +468,13 @@ fn composition(c: &mut Criterion) {
     });
     let synced = |clip| LayerSpec { sync: Some("g".into()), ..LayerSpec::new(clip) };
     let cases: Vec<(&str, MotionSpec<&Clip>)> = vec![
-        ("one_layer", MotionSpec { layers: vec![LayerSpec::new(&walk)], root_motion: None }),
+        ("one_layer", MotionSpec { layers: vec![LayerSpec::new(&walk)], root_motion: None, ..Default::default() }),
         (
             "two_layers_blend",
             MotionSpec {
                 layers: vec![LayerSpec::new(&walk), LayerSpec { weight: 0.3, ..LayerSpec::new(&run) }],
                 root_motion: None,
+                ik: Vec::new(),
             },
         ),
         (
@@ -478,11 +486,16 @@ fn composition(c: &mut Criterion) {
                     LayerSpec { mode: LayerMode::Additive, weight: 0.5, ..LayerSpec::new(&run) },
                 ],
                 root_motion: None,
+                ik: Vec::new(),
             },
         ),
         (
             "one_layer_root_motion",
-            MotionSpec { layers: vec![LayerSpec::new(&walk)], root_motion: Some(RootMotionSpec::default()) },
+            MotionSpec {
+                layers: vec![LayerSpec::new(&walk)],
+                root_motion: Some(RootMotionSpec::default()),
+                ..Default::default()
+            },
         ),
         ("three_layers", three_layers(&walk, &run, &wave, 0.3, 0.0)),
     ];
@@ -520,6 +533,7 @@ fn three_layers<'a>(
             LayerSpec { mask: Some(upper), offset: wave_offset, ..LayerSpec::new(wave) },
         ],
         root_motion: None,
+        ik: Vec::new(),
     }
 }
 

@@ -31,11 +31,13 @@ pub fn import_gltf(data: &[u8]) {
     }
 }
 
-/// BVH import of arbitrary bytes, with linear and Catmull-Rom keys (the
-/// last byte picks, so both are explored); whatever imports must build.
+/// BVH import of arbitrary bytes, with linear, Catmull-Rom and B-spline
+/// keys (the last byte picks, so all are explored; odd bytes keep the
+/// Catmull-Rom they had before B-splines came); whatever imports must build.
 pub fn import_bvh(data: &[u8]) {
     let interpolation = match data.last() {
         Some(b) if b % 2 == 1 => Interpolation::CatmullRom,
+        Some(b) if b % 4 == 2 => Interpolation::BSpline,
         _ => Interpolation::Linear,
     };
     let options = ImportOptions { bvh_interpolation: interpolation, ..ImportOptions::default() };
@@ -83,8 +85,9 @@ pub fn import_evaluate(data: &[u8]) {
     }
 }
 
-/// A motion document (SPEC §6) over three fixed clips (two of one skeleton,
-/// one of another; layer `clip` names pick them by their length), built and
+/// A motion document (SPEC §6, with §7's `ik`) over three fixed clips (two
+/// of one skeleton, one of another; layer `clip` names pick them by their
+/// length), built and
 /// sampled at times from the input, then played as a stream would: weight
 /// ramps and crossfades (nested) at input-chosen durations. Every local
 /// value must stay finite and every rotation a unit quaternion.
@@ -93,7 +96,8 @@ pub fn motion_json(data: &[u8]) {
     use std::sync::Arc;
     let Ok(doc) = serde_json::from_slice::<crate::wire::motion::MotionDoc>(data) else { return };
     let clips = motion_clips();
-    let spec = doc.to_spec().try_map(|_, id: String| Ok::<_, ()>(&clips[id.len() % clips.len()]));
+    let Ok(spec) = doc.to_spec("/motion") else { return };
+    let spec = spec.try_map(|_, id: String| Ok::<_, ()>(&clips[id.len() % clips.len()]));
     let Ok(spec) = spec else { return };
     let Ok(motion) = crate::anim::Motion::build(spec) else { return };
     let motion = Arc::new(motion);
@@ -103,6 +107,7 @@ pub fn motion_json(data: &[u8]) {
         let space = if i % 2 == 0 { Space::Local } else { Space::Model };
         motion.sample(t, &MotionOptions { ease: Ease::Linear, space }, &mut sampler);
         check_local(sampler.local(), t);
+        assert!(sampler.ik_reports().iter().all(|r| r.residual.is_finite()), "an IK residual is not finite at {t}");
     }
     let mut player = Player::new(Arc::clone(&motion));
     for (k, &b) in data.iter().rev().take(24).enumerate() {
@@ -127,7 +132,9 @@ fn motion_clips() -> &'static [Clip] {
         let build = |doc: &[u8]| Clip::build(&parse_clip(doc).expect("a fixed clip parses").1).expect("and builds");
         let mover = |rate: f32, end: f32| {
             let doc = serde_json::json!({"name": "m", "skeleton": {"joints": [
-                    {"name": "root", "parent": null}, {"name": "arm", "parent": "root"}]},
+                    {"name": "root", "parent": null}, {"name": "arm", "parent": "root"},
+                    {"name": "forearm", "parent": "arm", "rest": {"translation": [0, 0.5, 0]}},
+                    {"name": "hand", "parent": "forearm", "rest": {"translation": [0, 0.5, 0]}}]},
                 "tracks": [{"joint": "root", "channel": "translation", "interpolation": "catmull_rom",
                     "times": [0, end / 2.0, end], "values": [[0, 0, 0], [rate, 0.5, 0], [2.0 * rate, 0, 0]]},
                     {"joint": "arm", "channel": "rotation", "times": [0, end],
@@ -154,6 +161,7 @@ fn chosen_times(data: &[u8], start: f64, end: f64) -> Vec<f64> {
 fn check_local(pose: &crate::anim::Pose, t: f64) {
     assert!(pose.translations.iter().all(|v| v.is_finite()), "translation at {t}");
     assert!(pose.scales.iter().all(|v| v.is_finite()), "scale at {t}");
+    assert!(pose.parameters.iter().all(|v| v.is_finite()), "parameter at {t}");
     for q in &pose.rotations {
         assert!(q.is_finite() && (q.length() - 1.0).abs() < 1e-3, "rotation {q} at {t}");
     }

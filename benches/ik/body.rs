@@ -84,6 +84,7 @@ pub fn body() -> Clip {
         tracks: vec![track],
         events: vec![],
         playback: Playback::Once,
+        ..Default::default()
     };
     Clip::build(&spec).expect("bench body builds")
 }

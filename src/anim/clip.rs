@@ -13,7 +13,10 @@ use glam::Mat4;
 
 use super::arc::Meter;
 use super::compile::{self, Compiled, finite3, unit_quat};
-use super::error::{ClipError, ClipErrorKind as K, Path};
+use super::error::{ClipError, ClipErrorKind as K};
+use super::ik::{IkLimits, IkReport, KeyedIk, KeyedIkState};
+use super::parameters::{ParameterLayout, Parameters};
+use super::path::Path;
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
 use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
 use super::time::TimeRange;
@@ -62,6 +65,10 @@ pub struct Clip {
     /// Joints with a translation track, in track order (root motion's default joint).
     translated: Vec<u32>,
     events: Vec<Event>,
+    /// Constraints solved after the tracks at every sample (SPEC §7).
+    ik: Option<KeyedIk>,
+    /// Named tracks that are not joints (SPEC §8).
+    parameters: Parameters,
     /// What the build spent (see [`DEFAULT_BUILD_WORK`]).
     build_work: u64,
 }
@@ -82,9 +89,18 @@ pub struct Cursor {
     /// its span (that sampling locates only the timelines it reads).
     stamps: Vec<u32>,
     pass: u32,
+    /// The clip's IK constraints as last filled, and their solver (boxed:
+    /// most clips have none).
+    ik: Option<Box<KeyedIkState>>,
 }
 
 impl Cursor {
+    /// The IK reports of the last sample taken with this cursor, one per
+    /// constraint of its clip (empty for a clip without IK).
+    pub fn ik_reports(&self) -> &[IkReport] {
+        self.ik.as_ref().map_or(&[], |state| state.reports())
+    }
+
     #[inline]
     fn fit(&mut self, timelines: usize) {
         if self.hints.len() != timelines {
@@ -171,11 +187,25 @@ impl Clip {
     /// # Errors
     /// As [`Clip::build_within`]; `build_cancelled` once `cancel` is raised.
     pub fn build_cancellable(spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<Clip, ClipError> {
+        Clip::build_limited(spec, max_work, &IkLimits::default(), cancel)
+    }
+
+    /// [`Clip::build_cancellable`] with the service's ceilings on IK
+    /// constraints, effectors and iterations.
+    ///
+    /// # Errors
+    /// As [`Clip::build_cancellable`]; an `ik` constraint over `ik_limits`.
+    pub fn build_limited(
+        spec: &ClipSpec,
+        max_work: u64,
+        ik_limits: &IkLimits,
+        cancel: &AtomicBool,
+    ) -> Result<Clip, ClipError> {
         let chars = spec.name.chars().count();
         if chars == 0 || chars > MAX_NAME_CHARS {
             return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
         }
-        if spec.tracks.is_empty() {
+        if spec.tracks.is_empty() && spec.parameters.is_empty() {
             return Err(ClipError::new(Path::root().field("tracks"), K::NoTracks));
         }
         let skeleton = build_skeleton(spec)?;
@@ -235,6 +265,28 @@ impl Clip {
             }
         }
         bounds.check(&skeleton)?;
+        let built = Parameters::build(&spec.parameters, &mut meter, &mut intern)?;
+        base.parameters = built.base;
+        if let Some((first, last)) = built.domain {
+            (start, end) = (start.min(first), end.max(last));
+            if !(end - start).is_finite() {
+                let kind = K::TimeRangeTooLarge { start, end };
+                return Err(ClipError::new(Path::root().field("parameters"), kind));
+            }
+        }
+        let ik = match KeyedIk::build(&spec.ik, &skeleton, ik_limits, &mut meter)? {
+            None => None,
+            Some((ik, domain)) => {
+                if let Some((first, last)) = domain {
+                    (start, end) = (start.min(first), end.max(last));
+                }
+                Some(ik)
+            }
+        };
+        if !(end - start).is_finite() {
+            let kind = K::TimeRangeTooLarge { start, end };
+            return Err(ClipError::new(Path::root().field("ik"), kind));
+        }
 
         let mut events = Vec::with_capacity(spec.events.len());
         for (i, e) in spec.events.iter().enumerate() {
@@ -264,6 +316,8 @@ impl Clip {
             track_count: spec.tracks.len(),
             translated,
             events,
+            ik,
+            parameters: built.parameters,
             build_work: meter.spent(),
         })
     }
@@ -289,6 +343,19 @@ impl Clip {
             + self.scales.heap_bytes()
             + vec_bytes(&self.events)
             + events
+            + self.ik.as_ref().map_or(0, KeyedIk::heap_bytes)
+            + self.parameters.heap_bytes()
+    }
+
+    /// The clip's parameters (SPEC §8): names, widths and where each sits
+    /// in [`Pose::parameters`].
+    pub fn parameters(&self) -> &ParameterLayout {
+        &self.parameters.layout
+    }
+
+    /// How many IK constraints each sample solves (SPEC §7, "IK in clips").
+    pub fn ik_count(&self) -> usize {
+        self.ik.as_ref().map_or(0, KeyedIk::len)
     }
 
     pub fn name(&self) -> &str {
@@ -370,6 +437,19 @@ impl Clip {
         self.translations.apply(spans, &mut pose.translations);
         self.rotations.apply(spans, &mut pose.rotations);
         self.scales.apply(spans, &mut pose.scales);
+        self.parameters.apply(spans, &mut pose.parameters);
+        self.solve_ik(t, cursor, pose);
+    }
+
+    /// Solves the clip's constraints on `pose`; a cursor last used with a
+    /// clip that had some forgets their reports.
+    #[inline]
+    fn solve_ik(&self, t: f32, cursor: &mut Cursor, pose: &mut Pose) {
+        match (&self.ik, &mut cursor.ik) {
+            (Some(ik), state) => ik.solve(t, &self.skeleton, state.get_or_insert_default(), pose),
+            (None, Some(state)) => state.forget_reports(),
+            (None, None) => {}
+        }
     }
 
     /// [`Clip::sample_into`] for the joints `keep` accepts (by index in this
@@ -377,8 +457,12 @@ impl Clip {
     /// rest with constant tracks). The tracks of the joints left out are not
     /// evaluated and timelines only they read are not searched: how a motion
     /// layer skips the joints its mask leaves out or a layer above hides.
+    /// A clip with IK samples every joint: its solve reads whole chains.
     #[inline]
     pub(crate) fn sample_joints_into(&self, t: f32, cursor: &mut Cursor, pose: &mut Pose, keep: impl Fn(u32) -> bool) {
+        if self.ik.is_some() {
+            return self.sample_into(t, cursor, pose);
+        }
         cursor.fit(self.timelines.len());
         cursor.next_pass();
         pose.copy_from(&self.base);
@@ -386,6 +470,10 @@ impl Clip {
         self.translations.apply(spans, &mut pose.translations);
         self.rotations.apply(spans, &mut pose.rotations);
         self.scales.apply(spans, &mut pose.scales);
+        // Parameters belong to no joint: a layer always has them.
+        let spans = &mut LazySpans { timelines: &self.timelines, cursor: &mut *spans.cursor, t, keep: |_: u32| true };
+        self.parameters.apply(spans, &mut pose.parameters);
+        self.solve_ik(t, cursor, pose);
     }
 
     /// Like [`Clip::sample_into`] but takes a request time and options and
@@ -434,6 +522,12 @@ pub struct Sampler {
 impl Sampler {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The IK reports of the last [`Clip::sample`] call (one per
+    /// constraint of the clip).
+    pub fn ik_reports(&self) -> &[IkReport] {
+        self.cursor.ik_reports()
     }
 
     /// The pose of the last [`Clip::sample`] call, in the space it asked for.
@@ -610,7 +704,14 @@ mod numeric_edges {
     use crate::anim::spec::{Interpolation, JointSpec, Keys, SkeletonSpec, Speed, TrackSpec, Transform};
 
     fn clip(tracks: Vec<TrackSpec>, skeleton: Option<SkeletonSpec>) -> Result<Clip, ClipError> {
-        Clip::build(&ClipSpec { name: "edge".into(), skeleton, tracks, events: vec![], playback: Playback::Once })
+        Clip::build(&ClipSpec {
+            name: "edge".into(),
+            skeleton,
+            tracks,
+            events: vec![],
+            playback: Playback::Once,
+            ..Default::default()
+        })
     }
 
     fn translation(times: Vec<f32>, values: Vec<Vec3>) -> TrackSpec {

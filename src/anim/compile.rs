@@ -2,15 +2,17 @@
 //! SPEC §1–2 is checked here, once, and every control point is computed
 //! here, once, in `f64`.
 //!
-//! Catmull-Rom is written once for vectors and quaternions through
-//! [`Key::offset`], the lecture's "hack by association": `x + s·(y − z)` for
-//! vectors becomes `pow(short(y·z⁻¹), s)·x` for quaternions.
+//! Catmull-Rom and the uniform B-spline are written once for vectors and
+//! quaternions through [`Key::offset`], the lecture's "hack by association":
+//! `x + s·(y − z)` for vectors becomes `pow(short(y·z⁻¹), s)·x` for
+//! quaternions (and so `lerp` becomes the short-way `slerp`).
 
 use glam::{DQuat, DVec3, DVec4, Quat, Vec3, Vec3A, Vec4};
 
 use super::arc::{self, Meter};
 use super::curve::{QuatCurve, QuatSegment, SlerpTier, Vec3Curve};
-use super::error::{ClipError, ClipErrorKind as K, Path};
+use super::error::{ClipError, ClipErrorKind as K};
+use super::path::Path;
 use super::quat::{
     FAST_SLERP_MIN_COS, NARROW_SLERP_MIN_COS, TINY_SLERP_MIN_COS, align, make_continuous, pow, short, sine_ratio_series,
 };
@@ -80,13 +82,13 @@ fn check_common(spec: &TrackSpec, path: &Path) -> Result<(), ClipError> {
         }
     }
     let catmull = spec.interpolation == Interpolation::CatmullRom;
-    if !catmull {
-        if spec.ends.is_some() {
-            return err(path.clone().field("ends"), K::OnlyCatmullRom { field: "ends" });
-        }
-        if spec.tension.is_some() {
-            return err(path.clone().field("tension"), K::OnlyCatmullRom { field: "tension" });
-        }
+    if spec.ends.is_some() && !(catmull || spec.interpolation == Interpolation::BSpline) {
+        let kind = K::OnlyCatmullRom { field: "ends", modes: "catmull_rom and b_spline" };
+        return err(path.clone().field("ends"), kind);
+    }
+    // The uniform B-spline's basis is fixed: it has no tension.
+    if spec.tension.is_some() && !catmull {
+        return err(path.clone().field("tension"), K::OnlyCatmullRom { field: "tension", modes: "catmull_rom" });
     }
     if let Some(k) = spec.tension
         && !(0.0..=1.0).contains(&k)
@@ -169,12 +171,12 @@ pub(crate) fn vec3_track(
                 })
                 .collect()
         }
-        Interpolation::CatmullRom => {
+        Interpolation::CatmullRom | Interpolation::BSpline => {
             let ends = spec.ends.unwrap_or_default();
             if ends == Ends::Wrap && !same_vec3(c[0], c[n - 1]) {
                 return Err(ClipError::new(path.clone().field("values").index(n - 1), K::WrapEndsDiffer));
             }
-            catmull_rom(&c, &t, ends, spec.tension.unwrap_or(DEFAULT_TENSION) as f64)
+            spline(spec, &c, &t, ends)
         }
     };
     // Phantom ends interpolate only the inner keys.
@@ -250,13 +252,13 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
     match spec.interpolation {
         Interpolation::Step => Ok(Compiled { times: times.clone(), curve: QuatCurve::Step(f32_keys(&c)), domain }),
         Interpolation::Linear => Ok(Compiled { times: times.clone(), curve: QuatCurve::Slerp(f32_keys(&c)), domain }),
-        Interpolation::CatmullRom => {
+        Interpolation::CatmullRom | Interpolation::BSpline => {
             let ends = spec.ends.unwrap_or_default();
             if ends == Ends::Wrap && c[0].dot(c[n - 1]).abs() < 1.0 - 1e-6 {
                 return Err(ClipError::new(vpath.index(n - 1), K::WrapEndsDiffer));
             }
             let t: Vec<f64> = times.iter().map(|&x| x as f64).collect();
-            let segments = catmull_rom(&c, &t, ends, spec.tension.unwrap_or(DEFAULT_TENSION) as f64);
+            let segments = spline(spec, &c, &t, ends);
             let inner = if ends == Ends::Phantom { &times[1..n - 1] } else { &times[..] };
             let domain = (inner[0], inner[inner.len() - 1]);
             let curve = QuatCurve::SlerpBezier(segments.iter().map(quat_segment).collect());
@@ -297,7 +299,7 @@ fn same_vec3(a: DVec3, b: DVec3) -> bool {
     (a - b).abs().max_element() <= 1e-6 * a.abs().max_element().max(1.0)
 }
 
-/// A key type Catmull-Rom can be built on.
+/// A key type Catmull-Rom and the B-spline can be built on.
 pub trait Key: Copy {
     /// `base + s·(to − from)` for vectors; `pow(short(to·from⁻¹), s)·base`
     /// for quaternions (SPEC §2.2–2.3).
@@ -363,6 +365,49 @@ pub fn catmull_rom<T: Key>(c: &[T], t: &[f64], ends: Ends, k: f64) -> Vec<[T; 4]
         out[last][2] = out[last][3];
     }
     out
+}
+
+/// The Bezier segments of a `catmull_rom` or `b_spline` track.
+fn spline<T: Key>(spec: &TrackSpec, c: &[T], t: &[f64], ends: Ends) -> Vec<[T; 4]> {
+    match spec.interpolation {
+        Interpolation::BSpline => b_spline(c, ends),
+        _ => catmull_rom(c, t, ends, spec.tension.unwrap_or(DEFAULT_TENSION) as f64),
+    }
+}
+
+/// Bezier control points of the lecture's uniform cubic B-spline with the
+/// keys `c` as its control points (at least 2; at least 4 for phantom ends),
+/// by the lecture's conversion (SPEC §2.5): segment `i` from `c_{i-1}..c_{i+2}`,
+/// `b_1`, `b_2` at thirds of `c_i → c_{i+1}`, `b_0` and `b_3` halfway to the
+/// neighbouring segments' thirds (so adjacent segments share their joint and
+/// its tangent line). For quaternions every `lerp` is the short-way slerp.
+///
+/// Key times play no part: each segment is the uniform basis in its own `u`,
+/// which is exactly what the SPEC asks for on non-uniform keys. Phantom ends
+/// use the first and last keys as control points only; reflect ends mirror
+/// (`2c_0 − c_1`; rotations `c_0·c_1⁻¹·c_0`), which makes the curve start at
+/// `c_0` and end at `c_n`;
+/// zero-slope ends repeat the neighbour (`c_{-1} = c_1`), a zero velocity;
+/// wrap ends continue the loop (`c_{-1} = c_{n-1}`, `c_{n+1} = c_1`).
+pub fn b_spline<T: Key>(c: &[T], ends: Ends) -> Vec<[T; 4]> {
+    let n = c.len() - 1;
+    let lerp = |a: T, b: T, s: f64| T::offset(a, b, a, s);
+    let (first, last) = match ends {
+        Ends::Phantom => (None, None),
+        Ends::Wrap => (Some(c[n - 1]), Some(c[1])),
+        Ends::ZeroSlope => (Some(c[1]), Some(c[n - 1])),
+        Ends::Reflect => (Some(T::offset(c[0], c[0], c[1], 1.0)), Some(T::offset(c[n], c[n], c[n - 1], 1.0))),
+    };
+    let x: Vec<T> = first.into_iter().chain(c.iter().copied()).chain(last).collect();
+    x.windows(4)
+        .map(|w| {
+            let b1 = lerp(w[1], w[2], 1.0 / 3.0);
+            let b2 = lerp(w[1], w[2], 2.0 / 3.0);
+            let b0 = lerp(lerp(w[0], w[1], 2.0 / 3.0), b1, 0.5);
+            let b3 = lerp(b2, lerp(w[2], w[3], 1.0 / 3.0), 0.5);
+            [b0, b1, b2, b3]
+        })
+        .collect()
 }
 
 /// Converts spec-level vectors for the skeleton's rest transforms.

@@ -81,6 +81,25 @@ impl Vec3Curve {
     }
 }
 
+impl Vec3Curve {
+    /// The curve's value at `s`, a span of the timeline it was compiled
+    /// with (a constant ignores it): one curve evaluated on its own, as a
+    /// keyed IK target is, where track lists evaluate theirs in bulk.
+    pub fn at(&self, s: Span) -> Vec3A {
+        let i = s.index as usize;
+        match self {
+            Vec3Curve::Constant(v) => *v,
+            Vec3Curve::Step(keys) => step(keys, s),
+            Vec3Curve::Linear(keys) => keys[i].lerp(keys[i + 1], s.u),
+            Vec3Curve::Bezier(segments) => bezier3(&segments[i], s.u),
+            Vec3Curve::ConstantSpeed { segments, pieces } => {
+                let piece = pieces[i];
+                bezier3(&segments[piece.segment as usize], piece.u0 + s.u * piece.du)
+            }
+        }
+    }
+}
+
 /// A rotation curve.
 #[derive(Debug, Clone, PartialEq)]
 pub enum QuatCurve {

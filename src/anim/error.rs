@@ -4,62 +4,8 @@
 //! indices that mirrors SPEC §1 (`tracks`, 3, `times`, 5), so the edge can
 //! render a JSON pointer (`/tracks/3/times/5`) without the core knowing JSON.
 
-use std::fmt;
-
-/// One step of a path into a clip document.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Step {
-    Field(&'static str),
-    Index(usize),
-    /// A key of a JSON object given by the user (a mask's joint name).
-    Key(String),
-}
-
-/// A place in a clip document, outermost first.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Path(pub Vec<Step>);
-
-impl Path {
-    pub fn root() -> Self {
-        Path(Vec::new())
-    }
-
-    pub fn field(mut self, name: &'static str) -> Self {
-        self.0.push(Step::Field(name));
-        self
-    }
-
-    pub fn index(mut self, i: usize) -> Self {
-        self.0.push(Step::Index(i));
-        self
-    }
-
-    pub fn key(mut self, key: &str) -> Self {
-        self.0.push(Step::Key(key.to_owned()));
-        self
-    }
-
-    /// `/tracks/3/times/5` (RFC 6901).
-    pub fn to_pointer(&self) -> String {
-        let mut s = String::new();
-        for step in &self.0 {
-            s.push('/');
-            match step {
-                Step::Field(f) => s.push_str(f),
-                Step::Index(i) => s.push_str(&i.to_string()),
-                // RFC 6901: `~` is `~0`, `/` is `~1`.
-                Step::Key(k) => s.push_str(&k.replace('~', "~0").replace('/', "~1")),
-            }
-        }
-        s
-    }
-}
-
-impl fmt::Display for Path {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.0.is_empty() { f.write_str("/") } else { f.write_str(&self.to_pointer()) }
-    }
-}
+use super::ik::IkErrorKind;
+use super::path::Path;
 
 /// A clip that cannot be built: what is wrong ([`ClipErrorKind`]) and where.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -80,7 +26,7 @@ impl ClipError {
 pub enum ClipErrorKind {
     #[error("the clip name must be 1 to {max} characters")]
     BadName { max: usize },
-    #[error("a clip needs at least one track")]
+    #[error("a clip needs at least one track or parameter")]
     NoTracks,
     #[error("joint name must not be empty")]
     EmptyJointName,
@@ -113,8 +59,10 @@ pub enum ClipErrorKind {
     ZeroQuaternion { norm: f32 },
     #[error("tension must be in [0, 1], got {tension}")]
     TensionOutOfRange { tension: f32 },
-    #[error("'{field}' applies only to catmull_rom tracks")]
-    OnlyCatmullRom { field: &'static str },
+    /// `ends` outside `catmull_rom` and `b_spline`, `tension` outside
+    /// `catmull_rom` (the code predates `b_spline` and stays stable).
+    #[error("'{field}' applies only to {modes} tracks")]
+    OnlyCatmullRom { field: &'static str, modes: &'static str },
     #[error("'{field}' applies only to cubic_hermite tracks")]
     OnlyHermite { field: &'static str },
     #[error("cubic_hermite tracks need in_tangents and out_tangents")]
@@ -138,6 +86,15 @@ pub enum ClipErrorKind {
     BuildBudgetExceeded { limit: u64, spent: u64 },
     #[error("the build was abandoned by its caller")]
     BuildCancelled,
+    /// An `ik` constraint breaks a rule of SPEC §7.
+    #[error("{0}")]
+    Ik(IkErrorKind),
+    #[error("a parameter name must be 1 to {max} characters")]
+    BadParameterName { max: usize },
+    #[error("parameter '{name}' is defined twice")]
+    DuplicateParameter { name: String },
+    #[error("a parameter's keys have 1 to {max} numbers each, got {provided}")]
+    ParameterWidth { max: usize, provided: usize },
 }
 
 impl ClipErrorKind {
@@ -173,6 +130,10 @@ impl ClipErrorKind {
             CurveOverflow => "curve_overflow",
             BuildBudgetExceeded { .. } => "build_budget_exceeded",
             BuildCancelled => "build_cancelled",
+            Ik(kind) => kind.code(),
+            BadParameterName { .. } => "bad_parameter_name",
+            DuplicateParameter { .. } => "duplicate_parameter",
+            ParameterWidth { .. } => "parameter_width",
         }
     }
 }

@@ -16,7 +16,9 @@
 //! `time` request time → clip time (playback, ease, the seams);
 //! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
 //! hierarchy and model space; `clip` the clip and the sampling kernel; `motion` composition (SPEC §6): layers,
-//! masks, sync groups, over clips; `ik` inverse kinematics (SPEC §7) on local poses.
+//! masks, sync groups, over clips; `ik` inverse kinematics (SPEC §7) on local poses; `parameters` named
+//! tracks that are not joints (SPEC §8), compiled as translation-like curves; `lint` warnings about valid
+//! clips that are probably not what was meant.
 
 mod arc;
 mod clip;
@@ -24,7 +26,10 @@ mod compile;
 mod curve;
 mod error;
 pub mod ik;
+pub mod lint;
 pub mod motion;
+mod parameters;
+mod path;
 pub mod quat;
 mod skeleton;
 mod spec;
@@ -35,12 +40,14 @@ mod tracks;
 pub use clip::{
     Clip, Cursor, DEFAULT_BUILD_WORK, Event, MAX_NAME_CHARS, SampleOptions, Sampler, frame_count, frame_times,
 };
-pub use error::{ClipError, ClipErrorKind, Path, Step};
+pub use error::{ClipError, ClipErrorKind};
 pub use motion::{ClipSource, Motion, MotionError, MotionSampler};
+pub use parameters::{MAX_PARAMETER_WIDTH, ParameterLayout};
+pub use path::{Path, Step};
 pub use skeleton::{Pose, Skeleton};
 pub use spec::{
-    Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, Space, Speed,
-    TrackSpec, Transform,
+    Channel, ClipSpec, Ease, Ends, EventSpec, IkTarget, Interpolation, JointSpec, KeyedIkSpec, Keys, ParameterSpec,
+    Playback, SkeletonSpec, Space, Speed, TrackSpec, Transform,
 };
 pub use time::TimeRange;
 pub use timeline::{Span, Timeline};
@@ -48,6 +55,6 @@ pub use timeline::{Span, Timeline};
 /// Internals exposed for benchmarks and reference tests only.
 #[doc(hidden)]
 pub mod internals {
-    pub use super::compile::{Key, catmull_rom, quat_segment};
+    pub use super::compile::{Key, b_spline, catmull_rom, quat_segment};
     pub use super::curve::{QuatSegment, SlerpTier, bezier3, slerp_bezier};
 }

@@ -13,12 +13,22 @@ pub struct Pose {
     pub translations: Vec<Vec3A>,
     pub rotations: Vec<Quat>,
     pub scales: Vec<Vec3A>,
+    /// The clip's parameters (SPEC §8), three components per entry: a
+    /// parameter of width `W` takes `⌈W/3⌉` entries, its last one padded
+    /// with zeros (see `ParameterLayout`), so they are sampled and blended
+    /// with the translations' code. Empty for a clip without parameters.
+    pub parameters: Vec<Vec3A>,
 }
 
 impl Pose {
     /// `n` identity transforms.
     pub fn identity(n: usize) -> Self {
-        Pose { translations: vec![Vec3A::ZERO; n], rotations: vec![Quat::IDENTITY; n], scales: vec![Vec3A::ONE; n] }
+        Pose {
+            translations: vec![Vec3A::ZERO; n],
+            rotations: vec![Quat::IDENTITY; n],
+            scales: vec![Vec3A::ONE; n],
+            parameters: Vec::new(),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -32,7 +42,10 @@ impl Pose {
     /// Bytes of the three arrays' allocations.
     pub fn heap_bytes(&self) -> usize {
         use super::clip::vec_bytes;
-        vec_bytes(&self.translations) + vec_bytes(&self.rotations) + vec_bytes(&self.scales)
+        vec_bytes(&self.translations)
+            + vec_bytes(&self.rotations)
+            + vec_bytes(&self.scales)
+            + vec_bytes(&self.parameters)
     }
 
     /// Copies `other` into `self`, reusing `self`'s storage.
@@ -41,6 +54,7 @@ impl Pose {
         self.translations.clone_from(&other.translations);
         self.rotations.clone_from(&other.rotations);
         self.scales.clone_from(&other.scales);
+        self.parameters.clone_from(&other.parameters);
     }
 }
 

@@ -7,14 +7,58 @@
 
 use glam::{Mat4, Quat, Vec3, Vec4};
 
-/// A clip as authored: a name, an optional skeleton, tracks and events.
-#[derive(Debug, Clone, PartialEq)]
+use super::ik::IkSpec;
+
+/// A clip as authored: a name, an optional skeleton, tracks, events and IK
+/// constraints solved at every sample.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct ClipSpec {
     pub name: String,
     pub skeleton: Option<SkeletonSpec>,
     pub tracks: Vec<TrackSpec>,
     pub events: Vec<EventSpec>,
     pub playback: Playback,
+    /// SPEC §7 "IK in clips".
+    pub ik: Vec<KeyedIkSpec>,
+    /// SPEC §8: named tracks that are not joints (morph weights, a
+    /// camera's field of view).
+    pub parameters: Vec<ParameterSpec>,
+}
+
+/// A named parameter track (SPEC §8): keys of one width `1..=256`,
+/// interpolated per component as a translation track is (SPEC §2). Rows are
+/// kept as given so the core can name the row and component at fault.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParameterSpec {
+    pub name: String,
+    pub interpolation: Interpolation,
+    /// Strictly increasing, finite, in seconds.
+    pub times: Vec<f32>,
+    /// One row per time, every row of the same width.
+    pub values: Vec<Vec<f32>>,
+    /// `cubic_hermite` only: units per second, one row per key.
+    pub in_tangents: Option<Vec<Vec<f32>>>,
+    pub out_tangents: Option<Vec<Vec<f32>>>,
+    /// `catmull_rom` and `b_spline` only; `None` means [`Ends::Reflect`].
+    pub ends: Option<Ends>,
+    /// `catmull_rom` only; `None` means 0.5.
+    pub tension: Option<f32>,
+}
+
+impl ParameterSpec {
+    /// A parameter with the defaults of SPEC §8 for everything but its keys.
+    pub fn new(name: &str, interpolation: Interpolation, times: Vec<f32>, values: Vec<Vec<f32>>) -> Self {
+        ParameterSpec {
+            name: name.to_owned(),
+            interpolation,
+            times,
+            values,
+            in_tangents: None,
+            out_tangents: None,
+            ends: None,
+            tension: None,
+        }
+    }
 }
 
 /// Joints in order; each parent must be an earlier joint.
@@ -64,7 +108,7 @@ pub struct TrackSpec {
     /// `cubic_hermite` only: units per second, one per key.
     pub in_tangents: Option<Keys>,
     pub out_tangents: Option<Keys>,
-    /// `catmull_rom` only; `None` means [`Ends::Reflect`].
+    /// `catmull_rom` and `b_spline` only; `None` means [`Ends::Reflect`].
     pub ends: Option<Ends>,
     /// `catmull_rom` only; `None` means 0.5 (Catmull-Rom proper).
     pub tension: Option<f32>,
@@ -150,6 +194,10 @@ pub enum Interpolation {
     Linear,
     CatmullRom,
     CubicHermite,
+    /// The lecture's uniform cubic B-spline (SPEC §2.5): approximating and
+    /// C2, for smoothing motion capture; stored as Bezier segments like
+    /// Catmull-Rom, so it samples at the same cost.
+    BSpline,
 }
 
 impl Interpolation {
@@ -159,11 +207,12 @@ impl Interpolation {
             Interpolation::Linear => "linear",
             Interpolation::CatmullRom => "catmull_rom",
             Interpolation::CubicHermite => "cubic_hermite",
+            Interpolation::BSpline => "b_spline",
         }
     }
 }
 
-/// End conditions of a Catmull-Rom track (SPEC §2.4).
+/// End conditions of a Catmull-Rom or B-spline track (SPEC §2.4, §2.5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Ends {
     #[default]
@@ -266,4 +315,24 @@ impl Space {
             Space::Model => "model",
         }
     }
+}
+
+/// One constraint of a clip: its targets (one per target, in
+/// [`IkSpec::target_count`]'s order) fixed or keyed, and optionally its
+/// weight keyed. The constraint's own targets are ignored, and its weight
+/// too when `weight` is keyed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyedIkSpec {
+    pub constraint: IkSpec,
+    pub targets: Vec<IkTarget>,
+    /// Keys `[w, 0, 0]`: the weight is the first component, in [0, 1].
+    pub weight: Option<TrackSpec>,
+}
+
+/// A target in model space: a point, or a track of points (whose keys
+/// count toward the clip's time range; a point does not).
+#[derive(Debug, Clone, PartialEq)]
+pub enum IkTarget {
+    Fixed(Vec3),
+    Keyed(TrackSpec),
 }

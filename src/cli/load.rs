@@ -1,6 +1,7 @@
 //! `inbetween load`: the load generator (`crate::load`). Flags in, a human
 //! summary or a JSON report out.
 
+use std::io::Write;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
@@ -22,12 +23,17 @@ enum ModeArg {
     GrpcStream,
     /// WebSocket streams (`/v1/clips/{id}/stream`; `/v1/stream` with --motion).
     WsStream,
+    /// WebSocket viewers of one broadcast (`POST /v1/broadcasts` of the clip or --motion, then
+    /// `/v1/broadcasts/{id}/stream`).
+    WsBroadcast,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum MotionArg {
     /// Walk and run (weights 1 and 0.3, one sync group) under an upper-body layer masked to the chain's upper half.
     ThreeLayers,
+    /// A walk in place (hips, two legs, a spine) with two two-bone constraints planting the feet; --joints 7 or more.
+    FootIk,
 }
 
 #[derive(Debug, Args)]
@@ -113,6 +119,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
             ModeArg::RestHealth => Mode::RestHealth,
             ModeArg::GrpcStream => Mode::GrpcStream,
             ModeArg::WsStream => Mode::WsStream,
+            ModeArg::WsBroadcast => Mode::WsBroadcast,
         },
         http: args.http,
         grpc: args.grpc,
@@ -130,6 +137,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         shared: args.shared,
         motion: args.motion.map(|m| match m {
             MotionArg::ThreeLayers => MotionChoice::ThreeLayers,
+            MotionArg::FootIk => MotionChoice::FootIk,
         }),
         ws_protobuf: args.protobuf,
         ramp: args.ramp.then_some(RampPlan {
@@ -143,10 +151,12 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = runtime.block_on(crate::load::run(opts))?;
+    let mut out = super::Results::buffered();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print!("{}", report.human());
+        write!(out, "{}", report.human())?;
     }
+    out.flush()?;
     Ok(())
 }

@@ -8,7 +8,7 @@ use clap::Args;
 use glam::Mat4;
 
 use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
-use crate::wire::json::{EaseDoc, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc, parse_clip};
+use crate::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc, parse_clip};
 
 /// The most poses one invocation prints.
 const MAX_POSES: u64 = 1_000_000;
@@ -76,8 +76,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
 
     let mut sampler = Sampler::new();
     let mut matrices: Vec<Mat4> = Vec::new();
-    let stdout = std::io::stdout();
-    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut out = super::Results::buffered();
     out.write_all(b"[")?;
     for (k, &t) in times.iter().enumerate() {
         if k > 0 {
@@ -94,7 +93,10 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
                     skeleton: clip.skeleton(),
                     pose: sampler.pose(),
                 };
-                serde_json::to_writer(&mut out, &pose)?;
+                let mut text = Vec::new();
+                let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), None);
+                pose.write_with(&mut text, Extras { ik: sampler.ik_reports(), parameters, ..Extras::default() });
+                out.write_all(&text)?;
             }
             Some(skin) => {
                 clip.matrices(t, &options, skin, &mut sampler, &mut matrices);
@@ -108,7 +110,10 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
                     skeleton: clip.skeleton(),
                     matrices: &matrices,
                 };
-                serde_json::to_writer(&mut out, &doc)?;
+                let mut text = Vec::new();
+                let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), None);
+                doc.write_with(&mut text, Extras { ik: sampler.ik_reports(), parameters, ..Extras::default() });
+                out.write_all(&text)?;
             }
         }
     }

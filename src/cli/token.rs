@@ -31,7 +31,7 @@ enum TokenCommand {
 }
 
 pub fn run(args: TokenArgs) -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
+    let mut out = super::Results::buffered();
     match args.command {
         TokenCommand::New { name, scopes } => {
             let token = new_token()?;
@@ -54,5 +54,6 @@ pub fn run(args: TokenArgs) -> anyhow::Result<()> {
             writeln!(out, "{}", TokenHash::of(token.as_bytes()))?;
         }
     }
+    out.flush()?;
     Ok(())
 }

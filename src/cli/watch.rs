@@ -2,7 +2,9 @@
 //! stream commands need nothing but the project (no websocat, no jq).
 //!
 //! `--motion FILE` opens `GET /v1/stream` with `{"op":"open","motion":…}`;
-//! `--clip ID` streams `/v1/clips/{ID}/stream`. Each frame is printed as one
+//! `--clip ID` streams `/v1/clips/{ID}/stream`; `--broadcast ID` watches
+//! `/v1/broadcasts/{ID}/stream` (docs/broadcasts.md: its controls act on the
+//! broadcast for every viewer when the token may write). Each frame is printed as one
 //! compact line (or its JSON with `--raw`) on stdout; the `opened` message,
 //! errors and the close code go to stderr. Controls come from stdin (one JSON
 //! object a line) and from `--at SEQ=JSON`, sent when frame SEQ arrives, so a
@@ -11,6 +13,7 @@
 //! exactly one match) before anything is sent, so example files need no ids.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
@@ -39,11 +42,15 @@ pub struct WatchArgs {
     server: String,
     /// A motion document (docs/motion.md) to stream over `GET /v1/stream`; a layer may name its clip
     /// `"clip": "name:NAME"`.
-    #[arg(long, required_unless_present = "clip", conflicts_with = "clip")]
+    #[arg(long, required_unless_present_any = ["clip", "broadcast"], conflicts_with_all = ["clip", "broadcast"])]
     motion: Option<PathBuf>,
     /// Stream this clip (an id, or `name:NAME`) over `/v1/clips/{ID}/stream`.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "broadcast")]
     clip: Option<String>,
+    /// Watch this broadcast over `/v1/broadcasts/{ID}/stream` (its own fps and joints; `--fps`, `--max-frames`,
+    /// `--joints` and `--space` do not apply).
+    #[arg(long)]
+    broadcast: Option<String>,
     /// Frames per second.
     #[arg(long, default_value_t = 30)]
     fps: u32,
@@ -227,7 +234,18 @@ fn frame_line(frame: &Value) -> String {
     if let Some(joint) = pose["joints"].get(0) {
         line.push_str(&format!(" {}={}", joint["name"].as_str().unwrap_or("?"), vec3(&joint["translation"])));
     }
+    if let Some(reports) = pose["ik"].as_array() {
+        line.push_str(&format!(" ik=[{}]", reports.iter().map(ik_report).collect::<Vec<_>>().join(",")));
+    }
     line
+}
+
+/// One IK report (SPEC §7) as `kind:residual:iterations` with `!` when it
+/// did not converge.
+fn ik_report(r: &Value) -> String {
+    let converged = if r["converged"] == true { "" } else { "!" };
+    let residual = r["residual"].as_f64().unwrap_or(f64::NAN);
+    format!("{}:{residual:.1e}:{}{converged}", r["kind"].as_str().unwrap_or("?"), r["iterations"])
 }
 
 /// A server's problem as one line: `error CODE: DETAIL (at POINTER)`.
@@ -268,6 +286,9 @@ async fn watch(args: WatchArgs) -> anyhow::Result<()> {
 
 /// The stream's path and, for a motion, its open message (names resolved).
 async fn target(args: &WatchArgs, names: &Names) -> anyhow::Result<(String, Option<Value>)> {
+    if let Some(id) = &args.broadcast {
+        return Ok((format!("/v1/broadcasts/{}/stream", utf8_percent_encode(id, ENCODED)), None));
+    }
     if let Some(clip) = &args.clip {
         let id = match clip.strip_prefix(NAME_PREFIX) {
             Some(name) => names.lookup(name).await?,
@@ -392,7 +413,7 @@ impl Session {
                     if let Message::Close(frame) = message {
                         return self.closed(frame);
                     }
-                    for control in self.received(message) {
+                    for control in self.received(message)? {
                         sink.send(Message::text(control.to_string())).await.context("sending a control")?;
                     }
                 }
@@ -409,16 +430,20 @@ impl Session {
     }
 
     /// Prints a message; returns the timed controls now due.
-    fn received(&mut self, message: Message) -> Vec<Value> {
-        let Message::Text(text) = message else { return Vec::new() };
+    ///
+    /// # Errors
+    /// Standard output is gone (its reader left: the watch ends quietly).
+    fn received(&mut self, message: Message) -> std::io::Result<Vec<Value>> {
+        let Message::Text(text) = message else { return Ok(Vec::new()) };
         let Ok(value) = serde_json::from_str::<Value>(&text) else {
             eprintln!("not JSON: {text}");
-            return Vec::new();
+            return Ok(Vec::new());
         };
         if let Some(seq) = value["seq"].as_u64() {
             self.frames += 1;
-            println!("{}", if self.raw { text.to_string() } else { frame_line(&value) });
-            return self.due(seq);
+            let line = if self.raw { text.to_string() } else { frame_line(&value) };
+            writeln!(super::Results::lines(), "{line}")?;
+            return Ok(self.due(seq));
         }
         if let Some(opened) = value.get("opened") {
             eprintln!("opened {opened}");
@@ -427,7 +452,7 @@ impl Session {
         } else {
             eprintln!("{text}");
         }
-        Vec::new()
+        Ok(Vec::new())
     }
 
     fn due(&mut self, seq: u64) -> Vec<Value> {
@@ -543,6 +568,13 @@ mod tests {
             frame_line(&frame),
             "seq=4 time=0.2500 clip_time=0.5000 dropped=1 events=[step] root_total=[0.5000,0.0000,2.0000] \
              yaw=0.1250 hips=[1.0000,2.5000,-3.0000]"
+        );
+        let solved = json!({"seq": 0, "clip_time": 0, "dropped": 0, "events": [], "pose": {"time": 0, "joints": [],
+            "ik": [{"kind": "two_bone", "residual": 1.5e-7, "iterations": 0, "converged": true},
+                   {"kind": "chain", "residual": 0.25, "iterations": 100, "converged": false}]}});
+        assert_eq!(
+            frame_line(&solved),
+            "seq=0 time=0.0000 clip_time=0.0000 dropped=0 events=[] ik=[two_bone:1.5e-7:0,chain:2.5e-1:100!]"
         );
     }
 }

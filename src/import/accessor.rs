@@ -4,11 +4,20 @@
 //! stride and offsets are checked against its buffer view and buffer, with
 //! overflow-checked arithmetic, before a single value is read or a vector
 //! allocated. Sparse accessors are applied on top of their base (or zeros).
+//!
+//! Only the bytes an accessor's elements occupy are read, never its whole
+//! view or buffer, and strided elements are read in windows of at most
+//! [`WINDOW_BYTES`], so the memory a read takes is its output plus a window
+//! whatever the stride (up to 252 bytes, checked by the crate) and the size
+//! of the file behind the buffer.
 
 use ::gltf::accessor::{Accessor, DataType, Dimensions};
 
 use super::ImportError;
 use super::buffers::Buffers;
+
+/// Most bytes of strided elements read at once from a buffer.
+const WINDOW_BYTES: usize = 1 << 20;
 
 /// What the caller expects of an accessor.
 pub(crate) struct Expect<'s> {
@@ -138,12 +147,12 @@ fn read_dense(
             view.index()
         )));
     }
-    let bytes = view_bytes(view, buffers, what)?;
+    let span = view_span(view, buffers, what)?;
     let start = acc.offset();
     // Last byte read: start + stride·(count−1) + elem.
     let end = (count - 1).checked_mul(stride).and_then(|x| x.checked_add(start)).and_then(|x| x.checked_add(elem));
     match end {
-        Some(end) if end <= bytes.len() => {}
+        Some(end) if end as u64 <= span.length => {}
         _ => {
             return Err(ImportError::OutOfBounds {
                 what: what(),
@@ -151,18 +160,26 @@ fn read_dense(
                     "{count} elements of {elem} bytes, stride {stride}, from offset {start} do not fit \
                      in buffer view {} ({} bytes)",
                     view.index(),
-                    bytes.len()
+                    span.length
                 ),
             });
         }
     }
     let mut out = Vec::with_capacity(count * comps);
-    for i in 0..count {
-        let at = start + i * stride;
-        for c in 0..comps {
-            let o = at + c * comp_size;
-            out.push(layout.decode(&bytes[o..o + comp_size]));
+    // Elements per window: at least one, however wide the stride.
+    let per_window = ((WINDOW_BYTES - elem) / stride + 1).max(1);
+    let mut first = 0;
+    while first < count {
+        let n = per_window.min(count - first);
+        let from = start + first * stride;
+        let bytes = span.read(buffers, from, (n - 1) * stride + elem)?;
+        for i in 0..n {
+            for c in 0..comps {
+                let o = i * stride + c * comp_size;
+                out.push(layout.decode(&bytes[o..o + comp_size]));
+            }
         }
+        first += n;
     }
     Ok(out)
 }
@@ -184,28 +201,30 @@ fn apply_sparse(
     }
     let indices = sparse.indices();
     let index_size = indices.index_type_size();
-    let ibytes = view_bytes(&indices.view(), buffers, what)?.to_vec();
+    let ispan = view_span(&indices.view(), buffers, what)?;
     let ifrom = indices.offset();
-    let fits = |from: usize, size: usize, len: usize| {
-        n.checked_mul(size).and_then(|x| x.checked_add(from)).is_some_and(|e| e <= len)
+    let fits = |from: usize, size: usize, len: u64| {
+        n.checked_mul(size).and_then(|x| x.checked_add(from)).is_some_and(|e| e as u64 <= len)
     };
-    if !fits(ifrom, index_size, ibytes.len()) {
+    if !fits(ifrom, index_size, ispan.length) {
         return Err(ImportError::OutOfBounds {
             what: what(),
             detail: "its sparse indices overrun their buffer view".into(),
         });
     }
+    let ibytes = ispan.read(buffers, ifrom, n * index_size)?;
     let values = sparse.values();
-    let vbytes = view_bytes(&values.view(), buffers, what)?;
+    let vspan = view_span(&values.view(), buffers, what)?;
     let vfrom = values.offset();
-    if !fits(vfrom, elem, vbytes.len()) {
+    if !fits(vfrom, elem, vspan.length) {
         return Err(ImportError::OutOfBounds {
             what: what(),
             detail: "its sparse values overrun their buffer view".into(),
         });
     }
+    let vbytes = vspan.read(buffers, vfrom, n * elem)?;
     for k in 0..n {
-        let b = &ibytes[ifrom + k * index_size..];
+        let b = &ibytes[k * index_size..];
         let target = match index_size {
             1 => b[0] as usize,
             2 => u16::from_le_bytes([b[0], b[1]]) as usize,
@@ -218,30 +237,44 @@ fn apply_sparse(
             });
         }
         for c in 0..comps {
-            let o = vfrom + k * elem + c * comp_size;
+            let o = k * elem + c * comp_size;
             out[target * comps + c] = layout.decode(&vbytes[o..o + comp_size]);
         }
     }
     Ok(())
 }
 
-/// The bytes of a buffer view, checked against its buffer.
-fn view_bytes<'b>(
+/// Where a buffer view lies: its buffer, and its offset and length there.
+struct Span {
+    buffer: usize,
+    offset: u64,
+    length: u64,
+}
+
+impl Span {
+    /// `len` bytes of the view from `at`; the caller has checked the range
+    /// against `length`.
+    fn read(&self, buffers: &mut Buffers, at: usize, len: usize) -> Result<bytes::Bytes, ImportError> {
+        buffers.read(self.buffer, self.offset + at as u64, len)
+    }
+}
+
+/// A buffer view, checked against its buffer (which is opened, not read).
+fn view_span(
     view: &::gltf::buffer::View,
-    buffers: &'b mut Buffers,
+    buffers: &mut Buffers,
     what: &dyn Fn() -> String,
-) -> Result<&'b [u8], ImportError> {
-    let buffer = buffers.get(view.buffer().index())?;
-    let (offset, length) = (view.offset(), view.length());
+) -> Result<Span, ImportError> {
+    let buffer = view.buffer().index();
+    let buffer_len = buffers.len(buffer)?;
+    let (offset, length) = (view.offset() as u64, view.length() as u64);
     match offset.checked_add(length) {
-        Some(end) if end <= buffer.len() => Ok(&buffer[offset..end]),
+        Some(end) if end <= buffer_len => Ok(Span { buffer, offset, length }),
         _ => Err(ImportError::OutOfBounds {
             what: what(),
             detail: format!(
-                "buffer view {} spans bytes {offset}..+{length} of buffer {}, which has {} bytes",
+                "buffer view {} spans bytes {offset}..+{length} of buffer {buffer}, which has {buffer_len} bytes",
                 view.index(),
-                view.buffer().index(),
-                buffer.len()
             ),
         }),
     }

@@ -2,123 +2,134 @@
 //!
 //! The `gltf` crate's own GLB reader panics on a header length under 12
 //! and its URI import reads the filesystem, so both are done here, on the
-//! upload's bytes only: a GLB is split with checked arithmetic, a buffer is
-//! the BIN chunk or a `data:` URI, and any other URI goes to the caller's
-//! [`Resolver`] or is refused. Buffers are decoded lazily, so a texture
-//! buffer that no animation reads is never touched.
+//! upload's [`Source`] only: a GLB is split with checked arithmetic (its
+//! header and JSON chunk read, its BIN chunk kept as a range of the source),
+//! a buffer is the BIN chunk or a `data:` URI, and any other URI goes to the
+//! caller's [`Resolver`] or is refused. Buffers are opened lazily and read by
+//! range, so a texture or mesh that no animation reads is never touched, and
+//! a file-backed BIN chunk costs only the bytes the accessors read.
 //!
-//! A resolved URI is asked for once and its bytes are shared: every buffer
-//! naming it holds a [`Bytes`] slice of the same allocation, never a copy.
-//! Every buffer's `byteLength` still counts against
+//! A resolved URI is asked for once and its source is shared: every buffer
+//! naming it holds a range of the same source, never a copy. Every buffer
+//! named by a URI still counts its `byteLength` against
 //! [`ImportLimits::max_resolved_bytes`](super::ImportLimits), so a file whose
-//! thousands of buffers all name one large part is refused, not scanned.
+//! thousands of buffers all name one large part is refused, not scanned. The
+//! GLB's own BIN chunk is not counted there: it is the file itself, already
+//! bounded by [`ImportLimits::max_bytes`](super::ImportLimits), and it can
+//! back only buffer 0.
 
 use std::borrow::Cow;
 use std::collections::HashMap;
-use std::ops::Deref;
 
 use base64::Engine as _;
 use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
 use bytes::Bytes;
 
+use super::source::Source;
 use super::{ImportError, ImportLimits, Resolver};
 
-/// The chunks of a GLB file.
-pub(crate) struct Glb<'a> {
-    pub json: &'a [u8],
-    pub bin: Option<&'a [u8]>,
+/// The chunks of a GLB file: the JSON read into memory, the BIN chunk a
+/// range of the source, read later only where accessors point.
+pub(crate) struct Glb {
+    pub json: Bytes,
+    pub bin: Option<Source>,
 }
 
-fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
-    let b = bytes.get(at..at.checked_add(4)?)?;
-    Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+fn u32_le(b: &[u8]) -> u32 {
+    u32::from_le_bytes([b[0], b[1], b[2], b[3]])
 }
 
 /// Splits a GLB container (glTF 2.0 §4.4): a 12-byte header, a JSON chunk,
-/// an optional BIN chunk; later chunks are ignored as the spec says.
-pub(crate) fn split_glb(bytes: &[u8]) -> Result<Glb<'_>, ImportError> {
+/// an optional BIN chunk; later chunks are ignored as the spec says. The
+/// JSON chunk is held in memory whole, so it is refused over `max_json`
+/// bytes before it is read.
+pub(crate) fn split_glb(source: &Source, max_json: u64) -> Result<Glb, ImportError> {
     let bad = |m: String| Err(ImportError::Container(m));
-    if bytes.len() < 12 {
-        return bad(format!("{} bytes is shorter than the 12-byte GLB header", bytes.len()));
+    if source.len() < 12 {
+        return bad(format!("{} bytes is shorter than the 12-byte GLB header", source.len()));
     }
-    if &bytes[..4] != b"glTF" {
+    let header = source.read(0, 12)?;
+    if &header[..4] != b"glTF" {
         return bad("the magic is not 'glTF'".into());
     }
-    let version = u32_at(bytes, 4).unwrap_or(0);
+    let version = u32_le(&header[4..]);
     if version != 2 {
         return bad(format!("version {version} is not 2"));
     }
-    let length = u32_at(bytes, 8).unwrap_or(0) as usize;
-    if length < 12 || length > bytes.len() {
-        return bad(format!("the header says {length} bytes, but the file has {}", bytes.len()));
+    let length = u64::from(u32_le(&header[8..]));
+    if length < 12 || length > source.len() {
+        return bad(format!("the header says {length} bytes, but the file has {}", source.len()));
     }
-    let bytes = &bytes[..length];
-    // A chunk at byte `at`: its type, its data and where the next one starts.
-    type Chunk<'b> = Option<(&'b [u8; 4], &'b [u8], usize)>;
-    let chunk = |at: usize| -> Result<Chunk, ImportError> {
-        if at >= bytes.len() {
-            return Ok(None);
-        }
-        let (Some(len), Some(kind)) = (u32_at(bytes, at), bytes.get(at + 4..at + 8)) else {
-            return Err(ImportError::Container(format!("a chunk header at byte {at} is cut off")));
-        };
-        let start = at + 8;
-        let end = start.checked_add(len as usize).filter(|&e| e <= bytes.len()).ok_or_else(|| {
-            ImportError::Container(format!("the chunk at byte {at} claims {len} bytes, past the end of the file"))
-        })?;
-        let kind: &[u8; 4] = kind.try_into().map_err(|_| ImportError::Container("bad chunk header".into()))?;
-        // Chunks are 4-byte aligned; a missing final padding is tolerated.
-        Ok(Some((kind, &bytes[start..end], end.next_multiple_of(4))))
-    };
-    let Some((kind, json, next)) = chunk(12)? else {
+    let chunk = |at: u64| chunk_at(source, at, length);
+    let Some(json_chunk) = chunk(12)? else {
         return bad("there is no JSON chunk".into());
     };
-    if kind != b"JSON" {
+    if &json_chunk.kind != b"JSON" {
         return bad("the first chunk is not JSON".into());
     }
-    let bin = match chunk(next)? {
-        Some((b"BIN\0", data, _)) => Some(data),
+    if json_chunk.len > max_json {
+        return Err(ImportError::DocumentTooLarge {
+            what: "the GLB's JSON chunk",
+            max: max_json,
+            found: json_chunk.len,
+        });
+    }
+    let json = source.read(json_chunk.start, json_chunk.len as usize)?;
+    let bin = match chunk(json_chunk.next)? {
+        Some(c) if &c.kind == b"BIN\0" => source.slice(c.start, c.len),
         _ => None,
     };
     Ok(Glb { json, bin })
 }
 
-/// The bytes of one loaded buffer: a slice of the GLB's BIN chunk, or a
-/// shared slice of a decoded `data:` URI or a resolved part.
-enum Held<'a> {
-    Borrowed(&'a [u8]),
-    Shared(Bytes),
+/// A GLB chunk: its type, where its data starts, its length and where the
+/// next chunk starts.
+struct Chunk {
+    kind: [u8; 4],
+    start: u64,
+    len: u64,
+    next: u64,
 }
 
-impl Deref for Held<'_> {
-    type Target = [u8];
-
-    fn deref(&self) -> &[u8] {
-        match self {
-            Held::Borrowed(b) => b,
-            Held::Shared(b) => b,
-        }
+/// The chunk at byte `at` of a GLB of `length` bytes; `None` at the end.
+fn chunk_at(source: &Source, at: u64, length: u64) -> Result<Option<Chunk>, ImportError> {
+    if at >= length {
+        return Ok(None);
     }
+    if at + 8 > length {
+        return Err(ImportError::Container(format!("a chunk header at byte {at} is cut off")));
+    }
+    let head = source.read(at, 8)?;
+    let len = u64::from(u32_le(&head));
+    let start = at + 8;
+    if start + len > length {
+        return Err(ImportError::Container(format!(
+            "the chunk at byte {at} claims {len} bytes, past the end of the file"
+        )));
+    }
+    // Chunks are 4-byte aligned; a missing final padding is tolerated.
+    Ok(Some(Chunk { kind: [head[4], head[5], head[6], head[7]], start, len, next: (start + len).next_multiple_of(4) }))
 }
 
-/// Lazily resolved buffers of one document.
-pub(crate) struct Buffers<'a, 'r> {
+/// Lazily opened buffers of one document, read by range.
+pub(crate) struct Buffers<'r> {
     /// `(uri, byteLength)` per buffer.
     decl: Vec<(Option<String>, u64)>,
-    bin: Option<&'a [u8]>,
-    cache: Vec<Option<Held<'a>>>,
+    bin: Option<Source>,
+    /// Each opened buffer: exactly `byteLength` bytes of its source.
+    cache: Vec<Option<Source>>,
     /// What the resolver answered, by URI: each is asked for once.
-    resolved: HashMap<String, Bytes>,
+    resolved: HashMap<String, Source>,
     resolver: Option<Resolver<'r>>,
-    /// `byteLength`s of the buffers loaded so far, and their bound.
+    /// `byteLength`s of the URI buffers opened so far, and their bound.
     held_bytes: u64,
     max_held_bytes: u64,
 }
 
-impl<'a, 'r> Buffers<'a, 'r> {
+impl<'r> Buffers<'r> {
     pub(crate) fn new(
         doc: &::gltf::Document,
-        bin: Option<&'a [u8]>,
+        bin: Option<Source>,
         resolver: Option<Resolver<'r>>,
         limits: &ImportLimits,
     ) -> Self {
@@ -128,20 +139,32 @@ impl<'a, 'r> Buffers<'a, 'r> {
         Buffers { decl, bin, cache, resolved: HashMap::new(), resolver, held_bytes: 0, max_held_bytes }
     }
 
-    /// The bytes of buffer `index`, exactly `byteLength` long.
-    pub(crate) fn get(&mut self, index: usize) -> Result<&[u8], ImportError> {
+    /// Buffer `index`, exactly `byteLength` long, opened on first use.
+    fn get(&mut self, index: usize) -> Result<&Source, ImportError> {
         if self.cache[index].is_none() {
             let data = self.load(index)?;
             self.cache[index] = Some(data);
         }
-        Ok(self.cache[index].as_deref().unwrap_or(&[]))
+        self.cache[index].as_ref().ok_or_else(|| ImportError::InvalidGltf(format!("buffer {index} is missing")))
     }
 
-    fn load(&mut self, index: usize) -> Result<Held<'a>, ImportError> {
+    /// The length of buffer `index` (its `byteLength`, checked against the
+    /// bytes that back it).
+    pub(crate) fn len(&mut self, index: usize) -> Result<u64, ImportError> {
+        Ok(self.get(index)?.len())
+    }
+
+    /// `len` bytes of buffer `index` from `at`; the caller has checked the
+    /// range against [`Buffers::len`].
+    pub(crate) fn read(&mut self, index: usize, at: u64, len: usize) -> Result<Bytes, ImportError> {
+        Ok(self.get(index)?.read(at, len)?)
+    }
+
+    fn load(&mut self, index: usize) -> Result<Source, ImportError> {
         let (uri, declared) = self.decl[index].clone();
-        let data = match uri {
-            None if index == 0 => match self.bin {
-                Some(bin) => Held::Borrowed(bin),
+        let (data, counted) = match uri {
+            None if index == 0 => match &self.bin {
+                Some(bin) => (bin.clone(), false),
                 None => {
                     return Err(ImportError::InvalidGltf(
                         "buffer 0 has no uri and the file has no GLB BIN chunk".into(),
@@ -151,40 +174,39 @@ impl<'a, 'r> Buffers<'a, 'r> {
             None => return Err(ImportError::InvalidGltf(format!("buffer {index} has no uri (only buffer 0 may)"))),
             Some(uri) if uri.as_bytes().get(..5).is_some_and(|p| p.eq_ignore_ascii_case(b"data:")) => {
                 let decoded = decode_data_uri(&uri).map_err(|detail| ImportError::DataUri { buffer: index, detail })?;
-                Held::Shared(Bytes::from(decoded))
+                (Source::memory(decoded), true)
             }
-            Some(uri) => Held::Shared(self.resolve(index, uri)?),
+            Some(uri) => (self.resolve(index, uri)?, true),
         };
-        if (data.len() as u64) < declared {
+        let Some(buffer) = data.slice(0, declared) else {
             return Err(ImportError::OutOfBounds {
                 what: format!("buffer {index}"),
                 detail: format!("it declares byteLength {declared} but holds {} bytes", data.len()),
             });
+        };
+        if counted {
+            self.count(declared)?;
         }
-        self.count(declared)?;
-        Ok(match data {
-            Held::Borrowed(b) => Held::Borrowed(&b[..declared as usize]),
-            Held::Shared(b) => Held::Shared(b.slice(..declared as usize)),
-        })
+        Ok(buffer)
     }
 
-    /// The bytes behind an external URI: from the cache, else from the
+    /// The source behind an external URI: from the cache, else from the
     /// resolver (once per URI), else refused.
-    fn resolve(&mut self, index: usize, uri: String) -> Result<Bytes, ImportError> {
-        if let Some(bytes) = self.resolved.get(&uri) {
-            return Ok(bytes.clone());
+    fn resolve(&mut self, index: usize, uri: String) -> Result<Source, ImportError> {
+        if let Some(source) = self.resolved.get(&uri) {
+            return Ok(source.clone());
         }
         let Some(resolve) = self.resolver.as_mut() else {
             return Err(ImportError::ExternalUri { buffer: index, uri: shorten(&uri) });
         };
-        let bytes =
+        let source =
             resolve(&uri).map_err(|reason| ImportError::UnreadableUri { buffer: index, uri: shorten(&uri), reason })?;
-        self.resolved.insert(uri, bytes.clone());
-        Ok(bytes)
+        self.resolved.insert(uri, source.clone());
+        Ok(source)
     }
 
-    /// Counts a loaded buffer's `byteLength` against the import's bound,
-    /// even when its bytes are shared with another buffer's.
+    /// Counts an opened URI buffer's `byteLength` against the import's
+    /// bound, even when its bytes are shared with another buffer's.
     fn count(&mut self, declared: u64) -> Result<(), ImportError> {
         self.held_bytes = self.held_bytes.saturating_add(declared);
         if self.held_bytes > self.max_held_bytes {
@@ -248,13 +270,14 @@ mod tests {
         let mut calls = Vec::new();
         let mut resolve = |uri: &str| {
             calls.push(uri.to_owned());
-            Ok(part.clone())
+            Ok(Source::from(part.clone()))
         };
         let doc = shared_part_doc(64, 600);
         let mut buffers = Buffers::new(&doc, None, Some(&mut resolve), &limits(64 * 600));
         let starts: Vec<(*const u8, usize)> = (0..64)
             .map(|i| {
-                let b = buffers.get(i).unwrap();
+                let len = buffers.len(i).unwrap();
+                let b = buffers.read(i, 0, len as usize).unwrap();
                 (b.as_ptr(), b.len())
             })
             .collect();
@@ -267,18 +290,53 @@ mod tests {
     #[test]
     fn every_buffers_byte_length_counts_even_when_shared() {
         let part = Bytes::from(vec![7u8; 1000]);
-        let mut resolve = |_: &str| Ok(part.clone());
+        let mut resolve = |_: &str| Ok(Source::from(part.clone()));
         let doc = shared_part_doc(64, 600);
         // 63 buffers of 600 bytes fit in 63·600; the 64th does not.
         let mut buffers = Buffers::new(&doc, None, Some(&mut resolve), &limits(63 * 600));
         for i in 0..63 {
-            buffers.get(i).unwrap();
+            buffers.len(i).unwrap();
         }
-        let refused = buffers.get(63).map(<[u8]>::len).unwrap_err();
+        let refused = buffers.len(63).unwrap_err();
         assert_eq!(refused, ImportError::ResolvedTooLarge { max: 63 * 600, found: 64 * 600 });
         assert_eq!(
             (refused.code(), refused.class()),
             ("resolved_bytes_too_large", crate::import::ErrorClass::TooLarge)
         );
+    }
+
+    /// A GLB of a JSON chunk and a BIN chunk, with `tail` bytes after it.
+    fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
+        let (jlen, blen) = (json.len().next_multiple_of(4), bin.len().next_multiple_of(4));
+        let total = 12 + 8 + jlen + 8 + blen;
+        let mut out = b"glTF".to_vec();
+        for n in [2, total as u32, jlen as u32] {
+            out.extend_from_slice(&n.to_le_bytes());
+        }
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(json);
+        out.resize(20 + jlen, b' ');
+        out.extend_from_slice(&(blen as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(bin);
+        out.resize(total, 0);
+        out
+    }
+
+    #[test]
+    fn a_glb_split_from_a_file_reads_its_json_and_keeps_its_bin_as_a_range() {
+        use std::io::Write;
+        let bin: Vec<u8> = (0..=255u8).cycle().take(5000).collect();
+        let bytes = glb(br#"{"asset":{"version":"2.0"}}"#, &bin);
+        let mut file = tempfile::tempfile().unwrap();
+        file.write_all(&bytes).unwrap();
+        for source in [Source::from(bytes.clone()), Source::open_file(file).unwrap()] {
+            let split = split_glb(&source, 1000).unwrap();
+            assert_eq!(&split.json[..27], br#"{"asset":{"version":"2.0"}}"#);
+            let got = split.bin.unwrap();
+            assert_eq!((got.len(), &got.read(4000, 8).unwrap()[..]), (5000, &bin[4000..4008]));
+            let refused = split_glb(&source, 27).map(|_| ()).unwrap_err();
+            assert_eq!(refused, ImportError::DocumentTooLarge { what: "the GLB's JSON chunk", max: 27, found: 28 });
+        }
     }
 }

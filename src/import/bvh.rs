@@ -18,7 +18,9 @@ use std::borrow::Cow;
 
 use glam::{DQuat, DVec3, Vec3, Vec4};
 
+use super::Warning;
 use super::{Budget, ImportError, ImportLimits, ImportOptions, Imported, clip_name, unique_names};
+use crate::anim::lint;
 use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -66,23 +68,35 @@ pub(crate) fn import(bytes: &[u8], options: &ImportOptions) -> Result<Imported, 
     };
     let header = motion_header(&mut lines, motion_line, &options.limits)?;
     let layout = Layout::new(&joints, &options.limits)?;
-    let mut budget = Budget::new(&options.limits, bytes.len());
+    let mut budget = Budget::new(&options.limits, bytes.len() as u64);
     budget.take(joints.len())?;
     let keys = read_frames(lines, &joints, &layout, &header, &mut budget)?;
     let times = frame_times(&header)?;
 
     let tracks = tracks(&joints, &layout, keys, &times, interpolation);
-    let name = clip_name(options.name.as_deref().unwrap_or("bvh"));
-    let clip =
-        ClipSpec { name, skeleton: Some(skeleton(&joints)), tracks, events: Vec::new(), playback: Playback::Once };
-    Ok(Imported { clips: vec![clip], skipped: Vec::new() })
+    let name = clip_name(options.name.as_deref().or(options.file_name.as_deref()).unwrap_or("bvh"));
+    let clip = ClipSpec {
+        name,
+        skeleton: Some(skeleton(&joints)),
+        tracks,
+        events: Vec::new(),
+        playback: Playback::Once,
+        ..Default::default()
+    };
+    // The importer computes every rotation itself, so only the times can look wrong.
+    let warnings = lint::times(&clip).map(|l| Warning::from_lint(&l, FRAME_TIME_POINTER)).into_iter().collect();
+    Ok(Imported { clips: vec![clip], warnings })
 }
+
+/// Where a BVH warning about key times points: the header line that set
+/// them (a BVH is not JSON; its pointers name its sections and keywords).
+pub(crate) const FRAME_TIME_POINTER: &str = "/MOTION/Frame Time";
 
 /// The interpolation of the frames' keys: refused before any parsing when
 /// it needs tangents, which a BVH does not have.
 fn frame_interpolation(options: &ImportOptions) -> Result<Interpolation, ImportError> {
     match options.bvh_interpolation {
-        i @ (Interpolation::Linear | Interpolation::CatmullRom | Interpolation::Step) => Ok(i),
+        i @ (Interpolation::Linear | Interpolation::CatmullRom | Interpolation::BSpline | Interpolation::Step) => Ok(i),
         Interpolation::CubicHermite => {
             Err(ImportError::Unsupported("BVH frames cannot be imported as cubic_hermite (no tangents)".into()))
         }

@@ -1,8 +1,10 @@
 //! Why an upload could not be imported.
 //!
-//! Every variant is the client's fault (a malformed, hostile, oversized or
-//! unsupported file), never the server's: the edge maps [`ErrorClass`] to
-//! 400, 413 or 422 and sends [`ImportError::code`] with the message. The
+//! Every variant but [`ImportError::Read`] is the client's fault (a
+//! malformed, hostile, oversized or unsupported file): the edge maps
+//! [`ErrorClass`] to 400, 413 or 422 and sends [`ImportError::code`] with the
+//! message. `Read` is the caller's own source failing (its file could not be
+//! read), which the server answers as an internal error. The
 //! messages name the offending object by its glTF index or BVH line so a
 //! user can find it in their file.
 
@@ -31,6 +33,12 @@ pub enum ImportError {
          even when several name the same part), the limit is {max}"
     )]
     ResolvedTooLarge { max: u64, found: u64 },
+    /// A part held in memory whole (a `.gltf` or `.bvh` file, a GLB's JSON
+    /// chunk) over [`ImportLimits::max_document_bytes`](super::ImportLimits).
+    #[error("too large: {what} is {found} bytes and is read into memory whole; the limit is {max}")]
+    DocumentTooLarge { what: &'static str, max: u64, found: u64 },
+    #[error("the file could not be read: {0}")]
+    Read(String),
     #[error("not a valid GLB container: {0}")]
     Container(String),
     #[error("the glTF JSON cannot be read: {0}")]
@@ -78,6 +86,8 @@ impl ImportError {
             UnknownFormat => "unknown_format",
             TooLarge { .. } => "too_large",
             ResolvedTooLarge { .. } => "resolved_bytes_too_large",
+            DocumentTooLarge { .. } => "document_too_large",
+            Read(_) => "unreadable",
             Container(_) => "bad_container",
             Json(_) => "bad_json",
             InvalidGltf(_) => "invalid_gltf",
@@ -105,7 +115,9 @@ impl ImportError {
     pub fn class(&self) -> ErrorClass {
         use ImportError::*;
         match self {
-            TooLarge { .. } | ResolvedTooLarge { .. } | TooDeep { .. } => ErrorClass::TooLarge,
+            TooLarge { .. } | ResolvedTooLarge { .. } | DocumentTooLarge { .. } | TooDeep { .. } => {
+                ErrorClass::TooLarge
+            }
             UnknownFormat | Container(_) | Json(_) | DataUri { .. } | BvhSyntax { .. } => ErrorClass::Malformed,
             _ => ErrorClass::Unprocessable,
         }
@@ -118,6 +130,12 @@ impl ImportError {
             ImportError::InvalidClip { error, .. } => Some(error.path.to_pointer()),
             _ => None,
         }
+    }
+}
+
+impl From<std::io::Error> for ImportError {
+    fn from(e: std::io::Error) -> Self {
+        ImportError::Read(e.to_string())
     }
 }
 

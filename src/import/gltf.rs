@@ -17,30 +17,41 @@ use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 
 use super::accessor::{Expect, read_f32};
 use super::buffers::{Buffers, split_glb};
-use super::{Budget, Format, ImportError, ImportOptions, Imported, Resolver, Skipped, clip_name, unique_names};
-use crate::anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
+use super::source::Source;
+use super::warning::NOT_IMPORTED;
+use super::{
+    Budget, Format, ImportError, ImportOptions, Imported, Resolver, Warning, clip_name, read_document, unique_names,
+};
+use crate::anim::lint::{self, Lint, LintCode};
+use crate::anim::{
+    Channel, ClipSpec, Interpolation, JointSpec, Keys, MAX_PARAMETER_WIDTH, ParameterSpec, Playback, SkeletonSpec,
+    TrackSpec, Transform,
+};
 
 pub(crate) fn import(
-    bytes: &[u8],
+    source: &Source,
     format: Format,
     options: &ImportOptions,
     resolver: Option<Resolver<'_>>,
 ) -> Result<Imported, ImportError> {
+    let limits = &options.limits;
     // A GLB is recognised by its magic whatever the caller called it.
-    let (json, bin) = if format == Format::Glb || bytes.starts_with(b"glTF") {
-        let glb = split_glb(bytes)?;
+    let (json, bin) = if format == Format::Glb || source.head(4)?.starts_with(b"glTF") {
+        let glb = split_glb(source, limits.max_document_bytes)?;
         (glb.json, glb.bin)
     } else {
-        (bytes, None)
+        (read_document(source, "the glTF JSON file", limits)?, None)
     };
-    let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(json);
+    let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&json);
     let mut root: ::gltf::json::Root =
         ::gltf::json::deserialize::from_slice(json).map_err(|e| ImportError::Json(e.to_string()))?;
+    // Morph weights are a parameter as wide as the node's mesh has targets:
+    // counted before the meshes go.
+    let morph_targets = morph_targets(&root);
     strip_to_animation(&mut root);
     let doc = Document::from_json(root).map_err(|e| ImportError::InvalidGltf(validation_message(e)))?;
     check_channel_targets(&doc)?;
 
-    let limits = &options.limits;
     let animation_count = doc.animations().len();
     if animation_count > limits.max_clips {
         return Err(ImportError::TooLarge {
@@ -64,11 +75,12 @@ pub(crate) fn import(
         forest,
         buffers: Buffers::new(&doc, bin, resolver, limits),
         options,
-        budget: Budget::new(limits, bytes.len()),
+        budget: Budget::new(limits, source.len()),
         rest: HashMap::new(),
         inverse_binds: None,
         skins_of,
-        skipped: Vec::new(),
+        morph_targets,
+        warnings: Vec::new(),
     };
     let mut clips = Vec::new();
     for animation in doc.animations() {
@@ -79,7 +91,18 @@ pub(crate) fn import(
     if clips.is_empty() {
         return Err(ImportError::NoAnimations);
     }
-    Ok(Imported { clips, skipped: ctx.skipped })
+    Ok(Imported { clips, warnings: ctx.warnings })
+}
+
+/// Per node, the morph targets of its mesh (its first primitive's: glTF
+/// requires every primitive of a mesh to have as many), 0 without a mesh.
+fn morph_targets(root: &::gltf::json::Root) -> Vec<usize> {
+    (root.nodes.iter())
+        .map(|node| {
+            let mesh = node.mesh.and_then(|m| root.meshes.get(m.value()));
+            mesh.and_then(|m| m.primitives.first()).and_then(|p| p.targets.as_ref()).map_or(0, Vec::len)
+        })
+        .collect()
 }
 
 /// Drops everything an animation import never reads (meshes, materials,
@@ -206,10 +229,10 @@ impl Forest {
     }
 }
 
-struct Ctx<'d, 'a, 'r> {
+struct Ctx<'d, 'r> {
     doc: &'d Document,
     forest: Forest,
-    buffers: Buffers<'a, 'r>,
+    buffers: Buffers<'r>,
     options: &'d ImportOptions,
     budget: Budget,
     rest: HashMap<usize, Transform>,
@@ -217,90 +240,186 @@ struct Ctx<'d, 'a, 'r> {
     inverse_binds: Option<HashMap<usize, Mat4>>,
     /// Node → the skins it is a joint of.
     skins_of: Vec<Vec<usize>>,
-    skipped: Vec<Skipped>,
+    /// Node → its mesh's morph targets (0: none).
+    morph_targets: Vec<usize>,
+    /// Parts not imported, repairs made, and what the lints notice.
+    warnings: Vec<Warning>,
 }
 
-impl Ctx<'_, '_, '_> {
-    /// One animation as a clip, or `None` (listed in `skipped`) when it
-    /// animates no translation, rotation or scale.
+/// Where a clip's track came from: its channel and that channel's sampler.
+#[derive(Clone, Copy)]
+struct ChannelRef {
+    channel: usize,
+    sampler: usize,
+}
+
+/// An animation's channels: joint tracks (with where each came from, in
+/// step), morph-weight parameters, and the nodes they animate.
+#[derive(Default)]
+struct Channels {
+    tracks: Vec<TrackSpec>,
+    refs: Vec<ChannelRef>,
+    parameters: Vec<ParameterSpec>,
+    animated: Vec<usize>,
+}
+
+impl Ctx<'_, '_> {
+    /// One animation as a clip, or `None` (a `not_imported` warning) when
+    /// it animates no translation, rotation, scale or morph weights.
     fn animation(
         &mut self,
         animation: &::gltf::Animation,
         animation_count: usize,
     ) -> Result<Option<ClipSpec>, ImportError> {
         let a = animation.index();
-        let base = animation.name().filter(|s| !s.is_empty()).map_or_else(|| format!("animation{a}"), str::to_owned);
-        let name = match (&self.options.name, animation_count) {
-            (Some(prefix), 1) => prefix.clone(),
-            (Some(prefix), _) => format!("{prefix}/{base}"),
-            (None, _) => base.clone(),
+        let own = animation.name().filter(|s| !s.is_empty());
+        let base = own.map_or_else(|| format!("animation{a}"), str::to_owned);
+        let name = match (&self.options.name, animation_count, own, &self.options.file_name) {
+            (Some(prefix), 1, ..) => prefix.clone(),
+            (Some(prefix), ..) => format!("{prefix}/{base}"),
+            (None, _, Some(own), _) => own.to_owned(),
+            // An unnamed animation is named after its file.
+            (None, 1, None, Some(file)) => file.clone(),
+            (None, _, None, Some(file)) => format!("{file}/{base}"),
+            (None, _, None, None) => base.clone(),
         };
-        let (tracks, animated) = self.channel_tracks(animation, &base)?;
-        if tracks.is_empty() {
-            self.skipped.push(Skipped {
-                what: format!("animation '{base}'"),
-                why: "it animates no translation, rotation or scale".into(),
-            });
+        let Channels { tracks, refs, parameters, animated } = self.channel_tracks(animation, &base)?;
+        if tracks.is_empty() && parameters.is_empty() {
+            self.warnings.push(Warning::new(
+                NOT_IMPORTED,
+                format!("/animations/{a}"),
+                format!(
+                    "animation '{base}' was not imported: it animates no translation, rotation, scale or morph \
+                     weights"
+                ),
+            ));
             return Ok(None);
         }
         let (nodes, skinned) = self.clip_nodes(&animated)?;
         let joints = self.joints(&nodes, skinned)?;
-        Ok(Some(ClipSpec {
+        let clip = ClipSpec {
             name: clip_name(&name),
             skeleton: Some(SkeletonSpec { joints }),
             tracks,
             events: Vec::new(),
             playback: Playback::Once,
-        }))
+            parameters,
+            ..Default::default()
+        };
+        let lints = lint::lint(&clip);
+        self.warnings.extend(lints.iter().map(|l| Warning::from_lint(l, lint_pointer(a, &refs, l))));
+        Ok(Some(clip))
     }
 
-    /// The animation's channels as tracks, each with the node it animates;
-    /// morph-target weights are skipped, a second channel for the same
-    /// property of a node is refused, and the track count is capped.
-    fn channel_tracks(
-        &mut self,
-        animation: &::gltf::Animation,
-        base: &str,
-    ) -> Result<(Vec<TrackSpec>, Vec<usize>), ImportError> {
+    /// The animation's channels as tracks, each with where it came from
+    /// and the node it animates; morph-target weights become a parameter
+    /// named after the node (SPEC §8), a second channel for the same
+    /// property of a node is refused, and the track count (parameters
+    /// included) is capped.
+    fn channel_tracks(&mut self, animation: &::gltf::Animation, base: &str) -> Result<Channels, ImportError> {
         let a = animation.index();
         let max_tracks = self.options.limits.max_tracks;
-        let mut tracks = Vec::new();
-        let mut animated: Vec<usize> = Vec::new();
+        let mut out = Channels::default();
         let mut seen: HashSet<(usize, u8)> = HashSet::new();
         for channel in animation.channels() {
             let c = channel.index();
             let target = channel.target();
             let node = target.node().index();
-            let channel_kind = match target.property() {
-                Property::Translation => Channel::Translation,
-                Property::Rotation => Channel::Rotation,
-                Property::Scale => Channel::Scale,
-                Property::MorphTargetWeights => {
-                    self.skipped.push(Skipped {
-                        what: format!("animation '{base}' channel {c} (node '{}' weights)", self.forest.names[node]),
-                        why: "morph-target weight animation is not supported".into(),
-                    });
-                    continue;
-                }
+            let (kind, property) = match target.property() {
+                Property::Translation => (Some(Channel::Translation), "translation"),
+                Property::Rotation => (Some(Channel::Rotation), "rotation"),
+                Property::Scale => (Some(Channel::Scale), "scale"),
+                Property::MorphTargetWeights => (None, "weights"),
             };
-            if !seen.insert((node, channel_kind as u8)) {
+            if !seen.insert((node, kind.map_or(3, |k| k as u8))) {
                 return Err(ImportError::InvalidGltf(format!(
-                    "animation {a} has two channels for the {} of node {node}",
-                    channel_kind.as_str()
+                    "animation {a} has two channels for the {property} of node {node}"
                 )));
             }
-            if tracks.len() >= max_tracks {
+            let count = out.tracks.len() + out.parameters.len();
+            if count >= max_tracks {
                 return Err(ImportError::TooLarge {
                     what: "the tracks of one clip",
                     max: max_tracks as u64,
-                    found: tracks.len() as u64 + 1,
+                    found: count as u64 + 1,
                 });
             }
             let what = format!("animation {a} channel {c}");
-            tracks.push(self.track(&channel.sampler(), channel_kind, &self.forest.names[node].clone(), &what)?);
-            animated.push(node);
+            let name = self.forest.names[node].clone();
+            if kind.is_none() && self.morph_targets[node] == 0 {
+                self.warnings.push(Warning::new(
+                    NOT_IMPORTED,
+                    format!("/animations/{a}/channels/{c}"),
+                    format!(
+                        "animation '{base}' channel {c} (node '{name}' weights) was not imported: the node has no \
+                         mesh with morph targets to weigh"
+                    ),
+                ));
+                continue;
+            }
+            match kind {
+                Some(kind) => {
+                    let mut track = self.track(&channel.sampler(), kind, &name, &what)?;
+                    if self.options.fix_hemispheres {
+                        self.fix_hemispheres(&mut track, format!("/animations/{a}/channels/{c}"));
+                    }
+                    out.tracks.push(track);
+                    out.refs.push(ChannelRef { channel: c, sampler: channel.sampler().index() });
+                }
+                None => out.parameters.push(self.weights(&channel.sampler(), node, &name, &what)?),
+            }
+            out.animated.push(node);
         }
-        Ok((tracks, animated))
+        Ok(out)
+    }
+
+    /// A morph-weights channel as a parameter named after its node, as wide
+    /// as the node's mesh has morph targets (at least one: a node without
+    /// them is not imported) (glTF 2.0 §3.11: the output
+    /// holds that many scalars per key, × 3 for CUBICSPLINE).
+    fn weights(
+        &mut self,
+        sampler: &::gltf::animation::Sampler,
+        node: usize,
+        name: &str,
+        what: &str,
+    ) -> Result<ParameterSpec, ImportError> {
+        let width = self.morph_targets[node];
+        if width > MAX_PARAMETER_WIDTH {
+            let (max, found) = (MAX_PARAMETER_WIDTH as u64, width as u64);
+            return Err(ImportError::TooLarge { what: "the morph targets of one animated node", max, found });
+        }
+        let (times, flat, interpolation) = self.keys(sampler, Dimensions::Scalar, width, what)?;
+        let per_key = if interpolation == Interpolation::CubicHermite { 3 } else { 1 };
+        // Key i's row k of its per-key group (CUBICSPLINE: in-tangent, value, out-tangent).
+        let rows = |k: usize| -> Vec<Vec<f32>> {
+            (0..times.len()).map(|i| flat[(i * per_key + k) * width..][..width].to_vec()).collect()
+        };
+        let values = rows(if per_key == 3 { 1 } else { 0 });
+        let mut parameter = ParameterSpec::new(name, interpolation, times.clone(), values);
+        if per_key == 3 {
+            parameter.in_tangents = Some(rows(0));
+            parameter.out_tangents = Some(rows(2));
+        }
+        Ok(parameter)
+    }
+
+    /// [`ImportOptions::fix_hemispheres`] on one track, said in a warning.
+    fn fix_hemispheres(&mut self, track: &mut TrackSpec, pointer: String) {
+        let flipped = lint::make_hemisphere_continuous(track);
+        if flipped > 0 {
+            self.warnings.push(Warning::new(
+                LintCode::RotationHemisphereFlips.as_str(),
+                pointer,
+                format!(
+                    "{flipped} of {} CUBICSPLINE rotation keys of '{}' were in the opposite hemisphere to the key \
+                     before; they were flipped (value and tangents) so the rotation turns the short way, as \
+                     fix=hemisphere asked",
+                    track.values.len(),
+                    track.joint
+                ),
+            ));
+        }
     }
 
     /// The nodes of the clip's skeleton, parents first, and whether a skin
@@ -376,6 +495,37 @@ impl Ctx<'_, '_, '_> {
         joint: &str,
         what: &str,
     ) -> Result<TrackSpec, ImportError> {
+        let dims = if channel == Channel::Rotation { Dimensions::Vec4 } else { Dimensions::Vec3 };
+        let (times, flat, interpolation) = self.keys(sampler, dims, 1, what)?;
+        let cubic = interpolation == Interpolation::CubicHermite;
+        let (per_key, width) = (if cubic { 3 } else { 1 }, channel.width());
+        let rows = |k: usize| -> Keys {
+            // Key i's row k of its per-key group (CUBICSPLINE: in-tangent, value, out-tangent).
+            let row = |i: usize| &flat[(i * per_key + k) * width..][..width];
+            if width == 4 {
+                Keys::Vec4((0..times.len()).map(|i| Vec4::from_slice(row(i))).collect())
+            } else {
+                Keys::Vec3((0..times.len()).map(|i| Vec3::from_slice(row(i))).collect())
+            }
+        };
+        let mut track = TrackSpec::new(joint, channel, interpolation, times.clone(), rows(if cubic { 1 } else { 0 }));
+        if cubic {
+            track.in_tangents = Some(rows(0));
+            track.out_tangents = Some(rows(2));
+        }
+        Ok(track)
+    }
+
+    /// A sampler's key times and its output as flat floats (`elements`
+    /// elements of `dims` per key, × 3 for CUBICSPLINE), reading only the
+    /// accessors' own bytes; and the interpolation it names.
+    fn keys(
+        &mut self,
+        sampler: &::gltf::animation::Sampler,
+        dims: Dimensions,
+        elements: usize,
+        what: &str,
+    ) -> Result<(Vec<f32>, Vec<f32>, Interpolation), ImportError> {
         let max_keys = self.options.limits.max_keys_per_track;
         let input = sampler.input();
         let output = sampler.output();
@@ -401,46 +551,33 @@ impl Ctx<'_, '_, '_> {
         }
         let cubic = sampler.interpolation() == GltfInterpolation::CubicSpline;
         let per_key = if cubic { 3 } else { 1 };
-        let expected = times.len() * per_key;
+        let expected = times.len() * per_key * elements;
         if output.count() != expected {
+            let each = if elements > 1 { format!(" × {elements} morph targets") } else { String::new() };
             return Err(ImportError::InvalidGltf(format!(
-                "{what}: the output has {} elements, expected {expected} ({} keys{})",
+                "{what}: the output has {} elements, expected {expected} ({} keys{each}{})",
                 output.count(),
                 times.len(),
                 if cubic { " × 3 for CUBICSPLINE" } else { "" }
             )));
         }
-        let (dims, width) = if channel == Channel::Rotation { (Dimensions::Vec4, 4) } else { (Dimensions::Vec3, 3) };
         let flat = read_f32(
             &output,
             &mut self.buffers,
             &Expect {
                 what: &format!("{what} output"),
                 dims,
-                normalized_ints: channel == Channel::Rotation,
-                max_count: max_keys.saturating_mul(3),
+                // Rotations and morph weights may be stored as normalised integers (glTF 2.0 §3.11).
+                normalized_ints: dims != Dimensions::Vec3,
+                max_count: max_keys.saturating_mul(3).saturating_mul(elements),
             },
         )?;
-        let rows = |k: usize| -> Keys {
-            // Key i's row k of its per-key group (CUBICSPLINE: in-tangent, value, out-tangent).
-            let row = |i: usize| &flat[(i * per_key + k) * width..][..width];
-            if width == 4 {
-                Keys::Vec4((0..times.len()).map(|i| Vec4::from_slice(row(i))).collect())
-            } else {
-                Keys::Vec3((0..times.len()).map(|i| Vec3::from_slice(row(i))).collect())
-            }
-        };
         let interpolation = match sampler.interpolation() {
             GltfInterpolation::Step => Interpolation::Step,
             GltfInterpolation::Linear => Interpolation::Linear,
             GltfInterpolation::CubicSpline => Interpolation::CubicHermite,
         };
-        let mut track = TrackSpec::new(joint, channel, interpolation, times.clone(), rows(if cubic { 1 } else { 0 }));
-        if cubic {
-            track.in_tangents = Some(rows(0));
-            track.out_tangents = Some(rows(2));
-        }
-        Ok(track)
+        Ok((times, flat, interpolation))
     }
 
     /// The node's local transform as TRS (decomposing a `matrix`).
@@ -501,10 +638,15 @@ impl Ctx<'_, '_, '_> {
                         None => {
                             map.insert(node, m);
                         }
-                        Some(old) if !old.abs_diff_eq(m, 1e-6) => self.skipped.push(Skipped {
-                            what: format!("skin {}'s inverse bind matrix of node {node}", skin.index()),
-                            why: "the node is a joint of an earlier skin with a different one, which is kept".into(),
-                        }),
+                        Some(old) if !old.abs_diff_eq(m, 1e-6) => self.warnings.push(Warning::new(
+                            NOT_IMPORTED,
+                            format!("/skins/{}/inverseBindMatrices", skin.index()),
+                            format!(
+                                "skin {}'s inverse bind matrix of node {node} was not imported: the node is a joint \
+                                 of an earlier skin with a different one, which is kept",
+                                skin.index()
+                            ),
+                        )),
                         Some(_) => {}
                     }
                 }
@@ -512,6 +654,16 @@ impl Ctx<'_, '_, '_> {
             self.inverse_binds = Some(map);
         }
         Ok(self.inverse_binds.get_or_insert_with(HashMap::new))
+    }
+}
+
+/// Where in the glTF file a lint about track `lint.track` of animation `a`
+/// points: a time warning at its sampler's `input`, any other at its channel.
+fn lint_pointer(a: usize, refs: &[ChannelRef], lint: &Lint) -> String {
+    let Some(r) = refs.get(lint.track) else { return format!("/animations/{a}") };
+    match lint.field {
+        "times" => format!("/animations/{a}/samplers/{}/input", r.sampler),
+        _ => format!("/animations/{a}/channels/{}", r.channel),
     }
 }
 

@@ -1,17 +1,24 @@
 //! Importers: the files animators' tools produce (glTF 2.0, GLB, BVH motion
 //! capture) turned into [`ClipSpec`]s the core can build.
 //!
-//! Uploads are untrusted, so every importer reads only the bytes it is
+//! Uploads are untrusted, so every importer reads only the [`Source`] it is
 //! given (no filesystem, no network: a glTF buffer that names an external
-//! file is refused unless the caller supplies a [`Resolver`], which only the
-//! CLI does for local files), checks every count and offset against the data
-//! before it reads or allocates, and bounds everything it produces by
-//! [`ImportLimits`]. Any problem is an [`ImportError`], a client error with a
-//! stable code; no input panics.
+//! file is refused unless the caller supplies a [`Resolver`], which the CLI
+//! does for local files and the server for the parts of a multipart upload),
+//! checks every count and offset against the data before it reads or
+//! allocates, and bounds everything it produces by [`ImportLimits`]. Any
+//! problem is an [`ImportError`], a client error with a stable code; no input
+//! panics.
+//!
+//! Files may be far larger than what is read of them: a GLB's JSON chunk is
+//! read whole, then only the byte ranges its animations' accessors and its
+//! skins' inverse bind matrices occupy; images, textures and mesh data are
+//! never read. Only a `.gltf` or `.bvh` file (text, parsed whole) is held in
+//! memory entire, bounded by [`ImportLimits::max_document_bytes`].
 //!
 //! What is imported and how (the decisions a user would ask about):
-//! - glTF: one clip per animation, named after it (`animation<i>` when
-//!   unnamed). The skeleton is the joints of every skin the animation
+//! - glTF: one clip per animation, named after it (unnamed: after the file,
+//!   else `animation<i>`). The skeleton is the joints of every skin the animation
 //!   drives, plus every animated node, plus all their ancestors up to the
 //!   scene root, parents first, so a joint's model space is its node's
 //!   world transform. Rest poses are the nodes' TRS; `matrix` nodes are
@@ -20,7 +27,7 @@
 //!   `node<i>`; a repeated name gets `#<node index>` appended. Inverse bind
 //!   matrices come from the skin (identity when it has none). Samplers map
 //!   STEP/LINEAR/CUBICSPLINE to `step`/`linear`/`cubic_hermite`; morph
-//!   target weight channels are listed in [`Imported::skipped`].
+//!   target weight channels are reported as `not_imported` warnings.
 //! - BVH: one clip. OFFSET is the rest translation; position channels give
 //!   translation keys (a missing axis keeps its OFFSET value); rotation
 //!   channels multiply in the order listed (`Zrotation Xrotation Yrotation`
@@ -28,6 +35,12 @@
 //!   joints named `<parent>_end`. Frame `k` is at `k · Frame Time`.
 //!
 //! Every clip this module returns has passed [`Clip::build`](crate::anim::Clip::build).
+//!
+//! An import also returns [`Warning`]s, each pointing into the file: parts
+//! it left out, and what [`crate::anim::lint`] notices in the clips (glTF:
+//! every check; BVH: only the frame-time one, since the importer computes
+//! the rotations itself). Warnings never change a clip; the one repair,
+//! [`ImportOptions::fix_hemispheres`], is the caller's choice.
 
 use crate::anim::{Clip, ClipSpec, Interpolation, MAX_NAME_CHARS};
 
@@ -36,8 +49,12 @@ mod buffers;
 mod bvh;
 mod error;
 mod gltf;
+mod source;
+pub mod warning;
 
 pub use error::{ErrorClass, ImportError};
+pub use source::Source;
+pub use warning::Warning;
 
 /// A file format the importers read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -102,8 +119,12 @@ pub fn sniff(bytes: &[u8], content_type: Option<&str>) -> Option<Format> {
 /// importer allocate much more than its own size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ImportLimits {
-    /// The upload itself.
+    /// The file itself (a file-backed [`Source`] is read by range, so this
+    /// bounds disk, not memory).
     pub max_bytes: u64,
+    /// What is read into memory whole: a `.gltf` or `.bvh` file, a GLB's
+    /// JSON chunk.
+    pub max_document_bytes: u64,
     /// Joints of one clip's skeleton.
     pub max_joints: usize,
     /// Tracks of one clip.
@@ -120,9 +141,11 @@ pub struct ImportLimits {
     pub max_total_keys: u64,
     /// Levels of the joint hierarchy.
     pub max_depth: usize,
-    /// Bytes of glTF buffers read: every loaded buffer's `byteLength`,
-    /// counted once per buffer even when several name the same part or
-    /// file (whose bytes are then shared, not copied).
+    /// Bytes of glTF buffers named by URI (`data:`, or a file or part the
+    /// [`Resolver`] supplies): every opened buffer's `byteLength`, counted
+    /// once per buffer even when several name the same part or file (whose
+    /// bytes are then shared, not copied). A GLB's own BIN chunk is bounded
+    /// by `max_bytes` instead.
     pub max_resolved_bytes: u64,
     /// Build work of one produced clip (see [`Clip::build_within`]).
     pub max_build_work: u64,
@@ -131,7 +154,8 @@ pub struct ImportLimits {
 impl Default for ImportLimits {
     fn default() -> Self {
         ImportLimits {
-            max_bytes: 64 << 20,
+            max_bytes: 256 << 20,
+            max_document_bytes: 64 << 20,
             max_joints: 4096,
             max_tracks: 16_384,
             max_keys_per_track: 1_000_000,
@@ -148,42 +172,69 @@ impl Default for ImportLimits {
 /// How to import.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImportOptions {
-    /// BVH frames become keys with this interpolation: `Linear` (default)
-    /// or `CatmullRom` (SPEC §2.2). Other values are refused.
+    /// BVH frames become keys with this interpolation: `Linear` (default),
+    /// `CatmullRom` (SPEC §2.2), `BSpline` (§2.5: approximating, to smooth
+    /// the capture's jitter) or `Step`. `CubicHermite` is refused (no
+    /// tangents in a BVH).
     pub bvh_interpolation: Interpolation,
     /// The clip name (BVH), or a prefix `NAME/<animation>` for glTF files
     /// with several animations (a single animation is named `NAME`).
     pub name: Option<String>,
+    /// The file's name without its extension (the CLI's path, a multipart
+    /// part's file name), for clips the file does not name: without `name`,
+    /// a BVH clip is named after it, and so is an unnamed glTF animation
+    /// (`FILE`, or `FILE/animation<i>` when the file has several).
+    pub file_name: Option<String>,
+    /// glTF `CUBICSPLINE` rotations: flip each key (value and tangents)
+    /// that lies in the opposite hemisphere to the key before, so the curve
+    /// turns the short way (Blender 3.x's exporter writes such keys). Off by
+    /// default: the glTF spec says to use keys as given.
+    pub fix_hemispheres: bool,
     pub limits: ImportLimits,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { bvh_interpolation: Interpolation::Linear, name: None, limits: ImportLimits::default() }
+        ImportOptions {
+            bvh_interpolation: Interpolation::Linear,
+            name: None,
+            file_name: None,
+            fix_hemispheres: false,
+            limits: ImportLimits::default(),
+        }
     }
 }
 
-/// Something in the file that was deliberately not imported, and why.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
-pub struct Skipped {
-    pub what: String,
-    pub why: String,
+/// A file name without its directory and extension (`walk.bvh` → `walk`),
+/// `None` if nothing is left: the [`ImportOptions::file_name`] of an upload.
+pub fn file_stem(file_name: &str) -> Option<String> {
+    let base = file_name.rsplit(['/', '\\']).next().unwrap_or(file_name);
+    let stem = match base.rsplit_once('.') {
+        Some((stem, _)) if !stem.is_empty() => stem,
+        _ => base,
+    };
+    (!stem.trim().is_empty()).then(|| stem.to_owned())
 }
 
 /// The result of an import: clips ready for [`Clip::build`] (each already
-/// passed it once) and what was left out.
+/// passed it once) and the warnings about the file (what was left out,
+/// what looks wrong), at most [`warning::MAX_WARNINGS`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Imported {
     pub clips: Vec<ClipSpec>,
-    pub skipped: Vec<Skipped>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Supplies the bytes of an external glTF buffer URI (exactly as written in
 /// the file, still percent-encoded), or says why it will not: the CLI for
 /// files next to a local `.gltf`, the server for the parts of a multipart
 /// upload. It is called once per distinct URI; buffers naming the same URI
-/// share the [`Bytes`](bytes::Bytes) it returns.
-pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<bytes::Bytes, String>;
+/// share the [`Source`] it returns, and read only the ranges they need.
+pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<Source, String>;
+
+/// How many leading bytes [`sniff`] needs of a source: a GLB's magic, or a
+/// text file's first token after a byte-order mark and some whitespace.
+pub const SNIFF_BYTES: usize = 4096;
 
 /// Imports `bytes` as `format`.
 ///
@@ -204,23 +255,48 @@ pub fn import_with(
     options: &ImportOptions,
     resolver: Option<Resolver<'_>>,
 ) -> Result<Imported, ImportError> {
+    import_from(&Source::memory(bytes::Bytes::copy_from_slice(bytes)), format, options, resolver)
+}
+
+/// Imports a [`Source`] as `format`, reading only what the format needs of
+/// it (see the module doc): how the server imports a spooled upload and the
+/// CLI a file, whatever their size.
+///
+/// # Errors
+/// As [`import_with`]; [`ImportError::Read`] when the source cannot be read.
+pub fn import_from(
+    source: &Source,
+    format: Format,
+    options: &ImportOptions,
+    resolver: Option<Resolver<'_>>,
+) -> Result<Imported, ImportError> {
     let limits = &options.limits;
-    if bytes.len() as u64 > limits.max_bytes {
-        return Err(ImportError::TooLarge {
-            what: "the upload (bytes)",
-            max: limits.max_bytes,
-            found: bytes.len() as u64,
-        });
+    if source.len() > limits.max_bytes {
+        return Err(ImportError::TooLarge { what: "the upload (bytes)", max: limits.max_bytes, found: source.len() });
     }
-    let imported = match format {
-        Format::Gltf | Format::Glb => gltf::import(bytes, format, options, resolver)?,
-        Format::Bvh => bvh::import(bytes, options)?,
+    let mut imported = match format {
+        Format::Gltf | Format::Glb => gltf::import(source, format, options, resolver)?,
+        Format::Bvh => bvh::import(&read_document(source, "the BVH file", limits)?, options)?,
     };
+    imported.warnings = warning::capped(std::mem::take(&mut imported.warnings));
     for clip in &imported.clips {
         Clip::build_within(clip, limits.max_build_work)
             .map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
     }
     Ok(imported)
+}
+
+/// A text file, read into memory whole once it is known to fit
+/// [`ImportLimits::max_document_bytes`].
+pub(crate) fn read_document(
+    source: &Source,
+    what: &'static str,
+    limits: &ImportLimits,
+) -> Result<bytes::Bytes, ImportError> {
+    if source.len() > limits.max_document_bytes {
+        return Err(ImportError::DocumentTooLarge { what, max: limits.max_document_bytes, found: source.len() });
+    }
+    Ok(source.read_all()?)
 }
 
 /// Counts what an import produces (keys and joints, over all clips)
@@ -241,8 +317,8 @@ pub(crate) struct Budget {
 const BUDGET_SLACK: u64 = 4096;
 
 impl Budget {
-    pub(crate) fn new(limits: &ImportLimits, input_bytes: usize) -> Self {
-        Budget { max: limits.max_total_keys.min(input_bytes as u64 + BUDGET_SLACK), used: 0 }
+    pub(crate) fn new(limits: &ImportLimits, input_bytes: u64) -> Self {
+        Budget { max: limits.max_total_keys.min(input_bytes.saturating_add(BUDGET_SLACK)), used: 0 }
     }
 
     /// Reserves `n` more keys (or joints), before they are allocated.

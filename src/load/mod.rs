@@ -9,16 +9,21 @@
 //! omission); `grpc-stream` and `ws-stream` (N streams at F fps, independent
 //! playbacks or `--shared` viewers of one, measuring per-frame lateness
 //! against the server's tick grid after a `Ping` clock sync; with
-//! `--motion` every stream plays a composed motion instead of the clip). `--ramp` steps
-//! the load up until a p99 target breaks and reports the knee.
+//! `--motion` every stream plays a composed motion instead of the clip:
+//! `three-layers`, or `foot-ik`, a walk with IK-planted feet); `ws-broadcast`
+//! (one broadcast of the clip or motion, SPEC §9, watched by N WebSocket
+//! viewers, measured the same way on the broadcast's tick grid). `--ramp`
+//! steps the load up until a p99 target breaks and reports the knee.
 //!
 //! Every run is bounded in count and time, and only loopback targets are
 //! accepted unless the caller says `allow_remote`: a load generator pointed
 //! at someone else's server by a typo is an attack.
 //!
-//! `histogram`, `clock`, `lateness`, `ramp` and `motion` are pure (unit-tested);
-//! `unary` and `streams` drive the network; `procstat` reads `/proc`.
+//! `histogram`, `clock`, `lateness`, `ramp`, `motion` and `walk` are pure (unit-tested);
+//! `unary` and `streams` drive the network (`broadcast` creates the
+//! broadcast); `procstat` reads `/proc`.
 
+mod broadcast;
 mod clock;
 mod histogram;
 mod lateness;
@@ -29,6 +34,7 @@ mod report;
 mod setup;
 mod streams;
 mod unary;
+mod walk;
 
 use std::time::Duration;
 
@@ -47,6 +53,7 @@ pub enum Mode {
     RestHealth,
     GrpcStream,
     WsStream,
+    WsBroadcast,
 }
 
 impl Mode {
@@ -58,11 +65,12 @@ impl Mode {
             Mode::RestHealth => "rest-health",
             Mode::GrpcStream => "grpc-stream",
             Mode::WsStream => "ws-stream",
+            Mode::WsBroadcast => "ws-broadcast",
         }
     }
 
     pub(crate) fn is_stream(self) -> bool {
-        matches!(self, Mode::GrpcStream | Mode::WsStream)
+        matches!(self, Mode::GrpcStream | Mode::WsStream | Mode::WsBroadcast)
     }
 }
 
@@ -125,8 +133,8 @@ pub async fn run(opts: Options) -> anyhow::Result<Report> {
     let (clip_id, motion) = match (&opts.clip, opts.mode, opts.motion) {
         (_, Mode::GrpcPing | Mode::RestHealth, _) => (String::new(), None),
         (ClipChoice::Generate { joints }, _, Some(choice)) => {
-            let clips = setup::upload_layer_clips(&http, *joints).await?;
-            (clips.walk.clone(), Some(motion::Playable::new(choice, &clips, *joints)))
+            let clips = setup::upload_motion_clips(&http, choice, *joints).await?;
+            (clips.first().to_owned(), Some(motion::Playable::new(&clips, *joints)))
         }
         (ClipChoice::Existing(id), _, _) => (id.clone(), None),
         (ClipChoice::Generate { joints }, _, None) => (setup::upload_chain(&http, *joints).await?, None),
@@ -194,10 +202,15 @@ fn check_options(o: &Options) -> anyhow::Result<()> {
         bail!("--joints must be 1..=4096");
     }
     if o.motion.is_some() && !o.mode.is_stream() {
-        bail!("--motion is for the stream modes (grpc-stream, ws-stream)");
+        bail!("--motion is for the stream modes (grpc-stream, ws-stream, ws-broadcast)");
     }
     if o.motion.is_some() && matches!(o.clip, ClipChoice::Existing(_)) {
         bail!("--motion plays generated clips: it cannot be given with --clip");
+    }
+    if let (Some(m), ClipChoice::Generate { joints }) = (o.motion, &o.clip)
+        && *joints < m.min_joints()
+    {
+        bail!("--motion {} needs --joints {} or more", m.as_str(), m.min_joints());
     }
     if let Some(p) = &o.ramp
         && !(p.start >= 1 && p.start <= p.max && p.max <= MAX_CONCURRENCY && p.factor >= 1.0)
@@ -276,12 +289,25 @@ mod tests {
     #[test]
     fn a_motion_is_for_streams_of_generated_clips() {
         let generated = ClipChoice::Generate { joints: 64 };
-        for mode in [Mode::GrpcStream, Mode::WsStream] {
+        for mode in [Mode::GrpcStream, Mode::WsStream, Mode::WsBroadcast] {
             assert!(check_options(&stream_options(mode, generated.clone())).is_ok(), "{mode:?}");
         }
         let err = check_options(&stream_options(Mode::RestPose, generated)).unwrap_err().to_string();
         assert!(err.contains("stream modes"), "{err}");
         let err = check_options(&stream_options(Mode::WsStream, ClipChoice::Existing("x".into()))).unwrap_err();
         assert!(err.to_string().contains("--clip"), "{err}");
+    }
+
+    #[test]
+    fn foot_ik_needs_two_legs() {
+        let foot_ik = |mode, joints| Options {
+            motion: Some(MotionChoice::FootIk),
+            ..stream_options(mode, ClipChoice::Generate { joints })
+        };
+        for mode in [Mode::GrpcStream, Mode::WsStream] {
+            assert!(check_options(&foot_ik(mode, 7)).is_ok(), "{mode:?}");
+            let err = check_options(&foot_ik(mode, 6)).unwrap_err().to_string();
+            assert!(err.contains("foot-ik") && err.contains("--joints 7"), "{err}");
+        }
     }
 }

@@ -1,19 +1,27 @@
-//! The motion `--motion three-layers` streams play (issue 16): what a game
-//! character typically runs — locomotion blended from two synced cycles of
-//! different lengths, and an upper-body action masked on top (SPEC §6's
-//! example without its additive layer).
+//! The motions `--motion` streams play, each as its JSON for the WebSocket
+//! `open` message and its gRPC `Motion`.
 //!
-//! Its clips are generated chains of the run's joint count ([`Chain`]), the
-//! first being the clip a clip run streams, so a motion run and a clip run
-//! send the same joints in frames of the same size and differ only in the
-//! work per tick: three clip samples and two blends instead of one sample.
+//! `three-layers` (issue 16) is what a game character typically runs —
+//! locomotion blended from two synced cycles of different lengths, and an
+//! upper-body action masked on top (SPEC §6's example without its additive
+//! layer). Its clips are generated chains of the run's joint count
+//! ([`Chain`]), the first being the clip a clip run streams, so a motion
+//! run and a clip run send the same joints in frames of the same size and
+//! differ only in the work per tick: three clip samples and two blends
+//! instead of one sample.
+//!
+//! `foot-ik` (issue 17, `super::walk`) is a walk with both feet planted by
+//! two-bone IK.
 
 use std::collections::BTreeMap;
 
 use serde_json::Value;
 
 use super::setup::{Chain, chain, chain_clip};
+use super::walk;
+use crate::anim::ik::IkSpec;
 use crate::anim::motion::MotionSpec;
+use crate::anim::{IkTarget, KeyedIkSpec};
 use crate::wire::motion::{LayerDoc, MaskDoc, MotionDoc};
 use crate::wire::proto::{self, pb};
 
@@ -23,12 +31,41 @@ pub enum MotionChoice {
     /// Walk and run (weights 1 and 0.3, one sync group) under an upper-body
     /// layer masked to the chain's upper half.
     ThreeLayers,
+    /// A walk in place with two `two_bone` constraints planting the feet
+    /// (`super::walk`).
+    FootIk,
 }
 
 impl MotionChoice {
     pub fn as_str(self) -> &'static str {
         match self {
             MotionChoice::ThreeLayers => "three-layers",
+            MotionChoice::FootIk => "foot-ik",
+        }
+    }
+
+    /// The fewest `--joints` its clips can have.
+    pub fn min_joints(self) -> usize {
+        match self {
+            MotionChoice::ThreeLayers => 1,
+            MotionChoice::FootIk => walk::MIN_JOINTS,
+        }
+    }
+}
+
+/// A motion's uploaded clips.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MotionClips {
+    ThreeLayers(LayerClips),
+    FootIk { walk: String },
+}
+
+impl MotionClips {
+    /// The first layer's clip (the run's clip id in its report).
+    pub fn first(&self) -> &str {
+        match self {
+            MotionClips::ThreeLayers(c) => &c.walk,
+            MotionClips::FootIk { walk } => walk,
         }
     }
 }
@@ -77,6 +114,7 @@ pub fn three_layers(clips: &LayerClips, joints: usize) -> MotionDoc {
             LayerDoc { mask: Some(mask), ..layer(&clips.upper, 1.0) },
         ],
         root_motion: None,
+        ik: Vec::new(),
     }
 }
 
@@ -89,12 +127,14 @@ pub struct Playable {
 }
 
 impl Playable {
-    pub fn new(choice: MotionChoice, clips: &LayerClips, joints: usize) -> Playable {
-        let doc = match choice {
-            MotionChoice::ThreeLayers => three_layers(clips, joints),
+    pub fn new(clips: &MotionClips, joints: usize) -> Playable {
+        let doc = match clips {
+            MotionClips::ThreeLayers(clips) => three_layers(clips, joints),
+            MotionClips::FootIk { walk } => walk::foot_ik(walk),
         };
         let json = serde_json::to_value(&doc).unwrap_or_default();
-        Playable { json, pb: to_pb(&doc.to_spec()) }
+        let spec = doc.to_spec("/motion").expect("the load generator's motions are well formed");
+        Playable { json, pb: to_pb(&spec) }
     }
 }
 
@@ -124,7 +164,19 @@ pub fn to_pb(spec: &MotionSpec<String>) -> pb::Motion {
         mode: proto::root_mode_to_pb(r.mode).into(),
         up: proto::up_axis_to_pb(r.up).into(),
     });
-    pb::Motion { layers, root_motion }
+    pb::Motion { layers, root_motion, ik: spec.ik.iter().map(ik_to_pb).collect() }
+}
+
+/// A request-time constraint as the proto's, through the clip form's
+/// converter (every target a fixed point, the weight fixed).
+fn ik_to_pb(spec: &IkSpec) -> pb::IkConstraint {
+    let targets = match spec {
+        IkSpec::TwoBone(c) => vec![c.target],
+        IkSpec::Aim(c) => vec![c.target],
+        IkSpec::Chain(c) => c.effectors.iter().map(|e| e.target).collect(),
+    };
+    let targets = targets.into_iter().map(IkTarget::Fixed).collect();
+    proto::ik_to_pb(&KeyedIkSpec { constraint: spec.clone(), targets, weight: None })
 }
 
 #[cfg(test)]
@@ -160,20 +212,44 @@ mod tests {
         2.0 * f64::from(q.z).atan2(f64::from(q.w))
     }
 
+    /// As the server reads each: the JSON text through `MotionDoc`, the
+    /// protobuf through its converter.
+    fn as_read_from_json_and_protobuf(doc: &MotionDoc) -> (MotionSpec<String>, MotionSpec<String>) {
+        let text = serde_json::to_string(doc).unwrap();
+        let from_json = serde_json::from_str::<MotionDoc>(&text).unwrap().to_spec("/motion").unwrap();
+        let from_pb = proto::motion_from_pb(&to_pb(&doc.to_spec("/motion").unwrap())).unwrap();
+        (from_json, from_pb)
+    }
+
     #[test]
     fn the_json_and_protobuf_motions_say_the_same() {
         let doc = three_layers(&ids(), JOINTS);
-        // As the server reads each: the JSON text through `MotionDoc`, the protobuf through its converter.
-        let text = serde_json::to_string(&doc).unwrap();
-        let from_json = serde_json::from_str::<MotionDoc>(&text).unwrap().to_spec();
-        let from_pb = proto::motion_from_pb(&to_pb(&doc.to_spec())).unwrap();
+        let (from_json, from_pb) = as_read_from_json_and_protobuf(&doc);
         assert_eq!(format!("{from_json:?}"), format!("{from_pb:?}"));
-        let v: Value = serde_json::from_str(&text).unwrap();
+        let v = serde_json::to_value(&doc).unwrap();
         assert_eq!(v["layers"][0]["sync"], SYNC_GROUP);
         assert_eq!(v["layers"][1]["sync"], SYNC_GROUP);
         assert_eq!(v["layers"][1]["weight"], 0.3f32);
         assert_eq!(v["layers"][2]["mask"], serde_json::json!({"joints": {"j4": 1.0}, "descendants": true}));
         assert_eq!(v["layers"][2].get("sync"), None);
+    }
+
+    /// The foot-ik motion's two constraints survive both wires: the same
+    /// legs, targets and poles as the walk module's.
+    #[test]
+    fn the_foot_ik_motion_says_the_same_over_both_wires() {
+        let (from_json, from_pb) = as_read_from_json_and_protobuf(&walk::foot_ik("W"));
+        assert_eq!(format!("{from_json:?}"), format!("{from_pb:?}"));
+        assert_eq!(from_pb.ik.len(), 2);
+        for (i, c) in from_pb.ik.iter().enumerate() {
+            let IkSpec::TwoBone(c) = c else { panic!("{c:?} is not two_bone") };
+            assert_eq!(c.joints, walk::LEGS[i].map(str::to_owned));
+            assert_eq!(
+                (c.target.to_array(), c.pole.map(|p| p.to_array())),
+                (walk::FOOT_TARGETS[i], Some(walk::POLES[i]))
+            );
+            assert_eq!(c.weight, None);
+        }
     }
 
     #[test]
@@ -192,7 +268,7 @@ mod tests {
     fn the_motion_blends_synced_locomotion_under_a_masked_upper_body() {
         let [walk, run, upper] = clip_docs(JOINTS).map(|d| built(&d));
         let by_id = HashMap::from([("W", &walk), ("R", &run), ("U", &upper)]);
-        let spec = three_layers(&ids(), JOINTS).to_spec();
+        let spec = three_layers(&ids(), JOINTS).to_spec("/motion").unwrap();
         let spec = spec.try_map(|_, id| by_id.get(id.as_str()).copied().ok_or(id)).unwrap();
         let motion = Motion::build(spec).expect("a valid motion");
         let cycle = 0.7 * 3.0 + 0.3 * 2.0;

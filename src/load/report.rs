@@ -19,7 +19,7 @@ pub struct Report {
     pub grpc: String,
     /// The clip streamed, or the first layer's clip of the motion.
     pub clip_id: String,
-    /// Streams: the motion played instead of the clip (`three-layers`).
+    /// Streams: the motion played instead of the clip (`three-layers`, `foot-ik`).
     pub motion: Option<&'static str>,
     pub joints: Option<usize>,
     /// Unary workers, or streams.
@@ -74,8 +74,11 @@ pub struct StreamStats {
     pub clock: ClockSync,
     /// Server counters (from `/metrics`): playbacks started since the streams began to
     /// open (how many the viewers shared), and ticks evaluated in the window.
+    /// For `ws-broadcast`: broadcasts created (1) and broadcast ticks evaluated.
     pub playbacks_started: Option<u64>,
     pub ticks_evaluated: Option<u64>,
+    /// `ws-broadcast`: the id of the broadcast the viewers watched.
+    pub broadcast_id: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -171,8 +174,14 @@ impl Report {
                 st.reconnects,
                 human_us(st.drift_p50_us)
             );
-            if let (Some(p), Some(t)) = (st.playbacks_started, st.ticks_evaluated) {
-                let _ = writeln!(s, "server    {p} playbacks started, {t} ticks evaluated in the window");
+            match (&st.broadcast_id, st.playbacks_started, st.ticks_evaluated) {
+                (Some(id), Some(p), Some(t)) => {
+                    let _ = writeln!(s, "server    broadcast {id} ({p} created), {t} ticks evaluated in the window");
+                }
+                (None, Some(p), Some(t)) => {
+                    let _ = writeln!(s, "server    {p} playbacks started, {t} ticks evaluated in the window");
+                }
+                _ => {}
             }
         }
         if let Some(u) = &self.server {

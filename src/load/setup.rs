@@ -7,7 +7,8 @@ use serde_json::{Value, json};
 use tonic::transport::Channel;
 
 use super::clock::{ClockSync, PingSample, unix_now_ns};
-use super::motion::{LayerClips, clip_docs};
+use super::motion::{LayerClips, MotionChoice, MotionClips, clip_docs};
+use super::walk::walk_clip;
 use crate::wire::proto::pb;
 use crate::wire::proto::pb::animation_client::AnimationClient;
 
@@ -77,8 +78,16 @@ pub async fn upload_chain(http: &Url, joints: usize) -> anyhow::Result<String> {
     upload_clip(http, &chain_clip(joints)).await
 }
 
+/// Uploads the clips `choice` plays, `joints` joints each.
+pub async fn upload_motion_clips(http: &Url, choice: MotionChoice, joints: usize) -> anyhow::Result<MotionClips> {
+    Ok(match choice {
+        MotionChoice::ThreeLayers => MotionClips::ThreeLayers(upload_layer_clips(http, joints).await?),
+        MotionChoice::FootIk => MotionClips::FootIk { walk: upload_clip(http, &walk_clip(joints)).await? },
+    })
+}
+
 /// Uploads the clips of the three-layer motion (`motion::clip_docs`).
-pub async fn upload_layer_clips(http: &Url, joints: usize) -> anyhow::Result<LayerClips> {
+async fn upload_layer_clips(http: &Url, joints: usize) -> anyhow::Result<LayerClips> {
     let [walk, run, upper] = clip_docs(joints);
     Ok(LayerClips {
         walk: upload_clip(http, &walk).await?,

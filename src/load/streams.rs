@@ -16,6 +16,12 @@
 //! read the grid phase from the server's `opened` answer (the upgrade's
 //! headers are sent before the motion is known).
 //!
+//! `ws-broadcast` viewers open `GET /v1/broadcasts/{id}/stream` of the one
+//! broadcast the run created (see `broadcast`) and are measured like any
+//! WebSocket stream; the server counters are then the broadcast's
+//! (broadcasts created, broadcast ticks evaluated), and the broadcast is
+//! deleted when the run ends.
+//!
 //! Clients decode only the frame header (`seq`, `sent_at_unix_nanos`,
 //! `dropped`): the gRPC side through a codec for a three-field message
 //! (protobuf skips the pose), the WebSocket side by skipping the pose while
@@ -39,7 +45,7 @@ use super::histogram::Latency;
 use super::lateness::StreamTracker;
 use super::motion::Playable;
 use super::report::{Report, ServerUsage, StreamStats};
-use super::{Env, Mode, Options, procstat, setup};
+use super::{Env, Mode, Options, broadcast, procstat, setup};
 use crate::stream::PHASE_HEADER;
 use crate::sync::lock;
 use crate::wire::proto::pb;
@@ -140,6 +146,8 @@ struct Spec {
     clip_id: String,
     motion: Option<Arc<Playable>>,
     fps: u32,
+    /// `ws-broadcast`: the broadcast the viewers watch.
+    broadcast: Option<String>,
     clock: ClockSync,
     window: Arc<Window>,
     opening: Arc<Semaphore>,
@@ -221,18 +229,19 @@ impl Spec {
             Mode::GrpcStream => self.open_grpc(channel, start_time).await,
             _ => {
                 let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
-                let url = match self.motion {
-                    None => format!(
+                let url = match (&self.broadcast, &self.motion) {
+                    (Some(id), _) => format!("{}v1/broadcasts/{id}/stream?encoding={encoding}", self.ws_base),
+                    (None, None) => format!(
                         "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
                         self.ws_base, self.clip_id, self.fps
                     ),
-                    Some(_) => format!("{}v1/stream", self.ws_base),
+                    (None, Some(_)) => format!("{}v1/stream", self.ws_base),
                 };
                 let (mut ws, resp) = tokio_tungstenite::connect_async(url).await.map_err(|e| match e {
                     tokio_tungstenite::tungstenite::Error::Http(r) => format!("http:{}", r.status().as_u16()),
                     _ => "connect".to_string(),
                 })?;
-                let phase = match &self.motion {
+                let phase = match self.motion.as_ref().filter(|_| self.broadcast.is_none()) {
                     None => resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok()),
                     Some(motion) => {
                         let open = serde_json::json!({"op": "open", "motion": motion.json, "fps": self.fps,
@@ -395,11 +404,18 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
     // streams use one extra channel for it.
     let channels = setup::channels(&env.grpc, if opts.mode == Mode::GrpcStream { connections } else { 1 }).await?;
     let clock = setup::clock_sync(channels[0].clone()).await?;
-    let spec = Spec::new(opts, env, clock)?;
+    let broadcasting = opts.mode == Mode::WsBroadcast;
+    let counters_before_open = counters(broadcasting, &env.http).await;
+    let broadcast = match (broadcasting, &env.motion) {
+        (false, _) => None,
+        (true, Some(m)) => Some(broadcast::create(&env.http, &m.json, opts.fps).await?),
+        (true, None) => Some(broadcast::create(&env.http, &broadcast::clip_motion(&env.clip_id), opts.fps).await?),
+    };
+    let spec = Spec::new(opts, env, clock, broadcast.clone())?;
     let window = Arc::clone(&spec.window);
 
+    // After the broadcast exists: the RSS per viewer is the viewers' alone.
     let server_before = env.server_pid.and_then(procstat::sample);
-    let counters_before_open = setup::stream_counters(&env.http).await;
     let (stop_tx, stop_rx) = watch::channel(false);
     let groups: Vec<Arc<Mutex<Hists>>> = (0..n.div_ceil(GROUP)).map(|_| Arc::default()).collect();
     let mut tasks = Vec::with_capacity(n);
@@ -413,7 +429,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
     }
     wait_until_open(&window, n).await;
 
-    let counters_before = setup::stream_counters(&env.http).await;
+    let counters_before = counters(broadcasting, &env.http).await;
     let server_start = env.server_pid.and_then(procstat::sample);
     let client_start = procstat::sample_self();
     let start = unix_now_ns();
@@ -423,11 +439,16 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
     let elapsed = (unix_now_ns() - start) as f64 / 1e9;
     let server_end = env.server_pid.and_then(procstat::sample);
     let client_end = procstat::sample_self();
-    let counters_after = setup::stream_counters(&env.http).await;
+    let counters_after = counters(broadcasting, &env.http).await;
     stop_tx.send_replace(true);
 
-    let done = Collected::gather(tasks, &groups).await?;
-    let stats = done.stats(opts, n, elapsed, clock, [counters_before_open, counters_before, counters_after]);
+    let done = Collected::gather(tasks, &groups).await;
+    if let Some(id) = &broadcast {
+        broadcast::delete(&env.http, id).await;
+    }
+    let done = done?;
+    let mut stats = done.stats(opts, n, elapsed, clock, [counters_before_open, counters_before, counters_after]);
+    stats.broadcast_id = broadcast;
     let server = match (env.server_pid, server_before, server_start, server_end) {
         (Some(pid), Some(b), Some(s), Some(e)) => Some(ServerUsage {
             pid,
@@ -465,7 +486,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
 
 impl Spec {
     /// What every stream of this run shares; the window is not open yet.
-    fn new(opts: &Options, env: &Env, clock: ClockSync) -> anyhow::Result<Spec> {
+    fn new(opts: &Options, env: &Env, clock: ClockSync, broadcast: Option<String>) -> anyhow::Result<Spec> {
         let mut ws_base = env.http.clone();
         ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
         let window =
@@ -477,11 +498,18 @@ impl Spec {
             clip_id: env.clip_id.clone(),
             motion: env.motion.clone().map(Arc::new),
             fps: opts.fps,
+            broadcast,
             clock,
             window,
             opening: Arc::new(Semaphore::new(OPENING)),
         })
     }
+}
+
+/// The server's (playbacks started, ticks evaluated) counters, or for
+/// broadcast viewers (broadcasts created, broadcast ticks evaluated).
+async fn counters(broadcasting: bool, http: &reqwest::Url) -> Option<(u64, u64)> {
+    if broadcasting { broadcast::counters(http).await } else { setup::stream_counters(http).await }
 }
 
 /// Waits until every stream has delivered a frame (or a deadline that grows
@@ -538,9 +566,10 @@ impl Collected {
             streams: n,
             opened: self.opened,
             fps: opts.fps,
-            shared: opts.shared,
+            shared: opts.shared || opts.mode == Mode::WsBroadcast,
+            broadcast_id: None,
             encoding: match (opts.mode, opts.ws_protobuf) {
-                (Mode::WsStream, false) => "json",
+                (Mode::WsStream | Mode::WsBroadcast, false) => "json",
                 _ => "protobuf",
             },
             frames_per_stream_per_sec: total.frames as f64 / n as f64 / elapsed,

@@ -41,16 +41,27 @@
 //! headers are ignored, so a client cannot choose its own address.
 //! Handlers state the scope they need with the extractors [`ReadAccess`],
 //! [`WriteAccess`] and [`AdminAccess`], each carrying the `Caller`.
+//!
+//! **Tokens on a browser's WebSocket.** A browser cannot set headers on a
+//! WebSocket handshake; it can only offer subprotocols. So a handshake
+//! without `Authorization` may carry its token as the subprotocol
+//! `inbetween.bearer.<base64url of the token, unpadded>`, offered next to
+//! [`WS_PROTOCOL`] (`inbetween`), which the stream routes select: the token
+//! is never echoed. It is the same token under the same rules (a malformed
+//! entry is a token that matches nothing); `Authorization` wins when both are
+//! sent. This keeps the server stateless (any node accepts it, unlike a
+//! ticket kept in one node's memory) and the token out of URLs and logs.
 
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, LazyLock};
 
 use axum::extract::{ConnectInfo, FromRequestParts, Request, State};
-use axum::http::header::{AUTHORIZATION, FORWARDED};
+use axum::http::header::{AUTHORIZATION, FORWARDED, SEC_WEBSOCKET_PROTOCOL};
 use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderName};
 use axum::middleware::Next;
 use axum::response::Response;
+use base64::Engine as _;
 use subtle::ConstantTimeEq;
 
 use super::config::{Config, Secret};
@@ -97,6 +108,28 @@ impl Caller {
 
 static API_TOKEN_NAME: LazyLock<Arc<str>> = LazyLock::new(|| Arc::from("api-token"));
 static READ_TOKEN_NAME: LazyLock<Arc<str>> = LazyLock::new(|| Arc::from("read-token"));
+
+/// The WebSocket subprotocol the stream routes select when a client offers
+/// it; a browser offers it next to its `inbetween.bearer.…` token (module doc).
+pub const WS_PROTOCOL: &str = "inbetween";
+
+/// The subprotocol prefix that carries a token (module doc).
+const WS_BEARER_PREFIX: &str = "inbetween.bearer.";
+
+/// `Bearer <token>` from a handshake's `inbetween.bearer.<base64url>`
+/// subprotocol, if it offers one. An entry that does not decode gives an
+/// empty value, which identifies nobody (like a header of another scheme).
+fn protocol_authorization(headers: &HeaderMap) -> Option<Vec<u8>> {
+    let offered = headers.get_all(SEC_WEBSOCKET_PROTOCOL).iter().filter_map(|v| v.to_str().ok());
+    let encoded = offered.flat_map(|v| v.split(',')).find_map(|p| p.trim().strip_prefix(WS_BEARER_PREFIX))?;
+    let engine = base64::engine::general_purpose::URL_SAFE_NO_PAD;
+    Some(
+        engine
+            .decode(encoded.trim_end_matches('='))
+            .map(|token| [b"Bearer ".as_slice(), &token].concat())
+            .unwrap_or_default(),
+    )
+}
 
 /// The token of an `authorization: Bearer <token>` value (HTTP header or
 /// gRPC metadata).
@@ -276,13 +309,20 @@ impl Identity {
 /// The middleware that identifies every REST and WebSocket request once and
 /// leaves the [`Identity`] in its extensions, for the rate limit and the
 /// access extractors. It refuses nothing itself: routes that take no token
-/// (probes, the OpenAPI document) answer whatever the header says.
+/// (probes, the OpenAPI document) answer whatever the header says. The
+/// identity also goes on the answer's extensions, for the access log
+/// (`access_log`), which sits outside this layer.
 pub async fn identify_requests(State(auth): State<Auth>, mut request: Request, next: Next) -> Response {
     let peer = request.extensions().get::<ConnectInfo<SocketAddr>>().map(|ConnectInfo(a)| a.ip());
     let addr = auth.client_addr(peer, request.headers());
-    let identity = auth.identify(request.headers().get(AUTHORIZATION).map(|v| v.as_bytes()), addr);
-    request.extensions_mut().insert(identity);
-    next.run(request).await
+    let headers = request.headers();
+    let authorization =
+        headers.get(AUTHORIZATION).map(|v| v.as_bytes().to_vec()).or_else(|| protocol_authorization(headers));
+    let identity = auth.identify(authorization.as_deref(), addr);
+    request.extensions_mut().insert(identity.clone());
+    let mut response = next.run(request).await;
+    response.extensions_mut().insert(identity);
+    response
 }
 
 /// The identity [`identify_requests`] left on the request.
@@ -457,5 +497,24 @@ mod tests {
         assert_eq!(name("w").as_deref(), Some("api-token"));
         assert_eq!(name("r").as_deref(), Some("read-token"));
         assert_eq!(name("x"), None);
+    }
+
+    #[test]
+    fn a_websocket_subprotocol_carries_a_base64url_token() {
+        let mut headers = HeaderMap::new();
+        assert_eq!(protocol_authorization(&headers), None);
+        // "r/t+?" is not a valid subprotocol token; its base64url form is: ci90Kz8.
+        headers.insert(SEC_WEBSOCKET_PROTOCOL, "inbetween, inbetween.bearer.ci90Kz8".parse().unwrap());
+        assert_eq!(protocol_authorization(&headers).as_deref(), Some(b"Bearer r/t+?".as_slice()));
+        headers.insert(SEC_WEBSOCKET_PROTOCOL, "inbetween.bearer.ci90Kz8=".parse().unwrap());
+        assert_eq!(
+            protocol_authorization(&headers).as_deref(),
+            Some(b"Bearer r/t+?".as_slice()),
+            "padding is accepted"
+        );
+        headers.insert(SEC_WEBSOCKET_PROTOCOL, "inbetween.bearer.!!".parse().unwrap());
+        assert_eq!(protocol_authorization(&headers).as_deref(), Some(b"".as_slice()), "undecodable: nobody");
+        headers.insert(SEC_WEBSOCKET_PROTOCOL, "graphql-ws".parse().unwrap());
+        assert_eq!(protocol_authorization(&headers), None);
     }
 }

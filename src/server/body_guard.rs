@@ -12,6 +12,12 @@
 //! (its head ends the stream: no `Content-Length`/`Transfer-Encoding` in
 //! HTTP/1.1, `END_STREAM` on the HTTP/2 headers) passes straight on. (Slow
 //! heads and idle connections are the accept loop's, in `listen`.)
+//!
+//! The import route's body is spooled to a temporary file instead of held
+//! (`spool`), under its own limit (`max_import_bytes`) and the same timeout;
+//! it takes a spool slot rather than the arrival budget, which is memory,
+//! and only a caller allowed to write gets one.
+//! Every 413 names its limit and how to raise it.
 
 use std::time::Duration;
 
@@ -21,8 +27,11 @@ use axum::http::{HeaderValue, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
+use super::auth::{Identity, Scope};
+use super::compression::BodyCoding;
 use super::error::ApiError;
 use super::shed::Arrivals;
+use super::spool::SpoolRoute;
 
 /// The limits the middleware applies.
 #[derive(Debug, Clone)]
@@ -31,48 +40,104 @@ pub struct BodyGuard {
     pub read_timeout: Duration,
     /// The budget of bodies held at once (`max_arriving_bytes`).
     pub arrivals: Arrivals,
+    /// The route whose bodies go to a temporary file instead (import).
+    pub spool: Option<SpoolRoute>,
 }
+
+/// The setting `max_bytes` comes from.
+const MAX_BODY_BYTES: &str = "max_body_bytes";
 
 /// The middleware (see the module doc).
 pub async fn guard(State(g): State<BodyGuard>, request: Request, next: Next) -> Response {
+    let spool = g.spool.as_ref().filter(|route| route.matches(&request));
+    let (max_bytes, setting) = spool.map_or((g.max_bytes, MAX_BODY_BYTES), |r| (r.max_bytes, r.setting));
     let declared = request.headers().get(header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
-    if declared.is_some_and(|n| n > g.max_bytes as u64) {
-        return closing(ApiError::PayloadTooLarge { limit: g.max_bytes });
+    if declared.is_some_and(|n| n > max_bytes as u64) {
+        return closing(ApiError::PayloadTooLarge { limit: max_bytes, setting });
     }
     if request.body().is_end_stream() {
         return next.run(request).await;
     }
+    match spool {
+        Some(route) => spooled(route, g.read_timeout, request, next).await,
+        None => held(&g, request, next).await,
+    }
+}
+
+/// A body read whole into memory, then the request.
+async fn held(g: &BodyGuard, request: Request, next: Next) -> Response {
     let (parts, body) = request.into_parts();
+    let coding = parts.extensions.get::<BodyCoding>().copied();
     let deadline = tokio::time::Instant::now() + g.read_timeout;
     let mut held = None;
-    match tokio::time::timeout_at(deadline, read_whole(body, &g, &mut held)).await {
+    match tokio::time::timeout_at(deadline, read_whole(body, g, coding, &mut held)).await {
         Ok(Ok(bytes)) => {
             let response = next.run(Request::from_parts(parts, Body::from(bytes))).await;
             drop(held);
             response
         }
         Ok(Err(e)) => closing(e),
-        Err(_) => {
-            metrics::counter!("inbetween_body_timeouts_total").increment(1);
-            closing(ApiError::BodyTimeout { secs: g.read_timeout.as_secs() })
-        }
+        Err(_) => timed_out(g.read_timeout),
     }
+}
+
+/// A body spooled to a temporary file, then the request with an empty body
+/// and the file in its extensions (`spool::SpooledBody`).
+///
+/// A caller who may not write is refused before a byte is read: a file this
+/// size is not taken from someone the handler would answer 401 or 403.
+async fn spooled(route: &SpoolRoute, read_timeout: Duration, request: Request, next: Next) -> Response {
+    if let Some(Err(refused)) = request.extensions().get::<Identity>().map(|id| id.authorize(Scope::Write)) {
+        return closing(refused);
+    }
+    let slot = match route.slot() {
+        Ok(slot) => slot,
+        Err(e) => return closing(e),
+    };
+    let (parts, body) = request.into_parts();
+    let deadline = tokio::time::Instant::now() + read_timeout;
+    match tokio::time::timeout_at(deadline, route.receive(body)).await {
+        Ok(Ok(spooled)) => {
+            let mut request = Request::from_parts(parts, Body::empty());
+            request.extensions_mut().insert(spooled);
+            let response = next.run(request).await;
+            drop(slot);
+            response
+        }
+        Ok(Err(e)) => closing(e),
+        Err(_) => timed_out(read_timeout),
+    }
+}
+
+fn timed_out(read_timeout: Duration) -> Response {
+    metrics::counter!("inbetween_body_timeouts_total").increment(1);
+    closing(ApiError::BodyTimeout { secs: read_timeout.as_secs() })
 }
 
 /// The whole body, counted into `held` against the arrival budget as it
 /// comes; 413 once it passes `max_bytes`, 503 past the budget (400 if the
-/// client breaks the stream off).
+/// client breaks the stream off, or a compressed body does not decode).
+/// A body sent with a `Content-Encoding` (`coding`) arrives here decoded
+/// (`compression`), so both limits count decoded bytes.
 async fn read_whole(
     mut body: Body,
     g: &BodyGuard,
+    coding: Option<BodyCoding>,
     held: &mut Option<tokio::sync::OwnedSemaphorePermit>,
 ) -> Result<Bytes, ApiError> {
     let mut whole = bytes::BytesMut::new();
     while let Some(frame) = std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await {
-        let frame = frame.map_err(|e| ApiError::parameter("body_incomplete", "body", format!("{e}")))?;
+        let frame = frame.map_err(|e| match coding {
+            Some(BodyCoding(coding)) => ApiError::parameter(
+                "body_not_decodable",
+                "body",
+                format!("the body is not valid {coding} (its Content-Encoding), or it was cut off: {e}"),
+            ),
+            None => ApiError::parameter("body_incomplete", "body", format!("{e}")),
+        })?;
         let Ok(data) = frame.into_data() else { continue };
         if whole.len() + data.len() > g.max_bytes {
-            return Err(ApiError::PayloadTooLarge { limit: g.max_bytes });
+            return Err(ApiError::PayloadTooLarge { limit: g.max_bytes, setting: MAX_BODY_BYTES });
         }
         g.arrivals.take(held, data.len())?;
         whole.extend_from_slice(&data);

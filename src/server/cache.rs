@@ -287,9 +287,11 @@ mod tests {
             )],
             events: vec![],
             playback: Playback::Once,
+            ..Default::default()
         };
         let stats = ClipStats { joints: 1, tracks: 1, events: 0, start: 0.0, end: 0.0, playback: Playback::Once };
-        let meta = ClipMeta { id: id.into(), name: "c".into(), version, stats, created_at: 0, updated_at: 0 };
+        let meta =
+            ClipMeta { id: id.into(), name: "c".into(), version, stats, tags: vec![], created_at: 0, updated_at: 0 };
         Arc::new(CachedClip { meta, clip: Clip::build(&spec).unwrap() })
     }
 

@@ -203,6 +203,21 @@ settings! {
             "trusted_proxies", "trusted-proxy", "INBETWEEN_TRUSTED_PROXIES", "IP_OR_CIDR", shown "none",
             "Reverse proxy address or CIDR (repeatable, or comma-separated) whose X-Forwarded-For / Forwarded \
              header names the client; from any other peer those headers are ignored";
+        #[arg(num_args = 0..=1, default_missing_value = "true")]
+        #[arg(value_parser = clap::builder::BoolishValueParser::new())]
+        compression: bool = true => as_given -> bool,
+            "compression", "compression", "INBETWEEN_COMPRESSION", "BOOL",
+            "Compress answers for clients that ask (REST: gzip, br or zstd by Accept-Encoding; gRPC: gzip or zstd \
+             by grpc-accept-encoding) and decode request bodies and gRPC messages sent compressed, whose byte \
+             limits count decoded bytes; false: identity only, both ways";
+        compression_min_bytes: usize = 1024 => as_given -> usize,
+            "compression_min_bytes", "compression-min-bytes", "INBETWEEN_COMPRESSION_MIN_BYTES", "BYTES",
+            "Smallest REST answer compressed (a known length under it goes as it is; answers sent in pieces are \
+             always compressed)";
+        access_log_sample: f64 = 0.01 => fraction -> f64,
+            "access_log_sample", "access-log-sample", "INBETWEEN_ACCESS_LOG_SAMPLE", "FRACTION",
+            "Fraction of REST requests answered 1xx-3xx that get an access log line (target inbetween::access); \
+             every 4xx and 5xx gets one";
     }
 }
 
@@ -222,6 +237,10 @@ settings! {
         max_import_resolved_bytes: usize = 64 * 1024 * 1024 => positive -> usize,
             "max_import_resolved_bytes", "max-import-resolved-bytes", "INBETWEEN_MAX_IMPORT_RESOLVED_BYTES", "BYTES",
             "Bytes of glTF buffers one import may read (every buffer's byteLength, even when shared)";
+        max_import_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
+            "max_import_bytes", "max-import-bytes", "INBETWEEN_MAX_IMPORT_BYTES", "BYTES",
+            "Largest file `POST /v1/clips/import` accepts: spooled to a temporary file, of which only the glTF JSON \
+             and the animation data are read";
         max_tracks: usize = 4096 => positive -> usize,
             "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
             "Most tracks in one clip";
@@ -231,6 +250,9 @@ settings! {
         max_joints: usize = 4096 => positive -> usize,
             "max_joints", "max-joints", "INBETWEEN_MAX_JOINTS", "N",
             "Most joints in one skeleton";
+        max_parameters: usize = 1024 => positive -> usize,
+            "max_parameters", "max-parameters", "INBETWEEN_MAX_PARAMETERS", "N",
+            "Most parameter tracks (SPEC §8: morph weights, camera or light values) in one clip";
         max_poses: usize = 10_000 => positive -> usize,
             "max_poses", "max-poses", "INBETWEEN_MAX_POSES", "N",
             "Most poses one sample request may ask for";
@@ -267,6 +289,15 @@ settings! {
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
              tables, over the whole clip (over it: 422 build_budget_exceeded)";
+        ik_max_constraints: usize = 32 => positive -> usize,
+            "ik_max_constraints", "ik-max-constraints", "INBETWEEN_IK_MAX_CONSTRAINTS", "N",
+            "IK constraints in one clip, motion or stream control (over it: 422 too_many_constraints)";
+        ik_max_effectors: usize = 16 => positive -> usize,
+            "ik_max_effectors", "ik-max-effectors", "INBETWEEN_IK_MAX_EFFECTORS", "N",
+            "Effectors of one chain constraint (over it: 422 too_many_effectors)";
+        ik_max_iterations: u32 = 1000 => positive -> u32,
+            "ik_max_iterations", "ik-max-iterations", "INBETWEEN_IK_MAX_ITERATIONS", "N",
+            "The largest max_iterations a chain constraint may ask for (over it: 422 too_many_iterations)";
         max_concurrent_builds: usize = cores() => positive -> usize,
             "max_concurrent_builds", "max-concurrent-builds", "INBETWEEN_MAX_CONCURRENT_BUILDS", "N",
             shown "one per core",
@@ -280,6 +311,9 @@ settings! {
         max_streams_per_token: usize = 64 => positive -> usize,
             "max_streams_per_token", "max-streams-per-token", "INBETWEEN_MAX_STREAMS_PER_TOKEN", "N",
             "Concurrent streams per configured token (by its name)";
+        max_broadcasts: usize = 64 => positive -> usize,
+            "max_broadcasts", "max-broadcasts", "INBETWEEN_MAX_BROADCASTS", "N",
+            "Live broadcasts at once (SPEC §9; over it: 429 too_many_broadcasts); their viewers count as streams";
         body_read_timeout: u64 = 10 => seconds -> Duration,
             "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
             "Seconds a client may take to send a request's body, once its head is in (answered 408)";
@@ -361,6 +395,14 @@ fn seconds(name: &str, secs: u64) -> anyhow::Result<Duration> {
 /// A duration in seconds where 0 means "do not wait".
 fn seconds_or_none(_: &str, secs: u64) -> anyhow::Result<Duration> {
     Ok(Duration::from_secs(secs))
+}
+
+/// A share of something, from 0 (none) to 1 (all).
+fn fraction(name: &str, value: f64) -> anyhow::Result<f64> {
+    if !(0.0..=1.0).contains(&value) {
+        bail!("{name} must be a fraction from 0 to 1");
+    }
+    Ok(value)
 }
 
 fn plain_token(name: &str, token: Option<Secret>) -> anyhow::Result<Option<Secret>> {
@@ -452,12 +494,23 @@ impl RawConfig {
             log_format: s.log_format,
             drain_timeout: s.drain_timeout,
             trusted_proxies: s.trusted_proxies,
+            compression: Compression { enabled: s.compression, min_bytes: s.compression_min_bytes },
+            access_log_sample: s.access_log_sample,
             limits: s.limits,
         })
     }
 }
 
 impl Limits {
+    /// The ceilings on IK constraints (SPEC §7 errors), for the core.
+    pub fn ik(&self) -> crate::anim::ik::IkLimits {
+        crate::anim::ik::IkLimits {
+            max_constraints: self.ik_max_constraints,
+            max_iterations: self.ik_max_iterations,
+            max_effectors: self.ik_max_effectors,
+        }
+    }
+
     fn check_buffers(&self) -> anyhow::Result<()> {
         if self.ws_max_write_buffer_bytes <= self.ws_write_buffer_bytes {
             bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
@@ -553,8 +606,17 @@ impl fmt::Display for LogFormat {
     }
 }
 
+/// Content codings (`compression`, `compression_min_bytes`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Compression {
+    /// Offer compressed answers and accept compressed requests, on both ports.
+    pub enabled: bool,
+    /// REST answers of a known length under this go uncompressed.
+    pub min_bytes: usize,
+}
+
 /// Where clips are stored.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub enum StoreConfig {
     /// `DIR/inbetween.db`, the directory created if missing.
     DataDir(PathBuf),
@@ -562,6 +624,53 @@ pub enum StoreConfig {
     SqliteUrl(Secret),
     /// A `postgres:` URL: the shared store of a multi-node deployment.
     Postgres(Secret),
+}
+
+/// Shows a URL's host and database but never its password (the startup log
+/// line prints the effective configuration).
+impl fmt::Debug for StoreConfig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StoreConfig::DataDir(dir) => f.debug_tuple("DataDir").field(dir).finish(),
+            StoreConfig::SqliteUrl(url) => f.debug_tuple("SqliteUrl").field(&redacted_url(url.expose())).finish(),
+            StoreConfig::Postgres(url) => f.debug_tuple("Postgres").field(&redacted_url(url.expose())).finish(),
+        }
+    }
+}
+
+/// `url` with the password of its user info and the value of every query
+/// parameter whose name mentions a password, key or secret (`password`,
+/// `sslpassword`, `sslkey`) replaced by `***`.
+fn redacted_url(url: &str) -> String {
+    let (base, query) = url.split_once('?').map_or((url, None), |(b, q)| (b, Some(q)));
+    let mut out = match base.split_once("://") {
+        Some((scheme, rest)) => {
+            let (authority, path) = rest.split_once('/').map_or((rest, None), |(a, p)| (a, Some(p)));
+            let authority = match authority.rsplit_once('@') {
+                Some((user_info, host)) => match user_info.split_once(':') {
+                    Some((user, _password)) => format!("{user}:***@{host}"),
+                    None => format!("{user_info}@{host}"),
+                },
+                None => authority.to_owned(),
+            };
+            format!("{scheme}://{authority}{}", path.map(|p| format!("/{p}")).unwrap_or_default())
+        }
+        None => base.to_owned(),
+    };
+    if let Some(query) = query {
+        let pairs: Vec<String> = query
+            .split('&')
+            .map(|pair| match pair.split_once('=') {
+                Some((k, _)) if ["pass", "key", "secret"].iter().any(|s| k.to_ascii_lowercase().contains(s)) => {
+                    format!("{k}=***")
+                }
+                _ => pair.to_owned(),
+            })
+            .collect();
+        out.push('?');
+        out.push_str(&pairs.join("&"));
+    }
+    out
 }
 
 /// The PEM files of `--tls-cert` / `--tls-key` (read when the server is built).
@@ -654,6 +763,10 @@ pub struct Config {
     pub drain_timeout: Duration,
     /// Peers whose `X-Forwarded-For` / `Forwarded` name the client (`server::auth`).
     pub trusted_proxies: TrustedProxies,
+    /// Content codings on both ports (`server::compression`).
+    pub compression: Compression,
+    /// The share of 1xx–3xx REST requests the access log shows (`server::access_log`).
+    pub access_log_sample: f64,
     pub limits: Limits,
 }
 
@@ -723,6 +836,39 @@ mod tests {
         assert!(!format!("{c:?}").contains("hunter2"));
     }
 
+    /// The startup line prints the configuration's `Debug`: a database URL
+    /// keeps its user, host and database, never its password.
+    #[test]
+    fn database_passwords_never_print_but_the_host_does() {
+        let url = "postgres://app:s3cret@db.internal:5432/clips?sslmode=require&sslpassword=k3y";
+        let c = RawConfig { database_url: Some(Secret::new(url)), ..Default::default() }.validate().unwrap();
+        let shown = format!("{c:?}");
+        assert!(!shown.contains("s3cret") && !shown.contains("k3y"), "{shown}");
+        assert!(shown.contains("postgres://app:***@db.internal:5432/clips?sslmode=require&sslpassword=***"), "{shown}");
+        assert_eq!(redacted_url("postgres://app@h/db"), "postgres://app@h/db");
+        assert_eq!(redacted_url("postgresql://h"), "postgresql://h");
+        assert_eq!(redacted_url("sqlite://data/a.db?mode=rwc"), "sqlite://data/a.db?mode=rwc");
+        assert_eq!(redacted_url("postgres://u:p@ss@h/db"), "postgres://u:***@h/db", "the last @ ends the user info");
+    }
+
+    #[test]
+    fn compression_and_access_log_settings() {
+        let d = RawConfig::default().validate().unwrap();
+        assert_eq!(d.compression, Compression { enabled: true, min_bytes: 1024 });
+        assert!((d.access_log_sample - 0.01).abs() < 1e-12);
+        let c = parse_flags(&["--compression", "false", "--compression-min-bytes", "0", "--access-log-sample", "1"])
+            .validate()
+            .unwrap();
+        assert_eq!((c.compression, c.access_log_sample), (Compression { enabled: false, min_bytes: 0 }, 1.0));
+        let file: RawConfig = toml::from_str("compression = false\naccess_log_sample = 0\n").unwrap();
+        let c = file.validate().unwrap();
+        assert_eq!((c.compression.enabled, c.access_log_sample), (false, 0.0));
+        for bad in ["1.5", "-0.1", "NaN"] {
+            let raw = parse_flags(&[&format!("--access-log-sample={bad}")]);
+            assert_eq!(raw.validate().unwrap_err().to_string(), "access_log_sample must be a fraction from 0 to 1");
+        }
+    }
+
     #[test]
     fn unknown_keys_and_bad_values_are_refused() {
         assert!(toml::from_str::<RawConfig>("lisen = \"x\"").is_err());
@@ -771,9 +917,11 @@ mod tests {
         let expected = Limits {
             max_body_bytes: 16_777_216,
             max_import_resolved_bytes: 67_108_864,
+            max_import_bytes: 268_435_456,
             max_tracks: 4096,
             max_keys_per_track: 1_000_000,
             max_joints: 4096,
+            max_parameters: 1024,
             max_poses: 10_000,
             max_joint_poses: 16_777_216,
             max_answer_bytes: 268_435_456,
@@ -785,10 +933,14 @@ mod tests {
             cache_bytes: 268_435_456,
             motion_cache_entries: 1024,
             max_build_work: 16_000_000,
+            ik_max_constraints: 32,
+            ik_max_effectors: 16,
+            ik_max_iterations: 1000,
             max_concurrent_builds: cores,
             max_streams: 1024,
             max_streams_per_client: 64,
             max_streams_per_token: 64,
+            max_broadcasts: 64,
             body_read_timeout: Duration::from_secs(10),
             max_in_flight: 64 * cores,
             write_rate: 100,

@@ -42,19 +42,25 @@ pub enum ApiError {
     Forbidden { needed: &'static str },
     #[error("{what} not found")]
     NotFound { what: &'static str },
-    /// A motion layer's clip that does not exist: `clip_not_found` at the layer.
+    /// A clip named in a request that does not exist: `clip_not_found` at
+    /// the field naming it (a motion layer's `clip`, `compatible_with`).
     #[error("{detail}")]
-    LayerClipNotFound { pointer: String, detail: String },
+    ClipNotFoundAt { at: At, detail: String },
     #[error("method not allowed")]
     MethodNotAllowed,
     #[error("the clip is at version {current}; If-Match did not match")]
     PreconditionFailed { current: u64 },
-    #[error("request body is over the {limit}-byte limit")]
-    PayloadTooLarge { limit: usize },
+    /// A body over a size limit: `setting` names the limit (`max_body_bytes`,
+    /// `max_import_bytes`) so the answer can say how to raise it.
+    #[error("request body is over the {limit}-byte limit ({})", raise_hint(setting))]
+    PayloadTooLarge { limit: usize, setting: &'static str },
     #[error("{detail}")]
     UnsupportedMediaType { detail: String },
     #[error("{detail}")]
     TooMany { code: &'static str, pointer: String, detail: String },
+    /// `max_broadcasts` broadcasts are live (SPEC §9).
+    #[error("{} ({})", .0, raise_hint("max_broadcasts"))]
+    TooManyBroadcasts(crate::stream::BroadcastError),
     /// The stream caps (global or per client address) are reached.
     #[error("{0}")]
     TooManyStreams(crate::stream::AdmitError),
@@ -66,7 +72,7 @@ pub enum ApiError {
     #[error("the request took longer than {secs} s")]
     Timeout { secs: u64 },
     /// The body did not arrive within the body-read timeout (slow client).
-    #[error("the request body did not arrive within {secs} s")]
+    #[error("the request body did not arrive within {secs} s ({})", raise_hint("body_read_timeout_secs"))]
     BodyTimeout { secs: u64 },
     /// Too many requests in flight: shed at once instead of queued.
     #[error("the server is at capacity; retry after {retry_after} s")]
@@ -88,6 +94,13 @@ pub enum ApiError {
     Unavailable(#[source] Option<anyhow::Error>),
     #[error("internal error")]
     Internal(#[source] anyhow::Error),
+}
+
+/// How an operator raises a limit: the setting and its flag and environment
+/// variable, which follow one pattern for every limit (`max_x`, `--max-x`,
+/// `INBETWEEN_MAX_X`; the config module's README test keeps them listed).
+pub fn raise_hint(setting: &str) -> String {
+    format!("{setting}; raise it with --{} or INBETWEEN_{}", setting.replace('_', "-"), setting.to_ascii_uppercase())
 }
 
 /// Where a refused value sits in the request: problem+json says `parameter`
@@ -122,13 +135,15 @@ impl ApiError {
             Invalid { .. } | TooMany { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Unauthorized => StatusCode::UNAUTHORIZED,
             Forbidden { .. } => StatusCode::FORBIDDEN,
-            NotFound { .. } | LayerClipNotFound { .. } => StatusCode::NOT_FOUND,
+            NotFound { .. } | ClipNotFoundAt { .. } => StatusCode::NOT_FOUND,
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => StatusCode::SERVICE_UNAVAILABLE,
             TooManyStreams(_) => StatusCode::TOO_MANY_REQUESTS,
+            TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => StatusCode::SERVICE_UNAVAILABLE,
+            TooManyBroadcasts(_) => StatusCode::TOO_MANY_REQUESTS,
             Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
@@ -149,7 +164,8 @@ impl ApiError {
             Unauthorized => "unauthorized",
             Forbidden { .. } => "insufficient_scope",
             NotFound { what: "route" } => "route_not_found",
-            NotFound { .. } | LayerClipNotFound { .. } => "clip_not_found",
+            NotFound { what: "broadcast" } => "broadcast_not_found",
+            NotFound { .. } | ClipNotFoundAt { .. } => "clip_not_found",
             MethodNotAllowed => "method_not_allowed",
             PreconditionFailed { .. } => "version_mismatch",
             PayloadTooLarge { .. } => "body_too_large",
@@ -157,6 +173,8 @@ impl ApiError {
             UnsupportedMediaType { .. } => "unsupported_media_type",
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => "shutting_down",
             TooManyStreams(_) => "too_many_streams",
+            TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => "shutting_down",
+            TooManyBroadcasts(_) => "too_many_broadcasts",
             Timeout { .. } => "request_timeout",
             Unavailable(_) => "unavailable",
             BodyTimeout { .. } => "body_timeout",
@@ -169,10 +187,9 @@ impl ApiError {
 
     fn pointer(&self) -> Option<&str> {
         match self {
-            ApiError::MalformedJson { pointer, .. }
-            | ApiError::TooMany { pointer, .. }
-            | ApiError::LayerClipNotFound { pointer, .. } => Some(pointer),
+            ApiError::MalformedJson { pointer, .. } | ApiError::TooMany { pointer, .. } => Some(pointer),
             ApiError::Invalid { at: At::Pointer(pointer), .. }
+            | ApiError::ClipNotFoundAt { at: At::Pointer(pointer), .. }
             | ApiError::BadParameter { at: At::Pointer(pointer), .. } => Some(pointer),
             ApiError::Import { pointer, .. } => pointer.as_deref(),
             _ => None,
@@ -183,7 +200,8 @@ impl ApiError {
     fn parameter_name(&self) -> Option<&str> {
         match self {
             ApiError::Invalid { at: At::Parameter(name), .. }
-            | ApiError::BadParameter { at: At::Parameter(name), .. } => Some(name),
+            | ApiError::BadParameter { at: At::Parameter(name), .. }
+            | ApiError::ClipNotFoundAt { at: At::Parameter(name), .. } => Some(name),
             _ => None,
         }
     }
@@ -266,8 +284,8 @@ impl ApiError {
                 ApiError::BadParameter { code, at: At::Pointer(shift(p)), detail }
             }
             ApiError::MalformedJson { pointer, detail } => ApiError::MalformedJson { pointer: shift(pointer), detail },
-            ApiError::LayerClipNotFound { pointer, detail } => {
-                ApiError::LayerClipNotFound { pointer: shift(pointer), detail }
+            ApiError::ClipNotFoundAt { at: At::Pointer(pointer), detail } => {
+                ApiError::ClipNotFoundAt { at: At::Pointer(shift(pointer)), detail }
             }
             other => other,
         }
@@ -327,7 +345,7 @@ impl ApiError {
             TooMany { .. } => Code::InvalidArgument,
             Unauthorized => Code::Unauthenticated,
             Forbidden { .. } => Code::PermissionDenied,
-            NotFound { .. } | LayerClipNotFound { .. } => Code::NotFound,
+            NotFound { .. } | ClipNotFoundAt { .. } => Code::NotFound,
             MethodNotAllowed => Code::Unimplemented,
             PreconditionFailed { .. } => Code::FailedPrecondition,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => Code::ResourceExhausted,
@@ -335,6 +353,8 @@ impl ApiError {
             Import { .. } => Code::InvalidArgument,
             TooManyStreams(crate::stream::AdmitError::ShuttingDown) => Code::Unavailable,
             TooManyStreams(_) => Code::ResourceExhausted,
+            TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => Code::Unavailable,
+            TooManyBroadcasts(_) => Code::ResourceExhausted,
             Timeout { .. } => Code::DeadlineExceeded,
             Unavailable(_) => Code::Unavailable,
             BodyTimeout { .. } => Code::DeadlineExceeded,

@@ -24,21 +24,24 @@ use tonic::metadata::MetadataMap;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::anim::{SampleOptions, Sampler};
+use crate::import::warning::in_document;
 use crate::server::auth::{Caller, Identity, Scope};
 use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::limits::admit_doc;
 use crate::server::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
-    Sampling, Wire, evaluate, in_body, in_pose_body,
+    Sampling, Wire, clip as request_clip, evaluate, in_body, in_pose_body,
 };
+use crate::server::rest::skeleton::ClipSkeleton;
 use crate::server::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
-use crate::stream::{self, Control, Engine, StreamParams, WireFrame};
-use crate::wire::json::{ClipDoc, parse_clip_doc};
+use crate::stream::{self, Control, ControlError, Engine, StreamParams, WireFrame};
+use crate::wire::json::{ClipDoc, ParameterValues, parse_clip_doc};
 use crate::wire::proto::server::animation_server::{Animation, AnimationServer};
 use crate::wire::proto::{
-    FILE_DESCRIPTOR_SET, clip_from_pb, clip_to_pb, matrices_to_pb, pb, playback_to_pb, pose_to_pb,
+    FILE_DESCRIPTOR_SET, add_parameters, clip_from_pb, clip_to_pb, ik_from_pb, ik_reports_to_pb, matrices_to_pb, pb,
+    playback_to_pb, pose_to_pb,
 };
 
 /// The `Animation` service.
@@ -63,7 +66,8 @@ pub async fn routes(state: AppState, engine: Engine) -> anyhow::Result<tonic::se
         .register_encoded_file_descriptor_set(FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1alpha()?;
-    let service = AnimationServer::new(GrpcService { state, engine });
+    let codings = state.config.compression;
+    let service = crate::server::compression::grpc(AnimationServer::new(GrpcService { state, engine }), codings);
     Ok(tonic::service::Routes::new(service)
         .add_service(health)
         .add_service(reflection_v1)
@@ -128,6 +132,7 @@ impl GrpcService {
             max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
             joints: (!req.joints.is_empty()).then_some(req.joints.as_slice()),
+            parameters: (!req.parameters.is_empty()).then_some(req.parameters.as_slice()),
             at: stream_at,
         };
         let opening = match &req.motion {
@@ -156,8 +161,11 @@ const STREAM_BATCH_BYTES: u64 = 1024 * 1024;
 fn batch(cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>, names: bool) -> pb::PoseBatch {
     let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
     let (options, format) = (sampling.options, sampling.format);
+    let layout = cached.clip.parameters();
     pb::PoseBatch {
         joint_names: if names { cached.clip.skeleton().names().to_vec() } else { Vec::new() },
+        parameter_names: if names { layout.names().to_vec() } else { Vec::new() },
+        parameter_widths: if names { layout.widths().to_vec() } else { Vec::new() },
         poses: sampling.times[range]
             .iter()
             .map(|&t| pose(cached, t, &options, format, false, &mut sampler, &mut matrices))
@@ -236,6 +244,23 @@ fn stream_at(field: Field) -> At {
     }
 }
 
+/// `PutClipRequest.metadata_json`: empty for none, else a JSON object.
+///
+/// # Errors
+/// `malformed_json` (not JSON), `bad_metadata` (not an object), both at
+/// `/metadata_json`.
+fn metadata_from_pb(text: &str) -> Result<Option<serde_json::Map<String, serde_json::Value>>, ApiError> {
+    if text.is_empty() {
+        return Ok(None);
+    }
+    let at = "/metadata_json".to_owned();
+    match serde_json::from_str(text) {
+        Ok(serde_json::Value::Object(m)) => Ok(Some(m)),
+        Ok(_) => Err(ApiError::invalid("bad_metadata", at, "metadata_json must be a JSON object")),
+        Err(e) => Err(ApiError::MalformedJson { pointer: at, detail: format!("metadata_json is not JSON: {e}") }),
+    }
+}
+
 /// Summary of a stored clip, as in REST.
 fn summary(meta: &ClipMeta) -> pb::ClipSummary {
     let s = &meta.stats;
@@ -249,6 +274,32 @@ fn summary(meta: &ClipMeta) -> pb::ClipSummary {
         end: s.end,
         playback: playback_to_pb(s.playback) as i32,
         events: s.events,
+        tags: meta.tags.clone(),
+        warnings: Vec::new(),
+    }
+}
+
+/// A clip's skeleton as REST's `GET /v1/clips/{id}/skeleton` has it.
+fn skeleton_to_pb(cached: &CachedClip) -> pb::ClipSkeleton {
+    let doc = ClipSkeleton::of(cached);
+    let part = |v: Option<&[f32]>| v.map(<[f32]>::to_vec).unwrap_or_default();
+    let joints = (doc.joints.into_iter())
+        .map(|j| pb::Joint {
+            name: j.name,
+            parent: j.parent,
+            rest: Some(pb::Transform {
+                translation: part(j.rest.translation.as_ref().map(|a| a.as_slice())),
+                rotation: part(j.rest.rotation.as_ref().map(|a| a.as_slice())),
+                scale: part(j.rest.scale.as_ref().map(|a| a.as_slice())),
+            }),
+            inverse_bind: Vec::new(),
+        })
+        .collect();
+    pb::ClipSkeleton {
+        summary: Some(summary(&cached.meta)),
+        skeleton: Some(pb::Skeleton { joints }),
+        parameters: doc.parameters,
+        inverse_binds: doc.inverse_binds,
     }
 }
 
@@ -265,16 +316,22 @@ fn pose(
     let clip = &cached.clip;
     let names = names.then(|| clip.skeleton().names());
     let clip_time = evaluate(clip, t, options, format, sampler, matrices);
-    match format {
+    let mut pose = match format {
         Format::Trs => pose_to_pb(names, sampler.pose(), t, clip_time, options.space),
         Format::Matrix | Format::Skinning => matrices_to_pb(names, matrices, t, clip_time),
-    }
+    };
+    pose.ik = ik_reports_to_pb(sampler.ik_reports());
+    add_parameters(&mut pose, ParameterValues::of(clip.parameters(), sampler.pose(), None), names.is_some());
+    pose
 }
 
 type FrameStream = Pin<Box<dyn Stream<Item = Result<WireFrame, Status>> + Send + 'static>>;
 
 /// A `Play` control; a crossfade's motion is looked up (and pinned) here,
-/// its refusals carrying their own codes (`clip_not_found` …) at `/to/…`.
+/// its refusals carrying their own codes (`clip_not_found` …) at `/to/…`;
+/// an `ik` control's constraints are shaped here (pointers under
+/// `/constraints`, as on the WebSocket) and checked against the stream's
+/// skeleton by the subscription.
 async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>) -> Result<Control, Status> {
     use pb::playback_control::Op;
     match op {
@@ -290,7 +347,10 @@ async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>)
             let to = super::grpc_motion::crossfade_target(state, fade.to.as_ref()).await?;
             Ok(Control::Crossfade(stream::Crossfade { to, duration: fade.duration, ease }))
         }
-        Some(Op::Open(_)) => Err(bad_control("`open` is only valid as the first message")),
+        Some(Op::Ik(ik)) => Ok(Control::Ik(ik_from_pb(&ik.constraints, "/constraints").map_err(ApiError::from)?)),
+        Some(Op::Open(_) | Op::Broadcast(_)) => {
+            Err(bad_control("`open` and `broadcast` are only valid as the first message"))
+        }
         None => Err(bad_control("a PlaybackControl needs an op")),
     }
 }
@@ -298,6 +358,12 @@ async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>)
 /// A `Play` message that cannot be obeyed: `bad_control`, as on the WebSocket.
 fn bad_control(detail: impl Into<String>) -> Status {
     ApiError::invalid("bad_control", "", detail).into()
+}
+
+/// A control the stream refused, with the code and pointer the WebSocket
+/// sends (`bad_control`, or an IK rule's code at `/constraints/…`).
+fn refused(e: &ControlError) -> Status {
+    ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()).into()
 }
 
 #[tonic::async_trait]
@@ -390,9 +456,13 @@ impl Animation for GrpcService {
     ) -> Result<Response<Self::PlayStream>, Status> {
         let caller = self.read(&request)?;
         let lane = lane(&request);
+        let may_write = self.caller(&request, Scope::Write);
         let mut inbound = request.into_inner();
         let open = match inbound.message().await? {
             Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Open(open)) }) => open,
+            Some(pb::PlaybackControl { op: Some(pb::playback_control::Op::Broadcast(bind)) }) => {
+                return self.play_broadcast(&bind.broadcast_id, may_write?, inbound).await;
+            }
             Some(_) => return Err(bad_control("the first message of Play must be `open`")),
             None => return Err(bad_control("Play needs an `open` message first")),
         };
@@ -415,7 +485,7 @@ impl Animation for GrpcService {
                     Ok(Some(msg)) => {
                         let sent = control_from_pb(&state, msg.op)
                             .await
-                            .and_then(|c| controller.send(c).map_err(|e| bad_control(e.to_string())));
+                            .and_then(|c| controller.send(c).map_err(|e| refused(&e)));
                         match sent {
                             Ok(true) => {}
                             Ok(false) => return,
@@ -432,6 +502,16 @@ impl Animation for GrpcService {
         Ok(with_phase(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))), phase_ms))
     }
 
+    type WatchStream = FrameStream;
+
+    async fn watch(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchStream>, Status> {
+        let caller = self.read(&request)?;
+        let b = live_broadcast(&self.state, &request.get_ref().broadcast_id)?;
+        let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
+        let sub = b.watch(stream::Encoding::Protobuf, permit, false);
+        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.grid().0.phase_ms))
+    }
+
     async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
         self.read(&request)?;
         let id = &request.get_ref().clip_id;
@@ -443,7 +523,15 @@ impl Animation for GrpcService {
         let doc: ClipDoc = parse_clip_doc(stored.doc_json.as_bytes())
             .map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {id} no longer parses: {e}")))?;
         let spec = doc.to_spec().map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {id}: {e}")))?;
-        Ok(Response::new(pb::ClipRecord { summary: Some(summary(&stored.meta)), clip: Some(clip_to_pb(&spec)) }))
+        let metadata_json = doc.metadata.map(|m| serde_json::Value::Object(m).to_string()).unwrap_or_default();
+        let (summary, clip) = (Some(summary(&stored.meta)), Some(clip_to_pb(&spec)));
+        Ok(Response::new(pb::ClipRecord { summary, clip, metadata_json }))
+    }
+
+    async fn get_skeleton(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipSkeleton>, Status> {
+        self.read(&request)?;
+        let cached = request_clip(&self.state, &request.get_ref().clip_id).await?;
+        Ok(Response::new(skeleton_to_pb(&cached)))
     }
 
     async fn list_clips(
@@ -457,6 +545,12 @@ impl Animation for GrpcService {
             limit: (req.limit > 0).then_some(Raw::Number(f64::from(req.limit))),
             cursor: (!req.cursor.is_empty()).then_some(req.cursor.as_str()),
             name: (!req.name.is_empty()).then_some(req.name.as_str()),
+            name_prefix: (!req.name_prefix.is_empty()).then_some(req.name_prefix.as_str()),
+            name_contains: (!req.name_contains.is_empty()).then_some(req.name_contains.as_str()),
+            tag: (!req.tag.is_empty()).then_some(req.tag.as_str()),
+            min_duration: req.min_duration.map(Raw::Number),
+            max_duration: req.max_duration.map(Raw::Number),
+            compatible_with: (!req.compatible_with.is_empty()).then_some(req.compatible_with.as_str()),
             at: in_body,
         };
         let Page { clips, next_cursor } = raw.read(&self.state).await?;
@@ -469,9 +563,11 @@ impl Animation for GrpcService {
         let req = request.into_inner();
         let clip = req.clip.ok_or_else(|| ApiError::invalid("missing_clip", "/clip", "a PutClip needs a clip"))?;
         let spec = clip_from_pb(&clip).map_err(ApiError::from)?;
+        let mut doc = ClipDoc::from_spec(&spec);
+        doc.tags = req.tags;
+        doc.metadata = metadata_from_pb(&req.metadata_json)?;
         let limits = self.state.config.limits.clone();
-        let admitted =
-            self.state.builds.run(move |cancel| admit_doc(ClipDoc::from_spec(&spec), &limits, cancel)).await?;
+        let admitted = self.state.builds.run(move |cancel| admit_doc(doc, &limits, cancel)).await?;
         let meta = if req.clip_id.is_empty() {
             self.state.store.create(admitted.new_clip).await.map_err(ApiError::from)?
         } else {
@@ -480,8 +576,11 @@ impl Animation for GrpcService {
             }
             self.state.store.replace(&req.clip_id, admitted.new_clip, req.if_version).await.map_err(ApiError::from)?
         };
-        tracing::info!(id = %meta.id, version = meta.version, "clip written over gRPC");
-        let reply = summary(&meta);
+        tracing::info!(id = %meta.id, version = meta.version, warnings = admitted.lints.len(), "clip written over gRPC");
+        let mut reply = summary(&meta);
+        reply.warnings = (in_document(&admitted.lints).into_iter())
+            .map(|w| pb::Warning { code: w.code, pointer: w.pointer, detail: w.detail })
+            .collect();
         self.state.cache_written(Arc::new(CachedClip { meta, clip: admitted.clip }));
         Ok(Response::new(reply))
     }
@@ -510,6 +609,44 @@ impl Animation for GrpcService {
 }
 
 /// `frames`, ended early with the status sent on `abort` (a bad control).
+/// The live broadcast `id`, or `broadcast_not_found`.
+fn live_broadcast(state: &AppState, id: &str) -> Result<Arc<stream::Broadcast>, Status> {
+    Ok(state.streams.broadcasts().get(id).ok_or(ApiError::NotFound { what: "broadcast" })?)
+}
+
+impl GrpcService {
+    /// `Play` bound to broadcast `id` by a `caller` with the write scope:
+    /// the broadcast's frames out, each control in applied to it for every
+    /// viewer (a refused one ends the call with its code, as on `Play`).
+    async fn play_broadcast(
+        &self,
+        id: &str,
+        caller: Caller,
+        mut inbound: Streaming<pb::PlaybackControl>,
+    ) -> Result<Response<FrameStream>, Status> {
+        let b = live_broadcast(&self.state, id)?;
+        let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
+        let sub = b.watch(stream::Encoding::Protobuf, permit, true);
+        let phase_ms = b.grid().0.phase_ms;
+        let (abort_tx, abort_rx) = oneshot::channel::<Status>();
+        let state = self.state.clone();
+        crate::panics::spawn_guarded("grpc_broadcast_controls", async move {
+            while let Ok(Some(msg)) = inbound.message().await {
+                if let Some(pb::playback_control::Op::Stop(_)) = msg.op {
+                    let _ = abort_tx.send(Status::ok("stopped"));
+                    return;
+                }
+                let sent = control_from_pb(&state, msg.op).await.and_then(|c| b.control(c).map_err(|e| refused(&e)));
+                if let Err(status) = sent {
+                    let _ = abort_tx.send(status);
+                    return;
+                }
+            }
+        });
+        Ok(with_phase(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))), phase_ms))
+    }
+}
+
 fn with_abort(
     frames: impl Stream<Item = Result<WireFrame, Status>> + Send + 'static,
     abort: oneshot::Receiver<Status>,

@@ -3,7 +3,8 @@
 //! `/v1/samples`. The motion message is converted in `wire::proto`, checked
 //! and priced by `server::request` (`RawPose`, `RawBatch`, `RawMotion`) with
 //! the same codes as REST, and each pose is packed from the motion
-//! sampler's buffers with its joint subset and root motion.
+//! sampler's buffers with its joint subset, root motion and IK reports (the
+//! clips' constraints, then the request's `motion.ik`).
 
 use glam::Mat4;
 
@@ -18,18 +19,22 @@ use crate::server::state::AppState;
 use std::sync::Arc;
 
 use crate::stream::StreamMotion;
-use crate::wire::proto::{matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints};
+use crate::wire::json::ParameterValues;
+use crate::wire::proto::{
+    add_parameters, ik_reports_to_pb, matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints,
+};
 
 /// The request's motion and joints, looked up and built.
 async fn compose(
     state: &AppState,
     motion: Option<&pb::Motion>,
-    joints: &[String],
+    (joints, parameters): (&[String], &[String]),
     format: Format,
 ) -> Result<Composed, ApiError> {
     let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
     let joints = (!joints.is_empty()).then_some(joints);
-    RawMotion { spec, joints, format, at: in_body }.resolve(state).await
+    let parameters = (!parameters.is_empty()).then_some(parameters);
+    RawMotion { spec, joints, parameters, format, at: in_body }.resolve(state).await
 }
 
 /// A stream's motion (`StreamRequest.motion`), still to be looked up.
@@ -37,7 +42,7 @@ async fn compose(
 /// # Errors
 /// The message's enums or numbers out of range, at `/motion/…`.
 pub fn raw_motion(motion: &pb::Motion) -> Result<RawMotion<'static>, ApiError> {
-    Ok(RawMotion { spec: motion_from_pb(motion)?, joints: None, format: Format::Trs, at: in_body })
+    Ok(RawMotion { spec: motion_from_pb(motion)?, joints: None, parameters: None, format: Format::Trs, at: in_body })
 }
 
 /// A `Play` crossfade's target, looked up and built; pointers under `/to`.
@@ -58,7 +63,7 @@ pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
             .check()?;
-    let composed = compose(state, req.motion.as_ref(), &req.joints, checked.format).await?;
+    let composed = compose(state, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
     composed.cost(1, checked.format, Wire::Protobuf).check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut packer = Packer::new(&composed, checked.options.space, checked.format);
     state.counters.poses.increment(1);
@@ -80,7 +85,7 @@ pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let raw = RawBatch::of_message(times, range, modes, req.format);
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(state, req.motion.as_ref(), &req.joints, sampling.format).await?;
+    let composed = compose(state, req.motion.as_ref(), (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Protobuf);
     let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };
@@ -93,7 +98,8 @@ pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -
     let pack = move || {
         let mut packer = Packer::new(&composed, space, format);
         let poses: Vec<pb::Pose> = sampling.times.iter().map(|&t| packer.pose(t, false)).collect();
-        pb::PoseBatch { joint_names: packer.names(), poses }
+        let (parameter_names, parameter_widths) = packer.parameter_names();
+        pb::PoseBatch { joint_names: packer.names(), poses, parameter_names, parameter_widths }
     };
     let batch = if n > crate::server::request::BLOCKING_POSES {
         tokio::task::spawn_blocking(pack).await.map_err(crate::server::metrics::join_failed)?
@@ -127,6 +133,17 @@ impl<'a> Packer<'a> {
         }
     }
 
+    /// The parameter names and widths sent (the subset's, in the clip's order).
+    fn parameter_names(&self) -> (Vec<String>, Vec<u32>) {
+        let layout = self.composed.motion.parameters();
+        let all: Vec<usize> = (0..layout.len()).collect();
+        let shown = self.composed.parameters.as_deref().unwrap_or(&all);
+        (
+            shown.iter().map(|&p| layout.names()[p].clone()).collect(),
+            shown.iter().map(|&p| layout.widths()[p]).collect(),
+        )
+    }
+
     /// The pose at `t`, with its names when `named`.
     fn pose(&mut self, t: f64, named: bool) -> pb::Pose {
         let motion = &self.composed.motion;
@@ -146,6 +163,9 @@ impl<'a> Packer<'a> {
             }
         };
         pose.root_motion = self.sampler.root_motion().map(root_motion_to_pb);
+        pose.ik = ik_reports_to_pb(self.sampler.ik_reports());
+        let subset = self.composed.parameters.as_deref();
+        add_parameters(&mut pose, ParameterValues::of(motion.parameters(), self.sampler.pose(), subset), named);
         match &self.composed.joints {
             Some(joints) => select_joints(pose, joints),
             None => pose,

@@ -7,6 +7,8 @@
 
 use std::sync::atomic::AtomicBool;
 
+use crate::anim::ik::IkLimits;
+use crate::anim::lint::{Lint, lint};
 use crate::anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
 use crate::store::{ClipStats, NewClip};
 use crate::wire::json::{ClipDoc, DocError, parse_clip_doc};
@@ -14,11 +16,14 @@ use crate::wire::json::{ClipDoc, DocError, parse_clip_doc};
 use super::config::Limits;
 use super::error::ApiError;
 
-/// A clip that passed every check: what to store and its compiled form.
+/// A clip that passed every check: what to store, its compiled form, and
+/// what in it looks valid but probably wrong (tracks and keys of the
+/// document as given; the caller renders them where they were sent).
 #[derive(Debug)]
 pub struct Admitted {
     pub new_clip: NewClip,
     pub clip: Clip,
+    pub lints: Vec<Lint>,
 }
 
 /// Validates an uploaded clip document.
@@ -38,7 +43,7 @@ pub fn admit(body: &[u8], limits: &Limits, cancel: &AtomicBool) -> Result<Admitt
 pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
     check(&doc, limits)?;
     let spec = doc.to_spec()?;
-    let clip = build(&spec, limits.max_build_work, cancel)?;
+    let clip = build(&spec, limits.max_build_work, &limits.ik(), cancel)?;
     if clip.joint_count() > limits.max_joints {
         return Err(too_many("too_many_joints", "/tracks", "joints", clip.joint_count(), limits.max_joints));
     }
@@ -51,16 +56,18 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<A
         end: clip.end(),
         playback: clip.playback(),
     };
-    Ok(Admitted { new_clip: NewClip { name: doc.name, doc_json, stats }, clip })
+    let joint_names = clip.skeleton().names().to_vec();
+    let new_clip = NewClip { name: doc.name, doc_json, stats, tags: doc.tags, joint_names };
+    Ok(Admitted { new_clip, clip, lints: lint(&spec) })
 }
 
-/// `Clip::build_cancellable` within `max_work`, the budget refusal naming
-/// its setting.
+/// `Clip::build_limited` within `max_work` and the IK ceilings, the budget
+/// refusal naming its setting.
 ///
 /// # Errors
 /// A SPEC rule (422 with the rule's code), or `build_budget_exceeded` (422).
-pub fn build(spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<Clip, ApiError> {
-    Clip::build_cancellable(spec, max_work, cancel).map_err(|e| match e {
+pub fn build(spec: &ClipSpec, max_work: u64, ik: &IkLimits, cancel: &AtomicBool) -> Result<Clip, ApiError> {
+    Clip::build_limited(spec, max_work, ik, cancel).map_err(|e| match e {
         ClipError { kind: kind @ ClipErrorKind::BuildBudgetExceeded { .. }, path } => ApiError::TooMany {
             code: kind.code(),
             pointer: path.to_pointer(),
@@ -74,7 +81,48 @@ fn too_many(code: &'static str, pointer: &str, what: &str, got: usize, max: usiz
     ApiError::TooMany { code, pointer: pointer.to_owned(), detail: format!("{got} {what}; the limit is {max}") }
 }
 
+/// At most this many tags per clip, each 1..=[`MAX_TAG_CHARS`] characters.
+pub const MAX_TAGS: usize = 32;
+pub const MAX_TAG_CHARS: usize = 64;
+/// The largest `metadata` object, as compact JSON.
+pub const MAX_METADATA_BYTES: usize = 16 * 1024;
+
+/// Tags are labels to filter by: short, distinct, printable. Metadata is
+/// kept, never read, but bounded: it travels with every `GET` of the clip.
+///
+/// # Errors
+/// `too_many_tags`, `bad_tag`, `duplicate_tag`, `metadata_too_large`.
+fn check_labels(doc: &ClipDoc) -> Result<(), ApiError> {
+    if doc.tags.len() > MAX_TAGS {
+        return Err(too_many("too_many_tags", "/tags", "tags", doc.tags.len(), MAX_TAGS));
+    }
+    for (i, tag) in doc.tags.iter().enumerate() {
+        let chars = tag.chars().count();
+        if chars == 0 || chars > MAX_TAG_CHARS || tag.chars().any(char::is_control) || tag.trim() != tag {
+            let detail = format!(
+                "a tag has 1..={MAX_TAG_CHARS} characters, no control characters and no surrounding spaces; got {tag:?}"
+            );
+            return Err(ApiError::invalid("bad_tag", format!("/tags/{i}"), detail));
+        }
+        if doc.tags[..i].contains(tag) {
+            return Err(ApiError::invalid(
+                "duplicate_tag",
+                format!("/tags/{i}"),
+                format!("the tag {tag:?} is given twice"),
+            ));
+        }
+    }
+    if let Some(metadata) = &doc.metadata {
+        let bytes = serde_json::to_vec(metadata).map_err(ApiError::internal)?.len();
+        if bytes > MAX_METADATA_BYTES {
+            return Err(too_many("metadata_too_large", "/metadata", "bytes of metadata", bytes, MAX_METADATA_BYTES));
+        }
+    }
+    Ok(())
+}
+
 fn check(doc: &ClipDoc, limits: &Limits) -> Result<(), ApiError> {
+    check_labels(doc)?;
     if doc.tracks.len() > limits.max_tracks {
         return Err(too_many("too_many_tracks", "/tracks", "tracks", doc.tracks.len(), limits.max_tracks));
     }
@@ -88,6 +136,17 @@ fn check(doc: &ClipDoc, limits: &Limits) -> Result<(), ApiError> {
         let n = t.times.len().max(t.values.len());
         if n > limits.max_keys_per_track {
             let pointer = format!("/tracks/{i}/times");
+            return Err(too_many("too_many_keys", &pointer, "keys", n, limits.max_keys_per_track));
+        }
+    }
+    if doc.parameters.len() > limits.max_parameters {
+        let n = doc.parameters.len();
+        return Err(too_many("too_many_parameters", "/parameters", "parameters", n, limits.max_parameters));
+    }
+    for (i, p) in doc.parameters.iter().enumerate() {
+        let n = p.times.len().max(p.values.len());
+        if n > limits.max_keys_per_track {
+            let pointer = format!("/parameters/{i}/times");
             return Err(too_many("too_many_keys", &pointer, "keys", n, limits.max_keys_per_track));
         }
     }

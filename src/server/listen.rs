@@ -26,6 +26,23 @@ use tower::ServiceExt;
 use super::connections::{ConnGate, Held, Tracked};
 use super::tls;
 
+/// The accept queue asked of the kernel (which caps it at `somaxconn`):
+/// tokio's default of 1024 overflowed when a thousand clients connected at
+/// once, and a client whose SYN is dropped waits a whole second to retry.
+const ACCEPT_BACKLOG: u32 = 4096;
+
+/// A listening socket on `addr` with [`ACCEPT_BACKLOG`] (address reuse as
+/// `TcpListener::bind` sets it, so a restart can bind at once).
+///
+/// # Errors
+/// The address cannot be bound.
+pub fn bind(addr: std::net::SocketAddr) -> std::io::Result<TcpListener> {
+    let socket = if addr.is_ipv4() { tokio::net::TcpSocket::new_v4()? } else { tokio::net::TcpSocket::new_v6()? };
+    socket.set_reuseaddr(true)?;
+    socket.bind(addr)?;
+    socket.listen(ACCEPT_BACKLOG)
+}
+
 /// How each connection is bounded.
 #[derive(Debug, Clone)]
 pub struct Listening {

@@ -41,10 +41,12 @@ use crate::store::postgres::PgStore;
 use crate::store::sqlite::SqliteStore;
 use crate::stream::{Engine, EngineConfig};
 
+pub mod access_log;
 pub mod auth;
 pub mod body_guard;
 pub mod builds;
 pub mod cache;
+pub mod compression;
 pub mod config;
 pub mod connections;
 pub mod error;
@@ -60,6 +62,7 @@ pub mod ratelimit;
 pub mod request;
 pub mod rest;
 pub mod shed;
+pub mod spool;
 pub mod state;
 pub mod tls;
 pub mod tokens;
@@ -112,13 +115,14 @@ impl Application {
             // Nothing is cached until this node hears other nodes' changes.
             cache.suspend();
         }
-        let listener = TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
+        let listener = listen::bind(config.listen).with_context(|| format!("binding {}", config.listen))?;
         let grpc_listener =
-            TcpListener::bind(config.grpc_listen).await.with_context(|| format!("binding {}", config.grpc_listen))?;
+            listen::bind(config.grpc_listen).with_context(|| format!("binding {}", config.grpc_listen))?;
         let streams = Engine::new(EngineConfig {
             max_streams: config.limits.max_streams,
             max_streams_per_client: config.limits.max_streams_per_client,
             max_streams_per_token: config.limits.max_streams_per_token,
+            max_broadcasts: config.limits.max_broadcasts,
             precise_timer: true,
             ..EngineConfig::default()
         });
@@ -145,7 +149,15 @@ impl Application {
             streams,
             builds,
         });
-        Ok(Application { listener, grpc_listener, state, tls, shared_store })
+        let app = Application { listener, grpc_listener, state, tls, shared_store };
+        // One line with every setting in effect; `Secret` and `StoreConfig` print no token or password.
+        tracing::info!(
+            http = %app.local_addr(),
+            grpc = %app.grpc_addr(),
+            config = ?app.state.config,
+            "starting with the effective configuration (secrets redacted)"
+        );
+        Ok(app)
     }
 
     /// The bound address (the real port when built with port 0).
@@ -242,6 +254,7 @@ impl Application {
                 .http2_keepalive_interval(Some(Duration::from_secs(30)))
                 .max_concurrent_streams(limits.http2_max_concurrent_streams)
                 .layer(connections::GrpcConnLayer)
+                .layer(tower::util::MapRequestLayer::new(compression::frames_uncompressed))
                 .layer(grpc_edge::layer())
                 .layer(admission)
                 .add_routes(routes)

@@ -47,13 +47,16 @@ impl MotionKey {
     /// The key of `spec` over the clips its layers were looked up at.
     pub fn of<P: PinnedClip + ?Sized>(spec: &MotionSpec<Arc<P>>) -> Self {
         // Destructured without `..`: a field added to the spec cannot be left out of the key.
-        let MotionSpec { layers, root_motion } = spec;
+        let MotionSpec { layers, root_motion, ik } = spec;
         let mut key = KeyWriter(Vec::with_capacity(64 * layers.len()));
         key.len(layers.len());
         for layer in layers {
             key.layer(layer);
         }
         key.root_motion(root_motion.as_ref());
+        // Every field of every constraint, floats in their shortest exact
+        // form: two lists give the same text only if they are the same.
+        key.str(&format!("{ik:?}"));
         MotionKey(key.0.into_boxed_slice())
     }
 }
@@ -262,13 +265,18 @@ mod tests {
             tracks: vec![track("j"), track("k")],
             events: vec![],
             playback: Playback::Loop,
+            ..Default::default()
         };
         Arc::new(crate::stream::Pinned::new(id, version, Arc::new(Clip::build(&spec).unwrap())))
     }
 
     /// A motion of one full layer per clip.
     fn spec(clips: &[Arc<dyn PinnedClip>]) -> MotionSpec<Arc<dyn PinnedClip>> {
-        MotionSpec { layers: clips.iter().cloned().map(LayerSpec::new).collect(), root_motion: None }
+        MotionSpec {
+            layers: clips.iter().cloned().map(LayerSpec::new).collect(),
+            root_motion: None,
+            ..Default::default()
+        }
     }
 
     fn built(spec: MotionSpec<Arc<dyn PinnedClip>>) -> (MotionKey, Arc<StreamMotion>) {

@@ -9,7 +9,10 @@
 //! **Architecture invariant:** the store knows nothing of clips beyond what a
 //! row holds. It never parses or validates documents: whatever reaches it has
 //! already been accepted by `Clip::build`, and it stores the canonical text
-//! as given. Every write is one atomic statement, durable when it returns
+//! as given, with what the list filters on (tags, joint names) handed to it
+//! beside it (migration 0002 read stored documents once, to index the clips
+//! stored before it). Every write is one atomic transaction (the clip row
+//! and its `clip_tags` and `clip_joints` rows), durable when it returns
 //! (SQLite `synchronous=FULL` in WAL mode; PostgreSQL with `fsync`,
 //! `full_page_writes` and `synchronous_commit` on; both checked as read back
 //! from every pooled connection, see [`Durability`]), so a caller that answers `201`
@@ -24,6 +27,7 @@ use futures_util::future::BoxFuture;
 
 use crate::anim::Playback;
 
+mod filter;
 pub mod postgres;
 mod retry;
 pub mod sqlite;
@@ -85,6 +89,8 @@ pub struct ClipMeta {
     /// 1 on create, +1 on each replace.
     pub version: u64,
     pub stats: ClipStats,
+    /// The document's `tags`, as the list filters them (`clip_tags`).
+    pub tags: Vec<String>,
     /// Unix milliseconds.
     pub created_at: i64,
     pub updated_at: i64,
@@ -97,19 +103,40 @@ pub struct StoredClip {
     pub doc_json: String,
 }
 
-/// What a create or replace writes.
+/// What a create or replace writes: the document, and what the list
+/// filters on, derived from it by the caller (the store parses no document).
 #[derive(Debug, Clone, PartialEq)]
 pub struct NewClip {
     pub name: String,
     pub doc_json: String,
     pub stats: ClipStats,
+    /// Distinct tags (`clip_tags`, indexed by tag).
+    pub tags: Vec<String>,
+    /// Every joint name of the skeleton (`clip_joints`, indexed by name), for
+    /// [`ListQuery::compatible_with`].
+    pub joint_names: Vec<String>,
 }
 
-/// A page request: clips with ids after `after`, in id (creation) order.
+/// A page request: clips with ids after `after`, in id (creation) order,
+/// that pass every filter given (`None`: no filter).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ListQuery {
     pub after: Option<String>,
+    /// Exactly this name.
     pub name: Option<String>,
+    /// Names starting with this (case-sensitive; an index range).
+    pub name_prefix: Option<String>,
+    /// Names containing this (case-sensitive).
+    pub name_contains: Option<String>,
+    /// Clips carrying this tag.
+    pub tag: Option<String>,
+    /// `end - start` at least / at most this many seconds.
+    pub min_duration: Option<f64>,
+    pub max_duration: Option<f64>,
+    /// Clips whose joint names include every joint name of this clip (the
+    /// ones a layer of it can be put on); [`StoreError::NotFound`] when the
+    /// clip does not exist.
+    pub compatible_with: Option<String>,
     pub limit: u32,
 }
 
@@ -184,7 +211,7 @@ pub(crate) fn now_millis() -> i64 {
 }
 
 /// A clip row as [`ClipMeta`]: one mapping for both backends, whose schemas
-/// share column names and types (`migrations/*/0001_clips.sql`).
+/// share column names and types (`migrations/*/0001_clips.sql`, `0002_clip_index.sql`).
 pub(crate) fn meta_from_row<'r, R>(row: &'r R) -> Result<ClipMeta, sqlx::Error>
 where
     R: sqlx::Row,
@@ -198,6 +225,8 @@ where
     let playback: Playback = crate::wire::json::PlaybackDoc::from_str(&playback)
         .map_err(|e| sqlx::Error::Decode(format!("playback column: {e}").into()))?
         .into();
+    let tags: String = row.try_get("tags")?;
+    let tags = serde_json::from_str(&tags).map_err(|e| sqlx::Error::Decode(format!("tags column: {e}").into()))?;
     let count = |c: &'static str| -> Result<u32, sqlx::Error> { Ok(row.try_get::<i64, _>(c)? as u32) };
     Ok(ClipMeta {
         id: row.try_get("id")?,
@@ -211,6 +240,7 @@ where
             end: row.try_get::<f64, _>("end_time")? as f32,
             playback,
         },
+        tags,
         created_at: row.try_get("created_at")?,
         updated_at: row.try_get("updated_at")?,
     })

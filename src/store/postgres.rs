@@ -1,7 +1,7 @@
 //! The shared store: PostgreSQL through sqlx, for several nodes on one
 //! database (`--database-url postgres://…`).
 //!
-//! The schema (`migrations/postgres`) is the SQLite table plus a trigger that
+//! The schema (`migrations/postgres`) is the SQLite tables plus a trigger that
 //! announces every committed change with `NOTIFY` on [`PgStore::channel`];
 //! `server::notify` listens there and keeps each node's cache of compiled
 //! clips in step. Migrations take sqlx's advisory lock, so nodes starting
@@ -27,6 +27,7 @@ use futures_util::future::BoxFuture;
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::{Connection, Row, migrate::Migrator};
 
+use super::filter::{POSTGRES, list_query};
 use super::retry::{Retry, Transience, with_retry};
 use super::{
     ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
@@ -40,7 +41,7 @@ const DEFAULT_APPLICATION_NAME: &str = "inbetween";
 
 macro_rules! meta_columns {
     () => {
-        "id, name, version, joints, tracks, events, start_time, end_time, playback, created_at, updated_at"
+        "id, name, version, joints, tracks, events, start_time, end_time, playback, tags, created_at, updated_at"
     };
 }
 
@@ -188,20 +189,22 @@ fn new_meta(clip: &NewClip, now: i64) -> ClipMeta {
         name: clip.name.clone(),
         version: 1,
         stats: clip.stats,
+        tags: clip.tags.clone(),
         created_at: now,
         updated_at: now,
     }
 }
 
-async fn insert<'e>(db: impl sqlx::PgExecutor<'e>, meta: &ClipMeta, doc_json: &str) -> Result<(), sqlx::Error> {
+/// Inserts the clip row and its index rows (in the caller's transaction).
+async fn insert(db: &mut sqlx::PgConnection, meta: &ClipMeta, clip: &NewClip) -> Result<(), sqlx::Error> {
     let s = &meta.stats;
     sqlx::query(
         "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, playback, \
-         created_at, updated_at) VALUES ($1, $2, 1, $3, $4, $5, $6, $7, $8, $9, $10, $10)",
+         tags, created_at, updated_at) VALUES ($1, $2, 1, $3, $4, $5, $6, $7, $8, $9, $11, $10, $10)",
     )
     .bind(&meta.id)
     .bind(&meta.name)
-    .bind(doc_json)
+    .bind(&clip.doc_json)
     .bind(s.joints as i64)
     .bind(s.tracks as i64)
     .bind(s.events as i64)
@@ -209,8 +212,28 @@ async fn insert<'e>(db: impl sqlx::PgExecutor<'e>, meta: &ClipMeta, doc_json: &s
     .bind(s.end as f64)
     .bind(s.playback.as_str())
     .bind(meta.created_at)
-    .execute(db)
+    .bind(serde_json::Value::from(clip.tags.as_slice()).to_string())
+    .execute(&mut *db)
     .await?;
+    write_index(db, &meta.id, clip, false).await
+}
+
+/// The clip's `clip_tags` and `clip_joints` rows (replacing its old ones).
+async fn write_index(db: &mut sqlx::PgConnection, id: &str, clip: &NewClip, replace: bool) -> Result<(), sqlx::Error> {
+    if replace {
+        sqlx::query("DELETE FROM clip_tags WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+        sqlx::query("DELETE FROM clip_joints WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+    }
+    sqlx::query("INSERT INTO clip_tags (clip_id, tag) SELECT DISTINCT $1, unnest($2::text[])")
+        .bind(id)
+        .bind(&clip.tags)
+        .execute(&mut *db)
+        .await?;
+    sqlx::query("INSERT INTO clip_joints (clip_id, joint) SELECT DISTINCT $1, unnest($2::text[])")
+        .bind(id)
+        .bind(&clip.joint_names)
+        .execute(&mut *db)
+        .await?;
     Ok(())
 }
 
@@ -230,9 +253,15 @@ impl ClipStore for PgStore {
         async move {
             let meta = new_meta(&clip, now_millis());
             self.run("create", Retry::Always, |n| {
-                let (meta, doc) = (&meta, &clip.doc_json);
+                let (meta, clip) = (&meta, &clip);
                 async move {
-                    match insert(&self.pool, meta, doc).await {
+                    let r = async {
+                        let mut tx = self.pool.begin().await?;
+                        insert(&mut tx, meta, clip).await?;
+                        tx.commit().await
+                    }
+                    .await;
+                    match r {
                         Err(e) if !is_own_duplicate(&e, n) => Err(e),
                         _ => Ok(()),
                     }
@@ -254,7 +283,7 @@ impl ClipStore for PgStore {
                     let r = async {
                         let mut tx = self.pool.begin().await?;
                         for (meta, clip) in metas.iter().zip(clips) {
-                            insert(&mut *tx, meta, &clip.doc_json).await?;
+                            insert(&mut tx, meta, clip).await?;
                         }
                         tx.commit().await
                     }
@@ -287,23 +316,26 @@ impl ClipStore for PgStore {
 
     fn list(&self, query: ListQuery) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
         async move {
-            let sql = concat!(
-                "SELECT ",
-                meta_columns!(),
-                " FROM clips WHERE ($1::text IS NULL OR id > $1) AND ($2::text IS NULL OR name = $2) ",
-                "ORDER BY id LIMIT $3"
-            );
             let query = &query;
             self.run("list", Retry::Always, |_| async move {
-                let rows = sqlx::query(sql)
-                    .bind(query.after.as_deref())
-                    .bind(query.name.as_deref())
-                    .bind(query.limit as i64)
-                    .fetch_all(&self.pool)
-                    .await?;
-                rows.iter().map(super::meta_from_row).collect()
+                let reference = match &query.compatible_with {
+                    None => None,
+                    Some(id) => {
+                        let joints = sqlx::query_scalar("SELECT joints FROM clips WHERE id = $1")
+                            .bind(id)
+                            .fetch_optional(&self.pool)
+                            .await?;
+                        match joints {
+                            Some(n) => Some(n),
+                            None => return Ok(Err(StoreError::NotFound)),
+                        }
+                    }
+                };
+                let mut qb = list_query(meta_columns!(), query, reference, POSTGRES);
+                let rows = qb.build().fetch_all(&self.pool).await?;
+                rows.iter().map(super::meta_from_row).collect::<Result<Vec<_>, _>>().map(Ok)
             })
-            .await
+            .await?
         }
         .boxed()
     }
@@ -317,14 +349,17 @@ impl ClipStore for PgStore {
         async move {
             let sql = concat!(
                 "UPDATE clips SET name = $3, doc = $4, joints = $5, tracks = $6, events = $7, start_time = $8, ",
-                "end_time = $9, playback = $10, updated_at = $11, version = version + 1 ",
+                "end_time = $9, playback = $10, updated_at = $11, tags = $12, version = version + 1 ",
                 "WHERE id = $1 AND ($2::bigint IS NULL OR version = $2) RETURNING ",
                 meta_columns!()
             );
             let clip = &clip;
             let now = now_millis();
+            let tags = serde_json::Value::from(clip.tags.as_slice()).to_string();
+            let tags = &tags;
             self.run("replace", Retry::IfNotExecuted, |_| async move {
                 let s = clip.stats;
+                let mut tx = self.pool.begin().await?;
                 let row = sqlx::query(sql)
                     .bind(id)
                     .bind(expected_version.map(|v| v as i64))
@@ -337,12 +372,17 @@ impl ClipStore for PgStore {
                     .bind(s.end as f64)
                     .bind(s.playback.as_str())
                     .bind(now)
-                    .fetch_optional(&self.pool)
+                    .bind(tags)
+                    .fetch_optional(&mut *tx)
                     .await?;
-                match row {
-                    Some(row) => super::meta_from_row(&row).map(Ok),
-                    None => self.missed(id).await.map(Err),
-                }
+                let Some(row) = row else {
+                    tx.rollback().await?;
+                    return self.missed(id).await.map(Err);
+                };
+                let meta = super::meta_from_row(&row)?;
+                write_index(&mut tx, id, clip, true).await?;
+                tx.commit().await?;
+                Ok(Ok(meta))
             })
             .await?
         }

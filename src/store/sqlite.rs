@@ -13,20 +13,23 @@
 //! loss; `foreign_keys=ON` and a `busy_timeout` so concurrent writers wait
 //! for the lock instead of failing.
 //!
-//! Every write is a single statement (`INSERT`, conditional `UPDATE …
-//! RETURNING`, conditional `DELETE`), hence its own atomic transaction: no
-//! multi-statement transaction ever upgrades a read lock (which in WAL mode
-//! fails with `SQLITE_BUSY` instead of waiting).
+//! A delete is a single statement (its `clip_tags` and `clip_joints` rows go
+//! by cascade). A create or replace writes the clip row and its index rows
+//! in one transaction opened with `BEGIN IMMEDIATE`, which takes the write
+//! lock before anything is read: no transaction ever upgrades a read lock
+//! (which in WAL mode fails with `SQLITE_BUSY` instead of waiting).
 
 use std::path::Path;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use futures_util::FutureExt;
 use futures_util::future::BoxFuture;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::{Connection, Row, migrate::Migrator};
 
+use super::filter::{SQLITE, list_query};
 use super::{
     ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
 };
@@ -36,7 +39,7 @@ static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
 /// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
 macro_rules! meta_columns {
     () => {
-        "id, name, version, joints, tracks, events, start_time, end_time, playback, created_at, updated_at"
+        "id, name, version, joints, tracks, events, start_time, end_time, playback, tags, created_at, updated_at"
     };
 }
 
@@ -57,12 +60,16 @@ impl SqliteStore {
         Self::open_with(options, settings).await
     }
 
-    /// Opens a `sqlite:` URL (e.g. `sqlite://data/inbetween.db`).
+    /// Opens a `sqlite:` URL (e.g. `sqlite://data/inbetween.db`), creating
+    /// the file's directory if missing, as `--data-dir` does.
     ///
     /// # Errors
     /// As [`SqliteStore::open`], or the URL does not parse.
     pub async fn open_url(url: &str, settings: &PoolSettings) -> anyhow::Result<Self> {
         let options = SqliteConnectOptions::from_str(url)?.create_if_missing(true);
+        if let Some(dir) = options.get_filename().parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
         Self::open_with(options, settings).await
     }
 
@@ -133,21 +140,22 @@ fn timed<T>(op: &'static str, started: Instant, r: Result<T, sqlx::Error>) -> Re
     })
 }
 
-/// Inserts one new clip at version 1 with a fresh id.
-async fn insert<'e>(db: impl sqlx::SqliteExecutor<'e>, clip: NewClip) -> Result<ClipMeta, sqlx::Error> {
+/// Inserts one new clip at version 1 with a fresh id, and its index rows.
+async fn insert(db: &mut sqlx::SqliteConnection, clip: NewClip) -> Result<ClipMeta, sqlx::Error> {
     let now = now_millis();
     let meta = ClipMeta {
         id: new_clip_id(),
-        name: clip.name,
+        name: clip.name.clone(),
         version: 1,
         stats: clip.stats,
+        tags: clip.tags.clone(),
         created_at: now,
         updated_at: now,
     };
     let s = &meta.stats;
     sqlx::query(
         "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, playback, \
-         created_at, updated_at) VALUES (?1, ?2, 1, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+         tags, created_at, updated_at) VALUES (?1, ?2, 1, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?11, ?10, ?10)",
     )
     .bind(&meta.id)
     .bind(&meta.name)
@@ -159,10 +167,44 @@ async fn insert<'e>(db: impl sqlx::SqliteExecutor<'e>, clip: NewClip) -> Result<
     .bind(s.end as f64)
     .bind(s.playback.as_str())
     .bind(now)
-    .execute(db)
+    .bind(json_list(&clip.tags))
+    .execute(&mut *db)
     .await?;
+    write_index(db, &meta.id, &clip, false).await?;
     Ok(meta)
 }
+
+/// A list of strings as the JSON array `json_each` reads.
+fn json_list(items: &[String]) -> String {
+    serde_json::Value::from(items).to_string()
+}
+
+/// The clip's `clip_tags` and `clip_joints` rows (replacing its old ones).
+async fn write_index(
+    db: &mut sqlx::SqliteConnection,
+    id: &str,
+    clip: &NewClip,
+    replace: bool,
+) -> Result<(), sqlx::Error> {
+    if replace {
+        sqlx::query("DELETE FROM clip_tags WHERE clip_id = ?1").bind(id).execute(&mut *db).await?;
+        sqlx::query("DELETE FROM clip_joints WHERE clip_id = ?1").bind(id).execute(&mut *db).await?;
+    }
+    sqlx::query("INSERT INTO clip_tags (clip_id, tag) SELECT DISTINCT ?1, value FROM json_each(?2)")
+        .bind(id)
+        .bind(json_list(&clip.tags))
+        .execute(&mut *db)
+        .await?;
+    sqlx::query("INSERT INTO clip_joints (clip_id, joint) SELECT DISTINCT ?1, value FROM json_each(?2)")
+        .bind(id)
+        .bind(json_list(&clip.joint_names))
+        .execute(&mut *db)
+        .await?;
+    Ok(())
+}
+
+/// A write transaction that holds the write lock from its first statement.
+const BEGIN_WRITE: &str = "BEGIN IMMEDIATE";
 
 impl SqliteStore {
     /// The current version of `id`, for telling "not found" from "version
@@ -170,6 +212,11 @@ impl SqliteStore {
     async fn current_version(&self, id: &str) -> Result<Option<u64>, sqlx::Error> {
         let row = sqlx::query("SELECT version FROM clips WHERE id = ?1").bind(id).fetch_optional(&self.pool).await?;
         row.map(|r| r.try_get::<i64, _>(0).map(|v| v as u64)).transpose()
+    }
+
+    /// The joint count of `id`, if it exists (the reference of `compatible_with`).
+    async fn joint_count(&self, id: &str) -> Result<Option<i64>, sqlx::Error> {
+        sqlx::query_scalar("SELECT joints FROM clips WHERE id = ?1").bind(id).fetch_optional(&self.pool).await
     }
 
     async fn missed(&self, id: &str) -> Result<StoreError, sqlx::Error> {
@@ -184,7 +231,13 @@ impl ClipStore for SqliteStore {
     fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
         async move {
             let started = Instant::now();
-            let r = insert(&self.pool, clip).await;
+            let r = async {
+                let mut tx = self.pool.begin_with(BEGIN_WRITE).await?;
+                let meta = insert(&mut tx, clip).await?;
+                tx.commit().await?;
+                Ok(meta)
+            }
+            .await;
             timed("create", started, r)
         }
         .boxed()
@@ -194,10 +247,10 @@ impl ClipStore for SqliteStore {
         async move {
             let started = Instant::now();
             let r = async {
-                let mut tx = self.pool.begin().await?;
+                let mut tx = self.pool.begin_with(BEGIN_WRITE).await?;
                 let mut metas = Vec::with_capacity(clips.len());
                 for clip in clips {
-                    metas.push(insert(&mut *tx, clip).await?);
+                    metas.push(insert(&mut tx, clip).await?);
                 }
                 tx.commit().await?;
                 Ok(metas)
@@ -226,19 +279,20 @@ impl ClipStore for SqliteStore {
     fn list(&self, query: ListQuery) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
         async move {
             let started = Instant::now();
-            let sql = concat!(
-                "SELECT ",
-                meta_columns!(),
-                " FROM clips WHERE (?1 IS NULL OR id > ?1) AND (?2 IS NULL OR name = ?2) ORDER BY id LIMIT ?3"
-            );
-            let r = sqlx::query(sql)
-                .bind(query.after)
-                .bind(query.name)
-                .bind(query.limit as i64)
-                .fetch_all(&self.pool)
-                .await
-                .and_then(|rows| rows.iter().map(super::meta_from_row).collect());
-            timed("list", started, r)
+            let r = async {
+                let reference = match &query.compatible_with {
+                    None => None,
+                    Some(id) => match self.joint_count(id).await? {
+                        Some(n) => Some(n),
+                        None => return Ok(Err(StoreError::NotFound)),
+                    },
+                };
+                let mut qb = list_query(meta_columns!(), &query, reference, SQLITE);
+                let rows = qb.build().fetch_all(&self.pool).await?;
+                rows.iter().map(super::meta_from_row).collect::<Result<_, _>>().map(Ok)
+            }
+            .await;
+            timed("list", started, r)?
         }
         .boxed()
     }
@@ -254,29 +308,37 @@ impl ClipStore for SqliteStore {
             let s = clip.stats;
             let sql = concat!(
                 "UPDATE clips SET name = ?3, doc = ?4, joints = ?5, tracks = ?6, events = ?7, start_time = ?8, ",
-                "end_time = ?9, playback = ?10, updated_at = ?11, version = version + 1 ",
+                "end_time = ?9, playback = ?10, updated_at = ?11, tags = ?12, version = version + 1 ",
                 "WHERE id = ?1 AND (?2 IS NULL OR version = ?2) RETURNING ",
                 meta_columns!()
             );
-            let r = sqlx::query(sql)
-                .bind(id)
-                .bind(expected_version.map(|v| v as i64))
-                .bind(&clip.name)
-                .bind(&clip.doc_json)
-                .bind(s.joints as i64)
-                .bind(s.tracks as i64)
-                .bind(s.events as i64)
-                .bind(s.start as f64)
-                .bind(s.end as f64)
-                .bind(s.playback.as_str())
-                .bind(now_millis())
-                .fetch_optional(&self.pool)
-                .await;
-            let r = match r {
-                Ok(Some(row)) => super::meta_from_row(&row).map(Ok),
-                Ok(None) => self.missed(id).await.map(Err),
-                Err(e) => Err(e),
-            };
+            let r = async {
+                let mut tx = self.pool.begin_with(BEGIN_WRITE).await?;
+                let row = sqlx::query(sql)
+                    .bind(id)
+                    .bind(expected_version.map(|v| v as i64))
+                    .bind(&clip.name)
+                    .bind(&clip.doc_json)
+                    .bind(s.joints as i64)
+                    .bind(s.tracks as i64)
+                    .bind(s.events as i64)
+                    .bind(s.start as f64)
+                    .bind(s.end as f64)
+                    .bind(s.playback.as_str())
+                    .bind(now_millis())
+                    .bind(json_list(&clip.tags))
+                    .fetch_optional(&mut *tx)
+                    .await?;
+                let Some(row) = row else {
+                    tx.rollback().await?;
+                    return self.missed(id).await.map(Err);
+                };
+                let meta = super::meta_from_row(&row)?;
+                write_index(&mut tx, id, &clip, true).await?;
+                tx.commit().await?;
+                Ok(Ok(meta))
+            }
+            .await;
             timed("replace", started, r)?
         }
         .boxed()
@@ -311,5 +373,42 @@ impl ClipStore for SqliteStore {
 
     fn close(&self) -> BoxFuture<'_, ()> {
         self.pool.close().boxed()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{SQLITE, SqliteStore, list_query};
+    use crate::store::{ListQuery, PoolSettings};
+
+    /// SQLite's plan of the list for `query`, one line per step.
+    async fn plan(store: &SqliteStore, query: &ListQuery) -> String {
+        let qb = list_query::<sqlx::Sqlite>(meta_columns!(), query, Some(3), SQLITE);
+        let sql = sqlx::AssertSqlSafe(format!("EXPLAIN QUERY PLAN {}", qb.sql().as_str()));
+        let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(sql).fetch_all(&store.pool).await.unwrap();
+        rows.into_iter().map(|r| r.3).collect::<Vec<_>>().join("\n")
+    }
+
+    /// Each filter is served by its index, never a scan of every clip.
+    #[tokio::test]
+    async fn every_indexed_filter_uses_its_index() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = SqliteStore::open(&dir.path().join("c.db"), &PoolSettings::default()).await.unwrap();
+        let q = ListQuery::default;
+        let cases = [
+            (ListQuery { name_prefix: Some("walk".into()), ..q() }, "clips_by_name"),
+            (ListQuery { tag: Some("fast".into()), ..q() }, "clip_tags_by_tag"),
+            (ListQuery { min_duration: Some(1.0), max_duration: Some(2.0), ..q() }, "clips_by_duration"),
+            // Candidates in id order, each probed joint by joint on the primary key.
+            (
+                ListQuery { compatible_with: Some("x".into()), ..q() },
+                "SEARCH j USING PRIMARY KEY (clip_id=? AND joint=?)",
+            ),
+        ];
+        for (query, index) in cases {
+            let plan = plan(&store, &query).await;
+            assert!(plan.contains(index), "{query:?} should use {index}:\n{plan}");
+        }
+        store.pool.close().await;
     }
 }

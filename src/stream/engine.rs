@@ -27,6 +27,7 @@ use std::time::Duration;
 use tokio::sync::{broadcast, oneshot, watch};
 use tokio::time::Instant;
 
+use super::broadcast::Broadcasts;
 use super::hub::{self, Hub, Item};
 use super::limits::{AdmitError, Limits, StreamPermit};
 use super::params::StreamParams;
@@ -49,6 +50,8 @@ pub struct EngineConfig {
     /// than tokio's millisecond timer. The server turns it on; the default
     /// is off so that tests can drive the engine with a paused tokio clock.
     pub precise_timer: bool,
+    /// Live broadcasts at once (SPEC §9).
+    pub max_broadcasts: usize,
 }
 
 impl Default for EngineConfig {
@@ -59,6 +62,7 @@ impl Default for EngineConfig {
             max_streams_per_client: 64,
             max_streams_per_token: 64,
             precise_timer: false,
+            max_broadcasts: 64,
         }
     }
 }
@@ -71,6 +75,7 @@ struct Inner {
     limits: Arc<Limits>,
     /// Round-robin phases for private playbacks.
     next_phase: AtomicU32,
+    broadcasts: Broadcasts,
 }
 
 /// The streaming engine: cheap to clone, one per server.
@@ -89,16 +94,21 @@ impl Engine {
     /// A new engine; its tick grid starts now.
     pub fn new(config: EngineConfig) -> Self {
         let config = EngineConfig { buffer: config.buffer.max(1), ..config };
+        let epoch = Instant::now();
+        let shutdown = watch::Sender::new(false);
+        let broadcasts =
+            Broadcasts::new(config.max_broadcasts, epoch, config.buffer, config.precise_timer, shutdown.subscribe());
         Engine {
             inner: Arc::new(Inner {
-                epoch: Instant::now(),
+                epoch,
+                broadcasts,
                 limits: Arc::new(
                     Limits::new(config.max_streams, config.max_streams_per_client)
                         .per_token(config.max_streams_per_token),
                 ),
                 config,
                 registry: Arc::default(),
-                shutdown: watch::Sender::new(false),
+                shutdown,
                 next_phase: AtomicU32::new(0),
             }),
         }
@@ -206,6 +216,11 @@ impl Engine {
     /// status), or after `timeout`. Returns whether all ended.
     pub async fn drained(&self, timeout: Duration) -> bool {
         tokio::time::timeout(timeout, self.inner.limits.idle()).await.is_ok()
+    }
+
+    /// The live broadcasts (SPEC §9); viewers are admitted by the same caps.
+    pub fn broadcasts(&self) -> &Broadcasts {
+        &self.inner.broadcasts
     }
 
     /// Playbacks waiting for their first tick (for tests and metrics).

@@ -160,6 +160,7 @@ mod tests {
             tracks: vec![track],
             events,
             playback: Playback::Once,
+            ..Default::default()
         })
         .unwrap()
     }

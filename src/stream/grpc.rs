@@ -16,7 +16,7 @@ use super::wire_frame::WireFrame;
 /// The status a stream ends with, or `None` for a clean OK.
 pub fn end_status(reason: EndReason) -> Option<Status> {
     match reason {
-        EndReason::MaxFrames | EndReason::Stopped => None,
+        EndReason::MaxFrames | EndReason::Stopped | EndReason::Ended => None,
         EndReason::Shutdown => Some(Status::unavailable("the server is shutting down; reconnect to resume")),
         EndReason::Failed => Some(Status::internal("the stream failed")),
     }

@@ -41,6 +41,10 @@ use std::sync::Arc;
 use super::pinned::StreamMotion;
 use super::playhead::Crossfade;
 use crate::anim::motion::{MotionOptions, Player};
+use crate::wire::json::ParameterValues;
+
+/// The player of a stream's motion.
+pub(super) type StreamPlayer = Player<Arc<dyn super::pinned::PinnedClip>>;
 
 /// Why a stream ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -51,6 +55,8 @@ pub enum EndReason {
     Stopped,
     /// The server is shutting down.
     Shutdown,
+    /// The broadcast watched was deleted or ended (SPEC §9).
+    Ended,
     /// The playback ended unexpectedly (a bug; logged).
     Failed,
 }
@@ -66,7 +72,7 @@ pub(crate) struct Hub {
     params: StreamParams,
     schedule: Schedule,
     playhead: Playhead,
-    player: Player<Arc<dyn super::pinned::PinnedClip>>,
+    player: StreamPlayer,
     /// The current motion's first-layer position at the previous frame
     /// (for the events crossed), and which motion that was.
     prev: Option<(f64, Arc<StreamMotion>)>,
@@ -189,6 +195,8 @@ impl Hub {
                             tracing::error!(error = %e, "a weight ramp the subscription accepted was refused");
                         }
                     }
+                    Control::SetIk(constraints) => self.player.set_ik(constraints),
+                    Control::Ik(_) => tracing::error!("IK constraints reached a playback unresolved"),
                     c => jumped |= self.playhead.apply(c, tick.k),
                 }
             }
@@ -226,32 +234,70 @@ impl Hub {
 
     /// Evaluates and encodes tick `k`.
     fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
-        let p = &self.params;
-        let options = MotionOptions { ease: p.ease, space: p.space };
-        let clip_time = self.player.sample(self.playhead.time_at(k), &options);
-        let motion = self.player.motion();
-        let first = motion.first_clip();
-        let position = self.player.first_layer_position();
-        // Events continue only along one motion's first layer, without a jump.
-        let from = self.prev.as_ref().filter(|(_, m)| !jumped && Arc::ptr_eq(m, motion)).map(|(x, _)| *x);
-        crossed(first.clip(), position.playback, p.ease, from, position.x, &mut self.crossed);
-        self.prev = Some((position.x, Arc::clone(motion)));
-        self.encoder.encode(&FrameData {
-            seq: k,
-            dropped: skipped,
-            sent_at_unix_nanos: unix_nanos(),
-            clip_id: first.id(),
-            time: self.player.motion_time(),
-            clip_time,
-            space: p.space,
-            skeleton: motion.skeleton(),
-            pose: self.player.pose(),
-            joints: p.joints.as_deref(),
-            root_motion: self.player.root_motion(),
-            events: first.clip().events(),
-            crossed: &self.crossed,
-            with_names: std::mem::take(&mut self.with_names),
-        })
+        let time = self.playhead.time_at(k);
+        let clip_time = sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed);
+        let tick = TickStamp { seq: k, dropped: skipped, sent_at: unix_nanos(), clip_time };
+        let with_names = std::mem::take(&mut self.with_names);
+        self.encoder.encode(&frame_data(&self.player, &self.params, &self.crossed, tick, with_names))
+    }
+}
+
+/// What a frame says of its tick besides the pose.
+pub(super) struct TickStamp {
+    pub seq: u64,
+    pub dropped: u64,
+    pub sent_at: i64,
+    pub clip_time: f32,
+}
+
+/// Samples `player` at request time `time` and lists in `crossed` the first
+/// layer's events since `prev` (none across a jump or a change of motion);
+/// returns the clip time. One step for playbacks and broadcasts alike.
+pub(super) fn sample_tick(
+    player: &mut StreamPlayer,
+    params: &StreamParams,
+    time: f64,
+    jumped: bool,
+    prev: &mut Option<(f64, Arc<StreamMotion>)>,
+    crossed_out: &mut Vec<u32>,
+) -> f32 {
+    let options = MotionOptions { ease: params.ease, space: params.space };
+    let clip_time = player.sample(time, &options);
+    let motion = player.motion();
+    let position = player.first_layer_position();
+    let from = prev.as_ref().filter(|(_, m)| !jumped && Arc::ptr_eq(m, motion)).map(|(x, _)| *x);
+    crossed(motion.first_clip().clip(), position.playback, params.ease, from, position.x, crossed_out);
+    *prev = Some((position.x, Arc::clone(motion)));
+    clip_time
+}
+
+/// The frame of `player`'s current pose, as `params` asks for it.
+pub(super) fn frame_data<'a>(
+    player: &'a StreamPlayer,
+    params: &'a StreamParams,
+    crossed: &'a [u32],
+    tick: TickStamp,
+    with_names: bool,
+) -> FrameData<'a> {
+    let motion = player.motion();
+    let first = motion.first_clip();
+    FrameData {
+        seq: tick.seq,
+        dropped: tick.dropped,
+        sent_at_unix_nanos: tick.sent_at,
+        clip_id: first.id(),
+        time: player.motion_time(),
+        clip_time: tick.clip_time,
+        space: params.space,
+        skeleton: motion.skeleton(),
+        pose: player.pose(),
+        joints: params.joints.as_deref(),
+        parameters: ParameterValues::of(motion.parameters(), player.pose(), params.parameters.as_deref()),
+        root_motion: player.root_motion(),
+        ik: player.ik_reports(),
+        events: first.clip().events(),
+        crossed,
+        with_names,
     }
 }
 

@@ -20,15 +20,20 @@
 //! response stream of pre-encoded [`WireFrame`]s, `ws` as text or binary
 //! messages.
 //!
+//! A broadcast (SPEC §9, `broadcast`) is a playback made a feature: named,
+//! created and deleted explicitly, joinable at any tick, controlled for all
+//! its viewers with controls stamped by the tick they apply from.
+//!
 //! **Architecture invariants.** Nothing here knows about HTTP routes, the
 //! store or authentication: transports hand in a motion over pinned clips
 //! (and resolve a crossfade's motion for it) and get bytes out. No lock is held across an await. A slow client costs a fixed
 //! amount of memory and never delays a playback: publishing never waits.
 //! Every task started here ends on shutdown, when its last viewer leaves,
-//! or on `stop`. A playback never changes clip version mid-stream: replacing
+//! or on `stop` (a broadcast: when deleted or idle for its timeout). A playback never changes clip version mid-stream: replacing
 //! or deleting a clip affects streams started afterwards only, so no frame
 //! is ever a mix of two versions.
 
+mod broadcast;
 mod encode;
 mod engine;
 mod events;
@@ -45,7 +50,8 @@ mod ticker;
 mod wire_frame;
 pub mod ws;
 
-pub use encode::{Encoded, Encoding, FrameData, FrameEncoder};
+pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts};
+pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use hub::{EndReason, unix_nanos};
@@ -66,5 +72,7 @@ pub const PHASE_HEADER: &str = "inbetween-grid-phase-ms";
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_broadcast;
 #[cfg(test)]
 mod tests_ws;

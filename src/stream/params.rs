@@ -5,9 +5,10 @@
 
 use std::sync::Arc;
 
-use super::encode::Encoding;
+use super::encode::{Encoding, Names};
 use super::pinned::{PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
+use crate::anim::ik::IkLimits;
 use crate::anim::motion::{LayerSpec, MotionSpec};
 use crate::anim::{Clip, Ease, Motion, Playback, Space};
 
@@ -63,6 +64,10 @@ pub struct StreamParams {
     pub paused: bool,
     /// The output joints frames carry (skeleton order); `None`: all.
     pub joints: Option<Arc<[usize]>>,
+    /// The parameters frames carry (the first clip's order); `None`: all.
+    pub parameters: Option<Arc<[usize]>>,
+    /// Ceilings on the constraints of `ik` controls.
+    pub ik_limits: IkLimits,
 }
 
 impl std::fmt::Debug for StreamParams {
@@ -90,7 +95,7 @@ impl StreamParams {
         let playback = req.playback.unwrap_or(pinned.clip().playback());
         let identity = format!("clip {}@{} {}", pinned.id(), pinned.version(), playback.as_str());
         let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
-        let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None })
+        let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None, ..Default::default() })
             .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;
         Self::of_motion(Arc::new(motion), identity.into(), req)
     }
@@ -125,14 +130,42 @@ impl StreamParams {
             max_frames: (req.max_frames > 0).then_some(req.max_frames),
             paused: req.paused,
             joints: None,
+            parameters: None,
+            ik_limits: IkLimits::default(),
             motion,
         })
     }
 
     /// The same stream carrying only `joints` (output joint indices, in
     /// skeleton order).
+    /// The same stream with `ik` controls held to `limits`.
+    pub fn with_ik_limits(self, limits: IkLimits) -> Self {
+        StreamParams { ik_limits: limits, ..self }
+    }
+
     pub fn with_joints(self, joints: Option<Vec<usize>>) -> Self {
         StreamParams { joints: joints.map(Into::into), ..self }
+    }
+
+    /// The same stream carrying only `parameters` (indices in the first
+    /// clip's order).
+    pub fn with_parameters(self, parameters: Option<Vec<usize>>) -> Self {
+        StreamParams { parameters: parameters.map(Into::into), ..self }
+    }
+
+    /// What a protobuf viewer's first frame names: the joints, and the
+    /// parameters with their widths.
+    pub fn names(&self) -> Names {
+        let layout = self.motion.parameters();
+        let parameters: Vec<usize> = match &self.parameters {
+            Some(subset) => subset.to_vec(),
+            None => (0..layout.len()).collect(),
+        };
+        Names {
+            joints: self.joint_names(),
+            parameters: parameters.iter().map(|&p| layout.names()[p].clone()).collect(),
+            widths: parameters.iter().map(|&p| layout.widths()[p]).collect(),
+        }
     }
 
     /// The first layer's compiled clip.

@@ -16,6 +16,7 @@ use std::sync::Arc;
 
 use super::pinned::StreamMotion;
 use crate::anim::Ease;
+use crate::anim::ik::{IkConstraint, IkSpec};
 
 /// A change asked of a playback, applied at its next tick.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,6 +37,11 @@ pub enum Control {
         weight: f32,
         duration: f64,
     },
+    /// Replace the stream's IK constraints (SPEC §7), as a client names
+    /// them; the subscription resolves them into [`Control::SetIk`].
+    Ik(Vec<IkSpec>),
+    /// Replace the stream's IK constraints, resolved against its skeleton.
+    SetIk(Vec<IkConstraint>),
 }
 
 /// A crossfade asked for: its target, already built over pinned clips.
@@ -135,7 +141,7 @@ impl Playhead {
                 (self.anchor_k, self.anchor_t) = (k, t);
                 return true;
             }
-            Control::Stop | Control::Crossfade(_) | Control::Layer { .. } => {}
+            Control::Stop | Control::Crossfade(_) | Control::Layer { .. } | Control::Ik(_) | Control::SetIk(_) => {}
         }
         false
     }

@@ -24,6 +24,7 @@ use super::schedule::Schedule;
 pub(crate) struct PlaybackKey {
     identity: Arc<str>,
     joints: Option<Arc<[usize]>>,
+    parameters: Option<Arc<[usize]>>,
     fps: u32,
     start: u64,
     speed: u64,
@@ -37,6 +38,7 @@ impl PlaybackKey {
         PlaybackKey {
             identity: Arc::clone(&params.identity),
             joints: params.joints.clone(),
+            parameters: params.parameters.clone(),
             fps: params.fps,
             start: params.start.to_bits(),
             speed: params.speed.to_bits(),
@@ -137,6 +139,7 @@ mod tests {
             tracks: vec![track],
             events: vec![],
             playback: Playback::Once,
+            ..Default::default()
         };
         let clip: Arc<Clip> = Arc::new(Clip::build(&spec).unwrap());
         let params = StreamParams::new(

@@ -5,13 +5,14 @@
 use bytes::Bytes;
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
-use super::encode::Encoding;
+use super::encode::{Encoding, Names};
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
 use super::playhead::{Control, Playhead};
 use super::schedule::{Grid, Schedule};
+use crate::anim::ik::{IkError, IkLimits, build_constraints};
 
 /// A frame as this stream's client must receive it.
 #[derive(Debug, Clone, PartialEq)]
@@ -31,30 +32,61 @@ pub enum Next {
 }
 
 /// Why a control was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ControlError {
     #[error("{0}")]
     Invalid(&'static str),
     #[error("too many controls pending; wait for a frame before sending more")]
     Busy,
+    /// An `ik` control's constraint breaks a rule of SPEC §7 (its path is
+    /// relative to the control's `constraints`).
+    #[error("{}", .0.kind)]
+    Ik(IkError),
+    /// A broadcast viewer without the write scope sent a control.
+    #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
+    ReadOnly,
+}
+
+impl ControlError {
+    /// The stable code a client gets (`bad_control`, or the IK rule's).
+    pub fn code(&self) -> &'static str {
+        match self {
+            ControlError::Ik(e) => e.kind.code(),
+            ControlError::ReadOnly => "insufficient_scope",
+            _ => "bad_control",
+        }
+    }
+
+    /// The JSON pointer of the field at fault, when there is one.
+    pub fn pointer(&self) -> Option<String> {
+        match self {
+            ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
+            _ => None,
+        }
+    }
 }
 
 /// Checks controls against the stream's motions: numbers in range, a
 /// crossfade target with the stream's skeleton, a ramp of a layer the
 /// motion playing has.
 #[derive(Debug, Clone)]
-struct ControlCheck {
+pub(crate) struct ControlCheck {
     skeleton: std::sync::Arc<StreamMotion>,
     /// Layers of the motion the latest accepted control left playing.
     layers: usize,
+    ik_limits: IkLimits,
 }
 
 impl ControlCheck {
-    fn new(params: &StreamParams) -> Self {
-        ControlCheck { skeleton: std::sync::Arc::clone(&params.motion), layers: params.motion.layer_count() }
+    pub(crate) fn new(params: &StreamParams) -> Self {
+        ControlCheck {
+            skeleton: std::sync::Arc::clone(&params.motion),
+            layers: params.motion.layer_count(),
+            ik_limits: params.ik_limits,
+        }
     }
 
-    fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         let control = control.validate().map_err(ControlError::Invalid)?;
         match &control {
             Control::Crossfade(fade) => {
@@ -63,15 +95,40 @@ impl ControlCheck {
                         "the crossfade's motion has another skeleton: its first layer's clip must have the stream's joints in the same order",
                     ));
                 }
+                let (to, here) = (fade.to.parameters(), self.skeleton.parameters());
+                if to.names() != here.names() || to.widths() != here.widths() {
+                    return Err(ControlError::Invalid(
+                        "the crossfade's motion has other parameters: its first layer's clip must have the stream's parameter names and widths in the same order",
+                    ));
+                }
+                if !fade.to.ik().is_empty() {
+                    return Err(ControlError::Invalid(
+                        "a crossfade's motion carries no `ik`: change the stream's constraints with an `ik` control",
+                    ));
+                }
                 self.layers = fade.to.layer_count();
             }
             Control::Layer { index, .. } if *index >= self.layers => {
                 return Err(ControlError::Invalid("no such layer in the motion playing"));
             }
+            Control::Ik(specs) => {
+                let skeleton = self.skeleton.skeleton();
+                let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
+                return Ok(Control::SetIk(constraints));
+            }
+            Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),
             _ => {}
         }
         Ok(control)
     }
+}
+
+/// Where a broadcast viewer's controls go (the broadcast, which stamps
+/// each with the tick it applies from). Defined here, implemented by the
+/// broadcast, so that a subscription never imports it.
+pub(crate) trait ControlSink: Send + Sync {
+    /// Queues `control` for every viewer; returns the tick it applies from.
+    fn send(&self, control: Control) -> Result<u64, ControlError>;
 }
 
 /// A sender of controls to a private playback, usable from another task
@@ -117,8 +174,12 @@ pub struct Subscription {
     /// its first tick if nobody else joined.
     handback: Option<oneshot::Receiver<Box<Hub>>>,
     controls: Option<mpsc::Sender<Control>>,
+    /// A broadcast viewer (SPEC §9): its first frame has `dropped` 0, and
+    /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
+    /// whose controls are refused), never into a fork.
+    broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,
     /// The names of the joints frames carry, for a protobuf viewer's first frame.
-    names: Vec<String>,
+    names: Names,
     check: ControlCheck,
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
@@ -149,6 +210,9 @@ pub(crate) enum Source {
     Shared { rx: broadcast::Receiver<Item>, handback: Option<oneshot::Receiver<Box<Hub>>> },
     /// A private playback for this viewer to drive, and its controls.
     Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Control> },
+    /// A broadcast's frames of one encoding, and where this viewer's
+    /// controls go (`None`: it may not control).
+    Broadcast { rx: broadcast::Receiver<Item>, controls: Option<std::sync::Arc<dyn ControlSink>> },
 }
 
 impl Subscription {
@@ -159,12 +223,17 @@ impl Subscription {
         shutdown: watch::Receiver<bool>,
         permit: StreamPermit,
     ) -> Self {
+        let mut broadcast = None;
         let (rx, driver, handback, controls) = match source {
             Source::Shared { rx, handback } => (rx, None, handback, None),
             Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
+            Source::Broadcast { rx, controls } => {
+                broadcast = Some(controls);
+                (rx, None, None, None)
+            }
         };
         Subscription {
-            names: params.joint_names(),
+            names: params.names(),
             check: ControlCheck::new(&params),
             params,
             schedule,
@@ -172,6 +241,7 @@ impl Subscription {
             driver,
             handback,
             controls,
+            broadcast,
             shutdown,
             last_seq: None,
             delivered: 0,
@@ -239,8 +309,11 @@ impl Subscription {
             if self.last_seq.is_some_and(|last| frame.seq <= last) {
                 continue;
             }
-            let dropped = self.last_seq.map_or(frame.seq, |last| frame.seq - last - 1);
-            let names = (self.last_seq.is_none()).then_some(self.names.as_slice());
+            // A broadcast viewer's first frame is the tick after it joined:
+            // the ticks before were not its losses.
+            let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
+            let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
+            let names = (self.last_seq.is_none()).then_some(&self.names);
             let bytes = frame.for_viewer(dropped, names);
             self.last_seq = Some(frame.seq);
             self.delivered += 1;
@@ -262,6 +335,13 @@ impl Subscription {
     /// crossfade to another skeleton, a layer the motion lacks), or too
     /// many pending.
     pub fn control(&mut self, control: Control) -> Result<(), ControlError> {
+        if let Some(sink) = &self.broadcast {
+            if control == Control::Stop {
+                self.stopped = true;
+                return Ok(());
+            }
+            return sink.as_ref().ok_or(ControlError::ReadOnly)?.send(control).map(drop);
+        }
         let control = self.check.check(control)?;
         if self.controls.is_none() {
             if control == Control::Stop {

@@ -14,7 +14,7 @@ use crate::wire::proto::pb;
 
 /// `root` moves along x with x = t over [0, 10] (so a pose's x is its clip
 /// time); `tip` is a second joint; events at 1 and 2.5.
-fn clip() -> Arc<Clip> {
+pub(super) fn clip() -> Arc<Clip> {
     let track = |joint: &str| {
         TrackSpec::new(
             joint,
@@ -31,6 +31,7 @@ fn clip() -> Arc<Clip> {
         tracks: vec![track("root"), track("tip")],
         events,
         playback: Playback::Loop,
+        ..Default::default()
     };
     Arc::new(Clip::build(&spec).unwrap())
 }
@@ -332,8 +333,11 @@ fn stream_requests_are_validated() {
 /// A one-layer motion of the test clip with root motion reported, looping.
 fn root_motion_params(req: StreamRequest) -> StreamParams {
     use crate::anim::motion::{LayerSpec, MotionSpec, RootMotionSpec};
-    let spec =
-        MotionSpec { layers: vec![LayerSpec::new(pinned("c1", clip()))], root_motion: Some(RootMotionSpec::default()) };
+    let spec = MotionSpec {
+        layers: vec![LayerSpec::new(pinned("c1", clip()))],
+        root_motion: Some(RootMotionSpec::default()),
+        ..Default::default()
+    };
     let motion = Arc::new(crate::anim::Motion::build(spec).unwrap());
     StreamParams::of_motion(motion, "motion under test".into(), req).unwrap()
 }

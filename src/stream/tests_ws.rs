@@ -88,8 +88,14 @@ fn clip() -> Arc<Clip> {
         vec![0.0, 10.0],
         Keys::Vec3(vec![Vec3::ZERO, Vec3::new(10.0, 0.0, 0.0)]),
     );
-    let spec =
-        ClipSpec { name: "l".into(), skeleton: None, tracks: vec![track], events: vec![], playback: Playback::Once };
+    let spec = ClipSpec {
+        name: "l".into(),
+        skeleton: None,
+        tracks: vec![track],
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    };
     Arc::new(Clip::build(&spec).unwrap())
 }
 

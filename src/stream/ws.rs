@@ -37,8 +37,9 @@ use super::encode::Encoding;
 use super::hub::EndReason;
 use super::pinned::StreamMotion;
 use super::playhead::{Control, Crossfade};
-use super::subscription::{Next, Subscription};
-use crate::wire::json::EaseDoc;
+use super::subscription::{ControlError, Next, Subscription};
+use crate::wire::ik::IkDoc;
+use crate::wire::json::{DocError, EaseDoc};
 
 /// Builds the motion a control names (a crossfade's `to`): the transport's
 /// lookup of its clips. A refusal is the problem document to send back, its
@@ -100,6 +101,10 @@ enum ControlMsg {
         #[serde(default)]
         duration: f64,
     },
+    /// Replaces the stream's IK constraints at the next tick.
+    Ik {
+        constraints: Vec<IkDoc>,
+    },
 }
 
 fn linear() -> EaseDoc {
@@ -108,8 +113,8 @@ fn linear() -> EaseDoc {
 
 impl ControlMsg {
     /// The control, unless it is a crossfade (whose motion needs a lookup).
-    fn simple(self) -> Result<Control, (serde_json::Value, f64, EaseDoc)> {
-        Ok(match self {
+    fn simple(self) -> Result<Result<Control, DocError>, (serde_json::Value, f64, EaseDoc)> {
+        Ok(Ok(match self {
             ControlMsg::Play => Control::Play,
             ControlMsg::Pause => Control::Pause,
             ControlMsg::Seek { time } => Control::Seek(time),
@@ -117,7 +122,55 @@ impl ControlMsg {
             ControlMsg::Stop => Control::Stop,
             ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
             ControlMsg::Crossfade { to, duration, ease } => return Err((to, duration, ease)),
-        })
+            ControlMsg::Ik { constraints } => {
+                let specs = constraints.iter().enumerate().map(|(i, c)| c.to_spec(&format!("/constraints/{i}")));
+                match specs.collect() {
+                    Ok(specs) => Control::Ik(specs),
+                    Err(e) => return Ok(Err(e)),
+                }
+            }
+        }))
+    }
+}
+
+/// A control message parsed on its own (REST `POST /v1/broadcasts/{id}/controls`
+/// takes the same JSON as a stream's control messages).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParsedControl {
+    Ready(Control),
+    /// A crossfade to the motion `to`, which the caller looks up.
+    Crossfade {
+        to: serde_json::Value,
+        duration: f64,
+        ease: crate::anim::Ease,
+    },
+}
+
+/// Why a control message was refused: its stable code, the JSON pointer at
+/// fault if any, and the human detail.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlRefusal {
+    pub code: &'static str,
+    pub pointer: Option<String>,
+    pub detail: String,
+}
+
+/// Parses one control message (`{"op": …}`) as the stream's socket does.
+///
+/// # Errors
+/// Not a control (`bad_control`), or an `ik` control's constraint shape (its rule's code).
+pub fn parse_control(text: &str) -> Result<ParsedControl, ControlRefusal> {
+    let msg = serde_json::from_str::<ControlMsg>(text).map_err(|e| ControlRefusal {
+        code: "bad_control",
+        pointer: None,
+        detail: format!(
+            "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
+        ),
+    })?;
+    match msg.simple() {
+        Ok(Ok(control)) => Ok(ParsedControl::Ready(control)),
+        Ok(Err(e)) => Err(ControlRefusal { code: e.code, pointer: Some(e.pointer), detail: e.detail }),
+        Err((to, duration, ease)) => Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() }),
     }
 }
 
@@ -139,7 +192,7 @@ impl Controls {
             Ok(msg) => msg,
             Err(e) => {
                 return Some(error_message(&format!(
-                    "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\"|\"crossfade\"|\"layer\", ...}}: {e}"
+                    "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
                 )));
             }
         };
@@ -156,7 +209,8 @@ impl Controls {
     /// Applies `msg` now, or starts its motion's lookup.
     fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
         match msg.simple() {
-            Ok(control) => sub.control(control).err().map(|e| error_message(&e.to_string())),
+            Ok(Ok(control)) => sub.control(control).err().map(|e| refusal(&e)),
+            Ok(Err(e)) => Some(problem_message(e.code, Some(e.pointer), &e.detail)),
             Err((to, duration, ease)) => {
                 let Some(motions) = &self.motions else {
                     return Some(error_message("this stream cannot resolve motions"));
@@ -181,7 +235,7 @@ impl Controls {
         match motion {
             Ok(to) => {
                 let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into() });
-                errors.extend(sub.control(fade).err().map(|e| error_message(&e.to_string())));
+                errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
             }
             Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
         }
@@ -207,6 +261,7 @@ pub fn close_frame(reason: EndReason) -> CloseFrame {
     let (code, reason) = match reason {
         EndReason::MaxFrames => (close::NORMAL, "max_frames reached"),
         EndReason::Stopped => (close::NORMAL, "stopped"),
+        EndReason::Ended => (close::NORMAL, "the broadcast ended"),
         EndReason::Shutdown => (close::GOING_AWAY, "the server is shutting down"),
         EndReason::Failed => (close::INTERNAL, "the stream failed"),
     };
@@ -214,8 +269,20 @@ pub fn close_frame(reason: EndReason) -> CloseFrame {
 }
 
 fn error_message(detail: &str) -> Message {
-    let body = serde_json::json!({"error": {"code": "bad_control", "detail": detail}});
-    Message::Text(body.to_string().into())
+    problem_message("bad_control", None, detail)
+}
+
+/// A refused control's `{"error": {code, detail, pointer?}}`.
+fn refusal(e: &ControlError) -> Message {
+    problem_message(e.code(), e.pointer(), &e.to_string())
+}
+
+fn problem_message(code: &str, pointer: Option<String>, detail: &str) -> Message {
+    let mut problem = serde_json::json!({"code": code, "detail": detail});
+    if let Some(pointer) = pointer {
+        problem["pointer"] = pointer.into();
+    }
+    Message::Text(serde_json::json!({ "error": problem }).to_string().into())
 }
 
 /// Streams `sub` over `socket` until the stream ends (see the module doc);

@@ -11,10 +11,12 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use serde::ser::{SerializeMap, SerializeSeq};
 use serde::{Deserialize, Serialize, Serializer};
 
+use super::ik::IkDoc;
+use crate::anim::ik::IkReport;
 use crate::anim::motion::{Planar, RootMotion};
 use crate::anim::{
-    Channel, ClipError, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, Skeleton,
-    SkeletonSpec, Space, Speed, TrackSpec, Transform,
+    Channel, ClipError, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, ParameterLayout,
+    ParameterSpec, Playback, Pose, Skeleton, SkeletonSpec, Space, Speed, TrackSpec, Transform,
 };
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -28,6 +30,22 @@ pub struct ClipDoc {
     pub events: Vec<EventDoc>,
     #[serde(default)]
     pub playback: PlaybackDoc,
+    /// IK constraints solved at every sample (SPEC §7), targets and weights
+    /// fixed or keyed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ik: Vec<IkDoc>,
+    /// Named tracks that are not joints (SPEC §8): morph weights, a
+    /// camera's field of view. Poses carry their values under `parameters`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameters: Vec<ParameterDoc>,
+    /// Labels to find the clip by (`GET /v1/clips?tag=`); never evaluated.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tags: Vec<String>,
+    /// Free-form JSON object kept with the clip (source, author, licence…);
+    /// never evaluated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
+    pub metadata: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -91,6 +109,58 @@ pub struct TrackDoc {
     pub speed: Option<SpeedDoc>,
 }
 
+/// A parameter track (SPEC §8): every key a row of the same width
+/// (1 to 256 numbers), each number interpolated as a translation component.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterDoc {
+    /// Unique among the clip's parameters; glTF morph weights take their node's name.
+    pub name: String,
+    /// `step`, `linear` (default), `catmull_rom`, `cubic_hermite` or `b_spline`.
+    #[serde(default)]
+    pub interpolation: InterpolationDoc,
+    pub times: Vec<f32>,
+    /// One row per time, all of one width.
+    pub values: Vec<Vec<f32>>,
+    /// `cubic_hermite` only: one row per key, units per second.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_tangents: Option<Vec<Vec<f32>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_tangents: Option<Vec<Vec<f32>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ends: Option<EndsDoc>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tension: Option<f32>,
+}
+
+impl ParameterDoc {
+    fn to_spec(&self) -> ParameterSpec {
+        ParameterSpec {
+            name: self.name.clone(),
+            interpolation: self.interpolation.into(),
+            times: self.times.clone(),
+            values: self.values.clone(),
+            in_tangents: self.in_tangents.clone(),
+            out_tangents: self.out_tangents.clone(),
+            ends: self.ends.map(Into::into),
+            tension: self.tension,
+        }
+    }
+
+    fn from_spec(p: &ParameterSpec) -> ParameterDoc {
+        ParameterDoc {
+            name: p.name.clone(),
+            interpolation: p.interpolation.into(),
+            times: p.times.clone(),
+            values: p.values.clone(),
+            in_tangents: p.in_tangents.clone(),
+            out_tangents: p.out_tangents.clone(),
+            ends: p.ends.map(Into::into),
+            tension: p.tension,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EventDoc {
@@ -128,7 +198,8 @@ wire_enum!(ChannelDoc => Channel { Translation = "translation", Rotation = "rota
 wire_enum!(
     #[derive(Default)]
     InterpolationDoc => Interpolation {
-        Step = "step", #[default] Linear = "linear", CatmullRom = "catmull_rom", CubicHermite = "cubic_hermite"
+        Step = "step", #[default] Linear = "linear", CatmullRom = "catmull_rom", CubicHermite = "cubic_hermite",
+        BSpline = "b_spline"
     }
 );
 wire_enum!(EndsDoc => Ends { Reflect = "reflect", ZeroSlope = "zero_slope", Wrap = "wrap", Phantom = "phantom" });
@@ -247,6 +318,10 @@ impl ClipDoc {
             tracks,
             events: self.events.iter().map(|e| EventSpec { time: e.time, name: e.name.clone() }).collect(),
             playback: self.playback.into(),
+            ik: (self.ik.iter().enumerate())
+                .map(|(i, c)| c.to_keyed_spec(&format!("/ik/{i}")))
+                .collect::<Result<_, _>>()?,
+            parameters: self.parameters.iter().map(ParameterDoc::to_spec).collect(),
         })
     }
 
@@ -295,6 +370,10 @@ impl ClipDoc {
                 .collect(),
             events: spec.events.iter().map(|e| EventDoc { time: e.time, name: e.name.clone() }).collect(),
             playback: spec.playback.into(),
+            ik: spec.ik.iter().map(IkDoc::from_keyed_spec).collect(),
+            parameters: spec.parameters.iter().map(ParameterDoc::from_spec).collect(),
+            tags: Vec::new(),
+            metadata: None,
         }
     }
 }
@@ -357,7 +436,9 @@ impl PoseJson<'_> {
             out.put_u8(b'}');
         }
         out.put_u8(b']');
+        extras.write_parameters(out);
         extras.write_root_motion(out);
+        super::ik::write_reports(out, extras.ik);
         out.put_u8(b'}');
     }
 }
@@ -368,6 +449,61 @@ impl PoseJson<'_> {
 pub(crate) struct Extras<'a> {
     pub joints: Option<&'a [usize]>,
     pub root_motion: Option<RootMotion>,
+    /// IK reports (SPEC §7), written when there are any.
+    pub ik: &'a [IkReport],
+    /// Parameter values (SPEC §8), written when the clip has parameters.
+    pub parameters: Option<ParameterValues<'a>>,
+}
+
+/// A pose's parameters as an answer shows them: `"parameters": {"name":
+/// [values]}`, every parameter or a request's subset (indices in the
+/// layout, in layout order).
+#[derive(Debug, Clone, Copy)]
+pub struct ParameterValues<'a> {
+    pub layout: &'a ParameterLayout,
+    pub values: &'a [glam::Vec3A],
+    pub subset: Option<&'a [usize]>,
+}
+
+impl<'a> ParameterValues<'a> {
+    /// `None` for a clip without parameters, so no `parameters` key is written.
+    pub fn of(layout: &'a ParameterLayout, pose: &'a Pose, subset: Option<&'a [usize]>) -> Option<Self> {
+        (!layout.is_empty()).then_some(ParameterValues { layout, values: &pose.parameters, subset })
+    }
+
+    /// The parameters shown, by index in the layout.
+    pub fn indices(&self) -> impl Iterator<Item = usize> + Clone + '_ {
+        let (every, some) = match self.subset {
+            Some(subset) => (0..0, subset.iter()),
+            None => (0..self.layout.len(), [].iter()),
+        };
+        every.chain(some.copied())
+    }
+
+    /// Component `c` of parameter `p`.
+    pub fn value(&self, p: usize, c: usize) -> f32 {
+        self.values[self.layout.range(p).start + c / 3][c % 3]
+    }
+
+    /// `,"parameters":{"name":[…],…}`.
+    fn write(&self, out: &mut impl BufMut) {
+        out.put_slice(b",\"parameters\":{");
+        for (k, p) in self.indices().enumerate() {
+            if k > 0 {
+                out.put_u8(b',');
+            }
+            write_json_str(out, &self.layout.names()[p]);
+            out.put_slice(b":[");
+            for c in 0..self.layout.widths()[p] as usize {
+                if c > 0 {
+                    out.put_u8(b',');
+                }
+                write_float(out, self.value(p, c));
+            }
+            out.put_u8(b']');
+        }
+        out.put_u8(b'}');
+    }
 }
 
 impl Extras<'_> {
@@ -377,6 +513,13 @@ impl Extras<'_> {
             None => (0..all, [].iter()),
         };
         every.chain(some.copied())
+    }
+
+    /// `,"parameters":{…}` when the clip has parameters.
+    fn write_parameters(&self, out: &mut impl BufMut) {
+        if let Some(parameters) = &self.parameters {
+            parameters.write(out);
+        }
     }
 
     /// `,"root_motion":{"delta":{…},"total":{…}}` when there is one.
@@ -420,7 +563,7 @@ fn write_json_str(out: &mut impl BufMut, s: &str) {
 /// invariants make every sampled value finite (`anim::Clip::build` refuses
 /// what would overflow), and should one slip through it is written as the
 /// nearest finite number (NaN as 0), so a client's number is always a number.
-fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut impl BufMut, x: F) {
+pub(crate) fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut impl BufMut, x: F) {
     if x.into().is_finite() {
         out.put_slice(zmij::Buffer::new().format_finite(x).as_bytes());
     } else {
@@ -515,6 +658,7 @@ impl MatricesJson<'_> {
             out.put_u8(b'}');
         }
         out.put_u8(b']');
+        extras.write_parameters(out);
         extras.write_root_motion(out);
         out.put_u8(b'}');
     }
@@ -565,7 +709,14 @@ mod tests {
                 TrackSpec::new(n, Channel::Translation, Interpolation::CatmullRom, vec![0.0, 1.0], Keys::Vec3(keys))
             })
             .collect();
-        let spec = ClipSpec { name: "c".into(), skeleton: None, tracks, events: vec![], playback: Playback::Loop };
+        let spec = ClipSpec {
+            name: "c".into(),
+            skeleton: None,
+            tracks,
+            events: vec![],
+            playback: Playback::Loop,
+            ..Default::default()
+        };
         let clip = Clip::build(&spec).unwrap();
         let mut sampler = Sampler::new();
         for t in [0.0, 0.123456789, 0.5, 7.25] {
@@ -594,7 +745,14 @@ mod tests {
                 TrackSpec::new(n, Channel::Translation, Interpolation::Linear, vec![0.0, 1.0], Keys::Vec3(keys.clone()))
             })
             .collect();
-        let spec = ClipSpec { name: "c".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once };
+        let spec = ClipSpec {
+            name: "c".into(),
+            skeleton: None,
+            tracks,
+            events: vec![],
+            playback: Playback::Once,
+            ..Default::default()
+        };
         let clip = Clip::build(&spec).unwrap();
         let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
         for (t, format) in [(0.25, "matrix"), (0.75, "skinning")] {

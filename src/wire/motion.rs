@@ -6,7 +6,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use super::json::PlaybackDoc;
+use super::ik::IkDoc;
+use super::json::{DocError, PlaybackDoc};
 use crate::anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -16,6 +17,10 @@ pub struct MotionDoc {
     pub layers: Vec<LayerDoc>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub root_motion: Option<RootMotionDoc>,
+    /// IK constraints solved on the layered pose (SPEC §7), targets in
+    /// model space.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ik: Vec<IkDoc>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -123,9 +128,16 @@ pub enum UpAxisDoc {
 }
 
 impl MotionDoc {
-    /// The core's authoring form, with clip ids in place of clips.
-    pub fn to_spec(&self) -> MotionSpec<String> {
-        MotionSpec {
+    /// The core's authoring form, with clip ids in place of clips;
+    /// `pointer` is the motion's place in its message (`/motion`).
+    ///
+    /// # Errors
+    /// An `ik` constraint of the wrong shape (see [`IkDoc::to_spec`]).
+    pub fn to_spec(&self, pointer: &str) -> Result<MotionSpec<String>, DocError> {
+        let ik = (self.ik.iter().enumerate())
+            .map(|(i, c)| c.to_spec(&format!("{pointer}/ik/{i}")))
+            .collect::<Result<_, _>>()?;
+        Ok(MotionSpec {
             layers: self.layers.iter().map(LayerDoc::to_spec).collect(),
             root_motion: self.root_motion.as_ref().map(|r| RootMotionSpec {
                 joint: r.joint.clone(),
@@ -138,7 +150,8 @@ impl MotionDoc {
                     UpAxisDoc::Z => UpAxis::Z,
                 },
             }),
-        }
+            ik,
+        })
     }
 }
 
@@ -180,7 +193,7 @@ mod tests {
             ], "root_motion": {"joint": "hips", "mode": "extract"}}"#,
         )
         .unwrap();
-        let spec = doc.to_spec();
+        let spec = doc.to_spec("/motion").unwrap();
         assert_eq!(spec.layers.len(), 4);
         assert_eq!((spec.layers[2].weight, spec.layers[2].speed, spec.layers[2].offset), (1.0, 1.0, 0.0));
         assert_eq!(spec.layers[2].mask.as_ref().unwrap().joints, vec![("arm_l".into(), 1.0), ("spine".into(), 1.0)]);

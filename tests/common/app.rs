@@ -91,7 +91,15 @@ impl Builder {
         let server = tokio::spawn(app.run_until_stopped(async move {
             let _ = rx.await;
         }));
-        TestApp { addr, grpc_addr, http: reqwest::Client::new(), state, dir, shutdown: Some(tx), server: Some(server) }
+        TestApp {
+            addr,
+            grpc_addr,
+            http: crate::common::http_client(),
+            state,
+            dir,
+            shutdown: Some(tx),
+            server: Some(server),
+        }
     }
 }
 

@@ -23,6 +23,20 @@ pub use process::ServerProcess;
 /// The SPEC §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
 pub const WAVE: &str = include_str!("../../examples/wave.json");
 
+/// An HTTP client that asks for answers as they are (no `Accept-Encoding`).
+/// The test build turns reqwest's gzip, br and zstd decoders on (for the
+/// compression tests, which build their own clients), and with them on a
+/// plain `reqwest::Client` would negotiate compression with every server a
+/// test starts.
+pub fn http_client() -> reqwest::Client {
+    http_builder().build().expect("a plain client builds")
+}
+
+/// [`http_client`]'s builder, for tests that set more.
+pub fn http_builder() -> reqwest::ClientBuilder {
+    reqwest::Client::builder().no_gzip().no_brotli().no_zstd().no_deflate()
+}
+
 /// Bounds a wait: a server that stops answering fails the test instead of hanging it.
 pub async fn within<T>(secs: u64, what: &str, f: impl std::future::Future<Output = T>) -> T {
     tokio::time::timeout(Duration::from_secs(secs), f).await.unwrap_or_else(|_| panic!("timed out: {what}"))
@@ -76,6 +90,29 @@ pub fn hips_mover(name: &str, to: f32, duration: f32, playback: &str) -> String 
         "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
                     "times": [0, duration], "values": [[0, 0, 0], [to, 0, 0]]}],
         "playback": playback
+    })
+    .to_string()
+}
+
+/// A leg under moving hips for IK tests (SPEC §7): `hips` translates along
+/// x from 0 to `duration` over `duration` s (x equals the time), `thigh` at
+/// hips + (0.1, 0, 0), `knee` 0.5 below it, `foot` 0.5 below that (so
+/// l1 = l2 = 0.5), `toe` 0.2 ahead of the foot (+z), and `head` at hips +
+/// (0, 0.8, 0) looking along +z. `ik` is the clip's own constraint list.
+pub fn ik_leg(name: &str, duration: f32, ik: serde_json::Value) -> String {
+    serde_json::json!({
+        "name": name,
+        "skeleton": {"joints": [
+            {"name": "hips", "parent": null},
+            {"name": "thigh", "parent": "hips", "rest": {"translation": [0.1, 0, 0]}},
+            {"name": "knee", "parent": "thigh", "rest": {"translation": [0, -0.5, 0]}},
+            {"name": "foot", "parent": "knee", "rest": {"translation": [0, -0.5, 0]}},
+            {"name": "toe", "parent": "foot", "rest": {"translation": [0, 0, 0.2]}},
+            {"name": "head", "parent": "hips", "rest": {"translation": [0, 0.8, 0]}}
+        ]},
+        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
+                    "times": [0, duration], "values": [[0, 0, 0], [duration, 0, 0]]}],
+        "ik": ik
     })
     .to_string()
 }

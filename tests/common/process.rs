@@ -161,7 +161,7 @@ impl ProcessBuilder {
         let slot = Slot::take(self.alone).await;
         let started = Instant::now();
         let mut server = tokio::task::spawn_blocking(move || self.spawn(slot)).await.unwrap();
-        let client = reqwest::Client::new();
+        let client = crate::common::http_client();
         loop {
             let ready = client.get(server.url("/readyz")).send().await.is_ok_and(|r| r.status() == 200);
             if ready {

@@ -115,6 +115,7 @@ fn vector_modes_match_the_reference() {
         kinds.push(Kind::new(channel, Interpolation::Linear));
         kinds.push(Kind::new(channel, Interpolation::CubicHermite));
         kinds.extend(ALL_ENDS.map(|e| Kind::new(channel, Interpolation::CatmullRom).ends(e)));
+        kinds.extend(ALL_ENDS.map(|e| Kind::new(channel, Interpolation::BSpline).ends(e)));
     }
     report(&run(&kinds, 40, 100, 100));
 }
@@ -126,6 +127,7 @@ fn constant_speed_matches_the_reference() {
         Kind::new(Channel::Translation, Interpolation::CubicHermite).constant_speed(),
     ];
     kinds.extend(ALL_ENDS.map(|e| Kind::new(Channel::Translation, Interpolation::CatmullRom).ends(e).constant_speed()));
+    kinds.extend(ALL_ENDS.map(|e| Kind::new(Channel::Translation, Interpolation::BSpline).ends(e).constant_speed()));
     report(&run(&kinds, 8, 250, 200));
 }
 
@@ -138,6 +140,7 @@ fn rotation_modes_match_the_reference() {
         kinds.push(Kind::new(Channel::Rotation, Interpolation::CubicHermite).max_deg(max_deg));
         kinds
             .extend(ALL_ENDS.map(|e| Kind::new(Channel::Rotation, Interpolation::CatmullRom).ends(e).max_deg(max_deg)));
+        kinds.extend(ALL_ENDS.map(|e| Kind::new(Channel::Rotation, Interpolation::BSpline).ends(e).max_deg(max_deg)));
     }
     report(&run(&kinds, 40, 100, 300));
 }

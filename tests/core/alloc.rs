@@ -100,7 +100,7 @@ fn three_layers(clips: &[Clip], run_weight: f32, wave_offset: f64) -> Arc<Motion
         LayerSpec { weight: run_weight, ..synced(&clips[1]) },
         LayerSpec { mask: Some(upper), offset: wave_offset, ..LayerSpec::new(&clips[2]) },
     ];
-    Arc::new(Motion::build(MotionSpec { layers, root_motion: None }).unwrap())
+    Arc::new(Motion::build(MotionSpec { layers, root_motion: None, ..Default::default() }).unwrap())
 }
 
 /// Allocations and bytes still held after `ticks` ticks of `player` 1/60 s

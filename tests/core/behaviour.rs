@@ -15,7 +15,14 @@ use inbetween::anim::{
 use crate::random::{Kind, Rng, skeleton_clip, track};
 
 fn spec(tracks: Vec<TrackSpec>) -> ClipSpec {
-    ClipSpec { name: "b".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once }
+    ClipSpec {
+        name: "b".into(),
+        skeleton: None,
+        tracks,
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    }
 }
 
 fn v3(joint: &str, channel: Channel, interp: Interpolation, times: Vec<f32>, values: Vec<[f32; 3]>) -> TrackSpec {

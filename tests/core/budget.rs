@@ -32,7 +32,14 @@ fn hermite(joint: &str, from: usize, to: usize) -> TrackSpec {
 }
 
 fn clip(tracks: Vec<TrackSpec>) -> ClipSpec {
-    ClipSpec { name: "budget".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once }
+    ClipSpec {
+        name: "budget".into(),
+        skeleton: None,
+        tracks,
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    }
 }
 
 fn refusal(result: Result<Clip, ClipError>) -> (&'static str, String, u64) {

@@ -134,3 +134,42 @@ fn a_bad_clip_exits_non_zero_with_the_validation_error() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && stderr.contains("frames requested; the limit is"), "stderr: {stderr}");
 }
+
+/// Runs the binary with `args`, reads `keep` bytes of its stdout and closes
+/// the pipe, as `inbetween … | head -c KEEP` does; returns the bytes read,
+/// the exit status and stderr.
+fn closed_early(args: &[&str], keep: usize) -> (Vec<u8>, std::process::ExitStatus, String) {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_inbetween"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary runs");
+    let mut head = vec![0; keep];
+    child.stdout.take().unwrap().read_exact(&mut head).unwrap();
+    // The stdout handle is dropped here: the reader has gone.
+    let out = child.wait_with_output().unwrap();
+    (head, out.status, String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// `inbetween import 131_01.bvh | head -c 10` and `inbetween sample … | head -c 10`:
+/// the first bytes, then a quiet, successful exit (no "Broken pipe", no panic).
+#[test]
+fn a_reader_that_leaves_early_ends_the_output_quietly() {
+    let bvh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/bvh/131_01.bvh");
+    let wave = wave_path();
+    // Both answers are megabytes: far more than a pipe holds, so the writer meets the closed end.
+    let sample = vec!["sample", wave.to_str().unwrap(), "--start", "0", "--end", "100", "--fps", "100"];
+    for args in [vec!["import", bvh.to_str().unwrap()], sample] {
+        let (head, status, stderr) = closed_early(&args, 10);
+        assert!(
+            head.starts_with(b"{\"clips\":[") || head.starts_with(b"[{\"clip\""),
+            "{:?}",
+            String::from_utf8_lossy(&head)
+        );
+        assert!(stderr.is_empty(), "{}: stderr {stderr:?}", args[0]);
+        assert!(status.success(), "{}: {status}", args[0]);
+    }
+}

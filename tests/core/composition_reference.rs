@@ -78,7 +78,7 @@ impl Pool {
 
     /// The motion of `layers`, whose clips are indices into the pool.
     pub fn motion(&self, layers: &[LayerSpec<usize>]) -> Motion<&Clip> {
-        let spec = MotionSpec { layers: layers.to_vec(), root_motion: None };
+        let spec = MotionSpec { layers: layers.to_vec(), root_motion: None, ..Default::default() };
         let spec = spec.try_map(|_, i| Ok::<_, ()>(&self.clips[i])).unwrap();
         Motion::build(spec).unwrap_or_else(|e| panic!("{e} at {:?}", e.path))
     }

@@ -189,7 +189,7 @@ fn step(a: &Pose, b: &Pose) -> f64 {
 
 fn ping_pong(clip: &Clip) -> Shared<'_> {
     let layer = LayerSpec { playback: Some(Playback::PingPong), ..LayerSpec::new(clip) };
-    Arc::new(Motion::build(MotionSpec { layers: vec![layer], root_motion: None }).unwrap())
+    Arc::new(Motion::build(MotionSpec { layers: vec![layer], root_motion: None, ..Default::default() }).unwrap())
 }
 
 #[test]
@@ -258,7 +258,7 @@ fn fades_hold_while_paused_and_a_zero_duration_cuts() {
 /// Two layers, hips at x = 0 and x = 1: the hips' x is layer 1's weight.
 fn weight_meter<'a>(zero: &'a Clip, one: &'a Clip, weight: f32) -> Shared<'a> {
     let layers = vec![LayerSpec::new(zero), LayerSpec { weight, ..LayerSpec::new(one) }];
-    Arc::new(Motion::build(MotionSpec { layers, root_motion: None }).unwrap())
+    Arc::new(Motion::build(MotionSpec { layers, root_motion: None, ..Default::default() }).unwrap())
 }
 
 #[test]
@@ -298,7 +298,12 @@ fn a_ramp_changes_the_sync_phase_rate_without_a_jump() {
     let (walk, run) = (body("walk", 1.0, 0.0, 1.0, 0.0), body("run", 0.5, 0.0, 1.0, 0.0));
     let synced = |clip, weight| LayerSpec { sync: Some("g".into()), weight, ..LayerSpec::new(clip) };
     let motion = Arc::new(
-        Motion::build(MotionSpec { layers: vec![synced(&walk, 1.0), synced(&run, 0.0)], root_motion: None }).unwrap(),
+        Motion::build(MotionSpec {
+            layers: vec![synced(&walk, 1.0), synced(&run, 0.0)],
+            root_motion: None,
+            ..Default::default()
+        })
+        .unwrap(),
     );
     let cycle = |w: f64| (1.0 - w) * 1.0 + w * 0.5; // shares 1 − w and w
     let mut player = Player::new(motion);
@@ -362,7 +367,14 @@ fn a_seek_shows_the_given_motion_time_and_moves_a_fade_with_it() {
 /// A root-motion motion of one looping layer.
 fn walking(clip: &Clip) -> Shared<'_> {
     let layer = LayerSpec { playback: Some(Playback::Loop), ..LayerSpec::new(clip) };
-    Arc::new(Motion::build(MotionSpec { layers: vec![layer], root_motion: Some(RootMotionSpec::default()) }).unwrap())
+    Arc::new(
+        Motion::build(MotionSpec {
+            layers: vec![layer],
+            root_motion: Some(RootMotionSpec::default()),
+            ..Default::default()
+        })
+        .unwrap(),
+    )
 }
 
 fn ground(p: Planar) -> Ground {
@@ -466,8 +478,14 @@ fn refusals_say_why_and_change_nothing() {
     let other = travel(1.0, Vec3::X, 0.0);
     assert_eq!(player.crossfade(ping_pong(&other), 0.5, Ease::Linear), Err(PlayerError::Skeleton));
     // Same names, another hierarchy: also refused.
-    let mut renamed =
-        ClipSpec { name: "flat".into(), skeleton: None, tracks: vec![], events: vec![], playback: Playback::Loop };
+    let mut renamed = ClipSpec {
+        name: "flat".into(),
+        skeleton: None,
+        tracks: vec![],
+        events: vec![],
+        playback: Playback::Loop,
+        ..Default::default()
+    };
     for name in ["hips", "spine", "arm", "leg"] {
         renamed.tracks.push(TrackSpec::new(
             name,

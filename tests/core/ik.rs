@@ -6,6 +6,7 @@
 //! are in `ik/chain.rs`.
 
 mod chain;
+mod keyed;
 
 use glam::{DQuat, DVec3, Quat, Vec3, Vec3A, Vec4};
 use inbetween::anim::ik::{
@@ -53,6 +54,7 @@ pub fn body(joints: &[J]) -> Clip {
         tracks: vec![track],
         events: vec![],
         playback: Playback::Once,
+        ..Default::default()
     };
     Clip::build(&spec).expect("test skeleton builds")
 }

@@ -56,8 +56,15 @@ fn vec3_track(joint: &str, interp: Interpolation, times: Vec<f32>, keys: &[[f32;
 }
 
 fn clip(tracks: Vec<TrackSpec>, skeleton: Option<SkeletonSpec>) -> Clip {
-    Clip::build(&ClipSpec { name: "lecture".into(), skeleton, tracks, events: vec![], playback: Playback::Once })
-        .unwrap()
+    Clip::build(&ClipSpec {
+        name: "lecture".into(),
+        skeleton,
+        tracks,
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    })
+    .unwrap()
 }
 
 /// A parent joint "p" turned by `q`, and its child "c" at `offset`.

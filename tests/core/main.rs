@@ -2,11 +2,13 @@
 //!
 //! One binary, one module per concern. `reference` is an independent `f64`
 //! evaluator written from SPEC §2 alone; `accuracy` holds the core to it;
-//! `lecture` checks the lecture's worked examples; `properties` states what
+//! `lecture` checks the lecture's worked examples; `b_spline` the
+//! uniform B-spline against the lecture's basis matrix; `properties` states what
 //! must hold for any keys; `validation` pins each error code and path;
 //! `alloc` proves the hot path allocation-free; `budget` holds builds to
 //! their work budget and clips to their byte estimate; `cli` runs the real binary;
-//! `import` checks the importers against real third-party files; `ik`
+//! `import` checks the importers against real third-party files; `parameters`
+//! holds SPEC §8's parameters to hand-computed values; `ik`
 //! holds the IK solvers to SPEC §7 (and the chain to seed 003's own
 //! algorithm).
 //!
@@ -16,6 +18,7 @@
 
 mod accuracy;
 mod alloc;
+mod b_spline;
 mod behaviour;
 mod budget;
 mod cli;
@@ -25,6 +28,7 @@ mod ik;
 mod import;
 mod lecture;
 mod motion;
+mod parameters;
 mod playback;
 mod properties;
 mod random;

@@ -17,7 +17,7 @@ use crate::allocations;
 use crate::random::{Rng, skeleton_clip};
 
 fn motion(layers: Vec<LayerSpec<&Clip>>) -> Motion<&Clip> {
-    Motion::build(MotionSpec { layers, root_motion: None }).unwrap()
+    Motion::build(MotionSpec { layers, root_motion: None, ..Default::default() }).unwrap()
 }
 
 /// `hips → spine → arm`, plus `leg` under `hips`; `hips` moves linearly
@@ -52,6 +52,7 @@ pub fn body(name: &str, duration: f32, from: f32, to: f32, turn: f32) -> Clip {
         tracks: vec![hips, arm],
         events: vec![],
         playback: Playback::Loop,
+        ..Default::default()
     })
     .unwrap()
 }
@@ -287,11 +288,16 @@ fn refusals_name_the_field() {
         (LayerSpec { mask: Some(mask), ..LayerSpec::new(&walk) }, "/layers/1/mask/joints/tail", "unknown_joint"),
     ];
     for (layer, pointer, code) in cases {
-        let err =
-            Motion::build(MotionSpec { layers: vec![LayerSpec::new(&walk), layer], root_motion: None }).unwrap_err();
+        let err = Motion::build(MotionSpec {
+            layers: vec![LayerSpec::new(&walk), layer],
+            root_motion: None,
+            ..Default::default()
+        })
+        .unwrap_err();
         assert_eq!((err.path.to_pointer().as_str(), err.kind.code()), (pointer, code));
     }
-    let err = Motion::<&Clip>::build(MotionSpec { layers: vec![], root_motion: None }).unwrap_err();
+    let err =
+        Motion::<&Clip>::build(MotionSpec { layers: vec![], root_motion: None, ..Default::default() }).unwrap_err();
     assert_eq!(err.kind.code(), "no_layers");
 }
 

@@ -19,8 +19,15 @@ fn ramp(start: f32, end: f32, playback: Playback) -> Clip {
         vec![start, end],
         Keys::Vec3(vec![Vec3::new(start, 0.0, 0.0), Vec3::new(end, 0.0, 0.0)]),
     );
-    Clip::build(&ClipSpec { name: "ramp".into(), skeleton: None, tracks: vec![track], events: vec![], playback })
-        .unwrap()
+    Clip::build(&ClipSpec {
+        name: "ramp".into(),
+        skeleton: None,
+        tracks: vec![track],
+        events: vec![],
+        playback,
+        ..Default::default()
+    })
+    .unwrap()
 }
 
 const EXACT: f32 = 1e-6;
@@ -99,8 +106,14 @@ fn the_request_overrides_the_clip_default() {
 #[test]
 fn a_zero_length_clip_maps_everything_to_its_time() {
     let track = TrackSpec::new("j", Channel::Translation, Interpolation::Linear, vec![2.0], Keys::Vec3(vec![Vec3::X]));
-    let spec =
-        ClipSpec { name: "c".into(), skeleton: None, tracks: vec![track], events: vec![], playback: Playback::Loop };
+    let spec = ClipSpec {
+        name: "c".into(),
+        skeleton: None,
+        tracks: vec![track],
+        events: vec![],
+        playback: Playback::Loop,
+        ..Default::default()
+    };
     let clip = Clip::build(&spec).unwrap();
     for playback in [Playback::Once, Playback::Loop, Playback::PingPong] {
         for t in [-1.0, 2.0, 7.5, f64::NAN, f64::INFINITY] {

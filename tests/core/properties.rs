@@ -105,6 +105,9 @@ fn track_strategy(
                     spec.ends = ends;
                     spec.tension = tension;
                 }
+                if interpolation == Interpolation::BSpline {
+                    spec.ends = ends;
+                }
                 if interpolation == Interpolation::CubicHermite {
                     spec.in_tangents = Some(a);
                     spec.out_tangents = Some(b);
@@ -130,6 +133,7 @@ impl Sampled {
             tracks: vec![spec.clone()],
             events: vec![],
             playback: Playback::Loop,
+            ..Default::default()
         };
         // A build that hangs (see `behaviour::constant_speed_builds_quickly…`)
         // fails the property instead of stalling the run.
@@ -268,13 +272,15 @@ proptest! {
     }
 
     /// Every rotation output is a unit quaternion, including glTF cubic
-    /// splines (normalised after the cubic).
+    /// splines (normalised after the cubic) and B-splines (by slerp).
     #[test]
     fn rotations_are_unit_quaternions(
         track in prop_oneof![
             track_strategy(Channel::Rotation, Interpolation::CubicHermite, None, 2, 7),
             track_strategy(Channel::Rotation, Interpolation::CatmullRom, Some(Ends::Reflect), 2, 7),
             track_strategy(Channel::Rotation, Interpolation::Linear, None, 2, 7),
+            track_strategy(Channel::Rotation, Interpolation::BSpline, Some(Ends::Reflect), 2, 7),
+            track_strategy(Channel::Rotation, Interpolation::BSpline, Some(Ends::Phantom), 4, 7),
         ],
         at in prop::collection::vec(0.0f32..1.0, 20)
     ) {

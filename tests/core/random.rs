@@ -148,6 +148,9 @@ pub fn track(rng: &mut Rng, joint: &str, kind: Kind, n: usize) -> TrackSpec {
         }
     }
     let mut spec = TrackSpec::new(joint, kind.channel, kind.interpolation, times, values);
+    if kind.interpolation == Interpolation::BSpline {
+        spec.ends = kind.ends;
+    }
     if kind.interpolation == Interpolation::CatmullRom {
         spec.ends = kind.ends;
         if rng.chance(0.5) {
@@ -171,7 +174,14 @@ pub fn track(rng: &mut Rng, joint: &str, kind: Kind, n: usize) -> TrackSpec {
 
 /// A clip with a single joint and one track.
 pub fn one_track_clip(track: TrackSpec) -> ClipSpec {
-    ClipSpec { name: "t".into(), skeleton: None, tracks: vec![track], events: vec![], playback: Playback::Once }
+    ClipSpec {
+        name: "t".into(),
+        skeleton: None,
+        tracks: vec![track],
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    }
 }
 
 /// A random hierarchy of `joints` joints (each parent earlier), random
@@ -218,5 +228,5 @@ pub fn skeleton_clip(rng: &mut Rng, joints: usize) -> ClipSpec {
         tracks.push(track(rng, "j0", Kind::new(Channel::Translation, Interpolation::Linear), 3));
     }
     let playback = [Playback::Once, Playback::Loop, Playback::PingPong][rng.below(3)];
-    ClipSpec { name: "random".into(), skeleton: Some(skel), tracks, events: vec![], playback }
+    ClipSpec { name: "random".into(), skeleton: Some(skel), tracks, events: vec![], playback, ..Default::default() }
 }

@@ -3,7 +3,9 @@
 //! It shares no code with `src/anim`: it takes the same authoring
 //! [`ClipSpec`] but computes everything itself, the straightforward way —
 //! de Casteljau with exact slerps `p·(p⁻¹·q)^u`, the `a_i`/`b_i` formulas and
-//! phantom keys of §2.2–2.4, the Hermite basis of §2.5, constant speed by a
+//! phantom keys of §2.2–2.4, the Hermite basis of §2.5, the uniform
+//! B-spline of §2.5 by the lecture's basis matrix (vectors) and by its
+//! slerp construction (rotations), constant speed by a
 //! numeric arc-length table and bisection (§2.6), playback and ease (§2.6–2.7)
 //! and model space (§2.8). Speed is not a goal; being obviously right is.
 //! glam's `f64` types are used only as plain vector/quaternion arithmetic.
@@ -169,6 +171,61 @@ pub fn cr_quat(t: &[f64], c: &[DQuat], ends: Ends, k: f64) -> (Vec<f64>, Vec<[DQ
     (tx[1..tx.len() - 1].to_vec(), segs)
 }
 
+/// The lecture's uniform cubic B-spline basis: a segment with control
+/// points `P0..P3` is `[u³ u² u 1] · M · [P0 P1 P2 P3]ᵀ`.
+pub const B_SPLINE_BASIS: [[f64; 4]; 4] = [
+    [-1.0 / 6.0, 3.0 / 6.0, -3.0 / 6.0, 1.0 / 6.0],
+    [3.0 / 6.0, -6.0 / 6.0, 3.0 / 6.0, 0.0],
+    [-3.0 / 6.0, 0.0, 3.0 / 6.0, 0.0],
+    [1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0, 0.0],
+];
+
+/// `row · M · P` for a row of powers of `u` (or their derivatives), taken
+/// relative to `P1` (`M`'s weights sum to 1 for values and 0 for
+/// derivatives), so that equal control points give exactly that point and
+/// exactly zero speed.
+fn basis_apply(row: [f64; 4], p: &[DVec3; 4]) -> DVec3 {
+    let mut out = if row[3] == 1.0 { p[1] } else { DVec3::ZERO };
+    for (k, pk) in p.iter().enumerate() {
+        let w: f64 = (0..4).map(|r| row[r] * B_SPLINE_BASIS[r][k]).sum();
+        out += (*pk - p[1]) * w;
+    }
+    out
+}
+
+/// The B-spline's control points per segment, with the outer ones of §2.5:
+/// `reflect` as §2.4, `zero_slope` mirrored (`c_{-1} = c_1`), `wrap` as
+/// §2.4, `phantom` the supplied keys. Returns the times the segments span.
+fn b_spline_windows<T: Copy>(t: &[f64], c: &[T], ends: Ends, reflect: impl Fn(T, T) -> T) -> (Vec<f64>, Vec<[T; 4]>) {
+    let n = c.len() - 1;
+    let mut x = Vec::new();
+    match ends {
+        Ends::Phantom => {}
+        Ends::Reflect => x.push(reflect(c[0], c[1])),
+        Ends::ZeroSlope => x.push(c[1]),
+        Ends::Wrap => x.push(c[n - 1]),
+    }
+    x.extend_from_slice(c);
+    match ends {
+        Ends::Phantom => {}
+        Ends::Reflect => x.push(reflect(c[n], c[n - 1])),
+        Ends::ZeroSlope => x.push(c[n - 1]),
+        Ends::Wrap => x.push(c[1]),
+    }
+    let windows = x.windows(4).map(|w| [w[0], w[1], w[2], w[3]]).collect();
+    let times = if ends == Ends::Phantom { t[1..n].to_vec() } else { t.to_vec() };
+    (times, windows)
+}
+
+/// §2.5's slerp construction of a rotation B-spline segment's Bezier points.
+pub fn b_spline_quat_segment(w: &[DQuat; 4]) -> [DQuat; 4] {
+    let b1 = slerp(w[1], w[2], 1.0 / 3.0);
+    let b2 = slerp(w[1], w[2], 2.0 / 3.0);
+    let b0 = slerp(slerp(w[0], w[1], 2.0 / 3.0), b1, 0.5);
+    let b3 = slerp(b2, slerp(w[2], w[3], 1.0 / 3.0), 0.5);
+    [b0, b1, b2, b3]
+}
+
 /// The Hermite basis of §2.5 on any vector type.
 fn hermite<T>(v0: T, b0: T, v1: T, a1: T, h: f64, u: f64) -> T
 where
@@ -186,7 +243,14 @@ where
 pub enum Path3 {
     Linear(Vec<DVec3>),
     Bezier(Vec<[DVec3; 4]>),
-    Hermite { v: Vec<DVec3>, a: Vec<DVec3>, b: Vec<DVec3>, h: Vec<f64> },
+    Hermite {
+        v: Vec<DVec3>,
+        a: Vec<DVec3>,
+        b: Vec<DVec3>,
+        h: Vec<f64>,
+    },
+    /// Uniform B-spline: each segment's four control points.
+    BSpline(Vec<[DVec3; 4]>),
 }
 
 impl Path3 {
@@ -195,13 +259,14 @@ impl Path3 {
             Path3::Linear(c) => lerp3(c[i], c[i + 1], u),
             Path3::Bezier(s) => casteljau3(&s[i], u),
             Path3::Hermite { v, a, b, h } => hermite(v[i], b[i], v[i + 1], a[i + 1], h[i], u),
+            Path3::BSpline(p) => basis_apply([u * u * u, u * u, u, 1.0], &p[i]),
         }
     }
 
     fn segments(&self) -> usize {
         match self {
             Path3::Linear(c) => c.len() - 1,
-            Path3::Bezier(s) => s.len(),
+            Path3::Bezier(s) | Path3::BSpline(s) => s.len(),
             Path3::Hermite { h, .. } => h.len(),
         }
     }
@@ -223,6 +288,7 @@ impl Path3 {
                     + a[i + 1] * ((3.0 * u2 - 2.0 * u) * hh))
                     .length()
             }
+            Path3::BSpline(p) => basis_apply([3.0 * u * u, 2.0 * u, 1.0, 0.0], &p[i]).length(),
         }
     }
 }
@@ -335,6 +401,10 @@ impl RefTrack {
                     let (t, segs) = cr_quat(&t, &q, ends, k);
                     RefTrack::BezierQ(t, segs)
                 }
+                Interpolation::BSpline => {
+                    let (t, windows) = b_spline_windows(&t, &q, ends, |a, b| a * b.conjugate() * a);
+                    RefTrack::BezierQ(t, windows.iter().map(b_spline_quat_segment).collect())
+                }
                 Interpolation::CubicHermite => unreachable!(),
             };
         }
@@ -354,6 +424,10 @@ impl RefTrack {
                 let b = vec3_keys(spec.out_tangents.as_ref().unwrap());
                 let h = t.windows(2).map(|w| w[1] - w[0]).collect();
                 (t, Path3::Hermite { v: c, a, b, h })
+            }
+            Interpolation::BSpline => {
+                let (t, windows) = b_spline_windows(&t, &c, ends, |a, b| 2.0 * a - b);
+                (t, Path3::BSpline(windows))
             }
         };
         if spec.speed == Speed::Constant {

@@ -77,6 +77,7 @@ pub fn travel(duration: f32, to: Vec3, turn: f32) -> Clip {
         tracks: vec![t, r],
         events: vec![],
         playback: Playback::Loop,
+        ..Default::default()
     };
     Clip::build(&spec).unwrap()
 }
@@ -84,7 +85,7 @@ pub fn travel(duration: f32, to: Vec3, turn: f32) -> Clip {
 fn with_root(clip: &Clip, speed: f64, mode: RootMode) -> Motion<&Clip> {
     let root = RootMotionSpec { mode, ..RootMotionSpec::default() };
     let layer = LayerSpec { speed, playback: Some(Playback::Loop), ..LayerSpec::new(clip) };
-    Motion::build(MotionSpec { layers: vec![layer], root_motion: Some(root) }).unwrap()
+    Motion::build(MotionSpec { layers: vec![layer], root_motion: Some(root), ..Default::default() }).unwrap()
 }
 
 /// Samples `motion` at `k / fps` for `k = 0..=frames`; returns each sample's delta and the last total.

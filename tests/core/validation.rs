@@ -25,7 +25,14 @@ fn rotation(values: Vec<Vec4>) -> TrackSpec {
 }
 
 fn clip(tracks: Vec<TrackSpec>) -> ClipSpec {
-    ClipSpec { name: "c".into(), skeleton: None, tracks, events: vec![], playback: Playback::Once }
+    ClipSpec {
+        name: "c".into(),
+        skeleton: None,
+        tracks,
+        events: vec![],
+        playback: Playback::Once,
+        ..Default::default()
+    }
 }
 
 fn joint(name: &str, parent: Option<&str>) -> JointSpec {
@@ -221,6 +228,52 @@ fn mode_option_rules() {
     s.channel = Channel::Scale;
     s.speed = Speed::Constant;
     refused(clip(vec![s]), "speed_not_applicable", "/tracks/0/speed");
+}
+
+/// `b_spline` takes `ends` with Catmull-Rom's rules (SPEC §2.5), but no
+/// `tension`: its basis is fixed. The refusal keeps the stable code and
+/// names the modes the field belongs to.
+#[test]
+fn b_spline_option_rules() {
+    let bs = |f: &dyn Fn(&mut TrackSpec)| {
+        track_with(|t| {
+            t.interpolation = Interpolation::BSpline;
+            f(t)
+        })
+    };
+    refused(bs(&|t| t.tension = Some(0.5)), "only_catmull_rom", "/tracks/0/tension");
+    let err = Clip::build(&bs(&|t| t.tension = Some(0.5))).unwrap_err();
+    assert_eq!(err.to_string(), "/tracks/0/tension: 'tension' applies only to catmull_rom tracks");
+    let err = Clip::build(&track_with(|t| t.ends = Some(Ends::Reflect))).unwrap_err();
+    assert!(err.to_string().ends_with("'ends' applies only to catmull_rom and b_spline tracks"), "{err}");
+    refused(bs(&|t| t.ends = Some(Ends::Wrap)), "wrap_ends_differ", "/tracks/0/values/1");
+    let mut r = rotation(vec![Vec4::W, Vec4::from(Quat::from_rotation_x(0.5)), Vec4::from(Quat::from_rotation_x(0.1))]);
+    r.interpolation = Interpolation::BSpline;
+    r.ends = Some(Ends::Wrap);
+    refused(clip(vec![r]), "wrap_ends_differ", "/tracks/0/values/2");
+    refused(
+        bs(&|t| {
+            t.times = vec![0.0, 1.0, 2.0];
+            t.values = Keys::Vec3(vec![Vec3::ZERO; 3]);
+            t.ends = Some(Ends::Phantom);
+        }),
+        "phantom_too_few_keys",
+        "/tracks/0/ends",
+    );
+    for ends in [Ends::Reflect, Ends::ZeroSlope, Ends::Phantom] {
+        let spec = bs(&|t| {
+            t.times = vec![0.0, 1.0, 2.0, 3.0];
+            t.values = Keys::Vec3(vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z]);
+            t.ends = Some(ends);
+            t.speed = Speed::Constant;
+        });
+        assert!(Clip::build(&spec).is_ok(), "{ends:?}");
+    }
+    let q = Vec4::from(Quat::from_rotation_y(0.7));
+    let mut r = rotation(vec![q, Vec4::from(Quat::from_rotation_y(1.5)), -2.0 * q]);
+    r.interpolation = Interpolation::BSpline;
+    r.ends = Some(Ends::Wrap);
+    assert!(Clip::build(&clip(vec![r])).is_ok(), "the same rotation, other sign and norm, closes a wrap");
 }
 
 /// What is allowed stays allowed: the same rotation with the other sign and

@@ -669,7 +669,9 @@ HTTP_CASES = [
     ("list-cursor-garbage", http("GET", "/v1/clips?cursor=%00%01")),
     ("list-unknown-param", http("GET", "/v1/clips?sort=name")),
     ("unknown-route", http("GET", "/v1/animations")),
-    ("method-patch", http("PATCH", f"/v1/clips/{CLIP_ID}", ["Content-Type: application/json"], "{}")),
+    # PATCH changes name, tags, metadata, playback and events only: a patch of the tracks is refused.
+    ("patch-tracks", http("PATCH", f"/v1/clips/{CLIP_ID}", ["Content-Type: application/merge-patch+json"],
+                          '{"tracks":[]}')),
     ("method-delete-collection", http("DELETE", "/v1/clips")),
     ("stream-not-websocket", http("GET", f"/v1/clips/{CLIP_ID}/stream")),
     ("stream-bad-fps", http("GET", f"/v1/clips/{CLIP_ID}/stream?fps=0", [
@@ -879,7 +881,7 @@ for method, name, data in GRPC_CASES:
 # ---------------------------------------------------------------- valid files
 
 for i, (interp, ends) in enumerate([("step", None), ("linear", None), ("catmull_rom", "reflect"),
-                                    ("catmull_rom", "zero_slope")]):
+                                    ("catmull_rom", "zero_slope"), ("b_spline", "reflect")]):
     def edit(d, interp=interp, ends=ends):
         for t in d["tracks"]:
             t["interpolation"] = interp

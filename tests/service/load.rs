@@ -159,6 +159,48 @@ async fn motion_streams_play_three_layers_at_the_asked_rate() {
     }
 }
 
+/// Streams of the foot-ik motion (issue 17): the load uploads its walk and
+/// every stream opens with the motion and its two `two_bone` constraints —
+/// gRPC in `StreamRequest.motion`, the WebSocket in the `open` message with
+/// JSON and protobuf frames (a constraint the server refused would be an
+/// `open:` or `grpc:` error) — and frames come at the asked rate.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn foot_ik_streams_play_at_the_asked_rate() {
+    let app = spawn_app().await;
+    for (mode, ws_protobuf) in [(Mode::GrpcStream, false), (Mode::WsStream, false), (Mode::WsStream, true)] {
+        let opts = Options { motion: Some(MotionChoice::FootIk), ..options(&app, mode) };
+        check_stream(Options { ws_protobuf, ..opts }).await;
+    }
+    let listed = app.list_all(100, None).await;
+    let names: Vec<&str> = listed.iter().filter_map(|c| c["name"].as_str()).collect();
+    assert_eq!(names, ["load-walk-20"; 3], "the walk uploaded once per run");
+}
+
+/// Viewers of one broadcast (SPEC §9; issue 19): the load creates a
+/// broadcast of the clip (or of a motion), opens its viewers on
+/// `/v1/broadcasts/{id}/stream` in JSON and protobuf, and measures them
+/// like any stream; the server evaluates the broadcast once per tick
+/// whatever the number of viewers (≈ 30 ticks in the 1 s window for 4
+/// viewers, where 4 independent streams would be ≈ 120), exactly one
+/// broadcast is created per run, and it is deleted when the run ends.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn broadcast_viewers_get_the_asked_rate_from_one_evaluation_per_tick() {
+    let app = spawn_app().await;
+    let cases = [(false, None), (true, None), (true, Some(MotionChoice::ThreeLayers))];
+    for (ws_protobuf, motion) in cases {
+        let opts = Options { shared: true, ws_protobuf, motion, ..options(&app, Mode::WsBroadcast) };
+        let r = check_stream(opts).await;
+        let s = r.streams.as_ref().unwrap();
+        assert_eq!(s.encoding, if ws_protobuf { "protobuf" } else { "json" });
+        assert_eq!(s.playbacks_started, Some(1), "one broadcast per run");
+        let id = s.broadcast_id.as_deref().expect("the report names its broadcast");
+        let ticks = s.ticks_evaluated.expect("the broadcast counters are read") as f64 / r.elapsed_secs;
+        assert!((20.0..=33.0).contains(&ticks), "{ticks} evaluated ticks/s for 4 viewers at 30 fps");
+        let gone = reqwest::get(app.url(&format!("/v1/broadcasts/{id}"))).await.unwrap();
+        assert_eq!(gone.status(), 404, "the run deletes its broadcast");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_ramp_climbs_to_its_cap_or_stops_at_the_first_failing_stage() {
     let app = spawn_app().await;

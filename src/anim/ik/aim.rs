@@ -9,39 +9,56 @@
 //! rotation (its scale does not bend them). A target on the joint itself
 //! defines no direction and leaves the pose alone.
 
-use glam::{Quat, Vec3A};
+use glam::Vec3A;
 
-use super::model::{Xform, angle_between, arc, roll, to_local, unit, walk};
+use super::model::{ancestry, angle_between, arc, arc_unnormalized, model, roll, rotate, unit};
 use super::{Aim, IkKind, IkReport, blend};
 use crate::anim::{Pose, Skeleton};
 
 /// The aim's guarantee (SPEC §7), in radians.
 pub const AIM_TOLERANCE: f32 = 1e-5;
 
-pub(super) fn solve(
-    c: &Aim,
-    skeleton: &Skeleton,
-    local: &mut Pose,
-    path: &mut Vec<usize>,
-    model: &mut Vec<Xform>,
-) -> IkReport {
-    walk(skeleton, local, c.joint, path, model);
-    let last = model.len() - 1;
-    let joint = model[last];
-    let parent = if last == 0 { Quat::IDENTITY } else { model[last - 1].q };
-    let to = c.target - joint.t;
+/// Works in the frame of the joint's parent (vectors rotated by its model
+/// rotation's inverse): a turn found there is the joint's local turn, so
+/// the joint's own model rotation is never formed and the solved local
+/// rotation is one product away.
+pub(super) fn solve(c: &Aim, skeleton: &Skeleton, local: &mut Pose, path: &mut Vec<usize>) -> IkReport {
+    ancestry(skeleton, c.joint, path);
+    let parent = model(local, &path[1..]);
+    // From the joint to the target: `P⁻¹·(target − p_t) − p_s·t` with the
+    // parent's model `(p_t, P, p_s)` and the joint's local translation `t`.
+    let inv = parent.q.conjugate();
+    let to = rotate(inv, c.target - parent.t) - parent.s * local.translations[c.joint];
     if to == Vec3A::ZERO {
         return IkReport { kind: IkKind::Aim, residual: 0.0, iterations: 0, converged: true };
     }
-    let swing = arc(joint.q * c.forward, to);
-    let turn = match (c.up, c.up_direction) {
+    let before = local.rotations[c.joint];
+    let from = rotate(before, c.forward);
+    let (turned, exact) = match (c.up, c.up_direction) {
         (Some(up), Some(direction)) => {
-            unit(to).map_or(swing, |axis| roll(axis, swing * (joint.q * up), direction) * swing)
+            let swing = arc(from, to);
+            let turn = unit(to)
+                .map_or(swing, |axis| roll(axis, rotate(swing, rotate(before, up)), rotate(inv, direction)) * swing);
+            ((turn * before).normalize(), false)
         }
-        _ => swing,
+        // The smallest rotation alone, normalised once: `|from| = |forward|`
+        // (`before` is unit to rounding, and an error of that size turns the
+        // arc by a few 1e-7 rad at most), and `|swing·before| =
+        // |swing|·|before|`, so neither square root waits for the product.
+        _ => match arc_unnormalized(from, c.forward.length_squared(), to) {
+            Some(swing) => {
+                let scale = (swing.length_squared() * before.length_squared()).sqrt().recip();
+                (swing * before * scale, true)
+            }
+            None => ((arc(from, to) * before).normalize(), false),
+        },
     };
-    let solved = blend(local.rotations[c.joint], to_local(parent, turn, joint.q), c.weight);
+    let solved = blend(before, turned, c.weight);
     local.rotations[c.joint] = solved;
-    let residual = angle_between(parent * solved * c.forward, to);
+    // At full weight the smallest rotation's `f32` arc lands `forward` on
+    // `to` exactly but for rounding (a few 1e-7 rad), so its residual is 0
+    // without re-measuring; a roll, a partial weight or the `f64` arc is
+    // measured on the rotation written.
+    let residual = if exact && c.weight >= 1.0 { 0.0 } else { angle_between(rotate(solved, c.forward), to) };
     IkReport { kind: IkKind::Aim, residual, iterations: 0, converged: residual <= AIM_TOLERANCE }
 }

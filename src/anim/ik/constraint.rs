@@ -155,14 +155,9 @@ pub fn validate_constraints(
         return Err(IkError::new(Path::root(), kind));
     }
     for (i, c) in constraints.iter().enumerate() {
-        c.validate(skeleton, limits).map_err(|e| IkError::new(prefixed(Path::root().index(i), e.path), e.kind))?;
+        c.validate(skeleton, limits).map_err(|e| e.under(Path::root().index(i)))?;
     }
     Ok(())
-}
-
-fn prefixed(mut head: Path, tail: Path) -> Path {
-    head.0.extend(tail.0);
-    head
 }
 
 impl IkConstraint {
@@ -171,6 +166,38 @@ impl IkConstraint {
             IkConstraint::TwoBone(_) => IkKind::TwoBone,
             IkConstraint::Aim(_) => IkKind::Aim,
             IkConstraint::Chain(_) => IkKind::Chain,
+        }
+    }
+
+    /// Moves target `slot` (0 for `two_bone` and `aim`, the effector's
+    /// index for `chain`): how keyed targets and live drags change a
+    /// constraint without rebuilding it. Out-of-range slots are ignored.
+    pub fn set_target(&mut self, slot: usize, target: Vec3A) {
+        match self {
+            IkConstraint::TwoBone(c) if slot == 0 => c.target = target,
+            IkConstraint::Aim(c) if slot == 0 => c.target = target,
+            IkConstraint::Chain(c) => {
+                if let Some(e) = c.effectors.get_mut(slot) {
+                    e.target = target;
+                }
+            }
+            _ => {}
+        }
+    }
+
+    pub fn weight(&self) -> f32 {
+        match self {
+            IkConstraint::TwoBone(c) => c.weight,
+            IkConstraint::Aim(c) => c.weight,
+            IkConstraint::Chain(c) => c.weight,
+        }
+    }
+
+    pub fn set_weight(&mut self, weight: f32) {
+        match self {
+            IkConstraint::TwoBone(c) => c.weight = weight,
+            IkConstraint::Aim(c) => c.weight = weight,
+            IkConstraint::Chain(c) => c.weight = weight,
         }
     }
 

@@ -16,6 +16,13 @@ impl IkError {
     pub(crate) fn new(path: Path, kind: IkErrorKind) -> Self {
         IkError { path, kind }
     }
+
+    /// The same error placed under `head` (a list index, a document's
+    /// `ik` field).
+    pub fn under(self, mut head: Path) -> Self {
+        head.0.extend(self.path.0);
+        IkError { path: head, kind: self.kind }
+    }
 }
 
 /// The rules of SPEC §7 a constraint can break.
@@ -25,6 +32,10 @@ pub enum IkErrorKind {
     TooManyConstraints { max: usize, provided: usize },
     #[error("joint {joint} is not in the skeleton ({joints} joints)")]
     UnknownJoint { joint: usize, joints: usize },
+    #[error("joint '{joint}' is not in the skeleton")]
+    NoSuchJoint { joint: String },
+    #[error("`up` and `up_direction` go together: the roll is fixed by both or by neither")]
+    UpNeedsDirection,
     #[error("joint '{joint}' is not a descendant of '{ancestor}': two_bone joints must form a descendant chain")]
     NotDescendant { joint: String, ancestor: String },
     #[error("value is not a finite number")]
@@ -53,7 +64,8 @@ impl IkErrorKind {
         use IkErrorKind::*;
         match self {
             TooManyConstraints { .. } => "too_many_constraints",
-            UnknownJoint { .. } => "unknown_joint",
+            UnknownJoint { .. } | NoSuchJoint { .. } => "unknown_joint",
+            UpNeedsDirection => "incomplete_up",
             NotDescendant { .. } => "not_descendant",
             NonFinite => "non_finite",
             WeightOutOfRange { .. } => "weight_out_of_range",

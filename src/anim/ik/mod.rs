@@ -15,8 +15,10 @@
 //! [`ChainStart::Warm`] so each chain starts from the previous frame's
 //! angles.
 //!
-//! Module map: `constraint` the constraint types and their validation;
-//! `error` why one is refused; `model` model space along one ancestry and
+//! Module map: `spec` constraints as authored (joint names) and their
+//! resolution; `constraint` the constraint types and their validation;
+//! `error` why one is refused; `keyed` IK keyed in clips (target and
+//! weight tracks); `model` model space along one ancestry and
 //! the shared rotation tools; `two_bone`, `aim`, `chain` the three solvers;
 //! `linalg` the chain's small `f64` systems.
 
@@ -24,8 +26,10 @@ mod aim;
 mod chain;
 mod constraint;
 mod error;
+mod keyed;
 mod linalg;
 mod model;
+mod spec;
 mod two_bone;
 
 use glam::Quat;
@@ -37,15 +41,18 @@ pub use self::constraint::{
     validate_constraints,
 };
 pub use self::error::{IkError, IkErrorKind};
+pub(crate) use self::keyed::KeyedIk;
+pub use self::keyed::KeyedIkState;
+pub use self::spec::{AimSpec, ChainSpec, EffectorSpec, IkSpec, LimitSpec, TwoBoneSpec, build_constraints};
 pub use self::two_bone::TWO_BONE_TOLERANCE;
 
 use self::chain::{ChainSolver, WarmChain};
-use self::model::Xform;
 use super::{Pose, Skeleton};
 
 /// How one constraint's solve went (SPEC §7's `{kind, residual,
 /// iterations, converged}`), measured on the pose written, weight
-/// included. Analytic solvers report 0 iterations; `two_bone` converges
+/// included (except `aim` by the smallest rotation at full weight, whose
+/// `f32` arc is exact to rounding: it reports 0). Analytic solvers report 0 iterations; `two_bone` converges
 /// when the end meets the target within [`TWO_BONE_TOLERANCE`]·(l1 + l2),
 /// `aim` within [`AIM_TOLERANCE`] rad, `chain` when `√E ≤ tolerance`
 /// before weighting.
@@ -72,8 +79,8 @@ pub enum ChainStart {
 /// chain's last angles) between calls.
 #[derive(Debug, Clone, Default)]
 pub struct IkSolver {
+    /// The ancestry an analytic solver walks.
     path: Vec<usize>,
-    model: Vec<Xform>,
     chain: ChainSolver,
     /// Per constraint index: a chain's last angles (empty for other kinds).
     warm: Vec<WarmChain>,
@@ -104,8 +111,8 @@ impl IkSolver {
         reports.clear();
         for (constraint, warm) in constraints.iter().zip(&mut self.warm) {
             let report = match constraint {
-                IkConstraint::TwoBone(c) => two_bone::solve(c, skeleton, local, &mut self.path, &mut self.model),
-                IkConstraint::Aim(c) => aim::solve(c, skeleton, local, &mut self.path, &mut self.model),
+                IkConstraint::TwoBone(c) => two_bone::solve(c, skeleton, local, &mut self.path),
+                IkConstraint::Aim(c) => aim::solve(c, skeleton, local, &mut self.path),
                 IkConstraint::Chain(c) => self.chain.solve(c, skeleton, local, warm, start == ChainStart::Warm),
             };
             if report.kind != IkKind::Chain {

@@ -2,6 +2,7 @@
 //! relative to the motion, e.g. `layers/2/mask/joints/spine`).
 
 use crate::anim::Path;
+use crate::anim::ik::IkErrorKind;
 
 /// A refused motion: the place and the rule.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -36,6 +37,11 @@ pub enum MotionErrorKind {
     DuplicateMaskJoint { joint: String },
     #[error("no root motion joint: the output skeleton has no root joint with a translation track")]
     NoRootJoint,
+    /// An `ik` constraint breaks a rule of SPEC §7.
+    #[error("{0}")]
+    Ik(IkErrorKind),
+    #[error("parameter '{name}' has {expected} numbers in the first layer's clip but {provided} in this one")]
+    ParameterWidthMismatch { name: String, expected: u32, provided: u32 },
 }
 
 impl MotionErrorKind {
@@ -51,6 +57,8 @@ impl MotionErrorKind {
             UnknownJoint { .. } => "unknown_joint",
             DuplicateMaskJoint { .. } => "duplicate_mask_joint",
             NoRootJoint => "no_root_joint",
+            Ik(kind) => kind.code(),
+            ParameterWidthMismatch { .. } => "parameter_width_mismatch",
         }
     }
 }

@@ -51,6 +51,19 @@ pub(super) fn add(pose: &mut Joint, layer: &Joint, reference: &Joint, w: f32) {
     pose.s = clamp(pose.s * (Vec3A::ONE + (ratio - Vec3A::ONE) * w));
 }
 
+/// A parameter entry's blend: the translation's lerp (a copy at `w ≥ 1`).
+#[inline]
+pub(super) fn lerp(value: Vec3A, layer: Vec3A, w: f32) -> Vec3A {
+    if w >= 1.0 { layer } else { value.lerp(layer, w) }
+}
+
+/// A parameter entry's additive step: `value + w·difference`, bounded as
+/// translations are.
+#[inline]
+pub(super) fn offset(value: Vec3A, difference: Vec3A, w: f32) -> Vec3A {
+    clamp(value + difference * w)
+}
+
 fn clamp(v: Vec3A) -> Vec3A {
     // NaN only from inf − inf, which bounded inputs cannot produce.
     v.clamp(Vec3A::splat(-BOUND), Vec3A::splat(BOUND))

@@ -40,6 +40,7 @@ use self::coverage::Reach;
 use self::error::MotionErrorKind as K;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
+use super::ik::{IkConstraint, IkLimits, build_constraints};
 use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
 
 /// Most layers in one motion.
@@ -84,6 +85,8 @@ pub struct Motion<C> {
     /// The layer weights the motion was built with.
     weights: Vec<f32>,
     root: Option<RootSetup>,
+    /// Request-time IK (SPEC §7), solved on the layered pose.
+    ik: Vec<IkConstraint>,
 }
 
 /// Root motion as built: the output skeleton's root-motion joint.
@@ -121,6 +124,17 @@ struct Layer<C> {
     reference: Option<Pose>,
     /// With root motion, when the layer's clip has the root joint.
     root: Option<LayerRoot>,
+    /// The output's parameters this layer's clip also has (SPEC §8).
+    parameters: Vec<ParameterMap>,
+}
+
+/// One parameter of a layer: its entries in the layer clip's pose and in the
+/// output pose (the same count: widths must agree).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ParameterMap {
+    from: u32,
+    to: u32,
+    entries: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,6 +150,16 @@ impl<C: ClipSource> Motion<C> {
     /// The first rule of SPEC §6 it breaks, with the path of the field
     /// relative to the motion (`layers/2/mask/joints/spine`).
     pub fn build(spec: MotionSpec<C>) -> Result<Motion<C>, MotionError> {
+        Motion::build_limited(spec, &IkLimits::default())
+    }
+
+    /// [`Motion::build`] with the service's ceilings on IK constraints,
+    /// effectors and iterations.
+    ///
+    /// # Errors
+    /// As [`Motion::build`]; `ik` constraints are checked against the
+    /// output skeleton and `ik_limits` (paths `ik/0/joints/1`).
+    pub fn build_limited(spec: MotionSpec<C>, ik_limits: &IkLimits) -> Result<Motion<C>, MotionError> {
         let layers_path = Path::root().field("layers");
         if spec.layers.is_empty() {
             return Err(MotionError::new(layers_path, K::NoLayers));
@@ -155,7 +179,10 @@ impl<C: ClipSource> Motion<C> {
             durations.push(layer.clip.clip().range().duration());
             let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
             let map = joint_map(output, layer.clip.clip().skeleton());
+            let first = layers.first().map_or(layer.clip.clip(), |l: &Layer<C>| l.clip.clip());
+            let parameters = parameter_map(first.parameters(), layer.clip.clip().parameters(), &path)?;
             layers.push(Layer {
+                parameters,
                 reach: Reach::new(layer.mode, &map, &mask, layer.clip.clip().joint_count()),
                 unmasked: mask.iter().all(|m| *m >= 1.0),
                 mask,
@@ -169,18 +196,27 @@ impl<C: ClipSource> Motion<C> {
             });
         }
         let root = root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?;
+        let ik = build_constraints(&spec.ik, layers[0].clip.clip().skeleton(), ik_limits).map_err(|e| {
+            let e = e.under(Path::root().field("ik"));
+            MotionError::new(e.path, K::Ik(e.kind))
+        })?;
         if let Some(setup) = root {
             let name = layers[0].clip.clip().skeleton().names()[setup.joint].clone();
             for layer in &mut layers {
                 layer.root = layer_root(layer.clip.clip(), &name, setup.up);
             }
         }
-        Ok(Motion { layers, groups, durations, weights, root })
+        Ok(Motion { layers, groups, durations, weights, root, ik })
     }
 
     /// The output skeleton: the first layer's clip's.
     pub fn skeleton(&self) -> &Skeleton {
         self.layers[0].clip.clip().skeleton()
+    }
+
+    /// The output's parameters (SPEC §8): the first layer's clip's.
+    pub fn parameters(&self) -> &crate::anim::ParameterLayout {
+        self.layers[0].clip.clip().parameters()
     }
 
     /// The first layer's clip (whose id a pose names).
@@ -191,6 +227,17 @@ impl<C: ClipSource> Motion<C> {
     /// Each layer's clip, bottom to top.
     pub fn layers(&self) -> impl Iterator<Item = &C> {
         self.layers.iter().map(|l| &l.clip)
+    }
+
+    /// The request-time IK constraints, solved after layering.
+    pub fn ik(&self) -> &[IkConstraint] {
+        &self.ik
+    }
+
+    /// IK reports each sample gives: every layer's clip constraints, bottom
+    /// to top, then the motion's own.
+    pub fn ik_report_count(&self) -> usize {
+        self.layers.iter().map(|l| l.clip.clip().ik_count()).sum::<usize>() + self.ik.len()
     }
 
     /// The up axis of the motion's root motion, if it has one.
@@ -298,6 +345,31 @@ fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
 /// Per output joint, the same-named joint of `layer` (or `UNMAPPED`).
 fn joint_map(output: &Skeleton, layer: &Skeleton) -> Vec<u32> {
     output.names().iter().map(|name| layer.index_of(name).map_or(UNMAPPED, |j| j as u32)).collect()
+}
+
+/// Per output parameter the layer's clip also has (by name), where each
+/// sits in either pose.
+///
+/// # Errors
+/// `parameter_width_mismatch` when the layer's parameter of that name has
+/// another width.
+fn parameter_map(
+    output: &crate::anim::ParameterLayout,
+    layer: &crate::anim::ParameterLayout,
+    path: &Path,
+) -> Result<Vec<ParameterMap>, MotionError> {
+    let mut maps = Vec::new();
+    for (p, name) in output.names().iter().enumerate() {
+        let Some(q) = layer.index_of(name) else { continue };
+        let (expected, provided) = (output.widths()[p], layer.widths()[q]);
+        if expected != provided {
+            let kind = K::ParameterWidthMismatch { name: name.clone(), expected, provided };
+            return Err(MotionError::new(path.clone().field("clip"), kind));
+        }
+        let (to, from) = (output.range(p), layer.range(q));
+        maps.push(ParameterMap { from: from.start as u32, to: to.start as u32, entries: to.len() as u32 });
+    }
+    Ok(maps)
 }
 
 /// `clip`'s local pose at `time` (default its start), clamped to its range

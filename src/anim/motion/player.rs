@@ -24,6 +24,7 @@ use std::sync::Arc;
 use super::layering::{self, Joint};
 use super::root::Planar;
 use super::{ClipSource, Motion, MotionOptions, MotionSampler, RootMotion, UpAxis};
+use crate::anim::ik::{ChainStart, IkConstraint, IkReport, IkSolver};
 use crate::anim::{Ease, Playback, Pose, Space};
 
 /// Fades in progress at most; a crossfade beyond them finishes the oldest
@@ -85,6 +86,20 @@ pub struct Player<C> {
     space: Space,
     root: Option<RootMotion>,
     up: UpAxis,
+    ik: StreamIk,
+}
+
+/// The stream's request-time IK (SPEC §7 "In streams"): solved on the
+/// mixed pose at every tick, chains warm-started from the previous tick.
+#[derive(Debug, Default)]
+struct StreamIk {
+    constraints: Vec<IkConstraint>,
+    solver: IkSolver,
+    solved: Vec<IkReport>,
+    /// The current motion's clip reports, then `solved`.
+    reports: Vec<IkReport>,
+    /// Whether the player's `local` holds the last tick's solved pose.
+    applied: bool,
 }
 
 /// Why a live change was refused.
@@ -98,6 +113,13 @@ pub enum PlayerError {
     Duration(f64),
     #[error("the motion's skeleton differs from the stream's: a crossfade needs the same joints in the same order")]
     Skeleton,
+    #[error(
+        "the motion's parameters differ from the stream's: a crossfade needs the same parameter names and widths in \
+         the same order"
+    )]
+    Parameters,
+    #[error("a crossfade's motion carries no `ik`: a stream's constraints change with an `ik` control")]
+    CrossfadeIk,
 }
 
 impl<C: ClipSource> Deck<C> {
@@ -158,6 +180,7 @@ impl<C: ClipSource> Player<C> {
     /// A player of `motion`, whose motion time is the stream time.
     pub fn new(motion: Arc<Motion<C>>) -> Self {
         let up = motion.root_up().unwrap_or_default();
+        let ik = StreamIk { constraints: motion.ik().to_vec(), ..StreamIk::default() };
         Player {
             top: Deck { origin: Some(0.0), ..Deck::new(motion) },
             fade: None,
@@ -169,6 +192,7 @@ impl<C: ClipSource> Player<C> {
             space: Space::Local,
             root: None,
             up,
+            ik,
         }
     }
 
@@ -199,6 +223,14 @@ impl<C: ClipSource> Player<C> {
         if !to.skeleton().same_joints(self.top.motion.skeleton()) {
             return Err(PlayerError::Skeleton);
         }
+        if to.parameters().names() != self.top.motion.parameters().names()
+            || to.parameters().widths() != self.top.motion.parameters().widths()
+        {
+            return Err(PlayerError::Parameters);
+        }
+        if !to.ik().is_empty() {
+            return Err(PlayerError::CrossfadeIk);
+        }
         if self.fades() + 1 > MAX_FADES {
             self.drop_oldest_fade();
         }
@@ -213,6 +245,7 @@ impl<C: ClipSource> Player<C> {
             space: Space::Local,
             root: None,
             up: self.up,
+            ik: StreamIk::default(),
         };
         self.up = self.top.motion.root_up().unwrap_or(self.up);
         self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
@@ -244,6 +277,25 @@ impl<C: ClipSource> Player<C> {
         Ok(())
     }
 
+    /// Replaces the stream's IK constraints from the next tick on (SPEC §7
+    /// "In streams"); they must have been validated against the player's
+    /// skeleton. A chain at the same place over the same joints carries
+    /// its angles on.
+    pub fn set_ik(&mut self, constraints: Vec<IkConstraint>) {
+        self.ik.constraints = constraints;
+    }
+
+    /// The stream's IK constraints.
+    pub fn ik(&self) -> &[IkConstraint] {
+        &self.ik.constraints
+    }
+
+    /// The last tick's IK reports: the current motion's clip constraints,
+    /// then the stream's.
+    pub fn ik_reports(&self) -> &[IkReport] {
+        &self.ik.reports
+    }
+
     /// The next tick shows the current motion at motion time `tau`; every
     /// motion beneath jumps by as much, and root motion has no delta.
     pub fn seek(&mut self, tau: f64) {
@@ -256,6 +308,7 @@ impl<C: ClipSource> Player<C> {
         let jump = self.take_seek(s);
         let ds = if jump { 0.0 } else { self.last_s.map_or(0.0, |last| s - last) };
         self.advance(s, ds, options.ease);
+        self.solve_ik();
         let delta = self.delta();
         if self.has_root_motion() {
             let total = self.root.map_or(Planar::IDENTITY, |r| r.total).then(delta, self.up);
@@ -263,10 +316,28 @@ impl<C: ClipSource> Player<C> {
         }
         self.space = options.space;
         if options.space == Space::Model {
-            let local = if self.fade.is_some() { &self.local } else { self.top.sampler.local() };
+            let local = if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() };
             self.top.motion.skeleton().to_model(local, &mut self.model);
         }
         self.top.sampler.clip_times()[0]
+    }
+
+    /// Solves the stream's constraints on the mixed pose (into `local`) and
+    /// gathers the reports.
+    fn solve_ik(&mut self) {
+        let ik = &mut self.ik;
+        ik.reports.clear();
+        ik.reports.extend_from_slice(self.top.sampler.ik_reports());
+        ik.applied = !ik.constraints.is_empty();
+        if !ik.applied {
+            return;
+        }
+        if self.fade.is_none() {
+            self.local.copy_from(self.top.sampler.local());
+        }
+        let skeleton = self.top.motion.skeleton();
+        ik.solver.solve(skeleton, &mut self.local, &ik.constraints, ChainStart::Warm, &mut ik.solved);
+        ik.reports.extend_from_slice(&ik.solved);
     }
 
     /// Turns a pending seek into origins moved so that the current motion
@@ -319,7 +390,7 @@ impl<C: ClipSource> Player<C> {
 
     /// The mixed local pose of the last tick.
     fn local_pose(&self) -> &Pose {
-        if self.fade.is_some() { &self.local } else { self.top.sampler.local() }
+        if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() }
     }
 
     /// The last tick's layered root delta: the fade's sides lerped by `α`.
@@ -393,5 +464,10 @@ fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
         let other = Joint { t: b.translations[j], q: b.rotations[j], s: b.scales[j] };
         layering::blend(&mut joint, &other, alpha);
         (out.translations[j], out.rotations[j], out.scales[j]) = (joint.t, joint.q, joint.s);
+    }
+    // Both sides have the same parameters (`crossfade` checks it).
+    out.parameters.clone_from(&a.parameters);
+    for (o, b) in out.parameters.iter_mut().zip(&b.parameters) {
+        *o = layering::lerp(*o, *b, alpha);
     }
 }

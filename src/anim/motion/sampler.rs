@@ -9,6 +9,7 @@ use super::layering::{self, Joint};
 use super::root::{self, Planar, motion_transform};
 use super::sync::position;
 use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode, UNMAPPED};
+use crate::anim::ik::{ChainStart, IkReport, IkSolver};
 use crate::anim::{Clip, Cursor, Ease, Playback, Pose, Space};
 
 /// How a request samples a motion.
@@ -50,6 +51,11 @@ pub struct MotionSampler {
     roots: Vec<Option<(i64, Planar)>>,
     previous: Vec<Option<(i64, Planar)>>,
     root_motion: Option<RootMotion>,
+    ik: IkSolver,
+    /// The last sample's IK reports: each layer's clip constraints, then
+    /// the motion's own (requests only).
+    ik_reports: Vec<IkReport>,
+    solved: Vec<IkReport>,
 }
 
 impl MotionSampler {
@@ -75,6 +81,13 @@ impl MotionSampler {
         &self.clip_times
     }
 
+    /// The last sample's IK reports (SPEC §7): each layer's clip
+    /// constraints bottom to top, then, for [`Motion::sample`], the
+    /// motion's own.
+    pub fn ik_reports(&self) -> &[IkReport] {
+        &self.ik_reports
+    }
+
     /// The last sample's root motion, for motions that ask for it.
     pub fn root_motion(&self) -> Option<RootMotion> {
         self.root_motion
@@ -92,14 +105,30 @@ impl MotionSampler {
     }
 }
 
+impl MotionSampler {
+    /// Puts the local pose into the space asked for.
+    fn finish(&mut self, skeleton: &crate::anim::Skeleton, space: Space) {
+        if space == Space::Model {
+            skeleton.to_model(&self.local, &mut self.model);
+        }
+        self.space = space;
+    }
+}
+
 impl<C: ClipSource> Motion<C> {
     /// The pose at motion time `tau` with the motion's own weights (a
     /// request's answer). Returns the first layer's clip time.
     pub fn sample(&self, tau: f64, options: &MotionOptions, sampler: &mut MotionSampler) -> f32 {
         let mut phases = std::mem::take(&mut sampler.phases);
         self.phases_at(tau, &self.weights, &mut phases);
-        let clip_time = self.sample_with(tau, &phases, &self.weights, options, sampler);
+        let clip_time = self.layer_into(tau, &phases, &self.weights, options.ease, sampler);
         sampler.phases = phases;
+        if !self.ik.is_empty() {
+            let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;
+            ik.solve(self.skeleton(), local, &self.ik, ChainStart::Cold, solved);
+            ik_reports.extend_from_slice(solved);
+        }
+        sampler.finish(self.skeleton(), options.space);
         clip_time
     }
 
@@ -114,14 +143,27 @@ impl<C: ClipSource> Motion<C> {
         options: &MotionOptions,
         sampler: &mut MotionSampler,
     ) -> f32 {
-        let MotionSampler { cursors, layer: scratch, local, clip_times, roots, needs, hidden, kept, .. } = sampler;
+        let clip_time = self.layer_into(tau, phases, weights, options.ease, sampler);
+        sampler.finish(self.skeleton(), options.space);
+        clip_time
+    }
+
+    /// Each layer's clip pose (its clip IK solved), layered into the
+    /// sampler's local pose, with root motion; returns the first layer's
+    /// clip time.
+    fn layer_into(&self, tau: f64, phases: &[f64], weights: &[f32], ease: Ease, sampler: &mut MotionSampler) -> f32 {
+        let MotionSampler {
+            cursors, layer: scratch, local, clip_times, roots, needs, hidden, kept, ik_reports, ..
+        } = sampler;
         let words = coverage::words(self.skeleton().len());
         coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
         cursors.resize_with(self.layers.len(), Cursor::default);
         roots.clear();
         clip_times.clear();
+        ik_reports.clear();
         for (i, layer) in self.layers.iter().enumerate() {
-            let (t, cycle) = self.layer_time(i, tau, phases, options.ease);
+            let (t, cycle) = self.layer_time(i, tau, phases, ease);
+            let has_ik = layer.clip.clip().ik_count() > 0;
             clip_times.push(t);
             let need = &needs[i * words..(i + 1) * words];
             let direct = i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.unmasked;
@@ -129,28 +171,31 @@ impl<C: ClipSource> Motion<C> {
                 // The common case, and the bit-for-bit promise: the first
                 // full-weight layer is the clip's own pose.
                 layer.sample_needed(t, need, kept, &mut cursors[0], local);
+                ik_reports.extend_from_slice(cursors[0].ik_reports());
                 roots.push(self.take_root(layer, cycle, local));
                 continue;
             }
             if i == 0 {
                 local.copy_from(self.skeleton().rest());
+                // A parameter's rest value is 0 (SPEC §8: no morph, no offset).
+                local.parameters.clear();
+                local.parameters.resize(self.parameters().entries(), glam::Vec3A::ZERO);
             }
-            if layer.root.is_none() && need.iter().all(|w| *w == 0) {
-                // Weight 0, or hidden everywhere: nothing to sample.
+            let parameters = !layer.parameters.is_empty() && weights[i] > 0.0;
+            if layer.root.is_none() && !has_ik && !parameters && need.iter().all(|w| *w == 0) {
+                // Weight 0, or hidden everywhere: nothing to sample. (A
+                // clip with IK still solves, so its reports are there.)
                 roots.push(None);
                 continue;
             }
             layer.sample_needed(t, need, kept, &mut cursors[i], scratch);
+            ik_reports.extend_from_slice(cursors[i].ik_reports());
             roots.push(self.take_root(layer, cycle, scratch));
             layer.apply(scratch, weights[i], need, local);
         }
         if self.root.is_some() {
             self.layer_root_motion(weights, sampler);
         }
-        if options.space == Space::Model {
-            self.skeleton().to_model(&sampler.local, &mut sampler.model);
-        }
-        sampler.space = options.space;
         sampler.clip_times[0]
     }
 
@@ -250,6 +295,7 @@ impl<C> super::Layer<C> {
     /// output skeleton's) at layer weight `weight`, for the output joints in
     /// `need` (all mapped, with a positive mask).
     fn apply(&self, pose: &Pose, weight: f32, need: &[u64], out: &mut Pose) {
+        self.apply_parameters(pose, weight, out);
         let source = |j: usize| {
             debug_assert_ne!(self.map[j], UNMAPPED, "a needed joint is mapped");
             self.map[j] as usize
@@ -266,6 +312,31 @@ impl<C> super::Layer<C> {
                 layering::add(&mut now, &joint(pose, s), &joint(reference, s), weight * self.mask[j]);
                 set_joint(out, j, now);
             }),
+        }
+    }
+}
+
+impl<C> super::Layer<C> {
+    /// Layers the parameters this layer's clip has like translations (SPEC
+    /// §6, §8): a blend lerps toward the layer's values by the layer weight
+    /// (masks are per joint and do not apply), an additive layer adds
+    /// `weight · (value − reference)`. Parameters it lacks stay as they are.
+    fn apply_parameters(&self, pose: &Pose, weight: f32, out: &mut Pose) {
+        if weight <= 0.0 {
+            return;
+        }
+        for m in &self.parameters {
+            let (from, to, n) = (m.from as usize, m.to as usize, m.entries as usize);
+            let (layer, out) = (&pose.parameters[from..from + n], &mut out.parameters[to..to + n]);
+            match &self.reference {
+                None => out.iter_mut().zip(layer).for_each(|(o, l)| *o = layering::lerp(*o, *l, weight)),
+                Some(reference) => {
+                    let reference = &reference.parameters[from..from + n];
+                    for ((o, l), r) in out.iter_mut().zip(layer).zip(reference) {
+                        *o = layering::offset(*o, *l - *r, weight);
+                    }
+                }
+            }
         }
     }
 }

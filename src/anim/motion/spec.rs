@@ -2,12 +2,22 @@
 //! control says, unchecked. [`Motion::build`](super::Motion::build) checks it.
 
 use crate::anim::Playback;
+use crate::anim::ik::IkSpec;
 
-/// Layers bottom to top, and what to do with the root's motion.
+/// Layers bottom to top, what to do with the root's motion, and the IK
+/// constraints solved on the layered pose.
 #[derive(Debug, Clone)]
 pub struct MotionSpec<C> {
     pub layers: Vec<LayerSpec<C>>,
     pub root_motion: Option<RootMotionSpec>,
+    /// SPEC §7: request-time constraints, after layering and root motion.
+    pub ik: Vec<IkSpec>,
+}
+
+impl<C> Default for MotionSpec<C> {
+    fn default() -> Self {
+        MotionSpec { layers: Vec::new(), root_motion: None, ik: Vec::new() }
+    }
 }
 
 impl<C> MotionSpec<C> {
@@ -35,7 +45,7 @@ impl<C> MotionSpec<C> {
                 })
             })
             .collect::<Result<_, E>>()?;
-        Ok(MotionSpec { layers, root_motion: self.root_motion })
+        Ok(MotionSpec { layers, root_motion: self.root_motion, ik: self.ik })
     }
 }
 

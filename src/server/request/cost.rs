@@ -111,7 +111,30 @@ fn json_pose(clip: &Clip, clip_id: &str, format: Format) -> u64 {
         // `{"name":…,"matrix":[16]},`
         Format::Matrix | Format::Skinning => (head + 20, 22 + 15 + 16 * F32_TEXT),
     };
-    head + names + joints * per_joint
+    head + names + joints * per_joint + ik_reports(clip.ik_count() as u64, Wire::Json) + json_parameters(clip)
+}
+
+/// `,"parameters":{"name":[v,…],…}` (SPEC §8): every parameter, whatever
+/// a request's subset (a bound), each value at its longest.
+fn json_parameters(clip: &Clip) -> u64 {
+    let layout = clip.parameters();
+    if layout.is_empty() {
+        return 0;
+    }
+    let names: u64 = layout.names().iter().map(|n| json_str(n) + 4).sum();
+    16 + names + layout.total_width() as u64 * (F32_TEXT + 1)
+}
+
+/// Bytes of `n` IK reports (SPEC §7) in a pose: JSON
+/// `,"ik":[{"kind":"two_bone","residual":…,"iterations":…,"converged":false},…]`,
+/// protobuf `IkReport` messages (kind, residual, iterations, converged).
+pub fn ik_reports(n: u64, wire: Wire) -> u64 {
+    match wire {
+        // 73 bytes of the widest report around its residual, and a comma.
+        Wire::Json if n > 0 => 8 + n * (74 + F32_TEXT),
+        Wire::Json => 0,
+        Wire::Protobuf => n * (2 + 2 + 5 + 6 + 2),
+    }
 }
 
 /// The length of `s` as a JSON string, quotes and escapes included (as
@@ -130,14 +153,22 @@ pub fn json_str(s: &str) -> u64 {
 
 /// Protobuf `joint_names`: a tag, a length and the bytes of each.
 fn proto_names(clip: &Clip) -> u64 {
-    clip.skeleton().names().iter().map(|n| 1 + VARINT + n.len() as u64).sum()
+    let names = |names: &[String]| names.iter().map(|n| 1 + VARINT + n.len() as u64).sum::<u64>();
+    let layout = clip.parameters();
+    // `parameter_names`, and `parameter_widths` packed (a varint each).
+    let parameters =
+        if layout.is_empty() { 0 } else { names(layout.names()) + 1 + VARINT + VARINT * layout.len() as u64 };
+    names(clip.skeleton().names()) + parameters
 }
 
 /// A protobuf `Pose` without its names.
 fn proto_pose(clip: &Clip, format: Format) -> u64 {
     let joints = clip.joint_count() as u64;
     // time (9), clip_time (5), space (2).
-    let scalars = 9 + 5 + 2;
+    let scalars = 9 + 5 + 2 + ik_reports(clip.ik_count() as u64, Wire::Protobuf);
+    // The packed `parameters` (SPEC §8).
+    let width = clip.parameters().total_width() as u64;
+    let scalars = scalars + if width == 0 { 0 } else { 1 + VARINT + 4 * width };
     match format {
         Format::Trs => 3 * (1 + VARINT) + 40 * joints + scalars,
         Format::Matrix | Format::Skinning => (1 + VARINT) + 64 * joints + scalars,
@@ -209,9 +240,11 @@ mod tests {
     use prost::Message;
 
     use super::*;
-    use crate::anim::{Channel, ClipSpec, EventSpec, Interpolation, Keys, Playback, SampleOptions, Sampler, TrackSpec};
-    use crate::wire::json::{MatricesJson, PoseJson};
-    use crate::wire::proto::{matrices_to_pb, pb, pose_to_pb};
+    use crate::anim::{
+        Channel, ClipSpec, EventSpec, Interpolation, Keys, ParameterSpec, Playback, SampleOptions, Sampler, TrackSpec,
+    };
+    use crate::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson};
+    use crate::wire::proto::{add_parameters, matrices_to_pb, pb, pose_to_pb};
 
     const ID: &str = "0192f3a4-5b6c-7d8e-9f01-23456789abcd";
 
@@ -232,7 +265,23 @@ mod tests {
             })
             .collect();
         let events = vec![EventSpec { time: 0.5, name: "step \"left\"".into() }];
-        let spec = ClipSpec { name: "c".into(), skeleton: None, tracks, events, playback: Playback::Loop };
+        // Parameters (SPEC §8) of widths 1, 7 and 256, named like the joints.
+        let parameters = [1, 7, 256]
+            .iter()
+            .enumerate()
+            .map(|(k, &w)| {
+                ParameterSpec::new(&name(k), Interpolation::Linear, vec![0.0, 1.0], vec![vec![a; w], vec![b; w]])
+            })
+            .collect();
+        let spec = ClipSpec {
+            name: "c".into(),
+            skeleton: None,
+            tracks,
+            events,
+            parameters,
+            playback: Playback::Loop,
+            ..Default::default()
+        };
         Clip::build(&spec).unwrap()
     }
 
@@ -242,17 +291,26 @@ mod tests {
         let (mut sampler, mut matrices) = (Sampler::new(), Vec::<Mat4>::new());
         let options = SampleOptions::default();
         let mut json = b"{\"poses\":[".to_vec();
-        let mut batch = pb::PoseBatch { joint_names: clip.skeleton().names().to_vec(), poses: Vec::new() };
+        let mut batch = pb::PoseBatch {
+            joint_names: clip.skeleton().names().to_vec(),
+            parameter_names: clip.parameters().names().to_vec(),
+            parameter_widths: clip.parameters().widths().to_vec(),
+            poses: Vec::new(),
+        };
         for (k, &t) in times.iter().enumerate() {
             if k > 0 {
                 json.push(b',');
             }
             let clip_time = crate::server::request::evaluate(clip, t, &options, format, &mut sampler, &mut matrices);
+            let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), None);
+            let extras = Extras { parameters, ..Extras::default() };
             if format == Format::Trs {
                 let (skeleton, pose) = (clip.skeleton(), sampler.pose());
                 PoseJson { clip: ID, time: t, clip_time, space: options.space, skeleton, pose }
-                    .write_with(&mut json, crate::wire::json::Extras::default());
-                batch.poses.push(pose_to_pb(None, pose, t, clip_time, options.space));
+                    .write_with(&mut json, extras);
+                let mut pose = pose_to_pb(None, pose, t, clip_time, options.space);
+                add_parameters(&mut pose, parameters, false);
+                batch.poses.push(pose);
             } else {
                 let doc = MatricesJson {
                     clip: ID,
@@ -262,8 +320,10 @@ mod tests {
                     skeleton: clip.skeleton(),
                     matrices: &matrices,
                 };
-                doc.write_with(&mut json, crate::wire::json::Extras::default());
-                batch.poses.push(matrices_to_pb(None, &matrices, t, clip_time));
+                doc.write_with(&mut json, extras);
+                let mut pose = matrices_to_pb(None, &matrices, t, clip_time);
+                add_parameters(&mut pose, parameters, false);
+                batch.poses.push(pose);
             }
         }
         json.extend_from_slice(b"]}");
@@ -316,7 +376,9 @@ mod tests {
                 skeleton: clip.skeleton(),
                 pose: sampler.pose(),
                 joints: None,
+                parameters: crate::wire::json::ParameterValues::of(clip.parameters(), sampler.pose(), None),
                 root_motion: None,
+                ik: &[],
                 events: clip.events(),
                 crossed: &[0; MAX_EVENTS_PER_FRAME],
                 with_names: true,
@@ -325,6 +387,28 @@ mod tests {
             let bound = Estimate::frame(&clip, ID, encoding.into());
             assert!(bytes <= bound && bound <= 4 * bytes, "{encoding:?}: {bytes} written, bound {bound}");
         }
+    }
+
+    /// The IK reports' bound holds the widest reports really written, on
+    /// both wires, and is exact for protobuf's widest.
+    #[test]
+    fn ik_report_bounds_hold_the_widest_reports() {
+        use crate::anim::ik::{IkKind, IkReport};
+        let report =
+            |converged| IkReport { kind: IkKind::TwoBone, residual: -1.175_494_4e-38, iterations: u32::MAX, converged };
+        for n in [1, 2, 32] {
+            // JSON's widest says `false`, protobuf's `true` (proto3 omits false).
+            let mut json = Vec::new();
+            crate::wire::ik::write_reports(&mut json, &vec![report(false); n]);
+            let bound = ik_reports(n as u64, Wire::Json);
+            assert!(json.len() as u64 <= bound, "{n} JSON reports: {} bytes over {bound}", json.len());
+            let pose = pose_to_pb(None, &crate::anim::Pose::default(), 1.0, 1.0, crate::anim::Space::Local);
+            let with = pb::Pose { ik: crate::wire::proto::ik_reports_to_pb(&vec![report(true); n]), ..pose.clone() };
+            let proto = (with.encoded_len() - pose.encoded_len()) as u64;
+            assert_eq!(proto, ik_reports(n as u64, Wire::Protobuf), "{n} protobuf reports");
+        }
+        assert_eq!(ik_reports(0, Wire::Json), 0);
+        assert_eq!(ik_reports(0, Wire::Protobuf), 0);
     }
 
     #[test]

@@ -14,7 +14,8 @@
 //!   and the list's `bad_limit`, `bad_cursor`;
 //! - 422 (`ApiError::Invalid`), it parses but breaks a rule:
 //!   `fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`,
-//!   `times_or_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`;
+//!   `times_or_range`, `bad_range`, `too_many_poses`, `no_inverse_binds`, `unknown_joint` and
+//!   `unknown_parameter` (a subset's name the clip lacks);
 //!   and the cost model's (`cost`, checked once the clip is known, before
 //!   anything is evaluated): `too_many_poses` (over `max_joint_poses`),
 //!   `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
@@ -23,10 +24,15 @@
 //! the motion (its refusals pointed at `/motion/…`) and price the answer the
 //! same way.
 //!
+//! Broadcasts (SPEC §9, `broadcast`) take a stream's rules for their motion,
+//! fps, space and joints, plus `format_not_streamable` and
+//! `idle_timeout_out_of_range` (422).
+//!
 //! Malformed values are reported before broken rules, and both before the
 //! clip is looked up (`clip_not_found`), except the stream rules that need
 //! the clip (its start is the default start).
 
+mod broadcast;
 mod cost;
 mod list;
 mod motion;
@@ -34,11 +40,13 @@ mod raw;
 mod sample;
 mod stream;
 
+pub use broadcast::{DEFAULT_IDLE_TIMEOUT_SECS, MAX_IDLE_TIMEOUT_SECS, RawBroadcast};
 pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, MAX_UNARY_ANSWER_BYTES, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
 pub use motion::{Composed, RawMotion};
 pub use raw::{
     Field, Format, Locate, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
+    parameter_subset,
 };
 pub use sample::{BLOCKING_POSES, FPS_RANGE, PoseRequest, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{DEFAULT_FPS, Opening, RawStream};

@@ -8,11 +8,12 @@
 use std::sync::Arc;
 
 use super::cost::{Cost, Estimate, F64_TEXT, Wire};
-use super::raw::{Field, Format, Locate, joint_subset};
+use super::raw::{Field, Format, Locate, joint_subset, parameter_subset};
 use crate::anim::Motion;
+use crate::anim::ik::IkLimits;
 use crate::anim::motion::MotionSpec;
 use crate::server::cache::CachedClip;
-use crate::server::error::ApiError;
+use crate::server::error::{ApiError, At};
 use crate::server::motion_cache::MotionKey;
 use crate::server::state::AppState;
 use crate::stream::{PinnedClip, StreamMotion};
@@ -24,6 +25,8 @@ pub struct RawMotion<'a> {
     pub spec: MotionSpec<String>,
     /// Joint names; `None`: every joint.
     pub joints: Option<&'a [String]>,
+    /// Parameter names (SPEC §8); `None`: every parameter.
+    pub parameters: Option<&'a [String]>,
     pub format: Format,
     pub at: Locate,
 }
@@ -33,6 +36,8 @@ pub struct Composed {
     pub motion: Arc<StreamMotion>,
     /// Output joint indices, in skeleton order; `None`: all.
     pub joints: Option<Vec<usize>>,
+    /// Output parameter indices, in the first clip's order; `None`: all.
+    pub parameters: Option<Vec<usize>>,
 }
 
 /// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
@@ -53,6 +58,10 @@ impl Composed {
         if self.motion.has_root_motion() {
             estimate.per_pose += ROOT_MOTION_BYTES;
         }
+        // The first clip's reports are in its estimate; the other layers'
+        // and the motion's own come on top.
+        let more_reports = self.motion.ik_report_count() - first.ik_count();
+        estimate.per_pose += super::cost::ik_reports(more_reports as u64, wire) + 8;
         let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
         Cost { poses, joints, bytes: estimate.total(poses) }
     }
@@ -72,8 +81,8 @@ impl RawMotion<'_> {
         let mut clips = Vec::with_capacity(spec.layers.len());
         for (i, layer) in spec.layers.iter().enumerate() {
             clips.push(super::raw::clip(state, &layer.clip).await.map_err(|e| match e {
-                ApiError::NotFound { .. } => ApiError::LayerClipNotFound {
-                    pointer: format!("/motion/layers/{i}/clip"),
+                ApiError::NotFound { .. } => ApiError::ClipNotFoundAt {
+                    at: At::Pointer(format!("/motion/layers/{i}/clip")),
                     detail: format!("layer {i}'s clip `{}` does not exist", layer.clip),
                 },
                 other => other,
@@ -84,7 +93,7 @@ impl RawMotion<'_> {
         let motion = match state.cached_motion(&key) {
             Some(hit) => hit,
             None => {
-                let motion = Arc::new(build(pinned)?);
+                let motion = Arc::new(build(pinned, &state.config.limits.ik())?);
                 state.cache_motion(key, Arc::clone(&motion), &clips);
                 motion
             }
@@ -94,7 +103,9 @@ impl RawMotion<'_> {
             return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
-        Ok(Composed { motion, joints })
+        let parameters =
+            self.parameters.map(|names| parameter_subset(motion.parameters(), names, self.at)).transpose()?;
+        Ok(Composed { motion, joints, parameters })
     }
 }
 
@@ -106,7 +117,7 @@ fn pin(spec: MotionSpec<String>, clips: &[Arc<CachedClip>]) -> Result<MotionSpec
 }
 
 /// Builds the motion, its refusals pointed into the request's `/motion`.
-fn build(spec: MotionSpec<Arc<dyn PinnedClip>>) -> Result<StreamMotion, ApiError> {
-    Motion::build(spec)
+fn build(spec: MotionSpec<Arc<dyn PinnedClip>>, ik: &IkLimits) -> Result<StreamMotion, ApiError> {
+    Motion::build_limited(spec, ik)
         .map_err(|e| ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string()))
 }

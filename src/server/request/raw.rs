@@ -7,7 +7,7 @@ use std::sync::Arc;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::anim::{Ease, Playback, SampleOptions, Skeleton, Space};
+use crate::anim::{Ease, ParameterLayout, Playback, SampleOptions, Skeleton, Space};
 use crate::server::cache::CachedClip;
 use crate::server::error::{ApiError, At};
 use crate::server::state::AppState;
@@ -41,8 +41,20 @@ pub enum Field {
     /// A page of the clip list: its size and where it starts.
     Limit,
     Cursor,
+    /// The clip-list filters (`request::list`).
+    Name,
+    NamePrefix,
+    NameContains,
+    Tag,
+    MinDuration,
+    MaxDuration,
+    CompatibleWith,
     /// One of the joint names of a subset (SPEC §6).
     JointAt(usize),
+    /// One of the parameter names of a subset (SPEC §8).
+    ParameterAt(usize),
+    /// A broadcast's `idle_timeout_secs` (SPEC §9).
+    IdleTimeout,
 }
 
 impl Field {
@@ -64,7 +76,16 @@ impl Field {
             Field::MaxFrames => "max_frames",
             Field::Limit => "limit",
             Field::Cursor => "cursor",
+            Field::Name => "name",
+            Field::NamePrefix => "name_prefix",
+            Field::NameContains => "name_contains",
+            Field::Tag => "tag",
+            Field::MinDuration => "min_duration",
+            Field::MaxDuration => "max_duration",
+            Field::CompatibleWith => "compatible_with",
             Field::JointAt(_) => "joints",
+            Field::ParameterAt(_) => "parameters",
+            Field::IdleTimeout => "idle_timeout_secs",
         }
     }
 }
@@ -84,6 +105,7 @@ pub fn in_body(field: Field) -> At {
         Field::When => At::Pointer(String::new()),
         Field::TimeAt(i) => At::Pointer(format!("/times/{i}")),
         Field::JointAt(i) => At::Pointer(format!("/joints/{i}")),
+        Field::ParameterAt(i) => At::Pointer(format!("/parameters/{i}")),
         other => At::Pointer(format!("/{}", other.name())),
     }
 }
@@ -206,6 +228,30 @@ pub fn joint_subset<S: AsRef<str>>(skeleton: &Skeleton, names: &[S], at: Locate)
             unprocessable("unknown_joint", Field::JointAt(i), at, detail)
         })?;
         indices.push(j);
+    }
+    indices.sort_unstable();
+    indices.dedup();
+    Ok(indices)
+}
+
+/// The indices of the parameters `names` in `layout`, in the clip's order
+/// (a subset's parameters; SPEC §8), as [`joint_subset`] for joints.
+///
+/// # Errors
+/// `unknown_parameter` at the first name the clip lacks.
+pub fn parameter_subset<S: AsRef<str>>(
+    layout: &ParameterLayout,
+    names: &[S],
+    at: Locate,
+) -> Result<Vec<usize>, ApiError> {
+    let mut indices = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let name = name.as_ref();
+        let p = layout.index_of(name).ok_or_else(|| {
+            let detail = format!("parameter '{name}' is not one of the clip's");
+            unprocessable("unknown_parameter", Field::ParameterAt(i), at, detail)
+        })?;
+        indices.push(p);
     }
     indices.sort_unstable();
     indices.dedup();

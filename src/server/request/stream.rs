@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use super::cost::{Estimate, check_stream};
 use super::motion::{ROOT_MOTION_BYTES, RawMotion};
-use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, unprocessable, whole};
+use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
 use crate::server::auth::Caller;
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
@@ -38,6 +38,8 @@ pub struct RawStream<'a> {
     pub paused: bool,
     /// Only these joints in every frame (SPEC §6); `None`: all.
     pub joints: Option<&'a [String]>,
+    /// Only these parameters in every frame (SPEC §8); `None`: all.
+    pub parameters: Option<&'a [String]>,
     pub at: Locate,
 }
 
@@ -111,6 +113,18 @@ impl RawStream<'_> {
         motion: RawMotion<'_>,
         caller: &Caller,
     ) -> Result<Opening, ApiError> {
+        let params = self.motion_params(state, motion).await?;
+        let permit = state.streams.admit_for(caller.addr, caller.token.clone());
+        Ok(Opening { params, permit })
+    }
+
+    /// A composed motion's stream parameters, checked, bound and priced as
+    /// [`RawStream::open_motion`] does, without a permit: a broadcast's
+    /// (SPEC §9), whose viewers are admitted one by one as they join.
+    ///
+    /// # Errors
+    /// As [`RawStream::open_motion`].
+    pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
         if self.modes.playback.is_some() {
             let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
             return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
@@ -122,19 +136,32 @@ impl RawStream<'_> {
         if composed.motion.has_root_motion() {
             frame += ROOT_MOTION_BYTES;
         }
+        let first_reports = composed.motion.first_clip().clip().ik_count();
+        frame += super::cost::ik_reports(
+            (composed.motion.ik_report_count() - first_reports) as u64,
+            request.encoding.into(),
+        ) + 8;
         let identity = format!("motion {:p}", Arc::as_ptr(&composed.motion));
         let params = StreamParams::of_motion(composed.motion, identity.into(), request).map_err(|e| self.refused(e))?;
-        self.admit(params, frame, state, caller)
+        self.bind(params, frame, state)
     }
 
     /// The joint subset applied, the stream priced (a frame at most `frame`
     /// bytes) and a permit asked of the caps.
     fn admit(&self, params: StreamParams, frame: u64, state: &AppState, caller: &Caller) -> Result<Opening, ApiError> {
-        let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
-        let params = params.with_joints(joints);
-        check_stream(frame, params.fps, &state.config.limits, self.at)?;
+        let params = self.bind(params, frame, state)?;
         let permit = state.streams.admit_for(caller.addr, caller.token.clone());
         Ok(Opening { params, permit })
+    }
+
+    /// The joint subset applied and the stream priced (a frame at most `frame` bytes).
+    fn bind(&self, params: StreamParams, frame: u64, state: &AppState) -> Result<StreamParams, ApiError> {
+        let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
+        let parameters =
+            self.parameters.map(|names| parameter_subset(params.motion.parameters(), names, self.at)).transpose()?;
+        let params = params.with_joints(joints).with_parameters(parameters).with_ik_limits(state.config.limits.ik());
+        check_stream(frame, params.fps, &state.config.limits, self.at)?;
+        Ok(params)
     }
 
     /// # Errors

@@ -118,6 +118,7 @@ fn stream(fps: Option<Raw<'static>>) -> RawStream<'static> {
         max_frames: None,
         paused: false,
         joints: None,
+        parameters: None,
         at: in_query,
     }
 }

@@ -14,6 +14,9 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use crate::anim::lint::Lint;
+use crate::import::Warning;
+use crate::import::warning::in_document;
 use crate::server::auth::{ReadAccess, WriteAccess};
 use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
@@ -22,7 +25,7 @@ use crate::server::request::{Page, RawPage, in_query};
 use crate::server::state::AppState;
 use crate::store::ClipMeta;
 
-use super::extract::{ClipId, JsonBody, Precondition, etag, precondition};
+use super::extract::{ClipId, JsonBody, Precondition, etag, precondition, unless_modified};
 use super::query::Query;
 use super::summary::ClipSummary;
 
@@ -34,14 +37,39 @@ pub struct ClipList {
     pub next_cursor: Option<String>,
 }
 
+/// A written clip's summary, and what in its document looks valid but
+/// probably wrong (the write succeeded; docs/warnings.md).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ClipWritten {
+    #[serde(flatten)]
+    pub summary: ClipSummary,
+    /// Pointers into the document as uploaded; `[]` when nothing looked wrong.
+    #[schema(value_type = Vec<super::schemas::Warning>)]
+    pub warnings: Vec<Warning>,
+}
+
 /// Parses, checks and builds an upload through the build gate (never on
 /// the async workers, whatever its size).
-async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
+pub(super) async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
     let limits = state.config.limits.clone();
     state.builds.run(move |cancel| admit(&body, &limits, cancel)).await
 }
 
-fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::HeaderName, String)>) -> Response {
+pub(super) fn with_etag(
+    meta: &ClipMeta,
+    status: StatusCode,
+    extra: Option<(axum::http::HeaderName, String)>,
+) -> Response {
+    etagged(meta, status, extra, ClipSummary::from(meta))
+}
+
+/// `body` with the version's `ETag` and the `extra` header.
+fn etagged(
+    meta: &ClipMeta,
+    status: StatusCode,
+    extra: Option<(axum::http::HeaderName, String)>,
+    body: impl Serialize,
+) -> Response {
     let mut headers = HeaderMap::new();
     if let Ok(v) = HeaderValue::from_str(&etag(meta.version)) {
         headers.insert(ETAG, v);
@@ -51,7 +79,13 @@ fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::Hea
     {
         headers.insert(name, v);
     }
-    (status, headers, Json(ClipSummary::from(meta))).into_response()
+    (status, headers, Json(body)).into_response()
+}
+
+/// A create's or replace's answer: the summary with the upload's warnings.
+fn written(meta: &ClipMeta, status: StatusCode, location: bool, lints: &[Lint]) -> Response {
+    let extra = location.then(|| (LOCATION, format!("/v1/clips/{}", meta.id)));
+    etagged(meta, status, extra, ClipWritten { summary: ClipSummary::from(meta), warnings: in_document(lints) })
 }
 
 /// Upload a clip.
@@ -59,7 +93,7 @@ fn with_etag(meta: &ClipMeta, status: StatusCode, extra: Option<(axum::http::Hea
     post, path = "/v1/clips", tag = "clips",
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
     responses(
-        (status = 201, description = "Stored; `Location` names the clip", body = ClipSummary),
+        (status = 201, description = "Stored; `Location` names the clip; `warnings` lists what looks valid but probably wrong", body = ClipWritten),
         (status = 400, description = "Not JSON", body = super::schemas::Problem),
         (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
         (status = 413, description = "Body over the limit", body = super::schemas::Problem),
@@ -73,23 +107,36 @@ pub async fn create_clip(
     _: WriteAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
-    let Admitted { new_clip, clip } = admit_body(&state, body).await?;
+    let Admitted { new_clip, clip, lints } = admit_body(&state, body).await?;
     let meta = state.store.create(new_clip).await?;
-    tracing::info!(id = %meta.id, name = %meta.name, "clip created");
-    let response = with_etag(&meta, StatusCode::CREATED, Some((LOCATION, format!("/v1/clips/{}", meta.id))));
+    tracing::info!(id = %meta.id, name = %meta.name, warnings = lints.len(), "clip created");
+    let response = written(&meta, StatusCode::CREATED, true, &lints);
     state.cache_written(Arc::new(CachedClip { meta, clip }));
     Ok(response)
 }
 
-/// List clips in creation order, a page at a time.
+/// List clips in creation order, a page at a time, optionally filtered
+/// (the filters combine with AND; each is a query on the store's indexes,
+/// never a read of documents).
 #[utoipa::path(
     get, path = "/v1/clips", tag = "clips",
     params(
         ("limit" = Option<u32>, Query, minimum = 1, maximum = 1000, description = "Page size, 1..=1000 (default 100)"),
-        ("cursor" = Option<String>, Query, pattern = "^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$", description = "`next_cursor` of the previous page"),
-        ("name" = Option<String>, Query, description = "Only clips with exactly this name"),
+        ("cursor" = Option<String>, Query, pattern = "^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$", description = "`next_cursor` of the previous page (with the same filters)"),
+        ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips with exactly this name"),
+        ("name_prefix" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips whose name starts with this (case-sensitive)"),
+        ("name_contains" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips whose name contains this (case-sensitive)"),
+        ("tag" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips carrying this tag"),
+        ("min_duration" = Option<f64>, Query, minimum = 0, description = "Only clips at least this long (`end - start`, seconds, inclusive)"),
+        ("max_duration" = Option<f64>, Query, minimum = 0, description = "Only clips at most this long (seconds, inclusive)"),
+        ("compatible_with" = Option<String>, Query, description = "A clip id: only clips whose joint names include every joint name of that clip (the ones a layer of it can be put on; the clip itself included). 404 `clip_not_found` if it does not exist"),
     ),
-    responses((status = 200, body = ClipList), (status = 400, body = super::schemas::Problem)),
+    responses(
+        (status = 200, body = ClipList),
+        (status = 400, body = super::schemas::Problem),
+        (status = 404, description = "`compatible_with` names no clip", body = super::schemas::Problem),
+        (status = 422, description = "A negative duration, or `min_duration` above `max_duration` (`bad_duration_range`)", body = super::schemas::Problem),
+    ),
     security((), ("bearer" = []))
 )]
 pub async fn list_clips(
@@ -97,7 +144,18 @@ pub async fn list_clips(
     _: ReadAccess,
     Query(q): Query,
 ) -> Result<Json<ClipList>, ApiError> {
-    let raw = RawPage { limit: q.raw("limit"), cursor: q.get("cursor"), name: q.get("name"), at: in_query };
+    let raw = RawPage {
+        limit: q.raw("limit"),
+        cursor: q.get("cursor"),
+        name: q.get("name"),
+        name_prefix: q.get("name_prefix"),
+        name_contains: q.get("name_contains"),
+        tag: q.get("tag"),
+        min_duration: q.raw("min_duration"),
+        max_duration: q.raw("max_duration"),
+        compatible_with: q.get("compatible_with"),
+        at: in_query,
+    };
     let Page { clips, next_cursor } = raw.read(&state).await?;
     Ok(Json(ClipList { clips: clips.iter().map(ClipSummary::from).collect(), next_cursor }))
 }
@@ -121,17 +179,15 @@ pub async fn get_clip(
 ) -> Result<Response, ApiError> {
     let if_none_match = precondition(&headers, IF_NONE_MATCH, true)?;
     let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
-    let tag = HeaderValue::from_str(&etag(stored.meta.version)).map_err(ApiError::internal)?;
-    if if_none_match.is_some_and(|p| p.matches(stored.meta.version)) {
-        return Ok((StatusCode::NOT_MODIFIED, [(ETAG, tag)]).into_response());
-    }
     let content_type = HeaderValue::from_static("application/json");
-    Ok((StatusCode::OK, [(ETAG, tag), (CONTENT_TYPE, content_type)], stored.doc_json).into_response())
+    unless_modified(if_none_match, stored.meta.version, || {
+        ([(CONTENT_TYPE, content_type)], stored.doc_json).into_response()
+    })
 }
 
 /// The version `expected` must name for a conditional write, resolving a
 /// multi-tag `If-Match` against the current version.
-async fn expected_version(
+pub(super) async fn expected_version(
     state: &AppState,
     id: &str,
     condition: Option<Precondition>,
@@ -163,7 +219,7 @@ async fn expected_version(
     ),
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
     responses(
-        (status = 200, description = "Replaced", body = ClipSummary),
+        (status = 200, description = "Replaced; `warnings` lists what looks valid but probably wrong", body = ClipWritten),
         (status = 404, body = super::schemas::Problem),
         (status = 412, description = "`If-Match` did not match the current version", body = super::schemas::Problem),
         (status = 422, body = super::schemas::Problem),
@@ -178,11 +234,11 @@ pub async fn replace_clip(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let condition = precondition(&headers, IF_MATCH, false)?;
-    let Admitted { new_clip, clip } = admit_body(&state, body).await?;
+    let Admitted { new_clip, clip, lints } = admit_body(&state, body).await?;
     let expected = expected_version(&state, &id, condition).await?;
     let meta = state.store.replace(&id, new_clip, expected).await?;
-    tracing::info!(id = %meta.id, version = meta.version, "clip replaced");
-    let response = with_etag(&meta, StatusCode::OK, None);
+    tracing::info!(id = %meta.id, version = meta.version, warnings = lints.len(), "clip replaced");
+    let response = written(&meta, StatusCode::OK, false, &lints);
     state.cache_written(Arc::new(CachedClip { meta, clip }));
     Ok(response)
 }

@@ -4,9 +4,10 @@
 
 use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Path, Request};
-use axum::http::header::CONTENT_TYPE;
+use axum::http::header::{CONTENT_TYPE, ETAG};
 use axum::http::request::Parts;
-use axum::http::{HeaderMap, HeaderName, StatusCode};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
 
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
@@ -34,7 +35,7 @@ impl FromRequest<AppState> for JsonBody {
         match Bytes::from_request(req, state).await {
             Ok(bytes) => Ok(JsonBody(bytes)),
             Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
-                Err(ApiError::PayloadTooLarge { limit: state.config.limits.max_body_bytes })
+                Err(ApiError::PayloadTooLarge { limit: state.config.limits.max_body_bytes, setting: "max_body_bytes" })
             }
             Err(e) => Err(ApiError::parameter("unreadable_body", "body", e.body_text())),
         }
@@ -86,6 +87,26 @@ impl Precondition {
 /// The strong ETag of a clip version.
 pub fn etag(version: u64) -> String {
     format!("\"{version}\"")
+}
+
+/// A conditional GET of stored `version`: `304` with its `ETag` when
+/// `if_none_match` (parsed before the lookup, so a malformed header is a
+/// 400 whether or not the clip exists) names it, else `ok()` with the `ETag`.
+///
+/// # Errors
+/// None in practice: an `ETag` is always a valid header value.
+pub fn unless_modified(
+    if_none_match: Option<Precondition>,
+    version: u64,
+    ok: impl FnOnce() -> Response,
+) -> Result<Response, ApiError> {
+    let tag = HeaderValue::from_str(&etag(version)).map_err(ApiError::internal)?;
+    if if_none_match.is_some_and(|p| p.matches(version)) {
+        return Ok((StatusCode::NOT_MODIFIED, [(ETAG, tag)]).into_response());
+    }
+    let mut response = ok();
+    response.headers_mut().insert(ETAG, tag);
+    Ok(response)
 }
 
 /// Parses a conditional header (RFC 9110 §13.1).

@@ -19,22 +19,26 @@ use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
 
+use super::access_log::{self, AccessLog};
 use super::config::Cors;
 use super::error::ApiError;
 use super::metrics;
 use super::state::AppState;
-use super::{auth, body_guard, ratelimit, shed};
+use super::{auth, body_guard, compression, ratelimit, shed, spool};
 
+pub mod broadcasts;
 pub mod clips;
 pub mod extract;
 pub mod health;
 pub mod import;
 pub mod motions;
 pub mod openapi;
+pub mod patch;
 pub mod pieces;
 pub mod poses;
 pub mod query;
 pub mod schemas;
+pub mod skeleton;
 pub mod stream;
 pub mod summary;
 pub mod viewer;
@@ -48,12 +52,21 @@ pub fn router(state: AppState) -> Router {
     let allowed = query::Allowed::from_openapi(&<openapi::ApiDoc as utoipa::OpenApi>::openapi());
     let strict = Router::new()
         .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
-        .route("/v1/clips/import", post(import::import_clips))
-        .route("/v1/clips/{id}", get(clips::get_clip).put(clips::replace_clip).delete(clips::delete_clip))
+        // Its body is spooled under max_import_bytes by the guard: no in-memory limit applies.
+        .route(import::PATH, post(import::import_clips).layer(DefaultBodyLimit::disable()))
+        .route(
+            "/v1/clips/{id}",
+            get(clips::get_clip).put(clips::replace_clip).patch(patch::patch_clip).delete(clips::delete_clip),
+        )
+        .route("/v1/clips/{id}/skeleton", get(skeleton::get_skeleton))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
         .route("/v1/clips/{id}/stream", get(stream::stream))
         .route("/v1/stream", get(stream::motion_stream))
+        .route("/v1/broadcasts", post(broadcasts::create).get(broadcasts::list))
+        .route("/v1/broadcasts/{id}", get(broadcasts::get).delete(broadcasts::delete))
+        .route("/v1/broadcasts/{id}/controls", post(broadcasts::control))
+        .route("/v1/broadcasts/{id}/stream", get(broadcasts::watch))
         .route("/v1/poses", post(motions::pose))
         .route("/v1/samples", post(motions::samples))
         .route("/healthz", get(health::healthz))
@@ -80,9 +93,17 @@ pub fn router(state: AppState) -> Router {
                 max_bytes: limits.max_body_bytes,
                 read_timeout: limits.body_read_timeout,
                 arrivals: state.arrivals.clone(),
+                spool: Some(spool::SpoolRoute::new(
+                    import::PATH,
+                    limits.max_import_bytes,
+                    "max_import_bytes",
+                    limits.max_concurrent_builds,
+                )),
             },
             body_guard::guard,
         ))
+        // Compressed bodies are decoded before the body guard reads them: its limits count decoded bytes.
+        .layer(compression::requests(state.config.compression))
         .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
         .layer(middleware::from_fn_with_state(state.auth.clone(), auth::identify_requests))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
@@ -91,6 +112,9 @@ pub fn router(state: AppState) -> Router {
             metrics::panic_caught("http");
             ApiError::internal(anyhow::anyhow!("handler panicked")).into_response()
         }))
+        .layer(middleware::from_fn_with_state(AccessLog::new(state.config.access_log_sample), access_log::log))
+        .layer(compression::responses(state.config.compression))
+        .layer(middleware::from_fn_with_state(state.config.compression, compression::negotiate))
         .layer(TraceLayer::new_for_http())
         .layer(PropagateRequestIdLayer::new(request_id.clone()))
         .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
@@ -114,7 +138,7 @@ fn cors_layer(cors: &Cors) -> CorsLayer {
     };
     CorsLayer::new()
         .allow_origin(origins)
-        .allow_methods([Method::GET, Method::POST, Method::PUT, Method::DELETE])
+        .allow_methods([Method::GET, Method::POST, Method::PUT, Method::PATCH, Method::DELETE])
         .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, header::IF_MATCH, header::IF_NONE_MATCH])
         .expose_headers([header::ETAG, header::LOCATION])
         .max_age(Duration::from_secs(3600))

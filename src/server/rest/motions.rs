@@ -21,7 +21,7 @@ use crate::server::request::{
     Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body,
 };
 use crate::server::state::AppState;
-use crate::wire::json::{Extras, MatricesJson, PoseJson, SpaceDoc};
+use crate::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson, SpaceDoc};
 use crate::wire::motion::MotionDoc;
 
 use super::extract::JsonBody;
@@ -44,6 +44,9 @@ pub struct PoseOfMotion {
     /// Only these joints (in skeleton order); model space is still computed through the whole hierarchy.
     #[serde(default)]
     pub joints: Option<Vec<String>>,
+    /// Only these parameters (SPEC §8), in the first layer's clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
 }
 
 /// `POST /v1/samples`: many poses of a motion, at `times` or on a frame range.
@@ -67,6 +70,9 @@ pub struct SamplesOfMotion {
     pub format: Option<String>,
     #[serde(default)]
     pub joints: Option<Vec<String>>,
+    /// Only these parameters (SPEC §8), in the first layer's clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
 }
 
 fn text(v: &Option<String>) -> Option<Raw<'_>> {
@@ -81,7 +87,7 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
         (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it", body = super::schemas::PoseSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
         (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); `no_inverse_binds`; the cost model's `too_many_poses`, `answer_too_large`", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `answer_too_large`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -94,8 +100,13 @@ pub async fn pose(
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
-    let motion =
-        RawMotion { spec: req.motion.to_spec(), joints: req.joints.as_deref(), format: checked.format, at: in_body };
+    let motion = RawMotion {
+        spec: req.motion.to_spec("/motion")?,
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        format: checked.format,
+        at: in_body,
+    };
     let composed = motion.resolve(&state).await?;
     let cost = composed.cost(1, checked.format, Wire::Json);
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
@@ -134,8 +145,13 @@ pub async fn samples(
         at: in_body,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let motion =
-        RawMotion { spec: req.motion.to_spec(), joints: req.joints.as_deref(), format: sampling.format, at: in_body };
+    let motion = RawMotion {
+        spec: req.motion.to_spec("/motion")?,
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        format: sampling.format,
+        at: in_body,
+    };
     let composed = motion.resolve(&state).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Json);
@@ -180,7 +196,16 @@ impl MotionPoses {
         let t = self.times[k];
         let space = if self.format == Format::Trs { self.space } else { Space::Local };
         let clip_time = motion.sample(t, &MotionOptions { space, ..MotionOptions::default() }, &mut self.sampler);
-        let extras = Extras { joints: self.composed.joints.as_deref(), root_motion: self.sampler.root_motion() };
+        let extras = Extras {
+            joints: self.composed.joints.as_deref(),
+            root_motion: self.sampler.root_motion(),
+            ik: self.sampler.ik_reports(),
+            parameters: ParameterValues::of(
+                motion.parameters(),
+                self.sampler.pose(),
+                self.composed.parameters.as_deref(),
+            ),
+        };
         let (clip, skeleton) = (self.composed.clip_id(), motion.skeleton());
         match self.format {
             Format::Trs => {

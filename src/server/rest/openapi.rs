@@ -10,8 +10,8 @@ use utoipa::openapi::{Content, Ref, RefOr, Response, ResponseBuilder};
 use utoipa::{Modify, OpenApi};
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem};
-use super::{clips, health, import, motions, poses, stream, viewer};
+use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem, Warning};
+use super::{broadcasts, clips, health, import, motions, patch, poses, skeleton, stream, viewer};
 use crate::server::error::PROBLEM_JSON;
 
 /// The bearer scheme, and on every operation that takes it the two answers
@@ -27,7 +27,7 @@ impl Modify for BearerAuth {
             SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
         );
         for (path, item) in openapi.paths.paths.iter_mut() {
-            let operations = [&mut item.get, &mut item.put, &mut item.post, &mut item.delete];
+            let operations = [&mut item.get, &mut item.put, &mut item.post, &mut item.patch, &mut item.delete];
             for op in operations.into_iter().flatten() {
                 let mut add = |status: &str, what: &str| {
                     op.responses.responses.entry(status.to_owned()).or_insert_with(|| problem_response(what));
@@ -41,8 +41,8 @@ impl Modify for BearerAuth {
                          or gives twice (`unknown_parameter`, `repeated_parameter`)",
                     );
                 }
-                let json_body =
-                    matches!(&op.request_body, Some(RefOr::T(b)) if b.content.contains_key("application/json"));
+                let json_body = matches!(&op.request_body, Some(RefOr::T(b))
+                    if b.content.keys().any(|k| k == "application/json" || k.ends_with("+json")));
                 if json_body {
                     add("413", "Request body over the size limit");
                     add("415", "The body is not declared application/json");
@@ -83,17 +83,21 @@ fn problem_response(description: &str) -> RefOr<Response> {
     info(title = "inbetween", description = "Keyframe clips in, inbetweens out. See SPEC §3."),
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
+        patch::patch_clip, skeleton::get_skeleton,
         import::import_clips,
         poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream, stream::motion_stream,
+        broadcasts::create, broadcasts::list, broadcasts::get, broadcasts::delete, broadcasts::control,
+        broadcasts::watch,
         health::healthz, health::readyz, health::metrics,
         viewer::viewer_page,
     ),
-    components(schemas(Problem, PoseSchema, PosesSchema, JointPoseSchema, super::stream::StreamOpen)),
+    components(schemas(Problem, Warning, PoseSchema, PosesSchema, JointPoseSchema, super::stream::StreamOpen)),
     modifiers(&BearerAuth),
     tags(
         (name = "clips", description = "Store and fetch keyframe clips"),
         (name = "poses", description = "Evaluate poses"),
         (name = "streams", description = "Fixed-rate frames over a WebSocket"),
+        (name = "broadcasts", description = "One shared playback, many viewers (SPEC §9)"),
         (name = "operations", description = "Health and metrics"),
         (name = "viewer", description = "The browser viewer page"),
     )

@@ -12,6 +12,7 @@ use axum::body::Body;
 use axum::http::header::CONTENT_TYPE;
 use axum::http::{HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
+use futures_util::StreamExt;
 
 use crate::server::error::ApiError;
 use crate::server::state::AppState;
@@ -89,11 +90,14 @@ impl Pieces {
     }
 
     /// A 200 whose JSON body is these pieces, sent as the client reads them.
+    /// Fused: a body may be polled again after its end (tower-http's
+    /// compressor does, through its reader), and a bare `Unfold` panics then.
     pub fn into_response(self) -> Response {
         let stream = futures_util::stream::unfold(self, |mut pieces| async move {
             let piece = pieces.piece().await?;
             Some((piece, pieces))
-        });
+        })
+        .fuse();
         let body = Body::from_stream(stream);
         (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
     }

@@ -25,9 +25,10 @@ use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::request::{
     Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
+    parameter_subset,
 };
 use crate::server::state::AppState;
-use crate::wire::json::{EaseDoc, Extras, MatricesJson, PlaybackDoc, PoseJson, SpaceDoc};
+use crate::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc};
 
 use super::extract::{ClipId, JsonBody};
 use super::pieces::{self, Pieces, PoseWriter};
@@ -41,19 +42,28 @@ thread_local! {
     static SCRATCH: RefCell<(Sampler, Vec<Mat4>)> = RefCell::new((Sampler::new(), Vec::new()));
 }
 
+/// The joint and parameter subsets of a request (`None`: all).
+#[derive(Debug, Clone, Default)]
+struct Subsets {
+    joints: Option<Vec<usize>>,
+    parameters: Option<Vec<usize>>,
+}
+
 /// Appends the pose of `cached` at request time `t` to `out` as JSON (only
-/// `joints`, when given).
+/// the subsets' joints and parameters, when given).
 fn write_pose(
     out: &mut Vec<u8>,
     cached: &CachedClip,
     t: f64,
     (options, format): (&SampleOptions, Format),
-    joints: Option<&[usize]>,
+    subsets: &Subsets,
 ) {
-    let extras = Extras { joints, root_motion: None };
     let clip = &cached.clip;
     SCRATCH.with_borrow_mut(|(sampler, matrices)| {
         let clip_time = evaluate(clip, t, options, format, sampler, matrices);
+        let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), subsets.parameters.as_deref());
+        let joints = subsets.joints.as_deref();
+        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters };
         match format {
             Format::Trs => {
                 let pose = PoseJson {
@@ -96,6 +106,7 @@ pub(super) fn json_response(body: Vec<u8>) -> Response {
         ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
         ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
+        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (SPEC §8): only those parameters, in the clip's order"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
@@ -113,13 +124,17 @@ pub async fn get_pose(
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
     let (req, cached) = raw.resolve(&state, &id, Wire::Json).await?;
-    let names: Option<Vec<&str>> = q.raw("joints").map(|raw| match raw {
-        Raw::Text(text) => text.split(',').collect(),
-        _ => Vec::new(),
-    });
-    let joints = names.map(|names| joint_subset(cached.clip.skeleton(), &names, in_query)).transpose()?;
+    let list = |name: &str| -> Option<Vec<&str>> {
+        q.raw(name).map(|raw| match raw {
+            Raw::Text(text) => text.split(',').collect(),
+            _ => Vec::new(),
+        })
+    };
+    let joints = list("joints").map(|names| joint_subset(cached.clip.skeleton(), &names, in_query)).transpose()?;
+    let parameters =
+        list("parameters").map(|names| parameter_subset(cached.clip.parameters(), &names, in_query)).transpose()?;
     let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
-    write_pose(&mut body, &cached, req.t, (&req.options, req.format), joints.as_deref());
+    write_pose(&mut body, &cached, req.t, (&req.options, req.format), &Subsets { joints, parameters });
     state.counters.poses.increment(1);
     Ok(json_response(body))
 }
@@ -157,6 +172,9 @@ pub struct SampleRequest {
     /// Only these joints, in skeleton order (model space still goes through the whole hierarchy).
     #[serde(default)]
     pub joints: Option<Vec<String>>,
+    /// Only these parameters (SPEC §8), in the clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
 }
 
 impl SampleRequest {
@@ -224,8 +242,11 @@ pub async fn sample(
     let req: SampleRequest = parse_json(&body)?;
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
     let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;
+    let parameters = (req.parameters.as_deref())
+        .map(|names| parameter_subset(cached.clip.parameters(), names, in_body))
+        .transpose()?;
     let (large, blocking, n) = (sampling.is_large(), sampling.is_blocking(), sampling.times.len());
-    let mut writer = ClipPoses { sampling, cached, joints };
+    let mut writer = ClipPoses { sampling, cached, subsets: Subsets { joints, parameters } };
     if large {
         return Ok(Pieces::new(state, Box::new(writer)).into_response());
     }
@@ -243,7 +264,7 @@ pub async fn sample(
 struct ClipPoses {
     sampling: Sampling,
     cached: Arc<CachedClip>,
-    joints: Option<Vec<usize>>,
+    subsets: Subsets,
 }
 
 impl PoseWriter for ClipPoses {
@@ -262,7 +283,7 @@ impl PoseWriter for ClipPoses {
             }
             let sampling = &self.sampling;
             let how = (&sampling.options, sampling.format);
-            write_pose(out, &self.cached, sampling.times[k], how, self.joints.as_deref());
+            write_pose(out, &self.cached, sampling.times[k], how, &self.subsets);
         }
     }
 }

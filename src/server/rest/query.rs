@@ -39,6 +39,7 @@ impl Allowed {
                 (Method::PUT, &item.put),
                 (Method::POST, &item.post),
                 (Method::DELETE, &item.delete),
+                (Method::PATCH, &item.patch),
             ];
             let methods = operations
                 .into_iter()

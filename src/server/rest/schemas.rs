@@ -24,6 +24,20 @@ pub struct Problem {
     pub parameter: Option<String>,
 }
 
+/// Something valid but probably wrong in an upload or import: the upload
+/// succeeded, the clip is stored (docs/warnings.md lists every code).
+#[derive(Serialize, ToSchema)]
+pub struct Warning {
+    /// Stable machine-readable code, e.g. `rotation_not_unit`.
+    pub code: String,
+    /// JSON pointer into what was uploaded: the clip document
+    /// (`/tracks/3/values/5`), the glTF file (`/animations/0/channels/3`),
+    /// or a BVH header (`/MOTION/Frame Time`); empty for `too_many_warnings`.
+    pub pointer: String,
+    /// What was noticed, and what the server did about it.
+    pub detail: String,
+}
+
 /// One joint of a `format=trs` pose.
 #[derive(Serialize, ToSchema)]
 pub struct JointPoseSchema {
@@ -47,6 +61,15 @@ pub struct PoseSchema {
     /// `local` or `model`.
     pub space: String,
     pub joints: Vec<JointPoseSchema>,
+    /// IK reports (SPEC §7), one per constraint solved, when there are any:
+    /// each layer's clip constraints bottom to top, then the request's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ik: Option<Vec<crate::wire::ik::IkReportDoc>>,
+    /// The clip's parameters (SPEC §8) by name, each its values (the key's
+    /// width), when the clip has any; only a request's `parameters` if given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
+    pub parameters: Option<std::collections::BTreeMap<String, Vec<f32>>>,
 }
 
 #[derive(Serialize, ToSchema)]
@@ -58,3 +81,19 @@ pub struct PosesSchema {
 #[derive(ToSchema)]
 #[schema(value_type = String, format = Binary)]
 pub struct FileBytes(pub Vec<u8>);
+
+/// A merge patch of a clip (RFC 7396): each field given replaces the
+/// document's (an object merges into `metadata`); `null` removes it.
+#[derive(Serialize, ToSchema)]
+pub struct ClipPatch {
+    #[schema(min_length = 1, max_length = 256)]
+    pub name: Option<String>,
+    /// Replaces the whole list; `null` or `[]` removes every tag.
+    pub tags: Option<Vec<String>>,
+    /// Merged into the stored object key by key; a key set to `null` is removed.
+    #[schema(value_type = Option<Object>)]
+    pub metadata: Option<serde_json::Value>,
+    pub playback: Option<crate::wire::json::PlaybackDoc>,
+    /// Replaces the whole list.
+    pub events: Option<Vec<crate::wire::json::EventDoc>>,
+}

@@ -69,6 +69,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
+        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (SPEC §8): frames carry only those parameters, in the clip's order"),
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
@@ -88,10 +89,13 @@ pub async fn stream(
 ) -> Result<Response, ApiError> {
     // A plain GET (no upgrade headers) gets a problem body like every other refusal.
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
-    let joints: Option<Vec<String>> = q.raw("joints").map(|raw| match raw {
-        Raw::Text(text) => text.split(',').map(str::to_owned).collect(),
-        _ => Vec::new(),
-    });
+    let list = |name: &str| -> Option<Vec<String>> {
+        q.raw(name).map(|raw| match raw {
+            Raw::Text(text) => text.split(',').map(str::to_owned).collect(),
+            _ => Vec::new(),
+        })
+    };
+    let (joints, parameters) = (list("joints"), list("parameters"));
     let raw = RawStream {
         fps: q.raw("fps"),
         start: q.raw("start"),
@@ -101,6 +105,7 @@ pub async fn stream(
         max_frames: q.raw("max_frames"),
         paused: false,
         joints: joints.as_deref(),
+        parameters: parameters.as_deref(),
         at: in_query,
     };
     // The peer address, when served with connect info (`Application` is);
@@ -197,6 +202,8 @@ pub struct StreamOpen {
     max_frames: Option<f64>,
     /// Only these joints in every frame, in skeleton order (default: all).
     joints: Option<Vec<String>>,
+    /// Only these parameters in every frame (SPEC §8), in the first layer's clip's order (default: all).
+    parameters: Option<Vec<String>>,
     /// Start paused (a private playback; `play` resumes it).
     #[serde(default)]
     paused: bool,
@@ -241,9 +248,16 @@ async fn open(
         max_frames: msg.max_frames.map(Raw::Number),
         paused: msg.paused,
         joints: msg.joints.as_deref(),
+        parameters: msg.parameters.as_deref(),
         at: in_body,
     };
-    let motion = RawMotion { spec: msg.motion.to_spec(), joints: None, format: Format::Trs, at: in_body };
+    let motion = RawMotion {
+        spec: msg.motion.to_spec("/motion")?,
+        joints: None,
+        parameters: None,
+        format: Format::Trs,
+        at: in_body,
+    };
     let Opening { params, permit } = raw.open_motion(state, motion, caller).await?;
     let engine = &state.streams;
     Ok(permit.map(
@@ -254,9 +268,12 @@ async fn open(
 }
 
 /// Inbound messages are small controls; outbound frames are buffered up
-/// to a bound, so a viewer that stops reading cannot grow memory.
-fn configured(upgrade: WebSocketUpgrade, l: &Limits) -> WebSocketUpgrade {
+/// to a bound, so a viewer that stops reading cannot grow memory. The
+/// `inbetween` subprotocol is selected when offered: a browser offers it
+/// with its token (`server::auth`) and needs one of its offers chosen.
+pub(super) fn configured(upgrade: WebSocketUpgrade, l: &Limits) -> WebSocketUpgrade {
     upgrade
+        .protocols([crate::server::auth::WS_PROTOCOL])
         .max_message_size(l.ws_max_message_bytes)
         .max_frame_size(l.ws_max_message_bytes)
         .write_buffer_size(ws_write_buffer(l))
@@ -264,12 +281,12 @@ fn configured(upgrade: WebSocketUpgrade, l: &Limits) -> WebSocketUpgrade {
         .read_buffer_size(READ_BUFFER_BYTES)
 }
 
-async fn serve(socket: WebSocket, sub: Subscription, motions: Arc<dyn MotionResolver>) {
+pub(super) async fn serve(socket: WebSocket, sub: Subscription, motions: Arc<dyn MotionResolver>) {
     let served = crate::stream::ws::serve(socket, sub, WsConfig::default(), Some(motions));
     crate::panics::guarded("websocket", served).await;
 }
 
-async fn refuse(mut socket: WebSocket, code: u16, reason: String) {
+pub(super) async fn refuse(mut socket: WebSocket, code: u16, reason: String) {
     let frame = CloseFrame { code, reason: Utf8Bytes::from(reason) };
     let _ = socket.send(Message::Close(Some(frame))).await;
 }
@@ -277,7 +294,7 @@ async fn refuse(mut socket: WebSocket, code: u16, reason: String) {
 /// Crossfade targets, looked up like a composed request's motion.
 struct StateMotions(AppState);
 
-fn resolver(state: &AppState) -> Arc<dyn MotionResolver> {
+pub(super) fn resolver(state: &AppState) -> Arc<dyn MotionResolver> {
     Arc::new(StateMotions(state.clone()))
 }
 
@@ -287,7 +304,13 @@ impl MotionResolver for StateMotions {
         Box::pin(async move {
             let built = async {
                 let doc: MotionDoc = super::poses::parse_json(motion.to_string().as_bytes())?;
-                let raw = RawMotion { spec: doc.to_spec(), joints: None, format: Format::Trs, at: in_body };
+                let raw = RawMotion {
+                    spec: doc.to_spec("/motion")?,
+                    joints: None,
+                    parameters: None,
+                    format: Format::Trs,
+                    at: in_body,
+                };
                 Ok::<_, ApiError>(raw.resolve(&state).await?.motion)
             };
             built.await.map_err(|e| under_to(e.problem_json()))

@@ -28,6 +28,8 @@ pub struct ClipSummary {
     pub playback: PlaybackDoc,
     /// How many events the clip has.
     pub events: u32,
+    /// The document's `tags`.
+    pub tags: Vec<String>,
     /// RFC 3339, UTC.
     pub created_at: String,
     pub updated_at: String,
@@ -49,6 +51,7 @@ impl From<&ClipMeta> for ClipSummary {
             duration: s.end - s.start,
             playback: s.playback.into(),
             events: s.events,
+            tags: m.tags.clone(),
             created_at: rfc3339(m.created_at),
             updated_at: rfc3339(m.updated_at),
             etag: etag(m.version),

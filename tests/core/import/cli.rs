@@ -32,7 +32,7 @@ fn prints_clip_documents_that_parse_and_build() {
         let out = import_ok(&[path.to_str().unwrap()]);
         let docs = out["clips"].as_array().unwrap();
         assert_eq!(docs.len(), clips, "{rel}");
-        assert_eq!(out["skipped"], json!([]));
+        assert_eq!(out["warnings"], json!([]));
         for doc in docs {
             let (_, spec) = parse_clip(&serde_json::to_vec(doc).unwrap()).unwrap();
             Clip::build(&spec).unwrap();
@@ -41,6 +41,11 @@ fn prints_clip_documents_that_parse_and_build() {
     let bvh = import_ok(&[testdata("bvh/131_01.bvh").to_str().unwrap(), "--interpolation", "catmull_rom"]);
     assert_eq!(bvh["clips"][0]["name"], "131_01", "BVH clips are named after the file");
     assert_eq!(bvh["clips"][0]["tracks"][0]["interpolation"], "catmull_rom");
+    let smooth = import_ok(&[testdata("bvh/131_01.bvh").to_str().unwrap(), "--interpolation", "b_spline"]);
+    let tracks = smooth["clips"][0]["tracks"].as_array().unwrap();
+    assert!(tracks.iter().all(|t| t["interpolation"] == "b_spline"), "every BVH track smoothed");
+    let (_, spec) = parse_clip(&serde_json::to_vec(&smooth["clips"][0]).unwrap()).unwrap();
+    Clip::build(&spec).unwrap();
 }
 
 #[test]

@@ -414,16 +414,23 @@ fn malformed_and_unprocessable_are_told_apart() {
     assert!(e.to_string().contains("x.bin"), "{e}");
 }
 
+/// Weights of a node without a mesh of morph targets have nothing to weigh:
+/// a `not_imported` warning with the reason (with targets they are a
+/// parameter, SPEC §8: `tests/service/api/parameters.rs`).
 #[test]
-fn morph_target_weights_are_reported_as_skipped() {
+fn morph_weights_of_a_node_without_targets_are_reported_as_not_imported() {
     let bytes = gltf(|d| {
         let weights = json!({"sampler": 0, "target": {"node": 0, "path": "weights"}});
         d["animations"][0]["channels"].as_array_mut().unwrap().push(weights);
     });
     let imported = import(&bytes, Format::Gltf, &ImportOptions::default()).unwrap();
     assert_eq!(imported.clips[0].tracks.len(), 1);
-    assert_eq!(imported.skipped.len(), 1);
-    assert!(imported.skipped[0].what.contains("weights"), "{:?}", imported.skipped);
+    assert_eq!(imported.warnings.len(), 1);
+    assert_eq!(
+        (imported.warnings[0].code.as_str(), imported.warnings[0].pointer.as_str()),
+        ("not_imported", "/animations/0/channels/1")
+    );
+    assert!(imported.warnings[0].detail.contains("no mesh with morph targets"), "{:?}", imported.warnings);
 }
 
 #[test]

@@ -13,20 +13,25 @@ mod hostile;
 pub mod reference;
 
 use inbetween::anim::{Clip, ClipSpec, Playback, SampleOptions, Sampler, Space};
-use inbetween::import::{Format, ImportOptions, Imported, import, import_with};
+use inbetween::import::{Format, ImportOptions, Imported, Source, import, import_with};
 
 /// Imports a testdata file through the library, resolving a sibling buffer
 /// file the way the CLI does (the test reads it itself).
 pub fn import_file(rel: &str, options: &ImportOptions) -> Imported {
-    let path = reference::testdata(rel);
-    let bytes = std::fs::read(&path).unwrap();
+    import_path(&reference::testdata(rel), options)
+}
+
+/// [`import_file`] for any file.
+pub fn import_path(path: &std::path::Path, options: &ImportOptions) -> Imported {
+    let rel = path.display();
+    let bytes = std::fs::read(path).unwrap();
     let format = match path.extension().and_then(|e| e.to_str()) {
         Some("glb") => Format::Glb,
         Some("bvh") => Format::Bvh,
         _ => Format::Gltf,
     };
     let dir = path.parent().unwrap().to_path_buf();
-    let mut resolve = |uri: &str| std::fs::read(dir.join(uri)).map(bytes::Bytes::from).map_err(|e| e.to_string());
+    let mut resolve = |uri: &str| std::fs::read(dir.join(uri)).map(Source::from).map_err(|e| e.to_string());
     let imported = if format == Format::Gltf && bytes.windows(5).any(|w| w == b".bin\"") {
         import_with(&bytes, format, options, Some(&mut resolve))
     } else {

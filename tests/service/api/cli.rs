@@ -29,7 +29,7 @@ async fn file_env_and_flags_layer_and_json_logs_are_json() {
         .env("INBETWEEN_LOG_FORMAT", "json")
         .start()
         .await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let post = |token: &str| {
         http.post(format!("{}/v1/clips", server.base()))
             .bearer_auth(token)
@@ -74,7 +74,7 @@ fn numbers(text: &str) -> Vec<f64> {
 async fn watch_streams_a_motion_file_by_clip_names_and_sends_a_crossfade_at_its_frame() {
     let dir = tempfile::tempdir().unwrap();
     let server = ServerProcess::serve().data_dir(dir.path()).start().await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let fox = std::fs::read("examples/gltf/Fox/Fox.glb").unwrap();
     let imported: Value =
         http.post(server.url("/v1/clips/import")).body(fox).send().await.unwrap().json().await.unwrap();
@@ -122,4 +122,36 @@ async fn watch_streams_a_motion_file_by_clip_names_and_sends_a_crossfade_at_its_
         close(field(line, "b_Hip_01"), &hips_at(t).await, line);
     }
     close(field(lines[fade], "b_Hip_01"), &hips_at(fade as f64 / fps).await, "the fade's first frame is A's pose");
+}
+
+#[tokio::test]
+async fn watch_follows_a_broadcast_sends_its_controls_and_exits_cleanly_when_it_is_deleted() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = ServerProcess::serve().data_dir(dir.path()).start().await;
+    let http = crate::common::http_client();
+    let upload = http.post(server.url("/v1/clips")).header("content-type", "application/json").body(WAVE);
+    let clip: Value = upload.send().await.unwrap().json().await.unwrap();
+    let body = json!({"motion": {"layers": [{"clip": clip["id"]}]}, "fps": 10});
+    let created: Value =
+        http.post(server.url("/v1/broadcasts")).json(&body).send().await.unwrap().json().await.unwrap();
+    let id = created["id"].as_str().unwrap().to_owned();
+
+    let mut watch = tokio::process::Command::from(ServerProcess::command());
+    watch.args(["watch", "--server", &server.base(), "--broadcast", &id, "--at", r#"0={"op":"seek","time":0.25}"#]);
+    let running = watch.stdin(std::process::Stdio::null()).output();
+    let deleting = async {
+        tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+        let resp = http.delete(server.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+        assert_eq!(resp.status(), 204);
+    };
+    let (out, ()) = within(30, "watch", async { tokio::join!(running, deleting) }).await;
+    let out = out.unwrap();
+    let (stdout, stderr) = (String::from_utf8(out.stdout).unwrap(), String::from_utf8(out.stderr).unwrap());
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("closed 1000 the broadcast ended"), "{stderr}");
+    // The seek sent on the first frame shows 0.25 at a later tick, then plays on from there.
+    let lines: Vec<&str> = stdout.lines().collect();
+    let at = lines.iter().position(|l| field(l, "time") == "0.2500").expect("the seek's frame");
+    assert!(at >= 1, "{stdout}");
+    assert_eq!(field(lines[at + 1], "time"), "0.3500", "{stdout}");
 }

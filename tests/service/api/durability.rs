@@ -48,7 +48,7 @@ async fn acknowledged_uploads_survive_kill_9() {
     for client in 0..CLIENTS {
         let (base, acked, reached) = (server.base(), acked.clone(), reached.clone());
         clients.push(tokio::spawn(async move {
-            let http = reqwest::Client::new();
+            let http = crate::common::http_client();
             // name → (document, id if acknowledged)
             let mut sent: HashMap<String, (String, Option<String>)> = HashMap::new();
             for k in 0.. {
@@ -84,7 +84,7 @@ async fn acknowledged_uploads_survive_kill_9() {
     assert!(acked_count >= KILL_AFTER);
 
     let mut server = start(dir.path()).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let mut listed = Vec::new();
     let mut cursor = String::new();
     loop {
@@ -125,7 +125,7 @@ async fn acknowledged_uploads_survive_kill_9() {
 async fn sigterm_drains_and_exits_cleanly_keeping_the_data() {
     let dir = tempfile::tempdir().unwrap();
     let mut server = start(dir.path()).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let body = doc(0, 0);
     let resp = http
         .post(format!("{}/v1/clips", server.base()))

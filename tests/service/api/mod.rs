@@ -1,23 +1,32 @@
 //! REST API tests: the real `Application` on 127.0.0.1:0 with its own SQLite
 //! file, driven by a real HTTP client (reqwest). One module per concern.
 
+mod b_spline;
 mod bad_inputs;
 mod budget;
 mod cache;
 mod cli;
+mod clip_meta;
+mod clip_query;
 mod clips;
+mod compression;
 mod concurrency;
 mod cost;
 mod durability;
+mod ik;
 mod import;
+mod import_big;
+mod logs;
 mod motion_cache;
 mod motions;
 mod numbers;
 mod operations;
+mod parameters;
 mod poses;
 mod security;
 mod shared_parts;
 mod strict;
+mod warnings;
 
 use serde_json::Value;
 

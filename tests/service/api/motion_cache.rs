@@ -65,7 +65,7 @@ impl Server {
 async fn a_repeated_composition_is_built_once_and_a_replaced_clip_is_built_again() {
     let dir = tempfile::tempdir().unwrap();
     let process = ServerProcess::serve().data_dir(dir.path()).env("INBETWEEN_MOTION_CACHE_ENTRIES", "2").start().await;
-    let server = Server { process, http: reqwest::Client::new() };
+    let server = Server { process, http: crate::common::http_client() };
     let walk_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("walk", 2.0)).await["id"].clone();
     let run_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("run", 6.0)).await["id"].clone();
     let blend = |run_weight: f32| json!({"layers": [{"clip": walk_id}, {"clip": run_id, "weight": run_weight}]});
@@ -176,7 +176,7 @@ async fn first_frame(server: &Server, motion: &Value) -> u64 {
 async fn viewers_of_one_composition_share_a_playback_and_another_composition_has_its_own() {
     let dir = tempfile::tempdir().unwrap();
     let process = ServerProcess::serve().data_dir(dir.path()).start().await;
-    let server = Server { process, http: reqwest::Client::new() };
+    let server = Server { process, http: crate::common::http_client() };
     let walk_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("walk", 2.0)).await["id"].clone();
     let run_id = server.write(reqwest::Method::POST, "/v1/clips", &walk("run", 6.0)).await["id"].clone();
     let blend = |run_weight: f32| json!({"layers": [{"clip": walk_id}, {"clip": run_id, "weight": run_weight}]});

@@ -135,7 +135,11 @@ async fn bad_motions_are_refused_with_their_codes_and_pointers() {
 }
 
 fn one_layer(id: &str) -> pb::Motion {
-    pb::Motion { layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }], root_motion: None }
+    pb::Motion {
+        layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }],
+        root_motion: None,
+        ik: Vec::new(),
+    }
 }
 
 #[tokio::test]
@@ -148,7 +152,8 @@ async fn grpc_sample_motion_mirrors_the_clip_rpcs_and_the_rest_routes() {
             let (space, format) = (space as i32, format as i32);
             let clip = pb::SampleRequest { clip_id: id.clone(), time: t, space, format, ..Default::default() };
             let clip = grpc.sample(clip).await.unwrap().into_inner();
-            let req = pb::SampleMotionRequest { motion: Some(one_layer(&id)), time: t, space, format, joints: vec![] };
+            let req =
+                pb::SampleMotionRequest { motion: Some(one_layer(&id)), time: t, space, format, ..Default::default() };
             assert_eq!(grpc.sample_motion(req).await.unwrap().into_inner(), clip, "t = {t}");
         }
     }
@@ -172,7 +177,7 @@ async fn grpc_sample_motion_mirrors_the_clip_rpcs_and_the_rest_routes() {
     // The same refusals and codes as REST.
     let bad = pb::Motion {
         layers: vec![pb::Layer { clip_id: id.clone(), weight: Some(2.0), ..Default::default() }],
-        root_motion: None,
+        ..Default::default()
     };
     let req = pb::SampleMotionRequest { motion: Some(bad), time: 0.0, ..Default::default() };
     let status = grpc.sample_motion(req).await.unwrap_err();

@@ -20,8 +20,10 @@ const RPCS: &[(&str, Need)] = &[
     ("SampleMotionBatch", Need::Scope(Scope::Read)),
     ("StreamFrames", Need::Scope(Scope::Read)),
     ("Play", Need::Scope(Scope::Read)),
+    ("Watch", Need::Scope(Scope::Read)),
     ("GetClip", Need::Scope(Scope::Read)),
     ("ListClips", Need::Scope(Scope::Read)),
+    ("GetSkeleton", Need::Scope(Scope::Read)),
     ("PutClip", Need::Scope(Scope::Write)),
     ("DeleteClip", Need::Scope(Scope::Write)),
     ("Ping", Need::Open),
@@ -66,14 +68,20 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             Ok(())
         }
         "SampleMotion" => {
-            let motion =
-                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], root_motion: None };
+            let motion = pb::Motion {
+                layers: vec![pb::Layer { clip_id: id, ..Default::default() }],
+                root_motion: None,
+                ik: Vec::new(),
+            };
             let req = pb::SampleMotionRequest { motion: Some(motion), time: 0.5, ..Default::default() };
             grpc.sample_motion(with_token(req, t)).await.map(drop)
         }
         "SampleMotionBatch" => {
-            let motion =
-                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], root_motion: None };
+            let motion = pb::Motion {
+                layers: vec![pb::Layer { clip_id: id, ..Default::default() }],
+                root_motion: None,
+                ik: Vec::new(),
+            };
             let when = pb::sample_motion_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
             let req = pb::SampleMotionBatchRequest { motion: Some(motion), when: Some(when), ..Default::default() };
             grpc.sample_motion_batch(with_token(req, t)).await.map(drop)
@@ -96,10 +104,20 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             drop(tx);
             Ok(())
         }
+        "Watch" => {
+            let created = app.http.post(app.url("/v1/broadcasts")).bearer_auth(ADMIN);
+            let body = serde_json::json!({"motion": {"layers": [{"clip": id}]}, "fps": 60});
+            let created: serde_json::Value = created.json(&body).send().await.unwrap().json().await.unwrap();
+            let req = pb::WatchRequest { broadcast_id: created["id"].as_str().unwrap().to_owned() };
+            let mut frames = grpc.watch(with_token(req, t)).await?.into_inner();
+            frames.message().await?.expect("a first frame");
+            Ok(())
+        }
         "GetClip" => grpc.get_clip(with_token(pb::GetClipRequest { clip_id: id }, t)).await.map(drop),
         "ListClips" => grpc.list_clips(with_token(pb::ListClipsRequest::default(), t)).await.map(drop),
+        "GetSkeleton" => grpc.get_skeleton(with_token(pb::GetClipRequest { clip_id: id }, t)).await.map(drop),
         "PutClip" => {
-            let req = pb::PutClipRequest { clip_id: id, clip: Some(wave_pb()), if_version: None };
+            let req = pb::PutClipRequest { clip_id: id, clip: Some(wave_pb()), ..Default::default() };
             grpc.put_clip(with_token(req, t)).await.map(drop)
         }
         "DeleteClip" => grpc.delete_clip(with_token(pb::DeleteClipRequest { clip_id: id }, t)).await.map(drop),

@@ -20,12 +20,20 @@ const ROUTES: &[(&str, &str, Need, u16)] = &[
     ("post", "/v1/clips/import", Need::Scope(Scope::Write), 201),
     ("get", "/v1/clips/{id}", Need::Scope(Scope::Read), 200),
     ("put", "/v1/clips/{id}", Need::Scope(Scope::Write), 200),
+    ("patch", "/v1/clips/{id}", Need::Scope(Scope::Write), 200),
     ("delete", "/v1/clips/{id}", Need::Scope(Scope::Write), 204),
     ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
+    ("get", "/v1/clips/{id}/skeleton", Need::Scope(Scope::Read), 200),
     ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
     ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
     // Checked at the upgrade; the motion comes in the first message.
     ("get", "/v1/stream", Need::Scope(Scope::Read), 101),
+    ("post", "/v1/broadcasts", Need::Scope(Scope::Write), 201),
+    ("get", "/v1/broadcasts", Need::Scope(Scope::Read), 200),
+    ("get", "/v1/broadcasts/{id}", Need::Scope(Scope::Read), 200),
+    ("delete", "/v1/broadcasts/{id}", Need::Scope(Scope::Write), 204),
+    ("post", "/v1/broadcasts/{id}/controls", Need::Scope(Scope::Write), 200),
+    ("get", "/v1/broadcasts/{id}/stream", Need::Scope(Scope::Read), 101),
     ("post", "/v1/poses", Need::Scope(Scope::Read), 200),
     ("post", "/v1/samples", Need::Scope(Scope::Read), 200),
     ("get", "/healthz", Need::Open, 200),
@@ -62,21 +70,36 @@ async fn documented_operations(app: &TestApp) -> Vec<(String, String, bool)> {
 async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
     // Each call gets its own clip, so a delete or replace cannot disturb the next one.
     let id = app.create_id(WAVE, Some(ADMIN)).await;
+    let motion = serde_json::json!({"layers": [{"clip": id}]});
+    // Broadcast routes get a fresh broadcast of that clip, made by the admin.
+    let id = if path.starts_with("/v1/broadcasts/") {
+        let created = app.http.post(app.url("/v1/broadcasts")).bearer_auth(ADMIN);
+        let created = created.json(&serde_json::json!({"motion": motion, "fps": 30})).send().await.unwrap();
+        assert_eq!(created.status(), 201);
+        created.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+    } else {
+        id
+    };
     let path = path.replace("{id}", &id);
     if path.ends_with("/stream") {
-        return websocket(app, &path, role).await;
+        // A browser's way (the token as a subprotocol) answers as the header does.
+        let by_header = websocket(app, &path, role, false).await;
+        let by_protocol = websocket(app, &path, role, true).await;
+        assert_eq!(by_protocol, by_header, "{path} as {role:?}: subprotocol token vs Authorization");
+        return by_header;
     }
     let mut req = app.http.request(method.to_uppercase().parse::<Method>().unwrap(), app.url(&path));
     req = match (method, path.as_str()) {
         ("post", "/v1/clips") | ("put", _) => req.header("content-type", "application/json").body(WAVE),
+        ("patch", _) => req.header("content-type", "application/merge-patch+json").body(r#"{"tags":["x"]}"#),
         ("post", "/v1/clips/import") => {
             req.query(&[("format", "bvh")]).header("content-type", "application/octet-stream").body(TINY_BVH)
         }
         ("post", p) if p.ends_with("/sample") => req.json(&serde_json::json!({"times": [0.0, 0.5]})),
-        ("post", "/v1/poses") => req.json(&serde_json::json!({"motion": {"layers": [{"clip": id}]}, "time": 0.25})),
-        ("post", "/v1/samples") => {
-            req.json(&serde_json::json!({"motion": {"layers": [{"clip": id}]}, "times": [0.0, 0.5]}))
-        }
+        ("post", "/v1/poses") => req.json(&serde_json::json!({"motion": motion, "time": 0.25})),
+        ("post", "/v1/broadcasts") => req.json(&serde_json::json!({"motion": motion, "fps": 30})),
+        ("post", p) if p.ends_with("/controls") => req.json(&serde_json::json!({"op": "pause"})),
+        ("post", "/v1/samples") => req.json(&serde_json::json!({"motion": motion, "times": [0.0, 0.5]})),
         ("get", p) if p.ends_with("/pose") => req.query(&[("t", "0.25")]),
         _ => req,
     };
@@ -97,15 +120,30 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
     (status, Some((ct, body)))
 }
 
-async fn websocket(app: &TestApp, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
-    let query = if path == "/v1/stream" { "" } else { "?max_frames=1" };
+/// Opens the stream as `role`, its token in `Authorization` or, as a browser
+/// sends it, in the subprotocol `inbetween.bearer.<base64url>` (`server::auth`).
+async fn websocket(app: &TestApp, path: &str, role: Role, as_protocol: bool) -> (u16, Option<(String, Value)>) {
+    use base64::Engine as _;
+    let query = if path == "/v1/stream" || path.starts_with("/v1/broadcasts/") { "" } else { "?max_frames=1" };
     let mut req = format!("ws://{}{path}{query}", app.addr).into_client_request().unwrap();
-    if let Some(t) = role.token() {
-        req.headers_mut().insert("authorization", format!("Bearer {t}").parse().unwrap());
+    match (role.token(), as_protocol) {
+        (Some(t), false) => {
+            req.headers_mut().insert("authorization", format!("Bearer {t}").parse().unwrap());
+        }
+        (Some(t), true) => {
+            let encoded = base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(t);
+            let offer = format!("inbetween, inbetween.bearer.{encoded}");
+            req.headers_mut().insert("sec-websocket-protocol", offer.parse().unwrap());
+        }
+        (None, _) => {}
     }
     match tokio_tungstenite::connect_async(req).await {
         Ok((mut ws, resp)) => {
             use futures_util::StreamExt;
+            // The server selects `inbetween` (never echoing the token), as a browser requires.
+            let selected = resp.headers().get("sec-websocket-protocol").map(|v| v.to_str().unwrap().to_owned());
+            let offered = as_protocol && role.token().is_some();
+            assert_eq!(selected.as_deref(), offered.then_some("inbetween"), "{path}: selected subprotocol");
             // Allowed: the first frame arrives.
             let first = ws.next().await.expect("a frame").expect("a frame");
             assert!(matches!(first, tungstenite::Message::Text(_)), "{first:?}");
@@ -171,7 +209,7 @@ async fn every_rest_route_checks_its_scope() {
     }
     assert_eq!(cells, ROUTES.len() * Role::ALL.len());
     // write routes × {none, invalid, read}
-    assert_eq!(refused_writes, 4 * 3);
+    assert_eq!(refused_writes, 8 * 3);
     app.stop().await;
 }
 

@@ -6,7 +6,8 @@
 use axum::response::IntoResponse;
 use inbetween::import::ErrorClass;
 use inbetween::server::ApiError;
-use inbetween::stream::AdmitError;
+use inbetween::server::error::At;
+use inbetween::stream::{AdmitError, BroadcastError};
 use inbetween::wire::proto::pb;
 use tonic::Code;
 
@@ -46,13 +47,16 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::NotFound { what: "route" },
         ApiError::MethodNotAllowed,
         ApiError::PreconditionFailed { current: 3 },
-        ApiError::PayloadTooLarge { limit: 10 },
+        ApiError::PayloadTooLarge { limit: 10, setting: "max_body_bytes" },
         ApiError::UnsupportedMediaType { detail: "x".into() },
         ApiError::TooMany { code: "too_many_poses", pointer: "/times".into(), detail: "x".into() },
         ApiError::TooManyStreams(AdmitError::Global { limit: 1 }),
         ApiError::TooManyStreams(AdmitError::PerClient { limit: 1 }),
         ApiError::TooManyStreams(AdmitError::PerToken { limit: 1 }),
         ApiError::TooManyStreams(AdmitError::ShuttingDown),
+        ApiError::TooManyBroadcasts(BroadcastError::TooMany { limit: 1 }),
+        ApiError::TooManyBroadcasts(BroadcastError::ShuttingDown),
+        ApiError::NotFound { what: "broadcast" },
         ApiError::Import { class: ErrorClass::Malformed, code: "bad_glb", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::TooLarge, code: "too_many_keys", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::Unprocessable, code: "no_animations", pointer: None, detail: "x".into() },
@@ -62,7 +66,7 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::RateLimited { retry_after: 1 },
         ApiError::AnswerTooLargeForUnary { bytes: 20, limit: 10, stream: "SampleStream" },
         ApiError::ClientInFlight { limit: 32, retry_after: 1 },
-        ApiError::LayerClipNotFound { pointer: "/motion/layers/1/clip".into(), detail: "x".into() },
+        ApiError::ClipNotFoundAt { at: At::Pointer("/motion/layers/1/clip".into()), detail: "x".into() },
         ApiError::Unavailable(None),
         ApiError::internal(anyhow::anyhow!("disk on fire")),
     ]
@@ -91,7 +95,8 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::RateLimited { .. } => 18,
         ApiError::AnswerTooLargeForUnary { .. } => 19,
         ApiError::ClientInFlight { .. } => 20,
-        ApiError::LayerClipNotFound { .. } => 21,
+        ApiError::ClipNotFoundAt { .. } => 21,
+        ApiError::TooManyBroadcasts(_) => 22,
     }
 }
 
@@ -99,7 +104,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 22, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 23, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));
@@ -174,6 +179,7 @@ async fn real_failures_agree_on_both_protocols() {
             clip_id: id.clone(),
             clip: Some(clip),
             if_version,
+            ..Default::default()
         };
         let (rest, rpc) = match k {
             0 => (put(None), grpc.put_clip(with_token(put_pb(wave_pb(), None), None)).await.map(drop)),

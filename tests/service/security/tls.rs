@@ -64,7 +64,7 @@ async fn https_and_grpc_over_tls_are_served_to_clients_that_trust_the_ca() {
     let port = app.addr.port();
 
     // reqwest (rustls) with the test CA: a read and a write, by name and by IP.
-    let client = reqwest::Client::builder()
+    let client = crate::common::http_builder()
         .use_rustls_tls()
         .tls_built_in_root_certs(false)
         .add_root_certificate(reqwest::Certificate::from_pem(pki.ca_pem.as_bytes()).unwrap())
@@ -83,7 +83,7 @@ async fn https_and_grpc_over_tls_are_served_to_clients_that_trust_the_ca() {
     assert_eq!(created.status(), 201);
 
     // A client that does not trust the CA is refused by its own check.
-    let untrusting = reqwest::Client::builder().use_rustls_tls().tls_built_in_root_certs(false).build().unwrap();
+    let untrusting = crate::common::http_builder().use_rustls_tls().tls_built_in_root_certs(false).build().unwrap();
     assert!(untrusting.get(format!("https://localhost:{port}/healthz")).send().await.is_err());
 
     // gRPC over TLS (tonic, rustls on ring).

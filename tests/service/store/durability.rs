@@ -33,6 +33,15 @@ async fn every_pooled_sqlite_connection_is_wal_with_full_sync() {
 }
 
 #[tokio::test]
+async fn a_sqlite_url_in_a_missing_directory_creates_it_like_the_data_dir() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("nested/deeper/clips.db");
+    let url = format!("sqlite://{}", file.display());
+    SqliteStore::open_url(&url, &settings(1, Durability::Required)).await.unwrap();
+    assert!(file.is_file(), "{} created", file.display());
+}
+
+#[tokio::test]
 async fn an_in_memory_sqlite_database_is_refused_unless_fast_writes_are_accepted() {
     let refused = SqliteStore::open_url("sqlite::memory:", &settings(1, Durability::Required)).await;
     let message = format!("{:#}", refused.expect_err("an in-memory database cannot be durable"));

@@ -5,6 +5,7 @@
 //! recovery from terminated connections.
 
 mod backend;
+mod filters;
 
 use std::sync::Arc;
 
@@ -46,20 +47,36 @@ for_both_backends!(
     concurrent_conditional_replaces_let_exactly_one_win,
     concurrent_creates_all_land,
     ping_answers_until_closed,
+    every_filter_pages_through_exactly_its_clips,
+    tags_and_joints_follow_replace_and_delete,
 );
+
+use filters::{every_filter_pages_through_exactly_its_clips, tags_and_joints_follow_replace_and_delete};
 
 pub fn stats(joints: u32, playback: Playback) -> ClipStats {
     ClipStats { joints, tracks: joints * 3, events: 2, start: 0.25, end: 1.5, playback }
 }
 
 pub fn new_clip(name: &str, doc: &str) -> NewClip {
-    NewClip { name: name.to_owned(), doc_json: doc.to_owned(), stats: stats(4, Playback::Loop) }
+    NewClip {
+        name: name.to_owned(),
+        doc_json: doc.to_owned(),
+        stats: stats(4, Playback::Loop),
+        tags: vec![],
+        joint_names: vec![],
+    }
 }
 
 async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
     // The store keeps text as given, multi-byte characters and all.
     let doc = format!("{{\"name\":\"wave ✓\",\"pad\":\"{}\"}}", "é".repeat(50_000));
-    let clip = NewClip { name: "wave ✓".into(), doc_json: doc.clone(), stats: stats(7, Playback::PingPong) };
+    let clip = NewClip {
+        name: "wave ✓".into(),
+        doc_json: doc.clone(),
+        stats: stats(7, Playback::PingPong),
+        tags: vec!["wave".into(), "✓".into()],
+        joint_names: vec!["root".into()],
+    };
     let meta = store.create(clip).await.unwrap();
     assert_eq!(meta.version, 1);
     assert!(inbetween::store::is_clip_id(&meta.id));
@@ -87,7 +104,8 @@ async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn Clip
     let mut seen = Vec::new();
     let mut after = None;
     loop {
-        let page = store.list(ListQuery { after: after.clone(), name: None, limit: 3 }).await.unwrap();
+        let page =
+            store.list(ListQuery { after: after.clone(), name: None, limit: 3, ..ListQuery::default() }).await.unwrap();
         assert!(page.len() <= 3);
         if page.is_empty() {
             break;
@@ -96,20 +114,25 @@ async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn Clip
         seen.extend(page.into_iter().map(|m| m.id));
     }
     assert_eq!(seen, ids, "every clip once, in creation order");
-    let odd = store.list(ListQuery { after: None, name: Some("odd".into()), limit: 100 }).await.unwrap();
+    let odd = store
+        .list(ListQuery { after: None, name: Some("odd".into()), limit: 100, ..ListQuery::default() })
+        .await
+        .unwrap();
     assert_eq!(
         odd.iter().map(|m| m.id.clone()).collect::<Vec<_>>(),
         vec![ids[1].clone(), ids[3].clone(), ids[5].clone()]
     );
-    let after_first_odd =
-        store.list(ListQuery { after: Some(ids[1].clone()), name: Some("odd".into()), limit: 1 }).await.unwrap();
+    let after_first_odd = store
+        .list(ListQuery { after: Some(ids[1].clone()), name: Some("odd".into()), limit: 1, ..ListQuery::default() })
+        .await
+        .unwrap();
     assert_eq!(after_first_odd.len(), 1);
     assert_eq!(after_first_odd[0].id, ids[3]);
 }
 
 async fn replace_bumps_the_version_and_honours_the_expected_one(store: Arc<dyn ClipStore>) {
     let v1 = store.create(new_clip("a", "{\"v\":1}")).await.unwrap();
-    let replacement = NewClip { name: "b".into(), doc_json: "{\"v\":2}".into(), stats: stats(9, Playback::Once) };
+    let replacement = NewClip { doc_json: "{\"v\":2}".into(), stats: stats(9, Playback::Once), ..new_clip("b", "") };
     let v2 = store.replace(&v1.id, replacement, Some(1)).await.unwrap();
     assert_eq!((v2.id.as_str(), v2.version, v2.name.as_str()), (v1.id.as_str(), 2, "b"));
     assert_eq!(v2.created_at, v1.created_at);
@@ -142,7 +165,7 @@ async fn create_all_stores_every_clip_in_order(store: Arc<dyn ClipStore>) {
     let clips: Vec<NewClip> = (0..5).map(|i| new_clip(&format!("anim{i}"), &format!("{{\"i\":{i}}}"))).collect();
     let metas = store.create_all(clips).await.unwrap();
     assert_eq!(metas.len(), 5);
-    let listed = store.list(ListQuery { after: None, name: None, limit: 10 }).await.unwrap();
+    let listed = store.list(ListQuery { after: None, name: None, limit: 10, ..ListQuery::default() }).await.unwrap();
     assert_eq!(listed, metas, "listed in creation order, exactly as returned");
     for (i, m) in metas.iter().enumerate() {
         assert_eq!(store.get(&m.id).await.unwrap().unwrap().doc_json, format!("{{\"i\":{i}}}"));
@@ -183,7 +206,10 @@ async fn concurrent_creates_all_land(store: Arc<dyn ClipStore>) {
     for t in tasks {
         ids.push(t.await.unwrap());
     }
-    let listed = store.list(ListQuery { after: None, name: Some("c".into()), limit: 100 }).await.unwrap();
+    let listed = store
+        .list(ListQuery { after: None, name: Some("c".into()), limit: 100, ..ListQuery::default() })
+        .await
+        .unwrap();
     let mut listed: Vec<String> = listed.into_iter().map(|m| m.id).collect();
     listed.sort();
     ids.sort();
@@ -198,3 +224,4 @@ async fn ping_answers_until_closed(store: Arc<dyn ClipStore>) {
 
 mod durability;
 mod postgres_only;
+mod upgrade;

@@ -135,9 +135,14 @@ async fn errors_map_to_grpc_status_codes() {
     assert_eq!(err.metadata().get("x-error-code").unwrap(), "times_not_increasing");
 
     // Replace with a stale version: FAILED_PRECONDITION.
-    let stale = pb::PutClipRequest { clip_id: created.id.clone(), clip: clip.clone(), if_version: Some(7) };
+    let stale = pb::PutClipRequest {
+        clip_id: created.id.clone(),
+        clip: clip.clone(),
+        if_version: Some(7),
+        ..Default::default()
+    };
     assert_eq!(grpc.put_clip(authed(stale)).await.unwrap_err().code(), Code::FailedPrecondition);
-    let replace = pb::PutClipRequest { clip_id: created.id.clone(), clip, if_version: Some(1) };
+    let replace = pb::PutClipRequest { clip_id: created.id.clone(), clip, if_version: Some(1), ..Default::default() };
     assert_eq!(grpc.put_clip(authed(replace)).await.unwrap().into_inner().version, 2);
 
     // Get, list, delete.

@@ -20,12 +20,26 @@ pub async fn read_for(stream: &mut Streaming<pb::Frame>, secs: f64) -> Vec<pb::F
     }
 }
 
-/// Checks `frames` are contiguous from seq 0 with clip time `seq·speed/fps`.
-pub fn check_schedule(seqs_times: &[(u64, u64, f32)], fps: f64, speed: f64) {
-    for (i, &(seq, dropped, clip_time)) in seqs_times.iter().enumerate() {
-        assert_eq!((seq, dropped), (i as u64, 0), "contiguous seq, nothing dropped");
+/// Checks `frames` follow the schedule from seq 0: clip time `seq·speed/fps`,
+/// and every gap in `seq` reported as `dropped`. A starved client (two cores
+/// running the whole suite) may miss a few ticks, even tick 0, so up to
+/// `fps/10` drops are allowed; bursts and unreported gaps are not. Returns the
+/// ticks covered.
+pub fn check_schedule(seqs_times: &[(u64, u64, f32)], fps: f64, speed: f64) -> u64 {
+    let (first_seq, first_dropped, _) = seqs_times[0];
+    assert_eq!(first_dropped, first_seq, "ticks before the first frame are reported as dropped");
+    let mut prev = None;
+    for &(seq, dropped, clip_time) in seqs_times {
+        if let Some(p) = prev {
+            assert_eq!(seq, p + 1 + dropped, "gaps in seq are reported as dropped");
+        }
         assert_close(f64::from(clip_time), seq as f64 * speed / fps, 1e-5, "clip time");
+        prev = Some(seq);
     }
+    let ticks = seqs_times.last().unwrap().0 + 1;
+    let missed = ticks - seqs_times.len() as u64;
+    assert!(missed as f64 <= fps / 10.0, "{missed} of {ticks} ticks dropped");
+    ticks
 }
 
 #[tokio::test]
@@ -36,22 +50,25 @@ async fn sixty_fps_for_two_seconds_is_120_frames_on_schedule() {
     let req = pb::StreamRequest { playback: pb::Playback::Once as i32, ..stream_request(&id, 60, 0.5) };
     let mut stream = grpc.stream_frames(req).await.unwrap().into_inner();
     let frames = read_for(&mut stream, 2.0).await;
-    assert!((118..=122).contains(&frames.len()), "{} frames in 2 s", frames.len());
     let v: Vec<_> = frames.iter().map(|f| (f.seq, f.dropped, f.clip_time)).collect();
-    check_schedule(&v, 60.0, 0.5);
+    let ticks = check_schedule(&v, 60.0, 0.5);
+    assert!((118..=122).contains(&ticks), "{ticks} ticks in 2 s");
     let pose = frames[0].pose.as_ref().unwrap();
     assert_eq!(pose.joint_names, ["root", "arm"], "names in the first frame");
     assert!(frames[1..].iter().all(|f| f.pose.as_ref().unwrap().joint_names.is_empty()), "and only there");
     assert!(frames.iter().all(|f| f.pose.as_ref().unwrap().rotations.len() == 8));
     // The wave clip's event at clip time 1.0 is reached at request time 2.0,
-    // by frame 120 exactly: only that frame (if it made the 2 s) carries it.
+    // by tick 120 exactly: only the frame covering that tick (if it made the
+    // 2 s; a dropped tick's events go with the next frame) carries it.
     for f in &frames {
         let names: Vec<&str> = f.events.iter().map(|e| e.name.as_str()).collect();
-        assert_eq!(names, if f.seq == 120 { vec!["footstep"] } else { vec![] }, "frame {}", f.seq);
+        let covers_120 = f.seq - f.dropped <= 120 && 120 <= f.seq;
+        assert_eq!(names, if covers_120 { vec!["footstep"] } else { vec![] }, "frame {}", f.seq);
     }
     // Sent-at stamps follow the schedule: frame k about k/60 s after frame 0.
-    let span = (frames.last().unwrap().sent_at_unix_nanos - frames[0].sent_at_unix_nanos) as f64 / 1e9;
-    assert_close(span, (frames.len() - 1) as f64 / 60.0, 0.05, "sent_at span");
+    let last = frames.last().unwrap();
+    let span = (last.sent_at_unix_nanos - frames[0].sent_at_unix_nanos) as f64 / 1e9;
+    assert_close(span, (last.seq - frames[0].seq) as f64 / 60.0, 0.05, "sent_at span");
 }
 
 #[tokio::test]
@@ -91,7 +108,7 @@ async fn a_stalled_client_gets_dropped_frames_while_others_keep_their_schedule()
     let mut stalled_client = pb::animation_client::AnimationClient::new(stalled_channel);
     let mut stalled = stalled_client.stream_frames(stream_request(&big, 60, 0.1)).await.unwrap().into_inner();
     let first = within(5, "first frame", stalled.message()).await.unwrap().unwrap();
-    assert_eq!(first.seq, 0);
+    assert_eq!(first.dropped, first.seq, "ticks before the first frame count as dropped");
     let rss_before = rss_bytes();
 
     // Meanwhile another client reads a 60 fps stream for 2 s.

@@ -6,8 +6,11 @@
 //! tests run on real time and real sockets, so their timing checks have
 //! tolerances, and every wait is bounded so a bug fails rather than hangs.
 
+mod broadcasts;
 mod grpc_api;
+mod grpc_ik;
 mod grpc_streams;
+mod ik;
 mod limits;
 mod motions;
 mod seam;

@@ -197,6 +197,12 @@ impl Page {
         }
     }
 
+    /// Emulates a screen of `width`×`height` CSS pixels (scale 1).
+    pub async fn set_viewport(&mut self, width: u32, height: u32) {
+        let metrics = json!({"width": width, "height": height, "deviceScaleFactor": 1, "mobile": false});
+        self.call("Emulation.setDeviceMetricsOverride", metrics).await;
+    }
+
     pub async fn navigate(&mut self, url: &str) {
         self.call("Page.navigate", json!({"url": url})).await;
         self.wait_for(&format!("location.href === {} && document.readyState === 'complete'", json!(url)), 20).await;

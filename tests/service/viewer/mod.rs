@@ -11,6 +11,8 @@
 //! upload test.
 
 mod cdp;
+mod curves;
+mod flows;
 
 use std::path::Path;
 use std::time::Duration;
@@ -121,7 +123,9 @@ async fn plays_a_clip_and_plots_the_sampled_curves() {
     assert!(drawn * 100 > pixels.len(), "canvas nearly blank: {drawn} of {} pixels drawn", pixels.len());
     assert!(joints >= 40, "joint dots: {joints} orange pixels");
 
-    // The curves panel plots exactly what the REST sample endpoint gives.
+    // The curves panel plots exactly what the REST sample endpoint gives
+    // (rotations as their quaternion components here; Euler angles in `curves.rs`).
+    set_value(page, "curve-rotation", "quaternion").await;
     for (joint, channel, components) in [("root", "translation", 3), ("arm", "rotation", 4)] {
         set_value(page, "curve-joint", joint).await;
         set_value(page, "curve-channel", channel).await;
@@ -177,14 +181,14 @@ async fn uploads_from_the_page_with_the_write_token_and_plays_in_local_space() {
     // The first try has no token: the page asks for it, then retries.
     let wave = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/wave.json");
     page.set_files("#file", &[Path::new(wave)]).await;
-    page.wait_for("!document.getElementById('token-form').hidden", 20).await;
+    page.wait_for("document.getElementById('token-form').classList.contains('wanted')", 20).await;
     let status = page.eval("document.getElementById('status').textContent").await;
     assert!(status.as_str().unwrap().contains("write token"), "status: {status}");
     set_value(page, "token", TOKEN).await;
     page.eval("document.getElementById('token-form').requestSubmit()").await;
     page.wait_for("window.inbetweenViewer.state.clip?.name === 'wave'", 30).await;
     assert_eq!(page.eval("sessionStorage.getItem('inbetween.token')").await, TOKEN);
-    assert_eq!(page.eval("document.getElementById('token-form').hidden").await, true);
+    assert_eq!(page.eval("document.getElementById('token-form').classList.contains('wanted')").await, false);
 
     let list: Value = app.http.get(app.url("/v1/clips")).send().await.unwrap().json().await.unwrap();
     assert_eq!(list["clips"].as_array().unwrap().len(), 1, "stored once: {list}");
@@ -198,12 +202,30 @@ async fn uploads_from_the_page_with_the_write_token_and_plays_in_local_space() {
     assert!(joints >= 40, "joint dots: {joints} orange pixels");
     assert_eq!(page.eval("window.inbetweenViewer.cspViolations").await, json!([]));
 
+    // A BVH from the page is named after its file, not "bvh" (the page sends it as multipart).
+    let bvh = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/bvh/131_01.bvh");
+    page.set_files("#file", &[Path::new(bvh)]).await;
+    page.wait_for("window.inbetweenViewer.state.clip?.name === '131_01'", 30).await;
+
     if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_SCREENSHOT") {
         page.eval("document.getElementById('play').click()").await;
         tokio::time::sleep(Duration::from_millis(300)).await;
         std::fs::write(&path, page.screenshot(None).await).unwrap();
         eprintln!("screenshot written to {}", path.to_string_lossy());
     }
+}
+
+/// Selects the clip `id` in the list and waits until its curve is plotted.
+async fn select_clip(page: &mut Page, id: &str) {
+    page.wait_for(&format!("document.querySelector('#clips li[data-id={}]')", json!(id)), 10).await;
+    page.eval(&format!("document.querySelector('#clips li[data-id={}]').click()", json!(id))).await;
+    page.wait_for(&format!("window.inbetweenViewer.curve?.clip === {}", json!(id)), 10).await;
+}
+
+/// The text of the element `id`.
+async fn text(page: &mut Page, id: &str) -> String {
+    let value = page.eval(&format!("document.getElementById({}).textContent", json!(id))).await;
+    value.as_str().unwrap_or_default().to_owned()
 }
 
 /// Sets a form control's value and fires `input` and `change`, as typing would.

@@ -21,7 +21,7 @@ const TEN_THOUSAND: &str = r#"{"start":0,"end":99.99,"fps":100,"space":"model"}"
 #[tokio::test(flavor = "multi_thread")]
 async fn ten_thousand_poses_of_4096_long_named_joints_are_refused_before_any_work() {
     let mut target = target(&[]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = target.server.create(&http, &wide_clip(4096, 256)).await;
     let grpc = AnimationClient::connect(target.server.grpc_url()).await.unwrap();
     let probes = target.probes().await;
@@ -71,7 +71,7 @@ async fn ten_thousand_poses_of_4096_long_named_joints_are_refused_before_any_wor
 #[tokio::test(flavor = "multi_thread")]
 async fn the_largest_admitted_answer_streams_in_bounded_memory() {
     let mut target = target(&[]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = target.server.create(&http, &wide_clip(4096, 16)).await;
     let url = target.server.url(&format!("/v1/clips/{id}/sample"));
     let body =

@@ -30,7 +30,7 @@ async fn upload(http: &reqwest::Client, url: &str, body: String) -> u16 {
 #[tokio::test(flavor = "multi_thread")]
 async fn expensive_builds_never_stall_the_probes_and_the_cache_stays_bounded() {
     let mut target = target(&["--max-build-work", "1000000", "--cache-bytes", "4000000"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let url = target.server.url("/v1/clips");
     let hostile = looping_hermite("loops", 40, 25, 900.0);
     assert!((30_000..80_000).contains(&hostile.len()), "a ~50 KB body: {}", hostile.len());

@@ -38,7 +38,7 @@ async fn silent(
 #[tokio::test(flavor = "multi_thread")]
 async fn bodyless_posts_on_one_http2_connection_shed_nobody() {
     let mut target = target(&[]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = target.server.create(&http, WAVE).await;
     let probes = target.probes().await;
     let mut attacker = h2_connection(target.server.http).await;
@@ -72,7 +72,7 @@ fn shed(statuses: &[u16]) -> Vec<(u16, usize)> {
 #[tokio::test(flavor = "multi_thread")]
 async fn grpc_calls_that_never_send_their_message_time_out_and_shed_nobody() {
     let mut target = target(&["--request-message-timeout-secs", "2"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = target.server.create(&http, WAVE).await;
     let probes = target.probes().await;
     let mut attacker = h2_connection(target.server.grpc).await;

@@ -39,7 +39,7 @@ fn gltf(nodes: usize) -> Vec<u8> {
 #[tokio::test(flavor = "multi_thread")]
 async fn a_part_named_by_a_thousand_buffers_is_shared_and_refused() {
     let mut target = target(&[]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let mut part = vec![0u8; PART_BYTES];
     part[4..8].copy_from_slice(&1.0f32.to_le_bytes());
     let probes = target.probes().await;

@@ -221,7 +221,7 @@ async fn probe_loop(
     stop: Arc<AtomicBool>,
     ready: tokio::sync::oneshot::Sender<()>,
 ) -> ProbeReport {
-    let http = reqwest::Client::builder().pool_max_idle_per_host(0).timeout(Duration::from_secs(2)).build().unwrap();
+    let http = crate::common::http_builder().pool_max_idle_per_host(0).timeout(Duration::from_secs(2)).build().unwrap();
     let channel = tonic::transport::Endpoint::from_shared(grpc).unwrap().connect().await.expect("Ping channel");
     let mut ping = AnimationClient::new(channel);
     let _ = ready.send(());

@@ -29,7 +29,7 @@ async fn deaf_viewer(addr: std::net::SocketAddr, path: &str) -> tokio::net::TcpS
 async fn viewers_that_never_read_are_closed_in_bounded_memory() {
     let n = VIEWERS.to_string();
     let mut target = target(&["--max-streams", "2048", "--max-streams-per-client", "2048"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = target.server.create(&http, &wide_clip(128, 128)).await;
     let path = format!("/v1/clips/{id}/stream?fps=10&playback=loop");
     let probes = target.probes().await;

@@ -115,7 +115,7 @@ impl Nginx {
             grpc: format!("http://127.0.0.1:{grpc_port}"),
             _dir: dir,
         };
-        let http = reqwest::Client::new();
+        let http = crate::common::http_client();
         let started = Instant::now();
         while !http.get(format!("{}/healthz", lb.http)).send().await.is_ok_and(|r| r.status() == 200) {
             assert!(started.elapsed() < Duration::from_secs(10), "nginx did not come up: {}", log());
@@ -142,7 +142,7 @@ async fn the_shipped_nginx_config_balances_http_websocket_and_each_grpc_call() {
         schema.drop_now().await;
         return;
     };
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
 
     // REST through the balancer: upload, then poses (any node answers).
     let resp = http
@@ -163,10 +163,13 @@ async fn the_shipped_nginx_config_balances_http_websocket_and_each_grpc_call() {
     // A WebSocket stream through the upgrade proxying.
     let url = format!("{}/v1/clips/{id}/stream?fps=30", lb.http.replace("http://", "ws://"));
     let (mut ws, _) = tokio_tungstenite::connect_async(url).await.expect("the upgrade passes through nginx");
-    for seq in 0..3 {
+    let mut next_seq = 0;
+    for _ in 0..3 {
         let msg = tokio::time::timeout(Duration::from_secs(5), ws.next()).await.unwrap().unwrap().unwrap();
         let frame: Value = serde_json::from_str(msg.to_text().unwrap()).unwrap();
-        assert_eq!(frame["seq"], seq);
+        let seq = frame["seq"].as_u64().unwrap();
+        assert_eq!(seq, next_seq + frame["dropped"].as_u64().unwrap(), "frames in order, gaps reported");
+        next_seq = seq + 1;
     }
     drop(ws);
 

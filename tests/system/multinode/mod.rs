@@ -118,7 +118,7 @@ async fn keeps_serving(http: &reqwest::Client, node: &Node, id: &str, want: Opti
 async fn changes_on_any_node_reach_every_node_within_a_second() {
     let Some(schema) = Schema::create("spread").await else { return };
     let [a, b, c] = start_all(&schema, ["node-a", "node-b", "node-c"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
 
     let id = create(&http, &a, 1).await;
     for node in [&a, &b, &c] {
@@ -163,7 +163,7 @@ async fn node_metric(http: &reqwest::Client, node: &Node, name: &str) -> f64 {
 async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let Some(schema) = Schema::create("motion").await else { return };
     let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let (base, top) = (create(&http, &a, 1).await, create(&http, &a, 10).await);
     // B caches nothing until it listens: wait for that, so the motion below is cached.
     let started = Instant::now();
@@ -219,7 +219,7 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
 async fn a_killed_node_leaves_the_others_serving_and_streaming() {
     let Some(schema) = Schema::create("kill").await else { return };
     let [mut a, b, c] = start_all(&schema, ["node-a", "node-b", "node-c"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = create(&http, &a, 5).await;
     let mut streams = Vec::new();
     for node in [&b, &c] {
@@ -256,7 +256,7 @@ async fn a_killed_node_leaves_the_others_serving_and_streaming() {
 async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version() {
     let Some(schema) = Schema::create("cut").await else { return };
     let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = create(&http, &a, 1).await;
     assert_eq!(served(&http, &b, &id).await, Some(1), "B has version 1 cached");
     // Wait for B's listener to be up, so the cut below hits a subscribed node.
@@ -291,7 +291,7 @@ async fn invalidation_delay_figures() {
     }
     let Some(schema) = Schema::create("delay").await else { return };
     let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = create(&http, &a, 0).await;
     until_served(&http, &b, &id, Some(0), PROPAGATION).await;
     let mut delays = Vec::new();

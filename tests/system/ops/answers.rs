@@ -46,7 +46,7 @@ async fn a_200_mb_answer_read_slowly_holds_pieces_not_the_answer() {
     let dir = tempfile::tempdir().unwrap();
     let flags = ["--max-poses", "100000", "--max-answer-bytes", "1073741824"];
     let server = start(&dir.path().join("data"), &flags).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, &wide_clip(JOINTS)).await;
     // Warm: the clip compiled and cached, the allocator's arenas in use.
     let body = json!({"start": 0, "end": 1, "fps": 100});

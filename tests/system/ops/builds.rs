@@ -18,7 +18,7 @@ async fn the_cache_reports_its_bytes_under_the_bound_on_metrics() {
     let data = dir.path().join("data");
     // One clip with arc-length tables weighs about 18 KB; the bound holds three.
     let server = start(&data, &["--cache-bytes", "60000"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let mut peak = 0.0f64;
     for k in 0..16 {
         server.create(&http, &looping_hermite(&format!("heavy{k}"), 1, 2, 1.0)).await;
@@ -42,7 +42,7 @@ async fn a_hostile_upload_is_refused_and_healthz_keeps_answering() {
     let dir = tempfile::tempdir().unwrap();
     // The debug binary is many times slower than release: a smaller budget.
     let server = start(&dir.path().join("data"), &["--max-build-work", "200000"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let doc = looping_hermite("attack", 40, 17, 3000.0);
     let (done_tx, done_rx) = tokio::sync::watch::channel(false);
     let probe = {
@@ -94,7 +94,7 @@ async fn build_budget_figures() {
     }
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &[]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let at_start = peak_rss(&server);
     let doc = looping_hermite("attack", 40, 17, 3000.0);
     let (done_tx, done_rx) = tokio::sync::watch::channel(false);

@@ -18,7 +18,7 @@ const LIMIT: [&str; 4] = ["--write-rate", "1", "--write-burst", "3"];
 
 fn client_from(last_octet: u8) -> reqwest::Client {
     let local = IpAddr::V4(Ipv4Addr::new(127, 0, 0, last_octet));
-    reqwest::Client::builder().local_address(local).build().unwrap()
+    crate::common::http_builder().local_address(local).build().unwrap()
 }
 
 /// `POST /v1/clips` of the wave clip with `Authorization: Bearer <token>`.

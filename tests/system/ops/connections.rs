@@ -18,7 +18,7 @@ async fn slow_heads_slow_bodies_and_idle_connections_are_closed_while_others_are
     let dir = tempfile::tempdir().unwrap();
     let server =
         start(&dir.path().join("data"), &["--header-read-timeout-secs", "5", "--body-read-timeout-secs", "5"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
     let addr = server.http;
     let started = Instant::now();
@@ -130,7 +130,7 @@ async fn oversized_bodies_get_413_before_they_are_read() {
 async fn an_oversized_websocket_message_is_closed_with_1009() {
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &["--ws-max-message-bytes", "1024"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
     let url = format!("ws://{}/v1/clips/{id}/stream?fps=10", server.http);
     let (mut other, _) = tokio_tungstenite::connect_async(&url).await.unwrap();

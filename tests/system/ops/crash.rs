@@ -228,7 +228,7 @@ async fn kill_9_loses_no_acknowledged_clip_and_leaves_no_partial_one() {
     });
     let mut rng = Rng(seed);
     let files = Arc::new(uploads());
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let no_rate_limit = ["--write-rate", "1000000", "--write-burst", "1000000"];
 
     // What a crash-free server stores for each upload.

@@ -70,7 +70,7 @@ async fn shed_grpc_status(client: &AnimationClient<tonic::transport::Channel>, i
 async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &["--max-in-flight", "2"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
     let body = shed_rest_answer(&server, &http, &id).await;
     assert_eq!(body["code"], "overloaded");
@@ -97,7 +97,7 @@ async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
 async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &["--write-rate", "1", "--write-burst", "3"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
     for _ in 0..2 {
         server.create(&http, WAVE).await;
@@ -132,7 +132,7 @@ async fn one_token_cannot_hold_more_than_its_stream_cap() {
     let flags =
         ["--max-streams-per-token", "1", "--max-streams-per-client", "100", "--token", &alpha, "--token", &beta];
     let server = start(&dir.path().join("data"), &flags).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
     let open = |token: &str| {
         let mut req = format!("ws://{}/v1/clips/{id}/stream?fps=10", server.http).into_client_request().unwrap();
@@ -180,7 +180,7 @@ async fn overload_p99_of_admitted_requests_at_four_times_capacity() {
     let dir = tempfile::tempdir().unwrap();
     let cap = capacity.to_string();
     let server = start(&dir.path().join("data"), &["--max-in-flight", &cap]).await;
-    let http = reqwest::Client::builder().pool_max_idle_per_host(4096).build().unwrap();
+    let http = crate::common::http_builder().pool_max_idle_per_host(4096).build().unwrap();
     let id = server.create(&http, WAVE).await;
     let url = Arc::new(server.url(&format!("/v1/clips/{id}/sample")));
     let body = r#"{"start": 0, "end": 2.075, "fps": 240}"#; // 499 poses

@@ -21,7 +21,7 @@ async fn sigterm_drains_streams_and_uploads_and_exits_by_the_deadline() {
     let data = dir.path().join("data");
     let drain = DRAIN_SECS.to_string();
     let mut server = start(&data, &["--drain-timeout-secs", &drain]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let id = server.create(&http, WAVE).await;
 
     // A WebSocket viewer and a gRPC stream, both receiving.
@@ -65,7 +65,7 @@ async fn sigterm_drains_streams_and_uploads_and_exits_by_the_deadline() {
     server.signal("TERM");
     // Readiness: 503 or refused within 1 s.
     let ready_flipped = loop {
-        let r = reqwest::Client::new().get(server.url("/readyz")).send().await;
+        let r = crate::common::http_client().get(server.url("/readyz")).send().await;
         if !r.is_ok_and(|r| r.status() == 200) {
             break term.elapsed();
         }

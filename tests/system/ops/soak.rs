@@ -31,7 +31,7 @@ async fn two_hundred_viewers_for_thirty_minutes_keep_rss_flat() {
     );
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &["--max-streams-per-client", "1000"]).await;
-    let http = reqwest::Client::new();
+    let http = crate::common::http_client();
     let ids = [server.create(&http, WAVE).await, server.create(&http, WAVE).await];
     let frames = Arc::new(AtomicU64::new(0));
     let errors = Arc::new(AtomicU64::new(0));

@@ -9,7 +9,7 @@
   const TOKEN_KEY = "inbetween.token";
   const CURVE_POINTS = 400; // samples per plotted curve, at most
   const FIT_POINTS = 30; // model-space poses sampled to fit the camera
-  const COLORS = ["#ff5c5c", "#5cd65c", "#5c9dff", "#c8c8c8"]; // x, y, z, w
+  const COLORS = ["#ff5c5c", "#5cd65c", "#5c9dff", "#c8c8c8", "#e0a040", "#c070e0"]; // x, y, z, w, then more parameter components
 
   const state = {
     clips: [],
@@ -17,9 +17,13 @@
     doc: null, // its document (skeleton, tracks)
     names: [], // joint names in pose order
     parents: [], // parent index per joint, -1 for roots
+    drawnJoints: [], // per joint: drawn (a joint, not a placement node)
     positions: [], // model-space joint positions to draw
     ws: null,
     playing: false,
+    ended: false, // a `once` stream reached its end: Play starts it over
+    firstClipTime: null, // the clip time of the running stream's first frame
+    speed: 1, // the running stream's speed (the last one the server took)
     requestTime: 0, // request time of the pose shown
     clipTime: 0, // its clip time (after playback and ease)
     frames: 0,
@@ -43,12 +47,23 @@
     return token ? { Authorization: `Bearer ${token}` } : {};
   }
 
+  /// A problem document (SPEC §3) as one line: its detail, then its code
+  /// and where (`pointer` or `parameter`). Never "[object Object]".
+  function describeProblem(p, status) {
+    if (typeof p === "string") return p;
+    if (!p || typeof p !== "object") return `HTTP ${status ?? "error"}`;
+    const what = p.detail || p.title || JSON.stringify(p);
+    const where = p.pointer || p.parameter;
+    const code = [p.code, status ?? p.status].filter((x) => x != null).join(", ");
+    return `${what}${code ? ` (${code}${where ? ` at ${where}` : ""})` : ""}`;
+  }
+
   async function problemText(response) {
+    const text = await response.text().catch(() => "");
     try {
-      const p = await response.json();
-      return `${p.code || response.status}: ${p.detail || p.title}`;
+      return describeProblem(JSON.parse(text), response.status);
     } catch {
-      return `HTTP ${response.status}`;
+      return `HTTP ${response.status}${text ? `: ${text.slice(0, 200)}` : ""}`;
     }
   }
 
@@ -64,8 +79,15 @@
   async function api(path, options = {}) {
     const headers = { ...authHeaders(), ...(options.headers || {}) };
     const response = await request(path, { ...options, headers });
+    if (response.status === 401) wantToken();
     if (!response.ok) throw new Error(await problemText(response));
     return response.json();
+  }
+
+  /// Points at the token field: the server wants a (different) token.
+  function wantToken() {
+    $("token-form").classList.add("wanted");
+    $("token").focus();
   }
 
   const postJson = (path, body) =>
@@ -90,7 +112,21 @@
       if (!cursor) break;
     }
     state.clips = clips;
+    $("token-form").classList.remove("wanted");
     renderClips();
+  }
+
+  /// Loads the list; a refusal says what to do about it.
+  async function loadClipsOrExplain() {
+    try {
+      await loadClips();
+    } catch (e) {
+      const given = sessionStorage.getItem(TOKEN_KEY);
+      const hint = $("token-form").classList.contains("wanted")
+        ? given ? " — the token was refused; enter another" : " — this server needs a read token: enter it under Token"
+        : "";
+      setStatus(`listing clips: ${e.message}${hint}`, true);
+    }
   }
 
   function renderClips() {
@@ -113,6 +149,7 @@
 
   async function selectClip(id) {
     stopStream();
+    setEnded(false);
     const summary = state.clips.find((c) => c.id === id);
     const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
     Object.assign(state, { clip: summary, doc, names: [], frames: 0, seq: null, dropped: 0, latencyMs: null });
@@ -137,6 +174,28 @@
     const parentName = new Map(joints.map((j) => [j.name, j.parent]));
     const index = new Map(names.map((n, i) => [n, i]));
     return names.map((n) => (parentName.get(n) == null ? -1 : index.get(parentName.get(n)) ?? -1));
+  }
+
+  /// Which joints the view draws. A glTF skin's joints carry `inverse_bind`;
+  /// when a clip has any, nodes without one (the scene root, an armature
+  /// node) are not joints. Nor is the *placement* chain at the top of each
+  /// tree: nodes without tracks, each with one child, whose ancestors are
+  /// placement too — the Fox's `root → _rootJoint → b_Root_00`, unweighted
+  /// nodes at the floor origin that only place the rig; drawing them gave a
+  /// stray bone from the floor to the hip. A bone is drawn from a drawn
+  /// joint to a drawn child.
+  function drawnJoints(names, parents) {
+    const joints = new Map((state.doc?.skeleton?.joints || []).map((j) => [j.name, j]));
+    const skinned = [...joints.values()].some((j) => j.inverse_bind);
+    const animated = new Set((state.doc?.tracks || []).map((t) => t.joint));
+    const children = names.map(() => 0);
+    parents.forEach((p) => p >= 0 && (children[p] += 1));
+    const placement = [];
+    names.forEach((n, i) => {
+      const p = parents[i];
+      placement[i] = !animated.has(n) && children[i] <= 1 && (p < 0 || placement[p]);
+    });
+    return names.map((n, i) => !placement[i] && (!skinned || Boolean(joints.get(n)?.inverse_bind)));
   }
 
   function rotate(q, v) {
@@ -186,6 +245,7 @@
     if (names.join("\n") !== state.names.join("\n")) {
       state.names = names;
       state.parents = parentsOf(names);
+      state.drawnJoints = drawnJoints(names, state.parents);
     }
     state.positions = modelPositions(pose);
     state.requestTime = pose.time;
@@ -218,31 +278,105 @@
     return `${scheme}://${location.host}/v1/clips/${encodeURIComponent(state.clip.id)}/stream?${q}`;
   }
 
+  /// The subprotocols that carry the token: a browser cannot set headers on
+  /// a WebSocket, so it offers `inbetween.bearer.<base64url of the token>`
+  /// next to `inbetween`, which the server selects (README, Security).
+  function streamProtocols() {
+    const token = sessionStorage.getItem(TOKEN_KEY);
+    if (!token) return [];
+    const bytes = new TextEncoder().encode(token);
+    const b64 = btoa(String.fromCharCode(...bytes)).replace(/\+/g, "-").replace(/\//g, "_").replace(/=+$/, "");
+    return ["inbetween", `inbetween.bearer.${b64}`];
+  }
+
+  /// What the page can check itself before opening a stream (the server
+  /// refuses a bad handshake with a body the WebSocket API cannot read).
+  function streamSettingsProblem() {
+    const fps = Number($("fps").value), speed = Number($("speed").value);
+    if (!(Number.isInteger(fps) && fps >= 1 && fps <= 240)) return `fps must be a whole number from 1 to 240, not "${$("fps").value}"`;
+    if (!(Number.isFinite(speed) && Math.abs(speed) <= 1000)) return `speed must be a number within ±1000, not "${$("speed").value}"`;
+    return null;
+  }
+
+  /// Why a stream closed before its first frame: the handshake was refused,
+  /// and the clip's own route says why (a token, a deleted clip), else the
+  /// stream caps.
+  async function explainRefusedStream(e) {
+    try {
+      await api(`/v1/clips/${encodeURIComponent(state.clip.id)}`);
+      setStatus(`the server refused the stream (${e.code}${e.reason ? `: ${e.reason}` : ""})`, true);
+    } catch (err) {
+      setStatus(`stream refused: ${err.message}`, true);
+    }
+  }
+
   function openStream() {
-    const ws = new WebSocket(streamUrl());
+    const settings = streamSettingsProblem();
+    if (settings) {
+      setStatus(settings, true);
+      return false;
+    }
+    const ws = new WebSocket(streamUrl(), streamProtocols());
     state.ws = ws;
+    state.speed = Number($("speed").value) || 1;
+    setEnded(false);
     // The readout counts this stream's ticks: each frame's `dropped` is the
     // ticks skipped since the previous frame, so the total is their sum.
     Object.assign(state, { frames: 0, seq: null, dropped: 0 });
     ws.onmessage = (message) => {
       if (typeof message.data !== "string") return;
       const frame = JSON.parse(message.data);
-      if (frame.error) return setStatus(frame.error, true);
+      if (frame.error) return refusedControl(frame.error);
       const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
       state.frames += 1;
+      if (state.frames === 1) state.firstClipTime = frame.clip_time;
       state.seq = frame.seq;
       state.dropped += frame.dropped;
       state.latencyMs = (nowNanos - frame.sent_at_unix_nanos) / 1e6;
       if (frame.events?.length) setStatus(`event: ${frame.events.map((e) => e.name).join(", ")}`);
       applyPose(frame.pose);
       updateReadout();
+      if (state.playing && reachedEnd(frame.clip_time)) endOnce();
     };
     ws.onclose = (e) => {
       if (state.ws !== ws) return;
       state.ws = null;
       setPlaying(false);
-      if (e.code !== 1000 && e.code !== 1005) setStatus(`stream closed (${e.code}) ${e.reason}`, true);
+      if (!state.frames && e.code === 1006) explainRefusedStream(e);
+      else if (e.code !== 1000 && e.code !== 1005) setStatus(`stream closed (${e.code}) ${e.reason}`, true);
     };
+    return true;
+  }
+
+  /// The server refused a control (`{"error": problem}`): say so, and put
+  /// the speed box back to the speed still in force.
+  function refusedControl(problem) {
+    setStatus(`control refused: ${describeProblem(problem)}`, true);
+    $("speed").value = state.speed;
+  }
+
+  /// The playback mode in force: the page's choice, else the clip's default.
+  const playbackMode = () => $("playback").value || state.clip?.playback || "loop";
+
+  /// Whether a `once` stream has reached the end it is heading for (a `once`
+  /// clip holds its last pose; the stream would go on sending it).
+  function reachedEnd(clipTime) {
+    if (playbackMode() !== "once" || !state.clip) return false;
+    const { start, end } = state.clip;
+    return state.speed >= 0 ? clipTime >= end : clipTime <= start;
+  }
+
+  /// A `once` stream ended: close it and let Play start it over.
+  function endOnce() {
+    stopStream();
+    setEnded(true);
+    setStatus(`${state.clip.name} ended at ${state.clipTime.toFixed(3)} s — Play starts it over`);
+  }
+
+  function setEnded(ended) {
+    state.ended = ended;
+    $("play").classList.toggle("ended", ended);
+    $("play").title = ended ? "Ended: play again from the start" : "";
   }
 
   function send(control) {
@@ -252,6 +386,7 @@
   function stopStream() {
     const ws = state.ws;
     state.ws = null;
+    state.playing = false;
     if (ws) {
       if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ op: "stop" }));
       ws.close();
@@ -267,8 +402,7 @@
     const wasPlaying = state.playing;
     stopStream();
     if (!wasPlaying) return showPoseAt(state.requestTime).catch((e) => setStatus(e.message, true));
-    openStream();
-    setPlaying(true);
+    if (openStream()) setPlaying(true);
   }
 
   function setPlaying(playing) {
@@ -279,12 +413,57 @@
   function togglePlay() {
     if (!state.clip) return;
     if (!state.ws) {
-      openStream();
-      setPlaying(true);
+      // After a `once` end (or from its very end) play starts over.
+      const speed = Number($("speed").value) || 1;
+      if (state.ended || (playbackMode() === "once" && atEnd(speed))) {
+        state.requestTime = speed >= 0 ? state.clip.start : state.clip.end;
+      }
+      if (openStream()) setPlaying(true);
     } else {
       send({ op: state.playing ? "pause" : "play" });
       setPlaying(!state.playing);
     }
+  }
+
+  function atEnd(speed) {
+    const { start, end } = state.clip;
+    return speed >= 0 ? state.clipTime >= end : state.clipTime <= start;
+  }
+
+  /// Moves the playhead to request time `t` (clamped to the clip): a
+  /// `seek` on a running stream, else a pose fetched for the paused view.
+  function seekTo(t) {
+    if (!state.clip) return;
+    const { start, end } = state.clip;
+    const time = Math.min(end, Math.max(start, t));
+    setEnded(false);
+    if (state.ws) send({ op: "seek", time });
+    else showPoseAt(time).catch((e) => setStatus(e.message, true));
+  }
+
+  /// Space plays or pauses, arrows step one frame (Shift: one second),
+  /// Home and End go to the clip's ends. Keys typed into a field are its own.
+  function onKey(e) {
+    const t = e.target;
+    if (e.ctrlKey || e.metaKey || e.altKey) return;
+    if (t instanceof HTMLElement && t.closest("input, select, textarea")) return;
+    // A focused button takes Space itself (it clicks).
+    if (e.key === " " && t instanceof HTMLElement && t.closest("button")) return;
+    if (!state.clip) return;
+    const fps = Math.round(Number($("fps").value)) || 30;
+    const here = Number($("seek").value);
+    const step = e.shiftKey ? 1 : 1 / fps;
+    const actions = {
+      " ": togglePlay,
+      ArrowLeft: () => seekTo(here - step),
+      ArrowRight: () => seekTo(here + step),
+      Home: () => seekTo(state.clip.start),
+      End: () => seekTo(state.clip.end),
+    };
+    const action = actions[e.key];
+    if (!action) return;
+    e.preventDefault();
+    action();
   }
 
   function updateReadout() {
@@ -334,10 +513,12 @@
     });
   }
 
-  function sizeCanvas(canvas, aspect) {
+  /// Sizes a canvas's pixels to its box (the layout gives it the height the
+  /// controls leave, so the page fits one screen).
+  function sizeCanvas(canvas) {
     const dpr = window.devicePixelRatio || 1;
     const w = Math.max(1, Math.round(canvas.clientWidth * dpr));
-    const h = Math.round(w * aspect);
+    const h = Math.max(1, Math.round(canvas.clientHeight * dpr));
     if (canvas.width !== w || canvas.height !== h) {
       canvas.width = w;
       canvas.height = h;
@@ -399,7 +580,7 @@
 
   function drawScene() {
     const canvas = $("scene");
-    const dpr = sizeCanvas(canvas, 0.6);
+    const dpr = sizeCanvas(canvas);
     const ctx = canvas.getContext("2d");
     ctx.fillStyle = "#101216";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
@@ -408,7 +589,7 @@
     const step = 10 ** Math.floor(Math.log10(radius)) / 2;
     const n = Math.ceil((2 * radius) / step);
     const ox = Math.round(target[0] / step) * step, oz = Math.round(target[2] / step) * step;
-    stroke(ctx, "#2a2f3a", dpr, () => {
+    stroke(ctx, "#323846", dpr, () => {
       for (let i = -n; i <= n; i++) {
         line(ctx, cam, [ox + i * step, 0, oz - n * step], [ox + i * step, 0, oz + n * step]);
         line(ctx, cam, [ox - n * step, 0, oz + i * step], [ox + n * step, 0, oz + i * step]);
@@ -418,21 +599,99 @@
     [[axis, 0, 0], [0, axis, 0], [0, 0, axis]].forEach((end, i) =>
       stroke(ctx, COLORS[i], 2 * dpr, () => line(ctx, cam, [0, 0, 0], end)),
     );
-    const pos = state.positions;
-    stroke(ctx, "#c8d0dc", 2.5 * dpr, () => {
-      state.parents.forEach((p, i) => {
-        if (p >= 0 && pos[p] && pos[i]) line(ctx, cam, pos[p], pos[i]);
-      });
+    drawSkeleton(ctx, cam);
+  }
+
+  // ---- the skeleton as solids: octahedral bones and shaded joint spheres,
+  // drawn far to near (painter's algorithm) on the 2D canvas ----
+
+  const BONE_RGB = [200, 208, 220];
+  const JOINT_COLOR = "#ff8c1a";
+
+  /// The bones and joints to draw this frame, and their world sizes: the
+  /// sphere radius and bone width follow the median bone length, bounded by
+  /// the framed size so that neither vanishes nor swamps the view.
+  function skeletonItems() {
+    const pos = state.positions, drawn = state.drawnJoints || [];
+    const bones = [];
+    state.parents.forEach((p, i) => {
+      if (p >= 0 && drawn[p] && drawn[i] && pos[p] && pos[i]) bones.push([p, i]);
     });
-    ctx.fillStyle = "#ff8c1a";
-    for (const p of pos) {
-      const v = toCamera(cam, p);
-      if (v[2] < cam.near) continue;
-      const [x, y] = toScreen(cam, v);
-      ctx.beginPath();
-      ctx.arc(x, y, 4 * dpr, 0, 2 * Math.PI);
-      ctx.fill();
+    const lengths = bones.map(([p, i]) => Math.hypot(...sub(pos[i], pos[p]))).filter((l) => l > 0).sort((a, b) => a - b);
+    const median = lengths.length ? lengths[lengths.length >> 1] : state.camera.radius * 0.2;
+    const R = state.camera.radius;
+    const radius = Math.min(0.04 * R, Math.max(0.008 * R, 0.12 * median));
+    const joints = pos.map((_, i) => i).filter((i) => drawn[i] && pos[i]);
+    return { pos, bones, joints, radius };
+  }
+
+  /// The 8 faces of an octahedral bone from `a` to `b`: a square ring a fifth
+  /// of the way along, pointed at both ends.
+  function boneFaces(a, b, width) {
+    const d = sub(b, a);
+    const len = Math.hypot(...d);
+    if (len < 1e-9) return [];
+    const axis = [d[0] / len, d[1] / len, d[2] / len];
+    const helper = Math.abs(axis[1]) < 0.9 ? [0, 1, 0] : [1, 0, 0];
+    const u = normalize(cross(axis, helper)), v = cross(axis, u);
+    const w = Math.min(width, 0.15 * len);
+    const c = [a[0] + 0.2 * d[0], a[1] + 0.2 * d[1], a[2] + 0.2 * d[2]];
+    const ring = [u, v, u.map((x) => -x), v.map((x) => -x)].map((e) => [c[0] + w * e[0], c[1] + w * e[1], c[2] + w * e[2]]);
+    const faces = [];
+    for (let k = 0; k < 4; k++) {
+      const r0 = ring[k], r1 = ring[(k + 1) % 4];
+      faces.push([a, r1, r0], [b, r0, r1]);
     }
+    return faces;
+  }
+
+  function drawSkeleton(ctx, cam) {
+    const { pos, bones, joints, radius } = skeletonItems();
+    const light = normalize([cam.u[0] * 0.6 - cam.r[0] * 0.4 - cam.f[0], cam.u[1] * 0.6 - cam.r[1] * 0.4 - cam.f[1], cam.u[2] * 0.6 - cam.r[2] * 0.4 - cam.f[2]]);
+    const items = [];
+    for (const [p, i] of bones)
+      for (const face of boneFaces(pos[p], pos[i], 1.6 * radius)) {
+        const n = normalize(cross(sub(face[1], face[0]), sub(face[2], face[0])));
+        if (dot(n, sub(face[0], cam.eye)) >= 0) continue; // facing away
+        const v = face.map((q) => toCamera(cam, q));
+        if (v.some((q) => q[2] < cam.near)) continue;
+        const shade = 0.35 + 0.65 * Math.max(0, dot(n, light));
+        items.push({ depth: (v[0][2] + v[1][2] + v[2][2]) / 3, face: v.map((q) => toScreen(cam, q)), shade });
+      }
+    for (const i of joints) {
+      const v = toCamera(cam, pos[i]);
+      if (v[2] < cam.near * 2) continue;
+      items.push({ depth: v[2] - radius, center: toScreen(cam, v), r: (radius * cam.focal) / v[2] });
+    }
+    items.sort((a, b) => b.depth - a.depth);
+    for (const item of items) (item.face ? drawFace : drawSphere)(ctx, item);
+    viewer.drawn = { bones: bones.map(([p, i]) => [state.names[p], state.names[i]]), joints: joints.length };
+  }
+
+  function drawFace(ctx, { face, shade }) {
+    ctx.beginPath();
+    ctx.moveTo(face[0][0], face[0][1]);
+    ctx.lineTo(face[1][0], face[1][1]);
+    ctx.lineTo(face[2][0], face[2][1]);
+    ctx.closePath();
+    const [r, g, b] = BONE_RGB.map((c) => Math.round(c * shade));
+    ctx.fillStyle = `rgb(${r},${g},${b})`;
+    ctx.strokeStyle = ctx.fillStyle; // closes the hairline seams between faces
+    ctx.lineWidth = 0.5;
+    ctx.fill();
+    ctx.stroke();
+  }
+
+  /// A lit sphere: a radial gradient with its highlight up and to the left.
+  function drawSphere(ctx, { center: [x, y], r }) {
+    const g = ctx.createRadialGradient(x - 0.35 * r, y - 0.35 * r, 0.1 * r, x, y, r);
+    g.addColorStop(0, "#ffd0a0");
+    g.addColorStop(0.45, JOINT_COLOR);
+    g.addColorStop(1, "#a04f00");
+    ctx.fillStyle = g;
+    ctx.beginPath();
+    ctx.arc(x, y, Math.max(r, 1.5), 0, 2 * Math.PI);
+    ctx.fill();
   }
 
   /// Frames the clip: the bounds of its model-space poses over its range.
@@ -486,19 +745,49 @@
   }
 
   // ---- curves ----
+  // A joint's channel or a parameter (SPEC §8), sampled by the server; a
+  // rotation as Euler angles in a chosen order or as quaternion components;
+  // keys marked, and the tangents of cubic Hermite keys drawn as handles.
+
+  const PARAM = "param:"; // the curve selector's prefix for parameters
 
   function setupCurveSelectors() {
     const joints = [];
     for (const t of state.doc.tracks) if (!joints.includes(t.joint)) joints.push(t.joint);
     const select = $("curve-joint");
     select.replaceChildren(...joints.map((j) => new Option(j, j)));
+    const params = state.doc.parameters || [];
+    if (params.length) {
+      const group = document.createElement("optgroup");
+      group.label = "parameters";
+      group.append(...params.map((p) => new Option(p.name, PARAM + p.name)));
+      select.append(group);
+    }
     setupChannels();
   }
 
   function setupChannels() {
     const joint = $("curve-joint").value;
-    const channels = state.doc.tracks.filter((t) => t.joint === joint).map((t) => t.channel);
+    const channels = joint.startsWith(PARAM)
+      ? ["value"]
+      : state.doc.tracks.filter((t) => t.joint === joint).map((t) => t.channel);
     $("curve-channel").replaceChildren(...channels.map((c) => new Option(c, c)));
+    showRotationChoice();
+  }
+
+  function showRotationChoice() {
+    $("rotation-as").hidden = $("curve-channel").value !== "rotation";
+  }
+
+  /// The track (or parameter) plotted, and how its values come out of a pose.
+  function curveSource(joint, channel) {
+    if (joint.startsWith(PARAM)) {
+      const name = joint.slice(PARAM.length);
+      const track = (state.doc.parameters || []).find((p) => p.name === name);
+      return { track, read: (pose) => pose.parameters[name] };
+    }
+    const track = state.doc.tracks.find((t) => t.joint === joint && t.channel === channel);
+    return { track, read: (pose) => pose.joints.find((j) => j.name === joint)[channel] };
   }
 
   async function loadCurve() {
@@ -508,31 +797,94 @@
       return drawCurves();
     }
     const { id, start, end } = state.clip;
-    const track = state.doc.tracks.find((t) => t.joint === joint && t.channel === channel);
+    const { track, read } = curveSource(joint, channel);
     const fps = end > start ? Math.min(240, Math.max(1, CURVE_POINTS / (end - start))) : 1;
     const request = { start, end, fps, space: "local", playback: "once", ease: $("ease").value };
     const { poses } = await postJson(`/v1/clips/${encodeURIComponent(id)}/sample`, request);
     const times = poses.map((p) => p.time);
-    const values = poses.map((p) => p.joints.find((j) => j.name === joint)[channel]);
-    const keys = track.times.map((t, i) => ({ time: requestTimeOf(t), clipTime: t, value: track.values[i] }));
-    state.curve = { clip: id, joint, channel, request, times, values, keys };
+    const raw = poses.map(read);
+    const euler = channel === "rotation" && $("curve-rotation").value !== "quaternion" ? $("curve-rotation").value : null;
+    const values = euler ? unwrapSeries(raw.map((q) => eulerDegrees(q, euler))) : raw;
+    const keys = track.times.map((t, i) => {
+      const time = requestTimeOf(t);
+      const v = track.values[i];
+      return { time, clipTime: t, value: euler ? nearestBranch(eulerDegrees(v, euler), values[nearestIndex(times, time)]) : v };
+    });
+    const tangents = euler ? [] : hermiteHandles(track);
+    state.curve = { clip: id, joint, channel, euler, request, times, values, keys, tangents };
     const ends = track.ends ? `, ends ${track.ends}` : "";
-    $("curve-info").textContent = `${track.interpolation}${ends} · ${track.times.length} keys · ${request.ease}`;
+    const unit = euler ? ` · Euler ${euler} (${euler[0]} first), degrees` : "";
+    $("curve-info").textContent = `${track.interpolation}${ends} · ${track.times.length} keys · ${request.ease}${unit}`;
     viewer.curve = state.curve;
     drawCurves();
   }
 
+  /// A cubic Hermite track's tangents as Bezier handles (units per second
+  /// times a third of the segment): out of key i at `t_i + h_i/3`, into key
+  /// i at `t_i - h_{i-1}/3`, as SPEC §2.5's segment is that Bezier.
+  function hermiteHandles(track) {
+    if (track.interpolation !== "cubic_hermite") return [];
+    const { times, values, in_tangents: a, out_tangents: b } = track;
+    const at = (i, sign, h, tangent) => ({
+      time: requestTimeOf(times[i] + (sign * h) / 3),
+      value: values[i].map((v, c) => v + (sign * h * tangent[c]) / 3),
+    });
+    return times.map((t, i) => ({
+      time: requestTimeOf(t),
+      value: values[i],
+      in: i > 0 ? at(i, -1, t - times[i - 1], a[i]) : null,
+      out: i + 1 < times.length ? at(i, 1, times[i + 1] - t, b[i]) : null,
+    }));
+  }
+
+  /// Euler angles in degrees, `[x, y, z]`, of the unit quaternion `[x, y, z,
+  /// w]` for `order` ("XYZ": X applied first, R = Rz·Ry·Rx).
+  function eulerDegrees(q, order) {
+    const [x, y, z, w] = q;
+    const n = Math.hypot(x, y, z, w) || 1;
+    const [qx, qy, qz, qw] = [x / n, y / n, z / n, w / n];
+    const R = [
+      [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+      [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+      [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)],
+    ];
+    const [i, j, k] = [...order].map((c) => "XYZ".indexOf(c));
+    const s = (j - i + 3) % 3 === 1 ? 1 : -1; // +1 for the cyclic orders
+    const out = [0, 0, 0];
+    out[i] = Math.atan2(s * R[k][j], R[k][k]);
+    out[j] = Math.asin(Math.max(-1, Math.min(1, -s * R[k][i])));
+    out[k] = Math.atan2(s * R[j][i], R[i][i]);
+    return out.map((r) => (r * 180) / Math.PI);
+  }
+
+  /// `a` with whole turns added to each angle to be nearest `b`.
+  const nearestBranch = (a, b) => a.map((v, c) => v + 360 * Math.round((b[c] - v) / 360));
+
+  /// Angles made continuous along the series (no ±180° jumps).
+  function unwrapSeries(series) {
+    const out = [];
+    for (const v of series) out.push(out.length ? nearestBranch(v, out[out.length - 1]) : v);
+    return out;
+  }
+
+  function nearestIndex(times, t) {
+    let best = 0;
+    times.forEach((x, i) => Math.abs(x - t) < Math.abs(times[best] - t) && (best = i));
+    return best;
+  }
+
   function drawCurves() {
     const canvas = $("curves");
-    const dpr = sizeCanvas(canvas, 0.25);
+    const dpr = sizeCanvas(canvas);
     const ctx = canvas.getContext("2d");
     const W = canvas.width, H = canvas.height;
     ctx.fillStyle = "#101216";
     ctx.fillRect(0, 0, W, H);
     const curve = state.curve;
     if (!curve || !curve.times.length) return;
+    const handles = curve.tangents.flatMap((k) => [k.in, k.out].filter(Boolean));
     let lo = Infinity, hi = -Infinity;
-    for (const v of [...curve.values, ...curve.keys.map((k) => k.value)])
+    for (const v of [...curve.values, ...curve.keys.map((k) => k.value), ...handles.map((h) => h.value)])
       for (const c of v) {
         lo = Math.min(lo, c);
         hi = Math.max(hi, c);
@@ -550,17 +902,27 @@
     const Y = (v) => bottom - ((v - lo) / (hi - lo)) * (bottom - top);
     ctx.font = `${11 * dpr}px system-ui, sans-serif`;
     ctx.fillStyle = "#8a93a3";
-    ctx.fillText(hi.toPrecision(4), 4 * dpr, top + 8 * dpr);
-    ctx.fillText(lo.toPrecision(4), 4 * dpr, bottom);
+    const unit = curve.euler ? "°" : "";
+    ctx.fillText(hi.toPrecision(4) + unit, 4 * dpr, top + 8 * dpr);
+    ctx.fillText(lo.toPrecision(4) + unit, 4 * dpr, bottom);
     ctx.fillText(`${t0.toFixed(2)} s`, left, H - 5 * dpr);
     ctx.fillText(`${t1.toFixed(2)} s`, right - 40 * dpr, H - 5 * dpr);
     if (lo < 0 && hi > 0) stroke(ctx, "#353a45", dpr, () => (ctx.moveTo(left, Y(0)), ctx.lineTo(right, Y(0))));
     const components = curve.values[0].length;
     for (let c = 0; c < components; c++) {
-      stroke(ctx, COLORS[c], 1.5 * dpr, () =>
+      const color = COLORS[c % COLORS.length];
+      stroke(ctx, color, 1.5 * dpr, () =>
         curve.times.forEach((t, i) => (i ? ctx.lineTo(X(t), Y(curve.values[i][c])) : ctx.moveTo(X(t), Y(curve.values[i][c])))),
       );
-      ctx.fillStyle = COLORS[c];
+      for (const k of curve.tangents)
+        for (const h of [k.in, k.out].filter(Boolean)) {
+          stroke(ctx, color, dpr, () => (ctx.moveTo(X(k.time), Y(k.value[c])), ctx.lineTo(X(h.time), Y(h.value[c]))));
+          ctx.beginPath();
+          ctx.arc(X(h.time), Y(h.value[c]), 3 * dpr, 0, 2 * Math.PI);
+          ctx.strokeStyle = color;
+          ctx.stroke();
+        }
+      ctx.fillStyle = color;
       for (const k of curve.keys) ctx.fillRect(X(k.time) - 3 * dpr, Y(k.value[c]) - 3 * dpr, 6 * dpr, 6 * dpr);
     }
     const playhead = X(requestTimeOf(state.clipTime));
@@ -576,13 +938,12 @@
     const ext = main.name.split(".").pop().toLowerCase();
     if (ext === "json") {
       state.pendingUpload = { url: "/v1/clips", body: await main.text(), type: "application/json" };
-    } else if (files.length > 1) {
+    } else {
+      // Multipart even for one file: its file name names the clips it does not name itself.
       const form = new FormData();
       form.append("file", main, main.name);
       for (const f of files) if (f !== main) form.append("buffer", f, f.name);
       state.pendingUpload = { url: `/v1/clips/import?format=${ext}`, body: form };
-    } else {
-      state.pendingUpload = { url: `/v1/clips/import?format=${ext}`, body: main, type: "application/octet-stream" };
     }
     await sendUpload();
   }
@@ -602,14 +963,14 @@
       body: "",
     });
     const response = probe.status === 401 ? probe : await request(req.url, { method: "POST", headers, body: req.body });
-    if (response.status === 401) {
-      $("token-form").hidden = false;
-      $("token").focus();
+    if (response.status === 401 || response.status === 403) {
+      wantToken();
       const given = sessionStorage.getItem(TOKEN_KEY);
-      return setStatus(given ? "the write token was refused" : "uploading needs the write token", true);
+      const why = given ? `the token was refused (${await problemText(response)})` : "uploading needs the write token";
+      return setStatus(`${why}: enter it under Token`, true);
     }
     state.pendingUpload = null;
-    $("token-form").hidden = true;
+    $("token-form").classList.remove("wanted");
     if (!response.ok) return setStatus(`upload refused: ${await problemText(response)}`, true);
     const body = await response.json();
     const created = body.clips || [body];
@@ -635,9 +996,20 @@
     });
     $("token-form").addEventListener("submit", (e) => {
       e.preventDefault();
-      sessionStorage.setItem(TOKEN_KEY, $("token").value.trim());
-      sendUpload().catch(report);
+      const token = $("token").value.trim();
+      if (token) sessionStorage.setItem(TOKEN_KEY, token);
+      else sessionStorage.removeItem(TOKEN_KEY);
+      $("token-form").classList.remove("wanted");
+      setStatus(token ? "token saved for this tab" : "no token");
+      // Retry what the token was for: a pending upload, and the list.
+      loadClipsOrExplain().then(() => sendUpload()).catch(report);
     });
+    $("token-forget").addEventListener("click", () => {
+      sessionStorage.removeItem(TOKEN_KEY);
+      $("token").value = "";
+      setStatus("token forgotten");
+    });
+    if (sessionStorage.getItem(TOKEN_KEY)) $("token").value = sessionStorage.getItem(TOKEN_KEY);
   }
 
   // ---- wiring ----
@@ -654,19 +1026,32 @@
       if (state.ws) send({ op: "seek", time: t });
       else showPoseAt(t).catch(report);
     });
-    $("speed").addEventListener("change", () => send({ op: "speed", speed: Number($("speed").value) || 1 }));
+    $("speed").addEventListener("change", () => {
+      const speed = Number($("speed").value);
+      if (!state.ws) return;
+      if (!Number.isFinite(speed)) return refusedControl(`speed must be a number, not "${$("speed").value}"`);
+      // Sent either way, so that the server's own words explain a refusal;
+      // kept only if it is one the server takes (SPEC §5: within ±1000).
+      if (Math.abs(speed) <= 1000) state.speed = speed;
+      send({ op: "speed", speed });
+    });
+    document.addEventListener("keydown", onKey);
     for (const id of ["fps", "playback", "space", "ease"]) $(id).addEventListener("change", restartStream);
     $("curve-joint").addEventListener("change", () => {
       setupChannels();
       loadCurve().catch(report);
     });
-    $("curve-channel").addEventListener("change", () => loadCurve().catch(report));
+    $("curve-channel").addEventListener("change", () => {
+      showRotationChoice();
+      loadCurve().catch(report);
+    });
+    $("curve-rotation").addEventListener("change", () => loadCurve().catch(report));
     setupOrbit();
     setupUpload();
     window.addEventListener("resize", () => (requestDraw(), drawCurves()));
     requestDraw();
     drawCurves();
-    loadClips().catch(report);
+    loadClipsOrExplain();
   }
 
   viewer.selectClip = selectClip;

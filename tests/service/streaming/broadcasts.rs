@@ -1,0 +1,524 @@
+//! Broadcasts (SPEC §9) with real clients: viewers joining at different
+//! times over WebSocket (JSON and protobuf) and gRPC `Watch` get the same
+//! frames for the same `seq`; a control from one caller reaches every viewer
+//! at the tick it was told, with poses equal to an independent
+//! `POST /v1/poses` at the same motion time; scopes; idle end; delete; the
+//! refusals and their codes.
+//!
+//! The clip moves `j0` along x at 1 unit/s over [0, 10] s, so a frame's x
+//! is its motion time (checked by hand as well as against `/v1/poses`).
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use inbetween::wire::proto::pb;
+use prost::Message as _;
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tonic::Streaming;
+
+use super::websocket::close_frame;
+use super::{TestApp, line_clip, within};
+use crate::common::app::Ws;
+use crate::security::{READER, WRITER, scoped_tokens, with_token};
+
+const FPS: u64 = 20;
+
+/// Creates a broadcast of `clip` (with `token`); returns its summary.
+async fn create(app: &TestApp, body: Value, token: Option<&str>) -> (u16, Value, Option<String>) {
+    let mut req = app.http.post(app.url("/v1/broadcasts")).json(&body);
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let resp = req.send().await.unwrap();
+    let status = resp.status().as_u16();
+    let location = resp.headers().get("location").map(|v| v.to_str().unwrap().to_owned());
+    (status, resp.json().await.unwrap(), location)
+}
+
+async fn broadcast_of(app: &TestApp, clip: &str, token: Option<&str>) -> String {
+    let (status, body, location) =
+        create(app, json!({"motion": {"layers": [{"clip": clip}]}, "fps": FPS}), token).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_str().unwrap().to_owned();
+    assert_eq!(location.as_deref(), Some(format!("/v1/broadcasts/{id}").as_str()));
+    id
+}
+
+async fn control(app: &TestApp, id: &str, body: Value, token: Option<&str>) -> (u16, Value) {
+    let mut req = app.http.post(app.url(&format!("/v1/broadcasts/{id}/controls"))).json(&body);
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let resp = req.send().await.unwrap();
+    (resp.status().as_u16(), resp.json().await.unwrap())
+}
+
+async fn watch_ws(app: &TestApp, id: &str, query: &str, token: Option<&str>) -> Ws {
+    let mut req = app.ws_url(&format!("/v1/broadcasts/{id}/stream{query}")).into_client_request().unwrap();
+    if let Some(t) = token {
+        req.headers_mut().insert("authorization", format!("Bearer {t}").parse().unwrap());
+    }
+    let (ws, resp) = within(5, "the upgrade", tokio_tungstenite::connect_async(req)).await.unwrap();
+    assert_eq!(resp.status(), 101);
+    ws
+}
+
+async fn watch_grpc(app: &TestApp, id: &str, token: Option<&str>) -> Streaming<pb::Frame> {
+    let req = with_token(pb::WatchRequest { broadcast_id: id.to_owned() }, token);
+    app.grpc().await.watch(req).await.unwrap().into_inner()
+}
+
+/// The next frame message (text or binary), pings skipped.
+async fn next_message(ws: &mut Ws) -> Message {
+    loop {
+        match within(5, "a frame", ws.next()).await.expect("the socket closed").unwrap() {
+            Message::Ping(_) | Message::Pong(_) => {}
+            Message::Text(t) if t.starts_with("{\"error\"") => panic!("an error message: {t}"),
+            msg => return msg,
+        }
+    }
+}
+
+/// (seq, dropped) of a JSON or protobuf frame message.
+fn header(msg: &Message) -> (u64, u64) {
+    match msg {
+        Message::Text(t) => {
+            let v: Value = serde_json::from_str(t).unwrap();
+            (v["seq"].as_u64().unwrap(), v["dropped"].as_u64().unwrap())
+        }
+        Message::Binary(b) => {
+            let f = pb::Frame::decode(b.clone()).unwrap();
+            (f.seq, f.dropped)
+        }
+        other => panic!("not a frame: {other:?}"),
+    }
+}
+
+/// A viewer's frames from its first up to seq `until`: seq → (dropped, message).
+async fn collect_ws(mut ws: Ws, until: u64) -> (Vec<u64>, BTreeMap<u64, (u64, Message)>) {
+    let mut order = Vec::new();
+    let mut frames = BTreeMap::new();
+    loop {
+        let msg = next_message(&mut ws).await;
+        let (seq, dropped) = header(&msg);
+        order.push(seq);
+        frames.insert(seq, (dropped, msg));
+        if seq >= until {
+            return (order, frames);
+        }
+    }
+}
+
+async fn collect_grpc(mut frames: Streaming<pb::Frame>, until: u64) -> BTreeMap<u64, pb::Frame> {
+    let mut out = BTreeMap::new();
+    loop {
+        let f = within(5, "a gRPC frame", frames.message()).await.unwrap().expect("a frame");
+        let seq = f.seq;
+        out.insert(seq, f);
+        if seq >= until {
+            return out;
+        }
+    }
+}
+
+/// A JSON frame's text with its own `dropped` set to 0: what every viewer shares.
+fn shared_text(msg: &Message) -> String {
+    let Message::Text(t) = msg else { panic!("not text") };
+    let at = t.find("\"dropped\":").unwrap() + "\"dropped\":".len();
+    let end = at + t[at..].find(|c: char| !c.is_ascii_digit()).unwrap();
+    format!("{}0{}", &t[..at], &t[end..])
+}
+
+/// A protobuf frame without its per-viewer parts (dropped, first-frame names).
+fn shared_pb(mut f: pb::Frame) -> pb::Frame {
+    f.dropped = 0;
+    if let Some(p) = f.pose.as_mut() {
+        p.joint_names.clear();
+    }
+    f
+}
+
+fn json_of(msg: &Message) -> Value {
+    let Message::Text(t) = msg else { panic!("not text") };
+    serde_json::from_str(t).unwrap()
+}
+
+#[tokio::test]
+async fn viewers_joining_at_different_times_get_the_same_frames_for_the_same_seq() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(2), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let until = 40;
+    let a = tokio::spawn(collect_ws(watch_ws(&app, &id, "", None).await, until));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let b = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=json", None).await, until));
+    let d = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=protobuf", None).await, until));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let c = tokio::spawn(collect_grpc(watch_grpc(&app, &id, None).await, until));
+    let e = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=protobuf", None).await, until));
+    let (a, b, d, e) = (a.await.unwrap(), b.await.unwrap(), d.await.unwrap(), e.await.unwrap());
+    let c = c.await.unwrap();
+
+    // Each viewer's first frame is a tick after it joined, with dropped 0.
+    for (name, (order, frames)) in [("a", &a), ("b", &b), ("d", &d), ("e", &e)] {
+        assert_eq!(frames[&order[0]].0, 0, "{name}'s first frame has dropped 0");
+    }
+    assert!(b.0[0] > a.0[0] + 3, "b joined 300 ms after a: {} vs {}", b.0[0], a.0[0]);
+    assert!(e.0[0] > b.0[0] + 3, "e joined 300 ms after b");
+    assert_eq!(c.values().next().unwrap().dropped, 0);
+    assert!(!c.values().next().unwrap().pose.as_ref().unwrap().joint_names.is_empty(), "names in the first frame");
+
+    let mut compared = 0;
+    for (seq, (_, msg)) in &b.1 {
+        // JSON: the same bytes for the same seq, but for each viewer's own dropped.
+        let (_, other) = a.1.get(seq).expect("a saw every seq b saw");
+        assert_eq!(shared_text(msg), shared_text(other), "seq {seq}");
+        // The pose is the motion at seq/fps (x = time on this clip), start 0, speed 1.
+        let v = json_of(msg);
+        let x = v["pose"]["joints"][0]["translation"][0].as_f64().unwrap();
+        assert!((x - *seq as f64 / FPS as f64).abs() < 1e-5, "seq {seq}: x {x}");
+        // Protobuf viewers: identical bytes (after the first frame's names), the
+        // same frame over gRPC, and the same tick stamp as the JSON frame.
+        if let (Some((_, dm)), Some((_, em))) = (d.1.get(seq), e.1.get(seq)) {
+            let (Message::Binary(db), Message::Binary(eb)) = (dm, em) else { panic!("binary frames") };
+            let (df, ef) = (pb::Frame::decode(db.clone()).unwrap(), pb::Frame::decode(eb.clone()).unwrap());
+            if *seq > e.0[0] && df.dropped == 0 && ef.dropped == 0 {
+                assert_eq!(db, eb, "seq {seq}: the same protobuf bytes");
+            }
+            assert_eq!(shared_pb(df.clone()), shared_pb(ef));
+            if let Some(cf) = c.get(seq) {
+                assert_eq!(shared_pb(cf.clone()), shared_pb(df.clone()), "seq {seq}: gRPC = WebSocket protobuf");
+                compared += 1;
+            }
+            assert_eq!(df.sent_at_unix_nanos, v["sent_at_unix_nanos"].as_i64().unwrap(), "stamped once per tick");
+            assert_eq!(df.clip_time, v["clip_time"].as_f64().unwrap() as f32);
+        }
+    }
+    assert!(compared >= 10, "only {compared} frames seen by all viewers");
+
+    // One evaluation per tick whatever the number of viewers: the summary's
+    // viewer count is back to 0 once they left, and the metrics count ticks.
+    let metrics = app.http.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(metrics.contains("inbetween_broadcast_ticks_total"), "{metrics}");
+    app.stop().await;
+}
+
+/// The motion time a JSON frame shows, and its x.
+fn time_and_x(msg: &Message) -> (f64, f64) {
+    let v = json_of(msg);
+    (v["pose"]["time"].as_f64().unwrap(), v["pose"]["joints"][0]["translation"][0].as_f64().unwrap())
+}
+
+#[tokio::test]
+async fn a_control_reaches_every_viewer_at_the_seq_it_returns() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(2), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let mut ws = watch_ws(&app, &id, "", None).await;
+    let grpc = watch_grpc(&app, &id, None).await;
+    let first = header(&next_message(&mut ws).await).0;
+
+    let (status, seek) = control(&app, &id, json!({"op": "seek", "time": 5.0}), None).await;
+    assert_eq!(status, 200, "{seek}");
+    let k = seek["seq"].as_u64().unwrap();
+    assert!(k > first, "the seek applies from a tick after the viewer's first frame");
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let (status, pause) = control(&app, &id, json!({"op": "pause"}), None).await;
+    assert_eq!(status, 200, "{pause}");
+    let p = pause["seq"].as_u64().unwrap();
+    assert!(p > k + 3);
+    let summary: Value = app.get_json(&format!("/v1/broadcasts/{id}")).await;
+    assert_eq!(summary["state"], "paused");
+    assert_eq!(
+        (summary["motion"]["layers"][0]["clip"].as_str(), summary["space"].as_str()),
+        (Some(&*clip), Some("local"))
+    );
+    assert_eq!(
+        (summary["fps"].as_u64(), summary["speed"].as_f64(), summary["viewers"].as_u64()),
+        (Some(FPS), Some(1.0), Some(2))
+    );
+    assert!(summary["seq"].as_u64().unwrap() + 1 >= p, "the summary's seq is the tick now: {summary}");
+    assert!(summary["joints"].is_null());
+
+    let until = p + 5;
+    let (_, frames) = collect_ws(ws, until).await;
+    let grpc = collect_grpc(grpc, until).await;
+    let fps = FPS as f64;
+    for (&seq, (_, msg)) in &frames {
+        let (t, x) = time_and_x(msg);
+        // By hand: seq/fps before the seek; 5 from tick k on; held at tick p−1's from p on.
+        let expected = if seq < k {
+            seq as f64 / fps
+        } else if seq < p {
+            5.0 + (seq - k) as f64 / fps
+        } else {
+            5.0 + (p - 1 - k) as f64 / fps
+        };
+        assert!((t - expected).abs() < 1e-9, "seq {seq}: time {t}, expected {expected} (k {k}, p {p})");
+        assert!((x - expected).abs() < 1e-5, "seq {seq}: x {x}");
+        // The gRPC viewer saw the same pose at the same seq.
+        if let Some(g) = grpc.get(&seq) {
+            let pose = g.pose.as_ref().unwrap();
+            assert_eq!(pose.translations[0], x as f32, "seq {seq}: gRPC and WebSocket poses");
+        }
+    }
+    // Around each control, the frames equal an independent evaluation at their motion time.
+    for seq in [k - 1, k, k + 1, p - 1, p, p + 2] {
+        let Some((_, msg)) = frames.get(&seq) else { continue };
+        let (t, _) = time_and_x(msg);
+        let pose = app.post_json("/v1/poses", &json!({"motion": {"layers": [{"clip": clip}]}, "time": t})).await;
+        assert_eq!(json_of(msg)["pose"]["joints"], pose["joints"], "seq {seq}");
+    }
+    assert!(frames.contains_key(&k) && frames.contains_key(&p), "the control ticks were delivered");
+
+    // `Play` bound to the broadcast controls it too.
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let bind = pb::playback_control::Op::Broadcast(pb::BindBroadcast { broadcast_id: id.clone() });
+    tx.send(pb::PlaybackControl { op: Some(bind) }).await.unwrap();
+    let mut play = app.grpc().await.play(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    within(5, "a bound frame", play.message()).await.unwrap().expect("a frame");
+    let resume = pb::playback_control::Op::Play(pb::Resume {});
+    tx.send(pb::PlaybackControl { op: Some(resume) }).await.unwrap();
+    within(5, "playing again", async {
+        while app.get_json(&format!("/v1/broadcasts/{id}")).await["state"] != "playing" {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
+    drop(tx);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_read_only_token_watches_but_cannot_control() {
+    let app = TestApp::builder().configure(scoped_tokens).start().await;
+    let clip = app.create_id(&line_clip(1), Some(WRITER)).await;
+    let body = json!({"motion": {"layers": [{"clip": clip}]}, "fps": FPS});
+    let (status, refused, _) = create(&app, body, Some(READER)).await;
+    assert_eq!((status, refused["code"].as_str()), (403, Some("insufficient_scope")));
+    let id = broadcast_of(&app, &clip, Some(WRITER)).await;
+
+    // The reader watches (WebSocket and gRPC) ...
+    let mut reader = watch_ws(&app, &id, "", Some(READER)).await;
+    next_message(&mut reader).await;
+    let mut frames = watch_grpc(&app, &id, Some(READER)).await;
+    within(5, "a gRPC frame", frames.message()).await.unwrap().expect("a frame");
+    // ... but neither controls over REST, nor on its socket, nor with a bound Play.
+    let (status, refused) = control(&app, &id, json!({"op": "pause"}), Some(READER)).await;
+    assert_eq!((status, refused["code"].as_str()), (403, Some("insufficient_scope")));
+    reader.send(Message::Text(json!({"op": "pause"}).to_string().into())).await.unwrap();
+    let error = loop {
+        match within(5, "the refusal", reader.next()).await.unwrap().unwrap() {
+            Message::Text(t) if t.contains("\"error\"") => break serde_json::from_str::<Value>(&t).unwrap(),
+            _ => {}
+        }
+    };
+    assert_eq!(error["error"]["code"], "insufficient_scope");
+    let (tx, rx) = tokio::sync::mpsc::channel(1);
+    let bind = pb::playback_control::Op::Broadcast(pb::BindBroadcast { broadcast_id: id.clone() });
+    tx.send(pb::PlaybackControl { op: Some(bind) }).await.unwrap();
+    let stream = tokio_stream::wrappers::ReceiverStream::new(rx);
+    let status = app.grpc().await.play(with_token(stream, Some(READER))).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::PermissionDenied);
+    let summary: Value = app
+        .http
+        .get(app.url(&format!("/v1/broadcasts/{id}")))
+        .bearer_auth(READER)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(summary["state"], "playing", "nothing the reader sent took effect");
+
+    // The writer's socket controls it for everyone.
+    let mut writer = watch_ws(&app, &id, "", Some(WRITER)).await;
+    writer.send(Message::Text(json!({"op": "pause"}).to_string().into())).await.unwrap();
+    within(5, "paused", async {
+        loop {
+            let req = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).bearer_auth(READER);
+            if req.send().await.unwrap().json::<Value>().await.unwrap()["state"] == "paused" {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn idle_broadcasts_end_and_watched_ones_do_not() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let motion = json!({"layers": [{"clip": clip}]});
+    let (_, idle, _) = create(&app, json!({"motion": motion, "fps": 30, "idle_timeout_secs": 1}), None).await;
+    let (_, watched, _) = create(&app, json!({"motion": motion, "fps": 30, "idle_timeout_secs": 1}), None).await;
+    let (idle, watched) = (idle["id"].as_str().unwrap(), watched["id"].as_str().unwrap());
+    let mut ws = watch_ws(&app, watched, "", None).await;
+    let status = |id: String| {
+        let req = app.http.get(app.url(&format!("/v1/broadcasts/{id}")));
+        async move { req.send().await.unwrap().status().as_u16() }
+    };
+    assert_eq!(status(idle.to_owned()).await, 200);
+    // Read frames for 2 s: the idle one ends after 1 s, the watched one goes on.
+    let until = tokio::time::Instant::now() + Duration::from_secs(2);
+    while tokio::time::Instant::now() < until {
+        next_message(&mut ws).await;
+    }
+    let gone: Value = app.get_json(&format!("/v1/broadcasts/{idle}")).await;
+    assert_eq!(gone["code"], "broadcast_not_found");
+    assert_eq!(status(watched.to_owned()).await, 200);
+    let list: Value = app.get_json("/v1/broadcasts").await;
+    let ids: Vec<&str> = list["broadcasts"].as_array().unwrap().iter().map(|b| b["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, [watched]);
+    // Once its viewer leaves, it ends too.
+    ws.close(None).await.unwrap();
+    within(5, "the watched broadcast to end", async {
+        while status(watched.to_owned()).await != 404 {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    })
+    .await;
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn delete_closes_viewers_with_1000_and_grpc_ok() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let mut ws = watch_ws(&app, &id, "", None).await;
+    let mut frames = watch_grpc(&app, &id, None).await;
+    next_message(&mut ws).await;
+    within(5, "a gRPC frame", frames.message()).await.unwrap().expect("a frame");
+    let resp = app.http.delete(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    assert_eq!(close_frame(&mut ws).await, (1000, "the broadcast ended".to_owned()));
+    let end = within(5, "the gRPC end", async {
+        loop {
+            match frames.message().await {
+                Ok(Some(_)) => {}
+                other => return other,
+            }
+        }
+    })
+    .await;
+    assert!(matches!(end, Ok(None)), "gRPC ends with OK: {end:?}");
+    let again = app.http.delete(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(again.status(), 404);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn shutdown_closes_viewers_with_1001_and_unavailable() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let mut ws = watch_ws(&app, &id, "", None).await;
+    let mut frames = watch_grpc(&app, &id, None).await;
+    next_message(&mut ws).await;
+    within(5, "a gRPC frame", frames.message()).await.unwrap().expect("a frame");
+    let stopping = tokio::spawn(app.stop());
+    assert_eq!(close_frame(&mut ws).await.0, 1001);
+    let end = within(5, "the gRPC end", async {
+        loop {
+            match frames.message().await {
+                Ok(Some(_)) => {}
+                other => return other,
+            }
+        }
+    })
+    .await;
+    assert_eq!(end.unwrap_err().code(), tonic::Code::Unavailable);
+    stopping.await.unwrap();
+}
+
+#[tokio::test]
+async fn bad_requests_are_refused_with_stable_codes() {
+    let app = TestApp::builder().configure(|c| c.limits.max_broadcasts = 2).start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let motion = json!({"layers": [{"clip": clip}]});
+    let cases = [
+        (json!({"motion": motion, "fps": 0}), 422, "fps_out_of_range", Some("/fps")),
+        (json!({"motion": motion, "fps": 1.5}), 400, "bad_number", Some("/fps")),
+        (json!({"motion": motion, "format": "matrix"}), 422, "format_not_streamable", Some("/format")),
+        (json!({"motion": motion, "format": "xyz"}), 400, "bad_parameter", Some("/format")),
+        (
+            json!({"motion": motion, "idle_timeout_secs": 0}),
+            422,
+            "idle_timeout_out_of_range",
+            Some("/idle_timeout_secs"),
+        ),
+        (json!({"motion": motion, "joints": ["nope"]}), 422, "unknown_joint", Some("/joints/0")),
+        (json!({"motion": motion, "colour": 1}), 422, "invalid_field", None),
+        (
+            json!({"motion": {"layers": [{"clip": "00000000-0000-7000-8000-000000000000"}]}}),
+            404,
+            "clip_not_found",
+            Some("/motion/layers/0/clip"),
+        ),
+    ];
+    for (body, status, code, pointer) in cases {
+        let (got, problem, _) = create(&app, body.clone(), None).await;
+        assert_eq!((got, problem["code"].as_str()), (status, Some(code)), "{body}: {problem}");
+        if let Some(pointer) = pointer {
+            assert_eq!(problem["pointer"], pointer, "{body}");
+        }
+    }
+    let not_json = app.http.post(app.url("/v1/broadcasts")).header("content-type", "application/json").body("{");
+    assert_eq!(not_json.send().await.unwrap().json::<Value>().await.unwrap()["code"], "malformed_json");
+
+    let id = broadcast_of(&app, &clip, None).await;
+    let controls = [
+        (json!({"op": "fly"}), "bad_control"),
+        (json!({"op": "stop"}), "bad_control"),
+        (json!({"op": "speed", "speed": 5000}), "bad_control"),
+        (json!({"op": "layer", "index": 3, "weight": 1}), "bad_control"),
+    ];
+    for (body, code) in controls {
+        let (status, problem) = control(&app, &id, body.clone(), None).await;
+        assert_eq!((status, problem["code"].as_str()), (422, Some(code)), "{body}: {problem}");
+    }
+    let fade =
+        json!({"op": "crossfade", "to": {"layers": [{"clip": "00000000-0000-7000-8000-000000000000"}]}, "duration": 1});
+    let (status, problem) = control(&app, &id, fade, None).await;
+    assert_eq!(
+        (status, problem["code"].as_str(), problem["pointer"].as_str()),
+        (404, Some("clip_not_found"), Some("/to/layers/0/clip"))
+    );
+
+    let missing = "00000000-0000-7000-8000-000000000000";
+    let (status, problem) = control(&app, missing, json!({"op": "play"}), None).await;
+    assert_eq!((status, problem["code"].as_str()), (404, Some("broadcast_not_found")));
+    let problem: Value = app.get_json(&format!("/v1/broadcasts/{missing}")).await;
+    assert_eq!(problem["code"], "broadcast_not_found");
+    let plain = app.http.get(app.url(&format!("/v1/broadcasts/{id}/stream"))).send().await.unwrap();
+    assert_eq!(plain.json::<Value>().await.unwrap()["code"], "websocket_upgrade_required");
+    let mut req = app.ws_url(&format!("/v1/broadcasts/{id}/stream?encoding=xml")).into_client_request().unwrap();
+    req.headers_mut().insert("x-test", "1".parse().unwrap());
+    let Err(tokio_tungstenite::tungstenite::Error::Http(resp)) = tokio_tungstenite::connect_async(req).await else {
+        panic!("a bad encoding is refused before the upgrade");
+    };
+    assert_eq!(resp.status(), 400);
+    let status = app.grpc().await.watch(pb::WatchRequest { broadcast_id: missing.into() }).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::NotFound);
+
+    // max_broadcasts = 2: the third is refused until one ends.
+    let second = broadcast_of(&app, &clip, None).await;
+    let (status, problem, _) = create(&app, json!({"motion": motion}), None).await;
+    assert_eq!((status, problem["code"].as_str()), (429, Some("too_many_broadcasts")), "{problem}");
+    app.http.delete(app.url(&format!("/v1/broadcasts/{second}"))).send().await.unwrap();
+    assert_eq!(create(&app, json!({"motion": motion}), None).await.0, 201);
+
+    // The OpenAPI document describes the shapes.
+    let doc: Value = app.get_json("/openapi.json").await;
+    for schema in ["CreateBroadcast", "BroadcastSummary", "BroadcastList", "ControlApplied"] {
+        assert!(doc["components"]["schemas"].get(schema).is_some(), "{schema} in /openapi.json");
+    }
+    app.stop().await;
+}
