@@ -13,6 +13,7 @@
 mod cdp;
 mod curves;
 mod flows;
+mod panel;
 
 use std::path::Path;
 use std::time::Duration;
