@@ -213,6 +213,7 @@ async fn broadcast_frames(page: &mut Page) -> serde_json::Map<String, Value> {
 async fn a_broadcast_link_shows_the_same_seq_and_pose_in_a_second_page() {
     let app = start().await;
     let wave = app.create_id(WAVE, Some(TOKEN)).await;
+    let away = app.create_id(AWAY, Some(TOKEN)).await;
     let Some(mut browser) = Browser::launch().await else { return };
     let second = browser.new_page().await;
     let page = &mut browser.page;
@@ -264,5 +265,119 @@ async fn a_broadcast_link_shows_the_same_seq_and_pose_in_a_second_page() {
     let b = broadcast_frames(&mut second).await;
     let held: Vec<&Value> = (k..=k + 6).filter_map(|s| b.get(&s.to_string())).map(|p| &p["time"]).collect();
     assert!(held.len() >= 3 && held.windows(2).all(|w| w[0] == w[1]), "paused from seq {k}: times {held:?}");
+
+    // A crossfade from the first tab's button reaches the second tab's frames.
+    click(page, "play").await;
+    set_value(page, "fade-clip", &away).await;
+    set_value(page, "fade-duration", "0.2").await;
+    click(page, "fade").await;
+    let applied = page.wait_for("window.inbetweenViewer.broadcast.lastControl?.op === 'crossfade' && window.inbetweenViewer.broadcast.lastControl.seq", 10).await;
+    let k = applied.as_u64().unwrap();
+    // Each tab's frames by seq: the wave's before the control's seq, away's from it on.
+    let clips = |from: u64| {
+        format!(
+            "[...window.inbetweenViewer.broadcast.frames].filter(([s]) => s >= {from} && s < {k} + 12).map(([s, p]) => [s, p.clip])"
+        )
+    };
+    for tab in [&mut second, page] {
+        tab.wait_for(&format!("{}.length >= 6", clips(k)), 10).await;
+        let seen: Vec<(u64, String)> = serde_json::from_value(tab.eval(&clips(k.saturating_sub(6))).await).unwrap();
+        assert!(seen.iter().all(|(s, clip)| clip == if *s < k { &wave } else { &away }), "control at {k}: {seen:?}");
+    }
     assert_eq!(second.eval("window.inbetweenViewer.cspViolations").await, json!([]));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_fox_walks_a_root_motion_trail_with_a_layer_and_a_handle_on_a_1366_by_768_screen() {
+    let app = start().await;
+    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
+    let imported: Value = app
+        .http
+        .post(app.url("/v1/clips/import?format=glb"))
+        .bearer_auth(TOKEN)
+        .header("content-type", "application/octet-stream")
+        .body(glb)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id_of = |name: &str| {
+        let clips = imported["clips"].as_array().unwrap();
+        clips.iter().find(|c| c["name"] == name).unwrap_or_else(|| panic!("{name} in {imported}"))["id"]
+            .as_str()
+            .unwrap()
+            .to_owned()
+    };
+    let (walk, survey) = (id_of("Walk"), id_of("Survey"));
+    let Some(mut browser) = Browser::launch().await else { return };
+    let page = &mut browser.page;
+    page.set_viewport(1366, 768).await;
+    page.navigate(&app.url("/viewer")).await;
+    select_clip(page, &walk).await;
+    set_value(page, "playback", "loop").await;
+    set_value(page, "root-mode", "extract").await;
+    set_value(page, "layer-clip", &survey).await;
+    click(page, "layer-add").await;
+    page.eval(
+        "(e => { e.value = 'b_Spine01_02'; e.dispatchEvent(new Event('change')); })\
+         (document.querySelector('#layers li[data-index=\"1\"] select'))",
+    )
+    .await;
+    set_value(page, "ik-joint", "b_LeftFoot01_017").await;
+    click(page, "ik-add").await;
+    click(page, "play").await;
+    page.wait_for("window.inbetweenViewer.state.frames >= 3", 10).await;
+    let (from, _) = handle_on_screen(page).await;
+    page.drag(from, [from[0] + 30.0, from[1] - 25.0], 6).await;
+    page.wait_for("window.inbetweenViewer.panel.trail.length >= 20", 10).await;
+    let motion = page.eval("window.inbetweenViewer.panel.motion()").await;
+    assert_eq!(motion["root_motion"], json!({"mode": "extract", "joint": "b_Hip_01"}));
+    assert_eq!(motion["layers"][1]["mask"], json!({"joints": {"b_Spine01_02": 1}, "descendants": true}));
+    assert_eq!(motion["ik"][0]["joints"], json!(["b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot01_017"]));
+    let sizes = page
+        .eval("(e => [e.scrollWidth, e.scrollHeight, e.clientWidth, e.clientHeight])(document.scrollingElement)")
+        .await;
+    let [scroll_w, scroll_h, client_w, client_h]: [u32; 4] = serde_json::from_value(sizes).unwrap();
+    assert!(scroll_w <= client_w && scroll_h <= client_h, "scrolls: {scroll_w}×{scroll_h} in {client_w}×{client_h}");
+
+    if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_PANEL_SCREENSHOT") {
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        std::fs::write(&path, page.screenshot(None).await).unwrap();
+        eprintln!("screenshot written to {}", path.to_string_lossy());
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn root_motion_is_a_trail_the_skeleton_walks_along_with_extract_on_or_off() {
+    let app = start().await;
+    let wave = app.create_id(WAVE, Some(TOKEN)).await;
+    let Some(mut browser) = Browser::launch().await else { return };
+    let page = &mut browser.page;
+    page.navigate(&app.url("/viewer")).await;
+    select_clip(page, &wave).await;
+    // wave.json's root goes along x (0 → 1) in its first second, then up.
+    for (mode, pose_moves) in [("report", true), ("extract", false)] {
+        set_value(page, "root-mode", mode).await;
+        if page.eval("window.inbetweenViewer.state.ws").await.is_null() {
+            click(page, "play").await;
+        }
+        page.wait_for("window.inbetweenViewer.panel.trail.length >= 10", 10).await;
+        page.wait_for(&format!("{LAST_FRAME}.pose.clip_time > 0.4 && {LAST_FRAME}.pose.clip_time < 0.9"), 10).await;
+        let seen = page
+            .eval(&format!(
+                "(v => [v.panel.trail[0], v.panel.trail.at(-1), v.state.positions[v.state.names.indexOf('root')],                    {LAST_FRAME}.pose.joints.find(j => j.name === 'root').translation])(window.inbetweenViewer)"
+            ))
+            .await;
+        let [first, trail, drawn, sent]: [[f64; 3]; 4] = serde_json::from_value(seen).unwrap();
+        assert_eq!((first[1], trail[1]), (0.0, 0.0), "{mode}: the trail is on the ground");
+        assert!(trail[0] - first[0] > 0.2, "{mode}: the trail follows the root along x: {first:?} → {trail:?}");
+        let ground = [drawn[0], 0.0, drawn[2]];
+        assert!(
+            distance(&ground, &trail) < 1e-4,
+            "{mode}: the root is drawn on the trail's end: {drawn:?} vs {trail:?}"
+        );
+        assert_eq!(sent[0] > 0.3, pose_moves, "{mode}: the frames' root at x = {}", sent[0]);
+    }
 }

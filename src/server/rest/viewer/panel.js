@@ -283,15 +283,52 @@
 
   const yawOf = (q) => 2 * Math.atan2(q[1], q[3]);
   const turn = (yaw, v) => [Math.cos(yaw) * v[0] + Math.sin(yaw) * v[2], v[1], -Math.sin(yaw) * v[0] + Math.cos(yaw) * v[2]];
+  const conj = (q) => [-q[0], -q[1], -q[2], q[3]];
+  const IDENTITY = { t: [0, 0, 0], q: [0, 0, 0, 1], s: [1, 1, 1] };
+
+  function rotate(q, v) {
+    const [x, y, z, w] = q;
+    const cx = y * v[2] - z * v[1], cy = z * v[0] - x * v[2], cz = x * v[1] - y * v[0];
+    const dx = y * cz - z * cy, dy = z * cx - x * cz, dz = x * cy - y * cx;
+    return [v[0] + 2 * (w * cx + dx), v[1] + 2 * (w * cy + dy), v[2] + 2 * (w * cz + dz)];
+  }
+
+  function qmul(a, b) {
+    const [ax, ay, az, aw] = a, [bx, by, bz, bw] = b;
+    return [aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz];
+  }
+
+  /// `frame` (the parent's model transform) applied to a point of its space, and back.
+  const toModel = (f, x) => rotate(f.q, x.map((c, k) => c * f.s[k])).map((c, k) => c + f.t[k]);
+  const fromModel = (f, p) => rotate(conj(f.q), p.map((c, k) => c - f.t[k])).map((c, k) => c / (f.s[k] || 1));
+
+  /// Joint `i`'s parent's model transform and its own local one, from a
+  /// pose in either space (SPEC §2.8; scales taken per axis, unsheared).
+  function rootFrames(pose, i) {
+    const joints = pose.joints, parents = state.parents;
+    const trs = (j) => ({ t: j.translation, q: j.rotation, s: j.scale });
+    let parent = IDENTITY;
+    if (parents[i] >= 0 && pose.space === "model") parent = trs(joints[parents[i]]);
+    else if (parents[i] >= 0) {
+      const chain = [];
+      for (let p = parents[i]; p >= 0; p = parents[p]) chain.unshift(trs(joints[p]));
+      parent = chain.reduce((m, l) => ({ t: toModel(m, l.t), q: qmul(m.q, l.q), s: m.s.map((c, k) => c * l.s[k]) }), IDENTITY);
+    }
+    const own = trs(joints[i]);
+    const local = pose.space === "model" ? { t: fromModel(parent, own.t), q: qmul(conj(parent.q), own.q) } : own;
+    return { parent, local };
+  }
 
   hooks.pose.push(() => {
     panel.model = state.positions;
   });
 
-  /// Each frame's total root motion `A` placed at the root's first-frame
-  /// transform `M0` (its ground position and heading): a trail point
-  /// `M0·A·0`; under `extract` (the pose kept in place) the skeleton is
-  /// drawn moved by `M0·A·M0⁻¹`, walking along the trail (up axis y).
+  /// Root motion lives in the root joint's parent's space, up its y axis
+  /// (SPEC §6): each frame's total `A` placed at the first frame's motion
+  /// transform `M0` (the root's ground position and heading there) is a
+  /// trail point `M0·A·0`; under `extract` (the pose kept in place) the
+  /// skeleton is drawn moved by `M0·A·M0⁻¹`, walking along the trail. Both
+  /// are mapped to model space by the parent's first-frame transform.
   hooks.frame.push((frame) => {
     panel.lastFrame = frame;
     if (frame.pose.clip !== panel.playingClip) {
@@ -302,20 +339,20 @@
     if (!total || !panel.rootMode) return;
     if (!panel.anchor) {
       const i = state.names.indexOf(panel.rootJoint);
-      const joint = frame.pose.joints[i];
-      if (!joint) return;
-      const p = panel.model[i];
-      panel.anchor = { p: [p[0], 0, p[2]], yaw: yawOf(joint.rotation) };
+      if (!frame.pose.joints[i]) return;
+      const { parent, local } = rootFrames(frame.pose, i);
+      panel.anchor = { parent, ground: [local.t[0], 0, local.t[2]], yaw: yawOf(local.q) };
     }
-    const { p, yaw } = panel.anchor;
+    const { parent, ground, yaw } = panel.anchor;
     const step = turn(yaw, total.translation);
-    const point = [p[0] + step[0], 0, p[2] + step[2]];
-    panel.trail.push(point);
+    const at = [ground[0] + step[0], 0, ground[2] + step[2]];
+    panel.trail.push(toModel(parent, at));
     if (panel.trail.length > TRAIL_POINTS) panel.trail.shift();
     if (panel.rootMode === "extract") {
-      state.positions = panel.model.map((q) => {
-        const r = turn(total.yaw, [q[0] - p[0], q[1], q[2] - p[2]]);
-        return [point[0] + r[0], r[1], point[2] + r[2]];
+      state.positions = panel.model.map((p) => {
+        const x = fromModel(parent, p);
+        const r = turn(total.yaw, [x[0] - ground[0], x[1], x[2] - ground[2]]);
+        return toModel(parent, [at[0] + r[0], r[1], at[2] + r[2]]);
       });
     }
   });

@@ -470,7 +470,7 @@
     if (t instanceof HTMLElement && t.closest("input, select, textarea")) return;
     // A focused button takes Space itself (it clicks).
     if (e.key === " " && t instanceof HTMLElement && t.closest("button")) return;
-    if (!state.clip) return;
+    if (!state.clip || $("play").hidden) return; // hidden: a read-only viewer of a broadcast
     const fps = Math.round(Number($("fps").value)) || 30;
     const here = Number($("seek").value);
     const step = e.shiftKey ? 1 : 1 / fps;
