@@ -53,6 +53,7 @@ async fn a_crossfade_from_the_button_reaches_the_server() {
     let app = start().await;
     let wave = app.create_id(WAVE, Some(TOKEN)).await;
     let away = app.create_id(AWAY, Some(TOKEN)).await;
+    let other = app.create_id(ARM, Some(TOKEN)).await;
     let Some(mut browser) = Browser::launch().await else { return };
     let page = &mut browser.page;
     page.navigate(&app.url("/viewer")).await;
@@ -60,11 +61,21 @@ async fn a_crossfade_from_the_button_reaches_the_server() {
     click(page, "play").await;
     page.wait_for(&format!("{LAST_FRAME}?.pose.clip === {}", json!(wave)), 10).await;
 
+    // A clip of another skeleton is refused: the status says why, the layers stay.
+    set_value(page, "fade-clip", &other).await;
+    click(page, "fade").await;
+    page.wait_for("document.getElementById('status').textContent.includes('control refused')", 10).await;
+    let status = text(page, "status").await;
+    assert!(status.contains("bad_control") && status.contains("skeleton"), "status: {status}");
+    page.wait_for(&format!("window.inbetweenViewer.panel.layers[0].clip === {}", json!(wave)), 5).await;
+
     set_value(page, "fade-clip", &away).await;
     set_value(page, "fade-duration", "0.3").await;
     click(page, "fade").await;
     page.wait_for(&format!("{LAST_FRAME}.pose.clip === {}", json!(away)), 10).await;
     assert!(text(page, "playing").await.contains("away"), "the panel names the clip playing");
+    page.wait_for(&format!("window.inbetweenViewer.state.clip.id === {}", json!(away)), 5).await;
+    assert_eq!(page.eval("document.getElementById('seek').max").await, "2", "the seek bar spans the new clip");
 
     // After the fade only `away` remains: each frame is its pose at the
     // frame's clip time, as the REST pose route computes it.

@@ -162,7 +162,7 @@
       .api(`${path(id)}/controls`, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) })
       .then(({ seq }) => (broadcast.lastControl = { op: body.op, seq }))
       .catch((e) => {
-        viewer.setStatus(`control refused: ${e.message}`, true);
+        viewer.refusedControl(e.message);
         if (broadcast.id === id) probeScope().catch(report);
       })
       .finally(() => {

@@ -32,6 +32,7 @@
     playingClip: null, // the clip the frames say is playing (the first layer's)
     lastFrame: null,
     openPaused: false, // the next stream opens paused (a change made while paused)
+    fading: null, // the layers before a crossfade the server has not shown yet
   };
   viewer.panel = panel;
 
@@ -267,12 +268,21 @@
     if (!to || !state.clip) return;
     if (!state.ws) return viewer.selectClip(to).catch(report); // nothing plays: nothing to fade from
     const playback = viewer.options().playback;
+    panel.fading = panel.layers; // put back if the server refuses the fade
     panel.layers = [{ clip: to, weight: 1, mask: null }];
     const target = { layers: [layerDoc(panel.layers[0], playback)] };
     if (panel.rootMode) target.root_motion = motion().root_motion;
     crossfadeTo(target, fadeSeconds());
     renderLayers();
   }
+
+  /// A refused crossfade (another skeleton, a clip gone) leaves the layers playing.
+  hooks.refused.push(() => {
+    if (!panel.fading) return;
+    panel.layers = panel.fading;
+    panel.fading = null;
+    renderLayers();
+  });
 
   // ---- root motion: the trail, and the character moved along it under `extract` ----
 
@@ -331,9 +341,12 @@
   /// are mapped to model space by the parent's first-frame transform.
   hooks.frame.push((frame) => {
     panel.lastFrame = frame;
+    if (panel.fading && frame.pose.clip === panel.layers[0]?.clip) panel.fading = null;
     if (frame.pose.clip !== panel.playingClip) {
       panel.playingClip = frame.pose.clip;
       $("playing").textContent = `playing: ${clipName(frame.pose.clip)}`;
+      // A crossfade's clip becomes the page's: its range (a `once` end), list entry and curves.
+      if (frame.pose.clip !== state.clip?.id) viewer.adoptClip(frame.pose.clip).catch(report);
     }
     const total = frame.pose.root_motion?.total;
     if (!total || !panel.rootMode) return;

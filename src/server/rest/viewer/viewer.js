@@ -45,6 +45,7 @@
     pose: [], // (pose) => void, after a pose is applied (may move state.positions)
     overlay: [], // (ctx, cam, dpr) => void, after the scene is drawn
     clipSelected: [], // (clip) => void, after a clip is selected
+    refused: [], // (problem) => void, when the server refuses a control
   };
   const viewer = { state, hooks, cspViolations: [] };
   window.inbetweenViewer = viewer;
@@ -178,6 +179,20 @@
     await Promise.all([fitCamera(), showPoseAt(summary.start), loadCurve()]);
     updateReadout();
     setStatus(`${summary.name}: ${summary.joints} joints, ${summary.start}–${summary.end} s`);
+  }
+
+  /// Makes `id` the page's clip while its stream goes on (a crossfade
+  /// brought it in): its range, its place in the list, its curves.
+  async function adoptClip(id) {
+    const summary = state.clips.find((c) => c.id === id);
+    if (!summary || state.clip?.id === id) return;
+    const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
+    Object.assign(state, { clip: summary, doc });
+    $("seek").min = summary.start;
+    $("seek").max = summary.end;
+    renderClips();
+    setupCurveSelectors();
+    await loadCurve();
   }
 
   // ---- poses and the skeleton ----
@@ -373,6 +388,7 @@
   function refusedControl(problem) {
     setStatus(`control refused: ${describeProblem(problem)}`, true);
     $("speed").value = state.speed;
+    for (const hook of hooks.refused) hook(problem);
   }
 
   /// The playback mode in force: the page's choice, else the clip's default.
@@ -1083,8 +1099,8 @@
   }
 
   Object.assign(viewer, {
-    selectClip, loadClips, api, postJson, setStatus, describeProblem, problemText, authHeaders, streamProtocols,
-    send, openStream, stopStream, setPlaying, showPoseAt, requestDraw, sceneCamera, toCamera, toScreen, options,
+    selectClip, adoptClip, loadClips, api, postJson, setStatus, describeProblem, problemText, authHeaders, streamProtocols,
+    send, refusedControl, openStream, stopStream, setPlaying, showPoseAt, requestDraw, sceneCamera, toCamera, toScreen, options,
   });
   viewer.ready = setup();
 })();
