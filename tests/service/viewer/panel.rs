@@ -165,6 +165,13 @@ async fn dragging_an_ik_handle_moves_the_effector() {
     let ik = page.eval("window.inbetweenViewer.panel.ik").await;
     assert_eq!(ik["joints"], json!(["shoulder", "elbow", "hand"]), "two-bone: the joint, its parent and grandparent");
     let start_target = floats(&ik["target"]);
+
+    // Paused, a drag fetches the solved pose (`POST /v1/poses` with the constraint).
+    let (from, _) = handle_on_screen(page).await;
+    page.drag(from, [from[0] + 15.0, from[1] + 15.0], 4).await;
+    let paused_target = page.eval("window.inbetweenViewer.panel.ik.target").await;
+    let hand_at = "(v => v.state.positions[v.state.names.indexOf('hand')])(window.inbetweenViewer)";
+    page.wait_for(&format!("Math.hypot(...{hand_at}.map((x, k) => x - {paused_target}[k])) < 1e-3"), 10).await;
     click(page, "play").await;
     page.wait_for(&format!("{LAST_FRAME}?.pose.ik?.length === 1"), 10).await;
 
@@ -198,6 +205,16 @@ async fn dragging_an_ik_handle_moves_the_effector() {
     let (l1, l2, d) = (distance(&shoulder, &elbow), distance(&elbow, &hand), distance(&shoulder, &target));
     assert!((l1 - l2).abs() <= d && d <= l1 + l2, "reachable: l1 {l1}, l2 {l2}, distance {d}");
     assert!(distance(&hand, &target) < 1e-3 * (l1 + l2), "hand {hand:?} on target {target:?}");
+
+    // The aim preset on the elbow: one `aim` constraint, solved (residual: the angle).
+    click(page, "ik-remove").await;
+    page.wait_for(&format!("{LAST_FRAME}.pose.ik === undefined"), 10).await;
+    set_value(page, "ik-joint", "elbow").await;
+    set_value(page, "ik-kind", "aim").await;
+    click(page, "ik-add").await;
+    let aim = page.eval("window.inbetweenViewer.panel.motion().ik").await;
+    assert_eq!((&aim[0]["kind"], &aim[0]["joint"]), (&json!("aim"), &json!("elbow")));
+    page.wait_for(&format!("(r => r && r.kind === 'aim' && r.residual < 1e-4)({LAST_FRAME}.pose.ik?.[0])"), 10).await;
     assert_eq!(page.eval("window.inbetweenViewer.cspViolations").await, json!([]));
 }
 
