@@ -8,11 +8,13 @@
 //! Without Chromium the browser tests skip with a message, unless
 //! `INBETWEEN_REQUIRE_BROWSER=1` (CI) makes them fail. Set
 //! `INBETWEEN_VIEWER_SCREENSHOT=path.png` to save a screenshot from the
-//! upload test.
+//! upload test, `INBETWEEN_VIEWER_PANEL_SCREENSHOT=path.png` one of the
+//! composition panel with the Fox (README's docs/viewer-panel.png).
 
 mod cdp;
 mod curves;
 mod flows;
+mod panel;
 
 use std::path::Path;
 use std::time::Duration;
@@ -59,13 +61,21 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
     assert_eq!(again.status(), 304);
     assert!(again.bytes().await.unwrap().is_empty());
 
-    for (path, content_type) in
-        [("/viewer/viewer.js", "text/javascript; charset=utf-8"), ("/viewer/viewer.css", "text/css; charset=utf-8")]
-    {
+    for (path, content_type) in [
+        ("/viewer/viewer.js", "text/javascript; charset=utf-8"),
+        ("/viewer/viewer.css", "text/css; charset=utf-8"),
+        ("/viewer/panel.js", "text/javascript; charset=utf-8"),
+        ("/viewer/broadcast.js", "text/javascript; charset=utf-8"),
+        ("/viewer/panel.css", "text/css; charset=utf-8"),
+    ] {
+        assert!(html.contains(&format!("=\"{path}\"")), "the page loads {path}");
         let resp = app.http.get(app.url(path)).send().await.unwrap();
         assert_eq!(resp.status(), 200, "{path}");
         assert_eq!(header(&resp, "content-type"), content_type);
-        assert_ne!(header(&resp, "etag"), etag, "each file has its own tag");
+        let tag = header(&resp, "etag");
+        assert_ne!(tag, etag, "each file has its own tag");
+        let again = app.http.get(app.url(path)).header("if-none-match", &tag).send().await.unwrap();
+        assert_eq!(again.status(), 304, "{path}");
     }
     let openapi: Value = app.http.get(app.url("/openapi.json")).send().await.unwrap().json().await.unwrap();
     assert!(openapi["paths"]["/viewer"]["get"].is_object());
