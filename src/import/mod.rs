@@ -49,6 +49,7 @@ mod buffers;
 mod bvh;
 mod error;
 mod gltf;
+mod mesh;
 mod source;
 pub mod warning;
 
@@ -149,6 +150,14 @@ pub struct ImportLimits {
     pub max_resolved_bytes: u64,
     /// Build work of one produced clip (see [`Clip::build_within`]).
     pub max_build_work: u64,
+    /// The encoded size a kept skinned mesh may reach (bounded from its
+    /// accessors' counts before any is read); a larger one is left out with
+    /// a warning, the clip imported without it.
+    pub max_mesh_bytes: u64,
+    /// A base colour texture is kept with a mesh up to this many bytes
+    /// (PNG or JPEG as in the file); a larger one leaves the base colour
+    /// factor.
+    pub max_mesh_texture_bytes: u64,
 }
 
 impl Default for ImportLimits {
@@ -165,6 +174,8 @@ impl Default for ImportLimits {
             max_depth: 256,
             max_resolved_bytes: 4 * (64 << 20),
             max_build_work: crate::anim::DEFAULT_BUILD_WORK,
+            max_mesh_bytes: 32 << 20,
+            max_mesh_texture_bytes: 1 << 20,
         }
     }
 }
@@ -222,6 +233,11 @@ pub fn file_stem(file_name: &str) -> Option<String> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Imported {
     pub clips: Vec<ClipSpec>,
+    /// Per clip (in step with `clips`): the skinned mesh the viewer draws,
+    /// in the binary form of [`crate::wire::mesh`], when the clip comes from
+    /// a glTF skin with triangles bound to it (shared bytes when several
+    /// clips drive one skin).
+    pub meshes: Vec<Option<bytes::Bytes>>,
     pub warnings: Vec<Warning>,
 }
 
