@@ -94,6 +94,15 @@ impl Mesh {
     }
 }
 
+/// The strong entity tag the mesh is served with: `"m-"` and 32 hex digits
+/// of the SHA-256 of its bytes.
+pub fn etag(bytes: &[u8]) -> String {
+    use sha2::Digest as _;
+    let digest = sha2::Sha256::digest(bytes);
+    let hex: String = digest[..16].iter().map(|b| format!("{b:02x}")).collect();
+    format!("\"m-{hex}\"")
+}
+
 /// One array of the body, as the header describes it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ArrayRef {

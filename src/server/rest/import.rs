@@ -44,7 +44,9 @@ use crate::server::error::{ApiError, raise_hint};
 use crate::server::limits::{Admitted, admit_doc};
 use crate::server::spool::{SpooledBody, Spooler};
 use crate::server::state::AppState;
+use crate::store::{MeshWrite, StoredMesh};
 use crate::wire::json::{ClipDoc, InterpolationDoc};
+use crate::wire::mesh;
 
 use super::query::Query;
 use super::summary::ClipSummary;
@@ -156,11 +158,17 @@ pub async fn import_clips(
             };
             let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
             let imported = import_from(&document, format, &options, resolver).map_err(refused)?;
-            let admitted = imported
+            let mut admitted = imported
                 .clips
                 .iter()
                 .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits, cancel))
                 .collect::<Result<Vec<Admitted>, ApiError>>()?;
+            // Each clip of a skin keeps its mesh, stored in the clips' transaction.
+            for (admitted, mesh) in admitted.iter_mut().zip(imported.meshes) {
+                if let Some(bytes) = mesh {
+                    admitted.new_clip.mesh = MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes });
+                }
+            }
             // The importer's warnings point into the file; the documents' own are the same findings.
             Ok((format, admitted, imported.warnings))
         })

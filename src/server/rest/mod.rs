@@ -37,6 +37,7 @@ pub mod patch;
 pub mod pieces;
 pub mod poses;
 pub mod query;
+pub mod mesh;
 pub mod schemas;
 pub mod skeleton;
 pub mod stream;
@@ -59,6 +60,7 @@ pub fn router(state: AppState) -> Router {
             get(clips::get_clip).put(clips::replace_clip).patch(patch::patch_clip).delete(clips::delete_clip),
         )
         .route("/v1/clips/{id}/skeleton", get(skeleton::get_skeleton))
+        .route("/v1/clips/{id}/mesh", get(mesh::get_mesh))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
         .route("/v1/clips/{id}/stream", get(stream::stream))

@@ -86,7 +86,7 @@ fn serve(asset: &Asset, request: &HeaderMap) -> Response {
 }
 
 /// Whether `If-None-Match` names `etag` (weak comparison, RFC 9110 §13.1.2).
-fn matches_etag(request: &HeaderMap, etag: &str) -> bool {
+pub(crate) fn matches_etag(request: &HeaderMap, etag: &str) -> bool {
     request
         .get_all(IF_NONE_MATCH)
         .iter()
