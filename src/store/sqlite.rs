@@ -205,7 +205,12 @@ async fn write_index(
 }
 
 /// The clip's `clip_meshes` row as [`MeshWrite`] says.
-async fn write_mesh(db: &mut sqlx::SqliteConnection, id: &str, mesh: &MeshWrite, replace: bool) -> Result<(), sqlx::Error> {
+async fn write_mesh(
+    db: &mut sqlx::SqliteConnection,
+    id: &str,
+    mesh: &MeshWrite,
+    replace: bool,
+) -> Result<(), sqlx::Error> {
     if *mesh == MeshWrite::Keep {
         return Ok(());
     }

@@ -51,7 +51,8 @@ impl Glb {
             5121 => (1, |b| b[0] as f64),
             other => panic!("component type {other}"),
         };
-        let stride = self.json["bufferViews"][view_index]["byteStride"].as_u64().map_or(size * components, |s| s as usize);
+        let stride =
+            self.json["bufferViews"][view_index]["byteStride"].as_u64().map_or(size * components, |s| s as usize);
         let data = &self.view(view_index)[acc["byteOffset"].as_u64().unwrap_or(0) as usize..];
         (0..acc["count"].as_u64().unwrap() as usize)
             .map(|i| (0..components).map(|c| read(&data[i * stride + c * size..][..size])).collect())

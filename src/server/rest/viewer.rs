@@ -1,7 +1,7 @@
 //! `GET /viewer`: a browser page that lists clips, plays their WebSocket
 //! stream as a 3D skeleton and plots their curves (issue 8).
 //!
-//! The page is three plain files embedded in the binary, so serving it
+//! The page is four plain files (mesh.js: the skinned mesh in WebGL2) embedded in the binary, so serving it
 //! needs no build step and no download. Each answer carries a strong
 //! `ETag` (a hash of the file, computed at compile time) and `no-cache`, so
 //! a browser revalidates and gets `304` until the binary changes. The
@@ -38,6 +38,7 @@ macro_rules! asset {
 
 const INDEX: Asset = asset!("viewer/index.html", "text/html; charset=utf-8");
 const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
+const MESH_SCRIPT: Asset = asset!("viewer/mesh.js", "text/javascript; charset=utf-8");
 const STYLE: Asset = asset!("viewer/viewer.css", "text/css; charset=utf-8");
 
 /// Same-origin script, style, images and connections only; no inline code,
@@ -51,6 +52,7 @@ pub fn router<S: Clone + Send + Sync + 'static>() -> Router<S> {
         .route("/viewer", get(viewer_page))
         .route("/viewer/", get(viewer_page))
         .route("/viewer/viewer.js", get(|headers: HeaderMap| async move { serve(&SCRIPT, &headers) }))
+        .route("/viewer/mesh.js", get(|headers: HeaderMap| async move { serve(&MESH_SCRIPT, &headers) }))
         .route("/viewer/viewer.css", get(|headers: HeaderMap| async move { serve(&STYLE, &headers) }))
 }
 

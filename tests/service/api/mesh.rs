@@ -92,8 +92,13 @@ async fn the_fox_keeps_its_skinned_mesh_as_the_file_has_it() {
         let other = app.http.get(app.url(&format!("/v1/clips/{id}/mesh"))).send().await.unwrap();
         assert_eq!(other.headers()["etag"].to_str().unwrap(), etag, "same mesh, same tag");
     }
-    let again =
-        app.http.get(app.url(&format!("/v1/clips/{}/mesh", ids[0]))).header("if-none-match", &etag).send().await.unwrap();
+    let again = app
+        .http
+        .get(app.url(&format!("/v1/clips/{}/mesh", ids[0])))
+        .header("if-none-match", &etag)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(again.status(), 304);
     assert_eq!(again.headers()["etag"].to_str().unwrap(), etag);
     assert!(again.bytes().await.unwrap().is_empty());

@@ -6,7 +6,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use inbetween::anim::Playback;
-use inbetween::store::{ClipStats, ClipStore, ListQuery, NewClip, StoreError, MeshWrite};
+use inbetween::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError};
 
 /// One fixture clip: name, tags, joint names, duration.
 struct Fixture {

@@ -13,6 +13,7 @@
 mod cdp;
 mod curves;
 mod flows;
+mod mesh;
 
 use std::path::Path;
 use std::time::Duration;
