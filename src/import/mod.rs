@@ -12,8 +12,9 @@
 //!
 //! Files may be far larger than what is read of them: a GLB's JSON chunk is
 //! read whole, then only the byte ranges its animations' accessors and its
-//! skins' inverse bind matrices occupy; images, textures and mesh data are
-//! never read. Only a `.gltf` or `.bvh` file (text, parsed whole) is held in
+//! skins' inverse bind matrices occupy, and those of the skinned mesh a clip
+//! keeps for the viewer (`mesh`: bounded by [`ImportLimits::max_mesh_bytes`]
+//! before it is read); other images and mesh data are never read. Only a `.gltf` or `.bvh` file (text, parsed whole) is held in
 //! memory entire, bounded by [`ImportLimits::max_document_bytes`].
 //!
 //! What is imported and how (the decisions a user would ask about):

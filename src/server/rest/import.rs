@@ -16,8 +16,9 @@
 //! Files may be far over the JSON body limit: the body guard spools the
 //! body to a temporary file under `max_import_bytes` (`server::spool`), a
 //! multipart body's parts are spooled again one file each, and the importer
-//! reads only the glTF JSON and the accessor ranges animations and skins
-//! use. What is held in memory whole (a `.gltf` or `.bvh` file, a GLB's JSON
+//! reads only the glTF JSON and the accessor ranges animations, skins and
+//! the kept skinned mesh use. Each clip of a skin is stored with its mesh
+//! (docs/mesh-format.md) in the same transaction. What is held in memory whole (a `.gltf` or `.bvh` file, a GLB's JSON
 //! chunk) stays within `max_body_bytes` (413 `document_too_large`). Every
 //! 413 names its limit and how to raise it.
 

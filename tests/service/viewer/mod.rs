@@ -54,15 +54,18 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
     let etag = header(&page, "etag");
     let html = page.text().await.unwrap();
     assert!(html.contains(r#"src="/viewer/viewer.js""#) && html.contains(r#"href="/viewer/viewer.css""#));
+    assert!(html.contains(r#"src="/viewer/mesh.js""#));
     assert!(!html.contains("<script>") && !html.contains("style="), "inline code would break the CSP");
 
     let again = app.http.get(app.url("/viewer")).header("if-none-match", &etag).send().await.unwrap();
     assert_eq!(again.status(), 304);
     assert!(again.bytes().await.unwrap().is_empty());
 
-    for (path, content_type) in
-        [("/viewer/viewer.js", "text/javascript; charset=utf-8"), ("/viewer/viewer.css", "text/css; charset=utf-8")]
-    {
+    for (path, content_type) in [
+        ("/viewer/viewer.js", "text/javascript; charset=utf-8"),
+        ("/viewer/mesh.js", "text/javascript; charset=utf-8"),
+        ("/viewer/viewer.css", "text/css; charset=utf-8"),
+    ] {
         let resp = app.http.get(app.url(path)).send().await.unwrap();
         assert_eq!(resp.status(), 200, "{path}");
         assert_eq!(header(&resp, "content-type"), content_type);
