@@ -86,6 +86,7 @@ pub(crate) fn import(
         warnings: Vec::new(),
         mesh_plan,
         meshes: HashMap::new(),
+        mesh_bytes: 0,
     };
     let (mut clips, mut meshes) = (Vec::new(), Vec::new());
     for animation in doc.animations() {
@@ -254,8 +255,10 @@ struct Ctx<'d, 'r> {
     warnings: Vec<Warning>,
     /// The skinned primitives found before validation.
     mesh_plan: MeshPlan,
-    /// The mesh kept per set of skins (clips of one skin share it).
+    /// The mesh kept per set of skins (clips of one skin share it), and
+    /// their bytes together (bounded by `max_mesh_bytes`).
     meshes: HashMap<Vec<usize>, Option<bytes::Bytes>>,
+    mesh_bytes: u64,
 }
 
 /// Where a clip's track came from: its channel and that channel's sampler.
@@ -333,16 +336,18 @@ impl Ctx<'_, '_> {
         if let Some(kept) = self.meshes.get(&skins) {
             return Ok(kept.clone());
         }
-        let palette = Palette::read(self.doc, &mut self.buffers, &skins)?;
+        let palette = Palette::read(self.doc, &mut self.buffers, &skins, self.options.limits.max_joints)?;
         let names: Vec<String> = palette.nodes.iter().map(|&n| self.forest.names[n].clone()).collect();
         let kept = MeshReader {
             doc: self.doc,
+            budget: self.options.limits.max_mesh_bytes.saturating_sub(self.mesh_bytes),
             buffers: &mut self.buffers,
             limits: &self.options.limits,
             plan: &self.mesh_plan,
             warnings: &mut self.warnings,
         }
         .read(&skins, &palette, &names)?;
+        self.mesh_bytes += kept.as_ref().map_or(0, |m| m.len() as u64);
         self.meshes.insert(skins, kept.clone());
         Ok(kept)
     }

@@ -12,7 +12,8 @@
 //!
 //! A mesh never stops an import: a primitive that cannot be kept (not
 //! triangles, no skin weights, bad data) is left out with a `not_imported`
-//! warning, and so is a mesh over [`ImportLimits::max_mesh_bytes`] (checked
+//! warning, and so is a mesh past [`ImportLimits::max_mesh_bytes`] (all of an
+//! import's meshes together; checked
 //! from the accessors' counts before anything is read), so memory follows
 //! what is kept. Only a source that cannot be read fails the import.
 
@@ -159,6 +160,10 @@ pub(crate) struct Palette {
 /// reasons in `warnings`) when none could be kept.
 pub(crate) struct MeshReader<'a, 'r> {
     pub doc: &'a Document,
+    /// Bytes the import's meshes may still take (all of them together are
+    /// bounded by [`ImportLimits::max_mesh_bytes`]); the caller subtracts what
+    /// [`MeshReader::read`] keeps.
+    pub budget: u64,
     pub buffers: &'a mut Buffers<'r>,
     pub limits: &'a ImportLimits,
     pub plan: &'a MeshPlan,
@@ -219,12 +224,16 @@ impl MeshReader<'_, '_> {
         let count = |i: usize| self.doc.accessors().nth(i).map_or(0, |a| a.count());
         let vertices: usize = primitives.iter().map(|(_, p)| count(p.positions)).sum();
         let indices: usize = primitives.iter().map(|(_, p)| p.indices.map_or(count(p.positions), count)).sum();
-        let bound = Mesh::encoded_len_bound(vertices, indices, joints, self.limits.max_mesh_texture_bytes as usize);
-        (bound as u64 > self.limits.max_mesh_bytes).then(|| {
+        let mut images: Vec<usize> = primitives.iter().filter_map(|(_, p)| p.texture.map(|t| t.0)).collect();
+        images.sort_unstable();
+        images.dedup();
+        let textures = images.len().saturating_mul(self.limits.max_mesh_texture_bytes as usize);
+        let bound = Mesh::encoded_len_bound(vertices, indices, joints, textures);
+        (bound as u64 > self.budget).then(|| {
             format!(
                 "the skinned mesh ({vertices} vertices, {indices} indices) was not kept for the viewer: it would \
-                 take up to {bound} bytes, over the limit of {} (max_mesh_bytes)",
-                self.limits.max_mesh_bytes
+                 take up to {bound} bytes, over the {} bytes left of the import's {} (max_mesh_bytes)",
+                self.budget, self.limits.max_mesh_bytes
             )
         })
     }
@@ -238,8 +247,9 @@ impl MeshReader<'_, '_> {
         joints: usize,
         first_vertex: usize,
     ) -> Result<ReadPrimitive, ImportError> {
-        let max = usize::MAX;
-        let positions = self.floats(p.positions, Dimensions::Vec3, false, &p.pointer, "POSITION")?;
+        // POSITION and indices were counted against the budget; the other attributes have as many elements.
+        let pointer = p.pointer.as_str();
+        let positions = self.floats(p.positions, Dimensions::Vec3, false, pointer, "POSITION", usize::MAX)?;
         let vertices = positions.len() / 3;
         let per_vertex = |values: Vec<f32>, width: usize, what: &str| -> Result<Vec<f32>, ImportError> {
             if values.len() != vertices * width {
@@ -248,12 +258,14 @@ impl MeshReader<'_, '_> {
             Ok(values)
         };
         let normals = match p.normals {
-            Some(n) => Some(per_vertex(self.floats(n, Dimensions::Vec3, false, &p.pointer, "NORMAL")?, 3, "NORMAL")?),
+            Some(n) => {
+                Some(per_vertex(self.floats(n, Dimensions::Vec3, false, pointer, "NORMAL", vertices)?, 3, "NORMAL")?)
+            }
             None => None,
         };
-        let weights =
-            per_vertex(self.floats(p.weights, Dimensions::Vec4, true, &p.pointer, "WEIGHTS_0")?, 4, "WEIGHTS_0")?;
-        let raw_joints = self.uints(p.joints, Dimensions::Vec4, &p.pointer, "JOINTS_0", max)?;
+        let weights = self.floats(p.weights, Dimensions::Vec4, true, pointer, "WEIGHTS_0", vertices)?;
+        let weights = per_vertex(weights, 4, "WEIGHTS_0")?;
+        let raw_joints = self.uints(p.joints, Dimensions::Vec4, pointer, "JOINTS_0", vertices)?;
         if raw_joints.len() != vertices * 4 {
             return Err(ImportError::InvalidGltf("JOINTS_0 has a different count from POSITION".into()));
         }
@@ -262,7 +274,7 @@ impl MeshReader<'_, '_> {
         }
         let joint_indices = raw_joints.iter().map(|&j| (j as usize + base) as u16).collect();
         let indices = match p.indices {
-            Some(i) => self.uints(i, Dimensions::Scalar, &p.pointer, "indices", max)?,
+            Some(i) => self.uints(i, Dimensions::Scalar, pointer, "indices", usize::MAX)?,
             None => (0..vertices as u32).collect(),
         };
         if indices.len() % 3 != 0 {
@@ -273,9 +285,11 @@ impl MeshReader<'_, '_> {
         }
         let indices = indices.into_iter().map(|i| i + first_vertex as u32).collect();
         let uvs = match p.texture {
-            Some((_, uv)) => {
-                Some(per_vertex(self.floats(uv, Dimensions::Vec2, true, &p.pointer, "TEXCOORD")?, 2, "TEXCOORD")?)
-            }
+            Some((_, uv)) => Some(per_vertex(
+                self.floats(uv, Dimensions::Vec2, true, pointer, "TEXCOORD", vertices)?,
+                2,
+                "TEXCOORD",
+            )?),
             None => None,
         };
         Ok(ReadPrimitive { positions, normals, weights, joint_indices, indices, uvs })
@@ -288,10 +302,11 @@ impl MeshReader<'_, '_> {
         normalized_ints: bool,
         pointer: &str,
         name: &str,
+        max_count: usize,
     ) -> Result<Vec<f32>, ImportError> {
         let acc = accessor_of(self.doc, accessor)?;
         let what = format!("{pointer} {name}");
-        read_f32(&acc, self.buffers, &Expect { what: &what, dims, normalized_ints, max_count: usize::MAX })
+        read_f32(&acc, self.buffers, &Expect { what: &what, dims, normalized_ints, max_count })
     }
 
     fn uints(
@@ -438,15 +453,24 @@ fn append(
 impl Palette {
     /// The palette of `skins`: each skin's joints and inverse binds
     /// (identity without them), skins in the order given.
-    pub(crate) fn read(doc: &Document, buffers: &mut Buffers, skins: &[usize]) -> Result<Palette, ImportError> {
+    pub(crate) fn read(
+        doc: &Document,
+        buffers: &mut Buffers,
+        skins: &[usize],
+        max_joints: usize,
+    ) -> Result<Palette, ImportError> {
         let mut palette = Palette { nodes: Vec::new(), inverse_binds: Vec::new(), starts: Vec::new() };
         for skin in skins.iter().filter_map(|&s| doc.skins().nth(s)) {
             let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
             let binds = match skin.inverse_bind_matrices() {
                 Some(acc) => {
                     let what = format!("skin {} inverseBindMatrices", skin.index());
-                    let expect =
-                        Expect { what: &what, dims: Dimensions::Mat4, normalized_ints: false, max_count: usize::MAX };
+                    let expect = Expect {
+                        what: &what,
+                        dims: Dimensions::Mat4,
+                        normalized_ints: false,
+                        max_count: max_joints.max(joints.len()),
+                    };
                     read_f32(&acc, buffers, &expect)?.chunks_exact(16).map(Mat4::from_cols_slice).collect()
                 }
                 None => vec![Mat4::IDENTITY; joints.len()],
@@ -494,5 +518,55 @@ mod tests {
         let mesh = decode(imported.meshes[0].as_ref().unwrap()).unwrap();
         assert!(mesh.textures.is_empty() && mesh.uvs.is_none());
         assert!(imported.warnings.iter().any(|w| w.pointer == "/images/0" && w.code == "not_imported"));
+    }
+
+    /// The Fox with its JSON chunk changed by `edit`.
+    fn fox_with(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+        let json_len = u32::from_le_bytes(FOX[12..16].try_into().unwrap()) as usize;
+        let mut doc: serde_json::Value = serde_json::from_slice(&FOX[20..20 + json_len]).unwrap();
+        edit(&mut doc);
+        let mut json = serde_json::to_vec(&doc).unwrap();
+        json.resize(json.len().next_multiple_of(4), b' ');
+        let bin = &FOX[20 + json_len..];
+        let mut out = b"glTF".to_vec();
+        for n in [2, (20 + json.len() + bin.len()) as u32, json.len() as u32] {
+            out.extend_from_slice(&n.to_le_bytes());
+        }
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&json);
+        out.extend_from_slice(bin);
+        out
+    }
+
+    #[test]
+    fn a_mesh_that_cannot_be_kept_leaves_the_clips_and_a_warning() {
+        let cases: [(&str, Box<dyn FnOnce(&mut serde_json::Value)>); 4] = [
+            // JOINTS_0 claims a billion elements: refused by its count before its bounds, never allocated.
+            ("huge joints", Box::new(|d| d["accessors"][2]["count"] = (1u64 << 30).into())),
+            ("joint past the skin", Box::new(|d| d["skins"][0]["joints"] = serde_json::json!([2, 3, 4]))),
+            ("points", Box::new(|d| d["meshes"][0]["primitives"][0]["mode"] = 0.into())),
+            (
+                "no weights",
+                Box::new(|d| {
+                    d["meshes"][0]["primitives"][0]["attributes"].as_object_mut().unwrap().remove("WEIGHTS_0");
+                }),
+            ),
+        ];
+        for (what, edit) in cases {
+            let imported = import(&fox_with(edit), Format::Glb, &ImportOptions::default())
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_eq!(imported.clips.len(), 3, "{what}");
+            assert!(imported.meshes.iter().all(Option::is_none), "{what}");
+            let warned =
+                imported.warnings.iter().any(|w| w.pointer == "/meshes/0/primitives/0" && w.code == "not_imported");
+            assert!(warned, "{what}: {:?}", imported.warnings);
+        }
+        let small = ImportOptions {
+            limits: crate::import::ImportLimits { max_mesh_bytes: 50_000, ..Default::default() },
+            ..Default::default()
+        };
+        let imported = import(FOX, Format::Glb, &small).unwrap();
+        assert!(imported.meshes.iter().all(Option::is_none));
+        assert!(imported.warnings.iter().any(|w| w.detail.contains("max_mesh_bytes")), "{:?}", imported.warnings);
     }
 }

@@ -151,9 +151,10 @@ pub struct ImportLimits {
     pub max_resolved_bytes: u64,
     /// Build work of one produced clip (see [`Clip::build_within`]).
     pub max_build_work: u64,
-    /// The encoded size a kept skinned mesh may reach (bounded from its
-    /// accessors' counts before any is read); a larger one is left out with
-    /// a warning, the clip imported without it.
+    /// The encoded size the skinned meshes of one import may reach together
+    /// (each bounded from its accessors' counts before any is read); a mesh
+    /// that would pass it is left out with a warning, its clips imported
+    /// without it.
     pub max_mesh_bytes: u64,
     /// A base colour texture is kept with a mesh up to this many bytes
     /// (PNG or JPEG as in the file); a larger one leaves the base colour
@@ -175,7 +176,7 @@ impl Default for ImportLimits {
             max_depth: 256,
             max_resolved_bytes: 4 * (64 << 20),
             max_build_work: crate::anim::DEFAULT_BUILD_WORK,
-            max_mesh_bytes: 32 << 20,
+            max_mesh_bytes: 16 << 20,
             max_mesh_texture_bytes: 1 << 20,
         }
     }
