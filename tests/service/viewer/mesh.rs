@@ -193,6 +193,14 @@ async fn the_fox_is_skinned_on_the_gpu_like_a_cpu_reference_and_walks() {
     eprintln!("silhouette: page {page_px} px, reference {reference_px} px, IoU {iou:.4}");
     assert!(iou >= 0.9, "IoU {iou:.4} (page {page_px} px, reference {reference_px} px, both {both})");
 
+    // In local space the page composes the model matrices itself: the same picture.
+    super::set_value(page, "space", "local").await;
+    page.wait_for("window.inbetweenViewer.mesh.poseSpace === 'local'", 10).await;
+    next_frame(page).await;
+    let (_, _, local) = scene_pixels(page).await;
+    let apart = with.iter().zip(&local).filter(|(a, b)| differs(**a, **b, 24)).count();
+    assert!(apart * 50 <= page_px, "local space differs from model space in {apart} px of {page_px}");
+
     // Playing (looped: the imported Walk is `once`, 0.7 s): the mesh moves between frames.
     super::set_value(page, "playback", "loop").await;
     super::set_value(page, "fps", "30").await;

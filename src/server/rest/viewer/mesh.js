@@ -86,8 +86,11 @@
   }
 
   /// Loads the clip's mesh (or learns it has none): called by viewer.js as
-  /// a clip is selected.
-  mesh.select = async (clipId) => {
+  /// a clip is selected. Never fails the selection: a mesh that cannot be
+  /// shown leaves the skeleton view, and the status says why.
+  mesh.select = (clipId) => load(clipId).catch((e) => viewer.setStatus(`mesh not shown: ${e.message}`, true));
+
+  async function load(clipId) {
     const ticket = ++loading;
     mesh.clip = null;
     mesh.info = null;
@@ -96,7 +99,7 @@
     const response = await fetch(`/v1/clips/${encodeURIComponent(clipId)}/mesh`, { headers: viewer.authHeaders() });
     if (ticket !== loading) return;
     if (response.status === 404) return; // no mesh (JSON, BVH, unskinned glTF): the skeleton view
-    if (!response.ok) throw new Error(`loading the mesh: HTTP ${response.status}`);
+    if (!response.ok) throw new Error(`GET …/mesh answered HTTP ${response.status}`);
     const parsed = parseMesh(await response.arrayBuffer());
     if (ticket !== loading || !context()) return;
     const images = await Promise.all(parsed.textures.map((blob) => createImageBitmap(blob).catch(() => null)));
@@ -114,7 +117,7 @@
     setActive(true);
     bindPose();
     viewer.requestDraw();
-  };
+  }
 
   // ---- poses → skinning matrices ----
 
@@ -155,6 +158,7 @@
   /// Called by viewer.js with each pose it shows.
   mesh.pose = (pose, parents) => {
     lastPose = pose;
+    mesh.poseSpace = pose.space; // read by the browser test
     lastParents = parents;
     if (gpu) bindPose();
   };
