@@ -520,6 +520,9 @@ mod tests {
         assert!(imported.warnings.iter().any(|w| w.pointer == "/images/0" && w.code == "not_imported"));
     }
 
+    /// A change to a glTF document.
+    type Edit = dyn FnOnce(&mut serde_json::Value);
+
     /// The Fox with its JSON chunk changed by `edit`.
     fn fox_with(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
         let json_len = u32::from_le_bytes(FOX[12..16].try_into().unwrap()) as usize;
@@ -540,7 +543,7 @@ mod tests {
 
     #[test]
     fn a_mesh_that_cannot_be_kept_leaves_the_clips_and_a_warning() {
-        let cases: [(&str, Box<dyn FnOnce(&mut serde_json::Value)>); 4] = [
+        let cases: [(&str, Box<Edit>); 4] = [
             // JOINTS_0 claims a billion elements: refused by its count before its bounds, never allocated.
             ("huge joints", Box::new(|d| d["accessors"][2]["count"] = (1u64 << 30).into())),
             ("joint past the skin", Box::new(|d| d["skins"][0]["joints"] = serde_json::json!([2, 3, 4]))),
