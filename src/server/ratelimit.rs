@@ -73,10 +73,13 @@ impl WriteLimiter {
     }
 }
 
-/// Whether a request changes state: every non-GET clip route but the
-/// read-only batch `POST /v1/clips/{id}/sample`.
+/// Whether a request changes state: every non-GET route but the reads sent
+/// as POST because their question is a body: the batch `POST
+/// /v1/clips/{id}/sample` and the motion reads `POST /v1/poses` and
+/// `/v1/samples` (SPEC §6).
 fn is_write(method: &Method, path: &str) -> bool {
-    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) && !path.ends_with("/sample")
+    let read_by_post = path.ends_with("/sample") || matches!(path, "/v1/poses" | "/v1/samples");
+    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) && !read_by_post
 }
 
 /// The middleware: limits writes, passes everything else. It runs inside
@@ -133,6 +136,9 @@ mod tests {
         assert!(is_write(&Method::PUT, "/v1/clips/x"));
         assert!(is_write(&Method::DELETE, "/v1/clips/x"));
         assert!(!is_write(&Method::POST, "/v1/clips/x/sample"));
+        assert!(!is_write(&Method::POST, "/v1/poses"));
+        assert!(!is_write(&Method::POST, "/v1/samples"));
+        assert!(is_write(&Method::POST, "/v1/broadcasts/x/controls"));
         assert!(!is_write(&Method::GET, "/v1/clips/x/pose"));
     }
 }

@@ -1,7 +1,8 @@
 //! `GET /viewer`: a browser page that lists clips, plays their WebSocket
-//! stream as a 3D skeleton and plots their curves (issue 8).
+//! stream as a 3D skeleton and plots their curves (issue 8), composes them
+//! into motions with IK handles and broadcasts them (issue 20).
 //!
-//! The page is four plain files (mesh.js: the skinned mesh in WebGL2) embedded in the binary, so serving it
+//! The page is plain files embedded in the binary, so serving it
 //! needs no build step and no download. Each answer carries a strong
 //! `ETag` (a hash of the file, computed at compile time) and `no-cache`, so
 //! a browser revalidates and gets `304` until the binary changes. The
@@ -40,20 +41,33 @@ const INDEX: Asset = asset!("viewer/index.html", "text/html; charset=utf-8");
 const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
 const MESH_SCRIPT: Asset = asset!("viewer/mesh.js", "text/javascript; charset=utf-8");
 const STYLE: Asset = asset!("viewer/viewer.css", "text/css; charset=utf-8");
+/// Composition and IK handles.
+const PANEL_SCRIPT: Asset = asset!("viewer/panel.js", "text/javascript; charset=utf-8");
+/// Creating and watching broadcasts.
+const BROADCAST_SCRIPT: Asset = asset!("viewer/broadcast.js", "text/javascript; charset=utf-8");
+const PANEL_STYLE: Asset = asset!("viewer/panel.css", "text/css; charset=utf-8");
+
+/// The page's files other than the page itself, by path.
+const FILES: [(&str, &Asset); 6] = [
+    ("/viewer/viewer.js", &SCRIPT),
+    ("/viewer/mesh.js", &MESH_SCRIPT),
+    ("/viewer/viewer.css", &STYLE),
+    ("/viewer/panel.js", &PANEL_SCRIPT),
+    ("/viewer/broadcast.js", &BROADCAST_SCRIPT),
+    ("/viewer/panel.css", &PANEL_STYLE),
+];
 
 /// Same-origin script, style, images and connections only; no inline code,
 /// no plugins, no framing. `data:` images are the empty favicon.
 pub const CONTENT_SECURITY_POLICY: &str = "default-src 'none'; script-src 'self'; style-src 'self'; \
     img-src 'self' data:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
-/// `/viewer` (and `/viewer/`) with its script and stylesheet.
+/// `/viewer` (and `/viewer/`) with its scripts and stylesheets.
 pub fn router<S: Clone + Send + Sync + 'static>() -> Router<S> {
-    Router::new()
-        .route("/viewer", get(viewer_page))
-        .route("/viewer/", get(viewer_page))
-        .route("/viewer/viewer.js", get(|headers: HeaderMap| async move { serve(&SCRIPT, &headers) }))
-        .route("/viewer/mesh.js", get(|headers: HeaderMap| async move { serve(&MESH_SCRIPT, &headers) }))
-        .route("/viewer/viewer.css", get(|headers: HeaderMap| async move { serve(&STYLE, &headers) }))
+    let page = Router::new().route("/viewer", get(viewer_page)).route("/viewer/", get(viewer_page));
+    FILES.into_iter().fold(page, |router, (path, asset)| {
+        router.route(path, get(move |headers: HeaderMap| async move { serve(asset, &headers) }))
+    })
 }
 
 /// The viewer page: pick a clip, play its stream, see its curves.
@@ -130,6 +144,8 @@ mod tests {
         assert_eq!(INDEX.etag.len(), 20);
         assert!(INDEX.etag.starts_with("\"v-") && INDEX.etag.ends_with('"'));
         assert_ne!(INDEX.etag, SCRIPT.etag);
+        let tags: std::collections::HashSet<_> = FILES.iter().map(|(_, a)| a.etag).collect();
+        assert_eq!(tags.len(), FILES.len(), "each file its own tag");
         // FNV-1a 64 test vector: "a" → af63dc4c8601ec8c.
         assert_eq!(fnv1a(b"a"), 0xaf63_dc4c_8601_ec8c);
         assert_eq!(&etag_of(0xaf63_dc4c_8601_ec8c), b"\"v-af63dc4c8601ec8c\"");

@@ -35,6 +35,7 @@ pub fn chromium_path() -> Option<PathBuf> {
 pub struct Browser {
     child: Child,
     _profile: TempDir,
+    port: u16,
     pub page: Page,
 }
 
@@ -76,14 +77,21 @@ impl Browser {
         let mut browser = BrowserGuard(Some(child));
         let port = devtools_port(profile.path()).await;
         let page_url = page_websocket(port).await;
-        let (ws, _) = tokio_tungstenite::connect_async(page_url.as_str()).await.expect("DevTools WebSocket");
-        let mut page = Page { ws, next_id: 0 };
-        page.call(
-            "Emulation.setDeviceMetricsOverride",
-            json!({"width": 1280, "height": 860, "deviceScaleFactor": 1, "mobile": false}),
-        )
-        .await;
-        Some(Browser { child: browser.0.take().unwrap(), _profile: profile, page })
+        let page = Page::connect(&page_url).await;
+        Some(Browser { child: browser.0.take().unwrap(), _profile: profile, port, page })
+    }
+
+    /// Another tab of this browser (its own `sessionStorage`).
+    pub async fn new_page(&mut self) -> Page {
+        let target: Value = reqwest::Client::new()
+            .put(format!("http://127.0.0.1:{}/json/new?about:blank", self.port))
+            .send()
+            .await
+            .expect("DevTools /json/new")
+            .json()
+            .await
+            .unwrap();
+        Page::connect(target["webSocketDebuggerUrl"].as_str().expect("a new tab's DevTools URL")).await
     }
 }
 
@@ -144,6 +152,28 @@ pub struct Page {
 }
 
 impl Page {
+    async fn connect(url: &str) -> Page {
+        let (ws, _) = tokio_tungstenite::connect_async(url).await.expect("DevTools WebSocket");
+        let mut page = Page { ws, next_id: 0 };
+        page.set_viewport(1280, 860).await;
+        page
+    }
+
+    /// Presses the left button at `from`, moves to `to` in `steps` moves and
+    /// releases it (CSS pixels of the viewport), as a user's drag would.
+    pub async fn drag(&mut self, from: [f64; 2], to: [f64; 2], steps: u32) {
+        let mouse = |kind: &str, [x, y]: [f64; 2], buttons: u32| json!({"type": kind, "x": x, "y": y, "button": "left", "buttons": buttons, "clickCount": 1});
+        self.call("Input.dispatchMouseEvent", mouse("mouseMoved", from, 0)).await;
+        self.call("Input.dispatchMouseEvent", mouse("mousePressed", from, 1)).await;
+        for i in 1..=steps {
+            let k = f64::from(i) / f64::from(steps);
+            let at = [from[0] + k * (to[0] - from[0]), from[1] + k * (to[1] - from[1])];
+            self.call("Input.dispatchMouseEvent", mouse("mouseMoved", at, 1)).await;
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        self.call("Input.dispatchMouseEvent", mouse("mouseReleased", to, 0)).await;
+    }
+
     /// Sends a command and waits (at most 30 s) for its result.
     pub async fn call(&mut self, method: &str, params: Value) -> Value {
         self.next_id += 1;

@@ -25,7 +25,9 @@
     showMesh: true,
     showSkeleton: true,
   };
-  viewer.mesh = mesh;
+  viewer.mesh = mesh; // viewer.js's drawScene asks mesh.draw first
+  viewer.hooks.clipSelected.push((clip) => mesh.select(clip.id));
+  viewer.hooks.pose.push((pose) => mesh.pose(pose, viewer.state.parents));
 
   let gl = null, programs = null, gpu = null; // the context, its programs, the loaded mesh's buffers
   let palette = null; // per palette entry: the pose joint it follows (index), and its inverse bind
@@ -85,8 +87,7 @@
     return { header, arrays, textures };
   }
 
-  /// Loads the clip's mesh (or learns it has none): called by viewer.js as
-  /// a clip is selected. Never fails the selection: a mesh that cannot be
+  /// Loads the clip's mesh (or learns it has none), as a clip is selected. Never fails the selection: a mesh that cannot be
   /// shown leaves the skeleton view, and the status says why.
   mesh.select = (clipId) => load(clipId).catch((e) => viewer.setStatus(`mesh not shown: ${e.message}`, true));
 
@@ -155,7 +156,7 @@
 
   let lastPose = null, lastParents = null, boundNames = null;
 
-  /// Called by viewer.js with each pose it shows.
+  /// With each pose the page shows (viewer.js's `pose` hook).
   mesh.pose = (pose, parents) => {
     lastPose = pose;
     mesh.poseSpace = pose.space; // read by the browser test

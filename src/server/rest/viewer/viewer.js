@@ -33,8 +33,21 @@
     camera: { yaw: 0.7, pitch: 0.35, dist: 5, target: [0, 1, 0], radius: 1 },
     curve: null, // the plotted series (read by the browser test)
     pendingUpload: null,
+    watching: null, // the broadcast this page watches (broadcast.js), if any
   };
-  const viewer = { state, cspViolations: [] };
+  // Hooks for the page's other scripts (panel.js: composition and IK;
+  // broadcast.js: broadcasts), so that they live in files of their own.
+  const hooks = {
+    streamTarget: null, // () => {url, open?}: what a new stream connects to (default: the clip route)
+    sendControl: null, // (control) => void: where controls go (default: the stream's socket)
+    poseAt: null, // (t) => Promise<pose> | null: the paused view's pose (default: the clip's GET pose)
+    frame: [], // (frame) => void, per stream frame
+    pose: [], // (pose) => void, after a pose is applied (may move state.positions)
+    overlay: [], // (ctx, cam, dpr) => void, after the scene is drawn
+    clipSelected: [], // (clip) => void, after a clip is selected
+    refused: [], // (problem) => void, when the server refuses a control
+  };
+  const viewer = { state, hooks, cspViolations: [] };
   window.inbetweenViewer = viewer;
   document.addEventListener("securitypolicyviolation", (e) =>
     viewer.cspViolations.push(`${e.violatedDirective} ${e.blockedURI}`),
@@ -153,6 +166,7 @@
     const summary = state.clips.find((c) => c.id === id);
     const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
     Object.assign(state, { clip: summary, doc, names: [], frames: 0, seq: null, dropped: 0, latencyMs: null });
+    for (const hook of hooks.clipSelected) hook(summary);
     state.requestTime = state.clipTime = summary.start;
     const seek = $("seek");
     seek.min = summary.start;
@@ -162,9 +176,23 @@
     $("play").disabled = false;
     renderClips();
     setupCurveSelectors();
-    await Promise.all([fitCamera(), showPoseAt(summary.start), loadCurve(), viewer.mesh?.select(id)]);
+    await Promise.all([fitCamera(), showPoseAt(summary.start), loadCurve()]);
     updateReadout();
     setStatus(`${summary.name}: ${summary.joints} joints, ${summary.start}–${summary.end} s`);
+  }
+
+  /// Makes `id` the page's clip while its stream goes on (a crossfade
+  /// brought it in): its range, its place in the list, its curves.
+  async function adoptClip(id) {
+    const summary = state.clips.find((c) => c.id === id);
+    if (!summary || state.clip?.id === id) return;
+    const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
+    Object.assign(state, { clip: summary, doc });
+    $("seek").min = summary.start;
+    $("seek").max = summary.end;
+    renderClips();
+    setupCurveSelectors();
+    await loadCurve();
   }
 
   // ---- poses and the skeleton ----
@@ -248,9 +276,9 @@
       state.drawnJoints = drawnJoints(names, state.parents);
     }
     state.positions = modelPositions(pose);
-    viewer.mesh?.pose(pose, state.parents); // mesh.js: the skinned mesh follows
     state.requestTime = pose.time;
     state.clipTime = pose.clip_time;
+    for (const hook of hooks.pose) hook(pose);
     requestDraw();
   }
 
@@ -262,7 +290,8 @@
 
   async function showPoseAt(t) {
     const q = new URLSearchParams({ t: String(t), ...options() });
-    applyPose(await api(`/v1/clips/${encodeURIComponent(state.clip.id)}/pose?${q}`));
+    const composed = hooks.poseAt?.(t);
+    applyPose(await (composed || api(`/v1/clips/${encodeURIComponent(state.clip.id)}/pose?${q}`)));
     updateReadout();
   }
 
@@ -317,7 +346,9 @@
       setStatus(settings, true);
       return false;
     }
-    const ws = new WebSocket(streamUrl(), streamProtocols());
+    const target = hooks.streamTarget?.() || { url: streamUrl() };
+    const ws = new WebSocket(target.url, streamProtocols());
+    if (target.open) ws.onopen = () => ws.send(JSON.stringify(target.open));
     state.ws = ws;
     state.speed = Number($("speed").value) || 1;
     setEnded(false);
@@ -327,6 +358,8 @@
     ws.onmessage = (message) => {
       if (typeof message.data !== "string") return;
       const frame = JSON.parse(message.data);
+      if (frame.opened) return;
+      if (frame.error && target.open && !state.frames) return setStatus(`stream refused: ${describeProblem(frame.error)}`, true);
       if (frame.error) return refusedControl(frame.error);
       const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
       state.frames += 1;
@@ -336,6 +369,7 @@
       state.latencyMs = (nowNanos - frame.sent_at_unix_nanos) / 1e6;
       if (frame.events?.length) setStatus(`event: ${frame.events.map((e) => e.name).join(", ")}`);
       applyPose(frame.pose);
+      for (const hook of hooks.frame) hook(frame);
       updateReadout();
       if (state.playing && reachedEnd(frame.clip_time)) endOnce();
     };
@@ -354,6 +388,7 @@
   function refusedControl(problem) {
     setStatus(`control refused: ${describeProblem(problem)}`, true);
     $("speed").value = state.speed;
+    for (const hook of hooks.refused) hook(problem);
   }
 
   /// The playback mode in force: the page's choice, else the clip's default.
@@ -362,7 +397,7 @@
   /// Whether a `once` stream has reached the end it is heading for (a `once`
   /// clip holds its last pose; the stream would go on sending it).
   function reachedEnd(clipTime) {
-    if (playbackMode() !== "once" || !state.clip) return false;
+    if (playbackMode() !== "once" || !state.clip || state.watching) return false;
     const { start, end } = state.clip;
     return state.speed >= 0 ? clipTime >= end : clipTime <= start;
   }
@@ -381,6 +416,7 @@
   }
 
   function send(control) {
+    if (hooks.sendControl) return hooks.sendControl(control);
     if (state.ws?.readyState === WebSocket.OPEN) state.ws.send(JSON.stringify(control));
   }
 
@@ -450,7 +486,7 @@
     if (t instanceof HTMLElement && t.closest("input, select, textarea")) return;
     // A focused button takes Space itself (it clicks).
     if (e.key === " " && t instanceof HTMLElement && t.closest("button")) return;
-    if (!state.clip) return;
+    if (!state.clip || $("play").hidden) return; // hidden: a read-only viewer of a broadcast
     const fps = Math.round(Number($("fps").value)) || 30;
     const here = Number($("seek").value);
     const step = e.shiftKey ? 1 : 1 / fps;
@@ -616,6 +652,7 @@
     }
     if (!mesh || viewer.mesh.showSkeleton) drawSkeleton(ctx, cam);
     else viewer.drawn = { bones: [], joints: 0 };
+    for (const hook of hooks.overlay) hook(ctx, cam, dpr);
   }
 
   // ---- the skeleton as solids: octahedral bones and shaded joint spheres,
@@ -1067,11 +1104,18 @@
     window.addEventListener("resize", () => (requestDraw(), drawCurves()));
     requestDraw();
     drawCurves();
-    loadClipsOrExplain();
+    return loadClipsOrExplain();
   }
 
-  viewer.selectClip = selectClip;
-  Object.assign(viewer, { authHeaders, requestDraw, setStatus }); // for mesh.js
-  viewer.loadClips = loadClips;
-  setup();
+  /// The scene's camera now, in the scene canvas's pixels.
+  function sceneCamera() {
+    const canvas = $("scene");
+    return { ...cameraBasis(canvas, canvas.width, canvas.height), dpr: window.devicePixelRatio || 1 };
+  }
+
+  Object.assign(viewer, {
+    selectClip, adoptClip, loadClips, api, postJson, setStatus, describeProblem, problemText, authHeaders, streamProtocols,
+    send, refusedControl, openStream, stopStream, setPlaying, showPoseAt, requestDraw, sceneCamera, toCamera, toScreen, options,
+  });
+  viewer.ready = setup();
 })();
