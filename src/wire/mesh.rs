@@ -137,7 +137,6 @@ impl ArrayType {
 
 /// The arrays of the body by name (`normal` and `uv` may be absent).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Arrays {
     pub position: ArrayRef,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -158,9 +157,9 @@ pub struct TextureRef {
     pub length: u32,
 }
 
-/// The JSON header.
+/// The JSON header. Fields a reader does not know are ignored (a change old
+/// readers would misread gets a new version instead).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Header {
     pub vertices: u32,
     pub joints: Vec<String>,
