@@ -49,15 +49,57 @@ fn dims_name(d: Dimensions) -> &'static str {
 pub(crate) fn read_f32(acc: &Accessor, buffers: &mut Buffers, expect: &Expect) -> Result<Vec<f32>, ImportError> {
     let what = || format!("{} (accessor {})", expect.what, acc.index());
     let layout = Layout::check(acc, expect, &what)?;
-    let mut out = match acc.view() {
-        Some(view) => read_dense(acc, &view, buffers, &layout, &what)?,
-        None => vec![0.0; layout.count * layout.comps],
-    };
-    if let Some(sparse) = acc.sparse() {
-        apply_sparse(&sparse, buffers, &layout, &mut out, &what)?;
+    let normalized_int = expect.normalized_ints && acc.normalized() && layout.data_type != DataType::U32;
+    if layout.data_type != DataType::F32 && !normalized_int {
+        return Err(ImportError::Unsupported(format!(
+            "{} has component type {:?}; only FLOAT{} is supported here",
+            what(),
+            layout.data_type,
+            if expect.normalized_ints { " or normalized BYTE/SHORT" } else { "" }
+        )));
     }
+    let out = read_elements(acc, buffers, &layout, &what, Layout::decode)?;
     if let Some(i) = out.iter().position(|x| !x.is_finite()) {
         return Err(ImportError::NonFinite { what: format!("{} element {}", what(), i / layout.comps) });
+    }
+    Ok(out)
+}
+
+/// The accessor's unsigned integer components as stored, flat: vertex
+/// joint indices (`JOINTS_n`: UNSIGNED_BYTE or UNSIGNED_SHORT) and
+/// primitive indices (UNSIGNED_BYTE, SHORT or INT). `expect.normalized_ints`
+/// is ignored: a normalised accessor is refused.
+///
+/// # Errors
+/// As [`read_f32`], and a float, signed or normalised component type.
+pub(crate) fn read_uint(acc: &Accessor, buffers: &mut Buffers, expect: &Expect) -> Result<Vec<u32>, ImportError> {
+    let what = || format!("{} (accessor {})", expect.what, acc.index());
+    let layout = Layout::check(acc, expect, &what)?;
+    if !matches!(layout.data_type, DataType::U8 | DataType::U16 | DataType::U32) || acc.normalized() {
+        return Err(ImportError::Unsupported(format!(
+            "{} has component type {:?}{}; only unsigned integers are supported here",
+            what(),
+            layout.data_type,
+            if acc.normalized() { " (normalized)" } else { "" }
+        )));
+    }
+    read_elements(acc, buffers, &layout, &what, Layout::decode_uint)
+}
+
+/// The dense elements (or zeros without a view), then the sparse ones.
+fn read_elements<T: Copy + Default>(
+    acc: &Accessor,
+    buffers: &mut Buffers,
+    layout: &Layout,
+    what: &dyn Fn() -> String,
+    decode: fn(&Layout, &[u8]) -> T,
+) -> Result<Vec<T>, ImportError> {
+    let mut out = match acc.view() {
+        Some(view) => read_dense(acc, &view, buffers, layout, what, decode)?,
+        None => vec![T::default(); layout.count * layout.comps],
+    };
+    if let Some(sparse) = acc.sparse() {
+        apply_sparse(&sparse, buffers, layout, &mut out, what, decode)?;
     }
     Ok(out)
 }
@@ -77,8 +119,8 @@ struct Layout {
 }
 
 impl Layout {
-    /// Refuses an accessor of other dimensions, an unsupported component
-    /// type, or a count of 0 or over the limit.
+    /// Refuses an accessor of other dimensions, or a count of 0 or over the
+    /// limit (the readers check the component type).
     fn check(acc: &Accessor, expect: &Expect, what: &dyn Fn() -> String) -> Result<Layout, ImportError> {
         if acc.dimensions() != expect.dims {
             return Err(ImportError::InvalidGltf(format!(
@@ -89,14 +131,6 @@ impl Layout {
             )));
         }
         let data_type = acc.data_type();
-        let normalized_int = expect.normalized_ints && acc.normalized() && data_type != DataType::U32;
-        if data_type != DataType::F32 && !normalized_int {
-            return Err(ImportError::Unsupported(format!(
-                "{} has component type {data_type:?}; only FLOAT{} is supported here",
-                what(),
-                if expect.normalized_ints { " or normalized BYTE/SHORT" } else { "" }
-            )));
-        }
         let count = acc.count();
         if count == 0 {
             return Err(ImportError::InvalidGltf(format!("{} has count 0", what())));
@@ -111,7 +145,7 @@ impl Layout {
         let comps = expect.dims.multiplicity();
         let comp_size = data_type.size();
         // Matrices of 1- or 2-byte components have padded columns; only float
-        // matrices are read here (checked above: MAT4 is never normalized).
+        // matrices are read here (MAT4 is only ever read by `read_f32`, never normalized).
         Ok(Layout { data_type, count, comps, comp_size, elem: comps * comp_size })
     }
 
@@ -127,17 +161,27 @@ impl Layout {
             DataType::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
         }
     }
+
+    /// One unsigned integer component from its little-endian bytes.
+    fn decode_uint(&self, b: &[u8]) -> u32 {
+        match self.comp_size {
+            1 => u32::from(b[0]),
+            2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
+            _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        }
+    }
 }
 
 /// The elements stored in the accessor's buffer view, after checking that
 /// its stride holds an element and that the last element ends inside it.
-fn read_dense(
+fn read_dense<T>(
     acc: &Accessor,
     view: &::gltf::buffer::View,
     buffers: &mut Buffers,
     layout: &Layout,
     what: &dyn Fn() -> String,
-) -> Result<Vec<f32>, ImportError> {
+    decode: fn(&Layout, &[u8]) -> T,
+) -> Result<Vec<T>, ImportError> {
     let Layout { count, comps, comp_size, elem, .. } = *layout;
     let stride = view.stride().unwrap_or(elem);
     if stride < elem {
@@ -176,7 +220,7 @@ fn read_dense(
         for i in 0..n {
             for c in 0..comps {
                 let o = i * stride + c * comp_size;
-                out.push(layout.decode(&bytes[o..o + comp_size]));
+                out.push(decode(layout, &bytes[o..o + comp_size]));
             }
         }
         first += n;
@@ -187,12 +231,13 @@ fn read_dense(
 /// Overwrites the elements a sparse accessor names (glTF 2.0 §3.6.2.3),
 /// after checking both its index and value arrays fit their views and
 /// before each write that its index is below the count.
-fn apply_sparse(
+fn apply_sparse<T>(
     sparse: &::gltf::accessor::sparse::Sparse,
     buffers: &mut Buffers,
     layout: &Layout,
-    out: &mut [f32],
+    out: &mut [T],
     what: &dyn Fn() -> String,
+    decode: fn(&Layout, &[u8]) -> T,
 ) -> Result<(), ImportError> {
     let Layout { count, comps, comp_size, elem, .. } = *layout;
     let n = sparse.count();
@@ -238,10 +283,21 @@ fn apply_sparse(
         }
         for c in 0..comps {
             let o = k * elem + c * comp_size;
-            out[target * comps + c] = layout.decode(&vbytes[o..o + comp_size]);
+            out[target * comps + c] = decode(layout, &vbytes[o..o + comp_size]);
         }
     }
     Ok(())
+}
+
+/// A buffer view's bytes whole (an embedded image), checked against its
+/// buffer first.
+pub(crate) fn read_view(
+    view: &::gltf::buffer::View,
+    buffers: &mut Buffers,
+    what: &str,
+) -> Result<bytes::Bytes, ImportError> {
+    let span = view_span(view, buffers, &|| what.to_owned())?;
+    span.read(buffers, 0, span.length as usize)
 }
 
 /// Where a buffer view lies: its buffer, and its offset and length there.

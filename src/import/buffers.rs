@@ -226,7 +226,7 @@ fn shorten(uri: &str) -> String {
 }
 
 /// Decodes `data:[<media type>][;base64],<data>` (RFC 2397).
-fn decode_data_uri(uri: &str) -> Result<Vec<u8>, String> {
+pub(crate) fn decode_data_uri(uri: &str) -> Result<Vec<u8>, String> {
     // The caller checked that `uri` starts with the ASCII `data:`.
     let rest = uri.get(5..).unwrap_or("");
     let comma = rest.find(',').ok_or("there is no ',' before the data")?;

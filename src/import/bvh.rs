@@ -85,7 +85,7 @@ pub(crate) fn import(bytes: &[u8], options: &ImportOptions) -> Result<Imported, 
     };
     // The importer computes every rotation itself, so only the times can look wrong.
     let warnings = lint::times(&clip).map(|l| Warning::from_lint(&l, FRAME_TIME_POINTER)).into_iter().collect();
-    Ok(Imported { clips: vec![clip], warnings })
+    Ok(Imported { clips: vec![clip], meshes: vec![None], warnings })
 }
 
 /// Where a BVH warning about key times points: the header line that set

@@ -17,6 +17,7 @@ use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 
 use super::accessor::{Expect, read_f32};
 use super::buffers::{Buffers, split_glb};
+use super::mesh::{MeshPlan, MeshReader, Palette};
 use super::source::Source;
 use super::warning::NOT_IMPORTED;
 use super::{
@@ -48,6 +49,8 @@ pub(crate) fn import(
     // Morph weights are a parameter as wide as the node's mesh has targets:
     // counted before the meshes go.
     let morph_targets = morph_targets(&root);
+    // So are the skinned meshes the viewer draws (read once the document is valid).
+    let mesh_plan = MeshPlan::new(&root);
     strip_to_animation(&mut root);
     let doc = Document::from_json(root).map_err(|e| ImportError::InvalidGltf(validation_message(e)))?;
     check_channel_targets(&doc)?;
@@ -81,17 +84,23 @@ pub(crate) fn import(
         skins_of,
         morph_targets,
         warnings: Vec::new(),
+        mesh_plan,
+        meshes: HashMap::new(),
+        mesh_bytes: 0,
     };
-    let mut clips = Vec::new();
+    let (mut clips, mut meshes) = (Vec::new(), Vec::new());
     for animation in doc.animations() {
-        if let Some(clip) = ctx.animation(&animation, animation_count)? {
+        if let Some((clip, skins)) = ctx.animation(&animation, animation_count)? {
             clips.push(clip);
+            meshes.push(ctx.mesh(skins)?);
         }
     }
     if clips.is_empty() {
         return Err(ImportError::NoAnimations);
     }
-    Ok(Imported { clips, warnings: ctx.warnings })
+    let mut warnings = std::mem::take(&mut ctx.mesh_plan.warnings);
+    warnings.append(&mut ctx.warnings);
+    Ok(Imported { clips, meshes, warnings })
 }
 
 /// Per node, the morph targets of its mesh (its first primitive's: glTF
@@ -244,6 +253,12 @@ struct Ctx<'d, 'r> {
     morph_targets: Vec<usize>,
     /// Parts not imported, repairs made, and what the lints notice.
     warnings: Vec<Warning>,
+    /// The skinned primitives found before validation.
+    mesh_plan: MeshPlan,
+    /// The mesh kept per set of skins (clips of one skin share it), and
+    /// their bytes together (bounded by `max_mesh_bytes`).
+    meshes: HashMap<Vec<usize>, Option<bytes::Bytes>>,
+    mesh_bytes: u64,
 }
 
 /// Where a clip's track came from: its channel and that channel's sampler.
@@ -270,7 +285,7 @@ impl Ctx<'_, '_> {
         &mut self,
         animation: &::gltf::Animation,
         animation_count: usize,
-    ) -> Result<Option<ClipSpec>, ImportError> {
+    ) -> Result<Option<(ClipSpec, Vec<usize>)>, ImportError> {
         let a = animation.index();
         let own = animation.name().filter(|s| !s.is_empty());
         let base = own.map_or_else(|| format!("animation{a}"), str::to_owned);
@@ -295,8 +310,8 @@ impl Ctx<'_, '_> {
             ));
             return Ok(None);
         }
-        let (nodes, skinned) = self.clip_nodes(&animated)?;
-        let joints = self.joints(&nodes, skinned)?;
+        let (nodes, skins) = self.clip_nodes(&animated)?;
+        let joints = self.joints(&nodes, !skins.is_empty())?;
         let clip = ClipSpec {
             name: clip_name(&name),
             skeleton: Some(SkeletonSpec { joints }),
@@ -308,7 +323,33 @@ impl Ctx<'_, '_> {
         };
         let lints = lint::lint(&clip);
         self.warnings.extend(lints.iter().map(|l| Warning::from_lint(l, lint_pointer(a, &refs, l))));
-        Ok(Some(clip))
+        Ok(Some((clip, skins)))
+    }
+
+    /// The mesh of the primitives bound to `skins` (their joints all in the
+    /// clip's skeleton, as [`Ctx::clip_nodes`] includes them), read once per
+    /// set of skins.
+    fn mesh(&mut self, skins: Vec<usize>) -> Result<Option<bytes::Bytes>, ImportError> {
+        if skins.is_empty() {
+            return Ok(None);
+        }
+        if let Some(kept) = self.meshes.get(&skins) {
+            return Ok(kept.clone());
+        }
+        let palette = Palette::read(self.doc, &mut self.buffers, &skins, self.options.limits.max_joints)?;
+        let names: Vec<String> = palette.nodes.iter().map(|&n| self.forest.names[n].clone()).collect();
+        let kept = MeshReader {
+            doc: self.doc,
+            budget: self.options.limits.max_mesh_bytes.saturating_sub(self.mesh_bytes),
+            buffers: &mut self.buffers,
+            limits: &self.options.limits,
+            plan: &self.mesh_plan,
+            warnings: &mut self.warnings,
+        }
+        .read(&skins, &palette, &names)?;
+        self.mesh_bytes += kept.as_ref().map_or(0, |m| m.len() as u64);
+        self.meshes.insert(skins, kept.clone());
+        Ok(kept)
     }
 
     /// The animation's channels as tracks, each with where it came from
@@ -422,12 +463,12 @@ impl Ctx<'_, '_> {
         }
     }
 
-    /// The nodes of the clip's skeleton, parents first, and whether a skin
-    /// is among them: the animated nodes, every joint of the skins they
+    /// The nodes of the clip's skeleton, parents first, and the skins among
+    /// them: the animated nodes, every joint of the skins they
     /// belong to, then every ancestor. Depth and count are checked as the
     /// set grows, so the work per animation stays bounded by the limits,
     /// not by the file.
-    fn clip_nodes(&mut self, animated: &[usize]) -> Result<(Vec<usize>, bool), ImportError> {
+    fn clip_nodes(&mut self, animated: &[usize]) -> Result<(Vec<usize>, Vec<usize>), ImportError> {
         let limits = self.options.limits;
         let too_many = |found: usize| ImportError::TooLarge {
             what: "the joints of one clip",
@@ -463,7 +504,7 @@ impl Ctx<'_, '_> {
         self.budget.take(included.len())?;
         let mut nodes: Vec<usize> = included.into_iter().collect();
         nodes.sort_by_key(|&n| self.forest.order[n]);
-        Ok((nodes, !skins.is_empty()))
+        Ok((nodes, skins))
     }
 
     /// The skeleton's joints for `nodes`: names, parents and rest poses,

@@ -12,8 +12,9 @@
 //!
 //! Files may be far larger than what is read of them: a GLB's JSON chunk is
 //! read whole, then only the byte ranges its animations' accessors and its
-//! skins' inverse bind matrices occupy; images, textures and mesh data are
-//! never read. Only a `.gltf` or `.bvh` file (text, parsed whole) is held in
+//! skins' inverse bind matrices occupy, and those of the skinned mesh a clip
+//! keeps for the viewer (`mesh`: bounded by [`ImportLimits::max_mesh_bytes`]
+//! before it is read); other images and mesh data are never read. Only a `.gltf` or `.bvh` file (text, parsed whole) is held in
 //! memory entire, bounded by [`ImportLimits::max_document_bytes`].
 //!
 //! What is imported and how (the decisions a user would ask about):
@@ -49,6 +50,7 @@ mod buffers;
 mod bvh;
 mod error;
 mod gltf;
+mod mesh;
 mod source;
 pub mod warning;
 
@@ -149,6 +151,15 @@ pub struct ImportLimits {
     pub max_resolved_bytes: u64,
     /// Build work of one produced clip (see [`Clip::build_within`]).
     pub max_build_work: u64,
+    /// The encoded size the skinned meshes of one import may reach together
+    /// (each bounded from its accessors' counts before any is read); a mesh
+    /// that would pass it is left out with a warning, its clips imported
+    /// without it.
+    pub max_mesh_bytes: u64,
+    /// A base colour texture is kept with a mesh up to this many bytes
+    /// (PNG or JPEG as in the file); a larger one leaves the base colour
+    /// factor.
+    pub max_mesh_texture_bytes: u64,
 }
 
 impl Default for ImportLimits {
@@ -165,6 +176,8 @@ impl Default for ImportLimits {
             max_depth: 256,
             max_resolved_bytes: 4 * (64 << 20),
             max_build_work: crate::anim::DEFAULT_BUILD_WORK,
+            max_mesh_bytes: 16 << 20,
+            max_mesh_texture_bytes: 1 << 20,
         }
     }
 }
@@ -222,6 +235,11 @@ pub fn file_stem(file_name: &str) -> Option<String> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Imported {
     pub clips: Vec<ClipSpec>,
+    /// Per clip (in step with `clips`): the skinned mesh the viewer draws,
+    /// in the binary form of [`crate::wire::mesh`], when the clip comes from
+    /// a glTF skin with triangles bound to it (shared bytes when several
+    /// clips drive one skin).
+    pub meshes: Vec<Option<bytes::Bytes>>,
     pub warnings: Vec<Warning>,
 }
 

@@ -165,6 +165,7 @@ impl ApiError {
             Forbidden { .. } => "insufficient_scope",
             NotFound { what: "route" } => "route_not_found",
             NotFound { what: "broadcast" } => "broadcast_not_found",
+            NotFound { what: "mesh" } => "no_mesh",
             NotFound { .. } | ClipNotFoundAt { .. } => "clip_not_found",
             MethodNotAllowed => "method_not_allowed",
             PreconditionFailed { .. } => "version_mismatch",

@@ -10,7 +10,7 @@ use std::sync::atomic::AtomicBool;
 use crate::anim::ik::IkLimits;
 use crate::anim::lint::{Lint, lint};
 use crate::anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
-use crate::store::{ClipStats, NewClip};
+use crate::store::{ClipStats, MeshWrite, NewClip};
 use crate::wire::json::{ClipDoc, DocError, parse_clip_doc};
 
 use super::config::Limits;
@@ -57,7 +57,7 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<A
         playback: clip.playback(),
     };
     let joint_names = clip.skeleton().names().to_vec();
-    let new_clip = NewClip { name: doc.name, doc_json, stats, tags: doc.tags, joint_names };
+    let new_clip = NewClip { name: doc.name, doc_json, stats, tags: doc.tags, joint_names, mesh: MeshWrite::None };
     Ok(Admitted { new_clip, clip, lints: lint(&spec) })
 }
 

@@ -115,6 +115,30 @@ pub struct NewClip {
     /// Every joint name of the skeleton (`clip_joints`, indexed by name), for
     /// [`ListQuery::compatible_with`].
     pub joint_names: Vec<String>,
+    /// What happens to the clip's mesh (`clip_meshes`), in the same transaction.
+    pub mesh: MeshWrite,
+}
+
+/// What a create or replace does to the clip's skinned mesh.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum MeshWrite {
+    /// No mesh: a create stores none, a replace drops the stored one (a
+    /// `PUT`'s document may rename or move the joints it is bound to).
+    #[default]
+    None,
+    /// A replace keeps the stored mesh (a `PATCH`, which cannot change the
+    /// skeleton); a create stores none.
+    Keep,
+    /// Store this one (an import).
+    Set(StoredMesh),
+}
+
+/// A clip's mesh as stored: the bytes an import wrote (docs/mesh-format.md)
+/// and the entity tag they are served with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredMesh {
+    pub etag: String,
+    pub bytes: bytes::Bytes,
 }
 
 /// A page request: clips with ids after `after`, in id (creation) order,
@@ -187,6 +211,13 @@ pub trait ClipStore: Send + Sync + 'static {
     /// # Errors
     /// As [`ClipStore::replace`].
     fn delete<'a>(&'a self, id: &'a str, expected_version: Option<u64>) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// The entity tag of the clip's mesh: `None` when there is no such clip,
+    /// `Some(None)` when it has no mesh. One small read, for `304`s.
+    fn mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>>;
+
+    /// The clip's mesh, or `None` (no such clip, or no mesh).
+    fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>>;
 
     /// Succeeds when the store answers a trivial query.
     fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>>;

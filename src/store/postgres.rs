@@ -30,7 +30,8 @@ use sqlx::{Connection, Row, migrate::Migrator};
 use super::filter::{POSTGRES, list_query};
 use super::retry::{Retry, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
+    ClipMeta, ClipStore, Durability, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredClip, StoredMesh,
+    new_clip_id, now_millis,
 };
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/postgres");
@@ -234,6 +235,25 @@ async fn write_index(db: &mut sqlx::PgConnection, id: &str, clip: &NewClip, repl
         .bind(&clip.joint_names)
         .execute(&mut *db)
         .await?;
+    write_mesh(db, id, &clip.mesh, replace).await
+}
+
+/// The clip's `clip_meshes` row as [`MeshWrite`] says.
+async fn write_mesh(db: &mut sqlx::PgConnection, id: &str, mesh: &MeshWrite, replace: bool) -> Result<(), sqlx::Error> {
+    if *mesh == MeshWrite::Keep {
+        return Ok(());
+    }
+    if replace {
+        sqlx::query("DELETE FROM clip_meshes WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+    }
+    if let MeshWrite::Set(m) = mesh {
+        sqlx::query("INSERT INTO clip_meshes (clip_id, etag, bytes) VALUES ($1, $2, $3)")
+            .bind(id)
+            .bind(&m.etag)
+            .bind(m.bytes.as_ref())
+            .execute(&mut *db)
+            .await?;
+    }
     Ok(())
 }
 
@@ -400,6 +420,35 @@ impl ClipStore for PgStore {
                 if done.rows_affected() == 1 { Ok(Ok(())) } else { self.missed(id).await.map(Err) }
             })
             .await?
+        }
+        .boxed()
+    }
+
+    fn mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>> {
+        async move {
+            self.run("mesh_tag", Retry::Always, |_| async move {
+                let sql = "SELECT m.etag FROM clips c LEFT JOIN clip_meshes m ON m.clip_id = c.id WHERE c.id = $1";
+                sqlx::query_scalar::<_, Option<String>>(sql).bind(id).fetch_optional(&self.pool).await
+            })
+            .await
+        }
+        .boxed()
+    }
+
+    fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>> {
+        async move {
+            self.run("mesh", Retry::Always, |_| async move {
+                let row = sqlx::query("SELECT etag, bytes FROM clip_meshes WHERE clip_id = $1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                row.map(|row| {
+                    let bytes: Vec<u8> = row.try_get("bytes")?;
+                    Ok(StoredMesh { etag: row.try_get("etag")?, bytes: bytes.into() })
+                })
+                .transpose()
+            })
+            .await
         }
         .boxed()
     }

@@ -31,7 +31,8 @@ use sqlx::{Connection, Row, migrate::Migrator};
 
 use super::filter::{SQLITE, list_query};
 use super::{
-    ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
+    ClipMeta, ClipStore, Durability, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredClip, StoredMesh,
+    new_clip_id, now_millis,
 };
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
@@ -200,6 +201,30 @@ async fn write_index(
         .bind(json_list(&clip.joint_names))
         .execute(&mut *db)
         .await?;
+    write_mesh(db, id, &clip.mesh, replace).await
+}
+
+/// The clip's `clip_meshes` row as [`MeshWrite`] says.
+async fn write_mesh(
+    db: &mut sqlx::SqliteConnection,
+    id: &str,
+    mesh: &MeshWrite,
+    replace: bool,
+) -> Result<(), sqlx::Error> {
+    if *mesh == MeshWrite::Keep {
+        return Ok(());
+    }
+    if replace {
+        sqlx::query("DELETE FROM clip_meshes WHERE clip_id = ?1").bind(id).execute(&mut *db).await?;
+    }
+    if let MeshWrite::Set(m) = mesh {
+        sqlx::query("INSERT INTO clip_meshes (clip_id, etag, bytes) VALUES (?1, ?2, ?3)")
+            .bind(id)
+            .bind(&m.etag)
+            .bind(m.bytes.as_ref())
+            .execute(&mut *db)
+            .await?;
+    }
     Ok(())
 }
 
@@ -358,6 +383,36 @@ impl ClipStore for SqliteStore {
                 Err(e) => Err(e),
             };
             timed("delete", started, r)?
+        }
+        .boxed()
+    }
+
+    fn mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let sql = "SELECT m.etag FROM clips c LEFT JOIN clip_meshes m ON m.clip_id = c.id WHERE c.id = ?1";
+            let r = sqlx::query_scalar::<_, Option<String>>(sql).bind(id).fetch_optional(&self.pool).await;
+            timed("mesh_tag", started, r)
+        }
+        .boxed()
+    }
+
+    fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let row = sqlx::query("SELECT etag, bytes FROM clip_meshes WHERE clip_id = ?1")
+                    .bind(id)
+                    .fetch_optional(&self.pool)
+                    .await?;
+                row.map(|row| {
+                    let bytes: Vec<u8> = row.try_get("bytes")?;
+                    Ok(StoredMesh { etag: row.try_get("etag")?, bytes: bytes.into() })
+                })
+                .transpose()
+            }
+            .await;
+            timed("mesh", started, r)
         }
         .boxed()
     }

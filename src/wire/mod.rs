@@ -3,5 +3,6 @@
 
 pub mod ik;
 pub mod json;
+pub mod mesh;
 pub mod motion;
 pub mod proto;

@@ -12,6 +12,7 @@
 #![allow(dead_code, unused_imports)]
 
 pub mod app;
+pub mod glb;
 pub mod pg;
 pub mod process;
 

@@ -16,8 +16,9 @@
 //! Files may be far over the JSON body limit: the body guard spools the
 //! body to a temporary file under `max_import_bytes` (`server::spool`), a
 //! multipart body's parts are spooled again one file each, and the importer
-//! reads only the glTF JSON and the accessor ranges animations and skins
-//! use. What is held in memory whole (a `.gltf` or `.bvh` file, a GLB's JSON
+//! reads only the glTF JSON and the accessor ranges animations, skins and
+//! the kept skinned mesh use. Each clip of a skin is stored with its mesh
+//! (docs/mesh-format.md) in the same transaction. What is held in memory whole (a `.gltf` or `.bvh` file, a GLB's JSON
 //! chunk) stays within `max_body_bytes` (413 `document_too_large`). Every
 //! 413 names its limit and how to raise it.
 
@@ -44,7 +45,9 @@ use crate::server::error::{ApiError, raise_hint};
 use crate::server::limits::{Admitted, admit_doc};
 use crate::server::spool::{SpooledBody, Spooler};
 use crate::server::state::AppState;
+use crate::store::{MeshWrite, StoredMesh};
 use crate::wire::json::{ClipDoc, InterpolationDoc};
+use crate::wire::mesh;
 
 use super::query::Query;
 use super::summary::ClipSummary;
@@ -156,11 +159,17 @@ pub async fn import_clips(
             };
             let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
             let imported = import_from(&document, format, &options, resolver).map_err(refused)?;
-            let admitted = imported
+            let mut admitted = imported
                 .clips
                 .iter()
                 .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits, cancel))
                 .collect::<Result<Vec<Admitted>, ApiError>>()?;
+            // Each clip of a skin keeps its mesh, stored in the clips' transaction.
+            for (admitted, mesh) in admitted.iter_mut().zip(imported.meshes) {
+                if let Some(bytes) = mesh {
+                    admitted.new_clip.mesh = MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes });
+                }
+            }
             // The importer's warnings point into the file; the documents' own are the same findings.
             Ok((format, admitted, imported.warnings))
         })

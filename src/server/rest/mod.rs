@@ -31,6 +31,7 @@ pub mod clips;
 pub mod extract;
 pub mod health;
 pub mod import;
+pub mod mesh;
 pub mod motions;
 pub mod openapi;
 pub mod patch;
@@ -59,6 +60,7 @@ pub fn router(state: AppState) -> Router {
             get(clips::get_clip).put(clips::replace_clip).patch(patch::patch_clip).delete(clips::delete_clip),
         )
         .route("/v1/clips/{id}/skeleton", get(skeleton::get_skeleton))
+        .route("/v1/clips/{id}/mesh", get(mesh::get_mesh))
         .route("/v1/clips/{id}/pose", get(poses::get_pose))
         .route("/v1/clips/{id}/sample", post(poses::sample))
         .route("/v1/clips/{id}/stream", get(stream::stream))

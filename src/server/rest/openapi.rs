@@ -11,7 +11,7 @@ use utoipa::{Modify, OpenApi};
 use utoipa_swagger_ui::SwaggerUi;
 
 use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem, Warning};
-use super::{broadcasts, clips, health, import, motions, patch, poses, skeleton, stream, viewer};
+use super::{broadcasts, clips, health, import, mesh, motions, patch, poses, skeleton, stream, viewer};
 use crate::server::error::PROBLEM_JSON;
 
 /// The bearer scheme, and on every operation that takes it the two answers
@@ -83,7 +83,7 @@ fn problem_response(description: &str) -> RefOr<Response> {
     info(title = "inbetween", description = "Keyframe clips in, inbetweens out. See SPEC §3."),
     paths(
         clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
-        patch::patch_clip, skeleton::get_skeleton,
+        patch::patch_clip, skeleton::get_skeleton, mesh::get_mesh,
         import::import_clips,
         poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream, stream::motion_stream,
         broadcasts::create, broadcasts::list, broadcasts::get, broadcasts::delete, broadcasts::control,

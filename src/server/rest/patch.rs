@@ -27,7 +27,7 @@ use crate::server::cache::CachedClip;
 use crate::server::error::ApiError;
 use crate::server::limits::Admitted;
 use crate::server::state::AppState;
-use crate::store::StoreError;
+use crate::store::{MeshWrite, StoreError};
 
 use super::clips::{admit_body, with_etag};
 use super::extract::{ClipId, JsonBody, Precondition, precondition};
@@ -84,7 +84,9 @@ pub async fn patch_clip(
             return Ok(with_etag(&stored.meta, StatusCode::OK, None));
         }
         let merged = serde_json::to_vec(&doc).map_err(ApiError::internal)?;
-        let Admitted { new_clip, clip, .. } = admit_body(&state, merged.into()).await?;
+        let Admitted { mut new_clip, clip, .. } = admit_body(&state, merged.into()).await?;
+        // A patch cannot touch the skeleton: the mesh bound to it stays.
+        new_clip.mesh = MeshWrite::Keep;
         if new_clip.doc_json == stored.doc_json {
             // The same canonical document (e.g. `"tags": []` on a clip without tags).
             return Ok(with_etag(&stored.meta, StatusCode::OK, None));

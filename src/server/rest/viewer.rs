@@ -39,6 +39,7 @@ macro_rules! asset {
 
 const INDEX: Asset = asset!("viewer/index.html", "text/html; charset=utf-8");
 const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
+const MESH_SCRIPT: Asset = asset!("viewer/mesh.js", "text/javascript; charset=utf-8");
 const STYLE: Asset = asset!("viewer/viewer.css", "text/css; charset=utf-8");
 /// Composition and IK handles.
 const PANEL_SCRIPT: Asset = asset!("viewer/panel.js", "text/javascript; charset=utf-8");
@@ -47,8 +48,9 @@ const BROADCAST_SCRIPT: Asset = asset!("viewer/broadcast.js", "text/javascript; 
 const PANEL_STYLE: Asset = asset!("viewer/panel.css", "text/css; charset=utf-8");
 
 /// The page's files other than the page itself, by path.
-const FILES: [(&str, &Asset); 5] = [
+const FILES: [(&str, &Asset); 6] = [
     ("/viewer/viewer.js", &SCRIPT),
+    ("/viewer/mesh.js", &MESH_SCRIPT),
     ("/viewer/viewer.css", &STYLE),
     ("/viewer/panel.js", &PANEL_SCRIPT),
     ("/viewer/broadcast.js", &BROADCAST_SCRIPT),
@@ -100,7 +102,7 @@ fn serve(asset: &Asset, request: &HeaderMap) -> Response {
 }
 
 /// Whether `If-None-Match` names `etag` (weak comparison, RFC 9110 §13.1.2).
-fn matches_etag(request: &HeaderMap, etag: &str) -> bool {
+pub(crate) fn matches_etag(request: &HeaderMap, etag: &str) -> bool {
     request
         .get_all(IF_NONE_MATCH)
         .iter()

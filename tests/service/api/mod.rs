@@ -17,6 +17,7 @@ mod ik;
 mod import;
 mod import_big;
 mod logs;
+mod mesh;
 mod motion_cache;
 mod motions;
 mod numbers;

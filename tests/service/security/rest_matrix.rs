@@ -24,6 +24,8 @@ const ROUTES: &[(&str, &str, Need, u16)] = &[
     ("delete", "/v1/clips/{id}", Need::Scope(Scope::Write), 204),
     ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
     ("get", "/v1/clips/{id}/skeleton", Need::Scope(Scope::Read), 200),
+    // The clip `call` makes is JSON, without a mesh: allowed is `404 no_mesh` (tests/service/api/mesh.rs: 200).
+    ("get", "/v1/clips/{id}/mesh", Need::Scope(Scope::Read), 404),
     ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
     ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
     // Checked at the upgrade; the motion comes in the first message.

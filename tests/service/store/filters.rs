@@ -6,7 +6,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use inbetween::anim::Playback;
-use inbetween::store::{ClipStats, ClipStore, ListQuery, NewClip, StoreError};
+use inbetween::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError};
 
 /// One fixture clip: name, tags, joint names, duration.
 struct Fixture {
@@ -54,6 +54,7 @@ fn new_clip(f: &Fixture) -> NewClip {
         },
         tags: owned(f.tags),
         joint_names: owned(f.joints),
+        mesh: MeshWrite::None,
     }
 }
 

@@ -10,7 +10,7 @@ mod filters;
 use std::sync::Arc;
 
 use inbetween::anim::Playback;
-use inbetween::store::{ClipStats, ClipStore, ListQuery, NewClip, StoreError};
+use inbetween::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError, StoredMesh};
 
 /// Runs each listed test once per backend: `sqlite::name` and `postgres::name`.
 macro_rules! for_both_backends {
@@ -49,6 +49,7 @@ for_both_backends!(
     ping_answers_until_closed,
     every_filter_pages_through_exactly_its_clips,
     tags_and_joints_follow_replace_and_delete,
+    a_mesh_is_written_kept_dropped_and_deleted_with_its_clip,
 );
 
 use filters::{every_filter_pages_through_exactly_its_clips, tags_and_joints_follow_replace_and_delete};
@@ -64,6 +65,7 @@ pub fn new_clip(name: &str, doc: &str) -> NewClip {
         stats: stats(4, Playback::Loop),
         tags: vec![],
         joint_names: vec![],
+        mesh: MeshWrite::None,
     }
 }
 
@@ -76,6 +78,7 @@ async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
         stats: stats(7, Playback::PingPong),
         tags: vec!["wave".into(), "✓".into()],
         joint_names: vec!["root".into()],
+        mesh: MeshWrite::None,
     };
     let meta = store.create(clip).await.unwrap();
     assert_eq!(meta.version, 1);
@@ -225,3 +228,32 @@ async fn ping_answers_until_closed(store: Arc<dyn ClipStore>) {
 mod durability;
 mod postgres_only;
 mod upgrade;
+
+/// A mesh is written in its clip's transaction, read back byte for byte,
+/// kept by a replace that says `Keep` (a PATCH), dropped by one that does
+/// not (a PUT), and gone with its clip.
+async fn a_mesh_is_written_kept_dropped_and_deleted_with_its_clip(store: Arc<dyn ClipStore>) {
+    let bytes: Vec<u8> = (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect();
+    let mesh = StoredMesh { etag: "\"m-1\"".into(), bytes: bytes.clone().into() };
+    let with_mesh = NewClip { mesh: MeshWrite::Set(mesh.clone()), ..new_clip("fox", "{}") };
+    let plain = store.create(new_clip("plain", "{}")).await.unwrap();
+    let metas = store.create_all(vec![with_mesh.clone(), with_mesh]).await.unwrap();
+    let id = &metas[0].id;
+    assert_eq!(store.mesh(id).await.unwrap(), Some(mesh.clone()));
+    assert_eq!(store.mesh_tag(id).await.unwrap(), Some(Some(mesh.etag.clone())));
+    assert_eq!(store.mesh_tag(&plain.id).await.unwrap(), Some(None), "a clip without a mesh");
+    assert_eq!(store.mesh(&plain.id).await.unwrap(), None);
+    assert_eq!(store.mesh_tag("no-such-clip").await.unwrap(), None, "no clip at all");
+
+    let patched = NewClip { mesh: MeshWrite::Keep, ..new_clip("renamed", "{}") };
+    store.replace(id, patched, Some(1)).await.unwrap();
+    assert_eq!(store.mesh(id).await.unwrap(), Some(mesh.clone()), "kept by a patch");
+    store.replace(id, new_clip("replaced", "{}"), Some(2)).await.unwrap();
+    assert_eq!(store.mesh_tag(id).await.unwrap(), Some(None), "dropped by a put");
+
+    let other = &metas[1].id;
+    store.delete(other, None).await.unwrap();
+    assert_eq!(store.mesh(other).await.unwrap(), None, "gone with its clip");
+    // The deleted clip's mesh row went too: a new row for the same id could be written.
+    assert_eq!(store.mesh_tag(other).await.unwrap(), None);
+}

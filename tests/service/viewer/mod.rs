@@ -14,6 +14,7 @@
 mod cdp;
 mod curves;
 mod flows;
+mod mesh;
 mod panel;
 
 use std::path::Path;
@@ -55,6 +56,7 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
     let etag = header(&page, "etag");
     let html = page.text().await.unwrap();
     assert!(html.contains(r#"src="/viewer/viewer.js""#) && html.contains(r#"href="/viewer/viewer.css""#));
+    assert!(html.contains(r#"src="/viewer/mesh.js""#));
     assert!(!html.contains("<script>") && !html.contains("style="), "inline code would break the CSP");
 
     let again = app.http.get(app.url("/viewer")).header("if-none-match", &etag).send().await.unwrap();
@@ -67,6 +69,7 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
         ("/viewer/panel.js", "text/javascript; charset=utf-8"),
         ("/viewer/broadcast.js", "text/javascript; charset=utf-8"),
         ("/viewer/panel.css", "text/css; charset=utf-8"),
+        ("/viewer/mesh.js", "text/javascript; charset=utf-8"),
     ] {
         assert!(html.contains(&format!("=\"{path}\"")), "the page loads {path}");
         let resp = app.http.get(app.url(path)).send().await.unwrap();

@@ -615,28 +615,43 @@
     ctx.stroke();
   }
 
-  function drawScene() {
-    const canvas = $("scene");
-    const dpr = sizeCanvas(canvas);
-    const ctx = canvas.getContext("2d");
-    ctx.fillStyle = "#101216";
-    ctx.fillRect(0, 0, canvas.width, canvas.height);
-    const cam = cameraBasis(canvas, canvas.width, canvas.height);
+  /// The floor grid and the axes at the origin, as world-space segments by
+  /// colour (RGBA 0–1 for mesh.js's WebGL, the CSS colour for the canvas).
+  function groundLines() {
     const { target, radius } = state.camera;
     const step = 10 ** Math.floor(Math.log10(radius)) / 2;
     const n = Math.ceil((2 * radius) / step);
     const ox = Math.round(target[0] / step) * step, oz = Math.round(target[2] / step) * step;
-    stroke(ctx, "#323846", dpr, () => {
-      for (let i = -n; i <= n; i++) {
-        line(ctx, cam, [ox + i * step, 0, oz - n * step], [ox + i * step, 0, oz + n * step]);
-        line(ctx, cam, [ox - n * step, 0, oz + i * step], [ox + n * step, 0, oz + i * step]);
-      }
-    });
+    const grid = [];
+    for (let i = -n; i <= n; i++) {
+      grid.push([[ox + i * step, 0, oz - n * step], [ox + i * step, 0, oz + n * step]]);
+      grid.push([[ox - n * step, 0, oz + i * step], [ox + n * step, 0, oz + i * step]]);
+    }
+    const rgba = (css) => [1, 3, 5].map((k) => parseInt(css.slice(k, k + 2), 16) / 255).concat(1);
     const axis = 2 * step;
-    [[axis, 0, 0], [0, axis, 0], [0, 0, axis]].forEach((end, i) =>
-      stroke(ctx, COLORS[i], 2 * dpr, () => line(ctx, cam, [0, 0, 0], end)),
-    );
-    drawSkeleton(ctx, cam);
+    const axes = [[axis, 0, 0], [0, axis, 0], [0, 0, axis]].map((end, i) => ({
+      css: COLORS[i], color: rgba(COLORS[i]), width: 2, segments: [[[0, 0, 0], end]],
+    }));
+    return [{ css: "#323846", color: rgba("#323846"), width: 1, segments: grid }, ...axes];
+  }
+
+  function drawScene() {
+    const canvas = $("scene");
+    const dpr = sizeCanvas(canvas);
+    const ctx = canvas.getContext("2d");
+    const cam = cameraBasis(canvas, canvas.width, canvas.height);
+    const lines = groundLines();
+    // With a skinned mesh, mesh.js draws background, ground and mesh below; this canvas only the skeleton.
+    const mesh = viewer.mesh?.draw(cam, canvas.width, canvas.height, lines);
+    if (mesh) ctx.clearRect(0, 0, canvas.width, canvas.height);
+    else {
+      ctx.fillStyle = "#101216";
+      ctx.fillRect(0, 0, canvas.width, canvas.height);
+      for (const { css, width, segments } of lines)
+        stroke(ctx, css, width * dpr, () => segments.forEach(([a, b]) => line(ctx, cam, a, b)));
+    }
+    if (!mesh || viewer.mesh.showSkeleton) drawSkeleton(ctx, cam);
+    else viewer.drawn = { bones: [], joints: 0 };
     for (const hook of hooks.overlay) hook(ctx, cam, dpr);
   }
 
