@@ -41,8 +41,11 @@ use super::query::Query;
 
 /// The socket's read buffer. tungstenite's default (128 KiB) made a WebSocket
 /// stream cost the server ~125 KiB of RSS (measured by `inbetween load
-/// ws-stream`); clients only send small controls.
-const READ_BUFFER_BYTES: usize = 8 * 1024;
+/// ws-stream`); clients mostly send small controls, and a bigger message
+/// reserves its own length when its header arrives. Small also because
+/// tungstenite zero-fills the buffer's free space on every read attempt, which
+/// is once per frame sent (8 KiB of memset per frame when this was 8 KiB).
+const READ_BUFFER_BYTES: usize = 1024;
 
 /// Most bytes a viewer may leave unsent in user space: `stream_buffer_bytes`,
 /// or the older `ws_max_write_buffer_bytes` when that is smaller.
