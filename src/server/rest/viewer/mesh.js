@@ -27,6 +27,7 @@
   };
   viewer.mesh = mesh; // viewer.js's drawScene asks mesh.draw first
   viewer.hooks.clipSelected.push((clip) => mesh.select(clip.id));
+  viewer.hooks.clipAdopted.push((clip) => mesh.select(clip.id, true)); // a crossfade's clip brings its own mesh
   viewer.hooks.pose.push((pose) => mesh.pose(pose, viewer.state.parents));
 
   let gl = null, programs = null, gpu = null; // the context, its programs, the loaded mesh's buffers
@@ -89,16 +90,24 @@
 
   /// Loads the clip's mesh (or learns it has none), as a clip is selected. Never fails the selection: a mesh that cannot be
   /// shown leaves the skeleton view, and the status says why.
-  mesh.select = (clipId) => load(clipId).catch((e) => viewer.setStatus(`mesh not shown: ${e.message}`, true));
+  mesh.select = (clipId, sameSkeleton = false) => load(clipId, sameSkeleton).catch((e) => viewer.setStatus(`mesh not shown: ${e.message}`, true));
 
-  async function load(clipId) {
-    const ticket = ++loading;
+  function unload() {
     mesh.clip = null;
     mesh.info = null;
     palette = null;
     setActive(false);
+  }
+
+  async function load(clipId, sameSkeleton) {
+    const ticket = ++loading;
+    // A crossfade's clip has the same skeleton (the server refuses others),
+    // so the old mesh may stay drawn until the answer, and usually it is the
+    // same mesh (clips of one skin share it: the browser revalidates, 304).
+    if (!sameSkeleton) unload();
     const response = await fetch(`/v1/clips/${encodeURIComponent(clipId)}/mesh`, { headers: viewer.authHeaders() });
     if (ticket !== loading) return;
+    if (!response.ok) unload();
     if (response.status === 404) return; // no mesh (JSON, BVH, unskinned glTF): the skeleton view
     if (!response.ok) throw new Error(`GET …/mesh answered HTTP ${response.status}`);
     const parsed = parseMesh(await response.arrayBuffer());

@@ -45,6 +45,7 @@
     pose: [], // (pose) => void, after a pose is applied (may move state.positions)
     overlay: [], // (ctx, cam, dpr) => void, after the scene is drawn
     clipSelected: [], // (clip) => void, after a clip is selected
+    clipAdopted: [], // (clip) => void, after a crossfade made its clip the page's
     refused: [], // (problem) => void, when the server refuses a control
   };
   const viewer = { state, hooks, cspViolations: [] };
@@ -188,6 +189,7 @@
     if (!summary || state.clip?.id === id) return;
     const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
     Object.assign(state, { clip: summary, doc });
+    for (const hook of hooks.clipAdopted) hook(summary);
     $("seek").min = summary.start;
     $("seek").max = summary.end;
     renderClips();
