@@ -509,7 +509,7 @@ impl Animation for GrpcService {
         let b = live_broadcast(&self.state, &request.get_ref().broadcast_id)?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
         let sub = b.watch(stream::Encoding::Protobuf, permit, false);
-        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.grid().0.phase_ms))
+        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.phase_ms()))
     }
 
     async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
@@ -627,7 +627,7 @@ impl GrpcService {
         let b = live_broadcast(&self.state, id)?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
         let sub = b.watch(stream::Encoding::Protobuf, permit, true);
-        let phase_ms = b.grid().0.phase_ms;
+        let phase_ms = b.phase_ms();
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
         let state = self.state.clone();
         crate::panics::spawn_guarded("grpc_broadcast_controls", async move {

@@ -118,7 +118,7 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
         speed: status.speed,
         viewers: status.viewers,
         idle_timeout_secs: b.spec().idle_timeout.as_secs(),
-        grid_phase_ms: b.grid().0.phase_ms,
+        grid_phase_ms: b.phase_ms(),
         stream: format!("/v1/broadcasts/{}/stream", b.id()),
         motion: described["motion"].clone(),
         space: described["space"].as_str().unwrap_or("local").to_owned(),
@@ -323,6 +323,6 @@ pub async fn watch(
             Err(refused) => refuse(socket, crate::stream::ws::close::TRY_AGAIN_LATER, refused.to_string()).await,
         }
     });
-    response.headers_mut().insert(crate::stream::PHASE_HEADER, b.grid().0.phase_ms.into());
+    response.headers_mut().insert(crate::stream::PHASE_HEADER, b.phase_ms().into());
     Ok(response)
 }
