@@ -515,6 +515,11 @@ impl Broadcast {
         }
     }
 
+    /// The ids of every control it has accepted.
+    pub fn control_ids(&self) -> HashSet<String> {
+        self.desk().known.iter().map(|id| id.to_string()).collect()
+    }
+
     /// Accepts `control` for every viewer at once (a viewer socket's, or
     /// without a journal); returns its stamp. With a journal it is stored
     /// as well (only the controls a message can say again: play, pause,
