@@ -9,6 +9,7 @@
 //! `INBETWEEN_REQUIRE_POSTGRES=1`.
 
 mod balancer;
+mod broadcasts;
 
 use std::time::Duration;
 
