@@ -316,7 +316,7 @@ settings! {
             "Live broadcasts at once (SPEC §9; over it: 429 too_many_broadcasts); their viewers count as streams";
         broadcast_control_lead: u64 = 50 => lead_millis -> Duration,
             "broadcast_control_lead_ms", "broadcast-control-lead-ms", "INBETWEEN_BROADCAST_CONTROL_LEAD_MS", "MS",
-            "With PostgreSQL, how far ahead a broadcast control is stamped, so every node hears of it before its tick (0..=10000)";
+            "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)";
         body_read_timeout: u64 = 10 => seconds -> Duration,
             "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
             "Seconds a client may take to send a request's body, once its head is in (answered 408)";

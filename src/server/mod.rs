@@ -124,8 +124,7 @@ impl Application {
             max_streams_per_client: config.limits.max_streams_per_client,
             max_streams_per_token: config.limits.max_streams_per_token,
             max_broadcasts: config.limits.max_broadcasts,
-            // One node alone stamps the next tick; many must hear of it first.
-            broadcast_lead: if shared_store.is_some() { config.limits.broadcast_control_lead } else { Duration::ZERO },
+            broadcast_lead: config.limits.broadcast_control_lead,
             precise_timer: true,
             ..EngineConfig::default()
         });

@@ -637,19 +637,23 @@ impl Task {
         }
     }
 
-    /// Files `controls` and steps the program through tick `k`: from
-    /// scratch if one is stamped for a tick already stepped, on a blocking
-    /// thread if that is many ticks (a node that joined late, a restart).
+    /// Files `controls` and steps the program through tick `k`: again from
+    /// before the earliest stamp if one is for a tick already stepped, on a
+    /// blocking thread if that is many ticks (a node that joined late, a
+    /// restart).
     async fn catch_up(&mut self, controls: Vec<StampedControl>, k: u64) {
         let mut program = self.program.take().expect("the program is back after each catch-up");
-        let mut rewind = false;
+        let mut rewind = None::<u64>;
         for c in controls {
-            rewind |= c.seq < program.next();
+            if c.seq < program.next() {
+                rewind = Some(rewind.map_or(c.seq, |r| r.min(c.seq)));
+            }
             self.log.insert(c);
         }
-        if rewind {
+        if let Some(stamp) = rewind {
+            let again = program.rewind_before(stamp);
             metrics::counter!("inbetween_broadcast_replays_total").increment(1);
-            program = Box::new(Program::new(&self.broadcast.spec.params));
+            metrics::counter!("inbetween_broadcast_replayed_ticks_total").increment(again);
         }
         if k.saturating_sub(program.next()) > BLOCKING_CATCH_UP {
             let log = self.log.clone();

@@ -18,11 +18,12 @@
 //! from is the same everywhere.
 //!
 //! A control that arrives for a tick already stepped (a node that heard it
-//! late) cannot be slotted into the past, so the program is rebuilt from the
-//! definition and every control and stepped again up to now
-//! ([`Program::replay`]); so is a node's copy of a broadcast created
-//! elsewhere, or resumed after a restart. Replaying costs one sample per
-//! tick of the broadcast's age.
+//! late) is slotted into the past by going back to the latest snapshot of
+//! the state before its stamp (one every [`SNAPSHOT_EVERY`] ticks, the last
+//! few kept; the player clones whole, warm starts included) and stepping
+//! again up to now; older than every snapshot, from tick 0. A node's copy
+//! of a broadcast created elsewhere, or resumed after a restart, steps from
+//! tick 0 likewise ([`Program::replay`]): one sample per tick of its age.
 
 use std::sync::Arc;
 
@@ -84,10 +85,15 @@ impl ControlLog {
     }
 }
 
-/// A broadcast's playback: its playhead and player, and one encoder per
-/// encoding (each reused, so a tick allocates only the bytes it sends).
-pub struct Program {
-    params: StreamParams,
+/// Ticks between snapshots of a program's state.
+pub const SNAPSHOT_EVERY: u64 = 64;
+
+/// Snapshots kept (the latest `SNAPSHOTS · SNAPSHOT_EVERY` ticks).
+const SNAPSHOTS: usize = 8;
+
+/// Everything a tick's frame depends on, as of the last tick stepped.
+#[derive(Clone)]
+struct State {
     playhead: Playhead,
     player: StreamPlayer,
     /// The current motion's first-layer position at the previous tick (for
@@ -97,6 +103,35 @@ pub struct Program {
     clip_time: f32,
     /// The last tick stepped.
     stepped: Option<u64>,
+}
+
+impl State {
+    fn new(params: &StreamParams) -> Self {
+        State {
+            playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
+            player: Player::new(Arc::clone(&params.motion)),
+            prev: None,
+            crossed: Vec::new(),
+            clip_time: 0.0,
+            stepped: None,
+        }
+    }
+
+    fn next(&self) -> u64 {
+        self.stepped.map_or(0, |k| k + 1)
+    }
+}
+
+/// A broadcast's playback: its state, snapshots of it every
+/// [`SNAPSHOT_EVERY`] ticks (so a control heard late replays from the
+/// latest snapshot before its stamp, not from tick 0), and one encoder per
+/// encoding (each reused, so a tick allocates only the bytes it sends —
+/// and, every [`SNAPSHOT_EVERY`] ticks, a snapshot).
+pub struct Program {
+    params: StreamParams,
+    state: State,
+    /// Oldest first; each taken after stepping a multiple of `SNAPSHOT_EVERY` − 1.
+    snapshots: std::collections::VecDeque<State>,
     json: FrameEncoder,
     protobuf: FrameEncoder,
 }
@@ -105,13 +140,9 @@ impl Program {
     /// Before its tick 0.
     pub fn new(params: &StreamParams) -> Self {
         Program {
-            playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
-            player: Player::new(Arc::clone(&params.motion)),
+            state: State::new(params),
             params: params.clone(),
-            prev: None,
-            crossed: Vec::new(),
-            clip_time: 0.0,
-            stepped: None,
+            snapshots: std::collections::VecDeque::new(),
             json: FrameEncoder::new(Encoding::Json),
             protobuf: FrameEncoder::new(Encoding::Protobuf),
         }
@@ -119,14 +150,35 @@ impl Program {
 
     /// The next tick to step.
     pub fn next(&self) -> u64 {
-        self.stepped.map_or(0, |k| k + 1)
+        self.state.next()
     }
 
     /// Steps every tick from [`Self::next`] to `k` (nothing if `k` is behind).
     pub fn step_to(&mut self, k: u64, log: &ControlLog) {
         for j in self.next()..=k {
             self.step(j, log.at(j));
+            if (j + 1) % SNAPSHOT_EVERY == 0 {
+                if self.snapshots.len() == SNAPSHOTS {
+                    self.snapshots.pop_front();
+                }
+                self.snapshots.push_back(self.state.clone());
+            }
         }
+    }
+
+    /// Goes back to a state from before tick `k` (the latest snapshot
+    /// before it, or the start), so that a control stamped `k` heard late
+    /// is stepped in its place. Returns the ticks to step again.
+    pub fn rewind_before(&mut self, k: u64) -> u64 {
+        let now = self.next();
+        while self.snapshots.back().is_some_and(|s| s.next() > k) {
+            self.snapshots.pop_back();
+        }
+        self.state = match self.snapshots.back() {
+            Some(s) => s.clone(),
+            None => State::new(&self.params),
+        };
+        now - self.next()
     }
 
     /// A fresh program of `params` stepped through tick `k` (none if `k` is
@@ -146,46 +198,49 @@ impl Program {
         for c in controls {
             jumped |= self.apply(c.control.clone(), k);
         }
-        let time = self.playhead.time_at(k);
-        self.clip_time = sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed);
-        self.stepped = Some(k);
+        let st = &mut self.state;
+        let time = st.playhead.time_at(k);
+        st.clip_time = sample_tick(&mut st.player, &self.params, time, jumped, &mut st.prev, &mut st.crossed);
+        st.stepped = Some(k);
     }
 
     /// Applies a control stamped for tick `k`; returns whether time jumped.
     /// One the player refuses (a ramp of a layer a crossfade stamped just
     /// before took away) is skipped — the same way on every node.
     fn apply(&mut self, control: Control, k: u64) -> bool {
+        let st = &mut self.state;
         match control {
             Control::Crossfade(Crossfade { to, duration, ease }) => {
-                if let Err(e) = self.player.crossfade(to, duration, ease) {
+                if let Err(e) = st.player.crossfade(to, duration, ease) {
                     tracing::warn!(error = %e, "a broadcast crossfade skipped");
                 }
                 false
             }
             Control::Layer { index, weight, duration } => {
-                if let Err(e) = self.player.ramp(index, weight, duration) {
+                if let Err(e) = st.player.ramp(index, weight, duration) {
                     tracing::warn!(error = %e, "a broadcast weight ramp skipped");
                 }
                 false
             }
             Control::SetIk(constraints) => {
-                self.player.set_ik(constraints);
+                st.player.set_ik(constraints);
                 false
             }
             Control::Seek(tau) => {
-                self.player.seek(tau);
+                st.player.seek(tau);
                 true
             }
             Control::Ik(_) | Control::Stop => false,
-            c => self.playhead.apply(c, k),
+            c => st.playhead.apply(c, k),
         }
     }
 
     /// The last stepped tick in `encoding`: `dropped` 0 and no joint names
     /// (each viewer's patch adds its own, see `encode`).
     pub fn encode(&mut self, encoding: Encoding, sent_at: i64) -> Encoded {
-        let tick = TickStamp { seq: self.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: self.clip_time };
-        let data = frame_data(&self.player, &self.params, &self.crossed, tick, false);
+        let st = &self.state;
+        let tick = TickStamp { seq: st.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: st.clip_time };
+        let data = frame_data(&st.player, &self.params, &st.crossed, tick, false);
         match encoding {
             Encoding::Json => self.json.encode(&data),
             Encoding::Protobuf => self.protobuf.encode(&data),
