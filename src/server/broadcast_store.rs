@@ -101,7 +101,8 @@ fn same_versions(motion: &StreamMotion, stored: &BTreeMap<String, u64>) -> Resul
 pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSpec, ApiError> {
     let req: CreateBroadcast = parse_json(body)?;
     let sent: Value = serde_json::from_slice(body).unwrap_or_default();
-    let description = serde_json::json!({"motion": sent.get("motion"), "space": req.space.as_deref().unwrap_or("local")});
+    let description =
+        serde_json::json!({"motion": sent.get("motion"), "space": req.space.as_deref().unwrap_or("local")});
     let stream = RawStream {
         fps: req.fps.map(Raw::Number),
         start: None,
@@ -120,8 +121,13 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         idle_timeout_secs: req.idle_timeout_secs.map(Raw::Number),
         at: in_body,
     };
-    let motion =
-        RawMotion { spec: req.motion.to_spec("/motion")?, joints: None, parameters: None, format: Format::Trs, at: in_body };
+    let motion = RawMotion {
+        spec: req.motion.to_spec("/motion")?,
+        joints: None,
+        parameters: None,
+        format: Format::Trs,
+        at: in_body,
+    };
     raw.spec(state, motion, description).await
 }
 
@@ -137,8 +143,13 @@ pub async fn control_from_body(state: &AppState, body: &[u8]) -> Result<Control,
         Ok(ParsedControl::Ready(control)) => Ok(control),
         Ok(ParsedControl::Crossfade { to, duration, ease }) => {
             let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
-            let raw =
-                RawMotion { spec: doc.to_spec("/motion")?, joints: None, parameters: None, format: Format::Trs, at: in_body };
+            let raw = RawMotion {
+                spec: doc.to_spec("/motion")?,
+                joints: None,
+                parameters: None,
+                format: Format::Trs,
+                at: in_body,
+            };
             let to = raw.resolve(state).await.map_err(|e| e.moved("/motion", "/to"))?.motion;
             Ok(Control::Crossfade(Crossfade { to, duration, ease }))
         }
@@ -175,11 +186,13 @@ pub async fn control(state: &AppState, b: &Broadcast, body: &[u8]) -> Result<u64
         Control::Crossfade(fade) => versions(&fade.to),
         _ => BTreeMap::new(),
     };
-    let (seq, control) = b.prepare(control).map_err(|e| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()))?;
+    let (seq, control) =
+        b.prepare(control).map_err(|e| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()))?;
     let message: Value = serde_json::from_slice(body).map_err(ApiError::internal)?;
     let stored = Stored { message, versions: fade_versions };
     let id = new_control_id();
-    let row = StoredControl { id: id.to_string(), seq, control: serde_json::to_string(&stored).map_err(ApiError::internal)? };
+    let row =
+        StoredControl { id: id.to_string(), seq, control: serde_json::to_string(&stored).map_err(ApiError::internal)? };
     match state.store.add_broadcast_control(b.id(), row).await {
         Ok(()) => {}
         Err(crate::store::StoreError::NotFound) => {

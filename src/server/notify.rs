@@ -42,11 +42,20 @@ const MAX_RECONNECT_WAIT: Duration = Duration::from_secs(2);
 /// One announced change.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Change<'a> {
-    Written { id: &'a str, version: u64 },
-    Deleted { id: &'a str },
+    Written {
+        id: &'a str,
+        version: u64,
+    },
+    Deleted {
+        id: &'a str,
+    },
     /// A broadcast created or given a control (SPEC §9).
-    Broadcast { id: &'a str },
-    BroadcastDeleted { id: &'a str },
+    Broadcast {
+        id: &'a str,
+    },
+    BroadcastDeleted {
+        id: &'a str,
+    },
     Ping,
 }
 

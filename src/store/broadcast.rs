@@ -29,8 +29,7 @@ pub struct StoredControl {
 /// The broadcast SQL of PostgreSQL.
 pub(crate) mod pg {
     pub const INSERT: &str = "INSERT INTO broadcasts (id, definition, created_at, active_at) VALUES ($1, $2, $3, $4)";
-    pub const INSERT_CONTROL: &str =
-        "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT $1, $2, $3, $4 \
+    pub const INSERT_CONTROL: &str = "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT $1, $2, $3, $4 \
          WHERE EXISTS (SELECT 1 FROM broadcasts WHERE id = $2)";
     pub const TOUCH: &str = "UPDATE broadcasts SET active_at = $2 WHERE id = $1 AND active_at < $2";
     pub const DELETE: &str = "DELETE FROM broadcasts WHERE id = $1";
@@ -44,8 +43,7 @@ pub(crate) mod pg {
 /// The same SQL for SQLite (`?n` placeholders).
 pub(crate) mod lite {
     pub const INSERT: &str = "INSERT INTO broadcasts (id, definition, created_at, active_at) VALUES (?1, ?2, ?3, ?4)";
-    pub const INSERT_CONTROL: &str =
-        "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT ?1, ?2, ?3, ?4 \
+    pub const INSERT_CONTROL: &str = "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT ?1, ?2, ?3, ?4 \
          WHERE EXISTS (SELECT 1 FROM broadcasts WHERE id = ?2)";
     pub const TOUCH: &str = "UPDATE broadcasts SET active_at = ?2 WHERE id = ?1 AND active_at < ?2";
     pub const DELETE: &str = "DELETE FROM broadcasts WHERE id = ?1";

@@ -27,13 +27,13 @@ use futures_util::future::BoxFuture;
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::{Connection, Row, migrate::Migrator};
 
+use super::broadcast::{broadcast_from_row, control_from_row, pg as bsql};
 use super::filter::{POSTGRES, list_query};
 use super::retry::{Retry, Transience, with_retry};
-use super::broadcast::{broadcast_from_row, control_from_row, pg as bsql};
-use super::{StoredBroadcast, StoredControl};
 use super::{
     ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
 };
+use super::{StoredBroadcast, StoredControl};
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/postgres");
 
@@ -250,8 +250,6 @@ impl PgStore {
     }
 }
 
-
-
 impl PgStore {
     /// Broadcast `id`'s controls in application order.
     async fn controls_of(&self, id: &str) -> Result<Vec<StoredControl>, sqlx::Error> {
@@ -261,7 +259,6 @@ impl PgStore {
 }
 
 impl ClipStore for PgStore {
-
     fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>> {
         async move {
             let started = Instant::now();

@@ -29,12 +29,12 @@ use futures_util::future::BoxFuture;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::{Connection, Row, migrate::Migrator};
 
-use super::filter::{SQLITE, list_query};
 use super::broadcast::{broadcast_from_row, control_from_row, lite as bsql};
-use super::{StoredBroadcast, StoredControl};
+use super::filter::{SQLITE, list_query};
 use super::{
     ClipMeta, ClipStore, Durability, ListQuery, NewClip, PoolSettings, StoreError, StoredClip, new_clip_id, now_millis,
 };
+use super::{StoredBroadcast, StoredControl};
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
 
@@ -229,8 +229,6 @@ impl SqliteStore {
     }
 }
 
-
-
 impl SqliteStore {
     /// Broadcast `id`'s controls in application order.
     async fn controls_of(&self, id: &str) -> Result<Vec<StoredControl>, sqlx::Error> {
@@ -240,7 +238,6 @@ impl SqliteStore {
 }
 
 impl ClipStore for SqliteStore {
-
     fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>> {
         async move {
             let started = Instant::now();

@@ -511,7 +511,9 @@ impl Broadcast {
         let checked = self.desk().check.check(control.control);
         match checked {
             Ok(c) => self.accept(StampedControl { control: c, ..control }),
-            Err(e) => tracing::warn!(broadcast = %self.id, control = %control.id, error = %e, "a stored control skipped"),
+            Err(e) => {
+                tracing::warn!(broadcast = %self.id, control = %control.id, error = %e, "a stored control skipped")
+            }
         }
     }
 

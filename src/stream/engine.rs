@@ -100,8 +100,7 @@ impl Engine {
         let config = EngineConfig { buffer: config.buffer.max(1), ..config };
         let epoch = Instant::now();
         let shutdown = watch::Sender::new(false);
-        let broadcasts =
-            Broadcasts::new(
+        let broadcasts = Broadcasts::new(
             config.max_broadcasts,
             epoch,
             config.buffer,

@@ -230,8 +230,7 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
         frame(&mut v1).await;
     }
     let mut stamped = Vec::new();
-    for control in [Control::Seek(2.0), Control::Speed(-1.5), Control::Layer { index: 0, weight: 0.5, duration: 0.3 }]
-    {
+    for control in [Control::Seek(2.0), Control::Speed(-1.5), Control::Layer { index: 0, weight: 0.5, duration: 0.3 }] {
         let (seq, control) = b1.prepare(control).unwrap();
         let c = StampedControl { seq, id: new_control_id(), control };
         b1.accept(c.clone());

@@ -248,7 +248,10 @@ async fn broadcasts_and_their_controls_read_back_in_order(store: Arc<dyn ClipSto
         store.add_broadcast_control(b1, stored_control(id, seq)).await.unwrap();
     }
     let got = store.broadcast(b1).await.unwrap().unwrap();
-    assert_eq!((got.definition.as_str(), got.created_at), (broadcast(b1, 0).definition.as_str(), 1_790_000_000_123_456_789));
+    assert_eq!(
+        (got.definition.as_str(), got.created_at),
+        (broadcast(b1, 0).definition.as_str(), 1_790_000_000_123_456_789)
+    );
     let order: Vec<(&str, u64)> = got.controls.iter().map(|c| (c.id.as_str(), c.seq)).collect();
     assert_eq!(order, [("d", 2), ("b", 4), ("a", 9), ("c", 9)]);
     assert_eq!(got.controls[0], stored_control("d", 2));
