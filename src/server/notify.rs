@@ -22,6 +22,13 @@
 //!
 //! Streams are not touched: each holds the compiled clip it started on
 //! (`Arc<CachedClip>`) until it ends, exactly as after a local replace.
+//!
+//! Broadcasts (SPEC §9) are announced on the same channel
+//! (`migrations/postgres/0004_broadcasts.sql`): `broadcast 0 <id>` (created),
+//! `control 0 <id>` (a control stored), `unbroadcast 0 <id>` (deleted). They
+//! are handed to `broadcast_store`, which reads the rows back; and since a
+//! lost connection loses announcements too, every (re)subscription starts a
+//! `broadcast_store::resync`.
 
 use std::time::Duration;
 

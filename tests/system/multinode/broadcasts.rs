@@ -214,3 +214,61 @@ async fn every_node_computes_the_same_frames_before_and_after_controls() {
     drop((a, b, c, d));
     schema.drop_now().await;
 }
+
+/// A control stored for a tick every node has already stepped (as a node
+/// would see one it heard late): each node rewinds to a snapshot before its
+/// stamp and steps again, and from then on they agree with each other and
+/// with a node that started after it and computed everything from tick 0.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nodes_that_hear_a_control_for_a_past_tick_converge() {
+    let Some(schema) = Schema::create("bpast").await else { return };
+    let (a, b) = (node(&schema, "node-a").await, node(&schema, "node-b").await);
+    let http = crate::common::http_client();
+    let x = upload(&http, &a, line_doc(0)).await;
+    let body = json!({"motion": {"layers": [{"clip": x}]}, "fps": FPS});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let limit = Duration::from_secs(30);
+    let viewers = [viewer(&a, &id, limit), viewer(&b, &id, limit)];
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+
+    // Stamped 20 ticks (1 s) ago, stored behind the nodes' backs: announced like any control.
+    let summary: Value = http.get(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap().json().await.unwrap();
+    let past = summary["seq"].as_u64().unwrap() - 20;
+    let db = sqlx::PgPool::connect(&schema.url("")).await.unwrap();
+    sqlx::query("INSERT INTO broadcast_controls (id, broadcast_id, seq, control) VALUES ($1, $2, $3, $4)")
+        .bind(uuid::Uuid::now_v7().to_string())
+        .bind(&id)
+        .bind(past as i64)
+        .bind(json!({"message": {"op": "seek", "time": 7.5}, "versions": {}}).to_string())
+        .execute(&db)
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let c = node(&schema, "node-c").await;
+    let late = viewer(&c, &id, limit);
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    let resp = http.delete(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let mut seen = Vec::new();
+    for v in viewers.into_iter().chain([late]) {
+        seen.push(tokio::time::timeout(Duration::from_secs(5), v).await.expect("closed in time").unwrap().0);
+    }
+    // From a few ticks after the insert on, every node shows the seek as of its (past) stamp.
+    let settled = past + 20 + 6;
+    let after = |f: &BTreeMap<u64, Value>| f.range(settled..).map(|(k, v)| (*k, v.clone())).collect::<BTreeMap<_, _>>();
+    let (fa, fb, fc) = (after(&seen[0]), after(&seen[1]), after(&seen[2]));
+    assert!(agree(&("A", &fa), &("B", &fb)) >= 20);
+    assert!(agree(&("A", &fa), &("C", &fc)) >= 10, "C computed it from tick 0");
+    for (k, frame) in &fa {
+        let want = 7.5 + (k - past) as f64 / FPS as f64;
+        assert!((xy(frame).2 - want).abs() < 1e-9, "seq {k}: {:?}, want time {want}", xy(frame));
+    }
+    for n in [&a, &b] {
+        assert!(metric(&http, n, "inbetween_broadcast_replays_total").await >= 1.0, "{} rewound", n.name);
+    }
+    db.close().await;
+    drop((a, b, c));
+    schema.drop_now().await;
+}
