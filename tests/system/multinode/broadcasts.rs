@@ -272,3 +272,37 @@ async fn nodes_that_hear_a_control_for_a_past_tick_converge() {
     drop((a, b, c));
     schema.drop_now().await;
 }
+
+/// The idle timeout counts viewers on every node: a broadcast created on A
+/// and watched only on B lives on past its timeout; once nobody watches
+/// anywhere, it ends on every node.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_idle_timeout_counts_viewers_on_every_node() {
+    let Some(schema) = Schema::create("bidle").await else { return };
+    let (a, b) = (node(&schema, "node-a").await, node(&schema, "node-b").await);
+    let http = crate::common::http_client();
+    let x = upload(&http, &a, line_doc(0)).await;
+    let body = json!({"motion": {"layers": [{"clip": x}]}, "fps": FPS, "idle_timeout_secs": 2});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let status = |n: &Node| {
+        let (http, url) = (http.clone(), n.url(&format!("/v1/broadcasts/{id}")));
+        async move { http.get(url).send().await.unwrap().status().as_u16() }
+    };
+
+    let watching = viewer(&b, &id, Duration::from_secs(4));
+    tokio::time::sleep(Duration::from_millis(3500)).await;
+    assert_eq!(status(&a).await, 200, "watched on B: alive on A past its 2 s");
+    let (frames, _) = watching.await.unwrap();
+    assert!(frames.len() > 60, "B's viewer saw {} frames", frames.len());
+    // Nobody watches now: within the timeout and a check or two, gone on both.
+    let started = tokio::time::Instant::now();
+    while status(&a).await != 404 || status(&b).await != 404 {
+        assert!(started.elapsed() < Duration::from_secs(6), "still live {:?} after the last viewer", started.elapsed());
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(started.elapsed() > Duration::from_millis(1000), "not before its idle timeout");
+    drop((a, b));
+    schema.drop_now().await;
+}
