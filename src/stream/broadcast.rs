@@ -269,18 +269,26 @@ impl Broadcasts {
             journal: self.inner.journal.get().cloned(),
             spec,
         });
+        let already = {
+            let mut live = self.lock();
+            match live.get(&id) {
+                // Adopted meanwhile (an announcement and a viewer's lookup at once): that copy takes the controls.
+                Some(already) => Some(Arc::clone(already)),
+                None if live.len() >= self.inner.max => return Err(BroadcastError::TooMany { limit: self.inner.max }),
+                None => {
+                    live.insert(id, Arc::clone(&broadcast));
+                    None
+                }
+            }
+        };
+        if let Some(already) = already {
+            for c in controls {
+                already.heard(c);
+            }
+            return Ok(already);
+        }
         for c in controls {
             broadcast.heard(c);
-        }
-        {
-            let mut live = self.lock();
-            if let Some(already) = live.get(&id) {
-                return Ok(Arc::clone(already));
-            }
-            if live.len() >= self.inner.max {
-                return Err(BroadcastError::TooMany { limit: self.inner.max });
-            }
-            live.insert(id, Arc::clone(&broadcast));
         }
         metrics::gauge!("inbetween_broadcasts").increment(1.0);
         metrics::counter!("inbetween_broadcasts_total").increment(1);

@@ -1,10 +1,12 @@
-//! Broadcasts across nodes (SPEC §9 "Many nodes"): three real processes on
-//! one PostgreSQL schema. A broadcast created on one node is watched on all
-//! three; controls (play, pause, seek, speed, layer, crossfade) are posted to
-//! different nodes; for every `seq` the three viewers received, the frames
-//! are equal apart from `sent_at_unix_nanos` and `dropped`. A fourth node
+//! Broadcasts across nodes (SPEC §9 "Many nodes"): real processes on one
+//! PostgreSQL schema. A broadcast created on one node is watched on three;
+//! controls (play, pause, seek, speed, layer, crossfade) are posted to
+//! different nodes; for every `seq` the viewers received, the frames are
+//! equal apart from `sent_at_unix_nanos` and `dropped`. A fourth node
 //! started after the controls computes the same frames from the stored
 //! ones; a DELETE on one node closes the viewers on the others with 1000.
+//! A control stored for a tick already past makes every node rewind and
+//! converge; the idle timeout counts the viewers of every node.
 //!
 //! The clips move one joint along x (and the second along y) at 1 unit/s,
 //! so a frame's pose says which time and which blend it shows; the checks
