@@ -173,9 +173,11 @@ pub async fn store_created(state: &AppState, b: &Broadcast, body: &[u8]) -> Resu
     Ok(state.store.create_broadcast(stored).await?)
 }
 
-/// Checks, stamps, stores and applies the control `body` asks of `b`;
-/// returns its stamp. Stored before it is applied, so that every node
-/// (and this one after a restart) plays what this one answered.
+/// Checks, stamps, applies and stores the control `body` asks of `b`;
+/// returns its stamp. Applied at once, so that it is never late on this
+/// node whatever the store's latency; answered only once stored, so that
+/// every node (and this one after a restart) plays what this one answered.
+/// If the store refuses it, it is withdrawn here too.
 ///
 /// # Errors
 /// The control's refusal; `broadcast_not_found` if it was deleted
@@ -189,20 +191,22 @@ pub async fn control(state: &AppState, b: &Broadcast, body: &[u8]) -> Result<u64
     let (seq, control) =
         b.prepare(control).map_err(|e| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()))?;
     let message: Value = serde_json::from_slice(body).map_err(ApiError::internal)?;
-    let stored = Stored { message, versions: fade_versions };
+    let text = serde_json::to_string(&Stored { message, versions: fade_versions }).map_err(ApiError::internal)?;
     let id = new_control_id();
-    let row =
-        StoredControl { id: id.to_string(), seq, control: serde_json::to_string(&stored).map_err(ApiError::internal)? };
-    match state.store.add_broadcast_control(b.id(), row).await {
-        Ok(()) => {}
-        Err(crate::store::StoreError::NotFound) => {
-            state.streams.broadcasts().delete(b.id());
-            return Err(ApiError::NotFound { what: "broadcast" });
+    b.accept(StampedControl { seq, id: Arc::clone(&id), control });
+    match state.store.add_broadcast_control(b.id(), StoredControl { id: id.to_string(), seq, control: text }).await {
+        Ok(()) => Ok(seq),
+        Err(e) => {
+            b.revoke(&id);
+            match e {
+                crate::store::StoreError::NotFound => {
+                    state.streams.broadcasts().delete(b.id());
+                    Err(ApiError::NotFound { what: "broadcast" })
+                }
+                e => Err(e.into()),
+            }
         }
-        Err(e) => return Err(e.into()),
     }
-    b.accept(StampedControl { seq, id, control });
-    Ok(seq)
 }
 
 /// The broadcast `id`: live here, or stored (created on another node an

@@ -255,6 +255,7 @@ impl Broadcasts {
             desk: Mutex::new(Desk {
                 next: placement.base,
                 inbox: Vec::new(),
+                revoked: Vec::new(),
                 known: HashSet::new(),
                 check: ControlCheck::new(&spec.params),
                 paused: spec.params.paused,
@@ -350,6 +351,8 @@ struct Desk {
     /// The first tick the task has not taken: no control is stamped before it.
     next: u64,
     inbox: Vec<StampedControl>,
+    /// Ids of controls accepted and then withdrawn (their store write failed).
+    revoked: Vec<Arc<str>>,
     /// Ids of every control accepted (one heard twice is taken once).
     known: HashSet<Arc<str>>,
     check: ControlCheck,
@@ -468,7 +471,8 @@ impl Broadcast {
     /// Checks `control` like a stream's (`stop` is refused: delete the
     /// broadcast) and stamps it: the first tick not yet produced, or with
     /// a control lead the tick due at now + lead, whichever is later. It is
-    /// not applied until [`Broadcast::accept`] (the caller stores it first).
+    /// not applied until [`Broadcast::accept`], which the caller does at
+    /// once (so it is never late here), before storing it.
     ///
     /// # Errors
     /// An invalid control, too many pending, or the broadcast has ended.
@@ -523,6 +527,15 @@ impl Broadcast {
                 tracing::warn!(broadcast = %self.id, control = %control.id, error = %e, "a stored control skipped")
             }
         }
+    }
+
+    /// Withdraws a control [`Broadcast::accept`]ed here whose store write
+    /// failed (its sender is told so): the frames from its stamp on are
+    /// computed again without it, as every other node computes them.
+    pub fn revoke(&self, id: &Arc<str>) {
+        let mut desk = self.desk();
+        desk.inbox.retain(|c| &c.id != id);
+        desk.revoked.push(Arc::clone(id));
     }
 
     /// The ids of every control it has accepted.
@@ -621,12 +634,13 @@ impl Task {
                 tick = self.schedule.next() => tick,
             };
             let k = b.placement.base + tick.k;
-            let (controls, last_control) = {
+            let (controls, revoked, last_control) = {
                 let mut desk = b.desk();
                 desk.next = k + 1;
-                (std::mem::take(&mut desk.inbox), desk.last_control)
+                let revoked = std::mem::take(&mut desk.revoked);
+                (std::mem::take(&mut desk.inbox), revoked, desk.last_control)
             };
-            self.catch_up(controls, k).await;
+            self.catch_up(controls, &revoked, k).await;
             let viewers = b.viewers();
             self.count_viewers(viewers);
             if let Some(reason) = self.idle(viewers, last_control) {
@@ -647,18 +661,27 @@ impl Task {
         }
     }
 
-    /// Files `controls` and steps the program through tick `k`: again from
-    /// before the earliest stamp if one is for a tick already stepped, on a
+    /// Files `controls` (and drops the `revoked` ones) and steps the program
+    /// through tick `k`: again from before the earliest stamp if one is for
+    /// a tick already stepped, on a
     /// blocking thread if that is many ticks (a node that joined late, a
     /// restart).
-    async fn catch_up(&mut self, controls: Vec<StampedControl>, k: u64) {
+    async fn catch_up(&mut self, controls: Vec<StampedControl>, revoked: &[Arc<str>], k: u64) {
         let mut program = self.program.take().expect("the program is back after each catch-up");
         let mut rewind = None::<u64>;
-        for c in controls {
-            if c.seq < program.next() {
-                rewind = Some(rewind.map_or(c.seq, |r| r.min(c.seq)));
+        let mut past = |seq: u64, next: u64| {
+            if seq < next {
+                rewind = Some(rewind.map_or(seq, |r: u64| r.min(seq)));
             }
+        };
+        for c in controls {
+            past(c.seq, program.next());
             self.log.insert(c);
+        }
+        for id in revoked {
+            if let Some(seq) = self.log.remove(id) {
+                past(seq, program.next());
+            }
         }
         if let Some(stamp) = rewind {
             let again = program.rewind_before(stamp);

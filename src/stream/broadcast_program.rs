@@ -69,6 +69,12 @@ impl ControlLog {
         }
     }
 
+    /// Removes control `id`; returns its stamp if it was there.
+    pub fn remove(&mut self, id: &str) -> Option<u64> {
+        let at = self.controls.iter().position(|c| &*c.id == id)?;
+        Some(self.controls.remove(at).seq)
+    }
+
     /// The controls stamped `k`, in order.
     pub fn at(&self, k: u64) -> &[StampedControl] {
         let from = self.controls.partition_point(|c| c.seq < k);

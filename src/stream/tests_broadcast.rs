@@ -265,3 +265,30 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
     b2.heard(stamped[0].clone());
     assert_eq!(b2.control_ids().len(), 3);
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_withdrawn_control_leaves_the_frames_as_without_it() {
+    let e = engine(4);
+    let b = create(&e, 10, 300);
+    let mut v = viewer(&e, &b, Encoding::Json, false);
+    frame(&mut v).await;
+    // Withdrawn before its tick: never shown.
+    let (seq, seek) = b.prepare(Control::Seek(7.0)).unwrap();
+    let id = new_control_id();
+    b.accept(StampedControl { seq, id: Arc::clone(&id), control: seek });
+    b.revoke(&id);
+    // Withdrawn after its tick: the frames after the withdrawal are as if it had never been.
+    let (late, pause) = b.prepare(Control::Pause).unwrap();
+    let id = new_control_id();
+    b.accept(StampedControl { seq: late, id: Arc::clone(&id), control: pause });
+    let mut times = Vec::new();
+    for _ in 0..3 {
+        times.push((time(&frame(&mut v).await) * 1e9).round() / 1e9);
+    }
+    b.revoke(&id);
+    for _ in 0..3 {
+        times.push((time(&frame(&mut v).await) * 1e9).round() / 1e9);
+    }
+    assert_eq!((seq, late), (1, 1));
+    assert_eq!(times, [0.0, 0.0, 0.0, 0.4, 0.5, 0.6], "paused from tick 1, then playing as if never paused");
+}
