@@ -35,7 +35,8 @@ use super::state::AppState;
 use crate::store::{ClipStore, StoredBroadcast, StoredControl};
 use crate::stream::ws::{ParsedControl, parse_control};
 use crate::stream::{
-    Broadcast, BroadcastSpec, Control, Crossfade, Journal, StampedControl, StreamMotion, new_control_id, unix_nanos,
+    Broadcast, BroadcastSpec, Control, ControlError, Crossfade, Journal, StampedControl, StreamMotion, new_control_id,
+    unix_nanos,
 };
 use crate::wire::json::SpaceDoc;
 use crate::wire::motion::MotionDoc;
@@ -188,12 +189,11 @@ pub async fn control(state: &AppState, b: &Broadcast, body: &[u8]) -> Result<u64
         Control::Crossfade(fade) => versions(&fade.to),
         _ => BTreeMap::new(),
     };
-    let (seq, control) =
-        b.prepare(control).map_err(|e| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()))?;
     let message: Value = serde_json::from_slice(body).map_err(ApiError::internal)?;
     let text = serde_json::to_string(&Stored { message, versions: fade_versions }).map_err(ApiError::internal)?;
     let id = new_control_id();
-    b.accept(StampedControl { seq, id: Arc::clone(&id), control });
+    let refused = |e: ControlError| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string());
+    let seq = b.take(control, Arc::clone(&id)).map_err(refused)?;
     match state.store.add_broadcast_control(b.id(), StoredControl { id: id.to_string(), seq, control: text }).await {
         Ok(()) => Ok(seq),
         Err(e) => {
@@ -342,9 +342,9 @@ pub struct StoreJournal {
 }
 
 impl Journal for StoreJournal {
-    fn record(&self, broadcast: &str, control: &StampedControl, json: Value) -> BoxFuture<'static, ()> {
+    fn record(&self, broadcast: &str, seq: u64, id: &str, json: Value) -> BoxFuture<'static, ()> {
         let store = Arc::clone(&self.store);
-        let (broadcast, seq, id) = (broadcast.to_owned(), control.seq, control.id.to_string());
+        let (broadcast, id) = (broadcast.to_owned(), id.to_owned());
         async move {
             let stored = Stored { message: json, versions: BTreeMap::new() };
             let Ok(text) = serde_json::to_string(&stored) else { return };

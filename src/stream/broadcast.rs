@@ -74,7 +74,7 @@ pub enum BroadcastError {
 pub trait Journal: Send + Sync + 'static {
     /// Stores a control a viewer's socket sent (`json` is its message),
     /// already applied here; the other nodes hear of it from the store.
-    fn record(&self, broadcast: &str, control: &StampedControl, json: serde_json::Value) -> BoxFuture<'static, ()>;
+    fn record(&self, broadcast: &str, seq: u64, id: &str, json: serde_json::Value) -> BoxFuture<'static, ()>;
     /// The broadcast has viewers on this node now.
     fn touch(&self, broadcast: &str) -> BoxFuture<'static, ()>;
     /// Ends the broadcast everywhere if no node has had viewers and nobody
@@ -477,17 +477,44 @@ impl Broadcast {
     /// # Errors
     /// An invalid control, too many pending, or the broadcast has ended.
     pub fn prepare(&self, control: Control) -> Result<(u64, Control), ControlError> {
-        if control == Control::Stop {
+        self.admissible(&control)?;
+        let ahead = self.ahead();
+        Self::stamp(&mut self.desk(), control, ahead)
+    }
+
+    /// [`Broadcast::prepare`] and [`Broadcast::accept`] under one lock (so
+    /// the task cannot take the stamped tick in between), as control `id`.
+    ///
+    /// # Errors
+    /// As [`Broadcast::prepare`].
+    pub fn take(&self, control: Control, id: Arc<str>) -> Result<u64, ControlError> {
+        self.admissible(&control)?;
+        let ahead = self.ahead();
+        let mut desk = self.desk();
+        let (seq, control) = Self::stamp(&mut desk, control, ahead)?;
+        Self::file(&mut desk, StampedControl { seq, id, control });
+        Ok(seq)
+    }
+
+    fn admissible(&self, control: &Control) -> Result<(), ControlError> {
+        if *control == Control::Stop {
             return Err(ControlError::Invalid("a broadcast has no `stop`: DELETE it to end it for every viewer"));
         }
         if self.ended.load(Ordering::Acquire) {
             return Err(ControlError::Invalid("the broadcast has ended"));
         }
-        let ahead = (!self.lead.is_zero()).then(|| {
+        Ok(())
+    }
+
+    /// With a control lead, the tick due at now + lead.
+    fn ahead(&self) -> Option<u64> {
+        (!self.lead.is_zero()).then(|| {
             let p = &self.placement;
             p.base + p.grid.next_at_or_after(Instant::now() + self.lead).saturating_sub(p.first)
-        });
-        let mut desk = self.desk();
+        })
+    }
+
+    fn stamp(desk: &mut Desk, control: Control, ahead: Option<u64>) -> Result<(u64, Control), ControlError> {
         if desk.inbox.len() >= PENDING_CONTROLS {
             return Err(ControlError::Busy);
         }
@@ -497,7 +524,10 @@ impl Broadcast {
 
     /// Applies a prepared control from its stamp on, for every viewer.
     pub fn accept(&self, control: StampedControl) {
-        let mut desk = self.desk();
+        Self::file(&mut self.desk(), control);
+    }
+
+    fn file(desk: &mut Desk, control: StampedControl) {
         if !desk.known.insert(Arc::clone(&control.id)) {
             return;
         }
@@ -558,12 +588,11 @@ impl Broadcast {
             ))?),
             None => None,
         };
-        let (seq, control) = self.prepare(control)?;
-        let stamped = StampedControl { seq, id: new_control_id(), control };
+        let id = new_control_id();
+        let seq = self.take(control, Arc::clone(&id))?;
         if let (Some(journal), Some(json)) = (&self.journal, json) {
-            tokio::spawn(journal.record(&self.id, &stamped, json));
+            tokio::spawn(journal.record(&self.id, seq, &id, json));
         }
-        self.accept(stamped);
         Ok(seq)
     }
 }
