@@ -314,6 +314,9 @@ settings! {
         max_broadcasts: usize = 64 => positive -> usize,
             "max_broadcasts", "max-broadcasts", "INBETWEEN_MAX_BROADCASTS", "N",
             "Live broadcasts at once (SPEC §9; over it: 429 too_many_broadcasts); their viewers count as streams";
+        broadcast_control_lead: u64 = 50 => lead_millis -> Duration,
+            "broadcast_control_lead_ms", "broadcast-control-lead-ms", "INBETWEEN_BROADCAST_CONTROL_LEAD_MS", "MS",
+            "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)";
         body_read_timeout: u64 = 10 => seconds -> Duration,
             "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
             "Seconds a client may take to send a request's body, once its head is in (answered 408)";
@@ -390,6 +393,14 @@ fn seconds(name: &str, secs: u64) -> anyhow::Result<Duration> {
         bail!("{name} must be at least 1 second");
     }
     Ok(Duration::from_secs(secs))
+}
+
+/// A broadcast control lead in milliseconds, at most 10 s.
+fn lead_millis(name: &str, ms: u64) -> anyhow::Result<Duration> {
+    if ms > 10_000 {
+        bail!("{name} must be at most 10000 ms");
+    }
+    Ok(Duration::from_millis(ms))
 }
 
 /// A duration in seconds where 0 means "do not wait".
@@ -941,6 +952,7 @@ mod tests {
             max_streams_per_client: 64,
             max_streams_per_token: 64,
             max_broadcasts: 64,
+            broadcast_control_lead: Duration::from_millis(50),
             body_read_timeout: Duration::from_secs(10),
             max_in_flight: 64 * cores,
             write_rate: 100,

@@ -506,10 +506,10 @@ impl Animation for GrpcService {
 
     async fn watch(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchStream>, Status> {
         let caller = self.read(&request)?;
-        let b = live_broadcast(&self.state, &request.get_ref().broadcast_id)?;
+        let b = live_broadcast(&self.state, &request.get_ref().broadcast_id).await?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
         let sub = b.watch(stream::Encoding::Protobuf, permit, false);
-        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.grid().0.phase_ms))
+        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.phase_ms()))
     }
 
     async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
@@ -610,8 +610,9 @@ impl Animation for GrpcService {
 
 /// `frames`, ended early with the status sent on `abort` (a bad control).
 /// The live broadcast `id`, or `broadcast_not_found`.
-fn live_broadcast(state: &AppState, id: &str) -> Result<Arc<stream::Broadcast>, Status> {
-    Ok(state.streams.broadcasts().get(id).ok_or(ApiError::NotFound { what: "broadcast" })?)
+/// (Live here, or stored by another node and started here now.)
+async fn live_broadcast(state: &AppState, id: &str) -> Result<Arc<stream::Broadcast>, Status> {
+    Ok(super::broadcast_store::find(state, id).await?)
 }
 
 impl GrpcService {
@@ -624,10 +625,10 @@ impl GrpcService {
         caller: Caller,
         mut inbound: Streaming<pb::PlaybackControl>,
     ) -> Result<Response<FrameStream>, Status> {
-        let b = live_broadcast(&self.state, id)?;
+        let b = live_broadcast(&self.state, id).await?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
         let sub = b.watch(stream::Encoding::Protobuf, permit, true);
-        let phase_ms = b.grid().0.phase_ms;
+        let phase_ms = b.phase_ms();
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
         let state = self.state.clone();
         crate::panics::spawn_guarded("grpc_broadcast_controls", async move {

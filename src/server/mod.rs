@@ -44,6 +44,7 @@ use crate::stream::{Engine, EngineConfig};
 pub mod access_log;
 pub mod auth;
 pub mod body_guard;
+pub mod broadcast_store;
 pub mod builds;
 pub mod cache;
 pub mod compression;
@@ -123,6 +124,7 @@ impl Application {
             max_streams_per_client: config.limits.max_streams_per_client,
             max_streams_per_token: config.limits.max_streams_per_token,
             max_broadcasts: config.limits.max_broadcasts,
+            broadcast_lead: config.limits.broadcast_control_lead,
             precise_timer: true,
             ..EngineConfig::default()
         });
@@ -149,6 +151,9 @@ impl Application {
             streams,
             builds,
         });
+        // Broadcasts are kept in the store: resumed after a restart, shared by every node.
+        let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };
+        state.streams.broadcasts().set_journal(Arc::new(journal));
         let app = Application { listener, grpc_listener, state, tls, shared_store };
         // One line with every setting in effect; `Secret` and `StoreConfig` print no token or password.
         tracing::info!(
@@ -204,6 +209,14 @@ impl Application {
             grpc_server = grpc_server.tls_config(m.grpc_config(header_timeout))?;
         }
         let drain = state.config.drain_timeout;
+        if shared_store.is_none() {
+            // One node alone: resume the stored broadcasts at the tick the wall clock says.
+            // (With PostgreSQL the listener does it each time it subscribes.)
+            tokio::spawn({
+                let state = state.clone();
+                async move { broadcast_store::resync(&state).await }
+            });
+        }
         let notify = shared_store.map(|store| tokio::spawn(notify::run(store, state.clone())));
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
         let (started_tx, started_rx) = tokio::sync::oneshot::channel::<tokio::time::Instant>();

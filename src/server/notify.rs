@@ -22,12 +22,20 @@
 //!
 //! Streams are not touched: each holds the compiled clip it started on
 //! (`Arc<CachedClip>`) until it ends, exactly as after a local replace.
+//!
+//! Broadcasts (SPEC §9) are announced on the same channel
+//! (`migrations/postgres/0004_broadcasts.sql`): `broadcast 0 <id>` (created),
+//! `control 0 <id>` (a control stored), `unbroadcast 0 <id>` (deleted). They
+//! are handed to `broadcast_store`, which reads the rows back; and since a
+//! lost connection loses announcements too, every (re)subscription starts a
+//! `broadcast_store::resync`.
 
 use std::time::Duration;
 
 use sqlx::postgres::{PgListener, PgPoolOptions};
 use tokio::time::Instant;
 
+use super::broadcast_store::{self, Heard};
 use super::state::AppState;
 use crate::store::postgres::PgStore;
 
@@ -41,8 +49,20 @@ const MAX_RECONNECT_WAIT: Duration = Duration::from_secs(2);
 /// One announced change.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Change<'a> {
-    Written { id: &'a str, version: u64 },
-    Deleted { id: &'a str },
+    Written {
+        id: &'a str,
+        version: u64,
+    },
+    Deleted {
+        id: &'a str,
+    },
+    /// A broadcast created or given a control (SPEC §9).
+    Broadcast {
+        id: &'a str,
+    },
+    BroadcastDeleted {
+        id: &'a str,
+    },
     Ping,
 }
 
@@ -54,6 +74,8 @@ pub fn parse(payload: &str) -> Option<Change<'_>> {
     match op {
         "create" | "replace" => Some(Change::Written { id, version }),
         "delete" => Some(Change::Deleted { id }),
+        "broadcast" | "control" => Some(Change::Broadcast { id }),
+        "unbroadcast" => Some(Change::BroadcastDeleted { id }),
         "ping" => Some(Change::Ping),
         _ => None,
     }
@@ -70,6 +92,8 @@ pub fn apply(state: &AppState, change: &Change<'_>) {
             state.cache_invalidate(id);
         }
         Change::Deleted { id } => state.cache_invalidate(id),
+        Change::Broadcast { id } => return broadcast_store::heard(state, Heard::Changed(id.to_owned())),
+        Change::BroadcastDeleted { id } => return broadcast_store::heard(state, Heard::Deleted(id.to_owned())),
         Change::Ping => return,
     }
     metrics::counter!("inbetween_cache_remote_invalidations_total").increment(1);
@@ -91,6 +115,11 @@ pub async fn run(store: PgStore, state: AppState) {
                 state.cache_resume();
                 metrics::gauge!("inbetween_notify_subscribed").set(1.0);
                 tracing::info!(channel = store.channel(), "listening for clip changes");
+                // Whatever was announced while this node could not hear.
+                tokio::spawn({
+                    let state = state.clone();
+                    async move { broadcast_store::resync(&state).await }
+                });
                 listen(listener, &state).await;
                 tracing::warn!("lost the clip-change subscription: serving from the store until it is back");
             }
@@ -186,6 +215,9 @@ mod tests {
         assert_eq!(parse(&format!("create 1 {id}")), Some(Change::Written { id, version: 1 }));
         assert_eq!(parse(&format!("delete 3 {id}")), Some(Change::Deleted { id }));
         assert_eq!(parse("ping 0 -"), Some(Change::Ping));
+        assert_eq!(parse(&format!("broadcast 0 {id}")), Some(Change::Broadcast { id }));
+        assert_eq!(parse(&format!("control 0 {id}")), Some(Change::Broadcast { id }));
+        assert_eq!(parse(&format!("unbroadcast 0 {id}")), Some(Change::BroadcastDeleted { id }));
         for junk in ["", "replace", "replace x id", "drop 1 id", "replace 1"] {
             assert_eq!(parse(junk), None, "{junk:?}");
         }

@@ -27,11 +27,13 @@ use futures_util::future::BoxFuture;
 
 use crate::anim::Playback;
 
+pub mod broadcast;
 mod filter;
 pub mod postgres;
 mod retry;
 pub mod sqlite;
 
+pub use broadcast::{StoredBroadcast, StoredControl};
 pub use retry::RetryPolicy;
 
 /// Whether the store insists on durable commits.
@@ -218,6 +220,33 @@ pub trait ClipStore: Send + Sync + 'static {
 
     /// The clip's mesh, or `None` (no such clip, or no mesh).
     fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>>;
+
+    /// Stores a new broadcast (`broadcast.controls` empty). Durable on `Ok`.
+    fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>>;
+
+    /// Stores a control of broadcast `id`; [`StoreError::NotFound`] if the
+    /// broadcast is gone. Marks the broadcast active. Durable on `Ok`.
+    fn add_broadcast_control<'a>(
+        &'a self,
+        id: &'a str,
+        control: StoredControl,
+    ) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// Broadcast `id` with its controls, or `None`.
+    fn broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredBroadcast>, StoreError>>;
+
+    /// Every stored broadcast with its controls.
+    fn broadcasts(&self) -> BoxFuture<'_, Result<Vec<StoredBroadcast>, StoreError>>;
+
+    /// Deletes broadcast `id` and its controls; returns whether it existed.
+    fn delete_broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<bool, StoreError>>;
+
+    /// Marks broadcast `id` active at `now_ms` (a node has viewers).
+    fn touch_broadcast<'a>(&'a self, id: &'a str, now_ms: i64) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// Deletes broadcast `id` if it has not been active since `before_ms`;
+    /// returns whether it did.
+    fn expire_broadcast<'a>(&'a self, id: &'a str, before_ms: i64) -> BoxFuture<'a, Result<bool, StoreError>>;
 
     /// Succeeds when the store answers a trivial query.
     fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>>;

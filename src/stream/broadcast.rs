@@ -1,48 +1,62 @@
 //! Broadcasts (SPEC §9): one named playback of a motion on a fixed tick
 //! grid, driven by controllers and watched by any number of viewers who
-//! join and leave at any time.
+//! join and leave at any time, on one node or on every node of a cluster.
 //!
-//! A broadcast is its own task. At each tick `k` it takes the controls
-//! stamped for it (each control is stamped, when it is accepted, with the
-//! first tick not yet taken, which is the `seq` its sender is told), applies
-//! them, samples its `anim::motion::Player` once and encodes the frame once
-//! per encoding that has viewers, publishing the bytes on that encoding's
-//! broadcast channel (as a shared playback does, see `hub`). A viewer
-//! subscribes to the channel of its encoding, so its first frame is the
-//! next tick after it joined; its [`Subscription`] turns gaps in `seq` into
-//! its own `dropped` (0 on its first frame) and patches only that number
-//! (and, in protobuf, the joint names of its first frame) into the shared
-//! bytes. A slow viewer loses only its own oldest frames.
+//! A broadcast is its own task. Tick `k` falls at `created_at + k/fps` by
+//! the wall clock (mapped onto the monotonic clock once, when the node
+//! starts the broadcast), so every node ticks on the same grid. At each
+//! tick the task files the controls accepted since the last one and steps
+//! its [`Program`] through tick `k` (every tick, watched or not: frame `k`
+//! is a pure function of the definition, the controls and `k`, see
+//! `broadcast_program`), then encodes the frame once per encoding that has
+//! viewers and publishes the bytes on that encoding's broadcast channel (as
+//! a shared playback does, see `hub`). A viewer subscribes to the channel
+//! of its encoding, so its first frame is the next tick after it joined;
+//! its [`Subscription`] turns gaps in `seq` into its own `dropped` (0 on its
+//! first frame) and patches only that number (and, in protobuf, the joint
+//! names of its first frame) into the shared bytes. A slow viewer loses
+//! only its own oldest frames.
 //!
-//! With no viewers the task still wakes on its grid (so stamps stay exact)
-//! but evaluates nothing; after `idle_timeout` with no viewers and no
-//! controls it ends. It also ends when deleted (viewers get
-//! [`EndReason::Ended`]: close 1000 / gRPC OK) and at shutdown.
+//! A control is stamped, when accepted, with the first tick not yet taken —
+//! or, with a control lead (many nodes), the tick due at now + lead, so the
+//! other nodes hear of it before its tick — and that `seq` is what its
+//! sender is told. Controls come from this node ([`Broadcast::prepare`] +
+//! [`Broadcast::accept`], or [`Broadcast::control`]) or from the store
+//! ([`Broadcasts::adopt`], [`Broadcast::heard`]); one heard for a tick
+//! already stepped makes the task replay from scratch.
+//!
+//! After `idle_timeout` with no viewers and no controls it ends (with a
+//! [`Journal`], only when no node had viewers either). It also ends when
+//! deleted (viewers get [`EndReason::Ended`]: close 1000 / gRPC OK) and at
+//! shutdown.
 //!
 //! The registry ([`Broadcasts`]) is a std mutex around a map, held for one
 //! lookup, insert or removal; the controls desk of each broadcast likewise,
 //! never across an await.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::{Duration, SystemTime};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+use futures_util::future::BoxFuture;
 use tokio::sync::{Notify, broadcast, watch};
 use tokio::time::Instant;
 
-use super::encode::{Encoded, Encoding, FrameEncoder};
-use super::hub::{EndReason, Item, StreamPlayer, TickStamp, frame_data, sample_tick, unix_nanos};
+use super::broadcast_program::{ControlLog, Program, StampedControl};
+use super::encode::Encoding;
+use super::hub::{EndReason, Item, unix_nanos};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
-use super::pinned::StreamMotion;
-use super::playhead::{Control, Crossfade, Playhead};
+use super::playhead::Control;
 use super::schedule::{Grid, Schedule};
 use super::subscription::{ControlCheck, ControlError, ControlSink, Source, Subscription};
-use crate::anim::motion::Player;
 
 /// Controls accepted but not yet applied, per broadcast, at most.
 const PENDING_CONTROLS: usize = 64;
+
+/// A catch-up longer than this many ticks runs on a blocking thread.
+const BLOCKING_CATCH_UP: u64 = 256;
 
 /// Why a broadcast could not be created.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -51,6 +65,21 @@ pub enum BroadcastError {
     TooMany { limit: usize },
     #[error("the server is shutting down")]
     ShuttingDown,
+}
+
+/// Where broadcasts are kept beyond this process (the server's store): a
+/// viewer socket's controls, the viewers' liveness and the idle end, which
+/// with many nodes are decided across all of them. Implemented by the
+/// server; without one a broadcast lives in this process alone.
+pub trait Journal: Send + Sync + 'static {
+    /// Stores a control a viewer's socket sent (`json` is its message),
+    /// already applied here; the other nodes hear of it from the store.
+    fn record(&self, broadcast: &str, seq: u64, id: &str, json: serde_json::Value) -> BoxFuture<'static, ()>;
+    /// The broadcast has viewers on this node now.
+    fn touch(&self, broadcast: &str) -> BoxFuture<'static, ()>;
+    /// Ends the broadcast everywhere if no node has had viewers and nobody
+    /// a control for `idle`; returns whether it did.
+    fn expire(&self, broadcast: &str, idle: Duration) -> BoxFuture<'static, bool>;
 }
 
 /// What a broadcast is, as its creator asked: the stream parameters (motion,
@@ -87,6 +116,10 @@ struct Registry {
     epoch: Instant,
     buffer: usize,
     precise: bool,
+    /// How far ahead of now a control is stamped (with many nodes, so the
+    /// others hear of it before its tick).
+    lead: Duration,
+    journal: OnceLock<Arc<dyn Journal>>,
     shutdown: watch::Receiver<bool>,
 }
 
@@ -96,45 +129,134 @@ impl std::fmt::Debug for Broadcasts {
     }
 }
 
+/// Where a broadcast's ticks fall on this node: its tick `base + k` is
+/// grid tick `first + k` of `grid`.
+#[derive(Debug, Clone, Copy)]
+struct Placement {
+    grid: Grid,
+    first: u64,
+    base: u64,
+    /// The grid's phase against the engine's epoch, whole ms (what a
+    /// client measuring lateness is told).
+    phase_ms: u32,
+}
+
 impl Broadcasts {
     /// At most `max` live broadcasts on the engine's clock `epoch`, each
-    /// viewer buffering `buffer` frames.
+    /// viewer buffering `buffer` frames, controls stamped `lead` ahead.
     pub(crate) fn new(
         max: usize,
         epoch: Instant,
         buffer: usize,
         precise: bool,
+        lead: Duration,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
-        Broadcasts { inner: Arc::new(Registry { live: Mutex::default(), max, epoch, buffer, precise, shutdown }) }
+        let registry =
+            Registry { live: Mutex::default(), max, epoch, buffer, precise, lead, journal: OnceLock::new(), shutdown };
+        Broadcasts { inner: Arc::new(registry) }
+    }
+
+    /// Keeps broadcasts in `journal` from now on (set once, at startup).
+    pub fn set_journal(&self, journal: Arc<dyn Journal>) {
+        let _ = self.inner.journal.set(journal);
     }
 
     fn lock(&self) -> MutexGuard<'_, HashMap<Arc<str>, Arc<Broadcast>>> {
         crate::sync::lock(&self.inner.live)
     }
 
-    /// Starts a broadcast of `spec`; its first tick is the next of its grid.
+    /// Starts a broadcast of `spec`; its first tick is the next of its grid
+    /// (its `created_at`).
     ///
     /// # Errors
     /// `max` broadcasts are live, or the engine is shutting down.
     pub fn create(&self, spec: BroadcastSpec) -> Result<Arc<Broadcast>, BroadcastError> {
-        if *self.inner.shutdown.borrow() {
-            return Err(BroadcastError::ShuttingDown);
-        }
         let id: Arc<str> = uuid::Uuid::now_v7().hyphenated().to_string().into();
         let fps = spec.params.fps;
         // Spread broadcasts over the period like playbacks (see `schedule`).
         let phase_ms = (uuid_low(&id) % u64::from(Grid::phases(fps))) as u32;
         let grid = Grid { epoch: self.inner.epoch, fps, phase_ms };
-        let schedule = Schedule::new(grid, grid.next_at_or_after(Instant::now()), 0).precise(self.inner.precise);
+        let (now, now_unix) = (Instant::now(), unix_nanos());
+        let first = grid.next_at_or_after(now);
+        let created_at = now_unix + grid.at(first).saturating_duration_since(now).as_nanos() as i64;
+        let placement = Placement { grid, first, base: 0, phase_ms };
+        self.start(id, spec, created_at, placement, Vec::new())
+    }
+
+    /// Runs here a broadcast created elsewhere (another node, or this one
+    /// before a restart): `id`, created at `created_at` (Unix ns, its tick
+    /// 0), with its `controls` so far. Its frames are computed from them
+    /// (`broadcast_program`), from the tick the wall clock says on.
+    /// Already live: the controls are added to it.
+    ///
+    /// # Errors
+    /// As [`Broadcasts::create`].
+    pub fn adopt(
+        &self,
+        id: &str,
+        spec: BroadcastSpec,
+        created_at: i64,
+        controls: Vec<StampedControl>,
+    ) -> Result<Arc<Broadcast>, BroadcastError> {
+        if let Some(live) = self.get(id) {
+            for c in controls {
+                live.heard(c);
+            }
+            return Ok(live);
+        }
+        let placement = self.placement(spec.params.fps, created_at);
+        self.start(id.into(), spec, created_at, placement, controls)
+    }
+
+    /// Where the ticks of a broadcast created at `created_at` (Unix ns) fall
+    /// on this node: tick `k` at `created_at + ⌊k·10⁹/fps⌋` ns by the wall
+    /// clock, mapped onto the monotonic clock once, here. The grid starts
+    /// at the latest tick due (`base`), so it never needs an instant before
+    /// this machine booted.
+    fn placement(&self, fps: u32, created_at: i64) -> Placement {
+        let (now, now_unix) = (Instant::now(), unix_nanos());
+        let nanos = |k: u64| (u128::from(k) * 1_000_000_000 / u128::from(fps)) as i64;
+        let elapsed = now_unix - created_at;
+        let (base, origin) = if elapsed < 0 {
+            (0, now + Duration::from_nanos(elapsed.unsigned_abs()))
+        } else {
+            let k = (i128::from(elapsed) * i128::from(fps) / 1_000_000_000) as u64;
+            let behind = now_unix - (created_at + nanos(k));
+            (k, now.checked_sub(Duration::from_nanos(behind.max(0) as u64)).unwrap_or(now))
+        };
+        let period = 1_000_000_000 / i128::from(fps);
+        let offset = if origin >= self.inner.epoch {
+            origin.duration_since(self.inner.epoch).as_nanos() as i128
+        } else {
+            -(self.inner.epoch.duration_since(origin).as_nanos() as i128)
+        };
+        let phase_ms = (offset.rem_euclid(period) / 1_000_000) as u32;
+        Placement { grid: Grid { epoch: origin, fps, phase_ms: 0 }, first: 0, base, phase_ms }
+    }
+
+    fn start(
+        &self,
+        id: Arc<str>,
+        spec: BroadcastSpec,
+        created_at: i64,
+        placement: Placement,
+        controls: Vec<StampedControl>,
+    ) -> Result<Arc<Broadcast>, BroadcastError> {
+        if *self.inner.shutdown.borrow() {
+            return Err(BroadcastError::ShuttingDown);
+        }
+        let schedule = Schedule::new(placement.grid, placement.first, 0).precise(self.inner.precise);
         let broadcast = Arc::new(Broadcast {
             id: Arc::clone(&id),
-            created_at: SystemTime::now(),
+            created_at,
             json: broadcast::channel(self.inner.buffer).0,
             protobuf: broadcast::channel(self.inner.buffer).0,
             desk: Mutex::new(Desk {
-                next: 0,
-                pending: Vec::new(),
+                next: placement.base,
+                inbox: Vec::new(),
+                revoked: Vec::new(),
+                known: HashSet::new(),
                 check: ControlCheck::new(&spec.params),
                 paused: spec.params.paused,
                 speed: spec.params.speed,
@@ -142,15 +264,32 @@ impl Broadcasts {
             }),
             deleted: Notify::new(),
             ended: AtomicBool::new(false),
+            placement,
             schedule: schedule.clone(),
+            lead: self.inner.lead,
+            journal: self.inner.journal.get().cloned(),
             spec,
         });
-        {
+        let already = {
             let mut live = self.lock();
-            if live.len() >= self.inner.max {
-                return Err(BroadcastError::TooMany { limit: self.inner.max });
+            match live.get(&id) {
+                // Adopted meanwhile (an announcement and a viewer's lookup at once): that copy takes the controls.
+                Some(already) => Some(Arc::clone(already)),
+                None if live.len() >= self.inner.max => return Err(BroadcastError::TooMany { limit: self.inner.max }),
+                None => {
+                    live.insert(id, Arc::clone(&broadcast));
+                    None
+                }
             }
-            live.insert(id, Arc::clone(&broadcast));
+        };
+        if let Some(already) = already {
+            for c in controls {
+                already.heard(c);
+            }
+            return Ok(already);
+        }
+        for c in controls {
+            broadcast.heard(c);
         }
         metrics::gauge!("inbetween_broadcasts").increment(1.0);
         metrics::counter!("inbetween_broadcasts_total").increment(1);
@@ -171,8 +310,8 @@ impl Broadcasts {
         all
     }
 
-    /// Ends broadcast `id` (its viewers get [`EndReason::Ended`]). Returns
-    /// whether it was live.
+    /// Ends broadcast `id` here (its viewers get [`EndReason::Ended`]).
+    /// Returns whether it was live.
     pub fn delete(&self, id: &str) -> bool {
         let Some(broadcast) = self.lock().remove(id) else { return false };
         broadcast.deleted.notify_one();
@@ -202,11 +341,20 @@ fn uuid_low(id: &str) -> u64 {
     uuid::Uuid::try_parse(id).map_or(0, |u| u.as_u64_pair().1)
 }
 
-/// Controls accepted and not yet applied, and what they leave playing.
+/// A fresh control id: UUIDv7 (what orders the controls of one tick).
+pub fn new_control_id() -> Arc<str> {
+    uuid::Uuid::now_v7().hyphenated().to_string().into()
+}
+
+/// Controls accepted and not yet taken by the task, and what they leave playing.
 struct Desk {
-    /// The first tick the task has not taken: the stamp of a control now.
+    /// The first tick the task has not taken: no control is stamped before it.
     next: u64,
-    pending: Vec<(u64, Control)>,
+    inbox: Vec<StampedControl>,
+    /// Ids of controls accepted and then withdrawn (their store write failed).
+    revoked: Vec<Arc<str>>,
+    /// Ids of every control accepted (one heard twice is taken once).
+    known: HashSet<Arc<str>>,
     check: ControlCheck,
     paused: bool,
     speed: f64,
@@ -217,8 +365,12 @@ struct Desk {
 pub struct Broadcast {
     id: Arc<str>,
     spec: BroadcastSpec,
-    created_at: SystemTime,
+    /// Unix ns of its tick 0.
+    created_at: i64,
+    placement: Placement,
     schedule: Schedule,
+    lead: Duration,
+    journal: Option<Arc<dyn Journal>>,
     json: broadcast::Sender<Item>,
     protobuf: broadcast::Sender<Item>,
     desk: Mutex<Desk>,
@@ -246,12 +398,17 @@ impl Broadcast {
     }
 
     pub fn created_at(&self) -> SystemTime {
+        UNIX_EPOCH + Duration::from_nanos(self.created_at.max(0) as u64)
+    }
+
+    /// Unix nanoseconds of tick 0: the grid every node puts its ticks on.
+    pub fn created_at_unix_nanos(&self) -> i64 {
         self.created_at
     }
 
-    /// The grid its ticks sit on, and the grid tick of its tick 0.
-    pub fn grid(&self) -> (Grid, u64) {
-        (self.schedule.grid(), self.schedule.first())
+    /// The phase of its grid against the engine's epoch, whole ms.
+    pub fn phase_ms(&self) -> u32 {
+        self.placement.phase_ms
     }
 
     fn channel(&self, encoding: Encoding) -> &broadcast::Sender<Item> {
@@ -269,11 +426,16 @@ impl Broadcast {
         crate::sync::lock(&self.desk)
     }
 
+    /// The broadcast tick due at or before `at` (0 before its first).
+    fn tick_at_or_before(&self, at: Instant) -> u64 {
+        let p = &self.placement;
+        p.base + p.grid.latest_at_or_before(at).saturating_sub(p.first)
+    }
+
     /// Where it is now: its tick by the clock, and the playhead its
     /// accepted controls leave.
     pub fn status(&self) -> BroadcastStatus {
-        let (grid, first) = self.grid();
-        let seq = grid.latest_at_or_before(Instant::now()).saturating_sub(first);
+        let seq = self.tick_at_or_before(Instant::now());
         let desk = self.desk();
         BroadcastStatus { seq, paused: desk.paused, speed: desk.speed, viewers: self.viewers() }
     }
@@ -306,35 +468,132 @@ impl Broadcast {
         Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls }, shutdown, permit)
     }
 
-    /// Accepts `control` for every viewer: checked like a stream's
-    /// (`stop` is refused: delete the broadcast), stamped with the first
-    /// tick not yet produced, which it returns.
+    /// Checks `control` like a stream's (`stop` is refused: delete the
+    /// broadcast) and stamps it: the first tick not yet produced, or with
+    /// a control lead the tick due at now + lead, whichever is later. It is
+    /// not applied until [`Broadcast::accept`], which the caller does at
+    /// once (so it is never late here), before storing it.
     ///
     /// # Errors
     /// An invalid control, too many pending, or the broadcast has ended.
-    pub fn control(&self, control: Control) -> Result<u64, ControlError> {
-        if control == Control::Stop {
+    pub fn prepare(&self, control: Control) -> Result<(u64, Control), ControlError> {
+        self.admissible(&control)?;
+        let ahead = self.ahead();
+        Self::stamp(&mut self.desk(), control, ahead)
+    }
+
+    /// [`Broadcast::prepare`] and [`Broadcast::accept`] under one lock (so
+    /// the task cannot take the stamped tick in between), as control `id`.
+    ///
+    /// # Errors
+    /// As [`Broadcast::prepare`].
+    pub fn take(&self, control: Control, id: Arc<str>) -> Result<u64, ControlError> {
+        self.admissible(&control)?;
+        let ahead = self.ahead();
+        let mut desk = self.desk();
+        let (seq, control) = Self::stamp(&mut desk, control, ahead)?;
+        Self::file(&mut desk, StampedControl { seq, id, control });
+        Ok(seq)
+    }
+
+    fn admissible(&self, control: &Control) -> Result<(), ControlError> {
+        if *control == Control::Stop {
             return Err(ControlError::Invalid("a broadcast has no `stop`: DELETE it to end it for every viewer"));
         }
         if self.ended.load(Ordering::Acquire) {
             return Err(ControlError::Invalid("the broadcast has ended"));
         }
-        let mut desk = self.desk();
-        let control = desk.check.check(control)?;
-        if desk.pending.len() >= PENDING_CONTROLS {
+        Ok(())
+    }
+
+    /// With a control lead, the tick due at now + lead.
+    fn ahead(&self) -> Option<u64> {
+        (!self.lead.is_zero()).then(|| {
+            let p = &self.placement;
+            p.base + p.grid.next_at_or_after(Instant::now() + self.lead).saturating_sub(p.first)
+        })
+    }
+
+    fn stamp(desk: &mut Desk, control: Control, ahead: Option<u64>) -> Result<(u64, Control), ControlError> {
+        if desk.inbox.len() >= PENDING_CONTROLS {
             return Err(ControlError::Busy);
         }
-        match control {
+        let control = desk.check.check(control)?;
+        Ok((ahead.unwrap_or(0).max(desk.next), control))
+    }
+
+    /// Applies a prepared control from its stamp on, for every viewer.
+    pub fn accept(&self, control: StampedControl) {
+        Self::file(&mut self.desk(), control);
+    }
+
+    fn file(desk: &mut Desk, control: StampedControl) {
+        if !desk.known.insert(Arc::clone(&control.id)) {
+            return;
+        }
+        match control.control {
             Control::Play => desk.paused = false,
             Control::Pause => desk.paused = true,
             Control::Speed(v) => desk.speed = v,
             _ => {}
         }
-        let k = desk.next;
-        desk.pending.push((k, control));
+        desk.inbox.push(control);
         desk.last_control = Instant::now();
         metrics::counter!("inbetween_broadcast_controls_total").increment(1);
-        Ok(k)
+    }
+
+    /// Takes a control another node stamped (or this one, before a restart),
+    /// checked like a local one (an `ik` control's names resolved); one it
+    /// already has is ignored. Applied from its stamp, even a past one
+    /// (the task then replays, see `broadcast_program`).
+    pub fn heard(&self, control: StampedControl) {
+        if self.desk().known.contains(&control.id) {
+            return;
+        }
+        let checked = self.desk().check.check(control.control);
+        match checked {
+            Ok(c) => self.accept(StampedControl { control: c, ..control }),
+            Err(e) => {
+                tracing::warn!(broadcast = %self.id, control = %control.id, error = %e, "a stored control skipped")
+            }
+        }
+    }
+
+    /// Withdraws a control [`Broadcast::accept`]ed here whose store write
+    /// failed (its sender is told so): the frames from its stamp on are
+    /// computed again without it, as every other node computes them.
+    pub fn revoke(&self, id: &Arc<str>) {
+        let mut desk = self.desk();
+        desk.inbox.retain(|c| &c.id != id);
+        desk.revoked.push(Arc::clone(id));
+    }
+
+    /// The ids of every control it has accepted.
+    pub fn control_ids(&self) -> HashSet<String> {
+        self.desk().known.iter().map(|id| id.to_string()).collect()
+    }
+
+    /// Accepts `control` for every viewer at once (a viewer socket's, or
+    /// without a journal); returns its stamp. With a journal it is stored
+    /// as well (only the controls a message can say again: play, pause,
+    /// seek, speed, layer; crossfades and IK go over REST, which stores
+    /// them itself).
+    ///
+    /// # Errors
+    /// As [`Broadcast::prepare`].
+    pub fn control(&self, control: Control) -> Result<u64, ControlError> {
+        let json = match &self.journal {
+            Some(_) => Some(control.to_json().ok_or(ControlError::Invalid(
+                "send a broadcast's crossfade and ik controls with POST /v1/broadcasts/{id}/controls",
+            ))?),
+            None => None,
+        };
+        let id = new_control_id();
+        let seq = self.take(control, Arc::clone(&id))?;
+        if let (Some(journal), Some(json)) = (&self.journal, json) {
+            tokio::spawn(journal.record(&self.id, seq, &id, json));
+        }
+        Ok(seq)
     }
 }
 
@@ -344,14 +603,18 @@ impl ControlSink for Broadcast {
     }
 }
 
-/// The broadcast's own task: its schedule, its playback and its idle clock.
+/// The broadcast's own task: its schedule, its program and its idle clock.
 struct Task {
     broadcast: Arc<Broadcast>,
     registry: Broadcasts,
     schedule: Schedule,
-    program: Program,
+    program: Option<Box<Program>>,
+    log: ControlLog,
     shutdown: watch::Receiver<bool>,
     last_watched: Instant,
+    /// When the journal last heard that this node has viewers, or was
+    /// asked to end the broadcast.
+    journaled: Instant,
     /// Viewers counted into `inbetween_broadcast_viewers` at the last tick.
     counted: usize,
 }
@@ -363,8 +626,19 @@ impl Task {
         schedule: Schedule,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
-        let program = Program::new(&broadcast.spec.params);
-        Task { broadcast, registry, schedule, program, shutdown, last_watched: Instant::now(), counted: 0 }
+        let program = Some(Box::new(Program::new(&broadcast.spec.params)));
+        let now = Instant::now();
+        Task {
+            broadcast,
+            registry,
+            schedule,
+            program,
+            log: ControlLog::default(),
+            shutdown,
+            last_watched: now,
+            journaled: now,
+            counted: 0,
+        }
     }
 
     async fn run(mut self) {
@@ -388,35 +662,118 @@ impl Task {
                 () = b.deleted.notified() => return EndReason::Ended,
                 tick = self.schedule.next() => tick,
             };
-            let (controls, last_control) = {
+            let k = b.placement.base + tick.k;
+            let (controls, revoked, last_control) = {
                 let mut desk = b.desk();
-                desk.next = tick.k + 1;
-                (std::mem::take(&mut desk.pending), desk.last_control)
+                desk.next = k + 1;
+                let revoked = std::mem::take(&mut desk.revoked);
+                (std::mem::take(&mut desk.inbox), revoked, desk.last_control)
             };
+            self.catch_up(controls, &revoked, k).await;
             let viewers = b.viewers();
             self.count_viewers(viewers);
-            let now = Instant::now();
-            if viewers > 0 {
-                self.last_watched = now;
-            } else if now.saturating_duration_since(self.last_watched.max(last_control)) >= b.spec.idle_timeout {
-                metrics::counter!("inbetween_broadcasts_idle_ended_total").increment(1);
-                return EndReason::Ended;
+            if let Some(reason) = self.idle(viewers, last_control) {
+                return reason;
             }
-            let jumped = self.program.apply_all(controls, tick.k);
             if viewers == 0 {
                 continue;
             }
-            let clip_time = self.program.evaluate(tick.k, jumped);
             let sent_at = unix_nanos();
             metrics::counter!("inbetween_broadcast_ticks_total").increment(1);
+            let program = self.program.as_mut().expect("the program is back after each catch-up");
             for encoding in [Encoding::Json, Encoding::Protobuf] {
                 let tx = b.channel(encoding);
                 if tx.receiver_count() > 0 {
-                    let frame = self.program.encode(encoding, tick.k, sent_at, clip_time);
-                    let _ = tx.send(Item::Frame(frame));
+                    let _ = tx.send(Item::Frame(program.encode(encoding, sent_at)));
                 }
             }
         }
+    }
+
+    /// Files `controls` (and drops the `revoked` ones) and steps the program
+    /// through tick `k`: again from before the earliest stamp if one is for
+    /// a tick already stepped, on a
+    /// blocking thread if that is many ticks (a node that joined late, a
+    /// restart).
+    async fn catch_up(&mut self, controls: Vec<StampedControl>, revoked: &[Arc<str>], k: u64) {
+        let mut program = self.program.take().expect("the program is back after each catch-up");
+        let mut rewind = None::<u64>;
+        let mut past = |seq: u64, next: u64| {
+            if seq < next {
+                rewind = Some(rewind.map_or(seq, |r: u64| r.min(seq)));
+            }
+        };
+        for c in controls {
+            past(c.seq, program.next());
+            self.log.insert(c);
+        }
+        for id in revoked {
+            if let Some(seq) = self.log.remove(id) {
+                past(seq, program.next());
+            }
+        }
+        if let Some(stamp) = rewind {
+            let again = program.rewind_before(stamp);
+            metrics::counter!("inbetween_broadcast_replays_total").increment(1);
+            metrics::counter!("inbetween_broadcast_replayed_ticks_total").increment(again);
+        }
+        if k.saturating_sub(program.next()) > BLOCKING_CATCH_UP {
+            let log = self.log.clone();
+            let stepped = tokio::task::spawn_blocking(move || {
+                program.step_to(k, &log);
+                program
+            })
+            .await;
+            program = match stepped {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::error!(error = %e, broadcast = %self.broadcast.id, "a broadcast catch-up failed");
+                    Box::new(Program::replay(&self.broadcast.spec.params, &self.log, Some(k)))
+                }
+            };
+        } else {
+            program.step_to(k, &self.log);
+        }
+        self.program = Some(program);
+    }
+
+    /// Whether the broadcast ends idle now. Without a journal: no viewers
+    /// and no controls for the idle timeout. With one (many nodes may have
+    /// viewers), it hears while this node has viewers, and decides the end
+    /// across every node once this one has been idle that long.
+    fn idle(&mut self, viewers: usize, last_control: Instant) -> Option<EndReason> {
+        let b = &self.broadcast;
+        let now = Instant::now();
+        let idle = b.spec.idle_timeout;
+        let every = (idle / 4).clamp(Duration::from_millis(250), Duration::from_secs(5));
+        if viewers > 0 {
+            self.last_watched = now;
+            if let Some(journal) = &b.journal
+                && now.saturating_duration_since(self.journaled) >= every
+            {
+                self.journaled = now;
+                tokio::spawn(journal.touch(&b.id));
+            }
+            return None;
+        }
+        if now.saturating_duration_since(self.last_watched.max(last_control)) < idle {
+            return None;
+        }
+        let Some(journal) = &b.journal else {
+            metrics::counter!("inbetween_broadcasts_idle_ended_total").increment(1);
+            return Some(EndReason::Ended);
+        };
+        if now.saturating_duration_since(self.journaled) >= every {
+            self.journaled = now;
+            let (expire, registry, id) = (journal.expire(&b.id, idle), self.registry.clone(), Arc::clone(&b.id));
+            tokio::spawn(async move {
+                if expire.await {
+                    metrics::counter!("inbetween_broadcasts_idle_ended_total").increment(1);
+                    registry.delete(&id);
+                }
+            });
+        }
+        None
     }
 
     /// Keeps `inbetween_broadcast_viewers` (all broadcasts) up to date.
@@ -425,98 +782,6 @@ impl Task {
             let gauge = metrics::gauge!("inbetween_broadcast_viewers");
             gauge.increment(viewers as f64 - self.counted as f64);
             self.counted = viewers;
-        }
-    }
-}
-
-/// What a broadcast plays: its playhead and player, and one encoder per
-/// encoding (each reused, so a tick allocates only the bytes it sends).
-struct Program {
-    params: StreamParams,
-    playhead: Playhead,
-    player: StreamPlayer,
-    /// The current motion's first-layer position at the previous evaluated
-    /// tick (for the events crossed), and which motion that was.
-    prev: Option<(f64, Arc<StreamMotion>)>,
-    crossed: Vec<u32>,
-    json: FrameEncoder,
-    protobuf: FrameEncoder,
-}
-
-impl Program {
-    fn new(params: &StreamParams) -> Self {
-        Program {
-            playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
-            player: Player::new(Arc::clone(&params.motion)),
-            params: params.clone(),
-            prev: None,
-            crossed: Vec::new(),
-            json: FrameEncoder::new(Encoding::Json),
-            protobuf: FrameEncoder::new(Encoding::Protobuf),
-        }
-    }
-
-    /// Applies `controls` (in stamp order) at tick `k`; returns whether
-    /// time jumped. Playhead controls take effect at their stamps exactly;
-    /// a seek stamped for a tick the task skipped (it woke late) shows at
-    /// `k` the time it would have reached by then, so every frame is as if
-    /// it had applied at its stamp.
-    fn apply_all(&mut self, controls: Vec<(u64, Control)>, k: u64) -> bool {
-        let mut seeks = Vec::new();
-        let mut jumped = false;
-        for (stamp, control) in controls {
-            match control {
-                // The stream time at its stamp: later controls only move times after their own stamps.
-                Control::Seek(tau) => seeks.push((tau, self.playhead.time_at(stamp))),
-                c => jumped |= self.apply(c, stamp),
-            }
-        }
-        let now = self.playhead.time_at(k);
-        for (tau, at) in seeks {
-            self.player.seek(if now == at { tau } else { tau + (now - at) });
-            jumped = true;
-        }
-        jumped
-    }
-
-    /// Applies a control (not a seek) stamped for tick `k`; returns whether time jumped.
-    fn apply(&mut self, control: Control, k: u64) -> bool {
-        match control {
-            Control::Crossfade(Crossfade { to, duration, ease }) => {
-                if let Err(e) = self.player.crossfade(to, duration, ease) {
-                    tracing::error!(error = %e, "a crossfade the broadcast accepted was refused");
-                }
-                false
-            }
-            Control::Layer { index, weight, duration } => {
-                if let Err(e) = self.player.ramp(index, weight, duration) {
-                    tracing::error!(error = %e, "a weight ramp the broadcast accepted was refused");
-                }
-                false
-            }
-            Control::SetIk(constraints) => {
-                self.player.set_ik(constraints);
-                false
-            }
-            Control::Seek(_) | Control::Ik(_) | Control::Stop => false,
-            c => self.playhead.apply(c, k),
-        }
-    }
-
-    /// Samples tick `k` once for every encoding; returns its clip time.
-    fn evaluate(&mut self, k: u64, jumped: bool) -> f32 {
-        let time = self.playhead.time_at(k);
-        sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed)
-    }
-
-    /// The evaluated tick `k` in `encoding`: `dropped` 0 and no joint names
-    /// (each viewer's patch adds its own, see `encode`).
-    fn encode(&mut self, encoding: Encoding, k: u64, sent_at: i64, clip_time: f32) -> Encoded {
-        let tick = TickStamp { seq: k, dropped: 0, sent_at, clip_time };
-        let data = frame_data(&self.player, &self.params, &self.crossed, tick, false);
-        match encoding {
-            Encoding::Json => self.json.encode(&data),
-            Encoding::Protobuf => self.protobuf.encode(&data),
         }
     }
 }

@@ -52,6 +52,9 @@ pub struct EngineConfig {
     pub precise_timer: bool,
     /// Live broadcasts at once (SPEC §9).
     pub max_broadcasts: usize,
+    /// How far ahead a broadcast control is stamped (many nodes: so that
+    /// the others hear of it before its tick); zero stamps the next tick.
+    pub broadcast_lead: std::time::Duration,
 }
 
 impl Default for EngineConfig {
@@ -63,6 +66,7 @@ impl Default for EngineConfig {
             max_streams_per_token: 64,
             precise_timer: false,
             max_broadcasts: 64,
+            broadcast_lead: std::time::Duration::ZERO,
         }
     }
 }
@@ -96,8 +100,14 @@ impl Engine {
         let config = EngineConfig { buffer: config.buffer.max(1), ..config };
         let epoch = Instant::now();
         let shutdown = watch::Sender::new(false);
-        let broadcasts =
-            Broadcasts::new(config.max_broadcasts, epoch, config.buffer, config.precise_timer, shutdown.subscribe());
+        let broadcasts = Broadcasts::new(
+            config.max_broadcasts,
+            epoch,
+            config.buffer,
+            config.precise_timer,
+            config.broadcast_lead,
+            shutdown.subscribe(),
+        );
         Engine {
             inner: Arc::new(Inner {
                 epoch,

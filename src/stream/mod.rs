@@ -34,6 +34,7 @@
 //! is ever a mix of two versions.
 
 mod broadcast;
+mod broadcast_program;
 mod encode;
 mod engine;
 mod events;
@@ -50,7 +51,8 @@ mod ticker;
 mod wire_frame;
 pub mod ws;
 
-pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts};
+pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Journal, new_control_id};
+pub use broadcast_program::{ControlLog, Program, StampedControl};
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};

@@ -89,6 +89,25 @@ impl Control {
     }
 }
 
+impl Control {
+    /// The control message that says this control again (SPEC §5), for
+    /// the controls a message carries in full; `None` for crossfades (their
+    /// motion is a lookup), IK lists and `stop`.
+    pub fn to_json(&self) -> Option<serde_json::Value> {
+        use serde_json::json;
+        Some(match self {
+            Control::Play => json!({"op": "play"}),
+            Control::Pause => json!({"op": "pause"}),
+            Control::Seek(time) => json!({"op": "seek", "time": time}),
+            Control::Speed(speed) => json!({"op": "speed", "speed": speed}),
+            Control::Layer { index, weight, duration } => {
+                json!({"op": "layer", "index": index, "weight": weight, "duration": duration})
+            }
+            Control::Stop | Control::Crossfade(_) | Control::Ik(_) | Control::SetIk(_) => return None,
+        })
+    }
+}
+
 /// The playhead of one playback.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Playhead {

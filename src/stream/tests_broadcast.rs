@@ -150,3 +150,145 @@ async fn a_seek_stamped_for_a_skipped_tick_shows_where_it_would_be_by_now() {
     assert!((time(&f) - 5.2).abs() < 1e-9, "5 at tick 3, so 5.2 at tick 5: {}", time(&f));
     assert!((time(&frame(&mut a).await) - 5.3).abs() < 1e-9);
 }
+
+/// Controls of every kind a broadcast takes, stamped at `ticks`.
+fn controls(params: &StreamParams, ticks: [u64; 7]) -> Vec<StampedControl> {
+    let fade = Crossfade { to: Arc::clone(&params.motion), duration: 0.4, ease: crate::anim::Ease::EaseInOut };
+    let kinds = [
+        Control::Seek(3.0),
+        Control::Pause,
+        Control::Play,
+        Control::Speed(-0.5),
+        Control::Layer { index: 0, weight: 0.3, duration: 0.2 },
+        Control::Crossfade(fade),
+        Control::Speed(2.0),
+    ];
+    ticks.into_iter().zip(kinds).map(|(seq, control)| StampedControl { seq, id: new_control_id(), control }).collect()
+}
+
+fn log_of(controls: &[StampedControl]) -> ControlLog {
+    let mut log = ControlLog::default();
+    for c in controls {
+        log.insert(c.clone());
+    }
+    log
+}
+
+/// Tick `k`'s JSON frame (`sent_at` fixed, so equal frames are equal bytes).
+fn bytes_at(p: &mut Program, k: u64, log: &ControlLog) -> bytes::Bytes {
+    p.step_to(k, log);
+    p.encode(Encoding::Json, 0).bytes
+}
+
+#[test]
+fn frames_are_a_function_of_the_definition_the_controls_and_the_tick() {
+    let params = StreamParams::new(pinned("c1", clip()), StreamRequest { fps: 10, ..Default::default() }).unwrap();
+    let all = controls(&params, [5, 9, 12, 15, 18, 100, 130]);
+    let full = log_of(&all);
+    // The reference: every control known from the start, every tick stepped.
+    let mut reference = Program::new(&params);
+    let frames: Vec<_> = (0..200).map(|k| bytes_at(&mut reference, k, &full)).collect();
+    assert_ne!(frames[4], frames[5], "the seek shows at its stamp");
+
+    // A node that hears the controls late: stepped without them, then rewound.
+    let mut late = Program::new(&params);
+    let mut log = log_of(&all[..1]);
+    for k in 0..140 {
+        if k == 11 || k == 140 - 1 {
+            // Hears the ones stamped 9 (before 11, a rewind to tick 0) ... and at 139 the ones stamped 100 and 130
+            // (a rewind to the snapshot before 100).
+            let heard = if k == 11 { &all[1..5] } else { &all[5..] };
+            let earliest = heard.iter().map(|c| c.seq).min().unwrap();
+            for c in heard {
+                log.insert(c.clone());
+            }
+            let again = late.rewind_before(earliest);
+            assert!(again <= k - earliest + super::broadcast_program::SNAPSHOT_EVERY, "{again} ticks again");
+        }
+        let got = bytes_at(&mut late, k, &log);
+        if k >= 11 && !(100..139).contains(&k) {
+            assert_eq!(got, frames[k as usize], "tick {k} after the rewind");
+        }
+    }
+    for k in 140..200 {
+        assert_eq!(bytes_at(&mut late, k, &log), frames[k as usize], "tick {k}");
+    }
+    // A node that starts late: replays from tick 0.
+    for k in [0u64, 63, 64, 101, 199] {
+        let mut fresh = Program::replay(&params, &full, k.checked_sub(1));
+        assert_eq!(bytes_at(&mut fresh, k, &full), frames[k as usize], "a late start at tick {k}");
+    }
+}
+
+/// On the real clock: a copy places its ticks by the wall clock (`created_at`).
+#[tokio::test]
+async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
+    let (e1, e2) = (engine(4), engine(4));
+    let b1 = create(&e1, 10, 300);
+    let mut v1 = viewer(&e1, &b1, Encoding::Json, false);
+    for _ in 0..3 {
+        frame(&mut v1).await;
+    }
+    let mut stamped = Vec::new();
+    for control in [Control::Seek(2.0), Control::Speed(-1.5), Control::Layer { index: 0, weight: 0.5, duration: 0.3 }] {
+        let (seq, control) = b1.prepare(control).unwrap();
+        let c = StampedControl { seq, id: new_control_id(), control };
+        b1.accept(c.clone());
+        stamped.push(c);
+        frame(&mut v1).await;
+    }
+    // Another node, later: the definition, `created_at` and the stored controls.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let spec = b1.spec().clone();
+    let b2 = e2.broadcasts().adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone()).unwrap();
+    let mut v2 = viewer(&e2, &b2, Encoding::Json, false);
+    let strip = |f: &Delivered| {
+        let mut v: serde_json::Value = serde_json::from_slice(&f.bytes).unwrap();
+        v.as_object_mut().unwrap().remove("sent_at_unix_nanos");
+        v
+    };
+    let mut seen = std::collections::BTreeMap::new();
+    for _ in 0..10 {
+        let f = frame(&mut v1).await;
+        seen.insert(f.seq, strip(&f));
+    }
+    let mut shared = 0;
+    for _ in 0..8 {
+        let f = frame(&mut v2).await;
+        if let Some(other) = seen.get(&f.seq) {
+            assert_eq!(&strip(&f), other, "seq {}", f.seq);
+            shared += 1;
+        }
+    }
+    assert!(shared >= 5, "{shared} frames compared");
+    // Heard twice (NOTIFY and a resync): taken once.
+    b2.heard(stamped[0].clone());
+    assert_eq!(b2.control_ids().len(), 3);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_withdrawn_control_leaves_the_frames_as_without_it() {
+    let e = engine(4);
+    let b = create(&e, 10, 300);
+    let mut v = viewer(&e, &b, Encoding::Json, false);
+    frame(&mut v).await;
+    // Withdrawn before its tick: never shown.
+    let (seq, seek) = b.prepare(Control::Seek(7.0)).unwrap();
+    let id = new_control_id();
+    b.accept(StampedControl { seq, id: Arc::clone(&id), control: seek });
+    b.revoke(&id);
+    // Withdrawn after its tick: the frames after the withdrawal are as if it had never been.
+    let (late, pause) = b.prepare(Control::Pause).unwrap();
+    let id = new_control_id();
+    b.accept(StampedControl { seq: late, id: Arc::clone(&id), control: pause });
+    let mut times = Vec::new();
+    for _ in 0..3 {
+        times.push((time(&frame(&mut v).await) * 1e9).round() / 1e9);
+    }
+    b.revoke(&id);
+    for _ in 0..3 {
+        times.push((time(&frame(&mut v).await) * 1e9).round() / 1e9);
+    }
+    assert_eq!((seq, late), (1, 1));
+    assert_eq!(times, [0.0, 0.0, 0.0, 0.4, 0.5, 0.6], "paused from tick 1, then playing as if never paused");
+}

@@ -41,7 +41,7 @@ struct Ramp {
 }
 
 /// One motion on the player.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Deck<C> {
     motion: Arc<Motion<C>>,
     /// Stream time of motion time 0; `None` until its first tick.
@@ -55,7 +55,7 @@ struct Deck<C> {
 }
 
 /// A fade in progress: the previous player, fading out.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Fade<C> {
     under: Player<C>,
     /// Stream time moved (`Σ|Δs|`) since the fade's first tick.
@@ -73,7 +73,9 @@ pub struct LayerPosition {
 }
 
 /// A live playback of motions; see the module doc.
-#[derive(Debug)]
+/// Cloning copies every piece of state (warm starts included), so a clone
+/// stepped on produces what the original would (broadcast snapshots).
+#[derive(Debug, Clone)]
 pub struct Player<C> {
     top: Deck<C>,
     fade: Option<Box<Fade<C>>>,
@@ -91,7 +93,7 @@ pub struct Player<C> {
 
 /// The stream's request-time IK (SPEC §7 "In streams"): solved on the
 /// mixed pose at every tick, chains warm-started from the previous tick.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 struct StreamIk {
     constraints: Vec<IkConstraint>,
     solver: IkSolver,

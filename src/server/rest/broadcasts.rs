@@ -21,49 +21,21 @@ use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::http::header::LOCATION;
 use axum::response::{IntoResponse, Response};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::server::auth::{Identity, ReadAccess, Scope, WriteAccess};
+use crate::server::broadcast_store;
 use crate::server::error::ApiError;
-use crate::server::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body};
+use crate::server::request::Raw;
 use crate::server::state::AppState;
-use crate::stream::ws::{ParsedControl, parse_control};
-use crate::stream::{Broadcast, Control, ControlError, Crossfade, Encoding};
-use crate::wire::json::SpaceDoc;
-use crate::wire::motion::MotionDoc;
+use crate::stream::{Broadcast, Encoding};
 
 use super::extract::JsonBody;
-use super::poses::parse_json;
 use super::query::Query;
 use super::stream::{configured, refuse, resolver, serve};
 
-/// `POST /v1/broadcasts`: what to broadcast.
-#[derive(Debug, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct CreateBroadcast {
-    /// The motion (SPEC §6; a clip is a one-layer motion), its clips pinned at their current versions.
-    pub motion: MotionDoc,
-    /// Ticks per second, 1..=240 (default 30).
-    #[serde(default)]
-    pub fps: Option<f64>,
-    #[serde(default)]
-    #[schema(value_type = Option<SpaceDoc>)]
-    pub space: Option<String>,
-    /// `trs` (the default; the only format frames have).
-    #[serde(default)]
-    #[schema(value_type = Option<Format>)]
-    pub format: Option<String>,
-    /// Only these joints in every frame, in skeleton order (default: all).
-    #[serde(default)]
-    pub joints: Option<Vec<String>>,
-    /// Only these parameters in every frame (SPEC §8; default: all).
-    #[serde(default)]
-    pub parameters: Option<Vec<String>>,
-    /// Seconds with no viewers and no controls before it ends, 1..=86400 (default 300).
-    #[serde(default)]
-    pub idle_timeout_secs: Option<f64>,
-}
+pub use crate::server::broadcast_store::CreateBroadcast;
 
 /// A broadcast as `GET` shows it.
 #[derive(Debug, Serialize, ToSchema)]
@@ -118,7 +90,7 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
         speed: status.speed,
         viewers: status.viewers,
         idle_timeout_secs: b.spec().idle_timeout.as_secs(),
-        grid_phase_ms: b.grid().0.phase_ms,
+        grid_phase_ms: b.phase_ms(),
         stream: format!("/v1/broadcasts/{}/stream", b.id()),
         motion: described["motion"].clone(),
         space: described["space"].as_str().unwrap_or("local").to_owned(),
@@ -126,9 +98,9 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
     }
 }
 
-/// The live broadcast `id`, or `broadcast_not_found`.
-pub fn live(state: &AppState, id: &str) -> Result<Arc<Broadcast>, ApiError> {
-    state.streams.broadcasts().get(id).ok_or(ApiError::NotFound { what: "broadcast" })
+/// The broadcast `id` (live here, or stored by another node), or `broadcast_not_found`.
+pub async fn live(state: &AppState, id: &str) -> Result<Arc<Broadcast>, ApiError> {
+    broadcast_store::find(state, id).await
 }
 
 /// Create a broadcast.
@@ -149,37 +121,12 @@ pub async fn create(
     _: WriteAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
-    let req: CreateBroadcast = parse_json(&body)?;
-    let sent: serde_json::Value = serde_json::from_slice(&body).unwrap_or_default();
-    let description =
-        serde_json::json!({"motion": sent.get("motion"), "space": req.space.as_deref().unwrap_or("local")});
-    let stream = RawStream {
-        fps: req.fps.map(Raw::Number),
-        start: None,
-        speed: None,
-        modes: RawModes { space: req.space.as_deref().map(Raw::Text), ..RawModes::default() },
-        encoding: None,
-        max_frames: None,
-        paused: false,
-        joints: req.joints.as_deref(),
-        parameters: req.parameters.as_deref(),
-        at: in_body,
-    };
-    let raw = RawBroadcast {
-        stream,
-        format: req.format.as_deref().map(Raw::Text),
-        idle_timeout_secs: req.idle_timeout_secs.map(Raw::Number),
-        at: in_body,
-    };
-    let motion = RawMotion {
-        spec: req.motion.to_spec("/motion")?,
-        joints: None,
-        parameters: None,
-        format: Format::Trs,
-        at: in_body,
-    };
-    let spec = raw.spec(&state, motion, description).await?;
+    let spec = broadcast_store::spec_from_body(&state, &body).await?;
     let b = state.streams.broadcasts().create(spec).map_err(ApiError::TooManyBroadcasts)?;
+    if let Err(e) = broadcast_store::store_created(&state, &b, &body).await {
+        state.streams.broadcasts().delete(b.id());
+        return Err(e);
+    }
     tracing::info!(id = %b.id(), "broadcast created");
     let location = format!("/v1/broadcasts/{}", b.id());
     Ok((StatusCode::CREATED, [(LOCATION, location)], Json(summary(&b))).into_response())
@@ -210,7 +157,7 @@ pub async fn get(
     _: ReadAccess,
     Path(id): Path<String>,
 ) -> Result<Json<BroadcastSummary>, ApiError> {
-    let b = live(&state, &id)?;
+    let b = live(&state, &id).await?;
     Ok(Json(summary(&b)))
 }
 
@@ -229,7 +176,7 @@ pub async fn delete(
     _: WriteAccess,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    if !state.streams.broadcasts().delete(&id) {
+    if !broadcast_store::delete(&state, &id).await? {
         return Err(ApiError::NotFound { what: "broadcast" });
     }
     tracing::info!(%id, "broadcast deleted");
@@ -255,33 +202,9 @@ pub async fn control(
     Path(id): Path<String>,
     JsonBody(body): JsonBody,
 ) -> Result<Json<ControlApplied>, ApiError> {
-    let b = live(&state, &id)?;
-    // Not JSON at all is 400 like every body; a JSON that is no control is the socket's `bad_control`.
-    let _: serde_json::Value = parse_json(&body)?;
-    let text = std::str::from_utf8(&body).map_err(|e| ApiError::invalid("bad_control", "", e.to_string()))?;
-    let control = match parse_control(text) {
-        Ok(ParsedControl::Ready(control)) => control,
-        Ok(ParsedControl::Crossfade { to, duration, ease }) => {
-            let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
-            let raw = RawMotion {
-                spec: doc.to_spec("/motion")?,
-                joints: None,
-                parameters: None,
-                format: Format::Trs,
-                at: in_body,
-            };
-            let to = raw.resolve(&state).await.map_err(|e| e.moved("/motion", "/to"))?.motion;
-            Control::Crossfade(Crossfade { to, duration, ease })
-        }
-        Err(e) => return Err(ApiError::invalid(e.code, e.pointer.unwrap_or_default(), e.detail)),
-    };
-    let seq = b.control(control).map_err(|e| refused(&e))?;
+    let b = live(&state, &id).await?;
+    let seq = broadcast_store::control(&state, &b, &body).await?;
     Ok(Json(ControlApplied { seq }))
-}
-
-/// A control the broadcast refused, with the socket's code and pointer.
-fn refused(e: &ControlError) -> ApiError {
-    ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string())
 }
 
 /// Watch a broadcast: upgrade to a WebSocket of its frames.
@@ -312,7 +235,7 @@ pub async fn watch(
         Some(Raw::Text("protobuf")) => Encoding::Protobuf,
         Some(_) => return Err(ApiError::parameter("bad_parameter", "encoding", "expected one of: json, protobuf")),
     };
-    let b = live(&state, &id)?;
+    let b = live(&state, &id).await?;
     let may_control = identity.authorize(Scope::Write).is_ok();
     let watched =
         state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| b.watch(encoding, permit, may_control));
@@ -323,6 +246,6 @@ pub async fn watch(
             Err(refused) => refuse(socket, crate::stream::ws::close::TRY_AGAIN_LATER, refused.to_string()).await,
         }
     });
-    response.headers_mut().insert(crate::stream::PHASE_HEADER, b.grid().0.phase_ms.into());
+    response.headers_mut().insert(crate::stream::PHASE_HEADER, b.phase_ms().into());
     Ok(response)
 }

@@ -195,7 +195,7 @@ impl SampleRequest {
 }
 
 /// A JSON request body, its type errors pointed at the field.
-pub(super) fn parse_json<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
     let de = &mut serde_json::Deserializer::from_slice(body);
     let req = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         use serde_path_to_error::Segment;

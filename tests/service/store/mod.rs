@@ -10,7 +10,9 @@ mod filters;
 use std::sync::Arc;
 
 use inbetween::anim::Playback;
-use inbetween::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError, StoredMesh};
+use inbetween::store::{
+    ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError, StoredBroadcast, StoredControl, StoredMesh,
+};
 
 /// Runs each listed test once per backend: `sqlite::name` and `postgres::name`.
 macro_rules! for_both_backends {
@@ -50,6 +52,8 @@ for_both_backends!(
     every_filter_pages_through_exactly_its_clips,
     tags_and_joints_follow_replace_and_delete,
     a_mesh_is_written_kept_dropped_and_deleted_with_its_clip,
+    broadcasts_and_their_controls_read_back_in_order,
+    an_idle_broadcast_expires_and_a_touched_one_does_not,
 );
 
 use filters::{every_filter_pages_through_exactly_its_clips, tags_and_joints_follow_replace_and_delete};
@@ -256,4 +260,55 @@ async fn a_mesh_is_written_kept_dropped_and_deleted_with_its_clip(store: Arc<dyn
     assert_eq!(store.mesh(other).await.unwrap(), None, "gone with its clip");
     // The deleted clip's mesh row went too: a new row for the same id could be written.
     assert_eq!(store.mesh_tag(other).await.unwrap(), None);
+}
+
+fn broadcast(id: &str, created_at: i64) -> StoredBroadcast {
+    StoredBroadcast { id: id.to_owned(), definition: format!("{{\"def\":\"{id}\"}}"), created_at, controls: vec![] }
+}
+
+fn stored_control(id: &str, seq: u64) -> StoredControl {
+    StoredControl { id: id.to_owned(), seq, control: format!("{{\"op\":\"{id}\"}}") }
+}
+
+/// The stored form of broadcasts (SPEC §9): the definition as given, the
+/// controls in application order (by `seq`, then id) whatever order they
+/// were stored in, gone with their broadcast.
+async fn broadcasts_and_their_controls_read_back_in_order(store: Arc<dyn ClipStore>) {
+    let (b1, b2) = ("01a20000-0000-7000-8000-000000000001", "01a20000-0000-7000-8000-000000000002");
+    store.create_broadcast(broadcast(b1, 1_790_000_000_123_456_789)).await.unwrap();
+    store.create_broadcast(broadcast(b2, 7)).await.unwrap();
+    assert!(store.create_broadcast(broadcast(b1, 1)).await.is_err(), "one row per id");
+    for (id, seq) in [("c", 9), ("b", 4), ("a", 9), ("d", 2)] {
+        store.add_broadcast_control(b1, stored_control(id, seq)).await.unwrap();
+    }
+    let got = store.broadcast(b1).await.unwrap().unwrap();
+    assert_eq!(
+        (got.definition.as_str(), got.created_at),
+        (broadcast(b1, 0).definition.as_str(), 1_790_000_000_123_456_789)
+    );
+    let order: Vec<(&str, u64)> = got.controls.iter().map(|c| (c.id.as_str(), c.seq)).collect();
+    assert_eq!(order, [("d", 2), ("b", 4), ("a", 9), ("c", 9)]);
+    assert_eq!(got.controls[0], stored_control("d", 2));
+    assert!(store.add_broadcast_control(b1, stored_control("a", 11)).await.is_err(), "control ids are unique");
+
+    let all = store.broadcasts().await.unwrap();
+    assert_eq!(all.iter().map(|b| (b.id.as_str(), b.controls.len())).collect::<Vec<_>>(), [(b1, 4), (b2, 0)]);
+    assert!(store.delete_broadcast(b1).await.unwrap());
+    assert!(!store.delete_broadcast(b1).await.unwrap());
+    assert!(store.broadcast(b1).await.unwrap().is_none());
+    assert!(matches!(store.add_broadcast_control(b1, stored_control("e", 1)).await, Err(StoreError::NotFound)));
+    assert_eq!(store.broadcasts().await.unwrap().len(), 1);
+}
+
+/// The idle end across nodes is one conditional delete on `active_at`.
+async fn an_idle_broadcast_expires_and_a_touched_one_does_not(store: Arc<dyn ClipStore>) {
+    let b = "01a20000-0000-7000-8000-0000000000aa";
+    store.create_broadcast(broadcast(b, 0)).await.unwrap();
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_millis() as i64;
+    // Created (active) just now: not idle since a minute ago.
+    assert!(!store.expire_broadcast(b, now - 60_000).await.unwrap());
+    store.touch_broadcast(b, now + 60_000).await.unwrap();
+    assert!(!store.expire_broadcast(b, now + 30_000).await.unwrap(), "touched later than that");
+    assert!(store.expire_broadcast(b, now + 90_000).await.unwrap(), "idle since before then");
+    assert!(store.broadcast(b).await.unwrap().is_none());
 }

@@ -38,6 +38,29 @@ async fn every_committed_change_is_announced_on_the_schema_channel() {
     backend.finish().await;
 }
 
+/// Broadcasts (SPEC §9) are announced on the same channel: created, each
+/// control (naming its broadcast), deleted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn broadcast_changes_are_announced_on_the_schema_channel() {
+    let Some(backend) = Postgres::open("bannounce").await else { return };
+    let store = &backend.store;
+    let mut listener = PgListener::connect(&backend.schema.url("")).await.unwrap();
+    listener.listen(backend.pg.channel()).await.unwrap();
+    let id = "01a20000-0000-7000-8000-0000000000bb";
+    let b =
+        inbetween::store::StoredBroadcast { id: id.into(), definition: "{}".into(), created_at: 1, controls: vec![] };
+    store.create_broadcast(b).await.unwrap();
+    assert_eq!(next_payload(&mut listener).await, format!("broadcast 0 {id}"));
+    let c = inbetween::store::StoredControl { id: "c1".into(), seq: 5, control: "{}".into() };
+    store.add_broadcast_control(id, c).await.unwrap();
+    assert_eq!(next_payload(&mut listener).await, format!("control 0 {id}"));
+    store.touch_broadcast(id, i64::MAX).await.unwrap();
+    store.delete_broadcast(id).await.unwrap();
+    assert_eq!(next_payload(&mut listener).await, format!("unbroadcast 0 {id}"), "touching announces nothing");
+    listener.unlisten_all().await.unwrap();
+    backend.finish().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_store_rides_out_terminated_connections() {
     let app = "store-terminated";

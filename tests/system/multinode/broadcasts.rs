@@ -1,0 +1,310 @@
+//! Broadcasts across nodes (SPEC §9 "Many nodes"): real processes on one
+//! PostgreSQL schema. A broadcast created on one node is watched on three;
+//! controls (play, pause, seek, speed, layer, crossfade) are posted to
+//! different nodes; for every `seq` the viewers received, the frames are
+//! equal apart from `sent_at_unix_nanos` and `dropped`. A fourth node
+//! started after the controls computes the same frames from the stored
+//! ones; a DELETE on one node closes the viewers on the others with 1000.
+//! A control stored for a tick already past makes every node rewind and
+//! converge; the idle timeout counts the viewers of every node.
+//!
+//! The clips move one joint along x (and the second along y) at 1 unit/s,
+//! so a frame's pose says which time and which blend it shows; the checks
+//! of each control's effect at its stamp are made against that by hand.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use futures_util::StreamExt;
+use serde_json::{Value, json};
+use tokio::task::JoinHandle;
+use tokio_tungstenite::tungstenite::Message;
+
+use super::Node;
+use crate::common::pg::Schema;
+
+const FPS: u64 = 20;
+
+/// Controls are stamped this far ahead, generous for a loaded 2-core machine:
+/// a node that hears one late still converges, but the frames it already
+/// sent would differ, which this test would report.
+const LEAD_MS: &str = "250";
+
+/// A clip moving `axis` of joint `j` from 0 to 10 over 10 s, looping.
+fn line_doc(axis: usize) -> String {
+    let end = |v: f64| {
+        let mut p = [0.0; 3];
+        p[axis] = v;
+        p
+    };
+    json!({"name": format!("line{axis}"), "playback": "loop", "tracks": [{"joint": "j", "channel": "translation",
+        "interpolation": "linear", "times": [0.0, 10.0], "values": [end(0.0), end(10.0)]}]})
+    .to_string()
+}
+
+async fn upload(http: &reqwest::Client, node: &Node, doc: String) -> String {
+    let resp =
+        http.post(node.url("/v1/clips")).header("content-type", "application/json").body(doc).send().await.unwrap();
+    assert_eq!(resp.status(), 201, "{}: upload", node.name);
+    resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+}
+
+async fn post_control(http: &reqwest::Client, node: &Node, id: &str, body: Value) -> u64 {
+    let resp = http.post(node.url(&format!("/v1/broadcasts/{id}/controls"))).json(&body).send().await.unwrap();
+    let status = resp.status().as_u16();
+    let answer: Value = resp.json().await.unwrap();
+    assert_eq!(status, 200, "{}: control {body}: {answer}", node.name);
+    answer["seq"].as_u64().unwrap()
+}
+
+/// What one viewer received: each frame by `seq`, without the two fields
+/// that are its own (`sent_at_unix_nanos`, `dropped`); and how it closed.
+type Seen = (BTreeMap<u64, Value>, Option<u16>);
+
+/// Watches broadcast `id` on `node` until it closes (or `limit`).
+fn viewer(node: &Node, id: &str, limit: Duration) -> JoinHandle<Seen> {
+    let url = node.ws_url(&format!("/v1/broadcasts/{id}/stream"));
+    tokio::spawn(async move {
+        let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        let mut frames = BTreeMap::new();
+        let deadline = tokio::time::Instant::now() + limit;
+        loop {
+            let next = tokio::time::timeout_at(deadline, ws.next()).await;
+            match next {
+                Ok(Some(Ok(Message::Text(text)))) => {
+                    let mut frame: Value = serde_json::from_str(&text).unwrap();
+                    let seq = frame["seq"].as_u64().unwrap();
+                    let fields = frame.as_object_mut().unwrap();
+                    fields.remove("sent_at_unix_nanos");
+                    fields.remove("dropped");
+                    frames.insert(seq, frame);
+                }
+                Ok(Some(Ok(Message::Close(close)))) => return (frames, close.map(|c| u16::from(c.code))),
+                Ok(Some(Ok(_))) => {}
+                Ok(Some(Err(_)) | None) | Err(_) => return (frames, None),
+            }
+        }
+    })
+}
+
+/// A frame's x and y of joint `j` and its motion time.
+fn xy(frame: &Value) -> (f64, f64, f64) {
+    let t = &frame["pose"]["joints"][0]["translation"];
+    (t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), frame["pose"]["time"].as_f64().unwrap())
+}
+
+/// Asserts that every `seq` two viewers both received carries equal frames;
+/// returns how many they shared.
+fn agree(a: &(&str, &BTreeMap<u64, Value>), b: &(&str, &BTreeMap<u64, Value>)) -> usize {
+    let mut shared = 0;
+    for (seq, frame) in a.1 {
+        if let Some(other) = b.1.get(seq) {
+            assert_eq!(frame, other, "seq {seq}: {} and {} differ", a.0, b.0);
+            shared += 1;
+        }
+    }
+    shared
+}
+
+async fn metric(http: &reqwest::Client, node: &Node, name: &str) -> f64 {
+    let text = http.get(node.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    text.lines().find_map(|l| l.strip_prefix(name)?.trim().parse().ok()).unwrap_or(0.0)
+}
+
+async fn node(schema: &Schema, name: &str) -> Node {
+    Node::serve()
+        .name(name)
+        .args(["--db-max-connections", "4", "--broadcast-control-lead-ms", LEAD_MS, "--database-url"])
+        .arg(schema.url(&format!("application_name={name}")))
+        .start()
+        .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_node_computes_the_same_frames_before_and_after_controls() {
+    let Some(schema) = Schema::create("bcast").await else { return };
+    let (a, b, c) = (node(&schema, "node-a").await, node(&schema, "node-b").await, node(&schema, "node-c").await);
+    let http = crate::common::http_client();
+    let x = upload(&http, &a, line_doc(0)).await;
+    let y = upload(&http, &b, line_doc(1)).await;
+
+    let body = json!({"motion": {"layers": [{"clip": x}, {"clip": y, "weight": 0.5}]}, "fps": FPS});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+
+    // Watched on all three (B and C may not have heard of it yet: they read it from the store).
+    let limit = Duration::from_secs(30);
+    let viewers = [viewer(&a, &id, limit), viewer(&b, &id, limit), viewer(&c, &id, limit)];
+    let pause = Duration::from_millis(400);
+    tokio::time::sleep(pause).await;
+    let mut stamps = BTreeMap::new();
+    stamps.insert("pause", post_control(&http, &b, &id, json!({"op": "pause"})).await);
+    tokio::time::sleep(pause).await;
+    stamps.insert("play", post_control(&http, &c, &id, json!({"op": "play"})).await);
+    tokio::time::sleep(pause).await;
+    stamps.insert("seek", post_control(&http, &a, &id, json!({"op": "seek", "time": 9.0})).await);
+    tokio::time::sleep(pause).await;
+    stamps.insert("speed", post_control(&http, &b, &id, json!({"op": "speed", "speed": -2.0})).await);
+    tokio::time::sleep(pause).await;
+    let layer = json!({"op": "layer", "index": 1, "weight": 1.0, "duration": 0.5});
+    stamps.insert("layer", post_control(&http, &a, &id, layer).await);
+    tokio::time::sleep(pause).await;
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": x}]}, "duration": 0.5});
+    stamps.insert("crossfade", post_control(&http, &c, &id, fade).await);
+    tokio::time::sleep(Duration::from_secs(1)).await;
+
+    // A node started after every control computes the same frames from the stored ones.
+    let d = node(&schema, "node-d").await;
+    let late = viewer(&d, &id, limit);
+    tokio::time::sleep(Duration::from_secs(1)).await;
+
+    // DELETE on B ends it for the viewers on A, C and D.
+    let resp = http.delete(b.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let mut seen = Vec::new();
+    for (name, v) in ["A", "B", "C", "D"].into_iter().zip(viewers.into_iter().chain([late])) {
+        let (frames, close) = tokio::time::timeout(Duration::from_secs(5), v).await.expect("closed in time").unwrap();
+        assert_eq!(close, Some(1000), "{name}'s viewer closed with 1000");
+        seen.push((name, frames));
+    }
+    let seen: Vec<(&str, &BTreeMap<u64, Value>)> = seen.iter().map(|(n, f)| (*n, f)).collect();
+    let last_stamp = *stamps.values().max().unwrap();
+    for other in &seen[1..] {
+        let shared = agree(&seen[0], other);
+        eprintln!("A and {} agree on {shared} frames", other.0);
+        if other.0 == "D" {
+            assert!(shared >= 10, "D shares {shared} frames with A");
+            assert!(other.1.keys().all(|&k| k > last_stamp), "D joined after the controls");
+        } else {
+            assert!(shared as u64 >= last_stamp, "{} shares only {shared} frames", other.0);
+        }
+    }
+    // Each control shows at its stamp (checked on the frames of all, which agree).
+    let mut f = BTreeMap::new();
+    for (_, frames) in &seen {
+        f.extend(frames.iter().map(|(k, v)| (*k, v.clone())));
+    }
+    let at = |k: u64| xy(f.get(&k).unwrap_or_else(|| panic!("no viewer received seq {k}")));
+    let (p, s) = (stamps["pause"], stamps["seek"]);
+    assert_eq!(at(p).2, at(p - 1).2, "paused at its stamp");
+    assert_eq!(at(p + 3).2, at(p - 1).2, "held while paused");
+    assert!(at(stamps["play"]).2 > at(stamps["play"] - 1).2, "playing again");
+    assert!((at(s).2 - 9.0).abs() < 1e-9, "the seek shows 9 s at its stamp: {:?}", at(s));
+    let v = stamps["speed"];
+    assert!((at(v).2 - (at(v - 1).2 - 2.0 / FPS as f64)).abs() < 1e-6, "speed -2 from its stamp");
+    let l = stamps["layer"];
+    // y is the layer's weight times the time (while the time is in (0, 10)).
+    let weight = |k: u64| at(k).1 / at(k).2;
+    assert!((weight(l - 1) - 0.5).abs() < 1e-3, "layer 1 at 0.5 before: {:?}", at(l - 1));
+    assert!(stamps["crossfade"] > l + 5);
+    assert!((weight(l + 5) - 1.0).abs() < 1e-3, "layer 1 ramped to 1 in 0.5 s at speed 2: {:?}", at(l + 5));
+    let cf = stamps["crossfade"];
+    assert!(at(cf + 12).1.abs() < 1e-6, "after the crossfade to x alone, y is 0: {:?}", at(cf + 12));
+    eprintln!(
+        "broadcast replays: A {} B {} C {} D {}",
+        metric(&http, &a, "inbetween_broadcast_replays_total").await,
+        metric(&http, &b, "inbetween_broadcast_replays_total").await,
+        metric(&http, &c, "inbetween_broadcast_replays_total").await,
+        metric(&http, &d, "inbetween_broadcast_replays_total").await,
+    );
+    // Gone everywhere.
+    for n in [&a, &c, &d] {
+        let resp = http.get(n.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+        assert_eq!(resp.status(), 404, "{}", n.name);
+    }
+    drop((a, b, c, d));
+    schema.drop_now().await;
+}
+
+/// A control stored for a tick every node has already stepped (as a node
+/// would see one it heard late): each node rewinds to a snapshot before its
+/// stamp and steps again, and from then on they agree with each other and
+/// with a node that started after it and computed everything from tick 0.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nodes_that_hear_a_control_for_a_past_tick_converge() {
+    let Some(schema) = Schema::create("bpast").await else { return };
+    let (a, b) = (node(&schema, "node-a").await, node(&schema, "node-b").await);
+    let http = crate::common::http_client();
+    let x = upload(&http, &a, line_doc(0)).await;
+    let body = json!({"motion": {"layers": [{"clip": x}]}, "fps": FPS});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let limit = Duration::from_secs(30);
+    let viewers = [viewer(&a, &id, limit), viewer(&b, &id, limit)];
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+
+    // Stamped 20 ticks (1 s) ago, stored behind the nodes' backs: announced like any control.
+    let summary: Value = http.get(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap().json().await.unwrap();
+    let past = summary["seq"].as_u64().unwrap() - 20;
+    let db = sqlx::PgPool::connect(&schema.url("")).await.unwrap();
+    sqlx::query("INSERT INTO broadcast_controls (id, broadcast_id, seq, control) VALUES ($1, $2, $3, $4)")
+        .bind(uuid::Uuid::now_v7().to_string())
+        .bind(&id)
+        .bind(past as i64)
+        .bind(json!({"message": {"op": "seek", "time": 7.5}, "versions": {}}).to_string())
+        .execute(&db)
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let c = node(&schema, "node-c").await;
+    let late = viewer(&c, &id, limit);
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    let resp = http.delete(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let mut seen = Vec::new();
+    for v in viewers.into_iter().chain([late]) {
+        seen.push(tokio::time::timeout(Duration::from_secs(5), v).await.expect("closed in time").unwrap().0);
+    }
+    // From a few ticks after the insert on, every node shows the seek as of its (past) stamp.
+    let settled = past + 20 + 6;
+    let after = |f: &BTreeMap<u64, Value>| f.range(settled..).map(|(k, v)| (*k, v.clone())).collect::<BTreeMap<_, _>>();
+    let (fa, fb, fc) = (after(&seen[0]), after(&seen[1]), after(&seen[2]));
+    assert!(agree(&("A", &fa), &("B", &fb)) >= 20);
+    assert!(agree(&("A", &fa), &("C", &fc)) >= 10, "C computed it from tick 0");
+    for (k, frame) in &fa {
+        let want = 7.5 + (k - past) as f64 / FPS as f64;
+        assert!((xy(frame).2 - want).abs() < 1e-9, "seq {k}: {:?}, want time {want}", xy(frame));
+    }
+    for n in [&a, &b] {
+        assert!(metric(&http, n, "inbetween_broadcast_replays_total").await >= 1.0, "{} rewound", n.name);
+    }
+    db.close().await;
+    drop((a, b, c));
+    schema.drop_now().await;
+}
+
+/// The idle timeout counts viewers on every node: a broadcast created on A
+/// and watched only on B lives on past its timeout; once nobody watches
+/// anywhere, it ends on every node.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_idle_timeout_counts_viewers_on_every_node() {
+    let Some(schema) = Schema::create("bidle").await else { return };
+    let (a, b) = (node(&schema, "node-a").await, node(&schema, "node-b").await);
+    let http = crate::common::http_client();
+    let x = upload(&http, &a, line_doc(0)).await;
+    let body = json!({"motion": {"layers": [{"clip": x}]}, "fps": FPS, "idle_timeout_secs": 2});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let status = |n: &Node| {
+        let (http, url) = (http.clone(), n.url(&format!("/v1/broadcasts/{id}")));
+        async move { http.get(url).send().await.unwrap().status().as_u16() }
+    };
+
+    let watching = viewer(&b, &id, Duration::from_secs(4));
+    tokio::time::sleep(Duration::from_millis(3500)).await;
+    assert_eq!(status(&a).await, 200, "watched on B: alive on A past its 2 s");
+    let (frames, _) = watching.await.unwrap();
+    assert!(frames.len() > 60, "B's viewer saw {} frames", frames.len());
+    // Nobody watches now: within the timeout and a check or two, gone on both.
+    let started = tokio::time::Instant::now();
+    while status(&a).await != 404 || status(&b).await != 404 {
+        assert!(started.elapsed() < Duration::from_secs(6), "still live {:?} after the last viewer", started.elapsed());
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(started.elapsed() > Duration::from_millis(1000), "not before its idle timeout");
+    drop((a, b));
+    schema.drop_now().await;
+}
