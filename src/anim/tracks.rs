@@ -1,12 +1,14 @@
 //! The compiled tracks of a clip, stored in one list per channel and curve
 //! kind, so that sampling runs each list as a tight loop with no dispatch
 //! per track. Constant tracks never reach these lists: `Clip::build` folds
-//! them into the clip's base pose.
+//! them into the clip's base pose. Bezier tracks that share a timeline are
+//! then gathered four at a time into the SIMD groups of `soa` ([`QuatTracks::group`]).
 
 use glam::{Quat, Vec3A, Vec4};
 
 use super::curve::{ArcPiece, QuatCurve, QuatSegment, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
 use super::quat::slerp_fast;
+use super::soa::{Lanes, QuatGroup, Vec3Group};
 use super::timeline::Span;
 
 /// One track: the joint it writes, the timeline it reads and its curve.
@@ -31,6 +33,8 @@ pub(crate) struct Vec3Tracks {
     linear: Vec<Track<Box<[Vec3A]>>>,
     bezier: Vec<Track<Box<[[Vec3A; 4]]>>>,
     arc: Vec<Track<ArcCurve>>,
+    /// Bezier tracks sharing a timeline, four per group.
+    groups: Vec<Vec3Group>,
 }
 
 /// Rotation tracks by kind.
@@ -40,6 +44,8 @@ pub(crate) struct QuatTracks {
     slerp: Vec<Track<Box<[Quat]>>>,
     bezier: Vec<Track<Box<[QuatSegment]>>>,
     hermite: Vec<Track<Box<[[Vec4; 4]]>>>,
+    /// Slerp-Bezier tracks sharing a timeline, four per group.
+    groups: Vec<QuatGroup>,
 }
 
 /// Bytes of a track list: the list, and each track's curve arrays.
@@ -69,6 +75,50 @@ impl Spans for &[Span] {
     #[inline(always)]
     fn span(&mut self, timeline: u32) -> Span {
         self[timeline as usize]
+    }
+}
+
+/// Splits `tracks` into the ones left alone and runs of 2–4 tracks on one
+/// timeline (in track order), which `make` turns into a group.
+fn gather<C, G>(tracks: &mut Vec<Track<C>>, mut make: impl FnMut(u32, &[&Track<C>]) -> G) -> Vec<G> {
+    let mut timelines: Vec<u32> = tracks.iter().map(|t| t.timeline).collect();
+    timelines.sort_unstable();
+    timelines.dedup();
+    let mut grouped = vec![false; tracks.len()];
+    let mut groups = Vec::new();
+    for timeline in timelines {
+        let on: Vec<usize> = (0..tracks.len()).filter(|&i| tracks[i].timeline == timeline).collect();
+        for chunk in on.chunks(4).filter(|c| c.len() >= 2) {
+            groups.push(make(timeline, &chunk.iter().map(|&i| &tracks[i]).collect::<Vec<_>>()));
+            chunk.iter().for_each(|&i| grouped[i] = true);
+        }
+    }
+    let mut keep = grouped.iter().map(|g| !g);
+    tracks.retain(|_| keep.next().unwrap_or(true));
+    tracks.shrink_to_fit();
+    groups
+}
+
+/// Evaluates each group with a kept lane and writes its kept lanes.
+#[inline(always)]
+fn run_groups<G, T: Copy>(
+    groups: &[G],
+    spans: &mut impl Spans,
+    out: &mut [T],
+    of: impl Fn(&G) -> (&Lanes, u32),
+    eval: impl Fn(&G, Span) -> [T; 4],
+) {
+    for g in groups {
+        let (lanes, timeline) = of(g);
+        if !lanes.iter().any(|(_, j)| spans.keeps(j)) {
+            continue;
+        }
+        let values = eval(g, spans.span(timeline));
+        for (k, j) in lanes.iter() {
+            if spans.keeps(j) {
+                out[j as usize] = values[k];
+            }
+        }
     }
 }
 
@@ -102,6 +152,20 @@ impl Vec3Tracks {
             + list_bytes(&self.linear, |c| slice_bytes(c))
             + list_bytes(&self.bezier, |c| slice_bytes(c))
             + list_bytes(&self.arc, |c| slice_bytes(&c.segments) + slice_bytes(&c.pieces))
+            + super::clip::vec_bytes(&self.groups)
+            + self.groups.iter().map(Vec3Group::heap_bytes).sum::<usize>()
+    }
+
+    /// Tracks evaluated in groups.
+    pub fn simd_lanes(&self) -> usize {
+        self.groups.iter().map(|g| g.lanes.count as usize).sum()
+    }
+
+    /// Gathers Bezier tracks that share a timeline into groups of four.
+    pub fn group(&mut self) {
+        self.groups = gather(&mut self.bezier, |timeline, tracks| {
+            Vec3Group::new(timeline, &tracks.iter().map(|t| (t.joint, &*t.curve)).collect::<Vec<_>>())
+        });
     }
 
     /// Evaluates every track `spans` keeps at its timeline's span into `out`.
@@ -113,6 +177,7 @@ impl Vec3Tracks {
             k[i].lerp(k[i + 1], s.u)
         });
         run(&self.bezier, spans, out, |segs, s| bezier3(&segs[s.index as usize], s.u));
+        run_groups(&self.groups, spans, out, |g| (&g.lanes, g.timeline), Vec3Group::at);
         run(&self.arc, spans, out, |a, s| {
             let piece = a.pieces[s.index as usize];
             bezier3(&a.segments[piece.segment as usize], piece.u0 + s.u * piece.du)
@@ -138,6 +203,20 @@ impl QuatTracks {
             + list_bytes(&self.slerp, |c| slice_bytes(c))
             + list_bytes(&self.bezier, |c| slice_bytes(c))
             + list_bytes(&self.hermite, |c| slice_bytes(c))
+            + super::clip::vec_bytes(&self.groups)
+            + self.groups.iter().map(QuatGroup::heap_bytes).sum::<usize>()
+    }
+
+    /// Tracks evaluated in groups.
+    pub fn simd_lanes(&self) -> usize {
+        self.groups.iter().map(|g| g.lanes.count as usize).sum()
+    }
+
+    /// Gathers slerp-Bezier tracks that share a timeline into groups of four.
+    pub fn group(&mut self) {
+        self.groups = gather(&mut self.bezier, |timeline, tracks| {
+            QuatGroup::new(timeline, &tracks.iter().map(|t| (t.joint, &*t.curve)).collect::<Vec<_>>())
+        });
     }
 
     /// Evaluates every track `spans` keeps at its timeline's span into `out`.
@@ -149,6 +228,7 @@ impl QuatTracks {
             slerp_fast(k[i], k[i + 1], s.u)
         });
         run(&self.bezier, spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
+        run_groups(&self.groups, spans, out, |g| (&g.lanes, g.timeline), QuatGroup::at);
         run(&self.hermite, spans, out, |segs, s| {
             let seg = &segs[s.index as usize];
             // The cubic can pass through zero (a key and its negation with
