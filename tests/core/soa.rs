@@ -112,3 +112,45 @@ fn grouped_sampling_allocates_nothing_once_warm() {
     }
     assert_eq!(allocations() - before, 0);
 }
+
+#[test]
+fn a_masked_layer_writes_only_its_joints_lanes_and_each_as_the_whole_pose_does() {
+    // A mask samples part of a pose (`sample_joints_into`): a group whose
+    // lanes are partly kept must write those lanes, bit for bit as the
+    // whole-pose sample, whichever lanes the mask leaves out.
+    use inbetween::anim::Motion;
+    use inbetween::anim::motion::{LayerSpec, MaskSpec, MotionOptions, MotionSpec};
+    let mut rng = Rng::new(1920);
+    for _ in 0..8 {
+        let clip = Clip::build(&shared_clip(&mut rng, 13)).unwrap();
+        assert!(clip.simd_lanes() > 0);
+        let named = 1 + rng.below(12);
+        let mask = MaskSpec { joints: vec![(format!("j{named}"), 1.0)], descendants: true, default: None };
+        let layer = LayerSpec { mask: Some(mask), ..LayerSpec::new(&clip) };
+        let motion =
+            Motion::build(MotionSpec { layers: vec![layer], root_motion: None, ..Default::default() }).unwrap();
+        let under = |mut j: usize| loop {
+            if j == named {
+                return true;
+            }
+            match clip.skeleton().parent(j) {
+                Some(p) => j = p,
+                None => return false,
+            }
+        };
+        let (mut sampler, mut cursor, mut whole) =
+            (inbetween::anim::MotionSampler::new(), Cursor::default(), Pose::default());
+        for t in times(&mut rng, &clip) {
+            motion.sample(t, &MotionOptions::default(), &mut sampler);
+            clip.sample_into(sampler.clip_times()[0], &mut cursor, &mut whole);
+            let got = sampler.pose();
+            for j in (0..clip.joint_count()).filter(|&j| under(j)) {
+                assert_eq!(
+                    (got.translations[j], got.rotations[j], got.scales[j]),
+                    (whole.translations[j], whole.rotations[j], whole.scales[j]),
+                    "joint {j} at {t} (mask on j{named})"
+                );
+            }
+        }
+    }
+}
