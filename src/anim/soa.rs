@@ -4,9 +4,12 @@
 //! dependency chains, and the span, the Bernstein weights and the powers of
 //! `u` are computed once per group rather than per track.
 //!
-//! A group holds 2–4 tracks of one kind on one timeline (a lone track stays
-//! in the scalar lists of `tracks`); missing lanes repeat lane 0 and are
-//! never written. The arithmetic is the scalar kernel's (`curve`), lane by
+//! A group holds 2–4 tracks of one kind on one timeline; missing lanes
+//! repeat lane 0 and are never written. Rotation tracks with their own key
+//! times are gathered four at a time too ([`QuatSegment4::gather`]): each
+//! lane's segment is found by its own search and the four are transposed
+//! into the same form, with a `u` per lane. A lone track stays on the
+//! scalar kernel of `tracks`. The arithmetic is the scalar kernel's (`curve`), lane by
 //! lane: the same control points, the same level-1 series, Eberly's weights
 //! with the widest tier any lane of the segment needs (a longer series is
 //! accurate on a narrower turn too), and the exact slerps, per lane, where a
@@ -26,7 +29,7 @@ pub(crate) struct Lanes {
 }
 
 impl Lanes {
-    fn new(joints: &[u32]) -> Self {
+    pub fn new(joints: &[u32]) -> Self {
         debug_assert!((1..=4).contains(&joints.len()));
         Lanes { joints: std::array::from_fn(|k| joints[k.min(joints.len() - 1)]), count: joints.len() as u8 }
     }
@@ -99,24 +102,57 @@ impl QuatGroup {
     /// The four lanes' rotations at `s`.
     #[inline(always)]
     pub fn at(&self, s: Span) -> [Quat; 4] {
-        let seg = &self.segments[s.index as usize];
-        let mut out = match seg.tier {
-            SlerpTier::Tiny => pyramid4(seg, s.u, &TINY),
-            SlerpTier::Narrow => pyramid4(seg, s.u, &NARROW),
-            SlerpTier::Wide | SlerpTier::Exact => pyramid4(seg, s.u, &WIDE),
+        self.segments[s.index as usize].at(Vec4::splat(s.u))
+    }
+}
+
+impl QuatSegment4 {
+    /// Four rotation tracks' current segments, whatever their timelines,
+    /// side by side: the stored per-track records transposed (tracks with
+    /// their own key times, gathered at sampling time).
+    #[inline(always)]
+    pub fn gather(segs: [&QuatSegment; 4]) -> Self {
+        let points = std::array::from_fn(|p| {
+            let m = Mat4::from_cols(segs[0].points[p], segs[1].points[p], segs[2].points[p], segs[3].points[p]);
+            let t = m.transpose();
+            [t.x_axis, t.y_axis, t.z_axis, t.w_axis]
+        });
+        let sine = std::array::from_fn(|i| {
+            let m = Mat4::from_cols(segs[0].sine[i], segs[1].sine[i], segs[2].sine[i], segs[3].sine[i]);
+            let t = m.transpose();
+            [t.x_axis, t.y_axis, t.z_axis]
+        });
+        let (mut tier, mut exact) = (SlerpTier::Tiny, 0);
+        for (k, seg) in segs.iter().enumerate() {
+            if seg.tier == SlerpTier::Exact {
+                exact |= 1 << k;
+            } else {
+                tier = tier.max(seg.tier);
+            }
+        }
+        QuatSegment4 { points, sine, tier, exact }
+    }
+
+    /// The four lanes' rotations, lane `k` at `u[k]`.
+    #[inline(always)]
+    pub fn at(&self, u: Vec4) -> [Quat; 4] {
+        let mut out = match self.tier {
+            SlerpTier::Tiny => pyramid4(self, u, &TINY),
+            SlerpTier::Narrow => pyramid4(self, u, &NARROW),
+            SlerpTier::Wide | SlerpTier::Exact => pyramid4(self, u, &WIDE),
         };
-        if seg.exact != 0 {
-            exact_lanes(seg, s.u, &mut out);
+        if self.exact != 0 {
+            exact_lanes(self, u, &mut out);
         }
         out
     }
 }
 
 #[cold]
-fn exact_lanes(seg: &QuatSegment4, u: f32, out: &mut [Quat; 4]) {
+fn exact_lanes(seg: &QuatSegment4, u: Vec4, out: &mut [Quat; 4]) {
     for (k, q) in out.iter_mut().enumerate() {
         if seg.exact & (1 << k) != 0 {
-            *q = exact_pyramid(seg.lane_points(k), u);
+            *q = exact_pyramid(seg.lane_points(k), u[k]);
         }
     }
 }
@@ -142,28 +178,27 @@ fn aligned(p: &Quat4, q: &Quat4) -> (Quat4, Vec4) {
     ([q[0] * sign, q[1] * sign, q[2] * sign, q[3] * sign], (x * sign).min(Vec4::ONE) - Vec4::ONE)
 }
 
-/// Eberly's `N`-term slerp weight `sin(sθ)/sin θ` per lane, at the same
-/// `s` in every lane (so each term's factor is one scalar).
+/// Eberly's `N`-term slerp weight `sin(sθ)/sin θ` per lane.
 #[inline(always)]
-fn weight<const N: usize>(s: f32, xm1: Vec4, (cu, cv): &([f32; N], [f32; N])) -> Vec4 {
+fn weight<const N: usize>(s: Vec4, xm1: Vec4, (cu, cv): &([f32; N], [f32; N])) -> Vec4 {
     let ss = s * s;
     let mut acc = Vec4::ONE;
     let mut i = N;
     while i > 0 {
         i -= 1;
-        acc = xm1 * acc * (ss * cu[i] - cv[i]) + Vec4::ONE;
+        acc = xm1 * acc * (ss * cu[i] - Vec4::splat(cv[i])) + Vec4::ONE;
     }
     acc * s
 }
 
 /// The three-level pyramid of `curve::slerp_bezier`, four lanes at once.
 #[inline(always)]
-fn pyramid4<const N: usize>(seg: &QuatSegment4, u: f32, terms: &([f32; N], [f32; N])) -> [Quat; 4] {
-    let v = 1.0 - u;
+fn pyramid4<const N: usize>(seg: &QuatSegment4, u: Vec4, terms: &([f32; N], [f32; N])) -> [Quat; 4] {
+    let v = Vec4::ONE - u;
     let (uu, vv) = (u * u, v * v);
     let c = &seg.sine;
     let series =
-        |k: usize, s: f32, ss: f32| ((((c[4][k] * ss + c[3][k]) * ss + c[2][k]) * ss + c[1][k]) * ss + c[0][k]) * s;
+        |k: usize, s: Vec4, ss: Vec4| ((((c[4][k] * ss + c[3][k]) * ss + c[2][k]) * ss + c[1][k]) * ss + c[0][k]) * s;
     let [p0, p1, p2, p3] = &seg.points;
     // Level 1: pairs with fixed angles, weights from the stored series.
     let f = blend(p0, p1, series(0, v, vv), series(0, u, uu));

@@ -8,7 +8,7 @@ use glam::{Quat, Vec3A, Vec4};
 
 use super::curve::{ArcPiece, QuatCurve, QuatSegment, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
 use super::quat::slerp_fast;
-use super::soa::{Lanes, QuatGroup, Vec3Group};
+use super::soa::{Lanes, QuatGroup, QuatSegment4, Vec3Group};
 use super::timeline::Span;
 
 /// One track: the joint it writes, the timeline it reads and its curve.
@@ -46,6 +46,19 @@ pub(crate) struct QuatTracks {
     hermite: Vec<Track<Box<[[Vec4; 4]]>>>,
     /// Slerp-Bezier tracks sharing a timeline, four per group.
     groups: Vec<QuatGroup>,
+    /// Tracks at the front of `bezier` with different timelines, evaluated
+    /// four at a time all the same.
+    gathered: Vec<Gathered>,
+    /// How many tracks at the front of `bezier` `gathered` covers.
+    gathered_tracks: usize,
+}
+
+/// Two to four slerp-Bezier tracks with different timelines, by index in
+/// `QuatTracks::bezier` (missing lanes repeat the last).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Gathered {
+    lanes: Lanes,
+    tracks: [u32; 4],
 }
 
 /// Bytes of a track list: the list, and each track's curve arrays.
@@ -205,18 +218,55 @@ impl QuatTracks {
             + list_bytes(&self.hermite, |c| slice_bytes(c))
             + super::clip::vec_bytes(&self.groups)
             + self.groups.iter().map(QuatGroup::heap_bytes).sum::<usize>()
+            + super::clip::vec_bytes(&self.gathered)
     }
 
-    /// Tracks evaluated in groups.
+    /// Tracks evaluated in groups (gathered ones included).
     pub fn simd_lanes(&self) -> usize {
-        self.groups.iter().map(|g| g.lanes.count as usize).sum()
+        self.groups.iter().map(|g| g.lanes.count as usize).sum::<usize>() + self.gathered_tracks
     }
 
-    /// Gathers slerp-Bezier tracks that share a timeline into groups of four.
+    /// Gathers slerp-Bezier tracks that share a timeline into groups of
+    /// four, and the others four at a time (the last one alone stays scalar).
     pub fn group(&mut self) {
         self.groups = gather(&mut self.bezier, |timeline, tracks| {
             QuatGroup::new(timeline, &tracks.iter().map(|t| (t.joint, &*t.curve)).collect::<Vec<_>>())
         });
+        let n = self.bezier.len();
+        let covered = if n % 4 == 1 { n - 1 } else { n };
+        self.gathered = (0..covered)
+            .step_by(4)
+            .map(|first| {
+                let last = (first + 4).min(covered);
+                let joints: Vec<u32> = self.bezier[first..last].iter().map(|t| t.joint).collect();
+                let lanes = Lanes::new(&joints);
+                Gathered { lanes, tracks: std::array::from_fn(|k| (first + k.min(last - first - 1)) as u32) }
+            })
+            .collect();
+        self.gathered_tracks = covered;
+    }
+
+    /// The gathered groups: each kept lane's own span and segment,
+    /// transposed, evaluated together; lanes left out repeat a kept one.
+    #[inline(always)]
+    fn run_gathered(&self, spans: &mut impl Spans, out: &mut [Quat]) {
+        for g in &self.gathered {
+            let Some((first, _)) = g.lanes.iter().find(|&(_, j)| spans.keeps(j)) else { continue };
+            let mut u = [0.0; 4];
+            let segs: [&QuatSegment; 4] = std::array::from_fn(|k| {
+                let lane = if k < g.lanes.count as usize && spans.keeps(g.lanes.joints[k]) { k } else { first };
+                let track = &self.bezier[g.tracks[lane] as usize];
+                let span = spans.span(track.timeline);
+                u[k] = span.u;
+                &track.curve[span.index as usize]
+            });
+            let values = QuatSegment4::gather(segs).at(Vec4::from_array(u));
+            for (k, j) in g.lanes.iter() {
+                if spans.keeps(j) {
+                    out[j as usize] = values[k];
+                }
+            }
+        }
     }
 
     /// Evaluates every track `spans` keeps at its timeline's span into `out`.
@@ -227,7 +277,8 @@ impl QuatTracks {
             let i = s.index as usize;
             slerp_fast(k[i], k[i + 1], s.u)
         });
-        run(&self.bezier, spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
+        run(&self.bezier[self.gathered_tracks..], spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
+        self.run_gathered(spans, out);
         run_groups(&self.groups, spans, out, |g| (&g.lanes, g.timeline), QuatGroup::at);
         run(&self.hermite, spans, out, |segs, s| {
             let seg = &segs[s.index as usize];

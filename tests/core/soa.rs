@@ -15,8 +15,10 @@ use crate::allocations;
 use crate::random::{Kind, Rng, track};
 
 /// A clip of `joints` joints whose tracks of each channel share one of two
-/// key-time arrays, all in one spline mode per channel.
+/// key-time arrays (in half the clips, about half of them keep their own
+/// times instead), all in one spline mode per channel.
 fn shared_clip(rng: &mut Rng, joints: usize) -> ClipSpec {
+    let own_times = rng.chance(0.5);
     let ends = [None, Some(Ends::Reflect), Some(Ends::ZeroSlope), Some(Ends::Wrap), Some(Ends::Phantom)];
     let mut tracks = Vec::new();
     for channel in Channel::ALL {
@@ -30,7 +32,10 @@ fn shared_clip(rng: &mut Rng, joints: usize) -> ClipSpec {
                 continue;
             }
             let mut t = track(rng, &format!("j{j}"), kind, keys);
-            t.times = clocks[usize::from(rng.chance(0.3))].clone();
+            // Most share a clock; the rest keep their own times (gathered lanes).
+            if !own_times || rng.chance(0.5) {
+                t.times = clocks[usize::from(rng.chance(0.3))].clone();
+            }
             tracks.push(t);
         }
     }
