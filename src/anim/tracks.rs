@@ -2,7 +2,8 @@
 //! kind, so that sampling runs each list as a tight loop with no dispatch
 //! per track. Constant tracks never reach these lists: `Clip::build` folds
 //! them into the clip's base pose. Bezier tracks that share a timeline are
-//! then gathered four at a time into the SIMD groups of `soa` ([`QuatTracks::group`]).
+//! then gathered four at a time into the SIMD groups of `soa` ([`QuatTracks::group`]), and rotation
+//! tracks with their own times four at a time as well.
 
 use glam::{Quat, Vec3A, Vec4};
 
