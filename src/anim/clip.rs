@@ -201,6 +201,26 @@ impl Clip {
         ik_limits: &IkLimits,
         cancel: &AtomicBool,
     ) -> Result<Clip, ClipError> {
+        Clip::build_kernel(spec, max_work, ik_limits, cancel, true)
+    }
+
+    /// [`Clip::build`] without the SIMD groups: every track on the scalar
+    /// kernel, for tests that hold the two kernels to each other.
+    ///
+    /// # Errors
+    /// As [`Clip::build`].
+    #[doc(hidden)]
+    pub fn build_scalar(spec: &ClipSpec) -> Result<Clip, ClipError> {
+        Clip::build_kernel(spec, DEFAULT_BUILD_WORK, &IkLimits::default(), &AtomicBool::new(false), false)
+    }
+
+    fn build_kernel(
+        spec: &ClipSpec,
+        max_work: u64,
+        ik_limits: &IkLimits,
+        cancel: &AtomicBool,
+        simd_groups: bool,
+    ) -> Result<Clip, ClipError> {
         let chars = spec.name.chars().count();
         if chars == 0 || chars > MAX_NAME_CHARS {
             return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
@@ -265,6 +285,11 @@ impl Clip {
             }
         }
         bounds.check(&skeleton)?;
+        if simd_groups {
+            translations.group();
+            rotations.group();
+            scales.group();
+        }
         let built = Parameters::build(&spec.parameters, &mut meter, &mut intern)?;
         base.parameters = built.base;
         if let Some((first, last)) = built.domain {
@@ -396,6 +421,13 @@ impl Clip {
 
     pub fn track_count(&self) -> usize {
         self.track_count
+    }
+
+    /// How many tracks the SIMD groups evaluate (tracks sharing key times,
+    /// four at a time; the rest run on the scalar kernel).
+    #[doc(hidden)]
+    pub fn simd_lanes(&self) -> usize {
+        self.translations.simd_lanes() + self.rotations.simd_lanes() + self.scales.simd_lanes()
     }
 
     /// Distinct key-time arrays; tracks that share times share one search.

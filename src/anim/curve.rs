@@ -30,7 +30,7 @@ pub struct QuatSegment {
 /// How the runtime slerps of a segment are computed. Every slerp of the de
 /// Casteljau pyramid spans at most the control polygon's total turn, so the
 /// turn, known at build time, picks a method that is accurate for all of them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum SlerpTier {
     /// Turn ≤ acos(TINY_SLERP_MIN_COS): 3-term polynomial weights.
     Tiny,
@@ -113,7 +113,7 @@ pub enum QuatCurve {
 }
 
 #[inline(always)]
-fn bernstein(u: f32) -> Vec4 {
+pub(crate) fn bernstein(u: f32) -> Vec4 {
     let v = 1.0 - u;
     Vec4::new(v * v * v, 3.0 * u * v * v, 3.0 * u * u * v, u * u * u)
 }
@@ -184,13 +184,19 @@ fn pyramid(seg: &QuatSegment, u: f32, weights: impl Fn(Vec4, Vec4) -> Vec4) -> Q
 /// polynomial weights.
 #[cold]
 fn slerp_bezier_exact(seg: &QuatSegment, u: f32) -> Quat {
+    exact_pyramid(seg.points, u)
+}
+
+/// The exact pyramid on control points `[c, d, e, c1]` (each consecutive
+/// pair on one side).
+pub(crate) fn exact_pyramid(points: [Vec4; 4], u: f32) -> Quat {
     let slerp = |p: Vec4, q: Vec4| {
         let (q, x) = aligned(p, q);
         let (wp, wq) = slerp_weights_exact(x, u);
         let r = p * wp + q * wq;
         r * r.length_recip()
     };
-    let [c, d, e, c1] = seg.points;
+    let [c, d, e, c1] = points;
     let (f, g, h) = (slerp(c, d), slerp(d, e), slerp(e, c1));
     let (m, n) = (slerp(f, g), slerp(g, h));
     Quat::from_vec4(slerp(m, n))

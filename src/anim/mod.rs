@@ -14,7 +14,7 @@
 //! `compile` per-track validation and control points; `curve` the runtime
 //! curves and their evaluation; `quat` quaternion tools and fast slerp;
 //! `time` request time → clip time (playback, ease, the seams);
-//! `timeline` the segment search; `tracks` the per-kind track lists; `arc` constant-speed tables; `skeleton`
+//! `timeline` the segment search; `tracks` the per-kind track lists; `soa` tracks sharing key times evaluated four per SIMD group; `arc` constant-speed tables; `skeleton`
 //! hierarchy and model space; `clip` the clip and the sampling kernel; `motion` composition (SPEC §6): layers,
 //! masks, sync groups, over clips; `ik` inverse kinematics (SPEC §7) on local poses; `parameters` named
 //! tracks that are not joints (SPEC §8), compiled as translation-like curves; `lint` warnings about valid
@@ -32,6 +32,7 @@ mod parameters;
 mod path;
 pub mod quat;
 mod skeleton;
+mod soa;
 mod spec;
 mod time;
 mod timeline;

@@ -74,9 +74,9 @@ const fn eberly<const N: usize>(one_plus_mu: f32) -> ([f32; N], [f32; N]) {
     (u, v)
 }
 
-const TINY: ([f32; 3], [f32; 3]) = eberly(1.0);
-const NARROW: ([f32; 4], [f32; 4]) = eberly(1.04);
-const WIDE: ([f32; 6], [f32; 6]) = eberly(1.154);
+pub(crate) const TINY: ([f32; 3], [f32; 3]) = eberly(1.0);
+pub(crate) const NARROW: ([f32; 4], [f32; 4]) = eberly(1.04);
+pub(crate) const WIDE: ([f32; 6], [f32; 6]) = eberly(1.154);
 
 /// The smallest `cos θ` (11.5°, a 23° rotation) for [`slerp_weights_tiny`]:
 /// dense keys (mocap, baked exports) are nearly all in this range.

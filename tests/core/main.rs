@@ -35,6 +35,7 @@ mod random;
 mod reference;
 mod root_motion;
 mod seam;
+mod soa;
 mod tidy;
 mod validation;
 
