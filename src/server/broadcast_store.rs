@@ -83,16 +83,22 @@ fn versions(motion: &StreamMotion) -> BTreeMap<String, u64> {
     motion.layers().map(|c| (c.id().to_owned(), c.version())).collect()
 }
 
-/// Refuses a motion built again over other versions than the stored ones.
+/// Refuses a motion built again over other versions than the stored ones:
+/// its frames could not be the ones other nodes compute. The versions it
+/// was made of are gone, so it is the clip that is not found (a 404 with a
+/// stable code, not a server error).
 fn same_versions(motion: &StreamMotion, stored: &BTreeMap<String, u64>) -> Result<(), ApiError> {
     let now = versions(motion);
     if &now == stored {
         return Ok(());
     }
-    Err(ApiError::internal(anyhow::anyhow!(
-        "a stored broadcast's clips changed since it was created ({stored:?} then, {now:?} now): its frames cannot be \
-         computed again"
-    )))
+    Err(ApiError::ClipNotFoundAt {
+        at: super::error::At::Pointer("/motion".into()),
+        detail: format!(
+            "this broadcast was made of the clip versions {stored:?}, and a clip was replaced since ({now:?} now): \
+             its frames cannot be computed again here; delete the broadcast and create it anew"
+        ),
+    })
 }
 
 /// The broadcast a creation body asks for: the request layer's rules.

@@ -576,3 +576,35 @@ async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says()
     drop(ws);
     app.stop().await;
 }
+
+/// A stored broadcast is rebuilt from its clips at the versions it was made
+/// of; when a clip was replaced meanwhile, a node that must rebuild it (here:
+/// the same node after a restart) answers a stable 404, not a server error.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stored_broadcast_whose_clip_was_replaced_is_not_found_after_a_restart() {
+    let data = tempfile::tempdir().unwrap();
+    let on_disk = |c: &mut inbetween::server::config::Config| {
+        c.store = inbetween::server::config::StoreConfig::DataDir(data.path().to_owned());
+    };
+    let app = TestApp::builder().configure(on_disk).start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let replaced = app
+        .http
+        .put(app.url(&format!("/v1/clips/{clip}")))
+        .header("content-type", "application/json")
+        .body(line_clip(1))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(replaced.status(), 200);
+    app.stop().await;
+
+    let app = TestApp::builder().configure(on_disk).start().await;
+    let resp = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 404);
+    let problem: Value = resp.json().await.unwrap();
+    assert_eq!(problem["code"], "clip_not_found", "{problem}");
+    assert!(problem["detail"].as_str().unwrap().contains("replaced"), "{problem}");
+    app.stop().await;
+}
