@@ -72,6 +72,13 @@ impl Builder {
         self
     }
 
+    /// Keeps the store in `dir`, which outlives the app: a second app on the
+    /// same `dir` is the server restarted.
+    pub fn data_dir(self, dir: &Path) -> Self {
+        let store = inbetween::server::config::StoreConfig::DataDir(dir.to_owned());
+        self.configure(|c| c.store = store)
+    }
+
     /// The legacy single write token (`--api-token`).
     pub fn write_token(self, token: &str) -> Self {
         self.configure(|c| c.write_token = Some(Secret::new(token)))

@@ -8,7 +8,6 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 use inbetween::anim::Clip;
-use inbetween::server::config::StoreConfig;
 use inbetween::wire::json::parse_clip;
 use inbetween::wire::proto::pb;
 
@@ -155,19 +154,12 @@ async fn a_stored_clip_over_a_lowered_budget_is_refused_not_a_500() {
     let dir = tempfile::tempdir().unwrap();
     let doc = looping_hermite("stored", 1, 2, 1.0);
     let id = {
-        let store = StoreConfig::DataDir(dir.path().to_owned());
-        let app = TestApp::builder().configure(|c| c.store = store).start().await;
+        let app = TestApp::builder().data_dir(dir.path()).start().await;
         let id = app.create(&doc, None).await["id"].as_str().unwrap().to_owned();
         app.stop().await;
         id
     };
-    let app = TestApp::builder()
-        .configure(|c| {
-            c.limits.max_build_work = 100;
-            c.store = StoreConfig::DataDir(dir.path().to_owned());
-        })
-        .start()
-        .await;
+    let app = TestApp::builder().data_dir(dir.path()).configure(|c| c.limits.max_build_work = 100).start().await;
     let response = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
     assert_eq!(response.status(), 422);
     let problem: Value = response.json().await.unwrap();

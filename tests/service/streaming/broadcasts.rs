@@ -533,10 +533,7 @@ async fn bad_requests_are_refused_with_stable_codes() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says() {
     let data = tempfile::tempdir().unwrap();
-    let on_disk = |c: &mut inbetween::server::config::Config| {
-        c.store = inbetween::server::config::StoreConfig::DataDir(data.path().to_owned());
-    };
-    let app = TestApp::builder().configure(on_disk).start().await;
+    let app = TestApp::builder().data_dir(data.path()).start().await;
     let clip = app.create_id(&line_clip(1), None).await;
     let id = broadcast_of(&app, &clip, None).await;
     let (status, answer) = control(&app, &id, json!({"op": "seek", "time": 2.0}), None).await;
@@ -547,7 +544,7 @@ async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says()
     app.stop().await;
     tokio::time::sleep(Duration::from_millis(500)).await;
 
-    let app = TestApp::builder().configure(on_disk).start().await;
+    let app = TestApp::builder().data_dir(data.path()).start().await;
     let summary: Value = within(5, "the summary", async {
         loop {
             let resp = app.http.get(app.url("/v1/broadcasts")).send().await.unwrap();
@@ -583,10 +580,7 @@ async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says()
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stored_broadcast_whose_clip_was_replaced_is_not_found_after_a_restart() {
     let data = tempfile::tempdir().unwrap();
-    let on_disk = |c: &mut inbetween::server::config::Config| {
-        c.store = inbetween::server::config::StoreConfig::DataDir(data.path().to_owned());
-    };
-    let app = TestApp::builder().configure(on_disk).start().await;
+    let app = TestApp::builder().data_dir(data.path()).start().await;
     let clip = app.create_id(&line_clip(1), None).await;
     let id = broadcast_of(&app, &clip, None).await;
     let replaced = app
@@ -600,7 +594,7 @@ async fn a_stored_broadcast_whose_clip_was_replaced_is_not_found_after_a_restart
     assert_eq!(replaced.status(), 200);
     app.stop().await;
 
-    let app = TestApp::builder().configure(on_disk).start().await;
+    let app = TestApp::builder().data_dir(data.path()).start().await;
     let resp = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
     assert_eq!(resp.status(), 404);
     let problem: Value = resp.json().await.unwrap();
