@@ -157,8 +157,8 @@ pub async fn control_from_body(state: &AppState, body: &[u8]) -> Result<Control,
                 format: Format::Trs,
                 at: in_body,
             };
-            let to = raw.resolve(state).await.map_err(|e| e.moved("/motion", "/to"))?.motion;
-            Ok(Control::Crossfade(Crossfade { to, duration, ease }))
+            let motion = raw.resolve(state).await.map_err(|e| e.moved("/motion", "/to"))?.motion;
+            Ok(Control::Crossfade(Crossfade { to: motion, duration, ease, source: Some(Arc::new(to)) }))
         }
         Err(e) => Err(ApiError::invalid(e.code, e.pointer.unwrap_or_default(), e.detail)),
     }
@@ -348,11 +348,19 @@ pub struct StoreJournal {
 }
 
 impl Journal for StoreJournal {
-    fn record(&self, broadcast: &str, seq: u64, id: &str, json: Value) -> BoxFuture<'static, ()> {
+    fn record(
+        &self,
+        broadcast: &str,
+        seq: u64,
+        id: &str,
+        json: Value,
+        fade_to: Option<&StreamMotion>,
+    ) -> BoxFuture<'static, ()> {
         let store = Arc::clone(&self.store);
         let (broadcast, id) = (broadcast.to_owned(), id.to_owned());
+        let versions = fade_to.map(versions).unwrap_or_default();
         async move {
-            let stored = Stored { message: json, versions: BTreeMap::new() };
+            let stored = Stored { message: json, versions };
             let Ok(text) = serde_json::to_string(&stored) else { return };
             if let Err(e) = store.add_broadcast_control(&broadcast, StoredControl { id, seq, control: text }).await {
                 tracing::warn!(%broadcast, error = %e, "a viewer's broadcast control was not stored");

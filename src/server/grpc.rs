@@ -344,8 +344,9 @@ async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>)
         Some(Op::Crossfade(fade)) => {
             let ease =
                 crate::wire::proto::ease_from_pb(fade.ease, "/ease").map_err(ApiError::from)?.unwrap_or_default();
-            let to = super::grpc_motion::crossfade_target(state, fade.to.as_ref()).await?;
-            Ok(Control::Crossfade(stream::Crossfade { to, duration: fade.duration, ease }))
+            let (to, source) = super::grpc_motion::crossfade_target(state, fade.to.as_ref()).await?;
+            let source = Some(Arc::new(source));
+            Ok(Control::Crossfade(stream::Crossfade { to, duration: fade.duration, ease, source }))
         }
         Some(Op::Ik(ik)) => Ok(Control::Ik(ik_from_pb(&ik.constraints, "/constraints").map_err(ApiError::from)?)),
         Some(Op::Open(_) | Op::Broadcast(_)) => {

@@ -20,6 +20,7 @@ use std::sync::Arc;
 
 use crate::stream::StreamMotion;
 use crate::wire::json::ParameterValues;
+use crate::wire::motion::MotionDoc;
 use crate::wire::proto::{
     add_parameters, ik_reports_to_pb, matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints,
 };
@@ -46,12 +47,20 @@ pub fn raw_motion(motion: &pb::Motion) -> Result<RawMotion<'static>, ApiError> {
 }
 
 /// A `Play` crossfade's target, looked up and built; pointers under `/to`.
+/// With it, the target as a JSON motion (what a broadcast stores).
 ///
 /// # Errors
 /// As [`raw_motion`] and `RawMotion::resolve`, at `/to/…`.
-pub async fn crossfade_target(state: &AppState, to: Option<&pb::Motion>) -> Result<Arc<StreamMotion>, ApiError> {
-    let built = async { raw_motion(to.unwrap_or(&pb::Motion::default()))?.resolve(state).await };
-    built.await.map(|composed| composed.motion).map_err(|e| e.moved("/motion", "/to"))
+pub async fn crossfade_target(
+    state: &AppState,
+    to: Option<&pb::Motion>,
+) -> Result<(Arc<StreamMotion>, serde_json::Value), ApiError> {
+    let built = async {
+        let raw = raw_motion(to.unwrap_or(&pb::Motion::default()))?;
+        let source = serde_json::to_value(MotionDoc::from_spec(&raw.spec)).map_err(ApiError::internal)?;
+        Ok((raw.resolve(state).await?.motion, source))
+    };
+    built.await.map_err(|e: ApiError| e.moved("/motion", "/to"))
 }
 
 /// `SampleMotion`: one pose, with its names.

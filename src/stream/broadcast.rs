@@ -48,6 +48,7 @@ use super::encode::Encoding;
 use super::hub::{EndReason, Item, unix_nanos};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
+use super::pinned::StreamMotion;
 use super::playhead::Control;
 use super::schedule::{Grid, Schedule};
 use super::subscription::{ControlCheck, ControlError, ControlSink, Source, Subscription};
@@ -72,9 +73,17 @@ pub enum BroadcastError {
 /// with many nodes are decided across all of them. Implemented by the
 /// server; without one a broadcast lives in this process alone.
 pub trait Journal: Send + Sync + 'static {
-    /// Stores a control a viewer's socket sent (`json` is its message),
+    /// Stores a control a viewer's socket sent (`json` is its message;
+    /// `fade_to`, a crossfade's motion, whose clips' versions go with it),
     /// already applied here; the other nodes hear of it from the store.
-    fn record(&self, broadcast: &str, seq: u64, id: &str, json: serde_json::Value) -> BoxFuture<'static, ()>;
+    fn record(
+        &self,
+        broadcast: &str,
+        seq: u64,
+        id: &str,
+        json: serde_json::Value,
+        fade_to: Option<&StreamMotion>,
+    ) -> BoxFuture<'static, ()>;
     /// The broadcast has viewers on this node now.
     fn touch(&self, broadcast: &str) -> BoxFuture<'static, ()>;
     /// Ends the broadcast everywhere if no node has had viewers and nobody
@@ -575,23 +584,26 @@ impl Broadcast {
 
     /// Accepts `control` for every viewer at once (a viewer socket's, or
     /// without a journal); returns its stamp. With a journal it is stored
-    /// as well (only the controls a message can say again: play, pause,
-    /// seek, speed, layer; crossfades and IK go over REST, which stores
-    /// them itself).
+    /// as well, as the message that says it again (`Control::to_json`).
     ///
     /// # Errors
-    /// As [`Broadcast::prepare`].
+    /// As [`Broadcast::prepare`]; a control no message says again (a
+    /// crossfade whose motion was not written down) cannot be stored.
     pub fn control(&self, control: Control) -> Result<u64, ControlError> {
         let json = match &self.journal {
             Some(_) => Some(control.to_json().ok_or(ControlError::Invalid(
-                "send a broadcast's crossfade and ik controls with POST /v1/broadcasts/{id}/controls",
+                "this control cannot be stored for the broadcast's other nodes; send it with POST /v1/broadcasts/{id}/controls",
             ))?),
             None => None,
+        };
+        let fade_to = match &control {
+            Control::Crossfade(fade) => Some(Arc::clone(&fade.to)),
+            _ => None,
         };
         let id = new_control_id();
         let seq = self.take(control, Arc::clone(&id))?;
         if let (Some(journal), Some(json)) = (&self.journal, json) {
-            tokio::spawn(journal.record(&self.id, seq, &id, json));
+            tokio::spawn(journal.record(&self.id, seq, &id, json, fade_to.as_deref()));
         }
         Ok(seq)
     }

@@ -216,7 +216,7 @@ impl Program {
     fn apply(&mut self, control: Control, k: u64) -> bool {
         let st = &mut self.state;
         match control {
-            Control::Crossfade(Crossfade { to, duration, ease }) => {
+            Control::Crossfade(Crossfade { to, duration, ease, .. }) => {
                 if let Err(e) = st.player.crossfade(to, duration, ease) {
                     tracing::warn!(error = %e, "a broadcast crossfade skipped");
                 }

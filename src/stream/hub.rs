@@ -184,7 +184,7 @@ impl Hub {
                         self.player.seek(tau);
                         jumped = true;
                     }
-                    Control::Crossfade(Crossfade { to, duration, ease }) => {
+                    Control::Crossfade(Crossfade { to, duration, ease, .. }) => {
                         // Checked by the subscription; a refusal here is a bug.
                         if let Err(e) = self.player.crossfade(to, duration, ease) {
                             tracing::error!(error = %e, "a crossfade the subscription accepted was refused");

@@ -17,6 +17,8 @@ use std::sync::Arc;
 use super::pinned::StreamMotion;
 use crate::anim::Ease;
 use crate::anim::ik::{IkConstraint, IkSpec};
+use crate::wire::ik::IkDoc;
+use crate::wire::json::EaseDoc;
 
 /// A change asked of a playback, applied at its next tick.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,6 +52,9 @@ pub struct Crossfade {
     pub to: Arc<StreamMotion>,
     pub duration: f64,
     pub ease: Ease,
+    /// `to` as the client wrote it (the JSON motion), so that the control
+    /// can be said again: a broadcast stores it for the other nodes.
+    pub source: Option<Arc<serde_json::Value>>,
 }
 
 impl PartialEq for Crossfade {
@@ -90,12 +95,18 @@ impl Control {
 }
 
 impl Control {
-    /// The control message that says this control again (SPEC §5), for
-    /// the controls a message carries in full; `None` for crossfades (their
-    /// motion is a lookup), IK lists and `stop`.
+    /// The control message that says this control again (SPEC §5); `None`
+    /// for `stop`, resolved IK lists and a crossfade whose motion was not
+    /// written down (`Crossfade::source`).
     pub fn to_json(&self) -> Option<serde_json::Value> {
         use serde_json::json;
         Some(match self {
+            Control::Crossfade(Crossfade { source: Some(to), duration, ease, .. }) => {
+                json!({"op": "crossfade", "to": **to, "duration": duration, "ease": EaseDoc::from(*ease)})
+            }
+            Control::Ik(specs) => {
+                json!({"op": "ik", "constraints": specs.iter().map(IkDoc::from_spec).collect::<Vec<_>>()})
+            }
             Control::Play => json!({"op": "play"}),
             Control::Pause => json!({"op": "pause"}),
             Control::Seek(time) => json!({"op": "seek", "time": time}),
@@ -103,7 +114,7 @@ impl Control {
             Control::Layer { index, weight, duration } => {
                 json!({"op": "layer", "index": index, "weight": weight, "duration": duration})
             }
-            Control::Stop | Control::Crossfade(_) | Control::Ik(_) | Control::SetIk(_) => return None,
+            Control::Stop | Control::Crossfade(_) | Control::SetIk(_) => return None,
         })
     }
 }

@@ -153,7 +153,8 @@ async fn a_seek_stamped_for_a_skipped_tick_shows_where_it_would_be_by_now() {
 
 /// Controls of every kind a broadcast takes, stamped at `ticks`.
 fn controls(params: &StreamParams, ticks: [u64; 7]) -> Vec<StampedControl> {
-    let fade = Crossfade { to: Arc::clone(&params.motion), duration: 0.4, ease: crate::anim::Ease::EaseInOut };
+    let fade =
+        Crossfade { to: Arc::clone(&params.motion), duration: 0.4, ease: crate::anim::Ease::EaseInOut, source: None };
     let kinds = [
         Control::Seek(3.0),
         Control::Pause,

@@ -175,7 +175,11 @@ pub fn parse_control(text: &str) -> Result<ParsedControl, ControlRefusal> {
 }
 
 /// A crossfade whose motion is being looked up, and the controls sent after it.
-type Lookup = BoxFuture<'static, (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc)>;
+type Lookup = BoxFuture<'static, LookedUp>;
+
+/// A crossfade's motion looked up (or its refusal), with the rest of the
+/// control: duration, ease, and the motion as sent.
+type LookedUp = (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc, Arc<serde_json::Value>);
 
 /// The controls of one WebSocket stream: applied in the order sent, each
 /// crossfade's lookup holding back the ones after it.
@@ -215,8 +219,9 @@ impl Controls {
                 let Some(motions) = &self.motions else {
                     return Some(error_message("this stream cannot resolve motions"));
                 };
+                let source = Arc::new(to.clone());
                 let lookup = motions.resolve(to);
-                self.lookup = Some(Box::pin(async move { (lookup.await, duration, ease) }));
+                self.lookup = Some(Box::pin(async move { (lookup.await, duration, ease, source) }));
                 None
             }
         }
@@ -225,16 +230,12 @@ impl Controls {
     /// A lookup finished: the crossfade goes to the playback (or its refusal
     /// back to the client), then the controls queued behind it, up to the
     /// next crossfade. Returns the error messages to send.
-    fn looked_up(
-        &mut self,
-        (motion, duration, ease): (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc),
-        sub: &mut Subscription,
-    ) -> Vec<Message> {
+    fn looked_up(&mut self, (motion, duration, ease, source): LookedUp, sub: &mut Subscription) -> Vec<Message> {
         self.lookup = None;
         let mut errors = Vec::new();
         match motion {
             Ok(to) => {
-                let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into() });
+                let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into(), source: Some(source) });
                 errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
             }
             Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
@@ -249,7 +250,7 @@ impl Controls {
 }
 
 /// Waits for a pending lookup; never resolves without one.
-async fn lookup_done(lookup: &mut Option<Lookup>) -> (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc) {
+async fn lookup_done(lookup: &mut Option<Lookup>) -> LookedUp {
     match lookup.as_mut() {
         Some(lookup) => lookup.await,
         None => std::future::pending().await,

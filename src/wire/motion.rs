@@ -155,7 +155,51 @@ impl MotionDoc {
     }
 }
 
+impl MotionDoc {
+    /// The document that says `spec` again (`to_spec` of it gives `spec`
+    /// back): how a motion that came another way (gRPC) is written down as
+    /// JSON, e.g. a broadcast's crossfade kept in the store.
+    pub fn from_spec(spec: &MotionSpec<String>) -> MotionDoc {
+        MotionDoc {
+            layers: spec.layers.iter().map(LayerDoc::from_spec).collect(),
+            root_motion: spec.root_motion.as_ref().map(|r| RootMotionDoc {
+                joint: r.joint.clone(),
+                mode: match r.mode {
+                    RootMode::Report => RootModeDoc::Report,
+                    RootMode::Extract => RootModeDoc::Extract,
+                },
+                up: match r.up {
+                    UpAxis::Y => UpAxisDoc::Y,
+                    UpAxis::Z => UpAxisDoc::Z,
+                },
+            }),
+            ik: spec.ik.iter().map(IkDoc::from_spec).collect(),
+        }
+    }
+}
+
 impl LayerDoc {
+    fn from_spec(layer: &LayerSpec<String>) -> LayerDoc {
+        LayerDoc {
+            clip: layer.clip.clone(),
+            weight: layer.weight,
+            mode: match layer.mode {
+                LayerMode::Blend => LayerModeDoc::Blend,
+                LayerMode::Additive => LayerModeDoc::Additive,
+            },
+            mask: layer.mask.as_ref().map(|m| MaskDoc {
+                joints: m.joints.iter().cloned().collect(),
+                descendants: m.descendants,
+                default: m.default,
+            }),
+            offset: layer.offset,
+            speed: layer.speed,
+            playback: layer.playback.map(Into::into),
+            sync: layer.sync.clone(),
+            reference_time: layer.reference_time,
+        }
+    }
+
     fn to_spec(&self) -> LayerSpec<String> {
         LayerSpec {
             clip: self.clip.clone(),
@@ -181,6 +225,26 @@ impl LayerDoc {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_spec_written_back_as_a_document_parses_to_the_same_spec() {
+        let doc: MotionDoc = serde_json::from_str(
+            r#"{"layers": [
+                {"clip": "walk", "weight": 0.75, "speed": -1.5, "offset": 0.25, "playback": "ping_pong", "sync": "loco"},
+                {"clip": "wave", "mask": {"joints": {"spine": 0.5, "arm_l": 1}, "descendants": true, "default": 0.1}},
+                {"clip": "breathe", "mode": "additive", "weight": 0.5, "reference_time": 0.4}
+            ], "root_motion": {"joint": "hips", "mode": "extract", "up": "z"},
+            "ik": [{"kind": "aim", "joint": "head", "target": [1, 2, 3], "forward": [0, 0, 1]}]}"#,
+        )
+        .unwrap();
+        let spec = doc.to_spec("/motion").unwrap();
+        let again = MotionDoc::from_spec(&spec);
+        let json = serde_json::to_value(&again).unwrap();
+        let reparsed: MotionDoc = serde_json::from_value(json).unwrap();
+        assert_eq!(format!("{:?}", reparsed.to_spec("/motion").unwrap()), format!("{spec:?}"));
+        assert_eq!(again.layers, doc.layers);
+        assert_eq!(again.root_motion, doc.root_motion);
+    }
 
     #[test]
     fn the_spec_example_parses_with_its_defaults() {

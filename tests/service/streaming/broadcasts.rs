@@ -602,3 +602,74 @@ async fn a_stored_broadcast_whose_clip_was_replaced_is_not_found_after_a_restart
     assert!(problem["detail"].as_str().unwrap().contains("replaced"), "{problem}");
     app.stop().await;
 }
+
+/// A clip of `line_clip(1)`'s joint moving along y instead of x.
+fn rising_clip() -> String {
+    json!({"name": "rising", "tracks": [{"joint": "j0", "channel": "translation", "interpolation": "linear",
+        "times": [0.0, 10.0], "values": [[0.0, 0.0, 0.0], [0.0, 10.0, 0.0]]}]})
+    .to_string()
+}
+
+/// A viewer's socket may send every control REST takes (SPEC §9): its
+/// crossfade and `ik` reach every viewer and are stored as sent, so after a
+/// restart the broadcast plays the faded-to clip with the constraint solved.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sockets_crossfade_and_ik_are_stored_and_survive_a_restart() {
+    let data = tempfile::tempdir().unwrap();
+    let app = TestApp::builder().data_dir(data.path()).start().await;
+    let along_x = app.create_id(&line_clip(1), None).await;
+    let along_y = app.create_id(&rising_clip(), None).await;
+    let id = broadcast_of(&app, &along_x, None).await;
+    let mut controller = watch_ws(&app, &id, "", None).await;
+    let mut other = watch_ws(&app, &id, "", None).await;
+    next_message(&mut controller).await;
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": along_y}]}, "duration": 0});
+    let aim = json!({"op": "ik", "constraints": [{"kind": "aim", "joint": "j0", "target": [0, 0, 50], "forward": [1, 0, 0]}]});
+    for msg in [fade, aim] {
+        controller.send(Message::Text(msg.to_string().into())).await.unwrap();
+    }
+    // Both arrive at every viewer: the joint rises along y, and the aim is reported solved.
+    let faded_and_aimed = |msg: &Message| {
+        let pose = &json_of(msg)["pose"];
+        let translation = &pose["joints"][0]["translation"];
+        let faded = translation[0].as_f64() == Some(0.0) && translation[1].as_f64().unwrap() > 0.0;
+        let report = &pose["ik"][0];
+        faded && report["kind"] == "aim" && report["converged"] == true
+    };
+    for ws in [&mut controller, &mut other] {
+        within(5, "the socket's controls applied", async { while !faded_and_aimed(&next_message(ws).await) {} }).await;
+    }
+    drop((controller, other));
+    app.stop().await;
+
+    let app = TestApp::builder().data_dir(data.path()).start().await;
+    let mut ws = within(5, "the resumed broadcast", async {
+        loop {
+            let resp = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+            if resp.status() == 200 {
+                return watch_ws(&app, &id, "", None).await;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await;
+    for _ in 0..3 {
+        let msg = next_message(&mut ws).await;
+        assert!(faded_and_aimed(&msg), "after the restart: {}", json_of(&msg)["pose"]);
+        // The aim points j0's x axis at the target from where the faded-to clip put it.
+        let joint = &json_of(&msg)["pose"]["joints"][0];
+        let r: Vec<f64> = serde_json::from_value(joint["rotation"].clone()).unwrap();
+        let p: Vec<f64> = serde_json::from_value(joint["translation"].clone()).unwrap();
+        let (x, y, z, w) = (r[0], r[1], r[2], r[3]);
+        // The first column of the rotation matrix: the turned x axis.
+        let axis = [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)];
+        let to = [-p[0], -p[1], 50.0 - p[2]];
+        let cross =
+            [axis[1] * to[2] - axis[2] * to[1], axis[2] * to[0] - axis[0] * to[2], axis[0] * to[1] - axis[1] * to[0]];
+        let dot: f64 = axis.iter().zip(to).map(|(a, b)| a * b).sum();
+        let angle = cross.iter().map(|v| v * v).sum::<f64>().sqrt().atan2(dot);
+        assert!(angle < 1e-5, "x axis {axis:?} is {angle} rad off the direction to the target {to:?}");
+    }
+    drop(ws);
+    app.stop().await;
+}
