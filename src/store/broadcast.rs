@@ -26,6 +26,129 @@ pub struct StoredControl {
     pub control: String,
 }
 
+/// The broadcast methods of [`ClipStore`](super::ClipStore), the same for
+/// both backends but for the pool type and `$sql`, the backend's statement
+/// module (`lite` or `pg`). Expanded inside each backend's `impl ClipStore`,
+/// where `self.pool`, `self.controls_of`, `timed` and `now_millis` are the
+/// backend's own.
+macro_rules! broadcast_methods {
+    ($sql:ident) => {
+        fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = sqlx::query($sql::INSERT)
+                    .bind(&broadcast.id)
+                    .bind(&broadcast.definition)
+                    .bind(broadcast.created_at)
+                    .bind(now_millis())
+                    .execute(&self.pool)
+                    .await
+                    .map(|_| ());
+                timed("create_broadcast", started, r)
+            }
+            .boxed()
+        }
+
+        fn add_broadcast_control<'a>(
+            &'a self,
+            id: &'a str,
+            control: StoredControl,
+        ) -> BoxFuture<'a, Result<(), StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = async {
+                    let mut tx = self.pool.begin().await?;
+                    let done = sqlx::query($sql::INSERT_CONTROL)
+                        .bind(&control.id)
+                        .bind(id)
+                        .bind(control.seq as i64)
+                        .bind(&control.control)
+                        .execute(&mut *tx)
+                        .await?;
+                    sqlx::query($sql::TOUCH).bind(id).bind(now_millis()).execute(&mut *tx).await?;
+                    tx.commit().await?;
+                    Ok(done.rows_affected() == 1)
+                }
+                .await;
+                match timed("add_broadcast_control", started, r)? {
+                    true => Ok(()),
+                    false => Err(StoreError::NotFound),
+                }
+            }
+            .boxed()
+        }
+
+        fn broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredBroadcast>, StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = async {
+                    let Some(row) = sqlx::query($sql::ONE).bind(id).fetch_optional(&self.pool).await? else {
+                        return Ok(None);
+                    };
+                    let mut b = broadcast_from_row(&row)?;
+                    b.controls = self.controls_of(&b.id).await?;
+                    Ok(Some(b))
+                }
+                .await;
+                timed("broadcast", started, r)
+            }
+            .boxed()
+        }
+
+        fn broadcasts(&self) -> BoxFuture<'_, Result<Vec<StoredBroadcast>, StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = async {
+                    let rows = sqlx::query($sql::ALL).fetch_all(&self.pool).await?;
+                    let mut all = Vec::with_capacity(rows.len());
+                    for row in &rows {
+                        let mut b = broadcast_from_row(row)?;
+                        b.controls = self.controls_of(&b.id).await?;
+                        all.push(b);
+                    }
+                    Ok(all)
+                }
+                .await;
+                timed("broadcasts", started, r)
+            }
+            .boxed()
+        }
+
+        fn delete_broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<bool, StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = sqlx::query($sql::DELETE).bind(id).execute(&self.pool).await.map(|d| d.rows_affected() == 1);
+                timed("delete_broadcast", started, r)
+            }
+            .boxed()
+        }
+
+        fn touch_broadcast<'a>(&'a self, id: &'a str, now_ms: i64) -> BoxFuture<'a, Result<(), StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = sqlx::query($sql::TOUCH).bind(id).bind(now_ms).execute(&self.pool).await.map(|_| ());
+                timed("touch_broadcast", started, r)
+            }
+            .boxed()
+        }
+
+        fn expire_broadcast<'a>(&'a self, id: &'a str, before_ms: i64) -> BoxFuture<'a, Result<bool, StoreError>> {
+            async move {
+                let started = Instant::now();
+                let r = sqlx::query($sql::EXPIRE)
+                    .bind(id)
+                    .bind(before_ms)
+                    .execute(&self.pool)
+                    .await
+                    .map(|d| d.rows_affected() == 1);
+                timed("expire_broadcast", started, r)
+            }
+            .boxed()
+        }
+    };
+}
+pub(crate) use broadcast_methods;
+
 /// The broadcast SQL of PostgreSQL.
 pub(crate) mod pg {
     pub const INSERT: &str = "INSERT INTO broadcasts (id, definition, created_at, active_at) VALUES ($1, $2, $3, $4)";
