@@ -15,7 +15,7 @@ const MAX_POSES: u64 = 1_000_000;
 
 #[derive(Debug, Args)]
 pub struct SampleArgs {
-    /// A clip document (JSON, SPEC §1).
+    /// A clip document (JSON, docs/clip-format.md).
     clip: PathBuf,
     /// A time to sample, in seconds (repeatable).
     #[arg(long = "t", value_name = "SECONDS", allow_negative_numbers = true, conflicts_with_all = ["start", "end", "fps"])]

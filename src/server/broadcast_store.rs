@@ -45,7 +45,7 @@ use crate::wire::motion::MotionDoc;
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateBroadcast {
-    /// The motion (SPEC §6; a clip is a one-layer motion), its clips pinned at their current versions.
+    /// The motion (`docs/motion.md`; a clip is a one-layer motion), its clips pinned at their current versions.
     pub motion: MotionDoc,
     /// Ticks per second, 1..=240 (default 30).
     #[serde(default)]
@@ -60,7 +60,7 @@ pub struct CreateBroadcast {
     /// Only these joints in every frame, in skeleton order (default: all).
     #[serde(default)]
     pub joints: Option<Vec<String>>,
-    /// Only these parameters in every frame (SPEC §8; default: all).
+    /// Only these parameters in every frame (docs/clip-format.md §3; default: all).
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
     /// Seconds with no viewers and no controls before it ends, 1..=86400 (default 300).

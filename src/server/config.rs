@@ -252,7 +252,7 @@ settings! {
             "Most joints in one skeleton";
         max_parameters: usize = 1024 => positive -> usize,
             "max_parameters", "max-parameters", "INBETWEEN_MAX_PARAMETERS", "N",
-            "Most parameter tracks (SPEC §8: morph weights, camera or light values) in one clip";
+            "Most parameter tracks (docs/clip-format.md §3: morph weights, camera or light values) in one clip";
         max_poses: usize = 10_000 => positive -> usize,
             "max_poses", "max-poses", "INBETWEEN_MAX_POSES", "N",
             "Most poses one sample request may ask for";
@@ -313,7 +313,7 @@ settings! {
             "Concurrent streams per configured token (by its name)";
         max_broadcasts: usize = 64 => positive -> usize,
             "max_broadcasts", "max-broadcasts", "INBETWEEN_MAX_BROADCASTS", "N",
-            "Live broadcasts at once (SPEC §9; over it: 429 too_many_broadcasts); their viewers count as streams";
+            "Live broadcasts at once (docs/broadcasts.md; over it: 429 too_many_broadcasts); their viewers count as streams";
         broadcast_control_lead: u64 = 50 => lead_millis -> Duration,
             "broadcast_control_lead_ms", "broadcast-control-lead-ms", "INBETWEEN_BROADCAST_CONTROL_LEAD_MS", "MS",
             "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)";

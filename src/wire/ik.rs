@@ -17,7 +17,7 @@ use super::json::{DocError, EndsDoc, InterpolationDoc, SpeedDoc};
 use crate::anim::ik::{AimSpec, ChainSpec, EffectorSpec, IkReport, IkSpec, LimitSpec, TwoBoneSpec};
 use crate::anim::{Channel, IkTarget, KeyedIkSpec, Keys, Speed, TrackSpec};
 
-/// One constraint. Which fields apply depends on `kind` (SPEC §7):
+/// One constraint. Which fields apply depends on `kind` (`docs/ik.md`):
 /// `two_bone` {joints: [upper, middle, end], target, pole?, weight?};
 /// `aim` {joint, target, forward?, up?, up_direction?, weight?};
 /// `chain` {effectors, joints?, limits?, max_iterations?, tolerance?, weight?}.
@@ -98,8 +98,9 @@ pub struct LimitDoc {
     pub max: [f32; 3],
 }
 
-/// Keys of a target or weight, as a joint track's (SPEC §2), without its
-/// joint and channel: targets have 3-number values, weights 1-number ones.
+/// Keys of a target or weight, as a joint track's (`docs/clip-format.md`),
+/// without its joint and channel: targets have 3-number values, weights
+/// 1-number ones.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct KeysDoc {
@@ -452,7 +453,7 @@ impl KeysDoc {
     }
 }
 
-/// One solve's report in a pose (SPEC §7).
+/// One solve's report in a pose (`docs/ik.md`, "Reports").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct IkReportDoc {
     pub kind: IkKindDoc,

@@ -19,6 +19,9 @@ use crate::anim::{
     ParameterSpec, Playback, Pose, Skeleton, SkeletonSpec, Space, Speed, TrackSpec, Transform,
 };
 
+/// A clip document: joints' keyframe tracks, an optional skeleton, events,
+/// parameters and IK constraints, as `docs/clip-format.md` describes them
+/// (with the evaluation math every pose follows).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ClipDoc {
@@ -30,11 +33,11 @@ pub struct ClipDoc {
     pub events: Vec<EventDoc>,
     #[serde(default)]
     pub playback: PlaybackDoc,
-    /// IK constraints solved at every sample (SPEC §7), targets and weights
+    /// IK constraints solved at every sample (`docs/ik.md`), targets and weights
     /// fixed or keyed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ik: Vec<IkDoc>,
-    /// Named tracks that are not joints (SPEC §8): morph weights, a
+    /// Named tracks that are not joints (docs/clip-format.md §3): morph weights, a
     /// camera's field of view. Poses carry their values under `parameters`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub parameters: Vec<ParameterDoc>,
@@ -109,7 +112,7 @@ pub struct TrackDoc {
     pub speed: Option<SpeedDoc>,
 }
 
-/// A parameter track (SPEC §8): every key a row of the same width
+/// A parameter track (docs/clip-format.md §3): every key a row of the same width
 /// (1 to 256 numbers), each number interpolated as a translation component.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]

@@ -10,6 +10,8 @@ use super::ik::IkDoc;
 use super::json::{DocError, PlaybackDoc};
 use crate::anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
 
+/// A composed motion: layers of clips with weights, masks, sync groups,
+/// root motion and IK, as `docs/motion.md` describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MotionDoc {
@@ -17,7 +19,7 @@ pub struct MotionDoc {
     pub layers: Vec<LayerDoc>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub root_motion: Option<RootMotionDoc>,
-    /// IK constraints solved on the layered pose (SPEC §7), targets in
+    /// IK constraints solved on the layered pose (`docs/ik.md`), targets in
     /// model space.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ik: Vec<IkDoc>,

@@ -16,6 +16,7 @@ pub mod glb;
 pub mod pg;
 pub mod process;
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 pub use app::TestApp;
@@ -23,6 +24,25 @@ pub use process::ServerProcess;
 
 /// The SPEC §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
 pub const WAVE: &str = include_str!("../../examples/wave.json");
+
+/// A real third-party test file, `rel` as in `../shared/testdata` (e.g.
+/// `gltf/Fox/Fox.glb`): the repository's own copy in `examples/` when it
+/// ships one (the Fox, InterpolationTest, CMU 131_01, byte for byte the
+/// same), else the file in `../shared/testdata` beside the clone (README,
+/// "The two commands").
+pub fn testdata_path(rel: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let shipped = root.join("examples").join(rel);
+    if shipped.is_file() { shipped } else { root.join("../shared/testdata").join(rel) }
+}
+
+/// [`testdata_path`]'s bytes; a missing file fails the test with its path.
+pub fn testdata(rel: &str) -> Vec<u8> {
+    let path = testdata_path(rel);
+    std::fs::read(&path).unwrap_or_else(|e| {
+        panic!("{}: {e} (the tests read third-party files from ../shared/testdata beside the clone)", path.display())
+    })
+}
 
 /// An HTTP client that asks for answers as they are (no `Accept-Encoding`).
 /// The test build turns reqwest's gzip, br and zstd decoders on (for the

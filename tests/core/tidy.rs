@@ -202,3 +202,71 @@ fn the_cycle_finder_finds_a_circle_round_three_modules() {
     let acyclic = BTreeMap::from([edge("a", "b"), edge("b", "c"), edge("d", "a")]);
     assert_eq!(find_cycle(&acyclic), None);
 }
+
+/// The Markdown the project writes for its users (the third-party READMEs
+/// copied beside the example files are not ours).
+fn user_docs() -> Vec<String> {
+    let mut out: Vec<String> =
+        ["README.md", "BENCHMARKS.md", "RELIABILITY.md", "examples/SOURCES.md", "examples/clients/README.md"]
+            .map(str::to_owned)
+            .into();
+    for entry in std::fs::read_dir(root().join("docs")).expect("read docs/") {
+        let path = entry.expect("a folder entry").path();
+        if path.extension().is_some_and(|e| e == "md") {
+            out.push(format!("docs/{}", path.file_name().unwrap().to_string_lossy()));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// `text` without its fenced code blocks.
+fn prose(text: &str) -> String {
+    text.split("```").step_by(2).collect::<Vec<_>>().join("\n")
+}
+
+/// The anchor GitHub gives a heading: lower case, punctuation dropped, spaces as `-`.
+fn anchor(heading: &str) -> String {
+    heading
+        .trim()
+        .to_lowercase()
+        .chars()
+        .filter(|c| c.is_alphanumeric() || matches!(c, '-' | '_' | ' '))
+        .map(|c| if c == ' ' { '-' } else { c })
+        .collect()
+}
+
+/// A user needs only the repository: the docs name no contract they do not
+/// have ("SPEC §…"), and every relative link, with its `#anchor`, lands on a
+/// file and heading that exist.
+#[test]
+fn the_user_docs_stand_alone_and_their_links_resolve() {
+    let mut broken = Vec::new();
+    for doc in user_docs() {
+        let text = read(&doc);
+        if text.contains("SPEC §") {
+            broken.push(format!("{doc} cites SPEC §…: link the docs/ section that says it"));
+        }
+        let dir = Path::new(&doc).parent().unwrap();
+        for link in prose(&text).split("](").skip(1) {
+            let Some(target) = link.split(')').next().filter(|t| !t.contains(':') && !t.contains(' ')) else {
+                continue;
+            };
+            let (file, fragment) = target.split_once('#').unwrap_or((target, ""));
+            let path = if file.is_empty() { root().join(&doc) } else { root().join(dir).join(file) };
+            if !path.exists() {
+                broken.push(format!("{doc}: {target}: no such file"));
+            } else if !fragment.is_empty() && (file.is_empty() || file.ends_with(".md")) {
+                let headings = prose(&std::fs::read_to_string(&path).unwrap())
+                    .lines()
+                    .filter_map(|l| l.strip_prefix('#'))
+                    .map(|l| anchor(l.trim_start_matches('#')))
+                    .collect::<BTreeSet<_>>();
+                if !headings.contains(fragment) {
+                    broken.push(format!("{doc}: {target}: no such heading"));
+                }
+            }
+        }
+    }
+    assert!(broken.is_empty(), "{broken:#?}");
+}

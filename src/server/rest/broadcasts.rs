@@ -187,7 +187,7 @@ pub async fn delete(
 #[utoipa::path(
     post, path = "/v1/broadcasts/{id}/controls", tag = "broadcasts",
     params(("id" = String, Path, description = "Broadcast id")),
-    request_body(content = Object, content_type = "application/json", description = "One stream control (SPEC §5–§7): `{\"op\":\"play\"}`, `pause`, `{\"op\":\"seek\",\"time\"}`, `{\"op\":\"speed\",\"speed\"}`, `{\"op\":\"crossfade\",\"to\":motion,\"duration\",\"ease\"}`, `{\"op\":\"layer\",\"index\",\"weight\",\"duration\"}`, `{\"op\":\"ik\",\"constraints\"}`"),
+    request_body(content = Object, content_type = "application/json", description = "One stream control (`docs/motion.md`, \"Controls\"; `ik`: `docs/ik.md`): `{\"op\":\"play\"}`, `pause`, `{\"op\":\"seek\",\"time\"}`, `{\"op\":\"speed\",\"speed\"}`, `{\"op\":\"crossfade\",\"to\":motion,\"duration\",\"ease\"}`, `{\"op\":\"layer\",\"index\",\"weight\",\"duration\"}`, `{\"op\":\"ik\",\"constraints\"}`"),
     responses(
         (status = 200, description = "The tick from which it applies for every viewer", body = ControlApplied),
         (status = 400, description = "Not JSON", body = super::schemas::Problem),

@@ -88,7 +88,7 @@ fn written(meta: &ClipMeta, status: StatusCode, location: bool, lints: &[Lint]) 
     etagged(meta, status, extra, ClipWritten { summary: ClipSummary::from(meta), warnings: in_document(lints) })
 }
 
-/// Upload a clip.
+/// Upload a clip: the JSON document of `docs/clip-format.md`.
 #[utoipa::path(
     post, path = "/v1/clips", tag = "clips",
     request_body(content = crate::wire::json::ClipDoc, content_type = "application/json"),
@@ -116,8 +116,9 @@ pub async fn create_clip(
 }
 
 /// List clips in creation order, a page at a time, optionally filtered
-/// (the filters combine with AND; each is a query on the store's indexes,
-/// never a read of documents).
+/// (the filters combine with AND, never a read of documents; each is served
+/// by the store's indexes except `name_contains`, which tests each clip's
+/// name in id order).
 #[utoipa::path(
     get, path = "/v1/clips", tag = "clips",
     params(
@@ -125,7 +126,7 @@ pub async fn create_clip(
         ("cursor" = Option<String>, Query, pattern = "^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$", description = "`next_cursor` of the previous page (with the same filters)"),
         ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips with exactly this name"),
         ("name_prefix" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips whose name starts with this (case-sensitive)"),
-        ("name_contains" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips whose name contains this (case-sensitive)"),
+        ("name_contains" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips whose name contains this (case-sensitive). The one filter no index serves: each clip's name is tested in id order, never its document"),
         ("tag" = Option<String>, Query, min_length = 1, max_length = 256, description = "Only clips carrying this tag"),
         ("min_duration" = Option<f64>, Query, minimum = 0, description = "Only clips at least this long (`end - start`, seconds, inclusive)"),
         ("max_duration" = Option<f64>, Query, minimum = 0, description = "Only clips at most this long (seconds, inclusive)"),

@@ -44,7 +44,7 @@ pub struct PoseOfMotion {
     /// Only these joints (in skeleton order); model space is still computed through the whole hierarchy.
     #[serde(default)]
     pub joints: Option<Vec<String>>,
-    /// Only these parameters (SPEC §8), in the first layer's clip's order.
+    /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
 }
@@ -70,7 +70,7 @@ pub struct SamplesOfMotion {
     pub format: Option<String>,
     #[serde(default)]
     pub joints: Option<Vec<String>>,
-    /// Only these parameters (SPEC §8), in the first layer's clip's order.
+    /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
 }
@@ -79,7 +79,7 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
     v.as_deref().map(Raw::Text)
 }
 
-/// One pose of a motion.
+/// One pose of a motion (`docs/motion.md`).
 #[utoipa::path(
     post, path = "/v1/poses", tag = "poses",
     request_body(content = PoseOfMotion, content_type = "application/json"),
@@ -117,7 +117,7 @@ pub async fn pose(
     Ok(json_response(body))
 }
 
-/// Many poses of a motion; each carries its root motion since the previous one.
+/// Many poses of a motion (`docs/motion.md`); each carries its root motion since the previous one.
 #[utoipa::path(
     post, path = "/v1/samples", tag = "poses",
     request_body(content = SamplesOfMotion, content_type = "application/json"),

@@ -106,7 +106,7 @@ pub(super) fn json_response(body: Vec<u8>) -> Response {
         ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
         ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
-        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (SPEC §8): only those parameters, in the clip's order"),
+        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): only those parameters, in the clip's order"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
@@ -172,7 +172,7 @@ pub struct SampleRequest {
     /// Only these joints, in skeleton order (model space still goes through the whole hierarchy).
     #[serde(default)]
     pub joints: Option<Vec<String>>,
-    /// Only these parameters (SPEC §8), in the clip's order.
+    /// Only these parameters (docs/clip-format.md §3), in the clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
 }

@@ -61,11 +61,11 @@ pub struct PoseSchema {
     /// `local` or `model`.
     pub space: String,
     pub joints: Vec<JointPoseSchema>,
-    /// IK reports (SPEC §7), one per constraint solved, when there are any:
+    /// IK reports (`docs/ik.md`), one per constraint solved, when there are any:
     /// each layer's clip constraints bottom to top, then the request's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ik: Option<Vec<crate::wire::ik::IkReportDoc>>,
-    /// The clip's parameters (SPEC §8) by name, each its values (the key's
+    /// The clip's parameters (docs/clip-format.md §3) by name, each its values (the key's
     /// width), when the clip has any; only a request's `parameters` if given.
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(value_type = Option<Object>)]

@@ -36,7 +36,7 @@ pub struct ClipSkeleton {
     pub duration: f32,
     /// Parents before children, in the order poses list them.
     pub joints: Vec<SkeletonJoint>,
-    /// The names of the clip's parameter tracks (SPEC §8), in order.
+    /// The names of the clip's parameter tracks (docs/clip-format.md §3), in order.
     pub parameters: Vec<String>,
     /// Whether the clip has inverse bind matrices (`format=skinning`).
     pub inverse_binds: bool,

@@ -72,7 +72,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
-        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (SPEC §8): frames carry only those parameters, in the clip's order"),
+        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): frames carry only those parameters, in the clip's order"),
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
@@ -187,7 +187,7 @@ pub struct StreamOpen {
     /// Always `open`.
     #[allow(dead_code)]
     op: OpenOp,
-    /// The composed motion (SPEC §6); its clips are pinned at their current versions.
+    /// The composed motion (`docs/motion.md`); its clips are pinned at their current versions.
     motion: MotionDoc,
     /// Frames per second, 1..=240 (default 30).
     fps: Option<f64>,
@@ -205,7 +205,7 @@ pub struct StreamOpen {
     max_frames: Option<f64>,
     /// Only these joints in every frame, in skeleton order (default: all).
     joints: Option<Vec<String>>,
-    /// Only these parameters in every frame (SPEC §8), in the first layer's clip's order (default: all).
+    /// Only these parameters in every frame (docs/clip-format.md §3), in the first layer's clip's order (default: all).
     parameters: Option<Vec<String>>,
     /// Start paused (a private playback; `play` resumes it).
     #[serde(default)]

@@ -44,7 +44,10 @@ fn every_file_imports_into_clips_that_build_and_round_trip_as_json() {
 /// Issue 18's rules (docs/warnings.md) keep false positives at zero on the
 /// files users try: every test file and example imports with no warning,
 /// with or without `fix_hemispheres` (which then has nothing to flip), and
-/// the example clip documents raise none when uploaded.
+/// the example clip documents raise none when uploaded; the one example made
+/// to show warnings (`examples/gltf/ArmWithWarnings`, see its `make.py`)
+/// raises exactly the three it was written with, and `fix_hemispheres` flips
+/// its six negated keys.
 #[test]
 fn no_test_file_or_example_raises_a_warning() {
     let fix = ImportOptions { fix_hemispheres: true, ..ImportOptions::default() };
@@ -57,11 +60,27 @@ fn no_test_file_or_example_raises_a_warning() {
     for rel in ["gltf/Fox/Fox.glb", "gltf/InterpolationTest/InterpolationTest.gltf", "bvh/131_01.bvh"] {
         assert_eq!(import_path(&examples.join(rel), &ImportOptions::default()).warnings, [], "examples/{rel}");
     }
+    let arm = examples.join("gltf/ArmWithWarnings/ArmWithWarnings.gltf");
+    let frames = ("times_look_like_frames", "/animations/0/samplers/0/input");
+    let flips = ("rotation_hemisphere_flips", "/animations/0/channels/1");
+    let w_first = ("rotation_looks_w_first", "/animations/0/channels/2");
+    // As given, the lints in clip order; fixed, the fix's report (the importer's) comes first.
+    let cases = [
+        (ImportOptions::default(), [frames, flips, w_first], "12 of 13 cubic_hermite rotation keys"),
+        (fix.clone(), [flips, frames, w_first], "6 of 13 CUBICSPLINE rotation keys of 'upper' were in the opposite"),
+    ];
+    for (options, expected, hemisphere) in cases {
+        let warnings = import_path(&arm, &options).warnings;
+        let got: Vec<_> = warnings.iter().map(|w| (w.code.as_str(), w.pointer.as_str())).collect();
+        assert_eq!(got, expected, "{warnings:#?}");
+        let detail = &warnings.iter().find(|w| w.code == flips.0).unwrap().detail;
+        assert!(detail.contains(hemisphere), "{detail}");
+    }
     for rel in ["wave.json", "ik/reach.json", "face.json"] {
         let (_, spec) = parse_clip(&std::fs::read(examples.join(rel)).unwrap()).unwrap();
         assert_eq!(lint(&spec), [], "examples/{rel}");
     }
-    // Every file under examples/ is one of the above, a motion (no keys of its own) or prose.
+    // Every file under examples/ is one of the above, a motion (no keys of its own), prose or a script.
     let mut seen = Vec::new();
     let mut dirs = vec![examples.clone()];
     while let Some(dir) = dirs.pop() {
@@ -81,6 +100,7 @@ fn no_test_file_or_example_raises_a_warning() {
         [
             "bvh/131_01.bvh",
             "face.json",
+            "gltf/ArmWithWarnings/ArmWithWarnings.gltf",
             "gltf/Fox/Fox.glb",
             "gltf/InterpolationTest/InterpolationTest.gltf",
             "ik/reach.json",

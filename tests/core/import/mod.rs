@@ -1,5 +1,6 @@
 //! Importer tests against the real third-party files in `../shared/testdata`
-//! (see its SOURCES.md), with every expected value computed independently in
+//! (see its SOURCES.md; those the repository ships are read from `examples/`,
+//! see `reference::testdata`), with every expected value computed independently in
 //! `reference` (raw JSON and buffers, glTF Appendix C formulas, matrix
 //! forward kinematics), plus a table of hostile inputs.
 

@@ -13,12 +13,22 @@ use std::path::PathBuf;
 use base64::Engine as _;
 use serde_json::Value;
 
+/// A real third-party test file, `rel` as in `../shared/testdata`: the
+/// repository's own copy in `examples/` when it ships one (the Fox,
+/// InterpolationTest, CMU 131_01, byte for byte the same), else the file in
+/// `../shared/testdata` beside the clone (README, "The two commands"). The
+/// service tests' `common::testdata_path` is the same rule.
 pub fn testdata(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel)
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let shipped = root.join("examples").join(rel);
+    if shipped.is_file() { shipped } else { root.join("../shared/testdata").join(rel) }
 }
 
 pub fn read(rel: &str) -> Vec<u8> {
-    std::fs::read(testdata(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+    let path = testdata(rel);
+    std::fs::read(&path).unwrap_or_else(|e| {
+        panic!("{}: {e} (the tests read third-party files from ../shared/testdata beside the clone)", path.display())
+    })
 }
 
 /// A glTF file as plain JSON plus its decoded buffers.

@@ -7,6 +7,7 @@ use inbetween::wire::proto::pb;
 use serde_json::{Value, json};
 
 use super::TestApp;
+use crate::common::testdata_path;
 
 /// A root translation with the default `reflect` ends and an arm rotation
 /// about Z with `zero_slope` ends; angles 0, 0.8 and 0.2 rad.
@@ -106,7 +107,7 @@ async fn a_b_spline_clip_is_stored_and_posed_over_rest_and_grpc() {
 #[tokio::test]
 async fn bvh_import_takes_b_spline_and_the_openapi_document_names_it() {
     let app = TestApp::start().await;
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata/bvh/131_03.bvh");
+    let path = testdata_path("bvh/131_03.bvh");
     let bvh = std::fs::read(&path).unwrap();
     let url = app.url("/v1/clips/import?format=bvh&interpolation=b_spline&name=smooth");
     let resp = app.http.post(url).body(bvh.clone()).send().await.unwrap();

@@ -11,16 +11,7 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
 use super::{TestApp, WAVE, within};
-use crate::common::ServerProcess;
-
-fn testdata_path(rel: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel)
-}
-
-fn testdata(rel: &str) -> Vec<u8> {
-    let path = testdata_path(rel);
-    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
+use crate::common::{ServerProcess, testdata, testdata_path};
 
 /// The names of the clips an import answered with.
 async fn imported_names(resp: reqwest::Response) -> Vec<String> {

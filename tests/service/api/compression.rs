@@ -18,17 +18,12 @@ use serde_json::{Value, json};
 use tonic::codec::CompressionEncoding;
 
 use super::{TestApp, WAVE, canonical, within};
-use crate::common::{http_builder, http_client};
+use crate::common::{http_builder, http_client, testdata};
 
 const CODINGS: [&str; 3] = ["gzip", "br", "zstd"];
 
 /// The 300-pose batch: 3 s of the take at 100 fps.
 const BATCH: &str = r#"{"start":0,"end":2.995,"fps":100}"#;
-
-fn testdata(rel: &str) -> Vec<u8> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel);
-    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 /// A client that asks for `coding` alone and decodes it itself, as a
 /// browser or `curl --compressed` does.

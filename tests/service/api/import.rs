@@ -7,11 +7,7 @@ use inbetween::import::{ErrorClass, Format, ImportOptions, import};
 use serde_json::{Value, json};
 
 use super::TestApp;
-
-fn testdata(rel: &str) -> Vec<u8> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel);
-    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
+use crate::common::testdata;
 
 /// Files whose buffers travel inside them, with their format and the number
 /// of clips (animations) they hold.

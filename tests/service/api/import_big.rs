@@ -15,7 +15,7 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
 use super::TestApp;
-use crate::common::ServerProcess;
+use crate::common::{ServerProcess, testdata};
 
 /// The padding "image" that no animation references: the file is 200 MB.
 const PADDING_BYTES: usize = 200_000_000;
@@ -27,11 +27,6 @@ const RSS_BOUND: u64 = 64 << 20;
 /// image: imports of one file vary by up to ±10 MiB from run to run (the
 /// allocator), while reading the image would cost 190 MiB.
 const SLACK: u64 = 32 << 20;
-
-fn testdata(rel: &str) -> Vec<u8> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/testdata").join(rel);
-    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 fn u32_at(b: &[u8], at: usize) -> usize {
     u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize

@@ -57,6 +57,41 @@ async fn the_openapi_document_lists_every_route_and_docs_are_served() {
     app.stop().await;
 }
 
+/// The OpenAPI descriptions stand alone: they cite no contract users do not
+/// have ("SPEC §…") and point at the repository's own docs, which exist: the
+/// clip document at docs/clip-format.md, motions at docs/motion.md.
+#[tokio::test]
+async fn the_openapi_document_links_the_docs_and_cites_no_spec() {
+    let app = TestApp::start().await;
+    let text = app.http.get(app.url("/openapi.json")).send().await.unwrap().text().await.unwrap();
+    let cited: Vec<&str> = text
+        .match_indices("SPEC §")
+        .map(|(i, _)| &text[text.floor_char_boundary(i.saturating_sub(80))..i + 12])
+        .collect();
+    assert!(cited.is_empty(), "the OpenAPI document cites SPEC: {cited:#?}");
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    let description = |v: &Value| v["description"].as_str().unwrap_or_default().to_owned();
+    let schemas = &doc["components"]["schemas"];
+    assert!(description(&schemas["ClipDoc"]).contains("docs/clip-format.md"), "{}", schemas["ClipDoc"]);
+    assert!(description(&schemas["MotionDoc"]).contains("docs/motion.md"), "{}", schemas["MotionDoc"]);
+    let info = description(&doc["info"]);
+    for page in ["clip-format", "motion", "ik", "broadcasts", "import", "warnings"] {
+        assert!(info.contains(&format!("docs/{page}.md")), "{info}");
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut named = 0;
+    for piece in text.split("docs/").skip(1) {
+        let name: String = piece.chars().take_while(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '.')).collect();
+        let name = name.trim_end_matches('.');
+        if name.ends_with(".md") {
+            assert!(root.join("docs").join(name).is_file(), "the OpenAPI document names docs/{name}");
+            named += 1;
+        }
+    }
+    assert!(named >= 10, "{named} links to docs/");
+    app.stop().await;
+}
+
 /// Shutdown drains: readiness flips, a stream gets its documented end
 /// (close 1001), a request already in flight is still answered, the server
 /// returns cleanly, and only then does the listener refuse connections.

@@ -176,6 +176,34 @@ fn frames_bvh() -> Vec<u8> {
     bvh.into_bytes()
 }
 
+/// `joints` joints, each with one rotation track whose first key has norm 2:
+/// one `rotation_not_unit` per track, `joints` warnings before the cap.
+fn many_not_unit_doc(joints: usize) -> String {
+    let names: Vec<String> = (0..joints).map(|i| format!("j{i}")).collect();
+    let skeleton: Vec<Value> = names.iter().map(|n| json!({"name": n})).collect();
+    let tracks: Vec<Value> = (names.iter())
+        .map(|n| json!({"joint": n, "channel": "rotation", "times": [0, 1], "values": [[0, 0, 0, 2], [0, 0, 0, 1]]}))
+        .collect();
+    json!({"name": "many", "skeleton": {"joints": skeleton}, "tracks": tracks}).to_string()
+}
+
+/// The same in a glTF: `nodes` children of one root, each with a LINEAR
+/// rotation channel whose first key has norm 2.
+fn many_not_unit_gltf(nodes: usize) -> Vec<u8> {
+    let mut g = Gltf::default();
+    let times = g.accessor("SCALAR", &[0.0, 1.0]);
+    let keys = g.accessor("VEC4", &flat(&[[0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 0.0, 1.0]]));
+    let mut all = vec![json!({"name": "root", "children": (1..=nodes).collect::<Vec<_>>()})];
+    all.extend((0..nodes).map(|i| json!({"name": format!("j{i}")})));
+    let channels: Vec<Value> =
+        (0..nodes).map(|i| json!({"sampler": 0, "target": {"node": i + 1, "path": "rotation"}})).collect();
+    g.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": all,
+        "animations": [{"name": "many", "channels": channels,
+            "samplers": [{"input": times, "output": keys}]}]
+    }))
+}
+
 // ---- Helpers ----
 
 /// The `(code, pointer)` of each warning of an answer.
@@ -276,6 +304,40 @@ async fn imports_answer_each_code_with_a_pointer_into_the_file() {
     let bad = app.http.post(app.url("/v1/clips/import?fix=everything")).body(hemisphere_gltf()).send().await.unwrap();
     assert_eq!(bad.status(), 400);
     assert_eq!(bad.json::<Value>().await.unwrap()["code"], "bad_fix");
+    app.stop().await;
+}
+
+/// More warnings than the cap (100, docs/warnings.md): 150 tracks each off
+/// the unit sphere answer the first 99 as they are, then one
+/// `too_many_warnings` (empty pointer) saying the other 150 − 99 = 51 were
+/// left out; the upload and the import still succeed.
+#[tokio::test]
+async fn more_warnings_than_the_cap_end_with_too_many_warnings() {
+    let app = TestApp::start().await;
+    let check = |body: &Value, pointer: &dyn Fn(usize) -> String| {
+        let warnings = body["warnings"].as_array().unwrap();
+        assert_eq!(warnings.len(), 100, "{body}");
+        for (i, w) in warnings[..99].iter().enumerate() {
+            assert_eq!(
+                (w["code"].as_str().unwrap(), w["pointer"].as_str().unwrap()),
+                ("rotation_not_unit", &*pointer(i))
+            );
+        }
+        let last = &warnings[99];
+        assert_eq!(last["code"], "too_many_warnings", "{last}");
+        assert_eq!(last["pointer"], "", "{last}");
+        assert_eq!(last["detail"], "51 more warnings were left out", "{last}");
+    };
+    let created = app.create(&many_not_unit_doc(150), None).await;
+    check(&created, &|i| format!("/tracks/{i}/values/0"));
+    let stored = app.get_json(&format!("/v1/clips/{}", created["id"].as_str().unwrap())).await;
+    assert_eq!(stored["tracks"].as_array().unwrap().len(), 150, "every track kept");
+    let imported = import(&app, "?format=gltf", many_not_unit_gltf(150)).await;
+    check(&imported, &|i| format!("/animations/0/channels/{i}"));
+    // At the cap exactly, nothing is cut: 100 warnings, the last a track's own.
+    let at_cap = app.create(&many_not_unit_doc(100), None).await;
+    assert_eq!(codes(&at_cap).last().unwrap(), &("rotation_not_unit".to_owned(), "/tracks/99/values/0".to_owned()));
+    assert_eq!(codes(&at_cap).len(), 100);
     app.stop().await;
 }
 

@@ -246,10 +246,11 @@ fn read_index() -> (String, Vec<Entry>) {
     (header, entries)
 }
 
-/// The path of an index entry: in tests/corpus, or in ../shared/testdata.
+/// The path of an index entry: in tests/corpus, or a real file (`@shared/`:
+/// `examples/` when the repository ships it, else ../shared/testdata).
 fn resolve(file: &str) -> PathBuf {
     match file.strip_prefix("@shared/") {
-        Some(rest) => root().join("../shared/testdata").join(rest),
+        Some(rest) => crate::common::testdata_path(rest),
         None => root().join("tests/corpus").join(file),
     }
 }
