@@ -3,12 +3,14 @@
 //!
 //! Without `--server` the result is `{"clips": [clip document...],
 //! "warnings": [{"code", "pointer", "detail"}...]}` on stdout, ready for
-//! `POST /v1/clips` or `inbetween sample`. With `--server URL` each clip is
-//! POSTed to `URL/v1/clips` and the server's answers (summaries, each with
-//! the server's warnings about that document) are printed in the same
-//! shape. The top-level warnings point into the file (docs/warnings.md) and
-//! are also written to stderr, one line each, so they are seen when stdout
-//! goes to a file.
+//! `POST /v1/clips` or `inbetween sample`. With `--server URL` the file is
+//! checked here the same way, then sent as it is (with the `.bin` files a
+//! `.gltf` names beside it, as parts of one multipart upload) to
+//! `URL/v1/clips/import`, which keeps what a clip document cannot carry (the
+//! skinned mesh the viewer draws); its answer — the created clips' summaries
+//! and its warnings — is printed in the same shape. The warnings point into
+//! the file (docs/warnings.md) and are also written to stderr, one line each,
+//! so they are seen when stdout goes to a file.
 //!
 //! `--fix hemisphere` flips glTF CUBICSPLINE rotation keys that alternate
 //! hemispheres, like the import route's `?fix=hemisphere`.
@@ -89,20 +91,27 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
         limits,
     };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let mut resolve = |uri: &str| sibling(&dir, uri, limits.max_bytes);
+    let mut buffers = Vec::new();
+    let mut resolve = |uri: &str| {
+        let opened = sibling(&dir, uri, limits.max_bytes)?;
+        buffers.push(uri.to_owned());
+        Ok(opened)
+    };
     let imported = import_from(&source, format, &options, Some(&mut resolve))
         .map_err(|e| anyhow::anyhow!("{}: {e} ({})", path.display(), e.code()))?;
-    let docs: Vec<ClipDoc> = imported.clips.iter().map(ClipDoc::from_spec).collect();
     for w in &imported.warnings {
         eprintln!("warning: {}: {} at {}: {}", path.display(), w.code, w.pointer, w.detail);
     }
 
     let mut out = super::Results::buffered();
     match &args.server {
-        None => serde_json::to_writer(&mut out, &Output { clips: docs, warnings: imported.warnings })?,
+        None => {
+            let docs: Vec<ClipDoc> = imported.clips.iter().map(ClipDoc::from_spec).collect();
+            serde_json::to_writer(&mut out, &Output { clips: docs, warnings: imported.warnings })?
+        }
         Some(server) => {
-            let created = upload(server, args.token.as_deref(), &docs)?;
-            serde_json::to_writer(&mut out, &Output { clips: created, warnings: imported.warnings })?;
+            let upload = Upload { path, buffers: &buffers, format, args: &args };
+            serde_json::to_writer(&mut out, &upload.send(server)?)?;
         }
     }
     out.write_all(b"\n")?;
@@ -151,26 +160,69 @@ fn sibling(dir: &Path, uri: &str, max_bytes: u64) -> Result<Source, String> {
     open(&dir.join(name.as_ref()), max_bytes)
 }
 
-/// POSTs each document to `server/v1/clips`, returning the created summaries.
-fn upload(server: &str, token: Option<&str>, docs: &[ClipDoc]) -> anyhow::Result<Vec<serde_json::Value>> {
-    let url = format!("{}/v1/clips", server.trim_end_matches('/'));
-    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-    runtime.block_on(async {
-        let client = reqwest::Client::new();
-        let mut created = Vec::with_capacity(docs.len());
-        for doc in docs {
-            let mut request = client.post(&url).json(doc);
-            if let Some(token) = token {
+/// A file checked here, to send to a server's import route.
+struct Upload<'a> {
+    path: &'a Path,
+    /// The external buffers the file names (plain file names beside it).
+    buffers: &'a [String],
+    format: Format,
+    args: &'a ImportArgs,
+}
+
+impl Upload<'_> {
+    /// POSTs the file and its buffers to `server/v1/clips/import`; returns
+    /// the server's answer (`{clips, warnings}`).
+    fn send(&self, server: &str) -> anyhow::Result<serde_json::Value> {
+        let url = format!("{}/v1/clips/import", server.trim_end_matches('/'));
+        let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+        runtime.block_on(async {
+            let mut request = reqwest::Client::new().post(&url).query(&self.query()).multipart(self.form().await?);
+            if let Some(token) = &self.args.token {
                 request = request.bearer_auth(token);
             }
             let response = request.send().await.with_context(|| format!("POST {url}"))?;
             let status = response.status();
             let body = response.text().await.with_context(|| format!("POST {url}: reading the response"))?;
             if !status.is_success() {
-                bail!("POST {url} for clip '{}': {status}: {body}", doc.name);
+                bail!("POST {url} for {}: {status}: {body}", self.path.display());
             }
-            created.push(serde_json::from_str(&body).with_context(|| format!("POST {url}: the response is not JSON"))?);
+            serde_json::from_str(&body).with_context(|| format!("POST {url}: the response is not JSON"))
+        })
+    }
+
+    /// The command's options as the route's query.
+    fn query(&self) -> Vec<(&'static str, String)> {
+        let mut query = Vec::new();
+        if self.format == Format::Bvh {
+            query.push(("interpolation", self.args.interpolation.clone()));
         }
-        Ok(created)
-    })
+        if let Some(name) = &self.args.name {
+            query.push(("name", name.clone()));
+        }
+        if let Some(fix) = &self.args.fix {
+            query.push(("fix", fix.clone()));
+        }
+        query
+    }
+
+    /// The file as the `file` part (streamed, never read whole), then each
+    /// buffer as a part named by its URI, as the route matches them.
+    async fn form(&self) -> anyhow::Result<reqwest::multipart::Form> {
+        let name = self.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let mut form = reqwest::multipart::Form::new().part("file", file_part(self.path, name).await?);
+        let dir = self.path.parent().map(Path::to_path_buf).unwrap_or_default();
+        for uri in self.buffers {
+            let file = percent_encoding::percent_decode_str(uri).decode_utf8_lossy().into_owned();
+            form = form.part("buffer", file_part(&dir.join(file), uri.clone()).await?);
+        }
+        Ok(form)
+    }
+}
+
+/// A multipart part streaming the file at `path`, named `file_name`.
+async fn file_part(path: &Path, file_name: String) -> anyhow::Result<reqwest::multipart::Part> {
+    let file = tokio::fs::File::open(path).await.with_context(|| format!("reading {}", path.display()))?;
+    let len = file.metadata().await.with_context(|| format!("reading {}", path.display()))?.len();
+    let body = reqwest::Body::from(file);
+    Ok(reqwest::multipart::Part::stream_with_length(body, len).file_name(file_name))
 }

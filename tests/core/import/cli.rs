@@ -1,11 +1,7 @@
 //! `inbetween import` as a user runs it: the real binary, on the real files.
 
 use std::process::{Command, Output};
-use std::sync::{Arc, Mutex};
 
-use axum::Json;
-use axum::http::{HeaderMap, StatusCode};
-use axum::routing::post;
 use inbetween::anim::Clip;
 use inbetween::wire::json::parse_clip;
 use serde_json::{Value, json};
@@ -93,54 +89,4 @@ fn reports_bad_files_on_stderr_with_the_code() {
     assert!(!out.status.success());
     assert!(out.stdout.is_empty());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad_frame_time"));
-}
-
-/// `--server`: each clip is POSTed to `/v1/clips` with the bearer token, and
-/// the server's summaries are printed. A stand-in server records requests.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn uploads_each_clip_with_the_token() {
-    // (Authorization header, body) per request.
-    type Requests = Arc<Mutex<Vec<(Option<String>, Value)>>>;
-    let received: Requests = Arc::default();
-    let seen = received.clone();
-    let app = axum::Router::new().route(
-        "/v1/clips",
-        post(move |headers: HeaderMap, Json(doc): Json<Value>| {
-            let seen = seen.clone();
-            async move {
-                let auth = headers.get("authorization").and_then(|v| v.to_str().ok()).map(str::to_owned);
-                let name = doc["name"].clone();
-                let mut seen = seen.lock().unwrap();
-                seen.push((auth, doc));
-                (StatusCode::CREATED, Json(json!({"id": format!("c{}", seen.len()), "name": name, "version": 1})))
-            }
-        }),
-    );
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let url = format!("http://{}", listener.local_addr().unwrap());
-    let server = tokio::spawn(async move { axum::serve(listener, app).await });
-
-    let fox = testdata("gltf/Fox/Fox.glb");
-    let out = tokio::task::spawn_blocking(move || {
-        inbetween(&["import", fox.to_str().unwrap(), "--server", &url, "--token", "s3cret"])
-    })
-    .await
-    .unwrap();
-    server.abort();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let printed: Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(
-        printed["clips"],
-        json!([
-            {"id": "c1", "name": "Survey", "version": 1},
-            {"id": "c2", "name": "Walk", "version": 1},
-            {"id": "c3", "name": "Run", "version": 1}
-        ])
-    );
-    let received = received.lock().unwrap();
-    assert_eq!(received.len(), 3);
-    for (auth, doc) in received.iter() {
-        assert_eq!(auth.as_deref(), Some("Bearer s3cret"));
-        Clip::build(&parse_clip(&serde_json::to_vec(doc).unwrap()).unwrap().1).unwrap();
-    }
 }

@@ -155,3 +155,68 @@ async fn watch_follows_a_broadcast_sends_its_controls_and_exits_cleanly_when_it_
     assert!(at >= 1, "{stdout}");
     assert_eq!(field(lines[at + 1], "time"), "0.3500", "{stdout}");
 }
+
+/// `inbetween import FILE --server URL [--token T]`, its standard output as
+/// JSON, or its failure's standard error.
+async fn import_to(server: &str, file: &std::path::Path, token: Option<&str>) -> Result<Value, String> {
+    let mut command = tokio::process::Command::from(ServerProcess::command());
+    command.arg("import").arg(file).args(["--server", server]).stdin(std::process::Stdio::null());
+    if let Some(token) = token {
+        command.args(["--token", token]);
+    }
+    let out = within(60, "inbetween import --server", command.output()).await.unwrap();
+    match out.status.success() {
+        true => Ok(serde_json::from_slice(&out.stdout).unwrap()),
+        false => Err(String::from_utf8_lossy(&out.stderr).into_owned()),
+    }
+}
+
+/// `import --server` sends the file itself to the import route: the Fox's
+/// clips arrive with the skinned mesh a clip document cannot carry, with the
+/// caller's token (refused without it); a `.gltf` travels with the `.bin`
+/// beside it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn import_to_a_server_sends_the_file_with_its_mesh_and_buffers() {
+    use crate::common::testdata_path;
+    use crate::security::{WRITER, scoped_tokens};
+    let app = crate::common::TestApp::builder().configure(scoped_tokens).start().await;
+    let base = app.url("");
+    let fox = testdata_path("gltf/Fox/Fox.glb");
+
+    let refused = import_to(&base, &fox, None).await.unwrap_err();
+    assert!(refused.contains("401"), "{refused}");
+    let printed = import_to(&base, &fox, Some(WRITER)).await.unwrap();
+    let names: Vec<&str> = printed["clips"].as_array().unwrap().iter().map(|c| c["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["Survey", "Walk", "Run"]);
+    assert_eq!(printed["warnings"], json!([]));
+    for clip in printed["clips"].as_array().unwrap() {
+        let id = clip["id"].as_str().unwrap();
+        let mesh = app.http.get(app.url(&format!("/v1/clips/{id}/mesh"))).bearer_auth(WRITER).send().await.unwrap();
+        assert_eq!(mesh.status(), 200, "{id}");
+        assert_eq!(&mesh.bytes().await.unwrap()[..4], b"INBM", "{id}: the mesh format's magic");
+    }
+
+    let gltf = testdata_path("gltf/InterpolationTest/InterpolationTest.gltf");
+    let printed = import_to(&base, &gltf, Some(WRITER)).await.unwrap();
+    let local = {
+        let out =
+            std::process::Command::new(env!("CARGO_BIN_EXE_inbetween")).arg("import").arg(&gltf).output().unwrap();
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()
+    };
+    assert_eq!(printed["clips"].as_array().unwrap().len(), local["clips"].as_array().unwrap().len());
+    for (created, doc) in printed["clips"].as_array().unwrap().iter().zip(local["clips"].as_array().unwrap()) {
+        let id = created["id"].as_str().unwrap();
+        let stored: Value = app
+            .http
+            .get(app.url(&format!("/v1/clips/{id}")))
+            .bearer_auth(WRITER)
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        assert_eq!(stored["tracks"], doc["tracks"], "{id}: the server read the .bin as the CLI did");
+    }
+    app.stop().await;
+}
