@@ -535,6 +535,18 @@ impl Animation for GrpcService {
         Ok(Response::new(skeleton_to_pb(&cached)))
     }
 
+    async fn get_mesh(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipMesh>, Status> {
+        self.read(&request)?;
+        let id = &request.get_ref().clip_id;
+        if !is_clip_id(id) {
+            return Err(ApiError::NotFound { what: "clip" }.into());
+        }
+        let store = &self.state.store;
+        store.mesh_tag(id).await.map_err(ApiError::from)?.ok_or(ApiError::NotFound { what: "clip" })?;
+        let mesh = store.mesh(id).await.map_err(ApiError::from)?.ok_or(ApiError::NotFound { what: "mesh" })?;
+        Ok(Response::new(pb::ClipMesh { data: mesh.bytes.into(), etag: mesh.etag }))
+    }
+
     async fn list_clips(
         &self,
         request: Request<pb::ListClipsRequest>,

@@ -147,3 +147,29 @@ async fn clips_without_a_mesh_say_so_and_writes_keep_or_drop_it() {
     assert_eq!(problem_code(mesh(deleted).await.unwrap()).await, (404, "clip_not_found".into()));
     app.stop().await;
 }
+
+/// gRPC `GetMesh` serves the same bytes and entity tag as REST, and the same
+/// refusals: NOT_FOUND `no_mesh` for a clip without one, `clip_not_found`.
+#[tokio::test]
+async fn grpc_get_mesh_serves_the_same_bytes_and_refusals() {
+    use inbetween::wire::proto::pb;
+    let app = TestApp::start().await;
+    let fox = import_fox(&app).await;
+    let wave = app.create_id(WAVE, None).await;
+    let mut grpc = app.grpc().await;
+    let get = |id: &str| pb::GetClipRequest { clip_id: id.to_owned() };
+
+    let rest = app.http.get(app.url(&format!("/v1/clips/{}/mesh", fox[1]))).send().await.unwrap();
+    let etag = rest.headers()["etag"].to_str().unwrap().to_owned();
+    let bytes = rest.bytes().await.unwrap();
+    let mesh = grpc.get_mesh(get(&fox[1])).await.unwrap().into_inner();
+    assert!(mesh.data == bytes, "the same {} bytes as REST", bytes.len());
+    assert_eq!(mesh.etag, etag);
+
+    for (id, code) in [(wave.as_str(), "no_mesh"), ("0190f5d3-0000-7000-8000-000000000000", "clip_not_found")] {
+        let status = grpc.get_mesh(get(id)).await.unwrap_err();
+        assert_eq!(status.code(), tonic::Code::NotFound, "{id}");
+        assert_eq!(status.metadata().get("x-error-code").unwrap(), code, "{id}");
+    }
+    app.stop().await;
+}
