@@ -406,6 +406,7 @@ async fn open(mut stream: TcpStream, kind: Kind, phase: u32) -> anyhow::Result<C
             copies
         }
         Kind::WsJson | Kind::WsProtobuf => {
+            #[allow(clippy::result_large_err)] // the signature tungstenite's `Callback` asks for
             let with_phase = move |_: &Request, mut response: Response| -> Result<Response, ErrorResponse> {
                 response.headers_mut().insert(PHASE_HEADER, phase.into());
                 Ok(response)
@@ -656,7 +657,7 @@ mod tests {
         assert_eq!(header(1000, true), [0x82, 0x7e, 0x03, 0xe8]);
         assert_eq!(header(65_535, true), [0x82, 0x7e, 0xff, 0xff]);
         assert_eq!(header(65_536, false), [0x81, 0x7f, 0, 0, 0, 0, 0, 0x01, 0x00, 0x00]);
-        assert_eq!(header(0x0102_0304_05, true), [0x82, 0x7f, 0, 0, 0, 0x01, 0x02, 0x03, 0x04, 0x05]);
+        assert_eq!(header(0x0001_0203_0405, true), [0x82, 0x7f, 0, 0, 0, 0x01, 0x02, 0x03, 0x04, 0x05]);
     }
 
     /// A protobuf frame's header written as the server writes it: `seq`,
