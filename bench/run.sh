@@ -65,10 +65,10 @@ done
 load grpc-sample-open grpc-sample -c 64 -d "$secs" --rate 5000 --joints 20
 load rest-pose-open rest-pose -c 64 -d "$secs" --rate 5000 --joints 20
 
-# Streams of the 20-joint clip at 60 fps.
-load grpc-stream-1000 grpc-stream -c "$(n 1000)" -d "$secs" --fps 60
-load ws-stream-1000 ws-stream -c "$(n 1000)" -d "$secs" --fps 60
-load ws-stream-1000-protobuf ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --protobuf
+# Streams of the 20-joint clip at 60 fps; the 1,000-stream runs then measure the streaming floor (issue 19).
+load grpc-stream-1000 grpc-stream -c "$(n 1000)" -d "$secs" --fps 60 --floor
+load ws-stream-1000 ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --floor
+load ws-stream-1000-protobuf ws-stream -c "$(n 1000)" -d "$secs" --fps 60 --protobuf --floor
 load grpc-stream-shared-20000 grpc-stream -c "$(n 20000)" -d "$secs" --fps 60 --shared
 # The same 20,000 shared viewers at 10 fps: what one playback's fan-out sustains when 60 fps is more than the cores can send.
 load grpc-stream-shared-20000-10fps grpc-stream -c "$(n 20000)" -d "$secs" --fps 10 --shared

@@ -22,7 +22,7 @@ bs_serve() {
   ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
   ib_bin release
   ib_workdir
-  ib_serve server --data-dir "$IB_WORK/data" --max-streams 40000 --max-streams-per-client 40000
+  ib_serve server --data-dir "$IB_WORK/data" --max-streams 40000 --max-streams-per-client 40000 --max-connections 40000
   pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
   echo "server pid $pid, $http, $grpc; reports in $out"
 }
@@ -60,6 +60,13 @@ print("   %d/%d opened, %.1f frames/s each; receive late p50 %.0f p99 %.0f max %
       s["opened"], s["streams"], s["frames_per_stream_per_sec"], l["p50_us"], l["p99_us"], l["max_us"],
       100 * s["loss_ratio"], srv.get("cpu_cores", -1), srv.get("cpu_us_per_op", -1), r.get("client_cpu_cores") or -1,
       busy, r["loadavg"].split()[0], r["errors"]))
+f = r.get("floor")
+if f:
+    print("   floor %s (%d B frames): %d/%d opened, %.1f frames/s each; receive late p99 %.0f µs; loss %.2f%%; floor %.2f cores "
+          "(%.2f µs/frame); server/floor %s; errors %s" % (
+          f["kind"], f["frame_bytes"], f["opened"], f["streams"], f["frames_per_stream_per_sec"],
+          f["receive_lateness"]["p99_us"], 100 * f["loss_ratio"], f["cpu_cores"], f["cpu_us_per_frame"],
+          "%.2f×" % f["server_to_floor"] if f["server_to_floor"] else "–", f["errors"]))
 PY
 }
 

@@ -116,6 +116,25 @@ if streams:
           f"{'–' if per is None else f'{per / 1024:.1f} KiB'} | {s.get('playbacks_started', '–')} |")
     w("")
 
+floors = [(n, r) for n, r in streams if r.get("floor")]
+if floors:
+    w("**Streaming floor** (issue 19; `--floor`): after each run, the same streams from a bare sender of the server's "
+      "own frame (`inbetween load-floor`, its own process; see \"Streaming floor\" below), CPU per delivered frame:")
+    w("")
+    w("| scenario | floor | frame | server CPU per frame | floor CPU per frame | server / floor | floor loss | "
+      "floor receive late p99 |")
+    w("|---|---|---|---|---|---|---|---|")
+    for n, r in floors:
+        f, sv = r["floor"], r.get("server") or {}
+        ratio = f.get("server_to_floor")
+        w(f"| {n} | {f['kind']} | {f['frame_bytes']:,} B | {sv.get('cpu_us_per_op', float('nan')):.2f} µs | "
+          f"{f['cpu_us_per_frame']:.2f} µs | {'–' if ratio is None else f'{ratio:.2f}×'} | {f['loss_ratio'] * 100:.2f}% | "
+          f"{ms(f['receive_lateness']['p99_us'])} |")
+        if ratio is not None:
+            verdicts.append((f"server CPU per frame ≤ 2× the floor ({n}, issue 19)", f"{ratio:.2f}×",
+                             "met" if ratio <= 2 else "**missed**"))
+    w("")
+
 for name, label in [("grpc-stream-ramp", "gRPC"), ("ws-stream-ramp", "WebSocket (protobuf)")]:
     r = report(name)
     if not (r and r.get("ramp")):

@@ -1,11 +1,13 @@
 //! `inbetween load`: the load generator (`crate::load`). Flags in, a human
-//! summary or a JSON report out.
+//! summary or a JSON report out. `inbetween load-floor` (hidden) is the bare
+//! sender `load --floor` starts as its own process (`crate::load::floor`).
 
 use std::io::Write;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 
+use crate::load::floor::Kind;
 use crate::load::ramp::RampPlan;
 use crate::load::{ClipChoice, Mode, MotionChoice, Options};
 
@@ -102,6 +104,10 @@ pub struct LoadArgs {
     /// The server's process id for /proc readings [default: the local process listening on --http].
     #[arg(long)]
     server_pid: Option<u32>,
+    /// grpc-stream, ws-stream: then run the same streams against a bare sender of one of the server's own
+    /// frames (a process of this binary) and report its CPU per frame beside the server's.
+    #[arg(long)]
+    floor: bool,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -148,6 +154,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
             max_loss_ratio: args.max_loss,
         }),
         server_pid: args.server_pid,
+        floor: if args.floor { Some(std::env::current_exe()?) } else { None },
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = runtime.block_on(crate::load::run(opts))?;
@@ -159,4 +166,34 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     }
     out.flush()?;
     Ok(())
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum FloorKindArg {
+    /// WebSocket text frames (JSON).
+    WsJson,
+    /// WebSocket binary frames (protobuf).
+    WsProtobuf,
+    /// gRPC messages on raw TCP, without HTTP/2.
+    Tcp,
+}
+
+#[derive(Debug, Args)]
+pub struct FloorArgs {
+    /// What to send.
+    #[arg(long, value_enum)]
+    kind: FloorKindArg,
+    /// Frames per second.
+    #[arg(long, default_value_t = 60)]
+    fps: u32,
+}
+
+/// The floor process: a frame on stdin, `{"port","epoch_unix_ns"}` and at the end its tally on stdout.
+pub fn run_floor(args: FloorArgs) -> anyhow::Result<()> {
+    let kind = match args.kind {
+        FloorKindArg::WsJson => Kind::WsJson,
+        FloorKindArg::WsProtobuf => Kind::WsProtobuf,
+        FloorKindArg::Tcp => Kind::Tcp,
+    };
+    crate::load::floor::run_sender(kind, args.fps)
 }

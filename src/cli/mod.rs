@@ -42,6 +42,9 @@ enum Command {
     Load(Box<load::LoadArgs>),
     /// Watch a WebSocket stream of a clip or a composed motion; send controls from stdin or `--at`.
     Watch(Box<watch::WatchArgs>),
+    /// The bare sender `load --floor` runs as its own process (reads a frame on stdin).
+    #[command(hide = true)]
+    LoadFloor(load::FloorArgs),
 }
 
 impl Cli {
@@ -53,6 +56,7 @@ impl Cli {
             Command::Token(args) => token::run(args),
             Command::Load(args) => load::run(*args),
             Command::Watch(args) => watch::run(*args),
+            Command::LoadFloor(args) => load::run_floor(args),
         };
         match result {
             Ok(()) => ExitCode::SUCCESS,

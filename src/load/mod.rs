@@ -14,6 +14,10 @@
 //! (one broadcast of the clip or motion, SPEC §9, watched by N WebSocket
 //! viewers, measured the same way on the broadcast's tick grid). `--ramp`
 //! steps the load up until a p99 target breaks and reports the knee.
+//! `--floor` (`grpc-stream`, `ws-stream`) then measures the streaming floor
+//! in the same invocation: a bare sender process writing one of the server's
+//! own frames to as many streams at the same rate, received by the same
+//! code, its CPU per delivered frame reported beside the server's (`floor`).
 //!
 //! Every run is bounded in count and time, and only loopback targets are
 //! accepted unless the caller says `allow_remote`: a load generator pointed
@@ -21,10 +25,11 @@
 //!
 //! `histogram`, `clock`, `lateness`, `ramp`, `motion` and `walk` are pure (unit-tested);
 //! `unary` and `streams` drive the network (`broadcast` creates the
-//! broadcast); `procstat` reads `/proc`.
+//! broadcast); `floor` is the bare sender and its run; `procstat` reads `/proc`.
 
 mod broadcast;
 mod clock;
+pub mod floor;
 mod histogram;
 mod lateness;
 mod motion;
@@ -36,11 +41,13 @@ mod streams;
 mod unary;
 mod walk;
 
+use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
 use reqwest::Url;
 
+pub use floor::FloorReport;
 pub use motion::MotionChoice;
 pub use report::Report;
 
@@ -118,6 +125,9 @@ pub struct Options {
     /// The server process for `/proc` readings; `None`: found by its
     /// listening port when it runs on this machine.
     pub server_pid: Option<u32>,
+    /// Streams: after the server, measure the floor (`floor`), run as this
+    /// `inbetween` binary's hidden `load-floor` subcommand.
+    pub floor: Option<PathBuf>,
 }
 
 /// Runs the load and returns its report.
@@ -168,7 +178,10 @@ pub(crate) struct Env {
 
 async fn run_once(opts: &Options, env: &Env, n: usize) -> anyhow::Result<Report> {
     let mut report =
-        if opts.mode.is_stream() { streams::run(opts, env, n).await? } else { unary::run(opts, env, n).await? };
+        if opts.mode.is_stream() { streams::run(opts, env, n, None).await? } else { unary::run(opts, env, n).await? };
+    if let Some(bin) = &opts.floor {
+        report.floor = Some(floor::measure(opts, env, n, bin, &report).await?);
+    }
     report.joints = match opts.clip {
         ClipChoice::Generate { joints } => Some(joints),
         ClipChoice::Existing(_) => None,
@@ -216,6 +229,12 @@ fn check_options(o: &Options) -> anyhow::Result<()> {
         && !(p.start >= 1 && p.start <= p.max && p.max <= MAX_CONCURRENCY && p.factor >= 1.0)
     {
         bail!("--ramp needs 1 <= start <= max <= {MAX_CONCURRENCY} and a factor >= 1");
+    }
+    if o.floor.is_some() && !matches!(o.mode, Mode::GrpcStream | Mode::WsStream) {
+        bail!("--floor is for grpc-stream and ws-stream");
+    }
+    if o.floor.is_some() && o.ramp.is_some() {
+        bail!("--floor measures one load: it cannot be given with --ramp");
     }
     Ok(())
 }
@@ -283,6 +302,7 @@ mod tests {
             ws_protobuf: false,
             ramp: None,
             server_pid: None,
+            floor: None,
         }
     }
 
@@ -296,6 +316,24 @@ mod tests {
         assert!(err.contains("stream modes"), "{err}");
         let err = check_options(&stream_options(Mode::WsStream, ClipChoice::Existing("x".into()))).unwrap_err();
         assert!(err.to_string().contains("--clip"), "{err}");
+    }
+
+    #[test]
+    fn the_floor_is_for_independent_stream_modes_without_a_ramp() {
+        let floor = |mode| Options {
+            floor: Some("inbetween".into()),
+            ..stream_options(mode, ClipChoice::Generate { joints: 20 })
+        };
+        for mode in [Mode::GrpcStream, Mode::WsStream] {
+            assert!(check_options(&floor(mode)).is_ok(), "{mode:?}");
+        }
+        for mode in [Mode::WsBroadcast, Mode::RestPose] {
+            let err = check_options(&Options { motion: None, ..floor(mode) }).unwrap_err().to_string();
+            assert!(err.contains("--floor"), "{mode:?}: {err}");
+        }
+        let plan = ramp::RampPlan { start: 1, factor: 2.0, max: 4, target_p99_us: 1e3, max_loss_ratio: 0.0 };
+        let err = check_options(&Options { ramp: Some(plan), ..floor(Mode::GrpcStream) }).unwrap_err();
+        assert!(err.to_string().contains("--ramp"), "{err}");
     }
 
     #[test]

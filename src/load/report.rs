@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use super::clock::ClockSync;
+use super::floor::FloorReport;
 use super::histogram::{Summary, human_us};
 use super::ramp::{RampPlan, Stage};
 
@@ -44,6 +45,8 @@ pub struct Report {
     /// `/proc/loadavg` at the end of the run.
     pub loadavg: Option<String>,
     pub ramp: Option<RampReport>,
+    /// `--floor`: the bare sender measured after the server, and the ratio of their CPU per frame.
+    pub floor: Option<FloorReport>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -219,6 +222,31 @@ impl Report {
             let knee = r.knee.map_or("none".into(), |k| k.to_string());
             let broke = r.broke_at.map_or("not reached".into(), |k| k.to_string());
             let _ = writeln!(s, "knee      {knee} (target broke at {broke})");
+        }
+        if let Some(f) = &self.floor {
+            let ratio = f.server_to_floor.map_or("unmeasured".into(), |r| format!("{r:.2}×"));
+            let _ = writeln!(
+                s,
+                "floor     {} ({} B frames), {} of {} opened, {} connection(s): {} frames, {:.2}/s per stream, loss {:.4}%",
+                f.kind,
+                f.frame_bytes,
+                f.opened,
+                f.streams,
+                f.connections,
+                f.frames,
+                f.frames_per_stream_per_sec,
+                f.loss_ratio * 100.0
+            );
+            let _ = writeln!(s, "floor     recv late {}", f.receive_lateness);
+            let _ = writeln!(
+                s,
+                "floor     {:.2} cores, {:.2} µs CPU per frame; server per frame / floor per frame = {ratio}",
+                f.cpu_cores, f.cpu_us_per_frame
+            );
+            if !f.errors.is_empty() {
+                let list: Vec<String> = f.errors.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                let _ = writeln!(s, "floor     errors {}", list.join(" "));
+            }
         }
         if let Some(l) = &self.loadavg {
             let _ = writeln!(s, "loadavg   {l}");

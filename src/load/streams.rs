@@ -22,6 +22,13 @@
 //! (broadcasts created, broadcast ticks evaluated), and the broadcast is
 //! deleted when the run ends.
 //!
+//! With a floor (`floor`), the same streams are measured against the bare
+//! sender instead: WebSocket streams open `ws://127.0.0.1:{port}/`, and the
+//! gRPC floor's streams share raw TCP connections as they shared HTTP/2 ones,
+//! each connection's reader handing every stream its frames (as tonic's
+//! connection task does); the clock is the floor's grid, and there are no
+//! server counters.
+//!
 //! Clients decode only the frame header (`seq`, `sent_at_unix_nanos`,
 //! `dropped`): the gRPC side through a codec for a three-field message
 //! (protobuf skips the pose), the WebSocket side by skipping the pose while
@@ -32,9 +39,12 @@ use std::sync::atomic::{AtomicI64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use anyhow::Context;
+use bytes::Bytes;
 use futures_util::{SinkExt, StreamExt};
 use serde::Deserialize;
-use tokio::sync::{Semaphore, watch};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::sync::{Semaphore, mpsc, watch};
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Message;
 use tonic::codegen::http::uri::PathAndQuery;
@@ -45,8 +55,8 @@ use super::histogram::Latency;
 use super::lateness::StreamTracker;
 use super::motion::Playable;
 use super::report::{Report, ServerUsage, StreamStats};
-use super::{Env, Mode, Options, broadcast, procstat, setup};
-use crate::stream::PHASE_HEADER;
+use super::{Env, Mode, Options, broadcast, floor, procstat, setup};
+use crate::stream::{PHASE_HEADER, WireFrame};
 use crate::sync::lock;
 use crate::wire::proto::pb;
 
@@ -169,12 +179,15 @@ struct Spec {
     fps: u32,
     /// `ws-broadcast`: the broadcast the viewers watch.
     broadcast: Option<String>,
+    /// The floor the streams connect to instead of the server.
+    floor: Option<floor::Target>,
     clock: ClockSync,
     window: Arc<Window>,
     opening: Arc<Semaphore>,
 }
 
 /// A frame header, or the end of the stream (with why, if it failed).
+#[derive(Debug)]
 enum Got {
     Frame(u64, i64, u64),
     End(Option<String>),
@@ -204,6 +217,19 @@ type WebSocket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsS
 enum Open {
     Grpc(Box<tonic::Streaming<FrameHead>>),
     Ws(Box<WebSocket>, bool),
+    /// A stream of a shared floor connection: what its reader hands it.
+    Floor(mpsc::UnboundedReceiver<Got>),
+}
+
+/// What a stream connects through.
+#[derive(Clone)]
+enum Link {
+    /// An HTTP/2 connection to the server's gRPC port.
+    Grpc(Channel),
+    /// Its own connection (a WebSocket).
+    Own,
+    /// Its place on a floor connection, taken when it opens.
+    Floor(Arc<Mutex<Option<mpsc::UnboundedReceiver<Got>>>>),
 }
 
 impl Open {
@@ -233,6 +259,7 @@ impl Open {
                     None => return Got::End(Some("ended".into())),
                 }
             },
+            Open::Floor(frames) => frames.recv().await.unwrap_or(Got::End(Some("ended".into()))),
         }
     }
 
@@ -245,12 +272,18 @@ impl Open {
 
 impl Spec {
     /// Opens a stream; with it, the grid phase the server announced.
-    async fn open(&self, channel: &Channel, start_time: f64) -> Result<(Open, Option<u32>), String> {
-        match self.mode {
-            Mode::GrpcStream => self.open_grpc(channel, start_time).await,
+    async fn open(&self, link: &Link, start_time: f64) -> Result<(Open, Option<u32>), String> {
+        match (self.mode, link) {
+            (_, Link::Floor(frames)) => {
+                let frames = lock(frames).take().ok_or_else(|| "floor_connection_gone".to_string())?;
+                Ok((Open::Floor(frames), None))
+            }
+            (Mode::GrpcStream, Link::Grpc(channel)) => self.open_grpc(channel, start_time).await,
+            (Mode::GrpcStream, Link::Own) => Err("no_channel".into()),
             _ => {
                 let encoding = if self.ws_protobuf { "protobuf" } else { "json" };
                 let url = match (&self.broadcast, &self.motion) {
+                    _ if self.floor.is_some() => format!("ws://127.0.0.1:{}/", self.floor.map_or(0, |f| f.port)),
                     (Some(id), _) => format!("{}v1/broadcasts/{id}/stream?encoding={encoding}", self.ws_base),
                     (None, None) => format!(
                         "{}v1/clips/{}/stream?fps={}&start={start_time}&encoding={encoding}",
@@ -262,7 +295,7 @@ impl Spec {
                     tokio_tungstenite::tungstenite::Error::Http(r) => format!("http:{}", r.status().as_u16()),
                     _ => "connect".to_string(),
                 })?;
-                let phase = match self.motion.as_ref().filter(|_| self.broadcast.is_none()) {
+                let phase = match self.motion.as_ref().filter(|_| self.broadcast.is_none() && self.floor.is_none()) {
                     None => resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok()),
                     Some(motion) => {
                         let open = serde_json::json!({"op": "open", "motion": motion.json, "fps": self.fps,
@@ -276,6 +309,17 @@ impl Spec {
     }
 
     async fn open_grpc(&self, channel: &Channel, start_time: f64) -> Result<(Open, Option<u32>), String> {
+        let resp = self.grpc_stream::<FrameHead>(channel, start_time).await?;
+        let phase = resp.metadata().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
+        Ok((Open::Grpc(Box::new(resp.into_inner())), phase))
+    }
+
+    /// A `StreamFrames` call whose frames decode as `T`.
+    async fn grpc_stream<T: prost::Message + Default + Send + 'static>(
+        &self,
+        channel: &Channel,
+        start_time: f64,
+    ) -> Result<tonic::Response<tonic::Streaming<T>>, String> {
         let mut grpc = tonic::client::Grpc::new(channel.clone());
         grpc.ready().await.map_err(|_| "connect".to_string())?;
         let req = pb::StreamRequest {
@@ -286,19 +330,14 @@ impl Spec {
             ..Default::default()
         };
         let path = PathAndQuery::from_static("/inbetween.v1.Animation/StreamFrames");
-        let codec = tonic_prost::ProstCodec::<pb::StreamRequest, FrameHead>::default();
-        let resp = grpc
-            .server_streaming(tonic::Request::new(req), path, codec)
-            .await
-            .map_err(|s| format!("grpc:{:?}", s.code()))?;
-        let phase = resp.metadata().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok());
-        Ok((Open::Grpc(Box::new(resp.into_inner())), phase))
+        let codec = tonic_prost::ProstCodec::<pb::StreamRequest, T>::default();
+        grpc.server_streaming(tonic::Request::new(req), path, codec).await.map_err(|s| format!("grpc:{:?}", s.code()))
     }
 
     /// One stream until `stop`: open, receive, reopen on failure.
     async fn run(
         self,
-        channel: Channel,
+        link: Link,
         start_time: f64,
         hists: Arc<Mutex<Hists>>,
         mut stop: watch::Receiver<bool>,
@@ -310,7 +349,7 @@ impl Spec {
             }
             let permit = self.opening.acquire().await.expect("the semaphore is never closed");
             let opened = tokio::select! {
-                r = tokio::time::timeout(OPEN_TIMEOUT, self.open(&channel, start_time)) => r,
+                r = tokio::time::timeout(OPEN_TIMEOUT, self.open(&link, start_time)) => r,
                 _ = stopped(&mut stop) => return out,
             };
             drop(permit);
@@ -415,28 +454,43 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
     let _ = stop.wait_for(|s| *s).await;
 }
 
-pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<Report> {
+/// Runs `n` streams against the server, or against the floor `floor`.
+pub(crate) async fn run(opts: &Options, env: &Env, n: usize, floor: Option<&floor::Target>) -> anyhow::Result<Report> {
     let connections = match opts.mode {
         Mode::GrpcStream if opts.connections == 0 => n.div_ceil(STREAMS_PER_CONNECTION),
         Mode::GrpcStream => opts.connections.min(n),
         _ => n, // a WebSocket is its own connection
     };
-    // The clock sync always goes over gRPC (the `Ping` RPC); WebSocket
-    // streams use one extra channel for it.
-    let channels = setup::channels(&env.grpc, if opts.mode == Mode::GrpcStream { connections } else { 1 }).await?;
-    let clock = setup::clock_sync(channels[0].clone()).await?;
+    let grpc = opts.mode == Mode::GrpcStream;
+    let (links, clock, readers) = match floor {
+        Some(f) if grpc => {
+            let (links, readers) = floor_links(f.port, n, connections).await?;
+            (links, f.clock, readers)
+        }
+        Some(f) => (vec![Link::Own], f.clock, Vec::new()),
+        None => {
+            // The clock sync always goes over gRPC (the `Ping` RPC); WebSocket
+            // streams use one extra channel for it.
+            let channels = setup::channels(&env.grpc, if grpc { connections } else { 1 }).await?;
+            let clock = setup::clock_sync(channels[0].clone()).await?;
+            let links = if grpc { channels.into_iter().map(Link::Grpc).collect() } else { vec![Link::Own] };
+            (links, clock, Vec::new())
+        }
+    };
+    let server_pid = floor.map_or(env.server_pid, |f| Some(f.pid));
+    let http = floor.is_none().then_some(&env.http);
     let broadcasting = opts.mode == Mode::WsBroadcast;
-    let counters_before_open = counters(broadcasting, &env.http).await;
-    let broadcast = match (broadcasting, &env.motion) {
+    let counters_before_open = counters(broadcasting, http).await;
+    let broadcast = match (broadcasting && floor.is_none(), &env.motion) {
         (false, _) => None,
         (true, Some(m)) => Some(broadcast::create(&env.http, &m.json, opts.fps).await?),
         (true, None) => Some(broadcast::create(&env.http, &broadcast::clip_motion(&env.clip_id), opts.fps).await?),
     };
-    let spec = Spec::new(opts, env, clock, broadcast.clone())?;
+    let spec = Spec::new(opts, env, clock, broadcast.clone(), floor.copied())?;
     let window = Arc::clone(&spec.window);
 
     // After the broadcast exists: the RSS per viewer is the viewers' alone.
-    let server_before = env.server_pid.and_then(procstat::sample);
+    let server_before = server_pid.and_then(procstat::sample);
     let (stop_tx, stop_rx) = watch::channel(false);
     let groups: Vec<Arc<Mutex<Hists>>> = (0..n.div_ceil(GROUP)).map(|_| Arc::default()).collect();
     let mut tasks = Vec::with_capacity(n);
@@ -444,33 +498,36 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
         // Independent streams differ in start time (1 ms apart), so the
         // server cannot merge them; shared ones all start at 0.
         let start_time = if opts.shared { 0.0 } else { i as f64 * 0.001 };
-        let channel = channels[i % channels.len()].clone();
+        let link = links[i % links.len()].clone();
         let hists = Arc::clone(&groups[i / GROUP]);
-        tasks.push(tokio::spawn(spec.clone().run(channel, start_time, hists, stop_rx.clone())));
+        tasks.push(tokio::spawn(spec.clone().run(link, start_time, hists, stop_rx.clone())));
     }
     wait_until_open(&window, n).await;
 
-    let counters_before = counters(broadcasting, &env.http).await;
-    let server_start = env.server_pid.and_then(procstat::sample);
+    let counters_before = counters(broadcasting, http).await;
+    let server_start = server_pid.and_then(procstat::sample);
     let client_start = procstat::sample_self();
     let start = unix_now_ns();
     window.end.store(start + opts.duration.as_nanos() as i64, Ordering::Relaxed);
     window.start.store(start, Ordering::Relaxed);
     tokio::time::sleep(opts.duration).await;
     let elapsed = (unix_now_ns() - start) as f64 / 1e9;
-    let server_end = env.server_pid.and_then(procstat::sample);
+    let server_end = server_pid.and_then(procstat::sample);
     let client_end = procstat::sample_self();
-    let counters_after = counters(broadcasting, &env.http).await;
+    let counters_after = counters(broadcasting, http).await;
     stop_tx.send_replace(true);
 
     let done = Collected::gather(tasks, &groups).await;
+    for reader in readers {
+        reader.abort();
+    }
     if let Some(id) = &broadcast {
         broadcast::delete(&env.http, id).await;
     }
     let done = done?;
     let mut stats = done.stats(opts, n, elapsed, clock, [counters_before_open, counters_before, counters_after]);
     stats.broadcast_id = broadcast;
-    let server = match (env.server_pid, server_before, server_start, server_end) {
+    let server = match (server_pid, server_before, server_start, server_end) {
         (Some(pid), Some(b), Some(s), Some(e)) => Some(ServerUsage {
             pid,
             rss_before_bytes: b.rss_bytes,
@@ -502,12 +559,19 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize) -> anyhow::Result<R
         client_cpu_cores: client_start.zip(client_end).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / elapsed),
         loadavg: None,
         ramp: None,
+        floor: None,
     })
 }
 
 impl Spec {
     /// What every stream of this run shares; the window is not open yet.
-    fn new(opts: &Options, env: &Env, clock: ClockSync, broadcast: Option<String>) -> anyhow::Result<Spec> {
+    fn new(
+        opts: &Options,
+        env: &Env,
+        clock: ClockSync,
+        broadcast: Option<String>,
+        floor: Option<floor::Target>,
+    ) -> anyhow::Result<Spec> {
         let mut ws_base = env.http.clone();
         ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
         let window =
@@ -520,6 +584,7 @@ impl Spec {
             motion: env.motion.clone().map(Arc::new),
             fps: opts.fps,
             broadcast,
+            floor,
             clock,
             window,
             opening: Arc::new(Semaphore::new(OPENING)),
@@ -529,8 +594,106 @@ impl Spec {
 
 /// The server's (playbacks started, ticks evaluated) counters, or for
 /// broadcast viewers (broadcasts created, broadcast ticks evaluated).
-async fn counters(broadcasting: bool, http: &reqwest::Url) -> Option<(u64, u64)> {
+async fn counters(broadcasting: bool, http: Option<&reqwest::Url>) -> Option<(u64, u64)> {
+    let http = http?;
     if broadcasting { broadcast::counters(http).await } else { setup::stream_counters(http).await }
+}
+
+/// The gRPC floor's connections (`floor`): stream `i` rides connection
+/// `i % connections`, as on the server's channels, and is the `i /
+/// connections`-th of its frames in every batch. Each connection says how
+/// many streams it carries, then a reader hands the frames round.
+async fn floor_links(
+    port: u16,
+    n: usize,
+    connections: usize,
+) -> anyhow::Result<(Vec<Link>, Vec<tokio::task::JoinHandle<()>>)> {
+    let mut slots: Vec<Option<Link>> = vec![None; n];
+    let mut readers = Vec::with_capacity(connections);
+    for c in 0..connections {
+        let members: Vec<usize> = (c..n).step_by(connections).collect();
+        if members.len() > floor::MAX_COPIES {
+            anyhow::bail!("{} streams on one connection; the floor takes {}", members.len(), floor::MAX_COPIES);
+        }
+        let mut stream =
+            tokio::net::TcpStream::connect(("127.0.0.1", port)).await.context("connecting to the floor")?;
+        stream.set_nodelay(true)?;
+        stream.write_u32(members.len() as u32).await?;
+        let mut senders = Vec::with_capacity(members.len());
+        for i in members {
+            let (tx, rx) = mpsc::unbounded_channel();
+            senders.push(tx);
+            slots[i] = Some(Link::Floor(Arc::new(Mutex::new(Some(rx)))));
+        }
+        readers.push(tokio::spawn(read_floor(stream, senders)));
+    }
+    Ok((slots.into_iter().map(|l| l.expect("every stream has a connection")).collect(), readers))
+}
+
+/// Reads gRPC messages (5-byte prefix, `Frame`) and hands them round its
+/// streams, until the floor closes or every stream has gone.
+async fn read_floor(stream: tokio::net::TcpStream, streams: Vec<mpsc::UnboundedSender<Got>>) {
+    let mut reader = tokio::io::BufReader::with_capacity(64 * 1024, stream);
+    let mut prefix = [0u8; 5];
+    let mut message = Vec::new();
+    let why = 'read: loop {
+        for tx in &streams {
+            if reader.read_exact(&mut prefix).await.is_err() {
+                break 'read "ended";
+            }
+            let len = u32::from_be_bytes([prefix[1], prefix[2], prefix[3], prefix[4]]) as usize;
+            message.resize(len, 0);
+            if reader.read_exact(&mut message).await.is_err() {
+                break 'read "ended";
+            }
+            let got = match <FrameHead as prost::Message>::decode(&message[..]) {
+                Ok(h) => Got::Frame(h.seq, h.sent_at_unix_nanos, h.dropped),
+                Err(_) => Got::End(Some("bad_frame".into())),
+            };
+            let _ = tx.send(got);
+        }
+        if streams.iter().all(mpsc::UnboundedSender::is_closed) {
+            return;
+        }
+    };
+    for tx in &streams {
+        let _ = tx.send(Got::End(Some(why.into())));
+    }
+}
+
+/// One frame as the server sent it, for the floor: the second of a fresh
+/// stream of the run's clip or motion (a protobuf stream's first frame
+/// carries the joint names, which no later frame does).
+pub(crate) async fn sample_frame(opts: &Options, env: &Env) -> anyhow::Result<Bytes> {
+    let clock = ClockSync { offset_ns: 0, rtt_ns: 0, grid_epoch_unix_ns: 0 };
+    let spec = Spec::new(opts, env, clock, None, None)?;
+    tokio::time::timeout(OPEN_TIMEOUT, take_frame(&spec, env)).await.context("no frame within the open timeout")?
+}
+
+async fn take_frame(spec: &Spec, env: &Env) -> anyhow::Result<Bytes> {
+    if spec.mode == Mode::GrpcStream {
+        let channel = setup::channels(&env.grpc, 1).await?.remove(0);
+        let mut frames = spec.grpc_stream::<WireFrame>(&channel, 0.0).await.map_err(anyhow::Error::msg)?.into_inner();
+        frames.message().await?;
+        return Ok(frames.message().await?.context("the stream ended at its first frame")?.0);
+    }
+    let (open, _) = spec.open(&Link::Own, 0.0).await.map_err(anyhow::Error::msg)?;
+    let Open::Ws(mut ws, _) = open else { anyhow::bail!("a WebSocket stream was expected") };
+    let mut seen = 0;
+    while let Some(message) = ws.next().await {
+        let bytes = match message? {
+            Message::Text(t) => Bytes::copy_from_slice(t.as_bytes()),
+            Message::Binary(b) => b,
+            Message::Close(c) => anyhow::bail!("the stream closed: {c:?}"),
+            _ => continue,
+        };
+        seen += 1;
+        if seen == 2 {
+            let _ = tokio::time::timeout(Duration::from_secs(1), ws.close()).await;
+            return Ok(bytes);
+        }
+    }
+    anyhow::bail!("the stream ended before its second frame")
 }
 
 /// Waits until every stream has delivered a frame (or a deadline that grows

@@ -157,6 +157,7 @@ pub(crate) async fn run(opts: &Options, env: &Env, workers: usize) -> anyhow::Re
         client_cpu_cores: client_before.zip(client_after).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / elapsed),
         loadavg: None,
         ramp: None,
+        floor: None,
     })
 }
 

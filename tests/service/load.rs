@@ -39,6 +39,7 @@ fn options(app: &TestApp, mode: Mode) -> Options {
         ws_protobuf: false,
         ramp: None,
         server_pid: None,
+        floor: None,
     }
 }
 
@@ -198,6 +199,46 @@ async fn broadcast_viewers_get_the_asked_rate_from_one_evaluation_per_tick() {
         assert!((20.0..=33.0).contains(&ticks), "{ticks} evaluated ticks/s for 4 viewers at 30 fps");
         let gone = reqwest::get(app.url(&format!("/v1/broadcasts/{id}"))).await.unwrap();
         assert_eq!(gone.status(), 404, "the run deletes its broadcast");
+    }
+}
+
+/// The streaming floor (issue 19): after the server's streams, the same
+/// run starts the real binary's bare sender (`inbetween load-floor`), which
+/// sends a frame the server sent — as raw gRPC messages for `grpc-stream`
+/// (the 4 streams sharing one connection as they shared one HTTP/2
+/// connection), as WebSocket text or binary frames for `ws-stream` — and
+/// the same receive code measures it: every stream opens, frames arrive at
+/// the asked rate on the floor's grid, the sender's own tally agrees, and
+/// its CPU is read from its own process.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_floor_sends_the_servers_frame_at_the_same_rate_and_is_measured() {
+    let app = spawn_app().await;
+    let bin = std::path::PathBuf::from(env!("CARGO_BIN_EXE_inbetween"));
+    for (mode, ws_protobuf, kind, connections) in [
+        (Mode::GrpcStream, false, "tcp", 1),
+        (Mode::WsStream, false, "ws-json", 4),
+        (Mode::WsStream, true, "ws-protobuf", 4),
+    ] {
+        let r = run(Options { ws_protobuf, floor: Some(bin.clone()), ..options(&app, mode) }).await;
+        check_common(&r, mode.as_str());
+        let f = r.floor.as_ref().expect("a floor report");
+        assert_eq!((f.kind, f.streams, f.opened, f.connections), (kind, 4, 4, connections), "{f:?}");
+        assert!(f.errors.is_empty(), "{kind}: {:?}", f.errors);
+        // A 20-joint pose is 20 × 10 floats in protobuf, more in JSON.
+        assert!(f.frame_bytes > 800, "{kind}: a {}-byte frame", f.frame_bytes);
+        let ticks = f.frames as f64 / 4.0 / f.elapsed_secs / (1.0 - f.loss_ratio);
+        assert!((20.0..=33.0).contains(&ticks), "{kind}: {ticks} ticks/s per stream at 30 fps");
+        assert!(f.frames_per_stream_per_sec >= 15.0, "{kind}: {f:?}");
+        assert_eq!(f.receive_lateness.count, f.frames);
+        assert!(f.send_lateness.min_us >= 0.0 && f.send_lateness.p50_us < 33_333.0, "{kind}: {f:?}");
+        assert!(f.cpu_cores >= 0.0 && f.cpu_us_per_frame >= 0.0, "{kind}: {f:?}");
+        let sent = f.sent.expect("the sender's tally");
+        assert_eq!(sent.connections, connections as u64, "{kind}: {sent:?}");
+        assert!(sent.frames >= f.frames, "{kind}: the sender wrote {} frames, {} arrived", sent.frames, f.frames);
+        let json = serde_json::to_value(&r).unwrap();
+        for key in ["cpu_us_per_frame", "server_to_floor", "frames", "loss_ratio", "receive_lateness"] {
+            assert!(json["floor"].get(key).is_some(), "floor.{key} missing from the JSON report");
+        }
     }
 }
 
