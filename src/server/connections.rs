@@ -210,6 +210,10 @@ impl Tracked {
     /// Whether the connection has been idle for the timeout; otherwise the
     /// timer is armed to wake the reader when it may have been.
     fn idle_expired(&mut self, cx: &mut Context<'_>) -> bool {
+        if !self.expired && self.activity.upgraded.load(Ordering::Acquire) {
+            // Never idle again, and read once per message: no clock, no timer.
+            return false;
+        }
         loop {
             if self.expired {
                 return true;

@@ -2,7 +2,8 @@
 //! grid, driven by controllers and watched by any number of viewers who
 //! join and leave at any time, on one node or on every node of a cluster.
 //!
-//! A broadcast is its own task. Tick `k` falls at `created_at + k/fps` by
+//! A broadcast is its own task (with the precise timer, on the
+//! producers' thread, so it never waits behind its viewers: `producer`). Tick `k` falls at `created_at + k/fps` by
 //! the wall clock (mapped onto the monotonic clock once, when the node
 //! starts the broadcast), so every node ticks on the same grid. At each
 //! tick the task files the controls accepted since the last one and steps
@@ -303,7 +304,16 @@ impl Broadcasts {
         metrics::gauge!("inbetween_broadcasts").increment(1.0);
         metrics::counter!("inbetween_broadcasts_total").increment(1);
         let task = Task::new(Arc::clone(&broadcast), self.clone(), schedule, self.inner.shutdown.clone());
-        crate::panics::spawn_guarded("broadcast", task.run());
+        let run = async move {
+            crate::panics::guarded("broadcast", task.run()).await;
+        };
+        // With the precise timer (the server), off the workers its viewers
+        // run on, so that no tick waits behind their fan-out (`producer`).
+        if self.inner.precise {
+            super::producer::spawn(run);
+        } else {
+            tokio::spawn(run);
+        }
         Ok(broadcast)
     }
 
@@ -629,6 +639,9 @@ struct Task {
     journaled: Instant,
     /// Viewers counted into `inbetween_broadcast_viewers` at the last tick.
     counted: usize,
+    /// The runtime the broadcast was created from: what the task starts
+    /// besides its ticks (store writes, long catch-ups) runs there.
+    origin: tokio::runtime::Handle,
 }
 
 impl Task {
@@ -650,6 +663,7 @@ impl Task {
             last_watched: now,
             journaled: now,
             counted: 0,
+            origin: tokio::runtime::Handle::current(),
         }
     }
 
@@ -731,11 +745,13 @@ impl Task {
         }
         if k.saturating_sub(program.next()) > BLOCKING_CATCH_UP {
             let log = self.log.clone();
-            let stepped = tokio::task::spawn_blocking(move || {
-                program.step_to(k, &log);
-                program
-            })
-            .await;
+            let stepped = self
+                .origin
+                .spawn_blocking(move || {
+                    program.step_to(k, &log);
+                    program
+                })
+                .await;
             program = match stepped {
                 Ok(p) => p,
                 Err(e) => {
@@ -764,7 +780,7 @@ impl Task {
                 && now.saturating_duration_since(self.journaled) >= every
             {
                 self.journaled = now;
-                tokio::spawn(journal.touch(&b.id));
+                drop(self.origin.spawn(journal.touch(&b.id)));
             }
             return None;
         }
@@ -778,12 +794,12 @@ impl Task {
         if now.saturating_duration_since(self.journaled) >= every {
             self.journaled = now;
             let (expire, registry, id) = (journal.expire(&b.id, idle), self.registry.clone(), Arc::clone(&b.id));
-            tokio::spawn(async move {
+            drop(self.origin.spawn(async move {
                 if expire.await {
                     metrics::counter!("inbetween_broadcasts_idle_ended_total").increment(1);
                     registry.delete(&id);
                 }
-            });
+            }));
         }
         None
     }

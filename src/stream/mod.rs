@@ -44,6 +44,7 @@ mod limits;
 mod params;
 mod pinned;
 mod playhead;
+mod producer;
 mod registry;
 mod schedule;
 mod subscription;

@@ -5,7 +5,7 @@
 use bytes::Bytes;
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
-use super::encode::{Encoding, Names};
+use super::encode::Encoding;
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
@@ -178,8 +178,6 @@ pub struct Subscription {
     /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
     /// whose controls are refused), never into a fork.
     broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,
-    /// The names of the joints frames carry, for a protobuf viewer's first frame.
-    names: Names,
     check: ControlCheck,
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
@@ -233,7 +231,6 @@ impl Subscription {
             }
         };
         Subscription {
-            names: params.names(),
             check: ControlCheck::new(&params),
             params,
             schedule,
@@ -313,8 +310,11 @@ impl Subscription {
             // the ticks before were not its losses.
             let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
             let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
-            let names = (self.last_seq.is_none()).then_some(&self.names);
-            let bytes = frame.for_viewer(dropped, names);
+            // The names of the joints frames carry, on a protobuf viewer's
+            // first frame (made then: kept, they cost every viewer ~1 KiB).
+            let first_pb = self.last_seq.is_none() && self.params.encoding == Encoding::Protobuf;
+            let names = first_pb.then(|| self.params.names());
+            let bytes = frame.for_viewer(dropped, names.as_ref());
             self.last_seq = Some(frame.seq);
             self.delivered += 1;
             self.sent.increment(1);

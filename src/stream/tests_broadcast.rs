@@ -293,3 +293,52 @@ async fn a_withdrawn_control_leaves_the_frames_as_without_it() {
     assert_eq!((seq, late), (1, 1));
     assert_eq!(times, [0.0, 0.0, 0.0, 0.4, 0.5, 0.6], "paused from tick 1, then playing as if never paused");
 }
+
+/// Issue 19: a broadcast's tick never waits behind the viewers it wakes.
+/// With the precise timer (the server's) its task runs on the producers'
+/// thread, so while both workers of the runtime that created it are busy,
+/// it still produces every tick: a viewer reading on another thread gets
+/// each one in turn, none dropped. (On the workers, it produced nothing
+/// while they were busy and then skipped to the latest tick.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broadcast_produces_every_tick_while_the_workers_are_busy() {
+    let config = EngineConfig { precise_timer: true, buffer: 64, max_broadcasts: 4, ..Default::default() };
+    let e = Engine::new(config);
+    let b = create(&e, 100, 300);
+    let mut sub = viewer(&e, &b, Encoding::Json, false);
+    let (started, ticking) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        rt.block_on(async move {
+            let mut frames = Vec::new();
+            for i in 0..50 {
+                frames.push(frame(&mut sub).await);
+                if i == 5 {
+                    started.send(()).unwrap();
+                }
+            }
+            frames
+        })
+    });
+    ticking.recv().unwrap();
+    // Then both workers held (not yielding) for 300 ms, i.e. 30 ticks: the
+    // barrier makes the two hogs run on the two workers at once.
+    let both = Arc::new(std::sync::Barrier::new(2));
+    let hogs: Vec<_> = (0..2)
+        .map(|_| {
+            let both = Arc::clone(&both);
+            tokio::spawn(async move {
+                both.wait();
+                std::thread::sleep(Duration::from_millis(300));
+            })
+        })
+        .collect();
+    for hog in hogs {
+        hog.await.unwrap();
+    }
+    let frames = reader.join().unwrap();
+    let first = frames[0].seq;
+    let seqs: Vec<(u64, u64)> = frames.iter().map(|f| (f.seq, f.dropped)).collect();
+    let every: Vec<(u64, u64)> = (first..first + 50).map(|seq| (seq, 0)).collect();
+    assert_eq!(seqs, every, "every tick, in turn, none dropped");
+}

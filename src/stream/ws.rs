@@ -22,8 +22,11 @@
 //! with the problem of its lookup: `clip_not_found` at `/to/layers/1/clip`)
 //! and the stream goes on.
 
+use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::task::{Context, Poll, Wake, Waker};
 use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
@@ -31,7 +34,8 @@ use futures_util::{Sink, SinkExt, Stream, StreamExt};
 use serde::Deserialize;
 use tokio::time::{Instant, MissedTickBehavior, interval_at, timeout};
 
-use futures_util::future::BoxFuture;
+use futures_util::future::{BoxFuture, poll_fn};
+use futures_util::task::AtomicWaker;
 
 use super::encode::Encoding;
 use super::hub::EndReason;
@@ -302,6 +306,7 @@ pub async fn serve<S, E>(
     let mut awaiting_pong = false;
     let mut controls = Controls { motions, lookup: None, queued: VecDeque::new() };
     let mut outbox: VecDeque<Message> = VecDeque::new();
+    let mut reads = ReadGate::new();
     loop {
         let outgoing = if let Some(message) = outbox.pop_front() {
             message
@@ -309,9 +314,9 @@ pub async fn serve<S, E>(
             tokio::select! {
                 next = sub.next() => match next {
                     Next::Frame(f) => match sub.encoding() {
-                        Encoding::Json => match Utf8Bytes::try_from(f.bytes) {
-                            Ok(text) => Message::Text(text),
-                            Err(_) => continue, // the JSON encoder writes UTF-8 only
+                        Encoding::Json => match text(f.bytes) {
+                            Some(text) => Message::Text(text),
+                            None => continue, // the JSON encoder writes UTF-8 only
                         },
                         Encoding::Protobuf => Message::Binary(f.bytes),
                     },
@@ -320,7 +325,7 @@ pub async fn serve<S, E>(
                         return;
                     }
                 },
-                incoming = socket.next() => match incoming {
+                incoming = poll_fn(|cx| reads.poll_next(&mut socket, cx)) => match incoming {
                     None | Some(Ok(Message::Close(_))) => return,
                     Some(Err(e)) => {
                         // A message over the inbound limit is refused with 1009;
@@ -363,6 +368,74 @@ pub async fn serve<S, E>(
             Err(_) => return close_slow_consumer(&mut socket).await,
         }
     }
+}
+
+/// Reads the socket only when it has woken the task (or gave a message
+/// the last time, since more may be buffered). Polled beside the frames,
+/// the socket would otherwise be read once per frame sent, each attempt
+/// going through tungstenite, hyper's upgraded connection and the
+/// connection's wrappers to find nothing: a tenth of a broadcast viewer's
+/// cost per frame (issue 19).
+struct ReadGate {
+    wake: Arc<ReadWake>,
+    /// Wakes `wake`: the waker the socket's read side is polled with.
+    waker: Waker,
+}
+
+struct ReadWake {
+    woken: AtomicBool,
+    task: AtomicWaker,
+}
+
+impl Wake for ReadWake {
+    fn wake(self: Arc<Self>) {
+        self.wake_by_ref();
+    }
+
+    fn wake_by_ref(self: &Arc<Self>) {
+        self.woken.store(true, Ordering::Release);
+        self.task.wake();
+    }
+}
+
+impl ReadGate {
+    fn new() -> Self {
+        let wake = Arc::new(ReadWake { woken: AtomicBool::new(true), task: AtomicWaker::new() });
+        ReadGate { waker: Waker::from(Arc::clone(&wake)), wake }
+    }
+
+    fn poll_next<S: Stream + Unpin>(&mut self, socket: &mut S, cx: &mut Context<'_>) -> Poll<Option<S::Item>> {
+        // Registered before the flag is taken: a wake-up in between polls again.
+        self.wake.task.register(cx.waker());
+        if !self.wake.woken.swap(false, Ordering::AcqRel) {
+            return Poll::Pending;
+        }
+        let item = socket.poll_next_unpin(&mut Context::from_waker(&self.waker));
+        if item.is_ready() {
+            self.wake.woken.store(true, Ordering::Release);
+        }
+        item
+    }
+}
+
+/// A JSON frame as a text message. The viewers of a broadcast (or shared
+/// playback) send the very same bytes, so the UTF-8 check is made once
+/// per frame and worker thread, not once per viewer: the last text made
+/// on this thread is handed out again for the same bytes. The same
+/// allocation and length is the same text, since the kept copy holds the
+/// allocation alive and `Bytes` never change.
+fn text(bytes: bytes::Bytes) -> Option<Utf8Bytes> {
+    thread_local! {
+        static LAST: RefCell<Option<Utf8Bytes>> = const { RefCell::new(None) };
+    }
+    LAST.with_borrow_mut(|last| {
+        if let Some(text) = last.as_ref().filter(|t| t.as_ptr() == bytes.as_ptr() && t.len() == bytes.len()) {
+            return Some(text.clone());
+        }
+        let text = Utf8Bytes::try_from(bytes).ok()?;
+        *last = Some(text.clone());
+        Some(text)
+    })
 }
 
 /// A viewer that accepted nothing for a whole keepalive period: its bounded
