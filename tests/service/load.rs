@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use inbetween::load::{self, ClipChoice, Mode, MotionChoice, Options, Report, ramp::RampPlan};
 
-use crate::common::TestApp;
+use crate::common::{ServerProcess, TestApp};
 
 async fn spawn_app() -> TestApp {
     TestApp::builder()
@@ -22,10 +22,14 @@ async fn spawn_app() -> TestApp {
 }
 
 fn options(app: &TestApp, mode: Mode) -> Options {
+    options_at(app.url(""), app.grpc_url(), mode)
+}
+
+fn options_at(http: String, grpc: String, mode: Mode) -> Options {
     Options {
         mode,
-        http: app.url(""),
-        grpc: app.grpc_url(),
+        http,
+        grpc,
         allow_remote: false,
         concurrency: 4,
         connections: 0,
@@ -47,15 +51,21 @@ async fn run(opts: Options) -> Report {
     tokio::time::timeout(Duration::from_secs(60), load::run(opts)).await.expect("the run is bounded").expect("runs")
 }
 
-/// What every report must hold, whatever the mode.
+/// What every report must hold, whatever the mode, for a server in this
+/// process.
 fn check_common(r: &Report, mode: &str) {
+    check_common_of(r, mode, std::process::id());
+}
+
+/// [`check_common`] for the server process `pid`.
+fn check_common_of(r: &Report, mode: &str, pid: u32) {
     assert_eq!(r.mode, mode);
     assert!(r.errors.is_empty(), "{mode}: errors {:?}", r.errors);
     assert!(r.ok > 0 && r.throughput > 0.0, "{mode}: {r:?}");
     assert!((r.throughput - r.ok as f64 / r.elapsed_secs).abs() < 1e-6 * r.throughput.max(1.0));
-    // The server is this process, found by its listening port.
+    // The server is found by its listening port.
     let server = r.server.as_ref().expect("the local server is measured");
-    assert_eq!(server.pid, std::process::id());
+    assert_eq!(server.pid, pid);
     assert!(server.rss_end_bytes > 1 << 20 && server.cpu_cores >= 0.0, "{server:?}");
     assert!(r.loadavg.is_some());
     let json: serde_json::Value = serde_json::to_value(r).unwrap();
@@ -99,10 +109,15 @@ async fn a_request_budget_is_spent_exactly_and_an_open_loop_keeps_its_rate() {
 }
 
 async fn check_stream(opts: Options) -> Report {
+    check_stream_of(opts, std::process::id()).await
+}
+
+/// [`check_stream`] for the server process `pid`.
+async fn check_stream_of(opts: Options, pid: u32) -> Report {
     let (mode, shared) = (opts.mode, opts.shared);
     let motion = opts.motion.map(MotionChoice::as_str);
     let r = run(opts).await;
-    check_common(&r, mode.as_str());
+    check_common_of(&r, mode.as_str(), pid);
     assert_eq!(r.motion, motion);
     let s = r.streams.as_ref().expect("stream reports");
     assert_eq!((s.streams, s.opened, s.fps, s.shared), (4, 4, 30, shared));
@@ -183,14 +198,17 @@ async fn foot_ik_streams_play_at_the_asked_rate() {
 /// like any stream; the server evaluates the broadcast once per tick
 /// whatever the number of viewers (≈ 30 ticks in the 1 s window for 4
 /// viewers, where 4 independent streams would be ≈ 120), exactly one
-/// broadcast is created per run, and it is deleted when the run ends.
+/// broadcast is created per run, and it is deleted when the run ends. The
+/// counters are the server's `/metrics`, which an in-process server shares
+/// with every other test's broadcasts, so this one is a server process.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn broadcast_viewers_get_the_asked_rate_from_one_evaluation_per_tick() {
-    let app = spawn_app().await;
+    let app = ServerProcess::serve().start().await;
     let cases = [(false, None), (true, None), (true, Some(MotionChoice::ThreeLayers))];
     for (ws_protobuf, motion) in cases {
-        let opts = Options { shared: true, ws_protobuf, motion, ..options(&app, Mode::WsBroadcast) };
-        let r = check_stream(opts).await;
+        let at = options_at(app.base(), app.grpc_url(), Mode::WsBroadcast);
+        let opts = Options { shared: true, ws_protobuf, motion, ..at };
+        let r = check_stream_of(opts, app.pid() as u32).await;
         let s = r.streams.as_ref().unwrap();
         assert_eq!(s.encoding, if ws_protobuf { "protobuf" } else { "json" });
         assert_eq!(s.playbacks_started, Some(1), "one broadcast per run");
