@@ -28,19 +28,19 @@ pub const WAVE: &str = include_str!("../../examples/wave.json");
 /// A real third-party test file, `rel` as in `../shared/testdata` (e.g.
 /// `gltf/Fox/Fox.glb`): the repository's own copy in `examples/` when it
 /// ships one (the Fox, InterpolationTest, CMU 131_01, byte for byte the
-/// same), else the file in `../shared/testdata` beside the clone (README,
-/// "The two commands").
+/// same), else the file in `INBETWEEN_TESTDATA` (default `../shared/testdata`
+/// beside the clone; README, "The two commands").
 pub fn testdata_path(rel: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let shipped = root.join("examples").join(rel);
-    if shipped.is_file() { shipped } else { root.join("../shared/testdata").join(rel) }
+    if shipped.is_file() { shipped } else { corpus_dir(root).join(rel) }
 }
 
 /// [`testdata_path`]'s bytes; a missing file fails the test with its path.
 pub fn testdata(rel: &str) -> Vec<u8> {
     let path = testdata_path(rel);
     std::fs::read(&path).unwrap_or_else(|e| {
-        panic!("{}: {e} (the tests read third-party files from ../shared/testdata beside the clone)", path.display())
+        panic!("{}: {e} (third-party test files: set INBETWEEN_TESTDATA, README \"The two commands\")", path.display())
     })
 }
 
@@ -140,4 +140,11 @@ pub fn ik_leg(name: &str, duration: f32, ik: serde_json::Value) -> String {
 
 pub fn metric(text: &str, name: &str) -> Option<f64> {
     text.lines().find(|l| l.split(' ').next() == Some(name))?.split(' ').nth(1)?.parse().ok()
+}
+
+/// Where the third-party files the repository does not ship are:
+/// `INBETWEEN_TESTDATA`, else `shared/testdata` beside the clone (where CI
+/// keeps them).
+fn corpus_dir(root: &Path) -> PathBuf {
+    std::env::var_os("INBETWEEN_TESTDATA").map(PathBuf::from).unwrap_or_else(|| root.join("../shared/testdata"))
 }

@@ -25,7 +25,7 @@ pub fn import_file(rel: &str, options: &ImportOptions) -> Imported {
 /// [`import_file`] for any file.
 pub fn import_path(path: &std::path::Path, options: &ImportOptions) -> Imported {
     let rel = path.display();
-    let bytes = std::fs::read(path).unwrap();
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{rel}: {e} (README, \"The two commands\")"));
     let format = match path.extension().and_then(|e| e.to_str()) {
         Some("glb") => Format::Glb,
         Some("bvh") => Format::Bvh,

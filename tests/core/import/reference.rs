@@ -8,7 +8,7 @@
 // Matrix code reads as the maths does, with indices.
 #![allow(clippy::needless_range_loop)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
 use serde_json::Value;
@@ -16,18 +16,19 @@ use serde_json::Value;
 /// A real third-party test file, `rel` as in `../shared/testdata`: the
 /// repository's own copy in `examples/` when it ships one (the Fox,
 /// InterpolationTest, CMU 131_01, byte for byte the same), else the file in
-/// `../shared/testdata` beside the clone (README, "The two commands"). The
+/// `INBETWEEN_TESTDATA` (default `../shared/testdata` beside the clone; README,
+/// "The two commands"). The
 /// service tests' `common::testdata_path` is the same rule.
 pub fn testdata(rel: &str) -> PathBuf {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let shipped = root.join("examples").join(rel);
-    if shipped.is_file() { shipped } else { root.join("../shared/testdata").join(rel) }
+    if shipped.is_file() { shipped } else { corpus_dir(&root).join(rel) }
 }
 
 pub fn read(rel: &str) -> Vec<u8> {
     let path = testdata(rel);
     std::fs::read(&path).unwrap_or_else(|e| {
-        panic!("{}: {e} (the tests read third-party files from ../shared/testdata beside the clone)", path.display())
+        panic!("{}: {e} (third-party test files: set INBETWEEN_TESTDATA, README \"The two commands\")", path.display())
     })
 }
 
@@ -309,4 +310,11 @@ pub fn quat_diff(a: &[f64], b: [f32; 4]) -> f64 {
 
 pub fn vec_diff(a: &[f64], b: &[f32]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - *y as f64).abs()).fold(0.0, f64::max)
+}
+
+/// Where the third-party files the repository does not ship are:
+/// `INBETWEEN_TESTDATA`, else `shared/testdata` beside the clone (where CI
+/// keeps them).
+fn corpus_dir(root: &Path) -> PathBuf {
+    std::env::var_os("INBETWEEN_TESTDATA").map(PathBuf::from).unwrap_or_else(|| root.join("../shared/testdata"))
 }
