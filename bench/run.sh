@@ -8,6 +8,7 @@
 #   bench/run.sh --quick      # 2-second windows, a tenth of the streams (a smoke run of the script)
 #   bench/run.sh --long       # adds the 10-minute drift run and the 10-minute soak
 #   bench/run.sh --no-core    # skips the criterion comparison
+#   bench/run.sh --no-broadcasts  # skips bench/broadcasts.sh (20,000 viewers at 10 fps, 5,000 at 30 fps)
 #   bench/run.sh --no-write   # prints the tables instead of editing BENCHMARKS.md
 #   BENCH_SECS=4 bench/run.sh # shorter windows (default 10 s)
 #   INBETWEEN_BIN=path bench/run.sh  # a binary built elsewhere instead of `cargo build --release`
@@ -18,13 +19,14 @@
 set -euo pipefail
 source "$(dirname "$0")/../scripts/lib.sh"
 cd "$IB_ROOT"
-secs=${BENCH_SECS:-10} scale=1 long=0 core=1 write=1
+secs=${BENCH_SECS:-10} scale=1 long=0 core=1 broadcasts=1 write=1
 for arg in "$@"; do
   case $arg in
     -h | --help) ib_usage; exit 0 ;;
     --quick) secs=2 scale=10 ;;
     --long) long=1 ;;
     --no-core) core=0 ;;
+    --no-broadcasts) broadcasts=0 ;;
     --no-write) write=0 ;;
     *) echo "unknown option $arg (see --help)" >&2; exit 2 ;;
   esac
@@ -83,9 +85,18 @@ if [ "$long" = 1 ]; then
   load soak-grpc-sample-10min grpc-sample -c 64 -d 600 --rate "$rate" --joints 20
 fi
 
+if [ "$broadcasts" = 1 ]; then
+  # Issue 19's broadcast scenarios, each on a fresh server of the same binary (bench/broadcasts.sh); the idle
+  # record server above stays up. A short wait for a quiet machine, since the generator shares the two cores.
+  echo "== broadcasts: bench/broadcasts.sh"
+  OUT="$out/broadcasts" INBETWEEN_BIN=$bin SECS=$((secs * 2)) WAIT_MINUTES=${WAIT_MINUTES:-3} \
+    SCENARIOS="$(n 20000)x10 $(n 5000)x30" bash bench/broadcasts.sh >"$out/broadcasts.txt" 2>&1 \
+    || echo "   failed: $(tail -n 3 "$out/broadcasts.txt")"
+fi
+
 if [ "$core" = 1 ]; then
-  echo "== criterion: our sampling vs the ozz-style kernel"
-  cargo bench --bench sampling -- 'versus_ozz|rbt_64_joints/catmull_rom_shared' >"$out/criterion.txt" 2>&1 || true
+  echo "== criterion: our sampling vs the ozz-style kernel, and the Catmull-Rom RBT cases"
+  cargo bench --bench sampling -- 'versus_ozz|rbt_64_joints/catmull_rom' >"$out/criterion.txt" 2>&1 || true
 fi
 
 echo "== writing the tables"

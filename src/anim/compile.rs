@@ -10,11 +10,12 @@
 use glam::{DQuat, DVec3, DVec4, Quat, Vec3, Vec3A, Vec4};
 
 use super::arc::{self, Meter};
-use super::curve::{QuatCurve, QuatSegment, SlerpTier, Vec3Curve};
+use super::curve::{QuatCurve, QuatSegment, SlerpCurve, SlerpTier, Vec3Curve};
 use super::error::{ClipError, ClipErrorKind as K};
 use super::path::Path;
 use super::quat::{
-    FAST_SLERP_MIN_COS, NARROW_SLERP_MIN_COS, TINY_SLERP_MIN_COS, align, make_continuous, pow, short, sine_ratio_series,
+    FAST_SLERP_MIN_COS, NARROW_SLERP_MIN_COS, SERIES_MAX_ANGLE, TINY_SLERP_MIN_COS, align, make_continuous, pow, short,
+    sine_ratio_series,
 };
 use super::spec::{Channel, Ends, Interpolation, Keys, Speed, TrackSpec};
 
@@ -251,7 +252,9 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
     }
     match spec.interpolation {
         Interpolation::Step => Ok(Compiled { times: times.clone(), curve: QuatCurve::Step(f32_keys(&c)), domain }),
-        Interpolation::Linear => Ok(Compiled { times: times.clone(), curve: QuatCurve::Slerp(f32_keys(&c)), domain }),
+        Interpolation::Linear => {
+            Ok(Compiled { times: times.clone(), curve: QuatCurve::Slerp(slerp_curve(&c)), domain })
+        }
         Interpolation::CatmullRom | Interpolation::BSpline => {
             let ends = spec.ends.unwrap_or_default();
             if ends == Ends::Wrap && c[0].dot(c[n - 1]).abs() < 1.0 - 1e-6 {
@@ -266,6 +269,23 @@ pub(crate) fn quat_track(spec: &TrackSpec, path: &Path) -> Result<Compiled<QuatC
         }
         Interpolation::CubicHermite => unreachable!("handled above"),
     }
+}
+
+/// Linear rotation keys (already hemisphere-continuous) and the weight
+/// series of each pair close enough for four terms.
+fn slerp_curve(keys: &[DQuat]) -> SlerpCurve {
+    let sine = keys
+        .windows(2)
+        .map(|w| {
+            let theta = w[0].dot(w[1]).clamp(-1.0, 1.0).acos();
+            if theta > SERIES_MAX_ANGLE {
+                return Vec4::ZERO;
+            }
+            let c = sine_ratio_series(theta);
+            DVec4::new(c[0], c[1], c[2], c[3]).as_vec4()
+        })
+        .collect();
+    SlerpCurve { keys: keys.iter().map(|q| q.as_quat()).collect(), sine }
 }
 
 /// Aligns each control point to its predecessor's hemisphere (so every

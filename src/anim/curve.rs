@@ -11,7 +11,9 @@
 
 use glam::{Quat, Vec3A, Vec4};
 
-use super::quat::{slerp_weights, slerp_weights_exact, slerp_weights_narrow, slerp_weights_tiny};
+use super::quat::{
+    series_weights, slerp_fast, slerp_weights, slerp_weights_exact, slerp_weights_narrow, slerp_weights_tiny,
+};
 use super::timeline::Span;
 
 /// Bezier control points of one quaternion segment, signs chosen so that
@@ -105,11 +107,41 @@ impl Vec3Curve {
 pub enum QuatCurve {
     Constant(Quat),
     Step(Box<[Quat]>),
-    Slerp(Box<[Quat]>),
+    Slerp(SlerpCurve),
     /// Catmull-Rom by slerp de Casteljau (SPEC §2.3).
     SlerpBezier(Box<[QuatSegment]>),
     /// glTF CUBICSPLINE: a cubic on the 4-vectors, then normalised.
     Hermite(Box<[[Vec4; 4]]>),
+}
+
+/// Linear rotation keys (SPEC §2.5), each pair the short way, and per
+/// segment the series of its slerp weights: the angle between two keys is
+/// fixed, so `sin(uθ)/sin θ` is a polynomial in `u` computed once, and a
+/// sample needs no dot product, tier choice or normalisation. A pair wider
+/// than [`SERIES_MAX_ANGLE`](super::quat::SERIES_MAX_ANGLE) has a zero
+/// series and takes [`slerp_fast`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlerpCurve {
+    pub keys: Box<[Quat]>,
+    /// Per segment, coefficients 0..4 of [`sine_ratio_series`](super::quat::sine_ratio_series).
+    pub sine: Box<[Vec4]>,
+}
+
+impl SlerpCurve {
+    #[inline(always)]
+    pub fn at(&self, s: Span) -> Quat {
+        let i = s.index as usize;
+        let (p, q, c) = (self.keys[i], self.keys[i + 1], self.sine[i]);
+        if c.x == 0.0 {
+            return slerp_fast(p, q, s.u);
+        }
+        let (wp, wq) = series_weights(c, s.u);
+        Quat::from_vec4(Vec4::from(p) * wp + Vec4::from(q) * wq)
+    }
+
+    pub fn heap_bytes(&self) -> usize {
+        std::mem::size_of_val(&*self.keys) + std::mem::size_of_val(&*self.sine)
+    }
 }
 
 #[inline(always)]

@@ -4,7 +4,8 @@
 //! samplers often share inputs; every BVH channel shares the frame times),
 //! so a pose does one search per distinct timeline rather than per track.
 //! The search is O(1) for forward playback (the caller's hint is the last
-//! segment, and the next few are tried next), O(1) for uniformly spaced
+//! segment; it and the next are tried without a branch, the last segment
+//! by one check), O(1) for uniformly spaced
 //! keys (the index is computed, then checked), a bucket index for long
 //! irregular ones (constant-speed arc tables, hand-timed keys), and a binary
 //! search otherwise.
@@ -121,23 +122,18 @@ impl Timeline {
     #[inline]
     pub fn locate(&self, t: f32, hint: &mut u32) -> Span {
         let keys = &*self.keys;
-        let mut i = *hint as usize;
-        // The common cases: still in the hinted segment, or a few keys on
-        // (forward playback at 60 fps over 120 fps mocap crosses two).
-        if let Some(&[a, _]) = keys.get(i)
-            && a <= t
-        {
-            for _ in 0..4 {
-                match keys.get(i + 1) {
-                    Some(&[b, _]) if t < b => {
-                        *hint = i as u32;
-                        let [a, inv_h] = keys[i];
-                        // t ≥ a makes (t − a) ≥ 0 exactly; rounding can only overshoot 1.
-                        return Span { index: i as u32, u: ((t - a) * inv_h).min(1.0) };
-                    }
-                    Some(_) => i += 1,
-                    None => break,
-                }
+        let i = *hint as usize;
+        // Forward playback stays in the hinted segment or moves to the next
+        // one. Which of the two is data, not a branch (a key passed every
+        // few samples on every track would mispredict), then one check that
+        // nearly always holds; anything else is a search.
+        if i + 2 < keys.len() {
+            let j = i + usize::from(t >= keys[i + 1][0]);
+            let [a, inv_h] = keys[j];
+            if a <= t && t < keys[j + 1][0] {
+                *hint = j as u32;
+                // t ≥ a makes (t − a) ≥ 0 exactly; rounding can only overshoot 1.
+                return Span { index: j as u32, u: ((t - a) * inv_h).min(1.0) };
             }
         }
         self.locate_slow(t, hint)
@@ -158,7 +154,9 @@ impl Timeline {
         }
         // Here keys[0] < t < keys[n-1], so some i in 0..=last holds it.
         let i = (*hint as usize).min(last);
-        let i = if i < last && keys[i + 1][0] <= t && t < keys[i + 2][0] {
+        let i = if keys[i][0] <= t && t < keys[i + 1][0] {
+            i
+        } else if i < last && keys[i + 1][0] <= t && t < keys[i + 2][0] {
             i + 1
         } else if let Some((t0, inv_h)) = self.uniform {
             let mut j = (((t - t0) * inv_h) as usize).min(last);
@@ -219,6 +217,53 @@ mod tests {
                     check(times, t, hint, (k as u32, 0.75));
                 }
                 check(times, times[k], 7, (k as u32, 0.0));
+            }
+        }
+    }
+
+    /// Playback forward at several rates, backward and by jumps, over
+    /// irregular keys: every span is the one a plain binary search gives,
+    /// bit for bit, whatever the hint left by the previous time.
+    #[test]
+    fn a_hinted_walk_finds_what_a_plain_search_finds() {
+        let mut x = 0x2545_f491_u32;
+        let mut rand = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as f32 / u32::MAX as f32
+        };
+        let mut times = vec![0.0f32];
+        for _ in 0..40 {
+            let last = *times.last().unwrap();
+            times.push(last + 0.005 + 0.2 * rand());
+        }
+        let tl = Timeline::new(&times);
+        let (first, last) = (times[0], *times.last().unwrap());
+        let plain = |t: f32| -> (u32, f32) {
+            if t.is_nan() || t <= first {
+                return (0, 0.0);
+            }
+            if t >= last {
+                return ((times.len() - 2) as u32, 1.0);
+            }
+            let i = times.partition_point(|&k| k <= t) - 1;
+            (i as u32, ((t - times[i]) * tl.keys[i][1]).clamp(0.0, 1.0))
+        };
+        let mut hint = 0;
+        for step in [1.0 / 240.0, 1.0 / 60.0, 1.0 / 24.0, 0.3, -1.0 / 60.0] {
+            let mut t = if step > 0.0 { first - 0.1 } else { last + 0.1 };
+            for _ in 0..2000 {
+                let t_jump = match rand() {
+                    r if r < 0.02 => first + (last - first) * rand(),
+                    r if r < 0.04 => times[(rand() * (times.len() - 1) as f32) as usize],
+                    _ => t,
+                };
+                let span = tl.locate(t_jump, &mut hint);
+                let (i, u) = plain(t_jump);
+                assert_eq!((span.index, span.u.to_bits()), (i, u.to_bits()), "t={t_jump}");
+                assert_eq!(hint, span.index);
+                t += step;
             }
         }
     }

@@ -7,8 +7,7 @@
 
 use glam::{Quat, Vec3A, Vec4};
 
-use super::curve::{ArcPiece, QuatCurve, QuatSegment, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
-use super::quat::slerp_fast;
+use super::curve::{ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
 use super::soa::{Lanes, QuatGroup, QuatSegment4, Vec3Group};
 use super::timeline::Span;
 
@@ -42,7 +41,7 @@ pub(crate) struct Vec3Tracks {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub(crate) struct QuatTracks {
     step: Vec<Track<Box<[Quat]>>>,
-    slerp: Vec<Track<Box<[Quat]>>>,
+    slerp: Vec<Track<SlerpCurve>>,
     bezier: Vec<Track<Box<[QuatSegment]>>>,
     hermite: Vec<Track<Box<[[Vec4; 4]]>>>,
     /// Slerp-Bezier tracks sharing a timeline, four per group.
@@ -214,7 +213,7 @@ impl QuatTracks {
     /// Bytes of every list and curve.
     pub fn heap_bytes(&self) -> usize {
         list_bytes(&self.step, |c| slice_bytes(c))
-            + list_bytes(&self.slerp, |c| slice_bytes(c))
+            + list_bytes(&self.slerp, SlerpCurve::heap_bytes)
             + list_bytes(&self.bezier, |c| slice_bytes(c))
             + list_bytes(&self.hermite, |c| slice_bytes(c))
             + super::clip::vec_bytes(&self.groups)
@@ -274,10 +273,7 @@ impl QuatTracks {
     #[inline]
     pub fn apply(&self, spans: &mut impl Spans, out: &mut [Quat]) {
         run(&self.step, spans, out, |k, s| step(k, s));
-        run(&self.slerp, spans, out, |k, s| {
-            let i = s.index as usize;
-            slerp_fast(k[i], k[i + 1], s.u)
-        });
+        run(&self.slerp, spans, out, SlerpCurve::at);
         run(&self.bezier[self.gathered_tracks..], spans, out, |segs, s| slerp_bezier(&segs[s.index as usize], s.u));
         self.run_gathered(spans, out);
         run_groups(&self.groups, spans, out, |g| (&g.lanes, g.timeline), QuatGroup::at);

@@ -90,7 +90,7 @@ pub struct ServerUsage {
     /// RSS before the load started, and at the end of the window.
     pub rss_before_bytes: u64,
     pub rss_end_bytes: u64,
-    /// Streams only: (end − before) / streams.
+    /// Streams only: (end − before) / streams opened.
     pub rss_per_stream_bytes: Option<f64>,
     /// CPU seconds per second over the window (1.0 = one core).
     pub cpu_cores: f64,

@@ -540,7 +540,9 @@ pub(crate) async fn run(opts: &Options, env: &Env, n: usize, floor: Option<&floo
             pid,
             rss_before_bytes: b.rss_bytes,
             rss_end_bytes: e.rss_bytes,
-            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / n as f64),
+            // Per stream that opened: when some never do, dividing by the
+            // streams asked for would understate each one's cost.
+            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / stats.opened.max(1) as f64),
             cpu_cores: (e.cpu_secs - s.cpu_secs) / elapsed,
             cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / done.total.frames.max(1) as f64,
         }),

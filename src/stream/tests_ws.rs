@@ -29,6 +29,8 @@ impl Stream for MemSocket {
     }
 }
 
+impl super::ws::FrameSocket for MemSocket {}
+
 impl Sink<Message> for MemSocket {
     type Error = Infallible;
     fn poll_ready(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<Result<(), Infallible>> {

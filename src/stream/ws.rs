@@ -22,8 +22,8 @@
 //! with the problem of its lookup: `clip_not_found` at `/to/layers/1/clip`)
 //! and the stream goes on.
 
-use std::cell::RefCell;
 use std::collections::VecDeque;
+use std::future::Future;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::task::{Context, Poll, Wake, Waker};
@@ -290,6 +290,30 @@ fn problem_message(code: &str, pointer: Option<String>, detail: &str) -> Message
     Message::Text(serde_json::json!({ "error": problem }).to_string().into())
 }
 
+/// A socket that sends a stream's frames: by default as messages through
+/// its `Sink`; the server's socket writes the playback's shared bytes to the
+/// connection itself, behind a frame header, without copying them into a
+/// per-viewer buffer (`server::rest::socket`, issue 19).
+pub trait FrameSocket: Sink<Message> + Unpin {
+    /// Sends one frame: JSON text or protobuf binary, as `encoding` says.
+    fn send_frame(&mut self, encoding: Encoding, bytes: bytes::Bytes) -> impl Future<Output = Result<(), Self::Error>> {
+        async move {
+            match frame_message(encoding, bytes) {
+                Some(message) => self.send(message).await,
+                None => Ok(()), // the JSON encoder writes UTF-8 only
+            }
+        }
+    }
+}
+
+/// A frame as a WebSocket message.
+fn frame_message(encoding: Encoding, bytes: bytes::Bytes) -> Option<Message> {
+    match encoding {
+        Encoding::Json => text(bytes).map(Message::Text),
+        Encoding::Protobuf => Some(Message::Binary(bytes)),
+    }
+}
+
 /// Streams `sub` over `socket` until the stream ends (see the module doc);
 /// `motions` looks up a crossfade's motion (`None`: crossfades are refused).
 pub async fn serve<S, E>(
@@ -298,7 +322,7 @@ pub async fn serve<S, E>(
     config: WsConfig,
     motions: Option<Arc<dyn MotionResolver>>,
 ) where
-    S: Sink<Message, Error = E> + Stream<Item = Result<Message, E>> + Unpin,
+    S: FrameSocket + Sink<Message, Error = E> + Stream<Item = Result<Message, E>> + Unpin,
     E: std::error::Error + 'static,
 {
     let mut ping = interval_at(Instant::now() + config.keepalive, config.keepalive);
@@ -313,13 +337,16 @@ pub async fn serve<S, E>(
         } else {
             tokio::select! {
                 next = sub.next() => match next {
-                    Next::Frame(f) => match sub.encoding() {
-                        Encoding::Json => match text(f.bytes) {
-                            Some(text) => Message::Text(text),
-                            None => continue, // the JSON encoder writes UTF-8 only
-                        },
-                        Encoding::Protobuf => Message::Binary(f.bytes),
-                    },
+                    // Sent here (not below) so that a frame's bytes go to the
+                    // socket's own frame path.
+                    Next::Frame(f) => {
+                        let encoding = sub.encoding();
+                        match timeout(config.keepalive, socket.send_frame(encoding, f.bytes)).await {
+                            Ok(Ok(())) => continue,
+                            Ok(Err(_)) => return,
+                            Err(_) => return close_slow_consumer(&mut socket).await,
+                        }
+                    }
                     Next::End(reason) => {
                         let _ = timeout(config.keepalive, socket.send(Message::Close(Some(close_frame(reason))))).await;
                         return;
@@ -418,24 +445,10 @@ impl ReadGate {
     }
 }
 
-/// A JSON frame as a text message. The viewers of a broadcast (or shared
-/// playback) send the very same bytes, so the UTF-8 check is made once
-/// per frame and worker thread, not once per viewer: the last text made
-/// on this thread is handed out again for the same bytes. The same
-/// allocation and length is the same text, since the kept copy holds the
-/// allocation alive and `Bytes` never change.
+/// A JSON frame as a text message (the default `send_frame`; the server's
+/// socket writes the bytes itself and needs no check).
 fn text(bytes: bytes::Bytes) -> Option<Utf8Bytes> {
-    thread_local! {
-        static LAST: RefCell<Option<Utf8Bytes>> = const { RefCell::new(None) };
-    }
-    LAST.with_borrow_mut(|last| {
-        if let Some(text) = last.as_ref().filter(|t| t.as_ptr() == bytes.as_ptr() && t.len() == bytes.len()) {
-            return Some(text.clone());
-        }
-        let text = Utf8Bytes::try_from(bytes).ok()?;
-        *last = Some(text.clone());
-        Some(text)
-    })
+    Utf8Bytes::try_from(bytes).ok()
 }
 
 /// A viewer that accepted nothing for a whole keepalive period: its bounded

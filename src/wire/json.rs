@@ -582,6 +582,21 @@ fn write_finite_stand_in(out: &mut impl BufMut, x: f64) {
     out.put_slice(zmij::Buffer::new().format_finite(finite_stand_in(x)).as_bytes());
 }
 
+/// The text of the values most of a pose is made of — `0.0` (untouched
+/// translation axes and quaternion components) and `1.0` (scales, identity
+/// rotations) — exactly as the formatter writes them, without running it:
+/// in a typical pose two numbers in three are one of these.
+#[inline(always)]
+fn common_text(x: f32) -> Option<&'static [u8]> {
+    match x.to_bits() {
+        0x0000_0000 => Some(b"0.0"),
+        0x8000_0000 => Some(b"-0.0"),
+        0x3f80_0000 => Some(b"1.0"),
+        0xbf80_0000 => Some(b"-1.0"),
+        _ => None,
+    }
+}
+
 /// The nearest finite `f32` to a non-finite `x` (±`f32::MAX`; 0 for NaN).
 #[cold]
 fn finite_stand_in(x: f64) -> f32 {
@@ -654,8 +669,13 @@ impl Scratch {
             if i > 0 {
                 self.push(b",");
             }
-            let x = if x.is_finite() { x } else { finite_stand_in(f64::from(x)) };
-            self.push_number(zmij::Buffer::new().format_finite(x).as_bytes());
+            match common_text(x) {
+                Some(text) => self.push(text),
+                None => {
+                    let x = if x.is_finite() { x } else { finite_stand_in(f64::from(x)) };
+                    self.push_number(zmij::Buffer::new().format_finite(x).as_bytes());
+                }
+            }
         }
         self.push(b"]");
     }
@@ -771,6 +791,18 @@ impl Serialize for MatricesJson<'_> {
 mod tests {
     use super::*;
     use crate::anim::{Clip, ClipSpec, Interpolation, SampleOptions, Sampler, TrackSpec};
+
+    /// The shortcut for 0 and ±1 writes what the formatter would.
+    #[test]
+    fn the_common_values_are_written_as_the_formatter_writes_them() {
+        for x in [0.0f32, -0.0, 1.0, -1.0] {
+            let text = common_text(x).expect("a common value");
+            assert_eq!(text, zmij::Buffer::new().format_finite(x).as_bytes(), "{x}");
+        }
+        for x in [f32::MIN_POSITIVE, -f32::MIN_POSITIVE, 1.0 + f32::EPSILON, 0.5, 2.0, f32::from_bits(1)] {
+            assert_eq!(common_text(x), None, "{x}");
+        }
+    }
 
     /// The direct writer and serde agree byte for byte, names needing escapes included.
     #[test]

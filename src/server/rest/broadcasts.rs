@@ -16,7 +16,6 @@ use std::sync::Arc;
 use axum::Extension;
 use axum::Json;
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
-use axum::extract::ws::{WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::http::header::LOCATION;
@@ -227,7 +226,7 @@ pub async fn watch(
     Extension(identity): Extension<Identity>,
     Path(id): Path<String>,
     Query(q): Query,
-    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    upgrade: Result<super::socket::StreamUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
     let encoding = match q.raw("encoding") {
@@ -240,7 +239,7 @@ pub async fn watch(
     let watched =
         state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| b.watch(encoding, permit, may_control));
     let motions = resolver(&state);
-    let mut response = configured(upgrade, &state.config.limits).on_upgrade(move |socket: WebSocket| async move {
+    let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {
             Ok(sub) => serve(socket, sub, motions).await,
             Err(refused) => refuse(socket, crate::stream::ws::close::TRY_AGAIN_LATER, refused.to_string()).await,

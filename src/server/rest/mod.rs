@@ -40,6 +40,7 @@ pub mod poses;
 pub mod query;
 pub mod schemas;
 pub mod skeleton;
+pub mod socket;
 pub mod stream;
 pub mod summary;
 pub mod viewer;

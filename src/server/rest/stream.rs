@@ -17,7 +17,7 @@ use std::net::SocketAddr;
 
 use axum::Extension;
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
-use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
+use axum::extract::ws::{CloseFrame, Message};
 use axum::extract::{ConnectInfo, State};
 use axum::response::Response;
 
@@ -25,7 +25,9 @@ use std::sync::Arc;
 
 use axum::extract::ws::Utf8Bytes;
 use futures_util::future::BoxFuture;
+use futures_util::{SinkExt, StreamExt};
 use serde::Deserialize;
+use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 
 use crate::server::auth::{Caller, ReadAccess};
 use crate::server::config::Limits;
@@ -38,6 +40,7 @@ use crate::wire::motion::MotionDoc;
 
 use super::extract::ClipId;
 use super::query::Query;
+use super::socket::{StreamSocket, StreamUpgrade};
 
 /// The socket's read buffer. tungstenite's default (128 KiB) made a WebSocket
 /// stream cost the server ~125 KiB of RSS (measured by `inbetween load
@@ -88,7 +91,7 @@ pub async fn stream(
     ClipId(id): ClipId,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
     Query(q): Query,
-    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    upgrade: Result<StreamUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     // A plain GET (no upgrade headers) gets a problem body like every other refusal.
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
@@ -121,7 +124,7 @@ pub async fn stream(
     let watched = permit.map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
     let motions = resolver(&state);
-    let mut response = configured(upgrade, &state.config.limits).on_upgrade(move |socket: WebSocket| async move {
+    let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {
             Ok(sub) => serve(socket, sub, motions).await,
             Err(refused) => refuse(socket, close::TRY_AGAIN_LATER, refused.to_string()).await,
@@ -146,12 +149,12 @@ pub async fn motion_stream(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
     connect: Option<Extension<ConnectInfo<SocketAddr>>>,
-    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    upgrade: Result<StreamUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     let upgrade = upgrade.map_err(|e| ApiError::parameter("websocket_upgrade_required", "upgrade", e.body_text()))?;
     let lane = connect.map(|Extension(ConnectInfo(addr))| u64::from(addr.port()));
     let limits = state.config.limits.clone();
-    Ok(configured(upgrade, &limits).on_upgrade(move |socket: WebSocket| async move {
+    Ok(upgrade.on_upgrade(configured(&limits), move |socket| async move {
         let mut socket = socket;
         let wait = limits.request_message_timeout;
         let opened = match tokio::time::timeout(wait, first_text(&mut socket)).await {
@@ -219,9 +222,9 @@ enum OpenOp {
 }
 
 /// The client's first text message (`None`: it left first).
-async fn first_text(socket: &mut WebSocket) -> Option<String> {
+async fn first_text(socket: &mut StreamSocket) -> Option<String> {
     loop {
-        match socket.recv().await? {
+        match socket.next().await? {
             Ok(Message::Text(text)) => return Some(text.to_string()),
             Ok(Message::Close(_)) | Err(_) => return None,
             Ok(_) => {}
@@ -270,26 +273,26 @@ async fn open(
     ))
 }
 
-/// Inbound messages are small controls; outbound frames are buffered up
-/// to a bound, so a viewer that stops reading cannot grow memory. The
-/// `inbetween` subprotocol is selected when offered: a browser offers it
-/// with its token (`server::auth`) and needs one of its offers chosen.
-pub(super) fn configured(upgrade: WebSocketUpgrade, l: &Limits) -> WebSocketUpgrade {
-    upgrade
-        .protocols([crate::server::auth::WS_PROTOCOL])
-        .max_message_size(l.ws_max_message_bytes)
-        .max_frame_size(l.ws_max_message_bytes)
+/// Inbound messages are small controls; outbound messages are buffered up
+/// to a bound, so a viewer that stops reading cannot grow memory (frames
+/// skip that buffer: `socket`). The `inbetween` subprotocol is selected
+/// when offered (`StreamUpgrade`): a browser offers it with its token
+/// (`server::auth`) and needs one of its offers chosen.
+pub(super) fn configured(l: &Limits) -> WebSocketConfig {
+    WebSocketConfig::default()
+        .max_message_size(Some(l.ws_max_message_bytes))
+        .max_frame_size(Some(l.ws_max_message_bytes))
         .write_buffer_size(ws_write_buffer(l))
         .max_write_buffer_size(ws_max_write_buffer(l))
         .read_buffer_size(READ_BUFFER_BYTES)
 }
 
-pub(super) async fn serve(socket: WebSocket, sub: Subscription, motions: Arc<dyn MotionResolver>) {
+pub(super) async fn serve(socket: StreamSocket, sub: Subscription, motions: Arc<dyn MotionResolver>) {
     let served = crate::stream::ws::serve(socket, sub, WsConfig::default(), Some(motions));
     crate::panics::guarded("websocket", served).await;
 }
 
-pub(super) async fn refuse(mut socket: WebSocket, code: u16, reason: String) {
+pub(super) async fn refuse(mut socket: StreamSocket, code: u16, reason: String) {
     let frame = CloseFrame { code, reason: Utf8Bytes::from(reason) };
     let _ = socket.send(Message::Close(Some(frame))).await;
 }

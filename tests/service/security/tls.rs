@@ -43,6 +43,16 @@ async fn spawn_tls_app(pki: &TestPki) -> TestApp {
         .await
 }
 
+/// A reqwest client (rustls) that trusts only the test CA.
+fn trusting_client(pki: &TestPki) -> reqwest::Client {
+    crate::common::http_builder()
+        .use_rustls_tls()
+        .tls_built_in_root_certs(false)
+        .add_root_certificate(reqwest::Certificate::from_pem(pki.ca_pem.as_bytes()).unwrap())
+        .build()
+        .unwrap()
+}
+
 /// A rustls client that trusts only the test CA and speaks only `versions`.
 fn rustls_client(pki: &TestPki, versions: &[&'static rustls::SupportedProtocolVersion]) -> tokio_rustls::TlsConnector {
     use rustls_pki_types::CertificateDer;
@@ -64,12 +74,7 @@ async fn https_and_grpc_over_tls_are_served_to_clients_that_trust_the_ca() {
     let port = app.addr.port();
 
     // reqwest (rustls) with the test CA: a read and a write, by name and by IP.
-    let client = crate::common::http_builder()
-        .use_rustls_tls()
-        .tls_built_in_root_certs(false)
-        .add_root_certificate(reqwest::Certificate::from_pem(pki.ca_pem.as_bytes()).unwrap())
-        .build()
-        .unwrap();
+    let client = trusting_client(&pki);
     let health = client.get(format!("https://localhost:{port}/healthz")).send().await.unwrap();
     assert_eq!(health.status(), 200);
     let created = client
@@ -142,6 +147,58 @@ async fn tls_1_2_and_1_3_are_accepted_and_older_or_plaintext_clients_are_refused
     let mut reply = Vec::new();
     let _ = tokio::time::timeout(std::time::Duration::from_secs(10), tcp.read_to_end(&mut reply)).await;
     assert!(!reply.starts_with(b"HTTP/"), "plaintext was served: {}", String::from_utf8_lossy(&reply));
+    app.stop().await;
+}
+
+/// A WebSocket stream over TLS: the frames, which the server writes itself
+/// (header and shared bytes, `server::rest::socket`), arrive whole and in
+/// order through rustls, then the normal close.
+#[tokio::test]
+async fn a_websocket_stream_over_tls_delivers_its_frames_and_closes_normally() {
+    use futures_util::StreamExt;
+    use tokio_tungstenite::tungstenite::Message;
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+    let pki = make_pki();
+    let app = spawn_tls_app(&pki).await;
+    let port = app.addr.port();
+    let client = trusting_client(&pki);
+    let created: serde_json::Value = client
+        .post(format!("https://localhost:{port}/v1/clips"))
+        .bearer_auth(ADMIN)
+        .header("content-type", "application/json")
+        .body(super::WAVE)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id = created["id"].as_str().unwrap();
+    let name = rustls_pki_types::ServerName::try_from("localhost").unwrap();
+    let tcp = TcpStream::connect(app.addr).await.unwrap();
+    let tls = rustls_client(&pki, &[&rustls::version::TLS13]).connect(name, tcp).await.unwrap();
+    let mut request =
+        format!("wss://localhost:{port}/v1/clips/{id}/stream?fps=60&max_frames=5").into_client_request().unwrap();
+    request.headers_mut().insert("authorization", format!("Bearer {READER}").parse().unwrap());
+    let (mut ws, response) = tokio_tungstenite::client_async(request, tls).await.unwrap();
+    assert_eq!(response.status(), 101);
+    let mut seqs = Vec::new();
+    let close = loop {
+        let next = tokio::time::timeout(std::time::Duration::from_secs(5), ws.next()).await;
+        match next.expect("a frame or the close within 5 s").expect("the socket closed").unwrap() {
+            Message::Text(text) => {
+                let frame: serde_json::Value = serde_json::from_str(&text).unwrap();
+                assert!(frame["pose"]["joints"].is_array(), "{text}");
+                seqs.push(frame["seq"].as_u64().unwrap());
+            }
+            Message::Close(frame) => break frame.expect("a close frame with a code"),
+            other => panic!("unexpected {other:?}"),
+        }
+    };
+    assert_eq!(seqs.len(), 5, "{seqs:?}");
+    assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
+    assert_eq!(u16::from(close.code), 1000);
     app.stop().await;
 }
 
