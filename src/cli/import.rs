@@ -180,7 +180,7 @@ impl Upload<'_> {
             if let Some(token) = &self.args.token {
                 request = request.bearer_auth(token);
             }
-            let response = request.send().await.with_context(|| format!("POST {url}"))?;
+            let response = request.send().await.map_err(|e| send_failed(e, &url))?;
             let status = response.status();
             let body = response.text().await.with_context(|| format!("POST {url}: reading the response"))?;
             if !status.is_success() {
@@ -216,6 +216,21 @@ impl Upload<'_> {
             form = form.part("buffer", file_part(&dir.join(file), uri.clone()).await?);
         }
         Ok(form)
+    }
+}
+
+/// A failed upload, with what a connection closed mid-file usually means.
+fn send_failed(e: reqwest::Error, url: &str) -> anyhow::Error {
+    let reset = std::iter::successors(Some(&e as &(dyn std::error::Error + 'static)), |e| e.source())
+        .filter_map(|e| e.downcast_ref::<std::io::Error>())
+        .any(|e| matches!(e.kind(), std::io::ErrorKind::BrokenPipe | std::io::ErrorKind::ConnectionReset));
+    let e = anyhow::Error::new(e).context(format!("POST {url}"));
+    match reset {
+        true => e.context(
+            "the server closed the connection before it had the whole file: it refuses, unread, files over its \
+             max_import_bytes and big ones from a caller who may not write (see --token)",
+        ),
+        false => e,
     }
 }
 

@@ -16,7 +16,10 @@
 //! The import route's body is spooled to a temporary file instead of held
 //! (`spool`), under its own limit (`max_import_bytes`) and the same timeout;
 //! it takes a spool slot rather than the arrival budget, which is memory,
-//! and only a caller allowed to write gets one.
+//! and only a caller allowed to write gets one. Others are refused without
+//! spooling; their body, when no bigger than `max_body_bytes`, is read and
+//! dropped first, so that a client still sending gets the answer rather
+//! than a reset connection.
 //! Every 413 names its limit and how to raise it.
 
 use std::time::Duration;
@@ -59,7 +62,7 @@ pub async fn guard(State(g): State<BodyGuard>, request: Request, next: Next) -> 
         return next.run(request).await;
     }
     match spool {
-        Some(route) => spooled(route, g.read_timeout, request, next).await,
+        Some(route) => spooled(route, &g, request, next).await,
         None => held(&g, request, next).await,
     }
 }
@@ -84,15 +87,16 @@ async fn held(g: &BodyGuard, request: Request, next: Next) -> Response {
 /// A body spooled to a temporary file, then the request with an empty body
 /// and the file in its extensions (`spool::SpooledBody`).
 ///
-/// A caller who may not write is refused before a byte is read: a file this
-/// size is not taken from someone the handler would answer 401 or 403.
-async fn spooled(route: &SpoolRoute, read_timeout: Duration, request: Request, next: Next) -> Response {
+/// A caller who may not write is refused before the file is spooled: a file
+/// this size is not taken from someone the handler would answer 401 or 403.
+async fn spooled(route: &SpoolRoute, g: &BodyGuard, request: Request, next: Next) -> Response {
+    let read_timeout = g.read_timeout;
     if let Some(Err(refused)) = request.extensions().get::<Identity>().map(|id| id.authorize(Scope::Write)) {
-        return closing(refused);
+        return refuse_unread(refused, request.into_body(), g).await;
     }
     let slot = match route.slot() {
         Ok(slot) => slot,
-        Err(e) => return closing(e),
+        Err(e) => return refuse_unread(e, request.into_body(), g).await,
     };
     let (parts, body) = request.into_parts();
     let deadline = tokio::time::Instant::now() + read_timeout;
@@ -107,6 +111,29 @@ async fn spooled(route: &SpoolRoute, read_timeout: Duration, request: Request, n
         Ok(Err(e)) => closing(e),
         Err(_) => timed_out(read_timeout),
     }
+}
+
+/// Refuses a request whose body the route will not take. A body no bigger
+/// than `max_body_bytes` (what any route reads from anyone) is read and
+/// dropped first, within the body-read timeout: closing on a client that is
+/// still sending resets the connection, and a client whose write fails
+/// (hyper's, the CLI's) reports a broken pipe instead of this answer. A
+/// bigger body is refused at once, unread.
+async fn refuse_unread(e: ApiError, mut body: Body, g: &BodyGuard) -> Response {
+    let declared = body.size_hint().exact();
+    if declared.is_none_or(|n| n <= g.max_bytes as u64) {
+        let mut read = 0;
+        let drain = async {
+            while let Some(Ok(frame)) = std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await {
+                read += frame.data_ref().map_or(0, Bytes::len);
+                if read > g.max_bytes {
+                    break;
+                }
+            }
+        };
+        let _ = tokio::time::timeout(g.read_timeout, drain).await;
+    }
+    closing(e)
 }
 
 fn timed_out(read_timeout: Duration) -> Response {

@@ -373,3 +373,32 @@ async fn an_upload_from_a_caller_who_may_not_write_is_refused_before_it_is_read(
     assert!(text.to_ascii_lowercase().contains("www-authenticate: bearer"), "{text}");
     app.stop().await;
 }
+
+/// A small upload from a caller who may not write is read (and dropped)
+/// before its 401: the client, still sending when the answer is ready, would
+/// otherwise have its writes reset (a broken pipe, which is all hyper's
+/// client, and so `inbetween import --server`, reported) instead of reading
+/// the 401. The body follows the head a moment later, as a file does.
+#[tokio::test]
+async fn a_small_upload_refused_for_its_token_is_read_so_the_client_gets_the_401() {
+    let app = TestApp::builder().write_token("w").start().await;
+    let body = vec![0u8; 512 * 1024];
+    let head = format!(
+        "POST /v1/clips/import HTTP/1.1\r\nHost: x\r\nContent-Type: model/gltf-binary\r\n\
+         Authorization: Bearer wrong\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    let mut s = TcpStream::connect(app.addr).await.unwrap();
+    s.write_all(head.as_bytes()).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    for chunk in body.chunks(16 * 1024) {
+        s.write_all(chunk).await.expect("the server reads the body it refuses");
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    let mut answer = Vec::new();
+    tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut answer)).await.expect("answered").unwrap();
+    let text = String::from_utf8_lossy(&answer);
+    assert!(text.starts_with("HTTP/1.1 401"), "{text}");
+    assert!(text.to_ascii_lowercase().contains("connection: close"), "{text}");
+    app.stop().await;
+}

@@ -177,6 +177,41 @@ async fn the_page_fits_1366_by_768_and_answers_its_keys() {
     assert!(before >= 3.0);
 }
 
+/// Paused poses asked in a row can be answered out of order (the browser
+/// spreads them over connections; a loaded server finishes them in any
+/// order): the page shows the pose last asked for, not the last to arrive.
+/// Here the answer for t = 0 is held back until after the one for the end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_late_answer_for_an_earlier_seek_does_not_replace_the_pose_shown() {
+    let app = start().await;
+    let id = app.create_id(WAVE, Some(TOKEN)).await;
+    let Some(mut browser) = Browser::launch().await else { return };
+    let page = &mut browser.page;
+    page.navigate(&app.url("/viewer")).await;
+    select_clip(page, &id).await;
+    set_value(page, "playback", "once").await;
+    page.wait_for("document.getElementById('clip-time').textContent === '0.000 s'", 10).await;
+    page.eval(
+        "(() => { const plain = window.fetch; window.poseAnswers = 0; \
+         window.fetch = async (path, options) => { \
+           const response = await plain(path, options); \
+           if (String(path).includes('/pose?') && String(path).includes('t=0&')) \
+             await new Promise((done) => setTimeout(done, 600)); \
+           window.poseAnswers += String(path).includes('/pose?'); \
+           return response; }; })()",
+    )
+    .await;
+    let key = |k: &str| {
+        format!("document.body.dispatchEvent(new KeyboardEvent('keydown', {{key: {}, bubbles: true}}))", json!(k))
+    };
+    page.eval(&key("End")).await;
+    page.eval(&key("Home")).await;
+    page.eval(&key("End")).await;
+    page.wait_for("window.poseAnswers === 3", 10).await;
+    assert_eq!(text(page, "clip-time").await, "3.000 s", "the last seek wins");
+    assert_eq!(page.eval("document.getElementById('seek').value").await, json!("3"));
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_fox_is_drawn_with_solid_bones_and_no_stray_one() {
     let app = start().await;

@@ -26,6 +26,7 @@
     speed: 1, // the running stream's speed (the last one the server took)
     requestTime: 0, // request time of the pose shown
     clipTime: 0, // its clip time (after playback and ease)
+    poseAsked: 0, // paused poses asked for: only the newest one's answer is shown
     frames: 0,
     seq: null,
     dropped: 0,
@@ -290,10 +291,16 @@
     return o;
   }
 
+  /// Shows the pose at `t`. Answers can arrive out of order (the browser
+  /// spreads requests over connections), so only the newest request's answer
+  /// is shown, and none once a stream has opened since.
   async function showPoseAt(t) {
+    const asked = ++state.poseAsked;
     const q = new URLSearchParams({ t: String(t), ...options() });
     const composed = hooks.poseAt?.(t);
-    applyPose(await (composed || api(`/v1/clips/${encodeURIComponent(state.clip.id)}/pose?${q}`)));
+    const pose = await (composed || api(`/v1/clips/${encodeURIComponent(state.clip.id)}/pose?${q}`));
+    if (asked !== state.poseAsked) return;
+    applyPose(pose);
     updateReadout();
   }
 
@@ -350,6 +357,7 @@
     }
     const target = hooks.streamTarget?.() || { url: streamUrl() };
     const ws = new WebSocket(target.url, streamProtocols());
+    state.poseAsked += 1; // a paused pose still on its way is older than the stream
     if (target.open) ws.onopen = () => ws.send(JSON.stringify(target.open));
     state.ws = ws;
     state.speed = Number($("speed").value) || 1;
