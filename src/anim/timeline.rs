@@ -153,11 +153,11 @@ impl Timeline {
             return Span { index: last as u32, u: 1.0 };
         }
         // Here keys[0] < t < keys[n-1], so some i in 0..=last holds it.
-        let i = (*hint as usize).min(last);
-        let i = if keys[i][0] <= t && t < keys[i + 1][0] {
-            i
-        } else if i < last && keys[i + 1][0] <= t && t < keys[i + 2][0] {
-            i + 1
+        // `locate` has tried the hinted segment and the next one unless the
+        // hint is the last segment (or past it), which holds t if it starts
+        // at or before it.
+        let i = if *hint as usize >= last && keys[last][0] <= t {
+            last
         } else if let Some((t0, inv_h)) = self.uniform {
             let mut j = (((t - t0) * inv_h) as usize).min(last);
             while j > 0 && t < keys[j][0] {
