@@ -152,12 +152,6 @@ async fn the_page_fits_1366_by_768_and_answers_its_keys() {
     // Keys: End, Home, a frame step at 30 fps, a second with Shift, Space
     // (`once`, so that the end is shown as the end rather than the loop's start).
     set_value(page, "playback", "once").await;
-    let key = |k: &str, shift: bool| {
-        format!(
-            "document.body.dispatchEvent(new KeyboardEvent('keydown', {{key: {}, shiftKey: {shift}, bubbles: true}}))",
-            json!(k)
-        )
-    };
     for (k, shift, shown) in [
         ("End", false, "3.000 s"),
         ("Home", false, "0.000 s"),
@@ -201,12 +195,9 @@ async fn a_late_answer_for_an_earlier_seek_does_not_replace_the_pose_shown() {
            return response; }; })()",
     )
     .await;
-    let key = |k: &str| {
-        format!("document.body.dispatchEvent(new KeyboardEvent('keydown', {{key: {}, bubbles: true}}))", json!(k))
-    };
-    page.eval(&key("End")).await;
-    page.eval(&key("Home")).await;
-    page.eval(&key("End")).await;
+    for k in ["End", "Home", "End"] {
+        page.eval(&key(k, false)).await;
+    }
     page.wait_for("window.poseAnswers === 3", 10).await;
     assert_eq!(text(page, "clip-time").await, "3.000 s", "the last seek wins");
     assert_eq!(page.eval("document.getElementById('seek').value").await, json!("3"));
@@ -260,4 +251,12 @@ async fn the_fox_is_drawn_with_solid_bones_and_no_stray_one() {
     let grey_pixels = pixels.iter().filter(|p| p[0] > 90 && p[2] >= p[0] && p[0].abs_diff(p[2]) < 30).count();
     assert!(orange >= 200, "joint spheres: {orange} orange pixels");
     assert!(grey_pixels >= 1000 && greys.len() >= 3, "bone solids: {grey_pixels} px in {} shades", greys.len());
+}
+
+/// A script pressing `k` (with Shift if `shift`) on the page, as the keyboard would.
+fn key(k: &str, shift: bool) -> String {
+    format!(
+        "document.body.dispatchEvent(new KeyboardEvent('keydown', {{key: {}, shiftKey: {shift}, bubbles: true}}))",
+        json!(k)
+    )
 }
