@@ -5,8 +5,8 @@
 
 use serde_json::{Value, json};
 
-use super::cdp::{Browser, Page};
-use super::{TOKEN, floats, post_json, select_clip, set_value, start};
+use super::cdp::Page;
+use super::{TOKEN, floats, post_json, set_value, start, viewer_on_clip};
 
 /// Selects a curve and waits until the panel shows it (`euler`: an order, or "quaternion").
 async fn show_curve(page: &mut Page, joint: &str, channel: &str, euler: &str) -> Value {
@@ -70,10 +70,8 @@ async fn rotations_show_as_euler_angles_in_the_chosen_order() {
     let clip = json!({"name": "turn", "tracks": [{"joint": "j", "channel": "rotation", "interpolation": "linear",
         "times": [0, 1], "values": [[0, 0, 0, 1], q]}]});
     let id = app.create_id(&clip.to_string(), Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
 
     let curve = show_curve(page, "j", "rotation", "XYZ").await;
     let key = floats(&curve["keys"][1]["value"]);
@@ -104,10 +102,8 @@ async fn rotations_show_as_euler_angles_in_the_chosen_order() {
 async fn parameters_are_plotted_for_the_face_example() {
     let app = start().await;
     let id = app.create_id(include_str!("../../../examples/face.json"), Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
     let options = page.eval("[...document.getElementById('curve-joint').options].map(o => o.value)").await;
     assert_eq!(options, json!(["head", "param:face_mesh", "param:camera_fov"]));
 
@@ -135,10 +131,8 @@ async fn cubic_hermite_tangents_are_drawn_as_handles() {
         "interpolation": "cubic_hermite", "times": [0, 2], "values": [[0, 0, 0], [1, 2, 3]],
         "in_tangents": [[0, 0, 0], [1, 1, 1]], "out_tangents": [[3, 0, 0], [0, 0, 0]]}]});
     let id = app.create_id(&clip.to_string(), Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
     let curve = show_curve(page, "j", "translation", "XYZ").await;
     // Segment of h = 2 s: out of key 0 at (2/3, v0 + b0·2/3), into key 1 at (2 - 2/3, v1 - a1·2/3).
     let handles = &curve["tangents"];

@@ -9,7 +9,7 @@ use inbetween::server::config::Secret;
 use serde_json::json;
 
 use super::cdp::Browser;
-use super::{TOKEN, select_clip, set_value, start, text, text_number};
+use super::{TOKEN, select_clip, set_value, start, text, text_number, viewer_on_clip};
 use crate::common::{TestApp, WAVE};
 
 /// The read token of [`reading_server`].
@@ -19,10 +19,8 @@ const READ: &str = "viewer read/token+1";
 async fn a_once_clip_shows_its_end_and_play_starts_it_over() {
     let app = start().await;
     let id = app.create_id(WAVE, Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
 
     // wave.json loops by default; `once` at 4× ends its 3 s in 0.75 s.
     set_value(page, "playback", "once").await;
@@ -93,10 +91,8 @@ async fn a_read_token_server_works_from_the_token_field() {
 async fn problem_bodies_show_their_detail_and_code() {
     let app = start().await;
     let id = app.create_id(WAVE, Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
 
     // A control the stream refuses: `{"error": {code, detail}}` on the socket.
     page.eval("document.getElementById('play').click()").await;
@@ -179,10 +175,8 @@ async fn the_page_fits_1366_by_768_and_answers_its_keys() {
 async fn a_late_answer_for_an_earlier_seek_does_not_replace_the_pose_shown() {
     let app = start().await;
     let id = app.create_id(WAVE, Some(TOKEN)).await;
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
     set_value(page, "playback", "once").await;
     page.wait_for("document.getElementById('clip-time').textContent === '0.000 s'", 10).await;
     page.eval(
@@ -219,10 +213,8 @@ async fn the_fox_is_drawn_with_solid_bones_and_no_stray_one() {
     assert_eq!(imported.status(), 201);
     let imported: serde_json::Value = imported.json().await.unwrap();
     let id = imported["clips"][0]["id"].as_str().unwrap().to_owned();
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
     let drawn = page.wait_for("window.inbetweenViewer.drawn?.bones.length && window.inbetweenViewer.drawn", 10).await;
 
     // The Fox's 25 nodes: the scene root `root` (no skin joint), and its skin's

@@ -20,8 +20,8 @@ use std::time::Duration;
 use glam::{DMat4, DQuat, DVec3, DVec4};
 use serde_json::{Value, json};
 
-use super::cdp::{Browser, Page};
-use super::{TOKEN, differs, post_json, select_clip, start};
+use super::cdp::Page;
+use super::{TOKEN, differs, post_json, start, viewer_on_clip};
 use crate::common::glb::{FOX, Glb};
 
 /// The RGB pixels of the scene's content box (the canvas buffer's own
@@ -158,10 +158,8 @@ async fn the_fox_is_skinned_on_the_gpu_like_a_cpu_reference_and_walks() {
     let imported: Value = imported.json().await.unwrap();
     let walk = imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("the Fox walks");
     let id = walk["id"].as_str().unwrap().to_owned();
-    let Some(mut browser) = Browser::launch().await else { return };
+    let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;
-    page.navigate(&app.url("/viewer")).await;
-    select_clip(page, &id).await;
     let info = page.wait_for("window.inbetweenViewer.mesh.draws > 0 && window.inbetweenViewer.mesh.info", 20).await;
     assert_eq!(info, json!({"vertices": 1728, "triangles": 576, "joints": 24, "textured": true, "normals": false}));
 

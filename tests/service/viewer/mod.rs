@@ -229,6 +229,15 @@ async fn uploads_from_the_page_with_the_write_token_and_plays_in_local_space() {
     }
 }
 
+/// A browser on the app's viewer page with clip `id` selected (`None`
+/// where no browser can run, as [`Browser::launch`]).
+async fn viewer_on_clip(app: &TestApp, id: &str) -> Option<Browser> {
+    let mut browser = Browser::launch().await?;
+    browser.page.navigate(&app.url("/viewer")).await;
+    select_clip(&mut browser.page, id).await;
+    Some(browser)
+}
+
 /// Selects the clip `id` in the list and waits until its curve is plotted.
 async fn select_clip(page: &mut Page, id: &str) {
     page.wait_for(&format!("document.querySelector('#clips li[data-id={}]')", json!(id)), 10).await;
