@@ -110,18 +110,19 @@ pub fn grpc<S: Animation>(server: AnimationServer<S>, config: Compression) -> An
         .send_compressed(CompressionEncoding::Gzip)
 }
 
-/// The gRPC methods whose answers are stream frames.
-const FRAME_METHODS: [&str; 2] = ["/inbetween.v1.Animation/StreamFrames", "/inbetween.v1.Animation/Play"];
-
 /// Frames go uncompressed on gRPC as on the WebSocket: a playback encodes
 /// each frame once for all its viewers, and compressing would cost every
 /// viewer a compressor per tick (a packed 38-joint frame halves under gzip,
 /// ≈ 1.5 KB → 0.7 KB, at tens of µs each, times viewers × fps) — and
 /// grpcio clients ask for gzip by default. The server-side layer drops the
-/// client's `grpc-accept-encoding` on those two methods only; what the
-/// client sends compressed is still decoded.
-pub fn frames_uncompressed<B>(mut request: axum::http::Request<B>) -> axum::http::Request<B> {
-    if FRAME_METHODS.contains(&request.uri().path()) {
+/// client's `grpc-accept-encoding` on the methods `is_frames` names (the
+/// route table's streams of frames) only; what the client sends compressed
+/// is still decoded.
+pub fn frames_uncompressed<B>(
+    mut request: axum::http::Request<B>,
+    is_frames: fn(&str) -> bool,
+) -> axum::http::Request<B> {
+    if is_frames(request.uri().path()) {
         request.headers_mut().remove("grpc-accept-encoding");
     }
     request

@@ -62,6 +62,7 @@ pub mod notify;
 pub mod ratelimit;
 pub mod request;
 pub mod rest;
+pub mod routes;
 pub mod shed;
 pub mod spool;
 pub mod state;
@@ -257,10 +258,12 @@ impl Application {
             admission: shed::Admission {
                 gate: shed::Gate::new(limits.max_in_flight),
                 clients: Arc::clone(&state.in_flight),
+                never_shed: crate::routes::never_shed,
             },
             arrivals: state.arrivals.clone(),
             auth: state.auth.clone(),
             message_timeout: limits.request_message_timeout,
+            frame_stream: crate::routes::is_frame_rpc,
         };
         let incoming = connections::tracked_incoming(
             grpc_listener,
@@ -273,7 +276,9 @@ impl Application {
                 .http2_keepalive_interval(Some(Duration::from_secs(30)))
                 .max_concurrent_streams(limits.http2_max_concurrent_streams)
                 .layer(connections::GrpcConnLayer)
-                .layer(tower::util::MapRequestLayer::new(compression::frames_uncompressed))
+                .layer(tower::util::MapRequestLayer::new(|request| {
+                    compression::frames_uncompressed(request, crate::routes::is_frame_rpc)
+                }))
                 .layer(grpc_edge::layer())
                 .layer(admission)
                 .add_routes(routes)

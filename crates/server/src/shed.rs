@@ -129,6 +129,8 @@ impl Drop for ClientSlot {
 pub struct Admission {
     pub gate: Gate,
     pub clients: Arc<Clients>,
+    /// The REST paths never shed (the route table's probes and metrics).
+    pub never_shed: fn(&str) -> bool,
 }
 
 /// What an admitted request holds until it is done.
@@ -148,8 +150,10 @@ impl Admission {
     }
 }
 
-fn exempt(path: &str) -> bool {
-    matches!(path, "/healthz" | "/readyz" | "/metrics") || path.starts_with("/grpc.health.")
+impl Admission {
+    fn exempt(&self, path: &str) -> bool {
+        (self.never_shed)(path) || path.starts_with("/grpc.health.")
+    }
 }
 
 fn shed(protocol: &'static str) -> ApiError {
@@ -166,7 +170,7 @@ fn key_of(identity: Option<&Identity>) -> CallerKey {
 /// The REST middleware (inside the body guard and auth): holds both slots
 /// for the whole request.
 pub async fn rest(State(admission): State<Admission>, request: Request, next: Next) -> Response {
-    if exempt(request.uri().path()) {
+    if admission.exempt(request.uri().path()) {
         return next.run(request).await;
     }
     let key = key_of(request.extensions().get::<Identity>());
@@ -206,13 +210,6 @@ impl<B: Body + Unpin, H: Unpin> Body for Holding<B, H> {
     }
 }
 
-/// Streams of frames (`StreamFrames`, `Play`) give their slots back once
-/// they start: the stream caps govern them. Every other call, `SampleStream`
-/// included, is in flight until its last message is sent.
-fn is_frame_stream(path: &str) -> bool {
-    matches!(path, "/inbetween.v1.Animation/StreamFrames" | "/inbetween.v1.Animation/Play")
-}
-
 /// The same budgets as a tower layer for tonic's server, which also
 /// identifies each call's caller once (left in its extensions for the
 /// handlers). Slots are held until the response has been sent, but for
@@ -223,6 +220,11 @@ pub struct GrpcLayer {
     pub arrivals: Arrivals,
     pub auth: Auth,
     pub message_timeout: Duration,
+    /// Streams of frames (`StreamFrames`, `Play`: the route table's) give
+    /// their slots back once they start: the stream caps govern them. Every
+    /// other call, `SampleStream` included, is in flight until its last
+    /// message is sent.
+    pub frame_stream: fn(&str) -> bool,
 }
 
 impl<S> tower::Layer<S> for GrpcLayer {
@@ -259,14 +261,14 @@ where
     fn call(&mut self, mut request: GrpcRequest) -> Self::Future {
         let identity = identify(&self.layer.auth, &request);
         request.extensions_mut().insert(identity.clone());
-        if exempt(request.uri().path()) {
+        if self.layer.admission.exempt(request.uri().path()) {
             return Box::pin(self.inner.call(request));
         }
         // The service that was made ready goes with this call; a fresh clone stays.
         let mut inner = self.inner.clone();
         std::mem::swap(&mut inner, &mut self.inner);
         let layer = self.layer.clone();
-        let frames = is_frame_stream(request.uri().path());
+        let frames = (self.layer.frame_stream)(request.uri().path());
         Box::pin(async move {
             let (request, held) = match first_message(request, layer.message_timeout, &layer.arrivals).await {
                 Ok(arrived) => arrived,

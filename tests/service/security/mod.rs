@@ -63,6 +63,13 @@ pub enum Need {
     Scope(Scope),
 }
 
+impl Need {
+    /// What a route table row's scope (`None`: open) needs.
+    pub fn of(scope: Option<Scope>) -> Need {
+        scope.map_or(Need::Open, Need::Scope)
+    }
+}
+
 /// The outcome the matrix expects for `role` on an operation needing `need`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {

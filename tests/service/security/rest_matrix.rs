@@ -7,43 +7,34 @@ use std::collections::BTreeSet;
 use reqwest::Method;
 use serde_json::Value;
 use server::auth::Scope;
+use server::routes::{Class, ROUTES, Route};
 use tokio_tungstenite::tungstenite;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use super::{ADMIN, Need, Outcome, Role, TINY_BVH, TestApp, WAVE, expected, scoped_tokens, snapshot};
 
-/// What each operation needs, and the status it answers when allowed. A route
-/// added to the OpenAPI document without a line here fails the test.
-const ROUTES: &[(&str, &str, Need, u16)] = &[
-    ("post", "/v1/clips", Need::Scope(Scope::Write), 201),
-    ("get", "/v1/clips", Need::Scope(Scope::Read), 200),
-    ("post", "/v1/clips/import", Need::Scope(Scope::Write), 201),
-    ("get", "/v1/clips/{id}", Need::Scope(Scope::Read), 200),
-    ("put", "/v1/clips/{id}", Need::Scope(Scope::Write), 200),
-    ("patch", "/v1/clips/{id}", Need::Scope(Scope::Write), 200),
-    ("delete", "/v1/clips/{id}", Need::Scope(Scope::Write), 204),
-    ("get", "/v1/clips/{id}/pose", Need::Scope(Scope::Read), 200),
-    ("get", "/v1/clips/{id}/skeleton", Need::Scope(Scope::Read), 200),
-    // The clip `call` makes is JSON, without a mesh: allowed is `404 no_mesh` (tests/service/api/mesh.rs: 200).
-    ("get", "/v1/clips/{id}/mesh", Need::Scope(Scope::Read), 404),
-    ("post", "/v1/clips/{id}/sample", Need::Scope(Scope::Read), 200),
-    ("get", "/v1/clips/{id}/stream", Need::Scope(Scope::Read), 101),
-    // Checked at the upgrade; the motion comes in the first message.
-    ("get", "/v1/stream", Need::Scope(Scope::Read), 101),
-    ("post", "/v1/broadcasts", Need::Scope(Scope::Write), 201),
-    ("get", "/v1/broadcasts", Need::Scope(Scope::Read), 200),
-    ("get", "/v1/broadcasts/{id}", Need::Scope(Scope::Read), 200),
-    ("delete", "/v1/broadcasts/{id}", Need::Scope(Scope::Write), 204),
-    ("post", "/v1/broadcasts/{id}/controls", Need::Scope(Scope::Write), 200),
-    ("get", "/v1/broadcasts/{id}/stream", Need::Scope(Scope::Read), 101),
-    ("post", "/v1/poses", Need::Scope(Scope::Read), 200),
-    ("post", "/v1/samples", Need::Scope(Scope::Read), 200),
-    ("get", "/healthz", Need::Open, 200),
-    ("get", "/readyz", Need::Open, 200),
-    ("get", "/metrics", Need::Scope(Scope::Admin), 200),
-    // The viewer page is public; it asks for a token only when an upload answers 401.
-    ("get", "/viewer", Need::Open, 200),
-];
+/// The REST routes of the route table (`server::routes`): method, path,
+/// what each needs and the status it answers when allowed. A route added to
+/// the OpenAPI document but not to the table fails the test.
+fn routes() -> Vec<(&'static str, &'static str, Need, u16)> {
+    let rest =
+        |r: &Route| r.rest.map(|(method, path)| (method, path, Need::of(r.scope), allowed_status(r, method, path)));
+    ROUTES.iter().filter_map(rest).collect()
+}
+
+/// What an allowed call of the operation answers.
+fn allowed_status(route: &Route, method: &str, path: &str) -> u16 {
+    match (method, path) {
+        // Checked at the upgrade (for `/v1/stream`, the motion comes in the first message).
+        _ if route.class == Class::FrameStream => 101,
+        ("post", "/v1/clips" | "/v1/clips/import" | "/v1/broadcasts") => 201,
+        ("delete", _) => 204,
+        // The clip `call` makes is JSON, without a mesh: allowed is `404 no_mesh` (tests/service/api/mesh.rs: 200).
+        ("get", "/v1/clips/{id}/mesh") => 404,
+        // The viewer page is public; it asks for a token only when an upload answers 401.
+        _ => 200,
+    }
+}
 
 /// The (method, path) of every operation in `/openapi.json`, with whether it
 /// declares the bearer scheme.
@@ -167,17 +158,18 @@ async fn every_rest_route_checks_its_scope() {
     // The matrix covers exactly the documented operations, and the document
     // declares the bearer scheme on exactly the guarded ones.
     let documented = documented_operations(&app).await;
-    let listed: BTreeSet<(String, String)> = ROUTES.iter().map(|(m, p, ..)| (m.to_string(), p.to_string())).collect();
+    let routes = routes();
+    let listed: BTreeSet<(String, String)> = routes.iter().map(|(m, p, ..)| (m.to_string(), p.to_string())).collect();
     let in_doc: BTreeSet<(String, String)> = documented.iter().map(|(m, p, _)| (m.clone(), p.clone())).collect();
     assert_eq!(in_doc, listed, "every documented operation needs a matrix entry, and only those");
     for (method, path, secured) in &documented {
-        let need = ROUTES.iter().find(|(m, p, ..)| m == method && p == path).unwrap().2;
+        let need = routes.iter().find(|(m, p, ..)| m == method && p == path).unwrap().2;
         assert_eq!(*secured, need != Need::Open, "{method} {path}: bearer scheme in the document");
     }
 
     let mut cells = 0;
     let mut refused_writes = 0;
-    for &(method, path, need, ok_status) in ROUTES {
+    for &(method, path, need, ok_status) in &routes {
         for role in Role::ALL {
             let before = snapshot(&app).await;
             let (status, problem) = call(&app, method, path, role).await;
@@ -209,9 +201,10 @@ async fn every_rest_route_checks_its_scope() {
             cells += 1;
         }
     }
-    assert_eq!(cells, ROUTES.len() * Role::ALL.len());
+    assert_eq!(cells, routes.len() * Role::ALL.len());
     // write routes × {none, invalid, read}
-    assert_eq!(refused_writes, 8 * 3);
+    let writes = routes.iter().filter(|(_, _, need, _)| *need == Need::Scope(Scope::Write)).count();
+    assert_eq!(refused_writes, writes * 3);
     app.stop().await;
 }
 
@@ -219,15 +212,16 @@ async fn every_rest_route_checks_its_scope() {
 /// `--api-token`, reads stay public and `/metrics` stays open.
 #[tokio::test]
 async fn guards_follow_the_configured_tokens() {
+    let routes = routes();
     let open = TestApp::start().await;
-    for (method, path, _, ok) in ROUTES {
+    for (method, path, _, ok) in &routes {
         let (status, _) = call(&open, method, path, Role::None).await;
         assert_eq!(status, *ok, "open server: {method} {path}");
     }
     open.stop().await;
 
     let app = TestApp::builder().write_token(ADMIN).start().await;
-    for (method, path, need, ok) in ROUTES {
+    for (method, path, need, ok) in &routes {
         let (status, _) = call(&app, method, path, Role::None).await;
         let guarded = *need == Need::Scope(Scope::Write);
         assert_eq!(status, if guarded { 401 } else { *ok }, "write token only: {method} {path}");

@@ -52,9 +52,6 @@ use formats::wire::mesh;
 use super::query::Query;
 use super::summary::ClipSummary;
 
-/// The route's path (the body guard spools its bodies).
-pub const PATH: &str = "/v1/clips/import";
-
 /// What an import created, and what in the file looked wrong or was left out.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ImportResult {

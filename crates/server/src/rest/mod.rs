@@ -13,7 +13,6 @@ use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::{HeaderName, HeaderValue, Method, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
@@ -24,7 +23,7 @@ use super::config::Cors;
 use super::error::ApiError;
 use super::metrics;
 use super::state::AppState;
-use super::{auth, body_guard, compression, ratelimit, shed, spool};
+use super::{auth, body_guard, compression, ratelimit, routes, shed, spool};
 
 pub mod broadcasts;
 pub mod clips;
@@ -52,30 +51,7 @@ pub fn router(state: AppState) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
     // The API and operations routes take exactly the query parameters they document.
     let allowed = query::Allowed::from_openapi(&<openapi::ApiDoc as utoipa::OpenApi>::openapi());
-    let strict = Router::new()
-        .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
-        // Its body is spooled under max_import_bytes by the guard: no in-memory limit applies.
-        .route(import::PATH, post(import::import_clips).layer(DefaultBodyLimit::disable()))
-        .route(
-            "/v1/clips/{id}",
-            get(clips::get_clip).put(clips::replace_clip).patch(patch::patch_clip).delete(clips::delete_clip),
-        )
-        .route("/v1/clips/{id}/skeleton", get(skeleton::get_skeleton))
-        .route("/v1/clips/{id}/mesh", get(mesh::get_mesh))
-        .route("/v1/clips/{id}/pose", get(poses::get_pose))
-        .route("/v1/clips/{id}/sample", post(poses::sample))
-        .route("/v1/clips/{id}/stream", get(stream::stream))
-        .route("/v1/stream", get(stream::motion_stream))
-        .route("/v1/broadcasts", post(broadcasts::create).get(broadcasts::list))
-        .route("/v1/broadcasts/{id}", get(broadcasts::get).delete(broadcasts::delete))
-        .route("/v1/broadcasts/{id}/controls", post(broadcasts::control))
-        .route("/v1/broadcasts/{id}/stream", get(broadcasts::watch))
-        .route("/v1/poses", post(motions::pose))
-        .route("/v1/samples", post(motions::samples))
-        .route("/healthz", get(health::healthz))
-        .route("/readyz", get(health::readyz))
-        .route("/metrics", get(health::metrics))
-        .route_layer(middleware::from_fn_with_state(allowed, query::strict));
+    let strict = routes::mount(Router::new()).route_layer(middleware::from_fn_with_state(allowed, query::strict));
     Router::new()
         .merge(strict)
         .merge(openapi::router())
@@ -88,6 +64,7 @@ pub fn router(state: AppState) -> Router {
             shed::Admission {
                 gate: shed::Gate::new(limits.max_in_flight),
                 clients: std::sync::Arc::clone(&state.in_flight),
+                never_shed: routes::never_shed,
             },
             shed::rest,
         ))
@@ -97,7 +74,7 @@ pub fn router(state: AppState) -> Router {
                 read_timeout: limits.body_read_timeout,
                 arrivals: state.arrivals.clone(),
                 spool: Some(spool::SpoolRoute::new(
-                    import::PATH,
+                    routes::import_path(),
                     limits.max_import_bytes,
                     "max_import_bytes",
                     limits.max_concurrent_builds,
@@ -107,7 +84,10 @@ pub fn router(state: AppState) -> Router {
         ))
         // Compressed bodies are decoded before the body guard reads them: its limits count decoded bytes.
         .layer(compression::requests(state.config.compression))
-        .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
+        .layer(middleware::from_fn_with_state(
+            ratelimit::WriteGate { limiter: std::sync::Arc::clone(&state.writes), is_write: routes::is_write },
+            ratelimit::limit_writes,
+        ))
         .layer(middleware::from_fn_with_state(state.auth.clone(), auth::identify_requests))
         .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
         .layer(middleware::from_fn(metrics::track))

@@ -11,8 +11,8 @@ use utoipa::{Modify, OpenApi};
 use utoipa_swagger_ui::SwaggerUi;
 
 use super::schemas::{JointPoseSchema, PoseSchema, PosesSchema, Problem, Warning};
-use super::{broadcasts, clips, health, import, mesh, motions, patch, poses, skeleton, stream, viewer};
 use crate::error::PROBLEM_JSON;
+use crate::routes::RoutePaths;
 
 /// The bearer scheme, and on every operation that takes it the two answers
 /// a token can draw (401 missing/unknown, 403 lacking the scope), so no
@@ -73,6 +73,16 @@ impl Modify for BearerAuth {
     }
 }
 
+/// The operations of the route table's REST routes (`routes`), before
+/// [`BearerAuth`] completes them.
+struct RouteOperations;
+
+impl Modify for RouteOperations {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        openapi.merge(RoutePaths::openapi());
+    }
+}
+
 fn problem_response(description: &str) -> RefOr<Response> {
     let content = Content::new(Some(RefOr::Ref(Ref::from_schema_name("Problem"))));
     RefOr::T(ResponseBuilder::new().description(description).content(PROBLEM_JSON, content).build())
@@ -81,18 +91,8 @@ fn problem_response(description: &str) -> RefOr<Response> {
 #[derive(OpenApi)]
 #[openapi(
     info(title = "inbetween", description = "Keyframe clips in, inbetweens out. Described in the repository's docs: the clip document and how every pose is evaluated, `docs/clip-format.md` (the pose: its §4); composed motions (layers, crossfades, root motion, joint subsets, streams), `docs/motion.md`; inverse kinematics, `docs/ik.md`; broadcasts, `docs/broadcasts.md`; imports, `docs/import.md`; warnings, `docs/warnings.md`; every route with curl, the README's \"REST API\"."),
-    paths(
-        clips::create_clip, clips::list_clips, clips::get_clip, clips::replace_clip, clips::delete_clip,
-        patch::patch_clip, skeleton::get_skeleton, mesh::get_mesh,
-        import::import_clips,
-        poses::get_pose, poses::sample, motions::pose, motions::samples, stream::stream, stream::motion_stream,
-        broadcasts::create, broadcasts::list, broadcasts::get, broadcasts::delete, broadcasts::control,
-        broadcasts::watch,
-        health::healthz, health::readyz, health::metrics,
-        viewer::viewer_page,
-    ),
     components(schemas(Problem, Warning, PoseSchema, PosesSchema, JointPoseSchema, super::stream::StreamOpen)),
-    modifiers(&BearerAuth),
+    modifiers(&RouteOperations, &BearerAuth),
     tags(
         (name = "clips", description = "Store and fetch keyframe clips (the document: `docs/clip-format.md`)"),
         (name = "poses", description = "Evaluate poses of a clip (`docs/clip-format.md`, the pose: its §4) or of a composed motion (`docs/motion.md`)"),

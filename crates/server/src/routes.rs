@@ -1,0 +1,267 @@
+//! Every route of the service, declared once: its REST method and path, the
+//! scope its token needs, its class, its handler and its gRPC twin (or a
+//! gRPC call alone). The router, the OpenAPI paths, the write rate limit,
+//! shedding and frame compression, and the auth-matrix tests all read
+//! [`ROUTES`], so a new route is one line here plus its handler (the
+//! reference: `docs/api.md`).
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::http::Method;
+use axum::routing::MethodRouter;
+
+use crate::auth::Scope;
+use crate::rest::{broadcasts, clips, health, import, mesh, motions, patch, poses, skeleton, stream, viewer};
+use crate::state::AppState;
+
+/// What a route does, as the limits see it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Class {
+    /// Answers without changing state (a read sent as POST included).
+    Read,
+    /// Changes state: counted by the write rate limit.
+    Write,
+    /// A write whose body is spooled to disk under `max_import_bytes`.
+    Import,
+    /// Frames at a fixed rate: over gRPC, uncompressed and holding no
+    /// in-flight slot once started (the stream caps govern them).
+    FrameStream,
+    /// Probes and metrics: never shed, so an overloaded server looks alive.
+    Operations,
+    /// The viewer page, served with its files by `rest::viewer::router`.
+    Page,
+}
+
+impl Class {
+    /// Whether the write rate limit counts it.
+    pub fn changes_state(self) -> bool {
+        matches!(self, Class::Write | Class::Import)
+    }
+}
+
+/// One route: REST, gRPC or both.
+#[derive(Debug, Clone, Copy)]
+pub struct Route {
+    /// The REST method (lower case, as OpenAPI spells it) and path, if any.
+    pub rest: Option<(&'static str, &'static str)>,
+    /// The `inbetween.v1.Animation` method, if any.
+    pub rpc: Option<&'static str>,
+    /// The scope a token needs; `None`: open to anyone.
+    pub scope: Option<Scope>,
+    pub class: Class,
+}
+
+impl Route {
+    /// Whether the REST path template (`{id}` for one segment) matches `path`.
+    fn matches_path(&self, path: &str) -> bool {
+        self.rest.is_some_and(|(_, template)| template_matches(template, path))
+    }
+
+    fn matches(&self, method: &Method, path: &str) -> bool {
+        self.rest.is_some_and(|(m, _)| method.as_str().eq_ignore_ascii_case(m)) && self.matches_path(path)
+    }
+}
+
+fn template_matches(template: &str, path: &str) -> bool {
+    let (mut want, mut got) = (template.split('/'), path.split('/'));
+    loop {
+        match (want.next(), got.next()) {
+            (None, None) => return true,
+            (Some(w), Some(g)) if w.starts_with('{') => {
+                if g.is_empty() {
+                    return false;
+                }
+            }
+            (Some(w), Some(g)) if w == g => {}
+            _ => return false,
+        }
+    }
+}
+
+/// The `Scope` a table row names (`Open`: none).
+macro_rules! scope {
+    (Open) => {
+        None
+    };
+    ($scope:ident) => {
+        Some(Scope::$scope)
+    };
+}
+
+/// The table: REST routes (method, path, handler, scope, class, gRPC twin
+/// or `-`), then gRPC calls without a REST twin. Emits [`ROUTES`],
+/// [`mount`] and `RoutePaths` (the handlers' OpenAPI operations). Rows
+/// of one path keep the order of its `Allow` header.
+macro_rules! routes {
+    (
+        rest { $( ($method:ident, $path:literal, $module:ident :: $handler:ident, $scope:ident, $class:ident, $rpc:tt) ),* $(,)? }
+        grpc { $( ($only_rpc:literal, $only_scope:ident, $only_class:ident) ),* $(,)? }
+    ) => {
+        /// Every route, REST rows first.
+        pub const ROUTES: &[Route] = &[
+            $( Route {
+                rest: Some((stringify!($method), $path)),
+                rpc: routes!(@rpc $rpc),
+                scope: scope!($scope),
+                class: Class::$class,
+            }, )*
+            $( Route { rest: None, rpc: Some($only_rpc), scope: scope!($only_scope), class: Class::$only_class }, )*
+        ];
+
+        /// `api` with every REST route but the page added.
+        pub fn mount(api: Router<AppState>) -> Router<AppState> {
+            $( let api = add(api, $path, Class::$class, axum::routing::$method($module::$handler)); )*
+            api
+        }
+
+        /// The OpenAPI operations of the REST routes, merged into `rest::openapi::ApiDoc`.
+        #[derive(utoipa::OpenApi)]
+        #[openapi(paths($( $module::$handler ),*))]
+        pub struct RoutePaths;
+    };
+    (@rpc -) => { None };
+    (@rpc $rpc:literal) => { Some($rpc) };
+}
+
+routes! {
+    rest {
+        (post, "/v1/clips", clips::create_clip, Write, Write, -),
+        (get, "/v1/clips", clips::list_clips, Read, Read, "ListClips"),
+        (post, "/v1/clips/import", import::import_clips, Write, Import, -),
+        (get, "/v1/clips/{id}", clips::get_clip, Read, Read, "GetClip"),
+        (put, "/v1/clips/{id}", clips::replace_clip, Write, Write, "PutClip"),
+        (patch, "/v1/clips/{id}", patch::patch_clip, Write, Write, -),
+        (delete, "/v1/clips/{id}", clips::delete_clip, Write, Write, "DeleteClip"),
+        (get, "/v1/clips/{id}/skeleton", skeleton::get_skeleton, Read, Read, "GetSkeleton"),
+        (get, "/v1/clips/{id}/mesh", mesh::get_mesh, Read, Read, "GetMesh"),
+        (get, "/v1/clips/{id}/pose", poses::get_pose, Read, Read, "Sample"),
+        (post, "/v1/clips/{id}/sample", poses::sample, Read, Read, "SampleBatch"),
+        (get, "/v1/clips/{id}/stream", stream::stream, Read, FrameStream, "StreamFrames"),
+        (get, "/v1/stream", stream::motion_stream, Read, FrameStream, -),
+        (post, "/v1/broadcasts", broadcasts::create, Write, Write, -),
+        (get, "/v1/broadcasts", broadcasts::list, Read, Read, -),
+        (get, "/v1/broadcasts/{id}", broadcasts::get, Read, Read, -),
+        (delete, "/v1/broadcasts/{id}", broadcasts::delete, Write, Write, -),
+        (post, "/v1/broadcasts/{id}/controls", broadcasts::control, Write, Write, -),
+        (get, "/v1/broadcasts/{id}/stream", broadcasts::watch, Read, FrameStream, -),
+        (post, "/v1/poses", motions::pose, Read, Read, "SampleMotion"),
+        (post, "/v1/samples", motions::samples, Read, Read, "SampleMotionBatch"),
+        (get, "/healthz", health::healthz, Open, Operations, -),
+        (get, "/readyz", health::readyz, Open, Operations, -),
+        (get, "/metrics", health::metrics, Admin, Operations, -),
+        (get, "/viewer", viewer::viewer_page, Open, Page, -),
+    }
+    grpc {
+        ("SampleStream", Read, Read),
+        ("Play", Read, FrameStream),
+        // Its frames are compressed and hold their in-flight slot, as they always have.
+        ("Watch", Read, Read),
+        ("Ping", Open, Read),
+    }
+}
+
+/// `api` with one REST route added.
+fn add(api: Router<AppState>, path: &str, class: Class, route: MethodRouter<AppState>) -> Router<AppState> {
+    match class {
+        // The page is served with its files by `rest::viewer::router`, outside the strict query check.
+        Class::Page => api,
+        // Its body is spooled under max_import_bytes by the guard: no in-memory limit applies.
+        Class::Import => api.route(path, route.layer(DefaultBodyLimit::disable())),
+        _ => api.route(path, route),
+    }
+}
+
+/// The REST route `method path` answers, if any.
+fn rest_route(method: &Method, path: &str) -> Option<&'static Route> {
+    ROUTES.iter().find(|r| r.matches(method, path))
+}
+
+/// The one import route's path (its bodies are spooled).
+pub fn import_path() -> &'static str {
+    ROUTES.iter().find(|r| r.class == Class::Import).and_then(|r| r.rest).map_or("", |(_, path)| path)
+}
+
+/// Whether the write rate limit counts `method path`: its route's class, or
+/// for a request no route takes (404, 405), its method, unless its path is
+/// one of a read sent as POST.
+pub fn is_write(method: &Method, path: &str) -> bool {
+    if let Some(route) = rest_route(method, path) {
+        return route.class.changes_state();
+    }
+    let read_by_post = ROUTES
+        .iter()
+        .any(|r| r.rest.is_some_and(|(m, _)| m == "post") && r.class == Class::Read && r.matches_path(path));
+    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) && !read_by_post
+}
+
+/// Whether a REST request to `path` (any method) is never shed.
+pub fn never_shed(path: &str) -> bool {
+    ROUTES.iter().any(|r| r.class == Class::Operations && r.matches_path(path))
+}
+
+/// Whether the gRPC request to `path` is a stream of frames.
+pub fn is_frame_rpc(path: &str) -> bool {
+    let Some(method) = path.strip_prefix("/inbetween.v1.Animation/") else { return false };
+    ROUTES.iter().any(|r| r.class == Class::FrameStream && r.rpc == Some(method))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_state_changing_routes_are_writes() {
+        assert!(is_write(&Method::POST, "/v1/clips"));
+        assert!(is_write(&Method::POST, "/v1/clips/import"));
+        assert!(is_write(&Method::PUT, "/v1/clips/x"));
+        assert!(is_write(&Method::DELETE, "/v1/clips/x"));
+        assert!(!is_write(&Method::POST, "/v1/clips/x/sample"));
+        assert!(!is_write(&Method::POST, "/v1/poses"));
+        assert!(!is_write(&Method::POST, "/v1/samples"));
+        assert!(is_write(&Method::POST, "/v1/broadcasts/x/controls"));
+        assert!(!is_write(&Method::GET, "/v1/clips/x/pose"));
+        // No route: by method, but a read sent as POST stays a read whatever the method.
+        assert!(is_write(&Method::POST, "/v1/nothing"));
+        assert!(!is_write(&Method::PUT, "/v1/poses"));
+        assert!(!is_write(&Method::GET, "/v1/nothing"));
+    }
+
+    #[test]
+    fn probes_are_never_shed_and_frames_are_streams() {
+        assert!(never_shed("/healthz") && never_shed("/readyz") && never_shed("/metrics"));
+        assert!(!never_shed("/v1/clips") && !never_shed("/healthz/x"));
+        assert!(is_frame_rpc("/inbetween.v1.Animation/StreamFrames"));
+        assert!(is_frame_rpc("/inbetween.v1.Animation/Play"));
+        assert!(!is_frame_rpc("/inbetween.v1.Animation/Watch"));
+        assert!(!is_frame_rpc("/inbetween.v1.Animation/SampleStream"));
+        assert_eq!(import_path(), "/v1/clips/import");
+    }
+
+    #[test]
+    fn templates_match_one_segment_per_parameter() {
+        assert!(template_matches("/v1/clips/{id}", "/v1/clips/a%2Fb"));
+        assert!(!template_matches("/v1/clips/{id}", "/v1/clips/"));
+        assert!(!template_matches("/v1/clips/{id}", "/v1/clips/a/b"));
+        assert!(!template_matches("/v1/clips", "/v1/clips/"));
+    }
+
+    /// The scope each handler's OpenAPI operation declares is the table's.
+    #[test]
+    fn the_documented_security_is_the_tables() {
+        let doc = <crate::rest::openapi::ApiDoc as utoipa::OpenApi>::openapi();
+        for route in ROUTES {
+            let Some((method, path)) = route.rest else { continue };
+            let item = &doc.paths.paths[path];
+            let op = match method {
+                "get" => &item.get,
+                "post" => &item.post,
+                "put" => &item.put,
+                "patch" => &item.patch,
+                "delete" => &item.delete,
+                other => panic!("{other}"),
+            };
+            let secured = op.as_ref().unwrap().security.as_ref().is_some_and(|s| !s.is_empty());
+            assert_eq!(secured, route.scope.is_some(), "{method} {path}");
+        }
+    }
+}
