@@ -29,8 +29,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::error::ApiError;
-use super::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body};
-use super::rest::poses::parse_json;
+use super::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body, parse_json};
 use super::state::AppState;
 use crate::store::{ClipStore, StoredBroadcast, StoredControl};
 use crate::stream::ws::{ParsedControl, parse_control};
