@@ -104,6 +104,9 @@ impl Timeline {
     }
 
     /// The time of key `i`.
+    ///
+    /// # Panics
+    /// If there is no key `i`.
     pub fn time(&self, i: usize) -> f32 {
         self.keys[i][0]
     }
@@ -116,9 +119,10 @@ impl Timeline {
         self.keys[self.keys.len() - 1][0]
     }
 
-    /// The segment holding `t`, clamped outside the keys (SPEC §2: a track
-    /// holds its end values; at `t = t_n` the last segment with `u = 1`).
-    /// `hint` is the caller's last answer and is updated.
+    /// The segment holding `t`, clamped outside the keys (docs/clip-format.md,
+    /// “Evaluation math”: a track holds its end values; at `t = t_n` the last
+    /// segment with `u = 1`). `hint` is the caller's last answer and is
+    /// updated.
     #[inline]
     pub fn locate(&self, t: f32, hint: &mut u32) -> Span {
         let keys = &*self.keys;
