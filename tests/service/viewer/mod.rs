@@ -9,7 +9,7 @@
 //! `INBETWEEN_REQUIRE_BROWSER=1` (CI) makes them fail. Set
 //! `INBETWEEN_VIEWER_SCREENSHOT=path.png` to save a screenshot from the
 //! upload test, `INBETWEEN_VIEWER_PANEL_SCREENSHOT=path.png` one of the
-//! composition panel with the Fox (README's docs/viewer-panel.png).
+//! composition panel with the Fox (docs/viewer.md's docs/viewer-panel.png).
 
 mod cdp;
 mod curves;

@@ -2,7 +2,7 @@
 //! real in front of three nodes: the shipped file with only the compose host
 //! names and ports replaced by this machine's. Uploads, poses, a WebSocket
 //! stream and gRPC calls go through it, and the gRPC calls of one client
-//! channel must land on every node (per-call balancing, README "Scaling out").
+//! channel must land on every node (per-call balancing, docs/operations.md, "Scaling out over PostgreSQL").
 //!
 //! Needs nginx (Debian's package); skips without it unless
 //! `INBETWEEN_REQUIRE_NGINX=1` (CI installs it).
@@ -11,8 +11,8 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 use super::*;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 
 /// A running nginx on a config derived from `deploy/nginx.conf`.
 struct Nginx {
