@@ -73,7 +73,7 @@ const FILES: [(&str, &Asset); 20] = [
     module!("clips.js"),
     module!("upload.js"),
     module!("composition.js"),
-    module!("panel.js"), // composition and IK handles
+    module!("panel.js"),     // composition and IK handles
     module!("broadcast.js"), // creating and watching broadcasts
 ];
 

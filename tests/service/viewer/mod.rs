@@ -26,7 +26,7 @@ use serde_json::{Value, json};
 use crate::common::{TestApp, WAVE};
 use cdp::{Browser, Page};
 const TOKEN: &str = "viewer-test-write-token";
-/// The canvases' background colour (#101216 in viewer.js).
+/// The canvases' background colour (#101216 in scene.js and curves.js).
 const BACKGROUND: [u8; 3] = [0x10, 0x12, 0x16];
 
 /// The page's other ES modules (`viewer.js` imports them, `index.html` preloads them).
