@@ -1,7 +1,9 @@
-//! The `inbetween` binary: flags in, one subcommand run. All logic lives in
-//! the library; see `inbetween --help`.
+//! The `inbetween` binary: flags in, one subcommand run (`cli`). The work
+//! lives in the workspace's crates; see `inbetween --help`.
 
 use clap::Parser;
+
+mod cli;
 
 /// mimalloc instead of glibc's malloc: the server allocates and frees a
 /// response body or a frame per request on two threads, where glibc spent
@@ -10,5 +12,5 @@ use clap::Parser;
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> std::process::ExitCode {
-    inbetween::cli::Cli::parse().run()
+    cli::Cli::parse().run()
 }

@@ -1,4 +1,4 @@
-//! `inbetween::fuzzing::clip_json` (shared with the corpus replay in `cargo test`).
+//! `formats::fuzzing::clip_json` (shared with the corpus replay in `cargo test`).
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| inbetween::fuzzing::clip_json(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| formats::fuzzing::clip_json(data));

@@ -1,4 +1,4 @@
-//! `inbetween::fuzzing::import_gltf` (shared with the corpus replay in `cargo test`).
+//! `formats::fuzzing::import_gltf` (shared with the corpus replay in `cargo test`).
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| inbetween::fuzzing::import_gltf(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| formats::fuzzing::import_gltf(data));

@@ -1,4 +1,4 @@
-//! `inbetween::fuzzing::motion_json` (shared with the corpus replay in `cargo test`).
+//! `formats::fuzzing::motion_json` (shared with the corpus replay in `cargo test`).
 #![no_main]
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| inbetween::fuzzing::motion_json(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| formats::fuzzing::motion_json(data));

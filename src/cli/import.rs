@@ -31,9 +31,11 @@ use anyhow::{Context, bail};
 use clap::Args;
 use serde::Serialize;
 
-use crate::anim::Interpolation;
-use crate::import::{Format, ImportLimits, ImportOptions, SNIFF_BYTES, Source, Warning, file_stem, import_from, sniff};
-use crate::wire::json::ClipDoc;
+use anim::Interpolation;
+use formats::import::{
+    Format, ImportLimits, ImportOptions, SNIFF_BYTES, Source, Warning, file_stem, import_from, sniff,
+};
+use formats::wire::json::ClipDoc;
 
 #[derive(Debug, Args)]
 pub struct ImportArgs {

@@ -1,15 +1,15 @@
-//! `inbetween load`: the load generator (`crate::load`). Flags in, a human
+//! `inbetween load`: the load generator (`load`). Flags in, a human
 //! summary or a JSON report out. `inbetween load-floor` (hidden) is the bare
-//! sender `load --floor` starts as its own process (`crate::load::floor`).
+//! sender `load --floor` starts as its own process (`load::floor`).
 
 use std::io::Write;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 
-use crate::load::floor::Kind;
-use crate::load::ramp::RampPlan;
-use crate::load::{ClipChoice, Mode, MotionChoice, Options};
+use load::floor::Kind;
+use load::ramp::RampPlan;
+use load::{ClipChoice, Mode, MotionChoice, Options};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ModeArg {
@@ -157,7 +157,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
         floor: if args.floor { Some(std::env::current_exe()?) } else { None },
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
-    let report = runtime.block_on(crate::load::run(opts))?;
+    let report = runtime.block_on(load::run(opts))?;
     let mut out = super::Results::buffered();
     if args.json {
         writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
@@ -195,5 +195,5 @@ pub fn run_floor(args: FloorArgs) -> anyhow::Result<()> {
         FloorKindArg::WsProtobuf => Kind::WsProtobuf,
         FloorKindArg::Tcp => Kind::Tcp,
     };
-    crate::load::floor::run_sender(kind, args.fps)
+    load::floor::run_sender(kind, args.fps)
 }

@@ -19,7 +19,6 @@ mod load;
 mod sample;
 mod serve;
 mod token;
-mod watch;
 
 #[derive(Debug, Parser)]
 #[command(name = "inbetween", version, about = "Keyframes in, inbetweens out: a keyframe-animation server and tools.")]
@@ -41,7 +40,7 @@ enum Command {
     /// Load a running server (loopback only by default) and report throughput, latency and stream lateness.
     Load(Box<load::LoadArgs>),
     /// Watch a WebSocket stream of a clip or a composed motion; send controls from stdin or `--at`.
-    Watch(Box<watch::WatchArgs>),
+    Watch(Box<::load::watch::WatchArgs>),
     /// The bare sender `load --floor` runs as its own process (reads a frame on stdin).
     #[command(hide = true)]
     LoadFloor(load::FloorArgs),
@@ -55,7 +54,7 @@ impl Cli {
             Command::Import(args) => import::run(args),
             Command::Token(args) => token::run(args),
             Command::Load(args) => load::run(*args),
-            Command::Watch(args) => watch::run(*args),
+            Command::Watch(args) => ::load::watch::run(*args, Results::lines()),
             Command::LoadFloor(args) => load::run_floor(args),
         };
         match result {

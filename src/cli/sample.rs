@@ -7,8 +7,10 @@ use anyhow::{Context, bail};
 use clap::Args;
 use glam::Mat4;
 
-use crate::anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
-use crate::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc, parse_clip};
+use anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
+use formats::wire::json::{
+    EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc, parse_clip,
+};
 
 /// The most poses one invocation prints.
 const MAX_POSES: u64 = 1_000_000;

@@ -1,5 +1,5 @@
 //! `inbetween serve`: flags, environment and an optional TOML file in; the
-//! server (`crate::server::Application`) out. Logging is set up here, not in
+//! server (`server::Application`) out. Logging is set up here, not in
 //! the library, so tests and embedders keep their own subscriber.
 
 use std::io::Write;
@@ -8,8 +8,8 @@ use std::path::PathBuf;
 use clap::Args;
 use tracing_subscriber::EnvFilter;
 
-use crate::server::Application;
-use crate::server::config::{LogFormat, RawConfig};
+use server::Application;
+use server::config::{LogFormat, RawConfig};
 
 #[derive(Debug, Args)]
 pub struct ServeArgs {

@@ -6,7 +6,7 @@ use std::io::{BufRead, Write};
 
 use clap::{Args, Subcommand};
 
-use crate::server::tokens::{Scope, TokenHash, TokenSpec, new_token};
+use server::tokens::{Scope, TokenHash, TokenSpec, new_token};
 
 #[derive(Debug, Args)]
 pub struct TokenArgs {

@@ -12,12 +12,12 @@ use std::net::SocketAddr;
 use std::path::Path;
 use std::time::Duration;
 
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use futures_util::FutureExt;
-use inbetween::server::auth::Token;
-use inbetween::server::config::Secret;
-use inbetween::server::{AppState, Application, Config};
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use serde_json::Value;
+use server::auth::Token;
+use server::config::Secret;
+use server::{AppState, Application, Config};
 use tempfile::TempDir;
 use tokio::net::TcpStream;
 use tokio::sync::oneshot;
@@ -75,7 +75,7 @@ impl Builder {
     /// Keeps the store in `dir`, which outlives the app: a second app on the
     /// same `dir` is the server restarted.
     pub fn data_dir(self, dir: &Path) -> Self {
-        let store = inbetween::server::config::StoreConfig::DataDir(dir.to_owned());
+        let store = server::config::StoreConfig::DataDir(dir.to_owned());
         self.configure(|c| c.store = store)
     }
 

@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use inbetween::load::{self, ClipChoice, Mode, MotionChoice, Options, Report, ramp::RampPlan};
+use load::{self, ClipChoice, Mode, MotionChoice, Options, Report, ramp::RampPlan};
 
 use crate::common::{ServerProcess, TestApp};
 

@@ -3,7 +3,7 @@
 //! `?interpolation=b_spline`, and the OpenAPI document naming the mode.
 //! Expected poses are closed forms of the lecture's B-spline worked by hand.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::{Value, json};
 
 use super::TestApp;
@@ -72,8 +72,8 @@ async fn a_b_spline_clip_is_stored_and_posed_over_rest_and_grpc() {
     assert!(tracks.iter().all(|t| t.interpolation == pb::Interpolation::BSpline as i32));
     assert_eq!(pb::Interpolation::BSpline as i32, 5, "the wire number is part of the contract");
     assert_eq!(pb::Interpolation::BSpline.as_str_name(), "INTERPOLATION_B_SPLINE");
-    let (_, spec) = inbetween::wire::json::parse_clip(clip().to_string().as_bytes()).unwrap();
-    let put = pb::PutClipRequest { clip: Some(inbetween::wire::proto::clip_to_pb(&spec)), ..Default::default() };
+    let (_, spec) = formats::wire::json::parse_clip(clip().to_string().as_bytes()).unwrap();
+    let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
     assert!(put.clip.as_ref().unwrap().tracks.iter().all(|t| t.interpolation == pb::Interpolation::BSpline as i32));
     let created = grpc.put_clip(put).await.unwrap().into_inner();
     for t in [0, 1] {

@@ -69,7 +69,7 @@ async fn check(
 async fn every_bad_input_gets_its_status_and_code_and_changes_nothing() {
     let app = TestApp::builder()
         .configure(|c| {
-            c.write_token = Some(inbetween::server::config::Secret::new(TOKEN));
+            c.write_token = Some(server::config::Secret::new(TOKEN));
             c.limits.max_body_bytes = 64 * 1024;
             c.limits.max_tracks = 8;
             c.limits.max_keys_per_track = 100;

@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use inbetween::anim::Clip;
-use inbetween::wire::json::parse_clip;
-use inbetween::wire::proto::pb;
+use anim::Clip;
+use formats::wire::json::parse_clip;
+use formats::wire::proto::pb;
 
 use super::TestApp;
 use crate::common::{looping_hermite, metric};
@@ -133,7 +133,7 @@ async fn put_clip_over_the_budget_gets_the_rest_code() {
     assert!(pointer.starts_with("/tracks/"), "{problem}");
 
     let spec = parse_clip(doc.as_bytes()).unwrap().1;
-    let put = pb::PutClipRequest { clip: Some(inbetween::wire::proto::clip_to_pb(&spec)), ..Default::default() };
+    let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
     let refused = app.grpc().await.put_clip(put).await.unwrap_err();
     assert!(grpc_codes_for(422).contains(&refused.code()), "{refused:?}");
     let code = refused.metadata().get("x-error-code").map(|v| v.to_str().unwrap().to_owned());
@@ -144,7 +144,7 @@ async fn put_clip_over_the_budget_gets_the_rest_code() {
     let small = looping_hermite("under", 1, 2, 1.0);
     assert_eq!(app.create(&small, None).await["name"], "under");
     let spec = parse_clip(small.as_bytes()).unwrap().1;
-    let put = pb::PutClipRequest { clip: Some(inbetween::wire::proto::clip_to_pb(&spec)), ..Default::default() };
+    let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
     assert_eq!(app.grpc().await.put_clip(put).await.unwrap().into_inner().version, 1);
     app.stop().await;
 }

@@ -4,8 +4,8 @@
 //! events reaching new streams), and the skeleton a few KB where the
 //! document is megabytes.
 
+use formats::wire::proto::pb;
 use futures_util::StreamExt;
-use inbetween::wire::proto::pb;
 use reqwest::multipart::{Form, Part};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
@@ -216,7 +216,7 @@ async fn patch_merges_beside_the_motion_and_honours_if_match() {
     let text =
         app.http.patch(app.url(&format!("/v1/clips/{id}"))).header("content-type", "text/plain").body("{}").send();
     assert_eq!(text.await.unwrap().status(), 415);
-    let missing = inbetween::store::new_clip_id();
+    let missing = server::store::new_clip_id();
     assert_eq!(patch(&app, &missing, None, json!({"name": "x"})).await.status(), 404);
     assert_eq!(app.get_json(&format!("/v1/clips/{id}")).await["name"], "any", "refusals changed nothing");
     app.stop().await;
@@ -297,7 +297,7 @@ async fn the_skeleton_is_a_few_kilobytes_where_the_document_is_megabytes() {
     assert_eq!(skeleton["inverse_binds"], false);
     let cached = app.http.get(app.url(&format!("/v1/clips/{id}/skeleton"))).header("if-none-match", "\"1\"").send();
     assert_eq!(cached.await.unwrap().status(), 304);
-    let missing = app.http.get(app.url(&format!("/v1/clips/{}/skeleton", inbetween::store::new_clip_id()))).send();
+    let missing = app.http.get(app.url(&format!("/v1/clips/{}/skeleton", server::store::new_clip_id()))).send();
     assert_eq!(missing.await.unwrap().status(), 404);
 
     // gRPC GetSkeleton: the same joints.

@@ -5,9 +5,9 @@
 
 use std::collections::HashSet;
 
-use inbetween::server::config::{Secret, StoreConfig};
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::{Value, json};
+use server::config::{Secret, StoreConfig};
 
 use super::TestApp;
 use crate::common::pg::Schema;
@@ -94,7 +94,7 @@ async fn filters_answer_exactly_their_clips(app: &TestApp) {
 }
 
 async fn bad_filters_are_refused_with_their_parameter(app: &TestApp) {
-    let unknown = inbetween::store::new_clip_id();
+    let unknown = server::store::new_clip_id();
     let cases = [
         ("min_duration=-1".to_owned(), 422, "bad_duration_range", "min_duration"),
         ("min_duration=3&max_duration=2".to_owned(), 422, "bad_duration_range", "min_duration"),
@@ -173,7 +173,7 @@ async fn grpc_list_clips_filters_like_rest() {
     let tagged = list(pb::ListClipsRequest { tag: "fast".into(), ..Default::default() }).await.unwrap().into_inner();
     assert_eq!(tagged.clips[0].tags, ["locomotion", "fast"]);
 
-    let unknown = pb::ListClipsRequest { compatible_with: inbetween::store::new_clip_id(), ..Default::default() };
+    let unknown = pb::ListClipsRequest { compatible_with: server::store::new_clip_id(), ..Default::default() };
     let status = list(unknown).await.unwrap_err();
     assert_eq!(status.code(), tonic::Code::NotFound, "{status:?}");
     let reversed = pb::ListClipsRequest { min_duration: Some(3.0), max_duration: Some(1.0), ..Default::default() };

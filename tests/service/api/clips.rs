@@ -33,8 +33,8 @@ async fn an_uploaded_clip_comes_back_as_accepted() {
     assert_eq!(resp.headers()["content-type"], "application/json");
     let body = resp.text().await.unwrap();
     assert_eq!(body, canonical(WAVE), "GET returns the canonical document");
-    let original = inbetween::wire::json::parse_clip_doc(WAVE.as_bytes()).unwrap();
-    let back = inbetween::wire::json::parse_clip_doc(body.as_bytes()).unwrap();
+    let original = formats::wire::json::parse_clip_doc(WAVE.as_bytes()).unwrap();
+    let back = formats::wire::json::parse_clip_doc(body.as_bytes()).unwrap();
     assert_eq!(back, original, "the document means what was uploaded");
 
     let resp = app.http.get(app.url(&location)).header("if-none-match", "\"1\"").send().await.unwrap();

@@ -9,9 +9,9 @@
 
 use std::io::Write;
 
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use futures_util::StreamExt;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use prost::Message;
 use reqwest::header::{ACCEPT_ENCODING, CONTENT_ENCODING, CONTENT_LENGTH, VARY};
 use serde_json::{Value, json};

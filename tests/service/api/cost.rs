@@ -6,8 +6,8 @@
 
 use std::time::{Duration, Instant};
 
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::sample_batch_request::When;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::sample_batch_request::When;
 use serde_json::{Value, json};
 use tonic::Code;
 
@@ -256,8 +256,8 @@ async fn joint_names_over_256_characters_are_refused() {
     let doc = json!({"name": "long", "skeleton": {"joints": [{"name": long}]}, "tracks": [
         {"joint": long, "channel": "translation", "times": [0, 1], "values": [[0, 0, 0], [1, 1, 1]]}
     ]});
-    let spec = inbetween::wire::json::parse_clip(doc.to_string().as_bytes()).unwrap().1;
-    let clip = inbetween::wire::proto::clip_to_pb(&spec);
+    let spec = formats::wire::json::parse_clip(doc.to_string().as_bytes()).unwrap().1;
+    let clip = formats::wire::proto::clip_to_pb(&spec);
     let mut grpc = app.grpc().await;
     let put = pb::PutClipRequest { clip: Some(clip), ..Default::default() };
     let refused = grpc.put_clip(put).await.unwrap_err();

@@ -2,8 +2,8 @@
 //! library importer yields is stored whole, and posing it over HTTP equals
 //! importing and evaluating the same bytes in-process.
 
-use inbetween::anim::{Clip, SampleOptions, Sampler, Space};
-use inbetween::import::{ErrorClass, Format, ImportOptions, import};
+use anim::{Clip, SampleOptions, Sampler, Space};
+use formats::import::{ErrorClass, Format, ImportOptions, import};
 use serde_json::{Value, json};
 
 use super::TestApp;

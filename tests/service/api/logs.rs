@@ -17,7 +17,7 @@ fn lines_of(logs: &str, target: &str) -> Vec<Value> {
 
 /// The one startup line's `config` field.
 fn startup_config(logs: &str) -> String {
-    let starting: Vec<Value> = lines_of(logs, "inbetween::server")
+    let starting: Vec<Value> = lines_of(logs, "inbetween_server")
         .into_iter()
         .filter(|v| {
             v["fields"]["message"].as_str().unwrap_or("").starts_with("starting with the effective configuration")
@@ -32,7 +32,7 @@ async fn every_failure_gets_an_access_line_and_startup_states_the_configuration(
     const WRITE: &str = "plain-write-secret-71";
     const READ: &str = "plain-read-secret-72";
     const SCOPED: &str = "scoped-read-secret-73";
-    let hash = inbetween::server::tokens::TokenHash::of(SCOPED.as_bytes());
+    let hash = server::tokens::TokenHash::of(SCOPED.as_bytes());
     let dir = tempfile::tempdir().unwrap();
     let mut server = ServerProcess::serve()
         .data_dir(dir.path())

@@ -152,7 +152,7 @@ async fn clips_without_a_mesh_say_so_and_writes_keep_or_drop_it() {
 /// refusals: NOT_FOUND `no_mesh` for a clip without one, `clip_not_found`.
 #[tokio::test]
 async fn grpc_get_mesh_serves_the_same_bytes_and_refusals() {
-    use inbetween::wire::proto::pb;
+    use formats::wire::proto::pb;
     let app = TestApp::start().await;
     let fox = import_fox(&app).await;
     let wave = app.create_id(WAVE, None).await;

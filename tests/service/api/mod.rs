@@ -35,7 +35,7 @@ pub use crate::common::{TestApp, WAVE, assert_close, within};
 
 /// The canonical form the server stores for a document: parsed, re-serialised.
 pub fn canonical(doc: &str) -> String {
-    let parsed = inbetween::wire::json::parse_clip_doc(doc.as_bytes()).unwrap();
+    let parsed = formats::wire::json::parse_clip_doc(doc.as_bytes()).unwrap();
     serde_json::to_string(&parsed).unwrap()
 }
 

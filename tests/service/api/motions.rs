@@ -3,7 +3,7 @@
 //! subsets and root motion against hand-computed values; refusals with
 //! their codes and pointers.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::{Value, json};
 
 use super::{TestApp, WAVE, assert_close};

@@ -3,7 +3,7 @@
 //! overflow f32 are refused at upload (REST and gRPC `PutClip`) with a code
 //! and the field; and no answer carries `null` for a number.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::{Value, json};
 use tonic::Code;
 
@@ -58,8 +58,8 @@ async fn overflowing_clips_are_refused_over_rest_and_grpc() {
         assert_eq!(body["code"], code, "{what}: {body}");
         assert!(body["pointer"].as_str().unwrap().starts_with(pointer), "{what}: {body}");
 
-        let spec = inbetween::wire::json::parse_clip(doc.to_string().as_bytes()).unwrap().1;
-        let put = pb::PutClipRequest { clip: Some(inbetween::wire::proto::clip_to_pb(&spec)), ..Default::default() };
+        let spec = formats::wire::json::parse_clip(doc.to_string().as_bytes()).unwrap().1;
+        let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
         let err = grpc.put_clip(put).await.unwrap_err();
         assert_eq!(err.code(), Code::InvalidArgument, "{what}");
         assert!(err.message().starts_with(code), "{what}: {}", err.message());

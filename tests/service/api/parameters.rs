@@ -9,8 +9,8 @@
 //! 45, 35, 45 at 0, 1, 2 with reflect ends, evaluated here in f64.
 
 use base64::Engine as _;
+use formats::wire::proto::pb;
 use futures_util::StreamExt;
-use inbetween::wire::proto::pb;
 use prost::Message as _;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
@@ -140,9 +140,9 @@ async fn uploads_with_broken_parameters_are_refused_with_pointers() {
 async fn grpc_clips_poses_and_motions_carry_parameters() {
     let app = TestApp::start().await;
     let mut grpc = app.grpc().await;
-    let doc = inbetween::wire::json::parse_clip_doc(FACE.as_bytes()).unwrap();
-    let spec = inbetween::wire::json::parse_clip(FACE.as_bytes()).unwrap().1;
-    let clip = inbetween::wire::proto::clip_to_pb(&spec);
+    let doc = formats::wire::json::parse_clip_doc(FACE.as_bytes()).unwrap();
+    let spec = formats::wire::json::parse_clip(FACE.as_bytes()).unwrap().1;
+    let clip = formats::wire::proto::clip_to_pb(&spec);
     assert_eq!(clip.parameters[0].width, 2, "the proto clip carries the tracks");
     let put = pb::PutClipRequest { clip: Some(clip), ..Default::default() };
     let id = grpc.put_clip(put).await.unwrap().into_inner().id;

@@ -1,7 +1,7 @@
 //! Pose evaluation over HTTP agrees with the core and with hand-computed values.
 
+use anim::{Clip, Ease, Playback, SampleOptions, Sampler, Space};
 use glam::{Mat4, Quat, Vec3};
-use inbetween::anim::{Clip, Ease, Playback, SampleOptions, Sampler, Space};
 use serde_json::Value;
 
 use super::{TestApp, WAVE, assert_close};
@@ -11,7 +11,7 @@ fn vec(v: &Value) -> Vec<f64> {
 }
 
 fn wave_clip() -> Clip {
-    let (_, spec) = inbetween::wire::json::parse_clip(WAVE.as_bytes()).unwrap();
+    let (_, spec) = formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap();
     Clip::build(&spec).unwrap()
 }
 

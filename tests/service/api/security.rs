@@ -1,7 +1,7 @@
 //! The token matrix: which routes need which token.
 
-use inbetween::server::config::{Cors, Secret};
 use reqwest::StatusCode;
+use server::config::{Cors, Secret};
 
 use super::{TestApp, WAVE};
 

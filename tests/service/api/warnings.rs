@@ -7,7 +7,7 @@
 use std::process::Command;
 
 use base64::Engine as _;
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::{Value, json};
 
 use super::{TestApp, WAVE, canonical};
@@ -379,9 +379,9 @@ async fn fix_hemisphere_turns_the_short_way() {
 async fn grpc_put_clip_answers_the_warnings() {
     let app = TestApp::start().await;
     let mut grpc = app.grpc().await;
-    let spec = |doc: &str| inbetween::wire::json::parse_clip(doc.as_bytes()).unwrap().1;
+    let spec = |doc: &str| formats::wire::json::parse_clip(doc.as_bytes()).unwrap().1;
     let put = |doc: &str| pb::PutClipRequest {
-        clip: Some(inbetween::wire::proto::clip_to_pb(&spec(doc))),
+        clip: Some(formats::wire::proto::clip_to_pb(&spec(doc))),
         ..Default::default()
     };
     let reply = grpc.put_clip(put(&w_first_doc())).await.unwrap().into_inner();

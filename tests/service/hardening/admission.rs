@@ -10,13 +10,13 @@ use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
+use formats::wire::proto::pb;
 use http_body_util::combinators::BoxBody;
 use http_body_util::{BodyExt, Empty, Full, StreamBody};
 use hyper::body::Frame;
 use hyper_util::rt::{TokioExecutor, TokioIo};
-use inbetween::server::auth::{Scope, TokenHash, TokenSpec};
-use inbetween::wire::proto::pb;
 use serde_json::json;
+use server::auth::{Scope, TokenHash, TokenSpec};
 use tokio::io::AsyncReadExt;
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
@@ -299,10 +299,8 @@ async fn creates_from_two_forwarded_clients(trusted: bool) -> (u16, u16) {
             c.limits.write_rate = 1;
             c.limits.write_burst = 1;
             if trusted {
-                let raw = inbetween::server::config::RawConfig {
-                    trusted_proxies: Some(vec!["127.0.0.1".into()]),
-                    ..Default::default()
-                };
+                let raw =
+                    server::config::RawConfig { trusted_proxies: Some(vec!["127.0.0.1".into()]), ..Default::default() };
                 c.trusted_proxies = raw.validate().unwrap().trusted_proxies;
             }
         })

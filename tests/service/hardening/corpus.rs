@@ -15,8 +15,8 @@ use std::time::Duration;
 
 use axum::http::{Request, Uri};
 use http_body_util::BodyExt;
-use inbetween::server::Config;
 use serde_json::Value;
+use server::Config;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tower::{Service, ServiceExt};
 

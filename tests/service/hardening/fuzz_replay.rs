@@ -2,12 +2,12 @@
 //! inputs the fuzzer found, plus the hardening corpus's files of the
 //! target's formats, `tests/corpus/*/<area>/`) and every past crash
 //! (`fuzz/regressions/<target>/`) through
-//! `inbetween::fuzzing::<target>`, the function the libFuzzer target calls:
+//! `formats::fuzzing::<target>`, the function the libFuzzer target calls:
 //! none may panic. No libFuzzer needed, so plain `cargo test` runs it.
 
 use std::path::Path;
 
-use inbetween::fuzzing::TARGETS;
+use formats::fuzzing::TARGETS;
 
 use super::root;
 

@@ -9,9 +9,9 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Error as WsError;
 use tonic::transport::Channel;
 
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
-use inbetween::wire::proto::pb::sample_batch_request::When;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb::sample_batch_request::When;
 
 use super::status_table::grpc_codes_for;
 use super::{TestApp, WAVE};

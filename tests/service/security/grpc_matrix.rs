@@ -5,9 +5,9 @@
 
 use std::collections::BTreeSet;
 
-use inbetween::server::auth::Scope;
-use inbetween::wire::proto::{FILE_DESCRIPTOR_SET, pb};
+use formats::wire::proto::{FILE_DESCRIPTOR_SET, pb};
 use prost::Message;
+use server::auth::Scope;
 use tonic::Code;
 
 use super::{ADMIN, Need, Outcome, Role, TestApp, WAVE, expected, scoped_tokens, snapshot, wave_pb, with_token};

@@ -9,9 +9,9 @@ mod rest_matrix;
 pub mod status_table;
 mod tls;
 
-use inbetween::server::Config;
-use inbetween::server::auth::{Scope, TokenHash, TokenSpec};
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
+use server::Config;
+use server::auth::{Scope, TokenHash, TokenSpec};
 
 pub use crate::common::{TestApp, WAVE};
 
@@ -110,7 +110,7 @@ pub fn with_token<T>(msg: T, token: Option<&str>) -> tonic::Request<T> {
 
 /// The wave clip as a protobuf `Clip`.
 pub fn wave_pb() -> pb::Clip {
-    inbetween::wire::proto::clip_to_pb(&inbetween::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1)
+    formats::wire::proto::clip_to_pb(&formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1)
 }
 
 /// A two-frame BVH file, for the import route.

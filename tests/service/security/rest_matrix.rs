@@ -4,9 +4,9 @@
 
 use std::collections::BTreeSet;
 
-use inbetween::server::auth::Scope;
 use reqwest::Method;
 use serde_json::Value;
+use server::auth::Scope;
 use tokio_tungstenite::tungstenite;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 

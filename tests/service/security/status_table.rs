@@ -4,11 +4,11 @@
 //! choices), and real failing requests made on both protocols of one server.
 
 use axum::response::IntoResponse;
-use inbetween::import::ErrorClass;
-use inbetween::server::ApiError;
-use inbetween::server::error::At;
-use inbetween::stream::{AdmitError, BroadcastError};
-use inbetween::wire::proto::pb;
+use formats::import::ErrorClass;
+use formats::wire::proto::pb;
+use server::ApiError;
+use server::error::At;
+use server::stream::{AdmitError, BroadcastError};
 use tonic::Code;
 
 use super::{ADMIN, READER, TestApp, WAVE, WRITER, scoped_tokens, wave_pb, with_token};

@@ -3,10 +3,10 @@
 
 use std::sync::Arc;
 
-use inbetween::server::config::TlsFiles;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use rcgen::{BasicConstraints, CertificateParams, CertifiedIssuer, IsCa, KeyPair};
+use server::config::TlsFiles;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tonic::transport::{Certificate, Channel, ClientTlsConfig};

@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
-use inbetween::store::postgres::PgStore;
-use inbetween::store::sqlite::SqliteStore;
-use inbetween::store::{ClipStore, PoolSettings};
+use server::store::postgres::PgStore;
+use server::store::sqlite::SqliteStore;
+use server::store::{ClipStore, PoolSettings};
 
 use crate::common::pg::Schema;
 

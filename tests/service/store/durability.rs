@@ -6,8 +6,8 @@
 use std::io::{BufRead, BufReader, Read};
 use std::process::Stdio;
 
-use inbetween::store::sqlite::SqliteStore;
-use inbetween::store::{Durability, PoolSettings};
+use server::store::sqlite::SqliteStore;
+use server::store::{Durability, PoolSettings};
 
 use super::backend::Postgres;
 use crate::common::ServerProcess;
@@ -66,10 +66,10 @@ async fn postgres_connections_are_durable_as_read_back() {
 async fn postgres_with_synchronous_commit_off_is_refused_unless_fast_writes_are_accepted() {
     let Some(schema) = crate::common::pg::Schema::create("syncoff").await else { return };
     let url = schema.url("options=-csynchronous_commit%3Doff");
-    let refused = inbetween::store::postgres::PgStore::open(&url, &settings(2, Durability::Required)).await;
+    let refused = server::store::postgres::PgStore::open(&url, &settings(2, Durability::Required)).await;
     let message = format!("{:#}", refused.expect_err("synchronous_commit=off is not durable"));
     assert!(message.contains("synchronous_commit=off"), "{message}");
-    let store = inbetween::store::postgres::PgStore::open(&url, &settings(2, Durability::UnsafeFast)).await.unwrap();
+    let store = server::store::postgres::PgStore::open(&url, &settings(2, Durability::UnsafeFast)).await.unwrap();
     let sync: String = sqlx::query_scalar("SHOW synchronous_commit").fetch_one(store.pool()).await.unwrap();
     assert_eq!(sync, "off", "the flag permits, it does not repair");
     store.pool().close().await;

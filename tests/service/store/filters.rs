@@ -5,8 +5,8 @@
 use std::collections::HashSet;
 use std::sync::Arc;
 
-use inbetween::anim::Playback;
-use inbetween::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError};
+use anim::Playback;
+use server::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError};
 
 /// One fixture clip: name, tags, joint names, duration.
 struct Fixture {
@@ -170,7 +170,7 @@ pub async fn every_filter_pages_through_exactly_its_clips(store: Arc<dyn ClipSto
     let compatible = walk(&store, &ListQuery { compatible_with: Some(ids[0].clone()), ..q() }, 10).await;
     assert_eq!(compatible, vec![ids[0].clone(), ids[1].clone(), ids[2].clone(), ids[4].clone()]);
 
-    let unknown = ListQuery { compatible_with: Some(inbetween::store::new_clip_id()), limit: 10, ..q() };
+    let unknown = ListQuery { compatible_with: Some(server::store::new_clip_id()), limit: 10, ..q() };
     assert!(matches!(store.list(unknown).await, Err(StoreError::NotFound)));
 }
 

@@ -9,8 +9,8 @@ mod filters;
 
 use std::sync::Arc;
 
-use inbetween::anim::Playback;
-use inbetween::store::{
+use anim::Playback;
+use server::store::{
     ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError, StoredBroadcast, StoredControl, StoredMesh,
 };
 
@@ -86,7 +86,7 @@ async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
     };
     let meta = store.create(clip).await.unwrap();
     assert_eq!(meta.version, 1);
-    assert!(inbetween::store::is_clip_id(&meta.id));
+    assert!(server::store::is_clip_id(&meta.id));
     assert_eq!(meta.created_at, meta.updated_at);
     let got = store.get(&meta.id).await.unwrap().expect("the clip is there");
     assert_eq!(got.doc_json, doc);
@@ -95,7 +95,7 @@ async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
 }
 
 async fn an_unknown_id_is_none_and_writes_to_it_are_not_found(store: Arc<dyn ClipStore>) {
-    let id = inbetween::store::new_clip_id();
+    let id = server::store::new_clip_id();
     assert!(store.get(&id).await.unwrap().is_none());
     assert!(matches!(store.replace(&id, new_clip("x", "{}"), None).await, Err(StoreError::NotFound)));
     assert!(matches!(store.replace(&id, new_clip("x", "{}"), Some(1)).await, Err(StoreError::NotFound)));

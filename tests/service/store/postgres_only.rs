@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use inbetween::store::PoolSettings;
+use server::store::PoolSettings;
 use sqlx::postgres::PgListener;
 
 use super::backend::Postgres;
@@ -47,11 +47,10 @@ async fn broadcast_changes_are_announced_on_the_schema_channel() {
     let mut listener = PgListener::connect(&backend.schema.url("")).await.unwrap();
     listener.listen(backend.pg.channel()).await.unwrap();
     let id = "01a20000-0000-7000-8000-0000000000bb";
-    let b =
-        inbetween::store::StoredBroadcast { id: id.into(), definition: "{}".into(), created_at: 1, controls: vec![] };
+    let b = server::store::StoredBroadcast { id: id.into(), definition: "{}".into(), created_at: 1, controls: vec![] };
     store.create_broadcast(b).await.unwrap();
     assert_eq!(next_payload(&mut listener).await, format!("broadcast 0 {id}"));
-    let c = inbetween::store::StoredControl { id: "c1".into(), seq: 5, control: "{}".into() };
+    let c = server::store::StoredControl { id: "c1".into(), seq: 5, control: "{}".into() };
     store.add_broadcast_control(id, c).await.unwrap();
     assert_eq!(next_payload(&mut listener).await, format!("control 0 {id}"));
     store.touch_broadcast(id, i64::MAX).await.unwrap();

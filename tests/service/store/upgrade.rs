@@ -5,9 +5,9 @@
 
 use std::path::Path;
 
-use inbetween::store::postgres::PgStore;
-use inbetween::store::sqlite::SqliteStore;
-use inbetween::store::{ClipStore, ListQuery, PoolSettings};
+use server::store::postgres::PgStore;
+use server::store::sqlite::SqliteStore;
+use server::store::{ClipStore, ListQuery, PoolSettings};
 use sqlx::migrate::Migrator;
 
 use crate::common::pg::Schema;
@@ -32,14 +32,14 @@ const INSERT_PG: &str = "INSERT INTO clips (id, name, version, doc, joints, trac
 
 /// (id, name, doc, joint count) of the two old clips, ids in creation order.
 fn old_rows() -> [(String, &'static str, &'static str, i64); 2] {
-    let a = inbetween::store::new_clip_id();
-    let b = inbetween::store::new_clip_id();
+    let a = server::store::new_clip_id();
+    let b = server::store::new_clip_id();
     [(a, "a", WITH_SKELETON, 3), (b, "b", FROM_TRACKS, 2)]
 }
 
 async fn check(store: &dyn ClipStore, rows: &[(String, &str, &str, i64); 2]) {
     let compatible = |id: &str| ListQuery { compatible_with: Some(id.to_owned()), limit: 10, ..ListQuery::default() };
-    let ids = |metas: Vec<inbetween::store::ClipMeta>| metas.into_iter().map(|m| m.id).collect::<Vec<_>>();
+    let ids = |metas: Vec<server::store::ClipMeta>| metas.into_iter().map(|m| m.id).collect::<Vec<_>>();
     // a's joints (hips, leg, foot) include b's (hips, leg), not the other way round.
     assert_eq!(ids(store.list(compatible(&rows[1].0)).await.unwrap()), [rows[0].0.clone(), rows[1].0.clone()]);
     assert_eq!(ids(store.list(compatible(&rows[0].0)).await.unwrap()), [rows[0].0.clone()]);

@@ -11,8 +11,8 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use formats::wire::proto::pb;
 use futures_util::{SinkExt, StreamExt};
-use inbetween::wire::proto::pb;
 use prost::Message as _;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
@@ -556,7 +556,7 @@ async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says()
         }
     })
     .await;
-    let by_clock = (inbetween::stream::unix_nanos() - created_at) as f64 * FPS as f64 / 1e9;
+    let by_clock = (server::stream::unix_nanos() - created_at) as f64 * FPS as f64 / 1e9;
     let seq = summary["seq"].as_u64().unwrap();
     assert!((seq as f64 - by_clock).abs() <= 2.0, "resumed at seq {seq}, the clock says {by_clock:.1}");
     assert!(seq > stamp + 10, "{seq}: over 0.8 s after the seek at {stamp}");

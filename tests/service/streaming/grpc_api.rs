@@ -1,7 +1,7 @@
 //! The unary RPCs against the same server's REST answers, and the gRPC
 //! plumbing: status codes, the write token, health and reflection.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::Value;
 use tonic::Code;
 
@@ -111,7 +111,7 @@ async fn errors_map_to_grpc_status_codes() {
     assert_eq!(code(grpc.sample(bad_enum).await), Code::InvalidArgument);
 
     // Writes need the token in the `authorization` metadata.
-    let clip = Some(inbetween::wire::proto::clip_to_pb(&inbetween::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1));
+    let clip = Some(formats::wire::proto::clip_to_pb(&formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1));
     let put = pb::PutClipRequest { clip: clip.clone(), ..Default::default() };
     let err = grpc.put_clip(put.clone()).await.unwrap_err();
     assert_eq!(err.code(), Code::Unauthenticated);

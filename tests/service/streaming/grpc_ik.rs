@@ -8,8 +8,8 @@
 //! here: keyed targets by lerping the keys by hand, aims from the returned
 //! model-space pose.
 
+use formats::wire::proto::pb;
 use glam::{Quat, Vec3};
-use inbetween::wire::proto::pb;
 use pb::ik_constraint::Kind;
 use pb::playback_control::Op;
 use tonic::Code;

@@ -1,6 +1,6 @@
 //! Server-streaming and bidirectional playback over gRPC.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use tonic::{Code, Streaming};
 
 use super::{TestApp, WAVE, assert_close, line_clip, stream_request, within};

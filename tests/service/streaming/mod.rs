@@ -16,7 +16,7 @@ mod motions;
 mod seam;
 mod websocket;
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::Value;
 
 pub use crate::common::{TestApp, WAVE, assert_close, within};

@@ -7,8 +7,8 @@
 //! computed by hand from the frame's own times: `walk` at 2 units/s, `run`
 //! at 6 units/s, over 10 s (no loop seam within a test).
 
+use formats::wire::proto::pb;
 use futures_util::{SinkExt, StreamExt};
-use inbetween::wire::proto::pb;
 use prost::Message as _;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;

@@ -7,7 +7,7 @@
 //! 1.3, and events at both ends, so every expected value is read off the
 //! document: the first key's x at the start, the last key's at the end.
 
-use inbetween::wire::proto::pb;
+use formats::wire::proto::pb;
 use serde_json::Value;
 
 use super::{TestApp, within};

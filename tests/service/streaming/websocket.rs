@@ -1,7 +1,7 @@
 //! `GET /v1/clips/{id}/stream` with a real WebSocket client.
 
+use formats::wire::proto::pb;
 use futures_util::{SinkExt, StreamExt};
-use inbetween::wire::proto::pb;
 use prost::Message as _;
 use serde_json::Value;
 use tokio::time::Instant;

@@ -5,8 +5,8 @@
 
 use std::time::Duration;
 
-use inbetween::server::config::Secret;
 use serde_json::json;
+use server::config::Secret;
 
 use super::cdp::Browser;
 use super::{TOKEN, select_clip, set_value, start, text, text_number, viewer_on_clip};

@@ -1,4 +1,4 @@
-//! The viewer's JavaScript unit tests (`src/server/rest/viewer/tests/`:
+//! The viewer's JavaScript unit tests (`crates/server/src/rest/viewer/tests/`:
 //! its maths, `math.js`), run by `node --test`. Without Node they skip with
 //! a message, unless `INBETWEEN_REQUIRE_BROWSER=1` (CI) makes them fail, as
 //! the browser tests do.
@@ -9,7 +9,7 @@ use std::process::Command;
 use super::cdp::REQUIRE_ENV;
 
 /// The folder of the viewer's unit tests.
-const TESTS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/src/server/rest/viewer/tests");
+const TESTS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/crates/server/src/rest/viewer/tests");
 
 #[test]
 fn the_viewer_maths_passes_its_node_tests() {

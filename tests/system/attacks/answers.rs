@@ -6,8 +6,8 @@
 
 use std::time::{Duration, Instant};
 
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use serde_json::Value;
 
 use super::{grpc_code, joint_name, target, wide_clip};

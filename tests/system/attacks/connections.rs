@@ -10,8 +10,8 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use bytes::Bytes;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 
 use super::{grpc_code, target};
 use crate::common::WAVE;

@@ -26,8 +26,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 
 pub use crate::common::ServerProcess;
 

@@ -11,8 +11,8 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 use super::*;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 
 /// A running nginx on a config derived from `deploy/nginx.conf`.
 struct Nginx {

@@ -102,14 +102,14 @@ async fn build_budget_figures() {
         let (http, url, grpc_url) = (http.clone(), server.url("/healthz"), server.grpc_url());
         tokio::spawn(async move {
             let mut grpc =
-                inbetween::wire::proto::pb::animation_client::AnimationClient::connect(grpc_url).await.unwrap();
+                formats::wire::proto::pb::animation_client::AnimationClient::connect(grpc_url).await.unwrap();
             let (mut healthz, mut ping) = (Vec::new(), Vec::new());
             while !*done_rx.borrow() {
                 let started = Instant::now();
                 assert_eq!(http.get(&url).send().await.unwrap().status(), 200);
                 healthz.push(started.elapsed());
                 let started = Instant::now();
-                grpc.ping(inbetween::wire::proto::pb::PingRequest {}).await.unwrap();
+                grpc.ping(formats::wire::proto::pb::PingRequest {}).await.unwrap();
                 ping.push(started.elapsed());
                 tokio::time::sleep(Duration::from_millis(2)).await;
             }

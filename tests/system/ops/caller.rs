@@ -7,9 +7,9 @@
 
 use std::net::{IpAddr, Ipv4Addr};
 
-use inbetween::server::tokens::{TokenHash, new_token};
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
+use server::tokens::{TokenHash, new_token};
 
 use super::{ServerProcess, WAVE, start};
 
@@ -61,9 +61,9 @@ async fn without_tokens_fresh_bearer_metadata_does_not_escape_the_grpc_write_lim
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &LIMIT).await;
     let mut grpc = AnimationClient::connect(server.grpc_url()).await.unwrap();
-    let spec = inbetween::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1;
+    let spec = formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1;
     let put = || {
-        let clip = Some(inbetween::wire::proto::clip_to_pb(&spec));
+        let clip = Some(formats::wire::proto::clip_to_pb(&spec));
         let mut request = tonic::Request::new(pb::PutClipRequest { clip, ..Default::default() });
         let header = format!("Bearer {}", new_token().unwrap());
         request.metadata_mut().insert("authorization", header.parse().unwrap());

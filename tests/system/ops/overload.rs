@@ -5,9 +5,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use futures_util::StreamExt;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use super::{WAVE, raw_grpc_call, raw_http, start};
@@ -127,7 +127,7 @@ async fn one_token_cannot_hold_more_than_its_stream_cap() {
     let dir = tempfile::tempdir().unwrap();
     // Two configured read tokens (an unconfigured one would be refused, and
     // on a server without tokens every caller is its address).
-    let token = |name: &str| format!("{name}:read:{}", inbetween::server::tokens::TokenHash::of(name.as_bytes()));
+    let token = |name: &str| format!("{name}:read:{}", server::tokens::TokenHash::of(name.as_bytes()));
     let (alpha, beta) = (token("alpha"), token("beta"));
     let flags =
         ["--max-streams-per-token", "1", "--max-streams-per-client", "100", "--token", &alpha, "--token", &beta];

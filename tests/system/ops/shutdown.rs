@@ -6,9 +6,9 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
 use futures_util::StreamExt;
-use inbetween::wire::proto::pb;
-use inbetween::wire::proto::pb::animation_client::AnimationClient;
 use tokio_tungstenite::tungstenite::Message;
 
 use super::{WAVE, raw_grpc_call, raw_http, read_to_close, start};

@@ -1,0 +1,383 @@
+//! Composed motion (SPEC §6): layers of clips, blended or added bottom to
+//! top over the rest pose, with masks and sync groups.
+//!
+//! [`Motion::build`] checks a [`MotionSpec`] once: weights, speeds and
+//! offsets; each mask resolved to one weight per joint of the output
+//! skeleton (the first layer's clip's); each other layer's joints mapped
+//! onto it by name; additive reference poses sampled; sync groups formed.
+//! Sampling ([`Motion::sample`], [`Motion::sample_with`]) is then pure
+//! arithmetic into a caller-owned [`MotionSampler`], with no allocation
+//! once its buffers have their size. A motion of one full-weight layer
+//! gives the clip's pose bit for bit.
+//!
+//! Module map: `spec` the authoring types; `error` why a motion is refused;
+//! `mask` masks to per-joint weights; `sync` sync-group phases; `layering`
+//! the per-joint blend and additive rules; `coverage` which joints each
+//! layer must sample (its mask, and the layers above that hide it);
+//! `sampler` the sampling loop;
+//! `root` root motion; `player` a stream's live motions, weight ramps and
+//! crossfades.
+
+mod coverage;
+mod error;
+mod layering;
+mod mask;
+mod player;
+pub mod root;
+mod sampler;
+mod spec;
+mod sync;
+
+use std::sync::Arc;
+
+pub use error::{MotionError, MotionErrorKind};
+pub use player::{LayerPosition, MAX_FADES, Player, PlayerError};
+pub use root::Planar;
+pub use sampler::{MotionOptions, MotionSampler, RootMotion};
+pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+
+use self::coverage::Reach;
+use self::error::MotionErrorKind as K;
+use self::root::motion_transform;
+use self::sync::SyncGroup;
+use super::ik::{IkConstraint, IkLimits, build_constraints};
+use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
+
+/// Most layers in one motion.
+pub const MAX_LAYERS: usize = 32;
+
+/// Largest layer speed, as for streams.
+pub const MAX_SPEED: f64 = 1000.0;
+
+/// A layer's joint absent from the output skeleton's mapping.
+const UNMAPPED: u32 = u32::MAX;
+
+/// Anything that holds a built clip: a [`Clip`], or a cache entry.
+pub trait ClipSource {
+    fn clip(&self) -> &Clip;
+}
+
+impl ClipSource for Clip {
+    fn clip(&self) -> &Clip {
+        self
+    }
+}
+
+impl<T: ClipSource + ?Sized> ClipSource for Arc<T> {
+    fn clip(&self) -> &Clip {
+        (**self).clip()
+    }
+}
+
+impl<T: ClipSource + ?Sized> ClipSource for &T {
+    fn clip(&self) -> &Clip {
+        (**self).clip()
+    }
+}
+
+/// A validated, immutable composition, ready to sample.
+#[derive(Debug, Clone)]
+pub struct Motion<C> {
+    layers: Vec<Layer<C>>,
+    groups: Vec<SyncGroup>,
+    /// Each layer's clip duration, for the sync groups.
+    durations: Vec<f64>,
+    /// The layer weights the motion was built with.
+    weights: Vec<f32>,
+    root: Option<RootSetup>,
+    /// Request-time IK (SPEC §7), solved on the layered pose.
+    ik: Vec<IkConstraint>,
+}
+
+/// Root motion as built: the output skeleton's root-motion joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RootSetup {
+    joint: usize,
+    mode: RootMode,
+    up: UpAxis,
+}
+
+/// A layer's root-motion joint (in its clip) and its clip's `M(start)` and
+/// whole cycle `W = M(start)⁻¹·M(end)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LayerRoot {
+    joint: usize,
+    start: Planar,
+    whole: Planar,
+}
+
+#[derive(Debug, Clone)]
+struct Layer<C> {
+    clip: C,
+    mode: LayerMode,
+    /// One weight per output joint.
+    mask: Vec<f32>,
+    /// Per output joint, the layer clip's joint index (or `UNMAPPED`).
+    map: Vec<u32>,
+    /// Whether every mask weight is 1 (a first layer at weight 1 is then
+    /// the clip's own pose).
+    unmasked: bool,
+    /// The joints it reaches and hides (see `coverage`).
+    reach: Reach,
+    time: LayerTime,
+    /// Additive layers: the reference pose, in the layer clip's joints.
+    reference: Option<Pose>,
+    /// With root motion, when the layer's clip has the root joint.
+    root: Option<LayerRoot>,
+    /// The output's parameters this layer's clip also has (SPEC §8).
+    parameters: Vec<ParameterMap>,
+}
+
+/// One parameter of a layer: its entries in the layer clip's pose and in the
+/// output pose (the same count: widths must agree).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ParameterMap {
+    from: u32,
+    to: u32,
+    entries: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LayerTime {
+    Free { offset: f64, speed: f64, playback: Playback },
+    Synced { group: usize },
+}
+
+impl<C: ClipSource> Motion<C> {
+    /// Checks `spec` and prepares it for sampling.
+    ///
+    /// # Errors
+    /// The first rule of SPEC §6 it breaks, with the path of the field
+    /// relative to the motion (`layers/2/mask/joints/spine`).
+    pub fn build(spec: MotionSpec<C>) -> Result<Motion<C>, MotionError> {
+        Motion::build_limited(spec, &IkLimits::default())
+    }
+
+    /// [`Motion::build`] with the service's ceilings on IK constraints,
+    /// effectors and iterations.
+    ///
+    /// # Errors
+    /// As [`Motion::build`]; `ik` constraints are checked against the
+    /// output skeleton and `ik_limits` (paths `ik/0/joints/1`).
+    pub fn build_limited(spec: MotionSpec<C>, ik_limits: &IkLimits) -> Result<Motion<C>, MotionError> {
+        let layers_path = Path::root().field("layers");
+        if spec.layers.is_empty() {
+            return Err(MotionError::new(layers_path, K::NoLayers));
+        }
+        if spec.layers.len() > MAX_LAYERS {
+            let provided = spec.layers.len();
+            return Err(MotionError::new(layers_path, K::TooManyLayers { max: MAX_LAYERS, provided }));
+        }
+        let mut groups: Vec<SyncGroup> = Vec::new();
+        let (mut layers, mut durations, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+        for (i, layer) in spec.layers.into_iter().enumerate() {
+            let path = layers_path.clone().index(i);
+            weights.push(mask::check_weight(layer.weight, &path.clone().field("weight"))?);
+            check_layer_numbers(&layer, &path)?;
+            let output = layers.first().map_or(layer.clip.clip().skeleton(), |l: &Layer<C>| l.clip.clip().skeleton());
+            let time = layer_time(&layer, i, &mut groups);
+            durations.push(layer.clip.clip().range().duration());
+            let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
+            let map = joint_map(output, layer.clip.clip().skeleton());
+            let first = layers.first().map_or(layer.clip.clip(), |l: &Layer<C>| l.clip.clip());
+            let parameters = parameter_map(first.parameters(), layer.clip.clip().parameters(), &path)?;
+            layers.push(Layer {
+                parameters,
+                reach: Reach::new(layer.mode, &map, &mask, layer.clip.clip().joint_count()),
+                unmasked: mask.iter().all(|m| *m >= 1.0),
+                mask,
+                map,
+                time,
+                reference: (layer.mode == LayerMode::Additive)
+                    .then(|| reference_pose(layer.clip.clip(), layer.reference_time)),
+                mode: layer.mode,
+                root: None,
+                clip: layer.clip,
+            });
+        }
+        let root = root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?;
+        let ik = build_constraints(&spec.ik, layers[0].clip.clip().skeleton(), ik_limits).map_err(|e| {
+            let e = e.under(Path::root().field("ik"));
+            MotionError::new(e.path, K::Ik(e.kind))
+        })?;
+        if let Some(setup) = root {
+            let name = layers[0].clip.clip().skeleton().names()[setup.joint].clone();
+            for layer in &mut layers {
+                layer.root = layer_root(layer.clip.clip(), &name, setup.up);
+            }
+        }
+        Ok(Motion { layers, groups, durations, weights, root, ik })
+    }
+
+    /// The output skeleton: the first layer's clip's.
+    pub fn skeleton(&self) -> &Skeleton {
+        self.layers[0].clip.clip().skeleton()
+    }
+
+    /// The output's parameters (SPEC §8): the first layer's clip's.
+    pub fn parameters(&self) -> &crate::ParameterLayout {
+        self.layers[0].clip.clip().parameters()
+    }
+
+    /// The first layer's clip (whose id a pose names).
+    pub fn first_clip(&self) -> &C {
+        &self.layers[0].clip
+    }
+
+    /// Each layer's clip, bottom to top.
+    pub fn layers(&self) -> impl Iterator<Item = &C> {
+        self.layers.iter().map(|l| &l.clip)
+    }
+
+    /// The request-time IK constraints, solved after layering.
+    pub fn ik(&self) -> &[IkConstraint] {
+        &self.ik
+    }
+
+    /// IK reports each sample gives: every layer's clip constraints, bottom
+    /// to top, then the motion's own.
+    pub fn ik_report_count(&self) -> usize {
+        self.layers.iter().map(|l| l.clip.clip().ik_count()).sum::<usize>() + self.ik.len()
+    }
+
+    /// The up axis of the motion's root motion, if it has one.
+    pub fn root_up(&self) -> Option<UpAxis> {
+        self.root.map(|r| r.up)
+    }
+
+    /// Whether samples report root motion.
+    pub fn has_root_motion(&self) -> bool {
+        self.root.is_some()
+    }
+
+    pub fn layer_count(&self) -> usize {
+        self.layers.len()
+    }
+
+    /// The layer weights the motion was built with.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    pub fn sync_group_count(&self) -> usize {
+        self.groups.len()
+    }
+
+    /// Each sync group's phase at motion time `tau` under constant
+    /// `weights` (a stateless request), into `phases`.
+    pub fn phases_at(&self, tau: f64, weights: &[f32], phases: &mut Vec<f64>) {
+        phases.clear();
+        phases.extend(self.groups.iter().map(|g| g.phase_at(tau, &self.durations, weights)));
+    }
+
+    /// Advances each sync group's phase by `dtau` of motion time at the
+    /// rate the current `weights` give: when weights change mid-stream the
+    /// phase carries on from where it is.
+    pub fn advance_phases(&self, phases: &mut [f64], dtau: f64, weights: &[f32]) {
+        for (phase, group) in phases.iter_mut().zip(&self.groups) {
+            *phase += group.rate(&self.durations, weights) * dtau;
+        }
+    }
+}
+
+fn check_layer_numbers<C>(layer: &LayerSpec<C>, path: &Path) -> Result<(), MotionError> {
+    for (value, field) in
+        [(layer.offset, "offset"), (layer.speed, "speed"), (layer.reference_time.unwrap_or(0.0), "reference_time")]
+    {
+        if !value.is_finite() {
+            return Err(MotionError::new(path.clone().field(field), K::NonFinite));
+        }
+    }
+    if layer.speed.abs() > MAX_SPEED {
+        let kind = K::SpeedOutOfRange { speed: layer.speed, max: MAX_SPEED };
+        return Err(MotionError::new(path.clone().field("speed"), kind));
+    }
+    Ok(())
+}
+
+/// How layer `index` finds its clip time; a synced layer joins (or
+/// founds) its group, whose first layer sets the phase and its rate.
+fn layer_time<C: ClipSource>(layer: &LayerSpec<C>, index: usize, groups: &mut Vec<SyncGroup>) -> LayerTime {
+    let Some(name) = &layer.sync else {
+        let playback = layer.playback.unwrap_or_else(|| layer.clip.clip().playback());
+        return LayerTime::Free { offset: layer.offset, speed: layer.speed, playback };
+    };
+    if let Some(group) = groups.iter().position(|g| &g.name == name) {
+        groups[group].members.push(index);
+        return LayerTime::Synced { group };
+    }
+    let range = layer.clip.clip().range();
+    let duration = range.duration();
+    let phase0 = if duration > 0.0 { (layer.offset - f64::from(range.start())) / duration } else { 0.0 };
+    groups.push(SyncGroup { name: name.clone(), members: vec![index], phase0, speed: layer.speed });
+    LayerTime::Synced { group: groups.len() - 1 }
+}
+
+/// The root-motion joint of the output skeleton: the named one, or the
+/// first root joint with a translation track.
+fn root_setup(spec: Option<&RootMotionSpec>, first: &Clip) -> Result<Option<RootSetup>, MotionError> {
+    let Some(spec) = spec else { return Ok(None) };
+    let skeleton = first.skeleton();
+    let joint = match &spec.joint {
+        Some(name) => skeleton.index_of(name).ok_or_else(|| {
+            MotionError::new(Path::root().field("root_motion").field("joint"), K::UnknownJoint { joint: name.clone() })
+        })?,
+        None => (0..skeleton.len())
+            .find(|&j| skeleton.parent(j).is_none() && first.has_translation_track(j))
+            .ok_or_else(|| MotionError::new(Path::root().field("root_motion"), K::NoRootJoint))?,
+    };
+    Ok(Some(RootSetup { joint, mode: spec.mode, up: spec.up }))
+}
+
+/// `clip`'s joint `name` with its `M(start)` and whole cycle, if it has one.
+fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
+    let joint = clip.skeleton().index_of(name)?;
+    let range = clip.range();
+    let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
+    let mut at = |t: f32| {
+        clip.sample_into(t, &mut cursor, &mut pose);
+        motion_transform(up, pose.translations[joint], pose.rotations[joint])
+    };
+    let (start, end) = (at(range.start()), at(range.end()));
+    Some(LayerRoot { joint, start, whole: start.inverse(up).then(end, up) })
+}
+
+/// Per output joint, the same-named joint of `layer` (or `UNMAPPED`).
+fn joint_map(output: &Skeleton, layer: &Skeleton) -> Vec<u32> {
+    output.names().iter().map(|name| layer.index_of(name).map_or(UNMAPPED, |j| j as u32)).collect()
+}
+
+/// Per output parameter the layer's clip also has (by name), where each
+/// sits in either pose.
+///
+/// # Errors
+/// `parameter_width_mismatch` when the layer's parameter of that name has
+/// another width.
+fn parameter_map(
+    output: &crate::ParameterLayout,
+    layer: &crate::ParameterLayout,
+    path: &Path,
+) -> Result<Vec<ParameterMap>, MotionError> {
+    let mut maps = Vec::new();
+    for (p, name) in output.names().iter().enumerate() {
+        let Some(q) = layer.index_of(name) else { continue };
+        let (expected, provided) = (output.widths()[p], layer.widths()[q]);
+        if expected != provided {
+            let kind = K::ParameterWidthMismatch { name: name.clone(), expected, provided };
+            return Err(MotionError::new(path.clone().field("clip"), kind));
+        }
+        let (to, from) = (output.range(p), layer.range(q));
+        maps.push(ParameterMap { from: from.start as u32, to: to.start as u32, entries: to.len() as u32 });
+    }
+    Ok(maps)
+}
+
+/// `clip`'s local pose at `time` (default its start), clamped to its range
+/// with no playback mapping.
+fn reference_pose(clip: &Clip, time: Option<f64>) -> Pose {
+    let range = clip.range();
+    let t = time.map_or(range.start(), |t| (t as f32).clamp(range.start(), range.end()));
+    let mut pose = Pose::default();
+    clip.sample_into(t, &mut Cursor::default(), &mut pose);
+    pose
+}

@@ -1,0 +1,492 @@
+//! A live playback of motions (SPEC §6, streams): the motion playing now,
+//! the layer-weight ramps on it, and the crossfades in progress beneath it.
+//!
+//! A [`Player`] is driven by *stream time* `s`, which the stream's playhead
+//! computes (pause, speed, reverse); each motion it holds (a `Deck`) shows
+//! motion time `τ = s − origin`. The first motion's origin is 0 (stream
+//! time is its motion time, as a clip stream's request time is its clip's);
+//! a crossfade target's is the stream time at which it started. A crossfade to B puts a new deck on top whose origin is the
+//! next tick's `s` (so B starts at motion time 0) and keeps the whole
+//! previous player, still advancing, underneath; at `α = ease(elapsed /
+//! duration)` every joint is the short-way blend of the two sides' layered
+//! local poses. A fade asked for during a fade takes the fade in progress
+//! as its A, so the pose never jumps. Fades and weight ramps progress by
+//! `|Δs|` per tick: they hold while paused and follow the playback speed.
+//!
+//! Root motion: each side's delta comes from its own motion's sampler; a
+//! fade lerps the two by `α`; the player keeps the total.
+//!
+//! Nothing here allocates once every buffer has its size, except a
+//! crossfade itself (the new deck's buffers).
+
+use std::fmt;
+use std::sync::Arc;
+
+use super::layering::{self, Joint};
+use super::root::Planar;
+use super::{ClipSource, Motion, MotionOptions, MotionSampler, RootMotion, UpAxis};
+use crate::ik::{ChainStart, IkConstraint, IkReport, IkSolver};
+use crate::{Ease, Playback, Pose, Space};
+
+/// Fades in progress at most; a crossfade beyond them finishes the oldest
+/// at once (its pose leaves the mix), which bounds the work per tick.
+pub const MAX_FADES: usize = 8;
+
+/// A layer weight moving linearly to a target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Ramp {
+    from: f32,
+    to: f32,
+    elapsed: f64,
+    duration: f64,
+}
+
+/// One motion on the player.
+#[derive(Debug, Clone)]
+struct Deck<C> {
+    motion: Arc<Motion<C>>,
+    /// Stream time of motion time 0; `None` until its first tick.
+    origin: Option<f64>,
+    phases: Vec<f64>,
+    weights: Vec<f32>,
+    ramps: Vec<Option<Ramp>>,
+    sampler: MotionSampler,
+    /// Whether the next sample starts afresh (first tick or a jump).
+    fresh: bool,
+}
+
+/// A fade in progress: the previous player, fading out.
+#[derive(Debug, Clone)]
+struct Fade<C> {
+    under: Player<C>,
+    /// Stream time moved (`Σ|Δs|`) since the fade's first tick.
+    elapsed: f64,
+    duration: f64,
+    ease: Ease,
+}
+
+/// Where the current motion's first layer is in its clip, unwrapped: the
+/// position its playback maps to a clip time (for the events crossed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LayerPosition {
+    pub x: f64,
+    pub playback: Playback,
+}
+
+/// A live playback of motions; see the module doc.
+/// Cloning copies every piece of state (warm starts included), so a clone
+/// stepped on produces what the original would (broadcast snapshots).
+#[derive(Debug, Clone)]
+pub struct Player<C> {
+    top: Deck<C>,
+    fade: Option<Box<Fade<C>>>,
+    /// The motion time the next tick must show (a seek), if any.
+    seek: Option<f64>,
+    last_s: Option<f64>,
+    alpha: f32,
+    local: Pose,
+    model: Pose,
+    space: Space,
+    root: Option<RootMotion>,
+    up: UpAxis,
+    ik: StreamIk,
+}
+
+/// The stream's request-time IK (SPEC §7 "In streams"): solved on the
+/// mixed pose at every tick, chains warm-started from the previous tick.
+#[derive(Debug, Clone, Default)]
+struct StreamIk {
+    constraints: Vec<IkConstraint>,
+    solver: IkSolver,
+    solved: Vec<IkReport>,
+    /// The current motion's clip reports, then `solved`.
+    reports: Vec<IkReport>,
+    /// Whether the player's `local` holds the last tick's solved pose.
+    applied: bool,
+}
+
+/// Why a live change was refused.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlayerError {
+    NoSuchLayer { index: usize, layers: usize },
+    Weight(f32),
+    Duration(f64),
+    Skeleton,
+    Parameters,
+    CrossfadeIk,
+}
+
+impl<C: ClipSource> Deck<C> {
+    fn new(motion: Arc<Motion<C>>) -> Self {
+        Deck {
+            weights: motion.weights().to_vec(),
+            ramps: vec![None; motion.layer_count()],
+            phases: Vec::with_capacity(motion.sync_group_count()),
+            motion,
+            origin: None,
+            sampler: MotionSampler::new(),
+            fresh: true,
+        }
+    }
+}
+
+impl<C> Deck<C> {
+    /// Moves every ramp on by `progress` seconds.
+    fn step_ramps(&mut self, progress: f64) {
+        for (weight, slot) in self.weights.iter_mut().zip(&mut self.ramps) {
+            let Some(ramp) = slot else { continue };
+            ramp.elapsed += progress;
+            let done = ramp.duration <= 0.0 || ramp.elapsed >= ramp.duration;
+            *weight =
+                if done { ramp.to } else { ramp.from + (ramp.to - ramp.from) * (ramp.elapsed / ramp.duration) as f32 };
+            if done {
+                *slot = None;
+            }
+        }
+    }
+}
+
+impl<C: ClipSource> Deck<C> {
+    /// Samples the deck at stream time `s` (local space), `ds` after its
+    /// previous tick.
+    fn sample(&mut self, s: f64, ds: f64, ease: Ease) {
+        let origin = *self.origin.get_or_insert(s);
+        let tau = s - origin;
+        if self.fresh {
+            self.motion.phases_at(tau, &self.weights, &mut self.phases);
+        } else {
+            // The phase carries on at the rate of the weights that held
+            // over the interval; then the ramps move on.
+            self.motion.advance_phases(&mut self.phases, ds, &self.weights);
+        }
+        self.step_ramps(if self.fresh { 0.0 } else { ds.abs() });
+        let options = MotionOptions { ease, space: Space::Local };
+        self.motion.sample_with(tau, &self.phases, &self.weights, &options, &mut self.sampler);
+        self.fresh = false;
+    }
+
+    fn delta(&self) -> Planar {
+        self.sampler.root_motion().map_or(Planar::IDENTITY, |r| r.delta)
+    }
+}
+
+impl<C: ClipSource> Player<C> {
+    /// A player of `motion`, whose motion time is the stream time.
+    pub fn new(motion: Arc<Motion<C>>) -> Self {
+        let up = motion.root_up().unwrap_or_default();
+        let ik = StreamIk { constraints: motion.ik().to_vec(), ..StreamIk::default() };
+        Player {
+            top: Deck { origin: Some(0.0), ..Deck::new(motion) },
+            fade: None,
+            seek: None,
+            last_s: None,
+            alpha: 1.0,
+            local: Pose::default(),
+            model: Pose::default(),
+            space: Space::Local,
+            root: None,
+            up,
+            ik,
+        }
+    }
+
+    /// The motion playing now (the target of the latest crossfade).
+    pub fn motion(&self) -> &Arc<Motion<C>> {
+        &self.top.motion
+    }
+
+    /// Fades in progress.
+    pub fn fades(&self) -> usize {
+        self.fade.as_ref().map_or(0, |f| 1 + f.under.fades())
+    }
+
+    /// The current motion's time at the last tick.
+    pub fn motion_time(&self) -> f64 {
+        self.last_s.zip(self.top.origin).map_or(0.0, |(s, o)| s - o)
+    }
+
+    /// Starts a crossfade to `to` over `duration` seconds at the next tick.
+    ///
+    /// # Errors
+    /// A negative or non-finite duration, or a motion whose skeleton is not
+    /// the player's.
+    pub fn crossfade(&mut self, to: Arc<Motion<C>>, duration: f64, ease: Ease) -> Result<(), PlayerError> {
+        if !(duration.is_finite() && duration >= 0.0) {
+            return Err(PlayerError::Duration(duration));
+        }
+        if !to.skeleton().same_joints(self.top.motion.skeleton()) {
+            return Err(PlayerError::Skeleton);
+        }
+        if to.parameters().names() != self.top.motion.parameters().names()
+            || to.parameters().widths() != self.top.motion.parameters().widths()
+        {
+            return Err(PlayerError::Parameters);
+        }
+        if !to.ik().is_empty() {
+            return Err(PlayerError::CrossfadeIk);
+        }
+        if self.fades() + 1 > MAX_FADES {
+            self.drop_oldest_fade();
+        }
+        let under = Player {
+            top: std::mem::replace(&mut self.top, Deck::new(to)),
+            fade: self.fade.take(),
+            seek: None,
+            last_s: self.last_s,
+            alpha: self.alpha,
+            local: Pose::default(),
+            model: Pose::default(),
+            space: Space::Local,
+            root: None,
+            up: self.up,
+            ik: StreamIk::default(),
+        };
+        self.up = self.top.motion.root_up().unwrap_or(self.up);
+        self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
+        Ok(())
+    }
+
+    /// Ramps layer `index` of the current motion to `weight` over `duration`
+    /// seconds, from its weight at the last tick and counted from that tick
+    /// (the next tick already shows that interval's progress).
+    ///
+    /// # Errors
+    /// No such layer, a weight outside `[0, 1]`, a bad duration.
+    pub fn ramp(&mut self, index: usize, weight: f32, duration: f64) -> Result<(), PlayerError> {
+        let layers = self.top.motion.layer_count();
+        if index >= layers {
+            return Err(PlayerError::NoSuchLayer { index, layers });
+        }
+        if !(0.0..=1.0).contains(&weight) {
+            return Err(PlayerError::Weight(weight));
+        }
+        if !(duration.is_finite() && duration >= 0.0) {
+            return Err(PlayerError::Duration(duration));
+        }
+        let from = self.top.weights[index];
+        self.top.ramps[index] = Some(Ramp { from, to: weight, elapsed: 0.0, duration });
+        if duration == 0.0 {
+            self.top.step_ramps(0.0);
+        }
+        Ok(())
+    }
+
+    /// Replaces the stream's IK constraints from the next tick on (SPEC §7
+    /// "In streams"); they must have been validated against the player's
+    /// skeleton. A chain at the same place over the same joints carries
+    /// its angles on.
+    pub fn set_ik(&mut self, constraints: Vec<IkConstraint>) {
+        self.ik.constraints = constraints;
+    }
+
+    /// The stream's IK constraints.
+    pub fn ik(&self) -> &[IkConstraint] {
+        &self.ik.constraints
+    }
+
+    /// The last tick's IK reports: the current motion's clip constraints,
+    /// then the stream's.
+    pub fn ik_reports(&self) -> &[IkReport] {
+        &self.ik.reports
+    }
+
+    /// The next tick shows the current motion at motion time `tau`; every
+    /// motion beneath jumps by as much, and root motion has no delta.
+    pub fn seek(&mut self, tau: f64) {
+        self.seek = Some(tau);
+    }
+
+    /// Samples every motion at stream time `s` and mixes them; returns the
+    /// current motion's first layer's clip time.
+    pub fn sample(&mut self, s: f64, options: &MotionOptions) -> f32 {
+        let jump = self.take_seek(s);
+        let ds = if jump { 0.0 } else { self.last_s.map_or(0.0, |last| s - last) };
+        self.advance(s, ds, options.ease);
+        self.solve_ik();
+        let delta = self.delta();
+        if self.has_root_motion() {
+            let total = self.root.map_or(Planar::IDENTITY, |r| r.total).then(delta, self.up);
+            self.root = Some(RootMotion { delta, total });
+        }
+        self.space = options.space;
+        if options.space == Space::Model {
+            let local = if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() };
+            self.top.motion.skeleton().to_model(local, &mut self.model);
+        }
+        self.top.sampler.clip_times()[0]
+    }
+
+    /// Solves the stream's constraints on the mixed pose (into `local`) and
+    /// gathers the reports.
+    fn solve_ik(&mut self) {
+        let ik = &mut self.ik;
+        ik.reports.clear();
+        ik.reports.extend_from_slice(self.top.sampler.ik_reports());
+        ik.applied = !ik.constraints.is_empty();
+        if !ik.applied {
+            return;
+        }
+        if self.fade.is_none() {
+            self.local.copy_from(self.top.sampler.local());
+        }
+        let skeleton = self.top.motion.skeleton();
+        ik.solver.solve(skeleton, &mut self.local, &ik.constraints, ChainStart::Warm, &mut ik.solved);
+        ik.reports.extend_from_slice(&ik.solved);
+    }
+
+    /// Turns a pending seek into origins moved so that the current motion
+    /// shows it at `s`; returns whether there was one.
+    fn take_seek(&mut self, s: f64) -> bool {
+        let Some(tau) = self.seek.take() else { return false };
+        let shift = match self.top.origin {
+            Some(origin) => (s - tau) - origin,
+            None => 0.0,
+        };
+        self.top.origin = Some(self.top.origin.map_or(s - tau, |o| o + shift));
+        self.for_each_under(&mut |deck| {
+            if let Some(o) = deck.origin.as_mut() {
+                *o += shift;
+            }
+        });
+        self.for_each_deck(&mut |deck| {
+            deck.fresh = true;
+            deck.sampler.rebase_root();
+        });
+        true
+    }
+
+    /// Samples the decks at `s`, then mixes the fade into `local`.
+    fn advance(&mut self, s: f64, ds: f64, ease: Ease) {
+        self.last_s = Some(s);
+        // A fade starts at its target's first tick (B at motion time 0,
+        // α = 0, the pose still A's): the interval before it is not part
+        // of it.
+        let fade_starts = self.top.origin.is_none();
+        self.top.sample(s, ds, ease);
+        let Some(fade) = self.fade.as_mut() else {
+            self.alpha = 1.0;
+            return;
+        };
+        fade.under.advance(s, ds, ease);
+        if !fade_starts {
+            fade.elapsed += ds.abs();
+        }
+        let progress = if fade.duration > 0.0 { (fade.elapsed / fade.duration).min(1.0) } else { 1.0 };
+        self.alpha = fade.ease.apply(progress) as f32;
+        if progress >= 1.0 {
+            self.fade = None;
+            self.alpha = 1.0;
+            return;
+        }
+        let under = fade.under.local_pose();
+        mix(under, self.top.sampler.local(), self.alpha, &mut self.local);
+    }
+
+    /// The mixed local pose of the last tick.
+    fn local_pose(&self) -> &Pose {
+        if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() }
+    }
+
+    /// The last tick's layered root delta: the fade's sides lerped by `α`.
+    fn delta(&self) -> Planar {
+        match &self.fade {
+            None => self.top.delta(),
+            Some(fade) => fade.under.delta().lerp(self.top.delta(), f64::from(self.alpha)),
+        }
+    }
+
+    /// The pose of the last tick, in the space it asked for.
+    pub fn pose(&self) -> &Pose {
+        match self.space {
+            Space::Local => self.local_pose(),
+            Space::Model => &self.model,
+        }
+    }
+
+    /// The last tick's root motion, when any motion on the player has it.
+    pub fn root_motion(&self) -> Option<RootMotion> {
+        self.root
+    }
+
+    /// Whether any motion on the player reports root motion.
+    pub fn has_root_motion(&self) -> bool {
+        self.top.motion.has_root_motion() || self.fade.as_ref().is_some_and(|f| f.under.has_root_motion())
+    }
+
+    /// The current motion's first layer's unwrapped clip position at the
+    /// last tick (see [`LayerPosition`]).
+    pub fn first_layer_position(&self) -> LayerPosition {
+        let (x, playback) = self.top.motion.layer_position(0, self.motion_time(), &self.top.phases);
+        LayerPosition { x, playback }
+    }
+
+    /// The current fade's `α` at the last tick (1 without a fade).
+    pub fn alpha(&self) -> f32 {
+        self.alpha
+    }
+
+    fn drop_oldest_fade(&mut self) {
+        let Some(fade) = self.fade.as_mut() else { return };
+        if fade.under.fade.is_some() {
+            fade.under.drop_oldest_fade();
+        } else {
+            self.fade = None;
+        }
+    }
+
+    fn for_each_deck(&mut self, f: &mut impl FnMut(&mut Deck<C>)) {
+        f(&mut self.top);
+        self.for_each_under(f);
+    }
+
+    fn for_each_under(&mut self, f: &mut impl FnMut(&mut Deck<C>)) {
+        if let Some(fade) = self.fade.as_mut() {
+            fade.under.for_each_deck(f);
+        }
+    }
+}
+
+/// `out = blend(a, b, α)` joint by joint (lerp, short-way slerp), written
+/// straight into `out` (a crossfade's sides have the same joints; `a`'s
+/// are copied first only if they did not).
+fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
+    if a.len() != b.len() || out.len() != a.len() {
+        out.copy_from(a);
+    }
+    for j in 0..b.len().min(a.len()) {
+        let mut joint = Joint { t: a.translations[j], q: a.rotations[j], s: a.scales[j] };
+        let other = Joint { t: b.translations[j], q: b.rotations[j], s: b.scales[j] };
+        layering::blend(&mut joint, &other, alpha);
+        (out.translations[j], out.rotations[j], out.scales[j]) = (joint.t, joint.q, joint.s);
+    }
+    // Both sides have the same parameters (`crossfade` checks it).
+    out.parameters.clone_from(&a.parameters);
+    for (o, b) in out.parameters.iter_mut().zip(&b.parameters) {
+        *o = layering::lerp(*o, *b, alpha);
+    }
+}
+
+impl fmt::Display for PlayerError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PlayerError::NoSuchLayer { index, layers } => {
+                write!(f, "layer {index} does not exist: the motion playing has {layers} layers")
+            }
+            PlayerError::Weight(v0) => write!(f, "a layer weight must be in [0, 1], got {0}", v0),
+            PlayerError::Duration(v0) => write!(f, "a duration must be a finite number of seconds ≥ 0, got {0}", v0),
+            PlayerError::Skeleton => write!(
+                f,
+                "the motion's skeleton differs from the stream's: a crossfade needs the same joints in the same order"
+            ),
+            PlayerError::Parameters => write!(
+                f,
+                "the motion's parameters differ from the stream's: a crossfade needs the same parameter names and widths in the same order"
+            ),
+            PlayerError::CrossfadeIk => {
+                write!(f, "a crossfade's motion carries no `ik`: a stream's constraints change with an `ik` control")
+            }
+        }
+    }
+}
+
+impl std::error::Error for PlayerError {}

@@ -1,0 +1,350 @@
+//! Sampling a [`Motion`]: each layer's clip time, its local pose, then the
+//! layering of every output joint, bottom to top, over the rest pose; with
+//! root motion, each layer's motion transform, the layered delta since the
+//! previous sample and the running total. A layer samples and layers only
+//! the joints it can still change (`coverage`): the pose is the same.
+
+use super::coverage;
+use super::layering::{self, Joint};
+use super::root::{self, Planar, motion_transform};
+use super::sync::position;
+use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode, UNMAPPED};
+use crate::ik::{ChainStart, IkReport, IkSolver};
+use crate::{Clip, Cursor, Ease, Playback, Pose, Space};
+
+/// How a request samples a motion.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MotionOptions {
+    /// Applied to every layer's clip time after its playback.
+    pub ease: Ease,
+    pub space: Space,
+}
+
+/// Root motion of one sample: the layered delta since the previous sample
+/// of this sampler (0 for the first) and the total since the first.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RootMotion {
+    pub delta: Planar,
+    pub total: Planar,
+}
+
+/// Reusable buffers: one per playback or per worker. It remembers each
+/// layer's root position between samples, so consecutive samples report
+/// the root's travel between them.
+#[derive(Debug, Clone, Default)]
+pub struct MotionSampler {
+    cursors: Vec<Cursor>,
+    layer: Pose,
+    local: Pose,
+    model: Pose,
+    space: Space,
+    phases: Vec<f64>,
+    clip_times: Vec<f32>,
+    /// Per layer, the output joints it must sample (see `coverage`), and
+    /// scratch for working them out and for one layer's joints to sample
+    /// in its clip's numbering.
+    needs: Vec<u64>,
+    hidden: Vec<u64>,
+    kept: Vec<u64>,
+    /// Per layer: its loop cycle and root motion transform, now and at the
+    /// previous sample (`None`: no root in that layer, or no previous).
+    roots: Vec<Option<(i64, Planar)>>,
+    previous: Vec<Option<(i64, Planar)>>,
+    root_motion: Option<RootMotion>,
+    ik: IkSolver,
+    /// The last sample's IK reports: each layer's clip constraints, then
+    /// the motion's own (requests only).
+    ik_reports: Vec<IkReport>,
+    solved: Vec<IkReport>,
+}
+
+impl MotionSampler {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The pose of the last sample, in the space it asked for.
+    pub fn pose(&self) -> &Pose {
+        match self.space {
+            Space::Local => &self.local,
+            Space::Model => &self.model,
+        }
+    }
+
+    /// The local pose of the last sample, whatever space was asked for.
+    pub fn local(&self) -> &Pose {
+        &self.local
+    }
+
+    /// Each layer's clip time in the last sample.
+    pub fn clip_times(&self) -> &[f32] {
+        &self.clip_times
+    }
+
+    /// The last sample's IK reports (SPEC §7): each layer's clip
+    /// constraints bottom to top, then, for [`Motion::sample`], the
+    /// motion's own.
+    pub fn ik_reports(&self) -> &[IkReport] {
+        &self.ik_reports
+    }
+
+    /// The last sample's root motion, for motions that ask for it.
+    pub fn root_motion(&self) -> Option<RootMotion> {
+        self.root_motion
+    }
+
+    /// The next sample's delta is 0 (a jump: a seek), the total carries on.
+    pub fn rebase_root(&mut self) {
+        self.previous.clear();
+    }
+
+    /// The next sample starts the root motion afresh: delta and total 0.
+    pub fn restart_root(&mut self) {
+        self.previous.clear();
+        self.root_motion = None;
+    }
+}
+
+impl MotionSampler {
+    /// Puts the local pose into the space asked for.
+    fn finish(&mut self, skeleton: &crate::Skeleton, space: Space) {
+        if space == Space::Model {
+            skeleton.to_model(&self.local, &mut self.model);
+        }
+        self.space = space;
+    }
+}
+
+impl<C: ClipSource> Motion<C> {
+    /// The pose at motion time `tau` with the motion's own weights (a
+    /// request's answer). Returns the first layer's clip time.
+    pub fn sample(&self, tau: f64, options: &MotionOptions, sampler: &mut MotionSampler) -> f32 {
+        let mut phases = std::mem::take(&mut sampler.phases);
+        self.phases_at(tau, &self.weights, &mut phases);
+        let clip_time = self.layer_into(tau, &phases, &self.weights, options.ease, sampler);
+        sampler.phases = phases;
+        if !self.ik.is_empty() {
+            let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;
+            ik.solve(self.skeleton(), local, &self.ik, ChainStart::Cold, solved);
+            ik_reports.extend_from_slice(solved);
+        }
+        sampler.finish(self.skeleton(), options.space);
+        clip_time
+    }
+
+    /// The pose at motion time `tau` with sync-group `phases` (from
+    /// [`Motion::phases_at`] or kept by a stream) and live layer
+    /// `weights`. Returns the first layer's clip time.
+    pub fn sample_with(
+        &self,
+        tau: f64,
+        phases: &[f64],
+        weights: &[f32],
+        options: &MotionOptions,
+        sampler: &mut MotionSampler,
+    ) -> f32 {
+        let clip_time = self.layer_into(tau, phases, weights, options.ease, sampler);
+        sampler.finish(self.skeleton(), options.space);
+        clip_time
+    }
+
+    /// Each layer's clip pose (its clip IK solved), layered into the
+    /// sampler's local pose, with root motion; returns the first layer's
+    /// clip time.
+    fn layer_into(&self, tau: f64, phases: &[f64], weights: &[f32], ease: Ease, sampler: &mut MotionSampler) -> f32 {
+        let MotionSampler {
+            cursors, layer: scratch, local, clip_times, roots, needs, hidden, kept, ik_reports, ..
+        } = sampler;
+        let words = coverage::words(self.skeleton().len());
+        coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
+        cursors.resize_with(self.layers.len(), Cursor::default);
+        roots.clear();
+        clip_times.clear();
+        ik_reports.clear();
+        for (i, layer) in self.layers.iter().enumerate() {
+            let (t, cycle) = self.layer_time(i, tau, phases, ease);
+            let has_ik = layer.clip.clip().ik_count() > 0;
+            clip_times.push(t);
+            let need = &needs[i * words..(i + 1) * words];
+            let direct = i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.unmasked;
+            if direct {
+                // The common case, and the bit-for-bit promise: the first
+                // full-weight layer is the clip's own pose.
+                layer.sample_needed(t, need, kept, &mut cursors[0], local);
+                ik_reports.extend_from_slice(cursors[0].ik_reports());
+                roots.push(self.take_root(layer, cycle, local));
+                continue;
+            }
+            if i == 0 {
+                local.copy_from(self.skeleton().rest());
+                // A parameter's rest value is 0 (SPEC §8: no morph, no offset).
+                local.parameters.clear();
+                local.parameters.resize(self.parameters().entries(), glam::Vec3A::ZERO);
+            }
+            let parameters = !layer.parameters.is_empty() && weights[i] > 0.0;
+            if layer.root.is_none() && !has_ik && !parameters && need.iter().all(|w| *w == 0) {
+                // Weight 0, or hidden everywhere: nothing to sample. (A
+                // clip with IK still solves, so its reports are there.)
+                roots.push(None);
+                continue;
+            }
+            layer.sample_needed(t, need, kept, &mut cursors[i], scratch);
+            ik_reports.extend_from_slice(cursors[i].ik_reports());
+            roots.push(self.take_root(layer, cycle, scratch));
+            layer.apply(scratch, weights[i], need, local);
+        }
+        if self.root.is_some() {
+            self.layer_root_motion(weights, sampler);
+        }
+        sampler.clip_times[0]
+    }
+
+    /// Layer `i`'s unwrapped position at `tau` and the playback that maps
+    /// it to a clip time: `offset + speed·τ` unsynced, `start + φ·D` (looping)
+    /// synced.
+    pub fn layer_position(&self, i: usize, tau: f64, phases: &[f64]) -> (f64, Playback) {
+        let clip: &Clip = self.layers[i].clip.clip();
+        match self.layers[i].time {
+            LayerTime::Free { offset, speed, playback } => (offset + speed * tau, playback),
+            LayerTime::Synced { group } => {
+                (f64::from(clip.range().start()) + phases[group] * self.durations[i], Playback::Loop)
+            }
+        }
+    }
+
+    /// Layer `i`'s clip time at `tau` and its loop cycle (0 unless it loops).
+    fn layer_time(&self, i: usize, tau: f64, phases: &[f64], ease: Ease) -> (f32, i64) {
+        let clip: &Clip = self.layers[i].clip.clip();
+        let range = clip.range();
+        let looping = range.duration() > 0.0;
+        match self.layers[i].time {
+            LayerTime::Free { offset, speed, playback } => {
+                let x = offset + speed * tau;
+                let cycle = if playback == Playback::Loop && looping { range.cycle(range.offset(x)).0 } else { 0.0 };
+                (clip.clip_time(x, playback, ease), cycle as i64)
+            }
+            LayerTime::Synced { group } => {
+                let x = position(phases[group], self.durations[i]);
+                let cycle = if looping { phases[group].floor() + range.cycle(x).0 } else { 0.0 };
+                (range.clip_time(f64::from(range.start()) + x, Playback::Loop, ease), cycle as i64)
+            }
+        }
+    }
+
+    /// The layer's root motion transform in `pose` (its clip's joints) and
+    /// its cycle; with `extract`, a blend layer's root is put back at its
+    /// clip's start position and heading.
+    fn take_root(&self, layer: &super::Layer<C>, cycle: i64, pose: &mut Pose) -> Option<(i64, Planar)> {
+        let (setup, root) = (self.root?, layer.root?);
+        let (t, q) = (pose.translations[root.joint], pose.rotations[root.joint]);
+        let m = motion_transform(setup.up, t, q);
+        if setup.mode == RootMode::Extract && layer.mode == LayerMode::Blend {
+            let in_place = root.start.then(m.inverse(setup.up), setup.up);
+            (pose.translations[root.joint], pose.rotations[root.joint]) = in_place.apply(setup.up, t, q);
+        }
+        Some((cycle, m))
+    }
+
+    /// The blend layers' deltas since the previous sample, layered like the
+    /// pose (lerped by weight times the root's mask, from a zero delta), and
+    /// the total.
+    fn layer_root_motion(&self, weights: &[f32], sampler: &mut MotionSampler) {
+        let Some(setup) = self.root else { return };
+        let mut delta = Planar::IDENTITY;
+        if sampler.previous.len() == self.layers.len() {
+            for (i, layer) in self.layers.iter().enumerate() {
+                let (Some(root), Some(from), Some(to)) = (layer.root, sampler.previous[i], sampler.roots[i]) else {
+                    continue;
+                };
+                if layer.mode == LayerMode::Blend {
+                    let w = f64::from(weights[i] * layer.mask[setup.joint]);
+                    delta = delta.lerp(root::delta(from, to, root.start, root.whole, setup.up), w);
+                }
+            }
+        }
+        let total = sampler.root_motion.map_or(Planar::IDENTITY, |r| r.total).then(delta, setup.up);
+        sampler.root_motion = Some(RootMotion { delta, total });
+        sampler.previous.clone_from(&sampler.roots);
+    }
+}
+
+impl<C: ClipSource> super::Layer<C> {
+    /// Samples the layer's clip at clip time `t` into `pose` (its clip's
+    /// joints) for the output joints in `need` and its root-motion joint;
+    /// the whole clip when that is every joint it has. `kept` is scratch.
+    fn sample_needed(&self, t: f32, need: &[u64], kept: &mut Vec<u64>, cursor: &mut Cursor, pose: &mut Pose) {
+        let clip = self.clip.clip();
+        if self.reach.whole && *need == *self.reach.reaches {
+            clip.sample_into(t, cursor, pose);
+            return;
+        }
+        // The needed joints in the clip's own numbering, so each track's
+        // test is one bit.
+        kept.clear();
+        kept.resize(coverage::words(clip.joint_count()), 0);
+        coverage::for_each(need, |j| coverage::insert(kept, self.map[j] as usize));
+        if let Some(root) = self.root {
+            coverage::insert(kept, root.joint);
+        }
+        clip.sample_joints_into(t, cursor, pose, |j| coverage::has(kept, j as usize));
+    }
+}
+
+impl<C> super::Layer<C> {
+    /// Layers this layer's `pose` (in its clip's joints) onto `out` (in the
+    /// output skeleton's) at layer weight `weight`, for the output joints in
+    /// `need` (all mapped, with a positive mask).
+    fn apply(&self, pose: &Pose, weight: f32, need: &[u64], out: &mut Pose) {
+        self.apply_parameters(pose, weight, out);
+        let source = |j: usize| {
+            debug_assert_ne!(self.map[j], UNMAPPED, "a needed joint is mapped");
+            self.map[j] as usize
+        };
+        match &self.reference {
+            None => coverage::for_each(need, |j| {
+                let mut now = joint(out, j);
+                layering::blend(&mut now, &joint(pose, source(j)), weight * self.mask[j]);
+                set_joint(out, j, now);
+            }),
+            Some(reference) => coverage::for_each(need, |j| {
+                let mut now = joint(out, j);
+                let s = source(j);
+                layering::add(&mut now, &joint(pose, s), &joint(reference, s), weight * self.mask[j]);
+                set_joint(out, j, now);
+            }),
+        }
+    }
+}
+
+impl<C> super::Layer<C> {
+    /// Layers the parameters this layer's clip has like translations (SPEC
+    /// §6, §8): a blend lerps toward the layer's values by the layer weight
+    /// (masks are per joint and do not apply), an additive layer adds
+    /// `weight · (value − reference)`. Parameters it lacks stay as they are.
+    fn apply_parameters(&self, pose: &Pose, weight: f32, out: &mut Pose) {
+        if weight <= 0.0 {
+            return;
+        }
+        for m in &self.parameters {
+            let (from, to, n) = (m.from as usize, m.to as usize, m.entries as usize);
+            let (layer, out) = (&pose.parameters[from..from + n], &mut out.parameters[to..to + n]);
+            match &self.reference {
+                None => out.iter_mut().zip(layer).for_each(|(o, l)| *o = layering::lerp(*o, *l, weight)),
+                Some(reference) => {
+                    let reference = &reference.parameters[from..from + n];
+                    for ((o, l), r) in out.iter_mut().zip(layer).zip(reference) {
+                        *o = layering::offset(*o, *l - *r, weight);
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn joint(pose: &Pose, j: usize) -> Joint {
+    Joint { t: pose.translations[j], q: pose.rotations[j], s: pose.scales[j] }
+}
+
+fn set_joint(pose: &mut Pose, j: usize, joint: Joint) {
+    (pose.translations[j], pose.rotations[j], pose.scales[j]) = (joint.t, joint.q, joint.s);
+}

@@ -1,0 +1,10 @@
+//! Wire formats at the edge: each protocol's types and their conversions to
+//! and from the core (`[x, y, z, w]` quaternion order is fixed here).
+
+pub mod frame;
+pub mod grid;
+pub mod ik;
+pub mod json;
+pub mod mesh;
+pub mod motion;
+pub mod proto;

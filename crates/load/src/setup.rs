@@ -1,0 +1,172 @@
+//! What a run needs before the load starts: the clip, the gRPC channels, a
+//! clock sync, and the server's stream counters.
+
+use anyhow::{Context, bail};
+use reqwest::Url;
+use serde_json::{Value, json};
+use tonic::transport::Channel;
+
+use super::clock::{ClockSync, PingSample, unix_now_ns};
+use super::motion::{LayerClips, MotionChoice, MotionClips, clip_docs};
+use super::walk::walk_clip;
+use formats::wire::proto::pb;
+use formats::wire::proto::pb::animation_client::AnimationClient;
+
+/// How a generated chain clip moves: `joints` joints `j0`..`j{n-1}`, each
+/// the parent of the next, with a 31-key Catmull-Rom rotation track each
+/// (joint `i`'s angle at key `k` is `amplitude · sin(k / period + i)`) and a
+/// root translation track moving `stride` per second, `duration` s long,
+/// looping. Clips of one size differ only in these numbers, so the clip and
+/// motion runs stream the same joints in frames of the same size.
+#[derive(Debug, Clone)]
+pub struct Chain {
+    pub name: String,
+    pub joints: usize,
+    pub duration: f64,
+    pub amplitude: f64,
+    /// Keys per radian of the swing.
+    pub period: f64,
+    pub stride: f64,
+}
+
+/// Keys per track of a chain clip.
+const CHAIN_KEYS: u32 = 31;
+
+/// The standard load clip (the one `scripts/bench_rest.sh` uses): a chain of
+/// `joints` joints, 3 s long (see [`Chain`]).
+pub fn chain_clip(joints: usize) -> Value {
+    chain(&Chain {
+        name: format!("load-chain-{joints}"),
+        joints,
+        duration: 3.0,
+        amplitude: 0.3,
+        period: 5.0,
+        stride: 1.0,
+    })
+}
+
+/// The clip document of a [`Chain`].
+pub fn chain(c: &Chain) -> Value {
+    let skeleton: Vec<Value> = (0..c.joints)
+        .map(|i| {
+            let parent = (i > 0).then(|| format!("j{}", i - 1));
+            json!({"name": format!("j{i}"), "parent": parent, "rest": {"translation": [0.0, 0.1, 0.0]}})
+        })
+        .collect();
+    let last = f64::from(CHAIN_KEYS - 1);
+    let times: Vec<f64> = (0..CHAIN_KEYS).map(|k| f64::from(k) * c.duration / last).collect();
+    let mut tracks: Vec<Value> = (0..c.joints)
+        .map(|i| {
+            let values: Vec<[f64; 4]> = (0..CHAIN_KEYS)
+                .map(|k| {
+                    let a = c.amplitude * (f64::from(k) / c.period + i as f64).sin();
+                    [0.0, 0.0, (a / 2.0).sin(), (a / 2.0).cos()]
+                })
+                .collect();
+            json!({"joint": format!("j{i}"), "channel": "rotation", "interpolation": "catmull_rom",
+                   "times": times, "values": values})
+        })
+        .collect();
+    let path: Vec<[f64; 3]> = times.iter().map(|t| [t * c.stride, 0.0, 0.0]).collect();
+    tracks.push(json!({"joint": "j0", "channel": "translation", "interpolation": "catmull_rom",
+                       "times": times, "values": path}));
+    json!({"name": c.name, "skeleton": {"joints": skeleton}, "tracks": tracks, "playback": "loop"})
+}
+
+/// Uploads [`chain_clip`] and returns its id.
+pub async fn upload_chain(http: &Url, joints: usize) -> anyhow::Result<String> {
+    upload_clip(http, &chain_clip(joints)).await
+}
+
+/// Uploads the clips `choice` plays, `joints` joints each.
+pub async fn upload_motion_clips(http: &Url, choice: MotionChoice, joints: usize) -> anyhow::Result<MotionClips> {
+    Ok(match choice {
+        MotionChoice::ThreeLayers => MotionClips::ThreeLayers(upload_layer_clips(http, joints).await?),
+        MotionChoice::FootIk => MotionClips::FootIk { walk: upload_clip(http, &walk_clip(joints)).await? },
+    })
+}
+
+/// Uploads the clips of the three-layer motion (`motion::clip_docs`).
+async fn upload_layer_clips(http: &Url, joints: usize) -> anyhow::Result<LayerClips> {
+    let [walk, run, upper] = clip_docs(joints);
+    Ok(LayerClips {
+        walk: upload_clip(http, &walk).await?,
+        run: upload_clip(http, &run).await?,
+        upper: upload_clip(http, &upper).await?,
+    })
+}
+
+/// Uploads a clip document and returns its id.
+pub async fn upload_clip(http: &Url, clip: &Value) -> anyhow::Result<String> {
+    let url = http.join("/v1/clips")?;
+    let resp = reqwest::Client::new()
+        .post(url.clone())
+        .json(clip)
+        .send()
+        .await
+        .with_context(|| format!("uploading the load clip to {url}"))?;
+    let status = resp.status();
+    let body: Value = resp.json().await.context("reading the upload reply")?;
+    if status != 201 {
+        bail!("uploading the load clip: {status}: {body}");
+    }
+    body["id"].as_str().map(str::to_owned).context("the upload reply has no id")
+}
+
+/// `n` HTTP/2 connections to the gRPC server.
+pub async fn channels(grpc: &Url, n: usize) -> anyhow::Result<Vec<Channel>> {
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        let ch = Channel::from_shared(grpc.to_string())?
+            .connect()
+            .await
+            .with_context(|| format!("connecting to the gRPC server at {grpc}"))?;
+        out.push(ch);
+    }
+    Ok(out)
+}
+
+/// Pings the server a few times and keeps the best estimate (see `clock`).
+pub async fn clock_sync(channel: Channel) -> anyhow::Result<ClockSync> {
+    let mut client = AnimationClient::new(channel);
+    let mut samples = Vec::new();
+    for _ in 0..16 {
+        let local_sent = unix_now_ns();
+        let reply = client.ping(pb::PingRequest {}).await.context("Ping for the clock sync")?.into_inner();
+        let local_received = unix_now_ns();
+        samples.push(PingSample {
+            local_sent,
+            local_received,
+            server_unix: reply.server_unix_nanos,
+            server_monotonic: reply.server_monotonic_nanos,
+        });
+    }
+    ClockSync::from_samples(&samples).context("no ping answered")
+}
+
+/// The server's stream counters from `/metrics`: (playbacks started, ticks
+/// evaluated); `None` if they cannot be read.
+pub async fn stream_counters(http: &Url) -> Option<(u64, u64)> {
+    let text = reqwest::get(http.join("/metrics").ok()?).await.ok()?.text().await.ok()?;
+    let read = |name: &str| {
+        text.lines()
+            .find(|l| l.split([' ', '{']).next() == Some(name))
+            .and_then(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+            .map(|v| v as u64)
+    };
+    Some((read("inbetween_stream_playbacks_total").unwrap_or(0), read("inbetween_stream_ticks_total").unwrap_or(0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formats::wire::json::parse_clip;
+
+    #[test]
+    fn the_chain_clip_is_a_valid_clip_of_the_asked_size() {
+        let body = serde_json::to_vec(&chain_clip(20)).unwrap();
+        let (_, spec) = parse_clip(&body).expect("a valid clip document");
+        let clip = anim::Clip::build(&spec).expect("builds");
+        assert_eq!(clip.joint_count(), 20);
+    }
+}

@@ -1,0 +1,385 @@
+//! A bounded cache of compiled clips, so a pose request never re-parses or
+//! re-compiles a document and, on a hit, never touches the store.
+//!
+//! Keyed by clip id; each entry is an immutable `Arc<CachedClip>` at one
+//! version, so a request that took an entry keeps a whole, consistent clip
+//! even while a replace swaps in the next version (no torn poses).
+//!
+//! Consistency on one node (this process is the only writer):
+//! - writes are *write-through*: after a committed create or replace the new
+//!   version is put in, and an insert never replaces a newer version with an
+//!   older one when two writes race;
+//! - a delete removes the entry;
+//! - a miss loads from the store and compiles outside the lock; it may insert
+//!   its result only if no write happened meanwhile (a write counter, the
+//!   `epoch`, is compared under the lock), so a slow miss can never resurrect
+//!   a deleted clip or reinstate an old version.
+//!
+//! Several nodes (`server::notify`): another node's writes arrive as
+//! invalidations ([`ClipCache::invalidate`], from PostgreSQL `LISTEN/NOTIFY`);
+//! they bump the epoch exactly like local writes do. While a node cannot hear
+//! them (before its first subscription, after a lost connection) the cache
+//! is *suspended*: emptied, and nothing goes in, so every request reads the
+//! store; [`ClipCache::resume`] empties it again once the node listens.
+//!
+//! The cache is bounded twice: by entries (`cache_entries`) and by the heap
+//! bytes of the compiled clips (`cache_bytes`, from [`CachedClip::bytes`]),
+//! since one clip's tables can weigh anything from a kilobyte to tens of
+//! megabytes. A clip larger than the whole byte bound is not cached at all.
+//! Eviction is least-recently-used by a scan at insert time: inserts happen
+//! only on writes and misses, entry capacities are small (default 1024), and
+//! the hit path stays one lock, one hash lookup and one counter store.
+//!
+//! Built motions (`server::motion_cache`) hold the entries of their layers.
+//! So that they never keep alive what this cache let go, every id whose
+//! entry leaves (replaced by a newer version, deleted, invalidated, evicted)
+//! is noted; the caller takes the notes after each insert or invalidation
+//! ([`ClipCache::take_departed`]) and drops the motions over those ids.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::Mutex;
+
+use crate::store::ClipMeta;
+use anim::Clip;
+
+/// A compiled clip at one version, with its row (for summaries).
+#[derive(Debug)]
+pub struct CachedClip {
+    pub meta: ClipMeta,
+    pub clip: Clip,
+}
+
+impl CachedClip {
+    /// The bytes this entry keeps alive: itself, its row's strings and the
+    /// compiled clip's heap.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.meta.id.capacity() + self.meta.name.capacity() + self.clip.heap_bytes()
+    }
+}
+
+/// Motions (requests and streams alike; a clip stream is a one-layer
+/// motion) hold their layers' cache entries, pinned at the version they
+/// were built on: no copy of the clip.
+impl crate::stream::PinnedClip for CachedClip {
+    fn id(&self) -> &str {
+        &self.meta.id
+    }
+
+    fn version(&self) -> u64 {
+        self.meta.version
+    }
+
+    fn clip(&self) -> &Clip {
+        &self.clip
+    }
+}
+
+#[derive(Debug)]
+struct Entry {
+    clip: Arc<CachedClip>,
+    /// `clip.bytes()`, computed once.
+    bytes: usize,
+    last_used: u64,
+}
+
+#[derive(Debug, Default)]
+struct Inner {
+    entries: HashMap<String, Entry>,
+    /// The sum of the entries' `bytes`.
+    bytes: usize,
+    /// Bumped by every write and invalidation.
+    epoch: u64,
+    /// Logical clock for recency.
+    tick: u64,
+    /// True while invalidations may be missed: nothing is cached.
+    suspended: bool,
+    /// Ids whose entry left since [`ClipCache::take_departed`] last ran.
+    departed: Vec<String>,
+}
+
+/// The clip cache; see the module docs for its consistency rules.
+#[derive(Debug)]
+pub struct ClipCache {
+    capacity: usize,
+    capacity_bytes: usize,
+    inner: Mutex<Inner>,
+}
+
+/// A token taken before a miss reads the store; see [`ClipCache::insert_loaded`].
+#[derive(Debug, Clone, Copy)]
+pub struct Epoch(u64);
+
+impl ClipCache {
+    /// A cache of at most `capacity` clips weighing at most `capacity_bytes`.
+    ///
+    /// # Panics
+    /// If `capacity` is 0.
+    pub fn new(capacity: usize, capacity_bytes: usize) -> Self {
+        assert!(capacity > 0, "a cache needs room for one clip");
+        ClipCache { capacity, capacity_bytes, inner: Mutex::new(Inner::default()) }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        crate::sync::lock(&self.inner)
+    }
+
+    pub fn get(&self, id: &str) -> Option<Arc<CachedClip>> {
+        let mut inner = self.lock();
+        inner.tick += 1;
+        let tick = inner.tick;
+        let entry = inner.entries.get_mut(id)?;
+        entry.last_used = tick;
+        Some(entry.clip.clone())
+    }
+
+    /// The current epoch, to pass to [`ClipCache::insert_loaded`].
+    pub fn epoch(&self) -> Epoch {
+        Epoch(self.lock().epoch)
+    }
+
+    /// Write-through after a committed create or replace: keeps whichever of
+    /// the cached and the new version is newer.
+    pub fn insert_written(&self, clip: Arc<CachedClip>) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        if inner.suspended {
+            return;
+        }
+        self.put(&mut inner, clip);
+    }
+
+    /// Inserts what a miss loaded, unless a write happened since `seen` was
+    /// taken (the loaded version may then be stale). Returns whether it went in.
+    pub fn insert_loaded(&self, clip: Arc<CachedClip>, seen: Epoch) -> bool {
+        let mut inner = self.lock();
+        if inner.epoch != seen.0 || inner.suspended {
+            return false;
+        }
+        self.put(&mut inner, clip);
+        true
+    }
+
+    /// After a committed delete, or when another node changed `id`.
+    pub fn invalidate(&self, id: &str) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        Self::remove(&mut inner, id);
+    }
+
+    /// Stops caching and drops every entry: invalidations may be missed
+    /// from now on (the node lost, or does not yet have, its subscription).
+    pub fn suspend(&self) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        inner.suspended = true;
+        Self::clear(&mut inner);
+    }
+
+    /// Caches again, from empty: called once invalidations are heard again,
+    /// so nothing loaded before that moment is kept.
+    pub fn resume(&self) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        inner.suspended = false;
+        Self::clear(&mut inner);
+    }
+
+    /// Whether `clip` is the very entry cached for its id (not merely the
+    /// same version of it), without touching its recency.
+    pub fn holds(&self, clip: &Arc<CachedClip>) -> bool {
+        self.lock().entries.get(&clip.meta.id).is_some_and(|e| Arc::ptr_eq(&e.clip, clip))
+    }
+
+    /// The ids whose entry left the cache since the last call (each once;
+    /// a suspension or resumption notes nothing: it empties the whole cache).
+    pub fn take_departed(&self) -> Vec<String> {
+        std::mem::take(&mut self.lock().departed)
+    }
+
+    /// The cached version of `id`, without touching its recency.
+    pub fn version_of(&self, id: &str) -> Option<u64> {
+        self.lock().entries.get(id).map(|e| e.clip.meta.version)
+    }
+
+    pub fn len(&self) -> usize {
+        self.lock().entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Heap bytes of the cached clips (see [`CachedClip::bytes`]).
+    pub fn bytes(&self) -> usize {
+        self.lock().bytes
+    }
+
+    /// The byte bound.
+    pub fn capacity_bytes(&self) -> usize {
+        self.capacity_bytes
+    }
+
+    /// Puts `clip` in, unless a newer version of it is cached; then evicts
+    /// the least recently used others until both bounds hold. A clip over
+    /// the whole byte bound is not cached, and takes its older version out.
+    fn put(&self, inner: &mut Inner, clip: Arc<CachedClip>) {
+        inner.tick += 1;
+        let tick = inner.tick;
+        let id = clip.meta.id.clone();
+        if let Some(e) = inner.entries.get_mut(&id) {
+            e.last_used = tick;
+            if e.clip.meta.version >= clip.meta.version {
+                return;
+            }
+            Self::remove(inner, &id);
+        }
+        let bytes = clip.bytes();
+        if bytes > self.capacity_bytes {
+            return;
+        }
+        while inner.entries.len() >= self.capacity || inner.bytes + bytes > self.capacity_bytes {
+            let oldest = inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(id, _)| id.clone());
+            match oldest {
+                Some(id) => Self::remove(inner, &id),
+                None => break,
+            }
+        }
+        inner.bytes += bytes;
+        inner.entries.insert(id, Entry { clip, bytes, last_used: tick });
+    }
+
+    fn remove(inner: &mut Inner, id: &str) {
+        if let Some(e) = inner.entries.remove(id) {
+            inner.bytes -= e.bytes;
+            inner.departed.push(e.clip.meta.id.clone());
+        }
+    }
+
+    fn clear(inner: &mut Inner) {
+        inner.entries.clear();
+        inner.bytes = 0;
+        inner.departed.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::ClipStats;
+    use anim::{Channel, ClipSpec, Interpolation, Keys, Playback, TrackSpec};
+
+    fn cached(id: &str, version: u64) -> Arc<CachedClip> {
+        cached_keys(id, version, 1)
+    }
+
+    /// A clip of one linear track with `keys` keys (12 bytes of curve each).
+    fn cached_keys(id: &str, version: u64, keys: usize) -> Arc<CachedClip> {
+        let spec = ClipSpec {
+            name: "c".into(),
+            skeleton: None,
+            tracks: vec![TrackSpec::new(
+                "j",
+                Channel::Translation,
+                Interpolation::Linear,
+                (0..keys).map(|k| k as f32).collect(),
+                Keys::Vec3((0..keys).map(|k| glam::Vec3::splat(k as f32)).collect()),
+            )],
+            events: vec![],
+            playback: Playback::Once,
+            ..Default::default()
+        };
+        let stats = ClipStats { joints: 1, tracks: 1, events: 0, start: 0.0, end: 0.0, playback: Playback::Once };
+        let meta =
+            ClipMeta { id: id.into(), name: "c".into(), version, stats, tags: vec![], created_at: 0, updated_at: 0 };
+        Arc::new(CachedClip { meta, clip: Clip::build(&spec).unwrap() })
+    }
+
+    #[test]
+    fn an_older_version_never_replaces_a_newer_one() {
+        let cache = ClipCache::new(4, usize::MAX);
+        cache.insert_written(cached("a", 3));
+        cache.insert_written(cached("a", 2));
+        assert_eq!(cache.get("a").unwrap().meta.version, 3);
+        cache.insert_written(cached("a", 4));
+        assert_eq!(cache.get("a").unwrap().meta.version, 4);
+    }
+
+    #[test]
+    fn a_miss_that_raced_a_write_is_not_cached() {
+        let cache = ClipCache::new(4, usize::MAX);
+        cache.insert_written(cached("a", 1));
+        let seen = cache.epoch();
+        cache.invalidate("a"); // a delete committed while the miss was loading
+        assert!(!cache.insert_loaded(cached("a", 1), seen));
+        assert!(cache.get("a").is_none());
+        let seen = cache.epoch();
+        assert!(cache.insert_loaded(cached("a", 1), seen));
+    }
+
+    #[test]
+    fn a_suspended_cache_holds_nothing_until_resumed() {
+        let cache = ClipCache::new(4, usize::MAX);
+        cache.insert_written(cached("a", 1));
+        let seen = cache.epoch();
+        cache.suspend();
+        assert!(cache.get("a").is_none());
+        cache.insert_written(cached("b", 1));
+        assert!(!cache.insert_loaded(cached("c", 1), cache.epoch()));
+        assert!(cache.is_empty());
+        cache.resume();
+        assert!(!cache.insert_loaded(cached("a", 1), seen), "a load from before the resume is stale");
+        assert!(cache.insert_loaded(cached("a", 2), cache.epoch()));
+        assert_eq!(cache.version_of("a"), Some(2));
+    }
+
+    #[test]
+    fn every_entry_that_leaves_is_noted_once_and_holds_knows_the_very_entry() {
+        let cache = ClipCache::new(2, usize::MAX);
+        let a1 = cached("a", 1);
+        cache.insert_written(a1.clone());
+        assert!(cache.holds(&a1) && !cache.holds(&cached("a", 1)), "the same version, another copy");
+        cache.insert_written(cached("b", 1));
+        assert!(cache.take_departed().is_empty(), "nothing left yet");
+        cache.insert_written(cached("a", 2)); // replaces a@1
+        cache.insert_written(cached("c", 1)); // evicts b, the least recently used
+        cache.invalidate("c");
+        cache.invalidate("zz"); // not cached: nothing leaves
+        assert_eq!(cache.take_departed(), ["a", "b", "c"]);
+        assert!(cache.take_departed().is_empty() && !cache.holds(&a1));
+        cache.suspend();
+        assert!(cache.take_departed().is_empty(), "a suspension empties everything, noting nothing");
+    }
+
+    #[test]
+    fn the_least_recently_used_entry_is_evicted() {
+        let cache = ClipCache::new(2, usize::MAX);
+        cache.insert_written(cached("a", 1));
+        cache.insert_written(cached("b", 1));
+        cache.get("a");
+        cache.insert_written(cached("c", 1));
+        assert_eq!(cache.len(), 2);
+        assert!(cache.get("a").is_some() && cache.get("c").is_some() && cache.get("b").is_none());
+    }
+
+    #[test]
+    fn the_byte_bound_evicts_the_least_recently_used_and_skips_a_clip_over_it() {
+        let (a, b, c) = (cached_keys("a", 1, 1000), cached_keys("b", 1, 1000), cached_keys("c", 1, 1000));
+        let one = a.bytes();
+        assert!(one > 1000 * 12, "the curve's keys are counted: {one}");
+        let cache = ClipCache::new(100, 2 * one + one / 2);
+        cache.insert_written(a);
+        cache.insert_written(b);
+        assert_eq!((cache.len(), cache.bytes()), (2, 2 * one));
+        cache.get("a");
+        cache.insert_written(c);
+        assert_eq!((cache.len(), cache.bytes()), (2, 2 * one), "b left to make room");
+        assert!(cache.get("b").is_none() && cache.get("a").is_some() && cache.get("c").is_some());
+        // Too big for the whole cache: not cached, and its old version goes.
+        cache.insert_written(cached_keys("a", 2, 4000));
+        assert!(cache.get("a").is_none());
+        assert_eq!((cache.len(), cache.bytes()), (1, one));
+        cache.invalidate("c");
+        assert_eq!((cache.len(), cache.bytes()), (0, 0));
+    }
+}

@@ -1,0 +1,290 @@
+//! Content codings on the REST port (the gRPC port's are tonic's own,
+//! switched on in `grpc`).
+//!
+//! **Answers** are compressed with zstd, br or gzip when the client's
+//! `Accept-Encoding` asks for one (tower-http's `CompressionLayer`): clip
+//! documents (the 131_03 take: 1.8 MB of JSON), sample batches, the OpenAPI
+//! document and the viewer's files. Not compressed: answers of a known length
+//! under `compression_min_bytes` (a pose, an error: a compressor's header and
+//! CPU for a few bytes saved), the WebSocket upgrade (a 101 without a body;
+//! frames are never compressed: no `permessage-deflate`), gRPC, images and
+//! event streams. An answer sent in pieces (`rest::pieces`) is compressed
+//! piece by piece as the client takes them: the encoder holds its window,
+//! never the answer.
+//!
+//! [`negotiate`] picks the coding itself and hands the compressor exactly
+//! that one: the client's highest `q`, ties broken zstd → br → gzip (zstd is
+//! the fastest of the three at a similar size). A header that accepts none of
+//! them (`identity;q=0` alone, say) gets an uncompressed answer, which RFC
+//! 9110 §12.5.3 allows, rather than tower-http 0.7's 406 — which it sends
+//! after the handler ran, so a `POST` would have created a clip behind it.
+//!
+//! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
+//! that ask, except stream frames ([`frames_uncompressed`]), and decodes
+//! compressed requests ([`grpc`]).
+//!
+//! **Request bodies** may be sent with `Content-Encoding: gzip`, `br` or
+//! `zstd` (uploads of large documents). They are decoded *before* the body
+//! guard (`body_guard`) reads them, so `max_body_bytes` and the arrival
+//! budget count decoded bytes: a small compressed body that inflates past the
+//! limit is cut off with 413 as soon as the decoded bytes pass it, and no
+//! more of it is inflated (a zip bomb costs the server at most
+//! `max_body_bytes` of inflating). A coding we do not decode is 415
+//! `unsupported_media_type`, with `Accept-Encoding` naming the ones we do.
+//! With `compression = false` neither happens: answers go as they are and
+//! a compressed body is 415.
+
+use axum::body::HttpBody;
+use axum::extract::{Request, State};
+use axum::http::header::{ACCEPT_ENCODING, CONTENT_ENCODING, CONTENT_LENGTH};
+use axum::http::{HeaderMap, HeaderValue, StatusCode};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use tower_http::compression::CompressionLayer;
+use tower_http::compression::predicate::{NotForContentType, Predicate};
+use tower_http::decompression::RequestDecompressionLayer;
+
+use tonic::codec::CompressionEncoding;
+
+use super::config::Compression;
+use super::error::ApiError;
+use formats::wire::proto::server::animation_server::{Animation, AnimationServer};
+
+/// The codings we produce and decode, in our order of preference.
+const CODINGS: [&str; 3] = ["zstd", "br", "gzip"];
+
+/// The content coding a request body was sent in, left in the request's
+/// extensions for the body guard's error message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BodyCoding(pub &'static str);
+
+/// Answers worth compressing by status and size: never one that has no
+/// body by definition (1xx — the WebSocket upgrade —, 204, 304) or an empty
+/// one, nor one whose known length is under the minimum. A length not known
+/// in advance (an answer sent in pieces) is compressed.
+#[derive(Debug, Clone, Copy)]
+struct WorthIt {
+    min_bytes: u64,
+}
+
+impl Predicate for WorthIt {
+    fn should_compress<B: HttpBody>(&self, response: &axum::http::Response<B>) -> bool {
+        let status = response.status();
+        if status.is_informational() || status == StatusCode::NO_CONTENT || status == StatusCode::NOT_MODIFIED {
+            return false;
+        }
+        let known = response.body().size_hint().exact().or_else(|| {
+            response.headers().get(CONTENT_LENGTH).and_then(|v| v.to_str().ok()).and_then(|v| v.parse().ok())
+        });
+        known.is_none_or(|n| n > 0 && n >= self.min_bytes)
+    }
+}
+
+/// The compressor of answers (see the module doc for what it leaves alone).
+pub fn responses(config: Compression) -> CompressionLayer<impl Predicate> {
+    let worth_it = WorthIt { min_bytes: config.min_bytes as u64 }
+        .and(NotForContentType::GRPC)
+        .and(NotForContentType::IMAGES)
+        .and(NotForContentType::SSE);
+    CompressionLayer::new().zstd(config.enabled).br(config.enabled).gzip(config.enabled).compress_when(worth_it)
+}
+
+/// The decoder of request bodies; [`negotiate`] has already refused codings
+/// it does not decode.
+pub fn requests(config: Compression) -> RequestDecompressionLayer {
+    RequestDecompressionLayer::new().zstd(config.enabled).br(config.enabled).gzip(config.enabled)
+}
+
+/// The `Animation` service with gzip and zstd both ways: requests sent with
+/// `grpc-encoding` are decoded (tonic counts the decoding limit in decoded
+/// bytes and stops inflating there: `RESOURCE_EXHAUSTED`), and answers are
+/// compressed when the client's `grpc-accept-encoding` lists one of them.
+pub fn grpc<S: Animation>(server: AnimationServer<S>, config: Compression) -> AnimationServer<S> {
+    if !config.enabled {
+        return server;
+    }
+    server
+        .accept_compressed(CompressionEncoding::Gzip)
+        .accept_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Gzip)
+}
+
+/// The gRPC methods whose answers are stream frames.
+const FRAME_METHODS: [&str; 2] = ["/inbetween.v1.Animation/StreamFrames", "/inbetween.v1.Animation/Play"];
+
+/// Frames go uncompressed on gRPC as on the WebSocket: a playback encodes
+/// each frame once for all its viewers, and compressing would cost every
+/// viewer a compressor per tick (a packed 38-joint frame halves under gzip,
+/// ≈ 1.5 KB → 0.7 KB, at tens of µs each, times viewers × fps) — and
+/// grpcio clients ask for gzip by default. The server-side layer drops the
+/// client's `grpc-accept-encoding` on those two methods only; what the
+/// client sends compressed is still decoded.
+pub fn frames_uncompressed<B>(mut request: axum::http::Request<B>) -> axum::http::Request<B> {
+    if FRAME_METHODS.contains(&request.uri().path()) {
+        request.headers_mut().remove("grpc-accept-encoding");
+    }
+    request
+}
+
+/// Middleware (outside [`requests`] and [`responses`]): checks the body's
+/// `Content-Encoding` and rewrites `Accept-Encoding` to the one coding the
+/// answer will use (module doc).
+pub async fn negotiate(State(config): State<Compression>, mut request: Request, next: Next) -> Response {
+    match body_coding(request.headers(), config.enabled) {
+        Ok(None) => {
+            request.headers_mut().remove(CONTENT_ENCODING);
+        }
+        Ok(Some(_)) if request.body().is_end_stream() => {
+            // No body to decode (a GET that names a coding): nothing to do.
+            request.headers_mut().remove(CONTENT_ENCODING);
+        }
+        Ok(Some(coding)) => {
+            request.headers_mut().insert(CONTENT_ENCODING, HeaderValue::from_static(coding));
+            request.extensions_mut().insert(BodyCoding(coding));
+        }
+        Err(e) => return unsupported(e, config.enabled),
+    }
+    let chosen = if config.enabled { answer_coding(request.headers()) } else { None };
+    match chosen {
+        Some(coding) => request.headers_mut().insert(ACCEPT_ENCODING, HeaderValue::from_static(coding)),
+        None => request.headers_mut().remove(ACCEPT_ENCODING),
+    };
+    next.run(request).await
+}
+
+/// The body's coding: `None` for none or `identity`, one of [`CODINGS`]
+/// (lower-cased) when enabled, else the refusal.
+fn body_coding(headers: &HeaderMap, enabled: bool) -> Result<Option<&'static str>, ApiError> {
+    let mut values = headers.get_all(CONTENT_ENCODING).iter();
+    let Some(value) = values.next() else { return Ok(None) };
+    let refuse = |what: &str| ApiError::UnsupportedMediaType {
+        detail: if enabled {
+            format!("Content-Encoding {what} is not decoded here: send the body as it is, or in gzip, br or zstd")
+        } else {
+            format!("Content-Encoding {what} is not decoded here (compression is off): send the body as it is")
+        },
+    };
+    let text = value.to_str().unwrap_or("").trim().to_ascii_lowercase();
+    if values.next().is_some() || text.contains(',') {
+        return Err(refuse("with several codings"));
+    }
+    if text == "identity" {
+        return Ok(None);
+    }
+    match CODINGS.iter().find(|c| **c == text) {
+        Some(coding) if enabled => Ok(Some(coding)),
+        _ => Err(refuse(&format!("`{text}`"))),
+    }
+}
+
+/// 415, naming the codings we decode (RFC 7694).
+fn unsupported(e: ApiError, enabled: bool) -> Response {
+    let mut response = e.into_response();
+    let accepted = if enabled { "zstd, br, gzip" } else { "identity" };
+    response.headers_mut().insert(ACCEPT_ENCODING, HeaderValue::from_static(accepted));
+    response
+}
+
+/// The coding of the answer: the one of [`CODINGS`] the client's
+/// `Accept-Encoding` (every line of it) gives the highest `q`, ties in our
+/// order; `None` when it accepts none of them. Entries whose `q` does not
+/// parse are ignored; `*` stands for any coding not named.
+fn answer_coding(headers: &HeaderMap) -> Option<&'static str> {
+    let mut named: Vec<(String, f32)> = Vec::new();
+    let mut any: Option<f32> = None;
+    for item in headers.get_all(ACCEPT_ENCODING).iter().filter_map(|v| v.to_str().ok()).flat_map(|v| v.split(',')) {
+        let mut parts = item.split(';');
+        let coding = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+        let q = match parts.find_map(|p| p.trim().strip_prefix("q=").or_else(|| p.trim().strip_prefix("Q="))) {
+            Some(q) => match q.trim().parse::<f32>() {
+                Ok(q) if (0.0..=1.0).contains(&q) => q,
+                _ => continue,
+            },
+            None => 1.0,
+        };
+        match coding.as_str() {
+            "" => {}
+            "*" => any = Some(q),
+            _ => named.push((coding, q)),
+        }
+    }
+    let q_of = |coding: &str| named.iter().find(|(c, _)| c == coding).map(|(_, q)| *q).or(any).unwrap_or(0.0);
+    let mut best: Option<(&'static str, f32)> = None;
+    for coding in CODINGS {
+        let q = q_of(coding);
+        if q > 0.0 && best.is_none_or(|(_, b)| q > b) {
+            best = Some((coding, q));
+        }
+    }
+    best.map(|(c, _)| c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn choose(lines: &[&str]) -> Option<&'static str> {
+        let mut headers = HeaderMap::new();
+        for line in lines {
+            headers.append(ACCEPT_ENCODING, HeaderValue::from_str(line).unwrap());
+        }
+        answer_coding(&headers)
+    }
+
+    #[test]
+    fn the_clients_preference_wins_and_ties_go_zstd_br_gzip() {
+        assert_eq!(choose(&[]), None);
+        assert_eq!(choose(&["gzip, deflate, br, zstd"]), Some("zstd"), "Chrome's header");
+        assert_eq!(choose(&["gzip, deflate, br"]), Some("br"));
+        assert_eq!(choose(&["gzip"]), Some("gzip"));
+        assert_eq!(choose(&["GZIP;Q=0.5, br;q=0.4"]), Some("gzip"));
+        assert_eq!(choose(&["zstd;q=0.1", "gzip;q=0.9"]), Some("gzip"), "every header line counts");
+        assert_eq!(choose(&["*"]), Some("zstd"));
+        assert_eq!(choose(&["*;q=0.5, zstd;q=0"]), Some("br"), "a named q=0 beats the wildcard");
+        assert_eq!(choose(&["deflate, compress"]), None, "nothing we produce");
+        assert_eq!(choose(&["identity;q=0"]), None, "refusing identity alone gets identity anyway");
+        assert_eq!(choose(&["gzip;q=2, br;q=abc, zstd;q=0.3"]), Some("zstd"), "bad q values are ignored");
+    }
+
+    #[test]
+    fn bodiless_statuses_empty_and_small_answers_are_not_worth_compressing() {
+        let worth = WorthIt { min_bytes: 1024 };
+        let answer =
+            |status: u16, body: axum::body::Body| axum::http::Response::builder().status(status).body(body).unwrap();
+        let big = || axum::body::Body::from(vec![b'x'; 4096]);
+        assert!(worth.should_compress(&answer(200, big())));
+        for status in [101, 204, 304] {
+            assert!(!worth.should_compress(&answer(status, big())), "{status}");
+        }
+        assert!(!worth.should_compress(&answer(200, axum::body::Body::empty())));
+        assert!(!worth.should_compress(&answer(200, axum::body::Body::from(vec![b'x'; 1023]))));
+        assert!(worth.should_compress(&answer(200, axum::body::Body::from(vec![b'x'; 1024]))));
+        let pieces = axum::body::Body::from_stream(futures_util::stream::iter([Ok::<_, std::io::Error>("x")]));
+        assert!(worth.should_compress(&answer(200, pieces)), "a length not known in advance");
+        let zero = WorthIt { min_bytes: 0 };
+        assert!(!zero.should_compress(&answer(200, axum::body::Body::empty())), "never an empty body");
+    }
+
+    fn content_encoding(values: &[&str], enabled: bool) -> Result<Option<&'static str>, u16> {
+        let mut headers = HeaderMap::new();
+        for v in values {
+            headers.append(CONTENT_ENCODING, HeaderValue::from_str(v).unwrap());
+        }
+        body_coding(&headers, enabled).map_err(|e| e.status().as_u16())
+    }
+
+    #[test]
+    fn request_codings_are_ours_or_refused() {
+        assert_eq!(content_encoding(&[], true), Ok(None));
+        assert_eq!(content_encoding(&["identity"], true), Ok(None));
+        assert_eq!(content_encoding(&[" GZip "], true), Ok(Some("gzip")));
+        assert_eq!(content_encoding(&["zstd"], true), Ok(Some("zstd")));
+        assert_eq!(content_encoding(&["br"], true), Ok(Some("br")));
+        assert_eq!(content_encoding(&["deflate"], true), Err(415));
+        assert_eq!(content_encoding(&["gzip, gzip"], true), Err(415));
+        assert_eq!(content_encoding(&["gzip", "br"], true), Err(415));
+        assert_eq!(content_encoding(&["gzip"], false), Err(415));
+        assert_eq!(content_encoding(&["identity"], false), Ok(None));
+    }
+}

@@ -1,0 +1,330 @@
+//! `inbetween serve`: the HTTP service around the core.
+//!
+//! [`Application::build`] opens the store, binds the listeners (port 0 picks a
+//! free one; [`Application::local_addr`] and [`Application::grpc_addr`]
+//! report them) and assembles the router;
+//! [`Application::run_until_stopped`] serves until the given shutdown future
+//! resolves, then drains. `main` and `cli/serve.rs` only wire flags to this,
+//! and tests build it directly on `127.0.0.1:0` with a temporary store.
+//!
+//! Codemap: `config` layered settings; `error` the one `ApiError` (the only
+//! place statuses are chosen); `state` what handlers share; `cache` compiled
+//! clips (bounded in entries and bytes); `motion_cache` built motions over
+//! them; `builds` where clips are built (blocking threads, a few at once);
+//! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
+//! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
+//! `request` the sampling and stream rules both transports share, with their
+//! stable codes; `rest` the routes; `grpc` the gRPC API, served on its own port
+//! (`--grpc-listen`) by tonic beside the HTTP server, with the same shutdown.
+//!
+//! Shutdown: when the signal fires, readiness flips to 503 first; the
+//! streaming engine ends every stream with a final status (gRPC
+//! `UNAVAILABLE`, WebSocket close 1001: upgraded connections live in their
+//! own tasks, which the engine's shutdown reaches) and waits for them to be
+//! delivered; then both servers stop accepting and let in-flight requests
+//! finish. One drain deadline (the drain timeout from the signal) bounds all
+//! of it: whatever is still open then (a client that ignores GOAWAY, a
+//! request that never ends) is cut off. Then the metrics upkeep task stops
+//! and the store closes.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::net::TcpListener;
+
+use crate::store::ClipStore;
+use crate::store::postgres::PgStore;
+use crate::store::sqlite::SqliteStore;
+use crate::stream::{Engine, EngineConfig};
+
+pub mod access_log;
+pub mod auth;
+pub mod body_guard;
+pub mod broadcast_store;
+pub mod builds;
+pub mod cache;
+pub mod compression;
+pub mod config;
+pub mod connections;
+pub mod error;
+pub mod grpc;
+pub mod grpc_edge;
+pub mod grpc_motion;
+pub mod limits;
+mod listen;
+pub mod metrics;
+pub mod motion_cache;
+pub mod notify;
+pub mod ratelimit;
+pub mod request;
+pub mod rest;
+pub mod shed;
+pub mod spool;
+pub mod state;
+pub mod tls;
+pub mod tokens;
+
+pub mod store;
+pub mod stream;
+
+mod panics;
+mod sync;
+
+pub use config::Config;
+pub use error::ApiError;
+pub use state::AppState;
+
+/// A built server: store open, listeners bound, not yet serving.
+pub struct Application {
+    listener: TcpListener,
+    grpc_listener: TcpListener,
+    state: AppState,
+    /// Certificate and key when serving TLS (`--tls-cert`).
+    tls: Option<tls::TlsMaterial>,
+    /// The shared PostgreSQL store, whose change notifications keep the cache
+    /// in step with other nodes (`notify`); `None` for SQLite.
+    shared_store: Option<PgStore>,
+}
+
+impl Application {
+    /// Opens the store (running migrations) and binds the listener.
+    ///
+    /// # Errors
+    /// The data directory or database cannot be opened, or the address
+    /// cannot be bound.
+    pub async fn build(config: Config) -> anyhow::Result<Application> {
+        let mut shared_store = None;
+        let store: Arc<dyn ClipStore> = match &config.store {
+            config::StoreConfig::DataDir(dir) => {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating data directory {}", dir.display()))?;
+                let path = dir.join("inbetween.db");
+                let store = SqliteStore::open(&path, &config.db)
+                    .await
+                    .with_context(|| format!("opening {}", path.display()))?;
+                Arc::new(store)
+            }
+            config::StoreConfig::SqliteUrl(url) => {
+                Arc::new(SqliteStore::open_url(url.expose(), &config.db).await.context("opening database_url")?)
+            }
+            config::StoreConfig::Postgres(url) => {
+                let store = PgStore::open(url.expose(), &config.db).await.context("opening the PostgreSQL database")?;
+                shared_store = Some(store.clone());
+                Arc::new(store)
+            }
+        };
+        let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
+        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, config.limits.cache_bytes));
+        if shared_store.is_some() {
+            // Nothing is cached until this node hears other nodes' changes.
+            cache.suspend();
+        }
+        let listener = listen::bind(config.listen).with_context(|| format!("binding {}", config.listen))?;
+        let grpc_listener =
+            listen::bind(config.grpc_listen).with_context(|| format!("binding {}", config.grpc_listen))?;
+        let streams = Engine::new(EngineConfig {
+            max_streams: config.limits.max_streams,
+            max_streams_per_client: config.limits.max_streams_per_client,
+            max_streams_per_token: config.limits.max_streams_per_token,
+            max_broadcasts: config.limits.max_broadcasts,
+            broadcast_lead: config.limits.broadcast_control_lead,
+            precise_timer: true,
+            ..EngineConfig::default()
+        });
+        let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
+        let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
+        // The recorder first: handles registered before it would count nothing.
+        let prometheus = metrics::handle();
+        let counters = metrics::Counters::new();
+        counters.cache_limit(config.limits.cache_bytes);
+        let config = Arc::new(config);
+        let state = AppState::new(state::Shared {
+            store,
+            cache,
+            motions: motion_cache::MotionCache::new(config.limits.motion_cache_entries),
+            writes,
+            in_flight: shed::Clients::new(config.limits.max_in_flight_per_client),
+            arrivals: shed::Arrivals::new(config.limits.max_arriving_bytes),
+            auth: auth::Auth::new(Arc::clone(&config)),
+            config,
+            metrics: prometheus,
+            counters,
+            ready: Arc::new(AtomicBool::new(true)),
+            loads: Arc::default(),
+            streams,
+            builds,
+        });
+        // Broadcasts are kept in the store: resumed after a restart, shared by every node.
+        let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };
+        state.streams.broadcasts().set_journal(Arc::new(journal));
+        let app = Application { listener, grpc_listener, state, tls, shared_store };
+        // One line with every setting in effect; `Secret` and `StoreConfig` print no token or password.
+        tracing::info!(
+            http = %app.local_addr(),
+            grpc = %app.grpc_addr(),
+            config = ?app.state.config,
+            "starting with the effective configuration (secrets redacted)"
+        );
+        Ok(app)
+    }
+
+    /// The bound address (the real port when built with port 0).
+    ///
+    /// # Panics
+    /// If the OS cannot report the socket's address (it always can for a bound TCP listener).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.listener.local_addr().expect("a bound listener has an address")
+    }
+
+    /// The bound gRPC address.
+    ///
+    /// # Panics
+    /// As [`Application::local_addr`].
+    pub fn grpc_addr(&self) -> SocketAddr {
+        self.grpc_listener.local_addr().expect("a bound listener has an address")
+    }
+
+    /// Whether both listeners speak TLS (`--tls-cert`).
+    pub fn serves_tls(&self) -> bool {
+        self.tls.is_some()
+    }
+
+    /// The shared state (for tests and for protocols served beside REST).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Serves until `shutdown` resolves, then drains in-flight requests for
+    /// at most the configured drain timeout.
+    ///
+    /// # Errors
+    /// The gRPC routes cannot be built (the embedded descriptor set does not
+    /// parse: a build defect). Accept errors are logged and retried.
+    pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
+        let Application { listener, grpc_listener, state, tls, shared_store } = self;
+        let header_timeout = state.config.limits.header_read_timeout;
+        let http_tls = match &tls {
+            Some(m) => Some(tls::Acceptor::from(m.http_config()?)),
+            None => None,
+        };
+        let mut grpc_server = tonic::transport::Server::builder();
+        if let Some(m) = &tls {
+            grpc_server = grpc_server.tls_config(m.grpc_config(header_timeout))?;
+        }
+        let drain = state.config.drain_timeout;
+        if shared_store.is_none() {
+            // One node alone: resume the stored broadcasts at the tick the wall clock says.
+            // (With PostgreSQL the listener does it each time it subscribes.)
+            tokio::spawn({
+                let state = state.clone();
+                async move { broadcast_store::resync(&state).await }
+            });
+        }
+        let notify = shared_store.map(|store| tokio::spawn(notify::run(store, state.clone())));
+        let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
+        let (started_tx, started_rx) = tokio::sync::oneshot::channel::<tokio::time::Instant>();
+        // Streams end first (each with its final status), then both servers
+        // stop accepting and drain, all by one deadline (sent on `stop`).
+        let (stop_tx, stop_rx) = tokio::sync::watch::channel(None::<tokio::time::Instant>);
+        let ready = state.ready.clone();
+        let streams = state.streams.clone();
+        let coordinator = tokio::spawn(async move {
+            shutdown.await;
+            let deadline = tokio::time::Instant::now() + drain;
+            ready.store(false, Ordering::Release);
+            tracing::info!(active = streams.active_streams(), "shutting down: ending streams");
+            streams.shutdown();
+            if !streams.drained(drain).await {
+                tracing::warn!(timeout = ?drain, "streams still open after the drain timeout");
+            }
+            tracing::info!("shutting down: draining in-flight requests");
+            let _ = stop_tx.send(Some(deadline));
+        });
+        let mut http_stop = stop_rx.clone();
+        let signal = async move {
+            let deadline = http_stop.wait_for(Option::is_some).await.ok().and_then(|d| *d);
+            if let Some(deadline) = deadline {
+                let _ = started_tx.send(deadline);
+            }
+        };
+        let mut grpc_stop = stop_rx.clone();
+        let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
+        let limits = &state.config.limits;
+        let admission = shed::GrpcLayer {
+            admission: shed::Admission {
+                gate: shed::Gate::new(limits.max_in_flight),
+                clients: Arc::clone(&state.in_flight),
+            },
+            arrivals: state.arrivals.clone(),
+            auth: state.auth.clone(),
+            message_timeout: limits.request_message_timeout,
+        };
+        let incoming = connections::tracked_incoming(
+            grpc_listener,
+            connections::ConnGate::new(limits.max_connections, "grpc"),
+            (limits.idle_timeout, limits.write_stall_timeout),
+            limits.stream_buffer_bytes,
+        );
+        let mut grpc = tokio::spawn(
+            grpc_server
+                .http2_keepalive_interval(Some(Duration::from_secs(30)))
+                .max_concurrent_streams(limits.http2_max_concurrent_streams)
+                .layer(connections::GrpcConnLayer)
+                .layer(tower::util::MapRequestLayer::new(compression::frames_uncompressed))
+                .layer(grpc_edge::layer())
+                .layer(admission)
+                .add_routes(routes)
+                .serve_with_incoming_shutdown(incoming, async move {
+                    let _ = grpc_stop.wait_for(Option::is_some).await;
+                }),
+        );
+        let router = rest::router(state.clone());
+        let listening = listen::Listening {
+            header_read_timeout: header_timeout,
+            idle_timeout: limits.idle_timeout,
+            write_stall_timeout: limits.write_stall_timeout,
+            max_concurrent_streams: limits.http2_max_concurrent_streams,
+            connections: connections::ConnGate::new(limits.max_connections, "http"),
+            stream_buffer_bytes: limits.stream_buffer_bytes,
+        };
+        let mut serve = std::pin::pin!(listen::serve(listener, router, listening, http_tls, signal));
+        tokio::select! {
+            () = &mut serve => {}
+            Ok(deadline) = started_rx => {
+                if tokio::time::timeout_at(deadline, &mut serve).await.is_err() {
+                    tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
+                }
+            }
+        }
+        let deadline = stop_rx.borrow().unwrap_or_else(|| tokio::time::Instant::now() + drain);
+        match tokio::time::timeout_at(deadline, &mut grpc).await {
+            Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
+            Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
+            Ok(Ok(Ok(()))) => {}
+            Err(_) => {
+                tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls");
+                grpc.abort();
+            }
+        }
+        coordinator.abort();
+        upkeep.abort();
+        if let Some(notify) = notify {
+            notify.abort();
+        }
+        state.store.close().await;
+        tracing::info!("stopped");
+        Ok(())
+    }
+}
+
+/// Runs the Prometheus exporter's upkeep (histogram rotation) until aborted.
+async fn upkeep(handle: metrics_exporter_prometheus::PrometheusHandle) {
+    let mut every = tokio::time::interval(Duration::from_secs(5));
+    loop {
+        every.tick().await;
+        handle.run_upkeep();
+    }
+}

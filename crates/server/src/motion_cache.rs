@@ -1,0 +1,424 @@
+//! A bounded cache of built motions (SPEC §6), so a client that asks for the
+//! same composition every frame (`POST /v1/poses` at 60 Hz) looks its clips
+//! up but does not rebuild the motion (masks resolved, joints mapped by name,
+//! additive reference poses sampled) for each pose.
+//!
+//! **The key** ([`MotionKey`]) is the motion as the request gave it, every
+//! field of it (floats by their bits), together with the id *and version* of
+//! each layer's pinned clip. The versions are those the clip lookups just
+//! returned, so a cached motion is only ever found for the very clip versions
+//! the request would build on: a motion over a replaced version can never be
+//! served, even before any invalidation reaches this cache. Mask joints enter
+//! the key sorted by name (gRPC's map arrives in no fixed order; a motion
+//! naming a joint twice is refused when built, so for every motion that
+//! builds, the order is immaterial). The joint subset and the output format
+//! stay out of the key: they are checked per request on the cached motion.
+//!
+//! **Invalidation** keeps replaced or evicted versions from being held alive
+//! here (a cached motion holds its clips): a motion goes in only while each
+//! of its clips is still the clip cache's entry for its id (checked under
+//! this cache's lock, see [`MotionCache::insert_if`]), and whenever the clip
+//! cache lets an entry go (a local replace or delete, another node's change
+//! heard by `server::notify`, an eviction, a suspension) every motion with a
+//! layer of that clip id is dropped ([`MotionCache::invalidate`]). So this
+//! cache never keeps a clip in memory that the clip cache's byte bound has
+//! let go, and while the clip cache is suspended nothing is cached here
+//! either.
+//!
+//! Eviction is least-recently-used by a scan at insert time, as in the clip
+//! cache: inserts happen only on misses, and the hit path stays one lock and
+//! one hash lookup. Invalidation scans every entry's layers; it happens only
+//! on writes and evictions.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use crate::stream::{PinnedClip, StreamMotion};
+use anim::Playback;
+use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+
+/// What identifies a built motion: the request's motion, field by field,
+/// and each layer's pinned clip id and version, in an unambiguous byte
+/// encoding (lengths before strings, tags before options).
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct MotionKey(Box<[u8]>);
+
+impl MotionKey {
+    /// The key of `spec` over the clips its layers were looked up at.
+    pub fn of<P: PinnedClip + ?Sized>(spec: &MotionSpec<Arc<P>>) -> Self {
+        // Destructured without `..`: a field added to the spec cannot be left out of the key.
+        let MotionSpec { layers, root_motion, ik } = spec;
+        let mut key = KeyWriter(Vec::with_capacity(64 * layers.len()));
+        key.len(layers.len());
+        for layer in layers {
+            key.layer(layer);
+        }
+        key.root_motion(root_motion.as_ref());
+        // Every field of every constraint, floats in their shortest exact
+        // form: two lists give the same text only if they are the same.
+        key.str(&format!("{ik:?}"));
+        MotionKey(key.0.into_boxed_slice())
+    }
+}
+
+/// Builds a key's bytes.
+struct KeyWriter(Vec<u8>);
+
+impl KeyWriter {
+    fn layer<P: PinnedClip + ?Sized>(&mut self, layer: &LayerSpec<Arc<P>>) {
+        let LayerSpec { clip, weight, mode, mask, offset, speed, playback, sync, reference_time } = layer;
+        self.str(clip.id());
+        self.u64(clip.version());
+        self.f32(*weight);
+        self.tag(match mode {
+            LayerMode::Blend => 0,
+            LayerMode::Additive => 1,
+        });
+        self.mask(mask.as_ref());
+        self.f64(*offset);
+        self.f64(*speed);
+        self.tag(match playback {
+            None => 0,
+            Some(Playback::Once) => 1,
+            Some(Playback::Loop) => 2,
+            Some(Playback::PingPong) => 3,
+        });
+        self.option(sync.as_deref(), Self::str);
+        self.option(*reference_time, Self::f64);
+    }
+
+    fn mask(&mut self, mask: Option<&MaskSpec>) {
+        self.option(mask, |key, mask| {
+            let MaskSpec { joints, descendants, default } = mask;
+            let mut sorted: Vec<&(String, f32)> = joints.iter().collect();
+            sorted.sort_by(|(a, wa), (b, wb)| a.cmp(b).then(wa.to_bits().cmp(&wb.to_bits())));
+            key.len(sorted.len());
+            for (name, weight) in sorted {
+                key.str(name);
+                key.f32(*weight);
+            }
+            key.tag(u8::from(*descendants));
+            key.option(*default, Self::f32);
+        });
+    }
+
+    fn root_motion(&mut self, root: Option<&RootMotionSpec>) {
+        self.option(root, |key, root| {
+            let RootMotionSpec { joint, mode, up } = root;
+            key.option(joint.as_deref(), Self::str);
+            key.tag(match mode {
+                RootMode::Report => 0,
+                RootMode::Extract => 1,
+            });
+            key.tag(match up {
+                UpAxis::Y => 0,
+                UpAxis::Z => 1,
+            });
+        });
+    }
+
+    fn option<T>(&mut self, value: Option<T>, write: impl FnOnce(&mut Self, T)) {
+        match value {
+            None => self.tag(0),
+            Some(v) => {
+                self.tag(1);
+                write(self, v);
+            }
+        }
+    }
+
+    fn tag(&mut self, tag: u8) {
+        self.0.push(tag);
+    }
+
+    fn len(&mut self, len: usize) {
+        self.u64(len as u64);
+    }
+
+    fn str(&mut self, s: &str) {
+        self.len(s.len());
+        self.0.extend_from_slice(s.as_bytes());
+    }
+
+    fn u64(&mut self, n: u64) {
+        self.0.extend_from_slice(&n.to_le_bytes());
+    }
+
+    fn f32(&mut self, x: f32) {
+        self.0.extend_from_slice(&x.to_bits().to_le_bytes());
+    }
+
+    fn f64(&mut self, x: f64) {
+        self.u64(x.to_bits());
+    }
+}
+
+#[derive(Debug)]
+struct Entry {
+    motion: Arc<StreamMotion>,
+    last_used: u64,
+}
+
+#[derive(Debug, Default)]
+struct Inner {
+    entries: HashMap<MotionKey, Entry>,
+    /// Logical clock for recency.
+    tick: u64,
+}
+
+/// The motion cache; see the module docs for its key and invalidation rules.
+#[derive(Debug)]
+pub struct MotionCache {
+    capacity: usize,
+    inner: Mutex<Inner>,
+}
+
+impl MotionCache {
+    /// A cache of at most `capacity` motions.
+    ///
+    /// # Panics
+    /// If `capacity` is 0.
+    pub fn new(capacity: usize) -> Self {
+        assert!(capacity > 0, "a motion cache needs room for one motion");
+        MotionCache { capacity, inner: Mutex::new(Inner::default()) }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        crate::sync::lock(&self.inner)
+    }
+
+    pub fn get(&self, key: &MotionKey) -> Option<Arc<StreamMotion>> {
+        let mut inner = self.lock();
+        inner.tick += 1;
+        let tick = inner.tick;
+        let entry = inner.entries.get_mut(key)?;
+        entry.last_used = tick;
+        Some(Arc::clone(&entry.motion))
+    }
+
+    /// Puts `motion` in under `key` if `still_current()` holds, asked under
+    /// this cache's lock: an invalidation cannot slip between the question
+    /// and the insert (it waits for the lock, then drops the motion). Evicts
+    /// the least recently used motion when full. Returns whether it went in.
+    pub fn insert_if(&self, key: MotionKey, motion: Arc<StreamMotion>, still_current: impl FnOnce() -> bool) -> bool {
+        let mut inner = self.lock();
+        if !still_current() {
+            return false;
+        }
+        inner.tick += 1;
+        let tick = inner.tick;
+        if !inner.entries.contains_key(&key) && inner.entries.len() >= self.capacity {
+            let oldest = inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(k, _)| k.clone());
+            if let Some(oldest) = oldest {
+                inner.entries.remove(&oldest);
+            }
+        }
+        inner.entries.insert(key, Entry { motion, last_used: tick });
+        true
+    }
+
+    /// Drops every motion with a layer of one of `clip_ids`; returns how many.
+    pub fn invalidate<S: AsRef<str>>(&self, clip_ids: &[S]) -> usize {
+        if clip_ids.is_empty() {
+            return 0;
+        }
+        let mut inner = self.lock();
+        let before = inner.entries.len();
+        let uses = |motion: &StreamMotion| motion.layers().any(|c| clip_ids.iter().any(|id| id.as_ref() == c.id()));
+        inner.entries.retain(|_, e| !uses(&e.motion));
+        before - inner.entries.len()
+    }
+
+    /// Drops everything (the clip cache was suspended or resumed).
+    pub fn clear(&self) {
+        self.lock().entries.clear();
+    }
+
+    pub fn len(&self) -> usize {
+        self.lock().entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Motion, TrackSpec};
+
+    /// A clip pinned at a version: joints `j` and `k`.
+    fn pinned(id: &str, version: u64) -> Arc<dyn PinnedClip> {
+        let track = |joint: &str| {
+            TrackSpec::new(
+                joint,
+                Channel::Translation,
+                Interpolation::Linear,
+                vec![0.0, 1.0],
+                Keys::Vec3(vec![glam::Vec3::ZERO, glam::Vec3::X]),
+            )
+        };
+        let spec = ClipSpec {
+            name: id.into(),
+            skeleton: None,
+            tracks: vec![track("j"), track("k")],
+            events: vec![],
+            playback: Playback::Loop,
+            ..Default::default()
+        };
+        Arc::new(crate::stream::Pinned::new(id, version, Arc::new(Clip::build(&spec).unwrap())))
+    }
+
+    /// A motion of one full layer per clip.
+    fn spec(clips: &[Arc<dyn PinnedClip>]) -> MotionSpec<Arc<dyn PinnedClip>> {
+        MotionSpec {
+            layers: clips.iter().cloned().map(LayerSpec::new).collect(),
+            root_motion: None,
+            ..Default::default()
+        }
+    }
+
+    fn built(spec: MotionSpec<Arc<dyn PinnedClip>>) -> (MotionKey, Arc<StreamMotion>) {
+        (MotionKey::of(&spec), Arc::new(Motion::build(spec).unwrap()))
+    }
+
+    fn mask(joints: &[(&str, f32)]) -> Option<MaskSpec> {
+        let joints = joints.iter().map(|&(n, w)| (n.to_owned(), w)).collect();
+        Some(MaskSpec { joints, descendants: true, default: None })
+    }
+
+    #[test]
+    fn equal_motions_over_equal_versions_have_equal_keys() {
+        let (a, b) = (pinned("a", 1), pinned("b", 1));
+        let mut masked = spec(&[a.clone(), b.clone()]);
+        masked.layers[1].mask = mask(&[("j", 0.5), ("k", 1.0)]);
+        let mut again = spec(&[pinned("a", 1), pinned("b", 1)]);
+        again.layers[1].mask = mask(&[("k", 1.0), ("j", 0.5)]);
+        assert_eq!(MotionKey::of(&masked), MotionKey::of(&again), "other copies of the same versions, mask reordered");
+    }
+
+    #[test]
+    fn any_difference_in_the_motion_or_its_versions_is_another_key() {
+        let (a, b) = (pinned("a", 1), pinned("b", 1));
+        let base = spec(&[a.clone(), b.clone()]);
+        let key = MotionKey::of(&base);
+        let changed: Vec<(&str, MotionSpec<Arc<dyn PinnedClip>>)> = vec![
+            ("a weight", {
+                let mut s = base.clone();
+                s.layers[1].weight = 0.3;
+                s
+            }),
+            ("a weight by one ulp", {
+                let mut s = base.clone();
+                s.layers[1].weight = f32::from_bits(1.0f32.to_bits() - 1);
+                s
+            }),
+            ("a mask", {
+                let mut s = base.clone();
+                s.layers[1].mask = mask(&[("j", 1.0)]);
+                s
+            }),
+            ("a mask weight", {
+                let mut s = base.clone();
+                s.layers[1].mask = mask(&[("j", 0.5)]);
+                s
+            }),
+            ("a version", spec(&[a.clone(), pinned("b", 2)])),
+            ("a clip", spec(&[a.clone(), pinned("c", 1)])),
+            ("the layer order", spec(&[b.clone(), a.clone()])),
+            ("a layer less", spec(std::slice::from_ref(&a))),
+            ("the mode", {
+                let mut s = base.clone();
+                s.layers[1].mode = LayerMode::Additive;
+                s
+            }),
+            ("an offset", {
+                let mut s = base.clone();
+                s.layers[0].offset = 0.25;
+                s
+            }),
+            ("a sync group", {
+                let mut s = base.clone();
+                s.layers[0].sync = Some("walk".into());
+                s
+            }),
+            ("root motion", MotionSpec { root_motion: Some(RootMotionSpec::default()), ..base.clone() }),
+        ];
+        for (what, spec) in &changed {
+            assert_ne!(MotionKey::of(spec), key, "{what}");
+        }
+        // And the changed ones differ from one another (no two collapse).
+        for (i, (what, s)) in changed.iter().enumerate() {
+            for (other, t) in &changed[i + 1..] {
+                assert_ne!(MotionKey::of(s), MotionKey::of(t), "{what} vs {other}");
+            }
+        }
+    }
+
+    #[test]
+    fn strings_are_delimited_so_ids_cannot_run_into_each_other() {
+        let mut one = spec(&[pinned("ab", 1)]);
+        one.layers[0].sync = Some("c".into());
+        let mut other = spec(&[pinned("a", 1)]);
+        other.layers[0].sync = Some("bc".into());
+        assert_ne!(MotionKey::of(&one), MotionKey::of(&other));
+    }
+
+    #[test]
+    fn the_least_recently_used_motion_is_evicted() {
+        let cache = MotionCache::new(2);
+        let (a, b, c) = (pinned("a", 1), pinned("b", 1), pinned("c", 1));
+        let (ka, ma) = built(spec(std::slice::from_ref(&a)));
+        let (kb, mb) = built(spec(std::slice::from_ref(&b)));
+        let (kc, mc) = built(spec(std::slice::from_ref(&c)));
+        assert!(cache.insert_if(ka.clone(), ma.clone(), || true));
+        assert!(cache.insert_if(kb.clone(), mb, || true));
+        assert!(Arc::ptr_eq(&cache.get(&ka).unwrap(), &ma));
+        assert!(cache.insert_if(kc.clone(), mc, || true));
+        assert_eq!(cache.len(), 2);
+        assert!(cache.get(&kb).is_none(), "b was the least recently used");
+        assert!(cache.get(&ka).is_some() && cache.get(&kc).is_some());
+        // Re-inserting a present key evicts nothing.
+        let (_, again) = built(spec(std::slice::from_ref(&a)));
+        assert!(cache.insert_if(ka.clone(), again.clone(), || true));
+        assert_eq!(cache.len(), 2);
+        assert!(Arc::ptr_eq(&cache.get(&ka).unwrap(), &again) && cache.get(&kc).is_some());
+    }
+
+    #[test]
+    fn invalidating_a_clip_drops_every_motion_with_a_layer_of_it() {
+        let cache = MotionCache::new(8);
+        let (a, b, c) = (pinned("a", 1), pinned("b", 1), pinned("c", 1));
+        let motions = [
+            spec(std::slice::from_ref(&a)),
+            spec(&[b.clone(), a.clone()]),
+            spec(std::slice::from_ref(&b)),
+            spec(std::slice::from_ref(&c)),
+        ];
+        let keys: Vec<MotionKey> = motions
+            .into_iter()
+            .map(|s| {
+                let (key, motion) = built(s);
+                assert!(cache.insert_if(key.clone(), motion, || true));
+                key
+            })
+            .collect();
+        assert_eq!(cache.invalidate(&["a"]), 2, "a alone and a under b");
+        assert!(cache.get(&keys[0]).is_none() && cache.get(&keys[1]).is_none());
+        assert!(cache.get(&keys[2]).is_some() && cache.get(&keys[3]).is_some());
+        assert_eq!(cache.invalidate(&["zz", "c"]), 1);
+        assert_eq!(cache.invalidate(&[] as &[&str]), 0);
+        assert_eq!(cache.len(), 1);
+        cache.clear();
+        assert!(cache.is_empty());
+    }
+
+    #[test]
+    fn a_motion_whose_clips_went_meanwhile_is_not_cached() {
+        let cache = MotionCache::new(8);
+        let (key, motion) = built(spec(&[pinned("a", 1)]));
+        assert!(!cache.insert_if(key.clone(), motion, || false));
+        assert!(cache.get(&key).is_none() && cache.is_empty());
+    }
+}

@@ -1,0 +1,123 @@
+//! Composed requests (SPEC §6): a motion's clips looked up at their current
+//! versions and pinned, the motion built (its refusals pointed at
+//! `/motion/…`) or found built for those versions in the motion cache
+//! (`server::motion_cache`), the joint subset checked, and the answer priced
+//! before any pose is evaluated. REST's `POST /v1/poses` and `/v1/samples`
+//! and gRPC's `SampleMotion*` use it.
+
+use std::sync::Arc;
+
+use super::cost::{Cost, Estimate, F64_TEXT, Wire};
+use super::raw::{Field, Format, Locate, joint_subset, parameter_subset};
+use crate::cache::CachedClip;
+use crate::error::{ApiError, At};
+use crate::motion_cache::MotionKey;
+use crate::state::AppState;
+use crate::stream::{PinnedClip, StreamMotion};
+use anim::Motion;
+use anim::ik::IkLimits;
+use anim::motion::MotionSpec;
+
+/// A motion and the joints asked for, as a transport decoded them.
+#[derive(Debug, Clone)]
+pub struct RawMotion<'a> {
+    /// Clip ids still to be looked up.
+    pub spec: MotionSpec<String>,
+    /// Joint names; `None`: every joint.
+    pub joints: Option<&'a [String]>,
+    /// Parameter names (SPEC §8); `None`: every parameter.
+    pub parameters: Option<&'a [String]>,
+    pub format: Format,
+    pub at: Locate,
+}
+
+/// A built motion over pinned clips, and the output joints to send.
+pub struct Composed {
+    pub motion: Arc<StreamMotion>,
+    /// Output joint indices, in skeleton order; `None`: all.
+    pub joints: Option<Vec<usize>>,
+    /// Output parameter indices, in the first clip's order; `None`: all.
+    pub parameters: Option<Vec<usize>>,
+}
+
+/// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
+pub(super) const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
+
+impl Composed {
+    /// The first layer's clip id (what a composed pose names).
+    pub fn clip_id(&self) -> &str {
+        self.motion.first_clip().id()
+    }
+
+    /// What `poses` poses of this motion cost, sent as `format` over `wire`:
+    /// work counts every layer's joints; the size bound is the first clip's
+    /// (a subset only shrinks it) plus the root motion.
+    pub fn cost(&self, poses: u64, format: Format, wire: Wire) -> Cost {
+        let first = self.motion.first_clip().clip();
+        let mut estimate = Estimate::batch(first, self.clip_id(), format, wire);
+        if self.motion.has_root_motion() {
+            estimate.per_pose += ROOT_MOTION_BYTES;
+        }
+        // The first clip's reports are in its estimate; the other layers'
+        // and the motion's own come on top.
+        let more_reports = self.motion.ik_report_count() - first.ik_count();
+        estimate.per_pose += super::cost::ik_reports(more_reports as u64, wire) + 8;
+        let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
+        Cost { poses, joints, bytes: estimate.total(poses) }
+    }
+}
+
+impl RawMotion<'_> {
+    /// Looks up each layer's clip, finds the motion built over those
+    /// versions (or builds and caches it) and checks the subset.
+    ///
+    /// # Errors
+    /// `clip_not_found` for a layer's clip; the core's refusals
+    /// (`weight_out_of_range`, `unknown_joint`, …) at `/motion/…`;
+    /// `unknown_joint` at `/joints/{i}`; `no_inverse_binds` for skinning
+    /// matrices of a skeleton without them.
+    pub async fn resolve(self, state: &AppState) -> Result<Composed, ApiError> {
+        let spec = self.spec;
+        let mut clips = Vec::with_capacity(spec.layers.len());
+        for (i, layer) in spec.layers.iter().enumerate() {
+            clips.push(super::raw::clip(state, &layer.clip).await.map_err(|e| match e {
+                ApiError::NotFound { .. } => ApiError::ClipNotFoundAt {
+                    at: At::Pointer(format!("/motion/layers/{i}/clip")),
+                    detail: format!("layer {i}'s clip `{}` does not exist", layer.clip),
+                },
+                other => other,
+            })?);
+        }
+        let pinned = pin(spec, &clips)?;
+        let key = MotionKey::of(&pinned);
+        let motion = match state.cached_motion(&key) {
+            Some(hit) => hit,
+            None => {
+                let motion = Arc::new(build(pinned, &state.config.limits.ik())?);
+                state.cache_motion(key, Arc::clone(&motion), &clips);
+                motion
+            }
+        };
+        if self.format == Format::Skinning && !motion.skeleton().has_inverse_binds() {
+            let detail = "format=skinning needs inverse bind matrices, which the first layer's clip has not";
+            return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
+        }
+        let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
+        let parameters =
+            self.parameters.map(|names| parameter_subset(motion.parameters(), names, self.at)).transpose()?;
+        Ok(Composed { motion, joints, parameters })
+    }
+}
+
+/// `spec` with each layer's clip id swapped for the clip looked up for it.
+fn pin(spec: MotionSpec<String>, clips: &[Arc<CachedClip>]) -> Result<MotionSpec<Arc<dyn PinnedClip>>, ApiError> {
+    let mut clips = clips.iter();
+    let spec = spec.try_map(|_, _| clips.next().map(|c| Arc::clone(c) as Arc<dyn PinnedClip>).ok_or(()));
+    spec.map_err(|()| ApiError::internal(anyhow::anyhow!("a layer lost its clip")))
+}
+
+/// Builds the motion, its refusals pointed into the request's `/motion`.
+fn build(spec: MotionSpec<Arc<dyn PinnedClip>>, ik: &IkLimits) -> Result<StreamMotion, ApiError> {
+    Motion::build_limited(spec, ik)
+        .map_err(|e| ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string()))
+}

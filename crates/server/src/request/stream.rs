@@ -1,0 +1,196 @@
+//! Opening a stream (the WebSocket `GET …/stream`, `StreamFrames`, `Play`):
+//! the request checked, bound to the clip at its current version, and
+//! admitted by the stream caps.
+//!
+//! The stream rules themselves (SPEC §5: the fps range, a finite start, the
+//! speed bound) are the engine's, [`StreamParams::new`]; this maps its
+//! refusals onto the stable codes.
+
+use std::sync::Arc;
+
+use super::cost::{Estimate, check_stream};
+use super::motion::{ROOT_MOTION_BYTES, RawMotion};
+use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
+use crate::auth::Caller;
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::stream::{AdmitError, Encoding, MAX_FPS, ParamError, StreamParams, StreamPermit, StreamRequest};
+
+/// The frame rate of a stream that names none (the WebSocket's default;
+/// gRPC's `fps` is always given, 0 included).
+pub const DEFAULT_FPS: u32 = 30;
+
+/// A stream request, as a transport decoded it.
+#[derive(Debug, Clone, Copy)]
+pub struct RawStream<'a> {
+    /// `None`: [`DEFAULT_FPS`].
+    pub fps: Option<Raw<'a>>,
+    /// The request time of frame 0; `None`: the clip's start.
+    pub start: Option<Raw<'a>>,
+    /// `None`: 1.
+    pub speed: Option<Raw<'a>>,
+    pub modes: RawModes<'a>,
+    /// `json` or `protobuf`; `None`: JSON.
+    pub encoding: Option<Raw<'a>>,
+    /// `None`: no limit; given, at least 1.
+    pub max_frames: Option<Raw<'a>>,
+    /// Start paused (private playbacks only).
+    pub paused: bool,
+    /// Only these joints in every frame (SPEC §6); `None`: all.
+    pub joints: Option<&'a [String]>,
+    /// Only these parameters in every frame (SPEC §8); `None`: all.
+    pub parameters: Option<&'a [String]>,
+    pub at: Locate,
+}
+
+/// A stream ready to start: its parameters, bound to the clip version it
+/// plays, and the permit the stream caps gave it — or why they did not,
+/// which each transport reports its own way (gRPC `RESOURCE_EXHAUSTED`, the
+/// WebSocket a close frame after the upgrade).
+#[derive(Debug)]
+pub struct Opening {
+    pub params: StreamParams,
+    pub permit: Result<StreamPermit, AdmitError>,
+}
+
+impl RawStream<'_> {
+    /// # Errors
+    /// `bad_number`, `bad_parameter`; `max_frames_out_of_range`.
+    pub fn check(&self) -> Result<StreamRequest, ApiError> {
+        let at = self.at;
+        let fps = self.fps.map(|raw| whole(raw, Field::Fps, at)).transpose()?;
+        let start = self.start.map(|raw| finite(raw, Field::Start, at)).transpose()?;
+        let speed = self.speed.map(|raw| finite(raw, Field::Speed, at)).transpose()?;
+        let max_frames = self.max_frames.map(|raw| whole(raw, Field::MaxFrames, at)).transpose()?;
+        let options = self.modes.check(at)?;
+        let encoding = Self::encoding(self.encoding, at)?;
+        if let Some(n) = max_frames.filter(|n| *n < 1.0) {
+            let detail = format!("`max_frames` must be at least 1, got {n}");
+            return Err(unprocessable("max_frames_out_of_range", Field::MaxFrames, at, detail));
+        }
+        Ok(StreamRequest {
+            // Out of `u32` is out of range too: 0 and `u32::MAX` say so to the engine.
+            fps: fps.map_or(DEFAULT_FPS, |f| f as u32),
+            start,
+            speed,
+            playback: options.playback,
+            ease: options.ease,
+            space: options.space,
+            encoding,
+            max_frames: max_frames.map_or(0, |n| n as u64),
+            paused: self.paused,
+        })
+    }
+
+    /// Checks the request, binds it to the clip `id` at its current
+    /// version (the cache entry: the stream keeps it even if the clip is
+    /// replaced) and asks the caps for a permit for `caller`.
+    ///
+    /// # Errors
+    /// As [`RawStream::check`], then `clip_not_found`, then the stream
+    /// rules: `fps_out_of_range`, `speed_out_of_range`; then the cost
+    /// model's `frame_too_large`, `stream_rate_too_high`.
+    pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Opening, ApiError> {
+        let request = self.check()?;
+        let cached = super::raw::clip(state, id).await?;
+        let frame = Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into());
+        let params = StreamParams::new(cached, request).map_err(|e| self.refused(e))?;
+        self.admit(params, frame, state, caller)
+    }
+
+    /// As [`RawStream::open`] for a composed motion (SPEC §6): its clips
+    /// looked up and pinned, the motion built, the stream bound to it. A
+    /// repeated composition is the same built motion (the motion cache), so
+    /// its viewers can share a playback like a clip's.
+    ///
+    /// # Errors
+    /// As [`RawStream::check`]; `playback` is refused (each layer has its
+    /// own); the motion's refusals at `/motion/…` ([`RawMotion::resolve`]);
+    /// then as [`RawStream::open`].
+    pub async fn open_motion(
+        &self,
+        state: &AppState,
+        motion: RawMotion<'_>,
+        caller: &Caller,
+    ) -> Result<Opening, ApiError> {
+        let params = self.motion_params(state, motion).await?;
+        let permit = state.streams.admit_for(caller.addr, caller.token.clone());
+        Ok(Opening { params, permit })
+    }
+
+    /// A composed motion's stream parameters, checked, bound and priced as
+    /// [`RawStream::open_motion`] does, without a permit: a broadcast's
+    /// (SPEC §9), whose viewers are admitted one by one as they join.
+    ///
+    /// # Errors
+    /// As [`RawStream::open_motion`].
+    pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
+        if self.modes.playback.is_some() {
+            let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
+            return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
+        }
+        let request = self.check()?;
+        let composed = motion.resolve(state).await?;
+        let mut frame =
+            Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());
+        if composed.motion.has_root_motion() {
+            frame += ROOT_MOTION_BYTES;
+        }
+        let first_reports = composed.motion.first_clip().clip().ik_count();
+        frame += super::cost::ik_reports(
+            (composed.motion.ik_report_count() - first_reports) as u64,
+            request.encoding.into(),
+        ) + 8;
+        let identity = format!("motion {:p}", Arc::as_ptr(&composed.motion));
+        let params = StreamParams::of_motion(composed.motion, identity.into(), request).map_err(|e| self.refused(e))?;
+        self.bind(params, frame, state)
+    }
+
+    /// The joint subset applied, the stream priced (a frame at most `frame`
+    /// bytes) and a permit asked of the caps.
+    fn admit(&self, params: StreamParams, frame: u64, state: &AppState, caller: &Caller) -> Result<Opening, ApiError> {
+        let params = self.bind(params, frame, state)?;
+        let permit = state.streams.admit_for(caller.addr, caller.token.clone());
+        Ok(Opening { params, permit })
+    }
+
+    /// The joint subset applied and the stream priced (a frame at most `frame` bytes).
+    fn bind(&self, params: StreamParams, frame: u64, state: &AppState) -> Result<StreamParams, ApiError> {
+        let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
+        let parameters =
+            self.parameters.map(|names| parameter_subset(params.motion.parameters(), names, self.at)).transpose()?;
+        let params = params.with_joints(joints).with_parameters(parameters).with_ik_limits(state.config.limits.ik());
+        check_stream(frame, params.fps, &state.config.limits, self.at)?;
+        Ok(params)
+    }
+
+    /// # Errors
+    /// `bad_parameter`.
+    fn encoding(raw: Option<Raw<'_>>, at: Locate) -> Result<Encoding, ApiError> {
+        let by_name = |text: &str| match text {
+            "json" => Ok(Encoding::Json),
+            "protobuf" => Ok(Encoding::Protobuf),
+            _ => Err("expected one of: json, protobuf".to_owned()),
+        };
+        let by_number = |n: i32| Err(format!("expected a name, got the number {n}"));
+        Ok(choice(raw, Field::Encoding, at, by_name, by_number)?.unwrap_or_default())
+    }
+
+    /// The engine's refusal, under its stable code.
+    fn refused(&self, e: ParamError) -> ApiError {
+        let (code, field, detail) = match e.field {
+            "fps" => {
+                let given = self.fps.map_or(String::new(), |raw| match raw {
+                    Raw::Text(text) => format!(", got `{text}`"),
+                    Raw::Number(n) => format!(", got {n}"),
+                    Raw::Enum(_) => String::new(),
+                });
+                ("fps_out_of_range", Field::Fps, format!("`fps` must be in 1..={MAX_FPS}{given}"))
+            }
+            "speed" => ("speed_out_of_range", Field::Speed, format!("`speed` {}", e.detail)),
+            // Any rule the engine adds before it has a code of its own.
+            _ => ("bad_stream", Field::When, e.to_string()),
+        };
+        unprocessable(code, field, self.at, detail)
+    }
+}

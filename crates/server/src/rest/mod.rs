@@ -1,0 +1,148 @@
+//! The REST API (SPEC §3): routes, their extractors and the middleware stack.
+//!
+//! `router(state)` is the whole HTTP surface; [`crate::Application`]
+//! only binds and serves it, so tests may also drive it with `oneshot`.
+//! Other protocols' routes (the WebSocket stream, import) merge in here.
+//! Every API and operations route sits behind `query::strict`: it takes
+//! exactly the query parameters its OpenAPI operation lists.
+
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::{HeaderName, HeaderValue, Method, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::trace::TraceLayer;
+
+use super::access_log::{self, AccessLog};
+use super::config::Cors;
+use super::error::ApiError;
+use super::metrics;
+use super::state::AppState;
+use super::{auth, body_guard, compression, ratelimit, shed, spool};
+
+pub mod broadcasts;
+pub mod clips;
+pub mod extract;
+pub mod health;
+pub mod import;
+pub mod mesh;
+pub mod motions;
+pub mod openapi;
+pub mod patch;
+pub mod pieces;
+pub mod poses;
+pub mod query;
+pub mod schemas;
+pub mod skeleton;
+pub mod socket;
+pub mod stream;
+pub mod summary;
+pub mod viewer;
+
+/// Every route, with the middleware stack, bound to `state`.
+pub fn router(state: AppState) -> Router {
+    let limits = &state.config.limits;
+    let cors = cors_layer(&state.config.cors);
+    let request_id = HeaderName::from_static("x-request-id");
+    // The API and operations routes take exactly the query parameters they document.
+    let allowed = query::Allowed::from_openapi(&<openapi::ApiDoc as utoipa::OpenApi>::openapi());
+    let strict = Router::new()
+        .route("/v1/clips", post(clips::create_clip).get(clips::list_clips))
+        // Its body is spooled under max_import_bytes by the guard: no in-memory limit applies.
+        .route(import::PATH, post(import::import_clips).layer(DefaultBodyLimit::disable()))
+        .route(
+            "/v1/clips/{id}",
+            get(clips::get_clip).put(clips::replace_clip).patch(patch::patch_clip).delete(clips::delete_clip),
+        )
+        .route("/v1/clips/{id}/skeleton", get(skeleton::get_skeleton))
+        .route("/v1/clips/{id}/mesh", get(mesh::get_mesh))
+        .route("/v1/clips/{id}/pose", get(poses::get_pose))
+        .route("/v1/clips/{id}/sample", post(poses::sample))
+        .route("/v1/clips/{id}/stream", get(stream::stream))
+        .route("/v1/stream", get(stream::motion_stream))
+        .route("/v1/broadcasts", post(broadcasts::create).get(broadcasts::list))
+        .route("/v1/broadcasts/{id}", get(broadcasts::get).delete(broadcasts::delete))
+        .route("/v1/broadcasts/{id}/controls", post(broadcasts::control))
+        .route("/v1/broadcasts/{id}/stream", get(broadcasts::watch))
+        .route("/v1/poses", post(motions::pose))
+        .route("/v1/samples", post(motions::samples))
+        .route("/healthz", get(health::healthz))
+        .route("/readyz", get(health::readyz))
+        .route("/metrics", get(health::metrics))
+        .route_layer(middleware::from_fn_with_state(allowed, query::strict));
+    Router::new()
+        .merge(strict)
+        .merge(openapi::router())
+        .merge(viewer::router())
+        .fallback(|| async { ApiError::NotFound { what: "route" } })
+        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        // Admission after arrival: the in-flight slots are taken once the body guard has read the body.
+        .layer(middleware::from_fn_with_state(
+            shed::Admission {
+                gate: shed::Gate::new(limits.max_in_flight),
+                clients: std::sync::Arc::clone(&state.in_flight),
+            },
+            shed::rest,
+        ))
+        .layer(middleware::from_fn_with_state(
+            body_guard::BodyGuard {
+                max_bytes: limits.max_body_bytes,
+                read_timeout: limits.body_read_timeout,
+                arrivals: state.arrivals.clone(),
+                spool: Some(spool::SpoolRoute::new(
+                    import::PATH,
+                    limits.max_import_bytes,
+                    "max_import_bytes",
+                    limits.max_concurrent_builds,
+                )),
+            },
+            body_guard::guard,
+        ))
+        // Compressed bodies are decoded before the body guard reads them: its limits count decoded bytes.
+        .layer(compression::requests(state.config.compression))
+        .layer(middleware::from_fn_with_state(std::sync::Arc::clone(&state.writes), ratelimit::limit_writes))
+        .layer(middleware::from_fn_with_state(state.auth.clone(), auth::identify_requests))
+        .layer(middleware::from_fn_with_state(limits.request_timeout, request_timeout))
+        .layer(middleware::from_fn(metrics::track))
+        .layer(CatchPanicLayer::custom(|_| {
+            metrics::panic_caught("http");
+            ApiError::internal(anyhow::anyhow!("handler panicked")).into_response()
+        }))
+        .layer(middleware::from_fn_with_state(AccessLog::new(state.config.access_log_sample), access_log::log))
+        .layer(compression::responses(state.config.compression))
+        .layer(middleware::from_fn_with_state(state.config.compression, compression::negotiate))
+        .layer(TraceLayer::new_for_http())
+        .layer(PropagateRequestIdLayer::new(request_id.clone()))
+        .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
+        .layer(cors)
+        .with_state(state)
+}
+
+/// Answers 503 `request_timeout` when a request takes longer than the limit.
+async fn request_timeout(State(limit): State<Duration>, request: Request, next: Next) -> Response {
+    match tokio::time::timeout(limit, next.run(request)).await {
+        Ok(response) => response,
+        Err(_) => ApiError::Timeout { secs: limit.as_secs() }.into_response(),
+    }
+}
+
+fn cors_layer(cors: &Cors) -> CorsLayer {
+    let origins = match cors {
+        Cors::Off => return CorsLayer::new(),
+        Cors::Any => AllowOrigin::any(),
+        Cors::Origins(list) => AllowOrigin::list(list.iter().filter_map(|o| HeaderValue::from_str(o).ok())),
+    };
+    CorsLayer::new()
+        .allow_origin(origins)
+        .allow_methods([Method::GET, Method::POST, Method::PUT, Method::PATCH, Method::DELETE])
+        .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, header::IF_MATCH, header::IF_NONE_MATCH])
+        .expose_headers([header::ETAG, header::LOCATION])
+        .max_age(Duration::from_secs(3600))
+}

@@ -1,0 +1,247 @@
+//! Composed poses (SPEC §6): `POST /v1/poses` (one pose of a motion) and
+//! `POST /v1/samples` (many). Both are reads. The body is decoded here, the
+//! rules and the motion come from `server::request` (`RawPose`, `RawBatch`,
+//! `RawMotion`), and poses are written straight from the motion sampler's
+//! buffers with the joint subset and the root motion; a large answer is
+//! sent in pieces as the client reads.
+
+use std::ops::Range;
+
+use axum::extract::State;
+use axum::response::Response;
+use glam::Mat4;
+use serde::Deserialize;
+use utoipa::ToSchema;
+
+use crate::auth::ReadAccess;
+use crate::error::ApiError;
+use crate::request::{
+    Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body,
+};
+use crate::state::AppState;
+use anim::motion::MotionOptions;
+use anim::{MotionSampler, Space};
+use formats::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson, SpaceDoc};
+use formats::wire::motion::MotionDoc;
+
+use super::extract::JsonBody;
+use super::pieces::{self, Pieces, PoseWriter};
+use super::poses::{json_response, parse_json};
+
+/// `POST /v1/poses`: one pose of a motion.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PoseOfMotion {
+    pub motion: MotionDoc,
+    /// Motion time in seconds.
+    pub time: f64,
+    #[serde(default)]
+    #[schema(value_type = Option<SpaceDoc>)]
+    pub space: Option<String>,
+    #[serde(default)]
+    #[schema(value_type = Option<Format>)]
+    pub format: Option<String>,
+    /// Only these joints (in skeleton order); model space is still computed through the whole hierarchy.
+    #[serde(default)]
+    pub joints: Option<Vec<String>>,
+    /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
+}
+
+/// `POST /v1/samples`: many poses of a motion, at `times` or on a frame range.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SamplesOfMotion {
+    pub motion: MotionDoc,
+    #[serde(default)]
+    pub times: Option<Vec<f64>>,
+    #[serde(default)]
+    pub start: Option<f64>,
+    #[serde(default)]
+    pub end: Option<f64>,
+    #[serde(default)]
+    pub fps: Option<f64>,
+    #[serde(default)]
+    #[schema(value_type = Option<SpaceDoc>)]
+    pub space: Option<String>,
+    #[serde(default)]
+    #[schema(value_type = Option<Format>)]
+    pub format: Option<String>,
+    #[serde(default)]
+    pub joints: Option<Vec<String>>,
+    /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
+}
+
+fn text(v: &Option<String>) -> Option<Raw<'_>> {
+    v.as_deref().map(Raw::Text)
+}
+
+/// One pose of a motion (`docs/motion.md`).
+#[utoipa::path(
+    post, path = "/v1/poses", tag = "poses",
+    request_body(content = PoseOfMotion, content_type = "application/json"),
+    responses(
+        (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it", body = super::schemas::PoseSchema),
+        (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
+        (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `answer_too_large`", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn pose(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let req: PoseOfMotion = parse_json(&body)?;
+    let modes = RawModes { space: text(&req.space), ..RawModes::default() };
+    let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
+    let checked = raw.check()?;
+    let motion = RawMotion {
+        spec: req.motion.to_spec("/motion")?,
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        format: checked.format,
+        at: in_body,
+    };
+    let composed = motion.resolve(&state).await?;
+    let cost = composed.cost(1, checked.format, Wire::Json);
+    cost.check(&state.config.limits, Field::Time, in_pose_body)?;
+    let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
+    let mut body = Vec::with_capacity(usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20));
+    writer.write(&mut body, 0..1);
+    state.counters.poses.increment(1);
+    Ok(json_response(body))
+}
+
+/// Many poses of a motion (`docs/motion.md`); each carries its root motion since the previous one.
+#[utoipa::path(
+    post, path = "/v1/samples", tag = "poses",
+    request_body(content = SamplesOfMotion, content_type = "application/json"),
+    responses(
+        (status = 200, description = "`{\"poses\": [pose, ...]}`, each with `root_motion` when the motion asks for it (the first with delta and total 0); sent chunked, as it is evaluated, when the answer may exceed 1 MiB", body = super::schemas::PosesSchema),
+        (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
+        (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
+        (status = 422, description = "As `POST /v1/poses`, and `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn samples(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let req: SamplesOfMotion = parse_json(&body)?;
+    let raw = RawBatch {
+        times: req.times.as_deref(),
+        start: req.start,
+        end: req.end,
+        fps: req.fps,
+        modes: RawModes { space: text(&req.space), ..RawModes::default() },
+        format: text(&req.format),
+        at: in_body,
+    };
+    let sampling = raw.check(state.config.limits.max_poses)?;
+    let motion = RawMotion {
+        spec: req.motion.to_spec("/motion")?,
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        format: sampling.format,
+        at: in_body,
+    };
+    let composed = motion.resolve(&state).await?;
+    let n = sampling.times.len();
+    let cost = composed.cost(n as u64, sampling.format, Wire::Json);
+    let field = if req.times.is_some() { Field::Times } else { Field::When };
+    cost.check(&state.config.limits, field, in_body)?;
+    let (space, format) = (sampling.options.space, sampling.format);
+    let mut writer = MotionPoses::new(composed, sampling.times, space, format, cost.bytes);
+    if cost.bytes > crate::request::STREAM_ABOVE_BYTES {
+        return Ok(Pieces::new(state, Box::new(writer)).into_response());
+    }
+    let mut render = move || pieces::whole(&mut writer);
+    let body = if n > crate::request::BLOCKING_POSES {
+        tokio::task::spawn_blocking(render).await.map_err(crate::metrics::join_failed)?
+    } else {
+        render()
+    };
+    state.counters.poses.increment(n as u64);
+    Ok(json_response(body))
+}
+
+/// A motion's poses at a request's times, in order (root motion runs from
+/// each pose to the next).
+struct MotionPoses {
+    composed: Composed,
+    times: Vec<f64>,
+    space: Space,
+    format: Format,
+    bound: u64,
+    sampler: MotionSampler,
+    matrices: Vec<Mat4>,
+}
+
+impl MotionPoses {
+    fn new(composed: Composed, times: Vec<f64>, space: Space, format: Format, bound: u64) -> MotionPoses {
+        let (sampler, matrices) = (MotionSampler::new(), Vec::new());
+        MotionPoses { composed, times, space, format, bound, sampler, matrices }
+    }
+
+    /// Appends pose `k`.
+    fn write_one(&mut self, out: &mut Vec<u8>, k: usize) {
+        let motion = &self.composed.motion;
+        let t = self.times[k];
+        let space = if self.format == Format::Trs { self.space } else { Space::Local };
+        let clip_time = motion.sample(t, &MotionOptions { space, ..MotionOptions::default() }, &mut self.sampler);
+        let extras = Extras {
+            joints: self.composed.joints.as_deref(),
+            root_motion: self.sampler.root_motion(),
+            ik: self.sampler.ik_reports(),
+            parameters: ParameterValues::of(
+                motion.parameters(),
+                self.sampler.pose(),
+                self.composed.parameters.as_deref(),
+            ),
+        };
+        let (clip, skeleton) = (self.composed.clip_id(), motion.skeleton());
+        match self.format {
+            Format::Trs => {
+                let pose = self.sampler.pose();
+                PoseJson { clip, time: t, clip_time, space, skeleton, pose }.write_with(out, extras);
+            }
+            Format::Matrix | Format::Skinning => {
+                let skinning = self.format == Format::Skinning;
+                if skinning {
+                    skeleton.skinning_matrices(self.sampler.local(), &mut self.matrices);
+                } else {
+                    skeleton.model_matrices(self.sampler.local(), &mut self.matrices);
+                }
+                let format = if skinning { "skinning" } else { "matrix" };
+                let doc = MatricesJson { clip, time: t, clip_time, format, skeleton, matrices: &self.matrices };
+                doc.write_with(out, extras);
+            }
+        }
+    }
+}
+
+impl PoseWriter for MotionPoses {
+    fn count(&self) -> usize {
+        self.times.len()
+    }
+
+    fn bound(&self) -> u64 {
+        self.bound
+    }
+
+    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>) {
+        for k in range {
+            if k > 0 {
+                out.push(b',');
+            }
+            self.write_one(out, k);
+        }
+    }
+}

@@ -1,0 +1,289 @@
+//! Pose routes: one pose (`GET …/pose`) and many (`POST …/sample`).
+//!
+//! The query or body is decoded here and checked by `server::request` (the
+//! rules and codes gRPC shares); this module renders the JSON. The clip comes from the cache (compiled once per version); sampling uses a
+//! per-thread [`Sampler`] and matrix buffer, so a request allocates only its
+//! response body, and poses are serialised straight from the core's buffers
+//! into it. Large sample requests run on the blocking pool; answers whose
+//! size bound is over [`crate::request::STREAM_ABOVE_BYTES`] are sent chunked, a piece at a
+//! time as the client reads (see [`Pieces`]).
+
+use std::cell::RefCell;
+use std::sync::Arc;
+
+use axum::extract::State;
+use axum::http::header::CONTENT_TYPE;
+use axum::http::{HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use glam::Mat4;
+use serde::Deserialize;
+use utoipa::ToSchema;
+
+use crate::auth::ReadAccess;
+use crate::cache::CachedClip;
+use crate::error::ApiError;
+use crate::request::{
+    Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
+    parameter_subset,
+};
+use crate::state::AppState;
+use anim::{SampleOptions, Sampler};
+use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc};
+
+use super::extract::{ClipId, JsonBody};
+use super::pieces::{self, Pieces, PoseWriter};
+use super::query::Query;
+
+/// Response-size estimates, so a pose body is written without reallocating.
+const POSE_HEADER_BYTES: usize = 128;
+const JOINT_BYTES: usize = 160;
+
+thread_local! {
+    static SCRATCH: RefCell<(Sampler, Vec<Mat4>)> = RefCell::new((Sampler::new(), Vec::new()));
+}
+
+/// The joint and parameter subsets of a request (`None`: all).
+#[derive(Debug, Clone, Default)]
+struct Subsets {
+    joints: Option<Vec<usize>>,
+    parameters: Option<Vec<usize>>,
+}
+
+/// Appends the pose of `cached` at request time `t` to `out` as JSON (only
+/// the subsets' joints and parameters, when given).
+fn write_pose(
+    out: &mut Vec<u8>,
+    cached: &CachedClip,
+    t: f64,
+    (options, format): (&SampleOptions, Format),
+    subsets: &Subsets,
+) {
+    let clip = &cached.clip;
+    SCRATCH.with_borrow_mut(|(sampler, matrices)| {
+        let clip_time = evaluate(clip, t, options, format, sampler, matrices);
+        let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), subsets.parameters.as_deref());
+        let joints = subsets.joints.as_deref();
+        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters };
+        match format {
+            Format::Trs => {
+                let pose = PoseJson {
+                    clip: &cached.meta.id,
+                    time: t,
+                    clip_time,
+                    space: options.space,
+                    skeleton: clip.skeleton(),
+                    pose: sampler.pose(),
+                };
+                pose.write_with(out, extras);
+            }
+            Format::Matrix | Format::Skinning => {
+                let doc = MatricesJson {
+                    clip: &cached.meta.id,
+                    time: t,
+                    clip_time,
+                    format: if format == Format::Skinning { "skinning" } else { "matrix" },
+                    skeleton: clip.skeleton(),
+                    matrices: matrices.as_slice(),
+                };
+                doc.write_with(out, extras);
+            }
+        }
+    });
+}
+
+pub(super) fn json_response(body: Vec<u8>) -> Response {
+    (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
+}
+
+/// One pose at request time `t`.
+#[utoipa::path(
+    get, path = "/v1/clips/{id}/pose", tag = "poses",
+    params(
+        ("id" = String, Path, description = "Clip id"),
+        ("t" = f64, Query, description = "Request time in seconds (finite)"),
+        ("space" = Option<String>, Query, pattern = "^(local|model)$", description = "local (default) | model"),
+        ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "once | loop | ping_pong (default: the clip's)"),
+        ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
+        ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
+        ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
+        ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): only those parameters, in the clip's order"),
+    ),
+    responses(
+        (status = 200, description = "The pose", body = super::schemas::PoseSchema),
+        (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::schemas::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`); an answer over `max_answer_bytes` (`answer_too_large`)", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn get_pose(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    ClipId(id): ClipId,
+    Query(q): Query,
+) -> Result<Response, ApiError> {
+    let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
+    let (req, cached) = raw.resolve(&state, &id, Wire::Json).await?;
+    let list = |name: &str| -> Option<Vec<&str>> {
+        q.raw(name).map(|raw| match raw {
+            Raw::Text(text) => text.split(',').collect(),
+            _ => Vec::new(),
+        })
+    };
+    let joints = list("joints").map(|names| joint_subset(cached.clip.skeleton(), &names, in_query)).transpose()?;
+    let parameters =
+        list("parameters").map(|names| parameter_subset(cached.clip.parameters(), &names, in_query)).transpose()?;
+    let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
+    write_pose(&mut body, &cached, req.t, (&req.options, req.format), &Subsets { joints, parameters });
+    state.counters.poses.increment(1);
+    Ok(json_response(body))
+}
+
+/// `POST …/sample`: either `times` or `start`, `end` and `fps`.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SampleRequest {
+    /// Request times in seconds.
+    #[serde(default)]
+    pub times: Option<Vec<f64>>,
+    /// First frame time (with `end` and `fps`).
+    #[serde(default)]
+    pub start: Option<f64>,
+    /// Last frame time, inclusive when on the frame grid.
+    #[serde(default)]
+    pub end: Option<f64>,
+    /// Frames per second, 1..=240.
+    #[serde(default)]
+    pub fps: Option<f64>,
+    // The enums stay text here so that the request layer decodes them, with
+    // the same code (`bad_parameter`) as a query parameter or a gRPC field.
+    #[serde(default)]
+    #[schema(value_type = Option<SpaceDoc>)]
+    pub space: Option<String>,
+    #[serde(default)]
+    #[schema(value_type = Option<PlaybackDoc>)]
+    pub playback: Option<String>,
+    #[serde(default)]
+    #[schema(value_type = Option<EaseDoc>)]
+    pub ease: Option<String>,
+    #[serde(default)]
+    #[schema(value_type = Option<Format>)]
+    pub format: Option<String>,
+    /// Only these joints, in skeleton order (model space still goes through the whole hierarchy).
+    #[serde(default)]
+    pub joints: Option<Vec<String>>,
+    /// Only these parameters (docs/clip-format.md §3), in the clip's order.
+    #[serde(default)]
+    pub parameters: Option<Vec<String>>,
+}
+
+impl SampleRequest {
+    fn raw(&self) -> RawBatch<'_> {
+        fn text(v: &Option<String>) -> Option<Raw<'_>> {
+            v.as_deref().map(Raw::Text)
+        }
+        RawBatch {
+            times: self.times.as_deref(),
+            start: self.start,
+            end: self.end,
+            fps: self.fps,
+            modes: RawModes { space: text(&self.space), playback: text(&self.playback), ease: text(&self.ease) },
+            format: text(&self.format),
+            at: in_body,
+        }
+    }
+}
+
+/// A JSON request body, its type errors pointed at the field.
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
+    let de = &mut serde_json::Deserializer::from_slice(body);
+    let req = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
+        use serde_path_to_error::Segment;
+        let pointer: String = e
+            .path()
+            .iter()
+            .map(|s| match s {
+                Segment::Seq { index } => format!("/{index}"),
+                Segment::Map { key } => format!("/{}", key.replace('~', "~0").replace('/', "~1")),
+                Segment::Enum { variant } => format!("/{variant}"),
+                Segment::Unknown => String::new(),
+            })
+            .collect();
+        let inner = e.into_inner();
+        if inner.is_syntax() || inner.is_eof() {
+            ApiError::MalformedJson { pointer, detail: inner.to_string() }
+        } else {
+            ApiError::invalid("invalid_field", pointer, inner.to_string())
+        }
+    })?;
+    de.end().map_err(|e| ApiError::MalformedJson { pointer: String::new(), detail: e.to_string() })?;
+    Ok(req)
+}
+
+/// Many poses in one request.
+#[utoipa::path(
+    post, path = "/v1/clips/{id}/sample", tag = "poses",
+    params(("id" = String, Path, description = "Clip id")),
+    request_body(content = SampleRequest, content_type = "application/json"),
+    responses(
+        (status = 200, description = "`{\"poses\": [pose, ...]}`; sent chunked, as it is evaluated, when the answer may exceed 1 MiB", body = super::schemas::PosesSchema),
+        (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::schemas::Problem),
+        (status = 404, body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses` (over `max_poses`, or poses × joints over `max_joint_poses`), `answer_too_large` (the answer's size bound over `max_answer_bytes`), `no_inverse_binds`", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn sample(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    ClipId(id): ClipId,
+    JsonBody(body): JsonBody,
+) -> Result<Response, ApiError> {
+    let req: SampleRequest = parse_json(&body)?;
+    let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
+    let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;
+    let parameters = (req.parameters.as_deref())
+        .map(|names| parameter_subset(cached.clip.parameters(), names, in_body))
+        .transpose()?;
+    let (large, blocking, n) = (sampling.is_large(), sampling.is_blocking(), sampling.times.len());
+    let mut writer = ClipPoses { sampling, cached, subsets: Subsets { joints, parameters } };
+    if large {
+        return Ok(Pieces::new(state, Box::new(writer)).into_response());
+    }
+    let mut render = move || pieces::whole(&mut writer);
+    let body = if blocking {
+        tokio::task::spawn_blocking(render).await.map_err(crate::metrics::join_failed)?
+    } else {
+        render()
+    };
+    state.counters.poses.increment(n as u64);
+    Ok(json_response(body))
+}
+
+/// A clip's poses at a request's times, for [`pieces`](super::pieces).
+struct ClipPoses {
+    sampling: Sampling,
+    cached: Arc<CachedClip>,
+    subsets: Subsets,
+}
+
+impl PoseWriter for ClipPoses {
+    fn count(&self) -> usize {
+        self.sampling.times.len()
+    }
+
+    fn bound(&self) -> u64 {
+        self.sampling.answer_bytes
+    }
+
+    fn write(&mut self, out: &mut Vec<u8>, range: std::ops::Range<usize>) {
+        for k in range {
+            if k > 0 {
+                out.push(b',');
+            }
+            let sampling = &self.sampling;
+            let how = (&sampling.options, sampling.format);
+            write_pose(out, &self.cached, sampling.times[k], how, &self.subsets);
+        }
+    }
+}

@@ -1,0 +1,380 @@
+//! A [`Subscription`]: one stream as its transport sees it — the frames of
+//! its playback, with its own `dropped` count and frame limit, and the way
+//! to send it controls.
+
+use bytes::Bytes;
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
+
+use super::encode::Encoding;
+use super::hub::{self, EndReason, Hub, Item};
+use super::limits::StreamPermit;
+use super::params::StreamParams;
+use super::pinned::StreamMotion;
+use super::playhead::{Control, Playhead};
+use super::schedule::{Grid, Schedule};
+use anim::ik::{IkError, IkLimits, build_constraints};
+
+/// A frame as this stream's client must receive it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Delivered {
+    pub seq: u64,
+    /// Ticks skipped since this client's previous frame.
+    pub dropped: u64,
+    pub clip_time: f32,
+    pub bytes: Bytes,
+}
+
+/// The next thing to send.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Next {
+    Frame(Delivered),
+    End(EndReason),
+}
+
+/// Why a control was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    #[error("{0}")]
+    Invalid(&'static str),
+    #[error("too many controls pending; wait for a frame before sending more")]
+    Busy,
+    /// An `ik` control's constraint breaks a rule of SPEC §7 (its path is
+    /// relative to the control's `constraints`).
+    #[error("{}", .0.kind)]
+    Ik(IkError),
+    /// A broadcast viewer without the write scope sent a control.
+    #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
+    ReadOnly,
+}
+
+impl ControlError {
+    /// The stable code a client gets (`bad_control`, or the IK rule's).
+    pub fn code(&self) -> &'static str {
+        match self {
+            ControlError::Ik(e) => e.kind.code(),
+            ControlError::ReadOnly => "insufficient_scope",
+            _ => "bad_control",
+        }
+    }
+
+    /// The JSON pointer of the field at fault, when there is one.
+    pub fn pointer(&self) -> Option<String> {
+        match self {
+            ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
+            _ => None,
+        }
+    }
+}
+
+/// Checks controls against the stream's motions: numbers in range, a
+/// crossfade target with the stream's skeleton, a ramp of a layer the
+/// motion playing has.
+#[derive(Debug, Clone)]
+pub(crate) struct ControlCheck {
+    skeleton: std::sync::Arc<StreamMotion>,
+    /// Layers of the motion the latest accepted control left playing.
+    layers: usize,
+    ik_limits: IkLimits,
+}
+
+impl ControlCheck {
+    pub(crate) fn new(params: &StreamParams) -> Self {
+        ControlCheck {
+            skeleton: std::sync::Arc::clone(&params.motion),
+            layers: params.motion.layer_count(),
+            ik_limits: params.ik_limits,
+        }
+    }
+
+    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        let control = control.validate().map_err(ControlError::Invalid)?;
+        match &control {
+            Control::Crossfade(fade) => {
+                if !fade.to.skeleton().same_joints(self.skeleton.skeleton()) {
+                    return Err(ControlError::Invalid(
+                        "the crossfade's motion has another skeleton: its first layer's clip must have the stream's joints in the same order",
+                    ));
+                }
+                let (to, here) = (fade.to.parameters(), self.skeleton.parameters());
+                if to.names() != here.names() || to.widths() != here.widths() {
+                    return Err(ControlError::Invalid(
+                        "the crossfade's motion has other parameters: its first layer's clip must have the stream's parameter names and widths in the same order",
+                    ));
+                }
+                if !fade.to.ik().is_empty() {
+                    return Err(ControlError::Invalid(
+                        "a crossfade's motion carries no `ik`: change the stream's constraints with an `ik` control",
+                    ));
+                }
+                self.layers = fade.to.layer_count();
+            }
+            Control::Layer { index, .. } if *index >= self.layers => {
+                return Err(ControlError::Invalid("no such layer in the motion playing"));
+            }
+            Control::Ik(specs) => {
+                let skeleton = self.skeleton.skeleton();
+                let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
+                return Ok(Control::SetIk(constraints));
+            }
+            Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),
+            _ => {}
+        }
+        Ok(control)
+    }
+}
+
+/// Where a broadcast viewer's controls go (the broadcast, which stamps
+/// each with the tick it applies from). Defined here, implemented by the
+/// broadcast, so that a subscription never imports it.
+pub(crate) trait ControlSink: Send + Sync {
+    /// Queues `control` for every viewer; returns the tick it applies from.
+    fn send(&self, control: Control) -> Result<u64, ControlError>;
+}
+
+/// A sender of controls to a private playback, usable from another task
+/// (gRPC `Play` reads controls and frames on different tasks).
+#[derive(Debug, Clone)]
+pub struct Controller {
+    tx: mpsc::Sender<Control>,
+    check: ControlCheck,
+}
+
+impl Controller {
+    /// Queues `control` for the next tick. Returns `false` if the playback
+    /// has ended.
+    ///
+    /// # Errors
+    /// An invalid control, or too many pending.
+    pub fn send(&mut self, control: Control) -> Result<bool, ControlError> {
+        let control = self.check.check(control)?;
+        match self.tx.try_send(control) {
+            Ok(()) => Ok(true),
+            Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
+            Err(mpsc::error::TrySendError::Closed(_)) => Ok(false),
+        }
+    }
+
+    /// Resolves when the playback has ended.
+    pub async fn closed(&self) {
+        self.tx.closed().await;
+    }
+}
+
+/// One stream. Dropping it leaves the playback (which ends when its last
+/// viewer has gone) and frees its admission slot.
+pub struct Subscription {
+    params: StreamParams,
+    /// The schedule the stream started on (its tick 0 and grid).
+    schedule: Schedule,
+    rx: broadcast::Receiver<Item>,
+    /// The playback this viewer drives itself (see `hub`): a private one,
+    /// or a shared one nobody joined. `None`: it reads `rx`.
+    driver: Option<Box<Hub>>,
+    /// Where a shared playback this viewer started comes back to it after
+    /// its first tick if nobody else joined.
+    handback: Option<oneshot::Receiver<Box<Hub>>>,
+    controls: Option<mpsc::Sender<Control>>,
+    /// A broadcast viewer (SPEC §9): its first frame has `dropped` 0, and
+    /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
+    /// whose controls are refused), never into a fork.
+    broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,
+    check: ControlCheck,
+    /// The engine's shutdown flag, for a playback this viewer forks.
+    shutdown: watch::Receiver<bool>,
+    last_seq: Option<u64>,
+    delivered: u64,
+    stopped: bool,
+    /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
+    sent: metrics::Counter,
+    dropped: metrics::Counter,
+    _permit: StreamPermit,
+}
+
+impl std::fmt::Debug for Subscription {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Subscription")
+            .field("identity", &self.params.identity)
+            .field("last_seq", &self.last_seq)
+            .field("delivered", &self.delivered)
+            .field("private", &self.controls.is_some())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Where a new subscription's frames come from.
+pub(crate) enum Source {
+    /// A shared playback's broadcast, and the channel it comes back on if
+    /// this viewer started it and nobody joins (see `hub`).
+    Shared { rx: broadcast::Receiver<Item>, handback: Option<oneshot::Receiver<Box<Hub>>> },
+    /// A private playback for this viewer to drive, and its controls.
+    Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Control> },
+    /// A broadcast's frames of one encoding, and where this viewer's
+    /// controls go (`None`: it may not control).
+    Broadcast { rx: broadcast::Receiver<Item>, controls: Option<std::sync::Arc<dyn ControlSink>> },
+}
+
+impl Subscription {
+    pub(crate) fn new(
+        params: StreamParams,
+        schedule: Schedule,
+        source: Source,
+        shutdown: watch::Receiver<bool>,
+        permit: StreamPermit,
+    ) -> Self {
+        let mut broadcast = None;
+        let (rx, driver, handback, controls) = match source {
+            Source::Shared { rx, handback } => (rx, None, handback, None),
+            Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
+            Source::Broadcast { rx, controls } => {
+                broadcast = Some(controls);
+                (rx, None, None, None)
+            }
+        };
+        Subscription {
+            check: ControlCheck::new(&params),
+            params,
+            schedule,
+            rx,
+            driver,
+            handback,
+            controls,
+            broadcast,
+            shutdown,
+            last_seq: None,
+            delivered: 0,
+            stopped: false,
+            sent: metrics::counter!("inbetween_stream_frames_total"),
+            dropped: metrics::counter!("inbetween_stream_frames_dropped_total"),
+            _permit: permit,
+        }
+    }
+
+    pub fn params(&self) -> &StreamParams {
+        &self.params
+    }
+
+    pub fn encoding(&self) -> Encoding {
+        self.params.encoding
+    }
+
+    /// The grid this stream's ticks sit on.
+    pub fn grid(&self) -> Grid {
+        self.schedule.grid()
+    }
+
+    /// The grid tick of this stream's frame 0 (frame `seq` is due at
+    /// `grid().at(first_tick() + seq)`).
+    pub fn first_tick(&self) -> u64 {
+        self.schedule.first()
+    }
+
+    /// Waits for the next frame or the end. Cancel-safe.
+    pub async fn next(&mut self) -> Next {
+        if self.stopped {
+            return Next::End(EndReason::Stopped);
+        }
+        if self.params.max_frames.is_some_and(|max| self.delivered >= max) {
+            return Next::End(EndReason::MaxFrames);
+        }
+        loop {
+            let item = if let Some(hub) = self.driver.as_mut() {
+                Ok(hub.step(false).await.expect("a driven playback always has its viewer"))
+            } else if let Some(handback) = self.handback.as_mut() {
+                tokio::select! {
+                    biased;
+                    item = self.rx.recv() => item,
+                    hub = handback => {
+                        // Alone after the first tick: drive it from now on.
+                        self.handback = None;
+                        self.driver = hub.ok();
+                        continue;
+                    }
+                }
+            } else {
+                self.rx.recv().await
+            };
+            let frame = match item {
+                Ok(Item::Frame(f)) => f,
+                Ok(Item::End(reason)) => return Next::End(reason),
+                // The missed frames show up as a gap in seq.
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => {
+                    tracing::error!(clip = %self.params.clip_id, "a playback ended without a final status");
+                    return Next::End(EndReason::Failed);
+                }
+            };
+            if self.last_seq.is_some_and(|last| frame.seq <= last) {
+                continue;
+            }
+            // A broadcast viewer's first frame is the tick after it joined:
+            // the ticks before were not its losses.
+            let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
+            let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
+            // The names of the joints frames carry, on a protobuf viewer's
+            // first frame (made then: kept, they cost every viewer ~1 KiB).
+            let first_pb = self.last_seq.is_none() && self.params.encoding == Encoding::Protobuf;
+            let names = first_pb.then(|| self.params.names());
+            let bytes = frame.for_viewer(dropped, names.as_ref());
+            self.last_seq = Some(frame.seq);
+            self.delivered += 1;
+            self.sent.increment(1);
+            if dropped > 0 {
+                self.dropped.increment(dropped);
+            }
+            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes });
+        }
+    }
+
+    /// Applies `control` at the next tick. A viewer of a shared playback
+    /// first forks a private one that continues from its last frame (same
+    /// schedule, same playhead), so other viewers are unaffected. `stop` on
+    /// a shared viewer just ends this stream.
+    ///
+    /// # Errors
+    /// An invalid control (non-finite numbers, speed beyond ±1000, a
+    /// crossfade to another skeleton, a layer the motion lacks), or too
+    /// many pending.
+    pub fn control(&mut self, control: Control) -> Result<(), ControlError> {
+        if let Some(sink) = &self.broadcast {
+            if control == Control::Stop {
+                self.stopped = true;
+                return Ok(());
+            }
+            return sink.as_ref().ok_or(ControlError::ReadOnly)?.send(control).map(drop);
+        }
+        let control = self.check.check(control)?;
+        if self.controls.is_none() {
+            if control == Control::Stop {
+                self.stopped = true;
+                return Ok(());
+            }
+            self.fork();
+        }
+        let tx = self.controls.as_ref().expect("forked above");
+        match tx.try_send(control) {
+            Ok(()) | Err(mpsc::error::TrySendError::Closed(_)) => Ok(()),
+            Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
+        }
+    }
+
+    /// A controller for another task (private playbacks only).
+    pub fn controller(&self) -> Option<Controller> {
+        self.controls.as_ref().map(|tx| Controller { tx: tx.clone(), check: self.check.clone() })
+    }
+
+    fn fork(&mut self) {
+        let p = &self.params;
+        let next = self.last_seq.map_or(0, |last| last + 1);
+        let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
+        let prev_time = self.last_seq.map(|last| playhead.time_at(last));
+        let schedule = self.schedule.resumed_at(next);
+        let (mut hub, rx, tx) = hub::private(p, schedule, self.shutdown.clone());
+        hub.resume(prev_time, self.last_seq.is_none());
+        // The shared playback goes on for its other viewers (or, if this
+        // viewer drove it alone, ends here).
+        self.rx = rx;
+        self.handback = None;
+        self.driver = Some(hub);
+        self.controls = Some(tx);
+    }
+}

@@ -1,0 +1,477 @@
+//! The WebSocket side of a stream (SPEC §5): frames out as JSON text or
+//! binary protobuf, control messages in, ping/pong keepalive.
+//!
+//! [`serve`] is generic over any `Sink + Stream` of axum WebSocket messages,
+//! so unit tests drive it with in-memory channels and a paused clock while
+//! the server hands it the real socket. It is the only task of a WebSocket
+//! stream; it owns its [`Subscription`] and ends (with a close frame saying
+//! why) on `max_frames`, `stop`, shutdown, a client that goes away, one that
+//! stops answering pings, or one that does not accept a frame for a whole
+//! keepalive period (a slow consumer: close 1008 `slow_consumer` if that still
+//! fits; its unsent bytes are bounded by `stream_buffer_bytes` meanwhile).
+//!
+//! Control messages are JSON text: `{"op":"pause"}`, `{"op":"play"}`,
+//! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`,
+//! and for composition (SPEC §6) `{"op":"crossfade","to":motion,
+//! "duration":0.4,"ease":"ease_in_out"}` and `{"op":"layer","index":1,
+//! "weight":0.3,"duration":0.5}`. A crossfade's motion names clips the
+//! transport must look up ([`MotionResolver`]); while it does, the frames go
+//! on and later controls wait behind it, so they apply in the order sent.
+//! A bad control is answered with a text message
+//! `{"error":{"code":"bad_control","detail":"..."}}` (a crossfade's motion
+//! with the problem of its lookup: `clip_not_found` at `/to/layers/1/clip`)
+//! and the stream goes on.
+
+use std::collections::VecDeque;
+use std::future::Future;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::task::{Context, Poll, Wake, Waker};
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
+use futures_util::{Sink, SinkExt, Stream, StreamExt};
+use serde::Deserialize;
+use tokio::time::{Instant, MissedTickBehavior, interval_at, timeout};
+
+use futures_util::future::{BoxFuture, poll_fn};
+use futures_util::task::AtomicWaker;
+
+use super::encode::Encoding;
+use super::hub::EndReason;
+use super::pinned::StreamMotion;
+use super::playhead::{Control, Crossfade};
+use super::subscription::{ControlError, Next, Subscription};
+use formats::wire::ik::IkDoc;
+use formats::wire::json::{DocError, EaseDoc};
+
+/// Builds the motion a control names (a crossfade's `to`): the transport's
+/// lookup of its clips. A refusal is the problem document to send back, its
+/// pointer relative to the control message.
+pub trait MotionResolver: Send + Sync + 'static {
+    fn resolve(&self, motion: serde_json::Value) -> BoxFuture<'static, Result<Arc<StreamMotion>, serde_json::Value>>;
+}
+
+/// Controls waiting behind a crossfade's lookup, at most.
+const QUEUED_CONTROLS: usize = 32;
+
+/// WebSocket close codes (RFC 6455 §7.4.1).
+pub mod close {
+    pub const NORMAL: u16 = 1000;
+    pub const GOING_AWAY: u16 = 1001;
+    pub const POLICY: u16 = 1008;
+    /// A client message over the inbound size limit.
+    pub const TOO_BIG: u16 = 1009;
+    pub const INTERNAL: u16 = 1011;
+    /// "Try again later": the stream caps are reached.
+    pub const TRY_AGAIN_LATER: u16 = 1013;
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WsConfig {
+    /// How often to ping; a client that has not answered the previous ping
+    /// by the next one, or has not accepted a frame for this long, is closed.
+    pub keepalive: Duration,
+}
+
+impl Default for WsConfig {
+    fn default() -> Self {
+        WsConfig { keepalive: Duration::from_secs(20) }
+    }
+}
+
+/// A control message from a client.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
+enum ControlMsg {
+    Play,
+    Pause,
+    Seek {
+        time: f64,
+    },
+    Speed {
+        speed: f64,
+    },
+    Stop,
+    Crossfade {
+        to: serde_json::Value,
+        duration: f64,
+        #[serde(default = "linear")]
+        ease: EaseDoc,
+    },
+    Layer {
+        index: usize,
+        weight: f32,
+        #[serde(default)]
+        duration: f64,
+    },
+    /// Replaces the stream's IK constraints at the next tick.
+    Ik {
+        constraints: Vec<IkDoc>,
+    },
+}
+
+fn linear() -> EaseDoc {
+    EaseDoc::Linear
+}
+
+impl ControlMsg {
+    /// The control, unless it is a crossfade (whose motion needs a lookup).
+    fn simple(self) -> Result<Result<Control, DocError>, (serde_json::Value, f64, EaseDoc)> {
+        Ok(Ok(match self {
+            ControlMsg::Play => Control::Play,
+            ControlMsg::Pause => Control::Pause,
+            ControlMsg::Seek { time } => Control::Seek(time),
+            ControlMsg::Speed { speed } => Control::Speed(speed),
+            ControlMsg::Stop => Control::Stop,
+            ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
+            ControlMsg::Crossfade { to, duration, ease } => return Err((to, duration, ease)),
+            ControlMsg::Ik { constraints } => {
+                let specs = constraints.iter().enumerate().map(|(i, c)| c.to_spec(&format!("/constraints/{i}")));
+                match specs.collect() {
+                    Ok(specs) => Control::Ik(specs),
+                    Err(e) => return Ok(Err(e)),
+                }
+            }
+        }))
+    }
+}
+
+/// A control message parsed on its own (REST `POST /v1/broadcasts/{id}/controls`
+/// takes the same JSON as a stream's control messages).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParsedControl {
+    Ready(Control),
+    /// A crossfade to the motion `to`, which the caller looks up.
+    Crossfade {
+        to: serde_json::Value,
+        duration: f64,
+        ease: anim::Ease,
+    },
+}
+
+/// Why a control message was refused: its stable code, the JSON pointer at
+/// fault if any, and the human detail.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlRefusal {
+    pub code: &'static str,
+    pub pointer: Option<String>,
+    pub detail: String,
+}
+
+/// Parses one control message (`{"op": …}`) as the stream's socket does.
+///
+/// # Errors
+/// Not a control (`bad_control`), or an `ik` control's constraint shape (its rule's code).
+pub fn parse_control(text: &str) -> Result<ParsedControl, ControlRefusal> {
+    let msg = serde_json::from_str::<ControlMsg>(text).map_err(|e| ControlRefusal {
+        code: "bad_control",
+        pointer: None,
+        detail: format!(
+            "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
+        ),
+    })?;
+    match msg.simple() {
+        Ok(Ok(control)) => Ok(ParsedControl::Ready(control)),
+        Ok(Err(e)) => Err(ControlRefusal { code: e.code, pointer: Some(e.pointer), detail: e.detail }),
+        Err((to, duration, ease)) => Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() }),
+    }
+}
+
+/// A crossfade whose motion is being looked up, and the controls sent after it.
+type Lookup = BoxFuture<'static, LookedUp>;
+
+/// A crossfade's motion looked up (or its refusal), with the rest of the
+/// control: duration, ease, and the motion as sent.
+type LookedUp = (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc, Arc<serde_json::Value>);
+
+/// The controls of one WebSocket stream: applied in the order sent, each
+/// crossfade's lookup holding back the ones after it.
+struct Controls {
+    motions: Option<Arc<dyn MotionResolver>>,
+    lookup: Option<Lookup>,
+    queued: VecDeque<ControlMsg>,
+}
+
+impl Controls {
+    /// Takes a control message's text; returns the error message to send, if any.
+    fn receive(&mut self, text: &str, sub: &mut Subscription) -> Option<Message> {
+        let msg = match serde_json::from_str::<ControlMsg>(text) {
+            Ok(msg) => msg,
+            Err(e) => {
+                return Some(error_message(&format!(
+                    "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
+                )));
+            }
+        };
+        if self.lookup.is_some() {
+            if self.queued.len() >= QUEUED_CONTROLS {
+                return Some(error_message("too many controls pending; wait for a frame before sending more"));
+            }
+            self.queued.push_back(msg);
+            return None;
+        }
+        self.apply(msg, sub)
+    }
+
+    /// Applies `msg` now, or starts its motion's lookup.
+    fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
+        match msg.simple() {
+            Ok(Ok(control)) => sub.control(control).err().map(|e| refusal(&e)),
+            Ok(Err(e)) => Some(problem_message(e.code, Some(e.pointer), &e.detail)),
+            Err((to, duration, ease)) => {
+                let Some(motions) = &self.motions else {
+                    return Some(error_message("this stream cannot resolve motions"));
+                };
+                let source = Arc::new(to.clone());
+                let lookup = motions.resolve(to);
+                self.lookup = Some(Box::pin(async move { (lookup.await, duration, ease, source) }));
+                None
+            }
+        }
+    }
+
+    /// A lookup finished: the crossfade goes to the playback (or its refusal
+    /// back to the client), then the controls queued behind it, up to the
+    /// next crossfade. Returns the error messages to send.
+    fn looked_up(&mut self, (motion, duration, ease, source): LookedUp, sub: &mut Subscription) -> Vec<Message> {
+        self.lookup = None;
+        let mut errors = Vec::new();
+        match motion {
+            Ok(to) => {
+                let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into(), source: Some(source) });
+                errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
+            }
+            Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
+        }
+        while self.lookup.is_none()
+            && let Some(msg) = self.queued.pop_front()
+        {
+            errors.extend(self.apply(msg, sub));
+        }
+        errors
+    }
+}
+
+/// Waits for a pending lookup; never resolves without one.
+async fn lookup_done(lookup: &mut Option<Lookup>) -> LookedUp {
+    match lookup.as_mut() {
+        Some(lookup) => lookup.await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The close frame for an end reason.
+pub fn close_frame(reason: EndReason) -> CloseFrame {
+    let (code, reason) = match reason {
+        EndReason::MaxFrames => (close::NORMAL, "max_frames reached"),
+        EndReason::Stopped => (close::NORMAL, "stopped"),
+        EndReason::Ended => (close::NORMAL, "the broadcast ended"),
+        EndReason::Shutdown => (close::GOING_AWAY, "the server is shutting down"),
+        EndReason::Failed => (close::INTERNAL, "the stream failed"),
+    };
+    CloseFrame { code, reason: Utf8Bytes::from_static(reason) }
+}
+
+fn error_message(detail: &str) -> Message {
+    problem_message("bad_control", None, detail)
+}
+
+/// A refused control's `{"error": {code, detail, pointer?}}`.
+fn refusal(e: &ControlError) -> Message {
+    problem_message(e.code(), e.pointer(), &e.to_string())
+}
+
+fn problem_message(code: &str, pointer: Option<String>, detail: &str) -> Message {
+    let mut problem = serde_json::json!({"code": code, "detail": detail});
+    if let Some(pointer) = pointer {
+        problem["pointer"] = pointer.into();
+    }
+    Message::Text(serde_json::json!({ "error": problem }).to_string().into())
+}
+
+/// A socket that sends a stream's frames: by default as messages through
+/// its `Sink`; the server's socket writes the playback's shared bytes to the
+/// connection itself, behind a frame header, without copying them into a
+/// per-viewer buffer (`server::rest::socket`, issue 19).
+pub trait FrameSocket: Sink<Message> + Unpin {
+    /// Sends one frame: JSON text or protobuf binary, as `encoding` says.
+    fn send_frame(&mut self, encoding: Encoding, bytes: bytes::Bytes) -> impl Future<Output = Result<(), Self::Error>> {
+        async move {
+            match frame_message(encoding, bytes) {
+                Some(message) => self.send(message).await,
+                None => Ok(()), // the JSON encoder writes UTF-8 only
+            }
+        }
+    }
+}
+
+/// A frame as a WebSocket message.
+fn frame_message(encoding: Encoding, bytes: bytes::Bytes) -> Option<Message> {
+    match encoding {
+        Encoding::Json => text(bytes).map(Message::Text),
+        Encoding::Protobuf => Some(Message::Binary(bytes)),
+    }
+}
+
+/// Streams `sub` over `socket` until the stream ends (see the module doc);
+/// `motions` looks up a crossfade's motion (`None`: crossfades are refused).
+pub async fn serve<S, E>(
+    mut socket: S,
+    mut sub: Subscription,
+    config: WsConfig,
+    motions: Option<Arc<dyn MotionResolver>>,
+) where
+    S: FrameSocket + Sink<Message, Error = E> + Stream<Item = Result<Message, E>> + Unpin,
+    E: std::error::Error + 'static,
+{
+    let mut ping = interval_at(Instant::now() + config.keepalive, config.keepalive);
+    ping.set_missed_tick_behavior(MissedTickBehavior::Delay);
+    let mut awaiting_pong = false;
+    let mut controls = Controls { motions, lookup: None, queued: VecDeque::new() };
+    let mut outbox: VecDeque<Message> = VecDeque::new();
+    let mut reads = ReadGate::new();
+    loop {
+        let outgoing = if let Some(message) = outbox.pop_front() {
+            message
+        } else {
+            tokio::select! {
+                next = sub.next() => match next {
+                    // Sent here (not below) so that a frame's bytes go to the
+                    // socket's own frame path.
+                    Next::Frame(f) => {
+                        let encoding = sub.encoding();
+                        match timeout(config.keepalive, socket.send_frame(encoding, f.bytes)).await {
+                            Ok(Ok(())) => continue,
+                            Ok(Err(_)) => return,
+                            Err(_) => return close_slow_consumer(&mut socket).await,
+                        }
+                    }
+                    Next::End(reason) => {
+                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(close_frame(reason))))).await;
+                        return;
+                    }
+                },
+                incoming = poll_fn(|cx| reads.poll_next(&mut socket, cx)) => match incoming {
+                    None | Some(Ok(Message::Close(_))) => return,
+                    Some(Err(e)) => {
+                        // A message over the inbound limit is refused with 1009;
+                        // other read errors leave nothing to answer.
+                        if is_too_big(&e) {
+                            let frame = CloseFrame { code: close::TOO_BIG, reason: Utf8Bytes::from_static("message too big") };
+                            let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                        }
+                        return;
+                    }
+                    Some(Ok(Message::Pong(_))) => {
+                        awaiting_pong = false;
+                        continue;
+                    }
+                    Some(Ok(Message::Ping(_))) => continue, // the socket answers pings itself
+                    Some(Ok(Message::Binary(_))) => error_message("control messages are JSON text"),
+                    Some(Ok(Message::Text(text))) => match controls.receive(&text, &mut sub) {
+                        Some(error) => error,
+                        None => continue,
+                    },
+                },
+                done = lookup_done(&mut controls.lookup) => {
+                    outbox.extend(controls.looked_up(done, &mut sub));
+                    continue;
+                }
+                _ = ping.tick() => {
+                    if awaiting_pong {
+                        let frame = CloseFrame { code: close::POLICY, reason: Utf8Bytes::from_static("keepalive timeout") };
+                        let _ = timeout(config.keepalive, socket.send(Message::Close(Some(frame)))).await;
+                        return;
+                    }
+                    awaiting_pong = true;
+                    Message::Ping(bytes::Bytes::new())
+                }
+            }
+        };
+        match timeout(config.keepalive, socket.send(outgoing)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(_)) => return,
+            Err(_) => return close_slow_consumer(&mut socket).await,
+        }
+    }
+}
+
+/// Reads the socket only when it has woken the task (or gave a message
+/// the last time, since more may be buffered). Polled beside the frames,
+/// the socket would otherwise be read once per frame sent, each attempt
+/// going through tungstenite, hyper's upgraded connection and the
+/// connection's wrappers to find nothing: a tenth of a broadcast viewer's
+/// cost per frame (issue 19).
+struct ReadGate {
+    wake: Arc<ReadWake>,
+    /// Wakes `wake`: the waker the socket's read side is polled with.
+    waker: Waker,
+}
+
+struct ReadWake {
+    woken: AtomicBool,
+    task: AtomicWaker,
+}
+
+impl Wake for ReadWake {
+    fn wake(self: Arc<Self>) {
+        self.wake_by_ref();
+    }
+
+    fn wake_by_ref(self: &Arc<Self>) {
+        self.woken.store(true, Ordering::Release);
+        self.task.wake();
+    }
+}
+
+impl ReadGate {
+    fn new() -> Self {
+        let wake = Arc::new(ReadWake { woken: AtomicBool::new(true), task: AtomicWaker::new() });
+        ReadGate { waker: Waker::from(Arc::clone(&wake)), wake }
+    }
+
+    fn poll_next<S: Stream + Unpin>(&mut self, socket: &mut S, cx: &mut Context<'_>) -> Poll<Option<S::Item>> {
+        // Registered before the flag is taken: a wake-up in between polls again.
+        self.wake.task.register(cx.waker());
+        if !self.wake.woken.swap(false, Ordering::AcqRel) {
+            return Poll::Pending;
+        }
+        let item = socket.poll_next_unpin(&mut Context::from_waker(&self.waker));
+        if item.is_ready() {
+            self.wake.woken.store(true, Ordering::Release);
+        }
+        item
+    }
+}
+
+/// A JSON frame as a text message (the default `send_frame`; the server's
+/// socket writes the bytes itself and needs no check).
+fn text(bytes: bytes::Bytes) -> Option<Utf8Bytes> {
+    Utf8Bytes::try_from(bytes).ok()
+}
+
+/// A viewer that accepted nothing for a whole keepalive period: its bounded
+/// buffers are full. It is told why (1008) if the close frame still fits in
+/// within a second, then dropped either way.
+async fn close_slow_consumer<S, E>(socket: &mut S)
+where
+    S: Sink<Message, Error = E> + Unpin,
+{
+    metrics::counter!("inbetween_slow_consumers_closed_total").increment(1);
+    let frame = CloseFrame { code: close::POLICY, reason: Utf8Bytes::from_static("slow_consumer: frames not read") };
+    let _ = timeout(Duration::from_secs(1), socket.send(Message::Close(Some(frame)))).await;
+}
+
+/// Whether a read error (anywhere in its source chain) is tungstenite's
+/// "message or frame over the configured size".
+fn is_too_big(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause = Some(e);
+    while let Some(err) = cause {
+        if let Some(tokio_tungstenite::tungstenite::Error::Capacity(_)) = err.downcast_ref() {
+            return true;
+        }
+        cause = err.source();
+    }
+    false
+}

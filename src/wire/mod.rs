@@ -1,8 +1,0 @@
-//! Wire formats at the edge: each protocol's types and their conversions to
-//! and from the core (`[x, y, z, w]` quaternion order is fixed here).
-
-pub mod ik;
-pub mod json;
-pub mod mesh;
-pub mod motion;
-pub mod proto;
