@@ -291,6 +291,7 @@ impl Clip {
         self.ik.as_ref().map_or(0, KeyedIk::len)
     }
 
+    /// The clip's name.
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -310,14 +311,17 @@ impl Clip {
         self.end
     }
 
+    /// `end - start`, in seconds.
     pub fn duration(&self) -> f32 {
         self.end - self.start
     }
 
+    /// The skeleton its poses are for.
     pub fn skeleton(&self) -> &Skeleton {
         &self.skeleton
     }
 
+    /// Joints in its skeleton (and in every pose it samples).
     pub fn joint_count(&self) -> usize {
         self.skeleton.len()
     }
@@ -327,6 +331,7 @@ impl Clip {
         self.translated.contains(&(j as u32))
     }
 
+    /// Joint tracks, constant ones included.
     pub fn track_count(&self) -> usize {
         self.track_count
     }
@@ -460,6 +465,7 @@ pub struct Sampler {
 }
 
 impl Sampler {
+    /// Empty buffers; they take their size at the first sample.
     pub fn new() -> Self {
         Self::default()
     }

@@ -17,6 +17,7 @@ pub struct ClipError {
 }
 
 impl ClipError {
+    /// A refusal of the field at `path`.
     pub fn new(path: Path, kind: ClipErrorKind) -> Self {
         ClipError { path, kind }
     }

@@ -35,22 +35,27 @@ pub struct ParameterLayout {
 }
 
 impl ParameterLayout {
+    /// The number of parameters.
     pub fn len(&self) -> usize {
         self.names.len()
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.names.is_empty()
     }
 
+    /// Their names, in order.
     pub fn names(&self) -> &[String] {
         &self.names
     }
 
+    /// Their widths (numbers per key), in order.
     pub fn widths(&self) -> &[u32] {
         &self.widths
     }
 
+    /// The index of the parameter called `name`.
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
     }

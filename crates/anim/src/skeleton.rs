@@ -34,10 +34,12 @@ impl Pose {
         }
     }
 
+    /// The number of joints.
     pub fn len(&self) -> usize {
         self.translations.len()
     }
 
+    /// Whether there are no joints.
     pub fn is_empty(&self) -> bool {
         self.translations.is_empty()
     }
@@ -80,6 +82,7 @@ impl Skeleton {
         Skeleton { names, parents, rest, inverse_binds }
     }
 
+    /// The number of joints.
     pub fn len(&self) -> usize {
         self.names.len()
     }
@@ -94,14 +97,17 @@ impl Skeleton {
             + self.inverse_binds.as_ref().map_or(0, vec_bytes)
     }
 
+    /// Whether there are no joints.
     pub fn is_empty(&self) -> bool {
         self.names.is_empty()
     }
 
+    /// Joint names, in joint order.
     pub fn names(&self) -> &[String] {
         &self.names
     }
 
+    /// The index of the joint called `name`.
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
     }
@@ -123,6 +129,7 @@ impl Skeleton {
         (p != NO_PARENT).then_some(p as usize)
     }
 
+    /// The rest pose (local space).
     pub fn rest(&self) -> &Pose {
         &self.rest
     }
@@ -135,6 +142,7 @@ impl Skeleton {
         self.inverse_binds.as_ref().map(|b| &b[j])
     }
 
+    /// Whether the clip has a skin (inverse bind matrices).
     pub fn has_inverse_binds(&self) -> bool {
         self.inverse_binds.is_some()
     }

@@ -149,6 +149,7 @@ pub enum Keys {
 }
 
 impl Keys {
+    /// The number of keys.
     pub fn len(&self) -> usize {
         match self {
             Keys::Vec3(v) => v.len(),
@@ -156,10 +157,12 @@ impl Keys {
         }
     }
 
+    /// Whether there are no keys.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
+    /// Numbers per key (3 or 4).
     pub fn width(&self) -> usize {
         match self {
             Keys::Vec3(_) => 3,
@@ -178,6 +181,7 @@ pub enum Channel {
 impl Channel {
     pub const ALL: [Channel; 3] = [Channel::Translation, Channel::Rotation, Channel::Scale];
 
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Channel::Translation => "translation",
@@ -209,6 +213,7 @@ pub enum Interpolation {
 }
 
 impl Interpolation {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Interpolation::Step => "step",
@@ -232,6 +237,7 @@ pub enum Ends {
 }
 
 impl Ends {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Ends::Reflect => "reflect",
@@ -268,6 +274,7 @@ pub enum Playback {
 }
 
 impl Playback {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Playback::Once => "once",
@@ -288,6 +295,7 @@ pub enum Ease {
 }
 
 impl Ease {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Ease::Linear => "linear",
@@ -318,6 +326,7 @@ pub enum Space {
 }
 
 impl Space {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Space::Local => "local",

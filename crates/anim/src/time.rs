@@ -32,10 +32,12 @@ impl TimeRange {
         TimeRange { start, end }
     }
 
+    /// The first key's time.
     pub fn start(self) -> f32 {
         self.start
     }
 
+    /// The last key's time.
     pub fn end(self) -> f32 {
         self.end
     }

@@ -90,6 +90,7 @@ impl Timeline {
         uniform.then_some((times[0], reciprocal(h as f32)))
     }
 
+    /// The number of keys.
     pub fn len(&self) -> usize {
         self.keys.len()
     }
@@ -99,6 +100,7 @@ impl Timeline {
         std::mem::size_of_val(&*self.keys) + self.buckets.as_ref().map_or(0, |(_, _, b)| std::mem::size_of_val(&**b))
     }
 
+    /// Whether it has no keys.
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
     }
@@ -111,10 +113,18 @@ impl Timeline {
         self.keys[i][0]
     }
 
+    /// The first key's time.
+    ///
+    /// # Panics
+    /// On an empty timeline.
     pub fn first(&self) -> f32 {
         self.keys[0][0]
     }
 
+    /// The last key's time.
+    ///
+    /// # Panics
+    /// On an empty timeline.
     pub fn last(&self) -> f32 {
         self.keys[self.keys.len() - 1][0]
     }

@@ -161,6 +161,7 @@ pub fn validate_constraints(
 }
 
 impl IkConstraint {
+    /// Which solver takes it.
     pub fn kind(&self) -> IkKind {
         match self {
             IkConstraint::TwoBone(_) => IkKind::TwoBone,
@@ -185,6 +186,7 @@ impl IkConstraint {
         }
     }
 
+    /// How much of the solve applies, in `[0, 1]`.
     pub fn weight(&self) -> f32 {
         match self {
             IkConstraint::TwoBone(c) => c.weight,
@@ -193,6 +195,7 @@ impl IkConstraint {
         }
     }
 
+    /// Sets the weight (see [`IkConstraint::weight`]).
     pub fn set_weight(&mut self, weight: f32) {
         match self {
             IkConstraint::TwoBone(c) => c.weight = weight,

@@ -72,6 +72,7 @@ pub struct IkSolver {
 }
 
 impl IkSolver {
+    /// A solver with no buffers yet.
     pub fn new() -> Self {
         Self::default()
     }

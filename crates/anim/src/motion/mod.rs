@@ -249,6 +249,7 @@ impl<C: ClipSource> Motion<C> {
         self.root.is_some()
     }
 
+    /// Layers, bottom to top.
     pub fn layer_count(&self) -> usize {
         self.layers.len()
     }
@@ -258,6 +259,7 @@ impl<C: ClipSource> Motion<C> {
         &self.weights
     }
 
+    /// Distinct sync groups among the layers.
     pub fn sync_group_count(&self) -> usize {
         self.groups.len()
     }

@@ -32,6 +32,7 @@ impl Planar {
         Planar { translation: self.translation + turn(up, self.yaw) * next.translation, yaw: self.yaw + next.yaw }
     }
 
+    /// The move that undoes this one: `self.inverse(up).then(self, up)` is the identity.
     pub fn inverse(self, up: UpAxis) -> Planar {
         Planar { translation: -(turn(up, -self.yaw) * self.translation), yaw: -self.yaw }
     }

@@ -60,6 +60,7 @@ pub struct MotionSampler {
 }
 
 impl MotionSampler {
+    /// Empty buffers; they take their size at the first sample.
     pub fn new() -> Self {
         Self::default()
     }

@@ -98,6 +98,7 @@ pub enum LayerMode {
 }
 
 impl LayerMode {
+    /// The mode's name in requests (`blend`, `additive`).
     pub fn as_str(self) -> &'static str {
         match self {
             LayerMode::Blend => "blend",
