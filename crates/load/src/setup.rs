@@ -3,7 +3,7 @@
 
 use anyhow::{Context, bail};
 use reqwest::Url;
-use serde_json::{Value, json};
+use serde_json::Value;
 use tonic::transport::Channel;
 
 use super::chain::chain_clip;

@@ -699,7 +699,7 @@ impl Serialize for MatricesJson<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use anim::{Clip, ClipSpec, Interpolation, SampleOptions, Sampler, TrackSpec};
+    use anim::{Clip, ClipSpec, Interpolation, Playback, SampleOptions, Sampler, TrackSpec};
 
     /// The shortcut for 0 and ±1 writes what the formatter would.
     #[test]
