@@ -42,4 +42,3 @@ pub trait Dialect: Database {
     /// return, unless `durability` accepts that (then it only warns).
     fn check_durability(conn: &mut Self::Connection, durability: Durability) -> BoxFuture<'_, Result<(), sqlx::Error>>;
 }
-

@@ -27,9 +27,9 @@ use sqlx::migrate::Migrator;
 use sqlx::postgres::{PgConnectOptions, PgListener, PgPool, PgPoolOptions, PgQueryResult};
 use sqlx::{PgConnection, Postgres};
 
+use super::dialect::Dialect;
 use super::feed::{ChangeFeed, FeedError, Subscription};
 use super::retry::Transience;
-use super::dialect::Dialect;
 use super::sql::SqlStore;
 use super::{Durability, PoolSettings};
 

@@ -30,8 +30,8 @@ use super::dialect::Dialect;
 use super::filter::list_query;
 use super::retry::{Retry, RetryPolicy, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast,
-    StoredClip, StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
+    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast, StoredClip,
+    StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
 };
 
 /// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
@@ -40,6 +40,7 @@ macro_rules! meta_columns {
         "id, name, version, joints, tracks, events, start_time, end_time, playback, tags, created_at, updated_at"
     };
 }
+#[cfg(test)]
 pub(crate) use meta_columns;
 
 const INSERT_CLIP: &str = "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, \

@@ -33,8 +33,8 @@ use sqlx::migrate::Migrator;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqliteQueryResult, SqliteSynchronous};
 use sqlx::{Sqlite, SqliteConnection};
 
-use super::retry::Transience;
 use super::dialect::Dialect;
+use super::retry::Transience;
 use super::sql::SqlStore;
 use super::{Durability, PoolSettings};
 
