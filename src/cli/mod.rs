@@ -31,7 +31,7 @@ pub struct Cli {
 enum Command {
     /// Sample a clip file offline and print its poses as JSON.
     Sample(sample::SampleArgs),
-    /// Serve the REST API on the embedded clip store (see README, "REST API").
+    /// Serve the REST API on the embedded clip store (see docs/api.md).
     Serve(Box<serve::ServeArgs>),
     /// Import a glTF, GLB or BVH file: print clip documents or upload them.
     Import(import::ImportArgs),
