@@ -55,8 +55,8 @@ if loads:
 w("")
 
 # ---- unary pairs
-verdicts = []  # issue 6's targets
-verdicts19 = []  # issue 19's
+verdicts = []  # the first set of targets
+verdicts19 = []  # the second set: the floor, broadcasts, the kernel
 for base, real, label in [("grpc-ping", "grpc-sample", "gRPC Sample (20 joints) vs Ping"),
                           ("rest-health", "rest-pose", "REST pose (20 joints) vs /healthz")]:
     rows, ratios = [], []
@@ -122,7 +122,7 @@ if streams:
 
 floors = [(n, r) for n, r in streams if r.get("floor")]
 if floors:
-    w("**Streaming floor** (issue 19; `--floor`): after each run, the same streams from a bare sender of the server's "
+    w("**Streaming floor** (`--floor`): after each run, the same streams from a bare sender of the server's "
       "own frame (`inbetween load-floor`, its own process; see \"Streaming floor\" below), CPU per delivered frame:")
     w("")
     w("| scenario | floor | frame | server CPU per frame | floor CPU per frame | server / floor | floor loss | "
@@ -269,9 +269,10 @@ if rbt:
             verdicts19.append((f"64-joint Catmull-Rom model-space pose ≤ 2 µs (random times, {what})", f"{v:.2f} µs",
                                "met" if v <= 2 else "**missed**"))
 
-for issue, rows in [(6, verdicts), (19, verdicts19)]:
+for name, rows in [("first set: throughput, streams, memory, core", verdicts),
+                   ("second set: the streaming floor, broadcasts, the sampling kernel", verdicts19)]:
     if rows:
-        w(f"**Targets** (issue {issue}), as measured by this run:")
+        w(f"**Targets**, {name}, as measured by this run:")
         w("")
         w("| target | measured | verdict |")
         w("|---|---|---|")

@@ -262,13 +262,21 @@ fn the_cycle_finder_finds_a_circle_round_three_modules() {
     assert_eq!(find_cycle(&acyclic), None);
 }
 
-/// The Markdown the project writes for its users (the third-party READMEs
-/// copied beside the example files are not ours).
-fn user_docs() -> Vec<String> {
-    let mut out: Vec<String> =
-        ["README.md", "BENCHMARKS.md", "RELIABILITY.md", "examples/SOURCES.md", "examples/clients/README.md"]
-            .map(str::to_owned)
-            .into();
+/// The Markdown the project writes (the third-party READMEs copied beside
+/// the example files are not ours): the top-level documents, the examples'
+/// own and every page of docs/.
+fn project_docs() -> Vec<String> {
+    let mut out: Vec<String> = [
+        "README.md",
+        "ARCHITECTURE.md",
+        "CONTRIBUTING.md",
+        "BENCHMARKS.md",
+        "RELIABILITY.md",
+        "examples/SOURCES.md",
+        "examples/clients/README.md",
+    ]
+    .map(str::to_owned)
+    .into();
     for entry in std::fs::read_dir(root().join("docs")).expect("read docs/") {
         let path = entry.expect("a folder entry").path();
         if path.extension().is_some_and(|e| e == "md") {
@@ -295,17 +303,23 @@ fn anchor(heading: &str) -> String {
         .collect()
 }
 
-/// A user needs only the repository: the docs name no contract they do not
-/// have ("SPEC §…"), and every relative link, with its `#anchor`, lands on a
-/// file and heading that exist.
+/// A reader needs only the repository: the documents cite no contract they
+/// do not have ("SPEC §…") but the `docs/` section that says it.
 #[test]
-fn the_user_docs_stand_alone_and_their_links_resolve() {
+fn no_document_cites_the_internal_spec() {
+    let docs = project_docs();
+    assert!(docs.len() >= 15, "README, ARCHITECTURE, CONTRIBUTING, BENCHMARKS, RELIABILITY and docs/: {docs:?}");
+    let citing: Vec<_> = docs.into_iter().filter(|doc| read(doc).contains("SPEC §")).collect();
+    assert!(citing.is_empty(), "these cite SPEC §…; link the docs/ section that says it instead: {citing:?}");
+}
+
+/// Every relative link, with its `#anchor`, lands on a file and a heading that
+/// exist, so the map's roads lead somewhere.
+#[test]
+fn every_link_in_the_documents_resolves() {
     let mut broken = Vec::new();
-    for doc in user_docs() {
+    for doc in project_docs() {
         let text = read(&doc);
-        if text.contains("SPEC §") {
-            broken.push(format!("{doc} cites SPEC §…: link the docs/ section that says it"));
-        }
         let dir = Path::new(&doc).parent().unwrap();
         for link in prose(&text).split("](").skip(1) {
             let Some(target) = link.split(')').next().filter(|t| !t.contains(':') && !t.contains(' ')) else {
@@ -328,4 +342,22 @@ fn the_user_docs_stand_alone_and_their_links_resolve() {
         }
     }
     assert!(broken.is_empty(), "{broken:#?}");
+}
+
+/// The README and ARCHITECTURE.md are maps, not archives: short enough to read
+/// in one sitting, the reference one link away in docs/.
+#[test]
+fn the_readme_and_the_architecture_stay_maps() {
+    for (doc, limit) in [("README.md", 12 * 1024), ("ARCHITECTURE.md", 20 * 1024)] {
+        let bytes = read(doc).len();
+        assert!(bytes <= limit, "{doc} is {bytes} bytes, over {limit}: move reference material to docs/");
+    }
+    let readme = read("README.md");
+    for section in ["## The two commands", "## Limits and non-goals"] {
+        assert!(readme.lines().any(|l| l == section), "README.md lacks {section:?}");
+    }
+    for command in ["cargo run --release -- serve", "cargo test"] {
+        let given = readme.lines().any(|l| l.starts_with(&format!("{command} ")));
+        assert!(given, "README.md's two commands stay exactly as they are: {command}");
+    }
 }

@@ -1,4 +1,4 @@
-//! `inbetween watch`: one WebSocket stream in the terminal, so the README's
+//! `inbetween watch`: one WebSocket stream in the terminal, so the documents'
 //! stream commands need nothing but the project (no websocat, no jq).
 //!
 //! `--motion FILE` opens `GET /v1/stream` with `{"op":"open","motion":…}`;

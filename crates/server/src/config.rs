@@ -1072,17 +1072,17 @@ mod tests {
         }
     }
 
-    /// The README's settings table names every setting: one line with its
+    /// docs/configuration.md names every setting: one table row with its
     /// flag, its variable and its TOML key.
     #[test]
-    fn every_setting_is_in_the_readme() {
-        let readme = include_str!("../../../README.md");
-        let rows: Vec<&str> = readme.lines().filter(|l| l.starts_with("| `--")).collect();
+    fn every_setting_is_in_the_configuration_doc() {
+        let doc = include_str!("../../../docs/configuration.md");
+        let rows: Vec<&str> = doc.lines().filter(|l| l.starts_with("| `--")).collect();
         for [toml, flag, env] in RawConfig::NAMES.iter().chain(RawLimits::NAMES) {
             let documented = rows.iter().any(|row| {
                 row.contains(&format!("`--{flag} ")) && row.contains(&format!("`{env}`")) && row.contains(toml)
             });
-            assert!(documented, "README's configuration table lacks --{flag} / {env} / {toml}");
+            assert!(documented, "docs/configuration.md's table lacks --{flag} / {env} / {toml}");
         }
     }
 }

@@ -98,7 +98,7 @@ pub enum ApiError {
 
 /// How an operator raises a limit: the setting and its flag and environment
 /// variable, which follow one pattern for every limit (`max_x`, `--max-x`,
-/// `INBETWEEN_MAX_X`; the config module's README test keeps them listed).
+/// `INBETWEEN_MAX_X`; the config module's test keeps them listed in docs/configuration.md).
 pub fn raise_hint(setting: &str) -> String {
     format!("{setting}; raise it with --{} or INBETWEEN_{}", setting.replace('_', "-"), setting.to_ascii_uppercase())
 }

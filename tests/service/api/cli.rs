@@ -1,6 +1,6 @@
 //! `inbetween serve` wiring: the TOML file, environment and flags reach the
 //! server in that order of precedence; JSON logs are JSON. `inbetween watch`
-//! streams the README's example motion files from a real server.
+//! streams docs/motion.md's example motion files from a real server.
 
 use serde_json::{Value, json};
 

@@ -75,7 +75,7 @@ async fn the_openapi_document_links_the_docs_and_cites_no_spec() {
     assert!(description(&schemas["ClipDoc"]).contains("docs/clip-format.md"), "{}", schemas["ClipDoc"]);
     assert!(description(&schemas["MotionDoc"]).contains("docs/motion.md"), "{}", schemas["MotionDoc"]);
     let info = description(&doc["info"]);
-    for page in ["clip-format", "motion", "ik", "broadcasts", "import", "warnings"] {
+    for page in ["api", "configuration", "clip-format", "motion", "ik", "broadcasts", "import", "warnings"] {
         assert!(info.contains(&format!("docs/{page}.md")), "{info}");
     }
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -1,4 +1,4 @@
-//! Strict query strings on every API and operations route (README "Errors"):
+//! Strict query strings on every API and operations route (docs/api.md, "Strict queries"):
 //! an unknown or repeated parameter is a 400 naming it, and the request does
 //! nothing — in particular a write with an option the route does not have
 //! stores nothing.

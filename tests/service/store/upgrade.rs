@@ -20,7 +20,7 @@ const FROM_TRACKS: &str = r#"{"name":"b","tracks":[{"joint":"hips","channel":"tr
 /// The migrations of `dir` up to 0001 only, as a migrator of their own
 /// (the same file, so the same checksum the store's migrator records).
 async fn first_migration_only(dir: &str, scratch: &Path) -> Migrator {
-    let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("migrations").join(dir).join("0001_clips.sql");
+    let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/server/migrations").join(dir).join("0001_clips.sql");
     std::fs::copy(&from, scratch.join("0001_clips.sql")).unwrap();
     Migrator::new(scratch).await.unwrap()
 }

@@ -6,7 +6,7 @@
 //! (`common::glb`, not the importer), its model-space pose at the page's
 //! time from `POST /v1/poses`, skinned on the CPU (`v = Σ w·M·invBind·v̂`)
 //! and its triangles rasterized (pixel centres) through the page's camera
-//! (viewer.js `cameraBasis`: yaw, pitch, distance, target, 45° vertical
+//! (math.js `cameraBasis`: yaw, pitch, distance, target, 45° vertical
 //! field of view) into a silhouette. The page's silhouette is the pixels
 //! that change when the mesh is switched on (skeleton overlay off), so the
 //! floor grid under it does not count. They must overlap with IoU ≥ 0.9.
@@ -44,7 +44,7 @@ async fn scene_pixels(page: &mut Page) -> (usize, usize, Vec<[u8; 3]>) {
     (info.width as usize, info.height as usize, pixels)
 }
 
-/// viewer.js's `cameraBasis`, from the page's camera state: world point →
+/// math.js's `cameraBasis`, from the page's camera state: world point →
 /// canvas pixel coordinates, `None` behind the near plane.
 struct Camera {
     eye: DVec3,

@@ -9,13 +9,14 @@
 //! `INBETWEEN_REQUIRE_BROWSER=1` (CI) makes them fail. Set
 //! `INBETWEEN_VIEWER_SCREENSHOT=path.png` to save a screenshot from the
 //! upload test, `INBETWEEN_VIEWER_PANEL_SCREENSHOT=path.png` one of the
-//! composition panel with the Fox (README's docs/viewer-panel.png).
+//! composition panel with the Fox (docs/viewer.md's docs/viewer-panel.png).
 
 mod cdp;
 mod curves;
 mod flows;
 mod mesh;
 mod panel;
+mod units;
 
 use std::path::Path;
 use std::time::Duration;
@@ -25,8 +26,26 @@ use serde_json::{Value, json};
 use crate::common::{TestApp, WAVE};
 use cdp::{Browser, Page};
 const TOKEN: &str = "viewer-test-write-token";
-/// The canvases' background colour (#101216 in viewer.js).
+/// The canvases' background colour (#101216 in scene.js and curves.js).
 const BACKGROUND: [u8; 3] = [0x10, 0x12, 0x16];
+
+/// The page's other ES modules (`viewer.js` imports them, `index.html` preloads them).
+const MODULES: [&str; 14] = [
+    "/viewer/math.js",
+    "/viewer/dom.js",
+    "/viewer/events.js",
+    "/viewer/state.js",
+    "/viewer/api.js",
+    "/viewer/settings.js",
+    "/viewer/pose.js",
+    "/viewer/scene.js",
+    "/viewer/curves.js",
+    "/viewer/player.js",
+    "/viewer/controls.js",
+    "/viewer/clips.js",
+    "/viewer/upload.js",
+    "/viewer/composition.js",
+];
 
 /// A server whose writes need [`TOKEN`].
 async fn start() -> TestApp {
@@ -55,8 +74,9 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
     assert_eq!(header(&page, "cache-control"), "no-cache");
     let etag = header(&page, "etag");
     let html = page.text().await.unwrap();
-    assert!(html.contains(r#"src="/viewer/viewer.js""#) && html.contains(r#"href="/viewer/viewer.css""#));
-    assert!(html.contains(r#"src="/viewer/mesh.js""#));
+    // One entry module; the modules it imports (mesh.js among them) preloaded.
+    assert!(html.contains(r#"type="module" src="/viewer/viewer.js""#) && html.contains(r#"href="/viewer/viewer.css""#));
+    assert!(html.contains(r#"rel="modulepreload" href="/viewer/mesh.js""#));
     assert!(!html.contains("<script>") && !html.contains("style="), "inline code would break the CSP");
 
     let again = app.http.get(app.url("/viewer")).header("if-none-match", &etag).send().await.unwrap();
@@ -70,7 +90,10 @@ async fn serves_the_page_with_content_types_etags_and_a_strict_csp() {
         ("/viewer/broadcast.js", "text/javascript; charset=utf-8"),
         ("/viewer/panel.css", "text/css; charset=utf-8"),
         ("/viewer/mesh.js", "text/javascript; charset=utf-8"),
-    ] {
+    ]
+    .into_iter()
+    .chain(MODULES.iter().map(|m| (*m, "text/javascript; charset=utf-8")))
+    {
         assert!(html.contains(&format!("=\"{path}\"")), "the page loads {path}");
         let resp = app.http.get(app.url(path)).send().await.unwrap();
         assert_eq!(resp.status(), 200, "{path}");

@@ -2,7 +2,7 @@
 //! real in front of three nodes: the shipped file with only the compose host
 //! names and ports replaced by this machine's. Uploads, poses, a WebSocket
 //! stream and gRPC calls go through it, and the gRPC calls of one client
-//! channel must land on every node (per-call balancing, README "Scaling out").
+//! channel must land on every node (per-call balancing, docs/operations.md, "Scaling out over PostgreSQL").
 //!
 //! Needs nginx (Debian's package); skips without it unless
 //! `INBETWEEN_REQUIRE_NGINX=1` (CI installs it).

@@ -1,4 +1,4 @@
-//! Inputs the fuzzers found (`fuzz/`, README "Fuzzing"), each refused or
+//! Inputs the fuzzers found (`fuzz/`, CONTRIBUTING.md "Fuzzing"), each refused or
 //! imported as it should be, never a panic. Small inputs are embedded as
 //! found; others are regenerated from the finding's essence.
 

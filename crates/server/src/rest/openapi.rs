@@ -90,13 +90,13 @@ fn problem_response(description: &str) -> RefOr<Response> {
 
 #[derive(OpenApi)]
 #[openapi(
-    info(title = "inbetween", description = "Keyframe clips in, inbetweens out. Described in the repository's docs: the clip document and how every pose is evaluated, `docs/clip-format.md` (the pose: its §4); composed motions (layers, crossfades, root motion, joint subsets, streams), `docs/motion.md`; inverse kinematics, `docs/ik.md`; broadcasts, `docs/broadcasts.md`; imports, `docs/import.md`; warnings, `docs/warnings.md`; every route with curl, the README's \"REST API\"."),
+    info(title = "inbetween", description = "Keyframe clips in, inbetweens out. Described in the repository's docs: the clip document and how every pose is evaluated, `docs/clip-format.md` (the pose: its §4); composed motions (layers, crossfades, root motion, joint subsets, streams), `docs/motion.md`; inverse kinematics, `docs/ik.md`; broadcasts, `docs/broadcasts.md`; imports, `docs/import.md`; warnings, `docs/warnings.md`; every route with curl, `docs/api.md`; every setting, `docs/configuration.md`."),
     components(schemas(Problem, Warning, PoseSchema, PosesSchema, JointPoseSchema, super::stream::StreamOpen)),
     modifiers(&RouteOperations, &BearerAuth),
     tags(
         (name = "clips", description = "Store and fetch keyframe clips (the document: `docs/clip-format.md`)"),
         (name = "poses", description = "Evaluate poses of a clip (`docs/clip-format.md`, the pose: its §4) or of a composed motion (`docs/motion.md`)"),
-        (name = "streams", description = "Fixed-rate frames over a WebSocket (the README's \"Streaming\"; motions: `docs/motion.md`, \"Streams\")"),
+        (name = "streams", description = "Fixed-rate frames over a WebSocket (`docs/api.md`, \"Streams\"; motions: `docs/motion.md`, \"Streams\")"),
         (name = "broadcasts", description = "One shared playback, many viewers (`docs/broadcasts.md`)"),
         (name = "operations", description = "Health and metrics"),
         (name = "viewer", description = "The browser viewer page"),

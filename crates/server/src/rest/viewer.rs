@@ -25,7 +25,7 @@ struct Asset {
 
 /// A strong entity tag from the file's bytes: `"v-<fnv1a64 hex>"`.
 macro_rules! asset {
-    ($file:literal, $content_type:literal) => {{
+    ($file:expr, $content_type:literal) => {{
         const BODY: &str = include_str!($file);
         const HASH: u64 = fnv1a(BODY.as_bytes());
         const TAG: [u8; 20] = etag_of(HASH);
@@ -38,23 +38,43 @@ macro_rules! asset {
 }
 
 const INDEX: Asset = asset!("viewer/index.html", "text/html; charset=utf-8");
-const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
-const MESH_SCRIPT: Asset = asset!("viewer/mesh.js", "text/javascript; charset=utf-8");
 const STYLE: Asset = asset!("viewer/viewer.css", "text/css; charset=utf-8");
-/// Composition and IK handles.
-const PANEL_SCRIPT: Asset = asset!("viewer/panel.js", "text/javascript; charset=utf-8");
-/// Creating and watching broadcasts.
-const BROADCAST_SCRIPT: Asset = asset!("viewer/broadcast.js", "text/javascript; charset=utf-8");
 const PANEL_STYLE: Asset = asset!("viewer/panel.css", "text/css; charset=utf-8");
 
-/// The page's files other than the page itself, by path.
-const FILES: [(&str, &Asset); 6] = [
+/// A script of the page: an ES module, by its file name in `viewer/`.
+macro_rules! module {
+    ($file:literal) => {
+        (concat!("/viewer/", $file), &asset!(concat!("viewer/", $file), "text/javascript; charset=utf-8"))
+    };
+}
+
+/// The page's entry module (it imports the others).
+const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8");
+
+/// The page's files other than the page itself, by path. The scripts are
+/// ES modules importing each other (`viewer.js` lists them); their unit
+/// tests (`viewer/tests/`) and `viewer/package.json` are not served.
+const FILES: [(&str, &Asset); 20] = [
     ("/viewer/viewer.js", &SCRIPT),
-    ("/viewer/mesh.js", &MESH_SCRIPT),
     ("/viewer/viewer.css", &STYLE),
-    ("/viewer/panel.js", &PANEL_SCRIPT),
-    ("/viewer/broadcast.js", &BROADCAST_SCRIPT),
     ("/viewer/panel.css", &PANEL_STYLE),
+    module!("math.js"),
+    module!("dom.js"),
+    module!("events.js"),
+    module!("state.js"),
+    module!("api.js"),
+    module!("settings.js"),
+    module!("pose.js"),
+    module!("scene.js"),
+    module!("mesh.js"), // the clip's skinned mesh
+    module!("curves.js"),
+    module!("player.js"),
+    module!("controls.js"),
+    module!("clips.js"),
+    module!("upload.js"),
+    module!("composition.js"),
+    module!("panel.js"),     // composition and IK handles
+    module!("broadcast.js"), // creating and watching broadcasts
 ];
 
 /// Same-origin script, style, images and connections only; no inline code,

@@ -10,418 +10,389 @@
 // v = Σ w_k · M_jk · invBind_jk · v̂. Lit by a directional light plus
 // ambient, coloured by the base colour texture or factor; flat-shaded from
 // screen derivatives when the mesh has no normals (as glTF asks). The camera
-// is the 2D view's own (viewer.js cameraBasis), so mesh and skeleton line up.
-"use strict";
+// is the 2D view's own (math.js cameraBasis, drawn by scene.js), so mesh and
+// skeleton line up.
 
-(() => {
-  const viewer = window.inbetweenViewer;
-  if (!viewer) return;
-  const BACKGROUND = [0x10 / 255, 0x12 / 255, 0x16 / 255];
+import { authHeaders } from "./api.js";
+import { setStatus } from "./dom.js";
+import { emit, on } from "./events.js";
+import { mat4Multiply as multiply, trs, viewProjection } from "./math.js";
+import { state } from "./state.js";
 
-  const mesh = {
-    clip: null, // the clip whose mesh is loaded (null: none)
-    info: null, // { vertices, triangles, joints, textured, normals } (read by the browser test)
-    draws: 0, // frames drawn with the mesh
-    showMesh: true,
-    showSkeleton: true,
-  };
-  viewer.mesh = mesh; // viewer.js's drawScene asks mesh.draw first
-  viewer.hooks.clipSelected.push((clip) => mesh.select(clip.id));
-  viewer.hooks.clipAdopted.push((clip) => mesh.select(clip.id, true)); // a crossfade's clip brings its own mesh
-  viewer.hooks.pose.push((pose) => mesh.pose(pose, viewer.state.parents));
+const BACKGROUND = [0x10 / 255, 0x12 / 255, 0x16 / 255];
 
-  let gl = null, programs = null, gpu = null; // the context, its programs, the loaded mesh's buffers
-  let palette = null; // per palette entry: the pose joint it follows (index), and its inverse bind
-  let skinning = null; // Float32Array, 16 floats per palette joint (column-major)
-  let loading = 0; // the latest select() call: an older answer is dropped
+export const mesh = {
+  clip: null, // the clip whose mesh is loaded (null: none)
+  info: null, // { vertices, triangles, joints, textured, normals } (read by the browser test)
+  draws: 0, // frames drawn with the mesh
+  showMesh: true,
+  showSkeleton: true,
+  poseSpace: null, // the space of the last pose skinned (read by the browser test)
+};
 
-  // ---- the page's controls: a GL canvas under #scene and two toggles ----
+let gl = null, programs = null, gpu = null; // the context, its programs, the loaded mesh's buffers
+let palette = null; // per palette entry: the pose joint it follows (index), and its inverse bind
+let skinning = null; // Float32Array, 16 floats per palette joint (column-major)
+let loading = 0; // the latest select() call: an older answer is dropped
+let canvas = null, toggles = null; // made by setup()
 
-  const canvas = document.createElement("canvas");
+// ---- the page's controls: a GL canvas under #scene and two toggles ----
+
+/// The canvas and toggles, and the mesh following the page's clip and poses.
+export function setup() {
+  canvas = document.createElement("canvas");
   canvas.id = "mesh-gl";
   canvas.setAttribute("aria-hidden", "true");
   canvas.hidden = true;
   document.getElementById("scene-view").prepend(canvas);
 
   // The toggles sit in the view's corner, over the canvases.
-  const toggles = document.createElement("div");
+  toggles = document.createElement("div");
   toggles.className = "mesh-toggles";
   toggles.hidden = true;
   document.getElementById("scene-view").append(toggles);
-
-  function toggle(id, label, key) {
-    const wrap = document.createElement("label");
-    const box = document.createElement("input");
-    box.type = "checkbox";
-    box.id = id;
-    box.checked = true;
-    box.addEventListener("change", () => {
-      mesh[key] = box.checked;
-      viewer.requestDraw();
-    });
-    wrap.append(box, ` ${label}`);
-    toggles.append(wrap);
-  }
   toggle("show-mesh", "mesh", "showMesh");
   toggle("show-skeleton", "skeleton", "showSkeleton");
 
-  function setActive(active) {
-    canvas.hidden = !active;
-    toggles.hidden = !active;
-    document.getElementById("scene-view").classList.toggle("with-mesh", active);
-  }
+  on("clipSelected", (clip) => select(clip.id));
+  on("clipAdopted", (clip) => select(clip.id, true)); // a crossfade's clip brings its own mesh
+  on("pose", (pose) => posed(pose, state.parents));
+}
 
-  // ---- the binary form (docs/mesh-format.md) ----
+function toggle(id, label, key) {
+  const wrap = document.createElement("label");
+  const box = document.createElement("input");
+  box.type = "checkbox";
+  box.id = id;
+  box.checked = true;
+  box.addEventListener("change", () => {
+    mesh[key] = box.checked;
+    emit("redraw");
+  });
+  wrap.append(box, ` ${label}`);
+  toggles.append(wrap);
+}
 
-  /// The header and typed-array views of the arrays (no copies).
-  function parseMesh(buffer) {
-    const head = new DataView(buffer, 0, 12);
-    const magic = String.fromCharCode(...new Uint8Array(buffer, 0, 4));
-    if (magic !== "INBM" || head.getUint32(4, true) !== 1) throw new Error("not an inbetween mesh (INBM version 1)");
-    const length = head.getUint32(8, true);
-    const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 12, length)));
-    const body = 12 + length;
-    const TYPES = { f32: Float32Array, u8: Uint8Array, u16: Uint16Array, u32: Uint32Array };
-    const view = (a) => a && new TYPES[a.type](buffer, body + a.offset, a.length / TYPES[a.type].BYTES_PER_ELEMENT);
-    const arrays = Object.fromEntries(Object.entries(header.arrays).map(([name, a]) => [name, view(a)]));
-    const textures = header.textures.map((t) => new Blob([new Uint8Array(buffer, body + t.offset, t.length)], { type: t.mime_type }));
-    return { header, arrays, textures };
-  }
+function setActive(active) {
+  canvas.hidden = !active;
+  toggles.hidden = !active;
+  document.getElementById("scene-view").classList.toggle("with-mesh", active);
+}
 
-  /// Loads the clip's mesh (or learns it has none), as a clip is selected. Never fails the selection: a mesh that cannot be
-  /// shown leaves the skeleton view, and the status says why.
-  mesh.select = (clipId, sameSkeleton = false) => load(clipId, sameSkeleton).catch((e) => viewer.setStatus(`mesh not shown: ${e.message}`, true));
+// ---- the binary form (docs/mesh-format.md) ----
 
-  function unload() {
-    mesh.clip = null;
-    mesh.info = null;
-    palette = null;
-    setActive(false);
-  }
+/// The header and typed-array views of the arrays (no copies).
+function parseMesh(buffer) {
+  const head = new DataView(buffer, 0, 12);
+  const magic = String.fromCharCode(...new Uint8Array(buffer, 0, 4));
+  if (magic !== "INBM" || head.getUint32(4, true) !== 1) throw new Error("not an inbetween mesh (INBM version 1)");
+  const length = head.getUint32(8, true);
+  const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 12, length)));
+  const body = 12 + length;
+  const TYPES = { f32: Float32Array, u8: Uint8Array, u16: Uint16Array, u32: Uint32Array };
+  const view = (a) => a && new TYPES[a.type](buffer, body + a.offset, a.length / TYPES[a.type].BYTES_PER_ELEMENT);
+  const arrays = Object.fromEntries(Object.entries(header.arrays).map(([name, a]) => [name, view(a)]));
+  const textures = header.textures.map((t) => new Blob([new Uint8Array(buffer, body + t.offset, t.length)], { type: t.mime_type }));
+  return { header, arrays, textures };
+}
 
-  async function load(clipId, sameSkeleton) {
-    const ticket = ++loading;
-    // A crossfade's clip has the same skeleton (the server refuses others),
-    // so the old mesh may stay drawn until the answer, and usually it is the
-    // same mesh (clips of one skin share it: the browser revalidates, 304).
-    if (!sameSkeleton) unload();
-    const response = await fetch(`/v1/clips/${encodeURIComponent(clipId)}/mesh`, { headers: viewer.authHeaders() });
-    if (ticket !== loading) return;
-    if (!response.ok) unload();
-    if (response.status === 404) return; // no mesh (JSON, BVH, unskinned glTF): the skeleton view
-    if (!response.ok) throw new Error(`GET …/mesh answered HTTP ${response.status}`);
-    const parsed = parseMesh(await response.arrayBuffer());
-    if (ticket !== loading || !context()) return;
-    const images = await Promise.all(parsed.textures.map((blob) => createImageBitmap(blob).catch(() => null)));
-    if (ticket !== loading) return;
-    upload(parsed, images);
-    mesh.clip = clipId;
-    const { header, arrays } = parsed;
-    mesh.info = {
-      vertices: header.vertices,
-      triangles: arrays.indices.length / 3,
-      joints: header.joints.length,
-      textured: images.some(Boolean),
-      normals: Boolean(arrays.normal),
-    };
-    setActive(true);
-    bindPose();
-    viewer.requestDraw();
-  }
+/// Loads the clip's mesh (or learns it has none), as a clip is selected. Never fails the selection: a mesh that cannot be
+/// shown leaves the skeleton view, and the status says why.
+const select = (clipId, sameSkeleton = false) => load(clipId, sameSkeleton).catch((e) => setStatus(`mesh not shown: ${e.message}`, true));
 
-  // ---- poses → skinning matrices ----
+function unload() {
+  mesh.clip = null;
+  mesh.info = null;
+  palette = null;
+  setActive(false);
+}
 
-  /// Column-major 4×4 of translation t, rotation q = [x, y, z, w], scale s.
-  function trs(t, q, s) {
-    const [x, y, z, w] = q;
-    const m = [
-      1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w), 0,
-      2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w), 0,
-      2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y), 0,
-      t[0], t[1], t[2], 1,
-    ];
-    for (let c = 0; c < 3; c++) for (let r = 0; r < 3; r++) m[4 * c + r] *= s[c];
-    return m;
-  }
-
-  function multiply(a, b) {
-    const out = new Array(16);
-    for (let c = 0; c < 4; c++)
-      for (let r = 0; r < 4; r++)
-        out[4 * c + r] = a[r] * b[4 * c] + a[4 + r] * b[4 * c + 1] + a[8 + r] * b[4 * c + 2] + a[12 + r] * b[4 * c + 3];
-    return out;
-  }
-
-  /// Every joint's model matrix: as sent in model space, else M_parent · TRS.
-  function modelMatrices(pose, parents) {
-    const out = [];
-    pose.joints.forEach((j, i) => {
-      const local = trs(j.translation, j.rotation, j.scale);
-      const p = parents[i];
-      out.push(pose.space === "model" || p < 0 || p >= i ? local : multiply(out[p], local));
-    });
-    return out;
-  }
-
-  let lastPose = null, lastParents = null, boundNames = null;
-
-  /// With each pose the page shows (viewer.js's `pose` hook).
-  mesh.pose = (pose, parents) => {
-    lastPose = pose;
-    mesh.poseSpace = pose.space; // read by the browser test
-    lastParents = parents;
-    if (gpu) bindPose();
+async function load(clipId, sameSkeleton) {
+  const ticket = ++loading;
+  // A crossfade's clip has the same skeleton (the server refuses others),
+  // so the old mesh may stay drawn until the answer, and usually it is the
+  // same mesh (clips of one skin share it: the browser revalidates, 304).
+  if (!sameSkeleton) unload();
+  const response = await fetch(`/v1/clips/${encodeURIComponent(clipId)}/mesh`, { headers: authHeaders() });
+  if (ticket !== loading) return;
+  if (!response.ok) unload();
+  if (response.status === 404) return; // no mesh (JSON, BVH, unskinned glTF): the skeleton view
+  if (!response.ok) throw new Error(`GET …/mesh answered HTTP ${response.status}`);
+  const parsed = parseMesh(await response.arrayBuffer());
+  if (ticket !== loading || !context()) return;
+  const images = await Promise.all(parsed.textures.map((blob) => createImageBitmap(blob).catch(() => null)));
+  if (ticket !== loading) return;
+  upload(parsed, images);
+  mesh.clip = clipId;
+  const { header, arrays } = parsed;
+  mesh.info = {
+    vertices: header.vertices,
+    triangles: arrays.indices.length / 3,
+    joints: header.joints.length,
+    textured: images.some(Boolean),
+    normals: Boolean(arrays.normal),
   };
+  setActive(true);
+  bindPose();
+  emit("redraw");
+}
 
-  /// Skins the last pose, first finding the palette's joints in it by name
-  /// whenever its joints change (a new clip, a new stream).
-  function bindPose() {
-    if (!lastPose || !gpu) return;
-    const names = lastPose.joints.map((j) => j.name).join("\n");
-    if (!palette || names !== boundNames) {
-      const index = new Map(lastPose.joints.map((j, i) => [j.name, i]));
-      palette = gpu.joints.map((name) => index.get(name) ?? -1);
-      boundNames = names;
-    }
-    skin(lastPose, lastParents);
+// ---- poses → skinning matrices ----
+
+/// Every joint's model matrix: as sent in model space, else M_parent · TRS.
+function modelMatrices(pose, parents) {
+  const out = [];
+  pose.joints.forEach((j, i) => {
+    const local = trs(j.translation, j.rotation, j.scale);
+    const p = parents[i];
+    out.push(pose.space === "model" || p < 0 || p >= i ? local : multiply(out[p], local));
+  });
+  return out;
+}
+
+let lastPose = null, lastParents = null, boundNames = null;
+
+/// With each pose the page shows (the `pose` event).
+function posed(pose, parents) {
+  lastPose = pose;
+  mesh.poseSpace = pose.space; // read by the browser test
+  lastParents = parents;
+  if (gpu) bindPose();
+}
+
+/// Skins the last pose, first finding the palette's joints in it by name
+/// whenever its joints change (a new clip, a new stream).
+function bindPose() {
+  if (!lastPose || !gpu) return;
+  const names = lastPose.joints.map((j) => j.name).join("\n");
+  if (!palette || names !== boundNames) {
+    const index = new Map(lastPose.joints.map((j, i) => [j.name, i]));
+    palette = gpu.joints.map((name) => index.get(name) ?? -1);
+    boundNames = names;
   }
+  skin(lastPose, lastParents);
+}
 
-  function skin(pose, parents) {
-    const model = modelMatrices(pose, parents);
-    palette.forEach((joint, k) => {
-      const m = joint >= 0 ? multiply(model[joint], gpu.inverseBinds[k]) : gpu.inverseBinds[k].map((_, i) => (i % 5 === 0 ? 1 : 0));
-      skinning.set(m, 16 * k);
-    });
-    gpu.posed = true;
+function skin(pose, parents) {
+  const model = modelMatrices(pose, parents);
+  palette.forEach((joint, k) => {
+    const m = joint >= 0 ? multiply(model[joint], gpu.inverseBinds[k]) : gpu.inverseBinds[k].map((_, i) => (i % 5 === 0 ? 1 : 0));
+    skinning.set(m, 16 * k);
+  });
+  gpu.posed = true;
+}
+
+// ---- WebGL2 ----
+
+const SKIN_VS = `#version 300 es
+  in vec3 aPosition; in vec3 aNormal; in vec2 aUv; in uvec4 aJoints; in vec4 aWeights;
+  uniform mat4 uViewProjection;
+  uniform highp sampler2D uSkinning;
+  out vec3 vWorld; out vec3 vNormal; out vec2 vUv;
+  mat4 joint(uint j) {
+    int row = int(j);
+    return mat4(texelFetch(uSkinning, ivec2(0, row), 0), texelFetch(uSkinning, ivec2(1, row), 0),
+                texelFetch(uSkinning, ivec2(2, row), 0), texelFetch(uSkinning, ivec2(3, row), 0));
   }
+  void main() {
+    float total = dot(aWeights, vec4(1.0));
+    vec4 w = total > 0.0 ? aWeights / total : vec4(1.0, 0.0, 0.0, 0.0);
+    mat4 m = w.x * joint(aJoints.x) + w.y * joint(aJoints.y) + w.z * joint(aJoints.z) + w.w * joint(aJoints.w);
+    vec4 world = m * vec4(aPosition, 1.0);
+    vWorld = world.xyz;
+    vNormal = mat3(m) * aNormal;
+    vUv = aUv;
+    gl_Position = uViewProjection * world;
+  }`;
 
-  // ---- WebGL2 ----
+const SKIN_FS = `#version 300 es
+  precision highp float;
+  in vec3 vWorld; in vec3 vNormal; in vec2 vUv;
+  uniform vec4 uBaseColor; uniform bool uTextured; uniform sampler2D uTexture;
+  uniform bool uNormals; uniform vec3 uLight; uniform vec3 uEye;
+  out vec4 color;
+  void main() {
+    vec3 n = uNormals ? normalize(vNormal) : normalize(cross(dFdx(vWorld), dFdy(vWorld)));
+    if (dot(n, uEye - vWorld) < 0.0) n = -n;
+    vec4 base = uBaseColor * (uTextured ? texture(uTexture, vUv) : vec4(1.0));
+    float light = 0.35 + 0.65 * max(dot(n, uLight), 0.0);
+    color = vec4(base.rgb * light, 1.0);
+  }`;
 
-  const SKIN_VS = `#version 300 es
-    in vec3 aPosition; in vec3 aNormal; in vec2 aUv; in uvec4 aJoints; in vec4 aWeights;
-    uniform mat4 uViewProjection;
-    uniform highp sampler2D uSkinning;
-    out vec3 vWorld; out vec3 vNormal; out vec2 vUv;
-    mat4 joint(uint j) {
-      int row = int(j);
-      return mat4(texelFetch(uSkinning, ivec2(0, row), 0), texelFetch(uSkinning, ivec2(1, row), 0),
-                  texelFetch(uSkinning, ivec2(2, row), 0), texelFetch(uSkinning, ivec2(3, row), 0));
-    }
-    void main() {
-      float total = dot(aWeights, vec4(1.0));
-      vec4 w = total > 0.0 ? aWeights / total : vec4(1.0, 0.0, 0.0, 0.0);
-      mat4 m = w.x * joint(aJoints.x) + w.y * joint(aJoints.y) + w.z * joint(aJoints.z) + w.w * joint(aJoints.w);
-      vec4 world = m * vec4(aPosition, 1.0);
-      vWorld = world.xyz;
-      vNormal = mat3(m) * aNormal;
-      vUv = aUv;
-      gl_Position = uViewProjection * world;
-    }`;
+const LINE_VS = `#version 300 es
+  in vec3 aPosition; uniform mat4 uViewProjection;
+  void main() { gl_Position = uViewProjection * vec4(aPosition, 1.0); }`;
 
-  const SKIN_FS = `#version 300 es
-    precision highp float;
-    in vec3 vWorld; in vec3 vNormal; in vec2 vUv;
-    uniform vec4 uBaseColor; uniform bool uTextured; uniform sampler2D uTexture;
-    uniform bool uNormals; uniform vec3 uLight; uniform vec3 uEye;
-    out vec4 color;
-    void main() {
-      vec3 n = uNormals ? normalize(vNormal) : normalize(cross(dFdx(vWorld), dFdy(vWorld)));
-      if (dot(n, uEye - vWorld) < 0.0) n = -n;
-      vec4 base = uBaseColor * (uTextured ? texture(uTexture, vUv) : vec4(1.0));
-      float light = 0.35 + 0.65 * max(dot(n, uLight), 0.0);
-      color = vec4(base.rgb * light, 1.0);
-    }`;
+const LINE_FS = `#version 300 es
+  precision mediump float; uniform vec4 uColor; out vec4 color;
+  void main() { color = uColor; }`;
 
-  const LINE_VS = `#version 300 es
-    in vec3 aPosition; uniform mat4 uViewProjection;
-    void main() { gl_Position = uViewProjection * vec4(aPosition, 1.0); }`;
-
-  const LINE_FS = `#version 300 es
-    precision mediump float; uniform vec4 uColor; out vec4 color;
-    void main() { color = uColor; }`;
-
-  function compile(vs, fs) {
-    const program = gl.createProgram();
-    for (const [type, source] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
-      const shader = gl.createShader(type);
-      gl.shaderSource(shader, source);
-      gl.compileShader(shader);
-      if (!gl.getShaderParameter(shader, gl.COMPILE_STATUS)) throw new Error(`shader: ${gl.getShaderInfoLog(shader)}`);
-      gl.attachShader(program, shader);
-    }
-    gl.linkProgram(program);
-    if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(`program: ${gl.getProgramInfoLog(program)}`);
-    const uniforms = {};
-    for (let i = 0; i < gl.getProgramParameter(program, gl.ACTIVE_UNIFORMS); i++) {
-      const name = gl.getActiveUniform(program, i).name;
-      uniforms[name] = gl.getUniformLocation(program, name);
-    }
-    return { program, uniforms, attribute: (name) => gl.getAttribLocation(program, name) };
+function compile(vs, fs) {
+  const program = gl.createProgram();
+  for (const [type, source] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
+    const shader = gl.createShader(type);
+    gl.shaderSource(shader, source);
+    gl.compileShader(shader);
+    if (!gl.getShaderParameter(shader, gl.COMPILE_STATUS)) throw new Error(`shader: ${gl.getShaderInfoLog(shader)}`);
+    gl.attachShader(program, shader);
   }
-
-  /// The WebGL2 context and programs, made once; `null` without WebGL2
-  /// (the page then keeps the skeleton view and says why).
-  function context() {
-    if (gl) return gl;
-    gl = canvas.getContext("webgl2", { antialias: true });
-    if (!gl) {
-      viewer.setStatus?.("this browser has no WebGL2: showing the skeleton only", true);
-      return null;
-    }
-    programs = { skin: compile(SKIN_VS, SKIN_FS), line: compile(LINE_VS, LINE_FS) };
-    programs.lineBuffer = gl.createBuffer();
-    return gl;
+  gl.linkProgram(program);
+  if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(`program: ${gl.getProgramInfoLog(program)}`);
+  const uniforms = {};
+  for (let i = 0; i < gl.getProgramParameter(program, gl.ACTIVE_UNIFORMS); i++) {
+    const name = gl.getActiveUniform(program, i).name;
+    uniforms[name] = gl.getUniformLocation(program, name);
   }
+  return { program, uniforms, attribute: (name) => gl.getAttribLocation(program, name) };
+}
 
-  /// The mesh's arrays into GPU buffers, its textures, and the skinning texture.
-  function upload({ header, arrays }, images) {
-    if (gpu) {
-      gpu.buffers.forEach((b) => gl.deleteBuffer(b));
-      gpu.textures.forEach((t) => t && gl.deleteTexture(t));
-      gl.deleteTexture(gpu.skinning);
-      gl.deleteVertexArray(gpu.vao);
-    }
-    const s = programs.skin;
-    const vao = gl.createVertexArray();
-    gl.bindVertexArray(vao);
-    const buffers = [];
-    const attribute = (name, data, size, integer) => {
-      const location = s.attribute(name);
-      if (!data || location < 0) return;
-      const buffer = gl.createBuffer();
-      buffers.push(buffer);
-      gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
-      gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
-      gl.enableVertexAttribArray(location);
-      const type = data instanceof Uint8Array ? gl.UNSIGNED_BYTE : data instanceof Uint16Array ? gl.UNSIGNED_SHORT : gl.FLOAT;
-      if (integer) gl.vertexAttribIPointer(location, size, type, 0, 0);
-      else gl.vertexAttribPointer(location, size, type, false, 0, 0);
-    };
-    attribute("aPosition", arrays.position, 3);
-    attribute("aNormal", arrays.normal, 3);
-    attribute("aUv", arrays.uv, 2);
-    attribute("aJoints", arrays.joints, 4, true);
-    attribute("aWeights", arrays.weights, 4);
-    const indices = gl.createBuffer();
-    buffers.push(indices);
-    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indices);
-    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, arrays.indices, gl.STATIC_DRAW);
-    gl.bindVertexArray(null);
-
-    const textures = images.map((image) => {
-      if (!image) return null;
-      const t = gl.createTexture();
-      gl.bindTexture(gl.TEXTURE_2D, t);
-      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA, gl.RGBA, gl.UNSIGNED_BYTE, image);
-      gl.generateMipmap(gl.TEXTURE_2D);
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR_MIPMAP_LINEAR);
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.REPEAT);
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.REPEAT);
-      return t;
-    });
-    const joints = header.joints.length;
-    const skinningTexture = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_2D, skinningTexture);
-    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, 4, joints);
-    for (const p of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, p, gl.NEAREST);
-    const binds = arrays.inverse_binds;
-    gpu = {
-      vao,
-      buffers,
-      textures,
-      skinning: skinningTexture,
-      indexType: arrays.indices instanceof Uint32Array ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT,
-      indexSize: arrays.indices.BYTES_PER_ELEMENT,
-      primitives: header.primitives,
-      materials: header.materials,
-      joints: header.joints,
-      inverseBinds: header.joints.map((_, k) => Array.from(binds.subarray(16 * k, 16 * k + 16))),
-      normals: Boolean(arrays.normal),
-      posed: false,
-    };
-    skinning = new Float32Array(16 * joints);
-    palette = null;
+/// The WebGL2 context and programs, made once; `null` without WebGL2
+/// (the page then keeps the skeleton view and says why).
+function context() {
+  if (gl) return gl;
+  gl = canvas.getContext("webgl2", { antialias: true });
+  if (!gl) {
+    setStatus("this browser has no WebGL2: showing the skeleton only", true);
+    return null;
   }
+  programs = { skin: compile(SKIN_VS, SKIN_FS), line: compile(LINE_VS, LINE_FS) };
+  programs.lineBuffer = gl.createBuffer();
+  return gl;
+}
 
-  // ---- drawing ----
-
-  /// The camera as one column-major matrix: cameraBasis's projection (focal
-  /// length, centre, camera axes), with a depth range around the target.
-  function viewProjection(cam, width, height) {
-    const { dist, radius } = viewer.state.camera;
-    const near = Math.max(cam.near, dist * 0.01), far = dist + 40 * radius;
-    const a = (far + near) / (far - near), b = (-2 * far * near) / (far - near);
-    const sx = (2 * cam.focal) / width, sy = (2 * cam.focal) / height;
-    const row = (axis) => [axis[0], axis[1], axis[2], -(axis[0] * cam.eye[0] + axis[1] * cam.eye[1] + axis[2] * cam.eye[2])];
-    const [r, u, f] = [row(cam.r), row(cam.u), row(cam.f)];
-    const rows = [r.map((x) => sx * x), u.map((x) => sy * x), f.map((x, i) => a * x + (i === 3 ? b : 0)), f];
-    const m = new Float32Array(16);
-    for (let c = 0; c < 4; c++) for (let k = 0; k < 4; k++) m[4 * c + k] = rows[k][c];
-    return m;
+/// The mesh's arrays into GPU buffers, its textures, and the skinning texture.
+function upload({ header, arrays }, images) {
+  if (gpu) {
+    gpu.buffers.forEach((b) => gl.deleteBuffer(b));
+    gpu.textures.forEach((t) => t && gl.deleteTexture(t));
+    gl.deleteTexture(gpu.skinning);
+    gl.deleteVertexArray(gpu.vao);
   }
-
-  /// Whether the mesh view is on (a mesh loaded): then it draws the
-  /// background, the ground lines viewer.js gives and the mesh, and the 2D
-  /// canvas above only the skeleton. Called by viewer.js's drawScene.
-  mesh.draw = (cam, width, height, lines) => {
-    if (!mesh.clip || !gpu || !gl) return false;
-    if (canvas.width !== width || canvas.height !== height) {
-      canvas.width = width;
-      canvas.height = height;
-    }
-    gl.viewport(0, 0, width, height);
-    gl.clearColor(...BACKGROUND, 1);
-    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
-    const vp = viewProjection(cam, width, height);
-    drawLines(vp, lines);
-    if (mesh.showMesh && gpu.posed) drawMesh(vp, cam);
-    return true;
+  const s = programs.skin;
+  const vao = gl.createVertexArray();
+  gl.bindVertexArray(vao);
+  const buffers = [];
+  const attribute = (name, data, size, integer) => {
+    const location = s.attribute(name);
+    if (!data || location < 0) return;
+    const buffer = gl.createBuffer();
+    buffers.push(buffer);
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(location);
+    const type = data instanceof Uint8Array ? gl.UNSIGNED_BYTE : data instanceof Uint16Array ? gl.UNSIGNED_SHORT : gl.FLOAT;
+    if (integer) gl.vertexAttribIPointer(location, size, type, 0, 0);
+    else gl.vertexAttribPointer(location, size, type, false, 0, 0);
   };
+  attribute("aPosition", arrays.position, 3);
+  attribute("aNormal", arrays.normal, 3);
+  attribute("aUv", arrays.uv, 2);
+  attribute("aJoints", arrays.joints, 4, true);
+  attribute("aWeights", arrays.weights, 4);
+  const indices = gl.createBuffer();
+  buffers.push(indices);
+  gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, indices);
+  gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, arrays.indices, gl.STATIC_DRAW);
+  gl.bindVertexArray(null);
 
-  function drawLines(vp, lines) {
-    const l = programs.line;
-    gl.useProgram(l.program);
-    gl.uniformMatrix4fv(l.uniforms.uViewProjection, false, vp);
-    gl.disable(gl.DEPTH_TEST);
-    gl.bindVertexArray(null);
-    gl.bindBuffer(gl.ARRAY_BUFFER, programs.lineBuffer);
-    const at = l.attribute("aPosition");
-    gl.enableVertexAttribArray(at);
-    for (const { color, segments } of lines) {
-      gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(segments.flat(2)), gl.STREAM_DRAW);
-      gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
-      gl.uniform4fv(l.uniforms.uColor, color);
-      gl.drawArrays(gl.LINES, 0, segments.length * 2);
-    }
-    gl.disableVertexAttribArray(at);
-  }
+  const textures = images.map((image) => {
+    if (!image) return null;
+    const t = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA, gl.RGBA, gl.UNSIGNED_BYTE, image);
+    gl.generateMipmap(gl.TEXTURE_2D);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR_MIPMAP_LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.REPEAT);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.REPEAT);
+    return t;
+  });
+  const joints = header.joints.length;
+  const skinningTexture = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, skinningTexture);
+  gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, 4, joints);
+  for (const p of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, p, gl.NEAREST);
+  const binds = arrays.inverse_binds;
+  gpu = {
+    vao,
+    buffers,
+    textures,
+    skinning: skinningTexture,
+    indexType: arrays.indices instanceof Uint32Array ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT,
+    indexSize: arrays.indices.BYTES_PER_ELEMENT,
+    primitives: header.primitives,
+    materials: header.materials,
+    joints: header.joints,
+    inverseBinds: header.joints.map((_, k) => Array.from(binds.subarray(16 * k, 16 * k + 16))),
+    normals: Boolean(arrays.normal),
+    posed: false,
+  };
+  skinning = new Float32Array(16 * joints);
+  palette = null;
+}
 
-  function drawMesh(vp, cam) {
-    const s = programs.skin;
-    gl.enable(gl.DEPTH_TEST);
-    gl.useProgram(s.program);
-    gl.uniformMatrix4fv(s.uniforms.uViewProjection, false, vp);
-    gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D, gpu.skinning);
-    gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, 4, gpu.joints.length, gl.RGBA, gl.FLOAT, skinning);
-    gl.uniform1i(s.uniforms.uSkinning, 0);
-    gl.uniform1i(s.uniforms.uTexture, 1);
-    gl.uniform1i(s.uniforms.uNormals, gpu.normals ? 1 : 0);
-    const light = [0.6 * cam.u[0] - 0.4 * cam.r[0] - cam.f[0], 0.6 * cam.u[1] - 0.4 * cam.r[1] - cam.f[1], 0.6 * cam.u[2] - 0.4 * cam.r[2] - cam.f[2]];
-    const n = Math.hypot(...light) || 1;
-    gl.uniform3f(s.uniforms.uLight, light[0] / n, light[1] / n, light[2] / n);
-    gl.uniform3f(s.uniforms.uEye, ...cam.eye);
-    gl.bindVertexArray(gpu.vao);
-    for (const p of gpu.primitives) {
-      const material = gpu.materials[p.material];
-      const texture = material.texture != null ? gpu.textures[material.texture] : null;
-      gl.activeTexture(gl.TEXTURE1);
-      gl.bindTexture(gl.TEXTURE_2D, texture);
-      gl.uniform1i(s.uniforms.uTextured, texture ? 1 : 0);
-      gl.uniform4fv(s.uniforms.uBaseColor, material.base_color);
-      gl.drawElements(gl.TRIANGLES, p.count, gpu.indexType, p.first * gpu.indexSize);
-    }
-    gl.bindVertexArray(null);
-    mesh.draws += 1;
+// ---- drawing ----
+
+/// Whether the mesh view is on (a mesh loaded): then it draws the
+/// background, the ground lines scene.js gives and the mesh, and the 2D
+/// canvas above only the skeleton. Called by scene.js's drawScene.
+export function draw(cam, width, height, lines) {
+  if (!mesh.clip || !gpu || !gl) return false;
+  if (canvas.width !== width || canvas.height !== height) {
+    canvas.width = width;
+    canvas.height = height;
   }
-})();
+  gl.viewport(0, 0, width, height);
+  gl.clearColor(...BACKGROUND, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  const vp = viewProjection(cam, state.camera, width, height);
+  drawLines(vp, lines);
+  if (mesh.showMesh && gpu.posed) drawMesh(vp, cam);
+  return true;
+}
+
+function drawLines(vp, lines) {
+  const l = programs.line;
+  gl.useProgram(l.program);
+  gl.uniformMatrix4fv(l.uniforms.uViewProjection, false, vp);
+  gl.disable(gl.DEPTH_TEST);
+  gl.bindVertexArray(null);
+  gl.bindBuffer(gl.ARRAY_BUFFER, programs.lineBuffer);
+  const at = l.attribute("aPosition");
+  gl.enableVertexAttribArray(at);
+  for (const { color, segments } of lines) {
+    gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(segments.flat(2)), gl.STREAM_DRAW);
+    gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
+    gl.uniform4fv(l.uniforms.uColor, color);
+    gl.drawArrays(gl.LINES, 0, segments.length * 2);
+  }
+  gl.disableVertexAttribArray(at);
+}
+
+function drawMesh(vp, cam) {
+  const s = programs.skin;
+  gl.enable(gl.DEPTH_TEST);
+  gl.useProgram(s.program);
+  gl.uniformMatrix4fv(s.uniforms.uViewProjection, false, vp);
+  gl.activeTexture(gl.TEXTURE0);
+  gl.bindTexture(gl.TEXTURE_2D, gpu.skinning);
+  gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, 4, gpu.joints.length, gl.RGBA, gl.FLOAT, skinning);
+  gl.uniform1i(s.uniforms.uSkinning, 0);
+  gl.uniform1i(s.uniforms.uTexture, 1);
+  gl.uniform1i(s.uniforms.uNormals, gpu.normals ? 1 : 0);
+  const light = [0.6 * cam.u[0] - 0.4 * cam.r[0] - cam.f[0], 0.6 * cam.u[1] - 0.4 * cam.r[1] - cam.f[1], 0.6 * cam.u[2] - 0.4 * cam.r[2] - cam.f[2]];
+  const n = Math.hypot(...light) || 1;
+  gl.uniform3f(s.uniforms.uLight, light[0] / n, light[1] / n, light[2] / n);
+  gl.uniform3f(s.uniforms.uEye, ...cam.eye);
+  gl.bindVertexArray(gpu.vao);
+  for (const p of gpu.primitives) {
+    const material = gpu.materials[p.material];
+    const texture = material.texture != null ? gpu.textures[material.texture] : null;
+    gl.activeTexture(gl.TEXTURE1);
+    gl.bindTexture(gl.TEXTURE_2D, texture);
+    gl.uniform1i(s.uniforms.uTextured, texture ? 1 : 0);
+    gl.uniform4fv(s.uniforms.uBaseColor, material.base_color);
+    gl.drawElements(gl.TRIANGLES, p.count, gpu.indexType, p.first * gpu.indexSize);
+  }
+  gl.bindVertexArray(null);
+  mesh.draws += 1;
+}

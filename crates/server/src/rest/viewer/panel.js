@@ -1,564 +1,467 @@
 // The viewer's composition and IK panel (issue 20). The page plays a
-// *motion* (SPEC §6) over `GET /v1/stream` with an `open` message: the
-// selected clip is its first layer, more layers come from the clip list,
-// each with a weight slider (live `layer` controls) and a mask (a joint and
-// its descendants); a button crossfades to another clip (a live `crossfade`
-// control); root motion is drawn as a trail on the ground, with `extract`
-// on or off. IK handles (SPEC §7; two-bone or aim on a chosen joint) are
-// dragged in the 3D view's camera plane and sent as live `ik` controls, at
-// most once a frame. It hooks into viewer.js through `inbetweenViewer.hooks`.
-"use strict";
+// *motion* (SPEC §6; composition.js holds it) over `GET /v1/stream` with an
+// `open` message: the selected clip is its first layer, more layers come
+// from the clip list, each with a weight slider (live `layer` controls) and
+// a mask (a joint and its descendants); a button crossfades to another clip
+// (a live `crossfade` control); root motion is drawn as a trail on the
+// ground, with `extract` on or off. IK handles (SPEC §7; two-bone or aim on
+// a chosen joint) are dragged in the 3D view's camera plane and sent as live
+// `ik` controls, at most once a frame.
 
-(() => {
-  const viewer = window.inbetweenViewer;
-  if (!viewer) return;
-  const { state, hooks } = viewer;
-  const $ = (id) => document.getElementById(id);
-  const HANDLE_PX = 9; // the handle's radius on screen, CSS pixels
-  const GRAB_PX = 16; // how near a press must be to grab it
-  const TRAIL_POINTS = 900; // root-motion trail length, at most
-  const HANDLE_COLOR = "#3ad1e6";
-  const TRAIL_COLOR = "#ff8c1a";
+import { adoptClip, selectClip } from "./clips.js";
+import { constraint, layerDoc, motion, panel, resetTrail } from "./composition.js";
+import { send } from "./controls.js";
+import { $, el, row, setStatus } from "./dom.js";
+import { on } from "./events.js";
+import { IDENTITY, applyTransform, composeTransforms, conj, qmul, toCamera, toScreen, turn, unapplyTransform, yawOf } from "./math.js";
+import { openStream, setPlaying, showPoseAt, stopStream } from "./player.js";
+import { requestDraw, sceneCamera } from "./scene.js";
+import { fps, options } from "./settings.js";
+import { state } from "./state.js";
 
-  const panel = {
-    layers: [], // [{clip, weight, mask: joint name | null}]; the first is the selected clip
-    rootMode: "", // "" (off), "report" or "extract"
-    rootJoint: null,
-    anchor: null, // the root's ground position and heading at the stream's first frame
-    trail: [], // root ground positions, world space
-    ik: null, // {kind, joint, joints?, target}: the handle
-    sentIk: null, // the target last sent
-    model: [], // the model-space joint positions of the pose shown, before root motion moves them
-    playingClip: null, // the clip the frames say is playing (the first layer's)
-    lastFrame: null,
-    openPaused: false, // the next stream opens paused (a change made while paused)
-    fading: null, // the layers before a crossfade the server has not shown yet
-  };
-  viewer.panel = panel;
+const HANDLE_PX = 9; // the handle's radius on screen, CSS pixels
+const GRAB_PX = 16; // how near a press must be to grab it
+const TRAIL_POINTS = 900; // root-motion trail length, at most
+const HANDLE_COLOR = "#3ad1e6";
+const TRAIL_COLOR = "#ff8c1a";
 
-  // ---- the DOM ----
+// ---- the DOM ----
 
-  function el(tag, props = {}, ...children) {
-    const e = Object.assign(document.createElement(tag), props);
-    e.append(...children);
-    return e;
+function build() {
+  const composition = el(
+    "section",
+    { id: "composition" },
+    el("h2", { textContent: "Composition" }),
+    el("ol", { id: "layers", ariaLabel: "Layers" }),
+    row(el("select", { id: "layer-clip", ariaLabel: "Clip to add as a layer" }), el("button", { id: "layer-add", type: "button", textContent: "Add layer" })),
+    row(
+      el("select", { id: "fade-clip", ariaLabel: "Clip to crossfade to" }),
+      el("input", { id: "fade-duration", type: "number", min: "0", max: "60", step: "0.1", value: "0.5", ariaLabel: "Crossfade seconds" }),
+      el("button", { id: "fade", type: "button", textContent: "Crossfade" }),
+    ),
+    row(
+      el("label", {}, "root ", el("select", { id: "root-mode" }, new Option("off", ""), new Option("trail", "report"), new Option("trail, extract", "extract"))),
+      el("select", { id: "root-joint", ariaLabel: "Root-motion joint" }),
+    ),
+    el("p", { id: "playing", className: "info" }),
+  );
+  const ik = el(
+    "section",
+    { id: "ik-panel" },
+    el("h2", { textContent: "IK" }),
+    row(
+      el("select", { id: "ik-joint", ariaLabel: "IK joint" }),
+      el("select", { id: "ik-kind", ariaLabel: "IK preset" }, new Option("two-bone", "two_bone"), new Option("aim", "aim")),
+    ),
+    row(el("button", { id: "ik-add", type: "button", textContent: "Add handle" }), el("button", { id: "ik-remove", type: "button", textContent: "Remove", disabled: true })),
+    el("p", { id: "ik-info", className: "info", textContent: "drag the handle in the view" }),
+  );
+  $("panel").append(composition, ik);
+}
+
+// ---- the motion ----
+
+/// Shows a change: a running stream restarts with it (from the time shown),
+/// a broadcast crossfades to it, a paused view fetches its pose.
+function recompose() {
+  renderLayers();
+  if (state.watching) return crossfadeTo(motion({ ik: false }), fadeSeconds());
+  if (state.ws) {
+    const playing = state.playing;
+    panel.openPaused = !playing;
+    stopStream();
+    if (openStream()) setPlaying(playing);
+    return;
   }
+  if (state.clip) showPoseAt(state.requestTime).catch(report);
+}
 
-  const row = (...children) => el("div", { className: "row" }, ...children);
+function crossfadeTo(to, duration) {
+  send({ op: "crossfade", to, duration, ease: "ease_in_out" });
+}
 
-  function build() {
-    const composition = el(
-      "section",
-      { id: "composition" },
-      el("h2", { textContent: "Composition" }),
-      el("ol", { id: "layers", ariaLabel: "Layers" }),
-      row(el("select", { id: "layer-clip", ariaLabel: "Clip to add as a layer" }), el("button", { id: "layer-add", type: "button", textContent: "Add layer" })),
-      row(
-        el("select", { id: "fade-clip", ariaLabel: "Clip to crossfade to" }),
-        el("input", { id: "fade-duration", type: "number", min: "0", max: "60", step: "0.1", value: "0.5", ariaLabel: "Crossfade seconds" }),
-        el("button", { id: "fade", type: "button", textContent: "Crossfade" }),
-      ),
-      row(
-        el("label", {}, "root ", el("select", { id: "root-mode" }, new Option("off", ""), new Option("trail", "report"), new Option("trail, extract", "extract"))),
-        el("select", { id: "root-joint", ariaLabel: "Root-motion joint" }),
-      ),
-      el("p", { id: "playing", className: "info" }),
-    );
-    const ik = el(
-      "section",
-      { id: "ik-panel" },
-      el("h2", { textContent: "IK" }),
-      row(
-        el("select", { id: "ik-joint", ariaLabel: "IK joint" }),
-        el("select", { id: "ik-kind", ariaLabel: "IK preset" }, new Option("two-bone", "two_bone"), new Option("aim", "aim")),
-      ),
-      row(el("button", { id: "ik-add", type: "button", textContent: "Add handle" }), el("button", { id: "ik-remove", type: "button", textContent: "Remove", disabled: true })),
-      el("p", { id: "ik-info", className: "info", textContent: "drag the handle in the view" }),
-    );
-    $("panel").append(composition, ik);
-  }
+const fadeSeconds = () => Math.max(0, Number($("fade-duration").value) || 0);
+const report = (e) => setStatus(e.message, true);
+/// The paused view's pose again, at most once a frame.
+const refreshThrottled = throttled(() => showPoseAt(state.requestTime).catch(report));
+const clipName = (id) => state.clips.find((c) => c.id === id)?.name ?? id;
 
-  // ---- the motion ----
+// ---- layers ----
 
-  /// Whether the page shows more than its clip: another layer, a weight, a
-  /// mask, root motion or IK (a plain clip keeps the clip routes).
-  function composed() {
-    const [base, ...rest] = panel.layers;
-    return Boolean(rest.length || (base && (base.weight !== 1 || base.mask)) || panel.rootMode || panel.ik);
-  }
-
-  function layerDoc(layer, playback) {
-    const doc = { clip: layer.clip };
-    if (layer.weight !== 1) doc.weight = layer.weight;
-    if (layer.mask) doc.mask = { joints: { [layer.mask]: 1 }, descendants: true };
-    if (playback) doc.playback = playback;
-    return doc;
-  }
-
-  /// The motion the page plays (SPEC §6), IK included unless `ik` is false
-  /// (a crossfade's motion carries none: a stream has one IK list).
-  function motion({ ik = true } = {}) {
-    const playback = viewer.options().playback;
-    const doc = { layers: panel.layers.map((l) => layerDoc(l, playback)) };
-    if (panel.rootMode) doc.root_motion = { mode: panel.rootMode, ...(panel.rootJoint ? { joint: panel.rootJoint } : {}) };
-    if (ik && panel.ik) doc.ik = [constraint()];
-    return doc;
-  }
-  panel.motion = motion;
-
-  function constraint() {
-    const { kind, joint, joints, target } = panel.ik;
-    return kind === "aim" ? { kind, joint, target } : { kind, joints, target };
-  }
-
-  /// A new stream opens `/v1/stream` with the motion (viewer.js's settings).
-  hooks.streamTarget = () => {
-    const { space, ease } = viewer.options();
-    const scheme = location.protocol === "https:" ? "wss" : "ws";
-    const open = {
-      op: "open",
-      motion: motion(),
-      fps: Math.round(Number($("fps").value)) || 30,
-      speed: Number($("speed").value) || 1,
-      start: state.requestTime,
-      space,
-      ease,
-      paused: panel.openPaused,
-    };
-    panel.openPaused = false;
-    resetTrail();
-    return { url: `${scheme}://${location.host}/v1/stream`, open };
-  };
-
-  /// The paused view of a composition: `POST /v1/poses` (ease is a stream setting).
-  hooks.poseAt = (t) =>
-    composed() ? viewer.postJson("/v1/poses", { motion: motion(), time: t, space: viewer.options().space }) : null;
-
-  /// Shows a change: a running stream restarts with it (from the time shown),
-  /// a broadcast crossfades to it, a paused view fetches its pose.
-  function recompose() {
-    renderLayers();
-    if (state.watching) return crossfadeTo(motion({ ik: false }), fadeSeconds());
-    if (state.ws) {
-      const playing = state.playing;
-      panel.openPaused = !playing;
-      viewer.stopStream();
-      if (viewer.openStream()) viewer.setPlaying(playing);
-      return;
-    }
-    if (state.clip) viewer.showPoseAt(state.requestTime).catch(report);
-  }
-
-  function crossfadeTo(to, duration) {
-    viewer.send({ op: "crossfade", to, duration, ease: "ease_in_out" });
-  }
-
-  const fadeSeconds = () => Math.max(0, Number($("fade-duration").value) || 0);
-  const report = (e) => viewer.setStatus(e.message, true);
-  /// The paused view's pose again, at most once a frame.
-  const refreshThrottled = throttled(() => viewer.showPoseAt(state.requestTime).catch(report));
-  const clipName = (id) => state.clips.find((c) => c.id === id)?.name ?? id;
-
-  // ---- layers ----
-
-  function renderLayers() {
-    const joints = jointNames();
-    const items = panel.layers.map((layer, i) => {
-      const weight = el("input", { type: "range", min: "0", max: "1", step: "0.01", value: String(layer.weight), ariaLabel: `Layer ${i} weight` });
-      const shown = el("span", { className: "weight", textContent: layer.weight.toFixed(2) });
-      weight.addEventListener("input", () => {
-        layer.weight = Number(weight.value);
-        shown.textContent = layer.weight.toFixed(2);
-        sendWeight(i);
-      });
-      const mask = el("select", { ariaLabel: `Layer ${i} mask` }, new Option("all joints", ""), ...joints.map((j) => new Option(`${j} ↓`, j)));
-      mask.value = layer.mask || "";
-      mask.addEventListener("change", () => {
-        layer.mask = mask.value || null;
-        recompose();
-      });
-      const remove = el("button", { type: "button", textContent: "×", title: "Remove this layer", disabled: i === 0 });
-      remove.addEventListener("click", () => {
-        panel.layers.splice(i, 1);
-        recompose();
-      });
-      const item = el("li", {}, row(el("span", { className: "name", textContent: clipName(layer.clip) }), remove), row(weight, shown, mask));
-      item.dataset.index = String(i);
-      return item;
+function renderLayers() {
+  const joints = jointNames();
+  const items = panel.layers.map((layer, i) => {
+    const weight = el("input", { type: "range", min: "0", max: "1", step: "0.01", value: String(layer.weight), ariaLabel: `Layer ${i} weight` });
+    const shown = el("span", { className: "weight", textContent: layer.weight.toFixed(2) });
+    weight.addEventListener("input", () => {
+      layer.weight = Number(weight.value);
+      shown.textContent = layer.weight.toFixed(2);
+      sendWeight(i);
     });
-    $("layers").replaceChildren(...items);
-  }
-
-  /// A weight slider's value as a live `layer` control, at most once a frame.
-  const weightSenders = [];
-  function sendWeight(index) {
-    if (!state.ws) return refreshThrottled();
-    weightSenders[index] ??= throttled(() => viewer.send({ op: "layer", index, weight: panel.layers[index].weight, duration: 0 }));
-    weightSenders[index]();
-  }
-
-  /// `f` called at most once per frame of the stream, the last call always made.
-  function throttled(f) {
-    let last = 0, timer = null;
-    return () => {
-      const period = 1000 / (Math.round(Number($("fps").value)) || 30);
-      const wait = last + period - performance.now();
-      if (timer) return;
-      if (wait <= 0) {
-        last = performance.now();
-        return f();
-      }
-      timer = setTimeout(() => {
-        timer = null;
-        last = performance.now();
-        f();
-      }, wait);
-    };
-  }
-
-  function fillClipSelect(select) {
-    const value = select.value;
-    select.replaceChildren(...state.clips.map((c) => new Option(c.name, c.id)));
-    if (value) select.value = value;
-  }
-
-  function jointNames() {
-    return (state.doc?.skeleton?.joints || []).map((j) => j.name);
-  }
-
-  /// Joints a root motion can follow: those with a translation track, roots first.
-  function rootCandidates() {
-    const moving = new Set((state.doc?.tracks || []).filter((t) => t.channel === "translation").map((t) => t.joint));
-    const joints = (state.doc?.skeleton?.joints || []).filter((j) => moving.has(j.name));
-    return [...joints.filter((j) => j.parent == null), ...joints.filter((j) => j.parent != null)].map((j) => j.name);
-  }
-
-  hooks.clipSelected.push((clip) => {
-    panel.layers = [{ clip: clip.id, weight: 1, mask: null }];
-    panel.ik = null;
-    panel.sentIk = null;
-    resetTrail();
-    for (const id of ["layer-clip", "fade-clip"]) fillClipSelect($(id));
-    const roots = rootCandidates();
-    $("root-joint").replaceChildren(...roots.map((j) => new Option(j, j)));
-    panel.rootJoint = roots[0] ?? null;
-    $("ik-joint").replaceChildren(...jointNames().map((j) => new Option(j, j)));
-    const chains = jointNames().filter((j) => ancestors(j).length >= 2);
-    if (chains.length) $("ik-joint").value = chains[chains.length - 1];
-    showIk();
-    renderLayers();
+    const mask = el("select", { ariaLabel: `Layer ${i} mask` }, new Option("all joints", ""), ...joints.map((j) => new Option(`${j} ↓`, j)));
+    mask.value = layer.mask || "";
+    mask.addEventListener("change", () => {
+      layer.mask = mask.value || null;
+      recompose();
+    });
+    const remove = el("button", { type: "button", textContent: "×", title: "Remove this layer", disabled: i === 0 });
+    remove.addEventListener("click", () => {
+      panel.layers.splice(i, 1);
+      recompose();
+    });
+    const item = el("li", {}, row(el("span", { className: "name", textContent: clipName(layer.clip) }), remove), row(weight, shown, mask));
+    item.dataset.index = String(i);
+    return item;
   });
+  $("layers").replaceChildren(...items);
+}
 
-  /// Layers, masks and root motion as a broadcast plays them.
-  panel.adopt = (doc) => {
-    panel.layers = doc.layers.map((l) => ({ clip: l.clip, weight: l.weight ?? 1, mask: Object.keys(l.mask?.joints || {})[0] ?? null }));
-    panel.rootMode = doc.root_motion?.mode ?? "";
-    panel.rootJoint = doc.root_motion?.joint ?? panel.rootJoint;
-    $("root-mode").value = panel.rootMode;
-    const ik = doc.ik?.[0];
-    panel.ik = ik && (ik.kind === "aim" || ik.kind === "two_bone") ? { ...ik, joint: ik.joint ?? ik.joints[2] } : null;
-    showIk();
-    renderLayers();
+/// A weight slider's value as a live `layer` control, at most once a frame.
+const weightSenders = [];
+function sendWeight(index) {
+  if (!state.ws) return refreshThrottled();
+  weightSenders[index] ??= throttled(() => send({ op: "layer", index, weight: panel.layers[index].weight, duration: 0 }));
+  weightSenders[index]();
+}
+
+/// `f` called at most once per frame of the stream, the last call always made.
+function throttled(f) {
+  let last = 0, timer = null;
+  return () => {
+    const period = 1000 / fps();
+    const wait = last + period - performance.now();
+    if (timer) return;
+    if (wait <= 0) {
+      last = performance.now();
+      return f();
+    }
+    timer = setTimeout(() => {
+      timer = null;
+      last = performance.now();
+      f();
+    }, wait);
   };
+}
 
-  // ---- crossfade ----
+function fillClipSelect(select) {
+  const value = select.value;
+  select.replaceChildren(...state.clips.map((c) => new Option(c.name, c.id)));
+  if (value) select.value = value;
+}
 
-  function crossfade() {
-    const to = $("fade-clip").value;
-    if (!to || !state.clip) return;
-    if (!state.ws) return viewer.selectClip(to).catch(report); // nothing plays: nothing to fade from
-    const playback = viewer.options().playback;
-    panel.fading = panel.layers; // put back if the server refuses the fade
-    panel.layers = [{ clip: to, weight: 1, mask: null }];
-    const target = { layers: [layerDoc(panel.layers[0], playback)] };
-    if (panel.rootMode) target.root_motion = motion().root_motion;
-    crossfadeTo(target, fadeSeconds());
-    renderLayers();
+function jointNames() {
+  return (state.doc?.skeleton?.joints || []).map((j) => j.name);
+}
+
+/// Joints a root motion can follow: those with a translation track, roots first.
+function rootCandidates() {
+  const moving = new Set((state.doc?.tracks || []).filter((t) => t.channel === "translation").map((t) => t.joint));
+  const joints = (state.doc?.skeleton?.joints || []).filter((j) => moving.has(j.name));
+  return [...joints.filter((j) => j.parent == null), ...joints.filter((j) => j.parent != null)].map((j) => j.name);
+}
+
+function clipSelected(clip) {
+  panel.layers = [{ clip: clip.id, weight: 1, mask: null }];
+  panel.ik = null;
+  panel.sentIk = null;
+  resetTrail();
+  for (const id of ["layer-clip", "fade-clip"]) fillClipSelect($(id));
+  const roots = rootCandidates();
+  $("root-joint").replaceChildren(...roots.map((j) => new Option(j, j)));
+  panel.rootJoint = roots[0] ?? null;
+  $("ik-joint").replaceChildren(...jointNames().map((j) => new Option(j, j)));
+  const chains = jointNames().filter((j) => ancestors(j).length >= 2);
+  if (chains.length) $("ik-joint").value = chains[chains.length - 1];
+  showIk();
+  renderLayers();
+}
+
+/// Layers, masks and root motion as a broadcast plays them.
+export function adopt(doc) {
+  panel.layers = doc.layers.map((l) => ({ clip: l.clip, weight: l.weight ?? 1, mask: Object.keys(l.mask?.joints || {})[0] ?? null }));
+  panel.rootMode = doc.root_motion?.mode ?? "";
+  panel.rootJoint = doc.root_motion?.joint ?? panel.rootJoint;
+  $("root-mode").value = panel.rootMode;
+  const ik = doc.ik?.[0];
+  panel.ik = ik && (ik.kind === "aim" || ik.kind === "two_bone") ? { ...ik, joint: ik.joint ?? ik.joints[2] } : null;
+  showIk();
+  renderLayers();
+}
+
+// ---- crossfade ----
+
+function crossfade() {
+  const to = $("fade-clip").value;
+  if (!to || !state.clip) return;
+  if (!state.ws) return selectClip(to).catch(report); // nothing plays: nothing to fade from
+  const playback = options().playback;
+  panel.fading = panel.layers; // put back if the server refuses the fade
+  panel.layers = [{ clip: to, weight: 1, mask: null }];
+  const target = { layers: [layerDoc(panel.layers[0], playback)] };
+  if (panel.rootMode) target.root_motion = motion().root_motion;
+  crossfadeTo(target, fadeSeconds());
+  renderLayers();
+}
+
+/// A refused crossfade (another skeleton, a clip gone) leaves the layers playing.
+function refused() {
+  if (!panel.fading) return;
+  panel.layers = panel.fading;
+  panel.fading = null;
+  renderLayers();
+}
+
+// ---- root motion: the trail, and the character moved along it under `extract` ----
+
+/// `frame` (the parent's model transform) applied to a point of its space, and back.
+const toModel = applyTransform;
+const fromModel = unapplyTransform;
+
+/// Joint `i`'s parent's model transform and its own local one, from a
+/// pose in either space (SPEC §2.8; scales taken per axis, unsheared).
+function rootFrames(pose, i) {
+  const joints = pose.joints, parents = state.parents;
+  const trs = (j) => ({ t: j.translation, q: j.rotation, s: j.scale });
+  let parent = IDENTITY;
+  if (parents[i] >= 0 && pose.space === "model") parent = trs(joints[parents[i]]);
+  else if (parents[i] >= 0) {
+    const chain = [];
+    for (let p = parents[i]; p >= 0; p = parents[p]) chain.unshift(trs(joints[p]));
+    parent = chain.reduce(composeTransforms, IDENTITY);
   }
+  const own = trs(joints[i]);
+  const local = pose.space === "model" ? { t: fromModel(parent, own.t), q: qmul(conj(parent.q), own.q) } : own;
+  return { parent, local };
+}
 
-  /// A refused crossfade (another skeleton, a clip gone) leaves the layers playing.
-  hooks.refused.push(() => {
-    if (!panel.fading) return;
-    panel.layers = panel.fading;
-    panel.fading = null;
-    renderLayers();
-  });
-
-  // ---- root motion: the trail, and the character moved along it under `extract` ----
-
-  function resetTrail() {
-    panel.anchor = null;
-    panel.trail = [];
+/// Root motion lives in the root joint's parent's space, up its y axis
+/// (SPEC §6): each frame's total `A` placed at the first frame's motion
+/// transform `M0` (the root's ground position and heading there) is a
+/// trail point `M0·A·0`; under `extract` (the pose kept in place) the
+/// skeleton is drawn moved by `M0·A·M0⁻¹`, walking along the trail. Both
+/// are mapped to model space by the parent's first-frame transform.
+function onFrame(frame) {
+  panel.lastFrame = frame;
+  if (panel.fading && frame.pose.clip === panel.layers[0]?.clip) panel.fading = null;
+  if (frame.pose.clip !== panel.playingClip) {
+    panel.playingClip = frame.pose.clip;
+    $("playing").textContent = `playing: ${clipName(frame.pose.clip)}`;
+    // A crossfade's clip becomes the page's: its range (a `once` end), list entry and curves.
+    if (frame.pose.clip !== state.clip?.id) adoptClip(frame.pose.clip).catch(report);
   }
-
-  const yawOf = (q) => 2 * Math.atan2(q[1], q[3]);
-  const turn = (yaw, v) => [Math.cos(yaw) * v[0] + Math.sin(yaw) * v[2], v[1], -Math.sin(yaw) * v[0] + Math.cos(yaw) * v[2]];
-  const conj = (q) => [-q[0], -q[1], -q[2], q[3]];
-  const IDENTITY = { t: [0, 0, 0], q: [0, 0, 0, 1], s: [1, 1, 1] };
-
-  function rotate(q, v) {
-    const [x, y, z, w] = q;
-    const cx = y * v[2] - z * v[1], cy = z * v[0] - x * v[2], cz = x * v[1] - y * v[0];
-    const dx = y * cz - z * cy, dy = z * cx - x * cz, dz = x * cy - y * cx;
-    return [v[0] + 2 * (w * cx + dx), v[1] + 2 * (w * cy + dy), v[2] + 2 * (w * cz + dz)];
+  const total = frame.pose.root_motion?.total;
+  if (!total || !panel.rootMode) return;
+  if (!panel.anchor) {
+    const i = state.names.indexOf(panel.rootJoint);
+    if (!frame.pose.joints[i]) return;
+    const { parent, local } = rootFrames(frame.pose, i);
+    panel.anchor = { parent, ground: [local.t[0], 0, local.t[2]], yaw: yawOf(local.q) };
   }
-
-  function qmul(a, b) {
-    const [ax, ay, az, aw] = a, [bx, by, bz, bw] = b;
-    return [aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz];
+  const { parent, ground, yaw } = panel.anchor;
+  const step = turn(yaw, total.translation);
+  const at = [ground[0] + step[0], 0, ground[2] + step[2]];
+  panel.trail.push(toModel(parent, at));
+  if (panel.trail.length > TRAIL_POINTS) panel.trail.shift();
+  if (panel.rootMode === "extract") {
+    state.positions = panel.model.map((p) => {
+      const x = fromModel(parent, p);
+      const r = turn(total.yaw, [x[0] - ground[0], x[1], x[2] - ground[2]]);
+      return toModel(parent, [at[0] + r[0], r[1], at[2] + r[2]]);
+    });
   }
+}
 
-  /// `frame` (the parent's model transform) applied to a point of its space, and back.
-  const toModel = (f, x) => rotate(f.q, x.map((c, k) => c * f.s[k])).map((c, k) => c + f.t[k]);
-  const fromModel = (f, p) => rotate(conj(f.q), p.map((c, k) => c - f.t[k])).map((c, k) => c / (f.s[k] || 1));
+// ---- IK handles ----
 
-  /// Joint `i`'s parent's model transform and its own local one, from a
-  /// pose in either space (SPEC §2.8; scales taken per axis, unsheared).
-  function rootFrames(pose, i) {
-    const joints = pose.joints, parents = state.parents;
-    const trs = (j) => ({ t: j.translation, q: j.rotation, s: j.scale });
-    let parent = IDENTITY;
-    if (parents[i] >= 0 && pose.space === "model") parent = trs(joints[parents[i]]);
-    else if (parents[i] >= 0) {
-      const chain = [];
-      for (let p = parents[i]; p >= 0; p = parents[p]) chain.unshift(trs(joints[p]));
-      parent = chain.reduce((m, l) => ({ t: toModel(m, l.t), q: qmul(m.q, l.q), s: m.s.map((c, k) => c * l.s[k]) }), IDENTITY);
-    }
-    const own = trs(joints[i]);
-    const local = pose.space === "model" ? { t: fromModel(parent, own.t), q: qmul(conj(parent.q), own.q) } : own;
-    return { parent, local };
+function ancestors(name) {
+  const parent = new Map((state.doc?.skeleton?.joints || []).map((j) => [j.name, j.parent]));
+  const out = [];
+  for (let p = parent.get(name); p != null && out.length < 64; p = parent.get(p)) out.push(p);
+  return out;
+}
+
+/// A handle on the chosen joint: two-bone moves it with its parent and
+/// grandparent, aim turns it; the target starts where the joint is (aim:
+/// a little in front of it, along +z).
+function addHandle() {
+  const joint = $("ik-joint").value, kind = $("ik-kind").value;
+  const i = state.names.indexOf(joint);
+  const at = panel.model[i];
+  if (!at) return setStatus(`no pose of ${joint} to start the handle from`, true);
+  let joints;
+  if (kind === "two_bone") {
+    const up = ancestors(joint);
+    if (up.length < 2) return setStatus(`two-bone IK needs a joint with a parent and a grandparent; ${joint} has ${up.length ? "only a parent" : "none"}`, true);
+    joints = [up[1], up[0], joint];
   }
+  const reach = kind === "aim" ? 0.5 * state.camera.radius : 0;
+  panel.ik = { kind, joint, joints, target: [at[0], at[1], at[2] + reach] };
+  showIk();
+  sendIk();
+}
 
-  hooks.pose.push(() => {
-    panel.model = state.positions;
-  });
+function removeHandle() {
+  panel.ik = null;
+  showIk();
+  sendIk();
+}
 
-  /// Root motion lives in the root joint's parent's space, up its y axis
-  /// (SPEC §6): each frame's total `A` placed at the first frame's motion
-  /// transform `M0` (the root's ground position and heading there) is a
-  /// trail point `M0·A·0`; under `extract` (the pose kept in place) the
-  /// skeleton is drawn moved by `M0·A·M0⁻¹`, walking along the trail. Both
-  /// are mapped to model space by the parent's first-frame transform.
-  hooks.frame.push((frame) => {
-    panel.lastFrame = frame;
-    if (panel.fading && frame.pose.clip === panel.layers[0]?.clip) panel.fading = null;
-    if (frame.pose.clip !== panel.playingClip) {
-      panel.playingClip = frame.pose.clip;
-      $("playing").textContent = `playing: ${clipName(frame.pose.clip)}`;
-      // A crossfade's clip becomes the page's: its range (a `once` end), list entry and curves.
-      if (frame.pose.clip !== state.clip?.id) viewer.adoptClip(frame.pose.clip).catch(report);
-    }
-    const total = frame.pose.root_motion?.total;
-    if (!total || !panel.rootMode) return;
-    if (!panel.anchor) {
-      const i = state.names.indexOf(panel.rootJoint);
-      if (!frame.pose.joints[i]) return;
-      const { parent, local } = rootFrames(frame.pose, i);
-      panel.anchor = { parent, ground: [local.t[0], 0, local.t[2]], yaw: yawOf(local.q) };
-    }
-    const { parent, ground, yaw } = panel.anchor;
-    const step = turn(yaw, total.translation);
-    const at = [ground[0] + step[0], 0, ground[2] + step[2]];
-    panel.trail.push(toModel(parent, at));
-    if (panel.trail.length > TRAIL_POINTS) panel.trail.shift();
-    if (panel.rootMode === "extract") {
-      state.positions = panel.model.map((p) => {
-        const x = fromModel(parent, p);
-        const r = turn(total.yaw, [x[0] - ground[0], x[1], x[2] - ground[2]]);
-        return toModel(parent, [at[0] + r[0], r[1], at[2] + r[2]]);
-      });
-    }
-  });
+function showIk() {
+  $("ik-remove").disabled = !panel.ik;
+  $("ik-info").textContent = panel.ik
+    ? `${panel.ik.kind === "aim" ? "aim" : "two-bone"} on ${panel.ik.joint}: drag the handle`
+    : "pick a joint, then add a handle";
+  requestDraw();
+}
 
-  // ---- IK handles ----
+/// The handle's constraint as a live `ik` control (or the paused view's pose).
+const sendIkNow = () => {
+  panel.sentIk = panel.ik ? [...panel.ik.target] : null;
+  send({ op: "ik", constraints: panel.ik ? [constraint()] : [] });
+};
+const sendIkThrottled = throttled(sendIkNow);
+function sendIk() {
+  if (state.ws) sendIkThrottled();
+  else if (state.clip) refreshThrottled();
+}
 
-  function ancestors(name) {
-    const parent = new Map((state.doc?.skeleton?.joints || []).map((j) => [j.name, j.parent]));
-    const out = [];
-    for (let p = parent.get(name); p != null && out.length < 64; p = parent.get(p)) out.push(p);
-    return out;
-  }
+function handleOnScreen(cam) {
+  const v = toCamera(cam, panel.ik.target);
+  if (v[2] <= cam.near) return null;
+  return { depth: v[2], at: toScreen(cam, v) };
+}
 
-  /// A handle on the chosen joint: two-bone moves it with its parent and
-  /// grandparent, aim turns it; the target starts where the joint is (aim:
-  /// a little in front of it, along +z).
-  function addHandle() {
-    const joint = $("ik-joint").value, kind = $("ik-kind").value;
-    const i = state.names.indexOf(joint);
-    const at = panel.model[i];
-    if (!at) return viewer.setStatus(`no pose of ${joint} to start the handle from`, true);
-    let joints;
-    if (kind === "two_bone") {
-      const up = ancestors(joint);
-      if (up.length < 2) return viewer.setStatus(`two-bone IK needs a joint with a parent and a grandparent; ${joint} has ${up.length ? "only a parent" : "none"}`, true);
-      joints = [up[1], up[0], joint];
-    }
-    const reach = kind === "aim" ? 0.5 * state.camera.radius : 0;
-    panel.ik = { kind, joint, joints, target: [at[0], at[1], at[2] + reach] };
-    showIk();
-    sendIk();
-  }
+/// The pointer in the scene canvas's pixels.
+function pointer(e, cam) {
+  const r = $("scene").getBoundingClientRect();
+  return [(e.clientX - r.left) * cam.dpr, (e.clientY - r.top) * cam.dpr];
+}
 
-  function removeHandle() {
-    panel.ik = null;
-    showIk();
-    sendIk();
-  }
-
-  function showIk() {
-    $("ik-remove").disabled = !panel.ik;
-    $("ik-info").textContent = panel.ik
-      ? `${panel.ik.kind === "aim" ? "aim" : "two-bone"} on ${panel.ik.joint}: drag the handle`
-      : "pick a joint, then add a handle";
-    viewer.requestDraw();
-  }
-
-  /// The handle's constraint as a live `ik` control (or the paused view's pose).
-  const sendIkNow = () => {
-    panel.sentIk = panel.ik ? [...panel.ik.target] : null;
-    viewer.send({ op: "ik", constraints: panel.ik ? [constraint()] : [] });
-  };
-  const sendIkThrottled = throttled(sendIkNow);
-  function sendIk() {
-    if (state.ws) sendIkThrottled();
-    else if (state.clip) refreshThrottled();
-  }
-
-  function handleOnScreen(cam) {
-    const v = viewer.toCamera(cam, panel.ik.target);
-    if (v[2] <= cam.near) return null;
-    return { depth: v[2], at: viewer.toScreen(cam, v) };
-  }
-
-  /// The pointer in the scene canvas's pixels.
-  function pointer(e, cam) {
-    const r = $("scene").getBoundingClientRect();
-    return [(e.clientX - r.left) * cam.dpr, (e.clientY - r.top) * cam.dpr];
-  }
-
-  /// Dragging a handle moves its target in the camera's view plane through
-  /// it; a press elsewhere orbits as before (viewer.js never sees this one).
-  function setupDrag() {
-    const view = $("scene-view");
-    let drag = null;
-    view.addEventListener(
-      "pointerdown",
-      (e) => {
-        if (!panel.ik) return;
-        const cam = viewer.sceneCamera();
-        const handle = handleOnScreen(cam);
-        if (!handle) return;
-        const [x, y] = pointer(e, cam);
-        if (Math.hypot(x - handle.at[0], y - handle.at[1]) > GRAB_PX * cam.dpr) return;
-        e.stopPropagation();
-        e.preventDefault();
-        drag = { depth: handle.depth, grab: [handle.at[0] - x, handle.at[1] - y] };
-        view.setPointerCapture(e.pointerId);
-      },
-      { capture: true },
-    );
-    view.addEventListener("pointermove", (e) => {
-      if (!drag || !panel.ik) return;
-      const cam = viewer.sceneCamera();
+/// Dragging a handle moves its target in the camera's view plane through
+/// it; a press elsewhere orbits as before (scene.js never sees this one).
+function setupDrag() {
+  const view = $("scene-view");
+  let drag = null;
+  view.addEventListener(
+    "pointerdown",
+    (e) => {
+      if (!panel.ik) return;
+      const cam = sceneCamera();
+      const handle = handleOnScreen(cam);
+      if (!handle) return;
       const [x, y] = pointer(e, cam);
-      const sx = x + drag.grab[0], sy = y + drag.grab[1];
-      const right = ((sx - cam.cx) / cam.focal) * drag.depth, up = (-(sy - cam.cy) / cam.focal) * drag.depth;
-      panel.ik.target = [0, 1, 2].map((k) => cam.eye[k] + cam.f[k] * drag.depth + cam.r[k] * right + cam.u[k] * up);
-      viewer.requestDraw();
-      sendIk();
-    });
-    const end = () => {
-      if (!drag) return;
-      drag = null;
-      if (state.ws) setTimeout(sendIkNow, 0); // the final place, whatever the throttle held back
-    };
-    view.addEventListener("pointerup", end);
-    view.addEventListener("pointercancel", end);
-  }
-
-  /// The trail and the handle, over the scene.
-  hooks.overlay.push((ctx, cam, dpr) => {
-    if (panel.trail.length > 1) {
-      ctx.beginPath();
-      let open = false;
-      for (const p of panel.trail) {
-        const v = viewer.toCamera(cam, p);
-        if (v[2] <= cam.near) {
-          open = false;
-          continue;
-        }
-        const [x, y] = viewer.toScreen(cam, v);
-        open ? ctx.lineTo(x, y) : ctx.moveTo(x, y);
-        open = true;
-      }
-      ctx.strokeStyle = TRAIL_COLOR;
-      ctx.lineWidth = 2 * dpr;
-      ctx.setLineDash([6 * dpr, 4 * dpr]);
-      ctx.stroke();
-      ctx.setLineDash([]);
-    }
-    if (!panel.ik) return;
-    const handle = handleOnScreen(cam);
-    if (!handle) return;
-    const [x, y] = handle.at;
-    const effector = state.positions[state.names.indexOf(panel.ik.joint)];
-    if (effector) {
-      const v = viewer.toCamera(cam, effector);
-      if (v[2] > cam.near) {
-        const [ex, ey] = viewer.toScreen(cam, v);
-        ctx.beginPath();
-        ctx.moveTo(ex, ey);
-        ctx.lineTo(x, y);
-        ctx.strokeStyle = HANDLE_COLOR;
-        ctx.lineWidth = dpr;
-        ctx.stroke();
-      }
-    }
-    const r = HANDLE_PX * dpr;
-    ctx.beginPath();
-    ctx.arc(x, y, r, 0, 2 * Math.PI);
-    ctx.fillStyle = "rgba(58, 209, 230, 0.35)";
-    ctx.fill();
-    ctx.strokeStyle = HANDLE_COLOR;
-    ctx.lineWidth = 2 * dpr;
-    ctx.stroke();
-    ctx.beginPath();
-    ctx.moveTo(x - 1.6 * r, y);
-    ctx.lineTo(x + 1.6 * r, y);
-    ctx.moveTo(x, y - 1.6 * r);
-    ctx.lineTo(x, y + 1.6 * r);
-    ctx.lineWidth = dpr;
-    ctx.stroke();
+      if (Math.hypot(x - handle.at[0], y - handle.at[1]) > GRAB_PX * cam.dpr) return;
+      e.stopPropagation();
+      e.preventDefault();
+      drag = { depth: handle.depth, grab: [handle.at[0] - x, handle.at[1] - y] };
+      view.setPointerCapture(e.pointerId);
+    },
+    { capture: true },
+  );
+  view.addEventListener("pointermove", (e) => {
+    if (!drag || !panel.ik) return;
+    const cam = sceneCamera();
+    const [x, y] = pointer(e, cam);
+    const sx = x + drag.grab[0], sy = y + drag.grab[1];
+    const right = ((sx - cam.cx) / cam.focal) * drag.depth, up = (-(sy - cam.cy) / cam.focal) * drag.depth;
+    panel.ik.target = [0, 1, 2].map((k) => cam.eye[k] + cam.f[k] * drag.depth + cam.r[k] * right + cam.u[k] * up);
+    requestDraw();
+    sendIk();
   });
+  const end = () => {
+    if (!drag) return;
+    drag = null;
+    if (state.ws) setTimeout(sendIkNow, 0); // the final place, whatever the throttle held back
+  };
+  view.addEventListener("pointerup", end);
+  view.addEventListener("pointercancel", end);
+}
 
-  // ---- wiring ----
-
-  function setup() {
-    build();
-    for (const id of ["layer-clip", "fade-clip"]) $(id).addEventListener("focus", () => fillClipSelect($(id)));
-    $("layer-add").addEventListener("click", () => {
-      const clip = $("layer-clip").value;
-      if (!clip || !state.clip) return;
-      panel.layers.push({ clip, weight: 1, mask: null });
-      recompose();
-    });
-    $("fade").addEventListener("click", crossfade);
-    $("root-mode").addEventListener("change", () => {
-      panel.rootMode = $("root-mode").value;
-      resetTrail();
-      recompose();
-    });
-    $("root-joint").addEventListener("change", () => {
-      panel.rootJoint = $("root-joint").value || null;
-      resetTrail();
-      if (panel.rootMode) recompose();
-    });
-    $("ik-add").addEventListener("click", addHandle);
-    $("ik-remove").addEventListener("click", removeHandle);
-    setupDrag();
-    renderLayers();
-    showIk();
+/// The trail and the handle, over the scene.
+function overlay(ctx, cam, dpr) {
+  if (panel.trail.length > 1) {
+    ctx.beginPath();
+    let open = false;
+    for (const p of panel.trail) {
+      const v = toCamera(cam, p);
+      if (v[2] <= cam.near) {
+        open = false;
+        continue;
+      }
+      const [x, y] = toScreen(cam, v);
+      open ? ctx.lineTo(x, y) : ctx.moveTo(x, y);
+      open = true;
+    }
+    ctx.strokeStyle = TRAIL_COLOR;
+    ctx.lineWidth = 2 * dpr;
+    ctx.setLineDash([6 * dpr, 4 * dpr]);
+    ctx.stroke();
+    ctx.setLineDash([]);
   }
+  if (!panel.ik) return;
+  const handle = handleOnScreen(cam);
+  if (!handle) return;
+  const [x, y] = handle.at;
+  const effector = state.positions[state.names.indexOf(panel.ik.joint)];
+  if (effector) {
+    const v = toCamera(cam, effector);
+    if (v[2] > cam.near) {
+      const [ex, ey] = toScreen(cam, v);
+      ctx.beginPath();
+      ctx.moveTo(ex, ey);
+      ctx.lineTo(x, y);
+      ctx.strokeStyle = HANDLE_COLOR;
+      ctx.lineWidth = dpr;
+      ctx.stroke();
+    }
+  }
+  const r = HANDLE_PX * dpr;
+  ctx.beginPath();
+  ctx.arc(x, y, r, 0, 2 * Math.PI);
+  ctx.fillStyle = "rgba(58, 209, 230, 0.35)";
+  ctx.fill();
+  ctx.strokeStyle = HANDLE_COLOR;
+  ctx.lineWidth = 2 * dpr;
+  ctx.stroke();
+  ctx.beginPath();
+  ctx.moveTo(x - 1.6 * r, y);
+  ctx.lineTo(x + 1.6 * r, y);
+  ctx.moveTo(x, y - 1.6 * r);
+  ctx.lineTo(x, y + 1.6 * r);
+  ctx.lineWidth = dpr;
+  ctx.stroke();
+}
 
-  setup();
-})();
+// ---- wiring ----
+
+export function setup() {
+  build();
+  on("clipSelected", clipSelected);
+  on("refused", refused);
+  on("pose", () => (panel.model = state.positions));
+  on("frame", onFrame);
+  on("overlay", overlay);
+  for (const id of ["layer-clip", "fade-clip"]) $(id).addEventListener("focus", () => fillClipSelect($(id)));
+  $("layer-add").addEventListener("click", () => {
+    const clip = $("layer-clip").value;
+    if (!clip || !state.clip) return;
+    panel.layers.push({ clip, weight: 1, mask: null });
+    recompose();
+  });
+  $("fade").addEventListener("click", crossfade);
+  $("root-mode").addEventListener("change", () => {
+    panel.rootMode = $("root-mode").value;
+    resetTrail();
+    recompose();
+  });
+  $("root-joint").addEventListener("change", () => {
+    panel.rootJoint = $("root-joint").value || null;
+    resetTrail();
+    if (panel.rootMode) recompose();
+  });
+  $("ik-add").addEventListener("click", addHandle);
+  $("ik-remove").addEventListener("click", removeHandle);
+  setupDrag();
+  renderLayers();
+  showIk();
+}

@@ -1,0 +1,85 @@
+// The motion the page plays (SPEC §6): the selected clip as the first
+// layer, more layers with weights and masks, root motion and an IK handle
+// (panel.js edits them). A stream opens `/v1/stream` with this motion, and a
+// paused view of a composition asks `POST /v1/poses` for it.
+
+import { postJson } from "./api.js";
+import { $ } from "./dom.js";
+import { fps, options } from "./settings.js";
+import { state } from "./state.js";
+
+export const panel = {
+  layers: [], // [{clip, weight, mask: joint name | null}]; the first is the selected clip
+  rootMode: "", // "" (off), "report" or "extract"
+  rootJoint: null,
+  anchor: null, // the root's ground position and heading at the stream's first frame
+  trail: [], // root ground positions, world space
+  ik: null, // {kind, joint, joints?, target}: the handle
+  sentIk: null, // the target last sent
+  model: [], // the model-space joint positions of the pose shown, before root motion moves them
+  playingClip: null, // the clip the frames say is playing (the first layer's)
+  lastFrame: null,
+  openPaused: false, // the next stream opens paused (a change made while paused)
+  fading: null, // the layers before a crossfade the server has not shown yet
+  motion, // the motion doc, as `motion()` below (read by the browser test)
+};
+
+/// Whether the page shows more than its clip: another layer, a weight, a
+/// mask, root motion or IK (a plain clip keeps the clip routes).
+export function composed() {
+  const [base, ...rest] = panel.layers;
+  return Boolean(rest.length || (base && (base.weight !== 1 || base.mask)) || panel.rootMode || panel.ik);
+}
+
+export function layerDoc(layer, playback) {
+  const doc = { clip: layer.clip };
+  if (layer.weight !== 1) doc.weight = layer.weight;
+  if (layer.mask) doc.mask = { joints: { [layer.mask]: 1 }, descendants: true };
+  if (playback) doc.playback = playback;
+  return doc;
+}
+
+/// The motion the page plays (SPEC §6), IK included unless `ik` is false
+/// (a crossfade's motion carries none: a stream has one IK list).
+export function motion({ ik = true } = {}) {
+  const playback = options().playback;
+  const doc = { layers: panel.layers.map((l) => layerDoc(l, playback)) };
+  if (panel.rootMode) doc.root_motion = { mode: panel.rootMode, ...(panel.rootJoint ? { joint: panel.rootJoint } : {}) };
+  if (ik && panel.ik) doc.ik = [constraint()];
+  return doc;
+}
+
+/// The handle as an IK constraint.
+export function constraint() {
+  const { kind, joint, joints, target } = panel.ik;
+  return kind === "aim" ? { kind, joint, target } : { kind, joints, target };
+}
+
+export function resetTrail() {
+  panel.anchor = null;
+  panel.trail = [];
+}
+
+/// The `open` message of a new stream of the motion, with the page's
+/// settings (a new stream starts a new root-motion trail).
+export function openMessage() {
+  const { space, ease } = options();
+  const open = {
+    op: "open",
+    motion: motion(),
+    fps: fps(),
+    speed: Number($("speed").value) || 1,
+    start: state.requestTime,
+    space,
+    ease,
+    paused: panel.openPaused,
+  };
+  panel.openPaused = false;
+  resetTrail();
+  return open;
+}
+
+/// The paused view's pose of a composition at `t` (`POST /v1/poses`; ease
+/// is a stream setting), or null for a plain clip.
+export const composedPoseAt = (t) =>
+  composed() ? postJson("/v1/poses", { motion: motion(), time: t, space: options().space }) : null;

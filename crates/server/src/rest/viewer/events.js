@@ -1,0 +1,27 @@
+// What happens on the page, for the modules that react to it: each event
+// has a fixed name, listeners run in the order they were added (each
+// module's setup, called in order by viewer.js), and an unknown name throws.
+
+const LISTENERS = {
+  frame: [], // (frame): a stream frame, after its pose is applied
+  pose: [], // (pose): a pose applied (a frame's or a paused view's); may move state.positions
+  overlay: [], // (ctx, cam, dpr): the scene is drawn; draw over it
+  clipSelected: [], // (clip): a clip was selected
+  clipAdopted: [], // (clip): a crossfade made its clip the page's
+  refused: [], // (problem): the server refused a control
+  redraw: [], // (): the scene needs drawing again
+};
+
+function listeners(name) {
+  const list = LISTENERS[name];
+  if (!list) throw new Error(`no page event "${name}"`);
+  return list;
+}
+
+export function on(name, listener) {
+  listeners(name).push(listener);
+}
+
+export function emit(name, ...args) {
+  for (const listener of listeners(name)) listener(...args);
+}

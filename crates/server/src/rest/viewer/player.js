@@ -1,0 +1,239 @@
+// The player: the stream (a WebSocket of frames), play, pause, seek,
+// speed and the keys, a `once` stream's end, the paused view's pose, and the
+// readout (seq, clip time, dropped ticks, latency, frames).
+
+import { api, describeProblem, socketUrl, streamProtocols } from "./api.js";
+import { composedPoseAt, openMessage } from "./composition.js";
+import { refusedControl, send } from "./controls.js";
+import { drawCurves, loadCurve } from "./curves.js";
+import { $, setStatus } from "./dom.js";
+import { emit } from "./events.js";
+import { applyPose } from "./pose.js";
+import { fps, options, playbackMode, requestTimeOf } from "./settings.js";
+import { state } from "./state.js";
+
+let seeking = false; // the seek bar is held: the readout leaves it alone
+
+/// Shows the pose at `t`. Answers can arrive out of order (the browser
+/// spreads requests over connections), so only the newest request's answer
+/// is shown, and none once a stream has opened since.
+export async function showPoseAt(t) {
+  const asked = ++state.poseAsked;
+  const q = new URLSearchParams({ t: String(t), ...options() });
+  const composed = composedPoseAt(t);
+  const pose = await (composed || api(`/v1/clips/${encodeURIComponent(state.clip.id)}/pose?${q}`));
+  if (asked !== state.poseAsked) return;
+  applyPose(pose);
+  updateReadout();
+}
+
+/// What a new stream connects to: the watched broadcast's stream, else
+/// `/v1/stream` opened with the page's motion (SPEC §6).
+function streamTarget() {
+  if (state.watching) return { url: socketUrl(`/v1/broadcasts/${encodeURIComponent(state.watching)}/stream`) };
+  return { url: socketUrl("/v1/stream"), open: openMessage() };
+}
+
+/// What the page can check itself before opening a stream (the server
+/// refuses a bad handshake with a body the WebSocket API cannot read).
+function streamSettingsProblem() {
+  const rate = Number($("fps").value), speed = Number($("speed").value);
+  if (!(Number.isInteger(rate) && rate >= 1 && rate <= 240)) return `fps must be a whole number from 1 to 240, not "${$("fps").value}"`;
+  if (!(Number.isFinite(speed) && Math.abs(speed) <= 1000)) return `speed must be a number within ±1000, not "${$("speed").value}"`;
+  return null;
+}
+
+/// Why a stream closed before its first frame: the handshake was refused,
+/// and the clip's own route says why (a token, a deleted clip), else the
+/// stream caps.
+async function explainRefusedStream(e) {
+  try {
+    await api(`/v1/clips/${encodeURIComponent(state.clip.id)}`);
+    setStatus(`the server refused the stream (${e.code}${e.reason ? `: ${e.reason}` : ""})`, true);
+  } catch (err) {
+    setStatus(`stream refused: ${err.message}`, true);
+  }
+}
+
+export function openStream() {
+  const settings = streamSettingsProblem();
+  if (settings) {
+    setStatus(settings, true);
+    return false;
+  }
+  const target = streamTarget();
+  const ws = new WebSocket(target.url, streamProtocols());
+  state.poseAsked += 1; // a paused pose still on its way is older than the stream
+  if (target.open) ws.onopen = () => ws.send(JSON.stringify(target.open));
+  state.ws = ws;
+  state.speed = Number($("speed").value) || 1;
+  setEnded(false);
+  // The readout counts this stream's ticks: each frame's `dropped` is the
+  // ticks skipped since the previous frame, so the total is their sum.
+  Object.assign(state, { frames: 0, seq: null, dropped: 0 });
+  ws.onmessage = (message) => {
+    if (typeof message.data !== "string") return;
+    const frame = JSON.parse(message.data);
+    if (frame.opened) return;
+    if (frame.error && target.open && !state.frames) return setStatus(`stream refused: ${describeProblem(frame.error)}`, true);
+    if (frame.error) return refusedControl(frame.error);
+    const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
+    state.frames += 1;
+    if (state.frames === 1) state.firstClipTime = frame.clip_time;
+    state.seq = frame.seq;
+    state.dropped += frame.dropped;
+    state.latencyMs = (nowNanos - frame.sent_at_unix_nanos) / 1e6;
+    if (frame.events?.length) setStatus(`event: ${frame.events.map((e) => e.name).join(", ")}`);
+    applyPose(frame.pose);
+    emit("frame", frame);
+    updateReadout();
+    if (state.playing && reachedEnd(frame.clip_time)) endOnce();
+  };
+  ws.onclose = (e) => {
+    if (state.ws !== ws) return;
+    state.ws = null;
+    setPlaying(false);
+    if (!state.frames && e.code === 1006) explainRefusedStream(e);
+    else if (e.code !== 1000 && e.code !== 1005) setStatus(`stream closed (${e.code}) ${e.reason}`, true);
+  };
+  return true;
+}
+
+/// Whether a `once` stream has reached the end it is heading for (a `once`
+/// clip holds its last pose; the stream would go on sending it).
+function reachedEnd(clipTime) {
+  if (playbackMode() !== "once" || !state.clip || state.watching) return false;
+  const { start, end } = state.clip;
+  return state.speed >= 0 ? clipTime >= end : clipTime <= start;
+}
+
+/// A `once` stream ended: close it and let Play start it over.
+function endOnce() {
+  stopStream();
+  setEnded(true);
+  setStatus(`${state.clip.name} ended at ${state.clipTime.toFixed(3)} s — Play starts it over`);
+}
+
+export function setEnded(ended) {
+  state.ended = ended;
+  $("play").classList.toggle("ended", ended);
+  $("play").title = ended ? "Ended: play again from the start" : "";
+}
+
+export function stopStream() {
+  const ws = state.ws;
+  state.ws = null;
+  state.playing = false;
+  if (ws) {
+    if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ op: "stop" }));
+    ws.close();
+  }
+  setPlaying(false);
+}
+
+/// Settings a running stream cannot change: start a new one from here.
+function restartStream() {
+  if (!state.clip) return;
+  loadCurve().catch((e) => setStatus(e.message, true));
+  if (!state.ws) return showPoseAt(state.requestTime).catch((e) => setStatus(e.message, true));
+  const wasPlaying = state.playing;
+  stopStream();
+  if (!wasPlaying) return showPoseAt(state.requestTime).catch((e) => setStatus(e.message, true));
+  if (openStream()) setPlaying(true);
+}
+
+export function setPlaying(playing) {
+  state.playing = playing;
+  $("play").textContent = playing ? "Pause" : "Play";
+}
+
+function togglePlay() {
+  if (!state.clip) return;
+  if (!state.ws) {
+    // After a `once` end (or from its very end) play starts over.
+    const speed = Number($("speed").value) || 1;
+    if (state.ended || (playbackMode() === "once" && atEnd(speed))) {
+      state.requestTime = speed >= 0 ? state.clip.start : state.clip.end;
+    }
+    if (openStream()) setPlaying(true);
+  } else {
+    send({ op: state.playing ? "pause" : "play" });
+    setPlaying(!state.playing);
+  }
+}
+
+function atEnd(speed) {
+  const { start, end } = state.clip;
+  return speed >= 0 ? state.clipTime >= end : state.clipTime <= start;
+}
+
+/// Moves the playhead to request time `t` (clamped to the clip): a
+/// `seek` on a running stream, else a pose fetched for the paused view.
+function seekTo(t) {
+  if (!state.clip) return;
+  const { start, end } = state.clip;
+  const time = Math.min(end, Math.max(start, t));
+  setEnded(false);
+  if (state.ws) send({ op: "seek", time });
+  else showPoseAt(time).catch((e) => setStatus(e.message, true));
+}
+
+/// Space plays or pauses, arrows step one frame (Shift: one second),
+/// Home and End go to the clip's ends. Keys typed into a field are its own.
+function onKey(e) {
+  const t = e.target;
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  if (t instanceof HTMLElement && t.closest("input, select, textarea")) return;
+  // A focused button takes Space itself (it clicks).
+  if (e.key === " " && t instanceof HTMLElement && t.closest("button")) return;
+  if (!state.clip || $("play").hidden) return; // hidden: a read-only viewer of a broadcast
+  const here = Number($("seek").value);
+  const step = e.shiftKey ? 1 : 1 / fps();
+  const actions = {
+    " ": togglePlay,
+    ArrowLeft: () => seekTo(here - step),
+    ArrowRight: () => seekTo(here + step),
+    Home: () => seekTo(state.clip.start),
+    End: () => seekTo(state.clip.end),
+  };
+  const action = actions[e.key];
+  if (!action) return;
+  e.preventDefault();
+  action();
+}
+
+export function updateReadout() {
+  $("seq").textContent = state.seq ?? "–";
+  $("clip-time").textContent = `${state.clipTime.toFixed(3)} s`;
+  $("dropped").textContent = state.seq == null ? "–" : state.dropped;
+  $("latency").textContent = state.latencyMs == null ? "–" : `${state.latencyMs.toFixed(1)} ms`;
+  $("frames").textContent = state.frames;
+  if (!seeking) $("seek").value = requestTimeOf(state.clipTime);
+  drawCurves();
+}
+
+/// The play button, the seek bar, the speed box, the keys, and the
+/// settings a running stream cannot change.
+export function setup() {
+  const report = (e) => setStatus(e.message, true);
+  $("play").addEventListener("click", togglePlay);
+  const seek = $("seek");
+  seek.addEventListener("pointerdown", () => (seeking = true));
+  seek.addEventListener("change", () => (seeking = false));
+  seek.addEventListener("input", () => {
+    const t = Number(seek.value);
+    if (state.ws) send({ op: "seek", time: t });
+    else showPoseAt(t).catch(report);
+  });
+  $("speed").addEventListener("change", () => {
+    const speed = Number($("speed").value);
+    if (!state.ws) return;
+    if (!Number.isFinite(speed)) return refusedControl(`speed must be a number, not "${$("speed").value}"`);
+    // Sent either way, so that the server's own words explain a refusal;
+    // kept only if it is one the server takes (SPEC §5: within ±1000).
+    if (Math.abs(speed) <= 1000) state.speed = speed;
+    send({ op: "speed", speed });
+  });
+  document.addEventListener("keydown", onKey);
+  for (const id of ["fps", "playback", "space", "ease"]) $(id).addEventListener("change", restartStream);
+}
