@@ -1,4 +1,4 @@
-//! Inverse kinematics benchmarks (SPEC §7, issue 17; BENCHMARKS.md).
+//! Inverse kinematics benchmarks (docs/ik.md, issue 17; BENCHMARKS.md).
 //!
 //! One 20-joint body (`ik/body.rs`: hips, three spine joints, neck, head,
 //! two arms of shoulder–upper–fore–hand, two legs of thigh–shin–foot) in a

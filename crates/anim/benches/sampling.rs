@@ -444,7 +444,7 @@ fn versus_ozz(c: &mut Criterion) {
     run_pose(c, "versus_ozz_64_joints", "inbetween_catmull_rom_random", &cr, &rnd, false);
 }
 
-/// Composition (SPEC §6): the same 64-joint Catmull-Rom clips (translation,
+/// Composition (docs/motion.md): the same 64-joint Catmull-Rom clips (translation,
 /// rotation, scale) sampled forward as a clip, as a one-layer motion (its
 /// fast path), as two blended layers, as two synced layers plus an additive
 /// one, as one layer with root motion, as three layers (two synced blends

@@ -1,4 +1,4 @@
-//! Arc-length reparameterisation for `speed: "constant"` (SPEC §2.6).
+//! Arc-length reparameterisation for `speed: "constant"` (docs/clip-format.md, “Speed control”).
 //!
 //! Built once per track, in `f64`: the path is cut into pieces inside which
 //! the Bezier parameter is linear in arc length to within a tolerance of
@@ -19,8 +19,9 @@ use glam::DVec3;
 
 use super::curve::ArcPiece;
 
-/// Position tolerance: relative to the path length, capped absolutely so
-/// long paths also stay inside SPEC §2.9's 1e-5 (at about f32 resolution).
+/// Position tolerance: relative to the path length, capped absolutely so long
+/// paths also stay inside the 1e-5 of docs/clip-format.md, “Accuracy” (at about
+/// f32 resolution).
 const REL_TOLERANCE: f64 = 1e-6;
 const ABS_TOLERANCE: f64 = 1e-6;
 /// A sixth of an `f32` ulp, relative: finer positions cannot be output.

@@ -6,7 +6,7 @@
 //! ([`Cursor`], [`Pose`]) have their size. Tracks are stored by channel and
 //! kind (`tracks`), so sampling is a handful of tight loops.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::atomic::AtomicBool;
 
 use glam::Mat4;
@@ -14,17 +14,15 @@ use glam::Mat4;
 use super::arc::Meter;
 use super::compile::{self, Compiled, finite3, unit_quat};
 use super::error::{ClipError, ClipErrorKind as K};
+use super::heap::vec_bytes;
 use super::ik::{IkLimits, IkReport, KeyedIk, KeyedIkState};
 use super::parameters::{ParameterLayout, Parameters};
 use super::path::Path;
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
-use super::spec::{Channel, ClipSpec, Ease, Playback, Space};
+use super::spec::{Channel, ClipSpec, Ease, EventSpec, MAX_NAME_CHARS, Playback, Space, TrackSpec};
 use super::time::TimeRange;
 use super::timeline::{Span, Timeline};
 use super::tracks::{QuatTracks, Spans, Vec3Tracks};
-
-/// Longest accepted clip or event name, in characters.
-pub const MAX_NAME_CHARS: usize = 256;
 
 /// The largest model-space scale or translation magnitude a joint below a
 /// root may reach: 1/340 of `f32::MAX`, so matrix products (and a skinning
@@ -65,17 +63,12 @@ pub struct Clip {
     /// Joints with a translation track, in track order (root motion's default joint).
     translated: Vec<u32>,
     events: Vec<Event>,
-    /// Constraints solved after the tracks at every sample (SPEC §7).
+    /// Constraints solved after the tracks at every sample (docs/ik.md).
     ik: Option<KeyedIk>,
-    /// Named tracks that are not joints (SPEC §8).
+    /// Named tracks that are not joints (docs/clip-format.md, “Parameters”).
     parameters: Parameters,
     /// What the build spent (see [`DEFAULT_BUILD_WORK`]).
     build_work: u64,
-}
-
-/// Bytes of a vector's allocation (its capacity, not its length).
-pub(crate) fn vec_bytes<T>(v: &Vec<T>) -> usize {
-    v.capacity() * std::mem::size_of::<T>()
 }
 
 /// Per-caller search state: the last span of each timeline, which makes
@@ -150,7 +143,7 @@ impl<K: Fn(u32) -> bool> Spans for LazySpans<'_, K> {
     }
 }
 
-/// How a request maps to clip time and space (SPEC §2.6–2.8).
+/// How a request maps to clip time and space (docs/clip-format.md, 2.6–2.8).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SampleOptions {
     /// `None`: the clip's own default.
@@ -160,8 +153,8 @@ pub struct SampleOptions {
 }
 
 impl Clip {
-    /// Validates `spec` and compiles it (SPEC §1–2) within
-    /// [`DEFAULT_BUILD_WORK`].
+    /// Validates `spec` and compiles it (docs/clip-format.md, “Data model” and
+    /// “Evaluation math”) within [`DEFAULT_BUILD_WORK`].
     ///
     /// # Errors
     /// The first rule `spec` breaks, with the path of the offending field.
@@ -214,6 +207,10 @@ impl Clip {
         Clip::build_kernel(spec, DEFAULT_BUILD_WORK, &IkLimits::default(), &AtomicBool::new(false), false)
     }
 
+    /// Every build, phase by phase, each refusing what it checks in the
+    /// order the tests pin: the name, the skeleton, the joint tracks, the
+    /// parameters, the keyed IK, the events. Without `simd_groups` every
+    /// track stays on the scalar kernel.
     fn build_kernel(
         spec: &ClipSpec,
         max_work: u64,
@@ -221,125 +218,36 @@ impl Clip {
         cancel: &AtomicBool,
         simd_groups: bool,
     ) -> Result<Clip, ClipError> {
-        let chars = spec.name.chars().count();
-        if chars == 0 || chars > MAX_NAME_CHARS {
-            return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
-        }
-        if spec.tracks.is_empty() && spec.parameters.is_empty() {
-            return Err(ClipError::new(Path::root().field("tracks"), K::NoTracks));
-        }
+        check_header(spec)?;
         let skeleton = build_skeleton(spec)?;
-
-        let mut timelines: Vec<Timeline> = Vec::new();
-        let mut timeline_of: HashMap<Vec<u32>, u32> = HashMap::new();
-        let mut intern = |times: Vec<f32>| -> u32 {
-            let key: Vec<u32> = times.iter().map(|t| t.to_bits()).collect();
-            *timeline_of.entry(key).or_insert_with(|| {
-                timelines.push(Timeline::new(&times));
-                (timelines.len() - 1) as u32
-            })
-        };
-        let mut seen: HashMap<(usize, Channel), ()> = HashMap::new();
-        let mut base = skeleton.rest().clone();
-        let (mut translations, mut rotations, mut scales) =
-            (Vec3Tracks::default(), QuatTracks::default(), Vec3Tracks::default());
-        let (mut start, mut end) = (f32::INFINITY, f32::NEG_INFINITY);
-        let mut bounds = JointBounds::of_rest(skeleton.rest());
-        let mut translated = Vec::new();
+        let mut timelines = Timelines::default();
         let mut meter = Meter::new(max_work, cancel);
-        for (i, track) in spec.tracks.iter().enumerate() {
-            let path = Path::root().field("tracks").index(i);
-            let joint = skeleton.index_of(&track.joint).ok_or_else(|| {
-                ClipError::new(path.clone().field("joint"), K::UnknownJoint { joint: track.joint.clone() })
-            })?;
-            if seen.insert((joint, track.channel), ()).is_some() {
-                return Err(ClipError::new(
-                    path.field("channel"),
-                    K::DuplicateTrack { joint: track.joint.clone(), channel: track.channel.as_str() },
-                ));
-            }
-            let j = joint;
-            let joint = joint as u32;
-            if track.channel == Channel::Translation {
-                translated.push(joint);
-            }
-            let domain = if track.channel == Channel::Rotation {
-                let Compiled { times, curve, domain } = compile::quat_track(track, &path)?;
-                rotations.push(joint, intern(times), curve, &mut base.rotations[j]);
-                domain
-            } else {
-                let Compiled { times, curve, domain } = compile::vec3_track(track, &path, &mut meter)?;
-                let (list, slot, bound) = match track.channel {
-                    Channel::Scale => (&mut scales, &mut base.scales[j], &mut bounds.scales[j]),
-                    _ => (&mut translations, &mut base.translations[j], &mut bounds.translations[j]),
-                };
-                *bound = curve.max_abs() as f64;
-                list.push(joint, intern(times), curve, slot);
-                domain
-            };
-            start = start.min(domain.0);
-            end = end.max(domain.1);
-            // Durations and clip-time arithmetic are f32 (the summary's `duration`).
-            if !(end - start).is_finite() {
-                return Err(ClipError::new(path.field("times"), K::TimeRangeTooLarge { start, end }));
-            }
-        }
-        bounds.check(&skeleton)?;
+        let mut joints = JointTracks::build(&spec.tracks, &skeleton, &mut timelines, &mut meter)?;
         if simd_groups {
-            translations.group();
-            rotations.group();
-            scales.group();
+            joints.group();
         }
-        let built = Parameters::build(&spec.parameters, &mut meter, &mut intern)?;
-        base.parameters = built.base;
-        if let Some((first, last)) = built.domain {
-            (start, end) = (start.min(first), end.max(last));
-            if !(end - start).is_finite() {
-                let kind = K::TimeRangeTooLarge { start, end };
-                return Err(ClipError::new(Path::root().field("parameters"), kind));
-            }
+        let mut domain = joints.domain;
+        let built = Parameters::build(&spec.parameters, &mut meter, |times| timelines.intern(times))?;
+        joints.base.parameters = built.base;
+        if let Some(range) = built.domain {
+            domain.widen(range);
+            domain.check(Path::root().field("parameters"))?;
         }
-        let ik = match KeyedIk::build(&spec.ik, &skeleton, ik_limits, &mut meter)? {
-            None => None,
-            Some((ik, domain)) => {
-                if let Some((first, last)) = domain {
-                    (start, end) = (start.min(first), end.max(last));
-                }
-                Some(ik)
-            }
-        };
-        if !(end - start).is_finite() {
-            let kind = K::TimeRangeTooLarge { start, end };
-            return Err(ClipError::new(Path::root().field("ik"), kind));
-        }
-
-        let mut events = Vec::with_capacity(spec.events.len());
-        for (i, e) in spec.events.iter().enumerate() {
-            let path = Path::root().field("events").index(i);
-            if !e.time.is_finite() {
-                return Err(ClipError::new(path.field("time"), K::NonFinite));
-            }
-            let chars = e.name.chars().count();
-            if chars == 0 || chars > MAX_NAME_CHARS {
-                return Err(ClipError::new(path.field("name"), K::BadName { max: MAX_NAME_CHARS }));
-            }
-            events.push(Event { time: e.time, name: e.name.clone() });
-        }
-        events.sort_by(|a, b| a.time.total_cmp(&b.time));
-
+        let ik = build_keyed_ik(spec, &skeleton, ik_limits, &mut meter, &mut domain)?;
+        let events = build_events(&spec.events)?;
         Ok(Clip {
             name: spec.name.clone(),
             playback: spec.playback,
-            start,
-            end,
+            start: domain.start,
+            end: domain.end,
             skeleton,
-            timelines,
-            base,
-            translations,
-            rotations,
-            scales,
+            timelines: timelines.list,
+            base: joints.base,
+            translations: joints.translations,
+            rotations: joints.rotations,
+            scales: joints.scales,
             track_count: spec.tracks.len(),
-            translated,
+            translated: joints.translated,
             events,
             ik,
             parameters: built.parameters,
@@ -372,17 +280,18 @@ impl Clip {
             + self.parameters.heap_bytes()
     }
 
-    /// The clip's parameters (SPEC §8): names, widths and where each sits
+    /// The clip's parameters (docs/clip-format.md, “Parameters”): names, widths and where each sits
     /// in [`Pose::parameters`].
     pub fn parameters(&self) -> &ParameterLayout {
         &self.parameters.layout
     }
 
-    /// How many IK constraints each sample solves (SPEC §7, "IK in clips").
+    /// How many IK constraints each sample solves (docs/ik.md, “Keyed targets in clips”).
     pub fn ik_count(&self) -> usize {
         self.ik.as_ref().map_or(0, KeyedIk::len)
     }
 
+    /// The clip's name.
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -392,7 +301,7 @@ impl Clip {
         self.playback
     }
 
-    /// Smallest first key over all tracks (SPEC §1).
+    /// Smallest first key over all tracks (docs/clip-format.md, “Data model”).
     pub fn start(&self) -> f32 {
         self.start
     }
@@ -402,14 +311,17 @@ impl Clip {
         self.end
     }
 
+    /// `end - start`, in seconds.
     pub fn duration(&self) -> f32 {
         self.end - self.start
     }
 
+    /// The skeleton its poses are for.
     pub fn skeleton(&self) -> &Skeleton {
         &self.skeleton
     }
 
+    /// Joints in its skeleton (and in every pose it samples).
     pub fn joint_count(&self) -> usize {
         self.skeleton.len()
     }
@@ -419,6 +331,7 @@ impl Clip {
         self.translated.contains(&(j as u32))
     }
 
+    /// Joint tracks, constant ones included.
     pub fn track_count(&self) -> usize {
         self.track_count
     }
@@ -441,12 +354,12 @@ impl Clip {
     }
 
     /// The clip's time range and the map from request times into it
-    /// (SPEC §2.7's rule at the seams; see [`TimeRange`]).
+    /// (the seam rule of docs/clip-format.md, “Playback modes and time”; see [`TimeRange`]).
     pub fn range(&self) -> TimeRange {
         TimeRange::new(self.start, self.end)
     }
 
-    /// Maps a request time to clip time (SPEC §2.6–2.7): playback first
+    /// Maps a request time to clip time (docs/clip-format.md, 2.6–2.7): playback first
     /// (`once` clamps, `loop` wraps, `ping_pong` reflects), then the ease
     /// warp; a time that rounds to the start or end is exactly there.
     /// Non-finite `t` maps to the start. See [`TimeRange::clip_time`].
@@ -552,6 +465,7 @@ pub struct Sampler {
 }
 
 impl Sampler {
+    /// Empty buffers; they take their size at the first sample.
     pub fn new() -> Self {
         Self::default()
     }
@@ -569,6 +483,202 @@ impl Sampler {
             Space::Model => &self.model,
         }
     }
+}
+
+/// A clip's name, and that it animates something.
+fn check_header(spec: &ClipSpec) -> Result<(), ClipError> {
+    let chars = spec.name.chars().count();
+    if chars == 0 || chars > MAX_NAME_CHARS {
+        return Err(ClipError::new(Path::root().field("name"), K::BadName { max: MAX_NAME_CHARS }));
+    }
+    if spec.tracks.is_empty() && spec.parameters.is_empty() {
+        return Err(ClipError::new(Path::root().field("tracks"), K::NoTracks));
+    }
+    Ok(())
+}
+
+/// A clip's timelines, one per distinct list of key times: tracks keyed at
+/// the same times share one search.
+#[derive(Default)]
+struct Timelines {
+    list: Vec<Timeline>,
+    index: HashMap<Vec<u32>, u32>,
+}
+
+impl Timelines {
+    /// The index of the timeline of `times`, added if it is new.
+    fn intern(&mut self, times: Vec<f32>) -> u32 {
+        let key: Vec<u32> = times.iter().map(|t| t.to_bits()).collect();
+        *self.index.entry(key).or_insert_with(|| {
+            self.list.push(Timeline::new(&times));
+            (self.list.len() - 1) as u32
+        })
+    }
+}
+
+/// The time range a clip's keys cover so far.
+#[derive(Debug, Clone, Copy)]
+struct Domain {
+    start: f32,
+    end: f32,
+}
+
+impl Domain {
+    /// No keys yet: any key widens it.
+    const EMPTY: Domain = Domain { start: f32::INFINITY, end: f32::NEG_INFINITY };
+
+    fn widen(&mut self, (first, last): (f32, f32)) {
+        self.start = self.start.min(first);
+        self.end = self.end.max(last);
+    }
+
+    /// Durations and clip-time arithmetic are f32 (the summary's
+    /// `duration`), so the range must be too; `path` names the field that
+    /// widened it past.
+    fn check(self, path: Path) -> Result<(), ClipError> {
+        if (self.end - self.start).is_finite() {
+            return Ok(());
+        }
+        Err(ClipError::new(path, K::TimeRangeTooLarge { start: self.start, end: self.end }))
+    }
+}
+
+/// A clip's joint tracks by channel and kind, and what they make of it: the
+/// base pose (rest pose with constant tracks applied), the translated
+/// joints, the time range.
+struct JointTracks {
+    base: Pose,
+    translations: Vec3Tracks,
+    rotations: QuatTracks,
+    scales: Vec3Tracks,
+    translated: Vec<u32>,
+    domain: Domain,
+}
+
+impl JointTracks {
+    /// Checks and compiles `tracks` (paths `/tracks/i/...`) in order, then
+    /// refuses model-space transforms that could overflow.
+    fn build(
+        tracks: &[TrackSpec],
+        skeleton: &Skeleton,
+        timelines: &mut Timelines,
+        meter: &mut Meter<'_>,
+    ) -> Result<JointTracks, ClipError> {
+        let mut out = JointTracks {
+            base: skeleton.rest().clone(),
+            translations: Vec3Tracks::default(),
+            rotations: QuatTracks::default(),
+            scales: Vec3Tracks::default(),
+            translated: Vec::new(),
+            domain: Domain::EMPTY,
+        };
+        let mut bounds = JointBounds::of_rest(skeleton.rest());
+        let mut seen = HashSet::new();
+        for (i, track) in tracks.iter().enumerate() {
+            let path = Path::root().field("tracks").index(i);
+            let joint = track_joint(track, skeleton, &path, &mut seen)?;
+            let domain = out.add(track, joint, &path, timelines, meter, &mut bounds)?;
+            out.domain.widen(domain);
+            out.domain.check(path.field("times"))?;
+        }
+        bounds.check(skeleton)?;
+        Ok(out)
+    }
+
+    /// Compiles `track` of joint `j` into its list and records its bound;
+    /// returns the time range its keys cover.
+    fn add(
+        &mut self,
+        track: &TrackSpec,
+        j: usize,
+        path: &Path,
+        timelines: &mut Timelines,
+        meter: &mut Meter<'_>,
+        bounds: &mut JointBounds,
+    ) -> Result<(f32, f32), ClipError> {
+        let joint = j as u32;
+        if track.channel == Channel::Translation {
+            self.translated.push(joint);
+        }
+        if track.channel == Channel::Rotation {
+            let Compiled { times, curve, domain } = compile::quat_track(track, path)?;
+            self.rotations.push(joint, timelines.intern(times), curve, &mut self.base.rotations[j]);
+            return Ok(domain);
+        }
+        let Compiled { times, curve, domain } = compile::vec3_track(track, path, meter)?;
+        let (list, slot, bound) = match track.channel {
+            Channel::Scale => (&mut self.scales, &mut self.base.scales[j], &mut bounds.scales[j]),
+            _ => (&mut self.translations, &mut self.base.translations[j], &mut bounds.translations[j]),
+        };
+        *bound = curve.max_abs() as f64;
+        list.push(joint, timelines.intern(times), curve, slot);
+        Ok(domain)
+    }
+
+    /// Moves tracks that share key times into SIMD groups.
+    fn group(&mut self) {
+        self.translations.group();
+        self.rotations.group();
+        self.scales.group();
+    }
+}
+
+/// The joint `track` animates, refusing an unknown joint and a second
+/// track of the same joint and channel.
+fn track_joint(
+    track: &TrackSpec,
+    skeleton: &Skeleton,
+    path: &Path,
+    seen: &mut HashSet<(usize, Channel)>,
+) -> Result<usize, ClipError> {
+    let joint = skeleton
+        .index_of(&track.joint)
+        .ok_or_else(|| ClipError::new(path.clone().field("joint"), K::UnknownJoint { joint: track.joint.clone() }))?;
+    if !seen.insert((joint, track.channel)) {
+        let kind = K::DuplicateTrack { joint: track.joint.clone(), channel: track.channel.as_str() };
+        return Err(ClipError::new(path.clone().field("channel"), kind));
+    }
+    Ok(joint)
+}
+
+/// The clip's keyed IK, widening `domain` by the times of its tracks.
+fn build_keyed_ik(
+    spec: &ClipSpec,
+    skeleton: &Skeleton,
+    limits: &IkLimits,
+    meter: &mut Meter<'_>,
+    domain: &mut Domain,
+) -> Result<Option<KeyedIk>, ClipError> {
+    let ik = match KeyedIk::build(&spec.ik, skeleton, limits, meter)? {
+        None => None,
+        Some((ik, range)) => {
+            if let Some(range) = range {
+                domain.widen(range);
+            }
+            Some(ik)
+        }
+    };
+    domain.check(Path::root().field("ik"))?;
+    Ok(ik)
+}
+
+/// The clip's events, checked and sorted by time (stably: simultaneous
+/// events keep their order).
+fn build_events(specs: &[EventSpec]) -> Result<Vec<Event>, ClipError> {
+    let mut events = Vec::with_capacity(specs.len());
+    for (i, e) in specs.iter().enumerate() {
+        let path = Path::root().field("events").index(i);
+        if !e.time.is_finite() {
+            return Err(ClipError::new(path.field("time"), K::NonFinite));
+        }
+        let chars = e.name.chars().count();
+        if chars == 0 || chars > MAX_NAME_CHARS {
+            return Err(ClipError::new(path.field("name"), K::BadName { max: MAX_NAME_CHARS }));
+        }
+        events.push(Event { time: e.time, name: e.name.clone() });
+    }
+    events.sort_by(|a, b| a.time.total_cmp(&b.time));
+    Ok(events)
 }
 
 /// Per joint, the largest coordinate magnitude of its local translation
@@ -619,8 +729,6 @@ impl JointBounds {
     }
 }
 
-/// The skeleton of `spec`, or one root joint per animated joint in order of
-/// first appearance when it has none (SPEC §1).
 /// A joint name: 1 to [`MAX_NAME_CHARS`] characters, as clip names.
 fn check_joint_name(name: &str, path: Path) -> Result<(), ClipError> {
     if name.is_empty() {
@@ -633,6 +741,8 @@ fn check_joint_name(name: &str, path: Path) -> Result<(), ClipError> {
     Ok(())
 }
 
+/// The skeleton of `spec`, or one root joint per animated joint in order of
+/// first appearance when it has none (docs/clip-format.md, “Data model”).
 fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
     let Some(skel) = &spec.skeleton else {
         let mut names: Vec<String> = Vec::new();
@@ -708,7 +818,7 @@ fn on_cycle(joints: &[super::spec::JointSpec], index: &HashMap<&str, usize>, j: 
 }
 
 /// The times `start + k/fps` for `k = 0, 1, …` up to and including `end`
-/// (a `start,end,fps` sample request, SPEC §3). The caller bounds the count
+/// (a `start,end,fps` sample request). The caller bounds the count
 /// with [`frame_count`] before asking for them.
 pub fn frame_times(start: f64, end: f64, fps: f64) -> impl Iterator<Item = f64> {
     (0..frame_count(start, end, fps)).map(move |k| start + k as f64 / fps)

@@ -1,6 +1,6 @@
 //! From a [`TrackSpec`] to its runtime curve: every per-track rule of
-//! SPEC §1–2 is checked here, once, and every control point is computed
-//! here, once, in `f64`.
+//! docs/clip-format.md (“Data model”, “Evaluation math”) is checked here, once,
+//! and every control point is computed here, once, in `f64`.
 //!
 //! Catmull-Rom and the uniform B-spline are written once for vectors and
 //! quaternions through [`Key::offset`], the lecture's "hack by association":
@@ -118,7 +118,8 @@ fn check_finite(keys: &Keys, path: &Path) -> Result<(), ClipError> {
     }
 }
 
-/// Normalises one rotation key, refusing near-zero ones (SPEC §2.3).
+/// Normalises one rotation key, refusing near-zero ones (docs/clip-format.md,
+/// “Quaternion Catmull-Rom”).
 pub(crate) fn unit_quat(v: Vec4, path: &Path) -> Result<DQuat, ClipError> {
     let d = v.as_dvec4();
     let norm = d.length();
@@ -322,7 +323,7 @@ fn same_vec3(a: DVec3, b: DVec3) -> bool {
 /// A key type Catmull-Rom and the B-spline can be built on.
 pub trait Key: Copy {
     /// `base + s·(to − from)` for vectors; `pow(short(to·from⁻¹), s)·base`
-    /// for quaternions (SPEC §2.2–2.3).
+    /// for quaternions (docs/clip-format.md, “Catmull-Rom” and “Quaternion Catmull-Rom”).
     fn offset(base: Self, to: Self, from: Self, s: f64) -> Self;
 }
 
@@ -338,10 +339,10 @@ impl Key for DQuat {
     }
 }
 
-/// Bezier control points `[c_i, d_i, e_i, c_{i+1}]` of a cardinal spline
-/// with tension `k` through `c` at times `t` (at least 2 keys), with the
-/// phantom keys of `ends` (SPEC §2.2, §2.4). Phantom ends drop the first
-/// and last key from the interpolated ones.
+/// Bezier control points `[c_i, d_i, e_i, c_{i+1}]` of a cardinal spline with
+/// tension `k` through `c` at times `t` (at least 2 keys), with the phantom
+/// keys of `ends` (docs/clip-format.md, “Catmull-Rom” and “End conditions”).
+/// Phantom ends drop the first and last key from the interpolated ones.
 pub fn catmull_rom<T: Key>(c: &[T], t: &[f64], ends: Ends, k: f64) -> Vec<[T; 4]> {
     let n = c.len() - 1;
     // Extended keys: x[0] = c_{-1}, x[1..=m] = the interpolated keys, x[m+1] = c_{m}.
@@ -395,15 +396,16 @@ fn spline<T: Key>(spec: &TrackSpec, c: &[T], t: &[f64], ends: Ends) -> Vec<[T; 4
     }
 }
 
-/// Bezier control points of the lecture's uniform cubic B-spline with the
-/// keys `c` as its control points (at least 2; at least 4 for phantom ends),
-/// by the lecture's conversion (SPEC §2.5): segment `i` from `c_{i-1}..c_{i+2}`,
-/// `b_1`, `b_2` at thirds of `c_i → c_{i+1}`, `b_0` and `b_3` halfway to the
-/// neighbouring segments' thirds (so adjacent segments share their joint and
-/// its tangent line). For quaternions every `lerp` is the short-way slerp.
+/// Bezier control points of the lecture's uniform cubic B-spline with the keys
+/// `c` as its control points (at least 2; at least 4 for phantom ends), by the
+/// lecture's conversion (docs/clip-format.md, “Other interpolation modes”):
+/// segment `i` from `c_{i-1}..c_{i+2}`, `b_1`, `b_2` at thirds of `c_i →
+/// c_{i+1}`, `b_0` and `b_3` halfway to the neighbouring segments' thirds (so
+/// adjacent segments share their joint and its tangent line). For quaternions
+/// every `lerp` is the short-way slerp.
 ///
 /// Key times play no part: each segment is the uniform basis in its own `u`,
-/// which is exactly what the SPEC asks for on non-uniform keys. Phantom ends
+/// which is exactly what docs/clip-format.md asks for on non-uniform keys. Phantom ends
 /// use the first and last keys as control points only; reflect ends mirror
 /// (`2c_0 − c_1`; rotations `c_0·c_1⁻¹·c_0`), which makes the curve start at
 /// `c_0` and end at `c_n`;

@@ -1,13 +1,13 @@
 //! Compiled curves: the runtime form of one track, evaluated at a [`Span`].
 //!
-//! Every cubic mode is stored as per-segment Bezier control points
-//! `[c_i, d_i, e_i, c_{i+1}]` (SPEC §2.1), computed once by `compile`:
-//! Catmull-Rom (§2.2, §2.3), cubic Hermite (§2.5, `d = v_i + h·b_i/3`,
-//! `e = v_{i+1} − h·a_{i+1}/3`, the same cubic) and constant-speed paths
-//! (§2.6). Evaluation is then a fixed, branch-light sequence of arithmetic:
-//! Bernstein weights for vectors, three levels of slerp de Casteljau for
-//! rotations. Nothing here allocates or fails. `tracks` stores these by
-//! kind for the sampling loop.
+//! Every cubic mode is stored as per-segment Bezier control points `[c_i, d_i,
+//! e_i, c_{i+1}]` (docs/clip-format.md, “Cubic Bezier by de Casteljau”),
+//! computed once by `compile`: Catmull-Rom (§2.2, §2.3 there), cubic Hermite
+//! (§2.5, `d = v_i + h·b_i/3`, `e = v_{i+1} − h·a_{i+1}/3`, the same cubic) and
+//! constant-speed paths (§2.6). Evaluation is then a fixed, branch-light
+//! sequence of arithmetic: Bernstein weights for vectors, three levels of slerp
+//! de Casteljau for rotations. Nothing here allocates or fails. `tracks` stores
+//! these by kind for the sampling loop.
 
 use glam::{Quat, Vec3A, Vec4};
 
@@ -108,18 +108,19 @@ pub enum QuatCurve {
     Constant(Quat),
     Step(Box<[Quat]>),
     Slerp(SlerpCurve),
-    /// Catmull-Rom by slerp de Casteljau (SPEC §2.3).
+    /// Catmull-Rom by slerp de Casteljau (docs/clip-format.md, “Quaternion Catmull-Rom”).
     SlerpBezier(Box<[QuatSegment]>),
     /// glTF CUBICSPLINE: a cubic on the 4-vectors, then normalised.
     Hermite(Box<[[Vec4; 4]]>),
 }
 
-/// Linear rotation keys (SPEC §2.5), each pair the short way, and per
-/// segment the series of its slerp weights: the angle between two keys is
-/// fixed, so `sin(uθ)/sin θ` is a polynomial in `u` computed once, and a
-/// sample needs no dot product, tier choice or normalisation. A pair wider
-/// than [`SERIES_MAX_ANGLE`](super::quat::SERIES_MAX_ANGLE) has a zero
-/// series and takes [`slerp_fast`].
+/// Linear rotation keys (docs/clip-format.md, “Other interpolation modes”),
+/// each pair the short way, and per segment the series of its slerp weights:
+/// the angle between two keys is fixed, so `sin(uθ)/sin θ` is a polynomial in
+/// `u` computed once, and a sample needs no dot product, tier choice or
+/// normalisation. A pair wider than
+/// [`SERIES_MAX_ANGLE`](super::quat::SERIES_MAX_ANGLE) has a zero series and
+/// takes [`slerp_fast`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlerpCurve {
     pub keys: Box<[Quat]>,
@@ -162,18 +163,20 @@ pub fn bezier4(p: &[Vec4; 4], u: f32) -> Vec4 {
     p[0] * b.x + p[1] * b.y + p[2] * b.z + p[3] * b.w
 }
 
-/// SPEC §2.5: `c_i` on `[t_i, t_{i+1})`; at and after the last key, `c_n`.
+/// `step` (docs/clip-format.md, “Other interpolation modes”): `c_i` on `[t_i,
+/// t_{i+1})`; at and after the last key, `c_n`.
 #[inline(always)]
 pub fn step<T: Copy>(keys: &[T], s: Span) -> T {
     let i = s.index as usize;
     if s.u >= 1.0 { keys[i + 1] } else { keys[i] }
 }
 
-/// The three-level slerp de Casteljau of SPEC §2.3 (equations 1–6 with
-/// `lerp` replaced by short-way `slerp`): six slerps, whose weights come
-/// from the segment's stored series (level 1) and two polynomial evaluations
-/// of four lanes each (levels 2 and 3). Always inlined: it is the body of
-/// the rotation loop, whole-pose and part-pose sampling alike.
+/// The three-level slerp de Casteljau (docs/clip-format.md, “Quaternion
+/// Catmull-Rom”; equations 1–6 with `lerp` replaced by short-way `slerp`): six
+/// slerps, whose weights come from the segment's stored series (level 1) and
+/// two polynomial evaluations of four lanes each (levels 2 and 3). Always
+/// inlined: it is the body of the rotation loop, whole-pose and part-pose
+/// sampling alike.
 #[inline(always)]
 pub fn slerp_bezier(seg: &QuatSegment, u: f32) -> Quat {
     match seg.tier {

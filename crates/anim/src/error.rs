@@ -1,7 +1,7 @@
 //! Why a [`ClipSpec`](super::ClipSpec) was refused, and where.
 //!
 //! Every error names the offending place as a path of field names and
-//! indices that mirrors SPEC §1 (`tracks`, 3, `times`, 5), so the edge can
+//! indices that mirrors the clip document (`tracks`, 3, `times`, 5), so the edge can
 //! render a JSON pointer (`/tracks/3/times/5`) without the core knowing JSON.
 
 use std::fmt;
@@ -17,6 +17,7 @@ pub struct ClipError {
 }
 
 impl ClipError {
+    /// A refusal of the field at `path`.
     pub fn new(path: Path, kind: ClipErrorKind) -> Self {
         ClipError { path, kind }
     }
@@ -104,7 +105,7 @@ pub enum ClipErrorKind {
         spent: u64,
     },
     BuildCancelled,
-    /// An `ik` constraint breaks a rule of SPEC §7.
+    /// An `ik` constraint breaks a rule of docs/ik.md.
     Ik(IkErrorKind),
     BadParameterName {
         max: usize,

@@ -41,6 +41,7 @@ pub enum LintCode {
 }
 
 impl LintCode {
+    /// The code as reported (`rotation_not_unit`, …).
     pub fn as_str(self) -> &'static str {
         match self {
             LintCode::RotationNotUnit => "rotation_not_unit",

@@ -1,25 +1,25 @@
-//! Parameters (SPEC §8): named keyed values that are not joints — morph
+//! Parameters (docs/clip-format.md, “Parameters”): named keyed values that are not joints — morph
 //! weights, a camera's field of view, a light's intensity.
 //!
 //! A parameter of width `W` is compiled as `⌈W/3⌉` translation-like curves
-//! (components `3c..3c+3`, the last one padded with zeros), so it is checked
-//! by the same rules, its control points computed by the same `f64` code,
-//! and it samples through the same track lists as translations: per
-//! component exactly SPEC §2, at the same cost per three numbers. The pose
-//! holds them as `Vec3A` entries ([`Pose::parameters`]); [`ParameterLayout`]
-//! says which entries and lanes are whose.
+//! (components `3c..3c+3`, the last one padded with zeros), so it is checked by
+//! the same rules, its control points computed by the same `f64` code, and it
+//! samples through the same track lists as translations: per component exactly
+//! as docs/clip-format.md, “Evaluation math”, at the same cost per three
+//! numbers. The pose holds them as `Vec3A` entries ([`Pose::parameters`]);
+//! [`ParameterLayout`] says which entries and lanes are whose.
 
 use std::collections::HashMap;
 
 use glam::{Vec3, Vec3A};
 
 use super::arc::Meter;
-use super::clip::{MAX_NAME_CHARS, vec_bytes};
 use super::compile::{self, Compiled};
 use super::error::{ClipError, ClipErrorKind as K};
+use super::heap::vec_bytes;
 use super::path::Path;
 use super::skeleton::Pose;
-use super::spec::{Channel, Keys, ParameterSpec, TrackSpec};
+use super::spec::{Channel, Keys, MAX_NAME_CHARS, ParameterSpec, TrackSpec};
 use super::tracks::{Spans, Vec3Tracks};
 
 /// The widest parameter key (glTF meshes rarely have more morph targets).
@@ -35,22 +35,27 @@ pub struct ParameterLayout {
 }
 
 impl ParameterLayout {
+    /// The number of parameters.
     pub fn len(&self) -> usize {
         self.names.len()
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.names.is_empty()
     }
 
+    /// Their names, in order.
     pub fn names(&self) -> &[String] {
         &self.names
     }
 
+    /// Their widths (numbers per key), in order.
     pub fn widths(&self) -> &[u32] {
         &self.widths
     }
 
+    /// The index of the parameter called `name`.
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
     }
@@ -61,6 +66,9 @@ impl ParameterLayout {
     }
 
     /// The entries of parameter `p`.
+    ///
+    /// # Panics
+    /// If there is no parameter `p`.
     pub fn range(&self, p: usize) -> std::ops::Range<usize> {
         self.first[p] as usize..self.first[p + 1] as usize
     }
@@ -114,6 +122,9 @@ pub(crate) struct Built {
 impl Parameters {
     /// Checks and compiles `specs` (paths `/parameters/i/...`), interning
     /// their key times with `intern`.
+    ///
+    /// # Errors
+    /// The first rule a parameter breaks, at its path under `parameters`.
     pub fn build(
         specs: &[ParameterSpec],
         meter: &mut Meter<'_>,

@@ -19,20 +19,24 @@ pub enum Step {
 pub struct Path(pub Vec<Step>);
 
 impl Path {
+    /// The document itself (`/`).
     pub fn root() -> Self {
         Path(Vec::new())
     }
 
+    /// This path, then field `name`.
     pub fn field(mut self, name: &'static str) -> Self {
         self.0.push(Step::Field(name));
         self
     }
 
+    /// This path, then list index `i`.
     pub fn index(mut self, i: usize) -> Self {
         self.0.push(Step::Index(i));
         self
     }
 
+    /// This path, then map key `key`.
     pub fn key(mut self, key: &str) -> Self {
         self.0.push(Step::Key(key.to_owned()));
         self

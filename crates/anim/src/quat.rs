@@ -1,5 +1,5 @@
-//! Quaternion tools for SPEC §2.3: the short-way choice, powers, slerp and
-//! hemisphere continuity.
+//! Quaternion tools (docs/clip-format.md, “Quaternion Catmull-Rom”): the
+//! short-way choice, powers, slerp and hemisphere continuity.
 //!
 //! Two precisions live here on purpose. `Clip::build` computes control
 //! points once, in `f64` ([`DQuat`]), so the stored curve is as exact as
@@ -8,12 +8,12 @@
 //! which needs no `acos`, `sin` or division and evaluates four slerp weights
 //! in one SIMD register. On the pairs it is used for (see
 //! [`FAST_SLERP_MIN_COS`]) its error is below 2e-8, far inside the 1e-5
-//! bound of SPEC §2.9; wider pairs take the exact formula.
+//! bound of docs/clip-format.md, “Accuracy”; wider pairs take the exact formula.
 
 use glam::{DQuat, Quat, Vec4};
 
 /// `q` if `q.w >= 0`, else `-q`: the conditional negation that makes a power
-/// go the short way (SPEC §2.3).
+/// go the short way (docs/clip-format.md, “Quaternion Catmull-Rom”).
 #[inline]
 pub fn short(q: DQuat) -> DQuat {
     if q.w >= 0.0 { q } else { -q }

@@ -1,10 +1,13 @@
-//! Joints, their hierarchy and rest pose; local → model space (SPEC §2.8).
+//! Joints, their hierarchy and rest pose; local → model space
+//! (docs/clip-format.md, “Skeleton and spaces”).
 //!
-//! Joints are stored parents-first (SPEC §1 requires each parent to be an
-//! earlier joint), so local-to-model is one linear pass with no recursion
+//! Joints are stored parents-first (docs/clip-format.md, “Data model”,
+//! requires each parent to be an earlier joint), so local-to-model is one linear pass with no recursion
 //! and no stack, as in ozz-animation.
 
 use glam::{Mat4, Quat, Vec3A};
+
+use super::heap::vec_bytes;
 
 /// Joint transforms in structure-of-arrays form, caller-owned so sampling
 /// never allocates. Index `j` of each array is joint `j` of the skeleton.
@@ -13,7 +16,7 @@ pub struct Pose {
     pub translations: Vec<Vec3A>,
     pub rotations: Vec<Quat>,
     pub scales: Vec<Vec3A>,
-    /// The clip's parameters (SPEC §8), three components per entry: a
+    /// The clip's parameters (docs/clip-format.md, “Parameters”), three components per entry: a
     /// parameter of width `W` takes `⌈W/3⌉` entries, its last one padded
     /// with zeros (see `ParameterLayout`), so they are sampled and blended
     /// with the translations' code. Empty for a clip without parameters.
@@ -31,17 +34,18 @@ impl Pose {
         }
     }
 
+    /// The number of joints.
     pub fn len(&self) -> usize {
         self.translations.len()
     }
 
+    /// Whether there are no joints.
     pub fn is_empty(&self) -> bool {
         self.translations.is_empty()
     }
 
     /// Bytes of the three arrays' allocations.
     pub fn heap_bytes(&self) -> usize {
-        use super::clip::vec_bytes;
         vec_bytes(&self.translations)
             + vec_bytes(&self.rotations)
             + vec_bytes(&self.scales)
@@ -78,13 +82,13 @@ impl Skeleton {
         Skeleton { names, parents, rest, inverse_binds }
     }
 
+    /// The number of joints.
     pub fn len(&self) -> usize {
         self.names.len()
     }
 
     /// Bytes of its names, parents, rest pose and inverse binds.
     pub fn heap_bytes(&self) -> usize {
-        use super::clip::vec_bytes;
         let names = self.names.iter().map(String::capacity).sum::<usize>();
         vec_bytes(&self.names)
             + names
@@ -93,19 +97,21 @@ impl Skeleton {
             + self.inverse_binds.as_ref().map_or(0, vec_bytes)
     }
 
+    /// Whether there are no joints.
     pub fn is_empty(&self) -> bool {
         self.names.is_empty()
     }
 
+    /// Joint names, in joint order.
     pub fn names(&self) -> &[String] {
         &self.names
     }
 
+    /// The index of the joint called `name`.
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
     }
 
-    /// The parent of joint `j`, if any.
     /// Whether `other` has the same joints, by name and parent, in the same
     /// order: poses of one fit the other.
     pub fn same_joints(&self, other: &Skeleton) -> bool {
@@ -114,27 +120,39 @@ impl Skeleton {
             && (0..self.len()).all(|j| self.parent(j) == other.parent(j))
     }
 
+    /// The parent of joint `j`, if any.
+    ///
+    /// # Panics
+    /// If `j` is not a joint of this skeleton.
     pub fn parent(&self, j: usize) -> Option<usize> {
         let p = self.parents[j];
         (p != NO_PARENT).then_some(p as usize)
     }
 
+    /// The rest pose (local space).
     pub fn rest(&self) -> &Pose {
         &self.rest
     }
 
     /// Joint `j`'s inverse bind matrix, when the clip has a skin.
+    ///
+    /// # Panics
+    /// If the clip has a skin and `j` is not a joint of this skeleton.
     pub fn inverse_bind(&self, j: usize) -> Option<&Mat4> {
         self.inverse_binds.as_ref().map(|b| &b[j])
     }
 
+    /// Whether the clip has a skin (inverse bind matrices).
     pub fn has_inverse_binds(&self) -> bool {
         self.inverse_binds.is_some()
     }
 
-    /// Composes local transforms down the hierarchy (SPEC §2.8):
+    /// Composes local transforms down the hierarchy (docs/clip-format.md, “Skeleton and spaces”):
     /// `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m = q_p·q_l`, `s_m = s_p ⊙ s_l`.
     /// Exact for uniform scale; use [`Skeleton::model_matrices`] otherwise.
+    ///
+    /// # Panics
+    /// If `local` has fewer joints than the skeleton.
     pub fn to_model(&self, local: &Pose, model: &mut Pose) {
         model.copy_from(local);
         let (t, q, s) = (&mut model.translations, &mut model.rotations, &mut model.scales);
@@ -151,6 +169,9 @@ impl Skeleton {
     }
 
     /// Column-major model matrices `M_j = M_parent · T·R·S`.
+    ///
+    /// # Panics
+    /// If `local` has fewer joints than the skeleton.
     pub fn model_matrices(&self, local: &Pose, out: &mut Vec<Mat4>) {
         out.clear();
         for (j, &p) in self.parents.iter().enumerate() {
@@ -165,6 +186,9 @@ impl Skeleton {
 
     /// Skinning matrices `M_j · invBind_j`; `false` (and `out` untouched
     /// beyond the model matrices) when the clip has no inverse binds.
+    ///
+    /// # Panics
+    /// If `local` has fewer joints than the skeleton.
     pub fn skinning_matrices(&self, local: &Pose, out: &mut Vec<Mat4>) -> bool {
         let Some(binds) = &self.inverse_binds else { return false };
         self.model_matrices(local, out);

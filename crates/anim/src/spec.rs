@@ -1,4 +1,5 @@
-//! The authoring form of a clip (SPEC §1): what users and importers hand in.
+//! The authoring form of a clip (docs/clip-format.md, “Data model”): what users
+//! and importers hand in.
 //!
 //! These types hold data as given, unchecked. [`crate::Clip::build`]
 //! is the only way from here to something that can be sampled, and it
@@ -9,6 +10,9 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 
 use super::ik::IkSpec;
 
+/// Longest accepted clip or event name, in characters.
+pub const MAX_NAME_CHARS: usize = 256;
+
 /// A clip as authored: a name, an optional skeleton, tracks, events and IK
 /// constraints solved at every sample.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -18,16 +22,17 @@ pub struct ClipSpec {
     pub tracks: Vec<TrackSpec>,
     pub events: Vec<EventSpec>,
     pub playback: Playback,
-    /// SPEC §7 "IK in clips".
+    /// IK keyed in the clip (docs/ik.md, “Keyed targets in clips”).
     pub ik: Vec<KeyedIkSpec>,
-    /// SPEC §8: named tracks that are not joints (morph weights, a
-    /// camera's field of view).
+    /// Named tracks that are not joints (morph weights, a camera's field of
+    /// view): docs/clip-format.md, “Parameters: keys that are not joints”.
     pub parameters: Vec<ParameterSpec>,
 }
 
-/// A named parameter track (SPEC §8): keys of one width `1..=256`,
-/// interpolated per component as a translation track is (SPEC §2). Rows are
-/// kept as given so the core can name the row and component at fault.
+/// A named parameter track (docs/clip-format.md, “Parameters”): keys of one
+/// width `1..=256`, interpolated per component as a translation track is
+/// (docs/clip-format.md, “Evaluation math”). Rows are kept as given so the core
+/// can name the row and component at fault.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParameterSpec {
     pub name: String,
@@ -46,7 +51,8 @@ pub struct ParameterSpec {
 }
 
 impl ParameterSpec {
-    /// A parameter with the defaults of SPEC §8 for everything but its keys.
+    /// A parameter with the documented defaults for everything but its keys
+    /// (docs/clip-format.md, “Parameters: keys that are not joints”).
     pub fn new(name: &str, interpolation: Interpolation, times: Vec<f32>, values: Vec<Vec<f32>>) -> Self {
         ParameterSpec {
             name: name.to_owned(),
@@ -116,7 +122,8 @@ pub struct TrackSpec {
 }
 
 impl TrackSpec {
-    /// A track with the defaults of SPEC §1 for everything but its keys.
+    /// A track with the documented defaults for everything but its keys
+    /// (docs/clip-format.md, “Data model”).
     pub fn new(joint: &str, channel: Channel, interpolation: Interpolation, times: Vec<f32>, values: Keys) -> Self {
         TrackSpec {
             joint: joint.to_owned(),
@@ -142,6 +149,7 @@ pub enum Keys {
 }
 
 impl Keys {
+    /// The number of keys.
     pub fn len(&self) -> usize {
         match self {
             Keys::Vec3(v) => v.len(),
@@ -149,10 +157,12 @@ impl Keys {
         }
     }
 
+    /// Whether there are no keys.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
+    /// Numbers per key (3 or 4).
     pub fn width(&self) -> usize {
         match self {
             Keys::Vec3(_) => 3,
@@ -171,6 +181,7 @@ pub enum Channel {
 impl Channel {
     pub const ALL: [Channel; 3] = [Channel::Translation, Channel::Rotation, Channel::Scale];
 
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Channel::Translation => "translation",
@@ -194,13 +205,15 @@ pub enum Interpolation {
     Linear,
     CatmullRom,
     CubicHermite,
-    /// The lecture's uniform cubic B-spline (SPEC §2.5): approximating and
-    /// C2, for smoothing motion capture; stored as Bezier segments like
-    /// Catmull-Rom, so it samples at the same cost.
+    /// The lecture's uniform cubic B-spline (docs/clip-format.md, “Other
+    /// interpolation modes”): approximating and C2, for smoothing motion
+    /// capture; stored as Bezier segments like Catmull-Rom, so it samples at
+    /// the same cost.
     BSpline,
 }
 
 impl Interpolation {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Interpolation::Step => "step",
@@ -212,7 +225,8 @@ impl Interpolation {
     }
 }
 
-/// End conditions of a Catmull-Rom or B-spline track (SPEC §2.4, §2.5).
+/// End conditions of a Catmull-Rom or B-spline track (docs/clip-format.md, “End
+/// conditions”, “Other interpolation modes”).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Ends {
     #[default]
@@ -223,6 +237,7 @@ pub enum Ends {
 }
 
 impl Ends {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Ends::Reflect => "reflect",
@@ -233,7 +248,7 @@ impl Ends {
     }
 }
 
-/// How a translation track moves along its path (SPEC §2.6).
+/// How a translation track moves along its path (docs/clip-format.md, “Speed control”).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Speed {
     /// Keys are reached at their times.
@@ -249,7 +264,7 @@ pub struct EventSpec {
     pub name: String,
 }
 
-/// What happens outside the clip's time range (SPEC §2.7).
+/// What happens outside the clip's time range (docs/clip-format.md, “Playback modes and time”).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Playback {
     #[default]
@@ -259,6 +274,7 @@ pub enum Playback {
 }
 
 impl Playback {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Playback::Once => "once",
@@ -268,7 +284,7 @@ impl Playback {
     }
 }
 
-/// Request-level time warp over normalised clip time (SPEC §2.6).
+/// Request-level time warp over normalised clip time (docs/clip-format.md, “Speed control”).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Ease {
     #[default]
@@ -279,6 +295,7 @@ pub enum Ease {
 }
 
 impl Ease {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Ease::Linear => "linear",
@@ -309,6 +326,7 @@ pub enum Space {
 }
 
 impl Space {
+    /// The name documents and requests use.
     pub fn as_str(self) -> &'static str {
         match self {
             Space::Local => "local",

@@ -1,4 +1,4 @@
-//! Request time → clip time (SPEC §2.6–2.7): the playback modes, the ease
+//! Request time → clip time (docs/clip-format.md, 2.6–2.7): the playback modes, the ease
 //! warp, and the rule at the seams.
 //!
 //! A clip keeps its times in `f32`; requests arrive in `f64`. A request
@@ -32,10 +32,12 @@ impl TimeRange {
         TimeRange { start, end }
     }
 
+    /// The first key's time.
     pub fn start(self) -> f32 {
         self.start
     }
 
+    /// The last key's time.
     pub fn end(self) -> f32 {
         self.end
     }
@@ -85,7 +87,7 @@ impl TimeRange {
         ((f64::from(self.start) + position) as f32).clamp(self.start, self.end)
     }
 
-    /// Maps request time `t` to clip time (SPEC §2.6–2.7): playback first
+    /// Maps request time `t` to clip time (docs/clip-format.md, 2.6–2.7): playback first
     /// (`once` clamps, `loop` wraps, `ping_pong` reflects), then the ease.
     /// A non-finite `t`, or an empty range, maps to the start.
     #[inline]

@@ -90,6 +90,7 @@ impl Timeline {
         uniform.then_some((times[0], reciprocal(h as f32)))
     }
 
+    /// The number of keys.
     pub fn len(&self) -> usize {
         self.keys.len()
     }
@@ -99,26 +100,39 @@ impl Timeline {
         std::mem::size_of_val(&*self.keys) + self.buckets.as_ref().map_or(0, |(_, _, b)| std::mem::size_of_val(&**b))
     }
 
+    /// Whether it has no keys.
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
     }
 
     /// The time of key `i`.
+    ///
+    /// # Panics
+    /// If there is no key `i`.
     pub fn time(&self, i: usize) -> f32 {
         self.keys[i][0]
     }
 
+    /// The first key's time.
+    ///
+    /// # Panics
+    /// On an empty timeline.
     pub fn first(&self) -> f32 {
         self.keys[0][0]
     }
 
+    /// The last key's time.
+    ///
+    /// # Panics
+    /// On an empty timeline.
     pub fn last(&self) -> f32 {
         self.keys[self.keys.len() - 1][0]
     }
 
-    /// The segment holding `t`, clamped outside the keys (SPEC §2: a track
-    /// holds its end values; at `t = t_n` the last segment with `u = 1`).
-    /// `hint` is the caller's last answer and is updated.
+    /// The segment holding `t`, clamped outside the keys (docs/clip-format.md,
+    /// “Evaluation math”: a track holds its end values; at `t = t_n` the last
+    /// segment with `u = 1`). `hint` is the caller's last answer and is
+    /// updated.
     #[inline]
     pub fn locate(&self, t: f32, hint: &mut u32) -> Span {
         let keys = &*self.keys;

@@ -8,6 +8,7 @@
 use glam::{Quat, Vec3A, Vec4};
 
 use super::curve::{ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
+use super::heap::vec_bytes;
 use super::soa::{Lanes, QuatGroup, QuatSegment4, Vec3Group};
 use super::timeline::Span;
 
@@ -19,7 +20,7 @@ pub(crate) struct Track<C> {
     pub curve: C,
 }
 
-/// Bezier segments walked at constant speed (SPEC §2.6).
+/// Bezier segments walked at constant speed (docs/clip-format.md, “Speed control”).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ArcCurve {
     segments: Box<[[Vec3A; 4]]>,
@@ -63,7 +64,7 @@ pub(crate) struct Gathered {
 
 /// Bytes of a track list: the list, and each track's curve arrays.
 fn list_bytes<C>(tracks: &Vec<Track<C>>, curve: impl Fn(&C) -> usize) -> usize {
-    super::clip::vec_bytes(tracks) + tracks.iter().map(|t| curve(&t.curve)).sum::<usize>()
+    vec_bytes(tracks) + tracks.iter().map(|t| curve(&t.curve)).sum::<usize>()
 }
 
 fn slice_bytes<T>(s: &[T]) -> usize {
@@ -165,7 +166,7 @@ impl Vec3Tracks {
             + list_bytes(&self.linear, |c| slice_bytes(c))
             + list_bytes(&self.bezier, |c| slice_bytes(c))
             + list_bytes(&self.arc, |c| slice_bytes(&c.segments) + slice_bytes(&c.pieces))
-            + super::clip::vec_bytes(&self.groups)
+            + vec_bytes(&self.groups)
             + self.groups.iter().map(Vec3Group::heap_bytes).sum::<usize>()
     }
 
@@ -216,9 +217,9 @@ impl QuatTracks {
             + list_bytes(&self.slerp, SlerpCurve::heap_bytes)
             + list_bytes(&self.bezier, |c| slice_bytes(c))
             + list_bytes(&self.hermite, |c| slice_bytes(c))
-            + super::clip::vec_bytes(&self.groups)
+            + vec_bytes(&self.groups)
             + self.groups.iter().map(QuatGroup::heap_bytes).sum::<usize>()
-            + super::clip::vec_bytes(&self.gathered)
+            + vec_bytes(&self.gathered)
     }
 
     /// Tracks evaluated in groups (gathered ones included).

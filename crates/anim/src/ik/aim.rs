@@ -1,4 +1,4 @@
-//! Aim (SPEC §7 `aim`): turn one joint so its local `forward` axis, in
+//! Aim (docs/ik.md, “Constraints”, `aim`): turn one joint so its local `forward` axis, in
 //! model space, points at the target.
 //!
 //! The turn is the smallest rotation (the arc from the current forward
@@ -11,11 +11,12 @@
 
 use glam::Vec3A;
 
-use super::model::{ancestry, angle_between, arc, arc_unnormalized, model, roll, rotate, unit};
-use super::{Aim, IkKind, IkReport, blend};
+use super::constraint::{Aim, IkKind};
+use super::model::{ancestry, angle_between, arc, arc_unnormalized, blend, model, roll, rotate, unit};
+use super::report::IkReport;
 use crate::{Pose, Skeleton};
 
-/// The aim's guarantee (SPEC §7), in radians.
+/// The aim's guarantee (docs/ik.md, “Reports”), in radians.
 pub const AIM_TOLERANCE: f32 = 1e-5;
 
 /// Works in the frame of the joint's parent (vectors rotated by its model

@@ -1,4 +1,4 @@
-//! The chain solver (SPEC §7 `chain`, seed 003's problem): three angles
+//! The chain solver (docs/ik.md, “Constraints”, `chain`; seed 003's problem): three angles
 //! per movable joint, `q = q_anim·Rx(a1)·Ry(a2)·Rz(a3)`, chosen to minimise
 //! `E(a) = Σ_b ‖x_b(a) − target_b‖²` inside box limits.
 //!
@@ -28,14 +28,15 @@
 
 use glam::{Quat, Vec3A};
 
+use super::constraint::{Chain, IkKind};
 use super::linalg::cholesky_solve;
-use super::model::Xform;
-use super::{Chain, IkKind, IkReport, blend};
+use super::model::{Xform, blend};
+use super::report::IkReport;
 use crate::{Pose, Skeleton};
 
 const NONE: u32 = u32::MAX;
 
-/// The default tolerance as a fraction of the chain's length (SPEC §7).
+/// The default tolerance as a fraction of the chain's length (docs/ik.md, “Constraints”).
 pub const DEFAULT_RELATIVE_TOLERANCE: f32 = 1e-4;
 
 /// Damping `λ = μ·s`, `s` the mean diagonal of `J·Jᵀ`: where `μ` starts,

@@ -1,7 +1,7 @@
-//! The constraints of SPEC §7 as the core takes them (joints by index,
+//! The constraints of docs/ik.md as the core takes them (joints by index,
 //! targets in model space), and the checks that make them safe to solve.
 //!
-//! Wire formats resolve joint names to indices and fill the SPEC's
+//! Wire formats resolve joint names to indices and fill the documented
 //! defaults (`forward` `[0, 0, 1]`, `weight` 1, `max_iterations` 100) before
 //! they get here; [`IkConstraint::validate`] then enforces the rest of the
 //! rules once, so a solve never meets a bad joint or a non-finite number.
@@ -11,7 +11,7 @@ use glam::Vec3A;
 use super::error::{IkError, IkErrorKind as K};
 use crate::{Path, Skeleton};
 
-/// The SPEC's default iteration budget of a chain solve.
+/// The documented default iteration budget of a chain solve.
 pub const DEFAULT_MAX_ITERATIONS: u32 = 100;
 
 /// One IK constraint; a list of them applies in order.
@@ -31,7 +31,7 @@ pub enum IkKind {
 }
 
 impl IkKind {
-    /// The SPEC's name for the kind (`two_bone`, `aim`, `chain`).
+    /// The documented name of the kind (`two_bone`, `aim`, `chain`).
     pub fn name(self) -> &'static str {
         match self {
             IkKind::TwoBone => "two_bone",
@@ -127,7 +127,7 @@ pub struct JointLimits {
     pub max: [f32; 3],
 }
 
-/// The service's configurable ceilings (SPEC §7 errors).
+/// The service's configurable ceilings (docs/ik.md, “Errors”).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct IkLimits {
     pub max_constraints: usize,
@@ -161,6 +161,7 @@ pub fn validate_constraints(
 }
 
 impl IkConstraint {
+    /// Which solver takes it.
     pub fn kind(&self) -> IkKind {
         match self {
             IkConstraint::TwoBone(_) => IkKind::TwoBone,
@@ -185,6 +186,7 @@ impl IkConstraint {
         }
     }
 
+    /// How much of the solve applies, in `[0, 1]`.
     pub fn weight(&self) -> f32 {
         match self {
             IkConstraint::TwoBone(c) => c.weight,
@@ -193,6 +195,7 @@ impl IkConstraint {
         }
     }
 
+    /// Sets the weight (see [`IkConstraint::weight`]).
     pub fn set_weight(&mut self, weight: f32) {
         match self {
             IkConstraint::TwoBone(c) => c.weight = weight,
@@ -201,7 +204,7 @@ impl IkConstraint {
         }
     }
 
-    /// Checks SPEC §7's rules against `skeleton`: joints exist, a
+    /// Checks the rules of docs/ik.md against `skeleton`: joints exist, a
     /// `two_bone`'s joints form a descendant chain, every number is finite,
     /// weights lie in [0, 1], axes are not zero, limits are ordered, and
     /// the budgets stay under `limits`.

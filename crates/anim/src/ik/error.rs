@@ -26,7 +26,7 @@ impl IkError {
     }
 }
 
-/// The rules of SPEC §7 a constraint can break.
+/// The rules of docs/ik.md a constraint can break.
 #[derive(Debug, Clone, PartialEq)]
 pub enum IkErrorKind {
     TooManyConstraints { max: usize, provided: usize },

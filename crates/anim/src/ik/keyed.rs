@@ -1,4 +1,4 @@
-//! IK keyed in a clip (SPEC §7, "IK in clips"): constraints whose targets
+//! IK keyed in a clip (docs/ik.md, “Keyed targets in clips”): constraints whose targets
 //! and weights are keyed tracks, solved at every sample after the joint
 //! tracks, so an animator keys a foot's path and the computer solves the
 //! leg.
@@ -151,8 +151,8 @@ impl KeyedIk {
                     }
                 }
         };
-        crate::clip::vec_bytes(&self.constraints)
-            + crate::clip::vec_bytes(&self.curves)
+        crate::heap::vec_bytes(&self.constraints)
+            + crate::heap::vec_bytes(&self.curves)
             + self.curves.iter().map(curve).sum::<usize>()
     }
 

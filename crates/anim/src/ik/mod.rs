@@ -1,11 +1,11 @@
-//! Inverse kinematics (SPEC §7): "specify where the character should go,
+//! Inverse kinematics (docs/ik.md): "specify where the character should go,
 //! then deduce joint motion" (seed 003).
 //!
 //! Constraints ([`IkConstraint`]: `two_bone`, `aim`, `chain`) are checked
 //! once by [`IkConstraint::validate`]; an [`IkSolver`] then applies a list
 //! of them in order to a local pose, with targets in model space. Only
 //! rotations change; positions are model positions, scales included
-//! (SPEC §2.8's composition). Each constraint's solved rotations are
+//! (docs/clip-format.md, “Skeleton and spaces”). Each constraint's solved rotations are
 //! `slerp`ed from the unsolved ones by its weight, and each writes an
 //! [`IkReport`] (`residual`: the end joint's distance to its target, the
 //! aim angle, or `√E`).
@@ -29,10 +29,9 @@ mod error;
 mod keyed;
 mod linalg;
 mod model;
+mod report;
 mod spec;
 mod two_bone;
-
-use glam::Quat;
 
 pub use self::aim::AIM_TOLERANCE;
 pub use self::chain::DEFAULT_RELATIVE_TOLERANCE;
@@ -43,26 +42,12 @@ pub use self::constraint::{
 pub use self::error::{IkError, IkErrorKind};
 pub(crate) use self::keyed::KeyedIk;
 pub use self::keyed::KeyedIkState;
+pub use self::report::IkReport;
 pub use self::spec::{AimSpec, ChainSpec, EffectorSpec, IkSpec, LimitSpec, TwoBoneSpec, build_constraints};
 pub use self::two_bone::TWO_BONE_TOLERANCE;
 
 use self::chain::{ChainSolver, WarmChain};
 use super::{Pose, Skeleton};
-
-/// How one constraint's solve went (SPEC §7's `{kind, residual,
-/// iterations, converged}`), measured on the pose written, weight
-/// included (except `aim` by the smallest rotation at full weight, whose
-/// `f32` arc is exact to rounding: it reports 0). Analytic solvers report 0 iterations; `two_bone` converges
-/// when the end meets the target within [`TWO_BONE_TOLERANCE`]·(l1 + l2),
-/// `aim` within [`AIM_TOLERANCE`] rad, `chain` when `√E ≤ tolerance`
-/// before weighting.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct IkReport {
-    pub kind: IkKind,
-    pub residual: f32,
-    pub iterations: u32,
-    pub converged: bool,
-}
 
 /// Where chain solves start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -87,6 +72,7 @@ pub struct IkSolver {
 }
 
 impl IkSolver {
+    /// A solver with no buffers yet.
     pub fn new() -> Self {
         Self::default()
     }
@@ -130,17 +116,5 @@ impl IkSolver {
     pub fn chain_angles(&self, index: usize) -> Option<(&[usize], &[f32])> {
         let warm = self.warm.get(index)?;
         (!warm.joints.is_empty() || !warm.angles.is_empty()).then_some((&warm.joints, &warm.angles))
-    }
-}
-
-/// `slerp(before, solved, weight)`, exact at the ends.
-#[inline]
-fn blend(before: Quat, solved: Quat, weight: f32) -> Quat {
-    if weight >= 1.0 {
-        solved
-    } else if weight <= 0.0 {
-        before
-    } else {
-        before.slerp(solved, weight).normalize()
     }
 }

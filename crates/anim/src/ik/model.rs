@@ -1,22 +1,22 @@
 //! Model space along one joint's ancestry, and the rotation tools the
 //! solvers share.
 //!
-//! A solver needs the model transforms of a few joints, not the whole
-//! pose: [`model`] composes SPEC §2.8's rule down one root-to-joint path, so
-//! a leg costs its depth, not the skeleton's size. Under that rule a
-//! model-space rotation `D` applied at a joint (`q_m := D·q_m`) turns its
-//! whole subtree rigidly about the joint's position, scales included, which
-//! is what lets every solver here reason about positions with plain
-//! rotations; with `P` the parent's model rotation, the joint's local
-//! rotation becomes `P⁻¹·D·P·local`, and `P⁻¹·D·P` is the same turn found
-//! from vectors seen in the parent's frame (rotated by `P⁻¹`), so the
-//! solvers work there and never form `D` or the joint's model rotation.
+//! A solver needs the model transforms of a few joints, not the whole pose:
+//! [`model`] composes the rule of docs/clip-format.md, “Skeleton and spaces”,
+//! down one root-to-joint path, so a leg costs its depth, not the skeleton's
+//! size. Under that rule a model-space rotation `D` applied at a joint (`q_m :=
+//! D·q_m`) turns its whole subtree rigidly about the joint's position, scales
+//! included, which is what lets every solver here reason about positions with
+//! plain rotations; with `P` the parent's model rotation, the joint's local
+//! rotation becomes `P⁻¹·D·P·local`, and `P⁻¹·D·P` is the same turn found from
+//! vectors seen in the parent's frame (rotated by `P⁻¹`), so the solvers work
+//! there and never form `D` or the joint's model rotation.
 
 use glam::{DQuat, DVec3, Quat, Vec3A, Vec4};
 
 use crate::{Pose, Skeleton};
 
-/// A joint's model transform (SPEC §2.8).
+/// A joint's model transform (docs/clip-format.md, “Skeleton and spaces”).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Xform {
     pub t: Vec3A,
@@ -70,7 +70,8 @@ pub(crate) fn ancestry(skeleton: &Skeleton, joint: usize, path: &mut Vec<usize>)
 }
 
 /// The model transform of the first of `joints`, a leaf-first run up to a
-/// root (identity for none): SPEC §2.8 down one path, so a leg costs its
+/// root (identity for none): the composition of docs/clip-format.md,
+/// “Skeleton and spaces”, down one path, so a leg costs its
 /// depth, not the skeleton's size.
 #[inline]
 pub(crate) fn model(local: &Pose, joints: &[usize]) -> Xform {
@@ -102,6 +103,18 @@ fn tracks(local: &Pose) -> (&[Vec3A], &[Quat], &[Vec3A]) {
 /// The solvers compute their turns directly in the parent's frame
 /// (`parent⁻¹·delta·parent`, from vectors rotated by `parent⁻¹`), which
 /// needs neither product; this is the rule they rely on.
+/// `slerp(before, solved, weight)`, exact at the ends.
+#[inline]
+pub(super) fn blend(before: Quat, solved: Quat, weight: f32) -> Quat {
+    if weight >= 1.0 {
+        solved
+    } else if weight <= 0.0 {
+        before
+    } else {
+        before.slerp(solved, weight).normalize()
+    }
+}
+
 #[cfg(test)]
 fn to_local(parent: Quat, delta: Quat, local: Quat) -> Quat {
     (parent.conjugate() * delta * parent * local).normalize()

@@ -1,4 +1,4 @@
-//! IK constraints as authored (SPEC §7): joints by name, SPEC defaults
+//! IK constraints as authored (docs/ik.md): joints by name, documented defaults
 //! still unfilled. [`IkSpec::resolve`] maps names onto a skeleton and fills
 //! the defaults; [`build_constraints`] then validates the whole list, so
 //! every wire format and the clip and motion builders share one way in.
@@ -68,7 +68,7 @@ pub struct LimitSpec {
 }
 
 impl IkSpec {
-    /// The SPEC's name of this constraint's kind.
+    /// The documented name of this constraint's kind.
     pub fn kind_name(&self) -> &'static str {
         match self {
             IkSpec::TwoBone(_) => "two_bone",
@@ -100,7 +100,7 @@ impl IkSpec {
         }
     }
 
-    /// Maps joint names onto `skeleton` and fills the SPEC's defaults.
+    /// Maps joint names onto `skeleton` and fills the documented defaults.
     ///
     /// # Errors
     /// An unknown joint name, or an `up` without `up_direction` (or the
@@ -171,7 +171,7 @@ fn resolve_chain(c: &ChainSpec, joint: &impl Fn(&str, Path) -> Result<usize, IkE
     })
 }
 
-/// Resolves and validates a list against `skeleton` (SPEC §7's rules and
+/// Resolves and validates a list against `skeleton` (the rules of docs/ik.md and
 /// the service's `limits`).
 ///
 /// # Errors

@@ -1,4 +1,4 @@
-//! Analytic two-bone IK (SPEC §7 `two_bone`; ozz's IKTwoBoneJob).
+//! Analytic two-bone IK (docs/ik.md, “Constraints”, `two_bone`; ozz's IKTwoBoneJob).
 //!
 //! With `a`, `b`, `c` the model positions of upper, middle and end,
 //! `l1 = |b − a|`, `l2 = |c − b|` and `d = clamp(|t − a|, |l1 − l2|, l1 + l2)`
@@ -26,11 +26,12 @@
 
 use glam::{Mat3A, Quat, Vec3A};
 
-use super::model::{Xform, ancestry, arc, extend, model, roll, rotate, unit};
-use super::{IkKind, IkReport, TwoBone, blend};
+use super::constraint::{IkKind, TwoBone};
+use super::model::{Xform, ancestry, arc, blend, extend, model, roll, rotate, unit};
+use super::report::IkReport;
 use crate::{Pose, Skeleton};
 
-/// SPEC §7: a reachable target is met within this fraction of `l1 + l2`.
+/// docs/ik.md, “Reports”: a reachable target is met within this fraction of `l1 + l2`.
 pub const TWO_BONE_TOLERANCE: f32 = 1e-5;
 
 /// The limb before the solve, measured from its upper joint's parent.

@@ -1,4 +1,4 @@
-//! Which joints each layer must sample (SPEC §6's layering read top down).
+//! Which joints each layer must sample (docs/motion.md, “How a pose is computed”, read top down).
 //!
 //! A layer changes nothing where its weight times its mask is 0, and a
 //! blend layer at weight 1 copies its own value exactly, so nothing beneath
@@ -11,7 +11,8 @@
 //! each; what a layer reaches and hides is fixed at build, what it must
 //! sample depends on the live weights and is worked out once per sample.
 
-use super::{LayerMode, UNMAPPED};
+use super::joint_map::UNMAPPED;
+use super::spec::LayerMode;
 
 /// Words of a set of `joints` joints.
 pub(super) fn words(joints: usize) -> usize {

@@ -19,7 +19,7 @@ impl MotionError {
     }
 }
 
-/// The rules of SPEC §6 a motion can break.
+/// The rules of docs/motion.md a motion can break.
 #[derive(Debug, Clone, PartialEq)]
 pub enum MotionErrorKind {
     NoLayers,
@@ -42,7 +42,7 @@ pub enum MotionErrorKind {
         joint: String,
     },
     NoRootJoint,
-    /// An `ik` constraint breaks a rule of SPEC §7.
+    /// An `ik` constraint breaks a rule of docs/ik.md.
     Ik(IkErrorKind),
     ParameterWidthMismatch {
         name: String,

@@ -1,4 +1,4 @@
-//! Layering one joint (SPEC §6), bottom to top in local space.
+//! Layering one joint (docs/motion.md, “How a pose is computed”), bottom to top in local space.
 //!
 //! A `blend` layer moves the pose toward its own by `w`; an `additive`
 //! layer adds `w` times its difference from its reference pose. Weight 0

@@ -1,4 +1,4 @@
-//! Masks (SPEC §6): named joint weights resolved once, at build, into one
+//! Masks (docs/motion.md): named joint weights resolved once, at build, into one
 //! weight per joint of the output skeleton.
 
 use std::collections::HashMap;

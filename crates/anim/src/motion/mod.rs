@@ -1,4 +1,4 @@
-//! Composed motion (SPEC §6): layers of clips, blended or added bottom to
+//! Composed motion (docs/motion.md): layers of clips, blended or added bottom to
 //! top over the rest pose, with masks and sync groups.
 //!
 //! [`Motion::build`] checks a [`MotionSpec`] once: weights, speeds and
@@ -20,6 +20,7 @@
 
 mod coverage;
 mod error;
+mod joint_map;
 mod layering;
 mod mask;
 mod player;
@@ -38,6 +39,7 @@ pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionS
 
 use self::coverage::Reach;
 use self::error::MotionErrorKind as K;
+use self::joint_map::joint_map;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
 use super::ik::{IkConstraint, IkLimits, build_constraints};
@@ -48,9 +50,6 @@ pub const MAX_LAYERS: usize = 32;
 
 /// Largest layer speed, as for streams.
 pub const MAX_SPEED: f64 = 1000.0;
-
-/// A layer's joint absent from the output skeleton's mapping.
-const UNMAPPED: u32 = u32::MAX;
 
 /// Anything that holds a built clip: a [`Clip`], or a cache entry.
 pub trait ClipSource {
@@ -85,7 +84,7 @@ pub struct Motion<C> {
     /// The layer weights the motion was built with.
     weights: Vec<f32>,
     root: Option<RootSetup>,
-    /// Request-time IK (SPEC §7), solved on the layered pose.
+    /// Request-time IK (docs/ik.md), solved on the layered pose.
     ik: Vec<IkConstraint>,
 }
 
@@ -124,7 +123,7 @@ struct Layer<C> {
     reference: Option<Pose>,
     /// With root motion, when the layer's clip has the root joint.
     root: Option<LayerRoot>,
-    /// The output's parameters this layer's clip also has (SPEC §8).
+    /// The output's parameters this layer's clip also has (docs/clip-format.md, “Parameters”).
     parameters: Vec<ParameterMap>,
 }
 
@@ -147,7 +146,7 @@ impl<C: ClipSource> Motion<C> {
     /// Checks `spec` and prepares it for sampling.
     ///
     /// # Errors
-    /// The first rule of SPEC §6 it breaks, with the path of the field
+    /// The first rule of docs/motion.md it breaks, with the path of the field
     /// relative to the motion (`layers/2/mask/joints/spine`).
     pub fn build(spec: MotionSpec<C>) -> Result<Motion<C>, MotionError> {
         Motion::build_limited(spec, &IkLimits::default())
@@ -214,7 +213,7 @@ impl<C: ClipSource> Motion<C> {
         self.layers[0].clip.clip().skeleton()
     }
 
-    /// The output's parameters (SPEC §8): the first layer's clip's.
+    /// The output's parameters (docs/clip-format.md, “Parameters”): the first layer's clip's.
     pub fn parameters(&self) -> &crate::ParameterLayout {
         self.layers[0].clip.clip().parameters()
     }
@@ -250,6 +249,7 @@ impl<C: ClipSource> Motion<C> {
         self.root.is_some()
     }
 
+    /// Layers, bottom to top.
     pub fn layer_count(&self) -> usize {
         self.layers.len()
     }
@@ -259,12 +259,16 @@ impl<C: ClipSource> Motion<C> {
         &self.weights
     }
 
+    /// Distinct sync groups among the layers.
     pub fn sync_group_count(&self) -> usize {
         self.groups.len()
     }
 
     /// Each sync group's phase at motion time `tau` under constant
     /// `weights` (a stateless request), into `phases`.
+    ///
+    /// # Panics
+    /// If `weights` has fewer entries than the motion has layers.
     pub fn phases_at(&self, tau: f64, weights: &[f32], phases: &mut Vec<f64>) {
         phases.clear();
         phases.extend(self.groups.iter().map(|g| g.phase_at(tau, &self.durations, weights)));
@@ -273,6 +277,9 @@ impl<C: ClipSource> Motion<C> {
     /// Advances each sync group's phase by `dtau` of motion time at the
     /// rate the current `weights` give: when weights change mid-stream the
     /// phase carries on from where it is.
+    ///
+    /// # Panics
+    /// If `weights` has fewer entries than the motion has layers.
     pub fn advance_phases(&self, phases: &mut [f64], dtau: f64, weights: &[f32]) {
         for (phase, group) in phases.iter_mut().zip(&self.groups) {
             *phase += group.rate(&self.durations, weights) * dtau;
@@ -340,11 +347,6 @@ fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
     };
     let (start, end) = (at(range.start()), at(range.end()));
     Some(LayerRoot { joint, start, whole: start.inverse(up).then(end, up) })
-}
-
-/// Per output joint, the same-named joint of `layer` (or `UNMAPPED`).
-fn joint_map(output: &Skeleton, layer: &Skeleton) -> Vec<u32> {
-    output.names().iter().map(|name| layer.index_of(name).map_or(UNMAPPED, |j| j as u32)).collect()
 }
 
 /// Per output parameter the layer's clip also has (by name), where each

@@ -1,4 +1,4 @@
-//! A live playback of motions (SPEC §6, streams): the motion playing now,
+//! A live playback of motions (docs/motion.md, “Streams”): the motion playing now,
 //! the layer-weight ramps on it, and the crossfades in progress beneath it.
 //!
 //! A [`Player`] is driven by *stream time* `s`, which the stream's playhead
@@ -92,7 +92,7 @@ pub struct Player<C> {
     ik: StreamIk,
 }
 
-/// The stream's request-time IK (SPEC §7 "In streams"): solved on the
+/// The stream's request-time IK (docs/ik.md, “Streams”): solved on the
 /// mixed pose at every tick, chains warm-started from the previous tick.
 #[derive(Debug, Clone, Default)]
 struct StreamIk {
@@ -271,7 +271,7 @@ impl<C: ClipSource> Player<C> {
         Ok(())
     }
 
-    /// Replaces the stream's IK constraints from the next tick on (SPEC §7
+    /// Replaces the stream's IK constraints from the next tick on (docs/ik.md
     /// "In streams"); they must have been validated against the player's
     /// skeleton. A chain at the same place over the same joints carries
     /// its angles on.

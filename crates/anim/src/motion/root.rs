@@ -1,11 +1,11 @@
-//! Root motion (SPEC §6): the character's travel on the ground, as planar
+//! Root motion (docs/motion.md, “Root motion”): the character's travel on the ground, as planar
 //! transforms — a ground translation and a heading (yaw) about the up axis.
 //!
 //! `M(c) = translate(ground(t_root)) · rotate_up(yaw(q_root))` at clip time
 //! `c`; a frame's delta is `M(c_{k−1})⁻¹ · M(c_k)`, with each loop seam
 //! crossed replaced by the whole cycle `W = M(start)⁻¹·M(end)`:
 //! `Δ = M(c_{k−1})⁻¹ · M(start) · Wⁿ · M(start)⁻¹ · M(c_k)` for `n` seams
-//! crossed (negative backward), which is the SPEC's
+//! crossed (negative backward), which is the documented
 //! `M(c_{k−1})⁻¹·M(end)·M(start)⁻¹·M(c_k)` for one seam forward and its
 //! mirror backward. `Wⁿ` is taken by squaring, so a fast loop crossing a
 //! million seams in one frame costs twenty compositions.
@@ -32,6 +32,7 @@ impl Planar {
         Planar { translation: self.translation + turn(up, self.yaw) * next.translation, yaw: self.yaw + next.yaw }
     }
 
+    /// The move that undoes this one: `self.inverse(up).then(self, up)` is the identity.
     pub fn inverse(self, up: UpAxis) -> Planar {
         Planar { translation: -(turn(up, -self.yaw) * self.translation), yaw: -self.yaw }
     }

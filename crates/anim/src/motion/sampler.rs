@@ -5,10 +5,11 @@
 //! the joints it can still change (`coverage`): the pose is the same.
 
 use super::coverage;
+use super::joint_map::UNMAPPED;
 use super::layering::{self, Joint};
 use super::root::{self, Planar, motion_transform};
 use super::sync::position;
-use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode, UNMAPPED};
+use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode};
 use crate::ik::{ChainStart, IkReport, IkSolver};
 use crate::{Clip, Cursor, Ease, Playback, Pose, Space};
 
@@ -59,6 +60,7 @@ pub struct MotionSampler {
 }
 
 impl MotionSampler {
+    /// Empty buffers; they take their size at the first sample.
     pub fn new() -> Self {
         Self::default()
     }
@@ -81,7 +83,7 @@ impl MotionSampler {
         &self.clip_times
     }
 
-    /// The last sample's IK reports (SPEC §7): each layer's clip
+    /// The last sample's IK reports (docs/ik.md, “Reports”): each layer's clip
     /// constraints bottom to top, then, for [`Motion::sample`], the
     /// motion's own.
     pub fn ik_reports(&self) -> &[IkReport] {
@@ -135,6 +137,10 @@ impl<C: ClipSource> Motion<C> {
     /// The pose at motion time `tau` with sync-group `phases` (from
     /// [`Motion::phases_at`] or kept by a stream) and live layer
     /// `weights`. Returns the first layer's clip time.
+    ///
+    /// # Panics
+    /// If `phases` has fewer entries than the motion has sync groups, or
+    /// `weights` fewer than it has layers.
     pub fn sample_with(
         &self,
         tau: f64,
@@ -177,7 +183,8 @@ impl<C: ClipSource> Motion<C> {
             }
             if i == 0 {
                 local.copy_from(self.skeleton().rest());
-                // A parameter's rest value is 0 (SPEC §8: no morph, no offset).
+                // A parameter's rest value is 0 (docs/clip-format.md,
+                // “Parameters”: no morph, no offset).
                 local.parameters.clear();
                 local.parameters.resize(self.parameters().entries(), glam::Vec3A::ZERO);
             }
@@ -202,6 +209,10 @@ impl<C: ClipSource> Motion<C> {
     /// Layer `i`'s unwrapped position at `tau` and the playback that maps
     /// it to a clip time: `offset + speed·τ` unsynced, `start + φ·D` (looping)
     /// synced.
+    ///
+    /// # Panics
+    /// If there is no layer `i`, or `phases` has fewer entries than the
+    /// motion has sync groups.
     pub fn layer_position(&self, i: usize, tau: f64, phases: &[f64]) -> (f64, Playback) {
         let clip: &Clip = self.layers[i].clip.clip();
         match self.layers[i].time {
@@ -317,10 +328,11 @@ impl<C> super::Layer<C> {
 }
 
 impl<C> super::Layer<C> {
-    /// Layers the parameters this layer's clip has like translations (SPEC
-    /// §6, §8): a blend lerps toward the layer's values by the layer weight
-    /// (masks are per joint and do not apply), an additive layer adds
-    /// `weight · (value − reference)`. Parameters it lacks stay as they are.
+    /// Layers the parameters this layer's clip has like translations
+    /// (docs/motion.md, “How a pose is computed”): a blend lerps toward the
+    /// layer's values by the layer weight (masks are per joint and do not
+    /// apply), an additive layer adds `weight · (value − reference)`.
+    /// Parameters it lacks stay as they are.
     fn apply_parameters(&self, pose: &Pose, weight: f32, out: &mut Pose) {
         if weight <= 0.0 {
             return;

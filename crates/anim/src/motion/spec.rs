@@ -1,4 +1,4 @@
-//! The authoring form of a motion (SPEC §6): what a request or a stream
+//! The authoring form of a motion (docs/motion.md): what a request or a stream
 //! control says, unchecked. [`Motion::build`](super::Motion::build) checks it.
 
 use crate::Playback;
@@ -10,7 +10,7 @@ use crate::ik::IkSpec;
 pub struct MotionSpec<C> {
     pub layers: Vec<LayerSpec<C>>,
     pub root_motion: Option<RootMotionSpec>,
-    /// SPEC §7: request-time constraints, after layering and root motion.
+    /// Request-time constraints (docs/ik.md), after layering and root motion.
     pub ik: Vec<IkSpec>,
 }
 
@@ -98,6 +98,7 @@ pub enum LayerMode {
 }
 
 impl LayerMode {
+    /// The mode's name in requests (`blend`, `additive`).
     pub fn as_str(self) -> &'static str {
         match self {
             LayerMode::Blend => "blend",

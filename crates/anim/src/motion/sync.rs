@@ -1,4 +1,4 @@
-//! Sync groups (SPEC §6): layers that share one normalised phase, so walk
+//! Sync groups (docs/motion.md): layers that share one normalised phase, so walk
 //! and run cycles of different lengths stay in step.
 //!
 //! The group's cycle length is the share-weighted mean of its layers'

@@ -1,4 +1,4 @@
-//! SPEC §2.9: the `f32` core agrees with the independent `f64` reference to
+//! docs/clip-format.md, “Accuracy”: the `f32` core agrees with the independent `f64` reference to
 //! within `1e-5` absolute, for every interpolation mode, end condition,
 //! speed mode, playback mode, ease and space.
 //!
@@ -15,7 +15,7 @@ use glam::{DQuat, DVec3};
 use crate::random::{Kind, Rng, one_track_clip, skeleton_clip, track};
 use crate::reference::{RefClip, RefTrack, Trs, quat_err, vec_err};
 
-/// SPEC §2.9.
+/// docs/clip-format.md, “Accuracy”.
 pub const TOLERANCE: f64 = 1e-5;
 
 fn core_trs(pose: &Pose, j: usize) -> Trs {
@@ -186,7 +186,7 @@ fn playback_ease_and_spaces_match_the_reference() {
     println!("accuracy: whole clips, model space                              max error {:.3e}", worst[1]);
 }
 
-/// `Clip::clip_time` against §2.6–2.7 evaluated in `f64`: the result is an
+/// `Clip::clip_time` against docs/clip-format.md, 2.6–2.7, evaluated in `f64`: the result is an
 /// `f32`, so it may differ from the exact mapping by its rounding — at most
 /// an ulp of the clip's time scale (`ε·max(|start|, |end|)`) — and by
 /// nothing that grows with the number of periods played.

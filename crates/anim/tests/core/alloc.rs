@@ -1,4 +1,4 @@
-//! The hot path allocates nothing (SPEC: sampling into caller-owned
+//! The hot path allocates nothing (sampling into caller-owned
 //! buffers). Counted with the per-thread counting allocator of `main.rs`,
 //! so tests on other threads cannot disturb the count.
 

@@ -1,9 +1,9 @@
-//! The uniform cubic B-spline (SPEC §2.5, issue 18) through the public API:
+//! The uniform cubic B-spline (docs/clip-format.md, 2.5; issue 18) through the public API:
 //! values against the lecture's basis matrix, C2 at uniform keys, the four
 //! end conditions, rotations by association.
 //!
 //! Expected values come from the lecture's matrix `M_B-spline`, written out
-//! below and evaluated here in `f64` on the control polygon the SPEC
+//! below and evaluated here in `f64` on the control polygon the docs
 //! describes (never from the core's Bezier conversion), or from closed forms
 //! of that matrix: at a key the curve is `(c_{i−1} + 4c_i + c_{i+1})/6`, its
 //! velocity `(c_{i+1} − c_{i−1})/2h` and its acceleration
@@ -114,7 +114,7 @@ fn keys() -> Vec<DVec3> {
         .collect()
 }
 
-/// SPEC §2.5's control polygon for `ends` (phantom: the keys themselves).
+/// The control polygon of docs/clip-format.md, 2.5, for `ends` (phantom: the keys themselves).
 fn polygon(c: &[DVec3], ends: Ends) -> Vec<DVec3> {
     let n = c.len() - 1;
     let (first, last) = match ends {
@@ -216,8 +216,9 @@ fn uniform_keys_are_c2_where_catmull_rom_is_only_c1() {
 }
 
 /// Non-uniform keys: each segment is the uniform basis in its own `u`
-/// (SPEC §2.5), so what is continuous at a key is the derivative in `u`:
-/// the velocity in seconds times the segment's length agrees on both sides.
+/// (docs/clip-format.md, “Other interpolation modes”), so what is continuous at
+/// a key is the derivative in `u`: the velocity in seconds times the segment's
+/// length agrees on both sides.
 #[test]
 fn non_uniform_keys_are_smooth_in_the_segment_parameter() {
     let c = keys();

@@ -1,4 +1,4 @@
-//! Clip-level behaviour of SPEC §1–2 at hand-checked points: the segment
+//! Clip-level behaviour of docs/clip-format.md (sections 1–2) at hand-checked points: the segment
 //! search (forward, backward, random access agree), per-track key times,
 //! single-key tracks, rest values, events, model space against a naive
 //! composition, step boundaries, and building cost bounds.
@@ -239,7 +239,7 @@ fn model_space_matches_a_hand_composition() {
     assert!((m[2].w_axis.truncate() - Vec3::new(0.0, 2.0, 3.0)).abs().max_element() < 1e-6, "{}", m[2]);
 }
 
-/// SPEC §2.5: `step` holds `c_i` on the half-open `[t_i, t_{i+1})`, so just
+/// docs/clip-format.md, 2.5: `step` holds `c_i` on the half-open `[t_i, t_{i+1})`, so just
 /// before a key (by one `f32` ulp) it still holds the previous value.
 #[test]
 fn step_holds_until_the_next_key() {

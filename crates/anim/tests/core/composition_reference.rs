@@ -1,15 +1,15 @@
-//! SPEC §6 layering against an `f64` evaluation of §6 written here.
+//! Layering (docs/motion.md) against an `f64` evaluation of it written here.
 //!
 //! Random motions over random skeletons (fixed seeds): 1–4 layers, blend
 //! and additive (with and without a reference time), masks (named joints,
 //! descendants, defaults), sync groups over clips of different lengths,
 //! every playback mode with offsets and negative speeds, every ease, both
-//! spaces. The reference computes each layer's clip time itself (§2.7's
-//! mapping and rounding rules, §6's sync-group phase, all in `f64`) and
+//! spaces. The reference computes each layer's clip time itself (the
+//! mapping and rounding rules of docs/clip-format.md, 2.7, the sync-group phase, all in `f64`) and
 //! the layering (lerp, exact short-way slerp, the additive formulas) in
 //! `f64`; only each layer's clip pose at that time comes from
 //! `Clip::sample_into`, which `accuracy` holds to the clip reference. Both
-//! must agree within §2.9's bound. The worst error is printed
+//! must agree within the bound of docs/clip-format.md, 2.9. The worst error is printed
 //! (`cargo test --test core composition_reference -- --nocapture`).
 //!
 //! Also: one full-weight layer is its clip bit for bit at any offset,
@@ -145,7 +145,7 @@ pub fn random_layers_over(rng: &mut Rng, pool: &Pool, first: usize) -> Vec<Layer
         .collect()
 }
 
-/// SPEC §2.6's ease warps.
+/// The ease warps of docs/clip-format.md, “Speed control”.
 pub fn ease(e: Ease, x: f64) -> f64 {
     match e {
         Ease::Linear => x,
@@ -155,7 +155,7 @@ pub fn ease(e: Ease, x: f64) -> f64 {
     }
 }
 
-/// The `f64` evaluation of a motion (SPEC §6).
+/// The `f64` evaluation of a motion (docs/motion.md).
 pub struct Reference<'a> {
     pub pool: &'a Pool,
     pub layers: &'a [LayerSpec<usize>],
@@ -167,7 +167,7 @@ impl Reference<'_> {
         (r.start, r.end)
     }
 
-    /// §2.7: a request time `t` as a position `[0, d]` past the start
+    /// docs/clip-format.md, 2.7: a request time `t` as a position `[0, d]` past the start
     /// after `playback`, with the `f32` rule at the start, the end and the
     /// loop seam.
     fn position(start: f64, end: f64, t: f64, playback: Playback) -> f64 {
@@ -277,7 +277,8 @@ impl Reference<'_> {
         pose
     }
 
-    /// The model pose of a local pose (SPEC §2.8) on the output skeleton.
+    /// The model pose of a local pose (docs/clip-format.md, “Skeleton and
+    /// spaces”) on the output skeleton.
     pub fn model(&self, local: &[Trs]) -> Vec<Trs> {
         self.pool.refs[self.layers[0].clip].model(local)
     }
@@ -306,7 +307,7 @@ fn add(a: Trs, l: Trs, r: Trs, w: f64) -> Trs {
     Trs { t: a.t + (l.t - r.t) * w, r: (a.r * step).normalize(), s: a.s * (DVec3::ONE + (l.s / r.s - DVec3::ONE) * w) }
 }
 
-/// §2.9: the worst error of `got` against `expected`, each component
+/// docs/clip-format.md, 2.9: the worst error of `got` against `expected`, each component
 /// scaled by `max(1, |reference|)`; quaternions compared after choosing the sign.
 pub fn bound_err(got: Trs, expected: Trs) -> f64 {
     let vec = |a: DVec3, b: DVec3| ((a - b).abs() / b.abs().max(DVec3::ONE)).max_element();

@@ -1,4 +1,4 @@
-//! The [`Player`] (SPEC §6, stream controls): crossfades, weight ramps,
+//! The [`Player`] (docs/motion.md, “Controls”): crossfades, weight ramps,
 //! seeks and root motion across fades, against references written here.
 //!
 //! A fade's frames are checked against an `f64` blend (lerp, exact
@@ -52,7 +52,8 @@ fn synced(layers: &[LayerSpec<usize>]) -> bool {
     layers.iter().any(|l| l.sync.is_some())
 }
 
-/// Asserts `got` is `expected` bit for bit, or within §2.9 for synced motions.
+/// Asserts `got` is `expected` bit for bit, or within docs/clip-format.md,
+/// “Accuracy”, for synced motions.
 fn assert_same(got: &Pose, expected: &Pose, exact: bool, what: &str) {
     if exact {
         assert_eq!(got, expected, "{what}");

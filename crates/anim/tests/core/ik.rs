@@ -1,6 +1,6 @@
-//! Inverse kinematics in the core (SPEC §7, issue 17): `two_bone` and
+//! Inverse kinematics in the core (docs/ik.md, issue 17): `two_bone` and
 //! `aim` against their geometric guarantees on random chains, measured by
-//! an `f64` forward kinematics written here from SPEC §2.8; refusals with
+//! an `f64` forward kinematics written here from docs/clip-format.md, 2.8; refusals with
 //! their paths; no allocation once warm. The chain solver's tests, with an
 //! independent implementation of the seed's projected gradient descent,
 //! are in `ik/chain.rs`.
@@ -81,7 +81,8 @@ pub struct M {
     pub s: DVec3,
 }
 
-/// SPEC §2.8 in `f64`: `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m = q_p·q_l`, `s_m = s_p ⊙ s_l`.
+/// docs/clip-format.md, 2.8, in `f64`: `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m =
+/// q_p·q_l`, `s_m = s_p ⊙ s_l`.
 pub fn model_f64(skeleton: &Skeleton, pose: &Pose) -> Vec<M> {
     model_with(skeleton, pose, |j| pose.rotations[j].as_dquat())
 }

@@ -1,16 +1,16 @@
-//! The evaluation core's test suite (SPEC §1–2, issue 2).
+//! The evaluation core's test suite (docs/clip-format.md, issue 2).
 //!
 //! One binary, one module per concern. `reference` is an independent `f64`
-//! evaluator written from SPEC §2 alone; `accuracy` holds the core to it;
-//! `lecture` checks the lecture's worked examples; `b_spline` the
-//! uniform B-spline against the lecture's basis matrix; `properties` states what
-//! must hold for any keys; `validation` pins each error code and path;
-//! `alloc` proves the hot path allocation-free; `budget` holds builds to
-//! their work budget and clips to their byte estimate; `cli` runs the real binary;
-//! `import` checks the importers against real third-party files; `parameters`
-//! holds SPEC §8's parameters to hand-computed values; `ik`
-//! holds the IK solvers to SPEC §7 (and the chain to seed 003's own
-//! algorithm).
+//! evaluator written from docs/clip-format.md, “Evaluation math” alone;
+//! `accuracy` holds the core to it; `lecture` checks the lecture's worked
+//! examples; `b_spline` the uniform B-spline against the lecture's basis
+//! matrix; `properties` states what must hold for any keys; `validation` pins
+//! each error code and path; `alloc` proves the hot path allocation-free;
+//! `budget` holds builds to their work budget and clips to their byte estimate;
+//! `cli` runs the real binary; `import` checks the importers against real
+//! third-party files; `parameters` holds parameters (docs/clip-format.md,
+//! “Parameters”) to hand-computed values; `ik` holds the IK solvers to
+//! docs/ik.md (and the chain to seed 003's own algorithm).
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
 //! per binary. It counts per thread, so tests running in parallel do not

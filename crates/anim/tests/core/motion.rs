@@ -1,4 +1,4 @@
-//! Composition in the core (SPEC §6): one full-weight layer is the clip bit
+//! Composition in the core (docs/motion.md): one full-weight layer is the clip bit
 //! for bit; blends, masks, additive layers and sync groups against values
 //! computed by hand; a full-weight masked layer is its clip where it covers
 //! and the layers beneath elsewhere, bit for bit (the layers it hides are

@@ -1,8 +1,9 @@
-//! Parameters (SPEC §8) in the core: each interpolation against values
-//! worked out by hand from SPEC §2, widths that span several entries (and a
-//! padded one), the time range, every refusal with its code and path, a clip
-//! of parameters alone, and composition (SPEC §6: blend, additive, a
-//! parameter a layer lacks, crossfade needs the same parameters).
+//! Parameters (docs/clip-format.md, “Parameters”) in the core: each
+//! interpolation against values worked out by hand from docs/clip-format.md,
+//! “Evaluation math”, widths that span several entries (and a padded one), the
+//! time range, every refusal with its code and path, a clip of parameters
+//! alone, and composition (docs/motion.md: blend, additive, a parameter a layer
+//! lacks, crossfade needs the same parameters).
 
 use std::sync::Arc;
 
@@ -14,7 +15,7 @@ use anim::{
     SampleOptions, Sampler, TrackSpec,
 };
 
-/// The tolerance of SPEC §2.9 for values of magnitude up to a few units.
+/// The tolerance of docs/clip-format.md, “Accuracy”, for values of magnitude up to a few units.
 const TOL: f64 = 1e-5;
 
 fn rows(rows: &[&[f32]]) -> Vec<Vec<f32>> {
@@ -78,9 +79,9 @@ fn linear_lerps_every_component() {
     check(&values(&clip, "l", -1.0), &[0.0; 4], "held before the first key");
 }
 
-/// Catmull-Rom on unit spacing, k = 0.5 (SPEC §2.2): component j's keys are
-/// `(j + 1)·[0, 1, 3, 2]`, so each is the same scalar curve scaled. Width 5
-/// spans two entries, the second padded.
+/// Catmull-Rom on unit spacing, k = 0.5 (docs/clip-format.md, “Catmull-Rom”):
+/// component j's keys are `(j + 1)·[0, 1, 3, 2]`, so each is the same scalar
+/// curve scaled. Width 5 spans two entries, the second padded.
 #[test]
 fn catmull_rom_matches_the_lecture_on_every_component() {
     let base = [0.0f32, 1.0, 3.0, 2.0];
@@ -109,8 +110,8 @@ fn catmull_rom_takes_tension_and_zero_slope_ends() {
     check(&values(&clip, "c", 0.5), &[0.5], "zero slope, tension 1");
 }
 
-/// glTF CUBICSPLINE (SPEC §2.5): `h = 2`, at `u = ½` the Hermite basis is
-/// (½, ⅛, ½, −⅛).
+/// glTF CUBICSPLINE (docs/clip-format.md, “Other interpolation modes”): `h =
+/// 2`, at `u = ½` the Hermite basis is (½, ⅛, ½, −⅛).
 #[test]
 fn cubic_hermite_uses_the_tangents_per_component() {
     let mut p = ParameterSpec::new("h", Interpolation::CubicHermite, vec![0.0, 2.0], rows(&[&[0.0, 1.0], &[1.0, 0.0]]));

@@ -1,4 +1,4 @@
-//! SPEC §2.6–2.7: request time → clip time, at hand-computed times.
+//! docs/clip-format.md, 2.6–2.7: request time → clip time, at hand-computed times.
 //!
 //! `once` clamps, `loop` wraps modulo the duration, `ping_pong` reflects,
 //! and the ease warps normalised time. The clip used is a linear

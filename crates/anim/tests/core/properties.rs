@@ -1,6 +1,6 @@
-//! What must hold for any keys (SPEC §2), as proptest properties over
-//! random non-uniform key times, random values and random rotations up to
-//! 150° apart.
+//! What must hold for any keys (docs/clip-format.md, “Evaluation math”), as
+//! proptest properties over random non-uniform key times, random values and
+//! random rotations up to 150° apart.
 //!
 //! Derivatives are one-sided three-point differences on the sampled `f32`
 //! curve (the parabola through the samples at `t`, `t ± δ`, `t ± 2δ`, with
@@ -18,7 +18,7 @@ use crate::behaviour::build_within;
 use crate::reference::RefTrack;
 
 const DELTA: f32 = 5e-4;
-/// Values at keys (SPEC §2.9).
+/// Values at keys (docs/clip-format.md, “Accuracy”).
 const VALUE_TOL: f32 = 1e-5;
 
 /// Allowed difference between two slopes of magnitude about `v`.
@@ -331,9 +331,10 @@ proptest! {
     // Constant-speed builds are the heaviest part of this suite in debug.
     #![proptest_config(ProptestConfig::with_cases(12))]
 
-    /// `speed: constant`: the point is where arc length `L·(t − t_0)/(t_n − t_0)`
-    /// along the same path puts it, to within `1e-4·L` (SPEC §2.6). The path
-    /// and its arc length come from the reference evaluator.
+    /// `speed: constant`: the point is where arc length `L·(t − t_0)/(t_n −
+    /// t_0)` along the same path puts it, to within `1e-4·L`
+    /// (docs/clip-format.md, “Speed control”). The path and its arc length come
+    /// from the reference evaluator.
     #[test]
     fn constant_speed_tracks_move_at_constant_speed(
         track in prop_oneof![

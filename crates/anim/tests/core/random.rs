@@ -210,7 +210,7 @@ pub fn skeleton_clip(rng: &mut Rng, joints: usize) -> ClipSpec {
             let n = 1 + rng.below(6);
             let mut track = track(rng, &name, kind, n);
             if channel == Channel::Scale {
-                // Uniform scales keep §2.8's composition exact.
+                // Uniform scales keep the composition of docs/clip-format.md, 2.8, exact.
                 if let Keys::Vec3(v) = &mut track.values {
                     v.iter_mut().for_each(|s| *s = Vec3::splat(s.x));
                 }

@@ -1,4 +1,5 @@
-//! An independent `f64` evaluator, written from SPEC §2 alone.
+//! An independent `f64` evaluator, written from docs/clip-format.md, “Evaluation math”, alone
+//! (the § numbers below are that document's).
 //!
 //! It shares no code with `src/anim`: it takes the same authoring
 //! [`ClipSpec`] but computes everything itself, the straightforward way —
@@ -35,7 +36,7 @@ fn dot(p: DQuat, q: DQuat) -> f64 {
     p.x * q.x + p.y * q.y + p.z * q.z + p.w * q.w
 }
 
-/// Exact short-way slerp `p·(p⁻¹·q)^u`, normalised (SPEC §2.3).
+/// Exact short-way slerp `p·(p⁻¹·q)^u`, normalised (docs/clip-format.md, “Quaternion Catmull-Rom”).
 pub fn slerp(p: DQuat, q: DQuat, u: f64) -> DQuat {
     let q = if dot(p, q) < 0.0 { -q } else { q };
     (p * qpow(p.conjugate() * q, u)).normalize()
@@ -45,14 +46,14 @@ fn lerp3(a: DVec3, b: DVec3, u: f64) -> DVec3 {
     a * (1.0 - u) + b * u
 }
 
-/// De Casteljau, SPEC §2.1, equations 1–6.
+/// De Casteljau, docs/clip-format.md, “Cubic Bezier by de Casteljau”, equations 1–6.
 pub fn casteljau3(p: &[DVec3; 4], u: f64) -> DVec3 {
     let (f, g, h) = (lerp3(p[0], p[1], u), lerp3(p[1], p[2], u), lerp3(p[2], p[3], u));
     let (m, n) = (lerp3(f, g, u), lerp3(g, h, u));
     lerp3(m, n, u)
 }
 
-/// De Casteljau with `lerp` replaced by `slerp` (SPEC §2.3).
+/// De Casteljau with `lerp` replaced by `slerp` (docs/clip-format.md, “Quaternion Catmull-Rom”).
 pub fn casteljau_q(p: &[DQuat; 4], u: f64) -> DQuat {
     let (f, g, h) = (slerp(p[0], p[1], u), slerp(p[1], p[2], u), slerp(p[2], p[3], u));
     let (m, n) = (slerp(f, g, u), slerp(g, h, u));
@@ -561,7 +562,7 @@ impl RefClip {
         RefClip { parents, rest, tracks, start, end }
     }
 
-    /// Request time → clip time (SPEC §2.6–2.7).
+    /// Request time → clip time (docs/clip-format.md, 2.6–2.7).
     pub fn clip_time(&self, t: f64, playback: Playback, ease: Ease) -> f64 {
         let d = self.end - self.start;
         if d <= 0.0 {
@@ -599,7 +600,7 @@ impl RefClip {
         pose
     }
 
-    /// SPEC §2.8: `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m = q_p·q_l`, `s_m = s_p ⊙ s_l`.
+    /// Model space (§2.8): `t_m = t_p + q_p·(s_p ⊙ t_l)`, `q_m = q_p·q_l`, `s_m = s_p ⊙ s_l`.
     pub fn model(&self, local: &[Trs]) -> Vec<Trs> {
         let mut out: Vec<Trs> = Vec::with_capacity(local.len());
         for (j, l) in local.iter().enumerate() {

@@ -1,4 +1,4 @@
-//! Root motion (SPEC §6) against an independent planar reference written
+//! Root motion (docs/motion.md) against an independent planar reference written
 //! here: a straight line, a known turn, fast and backward loops, and the
 //! CMU walk of `examples/bvh/131_01.bvh`. After N loops the total
 //! is N whole cycles plus the partial one, no frame jumps at a seam, and

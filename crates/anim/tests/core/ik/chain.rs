@@ -1,4 +1,4 @@
-//! The chain solver (SPEC §7 `chain`) on random chains and trees with
+//! The chain solver (docs/ik.md, “Constraints”, `chain`) on random chains and trees with
 //! limits: every iterate inside the limits with `E` never rising (budgets
 //! `k = 0, 1, 2, …` return iterates `k`), reachable targets converging,
 //! agreement with the analytic two-bone solver, and with seed 003's own
@@ -15,7 +15,7 @@ use super::{J, M, body, d, joint, model_with};
 use crate::random::Rng;
 
 /// A chain problem with what the test knows independently of the solver:
-/// the movable joints (SPEC's default rule), each angle's bounds, and the
+/// the movable joints (the documented default rule), each angle's bounds, and the
 /// chain's length.
 struct Problem {
     clip: Clip,
@@ -72,7 +72,7 @@ fn tip(m: &M, tip: Vec3A) -> DVec3 {
     m.t + m.q * (m.s * d(tip))
 }
 
-/// SPEC §7's default: every ancestor of an effector, plus each effector
+/// The default of docs/ik.md, “Constraints”: every ancestor of an effector, plus each effector
 /// whose tip is not the origin; in skeleton order.
 fn default_movable(skeleton: &Skeleton, effectors: &[Effector]) -> Vec<usize> {
     let mut movable = vec![false; skeleton.len()];

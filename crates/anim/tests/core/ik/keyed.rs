@@ -1,4 +1,4 @@
-//! IK in clips, motions and players (SPEC §7): keyed targets solved at every
+//! IK in clips, motions and players (docs/ik.md): keyed targets solved at every
 //! sample against hand-computed positions, a clip's solve inside a masked
 //! layer equal to the clip's own pose, reports in order, warm starts on a
 //! player, no allocation once warm, and a crossfade's motion refused when
