@@ -395,12 +395,9 @@ async fn bodies_arriving_at_once_are_bounded_in_bytes() {
     stalled.write_all(&[b' '; 40_000]).await.unwrap();
     let body = format!("{WAVE}{}", " ".repeat(40_000));
     let post = || app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(body.clone());
-    // Refused once the server holds the stalled 40 KB (before that, a post is simply taken).
-    let refused = eventually_some(Duration::from_secs(10), "a post refused past the arriving budget", || async {
-        let resp = post().send().await.unwrap();
-        (resp.status() == 503).then_some(resp)
-    })
-    .await;
+    // Kept as it was: polling for the 503 instead never saw one (not yet understood).
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let refused = post().send().await.unwrap();
     assert_eq!(refused.status(), 503);
     assert_eq!(refused.json::<serde_json::Value>().await.unwrap()["code"], "overloaded");
     // Bodies-less requests need no budget.
@@ -438,12 +435,9 @@ async fn a_client_that_stops_reading_an_answer_is_cut_off_and_frees_its_slot() {
     tokio::io::AsyncWriteExt::write_all(&mut stuck, format!("{head}{body}").as_bytes()).await.unwrap();
     let started = Instant::now();
     let pose = app.url(&format!("/v1/clips/{id}/pose?t=1"));
-    // Refused once the server is writing the stuck answer (before that, a pose is simply answered).
-    let held = eventually_some(Duration::from_secs(10), "the stuck answer holds the caller's one slot", || async {
-        let resp = app.http.get(&pose).send().await.unwrap();
-        (resp.status() == 429).then_some(resp)
-    })
-    .await;
+    // Kept as it was: polling for the 429 instead never saw one (not yet understood).
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let held = app.http.get(&pose).send().await.unwrap();
     assert_eq!(held.status(), 429, "the stuck answer holds the caller's one slot");
     let freed_after = eventually_some(Duration::from_secs(10), "the stalled answer is cut off", || async {
         (app.http.get(&pose).send().await.unwrap().status() == 200).then(|| started.elapsed())
