@@ -105,7 +105,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
         eprintln!("warning: {}: {} at {}: {}", path.display(), w.code, w.pointer, w.detail);
     }
 
-    let mut out = super::Results::buffered();
+    let mut out = super::results::Results::buffered();
     match &args.server {
         None => {
             let docs: Vec<ClipDoc> = imported.clips.iter().map(ClipDoc::from_spec).collect();

@@ -158,7 +158,7 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
     };
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = runtime.block_on(load::run(opts))?;
-    let mut out = super::Results::buffered();
+    let mut out = super::results::Results::buffered();
     if args.json {
         writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {

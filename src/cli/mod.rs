@@ -8,14 +8,15 @@
 //! results go through it: `serve`'s address lines are written as before, so
 //! a server whose stdout is gone still says why it stopped.
 
-use std::io::{self, Write};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Parser, Subcommand};
 
+use results::Results;
+
 mod import;
 mod load;
+mod results;
 mod sample;
 mod serve;
 mod token;
@@ -60,51 +61,11 @@ impl Cli {
         match result {
             Ok(()) => ExitCode::SUCCESS,
             // Whatever failed after the reader left was only its consequence.
-            Err(_) if STDOUT_CLOSED.load(Ordering::Relaxed) => ExitCode::SUCCESS,
+            Err(_) if results::stdout_closed() => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("inbetween: {e:#}");
                 ExitCode::FAILURE
             }
         }
     }
-}
-
-/// Set once a result could not be written because standard output's reader
-/// has gone.
-static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
-
-/// Standard output for a subcommand's results (module doc).
-pub(crate) struct Results<W: Write>(W);
-
-impl Results<io::BufWriter<io::StdoutLock<'static>>> {
-    /// Buffered, for one document written at once (flush before returning).
-    pub(crate) fn buffered() -> Self {
-        Results(io::BufWriter::new(io::stdout().lock()))
-    }
-}
-
-impl Results<io::Stdout> {
-    /// Line by line, for results that come over time (a stream's frames).
-    pub(crate) fn lines() -> Self {
-        Results(io::stdout())
-    }
-}
-
-impl<W: Write> Write for Results<W> {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        noting_closed(self.0.write(buf))
-    }
-
-    fn flush(&mut self) -> io::Result<()> {
-        noting_closed(self.0.flush())
-    }
-}
-
-fn noting_closed<T>(result: io::Result<T>) -> io::Result<T> {
-    if let Err(e) = &result
-        && e.kind() == io::ErrorKind::BrokenPipe
-    {
-        STDOUT_CLOSED.store(true, Ordering::Relaxed);
-    }
-    result
 }

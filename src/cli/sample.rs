@@ -78,7 +78,7 @@ pub fn run(args: SampleArgs) -> anyhow::Result<()> {
 
     let mut sampler = Sampler::new();
     let mut matrices: Vec<Mat4> = Vec::new();
-    let mut out = super::Results::buffered();
+    let mut out = super::results::Results::buffered();
     out.write_all(b"[")?;
     for (k, &t) in times.iter().enumerate() {
         if k > 0 {

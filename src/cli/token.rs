@@ -31,7 +31,7 @@ enum TokenCommand {
 }
 
 pub fn run(args: TokenArgs) -> anyhow::Result<()> {
-    let mut out = super::Results::buffered();
+    let mut out = super::results::Results::buffered();
     match args.command {
         TokenCommand::New { name, scopes } => {
             let token = new_token()?;

@@ -28,6 +28,7 @@
 //! broadcast); `floor` is the bare sender and its run; `procstat` reads `/proc`.
 
 mod broadcast;
+mod chain;
 mod clock;
 pub mod floor;
 mod histogram;
@@ -48,8 +49,8 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use reqwest::Url;
 
-pub use floor::FloorReport;
 pub use motion::MotionChoice;
+pub use report::FloorReport;
 pub use report::Report;
 
 /// What to load.
@@ -92,7 +93,7 @@ pub const MAX_DURATION: Duration = Duration::from_secs(3600);
 pub enum ClipChoice {
     /// A clip already on the server.
     Existing(String),
-    /// Upload a generated chain of this many joints (see `setup::chain_clip`).
+    /// Upload a generated chain of this many joints (see `chain::chain_clip`).
     Generate { joints: usize },
 }
 

@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 
 use serde_json::Value;
 
-use super::setup::{Chain, chain, chain_clip};
+use super::chain::{Chain, chain, chain_clip};
 use super::walk;
 use anim::ik::IkSpec;
 use anim::motion::MotionSpec;

@@ -52,11 +52,13 @@ use tonic::codegen::http::uri::PathAndQuery;
 use tonic::transport::Channel;
 
 use super::clock::{ClockSync, unix_now_ns};
+use super::floor::sender::{MAX_COPIES, Target};
 use super::histogram::Latency;
 use super::lateness::StreamTracker;
 use super::motion::Playable;
+use super::procstat::{self, ProcSample};
 use super::report::{Report, ServerUsage, StreamStats};
-use super::{Env, Mode, Options, broadcast, floor, procstat, setup};
+use super::{Env, Mode, Options, broadcast, setup};
 use formats::wire::frame::WireFrame;
 use formats::wire::grid::PHASE_HEADER;
 use formats::wire::proto::pb;
@@ -186,7 +188,7 @@ struct Spec {
     /// `ws-broadcast`: the broadcast the viewers watch.
     broadcast: Option<String>,
     /// The floor the streams connect to instead of the server.
-    floor: Option<floor::Target>,
+    floor: Option<Target>,
     clock: ClockSync,
     window: Arc<Window>,
     opening: Arc<Semaphore>,
@@ -463,114 +465,194 @@ async fn stopped(stop: &mut watch::Receiver<bool>) {
 }
 
 /// Runs `n` streams against the server, or against the floor `floor`.
-pub async fn run(opts: &Options, env: &Env, n: usize, floor: Option<&floor::Target>) -> anyhow::Result<Report> {
-    let connections = match opts.mode {
-        Mode::GrpcStream if opts.connections == 0 => n.div_ceil(STREAMS_PER_CONNECTION),
-        Mode::GrpcStream => opts.connections.min(n),
-        _ => n, // a WebSocket is its own connection
-    };
-    let grpc = opts.mode == Mode::GrpcStream;
-    let (links, clock, readers) = match floor {
-        Some(f) if grpc => {
-            let (links, readers) = floor_links(f.port, n, connections).await?;
-            (links, f.clock, readers)
-        }
-        Some(f) => (vec![Link::Own], f.clock, Vec::new()),
-        None => {
-            // The clock sync always goes over gRPC (the `Ping` RPC); WebSocket
-            // streams use one extra channel for it.
-            let channels = setup::channels(&env.grpc, if grpc { connections } else { 1 }).await?;
-            let clock = setup::clock_sync(channels[0].clone()).await?;
-            let links = if grpc { channels.into_iter().map(Link::Grpc).collect() } else { vec![Link::Own] };
-            (links, clock, Vec::new())
-        }
-    };
+pub async fn run(opts: &Options, env: &Env, n: usize, floor: Option<&Target>) -> anyhow::Result<Report> {
+    let links = Links::connect(opts, env, n, floor).await?;
     let server_pid = floor.map_or(env.server_pid, |f| Some(f.pid));
     let http = floor.is_none().then_some(&env.http);
     let broadcasting = opts.mode == Mode::WsBroadcast;
     let counters_before_open = counters(broadcasting, http).await;
-    let broadcast = match (broadcasting && floor.is_none(), &env.motion) {
-        (false, _) => None,
-        (true, Some(m)) => Some(broadcast::create(&env.http, &m.json, opts.fps).await?),
-        (true, None) => Some(broadcast::create(&env.http, &broadcast::clip_motion(&env.clip_id), opts.fps).await?),
-    };
-    let spec = Spec::new(opts, env, clock, broadcast.clone(), floor.copied())?;
+    let broadcast = create_broadcast(opts, env, broadcasting && floor.is_none()).await?;
+    let spec = Spec::new(opts, env, links.clock, broadcast.clone(), floor.copied())?;
     let window = Arc::clone(&spec.window);
 
     // After the broadcast exists: the RSS per viewer is the viewers' alone.
     let server_before = server_pid.and_then(procstat::sample);
     let (stop_tx, stop_rx) = watch::channel(false);
     let groups: Vec<Arc<Mutex<Hists>>> = (0..n.div_ceil(GROUP)).map(|_| Arc::default()).collect();
-    let mut tasks = Vec::with_capacity(n);
-    for i in 0..n {
-        // Independent streams differ in start time (1 ms apart), so the
-        // server cannot merge them; shared ones all start at 0.
-        let start_time = if opts.shared { 0.0 } else { i as f64 * 0.001 };
-        let link = links[i % links.len()].clone();
-        let hists = Arc::clone(&groups[i / GROUP]);
-        tasks.push(tokio::spawn(spec.clone().run(link, start_time, hists, stop_rx.clone())));
-    }
+    let tasks = spawn_streams(opts, &spec, &links.links, &groups, n, stop_rx);
     wait_until_open(&window, n).await;
-
-    let counters_before = counters(broadcasting, http).await;
-    let server_start = server_pid.and_then(procstat::sample);
-    let client_start = procstat::sample_self();
-    let start = unix_now_ns();
-    window.end.store(start + opts.duration.as_nanos() as i64, Ordering::Relaxed);
-    window.start.store(start, Ordering::Relaxed);
-    tokio::time::sleep(opts.duration).await;
-    let elapsed = (unix_now_ns() - start) as f64 / 1e9;
-    let server_end = server_pid.and_then(procstat::sample);
-    let client_end = procstat::sample_self();
-    let counters_after = counters(broadcasting, http).await;
+    let measured = Measured::window(opts, &window, server_pid, broadcasting, http).await;
     stop_tx.send_replace(true);
 
     let done = Collected::gather(tasks, &groups).await;
-    for reader in readers {
+    for reader in links.readers {
         reader.abort();
     }
     if let Some(id) = &broadcast {
         broadcast::delete(&env.http, id).await;
     }
     let done = done?;
-    let mut stats = done.stats(opts, n, elapsed, clock, [counters_before_open, counters_before, counters_after]);
+    let counters = [counters_before_open, measured.counters_before, measured.counters_after];
+    let mut stats = done.stats(opts, n, measured.elapsed, links.clock, counters);
     stats.broadcast_id = broadcast;
-    let server = match (server_pid, server_before, server_start, server_end) {
-        (Some(pid), Some(b), Some(s), Some(e)) => Some(ServerUsage {
-            pid,
-            rss_before_bytes: b.rss_bytes,
-            rss_end_bytes: e.rss_bytes,
-            // Per stream that opened: when some never do, dividing by the
-            // streams asked for would understate each one's cost.
-            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / stats.opened.max(1) as f64),
-            cpu_cores: (e.cpu_secs - s.cpu_secs) / elapsed,
-            cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / done.total.frames.max(1) as f64,
-        }),
-        _ => None,
-    };
+    let server = measured.server_usage(server_pid, server_before, stats.opened, done.total.frames);
     Ok(Report {
         mode: opts.mode.as_str(),
-        started_unix: start as f64 / 1e9,
+        started_unix: measured.start as f64 / 1e9,
         http: env.http.to_string(),
         grpc: env.grpc.to_string(),
         clip_id: env.clip_id.clone(),
         motion: None,
         joints: None,
         concurrency: n,
-        connections,
+        connections: links.connections,
         rate: None,
-        elapsed_secs: elapsed,
+        elapsed_secs: measured.elapsed,
         ok: done.total.frames,
-        throughput: done.total.frames as f64 / elapsed,
+        throughput: done.total.frames as f64 / measured.elapsed,
         latency: None,
         streams: Some(stats),
         errors: done.total.errors,
         server,
-        client_cpu_cores: client_start.zip(client_end).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / elapsed),
+        client_cpu_cores: measured.client_cpu_cores(),
         loadavg: None,
         ramp: None,
         floor: None,
     })
+}
+
+/// How a run's streams reach the server (or the floor), and its clock.
+struct Links {
+    /// Connections the streams share (a WebSocket is its own).
+    connections: usize,
+    /// Stream `i` rides `links[i % links.len()]`.
+    links: Vec<Link>,
+    clock: ClockSync,
+    /// The gRPC floor's connection readers, aborted when the run ends.
+    readers: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Links {
+    async fn connect(opts: &Options, env: &Env, n: usize, floor: Option<&Target>) -> anyhow::Result<Links> {
+        let connections = match opts.mode {
+            Mode::GrpcStream if opts.connections == 0 => n.div_ceil(STREAMS_PER_CONNECTION),
+            Mode::GrpcStream => opts.connections.min(n),
+            _ => n, // a WebSocket is its own connection
+        };
+        let grpc = opts.mode == Mode::GrpcStream;
+        let (links, clock, readers) = match floor {
+            Some(f) if grpc => {
+                let (links, readers) = floor_links(f.port, n, connections).await?;
+                (links, f.clock, readers)
+            }
+            Some(f) => (vec![Link::Own], f.clock, Vec::new()),
+            None => {
+                // The clock sync always goes over gRPC (the `Ping` RPC); WebSocket
+                // streams use one extra channel for it.
+                let channels = setup::channels(&env.grpc, if grpc { connections } else { 1 }).await?;
+                let clock = setup::clock_sync(channels[0].clone()).await?;
+                let links = if grpc { channels.into_iter().map(Link::Grpc).collect() } else { vec![Link::Own] };
+                (links, clock, Vec::new())
+            }
+        };
+        Ok(Links { connections, links, clock, readers })
+    }
+}
+
+/// The broadcast a `ws-broadcast` run's viewers watch, created for the run:
+/// its motion, or the clip alone.
+async fn create_broadcast(opts: &Options, env: &Env, wanted: bool) -> anyhow::Result<Option<String>> {
+    Ok(match (wanted, &env.motion) {
+        (false, _) => None,
+        (true, Some(m)) => Some(broadcast::create(&env.http, &m.json, opts.fps).await?),
+        (true, None) => Some(broadcast::create(&env.http, &broadcast::clip_motion(&env.clip_id), opts.fps).await?),
+    })
+}
+
+/// Starts the `n` streams, each on its link and counting into its group's
+/// histograms, until `stop`.
+fn spawn_streams(
+    opts: &Options,
+    spec: &Spec,
+    links: &[Link],
+    groups: &[Arc<Mutex<Hists>>],
+    n: usize,
+    stop: watch::Receiver<bool>,
+) -> Vec<tokio::task::JoinHandle<StreamResult>> {
+    (0..n)
+        .map(|i| {
+            // Independent streams differ in start time (1 ms apart), so the
+            // server cannot merge them; shared ones all start at 0.
+            let start_time = if opts.shared { 0.0 } else { i as f64 * 0.001 };
+            let link = links[i % links.len()].clone();
+            let hists = Arc::clone(&groups[i / GROUP]);
+            tokio::spawn(spec.clone().run(link, start_time, hists, stop.clone()))
+        })
+        .collect()
+}
+
+/// The readings at the edges of the measured window.
+struct Measured {
+    /// The window's start, Unix ns.
+    start: i64,
+    elapsed: f64,
+    counters_before: Option<(u64, u64)>,
+    counters_after: Option<(u64, u64)>,
+    server_start: Option<ProcSample>,
+    server_end: Option<ProcSample>,
+    client_start: Option<ProcSample>,
+    client_end: Option<ProcSample>,
+}
+
+impl Measured {
+    /// Opens the window for the streams' samples, waits the run's duration
+    /// and reads the server's counters and both processes' usage either side.
+    async fn window(
+        opts: &Options,
+        window: &Window,
+        server_pid: Option<u32>,
+        broadcasting: bool,
+        http: Option<&reqwest::Url>,
+    ) -> Measured {
+        let counters_before = counters(broadcasting, http).await;
+        let server_start = server_pid.and_then(procstat::sample);
+        let client_start = procstat::sample_self();
+        let start = unix_now_ns();
+        window.end.store(start + opts.duration.as_nanos() as i64, Ordering::Relaxed);
+        window.start.store(start, Ordering::Relaxed);
+        tokio::time::sleep(opts.duration).await;
+        let elapsed = (unix_now_ns() - start) as f64 / 1e9;
+        let server_end = server_pid.and_then(procstat::sample);
+        let client_end = procstat::sample_self();
+        let counters_after = counters(broadcasting, http).await;
+        Measured { start, elapsed, counters_before, counters_after, server_start, server_end, client_start, client_end }
+    }
+
+    /// The server's memory and CPU over the window, when all were read.
+    fn server_usage(
+        &self,
+        server_pid: Option<u32>,
+        before: Option<ProcSample>,
+        opened: usize,
+        frames: u64,
+    ) -> Option<ServerUsage> {
+        let (pid, b, s, e) = (server_pid?, before?, self.server_start?, self.server_end?);
+        Some(ServerUsage {
+            pid,
+            rss_before_bytes: b.rss_bytes,
+            rss_end_bytes: e.rss_bytes,
+            // Per stream that opened: when some never do, dividing by the
+            // streams asked for would understate each one's cost.
+            rss_per_stream_bytes: Some((e.rss_bytes as f64 - b.rss_bytes as f64) / opened.max(1) as f64),
+            cpu_cores: (e.cpu_secs - s.cpu_secs) / self.elapsed,
+            cpu_us_per_op: (e.cpu_secs - s.cpu_secs) * 1e6 / frames.max(1) as f64,
+        })
+    }
+
+    /// The load generator's own CPU over the window.
+    fn client_cpu_cores(&self) -> Option<f64> {
+        self.client_start.zip(self.client_end).map(|(b, a)| (a.cpu_secs - b.cpu_secs) / self.elapsed)
+    }
 }
 
 impl Spec {
@@ -580,7 +662,7 @@ impl Spec {
         env: &Env,
         clock: ClockSync,
         broadcast: Option<String>,
-        floor: Option<floor::Target>,
+        floor: Option<Target>,
     ) -> anyhow::Result<Spec> {
         let mut ws_base = env.http.clone();
         ws_base.set_scheme("ws").map_err(|()| anyhow::anyhow!("cannot make a ws:// URL of {}", env.http))?;
@@ -622,8 +704,8 @@ async fn floor_links(
     let mut readers = Vec::with_capacity(connections);
     for c in 0..connections {
         let members: Vec<usize> = (c..n).step_by(connections).collect();
-        if members.len() > floor::MAX_COPIES {
-            anyhow::bail!("{} streams on one connection; the floor takes {}", members.len(), floor::MAX_COPIES);
+        if members.len() > MAX_COPIES {
+            anyhow::bail!("{} streams on one connection; the floor takes {}", members.len(), MAX_COPIES);
         }
         let mut stream =
             tokio::net::TcpStream::connect(("127.0.0.1", port)).await.context("connecting to the floor")?;

@@ -29,14 +29,12 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::error::ApiError;
-use super::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body};
-use super::rest::poses::parse_json;
+use super::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body, parse_json};
 use super::state::AppState;
 use crate::store::{ClipStore, StoredBroadcast, StoredControl};
-use crate::stream::ws::{ParsedControl, parse_control};
 use crate::stream::{
-    Broadcast, BroadcastSpec, Control, ControlError, Crossfade, Journal, StampedControl, StreamMotion, new_control_id,
-    unix_nanos,
+    Broadcast, BroadcastSpec, Control, ControlError, Crossfade, Journal, ParsedControl, StampedControl, StreamMotion,
+    new_control_id, parse_control, unix_nanos,
 };
 use formats::wire::json::SpaceDoc;
 use formats::wire::motion::MotionDoc;

@@ -40,7 +40,7 @@ use formats::import::warning::in_document;
 use formats::wire::json::{ClipDoc, ParameterValues, parse_clip_doc};
 use formats::wire::proto::server::animation_server::{Animation, AnimationServer};
 use formats::wire::proto::{
-    FILE_DESCRIPTOR_SET, add_parameters, clip_from_pb, clip_to_pb, ik_from_pb, ik_reports_to_pb, matrices_to_pb, pb,
+    FILE_DESCRIPTOR_SET, add_parameters, clip_from_pb, clip_to_pb, ik_reports_to_pb, matrices_to_pb, pb,
     playback_to_pb, pose_to_pb,
 };
 
@@ -333,26 +333,13 @@ type FrameStream = Pin<Box<dyn Stream<Item = Result<WireFrame, Status>> + Send +
 /// `/constraints`, as on the WebSocket) and checked against the stream's
 /// skeleton by the subscription.
 async fn control_from_pb(state: &AppState, op: Option<pb::playback_control::Op>) -> Result<Control, Status> {
-    use pb::playback_control::Op;
-    match op {
-        Some(Op::Play(_)) => Ok(Control::Play),
-        Some(Op::Pause(_)) => Ok(Control::Pause),
-        Some(Op::Seek(s)) => Ok(Control::Seek(s.time)),
-        Some(Op::Speed(s)) => Ok(Control::Speed(s.speed)),
-        Some(Op::Stop(_)) => Ok(Control::Stop),
-        Some(Op::Layer(l)) => Ok(Control::Layer { index: l.index as usize, weight: l.weight, duration: l.duration }),
-        Some(Op::Crossfade(fade)) => {
-            let ease =
-                formats::wire::proto::ease_from_pb(fade.ease, "/ease").map_err(ApiError::from)?.unwrap_or_default();
-            let (to, source) = super::grpc_motion::crossfade_target(state, fade.to.as_ref()).await?;
+    match stream::ParsedControl::from_pb(op).map_err(ApiError::from)? {
+        stream::ParsedControl::Ready(control) => Ok(control),
+        stream::ParsedControl::Crossfade { to, duration, ease } => {
+            let (to, source) = super::grpc_motion::crossfade_target(state, to.as_ref()).await?;
             let source = Some(Arc::new(source));
-            Ok(Control::Crossfade(stream::Crossfade { to, duration: fade.duration, ease, source }))
+            Ok(Control::Crossfade(stream::Crossfade { to, duration, ease, source }))
         }
-        Some(Op::Ik(ik)) => Ok(Control::Ik(ik_from_pb(&ik.constraints, "/constraints").map_err(ApiError::from)?)),
-        Some(Op::Open(_) | Op::Broadcast(_)) => {
-            Err(bad_control("`open` and `broadcast` are only valid as the first message"))
-        }
-        None => Err(bad_control("a PlaybackControl needs an op")),
     }
 }
 

@@ -35,8 +35,12 @@ use std::time::Duration;
 
 use anyhow::Context;
 use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
 
 use crate::store::ClipStore;
+use crate::store::feed::ChangeFeed;
 use crate::store::postgres::PgStore;
 use crate::store::sqlite::SqliteStore;
 use crate::stream::{Engine, EngineConfig};
@@ -85,10 +89,13 @@ pub struct Application {
     state: AppState,
     /// Certificate and key when serving TLS (`--tls-cert`).
     tls: Option<tls::TlsMaterial>,
-    /// The shared PostgreSQL store, whose change notifications keep the cache
-    /// in step with other nodes (`notify`); `None` for SQLite.
-    shared_store: Option<PgStore>,
+    /// The changes other nodes sharing the store commit, which keep the
+    /// cache in step (`notify`); `None` for a store of one node (SQLite).
+    change_feed: Option<Arc<dyn ChangeFeed>>,
 }
+
+/// When the servers must have drained: `None` until shutdown begins.
+type StopSignal = watch::Receiver<Option<Instant>>;
 
 impl Application {
     /// Opens the store (running migrations) and binds the listener.
@@ -97,7 +104,7 @@ impl Application {
     /// The data directory or database cannot be opened, or the address
     /// cannot be bound.
     pub async fn build(config: Config) -> anyhow::Result<Application> {
-        let mut shared_store = None;
+        let mut change_feed: Option<Arc<dyn ChangeFeed>> = None;
         let store: Arc<dyn ClipStore> = match &config.store {
             config::StoreConfig::DataDir(dir) => {
                 std::fs::create_dir_all(dir).with_context(|| format!("creating data directory {}", dir.display()))?;
@@ -112,13 +119,13 @@ impl Application {
             }
             config::StoreConfig::Postgres(url) => {
                 let store = PgStore::open(url.expose(), &config.db).await.context("opening the PostgreSQL database")?;
-                shared_store = Some(store.clone());
+                change_feed = Some(Arc::new(store.change_feed()));
                 Arc::new(store)
             }
         };
         let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
         let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, config.limits.cache_bytes));
-        if shared_store.is_some() {
+        if change_feed.is_some() {
             // Nothing is cached until this node hears other nodes' changes.
             cache.suspend();
         }
@@ -160,7 +167,7 @@ impl Application {
         // Broadcasts are kept in the store: resumed after a restart, shared by every node.
         let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };
         state.streams.broadcasts().set_journal(Arc::new(journal));
-        let app = Application { listener, grpc_listener, state, tls, shared_store };
+        let app = Application { listener, grpc_listener, state, tls, change_feed };
         // One line with every setting in effect; `Secret` and `StoreConfig` print no token or password.
         tracing::info!(
             http = %app.local_addr(),
@@ -204,119 +211,178 @@ impl Application {
     /// The gRPC routes cannot be built (the embedded descriptor set does not
     /// parse: a build defect). Accept errors are logged and retried.
     pub async fn run_until_stopped(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
-        let Application { listener, grpc_listener, state, tls, shared_store } = self;
-        let header_timeout = state.config.limits.header_read_timeout;
-        let http_tls = match &tls {
-            Some(m) => Some(tls::Acceptor::from(m.http_config()?)),
-            None => None,
-        };
-        let mut grpc_server = tonic::transport::Server::builder();
-        if let Some(m) = &tls {
-            grpc_server = grpc_server.tls_config(m.grpc_config(header_timeout))?;
-        }
+        let Application { listener, grpc_listener, state, tls, change_feed } = self;
+        let http_tls = tls.as_ref().map(|m| m.http_config().map(tls::Acceptor::from)).transpose()?;
+        let grpc_server = grpc_server(tls.as_ref(), state.config.limits.header_read_timeout)?;
+        let background = Background::start(&state, change_feed);
+        // Streams end first (each with its final status), then both servers
+        // stop accepting and drain, all by one deadline (sent on `stop`).
+        let (stop_tx, stop) = watch::channel(None);
+        let coordinator = tokio::spawn(end_streams_then_stop(shutdown, &state, stop_tx));
+        let grpc = tokio::spawn(serve_grpc(grpc_server, grpc_listener, &state, stop.clone()).await?);
+        serve_http(listener, &state, http_tls, stop.clone()).await;
         let drain = state.config.drain_timeout;
-        if shared_store.is_none() {
+        let deadline = stop.borrow().unwrap_or_else(|| Instant::now() + drain);
+        drain_grpc(grpc, deadline, drain).await;
+        coordinator.abort();
+        background.stop();
+        state.store.close().await;
+        tracing::info!("stopped");
+        Ok(())
+    }
+}
+
+/// What runs beside the servers until they stop.
+struct Background {
+    upkeep: JoinHandle<()>,
+    /// The change feed's listener, when nodes share the store.
+    notify: Option<JoinHandle<()>>,
+}
+
+impl Background {
+    fn start(state: &AppState, change_feed: Option<Arc<dyn ChangeFeed>>) -> Background {
+        if change_feed.is_none() {
             // One node alone: resume the stored broadcasts at the tick the wall clock says.
-            // (With PostgreSQL the listener does it each time it subscribes.)
+            // (With a change feed the listener does it each time it subscribes.)
             tokio::spawn({
                 let state = state.clone();
                 async move { broadcast_store::resync(&state).await }
             });
         }
-        let notify = shared_store.map(|store| tokio::spawn(notify::run(store, state.clone())));
+        let notify = change_feed.map(|feed| tokio::spawn(notify::run(feed, state.clone())));
         let upkeep = tokio::spawn(upkeep(state.metrics.clone()));
-        let (started_tx, started_rx) = tokio::sync::oneshot::channel::<tokio::time::Instant>();
-        // Streams end first (each with its final status), then both servers
-        // stop accepting and drain, all by one deadline (sent on `stop`).
-        let (stop_tx, stop_rx) = tokio::sync::watch::channel(None::<tokio::time::Instant>);
-        let ready = state.ready.clone();
-        let streams = state.streams.clone();
-        let coordinator = tokio::spawn(async move {
-            shutdown.await;
-            let deadline = tokio::time::Instant::now() + drain;
-            ready.store(false, Ordering::Release);
-            tracing::info!(active = streams.active_streams(), "shutting down: ending streams");
-            streams.shutdown();
-            if !streams.drained(drain).await {
-                tracing::warn!(timeout = ?drain, "streams still open after the drain timeout");
-            }
-            tracing::info!("shutting down: draining in-flight requests");
-            let _ = stop_tx.send(Some(deadline));
-        });
-        let mut http_stop = stop_rx.clone();
-        let signal = async move {
-            let deadline = http_stop.wait_for(Option::is_some).await.ok().and_then(|d| *d);
-            if let Some(deadline) = deadline {
-                let _ = started_tx.send(deadline);
-            }
-        };
-        let mut grpc_stop = stop_rx.clone();
-        let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
-        let limits = &state.config.limits;
-        let admission = shed::GrpcLayer {
-            admission: shed::Admission {
-                gate: shed::Gate::new(limits.max_in_flight),
-                clients: Arc::clone(&state.in_flight),
-            },
-            arrivals: state.arrivals.clone(),
-            auth: state.auth.clone(),
-            message_timeout: limits.request_message_timeout,
-        };
-        let incoming = connections::tracked_incoming(
-            grpc_listener,
-            connections::ConnGate::new(limits.max_connections, "grpc"),
-            (limits.idle_timeout, limits.write_stall_timeout),
-            limits.stream_buffer_bytes,
-        );
-        let mut grpc = tokio::spawn(
-            grpc_server
-                .http2_keepalive_interval(Some(Duration::from_secs(30)))
-                .max_concurrent_streams(limits.http2_max_concurrent_streams)
-                .layer(connections::GrpcConnLayer)
-                .layer(tower::util::MapRequestLayer::new(compression::frames_uncompressed))
-                .layer(grpc_edge::layer())
-                .layer(admission)
-                .add_routes(routes)
-                .serve_with_incoming_shutdown(incoming, async move {
-                    let _ = grpc_stop.wait_for(Option::is_some).await;
-                }),
-        );
-        let router = rest::router(state.clone());
-        let listening = listen::Listening {
-            header_read_timeout: header_timeout,
-            idle_timeout: limits.idle_timeout,
-            write_stall_timeout: limits.write_stall_timeout,
-            max_concurrent_streams: limits.http2_max_concurrent_streams,
-            connections: connections::ConnGate::new(limits.max_connections, "http"),
-            stream_buffer_bytes: limits.stream_buffer_bytes,
-        };
-        let mut serve = std::pin::pin!(listen::serve(listener, router, listening, http_tls, signal));
-        tokio::select! {
-            () = &mut serve => {}
-            Ok(deadline) = started_rx => {
-                if tokio::time::timeout_at(deadline, &mut serve).await.is_err() {
-                    tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
-                }
-            }
-        }
-        let deadline = stop_rx.borrow().unwrap_or_else(|| tokio::time::Instant::now() + drain);
-        match tokio::time::timeout_at(deadline, &mut grpc).await {
-            Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
-            Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
-            Ok(Ok(Ok(()))) => {}
-            Err(_) => {
-                tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls");
-                grpc.abort();
-            }
-        }
-        coordinator.abort();
-        upkeep.abort();
-        if let Some(notify) = notify {
+        Background { upkeep, notify }
+    }
+
+    fn stop(self) {
+        self.upkeep.abort();
+        if let Some(notify) = self.notify {
             notify.abort();
         }
-        state.store.close().await;
-        tracing::info!("stopped");
-        Ok(())
+    }
+}
+
+/// On `shutdown`: readiness flips to 503, every stream ends with its final
+/// status (waited for at most the drain timeout), then `stop` tells both
+/// servers to drain by the deadline, the drain timeout from the signal.
+fn end_streams_then_stop(
+    shutdown: impl Future<Output = ()> + Send + 'static,
+    state: &AppState,
+    stop: watch::Sender<Option<Instant>>,
+) -> impl Future<Output = ()> + Send + 'static {
+    let drain = state.config.drain_timeout;
+    let ready = state.ready.clone();
+    let streams = state.streams.clone();
+    async move {
+        shutdown.await;
+        let deadline = Instant::now() + drain;
+        ready.store(false, Ordering::Release);
+        tracing::info!(active = streams.active_streams(), "shutting down: ending streams");
+        streams.shutdown();
+        if !streams.drained(drain).await {
+            tracing::warn!(timeout = ?drain, "streams still open after the drain timeout");
+        }
+        tracing::info!("shutting down: draining in-flight requests");
+        let _ = stop.send(Some(deadline));
+    }
+}
+
+/// The gRPC server builder, with TLS when serving it.
+fn grpc_server(
+    tls: Option<&tls::TlsMaterial>,
+    handshake_timeout: Duration,
+) -> anyhow::Result<tonic::transport::Server> {
+    let server = tonic::transport::Server::builder();
+    Ok(match tls {
+        Some(m) => server.tls_config(m.grpc_config(handshake_timeout))?,
+        None => server,
+    })
+}
+
+/// The gRPC server on its listener, behind the edge, admission and
+/// connection layers, until `stop` says to drain.
+///
+/// # Errors
+/// The routes cannot be built (see [`Application::run_until_stopped`]).
+async fn serve_grpc(
+    server: tonic::transport::Server,
+    listener: TcpListener,
+    state: &AppState,
+    mut stop: StopSignal,
+) -> anyhow::Result<impl Future<Output = Result<(), tonic::transport::Error>> + Send + 'static> {
+    let routes = grpc::routes(state.clone(), state.streams.clone()).await?;
+    let limits = &state.config.limits;
+    let admission = shed::GrpcLayer {
+        admission: shed::Admission {
+            gate: shed::Gate::new(limits.max_in_flight),
+            clients: Arc::clone(&state.in_flight),
+        },
+        arrivals: state.arrivals.clone(),
+        auth: state.auth.clone(),
+        message_timeout: limits.request_message_timeout,
+    };
+    let incoming = connections::tracked_incoming(
+        listener,
+        connections::ConnGate::new(limits.max_connections, "grpc"),
+        (limits.idle_timeout, limits.write_stall_timeout),
+        limits.stream_buffer_bytes,
+    );
+    Ok(server
+        .http2_keepalive_interval(Some(Duration::from_secs(30)))
+        .max_concurrent_streams(limits.http2_max_concurrent_streams)
+        .layer(connections::GrpcConnLayer)
+        .layer(tower::util::MapRequestLayer::new(compression::frames_uncompressed))
+        .layer(grpc_edge::layer())
+        .layer(admission)
+        .add_routes(routes)
+        .serve_with_incoming_shutdown(incoming, async move {
+            let _ = stop.wait_for(Option::is_some).await;
+        }))
+}
+
+/// Serves REST until `stop` says to drain, then lets in-flight requests
+/// finish until the deadline it carries, and cuts off the rest.
+async fn serve_http(listener: TcpListener, state: &AppState, tls: Option<tls::Acceptor>, mut stop: StopSignal) {
+    let (started_tx, started_rx) = tokio::sync::oneshot::channel::<Instant>();
+    let signal = async move {
+        let deadline = stop.wait_for(Option::is_some).await.ok().and_then(|d| *d);
+        if let Some(deadline) = deadline {
+            let _ = started_tx.send(deadline);
+        }
+    };
+    let router = rest::router(state.clone());
+    let limits = &state.config.limits;
+    let listening = listen::Listening {
+        header_read_timeout: limits.header_read_timeout,
+        idle_timeout: limits.idle_timeout,
+        write_stall_timeout: limits.write_stall_timeout,
+        max_concurrent_streams: limits.http2_max_concurrent_streams,
+        connections: connections::ConnGate::new(limits.max_connections, "http"),
+        stream_buffer_bytes: limits.stream_buffer_bytes,
+    };
+    let mut serve = std::pin::pin!(listen::serve(listener, router, listening, tls, signal));
+    tokio::select! {
+        () = &mut serve => {}
+        Ok(deadline) = started_rx => {
+            if tokio::time::timeout_at(deadline, &mut serve).await.is_err() {
+                let drain = state.config.drain_timeout;
+                tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining requests");
+            }
+        }
+    }
+}
+
+/// Waits for the gRPC server to finish draining until `deadline`, then cuts
+/// off the calls still open.
+async fn drain_grpc(mut grpc: JoinHandle<Result<(), tonic::transport::Error>>, deadline: Instant, drain: Duration) {
+    match tokio::time::timeout_at(deadline, &mut grpc).await {
+        Ok(Ok(Err(e))) => tracing::error!(error = %e, "the gRPC server failed"),
+        Ok(Err(e)) => tracing::error!(error = %e, "the gRPC server task failed"),
+        Ok(Ok(Ok(()))) => {}
+        Err(_) => {
+            tracing::warn!(timeout = ?drain, "drain timeout: cutting off the remaining gRPC calls");
+            grpc.abort();
+        }
     }
 }
 

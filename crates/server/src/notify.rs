@@ -1,7 +1,7 @@
-//! Cross-node cache consistency: each node listens on the PostgreSQL
-//! channel its schema's trigger announces clip changes on
-//! (`migrations/postgres`), and drops what another node changed from its
-//! cache of compiled clips. No broker beyond the database.
+//! Cross-node cache consistency: each node subscribes to its store's
+//! [`ChangeFeed`] (PostgreSQL: the channel its schema's trigger announces
+//! clip changes on, `migrations/postgres`), and drops what another node
+//! changed from its cache of compiled clips. No broker beyond the database.
 //!
 //! The payload is `<op> <version> <id>`. Handling is idempotent, so a node
 //! hears its own writes too and ignores them: a `create` or `replace` at a
@@ -30,14 +30,14 @@
 //! lost connection loses announcements too, every (re)subscription starts a
 //! `broadcast_store::resync`.
 
+use std::sync::Arc;
 use std::time::Duration;
 
-use sqlx::postgres::{PgListener, PgPoolOptions};
 use tokio::time::Instant;
 
 use super::broadcast_store::{self, Heard};
 use super::state::AppState;
-use crate::store::postgres::PgStore;
+use crate::store::feed::{ChangeFeed, Subscription};
 
 /// How often each node proves the channel alive.
 pub const HEARTBEAT: Duration = Duration::from_secs(2);
@@ -102,25 +102,25 @@ pub fn apply(state: &AppState, change: &Change<'_>) {
 /// Listens until aborted: subscribe, resume the cache, apply changes; on a
 /// lost connection suspend the cache and subscribe again, with backoff.
 /// Runs beside the server (spawned by `Application::run_until_stopped`).
-pub async fn run(store: PgStore, state: AppState) {
-    let heartbeat = tokio::spawn(heartbeat(store.clone()));
+pub async fn run(feed: Arc<dyn ChangeFeed>, state: AppState) {
+    let heartbeat = tokio::spawn(heartbeat(Arc::clone(&feed)));
     let _stop_heartbeat = AbortOnDrop(heartbeat);
     let mut failures = 0u32;
     loop {
         state.cache_suspend();
         metrics::gauge!("inbetween_notify_subscribed").set(0.0);
-        match subscribe(&store).await {
-            Ok(listener) => {
+        match feed.subscribe().await {
+            Ok(subscription) => {
                 failures = 0;
                 state.cache_resume();
                 metrics::gauge!("inbetween_notify_subscribed").set(1.0);
-                tracing::info!(channel = store.channel(), "listening for clip changes");
+                tracing::info!(channel = feed.name(), "listening for clip changes");
                 // Whatever was announced while this node could not hear.
                 tokio::spawn({
                     let state = state.clone();
                     async move { broadcast_store::resync(&state).await }
                 });
-                listen(listener, &state).await;
+                listen(subscription, &state).await;
                 tracing::warn!("lost the clip-change subscription: serving from the store until it is back");
             }
             Err(e) => {
@@ -133,33 +133,17 @@ pub async fn run(store: PgStore, state: AppState) {
     }
 }
 
-/// A fresh connection of its own (not one of the store's pool), with `LISTEN` issued.
-async fn subscribe(store: &PgStore) -> Result<PgListener, sqlx::Error> {
-    let pool = PgPoolOptions::new()
-        .max_connections(1)
-        .acquire_timeout(Duration::from_secs(5))
-        .idle_timeout(None)
-        .max_lifetime(None)
-        .connect_with(store.connect_options().clone())
-        .await?;
-    let mut listener = PgListener::connect_with(&pool).await?;
-    listener.eager_reconnect(false);
-    listener.ignore_pool_close_event(true);
-    listener.listen(store.channel()).await?;
-    Ok(listener)
-}
-
 /// Applies notifications until the connection fails or falls silent.
-async fn listen(mut listener: PgListener, state: &AppState) {
+async fn listen(mut subscription: Box<dyn Subscription>, state: &AppState) {
     let mut deadline = Instant::now() + SILENCE_LIMIT;
     loop {
         tokio::select! {
-            received = listener.try_recv() => match received {
-                Ok(Some(n)) => {
+            received = subscription.next() => match received {
+                Ok(Some(payload)) => {
                     deadline = Instant::now() + SILENCE_LIMIT;
-                    match parse(n.payload()) {
+                    match parse(&payload) {
                         Some(change) => apply(state, &change),
-                        None => tracing::warn!(payload = n.payload(), "ignoring a malformed clip-change notification"),
+                        None => tracing::warn!(payload = payload.as_str(), "ignoring a malformed clip-change notification"),
                     }
                 }
                 Ok(None) => return,
@@ -168,7 +152,7 @@ async fn listen(mut listener: PgListener, state: &AppState) {
                     return;
                 }
             },
-            // The listener is dropped after this, never polled again, so
+            // The subscription is dropped after this, never polled again, so
             // cancelling its receive midway is harmless.
             () = tokio::time::sleep_until(deadline) => {
                 tracing::warn!(silence = ?SILENCE_LIMIT, "no clip-change notification or heartbeat heard");
@@ -178,15 +162,14 @@ async fn listen(mut listener: PgListener, state: &AppState) {
     }
 }
 
-/// Sends a `ping` on the channel every [`HEARTBEAT`], so listeners can tell
-/// a quiet channel from a dead connection.
-async fn heartbeat(store: PgStore) {
+/// Sends a `ping` on the feed every [`HEARTBEAT`], so listeners can tell
+/// a quiet feed from a dead connection.
+async fn heartbeat(feed: Arc<dyn ChangeFeed>) {
     let mut every = tokio::time::interval(HEARTBEAT);
     every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         every.tick().await;
-        let sent = sqlx::query("SELECT pg_notify($1, 'ping 0 -')").bind(store.channel()).execute(store.pool()).await;
-        if let Err(e) = sent {
+        if let Err(e) = feed.ping().await {
             tracing::debug!(error = %e, "heartbeat not sent");
         }
     }

@@ -13,8 +13,8 @@
 
 use ::gltf::accessor::{Accessor, DataType, Dimensions};
 
-use super::ImportError;
 use super::buffers::Buffers;
+use super::error::ImportError;
 
 /// Most bytes of strided elements read at once from a buffer.
 const WINDOW_BYTES: usize = 1 << 20;

@@ -25,8 +25,9 @@ use base64::Engine as _;
 use base64::engine::{DecodePaddingMode, GeneralPurpose, GeneralPurposeConfig};
 use bytes::Bytes;
 
+use super::error::ImportError;
 use super::source::Source;
-use super::{ImportError, ImportLimits, Resolver};
+use super::spec::{ImportLimits, Resolver};
 
 /// The chunks of a GLB file: the JSON read into memory, the BIN chunk a
 /// range of the source, read later only where accessors point.

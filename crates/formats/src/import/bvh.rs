@@ -18,8 +18,11 @@ use std::borrow::Cow;
 
 use glam::{DQuat, DVec3, Vec3, Vec4};
 
-use super::Warning;
-use super::{Budget, ImportError, ImportLimits, ImportOptions, Imported, clip_name, unique_names};
+use super::budget::Budget;
+use super::error::ImportError;
+use super::names::{clip_name, unique_names};
+use super::spec::{ImportLimits, ImportOptions, Imported};
+use super::warning::Warning;
 use anim::lint;
 use anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 

@@ -16,13 +16,14 @@ use ::gltf::scene::Transform as GltfTransform;
 use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 
 use super::accessor::{Expect, read_f32};
+use super::budget::{Budget, read_document};
 use super::buffers::{Buffers, split_glb};
+use super::error::ImportError;
 use super::mesh::{MeshPlan, MeshReader, Palette};
+use super::names::{clip_name, unique_names};
 use super::source::Source;
-use super::warning::NOT_IMPORTED;
-use super::{
-    Budget, Format, ImportError, ImportOptions, Imported, Resolver, Warning, clip_name, read_document, unique_names,
-};
+use super::spec::{Format, ImportOptions, Imported, Resolver};
+use super::warning::{NOT_IMPORTED, Warning};
 use anim::lint::{self, Lint, LintCode};
 use anim::{
     Channel, ClipSpec, Interpolation, JointSpec, Keys, MAX_PARAMETER_WIDTH, ParameterSpec, Playback, SkeletonSpec,

@@ -29,8 +29,9 @@ use glam::Mat4;
 
 use super::accessor::{Expect, read_f32, read_uint, read_view};
 use super::buffers::{Buffers, decode_data_uri};
-use super::warning::NOT_IMPORTED;
-use super::{ImportError, ImportLimits, Warning};
+use super::error::ImportError;
+use super::spec::ImportLimits;
+use super::warning::{NOT_IMPORTED, Warning};
 use crate::wire::mesh::{self, Material, Mesh, Primitive, Texture};
 
 /// What of the file's meshes could be kept, found before validation.

@@ -13,7 +13,8 @@ use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
-use super::json::{DocError, EndsDoc, InterpolationDoc, SpeedDoc};
+use super::doc::{DocError, EndsDoc, InterpolationDoc, SpeedDoc};
+use super::float::write_float;
 use anim::ik::{AimSpec, ChainSpec, EffectorSpec, IkReport, IkSpec, LimitSpec, TwoBoneSpec};
 use anim::{Channel, IkTarget, KeyedIkSpec, Keys, Speed, TrackSpec};
 
@@ -477,7 +478,7 @@ pub fn write_reports(out: &mut impl BufMut, reports: &[IkReport]) {
         out.put_slice(b"{\"kind\":\"");
         out.put_slice(r.kind.name().as_bytes());
         out.put_slice(b"\",\"residual\":");
-        super::json::write_float(out, r.residual);
+        write_float(out, r.residual);
         out.put_slice(b",\"iterations\":");
         write_u32(out, r.iterations);
         out.put_slice(if r.converged { b",\"converged\":true}" } else { b",\"converged\":false}" });

@@ -11,12 +11,15 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use serde::ser::{SerializeMap, SerializeSeq};
 use serde::{Deserialize, Serialize, Serializer};
 
+pub use super::doc::{ChannelDoc, DocError, EaseDoc, EndsDoc, InterpolationDoc, PlaybackDoc, SpaceDoc, SpeedDoc};
+pub use super::float::write_float;
+use super::float::{common_text, finite_stand_in};
 use super::ik::IkDoc;
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{
-    Channel, ClipError, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, Keys, ParameterLayout,
-    ParameterSpec, Playback, Pose, Skeleton, SkeletonSpec, Space, Speed, TrackSpec, Transform,
+    Channel, ClipSpec, EventSpec, JointSpec, Keys, ParameterLayout, ParameterSpec, Pose, Skeleton, SkeletonSpec, Space,
+    Speed, TrackSpec, Transform,
 };
 
 /// A clip document: joints' keyframe tracks, an optional skeleton, events,
@@ -169,62 +172,6 @@ impl ParameterDoc {
 pub struct EventDoc {
     pub time: f32,
     pub name: String,
-}
-
-macro_rules! wire_enum {
-    ($(#[$m:meta])* $doc:ident => $core:ident { $($(#[$vm:meta])* $variant:ident = $name:literal),+ $(,)? }) => {
-        $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
-        // Every wire name is its variant in snake_case; said once here so the OpenAPI schema
-        // (utoipa cannot read the per-variant renames through the macro) spells them the same.
-        #[serde(rename_all = "snake_case")]
-        pub enum $doc { $($(#[$vm])* #[serde(rename = $name)] $variant),+ }
-        impl From<$doc> for $core {
-            fn from(d: $doc) -> $core { match d { $($doc::$variant => $core::$variant),+ } }
-        }
-        impl From<$core> for $doc {
-            fn from(c: $core) -> $doc { match c { $($core::$variant => $doc::$variant),+ } }
-        }
-        impl std::str::FromStr for $doc {
-            type Err = String;
-            fn from_str(s: &str) -> Result<Self, String> {
-                match s {
-                    $($name => Ok($doc::$variant),)+
-                    _ => Err(format!("expected one of: {}", [$($name),+].join(", "))),
-                }
-            }
-        }
-    };
-}
-
-wire_enum!(ChannelDoc => Channel { Translation = "translation", Rotation = "rotation", Scale = "scale" });
-wire_enum!(
-    #[derive(Default)]
-    InterpolationDoc => Interpolation {
-        Step = "step", #[default] Linear = "linear", CatmullRom = "catmull_rom", CubicHermite = "cubic_hermite",
-        BSpline = "b_spline"
-    }
-);
-wire_enum!(EndsDoc => Ends { Reflect = "reflect", ZeroSlope = "zero_slope", Wrap = "wrap", Phantom = "phantom" });
-wire_enum!(SpeedDoc => Speed { Keyed = "keyed", Constant = "constant" });
-wire_enum!(#[derive(Default)] PlaybackDoc => Playback { #[default] Once = "once", Loop = "loop", PingPong = "ping_pong" });
-wire_enum!(EaseDoc => Ease { Linear = "linear", EaseIn = "ease_in", EaseOut = "ease_out", EaseInOut = "ease_in_out" });
-wire_enum!(SpaceDoc => Space { Local = "local", Model = "model" });
-
-/// A clip document that cannot be accepted: a stable `code`, the JSON
-/// pointer of the offending field (empty for the whole body) and a message.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{pointer}: {detail}")]
-pub struct DocError {
-    pub code: &'static str,
-    pub pointer: String,
-    pub detail: String,
-}
-
-impl From<ClipError> for DocError {
-    fn from(e: ClipError) -> Self {
-        DocError { code: e.kind.code(), pointer: e.path.to_pointer(), detail: e.kind.to_string() }
-    }
 }
 
 /// Parses a clip document, reporting the JSON pointer of any type error.
@@ -565,44 +512,6 @@ fn write_json_str(out: &mut impl BufMut, s: &str) {
     }
 }
 
-/// A float as serde_json writes a finite one. Never `null`: the build
-/// invariants make every sampled value finite (`anim::Clip::build` refuses
-/// what would overflow), and should one slip through it is written as the
-/// nearest finite number (NaN as 0), so a client's number is always a number.
-pub fn write_float<F: zmij::Float + Into<f64> + Copy>(out: &mut impl BufMut, x: F) {
-    if x.into().is_finite() {
-        out.put_slice(zmij::Buffer::new().format_finite(x).as_bytes());
-    } else {
-        write_finite_stand_in(out, x.into());
-    }
-}
-
-#[cold]
-fn write_finite_stand_in(out: &mut impl BufMut, x: f64) {
-    out.put_slice(zmij::Buffer::new().format_finite(finite_stand_in(x)).as_bytes());
-}
-
-/// The text of the values most of a pose is made of — `0.0` (untouched
-/// translation axes and quaternion components) and `1.0` (scales, identity
-/// rotations) — exactly as the formatter writes them, without running it:
-/// in a typical pose two numbers in three are one of these.
-#[inline(always)]
-fn common_text(x: f32) -> Option<&'static [u8]> {
-    match x.to_bits() {
-        0x0000_0000 => Some(b"0.0"),
-        0x8000_0000 => Some(b"-0.0"),
-        0x3f80_0000 => Some(b"1.0"),
-        0xbf80_0000 => Some(b"-1.0"),
-        _ => None,
-    }
-}
-
-/// The nearest finite `f32` to a non-finite `x` (±`f32::MAX`; 0 for NaN).
-#[cold]
-fn finite_stand_in(x: f64) -> f32 {
-    if x.is_nan() { 0.0 } else { f32::MAX.copysign(x as f32) }
-}
-
 /// A joint's numbers, assembled on the stack and appended with one copy.
 ///
 /// `BufMut::put_slice` is not inlined, so appending each number, comma and
@@ -790,7 +699,7 @@ impl Serialize for MatricesJson<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use anim::{Clip, ClipSpec, Interpolation, SampleOptions, Sampler, TrackSpec};
+    use anim::{Clip, ClipSpec, Interpolation, Playback, SampleOptions, Sampler, TrackSpec};
 
     /// The shortcut for 0 and ±1 writes what the formatter would.
     #[test]

@@ -1,6 +1,8 @@
 //! Wire formats at the edge: each protocol's types and their conversions to
 //! and from the core (`[x, y, z, w]` quaternion order is fixed here).
 
+mod doc;
+mod float;
 pub mod frame;
 pub mod grid;
 pub mod ik;

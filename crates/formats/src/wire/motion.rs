@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use super::doc::{DocError, PlaybackDoc};
 use super::ik::IkDoc;
-use super::json::{DocError, PlaybackDoc};
 use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
 
 /// A composed motion: layers of clips with weights, masks, sync groups,

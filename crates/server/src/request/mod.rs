@@ -32,6 +32,7 @@
 //! clip is looked up (`clip_not_found`), except the stream rules that need
 //! the clip (its start is the default start).
 
+mod body;
 mod broadcast;
 mod cost;
 mod list;
@@ -40,6 +41,7 @@ mod raw;
 mod sample;
 mod stream;
 
+pub use body::parse_json;
 pub use broadcast::{DEFAULT_IDLE_TIMEOUT_SECS, MAX_IDLE_TIMEOUT_SECS, RawBroadcast};
 pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, MAX_UNARY_ANSWER_BYTES, Wire, json_str};
 pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};

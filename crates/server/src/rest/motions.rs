@@ -16,7 +16,7 @@ use utoipa::ToSchema;
 use crate::auth::ReadAccess;
 use crate::error::ApiError;
 use crate::request::{
-    Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body,
+    Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body, parse_json,
 };
 use crate::state::AppState;
 use anim::motion::MotionOptions;
@@ -26,7 +26,7 @@ use formats::wire::motion::MotionDoc;
 
 use super::extract::JsonBody;
 use super::pieces::{self, Pieces, PoseWriter};
-use super::poses::{json_response, parse_json};
+use super::poses::json_response;
 
 /// `POST /v1/poses`: one pose of a motion.
 #[derive(Debug, Deserialize, ToSchema)]

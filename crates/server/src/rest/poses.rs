@@ -24,7 +24,7 @@ use crate::cache::CachedClip;
 use crate::error::ApiError;
 use crate::request::{
     Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
-    parameter_subset,
+    parameter_subset, parse_json,
 };
 use crate::state::AppState;
 use anim::{SampleOptions, Sampler};
@@ -192,32 +192,6 @@ impl SampleRequest {
             at: in_body,
         }
     }
-}
-
-/// A JSON request body, its type errors pointed at the field.
-pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, ApiError> {
-    let de = &mut serde_json::Deserializer::from_slice(body);
-    let req = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
-        use serde_path_to_error::Segment;
-        let pointer: String = e
-            .path()
-            .iter()
-            .map(|s| match s {
-                Segment::Seq { index } => format!("/{index}"),
-                Segment::Map { key } => format!("/{}", key.replace('~', "~0").replace('/', "~1")),
-                Segment::Enum { variant } => format!("/{variant}"),
-                Segment::Unknown => String::new(),
-            })
-            .collect();
-        let inner = e.into_inner();
-        if inner.is_syntax() || inner.is_eof() {
-            ApiError::MalformedJson { pointer, detail: inner.to_string() }
-        } else {
-            ApiError::invalid("invalid_field", pointer, inner.to_string())
-        }
-    })?;
-    de.end().map_err(|e| ApiError::MalformedJson { pointer: String::new(), detail: e.to_string() })?;
-    Ok(req)
 }
 
 /// Many poses in one request.

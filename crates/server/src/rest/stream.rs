@@ -32,7 +32,7 @@ use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use crate::auth::{Caller, ReadAccess};
 use crate::config::Limits;
 use crate::error::ApiError;
-use crate::request::{Format, Opening, Raw, RawModes, RawMotion, RawStream, in_body, in_query};
+use crate::request::{Format, Opening, Raw, RawModes, RawMotion, RawStream, in_body, in_query, parse_json};
 use crate::state::AppState;
 use crate::stream::ws::{MotionResolver, WsConfig, close};
 use crate::stream::{StreamMotion, Subscription};
@@ -240,7 +240,7 @@ async fn open(
     text: &str,
     lane: Option<u64>,
 ) -> Result<Result<Subscription, crate::stream::AdmitError>, ApiError> {
-    let msg: StreamOpen = super::poses::parse_json(text.as_bytes())?;
+    let msg: StreamOpen = parse_json(text.as_bytes())?;
     let raw = RawStream {
         fps: msg.fps.map(Raw::Number),
         start: msg.start.map(Raw::Number),
@@ -309,7 +309,7 @@ impl MotionResolver for StateMotions {
         let state = self.0.clone();
         Box::pin(async move {
             let built = async {
-                let doc: MotionDoc = super::poses::parse_json(motion.to_string().as_bytes())?;
+                let doc: MotionDoc = parse_json(motion.to_string().as_bytes())?;
                 let raw = RawMotion {
                     spec: doc.to_spec("/motion")?,
                     joints: None,

@@ -14,35 +14,17 @@
 //! substring cannot be served by a B-tree: it is tested on the name alone,
 //! never on a document.
 
-use sqlx::{Database, Encode, QueryBuilder, Type};
+use sqlx::{Encode, QueryBuilder, Type};
 
 use super::ListQuery;
-
-/// Where the two backends' SQL differs.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Dialect {
-    /// The name column compared bytewise (code-point order), as the index
-    /// the prefix range uses sorts it.
-    bytewise_name: &'static str,
-    /// `f(haystack, needle)`: the 1-based position of a substring, 0 if absent.
-    position_fn: &'static str,
-}
-
-pub(crate) const SQLITE: Dialect = Dialect { bytewise_name: "c.name", position_fn: "instr" };
-/// `clips_by_name_bytewise` is built `COLLATE "C"`, whatever the database's locale.
-pub(crate) const POSTGRES: Dialect = Dialect { bytewise_name: "c.name COLLATE \"C\"", position_fn: "strpos" };
+use super::dialect::Dialect;
 
 /// `SELECT <columns> FROM clips c WHERE <filters> ORDER BY id LIMIT n`.
 /// `reference_joints` is the joint count of `q.compatible_with`'s clip
 /// (a clip with fewer joints cannot include all of its joints).
-pub(crate) fn list_query<DB>(
-    columns: &str,
-    q: &ListQuery,
-    reference_joints: Option<i64>,
-    d: Dialect,
-) -> QueryBuilder<DB>
+pub(crate) fn list_query<DB>(columns: &str, q: &ListQuery, reference_joints: Option<i64>) -> QueryBuilder<DB>
 where
-    DB: Database,
+    DB: Dialect,
     DB::Arguments: Default,
     for<'t> String: Encode<'t, DB> + Type<DB>,
     for<'t> f64: Encode<'t, DB> + Type<DB>,
@@ -56,13 +38,13 @@ where
         qb.push(" AND c.name = ").push_bind(name.clone());
     }
     if let Some(prefix) = &q.name_prefix {
-        qb.push(format_args!(" AND {} >= ", d.bytewise_name)).push_bind(prefix.clone());
+        qb.push(format_args!(" AND {} >= ", DB::BYTEWISE_NAME)).push_bind(prefix.clone());
         if let Some(end) = prefix_end(prefix) {
-            qb.push(format_args!(" AND {} < ", d.bytewise_name)).push_bind(end);
+            qb.push(format_args!(" AND {} < ", DB::BYTEWISE_NAME)).push_bind(end);
         }
     }
     if let Some(part) = &q.name_contains {
-        qb.push(format_args!(" AND {}(c.name, ", d.position_fn)).push_bind(part.clone()).push(") > 0");
+        qb.push(format_args!(" AND {}(c.name, ", DB::POSITION_FN)).push_bind(part.clone()).push(") > 0");
     }
     if let Some(tag) = &q.tag {
         qb.push(" AND c.id IN (SELECT t.clip_id FROM clip_tags t WHERE t.tag = ").push_bind(tag.clone()).push(")");

@@ -2,9 +2,12 @@
 //!
 //! The service talks to a [`ClipStore`]. SQLite ([`sqlite::SqliteStore`]) is
 //! embedded so that `inbetween serve` needs no setup; PostgreSQL
-//! ([`postgres::PgStore`]) is for several nodes sharing one database. Both
-//! run their own migrations (`migrations/sqlite`, `migrations/postgres`, the
-//! same table), and nothing above this module knows which one is underneath.
+//! ([`postgres::PgStore`]) is for several nodes sharing one database, whose
+//! [`feed::ChangeFeed`] tells each node what the others changed. Both are one
+//! implementation ([`sql::SqlStore`]) running the same statements, with the
+//! few differences in a [`dialect::Dialect`]; each runs its own migrations
+//! (`migrations/sqlite`, `migrations/postgres`, the same tables), and nothing
+//! above this module knows which one is underneath.
 //!
 //! **Architecture invariant:** the store knows nothing of clips beyond what a
 //! row holds. It never parses or validates documents: whatever reaches it has
@@ -28,13 +31,16 @@ use futures_util::future::BoxFuture;
 use anim::Playback;
 
 pub mod broadcast;
+pub mod dialect;
+pub mod feed;
 mod filter;
 pub mod postgres;
 mod retry;
+pub mod sql;
 pub mod sqlite;
 
 pub use broadcast::{StoredBroadcast, StoredControl};
-pub use retry::RetryPolicy;
+pub use retry::{RetryPolicy, Transience};
 
 /// Whether the store insists on durable commits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -45,14 +45,14 @@ use tokio::sync::{Notify, broadcast, watch};
 use tokio::time::Instant;
 
 use super::broadcast_program::{ControlLog, Program, StampedControl};
+use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
 use super::hub::{EndReason, Item, unix_nanos};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
-use super::playhead::Control;
 use super::schedule::{Grid, Schedule};
-use super::subscription::{ControlCheck, ControlError, ControlSink, Source, Subscription};
+use super::subscription::{ControlSink, Source, Subscription};
 
 /// Controls accepted but not yet applied, per broadcast, at most.
 const PENDING_CONTROLS: usize = 64;
@@ -516,8 +516,8 @@ impl Broadcast {
     }
 
     fn admissible(&self, control: &Control) -> Result<(), ControlError> {
-        if *control == Control::Stop {
-            return Err(ControlError::Invalid("a broadcast has no `stop`: DELETE it to end it for every viewer"));
+        if let Some(refusal) = control.refused_on_broadcast() {
+            return Err(ControlError::Invalid(refusal));
         }
         if self.ended.load(Ordering::Acquire) {
             return Err(ControlError::Invalid("the broadcast has ended"));
@@ -550,12 +550,7 @@ impl Broadcast {
         if !desk.known.insert(Arc::clone(&control.id)) {
             return;
         }
-        match control.control {
-            Control::Play => desk.paused = false,
-            Control::Pause => desk.paused = true,
-            Control::Speed(v) => desk.speed = v,
-            _ => {}
-        }
+        (desk.paused, desk.speed) = control.control.status_after(desk.paused, desk.speed);
         desk.inbox.push(control);
         desk.last_control = Instant::now();
         metrics::counter!("inbetween_broadcast_controls_total").increment(1);

@@ -27,11 +27,12 @@
 
 use std::sync::Arc;
 
+use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameEncoder};
 use super::hub::{StreamPlayer, TickStamp, frame_data, sample_tick};
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
-use super::playhead::{Control, Crossfade, Playhead};
+use super::playhead::Playhead;
 use anim::motion::Player;
 
 /// A control with its stamp and its id (what orders the controls of one
@@ -215,29 +216,14 @@ impl Program {
     /// before took away) is skipped — the same way on every node.
     fn apply(&mut self, control: Control, k: u64) -> bool {
         let st = &mut self.state;
-        match control {
-            Control::Crossfade(Crossfade { to, duration, ease, .. }) => {
-                if let Err(e) = st.player.crossfade(to, duration, ease) {
-                    tracing::warn!(error = %e, "a broadcast crossfade skipped");
-                }
+        match control.apply(&mut st.playhead, &mut st.player, k) {
+            Ok(Applied::Jumped) => true,
+            // A broadcast refuses `stop` (`Control::refused_on_broadcast`).
+            Ok(Applied::Continued | Applied::Stopped) => false,
+            Err(Refused { what, error }) => {
+                tracing::warn!(%error, "a broadcast {what} skipped");
                 false
             }
-            Control::Layer { index, weight, duration } => {
-                if let Err(e) = st.player.ramp(index, weight, duration) {
-                    tracing::warn!(error = %e, "a broadcast weight ramp skipped");
-                }
-                false
-            }
-            Control::SetIk(constraints) => {
-                st.player.set_ik(constraints);
-                false
-            }
-            Control::Seek(tau) => {
-                st.player.seek(tau);
-                true
-            }
-            Control::Ik(_) | Control::Stop => false,
-            c => st.playhead.apply(c, k),
         }
     }
 

@@ -30,16 +30,16 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
+use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameData, FrameEncoder};
 use super::events::crossed;
 use super::params::StreamParams;
-use super::playhead::{Control, Playhead};
+use super::playhead::Playhead;
 use super::registry::Listing;
 use super::schedule::Schedule;
 use std::sync::Arc;
 
 use super::pinned::StreamMotion;
-use super::playhead::Crossfade;
 use anim::motion::{MotionOptions, Player};
 use formats::wire::json::ParameterValues;
 
@@ -178,26 +178,14 @@ impl Hub {
         if let Some(controls) = &mut self.controls {
             let mut stop = false;
             while let Ok(control) = controls.try_recv() {
-                match control {
-                    Control::Stop => stop = true,
-                    Control::Seek(tau) => {
-                        self.player.seek(tau);
-                        jumped = true;
+                match control.apply(&mut self.playhead, &mut self.player, tick.k) {
+                    Ok(Applied::Continued) => {}
+                    Ok(Applied::Jumped) => jumped = true,
+                    Ok(Applied::Stopped) => stop = true,
+                    // Checked by the subscription; a refusal here is a bug.
+                    Err(Refused { what, error }) => {
+                        tracing::error!(%error, "a {what} the subscription accepted was refused");
                     }
-                    Control::Crossfade(Crossfade { to, duration, ease, .. }) => {
-                        // Checked by the subscription; a refusal here is a bug.
-                        if let Err(e) = self.player.crossfade(to, duration, ease) {
-                            tracing::error!(error = %e, "a crossfade the subscription accepted was refused");
-                        }
-                    }
-                    Control::Layer { index, weight, duration } => {
-                        if let Err(e) = self.player.ramp(index, weight, duration) {
-                            tracing::error!(error = %e, "a weight ramp the subscription accepted was refused");
-                        }
-                    }
-                    Control::SetIk(constraints) => self.player.set_ik(constraints),
-                    Control::Ik(_) => tracing::error!("IK constraints reached a playback unresolved"),
-                    c => jumped |= self.playhead.apply(c, tick.k),
                 }
             }
             if stop {

@@ -35,6 +35,7 @@
 
 mod broadcast;
 mod broadcast_program;
+mod control;
 mod encode;
 mod engine;
 mod events;
@@ -53,6 +54,7 @@ pub mod ws;
 
 pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Journal, new_control_id};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
+pub use control::{Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, parse_control};
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};
@@ -61,9 +63,9 @@ pub use hub::{EndReason, unix_nanos};
 pub use limits::{AdmitError, StreamPermit};
 pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use pinned::{Pinned, PinnedClip, StreamMotion};
-pub use playhead::{Control, Crossfade, MAX_FADE_SECONDS, MAX_SPEED, Playhead};
+pub use playhead::{MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};
-pub use subscription::{ControlError, Controller, Delivered, Next, Subscription};
+pub use subscription::{Controller, Delivered, Next, Subscription};
 
 pub use formats::wire::grid::PHASE_HEADER;
 

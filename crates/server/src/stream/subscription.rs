@@ -5,14 +5,13 @@
 use bytes::Bytes;
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
+use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
-use super::pinned::StreamMotion;
-use super::playhead::{Control, Playhead};
+use super::playhead::Playhead;
 use super::schedule::{Grid, Schedule};
-use anim::ik::{IkError, IkLimits, build_constraints};
 
 /// A frame as this stream's client must receive it.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,98 +28,6 @@ pub struct Delivered {
 pub enum Next {
     Frame(Delivered),
     End(EndReason),
-}
-
-/// Why a control was refused.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ControlError {
-    #[error("{0}")]
-    Invalid(&'static str),
-    #[error("too many controls pending; wait for a frame before sending more")]
-    Busy,
-    /// An `ik` control's constraint breaks a rule of SPEC §7 (its path is
-    /// relative to the control's `constraints`).
-    #[error("{}", .0.kind)]
-    Ik(IkError),
-    /// A broadcast viewer without the write scope sent a control.
-    #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
-    ReadOnly,
-}
-
-impl ControlError {
-    /// The stable code a client gets (`bad_control`, or the IK rule's).
-    pub fn code(&self) -> &'static str {
-        match self {
-            ControlError::Ik(e) => e.kind.code(),
-            ControlError::ReadOnly => "insufficient_scope",
-            _ => "bad_control",
-        }
-    }
-
-    /// The JSON pointer of the field at fault, when there is one.
-    pub fn pointer(&self) -> Option<String> {
-        match self {
-            ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
-            _ => None,
-        }
-    }
-}
-
-/// Checks controls against the stream's motions: numbers in range, a
-/// crossfade target with the stream's skeleton, a ramp of a layer the
-/// motion playing has.
-#[derive(Debug, Clone)]
-pub(crate) struct ControlCheck {
-    skeleton: std::sync::Arc<StreamMotion>,
-    /// Layers of the motion the latest accepted control left playing.
-    layers: usize,
-    ik_limits: IkLimits,
-}
-
-impl ControlCheck {
-    pub(crate) fn new(params: &StreamParams) -> Self {
-        ControlCheck {
-            skeleton: std::sync::Arc::clone(&params.motion),
-            layers: params.motion.layer_count(),
-            ik_limits: params.ik_limits,
-        }
-    }
-
-    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
-        let control = control.validate().map_err(ControlError::Invalid)?;
-        match &control {
-            Control::Crossfade(fade) => {
-                if !fade.to.skeleton().same_joints(self.skeleton.skeleton()) {
-                    return Err(ControlError::Invalid(
-                        "the crossfade's motion has another skeleton: its first layer's clip must have the stream's joints in the same order",
-                    ));
-                }
-                let (to, here) = (fade.to.parameters(), self.skeleton.parameters());
-                if to.names() != here.names() || to.widths() != here.widths() {
-                    return Err(ControlError::Invalid(
-                        "the crossfade's motion has other parameters: its first layer's clip must have the stream's parameter names and widths in the same order",
-                    ));
-                }
-                if !fade.to.ik().is_empty() {
-                    return Err(ControlError::Invalid(
-                        "a crossfade's motion carries no `ik`: change the stream's constraints with an `ik` control",
-                    ));
-                }
-                self.layers = fade.to.layer_count();
-            }
-            Control::Layer { index, .. } if *index >= self.layers => {
-                return Err(ControlError::Invalid("no such layer in the motion playing"));
-            }
-            Control::Ik(specs) => {
-                let skeleton = self.skeleton.skeleton();
-                let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
-                return Ok(Control::SetIk(constraints));
-            }
-            Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),
-            _ => {}
-        }
-        Ok(control)
-    }
 }
 
 /// Where a broadcast viewer's controls go (the broadcast, which stamps

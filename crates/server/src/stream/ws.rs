@@ -31,19 +31,16 @@ use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes};
 use futures_util::{Sink, SinkExt, Stream, StreamExt};
-use serde::Deserialize;
 use tokio::time::{Instant, MissedTickBehavior, interval_at, timeout};
 
 use futures_util::future::{BoxFuture, poll_fn};
 use futures_util::task::AtomicWaker;
 
+use super::control::{Control, ControlError, ControlMsg, Crossfade, ParsedControl, not_a_control};
 use super::encode::Encoding;
 use super::hub::EndReason;
 use super::pinned::StreamMotion;
-use super::playhead::{Control, Crossfade};
-use super::subscription::{ControlError, Next, Subscription};
-use formats::wire::ik::IkDoc;
-use formats::wire::json::{DocError, EaseDoc};
+use super::subscription::{Next, Subscription};
 
 /// Builds the motion a control names (a crossfade's `to`): the transport's
 /// lookup of its clips. A refusal is the problem document to send back, its
@@ -80,110 +77,12 @@ impl Default for WsConfig {
     }
 }
 
-/// A control message from a client.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
-enum ControlMsg {
-    Play,
-    Pause,
-    Seek {
-        time: f64,
-    },
-    Speed {
-        speed: f64,
-    },
-    Stop,
-    Crossfade {
-        to: serde_json::Value,
-        duration: f64,
-        #[serde(default = "linear")]
-        ease: EaseDoc,
-    },
-    Layer {
-        index: usize,
-        weight: f32,
-        #[serde(default)]
-        duration: f64,
-    },
-    /// Replaces the stream's IK constraints at the next tick.
-    Ik {
-        constraints: Vec<IkDoc>,
-    },
-}
-
-fn linear() -> EaseDoc {
-    EaseDoc::Linear
-}
-
-impl ControlMsg {
-    /// The control, unless it is a crossfade (whose motion needs a lookup).
-    fn simple(self) -> Result<Result<Control, DocError>, (serde_json::Value, f64, EaseDoc)> {
-        Ok(Ok(match self {
-            ControlMsg::Play => Control::Play,
-            ControlMsg::Pause => Control::Pause,
-            ControlMsg::Seek { time } => Control::Seek(time),
-            ControlMsg::Speed { speed } => Control::Speed(speed),
-            ControlMsg::Stop => Control::Stop,
-            ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
-            ControlMsg::Crossfade { to, duration, ease } => return Err((to, duration, ease)),
-            ControlMsg::Ik { constraints } => {
-                let specs = constraints.iter().enumerate().map(|(i, c)| c.to_spec(&format!("/constraints/{i}")));
-                match specs.collect() {
-                    Ok(specs) => Control::Ik(specs),
-                    Err(e) => return Ok(Err(e)),
-                }
-            }
-        }))
-    }
-}
-
-/// A control message parsed on its own (REST `POST /v1/broadcasts/{id}/controls`
-/// takes the same JSON as a stream's control messages).
-#[derive(Debug, Clone, PartialEq)]
-pub enum ParsedControl {
-    Ready(Control),
-    /// A crossfade to the motion `to`, which the caller looks up.
-    Crossfade {
-        to: serde_json::Value,
-        duration: f64,
-        ease: anim::Ease,
-    },
-}
-
-/// Why a control message was refused: its stable code, the JSON pointer at
-/// fault if any, and the human detail.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ControlRefusal {
-    pub code: &'static str,
-    pub pointer: Option<String>,
-    pub detail: String,
-}
-
-/// Parses one control message (`{"op": …}`) as the stream's socket does.
-///
-/// # Errors
-/// Not a control (`bad_control`), or an `ik` control's constraint shape (its rule's code).
-pub fn parse_control(text: &str) -> Result<ParsedControl, ControlRefusal> {
-    let msg = serde_json::from_str::<ControlMsg>(text).map_err(|e| ControlRefusal {
-        code: "bad_control",
-        pointer: None,
-        detail: format!(
-            "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
-        ),
-    })?;
-    match msg.simple() {
-        Ok(Ok(control)) => Ok(ParsedControl::Ready(control)),
-        Ok(Err(e)) => Err(ControlRefusal { code: e.code, pointer: Some(e.pointer), detail: e.detail }),
-        Err((to, duration, ease)) => Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() }),
-    }
-}
-
 /// A crossfade whose motion is being looked up, and the controls sent after it.
 type Lookup = BoxFuture<'static, LookedUp>;
 
 /// A crossfade's motion looked up (or its refusal), with the rest of the
 /// control: duration, ease, and the motion as sent.
-type LookedUp = (Result<Arc<StreamMotion>, serde_json::Value>, f64, EaseDoc, Arc<serde_json::Value>);
+type LookedUp = (Result<Arc<StreamMotion>, serde_json::Value>, f64, anim::Ease, Arc<serde_json::Value>);
 
 /// The controls of one WebSocket stream: applied in the order sent, each
 /// crossfade's lookup holding back the ones after it.
@@ -198,11 +97,7 @@ impl Controls {
     fn receive(&mut self, text: &str, sub: &mut Subscription) -> Option<Message> {
         let msg = match serde_json::from_str::<ControlMsg>(text) {
             Ok(msg) => msg,
-            Err(e) => {
-                return Some(error_message(&format!(
-                    "expected {{\"op\": \"play\"|\"pause\"|\"seek\"|\"speed\"|\"stop\"|\"crossfade\"|\"layer\"|\"ik\", ...}}: {e}"
-                )));
-            }
+            Err(e) => return Some(error_message(&not_a_control(&e, true))),
         };
         if self.lookup.is_some() {
             if self.queued.len() >= QUEUED_CONTROLS {
@@ -216,10 +111,10 @@ impl Controls {
 
     /// Applies `msg` now, or starts its motion's lookup.
     fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
-        match msg.simple() {
-            Ok(Ok(control)) => sub.control(control).err().map(|e| refusal(&e)),
-            Ok(Err(e)) => Some(problem_message(e.code, Some(e.pointer), &e.detail)),
-            Err((to, duration, ease)) => {
+        match msg.parse() {
+            Ok(ParsedControl::Ready(control)) => sub.control(control).err().map(|e| refusal(&e)),
+            Err(e) => Some(problem_message(e.code, Some(e.pointer), &e.detail)),
+            Ok(ParsedControl::Crossfade { to, duration, ease }) => {
                 let Some(motions) = &self.motions else {
                     return Some(error_message("this stream cannot resolve motions"));
                 };
@@ -239,7 +134,7 @@ impl Controls {
         let mut errors = Vec::new();
         match motion {
             Ok(to) => {
-                let fade = Control::Crossfade(Crossfade { to, duration, ease: ease.into(), source: Some(source) });
+                let fade = Control::Crossfade(Crossfade { to, duration, ease, source: Some(source) });
                 errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
             }
             Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),

@@ -1,15 +1,5 @@
-//! The streaming floor (issue 19): the least work that can deliver the
-//! server's frames, measured in the same invocation as the server scenario.
-//!
-//! `inbetween load --floor` takes one frame the server sent (the whole frame,
-//! so the floor sends the same size and content), starts this module's bare
-//! sender as its own process (`inbetween load-floor`, a hidden subcommand) so
-//! that its CPU can be read from `/proc` alone, and runs the same number of
-//! streams at the same fps and duration against it with the same receive
-//! code (`streams`). The report puts the floor's CPU per delivered frame
-//! beside the server's: the ratio is how much the server spends per frame
-//! beyond what any sender of those bytes must (evaluation, encoding, HTTP/2
-//! or WebSocket bookkeeping, copies, scheduling).
+//! The floor's bare sender, run as its own process (`inbetween load-floor`):
+//! the least work that can deliver the server's frames (see `floor`).
 //!
 //! The sender does only what every sender must. Connections are spread over
 //! the server's phase grid (`stream::Grid::phases`), one task per phase on
@@ -31,9 +21,7 @@
 //! ⌊n·10⁹/fps⌋ ns` and its `seq` is `n`, so the load generator measures the
 //! floor's lateness on the floor's grid exactly as it does the server's.
 
-use std::collections::BTreeMap;
 use std::io::{ErrorKind, IoSlice, Read};
-use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -41,16 +29,14 @@ use anyhow::{Context, bail};
 use bytes::{Buf, Bytes, BytesMut};
 use prost::encoding::{WireType, decode_key, decode_varint, encode_varint};
 use serde::{Deserialize, Serialize};
-use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+use tokio::io::AsyncReadExt;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
 
-use super::clock::{ClockSync, unix_now_ns};
-use super::histogram::Summary;
-use super::report::Report;
-use super::{Env, Mode, Options, streams};
+use crate::clock::{ClockSync, unix_now_ns};
+use crate::{Mode, Options};
 use formats::wire::grid::{self, PHASE_HEADER};
 
 /// How long a connection may take to say what it carries.
@@ -288,9 +274,9 @@ impl Tally {
 
 /// The floor's first line.
 #[derive(Debug, Serialize, Deserialize)]
-struct Hello {
-    port: u16,
-    epoch_unix_ns: i64,
+pub(super) struct Hello {
+    pub(super) port: u16,
+    pub(super) epoch_unix_ns: i64,
 }
 
 /// The floor process (`inbetween load-floor`; module doc).
@@ -537,93 +523,6 @@ pub struct Target {
     pub port: u16,
     pub pid: u32,
     pub clock: ClockSync,
-}
-
-/// The floor beside the server, in the report.
-#[derive(Debug, Clone, Serialize)]
-pub struct FloorReport {
-    /// `ws-json`, `ws-protobuf` or `tcp`.
-    pub kind: &'static str,
-    /// The server's frame the floor sent, without WebSocket or gRPC framing.
-    pub frame_bytes: usize,
-    pub streams: usize,
-    /// Streams that received at least one frame.
-    pub opened: usize,
-    pub connections: usize,
-    pub elapsed_secs: f64,
-    /// Frames received from the floor in its window.
-    pub frames: u64,
-    pub frames_per_stream_per_sec: f64,
-    pub loss_ratio: f64,
-    /// On the floor's grid (module doc).
-    pub send_lateness: Summary,
-    pub receive_lateness: Summary,
-    /// The floor process's CPU over its window (1.0 = one core), and per delivered frame (µs).
-    pub cpu_cores: f64,
-    pub cpu_us_per_frame: f64,
-    /// The server's CPU per delivered frame over the floor's; `None` when either was not measured
-    /// (or the floor's rounded to zero: `/proc` counts 10 ms ticks).
-    pub server_to_floor: Option<f64>,
-    /// The load generator's CPU while it received the floor's frames.
-    pub client_cpu_cores: Option<f64>,
-    /// What the sender counted over its whole life (the opening and settling too).
-    pub sent: Option<Tally>,
-    pub errors: BTreeMap<String, u64>,
-}
-
-/// Measures the floor of a finished server run (module doc): `bin` is the
-/// `inbetween` binary that serves as the floor process.
-pub async fn measure(opts: &Options, env: &Env, n: usize, bin: &Path, server: &Report) -> anyhow::Result<FloorReport> {
-    let kind = Kind::of(opts);
-    let frame = streams::sample_frame(opts, env).await.context("taking a frame from the server for the floor")?;
-    let mut child = tokio::process::Command::new(bin)
-        .args(["load-floor", "--kind", kind.as_str(), "--fps", &opts.fps.to_string()])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .kill_on_drop(true)
-        .spawn()
-        .with_context(|| format!("starting the floor: {}", bin.display()))?;
-    let pid = child.id().context("the floor exited at once")?;
-    let mut stdin = child.stdin.take().context("the floor's stdin")?;
-    stdin.write_all(&(frame.len() as u32).to_be_bytes()).await?;
-    stdin.write_all(&frame).await?;
-    stdin.flush().await?;
-    let mut lines = BufReader::new(child.stdout.take().context("the floor's stdout")?).lines();
-    let hello = lines.next_line().await?.context("the floor stopped before saying its port")?;
-    let hello: Hello = serde_json::from_str(&hello).with_context(|| format!("the floor said {hello:?}"))?;
-    let clock = ClockSync { offset_ns: 0, rtt_ns: 0, grid_epoch_unix_ns: hello.epoch_unix_ns };
-    let target = Target { port: hello.port, pid, clock };
-    let run = streams::run(opts, env, n, Some(&target)).await;
-    drop(stdin);
-    let sent = match tokio::time::timeout(Duration::from_secs(10), lines.next_line()).await {
-        Ok(Ok(Some(line))) => serde_json::from_str::<Tally>(&line).ok(),
-        _ => None,
-    };
-    let _ = tokio::time::timeout(Duration::from_secs(5), child.wait()).await;
-    let run = run?;
-    let streams = run.streams.as_ref().context("a stream run reports its streams")?;
-    let usage = run.server.as_ref();
-    let cpu_us_per_frame = usage.map_or(f64::NAN, |u| u.cpu_us_per_op);
-    let server_us = server.server.as_ref().map(|u| u.cpu_us_per_op);
-    Ok(FloorReport {
-        kind: kind.as_str(),
-        frame_bytes: frame.len(),
-        streams: n,
-        opened: streams.opened,
-        connections: run.connections,
-        elapsed_secs: run.elapsed_secs,
-        frames: run.ok,
-        frames_per_stream_per_sec: streams.frames_per_stream_per_sec,
-        loss_ratio: streams.loss_ratio,
-        send_lateness: streams.send_lateness,
-        receive_lateness: streams.receive_lateness,
-        cpu_cores: usage.map_or(f64::NAN, |u| u.cpu_cores),
-        cpu_us_per_frame,
-        server_to_floor: server_us.filter(|_| cpu_us_per_frame > 0.0).map(|s| s / cpu_us_per_frame),
-        client_cpu_cores: run.client_cpu_cores,
-        sent,
-        errors: run.errors,
-    })
 }
 
 #[cfg(test)]

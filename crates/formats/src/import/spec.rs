@@ -1,0 +1,165 @@
+//! What an import is asked and what it answers: the format, the options
+//! and limits, the imported clips, and the resolver for external buffers.
+//! Every importer reads these, so they live apart from the entry points.
+
+use anim::{ClipSpec, Interpolation};
+
+use super::source::Source;
+use super::warning::Warning;
+
+/// A file format the importers read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// glTF 2.0 JSON (`.gltf`), buffers embedded as `data:` URIs.
+    Gltf,
+    /// Binary glTF (`.glb`): a JSON chunk and a BIN chunk.
+    Glb,
+    /// BioVision Hierarchy motion capture (`.bvh`), text.
+    Bvh,
+}
+
+impl Format {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Format::Gltf => "gltf",
+            Format::Glb => "glb",
+            Format::Bvh => "bvh",
+        }
+    }
+}
+
+impl std::str::FromStr for Format {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "gltf" => Ok(Format::Gltf),
+            "glb" => Ok(Format::Glb),
+            "bvh" => Ok(Format::Bvh),
+            _ => Err(format!("unknown format '{s}': expected gltf, glb or bvh")),
+        }
+    }
+}
+
+/// Bounds on what one import may read and produce. Each is checked before
+/// the corresponding allocation, so a small hostile file cannot make the
+/// importer allocate much more than its own size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImportLimits {
+    /// The file itself (a file-backed [`Source`] is read by range, so this
+    /// bounds disk, not memory).
+    pub max_bytes: u64,
+    /// What is read into memory whole: a `.gltf` or `.bvh` file, a GLB's
+    /// JSON chunk.
+    pub max_document_bytes: u64,
+    /// Joints of one clip's skeleton.
+    pub max_joints: usize,
+    /// Tracks of one clip.
+    pub max_tracks: usize,
+    /// Keys of one track (glTF accessor counts).
+    pub max_keys_per_track: usize,
+    /// BVH `Frames:`.
+    pub max_frames: usize,
+    /// Clips (glTF animations) of one file.
+    pub max_clips: usize,
+    /// Keys plus joints over every clip of the import: bounds the output
+    /// even when many channels share one accessor. The importers also cap
+    /// it at one per input byte (+4096), which no real file comes near.
+    pub max_total_keys: u64,
+    /// Levels of the joint hierarchy.
+    pub max_depth: usize,
+    /// Bytes of glTF buffers named by URI (`data:`, or a file or part the
+    /// [`Resolver`] supplies): every opened buffer's `byteLength`, counted
+    /// once per buffer even when several name the same part or file (whose
+    /// bytes are then shared, not copied). A GLB's own BIN chunk is bounded
+    /// by `max_bytes` instead.
+    pub max_resolved_bytes: u64,
+    /// Build work of one produced clip (see [`Clip::build_within`](anim::Clip::build_within)).
+    pub max_build_work: u64,
+    /// The encoded size the skinned meshes of one import may reach together
+    /// (each bounded from its accessors' counts before any is read); a mesh
+    /// that would pass it is left out with a warning, its clips imported
+    /// without it.
+    pub max_mesh_bytes: u64,
+    /// A base colour texture is kept with a mesh up to this many bytes
+    /// (PNG or JPEG as in the file); a larger one leaves the base colour
+    /// factor.
+    pub max_mesh_texture_bytes: u64,
+}
+
+impl Default for ImportLimits {
+    fn default() -> Self {
+        ImportLimits {
+            max_bytes: 256 << 20,
+            max_document_bytes: 64 << 20,
+            max_joints: 4096,
+            max_tracks: 16_384,
+            max_keys_per_track: 1_000_000,
+            max_frames: 1_000_000,
+            max_clips: 1024,
+            max_total_keys: 16_000_000,
+            max_depth: 256,
+            max_resolved_bytes: 4 * (64 << 20),
+            max_build_work: anim::DEFAULT_BUILD_WORK,
+            max_mesh_bytes: 16 << 20,
+            max_mesh_texture_bytes: 1 << 20,
+        }
+    }
+}
+
+/// How to import.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportOptions {
+    /// BVH frames become keys with this interpolation: `Linear` (default),
+    /// `CatmullRom` (SPEC §2.2), `BSpline` (§2.5: approximating, to smooth
+    /// the capture's jitter) or `Step`. `CubicHermite` is refused (no
+    /// tangents in a BVH).
+    pub bvh_interpolation: Interpolation,
+    /// The clip name (BVH), or a prefix `NAME/<animation>` for glTF files
+    /// with several animations (a single animation is named `NAME`).
+    pub name: Option<String>,
+    /// The file's name without its extension (the CLI's path, a multipart
+    /// part's file name), for clips the file does not name: without `name`,
+    /// a BVH clip is named after it, and so is an unnamed glTF animation
+    /// (`FILE`, or `FILE/animation<i>` when the file has several).
+    pub file_name: Option<String>,
+    /// glTF `CUBICSPLINE` rotations: flip each key (value and tangents)
+    /// that lies in the opposite hemisphere to the key before, so the curve
+    /// turns the short way (Blender 3.x's exporter writes such keys). Off by
+    /// default: the glTF spec says to use keys as given.
+    pub fix_hemispheres: bool,
+    pub limits: ImportLimits,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions {
+            bvh_interpolation: Interpolation::Linear,
+            name: None,
+            file_name: None,
+            fix_hemispheres: false,
+            limits: ImportLimits::default(),
+        }
+    }
+}
+
+/// The result of an import: clips ready for [`Clip::build`](anim::Clip::build) (each already
+/// passed it once) and the warnings about the file (what was left out,
+/// what looks wrong), at most [`MAX_WARNINGS`](super::warning::MAX_WARNINGS).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imported {
+    pub clips: Vec<ClipSpec>,
+    /// Per clip (in step with `clips`): the skinned mesh the viewer draws,
+    /// in the binary form of [`crate::wire::mesh`], when the clip comes from
+    /// a glTF skin with triangles bound to it (shared bytes when several
+    /// clips drive one skin).
+    pub meshes: Vec<Option<bytes::Bytes>>,
+    pub warnings: Vec<Warning>,
+}
+
+/// Supplies the bytes of an external glTF buffer URI (exactly as written in
+/// the file, still percent-encoded), or says why it will not: the CLI for
+/// files next to a local `.gltf`, the server for the parts of a multipart
+/// upload. It is called once per distinct URI; buffers naming the same URI
+/// share the [`Source`] it returns, and read only the ranges they need.
+pub type Resolver<'a> = &'a mut dyn FnMut(&str) -> Result<Source, String>;

@@ -1,0 +1,539 @@
+//! The one [`ClipStore`] implementation, over sqlx, for both backends.
+//!
+//! The statements are the same for SQLite and PostgreSQL: both take `$n`
+//! placeholders (sqlx binds SQLite's `$n` by its number), and the two
+//! schemas share table names, column names and types
+//! (`migrations/*/0001_clips.sql`). What differs is small and sits in a
+//! [`Dialect`]: how a write transaction begins, how a list of strings
+//! becomes rows, how the list filters compare names, and which failures are
+//! transient (retried with backoff, see `store::retry`). Opening a pool
+//! (pragmas, durability checks, migrations) stays with each backend
+//! (`sqlite.rs`, `postgres.rs`).
+//!
+//! Reads and id-keyed inserts are retried after any transient failure (an
+//! insert carries its id, so a retry after an attempt that did commit finds
+//! its own row); a replace or delete only when the failure proves the
+//! statement did not run. Broadcast writes and `ping` are never retried.
+
+use std::fmt::Debug;
+use std::future::Future;
+use std::time::Instant;
+
+use futures_util::FutureExt;
+use futures_util::future::BoxFuture;
+use sqlx::migrate::{Migrate, Migrator};
+use sqlx::pool::PoolOptions;
+use sqlx::{ColumnIndex, Connection, Decode, Encode, Executor, IntoArguments, Pool, Row, Type};
+
+use super::broadcast::{broadcast_from_row, control_from_row};
+use super::dialect::Dialect;
+use super::filter::list_query;
+use super::retry::{Retry, RetryPolicy, Transience, with_retry};
+use super::{
+    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast, StoredClip,
+    StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
+};
+
+/// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
+macro_rules! meta_columns {
+    () => {
+        "id, name, version, joints, tracks, events, start_time, end_time, playback, tags, created_at, updated_at"
+    };
+}
+#[cfg(test)]
+pub(crate) use meta_columns;
+
+const INSERT_CLIP: &str = "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, \
+     playback, tags, created_at, updated_at) VALUES ($1, $2, 1, $3, $4, $5, $6, $7, $8, $9, $11, $10, $10)";
+const GET_CLIP: &str = concat!("SELECT ", meta_columns!(), ", doc FROM clips WHERE id = $1");
+const REPLACE_CLIP: &str = concat!(
+    "UPDATE clips SET name = $3, doc = $4, joints = $5, tracks = $6, events = $7, start_time = $8, ",
+    "end_time = $9, playback = $10, updated_at = $11, tags = $12, version = version + 1 ",
+    "WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2) RETURNING ",
+    meta_columns!()
+);
+const DELETE_CLIP: &str = "DELETE FROM clips WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)";
+const CLIP_VERSION: &str = "SELECT version FROM clips WHERE id = $1";
+const CLIP_JOINTS: &str = "SELECT joints FROM clips WHERE id = $1";
+const MESH_TAG: &str = "SELECT m.etag FROM clips c LEFT JOIN clip_meshes m ON m.clip_id = c.id WHERE c.id = $1";
+const MESH: &str = "SELECT etag, bytes FROM clip_meshes WHERE clip_id = $1";
+const INSERT_MESH: &str = "INSERT INTO clip_meshes (clip_id, etag, bytes) VALUES ($1, $2, $3)";
+
+const INSERT_BROADCAST: &str = "INSERT INTO broadcasts (id, definition, created_at, active_at) VALUES ($1, $2, $3, $4)";
+const INSERT_CONTROL: &str = "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT $1, $2, $3, $4 \
+     WHERE EXISTS (SELECT 1 FROM broadcasts WHERE id = $2)";
+const TOUCH_BROADCAST: &str = "UPDATE broadcasts SET active_at = $2 WHERE id = $1 AND active_at < $2";
+const DELETE_BROADCAST: &str = "DELETE FROM broadcasts WHERE id = $1";
+const EXPIRE_BROADCAST: &str = "DELETE FROM broadcasts WHERE id = $1 AND active_at < $2";
+const ALL_BROADCASTS: &str = "SELECT id, definition, created_at FROM broadcasts ORDER BY id";
+const ONE_BROADCAST: &str = "SELECT id, definition, created_at FROM broadcasts WHERE id = $1";
+const CONTROLS: &str = "SELECT id, seq, control FROM broadcast_controls WHERE broadcast_id = $1 ORDER BY seq, id";
+
+/// A [`ClipStore`] on a sqlx pool of either backend
+/// ([`super::sqlite::SqliteStore`], [`super::postgres::PgStore`]).
+pub struct SqlStore<DB: Dialect> {
+    pub(super) pool: Pool<DB>,
+    pub(super) retry: RetryPolicy,
+    pub(super) extra: DB::Extra,
+}
+
+impl<DB: Dialect> Clone for SqlStore<DB> {
+    fn clone(&self) -> Self {
+        SqlStore { pool: self.pool.clone(), retry: self.retry, extra: self.extra.clone() }
+    }
+}
+
+impl<DB: Dialect> Debug for SqlStore<DB> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SqlStore").field("pool", &self.pool).field("extra", &self.extra).finish()
+    }
+}
+
+impl<DB: Dialect> SqlStore<DB>
+where
+    DB::Connection: Migrate,
+{
+    /// Opens a pool whose every connection passes the durability check, and
+    /// runs `migrator`. One connection is checked up front, so a refusal
+    /// reports its reason (the pool would only time out retrying).
+    pub(super) async fn connect(
+        options: <DB::Connection as Connection>::Options,
+        settings: &PoolSettings,
+        migrator: &Migrator,
+        extra: impl AsyncFnOnce(&Pool<DB>) -> Result<DB::Extra, sqlx::Error>,
+    ) -> anyhow::Result<Self> {
+        let durability = settings.durability;
+        let mut first = DB::Connection::connect_with(&options).await?;
+        DB::check_durability(&mut first, durability).await?;
+        first.close().await?;
+        let pool = PoolOptions::<DB>::new()
+            .max_connections(settings.max_connections.max(1))
+            .acquire_timeout(settings.acquire_timeout)
+            // The pool drops a connection whose after_connect hook failed.
+            .after_connect(move |conn, _| DB::check_durability(conn, durability))
+            .connect_with(options)
+            .await?;
+        migrator.run(&pool).await?;
+        let extra = extra(&pool).await?;
+        Ok(SqlStore { pool, retry: settings.retry, extra })
+    }
+}
+
+impl<DB: Dialect> SqlStore<DB> {
+    /// The pool, for tests that read settings back from its connections.
+    pub fn pool(&self) -> &Pool<DB> {
+        &self.pool
+    }
+}
+
+/// Records an operation's duration and maps its error.
+fn timed<DB: Dialect, T>(op: &'static str, started: Instant, r: Result<T, sqlx::Error>) -> Result<T, StoreError> {
+    metrics::histogram!("inbetween_store_operation_duration_seconds", "op" => op)
+        .record(started.elapsed().as_secs_f64());
+    r.map_err(to_store_error::<DB>)
+}
+
+fn to_store_error<DB: Dialect>(e: sqlx::Error) -> StoreError {
+    match e {
+        sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_) => StoreError::Unavailable(e.into()),
+        e if DB::classify(&e) != Transience::Permanent => StoreError::Unavailable(e.into()),
+        other => StoreError::Backend(other.into()),
+    }
+}
+
+/// Whether `e` is the primary-key conflict of an insert whose earlier
+/// attempt committed (then the row is ours).
+fn is_own_duplicate<DB: Dialect>(e: &sqlx::Error, attempt: u32) -> bool {
+    attempt > 0 && DB::is_clip_id_conflict(e)
+}
+
+fn new_meta(clip: &NewClip, now: i64) -> ClipMeta {
+    ClipMeta {
+        id: new_clip_id(),
+        name: clip.name.clone(),
+        version: 1,
+        stats: clip.stats,
+        tags: clip.tags.clone(),
+        created_at: now,
+        updated_at: now,
+    }
+}
+
+/// A list of strings as the JSON array the `tags` column holds.
+fn json_list(items: &[String]) -> String {
+    serde_json::Value::from(items).to_string()
+}
+
+// The sqlx bounds below say what the generic code needs of `DB`: an
+// executor per connection and the column types the schema uses.
+impl<DB: Dialect> SqlStore<DB>
+where
+    for<'c> &'c mut DB::Connection: Executor<'c, Database = DB>,
+    DB::Arguments: IntoArguments<DB>,
+    for<'q> String: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> &'q str: Encode<'q, DB> + Type<DB>,
+    for<'q> i64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> f64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> &'q [u8]: Encode<'q, DB> + Type<DB>,
+    for<'q> Vec<u8>: Decode<'q, DB> + Type<DB>,
+    &'static str: ColumnIndex<DB::Row>,
+    usize: ColumnIndex<DB::Row>,
+{
+    async fn run<T, F, Fut>(&self, op: &'static str, mode: Retry, attempt: F) -> Result<T, StoreError>
+    where
+        F: FnMut(u32) -> Fut,
+        Fut: Future<Output = Result<T, sqlx::Error>>,
+    {
+        let started = Instant::now();
+        let r = with_retry(self.retry, mode, DB::classify, attempt).await;
+        timed::<DB, T>(op, started, r)
+    }
+
+    /// Inserts the clip row and its index rows (in the caller's transaction).
+    async fn insert(db: &mut DB::Connection, meta: &ClipMeta, clip: &NewClip) -> Result<(), sqlx::Error> {
+        let s = &meta.stats;
+        sqlx::query(INSERT_CLIP)
+            .bind(&meta.id)
+            .bind(&meta.name)
+            .bind(&clip.doc_json)
+            .bind(s.joints as i64)
+            .bind(s.tracks as i64)
+            .bind(s.events as i64)
+            .bind(s.start as f64)
+            .bind(s.end as f64)
+            .bind(s.playback.as_str())
+            .bind(meta.created_at)
+            .bind(json_list(&clip.tags))
+            .execute(&mut *db)
+            .await?;
+        Self::write_index(db, &meta.id, clip, false).await
+    }
+
+    /// The clip's `clip_tags` and `clip_joints` rows (replacing its old ones).
+    async fn write_index(db: &mut DB::Connection, id: &str, clip: &NewClip, replace: bool) -> Result<(), sqlx::Error> {
+        if replace {
+            sqlx::query("DELETE FROM clip_tags WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+            sqlx::query("DELETE FROM clip_joints WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+        }
+        sqlx::query(DB::INSERT_TAGS).bind(id).bind(DB::string_list(&clip.tags)).execute(&mut *db).await?;
+        sqlx::query(DB::INSERT_JOINTS).bind(id).bind(DB::string_list(&clip.joint_names)).execute(&mut *db).await?;
+        Self::write_mesh(db, id, &clip.mesh, replace).await
+    }
+
+    /// The clip's `clip_meshes` row as [`MeshWrite`] says.
+    async fn write_mesh(db: &mut DB::Connection, id: &str, mesh: &MeshWrite, replace: bool) -> Result<(), sqlx::Error> {
+        if *mesh == MeshWrite::Keep {
+            return Ok(());
+        }
+        if replace {
+            sqlx::query("DELETE FROM clip_meshes WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+        }
+        if let MeshWrite::Set(m) = mesh {
+            sqlx::query(INSERT_MESH).bind(id).bind(&m.etag).bind(m.bytes.as_ref()).execute(&mut *db).await?;
+        }
+        Ok(())
+    }
+
+    /// Inserts `clips` in one transaction, tolerating the duplicate of an
+    /// earlier attempt that committed them all (all or nothing).
+    async fn insert_all(&self, metas: &[ClipMeta], clips: &[NewClip], attempt: u32) -> Result<(), sqlx::Error> {
+        let r = async {
+            let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
+            for (meta, clip) in metas.iter().zip(clips) {
+                Self::insert(&mut tx, meta, clip).await?;
+            }
+            tx.commit().await
+        }
+        .await;
+        match r {
+            Err(e) if !is_own_duplicate::<DB>(&e, attempt) => Err(e),
+            _ => Ok(()),
+        }
+    }
+
+    /// Tells "not found" from "version mismatch" after a conditional write matched no row.
+    async fn missed(&self, id: &str) -> Result<StoreError, sqlx::Error> {
+        let version: Option<i64> = sqlx::query_scalar(CLIP_VERSION).bind(id).fetch_optional(&self.pool).await?;
+        Ok(match version {
+            None => StoreError::NotFound,
+            Some(current) => StoreError::VersionMismatch { current: current as u64 },
+        })
+    }
+
+    /// Broadcast `id`'s controls in application order.
+    async fn controls_of(&self, id: &str) -> Result<Vec<StoredControl>, sqlx::Error> {
+        let rows = sqlx::query(CONTROLS).bind(id).fetch_all(&self.pool).await?;
+        rows.iter().map(control_from_row).collect()
+    }
+}
+
+impl<DB: Dialect> ClipStore for SqlStore<DB>
+where
+    for<'c> &'c mut DB::Connection: Executor<'c, Database = DB>,
+    DB::Arguments: IntoArguments<DB>,
+    for<'q> String: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> &'q str: Encode<'q, DB> + Type<DB>,
+    for<'q> i64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> Option<i64>: Encode<'q, DB>,
+    for<'q> f64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> &'q [u8]: Encode<'q, DB> + Type<DB>,
+    for<'q> Vec<u8>: Decode<'q, DB> + Type<DB>,
+    &'static str: ColumnIndex<DB::Row>,
+    usize: ColumnIndex<DB::Row>,
+{
+    fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
+        async move {
+            let metas = [new_meta(&clip, now_millis())];
+            let clips = [clip];
+            self.run("create", Retry::Always, |n| self.insert_all(&metas, &clips, n)).await?;
+            let [meta] = metas;
+            Ok(meta)
+        }
+        .boxed()
+    }
+
+    fn create_all(&self, clips: Vec<NewClip>) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
+        async move {
+            let now = now_millis();
+            let metas: Vec<ClipMeta> = clips.iter().map(|c| new_meta(c, now)).collect();
+            self.run("create_all", Retry::Always, |n| self.insert_all(&metas, &clips, n)).await?;
+            Ok(metas)
+        }
+        .boxed()
+    }
+
+    fn get<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredClip>, StoreError>> {
+        async move {
+            self.run("get", Retry::Always, |_| async move {
+                let row = sqlx::query(GET_CLIP).bind(id).fetch_optional(&self.pool).await?;
+                row.map(|row| Ok(StoredClip { meta: meta_from_row(&row)?, doc_json: row.try_get("doc")? })).transpose()
+            })
+            .await
+        }
+        .boxed()
+    }
+
+    fn list(&self, query: ListQuery) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
+        async move {
+            let query = &query;
+            self.run("list", Retry::Always, |_| async move {
+                let reference = match &query.compatible_with {
+                    None => None,
+                    Some(id) => match sqlx::query_scalar(CLIP_JOINTS).bind(id).fetch_optional(&self.pool).await? {
+                        Some(n) => Some(n),
+                        None => return Ok(Err(StoreError::NotFound)),
+                    },
+                };
+                let mut qb = list_query::<DB>(meta_columns!(), query, reference);
+                let rows = qb.build().fetch_all(&self.pool).await?;
+                rows.iter().map(meta_from_row).collect::<Result<Vec<_>, _>>().map(Ok)
+            })
+            .await?
+        }
+        .boxed()
+    }
+
+    fn replace<'a>(
+        &'a self,
+        id: &'a str,
+        clip: NewClip,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<ClipMeta, StoreError>> {
+        async move {
+            let clip = &clip;
+            let now = now_millis();
+            let tags = &json_list(&clip.tags);
+            self.run("replace", Retry::IfNotExecuted, |_| async move {
+                let s = clip.stats;
+                let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
+                let row = sqlx::query(REPLACE_CLIP)
+                    .bind(id)
+                    .bind(expected_version.map(|v| v as i64))
+                    .bind(&clip.name)
+                    .bind(&clip.doc_json)
+                    .bind(s.joints as i64)
+                    .bind(s.tracks as i64)
+                    .bind(s.events as i64)
+                    .bind(s.start as f64)
+                    .bind(s.end as f64)
+                    .bind(s.playback.as_str())
+                    .bind(now)
+                    .bind(tags)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+                let Some(row) = row else {
+                    tx.rollback().await?;
+                    return self.missed(id).await.map(Err);
+                };
+                let meta = meta_from_row(&row)?;
+                Self::write_index(&mut tx, id, clip, true).await?;
+                tx.commit().await?;
+                Ok(Ok(meta))
+            })
+            .await?
+        }
+        .boxed()
+    }
+
+    fn delete<'a>(&'a self, id: &'a str, expected_version: Option<u64>) -> BoxFuture<'a, Result<(), StoreError>> {
+        async move {
+            self.run("delete", Retry::IfNotExecuted, |_| async move {
+                let done = sqlx::query(DELETE_CLIP)
+                    .bind(id)
+                    .bind(expected_version.map(|v| v as i64))
+                    .execute(&self.pool)
+                    .await?;
+                if DB::rows_affected(&done) == 1 { Ok(Ok(())) } else { self.missed(id).await.map(Err) }
+            })
+            .await?
+        }
+        .boxed()
+    }
+
+    fn mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>> {
+        async move {
+            self.run("mesh_tag", Retry::Always, |_| async move {
+                sqlx::query_scalar::<_, Option<String>>(MESH_TAG).bind(id).fetch_optional(&self.pool).await
+            })
+            .await
+        }
+        .boxed()
+    }
+
+    fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>> {
+        async move {
+            self.run("mesh", Retry::Always, |_| async move {
+                let row = sqlx::query(MESH).bind(id).fetch_optional(&self.pool).await?;
+                row.map(|row| {
+                    let bytes: Vec<u8> = row.try_get("bytes")?;
+                    Ok(StoredMesh { etag: row.try_get("etag")?, bytes: bytes.into() })
+                })
+                .transpose()
+            })
+            .await
+        }
+        .boxed()
+    }
+
+    fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query(INSERT_BROADCAST)
+                .bind(&broadcast.id)
+                .bind(&broadcast.definition)
+                .bind(broadcast.created_at)
+                .bind(now_millis())
+                .execute(&self.pool)
+                .await
+                .map(|_| ());
+            timed::<DB, _>("create_broadcast", started, r)
+        }
+        .boxed()
+    }
+
+    fn add_broadcast_control<'a>(
+        &'a self,
+        id: &'a str,
+        control: StoredControl,
+    ) -> BoxFuture<'a, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let mut tx = self.pool.begin().await?;
+                let done = sqlx::query(INSERT_CONTROL)
+                    .bind(&control.id)
+                    .bind(id)
+                    .bind(control.seq as i64)
+                    .bind(&control.control)
+                    .execute(&mut *tx)
+                    .await?;
+                sqlx::query(TOUCH_BROADCAST).bind(id).bind(now_millis()).execute(&mut *tx).await?;
+                tx.commit().await?;
+                Ok(DB::rows_affected(&done) == 1)
+            }
+            .await;
+            match timed::<DB, _>("add_broadcast_control", started, r)? {
+                true => Ok(()),
+                false => Err(StoreError::NotFound),
+            }
+        }
+        .boxed()
+    }
+
+    fn broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredBroadcast>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let Some(row) = sqlx::query(ONE_BROADCAST).bind(id).fetch_optional(&self.pool).await? else {
+                    return Ok(None);
+                };
+                let mut b = broadcast_from_row(&row)?;
+                b.controls = self.controls_of(&b.id).await?;
+                Ok(Some(b))
+            }
+            .await;
+            timed::<DB, _>("broadcast", started, r)
+        }
+        .boxed()
+    }
+
+    fn broadcasts(&self) -> BoxFuture<'_, Result<Vec<StoredBroadcast>, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = async {
+                let rows = sqlx::query(ALL_BROADCASTS).fetch_all(&self.pool).await?;
+                let mut all = Vec::with_capacity(rows.len());
+                for row in &rows {
+                    let mut b = broadcast_from_row(row)?;
+                    b.controls = self.controls_of(&b.id).await?;
+                    all.push(b);
+                }
+                Ok(all)
+            }
+            .await;
+            timed::<DB, _>("broadcasts", started, r)
+        }
+        .boxed()
+    }
+
+    fn delete_broadcast<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<bool, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query(DELETE_BROADCAST).bind(id).execute(&self.pool).await;
+            timed::<DB, _>("delete_broadcast", started, r.map(|d| DB::rows_affected(&d) == 1))
+        }
+        .boxed()
+    }
+
+    fn touch_broadcast<'a>(&'a self, id: &'a str, now_ms: i64) -> BoxFuture<'a, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query(TOUCH_BROADCAST).bind(id).bind(now_ms).execute(&self.pool).await.map(|_| ());
+            timed::<DB, _>("touch_broadcast", started, r)
+        }
+        .boxed()
+    }
+
+    fn expire_broadcast<'a>(&'a self, id: &'a str, before_ms: i64) -> BoxFuture<'a, Result<bool, StoreError>> {
+        async move {
+            let started = Instant::now();
+            let r = sqlx::query(EXPIRE_BROADCAST).bind(id).bind(before_ms).execute(&self.pool).await;
+            timed::<DB, _>("expire_broadcast", started, r.map(|d| DB::rows_affected(&d) == 1))
+        }
+        .boxed()
+    }
+
+    fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            // No retry: readiness must report the database as it is now.
+            let r = sqlx::query("SELECT 1").execute(&self.pool).await.map(|_| ());
+            timed::<DB, _>("ping", started, r)
+        }
+        .boxed()
+    }
+
+    fn close(&self) -> BoxFuture<'_, ()> {
+        self.pool.close().boxed()
+    }
+}

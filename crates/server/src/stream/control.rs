@@ -1,0 +1,578 @@
+//! Stream controls, in one place: what a client may ask of a playback
+//! (`pause`, `seek`, `crossfade`, …; docs/motion.md, "Controls"), read
+//! from a WebSocket's JSON and a `Play` call's protobuf, checked against
+//! the stream, said again for a broadcast's journal, and applied to a
+//! playback — a per-viewer stream's and a broadcast's alike.
+//!
+//! Every `match` on a control here names each variant (no `_`), so a new
+//! control is a compile error at each place it must be handled; a new one
+//! touches this file, the `.proto` and its doc section.
+
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use super::hub::StreamPlayer;
+use super::params::StreamParams;
+use super::pinned::StreamMotion;
+use super::playhead::{MAX_SPEED, Playhead};
+use anim::Ease;
+use anim::ik::{IkConstraint, IkError, IkLimits, IkSpec, build_constraints};
+use anim::motion::PlayerError;
+use formats::wire::ik::IkDoc;
+use formats::wire::json::{DocError, EaseDoc};
+use formats::wire::proto::{ease_from_pb, ik_from_pb, pb};
+
+/// A change asked of a playback, applied at its next tick.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Control {
+    Play,
+    Pause,
+    /// Show this motion time of the current motion at the next tick.
+    Seek(f64),
+    /// Stream seconds per real second (negative plays backwards).
+    Speed(f64),
+    /// End the stream cleanly.
+    Stop,
+    /// Fade to another motion (docs/motion.md).
+    Crossfade(Crossfade),
+    /// Ramp a layer of the current motion to a weight.
+    Layer {
+        index: usize,
+        weight: f32,
+        duration: f64,
+    },
+    /// Replace the stream's IK constraints (docs/ik.md), as a client names
+    /// them; the stream's check resolves them into [`Control::SetIk`].
+    Ik(Vec<IkSpec>),
+    /// Replace the stream's IK constraints, resolved against its skeleton.
+    SetIk(Vec<IkConstraint>),
+}
+
+/// A crossfade asked for: its target, already built over pinned clips.
+#[derive(Debug, Clone)]
+pub struct Crossfade {
+    pub to: Arc<StreamMotion>,
+    pub duration: f64,
+    pub ease: Ease,
+    /// `to` as the client wrote it (the JSON motion), so that the control
+    /// can be said again: a broadcast stores it for the other nodes.
+    pub source: Option<Arc<serde_json::Value>>,
+}
+
+impl PartialEq for Crossfade {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.to, &other.to) && self.duration == other.duration && self.ease == other.ease
+    }
+}
+
+/// The longest crossfade or weight ramp, seconds.
+pub const MAX_FADE_SECONDS: f64 = 3600.0;
+
+impl Control {
+    /// Checks the numbers a client sent.
+    ///
+    /// # Errors
+    /// A non-finite seek time, a speed that is not finite or exceeds
+    /// [`MAX_SPEED`] in magnitude, a fade or ramp longer than
+    /// [`MAX_FADE_SECONDS`], a layer weight outside [0, 1].
+    pub fn validate(self) -> Result<Self, &'static str> {
+        match self.problem() {
+            Some(problem) => Err(problem),
+            None => Ok(self),
+        }
+    }
+
+    fn problem(&self) -> Option<&'static str> {
+        let long = |d: f64| !(0.0..=MAX_FADE_SECONDS).contains(&d);
+        match *self {
+            Control::Seek(t) => (!t.is_finite()).then_some("seek time must be a finite number of seconds"),
+            Control::Speed(v) => (!v.is_finite() || v.abs() > MAX_SPEED)
+                .then_some("speed must be a finite number between -1000 and 1000"),
+            Control::Crossfade(Crossfade { duration, .. }) => {
+                long(duration).then_some("a crossfade's duration must be between 0 and 3600 seconds")
+            }
+            Control::Layer { weight, duration, .. } => {
+                if long(duration) {
+                    Some("a weight ramp's duration must be between 0 and 3600 seconds")
+                } else {
+                    (!(0.0..=1.0).contains(&weight)).then_some("a layer weight must be in [0, 1]")
+                }
+            }
+            Control::Play | Control::Pause | Control::Stop | Control::Ik(_) | Control::SetIk(_) => None,
+        }
+    }
+
+    /// Why a broadcast refuses this control, if it does (its viewers share
+    /// one playback, which only `DELETE` ends).
+    pub(crate) fn refused_on_broadcast(&self) -> Option<&'static str> {
+        match self {
+            Control::Stop => Some("a broadcast has no `stop`: DELETE it to end it for every viewer"),
+            Control::Play
+            | Control::Pause
+            | Control::Seek(_)
+            | Control::Speed(_)
+            | Control::Crossfade(_)
+            | Control::Layer { .. }
+            | Control::Ik(_)
+            | Control::SetIk(_) => None,
+        }
+    }
+
+    /// The `(paused, speed)` a broadcast's status reports once this control
+    /// is accepted, from the ones before it.
+    pub(crate) fn status_after(&self, paused: bool, speed: f64) -> (bool, f64) {
+        match *self {
+            Control::Play => (false, speed),
+            Control::Pause => (true, speed),
+            Control::Speed(v) => (paused, v),
+            Control::Seek(_)
+            | Control::Stop
+            | Control::Crossfade(_)
+            | Control::Layer { .. }
+            | Control::Ik(_)
+            | Control::SetIk(_) => (paused, speed),
+        }
+    }
+
+    /// Applies the control to a playback so that it takes effect at tick
+    /// `k` (`k >= 1`): the one step of per-viewer streams and broadcasts.
+    ///
+    /// # Errors
+    /// A crossfade or ramp the player refuses (nothing changed).
+    pub(crate) fn apply(self, playhead: &mut Playhead, player: &mut StreamPlayer, k: u64) -> Result<Applied, Refused> {
+        match self {
+            Control::Play => playhead.play(k),
+            Control::Pause => playhead.pause(k),
+            Control::Speed(v) => playhead.set_speed(v, k),
+            Control::Seek(tau) => {
+                player.seek(tau);
+                return Ok(Applied::Jumped);
+            }
+            Control::Stop => return Ok(Applied::Stopped),
+            Control::Crossfade(Crossfade { to, duration, ease, .. }) => {
+                player.crossfade(to, duration, ease).map_err(|error| Refused { what: "crossfade", error })?;
+            }
+            Control::Layer { index, weight, duration } => {
+                player.ramp(index, weight, duration).map_err(|error| Refused { what: "weight ramp", error })?;
+            }
+            Control::SetIk(constraints) => player.set_ik(constraints),
+            // The stream's check resolves every `ik` control before it is queued.
+            Control::Ik(_) => tracing::error!("IK constraints reached a playback unresolved"),
+        }
+        Ok(Applied::Continued)
+    }
+
+    /// The control message that says this control again (docs/motion.md);
+    /// `None` for `stop`, resolved IK lists and a crossfade whose motion
+    /// was not written down (`Crossfade::source`).
+    pub fn to_json(&self) -> Option<serde_json::Value> {
+        let msg = match self {
+            Control::Play => ControlMsg::Play,
+            Control::Pause => ControlMsg::Pause,
+            Control::Seek(time) => ControlMsg::Seek { time: *time },
+            Control::Speed(speed) => ControlMsg::Speed { speed: *speed },
+            Control::Crossfade(Crossfade { source: Some(to), duration, ease, .. }) => {
+                ControlMsg::Crossfade { to: (**to).clone(), duration: *duration, ease: EaseDoc::from(*ease) }
+            }
+            Control::Layer { index, weight, duration } => {
+                ControlMsg::Layer { index: *index, weight: *weight, duration: *duration }
+            }
+            Control::Ik(specs) => ControlMsg::Ik { constraints: specs.iter().map(IkDoc::from_spec).collect() },
+            Control::Stop | Control::Crossfade(Crossfade { source: None, .. }) | Control::SetIk(_) => return None,
+        };
+        Some(serde_json::to_value(msg).expect("a control message is JSON"))
+    }
+}
+
+/// What applying a control did to its playback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Applied {
+    /// Time goes on from the previous tick.
+    Continued,
+    /// Time jumped (a seek), which ends event continuity.
+    Jumped,
+    /// The stream ends (`stop`).
+    Stopped,
+}
+
+/// A control the player refused: a bug on a per-viewer stream (its check
+/// accepted it); on a broadcast, a ramp of a layer a crossfade stamped just
+/// before took away, skipped the same way on every node.
+#[derive(Debug)]
+pub(crate) struct Refused {
+    /// `crossfade` or `weight ramp`.
+    pub what: &'static str,
+    pub error: PlayerError,
+}
+
+/// A control message as a client writes it (`{"op": "seek", "time": 1.5}`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case", deny_unknown_fields)]
+pub(crate) enum ControlMsg {
+    Play,
+    Pause,
+    Seek {
+        time: f64,
+    },
+    Speed {
+        speed: f64,
+    },
+    Stop,
+    Crossfade {
+        to: serde_json::Value,
+        duration: f64,
+        #[serde(default = "linear")]
+        ease: EaseDoc,
+    },
+    Layer {
+        index: usize,
+        weight: f32,
+        #[serde(default)]
+        duration: f64,
+    },
+    /// Replaces the stream's IK constraints at the next tick.
+    Ik {
+        constraints: Vec<IkDoc>,
+    },
+}
+
+fn linear() -> EaseDoc {
+    EaseDoc::Linear
+}
+
+/// The ops a control message may name, as its refusal lists them.
+const OPS: [&str; 8] = ["play", "pause", "seek", "speed", "stop", "crossfade", "layer", "ik"];
+
+/// The refusal of a text that is no control message; `stop` is listed only
+/// where it is taken (a stream's socket, not a broadcast's REST control).
+pub(crate) fn not_a_control(e: &serde_json::Error, with_stop: bool) -> String {
+    let ops: Vec<String> = OPS.iter().filter(|op| with_stop || **op != "stop").map(|op| format!("\"{op}\"")).collect();
+    format!("expected {{\"op\": {}, ...}}: {e}", ops.join("|"))
+}
+
+impl ControlMsg {
+    /// The control, or for a crossfade what to look its motion up from.
+    ///
+    /// # Errors
+    /// An `ik` control's constraint shape, at `/constraints/…`.
+    pub(crate) fn parse(self) -> Result<ParsedControl, DocError> {
+        Ok(ParsedControl::Ready(match self {
+            ControlMsg::Play => Control::Play,
+            ControlMsg::Pause => Control::Pause,
+            ControlMsg::Seek { time } => Control::Seek(time),
+            ControlMsg::Speed { speed } => Control::Speed(speed),
+            ControlMsg::Stop => Control::Stop,
+            ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
+            ControlMsg::Crossfade { to, duration, ease } => {
+                return Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() });
+            }
+            ControlMsg::Ik { constraints } => {
+                let specs = constraints.iter().enumerate().map(|(i, c)| c.to_spec(&format!("/constraints/{i}")));
+                Control::Ik(specs.collect::<Result<_, _>>()?)
+            }
+        }))
+    }
+}
+
+/// A control message parsed on its own: the control, or a crossfade whose
+/// motion `to` (JSON, or a `Play` call's protobuf) the caller looks up.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParsedControl<M = serde_json::Value> {
+    Ready(Control),
+    Crossfade { to: M, duration: f64, ease: Ease },
+}
+
+impl ParsedControl<Option<pb::Motion>> {
+    /// A `Play` message's control (`open` and `broadcast` only start a call).
+    ///
+    /// # Errors
+    /// No op, a starting op (`bad_control`), an undefined ease, or an `ik`
+    /// control's constraint shape at `/constraints/…`.
+    pub fn from_pb(op: Option<pb::playback_control::Op>) -> Result<Self, DocError> {
+        use pb::playback_control::Op;
+        let bad = |detail: &str| DocError { code: "bad_control", pointer: String::new(), detail: detail.into() };
+        Ok(ParsedControl::Ready(match op {
+            Some(Op::Play(_)) => Control::Play,
+            Some(Op::Pause(_)) => Control::Pause,
+            Some(Op::Seek(s)) => Control::Seek(s.time),
+            Some(Op::Speed(s)) => Control::Speed(s.speed),
+            Some(Op::Stop(_)) => Control::Stop,
+            Some(Op::Layer(l)) => Control::Layer { index: l.index as usize, weight: l.weight, duration: l.duration },
+            Some(Op::Crossfade(fade)) => {
+                let ease = ease_from_pb(fade.ease, "/ease")?.unwrap_or_default();
+                return Ok(ParsedControl::Crossfade { to: fade.to, duration: fade.duration, ease });
+            }
+            Some(Op::Ik(ik)) => Control::Ik(ik_from_pb(&ik.constraints, "/constraints")?),
+            Some(Op::Open(_) | Op::Broadcast(_)) => {
+                return Err(bad("`open` and `broadcast` are only valid as the first message"));
+            }
+            None => return Err(bad("a PlaybackControl needs an op")),
+        }))
+    }
+}
+
+/// Why a control message was refused: its stable code, the JSON pointer at
+/// fault if any, and the human detail.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlRefusal {
+    pub code: &'static str,
+    pub pointer: Option<String>,
+    pub detail: String,
+}
+
+/// Parses one control message (`{"op": …}`) as a stream's socket does
+/// (REST `POST /v1/broadcasts/{id}/controls` takes the same JSON).
+///
+/// # Errors
+/// Not a control (`bad_control`), or an `ik` control's constraint shape (its rule's code).
+pub fn parse_control(text: &str) -> Result<ParsedControl, ControlRefusal> {
+    let msg = serde_json::from_str::<ControlMsg>(text).map_err(|e| ControlRefusal {
+        code: "bad_control",
+        pointer: None,
+        detail: not_a_control(&e, false),
+    })?;
+    msg.parse().map_err(|e| ControlRefusal { code: e.code, pointer: Some(e.pointer), detail: e.detail })
+}
+
+/// Why a control was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    #[error("{0}")]
+    Invalid(&'static str),
+    #[error("too many controls pending; wait for a frame before sending more")]
+    Busy,
+    /// An `ik` control's constraint breaks a rule of docs/ik.md (its path
+    /// is relative to the control's `constraints`).
+    #[error("{}", .0.kind)]
+    Ik(IkError),
+    /// A broadcast viewer without the write scope sent a control.
+    #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
+    ReadOnly,
+}
+
+impl ControlError {
+    /// The stable code a client gets (`bad_control`, or the IK rule's).
+    pub fn code(&self) -> &'static str {
+        match self {
+            ControlError::Ik(e) => e.kind.code(),
+            ControlError::ReadOnly => "insufficient_scope",
+            ControlError::Invalid(_) | ControlError::Busy => "bad_control",
+        }
+    }
+
+    /// The JSON pointer of the field at fault, when there is one.
+    pub fn pointer(&self) -> Option<String> {
+        match self {
+            ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
+            ControlError::Invalid(_) | ControlError::Busy | ControlError::ReadOnly => None,
+        }
+    }
+}
+
+/// Checks controls against the stream's motions: numbers in range, a
+/// crossfade target with the stream's skeleton, a ramp of a layer the
+/// motion playing has.
+#[derive(Debug, Clone)]
+pub(crate) struct ControlCheck {
+    skeleton: Arc<StreamMotion>,
+    /// Layers of the motion the latest accepted control left playing.
+    layers: usize,
+    ik_limits: IkLimits,
+}
+
+impl ControlCheck {
+    pub(crate) fn new(params: &StreamParams) -> Self {
+        ControlCheck {
+            skeleton: Arc::clone(&params.motion),
+            layers: params.motion.layer_count(),
+            ik_limits: params.ik_limits,
+        }
+    }
+
+    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        let control = control.validate().map_err(ControlError::Invalid)?;
+        match &control {
+            Control::Crossfade(fade) => {
+                self.check_fade(fade)?;
+                self.layers = fade.to.layer_count();
+            }
+            Control::Layer { index, .. } if *index >= self.layers => {
+                return Err(ControlError::Invalid("no such layer in the motion playing"));
+            }
+            Control::Ik(specs) => {
+                let skeleton = self.skeleton.skeleton();
+                let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
+                return Ok(Control::SetIk(constraints));
+            }
+            Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),
+            Control::Play
+            | Control::Pause
+            | Control::Seek(_)
+            | Control::Speed(_)
+            | Control::Stop
+            | Control::Layer { .. } => {}
+        }
+        Ok(control)
+    }
+
+    /// A crossfade's motion must fit the stream: its skeleton and
+    /// parameters, and no IK of its own.
+    fn check_fade(&self, fade: &Crossfade) -> Result<(), ControlError> {
+        if !fade.to.skeleton().same_joints(self.skeleton.skeleton()) {
+            return Err(ControlError::Invalid(
+                "the crossfade's motion has another skeleton: its first layer's clip must have the stream's joints in the same order",
+            ));
+        }
+        let (to, here) = (fade.to.parameters(), self.skeleton.parameters());
+        if to.names() != here.names() || to.widths() != here.widths() {
+            return Err(ControlError::Invalid(
+                "the crossfade's motion has other parameters: its first layer's clip must have the stream's parameter names and widths in the same order",
+            ));
+        }
+        if !fade.to.ik().is_empty() {
+            return Err(ControlError::Invalid(
+                "a crossfade's motion carries no `ik`: change the stream's constraints with an `ik` control",
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formats::wire::proto::{ease_to_pb, ik_to_pb};
+    use pb::playback_control::Op;
+    use serde_json::json;
+
+    /// The protobuf op that says `control` (what a `Play` client sends).
+    fn to_pb(control: &Control) -> Op {
+        match control {
+            Control::Play => Op::Play(pb::Resume {}),
+            Control::Pause => Op::Pause(pb::Pause {}),
+            Control::Seek(time) => Op::Seek(pb::Seek { time: *time }),
+            Control::Speed(speed) => Op::Speed(pb::SetSpeed { speed: *speed }),
+            Control::Stop => Op::Stop(pb::Stop {}),
+            Control::Crossfade(fade) => {
+                Op::Crossfade(pb::Crossfade { to: None, duration: fade.duration, ease: ease_to_pb(fade.ease) as i32 })
+            }
+            Control::Layer { index, weight, duration } => {
+                Op::Layer(pb::LayerWeight { index: *index as u32, weight: *weight, duration: *duration })
+            }
+            Control::Ik(specs) => {
+                let keyed = specs.iter().map(|s| IkDoc::from_spec(s).to_keyed_spec("").expect("a fixed constraint"));
+                Op::Ik(pb::IkControl { constraints: keyed.map(|k| ik_to_pb(&k)).collect() })
+            }
+            Control::SetIk(_) => panic!("resolved constraints are never sent"),
+        }
+    }
+
+    /// A motion to fade to (its lookup is the transport's).
+    fn test_motion() -> Arc<StreamMotion> {
+        use crate::stream::tests::{clip, pinned};
+        let req = crate::stream::StreamRequest { fps: 30, ..Default::default() };
+        let params = StreamParams::new(pinned("c1", clip()), req).unwrap();
+        Arc::clone(&params.motion)
+    }
+
+    fn ready(parsed: ParsedControl<impl std::fmt::Debug>) -> Control {
+        match parsed {
+            ParsedControl::Ready(control) => control,
+            other => panic!("a crossfade: {other:?}"),
+        }
+    }
+
+    /// One message per op, as a client writes it (every field given).
+    fn messages() -> Vec<serde_json::Value> {
+        vec![
+            json!({"op": "play"}),
+            json!({"op": "pause"}),
+            json!({"op": "seek", "time": 1.5}),
+            json!({"op": "speed", "speed": -2.0}),
+            json!({"op": "stop"}),
+            json!({"op": "crossfade", "to": {"layers": [{"clip": "run"}]}, "duration": 0.4, "ease": "ease_in_out"}),
+            json!({"op": "layer", "index": 1, "weight": 0.25, "duration": 0.5}),
+            // Numbers an f32 holds exactly, so that they come back as written.
+            json!({"op": "ik", "constraints": [
+                {"kind": "two_bone", "joints": ["hip", "knee", "foot"], "target": [0.25, -1.5, 0.125]},
+                {"kind": "aim", "joint": "head", "target": [1.0, 2.0, 3.0], "weight": 0.5}
+            ]}),
+        ]
+    }
+
+    #[test]
+    fn every_control_round_trips_json_control_protobuf() {
+        for message in messages() {
+            let parsed = parse_control(&message.to_string()).unwrap();
+            let control = match parsed {
+                ParsedControl::Ready(control) => control,
+                ParsedControl::Crossfade { to, duration, ease } => {
+                    assert_eq!((&to, duration, ease), (&message["to"], 0.4, Ease::EaseInOut));
+                    let fade = Crossfade { to: test_motion(), duration, ease, source: Some(Arc::new(to)) };
+                    let control = Control::Crossfade(fade);
+                    assert_eq!(control.to_json().as_ref(), Some(&message));
+                    let ParsedControl::Crossfade { to: None, duration: d, ease: e } =
+                        ParsedControl::from_pb(Some(to_pb(&control))).unwrap()
+                    else {
+                        panic!("a crossfade");
+                    };
+                    assert_eq!((d, e), (duration, ease));
+                    continue;
+                }
+            };
+            assert_eq!(ready(ParsedControl::from_pb(Some(to_pb(&control))).unwrap()), control, "{message}");
+            match control.to_json() {
+                Some(again) => assert_eq!(again, message),
+                None => assert_eq!(control, Control::Stop, "only `stop` is not said again"),
+            }
+        }
+    }
+
+    #[test]
+    fn every_op_has_a_message() {
+        let ops: Vec<String> = messages().iter().map(|m| m["op"].as_str().unwrap().to_owned()).collect();
+        assert_eq!(ops, OPS);
+    }
+
+    #[test]
+    fn refusals_list_the_ops() {
+        let e = serde_json::from_str::<ControlMsg>("{}").unwrap_err();
+        assert!(
+            not_a_control(&e, true).starts_with(
+                r#"expected {"op": "play"|"pause"|"seek"|"speed"|"stop"|"crossfade"|"layer"|"ik", ...}: "#
+            )
+        );
+        assert!(
+            not_a_control(&e, false)
+                .starts_with(r#"expected {"op": "play"|"pause"|"seek"|"speed"|"crossfade"|"layer"|"ik", ...}: "#)
+        );
+    }
+
+    #[test]
+    fn starting_ops_are_not_controls() {
+        let open = ParsedControl::from_pb(Some(Op::Open(pb::Open::default()))).unwrap_err();
+        assert_eq!((open.code, open.pointer.as_str()), ("bad_control", ""));
+        assert_eq!(ParsedControl::from_pb(None).unwrap_err().detail, "a PlaybackControl needs an op");
+    }
+
+    #[test]
+    fn controls_are_validated() {
+        assert!(Control::Seek(f64::NAN).validate().is_err());
+        assert!(Control::Speed(f64::INFINITY).validate().is_err());
+        assert!(Control::Speed(-1000.5).validate().is_err());
+        assert_eq!(Control::Speed(-1000.0).validate(), Ok(Control::Speed(-1000.0)));
+        let ramp = |weight, duration| Control::Layer { index: 0, weight, duration }.validate();
+        assert_eq!(ramp(2.0, -1.0), Err("a weight ramp's duration must be between 0 and 3600 seconds"));
+        assert_eq!(ramp(2.0, 1.0), Err("a layer weight must be in [0, 1]"));
+    }
+
+    #[test]
+    fn only_stop_is_refused_on_a_broadcast() {
+        assert!(Control::Stop.refused_on_broadcast().is_some());
+        assert_eq!(Control::Pause.refused_on_broadcast(), None);
+        assert_eq!(Control::Pause.status_after(false, 2.0), (true, 2.0));
+        assert_eq!(Control::Speed(-1.0).status_after(true, 2.0), (true, -1.0));
+        assert_eq!(Control::Seek(1.0).status_after(true, 2.0), (true, 2.0));
+    }
+}
