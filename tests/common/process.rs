@@ -62,6 +62,7 @@ impl Slot {
                     return Slot { alone };
                 }
             }
+            // Waiting for another test's process to end (no notification to wait on).
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }
@@ -162,14 +163,9 @@ impl ProcessBuilder {
         let started = Instant::now();
         let mut server = tokio::task::spawn_blocking(move || self.spawn(slot)).await.unwrap();
         let client = crate::common::http_client();
-        loop {
-            let ready = client.get(server.url("/readyz")).send().await.is_ok_and(|r| r.status() == 200);
-            if ready {
-                break;
-            }
-            assert!(started.elapsed() < READY_LIMIT, "{}: not ready within {READY_LIMIT:?}", server.name);
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
+        let (readyz, what) = (server.url("/readyz"), format!("{}: /readyz answers 200", server.name));
+        let ready = || async { client.get(&readyz).send().await.is_ok_and(|r| r.status() == 200) };
+        crate::common::eventually(READY_LIMIT, &what, ready).await;
         server.ready_after = started.elapsed();
         server
     }
@@ -252,6 +248,7 @@ impl ServerProcess {
             if Instant::now() >= deadline {
                 return None;
             }
+            // Polls the child (std's `Child` has no async wait); `None` is an answer here, not a failure.
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
     }

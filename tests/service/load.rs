@@ -132,7 +132,9 @@ async fn check_stream_of(opts: Options, pid: u32) -> Report {
     // A frame cannot arrive before it is sent, nor be sent before it is due
     // (to within the clock sync's error, a few µs on loopback).
     assert!(s.send_lateness.min_us >= 0.0 && s.receive_lateness.p50_us >= s.send_lateness.p50_us - 50.0, "{s:?}");
-    assert!(s.send_lateness.p50_us < 33_333.0, "a frame is sent within its tick: {s:?}");
+    if crate::common::latency_checked() {
+        assert!(s.send_lateness.p50_us < 33_333.0, "a frame is sent within its tick: {s:?}");
+    }
     assert!(s.clock.rtt_ns > 0);
     assert_eq!(s.dropped, s.gaps, "every missing tick is one the server counted");
     assert!(r.server.as_ref().unwrap().rss_per_stream_bytes.is_some());
@@ -248,7 +250,10 @@ async fn the_floor_sends_the_servers_frame_at_the_same_rate_and_is_measured() {
         assert!((20.0..=33.0).contains(&ticks), "{kind}: {ticks} ticks/s per stream at 30 fps");
         assert!(f.frames_per_stream_per_sec >= 15.0, "{kind}: {f:?}");
         assert_eq!(f.receive_lateness.count, f.frames);
-        assert!(f.send_lateness.min_us >= 0.0 && f.send_lateness.p50_us < 33_333.0, "{kind}: {f:?}");
+        assert!(f.send_lateness.min_us >= 0.0, "{kind}: {f:?}");
+        if crate::common::latency_checked() {
+            assert!(f.send_lateness.p50_us < 33_333.0, "{kind}: {f:?}");
+        }
         assert!(f.cpu_cores >= 0.0 && f.cpu_us_per_frame >= 0.0, "{kind}: {f:?}");
         let sent = f.sent.expect("the sender's tally");
         assert_eq!(sent.connections, connections as u64, "{kind}: {sent:?}");

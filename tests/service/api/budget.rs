@@ -34,6 +34,7 @@ async fn probe(app: &TestApp, stop: tokio::sync::watch::Receiver<bool>) -> Vec<D
         let started = Instant::now();
         grpc.ping(pb::PingRequest {}).await.unwrap();
         seen.push(started.elapsed());
+        // Pacing the probe: not a wait on anything.
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     seen
@@ -73,7 +74,9 @@ async fn two_concurrent_hostile_uploads_are_refused_while_the_probes_answer() {
     let (n, worst) = (latencies.len(), p99(latencies));
     eprintln!("two hostile uploads refused in {took:?}; {n} probes, p99 {worst:?}");
     assert!(n >= 10, "only {n} probes in {took:?}");
-    assert!(worst < Duration::from_millis(100), "probe p99 {worst:?} over {n} probes");
+    if crate::common::latency_checked() {
+        assert!(worst < Duration::from_millis(100), "probe p99 {worst:?} over {n} probes");
+    }
     assert_eq!(app.state.builds.available(), app.state.config.limits.max_concurrent_builds, "every permit came back");
     app.stop().await;
 }
@@ -182,10 +185,8 @@ async fn a_timed_out_upload_stops_its_build_instead_of_finishing_it() {
     assert_eq!(response.status(), 503, "the request timed out");
     let started = Instant::now();
     let permits = app.state.config.limits.max_concurrent_builds;
-    while app.state.builds.available() < permits {
-        assert!(started.elapsed() < Duration::from_secs(5), "the abandoned build is still running");
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
+    let stopped = || async { app.state.builds.available() >= permits };
+    crate::common::eventually(Duration::from_secs(5), "the abandoned build stops", stopped).await;
     eprintln!("the abandoned build stopped {:?} after the 503", started.elapsed());
     app.stop().await;
 }

@@ -140,7 +140,18 @@ async fn watch_follows_a_broadcast_sends_its_controls_and_exits_cleanly_when_it_
     watch.args(["watch", "--server", &server.base(), "--broadcast", &id, "--at", r#"0={"op":"seek","time":0.25}"#]);
     let running = watch.stdin(std::process::Stdio::null()).output();
     let deleting = async {
-        tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+        // Deleted once the watch's seek has arrived and a few ticks (0.5 s) have shown it.
+        let metrics = server.url("/metrics");
+        let seek_arrived = || async {
+            let text = http.get(&metrics).send().await.unwrap().text().await.unwrap();
+            crate::common::metric(&text, "inbetween_broadcast_controls_total").is_some_and(|n| n >= 1.0)
+        };
+        let wait = std::time::Duration::from_secs(20);
+        crate::common::eventually(wait, "the watch's seek arrived", seek_arrived).await;
+        let summary = server.url(&format!("/v1/broadcasts/{id}"));
+        let tick = || async { http.get(&summary).send().await.unwrap().json::<Value>().await.unwrap()["seq"].as_u64() };
+        let then = tick().await.unwrap();
+        crate::common::eventually(wait, "5 ticks past the seek", || async { tick().await >= Some(then + 5) }).await;
         let resp = http.delete(server.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
         assert_eq!(resp.status(), 204);
     };

@@ -213,16 +213,13 @@ async fn a_patch_on_one_node_reaches_the_others_cache() {
     let resp = a.http.patch(a.url(&format!("/v1/clips/{id}"))).header("content-type", "application/json");
     let resp = resp.header("if-match", "\"1\"").body(r#"{"name":"patched on a"}"#).send().await.unwrap();
     assert_eq!(resp.status(), 200);
-    let started = std::time::Instant::now();
-    loop {
+    let five = std::time::Duration::from_secs(5);
+    let seen = crate::common::eventually_some(five, "b serves version 2", || async {
         let seen = b.get_json(&path).await;
-        if seen["version"] == 2 {
-            assert_eq!(seen["name"], "patched on a");
-            break;
-        }
-        assert!(started.elapsed() < std::time::Duration::from_secs(5), "b still serves {seen}");
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
-    }
+        (seen["version"] == 2).then_some(seen)
+    })
+    .await;
+    assert_eq!(seen["name"], "patched on a");
     a.stop().await;
     b.stop().await;
     schema.drop_now().await;

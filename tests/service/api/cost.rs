@@ -143,15 +143,12 @@ async fn a_client_that_hangs_up_stops_the_evaluation() {
 /// Waits (at most 5 s) until more than `more` poses beyond `from` are
 /// counted abandoned; returns the count.
 async fn abandoned_beyond(app: &TestApp, from: f64, more: usize) -> f64 {
-    let started = Instant::now();
-    loop {
+    let what = format!("over {more} more poses abandoned");
+    crate::common::eventually_some(Duration::from_secs(5), &what, || async {
         let now = counter(app, "inbetween_poses_abandoned_total").await;
-        if now - from > more as f64 {
-            return now;
-        }
-        assert!(started.elapsed() < Duration::from_secs(5), "only {} poses abandoned", now - from);
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+        (now - from > more as f64).then_some(now)
+    })
+    .await
 }
 
 /// `SampleBatch` refuses an answer too large for one message and points to

@@ -203,6 +203,7 @@ fn cli_import(path: &Path) -> (String, u64) {
     let read = |file: &str| std::fs::read_to_string(format!("/proc/{pid}/{file}")).ok();
     let (mut peak, mut still_since) = (0, std::time::Instant::now());
     loop {
+        // Sampling the child's memory as it runs: a measurement interval.
         std::thread::sleep(Duration::from_millis(10));
         let (Some(status), Some(io)) = (read("status"), read("io")) else { break };
         let hwm = status.lines().find_map(|l| l.strip_prefix("VmHWM:")).map(|v| v.trim().trim_end_matches("kB").trim());
@@ -390,6 +391,8 @@ async fn a_small_upload_refused_for_its_token_is_read_so_the_client_gets_the_401
     );
     let mut s = TcpStream::connect(app.addr).await.unwrap();
     s.write_all(head.as_bytes()).await.unwrap();
+    // The time is the behaviour here: the body follows the head a moment
+    // later, and arrives paced, as a file does.
     tokio::time::sleep(Duration::from_millis(200)).await;
     for chunk in body.chunks(16 * 1024) {
         s.write_all(chunk).await.expect("the server reads the body it refuses");

@@ -23,7 +23,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio_stream::wrappers::ReceiverStream;
 
-use crate::common::{TestApp, WAVE, within};
+use crate::common::{TestApp, WAVE, eventually, eventually_some, within};
 
 type ReqBody = BoxBody<Bytes, Infallible>;
 type Sender = mpsc::Sender<Result<Frame<Bytes>, Infallible>>;
@@ -103,6 +103,9 @@ async fn bodyless_posts_on_one_h2_connection_do_not_shed_requests_that_arrived()
         senders.push(tx);
         stalled.push(spawn_request(&conn, rest_post(app.addr, body)));
     }
+    // Nothing to wait on (no metric counts bodies still awaited): this gives
+    // the stalled requests time to arrive. Were they late, the traffic below
+    // would pass all the same; the test would only show less.
     tokio::time::sleep(Duration::from_millis(300)).await;
     normal_rest_traffic(&app, &id).await;
     // The stalled ones end with 408 once the body-read timeout passes.
@@ -141,6 +144,7 @@ async fn grpc_calls_without_their_message_time_out_and_shed_nothing() {
         let mut client = client.clone();
         tokio::spawn(async move { client.play(futures_util::stream::pending::<pb::PlaybackControl>()).await })
     };
+    // Nothing to wait on, as above: time for the stalled calls to arrive.
     tokio::time::sleep(Duration::from_millis(300)).await;
     for _ in 0..5 {
         let calls = (0..8).map(|i| {
@@ -206,11 +210,12 @@ async fn connections_over_the_cap_are_closed_at_accept() {
         for _ in 0..3 {
             held.push(TcpStream::connect(addr).await.unwrap());
         }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-        assert!(closed_at_accept(addr).await, "a 4th connection to {addr} stayed open");
+        // Once the server has accepted the three, a 4th is closed at accept.
+        let what = format!("a 4th connection to {addr} closed at accept");
+        eventually(Duration::from_secs(10), &what, || closed_at_accept(addr)).await;
         drop(held);
-        tokio::time::sleep(Duration::from_millis(200)).await;
-        assert!(!closed_at_accept(addr).await, "a connection under the cap to {addr} was closed");
+        let what = format!("a connection to {addr} kept once under the cap");
+        eventually(Duration::from_secs(10), &what, || async move { !closed_at_accept(addr).await }).await;
     }
     let metrics = app.http.get(app.url("/metrics")).send().await.unwrap().text().await.unwrap();
     for port in ["http", "grpc"] {
@@ -388,9 +393,10 @@ async fn bodies_arriving_at_once_are_bounded_in_bytes() {
     let head = "POST /v1/clips HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 60000\r\n\r\n";
     stalled.write_all(head.as_bytes()).await.unwrap();
     stalled.write_all(&[b' '; 40_000]).await.unwrap();
-    tokio::time::sleep(Duration::from_millis(300)).await;
     let body = format!("{WAVE}{}", " ".repeat(40_000));
     let post = || app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(body.clone());
+    // Kept as it was: polling for the 503 instead never saw one (not yet understood).
+    tokio::time::sleep(Duration::from_millis(300)).await;
     let refused = post().send().await.unwrap();
     assert_eq!(refused.status(), 503);
     assert_eq!(refused.json::<serde_json::Value>().await.unwrap()["code"], "overloaded");
@@ -429,16 +435,12 @@ async fn a_client_that_stops_reading_an_answer_is_cut_off_and_frees_its_slot() {
     tokio::io::AsyncWriteExt::write_all(&mut stuck, format!("{head}{body}").as_bytes()).await.unwrap();
     let started = Instant::now();
     let pose = app.url(&format!("/v1/clips/{id}/pose?t=1"));
+    // Kept as it was: polling for the 429 instead never saw one (not yet understood).
     tokio::time::sleep(Duration::from_millis(500)).await;
     let held = app.http.get(&pose).send().await.unwrap();
     assert_eq!(held.status(), 429, "the stuck answer holds the caller's one slot");
-    let freed_after = within(10, "the stalled answer is cut off", async {
-        loop {
-            if app.http.get(&pose).send().await.unwrap().status() == 200 {
-                return started.elapsed();
-            }
-            tokio::time::sleep(Duration::from_millis(100)).await;
-        }
+    let freed_after = eventually_some(Duration::from_secs(10), "the stalled answer is cut off", || async {
+        (app.http.get(&pose).send().await.unwrap().status() == 200).then(|| started.elapsed())
     })
     .await;
     assert!(freed_after >= Duration::from_millis(1500), "freed after {freed_after:?}, before the stall timeout");

@@ -22,6 +22,7 @@ use tonic::Streaming;
 use super::websocket::close_frame;
 use super::{TestApp, line_clip, within};
 use crate::common::app::Ws;
+use crate::common::{eventually, eventually_some};
 use crate::security::{READER, WRITER, scoped_tokens, with_token};
 
 const FPS: u64 = 20;
@@ -54,6 +55,17 @@ async fn control(app: &TestApp, id: &str, body: Value, token: Option<&str>) -> (
     }
     let resp = req.send().await.unwrap();
     (resp.status().as_u16(), resp.json().await.unwrap())
+}
+
+/// The tick broadcast `id` is at now (its summary's `seq`).
+async fn tick(app: &TestApp, id: &str) -> u64 {
+    app.get_json(&format!("/v1/broadcasts/{id}")).await["seq"].as_u64().unwrap()
+}
+
+/// Waits until broadcast `id` has stepped to tick `seq`.
+async fn until_tick(app: &TestApp, id: &str, seq: u64) {
+    let what = format!("broadcast {id} at tick {seq}");
+    eventually(Duration::from_secs(10), &what, || async { tick(app, id).await >= seq }).await;
 }
 
 async fn watch_ws(app: &TestApp, id: &str, query: &str, token: Option<&str>) -> Ws {
@@ -152,11 +164,14 @@ async fn viewers_joining_at_different_times_get_the_same_frames_for_the_same_seq
     let clip = app.create_id(&line_clip(2), None).await;
     let id = broadcast_of(&app, &clip, None).await;
     let until = 40;
+    // Each group joins 8 ticks (400 ms) after the one before.
     let a = tokio::spawn(collect_ws(watch_ws(&app, &id, "", None).await, until));
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    let joined = tick(&app, &id).await;
+    until_tick(&app, &id, joined + 8).await;
     let b = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=json", None).await, until));
     let d = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=protobuf", None).await, until));
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    let joined = tick(&app, &id).await;
+    until_tick(&app, &id, joined + 8).await;
     let c = tokio::spawn(collect_grpc(watch_grpc(&app, &id, None).await, until));
     let e = tokio::spawn(collect_ws(watch_ws(&app, &id, "?encoding=protobuf", None).await, until));
     let (a, b, d, e) = (a.await.unwrap(), b.await.unwrap(), d.await.unwrap(), e.await.unwrap());
@@ -225,6 +240,7 @@ async fn a_control_reaches_every_viewer_at_the_seq_it_returns() {
     assert_eq!(status, 200, "{seek}");
     let k = seek["seq"].as_u64().unwrap();
     assert!(k > first, "the seek applies from a tick after the viewer's first frame");
+    // Kept as it was: waiting on the summary's tick instead failed a check below (not yet understood).
     tokio::time::sleep(Duration::from_millis(400)).await;
     let (status, pause) = control(&app, &id, json!({"op": "pause"}), None).await;
     assert_eq!(status, 200, "{pause}");
@@ -285,10 +301,9 @@ async fn a_control_reaches_every_viewer_at_the_seq_it_returns() {
     within(5, "a bound frame", play.message()).await.unwrap().expect("a frame");
     let resume = pb::playback_control::Op::Play(pb::Resume {});
     tx.send(pb::PlaybackControl { op: Some(resume) }).await.unwrap();
-    within(5, "playing again", async {
-        while app.get_json(&format!("/v1/broadcasts/{id}")).await["state"] != "playing" {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+    let summary = format!("/v1/broadcasts/{id}");
+    eventually(Duration::from_secs(5), "playing again", || async {
+        app.get_json(&summary).await["state"] == "playing"
     })
     .await;
     drop(tx);
@@ -341,14 +356,9 @@ async fn a_read_only_token_watches_but_cannot_control() {
     // The writer's socket controls it for everyone.
     let mut writer = watch_ws(&app, &id, "", Some(WRITER)).await;
     writer.send(Message::Text(json!({"op": "pause"}).to_string().into())).await.unwrap();
-    within(5, "paused", async {
-        loop {
-            let req = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).bearer_auth(READER);
-            if req.send().await.unwrap().json::<Value>().await.unwrap()["state"] == "paused" {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+    eventually(Duration::from_secs(5), "paused", || async {
+        let req = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).bearer_auth(READER);
+        req.send().await.unwrap().json::<Value>().await.unwrap()["state"] == "paused"
     })
     .await;
     app.stop().await;
@@ -381,10 +391,8 @@ async fn idle_broadcasts_end_and_watched_ones_do_not() {
     assert_eq!(ids, [watched]);
     // Once its viewer leaves, it ends too.
     ws.close(None).await.unwrap();
-    within(5, "the watched broadcast to end", async {
-        while status(watched.to_owned()).await != 404 {
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
+    eventually(Duration::from_secs(5), "the watched broadcast to end", || async {
+        status(watched.to_owned()).await == 404
     })
     .await;
     app.stop().await;
@@ -540,20 +548,19 @@ async fn a_stored_broadcast_resumes_after_a_restart_at_the_tick_the_clock_says()
     assert_eq!(status, 200, "{answer}");
     let stamp = answer["seq"].as_u64().unwrap();
     let created_at = app.state.streams.broadcasts().get(&id).unwrap().created_at_unix_nanos();
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    until_tick(&app, &id, stamp).await;
     app.stop().await;
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // The time is the behaviour here: the clock moves on while the server is
+    // down, to 12 ticks past the seek's stamp (the check below wants over 10).
+    let due = created_at + (stamp + 12) as i64 * 1_000_000_000 / FPS as i64;
+    let left = u64::try_from(due - server::stream::unix_nanos()).unwrap_or(0);
+    tokio::time::sleep(Duration::from_nanos(left)).await;
 
     let app = TestApp::builder().data_dir(data.path()).start().await;
-    let summary: Value = within(5, "the summary", async {
-        loop {
-            let resp = app.http.get(app.url("/v1/broadcasts")).send().await.unwrap();
-            let list: Value = resp.json().await.unwrap();
-            if let Some(b) = list["broadcasts"].as_array().unwrap().iter().find(|b| b["id"] == id.as_str()) {
-                return b.clone();
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+    let summary: Value = eventually_some(Duration::from_secs(5), "the summary", || async {
+        let resp = app.http.get(app.url("/v1/broadcasts")).send().await.unwrap();
+        let list: Value = resp.json().await.unwrap();
+        list["broadcasts"].as_array().unwrap().iter().find(|b| b["id"] == id.as_str()).cloned()
     })
     .await;
     let by_clock = (server::stream::unix_nanos() - created_at) as f64 * FPS as f64 / 1e9;
@@ -643,16 +650,12 @@ async fn a_sockets_crossfade_and_ik_are_stored_and_survive_a_restart() {
     app.stop().await;
 
     let app = TestApp::builder().data_dir(data.path()).start().await;
-    let mut ws = within(5, "the resumed broadcast", async {
-        loop {
-            let resp = app.http.get(app.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
-            if resp.status() == 200 {
-                return watch_ws(&app, &id, "", None).await;
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+    let summary = app.url(&format!("/v1/broadcasts/{id}"));
+    eventually(Duration::from_secs(5), "the resumed broadcast", || async {
+        app.http.get(&summary).send().await.unwrap().status() == 200
     })
     .await;
+    let mut ws = watch_ws(&app, &id, "", None).await;
     for _ in 0..3 {
         let msg = next_message(&mut ws).await;
         assert!(faded_and_aimed(&msg), "after the restart: {}", json_of(&msg)["pose"]);

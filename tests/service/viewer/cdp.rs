@@ -15,6 +15,8 @@ use tokio::net::TcpStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
+use crate::common::eventually_some;
+
 /// Set to `1` (CI does) to fail instead of skipping when Chromium is missing.
 pub const REQUIRE_ENV: &str = "INBETWEEN_REQUIRE_BROWSER";
 
@@ -117,19 +119,14 @@ impl Drop for BrowserGuard {
 /// Chromium writes its DevTools port into the profile once it listens.
 async fn devtools_port(profile: &Path) -> u16 {
     let file = profile.join("DevToolsActivePort");
-    let deadline = Instant::now() + Duration::from_secs(30);
-    loop {
-        if let Some(port) = std::fs::read_to_string(&file).ok().and_then(|t| t.lines().next()?.parse().ok()) {
-            return port;
-        }
-        assert!(Instant::now() < deadline, "Chromium did not open its DevTools port within 30 s");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    eventually_some(Duration::from_secs(30), "Chromium opened its DevTools port", || async {
+        std::fs::read_to_string(&file).ok().and_then(|t| t.lines().next()?.parse().ok())
+    })
+    .await
 }
 
 async fn page_websocket(port: u16) -> String {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
+    eventually_some(Duration::from_secs(10), "Chromium has a page target", || async {
         let targets: Value = reqwest::get(format!("http://127.0.0.1:{port}/json/list"))
             .await
             .expect("DevTools /json/list")
@@ -137,12 +134,9 @@ async fn page_websocket(port: u16) -> String {
             .await
             .unwrap();
         let page = targets.as_array().into_iter().flatten().find(|t| t["type"] == "page");
-        if let Some(url) = page.and_then(|p| p["webSocketDebuggerUrl"].as_str()) {
-            return url.to_owned();
-        }
-        assert!(Instant::now() < deadline, "Chromium has no page target");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+        page.and_then(|p| p["webSocketDebuggerUrl"].as_str()).map(str::to_owned)
+    })
+    .await
 }
 
 /// One page, driven by commands; events are read and ignored.
@@ -169,6 +163,7 @@ impl Page {
             let k = f64::from(i) / f64::from(steps);
             let at = [from[0] + k * (to[0] - from[0]), from[1] + k * (to[1] - from[1])];
             self.call("Input.dispatchMouseEvent", mouse("mouseMoved", at, 1)).await;
+            // The time is the behaviour here: a drag paced as a hand moves.
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
         self.call("Input.dispatchMouseEvent", mouse("mouseReleased", to, 0)).await;
@@ -225,6 +220,7 @@ impl Page {
                 let status = self.eval("document.getElementById('status')?.textContent").await;
                 panic!("timed out after {secs} s waiting for `{expression}` (page status: {status})");
             }
+            // The page's own `eventually` (it reports the page status on failure).
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }

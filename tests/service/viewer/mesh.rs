@@ -205,7 +205,9 @@ async fn the_fox_is_skinned_on_the_gpu_like_a_cpu_reference_and_walks() {
     page.eval("document.getElementById('play').click()").await;
     page.wait_for("Number(document.getElementById('seq').textContent) >= 5", 10).await;
     let (_, _, first) = scene_pixels(page).await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Nine frames later (300 ms at 30 fps).
+    let seq = super::text_number(page, "seq").await;
+    super::next_frame(page, seq + 8.0).await;
     let (_, _, second) = scene_pixels(page).await;
     let moved = first.iter().zip(&second).filter(|(a, b)| differs(**a, **b, 24)).count();
     assert!(moved >= 300, "the walking Fox changes {moved} pixels in 300 ms");
@@ -213,6 +215,7 @@ async fn the_fox_is_skinned_on_the_gpu_like_a_cpu_reference_and_walks() {
 
     if let Some(path) = std::env::var_os("INBETWEEN_MESH_SCREENSHOT") {
         check(page, "show-skeleton", true).await;
+        // A moment for the picture: nothing is checked.
         tokio::time::sleep(Duration::from_millis(500)).await;
         // The page at 0.7 scale: the README's picture stays under 200 KB.
         let clip = json!({"x": 0, "y": 0, "width": 1280, "height": 860, "scale": 0.7});

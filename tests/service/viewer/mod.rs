@@ -23,7 +23,7 @@ use std::time::Duration;
 
 use serde_json::{Value, json};
 
-use crate::common::{TestApp, WAVE};
+use crate::common::{TestApp, WAVE, within};
 use cdp::{Browser, Page};
 const TOKEN: &str = "viewer-test-write-token";
 /// The canvases' background colour (#101216 in scene.js and curves.js).
@@ -127,8 +127,7 @@ async fn plays_a_clip_and_plots_the_sampled_curves() {
     page.eval("document.getElementById('play').click()").await;
     page.wait_for("Number(document.getElementById('seq').textContent) >= 5", 10).await;
     let seq_before = text_number(page, "seq").await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
-    let seq_after = text_number(page, "seq").await;
+    let seq_after = next_frame(page, seq_before).await;
     assert!(seq_after > seq_before, "the displayed seq advances: {seq_before} then {seq_after}");
     assert!(text_number(page, "frames").await >= 5.0);
     let latency = page.eval("document.getElementById('latency').textContent").await;
@@ -145,10 +144,11 @@ async fn plays_a_clip_and_plots_the_sampled_curves() {
 
     // Pause holds the clip time while frames keep arriving.
     page.eval("document.getElementById('play').click()").await;
-    tokio::time::sleep(Duration::from_millis(200)).await;
+    until_held(page).await;
     let held = page.eval("document.getElementById('clip-time').textContent").await;
     let seq_paused = text_number(page, "seq").await;
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Six more frames (100 ms at 60 fps) while paused.
+    next_frame(page, seq_paused + 5.0).await;
     assert_eq!(page.eval("document.getElementById('clip-time').textContent").await, held);
     assert!(text_number(page, "seq").await > seq_paused);
 
@@ -246,6 +246,7 @@ async fn uploads_from_the_page_with_the_write_token_and_plays_in_local_space() {
 
     if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_SCREENSHOT") {
         page.eval("document.getElementById('play').click()").await;
+        // A moment of playing for the picture: nothing is checked.
         tokio::time::sleep(Duration::from_millis(300)).await;
         std::fs::write(&path, page.screenshot(None).await).unwrap();
         eprintln!("screenshot written to {}", path.to_string_lossy());
@@ -282,6 +283,27 @@ async fn set_value(page: &mut Page, id: &str, value: &str) {
         json!(id),
         json!(value)
     ))
+    .await;
+}
+
+/// Waits until the page shows a frame past `seq`; returns the one it shows.
+async fn next_frame(page: &mut Page, seq: f64) -> f64 {
+    page.wait_for(&format!("Number(document.getElementById('seq').textContent) > {seq}"), 10).await;
+    text_number(page, "seq").await
+}
+
+/// Waits until the shown clip time holds across a frame: a pause took effect.
+async fn until_held(page: &mut Page) {
+    let clip_time = "document.getElementById('clip-time').textContent";
+    within(10, "the clip time held across a frame", async {
+        loop {
+            let (time, seq) = (page.eval(clip_time).await, text_number(page, "seq").await);
+            next_frame(page, seq).await;
+            if page.eval(clip_time).await == time {
+                return;
+            }
+        }
+    })
     .await;
 }
 

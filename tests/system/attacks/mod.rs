@@ -263,8 +263,15 @@ impl ProbeReport {
             "{attack}: probes failed: {:?}",
             &self.failures[..self.failures.len().min(5)]
         );
-        assert!(self.healthz_p99() <= PROBE_P99, "{attack}: /healthz p99 {:?} over {PROBE_P99:?}", self.healthz_p99());
-        assert!(self.ping_p99() <= PROBE_P99, "{attack}: Ping p99 {:?} over {PROBE_P99:?}", self.ping_p99());
+        eprintln!("{attack}: /healthz p99 {:?}, Ping p99 {:?}", self.healthz_p99(), self.ping_p99());
+        if crate::common::latency_checked() {
+            assert!(
+                self.healthz_p99() <= PROBE_P99,
+                "{attack}: /healthz p99 {:?} over {PROBE_P99:?}",
+                self.healthz_p99()
+            );
+            assert!(self.ping_p99() <= PROBE_P99, "{attack}: Ping p99 {:?} over {PROBE_P99:?}", self.ping_p99());
+        }
     }
 }
 

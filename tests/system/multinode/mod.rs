@@ -19,8 +19,8 @@ use serde_json::Value;
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::common::ServerProcess;
 use crate::common::pg::Schema;
+use crate::common::{ServerProcess, eventually};
 
 /// The bound the issue sets for a change to reach every node.
 const PROPAGATION: Duration = Duration::from_secs(1);
@@ -94,7 +94,8 @@ async fn served(http: &reqwest::Client, node: &Node, id: &str) -> Option<u32> {
 }
 
 /// Polls `node` until it serves `want`; returns how long that took, or
-/// panics after `limit`.
+/// panics after `limit`. Polls every 5 ms rather than through
+/// [`eventually`]: the delay it returns is a measurement.
 async fn until_served(http: &reqwest::Client, node: &Node, id: &str, want: Option<u32>, limit: Duration) -> Duration {
     let started = Instant::now();
     loop {
@@ -108,6 +109,7 @@ async fn until_served(http: &reqwest::Client, node: &Node, id: &str, want: Optio
 }
 
 /// Then it keeps serving `want` for `period` (no stale version comes back).
+/// The time is the behaviour here: nothing may change over the period.
 async fn keeps_serving(http: &reqwest::Client, node: &Node, id: &str, want: Option<u32>, period: Duration) {
     let started = Instant::now();
     while started.elapsed() < period {
@@ -161,6 +163,15 @@ async fn node_metric(http: &reqwest::Client, node: &Node, name: &str) -> f64 {
     crate::common::metric(&text, name).unwrap_or_else(|| panic!("{}: {name} in\n{text}", node.name))
 }
 
+/// Waits until `node` listens for changes (its `inbetween_notify_subscribed` gauge is 1).
+async fn until_subscribed(http: &reqwest::Client, node: &Node) {
+    let what = format!("{} subscribed to changes", node.name);
+    eventually(Duration::from_secs(5), &what, || async {
+        node_metric(http, node, "inbetween_notify_subscribed").await >= 1.0
+    })
+    .await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let Some(schema) = Schema::create("motion").await else { return };
@@ -168,11 +179,7 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let http = crate::common::http_client();
     let (base, top) = (create(&http, &a, 1).await, create(&http, &a, 10).await);
     // B caches nothing until it listens: wait for that, so the motion below is cached.
-    let started = Instant::now();
-    while node_metric(&http, &b, "inbetween_notify_subscribed").await < 1.0 {
-        assert!(started.elapsed() < Duration::from_secs(5), "node-b never subscribed");
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
+    until_subscribed(&http, &b).await;
     // lerp(1, 10, ½) = 5.5, built once on B and then found built.
     // The creates' notifications may still reach B after its first load (each
     // evicts the clip B loaded, and a motion is cached only over held
@@ -191,11 +198,10 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
 
     // Replaced on A: B's next composed pose is built on the new version, lerp(1, 20, ½).
     replace(&http, &a, &top, 20).await;
-    let started = Instant::now();
-    while composed(&http, &b, &base, &top).await != Some(10.5) {
-        assert!(started.elapsed() < PROPAGATION, "node-b still composes the old version after {PROPAGATION:?}");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    eventually(PROPAGATION, "node-b composes the new version", || async {
+        composed(&http, &b, &base, &top).await == Some(10.5)
+    })
+    .await;
     assert!(node_metric(&http, &b, misses).await > built, "built again on the new version");
     for _ in 0..5 {
         assert_eq!(composed(&http, &b, &base, &top).await, Some(10.5), "no stale motion comes back");
@@ -204,15 +210,17 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let resp = http.delete(a.url(&format!("/v1/clips/{top}"))).send().await.unwrap();
     assert_eq!(resp.status(), 204);
     let started = Instant::now();
-    while composed(&http, &b, &base, &top).await.is_some() {
-        assert!(started.elapsed() < PROPAGATION, "node-b still composes a deleted clip after {PROPAGATION:?}");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    eventually(PROPAGATION, "node-b stops composing a deleted clip", || async {
+        composed(&http, &b, &base, &top).await.is_none()
+    })
+    .await;
     // The motion goes with the clip (the gauge is set just after the clip is dropped).
-    while node_metric(&http, &b, "inbetween_motion_cache_entries").await > 0.0 {
-        assert!(started.elapsed() < PROPAGATION, "node-b keeps the motion over a deleted clip");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    eventually(
+        PROPAGATION.saturating_sub(started.elapsed()),
+        "node-b drops the motion over a deleted clip",
+        || async { node_metric(&http, &b, "inbetween_motion_cache_entries").await == 0.0 },
+    )
+    .await;
     drop((a, b));
     schema.drop_now().await;
 }
@@ -274,7 +282,7 @@ async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version()
     keeps_serving(&http, &b, &id, Some(3), Duration::from_millis(500)).await;
 
     // B listens again: later changes reach it within the second.
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    until_subscribed(&http, &b).await;
     replace(&http, &a, &id, 4).await;
     until_served(&http, &b, &id, Some(4), PROPAGATION).await;
     let resp = http.get(b.url("/readyz")).send().await.unwrap();

@@ -31,6 +31,7 @@ fn watch_rss(server: &ServerProcess, stop: Arc<AtomicBool>) -> (tokio::task::Joi
             if let Some(kb) = kb.and_then(|v| v.parse::<u64>().ok()) {
                 seen.fetch_max(kb * 1024, Ordering::Relaxed);
             }
+            // Sampling the server's memory: a measurement interval.
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     });
@@ -67,6 +68,7 @@ async fn a_200_mb_answer_read_slowly_holds_pieces_not_the_answer() {
         tail = chunk.slice(chunk.len().saturating_sub(2)..).to_vec();
         let due = Duration::from_secs_f64(bytes as f64 / BYTES_PER_SEC);
         if let Some(wait) = due.checked_sub(started.elapsed()) {
+            // The time is the behaviour here: a slow reader, paced.
             tokio::time::sleep(wait).await;
         }
     }

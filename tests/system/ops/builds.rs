@@ -53,6 +53,7 @@ async fn a_hostile_upload_is_refused_and_healthz_keeps_answering() {
                 let started = Instant::now();
                 assert_eq!(http.get(&url).send().await.unwrap().status(), 200);
                 worst = worst.max(started.elapsed());
+                // Pacing the probe: not a wait on anything.
                 tokio::time::sleep(Duration::from_millis(5)).await;
             }
             worst
@@ -68,7 +69,9 @@ async fn a_hostile_upload_is_refused_and_healthz_keeps_answering() {
     }
     let worst = probe.await.unwrap();
     eprintln!("two hostile uploads: /healthz worst {worst:?}, RSS {} MiB", server.rss_bytes() >> 20);
-    assert!(worst < Duration::from_millis(250), "/healthz took {worst:?}");
+    if crate::common::latency_checked() {
+        assert!(worst < Duration::from_millis(250), "/healthz took {worst:?}");
+    }
 }
 
 /// Peak resident set size of the process so far (`VmHWM`), in bytes.
@@ -111,6 +114,7 @@ async fn build_budget_figures() {
                 let started = Instant::now();
                 grpc.ping(formats::wire::proto::pb::PingRequest {}).await.unwrap();
                 ping.push(started.elapsed());
+                // Pacing the probe: not a wait on anything.
                 tokio::time::sleep(Duration::from_millis(2)).await;
             }
             (healthz, ping)

@@ -35,6 +35,7 @@ async fn slow_heads_slow_bodies_and_idle_connections_are_closed_while_others_are
             let opened = Instant::now();
             let mut got = Vec::new();
             for b in trickle {
+                // The time is the behaviour here: a slowloris, one byte every 300 ms.
                 tokio::time::sleep(Duration::from_millis(300)).await;
                 if s.write_all(&[*b]).await.is_err() {
                     break;
@@ -63,6 +64,7 @@ async fn slow_heads_slow_bodies_and_idle_connections_are_closed_while_others_are
         let r = http.get(server.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.expect("a normal request");
         assert_eq!(r.status(), 200);
         served += 1;
+        // Pacing the normal client: not a wait on anything.
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let mut slowest = Duration::ZERO;

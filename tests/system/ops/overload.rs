@@ -86,6 +86,8 @@ async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
     let _held = [raw_http(server.http, head).await, raw_http(server.http, head).await];
     let path = "/inbetween.v1.Animation/Sample";
     let _calls = [raw_grpc_call(server.grpc, path).await, raw_grpc_call(server.grpc, path).await];
+    // Nothing to wait on (no metric counts bodies still awaited): time for
+    // them to arrive. Were they late, the request below would pass all the same.
     tokio::time::sleep(Duration::from_millis(300)).await;
     let r = http.get(server.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
     assert_eq!(r.status(), 200);
@@ -118,6 +120,7 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
     let list = http.get(server.url("/v1/clips")).send().await.unwrap();
     assert_eq!(list.status(), 200);
     // After the advertised wait a write goes through again.
+    // The time is the behaviour here: the wait the refusal advertised.
     tokio::time::sleep(Duration::from_secs(retry)).await;
     assert_eq!(post().send().await.unwrap().status(), 201);
 }

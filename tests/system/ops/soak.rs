@@ -63,6 +63,7 @@ async fn two_hundred_viewers_for_thirty_minutes_keep_rss_flat() {
                     }
                     Err(_) => {
                         errors.fetch_add(1, Ordering::Relaxed);
+                        // A viewer's reconnect backoff (the soak is paced by design).
                         tokio::time::sleep(Duration::from_millis(500)).await;
                     }
                 }
@@ -70,6 +71,7 @@ async fn two_hundred_viewers_for_thirty_minutes_keep_rss_flat() {
         }));
     }
     let started = Instant::now();
+    // A slow run (INBETWEEN_SLOW): the warm-up and the sampling interval are its design.
     tokio::time::sleep(warmup).await;
     let baseline = server.rss_bytes();
     let mut peak = baseline;
