@@ -22,7 +22,7 @@ use std::time::Duration;
 pub use app::TestApp;
 pub use process::ServerProcess;
 
-/// The SPEC §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
+/// The docs/clip-format.md §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
 pub const WAVE: &str = include_str!("../../examples/wave.json");
 
 /// A real third-party test file, `rel` as in `../shared/testdata` (e.g.
@@ -158,7 +158,7 @@ pub fn hips_mover(name: &str, to: f32, duration: f32, playback: &str) -> String 
     .to_string()
 }
 
-/// A leg under moving hips for IK tests (SPEC §7): `hips` translates along
+/// A leg under moving hips for IK tests (docs/ik.md): `hips` translates along
 /// x from 0 to `duration` over `duration` s (x equals the time), `thigh` at
 /// hips + (0.1, 0, 0), `knee` 0.5 below it, `foot` 0.5 below that (so
 /// l1 = l2 = 0.5), `toe` 0.2 ahead of the foot (+z), and `head` at hips +

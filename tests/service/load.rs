@@ -194,7 +194,7 @@ async fn foot_ik_streams_play_at_the_asked_rate() {
     assert_eq!(names, ["load-walk-20"; 3], "the walk uploaded once per run");
 }
 
-/// Viewers of one broadcast (SPEC §9; issue 19): the load creates a
+/// Viewers of one broadcast (docs/broadcasts.md; issue 19): the load creates a
 /// broadcast of the clip (or of a motion), opens its viewers on
 /// `/v1/broadcasts/{id}/stream` in JSON and protobuf, and measures them
 /// like any stream; the server evaluates the broadcast once per tick

@@ -1,5 +1,5 @@
 //! `inbetween sample`: the real binary on `examples/wave.json`, its output
-//! shape (SPEC §3 pose) and values checked against the library, and bad
+//! shape (docs/api.md pose) and values checked against the library, and bad
 //! input refused with the validation error on stderr.
 
 use std::path::PathBuf;
@@ -39,7 +39,7 @@ fn floats(v: &Value, len: usize) -> Vec<f32> {
     a.iter().map(|x| x.as_f64().expect("a number") as f32).collect()
 }
 
-/// Every pose has the SPEC §3 shape and the library's values, exactly.
+/// Every pose has the docs/api.md shape and the library's values, exactly.
 fn check_poses(poses: &[Value], times: &[f64], space: Space) {
     let clip = wave();
     assert_eq!(poses.len(), times.len());

@@ -1,4 +1,4 @@
-//! `inbetween sample` at the clip's seams (SPEC §2.7): a time written as the
+//! `inbetween sample` at the clip's seams (docs/clip-format.md §2.7): a time written as the
 //! clip document writes its first or last key is that key in every
 //! playback mode (`loop` maps the end to the start), though f32 holds
 //! neither 0.1, 1/3 nor 1.3 exactly. Expected values are the documents'

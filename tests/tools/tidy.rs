@@ -313,6 +313,30 @@ fn no_document_cites_the_internal_spec() {
     assert!(citing.is_empty(), "these cite SPEC §…; link the docs/ section that says it instead: {citing:?}");
 }
 
+/// Code, protos and examples cite the project's `docs/` too, never the internal
+/// contract: a contributor reading a comment has the docs, not the SPEC. The
+/// SQL migrations are exempt: an applied migration is checksummed, so its
+/// text (comments included) can never change.
+#[test]
+fn no_code_cites_the_internal_spec() {
+    let mut files = Vec::new();
+    for dir in ["src", "crates", "proto", "examples", "scripts", "bench", "deploy"] {
+        let mut stack = vec![root().join(dir)];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).expect("read a folder") {
+                let path = entry.expect("a folder entry").path();
+                let name = path.file_name().unwrap().to_string_lossy().into_owned();
+                if path.is_dir() && name != "migrations" && name != "target" && name != "node_modules" {
+                    stack.push(path);
+                } else if path.is_file() && std::fs::read_to_string(&path).is_ok_and(|t| t.contains("SPEC §")) {
+                    files.push(path.strip_prefix(root()).unwrap().display().to_string());
+                }
+            }
+        }
+    }
+    assert!(files.is_empty(), "these cite SPEC §…; cite the docs/ section that says it instead: {files:?}");
+}
+
 /// Every relative link, with its `#anchor`, lands on a file and a heading that
 /// exist, so the map's roads lead somewhere.
 #[test]

@@ -85,7 +85,7 @@ pub fn import_evaluate(data: &[u8]) {
     }
 }
 
-/// A motion document (SPEC §6, with §7's `ik`) over three fixed clips (two
+/// A motion document (docs/motion.md, with §7's `ik`) over three fixed clips (two
 /// of one skeleton, one of another; layer `clip` names pick them by their
 /// length), built and
 /// sampled at times from the input, then played as a stream would: weight

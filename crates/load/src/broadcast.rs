@@ -1,4 +1,4 @@
-//! `ws-broadcast` setup: the one broadcast (SPEC §9) whose viewers the run
+//! `ws-broadcast` setup: the one broadcast (docs/broadcasts.md) whose viewers the run
 //! opens, created over REST before the viewers and deleted after them, and
 //! the server's broadcast counters from `/metrics`.
 //!

@@ -10,7 +10,7 @@
 //!   server's clock, and
 //! - the wall-clock instant of the engine's epoch, on which every stream's
 //!   ticks sit: grid tick `n` of rate `fps` is due at `epoch + ⌊n·10⁹/fps⌋`
-//!   ns (SPEC §5, `stream::schedule`), so a frame's due time is known exactly
+//!   ns (docs/api.md, `stream::schedule`), so a frame's due time is known exactly
 //!   once its grid tick is.
 
 use serde::Serialize;

@@ -11,7 +11,7 @@
 //! against the server's tick grid after a `Ping` clock sync; with
 //! `--motion` every stream plays a composed motion instead of the clip:
 //! `three-layers`, or `foot-ik`, a walk with IK-planted feet); `ws-broadcast`
-//! (one broadcast of the clip or motion, SPEC §9, watched by N WebSocket
+//! (one broadcast of the clip or motion, docs/broadcasts.md, watched by N WebSocket
 //! viewers, measured the same way on the broadcast's tick grid). `--ramp`
 //! steps the load up until a p99 target breaks and reports the knee.
 //! `--floor` (`grpc-stream`, `ws-stream`) then measures the streaming floor

@@ -3,7 +3,7 @@
 //!
 //! `three-layers` (issue 16) is what a game character typically runs —
 //! locomotion blended from two synced cycles of different lengths, and an
-//! upper-body action masked on top (SPEC §6's example without its additive
+//! upper-body action masked on top (docs/motion.md's example without its additive
 //! layer). Its clips are generated chains of the run's joint count
 //! ([`Chain`]), the first being the clip a clip run streams, so a motion
 //! run and a clip run send the same joints in frames of the same size and

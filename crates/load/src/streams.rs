@@ -77,7 +77,7 @@ const OPEN_TIMEOUT: Duration = Duration::from_secs(10);
 /// A frame bigger than this reserves its own length when its header arrives.
 const READ_BUFFER_BYTES: usize = 8 * 1024;
 
-/// The header of a `Frame` (SPEC §4): protobuf skips the other fields.
+/// The header of a `Frame` (docs/api.md): protobuf skips the other fields.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct FrameHead {
     #[prost(uint64, tag = "1")]

@@ -222,7 +222,7 @@ mod tests {
     /// The motion as the server builds it (the JSON document through
     /// `MotionDoc`, the clip by id): every sample reports both two-bone
     /// constraints converged, and the feet's model positions, computed
-    /// from the output pose, sit on the targets within the SPEC's
+    /// from the output pose, sit on the targets within the documented
     /// `1e-5·(l1 + l2)`.
     #[test]
     fn every_frame_plants_both_feet() {

@@ -240,7 +240,7 @@ fn frame_line(frame: &Value) -> String {
     line
 }
 
-/// One IK report (SPEC §7) as `kind:residual:iterations` with `!` when it
+/// One IK report (docs/ik.md) as `kind:residual:iterations` with `!` when it
 /// did not converge.
 fn ik_report(r: &Value) -> String {
     let converged = if r["converged"] == true { "" } else { "!" };

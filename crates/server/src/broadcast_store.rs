@@ -1,4 +1,4 @@
-//! Broadcasts kept in the store (SPEC §9 "Many nodes", and the resume after
+//! Broadcasts kept in the store (docs/broadcasts.md "Many nodes", and the resume after
 //! a restart): what is written, how a node builds a broadcast again from it,
 //! and how it keeps its copies in step with the store.
 //!

@@ -513,7 +513,7 @@ impl RawConfig {
 }
 
 impl Limits {
-    /// The ceilings on IK constraints (SPEC §7 errors), for the core.
+    /// The ceilings on IK constraints (docs/ik.md errors), for the core.
     pub fn ik(&self) -> anim::ik::IkLimits {
         anim::ik::IkLimits {
             max_constraints: self.ik_max_constraints,

@@ -29,7 +29,7 @@ pub enum ApiError {
     #[error("{detail}")]
     MalformedJson { pointer: String, detail: String },
     /// A body, clip or request value that parses but breaks a rule (types,
-    /// SPEC §1–2, limits, the request rules of `server::request`).
+    /// docs/clip-format.md §1–2, limits, the request rules of `server::request`).
     #[error("{detail}")]
     Invalid { code: &'static str, at: At, detail: String },
     /// A query parameter, header or request value that does not parse.
@@ -58,7 +58,7 @@ pub enum ApiError {
     UnsupportedMediaType { detail: String },
     #[error("{detail}")]
     TooMany { code: &'static str, pointer: String, detail: String },
-    /// `max_broadcasts` broadcasts are live (SPEC §9).
+    /// `max_broadcasts` broadcasts are live (docs/broadcasts.md).
     #[error("{} ({})", .0, raise_hint("max_broadcasts"))]
     TooManyBroadcasts(crate::stream::BroadcastError),
     /// The stream caps (global or per client address) are reached.

@@ -1,4 +1,4 @@
-//! The gRPC API (SPEC §4): service `inbetween.v1.Animation`, plus
+//! The gRPC API (docs/api.md): service `inbetween.v1.Animation`, plus
 //! `grpc.health.v1` and server reflection (v1 and v1alpha).
 //!
 //! Every RPC runs on the same state as REST: the same store, clip cache,

@@ -1,4 +1,4 @@
-//! The composed-motion RPCs (SPEC §6): `SampleMotion` and
+//! The composed-motion RPCs (docs/motion.md): `SampleMotion` and
 //! `SampleMotionBatch`, the gRPC mirror of `POST /v1/poses` and
 //! `/v1/samples`. The motion message is converted in `wire::proto`, checked
 //! and priced by `server::request` (`RawPose`, `RawBatch`, `RawMotion`) with

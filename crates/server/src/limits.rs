@@ -29,7 +29,7 @@ pub struct Admitted {
 /// Validates an uploaded clip document.
 ///
 /// # Errors
-/// `malformed_json` (400); a type error, a SPEC rule or a limit (422), each
+/// `malformed_json` (400); a type error, a documented rule or a limit (422), each
 /// with the JSON pointer of the offending field.
 pub fn admit(body: &[u8], limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
     admit_doc(parse_clip_doc(body)?, limits, cancel)
@@ -65,7 +65,7 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<A
 /// refusal naming its setting.
 ///
 /// # Errors
-/// A SPEC rule (422 with the rule's code), or `build_budget_exceeded` (422).
+/// A documented rule (422 with the rule's code), or `build_budget_exceeded` (422).
 pub fn build(spec: &ClipSpec, max_work: u64, ik: &IkLimits, cancel: &AtomicBool) -> Result<Clip, ApiError> {
     Clip::build_limited(spec, max_work, ik, cancel).map_err(|e| match e {
         ClipError { kind: kind @ ClipErrorKind::BuildBudgetExceeded { .. }, path } => ApiError::TooMany {

@@ -1,4 +1,4 @@
-//! A bounded cache of built motions (SPEC §6), so a client that asks for the
+//! A bounded cache of built motions (docs/motion.md), so a client that asks for the
 //! same composition every frame (`POST /v1/poses` at 60 Hz) looks its clips
 //! up but does not rebuild the motion (masks resolved, joints mapped by name,
 //! additive reference poses sampled) for each pose.

@@ -23,7 +23,7 @@
 //! Streams are not touched: each holds the compiled clip it started on
 //! (`Arc<CachedClip>`) until it ends, exactly as after a local replace.
 //!
-//! Broadcasts (SPEC §9) are announced on the same channel
+//! Broadcasts (docs/broadcasts.md) are announced on the same channel
 //! (`migrations/postgres/0004_broadcasts.sql`): `broadcast 0 <id>` (created),
 //! `control 0 <id>` (a control stored), `unbroadcast 0 <id>` (deleted). They
 //! are handed to `broadcast_store`, which reads the rows back; and since a
@@ -56,7 +56,7 @@ pub enum Change<'a> {
     Deleted {
         id: &'a str,
     },
-    /// A broadcast created or given a control (SPEC §9).
+    /// A broadcast created or given a control (docs/broadcasts.md).
     Broadcast {
         id: &'a str,
     },

@@ -63,7 +63,7 @@ func _apply(frame: Dictionary) -> void:
 ## A clip event (a footstep, a sound cue) crossed since the previous frame.
 signal event_crossed(name: String, time: float)
 
-## Controls act on the server's next tick (SPEC §5).
+## Controls act on the server's next tick (docs/api.md, streaming).
 func seek(time: float) -> void:
 	_socket.send_text(JSON.stringify({"op": "seek", "time": time}))
 

@@ -8,7 +8,7 @@
 //
 // Uploads the clip, plays it at 30 fps in model space, seeks half-way through
 // after 10 frames, and prints each frame; exits non-zero when a frame breaks
-// the schedule (SPEC §5) or the seek does not land.
+// the schedule (docs/api.md, streaming) or the seek does not land.
 import { readFile } from "node:fs/promises";
 import { parseArgs } from "node:util";
 

@@ -3,7 +3,7 @@
 
 Uploads a clip over REST, samples one pose over REST and the same pose over
 gRPC (they must agree), then plays the clip over a WebSocket for a few frames,
-printing each and checking its clip time against the schedule (SPEC §5).
+printing each and checking its clip time against the schedule (docs/api.md).
 
     python3 -m pip install -r examples/clients/python/requirements.txt
     python3 examples/clients/python/inbetween_client.py \

@@ -1,4 +1,4 @@
-//! `b_spline` (SPEC §2.5) over the wire: a JSON clip uploaded and posed over
+//! `b_spline` (docs/clip-format.md §2.5) over the wire: a JSON clip uploaded and posed over
 //! REST, the same clip over gRPC with the protobuf enum, a BVH imported with
 //! `?interpolation=b_spline`, and the OpenAPI document naming the mode.
 //! Expected poses are closed forms of the lecture's B-spline worked by hand.

@@ -15,7 +15,7 @@ async fn an_uploaded_clip_comes_back_as_accepted() {
     let summary: Value = resp.json().await.unwrap();
     let id = summary["id"].as_str().unwrap();
     assert_eq!(location, format!("/v1/clips/{id}"));
-    // Figures of the SPEC §1 example, counted by hand: 2 joints, 2 tracks,
+    // Figures of the docs/clip-format.md §1 example, counted by hand: 2 joints, 2 tracks,
     // keys from 0 to 3, one event, loop playback.
     assert_eq!(summary["name"], "wave");
     assert_eq!(summary["version"], 1);

@@ -1,4 +1,4 @@
-//! Inverse kinematics over REST (SPEC §7) with a real client: IK keyed in
+//! Inverse kinematics over REST (docs/ik.md) with a real client: IK keyed in
 //! clips (targets and weights as tracks, solved at every sample), IK in a
 //! request's motion, the reports every pose carries, the document's round
 //! trip, and the refusals with their codes and pointers.

@@ -1,4 +1,4 @@
-//! Composed poses over REST (SPEC §6): `POST /v1/poses` and `/v1/samples`.
+//! Composed poses over REST (docs/motion.md): `POST /v1/poses` and `/v1/samples`.
 //! A one-layer motion answers exactly what the clip routes answer; blends,
 //! subsets and root motion against hand-computed values; refusals with
 //! their codes and pointers.

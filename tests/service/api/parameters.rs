@@ -1,10 +1,10 @@
-//! Parameters (SPEC §8) end to end with real clients: `examples/face.json`
+//! Parameters (docs/clip-format.md §3) end to end with real clients: `examples/face.json`
 //! uploaded and sampled over REST, gRPC and the WebSocket; the `parameters`
 //! filter and its refusal; upload refusals with pointers; a glTF with morph
 //! targets built here (LINEAR, STEP and CUBICSPLINE weights) imported and
 //! sampled against weights worked out by hand.
 //!
-//! Expected values come from SPEC §2 by hand: `face_mesh` is linear between
+//! Expected values come from docs/clip-format.md §2 by hand: `face_mesh` is linear between
 //! `[0, 0]` at 0 and `[1, 0.1]` at 0.1; `camera_fov` is Catmull-Rom through
 //! 45, 35, 45 at 0, 1, 2 with reflect ends, evaluated here in f64.
 
@@ -19,7 +19,7 @@ use super::{TestApp, within};
 
 const FACE: &str = include_str!("../../../examples/face.json");
 
-/// `camera_fov` at `t` in [0, 1]: segment 0 of SPEC §2.2 with the reflect
+/// `camera_fov` at `t` in [0, 1]: segment 0 of docs/clip-format.md §2.2 with the reflect
 /// phantom `c₋₁ = 2·45 − 35 = 55` at `t₋₁ = −1` (unit spacing, k = ½).
 fn fov(t: f64) -> f64 {
     let (c0, c1, c2, cm) = (45.0, 35.0, 45.0, 55.0);

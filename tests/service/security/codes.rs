@@ -335,7 +335,7 @@ async fn the_cost_refusals_have_one_code_on_both_protocols() {
     app.stop().await;
 }
 
-/// Composed motions (SPEC §6): `POST /v1/poses` and `SampleMotion` refuse
+/// Composed motions (docs/motion.md): `POST /v1/poses` and `SampleMotion` refuse
 /// the same mistakes with the same codes.
 #[tokio::test]
 async fn the_motion_refusals_have_one_code_on_both_protocols() {

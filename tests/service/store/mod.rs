@@ -270,7 +270,7 @@ fn stored_control(id: &str, seq: u64) -> StoredControl {
     StoredControl { id: id.to_owned(), seq, control: format!("{{\"op\":\"{id}\"}}") }
 }
 
-/// The stored form of broadcasts (SPEC §9): the definition as given, the
+/// The stored form of broadcasts (docs/broadcasts.md): the definition as given, the
 /// controls in application order (by `seq`, then id) whatever order they
 /// were stored in, gone with their broadcast.
 async fn broadcasts_and_their_controls_read_back_in_order(store: Arc<dyn ClipStore>) {

@@ -38,7 +38,7 @@ async fn every_committed_change_is_announced_on_the_schema_channel() {
     backend.finish().await;
 }
 
-/// Broadcasts (SPEC §9) are announced on the same channel: created, each
+/// Broadcasts (docs/broadcasts.md) are announced on the same channel: created, each
 /// control (naming its broadcast), deleted.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn broadcast_changes_are_announced_on_the_schema_channel() {

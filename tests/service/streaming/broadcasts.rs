@@ -1,4 +1,4 @@
-//! Broadcasts (SPEC §9) with real clients: viewers joining at different
+//! Broadcasts (docs/broadcasts.md) with real clients: viewers joining at different
 //! times over WebSocket (JSON and protobuf) and gRPC `Watch` get the same
 //! frames for the same `seq`; a control from one caller reaches every viewer
 //! at the tick it was told, with poses equal to an independent
@@ -534,7 +534,7 @@ async fn bad_requests_are_refused_with_stable_codes() {
     app.stop().await;
 }
 
-/// SPEC §9's last bullet, on one node with SQLite: a broadcast and its
+/// docs/broadcasts.md's last bullet, on one node with SQLite: a broadcast and its
 /// controls are stored, so after a restart it is live again at the tick the
 /// wall clock says, with its controls applied (the seek's time plus the
 /// ticks since its stamp).
@@ -617,7 +617,7 @@ fn rising_clip() -> String {
     .to_string()
 }
 
-/// A viewer's socket may send every control REST takes (SPEC §9): its
+/// A viewer's socket may send every control REST takes (docs/broadcasts.md): its
 /// crossfade and `ik` reach every viewer and are stored as sent, so after a
 /// restart the broadcast plays the faded-to clip with the constraint solved.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

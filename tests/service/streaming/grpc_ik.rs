@@ -1,4 +1,4 @@
-//! IK over gRPC (SPEC §7) with a real tonic client: a clip whose two-bone
+//! IK over gRPC (docs/ik.md) with a real tonic client: a clip whose two-bone
 //! target is keyed, uploaded with `PutClip` and sampled; a request-time aim
 //! in `SampleMotion`; a motion stream's constraints; the `Play` stream's
 //! `ik` control; and the refusals with their codes and pointers.

@@ -1,4 +1,4 @@
-//! Inverse kinematics in WebSocket streams (SPEC §7) with a real client:
+//! Inverse kinematics in WebSocket streams (docs/ik.md) with a real client:
 //! a clip's keyed IK in every frame, and the `ik` control that replaces a
 //! stream's constraints at the next tick — two-bone and aim on target
 //! within one frame, a chain within its tolerance after the iterations it

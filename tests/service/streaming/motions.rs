@@ -1,4 +1,4 @@
-//! Composed motions in streams (SPEC §6) with real clients: `GET /v1/stream`
+//! Composed motions in streams (docs/motion.md) with real clients: `GET /v1/stream`
 //! opened by its first message, crossfades and weight ramps as WebSocket
 //! and gRPC `Play` controls, joint subsets and root motion in frames, and
 //! the refusals with their codes and pointers.
@@ -142,7 +142,7 @@ async fn crossfades_blend_both_sides_at_alpha_and_a_second_one_mid_fade_does_not
     };
     for _ in 0..5 {
         frame = next_frame(&mut ws).await;
-        close(hips_x(&frame), fade1(time(&frame)), "the SPEC blend at α = elapsed/duration");
+        close(hips_x(&frame), fade1(time(&frame)), "the docs blend at α = elapsed/duration");
     }
     // A second crossfade, back to walk, mid-fade: the fade in progress is its A.
     last = frame;

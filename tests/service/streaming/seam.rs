@@ -1,4 +1,4 @@
-//! Time at the clip's seams (SPEC §2.7) over REST `/pose`, gRPC `Sample`
+//! Time at the clip's seams (docs/clip-format.md §2.7) over REST `/pose`, gRPC `Sample`
 //! and a gRPC stream: a request time copied from the clip's own summary is
 //! the start (or end) in every playback mode, although neither end is
 //! exactly representable, and `loop` maps the end to the start.

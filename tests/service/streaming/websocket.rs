@@ -68,7 +68,7 @@ async fn sixty_fps_for_two_seconds_in_both_encodings() {
         assert!((118..=122).contains(&ticks), "{encoding}: {ticks} ticks");
         if let Message::Text(t) = &first.4 {
             let v: Value = serde_json::from_str(t).unwrap();
-            assert_eq!(v["pose"]["joints"][1]["name"], "arm", "the SPEC §3 pose shape");
+            assert_eq!(v["pose"]["joints"][1]["name"], "arm", "the docs/api.md pose shape");
             assert!(v["sent_at_unix_nanos"].as_i64().unwrap() > 0);
         } else if let Message::Binary(b) = &first.4 {
             assert_eq!(pb::Frame::decode(b.clone()).unwrap().pose.unwrap().joint_names, ["root", "arm"]);

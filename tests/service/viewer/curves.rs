@@ -1,7 +1,7 @@
 //! The curves panel in the browser: rotations as Euler angles in each order
 //! (checked by composing the shown angles back into the rotation, in f64),
 //! parameters plotted from the same samples as REST, and cubic Hermite
-//! tangents drawn as the handles SPEC §2.5's segment implies.
+//! tangents drawn as the handles docs/clip-format.md §2.5's segment implies.
 
 use serde_json::{Value, json};
 

@@ -1,4 +1,4 @@
-//! Broadcasts across nodes (SPEC §9 "Many nodes"): real processes on one
+//! Broadcasts across nodes (docs/broadcasts.md "Many nodes"): real processes on one
 //! PostgreSQL schema. A broadcast created on one node is watched on three;
 //! controls (play, pause, seek, speed, layer, crossfade) are posted to
 //! different nodes; for every `seq` the viewers received, the frames are

@@ -355,7 +355,7 @@ impl Ctx<'_, '_> {
 
     /// The animation's channels as tracks, each with where it came from
     /// and the node it animates; morph-target weights become a parameter
-    /// named after the node (SPEC §8), a second channel for the same
+    /// named after the node (docs/clip-format.md §3), a second channel for the same
     /// property of a node is refused, and the track count (parameters
     /// included) is capped.
     fn channel_tracks(&mut self, animation: &::gltf::Animation, base: &str) -> Result<Channels, ImportError> {

@@ -111,7 +111,7 @@ impl Default for ImportLimits {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImportOptions {
     /// BVH frames become keys with this interpolation: `Linear` (default),
-    /// `CatmullRom` (SPEC §2.2), `BSpline` (§2.5: approximating, to smooth
+    /// `CatmullRom` (docs/clip-format.md §2.2), `BSpline` (§2.5: approximating, to smooth
     /// the capture's jitter) or `Step`. `CubicHermite` is refused (no
     /// tangents in a BVH).
     pub bvh_interpolation: Interpolation,

@@ -1,4 +1,4 @@
-//! IK constraints in JSON (SPEC §7): one object per constraint with its
+//! IK constraints in JSON (docs/ik.md): one object per constraint with its
 //! `kind`, parsed strictly into the core's [`IkSpec`] (requests, stream
 //! controls) or [`KeyedIkSpec`] (clips, whose targets and weights may be
 //! keyed tracks), with the JSON pointer of any field at fault; and the

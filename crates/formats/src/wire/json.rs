@@ -1,4 +1,4 @@
-//! The JSON clip document and pose rendering (SPEC §1, §3).
+//! The JSON clip document and pose rendering (docs/clip-format.md §1 and docs/api.md).
 //!
 //! [`ClipDoc`] is the clip as it travels: parsed strictly (unknown fields are
 //! refused, so a typo is an error rather than a silently ignored option),
@@ -335,7 +335,7 @@ pub fn parse_clip(body: &[u8]) -> Result<(ClipDoc, ClipSpec), DocError> {
     Ok((doc, spec))
 }
 
-/// A pose in the SPEC §3 shape, serialised straight from the core's buffers
+/// A pose in the docs/api.md shape, serialised straight from the core's buffers
 /// (no intermediate per-joint allocation).
 pub struct PoseJson<'a> {
     pub clip: &'a str,
@@ -396,15 +396,15 @@ impl PoseJson<'_> {
     }
 }
 
-/// What a composed answer (SPEC §6) adds to a pose document: only some
+/// What a composed answer (docs/motion.md) adds to a pose document: only some
 /// joints (in skeleton order), and the root motion.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Extras<'a> {
     pub joints: Option<&'a [usize]>,
     pub root_motion: Option<RootMotion>,
-    /// IK reports (SPEC §7), written when there are any.
+    /// IK reports (docs/ik.md), written when there are any.
     pub ik: &'a [IkReport],
-    /// Parameter values (SPEC §8), written when the clip has parameters.
+    /// Parameter values (docs/clip-format.md §3), written when the clip has parameters.
     pub parameters: Option<ParameterValues<'a>>,
 }
 

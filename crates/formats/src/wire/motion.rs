@@ -1,4 +1,4 @@
-//! The JSON motion (SPEC §6): layers of clips by id, masks, sync groups and
+//! The JSON motion (docs/motion.md): layers of clips by id, masks, sync groups and
 //! root motion, parsed strictly (unknown fields refused) into the core's
 //! [`MotionSpec`] with the clip ids still to be looked up.
 

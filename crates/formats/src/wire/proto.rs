@@ -1,4 +1,4 @@
-//! The protobuf wire (`proto/inbetween/v1/animation.proto`, SPEC §4) and its
+//! The protobuf wire (`proto/inbetween/v1/animation.proto`, docs/api.md) and its
 //! conversions to and from the core.
 //!
 //! The generated messages and client live in [`pb`]; the server trait in
@@ -6,7 +6,7 @@
 //! pre-encoded, see `build.rs`). Conversions mirror the JSON document
 //! exactly: a proto [`pb::Clip`] becomes the same [`ClipSpec`] as the
 //! equivalent JSON, and every error carries the JSON pointer of the field at
-//! fault in the document shape of SPEC §1 (`/tracks/3/values`), so REST and
+//! fault in the document shape of docs/clip-format.md §1 (`/tracks/3/values`), so REST and
 //! gRPC clients read the same paths. Key arrays are flat on this wire (3 or 4
 //! floats per key), so "wrong width" is the one check done here; everything
 //! else is [`anim::Clip::build`]'s to judge.
@@ -299,7 +299,7 @@ fn parameter_to_pb(p: &ParameterSpec) -> pb::Parameter {
     }
 }
 
-/// Adds a pose's parameters (SPEC §8) to its message: the packed values,
+/// Adds a pose's parameters (docs/clip-format.md §3) to its message: the packed values,
 /// and the names and widths when the pose carries joint names (`named`).
 pub fn add_parameters(pose: &mut pb::Pose, values: Option<ParameterValues<'_>>, named: bool) {
     let Some(values) = values else { return };
@@ -586,7 +586,7 @@ pub fn ik_kind_to_pb(kind: IkKind) -> pb::IkKind {
     }
 }
 
-/// A pose's IK reports (SPEC §7) on the wire.
+/// A pose's IK reports (docs/ik.md) on the wire.
 pub fn ik_reports_to_pb(reports: &[IkReport]) -> Vec<pb::IkReport> {
     (reports.iter())
         .map(|r| pb::IkReport {

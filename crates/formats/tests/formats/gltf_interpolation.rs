@@ -8,7 +8,7 @@ use formats::import::ImportOptions;
 use super::reference::{RawGltf, Sampler, gltf_slerp, quat_diff, vec_diff};
 use super::{build, import_file, sample};
 
-/// The named tolerance of SPEC §2.9.
+/// The named tolerance of docs/clip-format.md §2.9.
 const TOL: f64 = 1e-5;
 
 /// The local value of `node`'s `path` in `clip` at time `t`.

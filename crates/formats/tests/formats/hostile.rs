@@ -416,7 +416,7 @@ fn malformed_and_unprocessable_are_told_apart() {
 
 /// Weights of a node without a mesh of morph targets have nothing to weigh:
 /// a `not_imported` warning with the reason (with targets they are a
-/// parameter, SPEC §8: `tests/service/api/parameters.rs`).
+/// parameter, docs/clip-format.md §3: `tests/service/api/parameters.rs`).
 #[test]
 fn morph_weights_of_a_node_without_targets_are_reported_as_not_imported() {
     let bytes = gltf(|d| {

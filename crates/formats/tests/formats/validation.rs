@@ -230,7 +230,7 @@ fn mode_option_rules() {
     refused(clip(vec![s]), "speed_not_applicable", "/tracks/0/speed");
 }
 
-/// `b_spline` takes `ends` with Catmull-Rom's rules (SPEC §2.5), but no
+/// `b_spline` takes `ends` with Catmull-Rom's rules (docs/clip-format.md §2.5), but no
 /// `tension`: its basis is fixed. The refusal keeps the stable code and
 /// names the modes the field belongs to.
 #[test]

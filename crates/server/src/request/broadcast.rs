@@ -1,4 +1,4 @@
-//! Creating a broadcast (SPEC §9): a motion stream's rules (`RawStream`
+//! Creating a broadcast (docs/broadcasts.md): a motion stream's rules (`RawStream`
 //! for fps, space and joints, `RawMotion` for the motion) plus the two a
 //! broadcast adds — frames are `trs` poses, and how long it lives unwatched.
 

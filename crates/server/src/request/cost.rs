@@ -114,7 +114,7 @@ fn json_pose(clip: &Clip, clip_id: &str, format: Format) -> u64 {
     head + names + joints * per_joint + ik_reports(clip.ik_count() as u64, Wire::Json) + json_parameters(clip)
 }
 
-/// `,"parameters":{"name":[v,…],…}` (SPEC §8): every parameter, whatever
+/// `,"parameters":{"name":[v,…],…}` (docs/clip-format.md §3): every parameter, whatever
 /// a request's subset (a bound), each value at its longest.
 fn json_parameters(clip: &Clip) -> u64 {
     let layout = clip.parameters();
@@ -125,7 +125,7 @@ fn json_parameters(clip: &Clip) -> u64 {
     16 + names + layout.total_width() as u64 * (F32_TEXT + 1)
 }
 
-/// Bytes of `n` IK reports (SPEC §7) in a pose: JSON
+/// Bytes of `n` IK reports (docs/ik.md) in a pose: JSON
 /// `,"ik":[{"kind":"two_bone","residual":…,"iterations":…,"converged":false},…]`,
 /// protobuf `IkReport` messages (kind, residual, iterations, converged).
 pub fn ik_reports(n: u64, wire: Wire) -> u64 {
@@ -166,7 +166,7 @@ fn proto_pose(clip: &Clip, format: Format) -> u64 {
     let joints = clip.joint_count() as u64;
     // time (9), clip_time (5), space (2).
     let scalars = 9 + 5 + 2 + ik_reports(clip.ik_count() as u64, Wire::Protobuf);
-    // The packed `parameters` (SPEC §8).
+    // The packed `parameters` (docs/clip-format.md §3).
     let width = clip.parameters().total_width() as u64;
     let scalars = scalars + if width == 0 { 0 } else { 1 + VARINT + 4 * width };
     match format {
@@ -265,7 +265,7 @@ mod tests {
             })
             .collect();
         let events = vec![EventSpec { time: 0.5, name: "step \"left\"".into() }];
-        // Parameters (SPEC §8) of widths 1, 7 and 256, named like the joints.
+        // Parameters (docs/clip-format.md §3) of widths 1, 7 and 256, named like the joints.
         let parameters = [1, 7, 256]
             .iter()
             .enumerate()

@@ -20,11 +20,11 @@
 //!   anything is evaluated): `too_many_poses` (over `max_joint_poses`),
 //!   `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
 //!
-//! Composed requests (`motion`, SPEC §6) look up every layer's clip, build
+//! Composed requests (`motion`, docs/motion.md) look up every layer's clip, build
 //! the motion (its refusals pointed at `/motion/…`) and price the answer the
 //! same way.
 //!
-//! Broadcasts (SPEC §9, `broadcast`) take a stream's rules for their motion,
+//! Broadcasts (docs/broadcasts.md, `broadcast`) take a stream's rules for their motion,
 //! fps, space and joints, plus `format_not_streamable` and
 //! `idle_timeout_out_of_range` (422).
 //!

@@ -1,4 +1,4 @@
-//! Composed requests (SPEC §6): a motion's clips looked up at their current
+//! Composed requests (docs/motion.md): a motion's clips looked up at their current
 //! versions and pinned, the motion built (its refusals pointed at
 //! `/motion/…`) or found built for those versions in the motion cache
 //! (`server::motion_cache`), the joint subset checked, and the answer priced
@@ -25,7 +25,7 @@ pub struct RawMotion<'a> {
     pub spec: MotionSpec<String>,
     /// Joint names; `None`: every joint.
     pub joints: Option<&'a [String]>,
-    /// Parameter names (SPEC §8); `None`: every parameter.
+    /// Parameter names (docs/clip-format.md §3); `None`: every parameter.
     pub parameters: Option<&'a [String]>,
     pub format: Format,
     pub at: Locate,

@@ -49,11 +49,11 @@ pub enum Field {
     MinDuration,
     MaxDuration,
     CompatibleWith,
-    /// One of the joint names of a subset (SPEC §6).
+    /// One of the joint names of a subset (docs/motion.md).
     JointAt(usize),
-    /// One of the parameter names of a subset (SPEC §8).
+    /// One of the parameter names of a subset (docs/clip-format.md §3).
     ParameterAt(usize),
-    /// A broadcast's `idle_timeout_secs` (SPEC §9).
+    /// A broadcast's `idle_timeout_secs` (docs/broadcasts.md).
     IdleTimeout,
 }
 
@@ -215,7 +215,7 @@ pub async fn clip(state: &AppState, id: &str) -> Result<Arc<CachedClip>, ApiErro
 }
 
 /// The indices of the joints `names` in `skeleton`, in skeleton order
-/// (a subset's joints; SPEC §6).
+/// (a subset's joints; docs/motion.md).
 ///
 /// # Errors
 /// `unknown_joint` at the first name the skeleton lacks.
@@ -235,7 +235,7 @@ pub fn joint_subset<S: AsRef<str>>(skeleton: &Skeleton, names: &[S], at: Locate)
 }
 
 /// The indices of the parameters `names` in `layout`, in the clip's order
-/// (a subset's parameters; SPEC §8), as [`joint_subset`] for joints.
+/// (a subset's parameters; docs/clip-format.md §3), as [`joint_subset`] for joints.
 ///
 /// # Errors
 /// `unknown_parameter` at the first name the clip lacks.

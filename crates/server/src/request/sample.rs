@@ -19,7 +19,7 @@ use formats::wire::proto::pb;
 /// pool, so a big batch does not hold up the async workers.
 pub const BLOCKING_POSES: usize = 256;
 
-/// The frame rates of a `{start, end, fps}` range: a stream's (SPEC §5).
+/// The frame rates of a `{start, end, fps}` range: a stream's (docs/api.md).
 pub const FPS_RANGE: RangeInclusive<f64> = 1.0..=MAX_FPS as f64;
 
 /// # Errors

@@ -2,7 +2,7 @@
 //! the request checked, bound to the clip at its current version, and
 //! admitted by the stream caps.
 //!
-//! The stream rules themselves (SPEC §5: the fps range, a finite start, the
+//! The stream rules themselves (docs/api.md: the fps range, a finite start, the
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
@@ -36,9 +36,9 @@ pub struct RawStream<'a> {
     pub max_frames: Option<Raw<'a>>,
     /// Start paused (private playbacks only).
     pub paused: bool,
-    /// Only these joints in every frame (SPEC §6); `None`: all.
+    /// Only these joints in every frame (docs/motion.md); `None`: all.
     pub joints: Option<&'a [String]>,
-    /// Only these parameters in every frame (SPEC §8); `None`: all.
+    /// Only these parameters in every frame (docs/clip-format.md §3); `None`: all.
     pub parameters: Option<&'a [String]>,
     pub at: Locate,
 }
@@ -98,7 +98,7 @@ impl RawStream<'_> {
         self.admit(params, frame, state, caller)
     }
 
-    /// As [`RawStream::open`] for a composed motion (SPEC §6): its clips
+    /// As [`RawStream::open`] for a composed motion (docs/motion.md): its clips
     /// looked up and pinned, the motion built, the stream bound to it. A
     /// repeated composition is the same built motion (the motion cache), so
     /// its viewers can share a playback like a clip's.
@@ -120,7 +120,7 @@ impl RawStream<'_> {
 
     /// A composed motion's stream parameters, checked, bound and priced as
     /// [`RawStream::open_motion`] does, without a permit: a broadcast's
-    /// (SPEC §9), whose viewers are admitted one by one as they join.
+    /// (docs/broadcasts.md), whose viewers are admitted one by one as they join.
     ///
     /// # Errors
     /// As [`RawStream::open_motion`].

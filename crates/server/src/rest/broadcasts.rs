@@ -1,4 +1,4 @@
-//! Broadcasts (SPEC §9): `POST /v1/broadcasts` (write), `GET /v1/broadcasts`
+//! Broadcasts (docs/broadcasts.md): `POST /v1/broadcasts` (write), `GET /v1/broadcasts`
 //! and `GET /v1/broadcasts/{id}` (read), `DELETE /v1/broadcasts/{id}` and
 //! `POST /v1/broadcasts/{id}/controls` (write), and the WebSocket
 //! `GET /v1/broadcasts/{id}/stream` (read).

@@ -1,4 +1,4 @@
-//! Clip routes: create, list, get, replace, delete (SPEC §3).
+//! Clip routes: create, list, get, replace, delete (docs/api.md).
 //!
 //! Every write validates fully ([`admit`]) before the store is touched, and
 //! answers only after the store committed; the cache is updated after the

@@ -1,4 +1,4 @@
-//! The REST API (SPEC §3): routes, their extractors and the middleware stack.
+//! The REST API (docs/api.md): routes, their extractors and the middleware stack.
 //!
 //! `router(state)` is the whole HTTP surface; [`crate::Application`]
 //! only binds and serves it, so tests may also drive it with `oneshot`.

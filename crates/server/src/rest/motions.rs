@@ -1,4 +1,4 @@
-//! Composed poses (SPEC §6): `POST /v1/poses` (one pose of a motion) and
+//! Composed poses (docs/motion.md): `POST /v1/poses` (one pose of a motion) and
 //! `POST /v1/samples` (many). Both are reads. The body is decoded here, the
 //! rules and the motion come from `server::request` (`RawPose`, `RawBatch`,
 //! `RawMotion`), and poses are written straight from the motion sampler's

@@ -1,4 +1,4 @@
-//! WebSocket streams (SPEC §5, §6): `GET /v1/clips/{id}/stream` plays a
+//! WebSocket streams (docs/api.md and docs/motion.md): `GET /v1/clips/{id}/stream` plays a
 //! clip (a one-layer motion) and `GET /v1/stream` a composed motion named
 //! in the client's first message, `{"op":"open","motion":…}`.
 //!

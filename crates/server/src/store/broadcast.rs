@@ -1,4 +1,4 @@
-//! The stored form of broadcasts (SPEC §9, `migrations/*/0004_broadcasts.sql`):
+//! The stored form of broadcasts (docs/broadcasts.md, `migrations/*/0004_broadcasts.sql`):
 //! a definition row and one row per stamped control. The store keeps the
 //! JSON it is handed and parses none of it; the server (`server::broadcast_sync`)
 //! writes and reads it back.

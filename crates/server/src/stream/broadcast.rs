@@ -1,4 +1,4 @@
-//! Broadcasts (SPEC §9): one named playback of a motion on a fixed tick
+//! Broadcasts (docs/broadcasts.md): one named playback of a motion on a fixed tick
 //! grid, driven by controllers and watched by any number of viewers who
 //! join and leave at any time, on one node or on every node of a cluster.
 //!

@@ -1,5 +1,5 @@
 //! What a broadcast plays, as a pure function of its definition, its
-//! stamped controls and the tick (SPEC §9 "Many nodes").
+//! stamped controls and the tick (docs/broadcasts.md "Many nodes").
 //!
 //! Every node of a cluster computes a broadcast's frames itself, so frame
 //! `k` must come out bit for bit the same wherever it is computed. The
@@ -29,9 +29,10 @@ use std::sync::Arc;
 
 use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameEncoder};
-use super::hub::{StreamPlayer, TickStamp, frame_data, sample_tick};
+use super::hub::{TickStamp, frame_data, sample_tick};
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
+use super::pinned::StreamPlayer;
 use super::playhead::Playhead;
 use anim::motion::Player;
 

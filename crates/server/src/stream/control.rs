@@ -12,9 +12,9 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use super::hub::StreamPlayer;
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
+use super::pinned::StreamPlayer;
 use super::playhead::{MAX_SPEED, Playhead};
 use anim::Ease;
 use anim::ik::{IkConstraint, IkError, IkLimits, IkSpec, build_constraints};

@@ -1,4 +1,4 @@
-//! Frame encodings: JSON text and protobuf `Frame` bytes (SPEC §5), written
+//! Frame encodings: JSON text and protobuf `Frame` bytes (docs/api.md), written
 //! straight from the core's pose buffers into one reusable buffer.
 //!
 //! A playback encodes each tick once for all its viewers. Two things differ
@@ -55,11 +55,11 @@ pub struct FrameData<'a> {
     pub pose: &'a Pose,
     /// The joints to send (skeleton order); `None`: all.
     pub joints: Option<&'a [usize]>,
-    /// The parameters (SPEC §8) to send, when the motion has any.
+    /// The parameters (docs/clip-format.md §3) to send, when the motion has any.
     pub parameters: Option<ParameterValues<'a>>,
     /// The frame's root motion, for motions that report it.
     pub root_motion: Option<RootMotion>,
-    /// IK reports (SPEC §7): the motion's clip constraints, then the stream's.
+    /// IK reports (docs/ik.md): the motion's clip constraints, then the stream's.
     pub ik: &'a [IkReport],
     /// Events crossed (all of the clip's events, and indices into them).
     pub events: &'a [Event],
@@ -404,7 +404,7 @@ mod tests {
     use formats::wire::proto::{add_parameters, pb, pose_to_pb};
     use prost::Message;
 
-    /// The example wave with two parameters (SPEC §8): widths 4 (two
+    /// The example wave with two parameters (docs/clip-format.md §3): widths 4 (two
     /// entries, one padded) and 1, so frames carry names, widths and values.
     fn wave() -> Clip {
         let body = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/wave.json")).unwrap();

@@ -50,7 +50,7 @@ pub struct EngineConfig {
     /// than tokio's millisecond timer. The server turns it on; the default
     /// is off so that tests can drive the engine with a paused tokio clock.
     pub precise_timer: bool,
-    /// Live broadcasts at once (SPEC §9).
+    /// Live broadcasts at once (docs/broadcasts.md).
     pub max_broadcasts: usize,
     /// How far ahead a broadcast control is stamped (many nodes: so that
     /// the others hear of it before its tick); zero stamps the next tick.
@@ -228,7 +228,7 @@ impl Engine {
         tokio::time::timeout(timeout, self.inner.limits.idle()).await.is_ok()
     }
 
-    /// The live broadcasts (SPEC §9); viewers are admitted by the same caps.
+    /// The live broadcasts (docs/broadcasts.md); viewers are admitted by the same caps.
     pub fn broadcasts(&self) -> &Broadcasts {
         &self.inner.broadcasts
     }

@@ -1,8 +1,8 @@
 //! Which clip events a frame delivers: the ones the clip time passed since
-//! the previous frame (SPEC §5), in the order they were crossed.
+//! the previous frame (docs/api.md), in the order they were crossed.
 //!
 //! A playhead moves in request time; the clip time follows it through the
-//! playback mode (SPEC §2.7) and the ease. Between two frames the request
+//! playback mode (docs/clip-format.md §2.7) and the ease. Between two frames the request
 //! time moves in a straight line, so the clip time sweeps a few monotonic
 //! pieces: one for `once` (clamped), one per cycle for `loop` (jumping from
 //! the end back to the start, or the other way when playing backwards), one
@@ -55,7 +55,7 @@ pub fn crossed(clip: &Clip, playback: Playback, ease: Ease, from: Option<f64>, t
     let range = clip.range();
     let duration = range.duration();
     // Offsets from the start, and clip times, as sampling computes them
-    // (SPEC §2.7's seam rule included), so a frame's events match its pose.
+    // (docs/clip-format.md §2.7's seam rule included), so a frame's events match its pose.
     let (xa, xb) = (range.offset(from), range.offset(to));
     if xa == xb || duration.is_nan() || duration <= 0.0 {
         return;

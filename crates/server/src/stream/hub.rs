@@ -41,10 +41,9 @@ use std::sync::Arc;
 
 use super::pinned::StreamMotion;
 use anim::motion::{MotionOptions, Player};
-use formats::wire::json::ParameterValues;
 
-/// The player of a stream's motion.
-pub(super) type StreamPlayer = Player<Arc<dyn super::pinned::PinnedClip>>;
+use super::pinned::StreamPlayer;
+use formats::wire::json::ParameterValues;
 
 /// Why a stream ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,7 +54,7 @@ pub enum EndReason {
     Stopped,
     /// The server is shutting down.
     Shutdown,
-    /// The broadcast watched was deleted or ended (SPEC §9).
+    /// The broadcast watched was deleted or ended (docs/broadcasts.md).
     Ended,
     /// The playback ended unexpectedly (a bug; logged).
     Failed,

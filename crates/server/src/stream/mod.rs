@@ -1,6 +1,6 @@
-//! The streaming engine: fixed-rate frames of a motion (SPEC §6; a clip is
+//! The streaming engine: fixed-rate frames of a motion (docs/motion.md; a clip is
 //! a one-layer motion) for gRPC server streaming and WebSocket viewers
-//! alike (SPEC §5).
+//! alike (docs/api.md).
 //!
 //! The flow of a stream: a transport validates a request into
 //! [`StreamParams`] (bound to the motion over the pinned clip versions it
@@ -20,7 +20,7 @@
 //! response stream of pre-encoded [`WireFrame`]s, `ws` as text or binary
 //! messages.
 //!
-//! A broadcast (SPEC §9, `broadcast`) is a playback made a feature: named,
+//! A broadcast (docs/broadcasts.md, `broadcast`) is a playback made a feature: named,
 //! created and deleted explicitly, joinable at any tick, controlled for all
 //! its viewers with controls stamped by the tick they apply from.
 //!

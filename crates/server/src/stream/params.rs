@@ -1,4 +1,4 @@
-//! [`StreamParams`]: a stream request checked against the rules of SPEC §5
+//! [`StreamParams`]: a stream request checked against the rules of docs/api.md
 //! and bound to the motion (a clip is a one-layer motion) and the compiled
 //! clip versions it plays. The transports build
 //! them (REST and gRPC alike); everything else in the engine reads them.
@@ -85,7 +85,7 @@ impl std::fmt::Debug for StreamParams {
 
 impl StreamParams {
     /// A stream of one clip: validates `req` against the stream rules
-    /// (SPEC §5) and plays the clip as a one-layer motion with the
+    /// (docs/api.md) and plays the clip as a one-layer motion with the
     /// request's playback.
     ///
     /// # Errors

@@ -1,10 +1,15 @@
 //! What a stream plays: a motion over clips pinned at their versions
-//! (SPEC §6). The transports pin their clips (the server's cache entries
+//! (docs/motion.md). The transports pin their clips (the server's cache entries
 //! implement [`PinnedClip`]); the engine reads them.
 
 use std::sync::Arc;
 
+use anim::motion::Player;
 use anim::{Clip, Motion};
+
+/// The player of a stream's motion: the one type per-viewer streams and
+/// broadcasts advance tick by tick.
+pub(super) type StreamPlayer = Player<Arc<dyn PinnedClip>>;
 
 /// A clip pinned at the version a stream plays: its id and version name
 /// the frames and the shared playbacks.
@@ -26,7 +31,7 @@ impl anim::ClipSource for dyn PinnedClip {
     }
 }
 
-/// What a stream plays: a motion over pinned clips (SPEC §6). A clip
+/// What a stream plays: a motion over pinned clips (docs/motion.md). A clip
 /// stream plays a motion of one full-weight layer, which is the clip's own
 /// pose bit for bit.
 pub type StreamMotion = Motion<Arc<dyn PinnedClip>>;

@@ -1,5 +1,5 @@
 //! The tick schedule: frame `k` is due at `start + k/fps` on the monotonic
-//! clock (SPEC §5).
+//! clock (docs/api.md).
 //!
 //! Every due instant is computed from its index with integer nanoseconds
 //! (`phase + ⌊n·10⁹/fps⌋` after the engine's epoch), never by adding

@@ -81,7 +81,7 @@ pub struct Subscription {
     /// its first tick if nobody else joined.
     handback: Option<oneshot::Receiver<Box<Hub>>>,
     controls: Option<mpsc::Sender<Control>>,
-    /// A broadcast viewer (SPEC §9): its first frame has `dropped` 0, and
+    /// A broadcast viewer (docs/broadcasts.md): its first frame has `dropped` 0, and
     /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
     /// whose controls are refused), never into a fork.
     broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,

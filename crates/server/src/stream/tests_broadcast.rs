@@ -1,4 +1,4 @@
-//! Broadcast tests on a paused tokio clock (SPEC §9): viewers of one
+//! Broadcast tests on a paused tokio clock (docs/broadcasts.md): viewers of one
 //! encoding share the very bytes of each tick (one encoding, observed as
 //! one allocation), late joiners start at the next tick with `dropped` 0,
 //! controls apply from the tick they were stamped with, read-only viewers

@@ -1,4 +1,4 @@
-//! The WebSocket side of a stream (SPEC §5): frames out as JSON text or
+//! The WebSocket side of a stream (docs/api.md): frames out as JSON text or
 //! binary protobuf, control messages in, ping/pong keepalive.
 //!
 //! [`serve`] is generic over any `Sink + Stream` of axum WebSocket messages,
@@ -12,7 +12,7 @@
 //!
 //! Control messages are JSON text: `{"op":"pause"}`, `{"op":"play"}`,
 //! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`,
-//! and for composition (SPEC §6) `{"op":"crossfade","to":motion,
+//! and for composition (docs/motion.md) `{"op":"crossfade","to":motion,
 //! "duration":0.4,"ease":"ease_in_out"}` and `{"op":"layer","index":1,
 //! "weight":0.3,"duration":0.5}`. A crossfade's motion names clips the
 //! transport must look up ([`MotionResolver`]); while it does, the frames go

@@ -20,7 +20,7 @@ export function authHeaders() {
   return token ? { Authorization: `Bearer ${token}` } : {};
 }
 
-/// A problem document (SPEC §3) as one line: its detail, then its code
+/// A problem document (docs/api.md) as one line: its detail, then its code
 /// and where (`pointer` or `parameter`). Never "[object Object]".
 export function describeProblem(p, status) {
   if (typeof p === "string") return p;

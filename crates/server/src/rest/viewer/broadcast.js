@@ -1,4 +1,4 @@
-// The viewer's broadcasts (issue 20, SPEC §9). "Broadcast" creates one from
+// The viewer's broadcasts (issue 20, docs/broadcasts.md). "Broadcast" creates one from
 // the current view (`POST /v1/broadcasts` with the page's motion, fps and
 // space), shows a link to it (`/viewer?broadcast=ID`) and watches it; a
 // page opened with that link watches it too (WebSocket

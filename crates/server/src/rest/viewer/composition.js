@@ -1,4 +1,4 @@
-// The motion the page plays (SPEC §6): the selected clip as the first
+// The motion the page plays (docs/motion.md): the selected clip as the first
 // layer, more layers with weights and masks, root motion and an IK handle
 // (panel.js edits them). A stream opens `/v1/stream` with this motion, and a
 // paused view of a composition asks `POST /v1/poses` for it.
@@ -39,7 +39,7 @@ export function layerDoc(layer, playback) {
   return doc;
 }
 
-/// The motion the page plays (SPEC §6), IK included unless `ik` is false
+/// The motion the page plays (docs/motion.md), IK included unless `ik` is false
 /// (a crossfade's motion carries none: a stream has one IK list).
 export function motion({ ik = true } = {}) {
   const playback = options().playback;

@@ -1,5 +1,5 @@
 // Where the page's live controls go — the stream's socket, or the watched
-// broadcast's controls route (SPEC §9), where they act for every viewer —
+// broadcast's controls route (docs/broadcasts.md), where they act for every viewer —
 // what a refusal does, and whether the controls are shown: a broadcast
 // shows them only to a caller with the write scope.
 

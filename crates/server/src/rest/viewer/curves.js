@@ -1,4 +1,4 @@
-// The curve plot: a joint's channel or a parameter (SPEC §8), sampled by
+// The curve plot: a joint's channel or a parameter (docs/clip-format.md §3), sampled by
 // the server; a rotation as Euler angles in a chosen order or as quaternion
 // components; keys marked, and the tangents of cubic Hermite keys drawn as
 // handles.
@@ -82,7 +82,7 @@ export async function loadCurve() {
 
 /// A cubic Hermite track's tangents as Bezier handles (units per second
 /// times a third of the segment): out of key i at `t_i + h_i/3`, into key
-/// i at `t_i - h_{i-1}/3`, as SPEC §2.5's segment is that Bezier.
+/// i at `t_i - h_{i-1}/3`, as docs/clip-format.md §2.5's segment is that Bezier.
 function hermiteHandles(track) {
   if (track.interpolation !== "cubic_hermite") return [];
   const { times, values, in_tangents: a, out_tangents: b } = track;

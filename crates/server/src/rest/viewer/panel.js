@@ -1,10 +1,10 @@
 // The viewer's composition and IK panel (issue 20). The page plays a
-// *motion* (SPEC §6; composition.js holds it) over `GET /v1/stream` with an
+// *motion* (docs/motion.md; composition.js holds it) over `GET /v1/stream` with an
 // `open` message: the selected clip is its first layer, more layers come
 // from the clip list, each with a weight slider (live `layer` controls) and
 // a mask (a joint and its descendants); a button crossfades to another clip
 // (a live `crossfade` control); root motion is drawn as a trail on the
-// ground, with `extract` on or off. IK handles (SPEC §7; two-bone or aim on
+// ground, with `extract` on or off. IK handles (docs/ik.md; two-bone or aim on
 // a chosen joint) are dragged in the 3D view's camera plane and sent as live
 // `ik` controls, at most once a frame.
 
@@ -218,7 +218,7 @@ const toModel = applyTransform;
 const fromModel = unapplyTransform;
 
 /// Joint `i`'s parent's model transform and its own local one, from a
-/// pose in either space (SPEC §2.8; scales taken per axis, unsheared).
+/// pose in either space (docs/clip-format.md §2.8; scales taken per axis, unsheared).
 function rootFrames(pose, i) {
   const joints = pose.joints, parents = state.parents;
   const trs = (j) => ({ t: j.translation, q: j.rotation, s: j.scale });
@@ -235,7 +235,7 @@ function rootFrames(pose, i) {
 }
 
 /// Root motion lives in the root joint's parent's space, up its y axis
-/// (SPEC §6): each frame's total `A` placed at the first frame's motion
+/// (docs/motion.md): each frame's total `A` placed at the first frame's motion
 /// transform `M0` (the root's ground position and heading there) is a
 /// trail point `M0·A·0`; under `extract` (the pose kept in place) the
 /// skeleton is drawn moved by `M0·A·M0⁻¹`, walking along the trail. Both

@@ -28,7 +28,7 @@ export async function showPoseAt(t) {
 }
 
 /// What a new stream connects to: the watched broadcast's stream, else
-/// `/v1/stream` opened with the page's motion (SPEC §6).
+/// `/v1/stream` opened with the page's motion (docs/motion.md).
 function streamTarget() {
   if (state.watching) return { url: socketUrl(`/v1/broadcasts/${encodeURIComponent(state.watching)}/stream`) };
   return { url: socketUrl("/v1/stream"), open: openMessage() };
@@ -230,7 +230,7 @@ export function setup() {
     if (!state.ws) return;
     if (!Number.isFinite(speed)) return refusedControl(`speed must be a number, not "${$("speed").value}"`);
     // Sent either way, so that the server's own words explain a refusal;
-    // kept only if it is one the server takes (SPEC §5: within ±1000).
+    // kept only if it is one the server takes (docs/api.md: within ±1000).
     if (Math.abs(speed) <= 1000) state.speed = speed;
     send({ op: "speed", speed });
   });

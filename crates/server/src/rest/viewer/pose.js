@@ -36,7 +36,7 @@ function drawnJoints(names, parents) {
 }
 
 /// Model-space positions from a pose: as sent for `space=model`, else
-/// composed down the hierarchy here (SPEC §2.8).
+/// composed down the hierarchy here (docs/clip-format.md §2.8).
 function modelPositions(pose) {
   if (pose.space === "model") return pose.joints.map((j) => j.translation);
   const locals = pose.joints.map((j) => ({ t: j.translation, q: j.rotation, s: j.scale }));
