@@ -42,16 +42,16 @@ mod sample;
 mod stream;
 
 pub use body::parse_json;
-pub use broadcast::{DEFAULT_IDLE_TIMEOUT_SECS, MAX_IDLE_TIMEOUT_SECS, RawBroadcast};
-pub use cost::{Cost, Estimate, F32_TEXT, F64_TEXT, MAX_UNARY_ANSWER_BYTES, Wire, json_str};
-pub use list::{DEFAULT_PAGE, MAX_PAGE, Page, RawPage};
+pub use broadcast::RawBroadcast;
+pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
+pub use list::{Page, RawPage};
 pub use motion::{Composed, RawMotion};
 pub use raw::{
-    Field, Format, Locate, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
+    Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,
 };
-pub use sample::{BLOCKING_POSES, FPS_RANGE, PoseRequest, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
-pub use stream::{DEFAULT_FPS, Opening, RawStream};
+pub use sample::{BLOCKING_POSES, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
+pub use stream::{Opening, RawStream};
 
 #[cfg(test)]
 mod tests;

@@ -1,6 +1,7 @@
 //! The request rules on their own: each input, its code, class and place.
 
 use super::raw::*;
+use super::stream::DEFAULT_FPS;
 use super::*;
 use crate::error::{ApiError, At};
 use crate::stream::Encoding;

@@ -78,9 +78,10 @@ pub struct PosesSchema {
 }
 
 /// The raw bytes of an uploaded file (`format: binary` in the document).
+/// A schema only: the import handler reads the multipart body itself.
 #[derive(ToSchema)]
 #[schema(value_type = String, format = Binary)]
-pub struct FileBytes(pub Vec<u8>);
+pub struct FileBytes(#[allow(dead_code)] pub Vec<u8>);
 
 /// A merge patch of a clip (RFC 7396): each field given replaces the
 /// document's (an object merges into `metadata`); `null` removes it.
