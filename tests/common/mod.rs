@@ -25,6 +25,16 @@ pub use process::ServerProcess;
 /// The docs/clip-format.md §1 example (`examples/wave.json`): joints `root` and `arm`, clip time [0, 3].
 pub const WAVE: &str = include_str!("../../examples/wave.json");
 
+/// Where `text` cites the project's internal contract by section (its name,
+/// a space, then `§`). Users and contributors have `docs/`, not that
+/// contract, so the documents, the code and the OpenAPI text must cite
+/// `docs/` instead. The name is spelled apart from the `§` so this file does
+/// not cite it itself.
+pub fn internal_contract_citations(text: &str) -> Vec<usize> {
+    const NAME: &str = "SPEC ";
+    text.match_indices('§').map(|(at, _)| at).filter(|&at| text[..at].ends_with(NAME)).collect()
+}
+
 /// A real third-party test file, `rel` as in `../shared/testdata` (e.g.
 /// `gltf/Fox/Fox.glb`): the repository's own copy in `examples/` when it
 /// ships one (the Fox, InterpolationTest, CMU 131_01, byte for byte the

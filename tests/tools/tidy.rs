@@ -8,6 +8,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+use crate::common::internal_contract_citations;
+
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
@@ -304,23 +306,24 @@ fn anchor(heading: &str) -> String {
 }
 
 /// A reader needs only the repository: the documents cite no contract they
-/// do not have ("SPEC §…") but the `docs/` section that says it.
+/// do not have (`common::internal_contract_citations`) but the `docs/`
+/// section that says it.
 #[test]
 fn no_document_cites_the_internal_spec() {
     let docs = project_docs();
     assert!(docs.len() >= 15, "README, ARCHITECTURE, CONTRIBUTING, BENCHMARKS, RELIABILITY and docs/: {docs:?}");
-    let citing: Vec<_> = docs.into_iter().filter(|doc| read(doc).contains("SPEC §")).collect();
-    assert!(citing.is_empty(), "these cite SPEC §…; link the docs/ section that says it instead: {citing:?}");
+    let citing: Vec<_> = docs.into_iter().filter(|doc| !internal_contract_citations(&read(doc)).is_empty()).collect();
+    assert!(citing.is_empty(), "these cite the internal contract; link the docs/ section instead: {citing:?}");
 }
 
-/// Code, protos and examples cite the project's `docs/` too, never the internal
-/// contract: a contributor reading a comment has the docs, not the SPEC. The
+/// Code, tests, protos and examples cite the project's `docs/` too, never the
+/// internal contract: a contributor reading a comment has the docs. The
 /// SQL migrations are exempt: an applied migration is checksummed, so its
 /// text (comments included) can never change.
 #[test]
 fn no_code_cites_the_internal_spec() {
     let mut files = Vec::new();
-    for dir in ["src", "crates", "proto", "examples", "scripts", "bench", "deploy"] {
+    for dir in ["src", "crates", "tests", "proto", "examples", "scripts", "bench", "deploy"] {
         let mut stack = vec![root().join(dir)];
         while let Some(dir) = stack.pop() {
             for entry in std::fs::read_dir(&dir).expect("read a folder") {
@@ -328,13 +331,15 @@ fn no_code_cites_the_internal_spec() {
                 let name = path.file_name().unwrap().to_string_lossy().into_owned();
                 if path.is_dir() && name != "migrations" && name != "target" && name != "node_modules" {
                     stack.push(path);
-                } else if path.is_file() && std::fs::read_to_string(&path).is_ok_and(|t| t.contains("SPEC §")) {
+                } else if path.is_file()
+                    && std::fs::read_to_string(&path).is_ok_and(|t| !internal_contract_citations(&t).is_empty())
+                {
                     files.push(path.strip_prefix(root()).unwrap().display().to_string());
                 }
             }
         }
     }
-    assert!(files.is_empty(), "these cite SPEC §…; cite the docs/ section that says it instead: {files:?}");
+    assert!(files.is_empty(), "these cite the internal contract; cite the docs/ section instead: {files:?}");
 }
 
 /// Every relative link, with its `#anchor`, lands on a file and a heading that

@@ -3,6 +3,7 @@
 use serde_json::Value;
 
 use super::{TestApp, WAVE, within};
+use crate::common::internal_contract_citations;
 
 #[tokio::test]
 async fn health_readiness_and_metrics_report() {
@@ -58,17 +59,17 @@ async fn the_openapi_document_lists_every_route_and_docs_are_served() {
 }
 
 /// The OpenAPI descriptions stand alone: they cite no contract users do not
-/// have ("SPEC §…") and point at the repository's own docs, which exist: the
+/// have (`common::internal_contract_citations`) and point at the repository's own docs, which exist: the
 /// clip document at docs/clip-format.md, motions at docs/motion.md.
 #[tokio::test]
 async fn the_openapi_document_links_the_docs_and_cites_no_spec() {
     let app = TestApp::start().await;
     let text = app.http.get(app.url("/openapi.json")).send().await.unwrap().text().await.unwrap();
-    let cited: Vec<&str> = text
-        .match_indices("SPEC §")
-        .map(|(i, _)| &text[text.floor_char_boundary(i.saturating_sub(80))..i + 12])
+    let cited: Vec<&str> = internal_contract_citations(&text)
+        .into_iter()
+        .map(|i| &text[text.floor_char_boundary(i.saturating_sub(80))..text.ceil_char_boundary(i + 12)])
         .collect();
-    assert!(cited.is_empty(), "the OpenAPI document cites SPEC: {cited:#?}");
+    assert!(cited.is_empty(), "the OpenAPI document cites the internal contract: {cited:#?}");
     let doc: Value = serde_json::from_str(&text).unwrap();
     let description = |v: &Value| v["description"].as_str().unwrap_or_default().to_owned();
     let schemas = &doc["components"]["schemas"];

@@ -278,7 +278,7 @@ async fn clip_uploads_answer_each_code_at_its_pointer_and_store_the_document_unc
     // Keys off the unit sphere are normalised when sampled: key 0 (norm 2) is the identity.
     let id = app.create_id(&not_unit_doc(), None).await;
     assert_same_rotation(rotation_at(&app, &id, "bone", 0.0).await, [0.0, 0.0, 0.0, 1.0], 1e-6, "normalised key");
-    // The SPEC example and a list of clips have none.
+    // The documented example and a list of clips have none.
     assert_eq!(codes(&app.create(WAVE, None).await), []);
     let list = app.get_json("/v1/clips").await;
     assert!(list["clips"][0].get("warnings").is_none(), "only writes answer warnings: {list}");
