@@ -331,6 +331,13 @@ impl Clip {
         self.translated.contains(&(j as u32))
     }
 
+    /// The key times of joint `j`'s rotation track (none when it is
+    /// constant or absent), for root motion's unwrapped yaw.
+    pub(crate) fn rotation_key_times(&self, j: usize) -> impl Iterator<Item = f32> + '_ {
+        let timeline = self.rotations.timeline_of(j as u32).map(|t| &self.timelines[t as usize]);
+        timeline.into_iter().flat_map(|t| (0..t.len()).map(|i| t.time(i)))
+    }
+
     /// Joint tracks, constant ones included.
     pub fn track_count(&self) -> usize {
         self.track_count

@@ -211,6 +211,19 @@ impl QuatTracks {
         }
     }
 
+    /// The timeline of `joint`'s rotation track, unless it has none or a
+    /// constant one.
+    pub fn timeline_of(&self, joint: u32) -> Option<u32> {
+        fn find<C>(tracks: &[Track<C>], joint: u32) -> Option<u32> {
+            tracks.iter().find(|t| t.joint == joint).map(|t| t.timeline)
+        }
+        find(&self.step, joint)
+            .or_else(|| find(&self.slerp, joint))
+            .or_else(|| find(&self.bezier, joint))
+            .or_else(|| find(&self.hermite, joint))
+            .or_else(|| self.groups.iter().find(|g| g.lanes.iter().any(|(_, j)| j == joint)).map(|g| g.timeline))
+    }
+
     /// Bytes of every list and curve.
     pub fn heap_bytes(&self) -> usize {
         list_bytes(&self.step, |c| slice_bytes(c))

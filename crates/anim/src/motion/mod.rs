@@ -96,13 +96,12 @@ struct RootSetup {
     up: UpAxis,
 }
 
-/// A layer's root-motion joint (in its clip) and its clip's `M(start)` and
-/// whole cycle `W = M(start)⁻¹·M(end)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A layer's root-motion joint (in its clip) and its clip's cycle: `M(start)`,
+/// the whole cycle and the root's yaw along it.
+#[derive(Debug, Clone, PartialEq)]
 struct LayerRoot {
     joint: usize,
-    start: Planar,
-    whole: Planar,
+    cycle: root::Cycle,
 }
 
 #[derive(Debug, Clone)]
@@ -336,17 +335,39 @@ fn root_setup(spec: Option<&RootMotionSpec>, first: &Clip) -> Result<Option<Root
     Ok(Some(RootSetup { joint, mode: spec.mode, up: spec.up }))
 }
 
-/// `clip`'s joint `name` with its `M(start)` and whole cycle, if it has one.
+/// The most samples of a root's yaw along its clip: a root rotation with more
+/// keys is sampled at this many evenly spaced times instead, which bounds
+/// what a motion build costs.
+const MAX_YAW_SAMPLES: usize = 4096;
+
+/// `clip`'s joint `name` with its cycle, if it has one.
 fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
     let joint = clip.skeleton().index_of(name)?;
-    let range = clip.range();
     let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
     let mut at = |t: f32| {
-        clip.sample_into(t, &mut cursor, &mut pose);
+        clip.sample_joints_into(t, &mut cursor, &mut pose, |j| j as usize == joint);
         motion_transform(up, pose.translations[joint], pose.rotations[joint])
     };
-    let (start, end) = (at(range.start()), at(range.end()));
-    Some(LayerRoot { joint, start, whole: start.inverse(up).then(end, up) })
+    let (start, end) = (at(clip.start()), at(clip.end()));
+    let along: Vec<(f32, f64)> = yaw_times(clip, joint).into_iter().map(|t| (t, at(t).yaw)).collect();
+    let yaw = root::Unwrapped::new((clip.start(), start.yaw), along);
+    Some(LayerRoot { joint, cycle: root::Cycle::new(start, end, yaw, up) })
+}
+
+/// The clip times after the start at which the root's yaw is summed
+/// (docs/motion.md, “Root motion”): its rotation's keys inside the clip's
+/// range and the midpoints between them, the last at the end; evenly spaced
+/// past [`MAX_YAW_SAMPLES`].
+fn yaw_times(clip: &Clip, joint: usize) -> Vec<f32> {
+    let (start, end) = (clip.start(), clip.end());
+    let inside = clip.rotation_key_times(joint).filter(|t| *t > start && *t < end);
+    let keys: Vec<f32> = std::iter::once(start).chain(inside).chain(std::iter::once(end)).collect();
+    if 2 * keys.len() > MAX_YAW_SAMPLES {
+        let n = MAX_YAW_SAMPLES as f64;
+        let at = |i: usize| (f64::from(start) + (f64::from(end) - f64::from(start)) * i as f64 / n) as f32;
+        return (1..=MAX_YAW_SAMPLES).map(at).collect();
+    }
+    keys.windows(2).flat_map(|w| [w[0] + 0.5 * (w[1] - w[0]), w[1]]).collect()
 }
 
 /// Per output parameter the layer's clip also has (by name), where each

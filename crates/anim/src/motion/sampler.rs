@@ -7,7 +7,7 @@
 use super::coverage;
 use super::joint_map::UNMAPPED;
 use super::layering::{self, Joint};
-use super::root::{self, Planar, motion_transform};
+use super::root::{Planar, RootAt, motion_transform};
 use super::sync::position;
 use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode};
 use crate::ik::{ChainStart, IkReport, IkSolver};
@@ -47,10 +47,10 @@ pub struct MotionSampler {
     needs: Vec<u64>,
     hidden: Vec<u64>,
     kept: Vec<u64>,
-    /// Per layer: its loop cycle and root motion transform, now and at the
-    /// previous sample (`None`: no root in that layer, or no previous).
-    roots: Vec<Option<(i64, Planar)>>,
-    previous: Vec<Option<(i64, Planar)>>,
+    /// Per layer: where its root is, now and at the previous sample
+    /// (`None`: no root in that layer, or no previous).
+    roots: Vec<Option<RootAt>>,
+    previous: Vec<Option<RootAt>>,
     root_motion: Option<RootMotion>,
     ik: IkSolver,
     /// The last sample's IK reports: each layer's clip constraints, then
@@ -178,7 +178,7 @@ impl<C: ClipSource> Motion<C> {
                 // full-weight layer is the clip's own pose.
                 layer.sample_needed(t, need, kept, &mut cursors[0], local);
                 ik_reports.extend_from_slice(cursors[0].ik_reports());
-                roots.push(self.take_root(layer, cycle, local));
+                roots.push(self.take_root(layer, (cycle, t), local));
                 continue;
             }
             if i == 0 {
@@ -197,7 +197,7 @@ impl<C: ClipSource> Motion<C> {
             }
             layer.sample_needed(t, need, kept, &mut cursors[i], scratch);
             ik_reports.extend_from_slice(cursors[i].ik_reports());
-            roots.push(self.take_root(layer, cycle, scratch));
+            roots.push(self.take_root(layer, (cycle, t), scratch));
             layer.apply(scratch, weights[i], need, local);
         }
         if self.root.is_some() {
@@ -242,18 +242,18 @@ impl<C: ClipSource> Motion<C> {
         }
     }
 
-    /// The layer's root motion transform in `pose` (its clip's joints) and
-    /// its cycle; with `extract`, a blend layer's root is put back at its
-    /// clip's start position and heading.
-    fn take_root(&self, layer: &super::Layer<C>, cycle: i64, pose: &mut Pose) -> Option<(i64, Planar)> {
-        let (setup, root) = (self.root?, layer.root?);
+    /// Where the layer's root is in `pose` (its clip's joints) at its loop
+    /// `cycle` and clip `time`; with `extract`, a blend layer's root is put
+    /// back at its clip's start position and heading.
+    fn take_root(&self, layer: &super::Layer<C>, (cycle, time): (i64, f32), pose: &mut Pose) -> Option<RootAt> {
+        let (setup, root) = (self.root?, layer.root.as_ref()?);
         let (t, q) = (pose.translations[root.joint], pose.rotations[root.joint]);
         let m = motion_transform(setup.up, t, q);
         if setup.mode == RootMode::Extract && layer.mode == LayerMode::Blend {
-            let in_place = root.start.then(m.inverse(setup.up), setup.up);
+            let in_place = root.cycle.start.then(m.inverse(setup.up), setup.up);
             (pose.translations[root.joint], pose.rotations[root.joint]) = in_place.apply(setup.up, t, q);
         }
-        Some((cycle, m))
+        Some(RootAt { cycle, time, m })
     }
 
     /// The blend layers' deltas since the previous sample, layered like the
@@ -264,12 +264,12 @@ impl<C: ClipSource> Motion<C> {
         let mut delta = Planar::IDENTITY;
         if sampler.previous.len() == self.layers.len() {
             for (i, layer) in self.layers.iter().enumerate() {
-                let (Some(root), Some(from), Some(to)) = (layer.root, sampler.previous[i], sampler.roots[i]) else {
+                let (Some(root), Some(from), Some(to)) = (&layer.root, sampler.previous[i], sampler.roots[i]) else {
                     continue;
                 };
                 if layer.mode == LayerMode::Blend {
                     let w = f64::from(weights[i] * layer.mask[setup.joint]);
-                    delta = delta.lerp(root::delta(from, to, root.start, root.whole, setup.up), w);
+                    delta = delta.lerp(root.cycle.delta(from, to, setup.up), w);
                 }
             }
         }
@@ -294,7 +294,7 @@ impl<C: ClipSource> super::Layer<C> {
         kept.clear();
         kept.resize(coverage::words(clip.joint_count()), 0);
         coverage::for_each(need, |j| coverage::insert(kept, self.map[j] as usize));
-        if let Some(root) = self.root {
+        if let Some(root) = &self.root {
             coverage::insert(kept, root.joint);
         }
         clip.sample_joints_into(t, cursor, pose, |j| coverage::has(kept, j as usize));

@@ -10,7 +10,8 @@
 //! `cli` runs the real binary; `import` checks the importers against real
 //! third-party files; `parameters` holds parameters (docs/clip-format.md,
 //! “Parameters”) to hand-computed values; `ik` holds the IK solvers to
-//! docs/ik.md (and the chain to seed 003's own algorithm).
+//! docs/ik.md (and the chain to seed 003's own algorithm); `root_motion` and
+//! `root_motion_cycles` hold root motion to a planar `f64` reference.
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
 //! per binary. It counts per thread, so tests running in parallel do not
@@ -32,6 +33,7 @@ mod properties;
 mod random;
 mod reference;
 mod root_motion;
+mod root_motion_cycles;
 mod soa;
 
 extern crate inbetween_anim as anim;

@@ -29,7 +29,7 @@ impl Ground {
         Ground { x: self.x + b.x * c + b.z * s, z: self.z - b.x * s + b.z * c, yaw: self.yaw + b.yaw }
     }
 
-    fn inverse(self) -> Ground {
+    pub fn inverse(self) -> Ground {
         let (s, c) = self.yaw.sin_cos();
         Ground { x: -(self.x * c - self.z * s), z: -(self.x * s + self.z * c), yaw: -self.yaw }
     }
@@ -80,7 +80,7 @@ pub fn travel(duration: f32, to: Vec3, turn: f32) -> Clip {
     Clip::build(&spec).unwrap()
 }
 
-fn with_root(clip: &Clip, speed: f64, mode: RootMode) -> Motion<&Clip> {
+pub fn with_root(clip: &Clip, speed: f64, mode: RootMode) -> Motion<&Clip> {
     let root = RootMotionSpec { mode, ..RootMotionSpec::default() };
     let layer = LayerSpec { speed, playback: Some(Playback::Loop), ..LayerSpec::new(clip) };
     Motion::build(MotionSpec { layers: vec![layer], root_motion: Some(root), ..Default::default() }).unwrap()
@@ -151,7 +151,7 @@ fn extract_keeps_the_root_at_its_start_while_the_deltas_carry_the_travel() {
     assert!(total.translation.length() > 1.0, "the travel is in the deltas: {total:?}");
 }
 
-fn root_ground(clip: &Clip, t: f32) -> Ground {
+pub fn root_ground(clip: &Clip, t: f32) -> Ground {
     let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
     clip.sample_into(t, &mut cursor, &mut pose);
     Ground::of(pose.translations[0].into(), pose.rotations[0])
