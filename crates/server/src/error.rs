@@ -74,6 +74,13 @@ pub enum ApiError {
     /// The body did not arrive within the body-read timeout (slow client).
     #[error("the request body did not arrive within {secs} s ({})", raise_hint("body_read_timeout_secs"))]
     BodyTimeout { secs: u64 },
+    /// An import upload slower than `min_upload_bytes_per_sec` over the last
+    /// window: cut off so that its slot goes to someone else.
+    #[error(
+        "the upload sent {received} bytes in the last {window_secs} s, under {min_per_sec} bytes/s ({})",
+        raise_hint("min_upload_bytes_per_sec").replace("raise", "lower")
+    )]
+    UploadTooSlow { received: u64, window_secs: u64, min_per_sec: u64 },
     /// Too many requests in flight: shed at once instead of queued.
     #[error("the server is at capacity; retry after {retry_after} s")]
     Overloaded { retry_after: u64 },
@@ -92,6 +99,10 @@ pub enum ApiError {
     ClientInFlight { limit: usize, retry_after: u64 },
     #[error("service unavailable")]
     Unavailable(#[source] Option<anyhow::Error>),
+    /// A write without a precondition that lost the race to other writes of
+    /// the same clip every time it started again (`unavailable`, with `Retry-After`).
+    #[error("the clip kept changing while this write was applied ({attempts} attempts); retry after {retry_after} s")]
+    WriteRace { attempts: u32, retry_after: u64 },
     #[error("internal error")]
     Internal(#[source] anyhow::Error),
 }
@@ -147,8 +158,8 @@ impl ApiError {
             Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
-            Timeout { .. } | Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
-            BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
+            Timeout { .. } | Unavailable(_) | WriteRace { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            BodyTimeout { .. } | UploadTooSlow { .. } => StatusCode::REQUEST_TIMEOUT,
             Overloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
             RateLimited { .. } | ClientInFlight { .. } => StatusCode::TOO_MANY_REQUESTS,
             Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
@@ -177,8 +188,8 @@ impl ApiError {
             TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => "shutting_down",
             TooManyBroadcasts(_) => "too_many_broadcasts",
             Timeout { .. } => "request_timeout",
-            Unavailable(_) => "unavailable",
-            BodyTimeout { .. } => "body_timeout",
+            Unavailable(_) | WriteRace { .. } => "unavailable",
+            BodyTimeout { .. } | UploadTooSlow { .. } => "body_timeout",
             Overloaded { .. } => "overloaded",
             RateLimited { .. } => "rate_limited",
             ClientInFlight { .. } => "client_in_flight_limit",
@@ -310,7 +321,8 @@ impl IntoResponse for ApiError {
         }
         if let ApiError::Overloaded { retry_after }
         | ApiError::RateLimited { retry_after }
-        | ApiError::ClientInFlight { retry_after, .. } = &self
+        | ApiError::ClientInFlight { retry_after, .. }
+        | ApiError::WriteRace { retry_after, .. } = &self
         {
             response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after));
         }
@@ -357,8 +369,8 @@ impl ApiError {
             TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => Code::Unavailable,
             TooManyBroadcasts(_) => Code::ResourceExhausted,
             Timeout { .. } => Code::DeadlineExceeded,
-            Unavailable(_) => Code::Unavailable,
-            BodyTimeout { .. } => Code::DeadlineExceeded,
+            Unavailable(_) | WriteRace { .. } => Code::Unavailable,
+            BodyTimeout { .. } | UploadTooSlow { .. } => Code::DeadlineExceeded,
             Overloaded { .. } | RateLimited { .. } | ClientInFlight { .. } => Code::ResourceExhausted,
             Internal(_) => Code::Internal,
         }

@@ -164,6 +164,7 @@ impl Application {
             loads: Arc::default(),
             streams,
             builds,
+            patches: sync::Turns::default(),
         });
         // Broadcasts are kept in the store: resumed after a restart, shared by every node.
         let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };

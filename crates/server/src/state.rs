@@ -66,6 +66,8 @@ pub struct Shared {
     pub arrivals: super::shed::Arrivals,
     /// Where every clip build runs (off the async workers, a few at once).
     pub builds: Arc<Builds>,
+    /// Patches of one clip take turns on this node (`rest::patch`).
+    pub patches: crate::sync::Turns,
 }
 
 impl AppState {
