@@ -14,9 +14,10 @@
 //! heads and idle connections are the accept loop's, in `listen`.)
 //!
 //! The import route's body is spooled to a temporary file instead of held
-//! (`spool`), under its own limit (`max_import_bytes`) and the same timeout;
-//! it takes a spool slot rather than the arrival budget, which is memory,
-//! and only a caller allowed to write gets one. Others are refused without
+//! (`spool`), under its own limit (`max_import_bytes`), the same timeout and
+//! a floor on its arrival rate; it takes one of its caller's upload slots
+//! rather than the arrival budget, which is memory, and only a caller allowed
+//! to write gets one. Others are refused without
 //! spooling; their body, when no bigger than `max_body_bytes`, is read and
 //! dropped first, so that a client still sending gets the answer rather
 //! than a reset connection.
@@ -33,7 +34,7 @@ use axum::response::{IntoResponse, Response};
 use super::auth::{Identity, Scope};
 use super::compression::BodyCoding;
 use super::error::ApiError;
-use super::shed::Arrivals;
+use super::shed::{Arrivals, key_of};
 use super::spool::SpoolRoute;
 
 /// The limits the middleware applies.
@@ -94,7 +95,8 @@ async fn spooled(route: &SpoolRoute, g: &BodyGuard, request: Request, next: Next
     if let Some(Err(refused)) = request.extensions().get::<Identity>().map(|id| id.authorize(Scope::Write)) {
         return refuse_unread(refused, request.into_body(), g).await;
     }
-    let slot = match route.slot() {
+    let caller = key_of(request.extensions().get::<Identity>());
+    let slot = match route.slot(caller).await {
         Ok(slot) => slot,
         Err(e) => return refuse_unread(e, request.into_body(), g).await,
     };

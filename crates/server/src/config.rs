@@ -241,6 +241,26 @@ settings! {
             "max_import_bytes", "max-import-bytes", "INBETWEEN_MAX_IMPORT_BYTES", "BYTES",
             "Largest file `POST /v1/clips/import` accepts: spooled to a temporary file, of which only the glTF JSON \
              and the animation data are read";
+        max_import_uploads: usize = 8 => positive -> usize,
+            "max_import_uploads", "max-import-uploads", "INBETWEEN_MAX_IMPORT_UPLOADS", "N",
+            "Import uploads spooled at once, all callers together (their disk is at most this many times \
+             max_import_bytes); as many more may wait import_slot_wait_secs for a slot";
+        max_import_uploads_per_caller: usize = 2 => positive -> usize,
+            "max_import_uploads_per_caller", "max-import-uploads-per-caller", "INBETWEEN_MAX_IMPORT_UPLOADS_PER_CALLER",
+            "N",
+            "Import uploads one caller (its token's name, or its address) may spool at once";
+        import_slot_wait: u64 = 2 => seconds_or_none -> Duration,
+            "import_slot_wait_secs", "import-slot-wait-secs", "INBETWEEN_IMPORT_SLOT_WAIT_SECS", "SECS",
+            "Seconds an import waits for an upload slot (its caller's and the node's) before it is answered 503 \
+             `overloaded` with Retry-After (0: not at all)";
+        min_upload_bytes_per_sec: u64 = 16 * 1024 => as_given -> u64,
+            "min_upload_bytes_per_sec", "min-upload-bytes-per-sec", "INBETWEEN_MIN_UPLOAD_BYTES_PER_SEC", "BYTES",
+            "Slowest import upload: one that brings fewer bytes per second over the last upload_rate_window_secs \
+             (checked once it has been sending that long) is cut off with 408 `body_timeout` and its slot freed \
+             (0: no floor)";
+        upload_rate_window: u64 = 3 => seconds -> Duration,
+            "upload_rate_window_secs", "upload-rate-window-secs", "INBETWEEN_UPLOAD_RATE_WINDOW_SECS", "SECS",
+            "Seconds over which an import upload's arrival rate is measured, and its grace before the first check";
         max_tracks: usize = 4096 => positive -> usize,
             "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
             "Most tracks in one clip";
@@ -929,6 +949,11 @@ mod tests {
             max_body_bytes: 16_777_216,
             max_import_resolved_bytes: 67_108_864,
             max_import_bytes: 268_435_456,
+            max_import_uploads: 8,
+            max_import_uploads_per_caller: 2,
+            import_slot_wait: Duration::from_secs(2),
+            min_upload_bytes_per_sec: 16_384,
+            upload_rate_window: Duration::from_secs(3),
             max_tracks: 4096,
             max_keys_per_track: 1_000_000,
             max_joints: 4096,

@@ -163,7 +163,7 @@ fn shed(protocol: &'static str) -> ApiError {
 
 /// What per-caller budgets count a request under: its caller, or (a token
 /// that matches nothing, refused later anyway) the unknown caller.
-fn key_of(identity: Option<&Identity>) -> CallerKey {
+pub(crate) fn key_of(identity: Option<&Identity>) -> CallerKey {
     identity.and_then(Identity::caller).map_or(CallerKey::Unknown, |c| c.key())
 }
 

@@ -75,9 +75,13 @@ pub fn router(state: AppState) -> Router {
                 arrivals: state.arrivals.clone(),
                 spool: Some(spool::SpoolRoute::new(
                     routes::import_path(),
-                    limits.max_import_bytes,
-                    "max_import_bytes",
-                    limits.max_concurrent_builds,
+                    (limits.max_import_bytes, "max_import_bytes"),
+                    spool::UploadLimits {
+                        node: limits.max_import_uploads,
+                        per_caller: limits.max_import_uploads_per_caller,
+                        wait: limits.import_slot_wait,
+                    },
+                    spool::PaceLimit { min_per_sec: limits.min_upload_bytes_per_sec, window: limits.upload_rate_window },
                 )),
             },
             body_guard::guard,
