@@ -19,6 +19,19 @@
 //! 9110 §12.5.3 allows, rather than tower-http 0.7's 406 — which it sends
 //! after the handler ran, so a `POST` would have created a clip behind it.
 //!
+//! **What compressing costs** (docs/operations.md, “Memory”): each
+//! compressed answer holds an encoder — its window and match tables — for
+//! as long as it is sent, and burns CPU per byte. So at most
+//! `max_compressed_answers` answers are compressed at once; an answer that
+//! finds them all busy goes uncompressed (as if the client had not asked),
+//! never waits. Answers of a known length under [`SMALL_ANSWER_BYTES`] use
+//! each coding's usual level (zstd 3, br 4, gzip 6: a few kilobytes, where
+//! the ratio matters and the CPU does not); larger ones and answers sent in
+//! pieces use level 1 of each (zstd 1: 512 KiB window; br 1; gzip 1: 32 KiB
+//! window), where the CPU per megabyte is what counts. [`state_bytes`] and
+//! [`compression_price`] give an answer's memory and CPU in the units the
+//! rest of the server budgets in.
+//!
 //! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
 //! that ask, except stream frames ([`frames_uncompressed`]), and decodes
 //! compressed requests ([`grpc`]).
@@ -34,14 +47,20 @@
 //! With `compression = false` neither happens: answers go as they are and
 //! a compressed body is 415.
 
-use axum::body::HttpBody;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
+
+use axum::body::{Body, Bytes, HttpBody};
 use axum::extract::{Request, State};
 use axum::http::header::{ACCEPT_ENCODING, CONTENT_ENCODING, CONTENT_LENGTH};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
-use tower_http::compression::CompressionLayer;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+use tower::layer::util::Stack;
 use tower_http::compression::predicate::{NotForContentType, Predicate};
+use tower_http::compression::{CompressionLayer, CompressionLevel};
 use tower_http::decompression::RequestDecompressionLayer;
 
 use tonic::codec::CompressionEncoding;
@@ -80,13 +99,133 @@ impl Predicate for WorthIt {
     }
 }
 
-/// The compressor of answers (see the module doc for what it leaves alone).
-pub fn responses(config: Compression) -> CompressionLayer<impl Predicate> {
-    let worth_it = WorthIt { min_bytes: config.min_bytes as u64 }
-        .and(NotForContentType::GRPC)
-        .and(NotForContentType::IMAGES)
-        .and(NotForContentType::SSE);
-    CompressionLayer::new().zstd(config.enabled).br(config.enabled).gzip(config.enabled).compress_when(worth_it)
+/// Answers of a known length under this are small: compressed at each
+/// coding's usual level; the others at [`LARGE_LEVEL`].
+pub const SMALL_ANSWER_BYTES: u64 = 64 * 1024;
+
+/// The level of large and streamed answers, the same number for the three
+/// codings: zstd 1, br 1, gzip 1.
+pub const LARGE_LEVEL: i32 = 1;
+
+/// [`WorthIt`], not gRPC, images or event streams; with `small_only`, only
+/// answers of a known length under [`SMALL_ANSWER_BYTES`].
+#[derive(Debug, Clone, Copy)]
+pub struct Answers {
+    worth_it: WorthIt,
+    small_only: bool,
+}
+
+impl Predicate for Answers {
+    fn should_compress<B: HttpBody>(&self, response: &axum::http::Response<B>) -> bool {
+        let small = || response.body().size_hint().exact().is_some_and(|n| n < SMALL_ANSWER_BYTES);
+        self.worth_it.should_compress(response)
+            && NotForContentType::GRPC.should_compress(response)
+            && NotForContentType::IMAGES.should_compress(response)
+            && NotForContentType::SSE.should_compress(response)
+            && (!self.small_only || small())
+    }
+}
+
+/// The compressors of answers (see the module doc for what they leave
+/// alone): the inner one takes the small answers at the usual levels, the
+/// outer one what is left (it never compresses an answer twice: tower-http
+/// leaves one that has a `Content-Encoding`) at [`LARGE_LEVEL`].
+pub fn responses(config: Compression) -> Stack<CompressionLayer<Answers>, CompressionLayer<Answers>> {
+    let worth_it = WorthIt { min_bytes: config.min_bytes as u64 };
+    let on = config.enabled;
+    let small =
+        CompressionLayer::new().zstd(on).br(on).gzip(on).compress_when(Answers { worth_it, small_only: true });
+    let large = CompressionLayer::new()
+        .zstd(on)
+        .br(on)
+        .gzip(on)
+        .quality(CompressionLevel::Precise(LARGE_LEVEL))
+        .compress_when(Answers { worth_it, small_only: false });
+    Stack::new(small, large)
+}
+
+/// Bytes one encoder holds while it compresses, by coding and level (the
+/// codings' documented state: window plus match tables, measured in
+/// BENCHMARKS.md, “Compression”): what [`Gate`] lets at most
+/// `max_compressed_answers` answers hold at once.
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub fn state_bytes(coding: &str, level: i32) -> u64 {
+    const KIB: u64 = 1024;
+    match (coding, level) {
+        // Window 2^(level-dependent log) and its tables; level 1: a 512 KiB window.
+        ("zstd", ..=1) => 1280 * KIB,
+        ("zstd", _) => 2560 * KIB,
+        // Ring buffer sized by lgwin 22 (4 MiB) plus the hasher of the quality.
+        ("br", ..=1) => 4 * 1024 * KIB + 512 * KIB,
+        ("br", _) => 4 * 1024 * KIB + 2 * 1024 * KIB,
+        // deflate: 32 KiB window, hash chains, the pending buffer.
+        ("gzip", _) => 288 * KIB,
+        _ => 0,
+    }
+}
+
+/// The CPU of compressing `bytes` in `coding` at `level`, in work units
+/// (one unit ≈ one joint sample, ≈ 20 ns: docs/operations.md, “Work”), from
+/// the nanoseconds per megabyte measured in BENCHMARKS.md, “Compression”.
+/// Identity (or an unknown coding) costs nothing.
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub fn compression_price(coding: &str, level: i32, bytes: u64) -> u64 {
+    // Nanoseconds per byte, rounded up.
+    let ns_per_byte: u64 = match (coding, level) {
+        ("zstd", ..=1) => 2,
+        ("zstd", _) => 3,
+        ("br", ..=1) => 4,
+        ("br", 2..=4) => 8,
+        ("br", _) => 120,
+        ("gzip", ..=1) => 8,
+        ("gzip", _) => 20,
+        _ => 0,
+    };
+    (bytes.saturating_mul(ns_per_byte) / NS_PER_WORK_UNIT).max(u64::from(ns_per_byte > 0))
+}
+
+/// Nanoseconds of CPU one work unit stands for (about one joint sample).
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub const NS_PER_WORK_UNIT: u64 = 20;
+
+/// The cap on answers compressed at once; handed to [`negotiate`].
+#[derive(Debug, Clone)]
+pub struct Gate {
+    config: Compression,
+    permits: Arc<Semaphore>,
+}
+
+impl Gate {
+    /// At most `max_answers` compressed at once.
+    pub fn new(config: Compression, max_answers: usize) -> Self {
+        Gate { config, permits: Arc::new(Semaphore::new(max_answers)) }
+    }
+}
+
+/// An answer's body holding its compressor's permit until it is sent (or dropped).
+struct Held {
+    body: Body,
+    _permit: OwnedSemaphorePermit,
+}
+
+impl HttpBody for Held {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<http_body::Frame<Bytes>, axum::Error>>> {
+        Pin::new(&mut self.body).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        self.body.size_hint()
+    }
 }
 
 /// The decoder of request bodies; [`negotiate`] has already refused codings
@@ -130,8 +269,10 @@ pub fn frames_uncompressed<B>(
 
 /// Middleware (outside [`requests`] and [`responses`]): checks the body's
 /// `Content-Encoding` and rewrites `Accept-Encoding` to the one coding the
-/// answer will use (module doc).
-pub async fn negotiate(State(config): State<Compression>, mut request: Request, next: Next) -> Response {
+/// answer will use (module doc), or to none when every compressor is busy;
+/// a compressed answer keeps its permit until it is sent.
+pub async fn negotiate(State(gate): State<Gate>, mut request: Request, next: Next) -> Response {
+    let config = gate.config;
     match body_coding(request.headers(), config.enabled) {
         Ok(None) => {
             request.headers_mut().remove(CONTENT_ENCODING);
@@ -147,11 +288,18 @@ pub async fn negotiate(State(config): State<Compression>, mut request: Request, 
         Err(e) => return unsupported(e, config.enabled),
     }
     let chosen = if config.enabled { answer_coding(request.headers()) } else { None };
-    match chosen {
+    let permit = chosen.and_then(|_| Arc::clone(&gate.permits).try_acquire_owned().ok());
+    match chosen.filter(|_| permit.is_some()) {
         Some(coding) => request.headers_mut().insert(ACCEPT_ENCODING, HeaderValue::from_static(coding)),
         None => request.headers_mut().remove(ACCEPT_ENCODING),
     };
-    next.run(request).await
+    let response = next.run(request).await;
+    match permit {
+        Some(permit) if response.headers().contains_key(CONTENT_ENCODING) => {
+            response.map(|body| Body::new(Held { body, _permit: permit }))
+        }
+        _ => response,
+    }
 }
 
 /// The body's coding: `None` for none or `identity`, one of [`CODINGS`]
@@ -287,5 +435,54 @@ mod tests {
         assert_eq!(content_encoding(&["gzip", "br"], true), Err(415));
         assert_eq!(content_encoding(&["gzip"], false), Err(415));
         assert_eq!(content_encoding(&["identity"], false), Ok(None));
+    }
+
+    /// CPU per megabyte of each coding at the levels the server uses, on a
+    /// sample answer's JSON: `cargo test --release -p inbetween-server --lib
+    /// compression_cpu -- --ignored --nocapture` (BENCHMARKS.md, “Compression”).
+    #[test]
+    #[ignore = "a measurement: run in release"]
+    fn compression_cpu_per_megabyte() {
+        use tower::{Service, ServiceExt};
+        let json = sample_json(8 << 20);
+        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
+        for (coding, level) in [("zstd", 1), ("zstd", 3), ("br", 1), ("br", 4), ("gzip", 1), ("gzip", 6)] {
+            let body = json.clone();
+            let inner = tower::service_fn(move |_: axum::http::Request<Body>| {
+                let body = body.clone();
+                async move { Ok::<_, std::convert::Infallible>(axum::http::Response::new(Body::from(body))) }
+            });
+            let layer = CompressionLayer::new().quality(CompressionLevel::Precise(level));
+            let mut service = tower::Layer::layer(&layer, inner);
+            let request =
+                axum::http::Request::builder().header(ACCEPT_ENCODING, coding).body(Body::empty()).unwrap();
+            let started = std::time::Instant::now();
+            let out = runtime.block_on(async {
+                let response = service.ready().await.unwrap().call(request).await.unwrap();
+                axum::body::to_bytes(Body::new(response.into_body()), usize::MAX).await.unwrap()
+            });
+            let secs = started.elapsed().as_secs_f64();
+            let mb = json.len() as f64 / 1e6;
+            println!(
+                "{coding} {level}: {:.1} ms CPU per MB, ratio {:.1}, {:.0} ns/byte",
+                secs * 1e3 / mb,
+                json.len() as f64 / out.len() as f64,
+                secs * 1e9 / json.len() as f64
+            );
+        }
+    }
+
+    /// About `len` bytes of pose JSON: joint names and varied floats.
+    fn sample_json(len: usize) -> Bytes {
+        let mut out = String::with_capacity(len + 256);
+        let mut x: u32 = 12345;
+        out.push_str("{\"poses\":[");
+        while out.len() < len {
+            x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let f = f64::from(x >> 8) / f64::from(1u32 << 24) - 0.5;
+            out.push_str(&format!("{{\"joint\":\"mixamorig:joint_{}\",\"t\":[{f:.6},{:.6},0.0]}},", x % 4096, f * 0.5));
+        }
+        out.push_str("{}]}");
+        Bytes::from(out)
     }
 }
