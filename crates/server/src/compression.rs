@@ -25,12 +25,14 @@
 //! `max_compressed_answers` answers are compressed at once; an answer that
 //! finds them all busy goes uncompressed (as if the client had not asked),
 //! never waits. Answers of a known length under [`SMALL_ANSWER_BYTES`] use
-//! each coding's usual level (zstd 3, br 4, gzip 6: a few kilobytes, where
-//! the ratio matters and the CPU does not); larger ones and answers sent in
-//! pieces use level 1 of each (zstd 1: 512 KiB window; br 1; gzip 1: 32 KiB
-//! window), where the CPU per megabyte is what counts. [`state_bytes`] and
+//! zstd's and gzip's usual levels (3 and 6: a few kilobytes, where the ratio
+//! matters and the CPU does not); larger ones and answers sent in pieces use
+//! level 1 of each, where the CPU per megabyte is what counts. br is always
+//! at quality 1: from quality 2 up its encoder allocates its full window
+//! tables whatever the answer's size (≈ 40 MB at quality 4, tower-http's
+//! default; 64 of them killed a 1 GiB server). [`state_bytes`] and
 //! [`compression_price`] give an answer's memory and CPU in the units the
-//! rest of the server budgets in.
+//! rest of the server budgets in (figures: BENCHMARKS.md, “Compression”).
 //!
 //! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
 //! that ask, except stream frames ([`frames_uncompressed`]), and decodes
@@ -99,8 +101,8 @@ impl Predicate for WorthIt {
     }
 }
 
-/// Answers of a known length under this are small: compressed at each
-/// coding's usual level; the others at [`LARGE_LEVEL`].
+/// Answers of a known length under this are small: compressed at zstd's and
+/// gzip's usual levels; the others, and br always, at [`LARGE_LEVEL`].
 pub const SMALL_ANSWER_BYTES: u64 = 64 * 1024;
 
 /// The level of large and streamed answers, the same number for the three
@@ -134,7 +136,7 @@ pub fn responses(config: Compression) -> Stack<CompressionLayer<Answers>, Compre
     let worth_it = WorthIt { min_bytes: config.min_bytes as u64 };
     let on = config.enabled;
     let small =
-        CompressionLayer::new().zstd(on).br(on).gzip(on).compress_when(Answers { worth_it, small_only: true });
+        CompressionLayer::new().zstd(on).br(false).gzip(on).compress_when(Answers { worth_it, small_only: true });
     let large = CompressionLayer::new()
         .zstd(on)
         .br(on)
@@ -144,41 +146,42 @@ pub fn responses(config: Compression) -> Stack<CompressionLayer<Answers>, Compre
     Stack::new(small, large)
 }
 
-/// Bytes one encoder holds while it compresses, by coding and level (the
-/// codings' documented state: window plus match tables, measured in
-/// BENCHMARKS.md, “Compression”): what [`Gate`] lets at most
-/// `max_compressed_answers` answers hold at once.
+/// Bytes one encoder holds while it compresses, by coding and level
+/// (window plus match tables; BENCHMARKS.md, “Compression”): what [`Gate`]
+/// lets at most `max_compressed_answers` answers hold at once.
 #[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
 pub fn state_bytes(coding: &str, level: i32) -> u64 {
     const KIB: u64 = 1024;
     match (coding, level) {
-        // Window 2^(level-dependent log) and its tables; level 1: a 512 KiB window.
+        // zstd allocates in C, out of the Rust counter's sight: its own
+        // estimate for these levels (window 512 KiB at 1, 1 MiB at 3).
         ("zstd", ..=1) => 1280 * KIB,
         ("zstd", _) => 2560 * KIB,
-        // Ring buffer sized by lgwin 22 (4 MiB) plus the hasher of the quality.
-        ("br", ..=1) => 4 * 1024 * KIB + 512 * KIB,
-        ("br", _) => 4 * 1024 * KIB + 2 * 1024 * KIB,
-        // deflate: 32 KiB window, hash chains, the pending buffer.
-        ("gzip", _) => 288 * KIB,
+        // Measured: quality 1 keeps no window tables; 2 and up do (lgwin 22).
+        ("br", ..=1) => 96 * KIB,
+        ("br", 2..=9) => 40 * 1024 * KIB,
+        ("br", _) => 72 * 1024 * KIB,
+        // Measured: deflate's window, hash chains and pending buffer.
+        ("gzip", _) => 404 * KIB,
         _ => 0,
     }
 }
 
 /// The CPU of compressing `bytes` in `coding` at `level`, in work units
-/// (one unit ≈ one joint sample, ≈ 20 ns: docs/operations.md, “Work”), from
+/// (one unit ≈ one joint sample, ≈ 20 ns of a core), from
 /// the nanoseconds per megabyte measured in BENCHMARKS.md, “Compression”.
 /// Identity (or an unknown coding) costs nothing.
 #[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
 pub fn compression_price(coding: &str, level: i32, bytes: u64) -> u64 {
     // Nanoseconds per byte, rounded up.
     let ns_per_byte: u64 = match (coding, level) {
-        ("zstd", ..=1) => 2,
-        ("zstd", _) => 3,
-        ("br", ..=1) => 4,
-        ("br", 2..=4) => 8,
-        ("br", _) => 120,
-        ("gzip", ..=1) => 8,
-        ("gzip", _) => 20,
+        ("zstd", ..=1) => 8,
+        ("zstd", _) => 13,
+        ("br", ..=1) => 14,
+        ("br", 2..=4) => 90,
+        ("br", _) => 5500,
+        ("gzip", ..=1) => 10,
+        ("gzip", _) => 39,
         _ => 0,
     };
     (bytes.saturating_mul(ns_per_byte) / NS_PER_WORK_UNIT).max(u64::from(ns_per_byte > 0))

@@ -1,0 +1,127 @@
+//! Memory the caches and encoders once held without bound:
+//! - the built-motion cache was bounded by entries: 110 reads of a
+//!   32-layer additive motion over a 4,096-joint clip, each with a new
+//!   float (a new key), kept ~9 MB of reference poses each and were
+//!   OOM-killed; now motions and clips share one byte budget (`cache_bytes`);
+//! - 64 concurrent answers with `Accept-Encoding: br` each held a brotli
+//!   encoder of ~40 MB (quality 4) and were OOM-killed in 8.5 s; now br runs
+//!   at quality 1 and at most `max_compressed_answers` are compressed at once;
+//! - a PNG declaring 16,000 × 16,000 (1 GiB decoded) was kept for the
+//!   viewer; now its header is checked against `max_texture_pixels`.
+
+use reqwest::multipart::{Form, Part};
+use serde_json::{Value, json};
+
+use super::{target, wide_clip};
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_hundred_and_ten_distinct_32_layer_additive_motions_stay_in_the_cache_budget() {
+    let mut target = target(&[]).await;
+    let http = crate::common::http_client();
+    let id = target.server.create(&http, &wide_clip(4096, 16)).await;
+    let url = target.server.url("/v1/poses");
+    let probes = target.probes().await;
+    for i in 0..110 {
+        // A new reference time per read: a new cache key, ~9 MB of reference poses.
+        let layer = json!({"clip": id, "mode": "additive", "weight": 0.5, "reference_time": f64::from(i) * 1e-4});
+        let body = json!({"motion": {"layers": vec![layer; 32]}, "time": 0.0});
+        let resp = http.post(&url).json(&body).send().await.unwrap();
+        assert_eq!(resp.status(), 200, "read {i}: {:?}", resp.text().await);
+        resp.bytes().await.unwrap();
+    }
+    let report = probes.finish();
+    let cached = target.metric("inbetween_cache_bytes").await.expect("/metrics reports the caches' bytes");
+    let limit = target.metric("inbetween_cache_limit_bytes").await.expect("/metrics reports the budget");
+    let motions = target.metric("inbetween_motion_cache_entries").await.unwrap_or(0.0);
+    println!("FIGURE 110 distinct 32-layer motions: caches {:.0} MB of {:.0} MB, {motions} motions", cached / 1e6, limit / 1e6);
+    assert!(cached <= limit, "the caches hold {cached} bytes, over {limit}");
+    assert!(motions >= 1.0 && motions < 110.0, "some motions kept, the oldest evicted: {motions}");
+    target.assert_survived("110 distinct 32-layer additive motions over 4,096 joints", &report);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn sixty_four_concurrent_big_answers_asking_for_br_are_compressed_within_the_cap() {
+    let mut target = target(&[]).await;
+    let http = crate::common::http_client();
+    let id = target.server.create(&http, &wide_clip(4096, 16)).await;
+    let url = target.server.url(&format!("/v1/clips/{id}/sample"));
+    let body = r#"{"start":0,"end":0.04,"fps":100,"space":"model"}"#;
+    let probes = target.probes().await;
+    let one = |http: reqwest::Client, url: String| async move {
+        let resp = http
+            .post(&url)
+            .header("content-type", "application/json")
+            .header("accept-encoding", "br")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(resp.status(), 200);
+        let coding = resp.headers().get("content-encoding").map(|v| v.to_str().unwrap().to_owned());
+        let bytes = resp.bytes().await.expect("the answer arrives whole");
+        (coding, bytes.len())
+    };
+    let answers = futures_util::future::join_all((0..64).map(|_| one(http.clone(), url.clone()))).await;
+    let report = probes.finish();
+    let br = answers.iter().filter(|(c, _)| c.as_deref() == Some("br")).count();
+    assert!(answers.iter().all(|(c, _)| c.is_none() || c.as_deref() == Some("br")), "br or identity only");
+    let bytes: usize = answers.iter().map(|(_, n)| n).sum();
+    println!("FIGURE 64 concurrent sample answers asking for br: {br} compressed, {:.0} MB sent", bytes as f64 / 1e6);
+    assert!(br >= 1, "some answers were compressed");
+    target.assert_survived("64 concurrent big answers with Accept-Encoding: br", &report);
+}
+
+/// A PNG's signature and IHDR declaring `width` × `height` (8-bit RGBA).
+fn png_header(width: u32, height: u32) -> Vec<u8> {
+    let mut png = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A, 0, 0, 0, 13];
+    png.extend_from_slice(b"IHDR");
+    png.extend_from_slice(&width.to_be_bytes());
+    png.extend_from_slice(&height.to_be_bytes());
+    png.extend_from_slice(&[8, 6, 0, 0, 0, 0, 0, 0, 0]);
+    png
+}
+
+/// The Fox with its texture replaced by `image`, as a data: URI.
+fn fox_with_image(image: &[u8]) -> Vec<u8> {
+    use base64::Engine as _;
+    const FOX: &[u8] = include_bytes!("../../../examples/gltf/Fox/Fox.glb");
+    let json_len = u32::from_le_bytes(FOX[12..16].try_into().unwrap()) as usize;
+    let mut doc: Value = serde_json::from_slice(&FOX[20..20 + json_len]).unwrap();
+    let uri = format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(image));
+    doc["images"][0] = json!({ "uri": uri });
+    let mut json = serde_json::to_vec(&doc).unwrap();
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let bin = &FOX[20 + json_len..];
+    let mut out = b"glTF".to_vec();
+    for n in [2, (20 + json.len() + bin.len()) as u32, json.len() as u32] {
+        out.extend_from_slice(&n.to_le_bytes());
+    }
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(bin);
+    out
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_png_declaring_16000_squared_is_left_out_and_the_mesh_kept() {
+    let mut target = target(&[]).await;
+    let http = crate::common::http_client();
+    let probes = target.probes().await;
+    let form = Form::new().part("file", Part::bytes(fox_with_image(&png_header(16_000, 16_000))).file_name("fox.glb"));
+    let resp = http.post(target.server.url("/v1/clips/import")).multipart(form).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let imported: Value = resp.json().await.unwrap();
+    let report = probes.finish();
+    let warned = imported["warnings"].as_array().unwrap().iter().any(|w| {
+        w["code"] == "not_imported"
+            && w["pointer"] == "/images/0"
+            && w["detail"].as_str().unwrap_or("").contains("max_texture_pixels")
+    });
+    assert!(warned, "{imported}");
+    let id = imported["clips"][0]["id"].as_str().unwrap();
+    let mesh = http.get(target.server.url(&format!("/v1/clips/{id}/mesh"))).send().await.unwrap();
+    assert_eq!(mesh.status(), 200, "the mesh is kept");
+    let mesh = formats::wire::mesh::decode(&mesh.bytes().await.unwrap()).unwrap();
+    assert!(mesh.textures.is_empty() && mesh.vertex_count() == 1728, "kept without its texture");
+    target.assert_survived("a glTF whose PNG declares 16,000 × 16,000", &report);
+}
