@@ -28,8 +28,13 @@ static A: Counting = Counting;
 /// Output that counts bytes and keeps none.
 struct Sink(usize);
 impl Write for Sink {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> { self.0 += b.len(); Ok(b.len()) }
-    fn flush(&mut self) -> std::io::Result<()> { Ok(()) }
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        self.0 += b.len();
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 fn sample_json(len: usize) -> Vec<u8> {
@@ -50,13 +55,38 @@ fn run(coding: &str, level: u32, json: &[u8]) {
     PEAK.store(base, Relaxed);
     let started = Instant::now();
     let out = match coding {
-        "zstd" => { let mut e = zstd::stream::Encoder::new(Sink(0), level as i32).unwrap(); for c in json.chunks(8192) { e.write_all(c).unwrap(); } e.finish().unwrap().0 }
-        "br" => { let mut e = brotli::CompressorWriter::new(Sink(0), 4096, level, 22); for c in json.chunks(8192) { e.write_all(c).unwrap(); } e.flush().unwrap(); e.into_inner().0 }
-        _ => { let mut e = flate2::write::GzEncoder::new(Sink(0), flate2::Compression::new(level)); for c in json.chunks(8192) { e.write_all(c).unwrap(); } e.finish().unwrap().0 }
+        "zstd" => {
+            let mut e = zstd::stream::Encoder::new(Sink(0), level as i32).unwrap();
+            for c in json.chunks(8192) {
+                e.write_all(c).unwrap();
+            }
+            e.finish().unwrap().0
+        }
+        "br" => {
+            let mut e = brotli::CompressorWriter::new(Sink(0), 4096, level, 22);
+            for c in json.chunks(8192) {
+                e.write_all(c).unwrap();
+            }
+            e.flush().unwrap();
+            e.into_inner().0
+        }
+        _ => {
+            let mut e = flate2::write::GzEncoder::new(Sink(0), flate2::Compression::new(level));
+            for c in json.chunks(8192) {
+                e.write_all(c).unwrap();
+            }
+            e.finish().unwrap().0
+        }
     };
     let secs = started.elapsed().as_secs_f64();
     let state = PEAK.load(Relaxed) - base;
-    println!("| {coding} | {level} | {:.1} | {:.1} | {:.0} | {:.1} |", secs * 1e3 / (json.len() as f64 / 1e6), secs * 1e9 / json.len() as f64, state as f64 / 1024.0, json.len() as f64 / out as f64);
+    println!(
+        "| {coding} | {level} | {:.1} | {:.1} | {:.0} | {:.1} |",
+        secs * 1e3 / (json.len() as f64 / 1e6),
+        secs * 1e9 / json.len() as f64,
+        state as f64 / 1024.0,
+        json.len() as f64 / out as f64
+    );
 }
 
 fn main() {
@@ -64,6 +94,10 @@ fn main() {
     println!("| coding | level | ms CPU per MB | ns per byte | encoder state (KiB) | ratio |");
     println!("|---|---|---|---|---|---|");
     for (c, l) in [("zstd", 1), ("zstd", 3), ("br", 1), ("br", 4), ("br", 11), ("gzip", 1), ("gzip", 6)] {
-        if c == "br" && l == 11 { run(c, l, &json[..1 << 20]); } else { run(c, l, &json); }
+        if c == "br" && l == 11 {
+            run(c, l, &json[..1 << 20]);
+        } else {
+            run(c, l, &json);
+        }
     }
 }

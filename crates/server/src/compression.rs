@@ -440,52 +440,54 @@ mod tests {
         assert_eq!(content_encoding(&["identity"], false), Ok(None));
     }
 
-    /// CPU per megabyte of each coding at the levels the server uses, on a
-    /// sample answer's JSON: `cargo test --release -p inbetween-server --lib
-    /// compression_cpu -- --ignored --nocapture` (BENCHMARKS.md, “Compression”).
-    #[test]
-    #[ignore = "a measurement: run in release"]
-    fn compression_cpu_per_megabyte() {
-        use tower::{Service, ServiceExt};
-        let json = sample_json(8 << 20);
-        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
-        for (coding, level) in [("zstd", 1), ("zstd", 3), ("br", 1), ("br", 4), ("gzip", 1), ("gzip", 6)] {
-            let body = json.clone();
-            let inner = tower::service_fn(move |_: axum::http::Request<Body>| {
-                let body = body.clone();
-                async move { Ok::<_, std::convert::Infallible>(axum::http::Response::new(Body::from(body))) }
-            });
-            let layer = CompressionLayer::new().quality(CompressionLevel::Precise(level));
-            let mut service = tower::Layer::layer(&layer, inner);
-            let request =
-                axum::http::Request::builder().header(ACCEPT_ENCODING, coding).body(Body::empty()).unwrap();
-            let started = std::time::Instant::now();
-            let out = runtime.block_on(async {
-                let response = service.ready().await.unwrap().call(request).await.unwrap();
-                axum::body::to_bytes(Body::new(response.into_body()), usize::MAX).await.unwrap()
-            });
-            let secs = started.elapsed().as_secs_f64();
-            let mb = json.len() as f64 / 1e6;
-            println!(
-                "{coding} {level}: {:.1} ms CPU per MB, ratio {:.1}, {:.0} ns/byte",
-                secs * 1e3 / mb,
-                json.len() as f64 / out.len() as f64,
-                secs * 1e9 / json.len() as f64
-            );
-        }
+    fn router(max_answers: usize) -> axum::Router {
+        let config = Compression { enabled: true, min_bytes: 1024 };
+        axum::Router::new()
+            .route("/big", axum::routing::get(|| async { vec![b'x'; 100_000] }))
+            .route("/small", axum::routing::get(|| async { vec![b'x'; 2000] }))
+            .layer(responses(config))
+            .layer(axum::middleware::from_fn_with_state(Gate::new(config, max_answers), negotiate))
     }
 
-    /// About `len` bytes of pose JSON: joint names and varied floats.
-    fn sample_json(len: usize) -> Bytes {
-        let mut out = String::with_capacity(len + 256);
-        let mut x: u32 = 12345;
-        out.push_str("{\"poses\":[");
-        while out.len() < len {
-            x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            let f = f64::from(x >> 8) / f64::from(1u32 << 24) - 0.5;
-            out.push_str(&format!("{{\"joint\":\"mixamorig:joint_{}\",\"t\":[{f:.6},{:.6},0.0]}},", x % 4096, f * 0.5));
-        }
-        out.push_str("{}]}");
-        Bytes::from(out)
+    fn get(path: &str, coding: &str) -> Request {
+        Request::builder().uri(path).header(ACCEPT_ENCODING, coding).body(Body::empty()).unwrap()
+    }
+
+    fn coding_of(response: &Response) -> Option<&str> {
+        response.headers().get(CONTENT_ENCODING).map(|v| v.to_str().unwrap())
+    }
+
+    #[tokio::test]
+    async fn past_the_cap_answers_go_uncompressed_until_a_compressed_one_is_sent() {
+        use tower::ServiceExt;
+        let app = router(1);
+        let first = app.clone().oneshot(get("/big", "gzip")).await.unwrap();
+        assert_eq!(coding_of(&first), Some("gzip"));
+        let second = app.clone().oneshot(get("/big", "gzip")).await.unwrap();
+        assert_eq!(coding_of(&second), None, "the one compressor is busy: sent as it is");
+        assert_eq!(axum::body::to_bytes(second.into_body(), usize::MAX).await.unwrap().len(), 100_000);
+        axum::body::to_bytes(first.into_body(), usize::MAX).await.unwrap();
+        let third = app.clone().oneshot(get("/big", "zstd")).await.unwrap();
+        assert_eq!(coding_of(&third), Some("zstd"), "the first was sent: its compressor is free again");
+        drop(third);
+        let small = app.clone().oneshot(get("/small", "br")).await.unwrap();
+        assert_eq!(coding_of(&small), Some("br"), "small answers asking for br get it (at quality 1)");
+    }
+
+    #[test]
+    fn compressing_is_priced_by_coding_level_and_bytes() {
+        const MB: u64 = 1_000_000;
+        assert_eq!(compression_price("identity", 0, MB), 0);
+        let price = |coding, level| compression_price(coding, level, MB);
+        // The measured order (BENCHMARKS.md, “Compression”).
+        assert!(price("zstd", 1) < price("gzip", 1) && price("gzip", 1) < price("br", 1));
+        assert!(
+            price("br", 1) < price("gzip", 6) && price("gzip", 6) < price("br", 4) && price("br", 4) < price("br", 11)
+        );
+        // 14 ns a byte at br 1: 14 ms a megabyte, 700,000 units of 20 ns.
+        assert_eq!(price("br", 1), 700_000);
+        assert_eq!(compression_price("gzip", 1, 3 * MB), 3 * price("gzip", 1));
+        assert_eq!(compression_price("zstd", 1, 1), 1, "any compressed byte costs something");
+        assert!(state_bytes("br", 1) < state_bytes("gzip", 6) && state_bytes("br", 4) > 32 << 20);
     }
 }

@@ -372,8 +372,8 @@ settings! {
         max_compressed_answers: usize = 4 * cores() => positive -> usize,
             "max_compressed_answers", "max-compressed-answers", "INBETWEEN_MAX_COMPRESSED_ANSWERS", "N",
             shown "4 per core",
-            "REST answers compressed at once (each holds an encoder: at most 2.5 MiB at the levels used); an answer that finds \
-             them all busy is sent uncompressed";
+            "REST answers compressed at once (each holds an encoder: at most 2.5 MiB at the levels used); an \
+             answer that finds them all busy is sent uncompressed";
         max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
             "Bytes of request bodies and first gRPC messages held at once, all requests together, from arrival \

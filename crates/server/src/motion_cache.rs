@@ -244,7 +244,8 @@ impl MotionCache {
         }
         let mut inner = self.lock();
         let uses = |motion: &StreamMotion| motion.layers().any(|c| clip_ids.iter().any(|id| id.as_ref() == c.id()));
-        let gone: Vec<MotionKey> = inner.entries.iter().filter(|(_, e)| uses(&e.motion)).map(|(k, _)| k.clone()).collect();
+        let gone: Vec<MotionKey> =
+            inner.entries.iter().filter(|(_, e)| uses(&e.motion)).map(|(k, _)| k.clone()).collect();
         for key in &gone {
             self.remove(&mut inner, key);
         }
@@ -514,7 +515,10 @@ mod tests {
         assert!(counted - by_hand < layers * 512, "{counted} is far over {by_hand}: the layers' records and the key");
         // The reference poses alone: the same motion in blend mode has none.
         let (blend_key, blend) = built(spec(&vec![clip; layers]));
-        assert_eq!(counted - motion_bytes(&blend_key, &blend), layers * joints * 3 * 16 + (key.0.len() - blend_key.0.len()));
+        assert_eq!(
+            counted - motion_bytes(&blend_key, &blend),
+            layers * joints * 3 * 16 + (key.0.len() - blend_key.0.len())
+        );
     }
 
     #[test]

@@ -42,8 +42,8 @@ use self::error::MotionErrorKind as K;
 use self::joint_map::joint_map;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
-use super::ik::{IkConstraint, IkLimits, build_constraints};
 use super::heap::vec_bytes;
+use super::ik::{IkConstraint, IkLimits, build_constraints};
 use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
 
 /// Most layers in one motion.

@@ -554,9 +554,10 @@ mod tests {
             let mesh = decode(imported.meshes[0].as_ref().expect("the mesh is kept")).unwrap();
             assert!(mesh.textures.is_empty() && mesh.uvs.is_none(), "{what}");
             assert_eq!(mesh.vertex_count(), 1728, "{what}");
-            let warned = imported.warnings.iter().any(|w| {
-                w.pointer == "/images/0" && w.code == "not_imported" && w.detail.contains(why)
-            });
+            let warned = imported
+                .warnings
+                .iter()
+                .any(|w| w.pointer == "/images/0" && w.code == "not_imported" && w.detail.contains(why));
             assert!(warned, "{what}: {:?}", imported.warnings);
         }
         // At the limit, kept: 4096 × 4096, and a JPEG.
