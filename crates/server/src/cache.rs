@@ -23,10 +23,12 @@
 //! store; [`ClipCache::resume`] empties it again once the node listens.
 //!
 //! The cache is bounded twice: by entries (`cache_entries`) and by the heap
-//! bytes of the compiled clips (`cache_bytes`, from [`CachedClip::bytes`]),
-//! since one clip's tables can weigh anything from a kilobyte to tens of
-//! megabytes. A clip larger than the whole byte bound is not cached at all.
-//! Eviction is least-recently-used by a scan at insert time: inserts happen
+//! bytes of the compiled clips ([`CachedClip::bytes`]), which it draws from
+//! the byte budget every cache shares (`server::cache_budget`,
+//! `cache_bytes`), since one clip's tables can weigh anything from a
+//! kilobyte to tens of megabytes. A clip larger than the whole budget is not
+//! cached at all. Eviction is least-recently-used by a scan: at insert time
+//! for the entry bound, and when the shared budget is trimmed; inserts happen
 //! only on writes and misses, entry capacities are small (default 1024), and
 //! the hit path stays one lock, one hash lookup and one counter store.
 //!
@@ -40,6 +42,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::Mutex;
 
+use crate::cache_budget::{Budgeted, CacheBudget};
 use crate::store::ClipMeta;
 use anim::Clip;
 
@@ -90,8 +93,6 @@ struct Inner {
     bytes: usize,
     /// Bumped by every write and invalidation.
     epoch: u64,
-    /// Logical clock for recency.
-    tick: u64,
     /// True while invalidations may be missed: nothing is cached.
     suspended: bool,
     /// Ids whose entry left since [`ClipCache::take_departed`] last ran.
@@ -102,7 +103,7 @@ struct Inner {
 #[derive(Debug)]
 pub struct ClipCache {
     capacity: usize,
-    capacity_bytes: usize,
+    budget: Arc<CacheBudget>,
     inner: Mutex<Inner>,
 }
 
@@ -111,13 +112,13 @@ pub struct ClipCache {
 pub struct Epoch(u64);
 
 impl ClipCache {
-    /// A cache of at most `capacity` clips weighing at most `capacity_bytes`.
+    /// A cache of at most `capacity` clips, whose bytes count on `budget`.
     ///
     /// # Panics
     /// If `capacity` is 0.
-    pub fn new(capacity: usize, capacity_bytes: usize) -> Self {
+    pub fn new(capacity: usize, budget: Arc<CacheBudget>) -> Self {
         assert!(capacity > 0, "a cache needs room for one clip");
-        ClipCache { capacity, capacity_bytes, inner: Mutex::new(Inner::default()) }
+        ClipCache { capacity, budget, inner: Mutex::new(Inner::default()) }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -126,10 +127,8 @@ impl ClipCache {
 
     pub fn get(&self, id: &str) -> Option<Arc<CachedClip>> {
         let mut inner = self.lock();
-        inner.tick += 1;
-        let tick = inner.tick;
         let entry = inner.entries.get_mut(id)?;
-        entry.last_used = tick;
+        entry.last_used = self.budget.tick();
         Some(entry.clip.clone())
     }
 
@@ -164,7 +163,7 @@ impl ClipCache {
     pub fn invalidate(&self, id: &str) {
         let mut inner = self.lock();
         inner.epoch += 1;
-        Self::remove(&mut inner, id);
+        self.remove(&mut inner, id);
     }
 
     /// Stops caching and drops every entry: invalidations may be missed
@@ -173,7 +172,7 @@ impl ClipCache {
         let mut inner = self.lock();
         inner.epoch += 1;
         inner.suspended = true;
-        Self::clear(&mut inner);
+        self.clear(&mut inner);
     }
 
     /// Caches again, from empty: called once invalidations are heard again,
@@ -182,7 +181,7 @@ impl ClipCache {
         let mut inner = self.lock();
         inner.epoch += 1;
         inner.suspended = false;
-        Self::clear(&mut inner);
+        self.clear(&mut inner);
     }
 
     /// Whether `clip` is the very entry cached for its id (not merely the
@@ -215,66 +214,85 @@ impl ClipCache {
         self.lock().bytes
     }
 
-    /// The byte bound.
-    pub fn capacity_bytes(&self) -> usize {
-        self.capacity_bytes
-    }
-
     /// Puts `clip` in, unless a newer version of it is cached; then evicts
-    /// the least recently used others until both bounds hold. A clip over
-    /// the whole byte bound is not cached, and takes its older version out.
+    /// the least recently used others until the entry bound holds (the
+    /// shared byte budget is trimmed by the caller, `cache_budget::trim`).
+    /// A clip over the whole budget is not cached, and takes its older
+    /// version out.
     fn put(&self, inner: &mut Inner, clip: Arc<CachedClip>) {
-        inner.tick += 1;
-        let tick = inner.tick;
+        let tick = self.budget.tick();
         let id = clip.meta.id.clone();
         if let Some(e) = inner.entries.get_mut(&id) {
             e.last_used = tick;
             if e.clip.meta.version >= clip.meta.version {
                 return;
             }
-            Self::remove(inner, &id);
+            self.remove(inner, &id);
         }
         let bytes = clip.bytes();
-        if bytes > self.capacity_bytes {
+        if !self.budget.admits(bytes) {
             return;
         }
-        while inner.entries.len() >= self.capacity || inner.bytes + bytes > self.capacity_bytes {
-            let oldest = inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(id, _)| id.clone());
-            match oldest {
-                Some(id) => Self::remove(inner, &id),
+        while inner.entries.len() >= self.capacity {
+            match Self::least_recent(inner) {
+                Some(id) => self.remove(inner, &id),
                 None => break,
             }
         }
         inner.bytes += bytes;
+        self.budget.charge(bytes);
         inner.entries.insert(id, Entry { clip, bytes, last_used: tick });
     }
 
-    fn remove(inner: &mut Inner, id: &str) {
+    fn least_recent(inner: &Inner) -> Option<String> {
+        inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(id, _)| id.clone())
+    }
+
+    fn remove(&self, inner: &mut Inner, id: &str) {
         if let Some(e) = inner.entries.remove(id) {
             inner.bytes -= e.bytes;
+            self.budget.refund(e.bytes);
             inner.departed.push(e.clip.meta.id.clone());
         }
     }
 
-    fn clear(inner: &mut Inner) {
+    fn clear(&self, inner: &mut Inner) {
         inner.entries.clear();
+        self.budget.refund(inner.bytes);
         inner.bytes = 0;
         inner.departed.clear();
     }
 }
 
+impl Budgeted for ClipCache {
+    fn oldest(&self) -> Option<u64> {
+        self.lock().entries.values().map(|e| e.last_used).min()
+    }
+
+    fn evict_oldest(&self) {
+        let mut inner = self.lock();
+        if let Some(id) = Self::least_recent(&inner) {
+            self.remove(&mut inner, &id);
+        }
+    }
+}
+
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::store::ClipStats;
     use anim::{Channel, ClipSpec, Interpolation, Keys, Playback, TrackSpec};
+
+    fn unbounded() -> Arc<CacheBudget> {
+        Arc::new(CacheBudget::new(usize::MAX))
+    }
 
     fn cached(id: &str, version: u64) -> Arc<CachedClip> {
         cached_keys(id, version, 1)
     }
 
     /// A clip of one linear track with `keys` keys (12 bytes of curve each).
-    fn cached_keys(id: &str, version: u64, keys: usize) -> Arc<CachedClip> {
+    pub(crate) fn cached_keys(id: &str, version: u64, keys: usize) -> Arc<CachedClip> {
         let spec = ClipSpec {
             name: "c".into(),
             skeleton: None,
@@ -297,7 +315,7 @@ mod tests {
 
     #[test]
     fn an_older_version_never_replaces_a_newer_one() {
-        let cache = ClipCache::new(4, usize::MAX);
+        let cache = ClipCache::new(4, unbounded());
         cache.insert_written(cached("a", 3));
         cache.insert_written(cached("a", 2));
         assert_eq!(cache.get("a").unwrap().meta.version, 3);
@@ -307,7 +325,7 @@ mod tests {
 
     #[test]
     fn a_miss_that_raced_a_write_is_not_cached() {
-        let cache = ClipCache::new(4, usize::MAX);
+        let cache = ClipCache::new(4, unbounded());
         cache.insert_written(cached("a", 1));
         let seen = cache.epoch();
         cache.invalidate("a"); // a delete committed while the miss was loading
@@ -319,7 +337,7 @@ mod tests {
 
     #[test]
     fn a_suspended_cache_holds_nothing_until_resumed() {
-        let cache = ClipCache::new(4, usize::MAX);
+        let cache = ClipCache::new(4, unbounded());
         cache.insert_written(cached("a", 1));
         let seen = cache.epoch();
         cache.suspend();
@@ -335,7 +353,7 @@ mod tests {
 
     #[test]
     fn every_entry_that_leaves_is_noted_once_and_holds_knows_the_very_entry() {
-        let cache = ClipCache::new(2, usize::MAX);
+        let cache = ClipCache::new(2, unbounded());
         let a1 = cached("a", 1);
         cache.insert_written(a1.clone());
         assert!(cache.holds(&a1) && !cache.holds(&cached("a", 1)), "the same version, another copy");
@@ -353,7 +371,7 @@ mod tests {
 
     #[test]
     fn the_least_recently_used_entry_is_evicted() {
-        let cache = ClipCache::new(2, usize::MAX);
+        let cache = ClipCache::new(2, unbounded());
         cache.insert_written(cached("a", 1));
         cache.insert_written(cached("b", 1));
         cache.get("a");
@@ -367,19 +385,24 @@ mod tests {
         let (a, b, c) = (cached_keys("a", 1, 1000), cached_keys("b", 1, 1000), cached_keys("c", 1, 1000));
         let one = a.bytes();
         assert!(one > 1000 * 12, "the curve's keys are counted: {one}");
-        let cache = ClipCache::new(100, 2 * one + one / 2);
-        cache.insert_written(a);
-        cache.insert_written(b);
-        assert_eq!((cache.len(), cache.bytes()), (2, 2 * one));
+        let budget = Arc::new(CacheBudget::new(2 * one + one / 2));
+        let cache = ClipCache::new(100, budget.clone());
+        let put = |clip| {
+            cache.insert_written(clip);
+            crate::cache_budget::trim(&budget, &[&cache]);
+        };
+        put(a);
+        put(b);
+        assert_eq!((cache.len(), cache.bytes(), budget.used()), (2, 2 * one, 2 * one));
         cache.get("a");
-        cache.insert_written(c);
+        put(c);
         assert_eq!((cache.len(), cache.bytes()), (2, 2 * one), "b left to make room");
         assert!(cache.get("b").is_none() && cache.get("a").is_some() && cache.get("c").is_some());
-        // Too big for the whole cache: not cached, and its old version goes.
-        cache.insert_written(cached_keys("a", 2, 4000));
+        // Too big for the whole budget: not cached, and its old version goes.
+        put(cached_keys("a", 2, 4000));
         assert!(cache.get("a").is_none());
-        assert_eq!((cache.len(), cache.bytes()), (1, one));
+        assert_eq!((cache.len(), cache.bytes(), budget.used()), (1, one, one));
         cache.invalidate("c");
-        assert_eq!((cache.len(), cache.bytes()), (0, 0));
+        assert_eq!((cache.len(), cache.bytes(), budget.used()), (0, 0, 0));
     }
 }

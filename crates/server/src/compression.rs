@@ -19,6 +19,21 @@
 //! 9110 §12.5.3 allows, rather than tower-http 0.7's 406 — which it sends
 //! after the handler ran, so a `POST` would have created a clip behind it.
 //!
+//! **What compressing costs** (docs/operations.md, “Memory”): each
+//! compressed answer holds an encoder — its window and match tables — for
+//! as long as it is sent, and burns CPU per byte. So at most
+//! `max_compressed_answers` answers are compressed at once; an answer that
+//! finds them all busy goes uncompressed (as if the client had not asked),
+//! never waits. Answers of a known length under [`SMALL_ANSWER_BYTES`] use
+//! zstd's and gzip's usual levels (3 and 6: a few kilobytes, where the ratio
+//! matters and the CPU does not); larger ones and answers sent in pieces use
+//! level 1 of each, where the CPU per megabyte is what counts. br is always
+//! at quality 1: from quality 2 up its encoder allocates its full window
+//! tables whatever the answer's size (≈ 40 MB at quality 4, tower-http's
+//! default; 64 of them killed a 1 GiB server). [`state_bytes`] and
+//! [`compression_price`] give an answer's memory and CPU in the units the
+//! rest of the server budgets in (figures: BENCHMARKS.md, “Compression”).
+//!
 //! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
 //! that ask, except stream frames ([`frames_uncompressed`]), and decodes
 //! compressed requests ([`grpc`]).
@@ -34,14 +49,20 @@
 //! With `compression = false` neither happens: answers go as they are and
 //! a compressed body is 415.
 
-use axum::body::HttpBody;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
+
+use axum::body::{Body, Bytes, HttpBody};
 use axum::extract::{Request, State};
 use axum::http::header::{ACCEPT_ENCODING, CONTENT_ENCODING, CONTENT_LENGTH};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
-use tower_http::compression::CompressionLayer;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+use tower::layer::util::Stack;
 use tower_http::compression::predicate::{NotForContentType, Predicate};
+use tower_http::compression::{CompressionLayer, CompressionLevel};
 use tower_http::decompression::RequestDecompressionLayer;
 
 use tonic::codec::CompressionEncoding;
@@ -80,13 +101,134 @@ impl Predicate for WorthIt {
     }
 }
 
-/// The compressor of answers (see the module doc for what it leaves alone).
-pub fn responses(config: Compression) -> CompressionLayer<impl Predicate> {
-    let worth_it = WorthIt { min_bytes: config.min_bytes as u64 }
-        .and(NotForContentType::GRPC)
-        .and(NotForContentType::IMAGES)
-        .and(NotForContentType::SSE);
-    CompressionLayer::new().zstd(config.enabled).br(config.enabled).gzip(config.enabled).compress_when(worth_it)
+/// Answers of a known length under this are small: compressed at zstd's and
+/// gzip's usual levels; the others, and br always, at [`LARGE_LEVEL`].
+pub const SMALL_ANSWER_BYTES: u64 = 64 * 1024;
+
+/// The level of large and streamed answers, the same number for the three
+/// codings: zstd 1, br 1, gzip 1.
+pub const LARGE_LEVEL: i32 = 1;
+
+/// [`WorthIt`], not gRPC, images or event streams; with `small_only`, only
+/// answers of a known length under [`SMALL_ANSWER_BYTES`].
+#[derive(Debug, Clone, Copy)]
+pub struct Answers {
+    worth_it: WorthIt,
+    small_only: bool,
+}
+
+impl Predicate for Answers {
+    fn should_compress<B: HttpBody>(&self, response: &axum::http::Response<B>) -> bool {
+        let small = || response.body().size_hint().exact().is_some_and(|n| n < SMALL_ANSWER_BYTES);
+        self.worth_it.should_compress(response)
+            && NotForContentType::GRPC.should_compress(response)
+            && NotForContentType::IMAGES.should_compress(response)
+            && NotForContentType::SSE.should_compress(response)
+            && (!self.small_only || small())
+    }
+}
+
+/// The compressors of answers (see the module doc for what they leave
+/// alone): the inner one takes the small answers at the usual levels, the
+/// outer one what is left (it never compresses an answer twice: tower-http
+/// leaves one that has a `Content-Encoding`) at [`LARGE_LEVEL`].
+pub fn responses(config: Compression) -> Stack<CompressionLayer<Answers>, CompressionLayer<Answers>> {
+    let worth_it = WorthIt { min_bytes: config.min_bytes as u64 };
+    let on = config.enabled;
+    let small =
+        CompressionLayer::new().zstd(on).br(false).gzip(on).compress_when(Answers { worth_it, small_only: true });
+    let large = CompressionLayer::new()
+        .zstd(on)
+        .br(on)
+        .gzip(on)
+        .quality(CompressionLevel::Precise(LARGE_LEVEL))
+        .compress_when(Answers { worth_it, small_only: false });
+    Stack::new(small, large)
+}
+
+/// Bytes one encoder holds while it compresses, by coding and level
+/// (window plus match tables; BENCHMARKS.md, “Compression”): what [`Gate`]
+/// lets at most `max_compressed_answers` answers hold at once.
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub fn state_bytes(coding: &str, level: i32) -> u64 {
+    const KIB: u64 = 1024;
+    match (coding, level) {
+        // zstd allocates in C, out of the Rust counter's sight: its own
+        // estimate for these levels (window 512 KiB at 1, 1 MiB at 3).
+        ("zstd", ..=1) => 1280 * KIB,
+        ("zstd", _) => 2560 * KIB,
+        // Measured: quality 1 keeps no window tables; 2 and up do (lgwin 22).
+        ("br", ..=1) => 96 * KIB,
+        ("br", 2..=9) => 40 * 1024 * KIB,
+        ("br", _) => 72 * 1024 * KIB,
+        // Measured: deflate's window, hash chains and pending buffer.
+        ("gzip", _) => 404 * KIB,
+        _ => 0,
+    }
+}
+
+/// The CPU of compressing `bytes` in `coding` at `level`, in work units
+/// (one unit ≈ one joint sample, ≈ 20 ns of a core), from
+/// the nanoseconds per megabyte measured in BENCHMARKS.md, “Compression”.
+/// Identity (or an unknown coding) costs nothing.
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub fn compression_price(coding: &str, level: i32, bytes: u64) -> u64 {
+    // Nanoseconds per byte, rounded up.
+    let ns_per_byte: u64 = match (coding, level) {
+        ("zstd", ..=1) => 8,
+        ("zstd", _) => 13,
+        ("br", ..=1) => 14,
+        ("br", 2..=4) => 90,
+        ("br", _) => 5500,
+        ("gzip", ..=1) => 10,
+        ("gzip", _) => 39,
+        _ => 0,
+    };
+    (bytes.saturating_mul(ns_per_byte) / NS_PER_WORK_UNIT).max(u64::from(ns_per_byte > 0))
+}
+
+/// Nanoseconds of CPU one work unit stands for (about one joint sample).
+#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+pub const NS_PER_WORK_UNIT: u64 = 20;
+
+/// The cap on answers compressed at once; handed to [`negotiate`].
+#[derive(Debug, Clone)]
+pub struct Gate {
+    config: Compression,
+    permits: Arc<Semaphore>,
+}
+
+impl Gate {
+    /// At most `max_answers` compressed at once.
+    pub fn new(config: Compression, max_answers: usize) -> Self {
+        Gate { config, permits: Arc::new(Semaphore::new(max_answers)) }
+    }
+}
+
+/// An answer's body holding its compressor's permit until it is sent (or dropped).
+struct Held {
+    body: Body,
+    _permit: OwnedSemaphorePermit,
+}
+
+impl HttpBody for Held {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<http_body::Frame<Bytes>, axum::Error>>> {
+        Pin::new(&mut self.body).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        self.body.size_hint()
+    }
 }
 
 /// The decoder of request bodies; [`negotiate`] has already refused codings
@@ -130,8 +272,10 @@ pub fn frames_uncompressed<B>(
 
 /// Middleware (outside [`requests`] and [`responses`]): checks the body's
 /// `Content-Encoding` and rewrites `Accept-Encoding` to the one coding the
-/// answer will use (module doc).
-pub async fn negotiate(State(config): State<Compression>, mut request: Request, next: Next) -> Response {
+/// answer will use (module doc), or to none when every compressor is busy;
+/// a compressed answer keeps its permit until it is sent.
+pub async fn negotiate(State(gate): State<Gate>, mut request: Request, next: Next) -> Response {
+    let config = gate.config;
     match body_coding(request.headers(), config.enabled) {
         Ok(None) => {
             request.headers_mut().remove(CONTENT_ENCODING);
@@ -147,11 +291,18 @@ pub async fn negotiate(State(config): State<Compression>, mut request: Request, 
         Err(e) => return unsupported(e, config.enabled),
     }
     let chosen = if config.enabled { answer_coding(request.headers()) } else { None };
-    match chosen {
+    let permit = chosen.and_then(|_| Arc::clone(&gate.permits).try_acquire_owned().ok());
+    match chosen.filter(|_| permit.is_some()) {
         Some(coding) => request.headers_mut().insert(ACCEPT_ENCODING, HeaderValue::from_static(coding)),
         None => request.headers_mut().remove(ACCEPT_ENCODING),
     };
-    next.run(request).await
+    let response = next.run(request).await;
+    match permit {
+        Some(permit) if response.headers().contains_key(CONTENT_ENCODING) => {
+            response.map(|body| Body::new(Held { body, _permit: permit }))
+        }
+        _ => response,
+    }
 }
 
 /// The body's coding: `None` for none or `identity`, one of [`CODINGS`]
@@ -287,5 +438,56 @@ mod tests {
         assert_eq!(content_encoding(&["gzip", "br"], true), Err(415));
         assert_eq!(content_encoding(&["gzip"], false), Err(415));
         assert_eq!(content_encoding(&["identity"], false), Ok(None));
+    }
+
+    fn router(max_answers: usize) -> axum::Router {
+        let config = Compression { enabled: true, min_bytes: 1024 };
+        axum::Router::new()
+            .route("/big", axum::routing::get(|| async { vec![b'x'; 100_000] }))
+            .route("/small", axum::routing::get(|| async { vec![b'x'; 2000] }))
+            .layer(responses(config))
+            .layer(axum::middleware::from_fn_with_state(Gate::new(config, max_answers), negotiate))
+    }
+
+    fn get(path: &str, coding: &str) -> Request {
+        Request::builder().uri(path).header(ACCEPT_ENCODING, coding).body(Body::empty()).unwrap()
+    }
+
+    fn coding_of(response: &Response) -> Option<&str> {
+        response.headers().get(CONTENT_ENCODING).map(|v| v.to_str().unwrap())
+    }
+
+    #[tokio::test]
+    async fn past_the_cap_answers_go_uncompressed_until_a_compressed_one_is_sent() {
+        use tower::ServiceExt;
+        let app = router(1);
+        let first = app.clone().oneshot(get("/big", "gzip")).await.unwrap();
+        assert_eq!(coding_of(&first), Some("gzip"));
+        let second = app.clone().oneshot(get("/big", "gzip")).await.unwrap();
+        assert_eq!(coding_of(&second), None, "the one compressor is busy: sent as it is");
+        assert_eq!(axum::body::to_bytes(second.into_body(), usize::MAX).await.unwrap().len(), 100_000);
+        axum::body::to_bytes(first.into_body(), usize::MAX).await.unwrap();
+        let third = app.clone().oneshot(get("/big", "zstd")).await.unwrap();
+        assert_eq!(coding_of(&third), Some("zstd"), "the first was sent: its compressor is free again");
+        drop(third);
+        let small = app.clone().oneshot(get("/small", "br")).await.unwrap();
+        assert_eq!(coding_of(&small), Some("br"), "small answers asking for br get it (at quality 1)");
+    }
+
+    #[test]
+    fn compressing_is_priced_by_coding_level_and_bytes() {
+        const MB: u64 = 1_000_000;
+        assert_eq!(compression_price("identity", 0, MB), 0);
+        let price = |coding, level| compression_price(coding, level, MB);
+        // The measured order (BENCHMARKS.md, “Compression”).
+        assert!(price("zstd", 1) < price("gzip", 1) && price("gzip", 1) < price("br", 1));
+        assert!(
+            price("br", 1) < price("gzip", 6) && price("gzip", 6) < price("br", 4) && price("br", 4) < price("br", 11)
+        );
+        // 14 ns a byte at br 1: 14 ms a megabyte, 700,000 units of 20 ns.
+        assert_eq!(price("br", 1), 700_000);
+        assert_eq!(compression_price("gzip", 1, 3 * MB), 3 * price("gzip", 1));
+        assert_eq!(compression_price("zstd", 1, 1), 1, "any compressed byte costs something");
+        assert!(state_bytes("br", 1) < state_bytes("gzip", 6) && state_bytes("br", 4) > 32 << 20);
     }
 }

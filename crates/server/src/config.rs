@@ -261,6 +261,10 @@ settings! {
         upload_rate_window: u64 = 3 => seconds -> Duration,
             "upload_rate_window_secs", "upload-rate-window-secs", "INBETWEEN_UPLOAD_RATE_WINDOW_SECS", "SECS",
             "Seconds over which an import upload's arrival rate is measured, and its grace before the first check";
+        max_texture_pixels: u64 = 4096 * 4096 => positive -> u64,
+            "max_texture_pixels", "max-texture-pixels", "INBETWEEN_MAX_TEXTURE_PIXELS", "PIXELS",
+            "Largest texture a glTF import keeps with its mesh, as width × height read from the image's header \
+             (PNG IHDR, JPEG SOF); over it the mesh is kept without it and a `not_imported` warning says why";
         max_tracks: usize = 4096 => positive -> usize,
             "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
             "Most tracks in one clip";
@@ -300,11 +304,13 @@ settings! {
             "Compiled clips kept in memory";
         cache_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "cache_bytes", "cache-bytes", "INBETWEEN_CACHE_BYTES", "BYTES",
-            "Heap bytes of the compiled clips kept in memory (least recently used leave first)";
+            "Heap bytes the caches keep together: compiled clips and built motions (additive layers' reference \
+             poses included); the least recently used entry of any of them leaves first, and an entry larger than \
+             this is used once and not kept";
         motion_cache_entries: usize = 1024 => positive -> usize,
             "motion_cache_entries", "motion-cache-entries", "INBETWEEN_MOTION_CACHE_ENTRIES", "N",
             "Built motions (composed requests' layer stacks) kept in memory, keyed by the motion and its clip \
-             versions (least recently used leave first)";
+             versions (least recently used leave first); their bytes count on cache_bytes";
         max_build_work: u64 = anim::DEFAULT_BUILD_WORK => positive -> u64,
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
@@ -383,6 +389,11 @@ settings! {
         stream_buffer_bytes: usize = 256 * 1024 => positive -> usize,
             "stream_buffer_bytes", "stream-buffer-bytes", "INBETWEEN_STREAM_BUFFER_BYTES", "BYTES",
             "Bytes of frames a stream viewer may leave unread before its stream is closed (slow consumer)";
+        max_compressed_answers: usize = 4 * cores() => positive -> usize,
+            "max_compressed_answers", "max-compressed-answers", "INBETWEEN_MAX_COMPRESSED_ANSWERS", "N",
+            shown "4 per core",
+            "REST answers compressed at once (each holds an encoder: at most 2.5 MiB at the levels used); an \
+             answer that finds them all busy is sent uncompressed";
         max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
             "Bytes of request bodies and first gRPC messages held at once, all requests together, from arrival \
@@ -954,6 +965,7 @@ mod tests {
             import_slot_wait: Duration::from_secs(2),
             min_upload_bytes_per_sec: 16_384,
             upload_rate_window: Duration::from_secs(3),
+            max_texture_pixels: 16_777_216,
             max_tracks: 4096,
             max_keys_per_track: 1_000_000,
             max_joints: 4096,
@@ -992,6 +1004,7 @@ mod tests {
             write_stall_timeout: Duration::from_secs(30),
             max_connections: 4096,
             stream_buffer_bytes: 262_144,
+            max_compressed_answers: 4 * cores,
             max_arriving_bytes: 268_435_456,
         };
         assert_eq!(c.limits, expected);

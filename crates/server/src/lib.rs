@@ -9,8 +9,8 @@
 //!
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
-//! clips (bounded in entries and bytes); `motion_cache` built motions over
-//! them; `builds` where clips are built (blocking threads, a few at once);
+//! clips; `motion_cache` built motions over them; `cache_budget` the one
+//! byte budget those caches share; `builds` where clips are built (blocking threads, a few at once);
 //! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `request` the sampling and stream rules both transports share, with their
@@ -51,6 +51,7 @@ pub(crate) mod body_guard;
 pub(crate) mod broadcast_store;
 pub(crate) mod builds;
 pub(crate) mod cache;
+pub(crate) mod cache_budget;
 pub(crate) mod compression;
 pub mod config;
 pub(crate) mod connections;
@@ -125,7 +126,8 @@ impl Application {
             }
         };
         let tls = config.tls.as_ref().map(tls::TlsMaterial::load).transpose()?;
-        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, config.limits.cache_bytes));
+        let cache_budget = Arc::new(cache_budget::CacheBudget::new(config.limits.cache_bytes));
+        let cache = Arc::new(cache::ClipCache::new(config.limits.cache_entries, cache_budget.clone()));
         if change_feed.is_some() {
             // Nothing is cached until this node hears other nodes' changes.
             cache.suspend();
@@ -152,7 +154,8 @@ impl Application {
         let state = AppState::new(state::Shared {
             store,
             cache,
-            motions: motion_cache::MotionCache::new(config.limits.motion_cache_entries),
+            motions: motion_cache::MotionCache::new(config.limits.motion_cache_entries, cache_budget.clone()),
+            cache_budget,
             writes,
             in_flight: shed::Clients::new(config.limits.max_in_flight_per_client),
             arrivals: shed::Arrivals::new(config.limits.max_arriving_bytes),

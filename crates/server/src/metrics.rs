@@ -55,8 +55,12 @@ fn describe() {
     describe_counter!("inbetween_clip_cache_misses_total", "Clip loads that had to read and compile from the store.");
     describe_gauge!("inbetween_clip_cache_entries", "Compiled clips held in memory (as inbetween_cache_entries).");
     describe_gauge!("inbetween_cache_entries", "Compiled clips held in memory.");
-    describe_gauge!("inbetween_cache_bytes", Unit::Bytes, "Heap bytes of the compiled clips held in memory.");
-    describe_gauge!("inbetween_cache_limit_bytes", Unit::Bytes, "The cache's byte bound (cache_bytes).");
+    describe_gauge!(
+        "inbetween_cache_bytes",
+        Unit::Bytes,
+        "Heap bytes the caches hold together (compiled clips and built motions), against cache_bytes."
+    );
+    describe_gauge!("inbetween_cache_limit_bytes", Unit::Bytes, "The caches' one byte bound (cache_bytes).");
     describe_counter!(
         "inbetween_motion_cache_hits_total",
         "Composed requests whose motion was found built in the motion cache."

@@ -25,14 +25,22 @@
 //! let go, and while the clip cache is suspended nothing is cached here
 //! either.
 //!
-//! Eviction is least-recently-used by a scan at insert time, as in the clip
-//! cache: inserts happen only on misses, and the hit path stays one lock and
-//! one hash lookup. Invalidation scans every entry's layers; it happens only
-//! on writes and evictions.
+//! **Bounds**: at most `motion_cache_entries` motions, and their bytes
+//! (`Motion::heap_bytes`: masks, joint maps and, above all, each additive
+//! layer's reference pose — 32 such layers over a 4,096-joint clip hold
+//! about 9 MB) count on the byte budget every cache shares
+//! (`server::cache_budget`): since any new float in a request is a new key,
+//! an entry bound alone would let a few hundred small requests hold
+//! gigabytes. A motion over the whole budget is built, used and not kept.
+//! Eviction is least-recently-used by a scan, as in the clip cache: inserts
+//! happen only on misses, and the hit path stays one lock and one hash
+//! lookup. Invalidation scans every entry's layers; it happens only on
+//! writes and evictions.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+use crate::cache_budget::{Budgeted, CacheBudget};
 use crate::stream::{PinnedClip, StreamMotion};
 use anim::Playback;
 use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
@@ -156,31 +164,41 @@ impl KeyWriter {
 #[derive(Debug)]
 struct Entry {
     motion: Arc<StreamMotion>,
+    /// [`motion_bytes`], computed once.
+    bytes: usize,
     last_used: u64,
 }
 
 #[derive(Debug, Default)]
 struct Inner {
     entries: HashMap<MotionKey, Entry>,
-    /// Logical clock for recency.
-    tick: u64,
+    /// The sum of the entries' `bytes`.
+    bytes: usize,
 }
 
 /// The motion cache; see the module docs for its key and invalidation rules.
 #[derive(Debug)]
 pub struct MotionCache {
     capacity: usize,
+    budget: Arc<CacheBudget>,
     inner: Mutex<Inner>,
 }
 
+/// The bytes a cached motion keeps alive: its key, the motion itself and
+/// its own heap (not its layers' clips: the clip cache counts those, and a
+/// motion never outlives their entries there).
+pub fn motion_bytes(key: &MotionKey, motion: &StreamMotion) -> usize {
+    std::mem::size_of::<Entry>() + key.0.len() + std::mem::size_of::<StreamMotion>() + motion.heap_bytes()
+}
+
 impl MotionCache {
-    /// A cache of at most `capacity` motions.
+    /// A cache of at most `capacity` motions, whose bytes count on `budget`.
     ///
     /// # Panics
     /// If `capacity` is 0.
-    pub fn new(capacity: usize) -> Self {
+    pub fn new(capacity: usize, budget: Arc<CacheBudget>) -> Self {
         assert!(capacity > 0, "a motion cache needs room for one motion");
-        MotionCache { capacity, inner: Mutex::new(Inner::default()) }
+        MotionCache { capacity, budget, inner: Mutex::new(Inner::default()) }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -189,31 +207,33 @@ impl MotionCache {
 
     pub fn get(&self, key: &MotionKey) -> Option<Arc<StreamMotion>> {
         let mut inner = self.lock();
-        inner.tick += 1;
-        let tick = inner.tick;
         let entry = inner.entries.get_mut(key)?;
-        entry.last_used = tick;
+        entry.last_used = self.budget.tick();
         Some(Arc::clone(&entry.motion))
     }
 
     /// Puts `motion` in under `key` if `still_current()` holds, asked under
     /// this cache's lock: an invalidation cannot slip between the question
     /// and the insert (it waits for the lock, then drops the motion). Evicts
-    /// the least recently used motion when full. Returns whether it went in.
+    /// the least recently used motion when full; a motion over the whole
+    /// byte budget is not kept (the caller trims the budget after).
+    /// Returns whether it went in.
     pub fn insert_if(&self, key: MotionKey, motion: Arc<StreamMotion>, still_current: impl FnOnce() -> bool) -> bool {
+        let bytes = motion_bytes(&key, &motion);
         let mut inner = self.lock();
-        if !still_current() {
+        if !still_current() || !self.budget.admits(bytes) {
             return false;
         }
-        inner.tick += 1;
-        let tick = inner.tick;
-        if !inner.entries.contains_key(&key) && inner.entries.len() >= self.capacity {
-            let oldest = inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(k, _)| k.clone());
-            if let Some(oldest) = oldest {
-                inner.entries.remove(&oldest);
+        self.remove(&mut inner, &key);
+        while inner.entries.len() >= self.capacity {
+            match Self::least_recent(&inner) {
+                Some(oldest) => self.remove(&mut inner, &oldest),
+                None => break,
             }
         }
-        inner.entries.insert(key, Entry { motion, last_used: tick });
+        inner.bytes += bytes;
+        self.budget.charge(bytes);
+        inner.entries.insert(key, Entry { motion, bytes, last_used: self.budget.tick() });
         true
     }
 
@@ -223,19 +243,41 @@ impl MotionCache {
             return 0;
         }
         let mut inner = self.lock();
-        let before = inner.entries.len();
         let uses = |motion: &StreamMotion| motion.layers().any(|c| clip_ids.iter().any(|id| id.as_ref() == c.id()));
-        inner.entries.retain(|_, e| !uses(&e.motion));
-        before - inner.entries.len()
+        let gone: Vec<MotionKey> =
+            inner.entries.iter().filter(|(_, e)| uses(&e.motion)).map(|(k, _)| k.clone()).collect();
+        for key in &gone {
+            self.remove(&mut inner, key);
+        }
+        gone.len()
     }
 
     /// Drops everything (the clip cache was suspended or resumed).
     pub fn clear(&self) {
-        self.lock().entries.clear();
+        let mut inner = self.lock();
+        inner.entries.clear();
+        self.budget.refund(inner.bytes);
+        inner.bytes = 0;
     }
 
     pub fn len(&self) -> usize {
         self.lock().entries.len()
+    }
+
+    /// Bytes of the cached motions (see [`motion_bytes`]).
+    pub fn bytes(&self) -> usize {
+        self.lock().bytes
+    }
+
+    fn least_recent(inner: &Inner) -> Option<MotionKey> {
+        inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(k, _)| k.clone())
+    }
+
+    fn remove(&self, inner: &mut Inner, key: &MotionKey) {
+        if let Some(e) = inner.entries.remove(key) {
+            inner.bytes -= e.bytes;
+            self.budget.refund(e.bytes);
+        }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -243,10 +285,27 @@ impl MotionCache {
     }
 }
 
+impl Budgeted for MotionCache {
+    fn oldest(&self) -> Option<u64> {
+        self.lock().entries.values().map(|e| e.last_used).min()
+    }
+
+    fn evict_oldest(&self) {
+        let mut inner = self.lock();
+        if let Some(key) = Self::least_recent(&inner) {
+            self.remove(&mut inner, &key);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Motion, TrackSpec};
+
+    fn unbounded() -> Arc<CacheBudget> {
+        Arc::new(CacheBudget::new(usize::MAX))
+    }
 
     /// A clip pinned at a version: joints `j` and `k`.
     fn pinned(id: &str, version: u64) -> Arc<dyn PinnedClip> {
@@ -367,7 +426,7 @@ mod tests {
 
     #[test]
     fn the_least_recently_used_motion_is_evicted() {
-        let cache = MotionCache::new(2);
+        let cache = MotionCache::new(2, unbounded());
         let (a, b, c) = (pinned("a", 1), pinned("b", 1), pinned("c", 1));
         let (ka, ma) = built(spec(std::slice::from_ref(&a)));
         let (kb, mb) = built(spec(std::slice::from_ref(&b)));
@@ -388,7 +447,7 @@ mod tests {
 
     #[test]
     fn invalidating_a_clip_drops_every_motion_with_a_layer_of_it() {
-        let cache = MotionCache::new(8);
+        let cache = MotionCache::new(8, unbounded());
         let (a, b, c) = (pinned("a", 1), pinned("b", 1), pinned("c", 1));
         let motions = [
             spec(std::slice::from_ref(&a)),
@@ -416,9 +475,93 @@ mod tests {
 
     #[test]
     fn a_motion_whose_clips_went_meanwhile_is_not_cached() {
-        let cache = MotionCache::new(8);
+        let cache = MotionCache::new(8, unbounded());
         let (key, motion) = built(spec(&[pinned("a", 1)]));
         assert!(!cache.insert_if(key.clone(), motion, || false));
         assert!(cache.get(&key).is_none() && cache.is_empty());
+    }
+
+    /// A clip of `joints` joints, each with a two-key translation track.
+    fn wide(id: &str, joints: usize) -> Arc<dyn PinnedClip> {
+        let track = |j: usize| {
+            TrackSpec::new(
+                &format!("j{j}"),
+                Channel::Translation,
+                Interpolation::Linear,
+                vec![0.0, 1.0],
+                Keys::Vec3(vec![glam::Vec3::ZERO, glam::Vec3::X]),
+            )
+        };
+        let spec = ClipSpec { name: id.into(), tracks: (0..joints).map(track).collect(), ..Default::default() };
+        Arc::new(crate::stream::Pinned::new(id, 1, Arc::new(Clip::build(&spec).unwrap())))
+    }
+
+    #[test]
+    fn a_motions_bytes_are_its_reference_poses_masks_and_maps_counted_by_hand() {
+        let (joints, layers) = (256, 4);
+        let clip = wide("w", joints);
+        let mut additive = spec(&vec![clip.clone(); layers]);
+        for layer in &mut additive.layers {
+            layer.mode = LayerMode::Additive;
+        }
+        let (key, motion) = built(additive);
+        // Per layer: a reference pose (translation, rotation and scale of
+        // 16 bytes each per joint), a mask (f32) and a map (u32) per joint,
+        // and two bit sets of the joints.
+        let per_layer = joints * (3 * 16 + 4 + 4) + 2 * joints.div_ceil(64) * 8;
+        let counted = motion_bytes(&key, &motion);
+        let by_hand = layers * per_layer;
+        assert!(counted >= by_hand, "{counted} < {by_hand}");
+        assert!(counted - by_hand < layers * 512, "{counted} is far over {by_hand}: the layers' records and the key");
+        // The reference poses alone: the same motion in blend mode has none.
+        let (blend_key, blend) = built(spec(&vec![clip; layers]));
+        assert_eq!(
+            counted - motion_bytes(&blend_key, &blend),
+            layers * joints * 3 * 16 + (key.0.len() - blend_key.0.len())
+        );
+    }
+
+    #[test]
+    fn the_byte_budget_evicts_the_least_recently_used_across_clips_and_motions_and_skips_one_over_it() {
+        use crate::cache::ClipCache;
+        use crate::cache::tests::cached_keys;
+        use crate::cache_budget::trim;
+        let (a, b, c) = (cached_keys("a", 1, 1000), cached_keys("b", 1, 1000), cached_keys("c", 1, 1000));
+        let unit = a.bytes();
+        let over_a: Arc<dyn PinnedClip> = a.clone();
+        let (key, motion) = built(spec(&[over_a]));
+        let m = motion_bytes(&key, &motion);
+        assert!(m < unit / 2, "the test wants a motion under half a clip: {m} vs {unit}");
+        let budget = Arc::new(CacheBudget::new(2 * unit + m + unit / 2));
+        let (clips, motions) = (ClipCache::new(100, budget.clone()), MotionCache::new(100, budget.clone()));
+        let caches: [&dyn Budgeted; 2] = [&clips, &motions];
+        clips.insert_written(a.clone());
+        clips.insert_written(b);
+        assert!(motions.insert_if(key.clone(), motion, || true));
+        clips.get("a");
+        assert_eq!(budget.used(), 2 * unit + m);
+        clips.insert_written(c);
+        trim(&budget, &caches);
+        assert!(clips.get("b").is_none(), "b was the least recently used of all");
+        assert!(motions.get(&key).is_some() && clips.version_of("a").is_some());
+        assert_eq!(budget.used(), 2 * unit + m);
+        // Now a (last used before the motion was, just above) goes first.
+        clips.insert_written(cached_keys("d", 1, 1000));
+        trim(&budget, &caches);
+        assert!(clips.version_of("a").is_none() && motions.get(&key).is_some(), "a, then enough room");
+        assert_eq!(budget.used(), 2 * unit + m);
+        // The motion (last used before c and d), then c.
+        clips.get("c");
+        clips.get("d");
+        clips.insert_written(cached_keys("e", 1, 1000));
+        trim(&budget, &caches);
+        assert!(motions.is_empty() && clips.version_of("c").is_none() && clips.version_of("d").is_some());
+        assert_eq!((budget.used(), clips.bytes() + motions.bytes()), (2 * unit, 2 * unit));
+        // A motion over the whole budget is not kept.
+        let small = Arc::new(CacheBudget::new(m - 1));
+        let tiny = MotionCache::new(100, small.clone());
+        let (key, motion) = built(spec(&[pinned("a", 1)]));
+        assert!(!tiny.insert_if(key, motion, || true));
+        assert_eq!((tiny.len(), small.used()), (0, 0));
     }
 }

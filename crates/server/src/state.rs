@@ -17,6 +17,7 @@ use formats::wire::json::{DocError, parse_clip};
 use super::auth::Auth;
 use super::builds::Builds;
 use super::cache::{CachedClip, ClipCache};
+use super::cache_budget::{CacheBudget, trim};
 use super::config::Config;
 use super::error::ApiError;
 use super::motion_cache::{MotionCache, MotionKey};
@@ -47,6 +48,8 @@ pub struct Shared {
     pub cache: Arc<ClipCache>,
     /// Built motions over the clip cache's entries (`server::motion_cache`).
     pub motions: MotionCache,
+    /// The byte budget both caches draw on (`server::cache_budget`).
+    pub cache_budget: Arc<CacheBudget>,
     pub config: Arc<Config>,
     /// Identifies callers from the configured tokens (REST and gRPC).
     pub auth: Auth,
@@ -121,8 +124,7 @@ impl AppState {
             match result {
                 Ok(cached) => {
                     state.cache.insert_loaded(cached.clone(), seen);
-                    state.forget_departed_motions();
-                    state.cache_gauges();
+                    state.trim_caches();
                     Ok(cached)
                 }
                 Err(ApiError::TooMany { code, detail, .. }) => {
@@ -150,8 +152,7 @@ impl AppState {
     pub fn cache_written(&self, cached: Arc<CachedClip>) {
         self.forget_load(&cached.meta.id);
         self.cache.insert_written(cached);
-        self.forget_departed_motions();
-        self.cache_gauges();
+        self.trim_caches();
     }
 
     /// After a committed delete (or another node's change): the clip and
@@ -191,13 +192,21 @@ impl AppState {
     /// cached): the motion would keep a clip alive that the cache let go.
     pub fn cache_motion(&self, key: MotionKey, motion: Arc<StreamMotion>, clips: &[Arc<CachedClip>]) {
         if self.motions.insert_if(key, motion, || clips.iter().all(|c| self.cache.holds(c))) {
-            self.counters.motion_cache_gauge(self.motions.len());
+            self.trim_caches();
         }
     }
 
-    /// The caches' sizes on `/metrics` (clips: entries and bytes; motions: entries).
+    /// Evicts the least recently used entries of every cache until they fit
+    /// `cache_bytes` together, then drops the motions over clips that left.
+    fn trim_caches(&self) {
+        trim(&self.cache_budget, &[&*self.cache, &self.motions]);
+        self.forget_departed_motions();
+        self.cache_gauges();
+    }
+
+    /// The caches' sizes on `/metrics` (entries of each; bytes of all).
     pub fn cache_gauges(&self) {
-        self.counters.cache_gauges(self.cache.len(), self.cache.bytes());
+        self.counters.cache_gauges(self.cache.len(), self.cache_budget.used());
         self.counters.motion_cache_gauge(self.motions.len());
     }
 

@@ -19,6 +19,7 @@ mod answers;
 mod builds;
 mod connections;
 mod imports;
+mod memory;
 mod viewers;
 
 use std::path::PathBuf;

@@ -161,6 +161,18 @@ pub fn validate_constraints(
 }
 
 impl IkConstraint {
+    /// Bytes a chain's lists hold on the heap (the others hold none).
+    pub fn heap_bytes(&self) -> usize {
+        match self {
+            IkConstraint::Chain(c) => {
+                crate::heap::vec_bytes(&c.effectors)
+                    + c.joints.as_ref().map_or(0, crate::heap::vec_bytes)
+                    + crate::heap::vec_bytes(&c.limits)
+            }
+            IkConstraint::TwoBone(_) | IkConstraint::Aim(_) => 0,
+        }
+    }
+
     /// Which solver takes it.
     pub fn kind(&self) -> IkKind {
         match self {

@@ -42,6 +42,7 @@ use self::error::MotionErrorKind as K;
 use self::joint_map::joint_map;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
+use super::heap::vec_bytes;
 use super::ik::{IkConstraint, IkLimits, build_constraints};
 use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
 
@@ -230,6 +231,29 @@ impl<C: ClipSource> Motion<C> {
     /// The request-time IK constraints, solved after layering.
     pub fn ik(&self) -> &[IkConstraint] {
         &self.ik
+    }
+
+    /// Bytes this motion holds on the heap beyond its layers' clips (which
+    /// it shares): per layer the mask, joint map, coverage bits and an
+    /// additive layer's reference pose; the sync groups and IK constraints.
+    pub fn heap_bytes(&self) -> usize {
+        let layer = |l: &Layer<C>| {
+            vec_bytes(&l.mask)
+                + vec_bytes(&l.map)
+                + std::mem::size_of_val(&*l.reach.reaches)
+                + std::mem::size_of_val(&*l.reach.hides)
+                + l.reference.as_ref().map_or(0, Pose::heap_bytes)
+                + vec_bytes(&l.parameters)
+        };
+        let group = |g: &SyncGroup| g.name.capacity() + vec_bytes(&g.members);
+        vec_bytes(&self.layers)
+            + self.layers.iter().map(layer).sum::<usize>()
+            + vec_bytes(&self.groups)
+            + self.groups.iter().map(group).sum::<usize>()
+            + vec_bytes(&self.durations)
+            + vec_bytes(&self.weights)
+            + vec_bytes(&self.ik)
+            + self.ik.iter().map(IkConstraint::heap_bytes).sum::<usize>()
     }
 
     /// IK reports each sample gives: every layer's clip constraints, bottom

@@ -30,6 +30,7 @@ use glam::Mat4;
 use super::accessor::{Expect, read_f32, read_uint, read_view};
 use super::buffers::{Buffers, decode_data_uri};
 use super::error::ImportError;
+use super::image::{HeaderError, read_header};
 use super::spec::ImportLimits;
 use super::warning::{NOT_IMPORTED, Warning};
 use crate::wire::mesh::{self, Material, Mesh, Primitive, Texture};
@@ -357,24 +358,36 @@ impl MeshReader<'_, '_> {
                 return Ok(None);
             }
         };
-        let mime_type = match bytes.get(..4) {
-            Some([0x89, b'P', b'N', b'G']) => "image/png",
-            Some([0xFF, 0xD8, 0xFF, _]) => "image/jpeg",
-            _ => {
-                self.warnings.push(Warning::new(
-                    NOT_IMPORTED,
-                    format!("/images/{image}"),
-                    format!("image {image} was not kept for the viewer: it is neither PNG nor JPEG"),
-                ));
-                return Ok(None);
+        match checked_header(&bytes, image, self.limits.max_texture_pixels) {
+            Ok(mime_type) => Ok(Some(Texture { mime_type: mime_type.into(), bytes })),
+            Err(warning) => {
+                self.warnings.push(warning);
+                Ok(None)
             }
-        };
-        Ok(Some(Texture { mime_type: mime_type.into(), bytes }))
+        }
     }
 }
 
 fn accessor_of(doc: &Document, index: usize) -> Result<::gltf::Accessor<'_>, ImportError> {
     doc.accessors().nth(index).ok_or_else(|| ImportError::InvalidGltf(format!("no accessor {index}")))
+}
+
+/// The image's type when its header is a PNG's or a JPEG's declaring at
+/// most `max_pixels`; else the warning that leaves it out.
+fn checked_header(bytes: &[u8], image: usize, max_pixels: u64) -> Result<&'static str, Warning> {
+    let left_out = |why: String| {
+        let detail = format!("image {image} was not kept for the viewer: {why}; the base colour factor is used");
+        Warning::new(NOT_IMPORTED, format!("/images/{image}"), detail)
+    };
+    match read_header(bytes) {
+        Ok(h) if h.pixels() > max_pixels => Err(left_out(format!(
+            "it declares {} × {} pixels, over the limit of {max_pixels} (max_texture_pixels)",
+            h.width, h.height
+        ))),
+        Ok(h) => Ok(h.mime_type),
+        Err(HeaderError::NotPngOrJpeg) => Err(left_out("it is neither PNG nor JPEG".into())),
+        Err(HeaderError::Malformed(what)) => Err(left_out(format!("its header is malformed ({what})"))),
+    }
 }
 
 fn texture_too_large(image: usize, found: u64, max: u64) -> Warning {
@@ -514,6 +527,46 @@ mod tests {
         let mesh = decode(imported.meshes[0].as_ref().unwrap()).unwrap();
         assert!(mesh.textures.is_empty() && mesh.uvs.is_none());
         assert!(imported.warnings.iter().any(|w| w.pointer == "/images/0" && w.code == "not_imported"));
+    }
+
+    /// The Fox with its texture replaced by `image` (a data: URI).
+    fn fox_with_image(image: &[u8]) -> Vec<u8> {
+        use base64::Engine as _;
+        let uri = format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(image));
+        fox_with(|d| d["images"][0] = serde_json::json!({ "uri": uri }))
+    }
+
+    #[test]
+    fn a_texture_declaring_too_many_pixels_or_a_malformed_header_is_left_out_with_the_mesh_kept() {
+        use crate::import::image::tests::{jpeg_header, png_header};
+        let huge_png = png_header(16_000, 16_000);
+        let mut malformed = png_header(64, 64);
+        malformed[12..16].copy_from_slice(b"IDAT");
+        let cases: [(&str, Vec<u8>, &str); 4] = [
+            ("16,000² PNG", huge_png, "16000 × 16000 pixels, over the limit of 16777216 (max_texture_pixels)"),
+            ("JPEG over the limit", jpeg_header(4097, 4096), "4097 × 4096 pixels"),
+            ("malformed PNG", malformed, "header is malformed"),
+            ("neither", b"GIF89a".to_vec(), "neither PNG nor JPEG"),
+        ];
+        for (what, image, why) in cases {
+            let imported = import(&fox_with_image(&image), Format::Glb, &ImportOptions::default()).unwrap();
+            assert_eq!(imported.clips.len(), 3, "{what}");
+            let mesh = decode(imported.meshes[0].as_ref().expect("the mesh is kept")).unwrap();
+            assert!(mesh.textures.is_empty() && mesh.uvs.is_none(), "{what}");
+            assert_eq!(mesh.vertex_count(), 1728, "{what}");
+            let warned = imported
+                .warnings
+                .iter()
+                .any(|w| w.pointer == "/images/0" && w.code == "not_imported" && w.detail.contains(why));
+            assert!(warned, "{what}: {:?}", imported.warnings);
+        }
+        // At the limit, kept: 4096 × 4096, and a JPEG.
+        for image in [png_header(4096, 4096), jpeg_header(4096, 4096)] {
+            let imported = import(&fox_with_image(&image), Format::Glb, &ImportOptions::default()).unwrap();
+            let mesh = decode(imported.meshes[0].as_ref().unwrap()).unwrap();
+            assert_eq!(mesh.textures.len(), 1);
+            assert!(imported.warnings.iter().all(|w| w.pointer != "/images/0"), "{:?}", imported.warnings);
+        }
     }
 
     /// A change to a glTF document.

@@ -51,6 +51,7 @@ mod buffers;
 mod bvh;
 mod error;
 mod gltf;
+mod image;
 mod mesh;
 mod names;
 mod source;

@@ -85,6 +85,10 @@ pub struct ImportLimits {
     /// (PNG or JPEG as in the file); a larger one leaves the base colour
     /// factor.
     pub max_mesh_texture_bytes: u64,
+    /// A texture is kept only if its header (PNG IHDR, JPEG SOF) declares
+    /// at most this many pixels (width × height): a small file can declare
+    /// an image that decodes to gigabytes in the viewer.
+    pub max_texture_pixels: u64,
 }
 
 impl Default for ImportLimits {
@@ -103,6 +107,7 @@ impl Default for ImportLimits {
             max_build_work: anim::DEFAULT_BUILD_WORK,
             max_mesh_bytes: 16 << 20,
             max_mesh_texture_bytes: 1 << 20,
+            max_texture_pixels: 4096 * 4096,
         }
     }
 }

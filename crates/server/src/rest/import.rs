@@ -272,6 +272,7 @@ fn import_limits(limits: &Limits) -> ImportLimits {
         max_frames: limits.max_keys_per_track,
         max_resolved_bytes: limits.max_import_resolved_bytes as u64,
         max_build_work: limits.max_build_work,
+        max_texture_pixels: limits.max_texture_pixels,
         ..ImportLimits::default()
     }
 }

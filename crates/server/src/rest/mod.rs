@@ -101,7 +101,10 @@ pub fn router(state: AppState) -> Router {
         }))
         .layer(middleware::from_fn_with_state(AccessLog::new(state.config.access_log_sample), access_log::log))
         .layer(compression::responses(state.config.compression))
-        .layer(middleware::from_fn_with_state(state.config.compression, compression::negotiate))
+        .layer(middleware::from_fn_with_state(
+            compression::Gate::new(state.config.compression, limits.max_compressed_answers),
+            compression::negotiate,
+        ))
         .layer(TraceLayer::new_for_http())
         .layer(PropagateRequestIdLayer::new(request_id.clone()))
         .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))
