@@ -78,6 +78,21 @@ impl Schema {
         .unwrap()
     }
 
+    /// Waits until no backend of `app` is left (a terminated one exits a
+    /// moment after [`Schema::terminate`] answers).
+    pub async fn until_gone(&self, app: &str) {
+        let what = format!("the backends of {app} exited");
+        super::eventually(Duration::from_secs(10), &what, || async {
+            let left: i64 = sqlx::query_scalar("SELECT count(*) FROM pg_stat_activity WHERE application_name = $1")
+                .bind(app)
+                .fetch_one(&self.admin)
+                .await
+                .unwrap();
+            left == 0
+        })
+        .await;
+    }
+
     pub async fn drop_now(self) {
         sqlx::query(sqlx::AssertSqlSafe(format!("DROP SCHEMA \"{}\" CASCADE", self.name)))
             .execute(&self.admin)

@@ -266,6 +266,18 @@ impl ServerProcess {
         let v: serde_json::Value = resp.json().await.unwrap();
         v["id"].as_str().unwrap().to_owned()
     }
+
+    /// Waits until its `/metrics` shows `name` at `at_least` or more (e.g.
+    /// `inbetween_bodies_awaited`: requests in, their bodies not yet).
+    pub async fn until_metric(&self, http: &reqwest::Client, name: &str, at_least: f64) {
+        let what = format!("{}: {name} ≥ {at_least}", self.name);
+        super::eventually(Duration::from_secs(10), &what, || async {
+            let Ok(resp) = http.get(self.url("/metrics")).send().await else { return false };
+            let text = resp.text().await.unwrap_or_default();
+            super::metric(&text, name).is_some_and(|v| v >= at_least)
+        })
+        .await;
+    }
 }
 
 impl Drop for ServerProcess {

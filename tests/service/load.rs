@@ -126,8 +126,12 @@ async fn check_stream_of(opts: Options, pid: u32) -> Report {
     // still in flight at its end is missed: the lower bound is loose, the
     // upper one is not (nothing may be counted twice).
     let ticks = (r.ok + s.gaps) as f64 / 4.0 / r.elapsed_secs;
-    assert!((20.0..=33.0).contains(&ticks), "{ticks} ticks/s per stream at 30 fps");
-    assert!(s.frames_per_stream_per_sec >= 15.0, "{}", s.frames_per_stream_per_sec);
+    assert!(ticks > 0.0 && ticks <= 33.0, "{ticks} ticks/s per stream at 30 fps");
+    // The lower bounds are throughput: the slow runs check them.
+    if crate::common::latency_checked() {
+        assert!(ticks >= 20.0, "{ticks} ticks/s per stream at 30 fps");
+        assert!(s.frames_per_stream_per_sec >= 15.0, "{}", s.frames_per_stream_per_sec);
+    }
     assert_eq!(s.receive_lateness.count, r.ok);
     // A frame cannot arrive before it is sent, nor be sent before it is due
     // (to within the clock sync's error, a few µs on loopback).
@@ -247,8 +251,12 @@ async fn the_floor_sends_the_servers_frame_at_the_same_rate_and_is_measured() {
         // A 20-joint pose is 20 × 10 floats in protobuf, more in JSON.
         assert!(f.frame_bytes > 800, "{kind}: a {}-byte frame", f.frame_bytes);
         let ticks = f.frames as f64 / 4.0 / f.elapsed_secs / (1.0 - f.loss_ratio);
-        assert!((20.0..=33.0).contains(&ticks), "{kind}: {ticks} ticks/s per stream at 30 fps");
-        assert!(f.frames_per_stream_per_sec >= 15.0, "{kind}: {f:?}");
+        assert!(ticks > 0.0 && ticks <= 33.0, "{kind}: {ticks} ticks/s per stream at 30 fps");
+        // The lower bounds are throughput: the slow runs check them.
+        if crate::common::latency_checked() {
+            assert!(ticks >= 20.0, "{kind}: {ticks} ticks/s per stream at 30 fps");
+            assert!(f.frames_per_stream_per_sec >= 15.0, "{kind}: {f:?}");
+        }
         assert_eq!(f.receive_lateness.count, f.frames);
         assert!(f.send_lateness.min_us >= 0.0, "{kind}: {f:?}");
         if crate::common::latency_checked() {
@@ -300,8 +308,12 @@ async fn the_cli_prints_a_json_report() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
     assert_eq!(v["mode"], "grpc-ping");
-    assert!(v["ok"].as_u64().unwrap() > 0);
-    assert!(v["latency"]["p99_us"].as_f64().unwrap() > 0.0);
+    // Half a second on a loaded machine may answer no ping at all: that count is throughput, for the slow runs.
+    let ok = v["ok"].as_u64().expect("an ok count");
+    assert!(v["latency"]["p99_us"].as_f64().is_some(), "{v}");
+    if crate::common::latency_checked() {
+        assert!(ok > 0 && v["latency"]["p99_us"].as_f64().unwrap() > 0.0, "{v}");
+    }
     let human = tokio::process::Command::new(bin)
         .args(&args[..args.len() - 4])
         .arg("--http")

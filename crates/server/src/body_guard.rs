@@ -74,7 +74,10 @@ async fn held(g: &BodyGuard, request: Request, next: Next) -> Response {
     let coding = parts.extensions.get::<BodyCoding>().copied();
     let deadline = tokio::time::Instant::now() + g.read_timeout;
     let mut held = None;
-    match tokio::time::timeout_at(deadline, read_whole(body, g, coding, &mut held)).await {
+    let awaiting = g.arrivals.awaiting();
+    let read = tokio::time::timeout_at(deadline, read_whole(body, g, coding, &mut held)).await;
+    drop(awaiting);
+    match read {
         Ok(Ok(bytes)) => {
             let response = next.run(Request::from_parts(parts, Body::from(bytes))).await;
             drop(held);
@@ -102,7 +105,10 @@ async fn spooled(route: &SpoolRoute, g: &BodyGuard, request: Request, next: Next
     };
     let (parts, body) = request.into_parts();
     let deadline = tokio::time::Instant::now() + read_timeout;
-    match tokio::time::timeout_at(deadline, route.receive(body)).await {
+    let awaiting = g.arrivals.awaiting();
+    let received = tokio::time::timeout_at(deadline, route.receive(body)).await;
+    drop(awaiting);
+    match received {
         Ok(Ok(spooled)) => {
             let mut request = Request::from_parts(parts, Body::empty());
             request.extensions_mut().insert(spooled);

@@ -7,7 +7,8 @@
 //! ([`RawConfig`], [`RawLimits`]: every field optional, absent meaning "ask
 //! the layer below"; at once the clap flags and the TOML schema, so the two
 //! cannot drift apart), the merge of two layers ([`RawConfig::over`]), and
-//! the checked values with their defaults filled in. What several settings
+//! the checked values with their defaults filled in, and the settings table
+//! of docs/configuration.md (`doc`: a row's `doc` text, else its help). What several settings
 //! decide together (the store, its pool, TLS, tokens) is checked after that,
 //! one short function per concern, into a [`Config`], which only holds values
 //! the server can run with. Tokens and database URLs are [`Secret`]s, which
@@ -27,12 +28,15 @@ use serde::Deserialize;
 use super::tokens::{Token, TokenSpec};
 use crate::store::{Durability, PoolSettings, RetryPolicy};
 
+#[cfg(test)]
+mod doc;
+
 /// Declares a table of settings, one row each:
 ///
 /// ```text
 /// #[arg(extra clap attributes)]
 /// name: Type [= default] => check -> Checked,
-///     "toml_key", "flag", "INBETWEEN_VAR", "VALUE", [shown "default as text",] "help";
+///     "toml_key", "flag", "INBETWEEN_VAR", "VALUE", [shown "default as text",] "help" [, doc "for the docs"];
 /// ```
 ///
 /// and generates the layer struct (`Option<Type>` fields, renamed to the
@@ -46,11 +50,13 @@ macro_rules! settings {
         layer: $(#[$raw_meta:meta])* $raw_vis:vis struct $Raw:ident,
         checked: $(#[$checked_meta:meta])* $checked_vis:vis struct $Checked:ident,
         $(nested: $sub:ident: $SubRaw:ident => $SubChecked:ident,)?
+        table: $table:literal,
         rows: {
             $(
                 $(#[$arg:meta])*
                 $name:ident: $ty:ty $(= $default:expr)? => $check:ident -> $out:ty,
-                $toml:literal, $flag:literal, $env:literal, $value:literal, $(shown $shown:literal,)? $help:literal;
+                $toml:literal, $flag:literal, $env:literal, $value:literal, $(shown $shown:literal,)? $help:literal
+                $(, doc $doc:literal)?;
             )*
         }
     ) => {
@@ -101,7 +107,52 @@ macro_rules! settings {
             /// The TOML key, flag and environment variable of every row.
             #[cfg(test)]
             const NAMES: &'static [[&'static str; 3]] = &[$([$toml, $flag, $env]),*];
+
+            /// Every row as docs/configuration.md shows it, then the nested table's.
+            #[cfg(test)]
+            fn doc_rows() -> Vec<doc::Row> {
+                let rows = vec![$(doc::Row {
+                    table: $table,
+                    toml: $toml,
+                    flag: $flag,
+                    env: $env,
+                    value: $value,
+                    ty: stringify!($ty),
+                    default: setting_default!($(shown $shown)? $(, default $default)?),
+                    meaning: setting_doc!($help $(, $doc)?),
+                }),*];
+                #[allow(unused_mut)]
+                let mut rows = rows;
+                $(rows.extend($SubRaw::doc_rows());)?
+                rows
+            }
         }
+    };
+}
+
+/// A row's default as the document shows it: the `shown` text as is, a
+/// value in code style, or none.
+#[cfg(test)]
+macro_rules! setting_default {
+    (shown $shown:literal $(, default $default:expr)?) => {
+        doc::Default::Shown($shown)
+    };
+    (, default $default:expr) => {
+        doc::Default::Value($default.to_string())
+    };
+    () => {
+        doc::Default::None
+    };
+}
+
+/// A row's meaning in the document: its `doc` text, else its help.
+#[cfg(test)]
+macro_rules! setting_doc {
+    ($help:literal, $doc:literal) => {
+        $doc
+    };
+    ($help:literal) => {
+        $help
     };
 }
 
@@ -136,27 +187,36 @@ settings! {
     /// [`RawConfig`] with defaults filled in and each value checked.
     struct Settings,
     nested: limits: RawLimits => Limits,
+    table: "",
     rows: {
         listen: SocketAddr = SocketAddr::from(([127, 0, 0, 1], 8080)) => as_given -> SocketAddr,
             "listen", "listen", "INBETWEEN_LISTEN", "ADDR",
-            "Address to listen on (port 0 picks a free port)";
+            "Address to listen on (port 0 picks a free port)",
+            doc "The HTTP address: REST, WebSocket streams, the viewer, the OpenAPI document (port 0 picks a free port)";
         grpc_listen: SocketAddr = SocketAddr::from(([127, 0, 0, 1], 50051)) => as_given -> SocketAddr,
             "grpc_listen", "grpc-listen", "INBETWEEN_GRPC_LISTEN", "ADDR",
-            "Address of the gRPC API (port 0 picks a free port)";
+            "Address of the gRPC API (port 0 picks a free port)",
+            doc "The gRPC address (port 0 picks a free port)";
         data_dir: PathBuf => as_given -> Option<PathBuf>,
             "data_dir", "data-dir", "INBETWEEN_DATA_DIR", "DIR", shown "./data",
-            "Directory of the embedded SQLite store, created if missing";
+            "Directory of the embedded SQLite store, created if missing",
+            doc "Directory of the embedded SQLite store `DIR/inbetween.db`, created if missing";
         #[arg(hide_env_values = true)]
         database_url: Secret => as_given -> Option<Secret>,
             "database_url", "database-url", "INBETWEEN_DATABASE_URL", "URL",
             "A store URL instead of --data-dir (`sqlite://path/to/file.db`, or `postgres://user@host/db` for \
-             several nodes sharing one database)";
+             several nodes sharing one database)",
+            doc "A store URL instead of `--data-dir` (giving both is an error): `sqlite://path/file.db` (directory \
+             created if missing), or PostgreSQL for several nodes, e.g. `postgres://user:password@host:5432/db` (the \
+             tables are created on first start; [operations.md](operations.md#scaling-out-over-postgresql))";
         db_max_connections: u32 = PoolSettings::default().max_connections => positive -> u32,
             "db_max_connections", "db-max-connections", "INBETWEEN_DB_MAX_CONNECTIONS", "N",
-            "Most database connections this node opens";
+            "Most database connections this node opens",
+            doc "Database connections this node opens at most";
         db_acquire_timeout: u64 = PoolSettings::default().acquire_timeout.as_secs() => seconds -> Duration,
             "db_acquire_timeout_secs", "db-acquire-timeout-secs", "INBETWEEN_DB_ACQUIRE_TIMEOUT_SECS", "SECS",
-            "Seconds a request waits for a free database connection before it fails with 503";
+            "Seconds a request waits for a free database connection before it fails with 503",
+            doc "Seconds a request waits for a free database connection before it is answered 503";
         db_retries: u32 = RetryPolicy::default().retries => as_given -> u32,
             "db_retries", "db-retries", "INBETWEEN_DB_RETRIES", "N",
             "Retries of a transiently failed database operation, with exponential backoff from 50 ms";
@@ -165,59 +225,81 @@ settings! {
         unsafe_fast_writes: bool = false => as_given -> bool,
             "unsafe_fast_writes", "unsafe-fast-writes", "INBETWEEN_UNSAFE_FAST_WRITES", "BOOL",
             "Start even if the database would acknowledge writes before they are durable (SQLite then runs \
-             with synchronous=NORMAL): a crash or power loss may lose acknowledged clips";
+             with synchronous=NORMAL): a crash or power loss may lose acknowledged clips",
+            doc "Start even if the database would acknowledge writes before they are durable (SQLite then runs with \
+             `synchronous=NORMAL`); without it the server refuses such a database";
         #[arg(hide_env_values = true)]
         api_token: Secret => plain_token -> Option<Secret>,
             "api_token", "api-token", "INBETWEEN_API_TOKEN", "TOKEN",
-            "Bearer token required by create, replace and delete";
+            "Bearer token required by create, replace and delete",
+            doc "Plain bearer token for writes (create, replace, delete, import); without any write token, writes are \
+             open";
         #[arg(hide_env_values = true)]
         read_token: Secret => plain_token -> Option<Secret>,
             "read_token", "read-token", "INBETWEEN_READ_TOKEN", "TOKEN",
-            "Bearer token required to read clips and poses (the write token also works)";
+            "Bearer token required to read clips and poses (the write token also works)",
+            doc "Plain bearer token for reads (clips, poses, streams; the write token also reads); without it, reads are \
+             open";
         #[arg(value_delimiter = ',')]
         tokens: Vec<TokenSpec> => scoped_tokens -> Vec<Token>,
             "tokens", "token", "INBETWEEN_TOKENS", "NAME:SCOPES:HASH",
             "A scoped token, as NAME:SCOPE[+SCOPE]:sha256:HEX (repeatable, or comma-separated; TOML: \
-             `[[tokens]]` tables with name, scopes, hash). `inbetween token new` makes one";
+             `[[tokens]]` tables with name, scopes, hash). `inbetween token new` makes one",
+            doc "Scoped tokens by hash, `NAME:SCOPE[+SCOPE]:sha256:HEX` \
+             ([operations.md](operations.md#tokens-and-scopes)); `inbetween token new` makes one";
         #[arg(requires = "tls_key")]
         tls_cert: PathBuf => as_given -> Option<PathBuf>,
             "tls_cert", "tls-cert", "INBETWEEN_TLS_CERT", "FILE",
-            "PEM certificate chain: serve HTTP and gRPC over TLS (1.2+; needs --tls-key)";
+            "PEM certificate chain: serve HTTP and gRPC over TLS (1.2+; needs --tls-key)",
+            doc "PEM certificate chain: serve HTTP and gRPC over TLS 1.2 or 1.3 (needs `--tls-key`)";
         #[arg(requires = "tls_cert")]
         tls_key: PathBuf => as_given -> Option<PathBuf>,
             "tls_key", "tls-key", "INBETWEEN_TLS_KEY", "FILE",
-            "PEM private key of --tls-cert";
+            "PEM private key of --tls-cert",
+            doc "PEM private key of `--tls-cert`";
         #[arg(value_delimiter = ',')]
         cors_origins: Vec<String> => cors -> Cors,
             "cors_origins", "cors-origin", "INBETWEEN_CORS_ORIGINS", "ORIGIN", shown "none",
-            "Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any)";
+            "Browser origin allowed by CORS (repeatable, or comma-separated; `*` for any)",
+            doc "Browser origins allowed by CORS; `*` allows any";
         #[arg(value_enum)]
         log_format: LogFormat = LogFormat::Text => as_given -> LogFormat,
             "log_format", "log-format", "INBETWEEN_LOG_FORMAT", "FORMAT",
-            "Log format; the filter comes from INBETWEEN_LOG or RUST_LOG";
+            "Log format; the filter comes from INBETWEEN_LOG or RUST_LOG",
+            doc "`text` or `json` logs on stderr; the filter is `INBETWEEN_LOG` or `RUST_LOG` (default `info`)";
         drain_timeout: u64 = 10 => seconds_or_none -> Duration,
             "drain_timeout_secs", "drain-timeout-secs", "INBETWEEN_DRAIN_TIMEOUT_SECS", "SECS",
-            "Seconds to let in-flight requests finish after SIGTERM/Ctrl-C";
+            "Seconds to let in-flight requests finish after SIGTERM/Ctrl-C",
+            doc "Seconds in-flight requests get to finish after SIGTERM or Ctrl-C (0: do not wait)";
         #[arg(value_delimiter = ',')]
         trusted_proxies: Vec<String> => trusted_proxies -> TrustedProxies,
             "trusted_proxies", "trusted-proxy", "INBETWEEN_TRUSTED_PROXIES", "IP_OR_CIDR", shown "none",
             "Reverse proxy address or CIDR (repeatable, or comma-separated) whose X-Forwarded-For / Forwarded \
-             header names the client; from any other peer those headers are ignored";
+             header names the client; from any other peer those headers are ignored",
+            doc "IPs or CIDRs of reverse proxies: only from them does `X-Forwarded-For` / `Forwarded` name the client";
         #[arg(num_args = 0..=1, default_missing_value = "true")]
         #[arg(value_parser = clap::builder::BoolishValueParser::new())]
         compression: bool = true => as_given -> bool,
             "compression", "compression", "INBETWEEN_COMPRESSION", "BOOL",
             "Compress answers for clients that ask (REST: gzip, br or zstd by Accept-Encoding; gRPC: gzip or zstd \
              by grpc-accept-encoding) and decode request bodies and gRPC messages sent compressed, whose byte \
-             limits count decoded bytes; false: identity only, both ways";
+             limits count decoded bytes; false: identity only, both ways",
+            doc "Compress answers for clients that ask (REST: zstd, br or gzip by `Accept-Encoding`; gRPC: gzip or zstd \
+             by `grpc-accept-encoding`, stream frames excepted) and decode compressed request bodies and gRPC \
+             messages, their limits counting decoded bytes; `false`: identity only, both ways \
+             ([api.md](api.md#compression))";
         compression_min_bytes: usize = 1024 => as_given -> usize,
             "compression_min_bytes", "compression-min-bytes", "INBETWEEN_COMPRESSION_MIN_BYTES", "BYTES",
             "Smallest REST answer compressed (a known length under it goes as it is; answers sent in pieces are \
-             always compressed)";
+             always compressed)",
+            doc "A REST answer of a known length under it goes uncompressed (answers sent in pieces are always compressed \
+             when asked)";
         access_log_sample: f64 = 0.01 => fraction -> f64,
             "access_log_sample", "access-log-sample", "INBETWEEN_ACCESS_LOG_SAMPLE", "FRACTION",
             "Fraction of REST requests answered 1xx-3xx that get an access log line (target inbetween::access); \
-             every 4xx and 5xx gets one";
+             every 4xx and 5xx gets one",
+            doc "The share of REST requests answered 1xx–3xx that get an access log line; every 4xx and 5xx gets one \
+             ([operations.md](operations.md#logs))";
     }
 }
 
@@ -230,17 +312,26 @@ settings! {
     /// (or shed with a 503), never half-processed.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Limits,
+    table: "limits",
     rows: {
         max_body_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
             "max_body_bytes", "max-body-bytes", "INBETWEEN_MAX_BODY_BYTES", "BYTES",
-            "Largest accepted request body, in bytes";
+            "Largest accepted request body, in bytes",
+            doc "Request bodies held in memory (413 `body_too_large`); for an import, what is held whole: a `.gltf` or \
+             `.bvh` file, a GLB's JSON chunk (413 `document_too_large`)";
         max_import_resolved_bytes: usize = 64 * 1024 * 1024 => positive -> usize,
             "max_import_resolved_bytes", "max-import-resolved-bytes", "INBETWEEN_MAX_IMPORT_RESOLVED_BYTES", "BYTES",
-            "Bytes of glTF buffers one import may read (every buffer's byteLength, even when shared)";
+            "Bytes of glTF buffers one import may read (every buffer's byteLength, even when shared)",
+            doc "GlTF buffers named by URI (`data:`, or the multipart parts beside a `.gltf`) one import opens, each \
+             buffer's `byteLength` counted even when several share a part (413 `resolved_bytes_too_large`); a GLB's \
+             own BIN chunk is bounded by `max_import_bytes` instead";
         max_import_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_import_bytes", "max-import-bytes", "INBETWEEN_MAX_IMPORT_BYTES", "BYTES",
             "Largest file `POST /v1/clips/import` accepts: spooled to a temporary file, of which only the glTF JSON \
-             and the animation data are read";
+             and the animation data are read",
+            doc "The largest file `POST /v1/clips/import` takes, spooled to a temporary file (in `$TMPDIR`) as it \
+             arrives, of which only the glTF JSON and the animation and skin data are read (413 `body_too_large`). Uploads \
+             take slots: `max_import_uploads` per node, `max_import_uploads_per_caller` per caller";
         max_import_uploads: usize = 8 => positive -> usize,
             "max_import_uploads", "max-import-uploads", "INBETWEEN_MAX_IMPORT_UPLOADS", "N",
             "Import uploads spooled at once, all callers together (their disk is at most this many times \
@@ -267,44 +358,65 @@ settings! {
              (PNG IHDR, JPEG SOF); over it the mesh is kept without it and a `not_imported` warning says why";
         max_tracks: usize = 4096 => positive -> usize,
             "max_tracks", "max-tracks", "INBETWEEN_MAX_TRACKS", "N",
-            "Most tracks in one clip";
+            "Most tracks in one clip",
+            doc "Tracks in one clip (422 `too_many_tracks`)";
         max_keys_per_track: usize = 1_000_000 => positive -> usize,
             "max_keys_per_track", "max-keys-per-track", "INBETWEEN_MAX_KEYS_PER_TRACK", "N",
-            "Most keys in one track";
+            "Most keys in one track",
+            doc "Keys in one track (422 `too_many_keys`)";
         max_joints: usize = 4096 => positive -> usize,
             "max_joints", "max-joints", "INBETWEEN_MAX_JOINTS", "N",
-            "Most joints in one skeleton";
+            "Most joints in one skeleton",
+            doc "Joints in one skeleton (422 `too_many_joints`)";
         max_parameters: usize = 1024 => positive -> usize,
             "max_parameters", "max-parameters", "INBETWEEN_MAX_PARAMETERS", "N",
-            "Most parameter tracks (docs/clip-format.md §3: morph weights, camera or light values) in one clip";
+            "Most parameter tracks (docs/clip-format.md §3: morph weights, camera or light values) in one clip",
+            doc "Parameter tracks per clip (422 `too_many_parameters`); each key has at most 256 numbers";
         max_poses: usize = 10_000 => positive -> usize,
             "max_poses", "max-poses", "INBETWEEN_MAX_POSES", "N",
-            "Most poses one sample request may ask for";
+            "Most poses one sample request may ask for",
+            doc "Poses per sample request";
         max_joint_poses: usize = 16 * 1024 * 1024 => positive -> usize,
             "max_joint_poses", "max-joint-poses", "INBETWEEN_MAX_JOINT_POSES", "N",
-            "Most poses × joints one sample request may ask for (the evaluation work it costs)";
+            "Most poses × joints one sample request may ask for (the evaluation work it costs)",
+            doc "Poses × joints per sample request (422 `too_many_poses`)";
         max_answer_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_answer_bytes", "max-answer-bytes", "INBETWEEN_MAX_ANSWER_BYTES", "BYTES",
             "Largest encoded answer (joint names included) one pose request may produce, estimated before \
-             anything is evaluated";
+             anything is evaluated",
+            doc "The largest pose answer, as estimated before evaluating (422 `answer_too_large`)";
         max_frame_bytes: usize = 1024 * 1024 => positive -> usize,
             "max_frame_bytes", "max-frame-bytes", "INBETWEEN_MAX_FRAME_BYTES", "BYTES",
-            "Largest encoded stream frame, estimated when the stream opens";
+            "Largest encoded stream frame, estimated when the stream opens",
+            doc "The largest stream frame, as estimated when it opens (422 `frame_too_large`)";
         max_stream_bytes_per_sec: usize = 64 * 1024 * 1024 => positive -> usize,
             "max_stream_bytes_per_sec", "max-stream-bytes-per-sec", "INBETWEEN_MAX_STREAM_BYTES_PER_SEC", "BYTES",
-            "Most bytes per second one stream may send (fps × the frame estimate)";
+            "Most bytes per second one stream may send (fps × the frame estimate)",
+            doc "Fps × frame estimate of one stream (422 `stream_rate_too_high`)";
         request_timeout: u64 = 30 => seconds -> Duration,
             "request_timeout_secs", "request-timeout-secs", "INBETWEEN_REQUEST_TIMEOUT_SECS", "SECS",
-            "Seconds a request may take before it is answered 503";
+            "Seconds a request may take before it is answered 503",
+            doc "Seconds a request may take before it is answered 503 `request_timeout`";
         header_read_timeout: u64 = 10 => seconds -> Duration,
             "header_read_timeout_secs", "header-read-timeout-secs", "INBETWEEN_HEADER_READ_TIMEOUT_SECS", "SECS",
-            "Seconds a client may take to send a request's head (slowloris guard)";
+            "Seconds a client may take to send a request's head (slowloris guard)",
+            doc "A connection that takes longer to send a request head is closed";
         cache_entries: usize = 1024 => positive -> usize,
             "cache_entries", "cache-entries", "INBETWEEN_CACHE_ENTRIES", "N",
-            "Compiled clips kept in memory";
+            "Compiled clips kept in memory",
+            doc "Compiled clips in memory";
         cache_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "cache_bytes", "cache-bytes", "INBETWEEN_CACHE_BYTES", "BYTES",
-            "Heap bytes the caches keep together: compiled clips and built motions (additive layers' reference \
+            "Heap bytes of the compiled clips kept in memory (least recently used leave first)",
+            doc "Heap bytes of the compiled clips in memory, least recently used evicted first (`inbetween_cache_bytes` \
+             on `/metrics`)";
+        motion_cache_entries: usize = 1024 => positive -> usize,
+            "motion_cache_entries", "motion-cache-entries", "INBETWEEN_MOTION_CACHE_ENTRIES", "N",
+            "Built motions (composed requests' layer stacks) kept in memory, keyed by the motion and its clip \
+             versions (least recently used leave first)",
+            doc "Built motions in memory, keyed by the motion and its layers' clip versions, so a composed request \
+             repeated every frame is not rebuilt; a replaced, deleted or evicted clip drops its motions \
+             (`inbetween_motion_cache_{hits,misses}_total`, `inbetween_motion_cache_entries` on `/metrics`)";
              poses included); the least recently used entry of any of them leaves first, and an entry larger than \
              this is used once and not kept";
         motion_cache_entries: usize = 1024 => positive -> usize,
@@ -314,81 +426,113 @@ settings! {
         max_build_work: u64 = anim::DEFAULT_BUILD_WORK => positive -> u64,
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
-             tables, over the whole clip (over it: 422 build_budget_exceeded)";
+             tables, over the whole clip (over it: 422 build_budget_exceeded)",
+            doc "Work units one clip's build may take (quadrature evaluations plus arc-length pieces of its \
+             constant-speed tables, over the whole clip; the default is about 0.4 s of one core): over it an upload, \
+             import or `PutClip` is refused with 422 `build_budget_exceeded`";
         ik_max_constraints: usize = 32 => positive -> usize,
             "ik_max_constraints", "ik-max-constraints", "INBETWEEN_IK_MAX_CONSTRAINTS", "N",
-            "IK constraints in one clip, motion or stream control (over it: 422 too_many_constraints)";
+            "IK constraints in one clip, motion or stream control (over it: 422 too_many_constraints)",
+            doc "IK constraints in one clip, motion or `ik` stream control (over it: 422 `too_many_constraints`)";
         ik_max_effectors: usize = 16 => positive -> usize,
             "ik_max_effectors", "ik-max-effectors", "INBETWEEN_IK_MAX_EFFECTORS", "N",
-            "Effectors of one chain constraint (over it: 422 too_many_effectors)";
+            "Effectors of one chain constraint (over it: 422 too_many_effectors)",
+            doc "Effectors of one `chain` constraint (over it: 422 `too_many_effectors`)";
         ik_max_iterations: u32 = 1000 => positive -> u32,
             "ik_max_iterations", "ik-max-iterations", "INBETWEEN_IK_MAX_ITERATIONS", "N",
-            "The largest max_iterations a chain constraint may ask for (over it: 422 too_many_iterations)";
+            "The largest max_iterations a chain constraint may ask for (over it: 422 too_many_iterations)",
+            doc "The largest `max_iterations` a `chain` may ask for (over it: 422 `too_many_iterations`)";
         max_concurrent_builds: usize = cores() => positive -> usize,
             "max_concurrent_builds", "max-concurrent-builds", "INBETWEEN_MAX_CONCURRENT_BUILDS", "N",
             shown "one per core",
-            "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait";
+            "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait",
+            doc "Clip builds (uploads, imports, cache misses) running at once, each on a blocking thread, never on the \
+             async workers";
         max_streams: usize = 1024 => positive -> usize,
             "max_streams", "max-streams", "INBETWEEN_MAX_STREAMS", "N",
-            "Concurrent streams (gRPC and WebSocket together)";
+            "Concurrent streams (gRPC and WebSocket together)",
+            doc "Concurrent streams (gRPC and WebSocket)";
         max_streams_per_client: usize = 64 => positive -> usize,
             "max_streams_per_client", "max-streams-per-client", "INBETWEEN_MAX_STREAMS_PER_CLIENT", "N",
-            "Concurrent streams per client IP address";
+            "Concurrent streams per client IP address",
+            doc "Per client IP address";
         max_streams_per_token: usize = 64 => positive -> usize,
             "max_streams_per_token", "max-streams-per-token", "INBETWEEN_MAX_STREAMS_PER_TOKEN", "N",
-            "Concurrent streams per configured token (by its name)";
+            "Concurrent streams per configured token (by its name)",
+            doc "Per configured token, from any address";
         max_broadcasts: usize = 64 => positive -> usize,
             "max_broadcasts", "max-broadcasts", "INBETWEEN_MAX_BROADCASTS", "N",
-            "Live broadcasts at once (docs/broadcasts.md; over it: 429 too_many_broadcasts); their viewers count as streams";
+            "Live broadcasts at once (docs/broadcasts.md; over it: 429 too_many_broadcasts); their viewers count as streams",
+            doc "Live broadcasts; their viewers count as streams";
         broadcast_control_lead: u64 = 50 => lead_millis -> Duration,
             "broadcast_control_lead_ms", "broadcast-control-lead-ms", "INBETWEEN_BROADCAST_CONTROL_LEAD_MS", "MS",
-            "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)";
+            "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)",
+            doc "A broadcast control is stamped with the first tick due this long from now, so that it is stored and \
+             every node hears of it first (0..=10000; [broadcasts.md](broadcasts.md#many-nodes))";
         body_read_timeout: u64 = 10 => seconds -> Duration,
             "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
-            "Seconds a client may take to send a request's body, once its head is in (answered 408)";
+            "Seconds a client may take to send a request's body, once its head is in (answered 408)",
+            doc "A body that takes longer to arrive is answered 408";
         max_in_flight: usize = 64 * cores() => positive -> usize,
             "max_in_flight", "max-in-flight", "INBETWEEN_MAX_IN_FLIGHT", "N", shown "64 per core",
-            "Requests in flight (REST and gRPC each) before new ones are shed with 503";
+            "Requests in flight (REST and gRPC each) before new ones are shed with 503",
+            doc "Requests in flight, per protocol; more are shed with 503 / `RESOURCE_EXHAUSTED`";
         write_rate: u32 = 100 => positive -> u32,
             "write_rate", "write-rate", "INBETWEEN_WRITE_RATE", "PER_SEC",
-            "Sustained writes per second per caller (its token's name, or its address without one)";
+            "Sustained writes per second per caller (its token's name, or its address without one)",
+            doc "Sustained writes per second per caller, REST and gRPC together (over it: 429 with `Retry-After` / \
+             `RESOURCE_EXHAUSTED`)";
         write_burst: u32 = 200 => positive -> u32,
             "write_burst", "write-burst", "INBETWEEN_WRITE_BURST", "N",
-            "Writes a caller may make in a burst above the sustained rate";
+            "Writes a caller may make in a burst above the sustained rate",
+            doc "Writes in a burst per caller";
         ws_max_message_bytes: usize = 4096 => positive -> usize,
             "ws_max_message_bytes", "ws-max-message-bytes", "INBETWEEN_WS_MAX_MESSAGE_BYTES", "BYTES",
-            "Largest WebSocket message a stream viewer may send (controls)";
+            "Largest WebSocket message a stream viewer may send (controls)",
+            doc "The largest control a viewer may send";
         ws_write_buffer_bytes: usize = 128 * 1024 => positive -> usize,
             "ws_write_buffer_bytes", "ws-write-buffer-bytes", "INBETWEEN_WS_WRITE_BUFFER_BYTES", "BYTES",
-            "Bytes of outgoing WebSocket frames buffered before a write is flushed";
+            "Bytes of outgoing WebSocket frames buffered before a write is flushed",
+            doc "Bytes of the server's own messages (errors, `opened`, pongs) buffered before a flush; frames are written \
+             from the playback's shared bytes, never buffered per viewer";
         ws_max_write_buffer_bytes: usize = 16 * 1024 * 1024 => positive -> usize,
             "ws_max_write_buffer_bytes", "ws-max-write-buffer-bytes", "INBETWEEN_WS_MAX_WRITE_BUFFER_BYTES", "BYTES",
-            "Most bytes a WebSocket may hold unsent before the stream fails (at most stream_buffer_bytes is used)";
+            "Most bytes a WebSocket may hold unsent before the stream fails (at most stream_buffer_bytes is used)",
+            doc "The smaller of it and `stream_buffer_bytes` is what a WebSocket may hold unsent";
         request_message_timeout: u64 = 10 => seconds -> Duration,
             "request_message_timeout_secs", "request-message-timeout-secs", "INBETWEEN_REQUEST_MESSAGE_TIMEOUT_SECS",
             "SECS",
-            "Seconds a gRPC call may take to send its first message (a Play its `open`); answered DEADLINE_EXCEEDED";
+            "Seconds a gRPC call may take to send its first message (a Play its `open`); answered DEADLINE_EXCEEDED",
+            doc "A gRPC call whose first message (a `Play`'s `open`) takes longer ends `DEADLINE_EXCEEDED` `body_timeout`";
         http2_max_concurrent_streams: u32 = 256 => positive -> u32,
             "http2_max_concurrent_streams", "http2-max-concurrent-streams", "INBETWEEN_HTTP2_MAX_CONCURRENT_STREAMS",
             "N",
-            "Requests and streams one HTTP/2 connection may have open at once (advertised on both ports)";
+            "Requests and streams one HTTP/2 connection may have open at once (advertised on both ports)",
+            doc "Streams per HTTP/2 connection, advertised on both ports";
         max_in_flight_per_client: usize = 32 => positive -> usize,
             "max_in_flight_per_client", "max-in-flight-per-client", "INBETWEEN_MAX_IN_FLIGHT_PER_CLIENT", "N",
             "Requests one caller (its token's name, or its address) may have in flight, REST and gRPC together \
-             (answered 429 `client_in_flight_limit`)";
+             (answered 429 `client_in_flight_limit`)",
+            doc "Requests per caller, REST and gRPC together, counted once a request's body (first message) has arrived; \
+             more: 429 `client_in_flight_limit` / `RESOURCE_EXHAUSTED`";
         idle_timeout: u64 = 60 => seconds -> Duration,
             "idle_timeout_secs", "idle-timeout-secs", "INBETWEEN_IDLE_TIMEOUT_SECS", "SECS",
-            "Seconds a connection (either port) may stay open with no request or stream before it is closed";
+            "Seconds a connection (either port) may stay open with no request or stream before it is closed",
+            doc "A connection (either port, HTTP/1.1 or HTTP/2) with no request or stream open this long is closed";
         write_stall_timeout: u64 = 30 => seconds -> Duration,
             "write_stall_timeout_secs", "write-stall-timeout-secs", "INBETWEEN_WRITE_STALL_TIMEOUT_SECS", "SECS",
             "Seconds a write to a client may make no progress (it stopped reading an answer or a stream) before its \
-             connection is closed";
+             connection is closed",
+            doc "A connection (either port) whose writes make no progress this long — a client that stopped reading an \
+             answer or a stream — is closed, and whatever it held (in-flight slots, buffers) is freed";
         max_connections: usize = 4096 => positive -> usize,
             "max_connections", "max-connections", "INBETWEEN_MAX_CONNECTIONS", "N",
-            "Open connections per port; connections over it are closed at accept";
+            "Open connections per port; connections over it are closed at accept",
+            doc "Open connections per port; more are closed at accept (`inbetween_connections_refused_total`)";
         stream_buffer_bytes: usize = 256 * 1024 => positive -> usize,
             "stream_buffer_bytes", "stream-buffer-bytes", "INBETWEEN_STREAM_BUFFER_BYTES", "BYTES",
-            "Bytes of frames a stream viewer may leave unread before its stream is closed (slow consumer)";
+            "Bytes of frames a stream viewer may leave unread before its stream is closed (slow consumer)",
+            doc "A viewer that leaves more unread is closed (WebSocket 1008 / `RESOURCE_EXHAUSTED` `slow_consumer`)";
         max_compressed_answers: usize = 4 * cores() => positive -> usize,
             "max_compressed_answers", "max-compressed-answers", "INBETWEEN_MAX_COMPRESSED_ANSWERS", "N",
             shown "4 per core",
@@ -397,7 +541,9 @@ settings! {
         max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
             "Bytes of request bodies and first gRPC messages held at once, all requests together, from arrival \
-             until the request ends; a request that would pass it is answered 503 `overloaded`";
+             until the request ends; a request that would pass it is answered 503 `overloaded`",
+            doc "Request bodies and first gRPC messages held at once, from arrival to the end of their request; a request \
+             that would pass it is answered 503 `overloaded` (at least `max_body_bytes`)";
     }
 }
 
@@ -1110,17 +1256,17 @@ mod tests {
         }
     }
 
-    /// docs/configuration.md names every setting: one table row with its
-    /// flag, its variable and its TOML key.
+    /// docs/configuration.md's table is the rendering of the rows (with
+    /// `INBETWEEN_BLESS=1` this test writes it).
     #[test]
-    fn every_setting_is_in_the_configuration_doc() {
-        let doc = include_str!("../../../docs/configuration.md");
-        let rows: Vec<&str> = doc.lines().filter(|l| l.starts_with("| `--")).collect();
-        for [toml, flag, env] in RawConfig::NAMES.iter().chain(RawLimits::NAMES) {
-            let documented = rows.iter().any(|row| {
-                row.contains(&format!("`--{flag} ")) && row.contains(&format!("`{env}`")) && row.contains(toml)
-            });
-            assert!(documented, "docs/configuration.md's table lacks --{flag} / {env} / {toml}");
+    fn the_configuration_doc_is_rendered_from_the_rows() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/configuration.md");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let rendered = doc::render(&text, &RawConfig::doc_rows());
+        if std::env::var("INBETWEEN_BLESS").is_ok_and(|v| v == "1") {
+            std::fs::write(&path, rendered).unwrap();
+            return;
         }
+        assert!(text == rendered, "docs/configuration.md differs from the settings rows; rewrite it: {}", doc::BLESS);
     }
 }

@@ -109,7 +109,7 @@ pub enum ApiError {
 
 /// How an operator raises a limit: the setting and its flag and environment
 /// variable, which follow one pattern for every limit (`max_x`, `--max-x`,
-/// `INBETWEEN_MAX_X`; the config module's test keeps them listed in docs/configuration.md).
+/// `INBETWEEN_MAX_X`; docs/configuration.md's table is rendered from the config rows).
 pub fn raise_hint(setting: &str) -> String {
     format!("{setting}; raise it with --{} or INBETWEEN_{}", setting.replace('_', "-"), setting.to_ascii_uppercase())
 }

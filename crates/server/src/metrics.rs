@@ -70,6 +70,10 @@ fn describe() {
         "Composed requests whose motion had to be built (not cached for these clip versions)."
     );
     describe_gauge!("inbetween_motion_cache_entries", "Built motions held in memory.");
+    describe_gauge!(
+        "inbetween_bodies_awaited",
+        "Requests whose body (a gRPC call's first message) is still arriving: they hold no in-flight slot yet."
+    );
     describe_histogram!(
         "inbetween_store_operation_duration_seconds",
         Unit::Seconds,

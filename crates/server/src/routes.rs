@@ -5,6 +5,10 @@
 //! [`ROUTES`], so a new route is one line here plus its handler (the
 //! reference: `docs/api.md`).
 
+use std::collections::HashMap;
+use std::str::Split;
+use std::sync::LazyLock;
+
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::Method;
@@ -51,17 +55,9 @@ pub struct Route {
     pub class: Class,
 }
 
-impl Route {
-    /// Whether the REST path template (`{id}` for one segment) matches `path`.
-    fn matches_path(&self, path: &str) -> bool {
-        self.rest.is_some_and(|(_, template)| template_matches(template, path))
-    }
-
-    fn matches(&self, method: &Method, path: &str) -> bool {
-        self.rest.is_some_and(|(m, _)| method.as_str().eq_ignore_ascii_case(m)) && self.matches_path(path)
-    }
-}
-
+/// Whether the REST path template (`{id}` for one segment) matches `path`:
+/// the rule [`PathTree`] implements, kept as the tests' reference.
+#[cfg(test)]
 fn template_matches(template: &str, path: &str) -> bool {
     let (mut want, mut got) = (template.split('/'), path.split('/'));
     loop {
@@ -171,9 +167,60 @@ fn add(api: Router<AppState>, path: &str, class: Class, route: MethodRouter<AppS
     }
 }
 
+/// The REST routes by path segment, built once from [`ROUTES`]: a request's
+/// class is found in one walk of its path, not a scan of the table with
+/// string matching.
+#[derive(Debug, Default)]
+struct PathTree {
+    literal: HashMap<&'static str, PathTree>,
+    /// The `{id}` segment: any one non-empty segment.
+    param: Option<Box<PathTree>>,
+    /// The routes whose template ends here.
+    routes: Vec<&'static Route>,
+}
+
+impl PathTree {
+    fn build() -> PathTree {
+        let mut root = PathTree::default();
+        for route in ROUTES {
+            let Some((_, template)) = route.rest else { continue };
+            let mut node = &mut root;
+            for segment in template.split('/') {
+                node = if segment.starts_with('{') {
+                    node.param.get_or_insert_default()
+                } else {
+                    node.literal.entry(segment).or_default()
+                };
+            }
+            node.routes.push(route);
+        }
+        root
+    }
+
+    /// The first route whose template matches `segments` and that `wanted` accepts.
+    fn find(&self, mut segments: Split<'_, char>, wanted: &impl Fn(&Route) -> bool) -> Option<&'static Route> {
+        let Some(segment) = segments.next() else { return self.routes.iter().copied().find(|r| wanted(r)) };
+        let literal = self.literal.get(segment).and_then(|next| next.find(segments.clone(), wanted));
+        let param = || self.param.as_ref().filter(|_| !segment.is_empty())?.find(segments, wanted);
+        literal.or_else(param)
+    }
+}
+
+/// The table as a [`PathTree`], built at the first request.
+static PATHS: LazyLock<PathTree> = LazyLock::new(PathTree::build);
+
+/// The gRPC methods' classes, built at the first call.
+static RPCS: LazyLock<HashMap<&'static str, Class>> =
+    LazyLock::new(|| ROUTES.iter().filter_map(|r| Some((r.rpc?, r.class))).collect());
+
+/// The first REST route matching `path` that `wanted` accepts.
+fn route_where(path: &str, wanted: impl Fn(&Route) -> bool) -> Option<&'static Route> {
+    PATHS.find(path.split('/'), &wanted)
+}
+
 /// The REST route `method path` answers, if any.
 fn rest_route(method: &Method, path: &str) -> Option<&'static Route> {
-    ROUTES.iter().find(|r| r.matches(method, path))
+    route_where(path, |r| r.rest.is_some_and(|(m, _)| method.as_str().eq_ignore_ascii_case(m)))
 }
 
 /// The one import route's path (its bodies are spooled).
@@ -188,21 +235,21 @@ pub fn is_write(method: &Method, path: &str) -> bool {
     if let Some(route) = rest_route(method, path) {
         return route.class.changes_state();
     }
-    let read_by_post = ROUTES
-        .iter()
-        .any(|r| r.rest.is_some_and(|(m, _)| m == "post") && r.class == Class::Read && r.matches_path(path));
-    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) && !read_by_post
+    if matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS) {
+        return false;
+    }
+    route_where(path, |r| r.rest.is_some_and(|(m, _)| m == "post") && r.class == Class::Read).is_none()
 }
 
 /// Whether a REST request to `path` (any method) is never shed.
 pub fn never_shed(path: &str) -> bool {
-    ROUTES.iter().any(|r| r.class == Class::Operations && r.matches_path(path))
+    route_where(path, |r| r.class == Class::Operations).is_some()
 }
 
 /// Whether the gRPC request to `path` is a stream of frames.
 pub fn is_frame_rpc(path: &str) -> bool {
     let Some(method) = path.strip_prefix("/inbetween.v1.Animation/") else { return false };
-    ROUTES.iter().any(|r| r.class == Class::FrameStream && r.rpc == Some(method))
+    RPCS.get(method) == Some(&Class::FrameStream)
 }
 
 #[cfg(test)]
@@ -235,6 +282,43 @@ mod tests {
         assert!(!is_frame_rpc("/inbetween.v1.Animation/Watch"));
         assert!(!is_frame_rpc("/inbetween.v1.Animation/SampleStream"));
         assert_eq!(import_path(), "/v1/clips/import");
+    }
+
+    /// The tree answers as a scan of the table with [`template_matches`] would.
+    #[test]
+    fn the_tree_finds_what_a_scan_of_the_table_finds() {
+        let paths = [
+            "/v1/clips",
+            "/v1/clips/",
+            "/v1/clips/import",
+            "/v1/clips/x",
+            "/v1/clips/x/pose",
+            "/v1/clips/x/sample",
+            "/v1/clips/x/y",
+            "/v1/clips//pose",
+            "/v1/broadcasts/b/controls",
+            "/v1/poses",
+            "/healthz",
+            "/healthz/x",
+            "/metrics",
+            "/viewer",
+            "/",
+            "",
+            "/v1/nothing",
+        ];
+        let methods = [Method::GET, Method::POST, Method::PUT, Method::PATCH, Method::DELETE, Method::HEAD];
+        for path in paths {
+            for method in &methods {
+                let scanned = ROUTES.iter().find(|r| {
+                    r.rest.is_some_and(|(m, t)| method.as_str().eq_ignore_ascii_case(m) && template_matches(t, path))
+                });
+                assert_eq!(rest_route(method, path).map(|r| r.rest), scanned.map(|r| r.rest), "{method} {path}");
+            }
+            let operations = ROUTES
+                .iter()
+                .any(|r| r.class == Class::Operations && r.rest.is_some_and(|(_, t)| template_matches(t, path)));
+            assert_eq!(never_shed(path), operations, "{path}");
+        }
     }
 
     #[test]

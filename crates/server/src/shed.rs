@@ -17,6 +17,7 @@
 use std::collections::HashMap;
 use std::future::Future;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
@@ -55,11 +56,47 @@ impl Gate {
 /// comes before admission, so this is what bounds the memory of many
 /// requests sending at once.
 #[derive(Debug, Clone)]
-pub struct Arrivals(Arc<Semaphore>);
+pub struct Arrivals {
+    budget: Arc<Semaphore>,
+    max_bytes: usize,
+    /// Requests whose body (first gRPC message) is being awaited now.
+    awaited: Arc<AtomicUsize>,
+}
+
+/// One request counted as awaiting its body until dropped
+/// (`inbetween_bodies_awaited`): such requests hold no in-flight slot, and
+/// this is where they show.
+#[derive(Debug)]
+pub struct Awaiting(Arc<AtomicUsize>);
+
+impl Drop for Awaiting {
+    fn drop(&mut self) {
+        let now = self.0.fetch_sub(1, Ordering::Relaxed) - 1;
+        metrics::gauge!("inbetween_bodies_awaited").set(now as f64);
+    }
+}
 
 impl Arrivals {
     pub fn new(max_bytes: usize) -> Arrivals {
-        Arrivals(Arc::new(Semaphore::new(max_bytes.min(Semaphore::MAX_PERMITS))))
+        let max_bytes = max_bytes.min(Semaphore::MAX_PERMITS);
+        Arrivals { budget: Arc::new(Semaphore::new(max_bytes)), max_bytes, awaited: Arc::default() }
+    }
+
+    /// Counts a request as awaiting its body until the guard is dropped.
+    pub fn awaiting(&self) -> Awaiting {
+        let now = self.awaited.fetch_add(1, Ordering::Relaxed) + 1;
+        metrics::gauge!("inbetween_bodies_awaited").set(now as f64);
+        Awaiting(Arc::clone(&self.awaited))
+    }
+
+    /// The requests awaiting their body now.
+    pub fn awaited(&self) -> usize {
+        self.awaited.load(Ordering::Relaxed)
+    }
+
+    /// The bytes held now, so a test can wait until a body has arrived.
+    pub fn held(&self) -> usize {
+        self.max_bytes - self.budget.available_permits()
     }
 
     /// Counts `bytes` more into `held`, or refuses (503) past the budget.
@@ -71,7 +108,7 @@ impl Arrivals {
             return Ok(());
         }
         let permits = u32::try_from(bytes).map_err(|_| shed("arrival"))?;
-        let more = Arc::clone(&self.0).try_acquire_many_owned(permits).map_err(|_| shed("arrival"))?;
+        let more = Arc::clone(&self.budget).try_acquire_many_owned(permits).map_err(|_| shed("arrival"))?;
         match held {
             Some(permit) => permit.merge(more),
             None => *held = Some(more),
@@ -90,6 +127,11 @@ pub struct Clients {
 impl Clients {
     pub fn new(max_per_client: usize) -> Arc<Clients> {
         Arc::new(Clients { max: max_per_client, counts: Mutex::new(HashMap::new()) })
+    }
+
+    /// The requests in flight now, every caller's, so a test can wait until one is admitted.
+    pub fn in_flight(&self) -> usize {
+        lock(&self.counts).values().sum()
     }
 
     /// A slot for one more request of `key`, unless it has `max` in flight.
@@ -310,6 +352,7 @@ async fn first_message(
     let (parts, mut body) = request.into_parts();
     let mut head = bytes::BytesMut::new();
     let mut held = None;
+    let _awaiting = arrivals.awaiting();
     let read = async {
         while !message_complete(&head) {
             let Some(frame) = std::future::poll_fn(|cx| Pin::new(&mut body).poll_frame(cx)).await else { break };

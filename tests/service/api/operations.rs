@@ -115,12 +115,10 @@ async fn shutdown_drains_in_flight_work_then_closes_the_listener() {
     );
     let (first, rest) = WAVE.split_at(WAVE.len() / 2);
     upload.write_all(format!("{head}{first}").as_bytes()).await.unwrap();
-    // Nothing to wait on (no metric counts bodies arriving): time for the
-    // half body to reach the server before it is stopped.
-    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    let five = std::time::Duration::from_secs(5);
+    crate::common::eventually(five, "the half body held", || async { state.arrivals.held() > 0 }).await;
 
     let stop = tokio::spawn(app.stop());
-    let five = std::time::Duration::from_secs(5);
     crate::common::eventually(five, "readiness flips", || async { !state.is_ready() }).await;
     let close = within(5, "the stream's close", async {
         loop {

@@ -103,10 +103,8 @@ async fn bodyless_posts_on_one_h2_connection_do_not_shed_requests_that_arrived()
         senders.push(tx);
         stalled.push(spawn_request(&conn, rest_post(app.addr, body)));
     }
-    // Nothing to wait on (no metric counts bodies still awaited): this gives
-    // the stalled requests time to arrive. Were they late, the traffic below
-    // would pass all the same; the test would only show less.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Every stalled request is in, awaiting its body, before the traffic below.
+    eventually(Duration::from_secs(10), "128 bodies awaited", || async { app.state.arrivals.awaited() >= 128 }).await;
     normal_rest_traffic(&app, &id).await;
     // The stalled ones end with 408 once the body-read timeout passes.
     let started = Instant::now();
@@ -144,8 +142,9 @@ async fn grpc_calls_without_their_message_time_out_and_shed_nothing() {
         let mut client = client.clone();
         tokio::spawn(async move { client.play(futures_util::stream::pending::<pb::PlaybackControl>()).await })
     };
-    // Nothing to wait on, as above: time for the stalled calls to arrive.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Every stalled call and the Play are in, awaiting their first message.
+    eventually(Duration::from_secs(10), "129 first messages awaited", || async { app.state.arrivals.awaited() >= 129 })
+        .await;
     for _ in 0..5 {
         let calls = (0..8).map(|i| {
             let mut client = client.clone();
@@ -395,8 +394,11 @@ async fn bodies_arriving_at_once_are_bounded_in_bytes() {
     stalled.write_all(&[b' '; 40_000]).await.unwrap();
     let body = format!("{WAVE}{}", " ".repeat(40_000));
     let post = || app.http.post(app.url("/v1/clips")).header("content-type", "application/json").body(body.clone());
-    // Kept as it was: polling for the 503 instead never saw one (not yet understood).
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Posting before the stalled bytes are held would race them for the
+    // budget (a post that wins gets its 201 and the stalled body the 503):
+    // wait until the server holds them, then post once.
+    eventually(Duration::from_secs(10), "the stalled 40 KB held", || async { app.state.arrivals.held() >= 40_000 })
+        .await;
     let refused = post().send().await.unwrap();
     assert_eq!(refused.status(), 503);
     assert_eq!(refused.json::<serde_json::Value>().await.unwrap()["code"], "overloaded");
@@ -435,8 +437,13 @@ async fn a_client_that_stops_reading_an_answer_is_cut_off_and_frees_its_slot() {
     tokio::io::AsyncWriteExt::write_all(&mut stuck, format!("{head}{body}").as_bytes()).await.unwrap();
     let started = Instant::now();
     let pose = app.url(&format!("/v1/clips/{id}/pose?t=1"));
-    // Kept as it was: polling for the 429 instead never saw one (not yet understood).
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // Polling before the stuck request is admitted would race it for the
+    // caller's one slot (a pose that wins leaves the stuck request its 429):
+    // wait until it holds the slot, then ask once.
+    eventually(Duration::from_secs(10), "the stuck request admitted", || async {
+        app.state.in_flight.in_flight() >= 1
+    })
+    .await;
     let held = app.http.get(&pose).send().await.unwrap();
     assert_eq!(held.status(), 429, "the stuck answer holds the caller's one slot");
     let freed_after = eventually_some(Duration::from_secs(10), "the stalled answer is cut off", || async {

@@ -77,9 +77,8 @@ async fn the_store_rides_out_terminated_connections() {
     for round in 0..3 {
         let killed = backend.schema.terminate(app).await;
         assert!(killed >= 1, "round {round}: the store's connections carry application_name={app}");
-        // Nothing to wait on: a moment for the terminations to land, so the
-        // read below meets the closed connections and must get through them.
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        // Once they have exited, the read below meets the closed connections and must get through them.
+        backend.schema.until_gone(app).await;
         let got = store.get(&meta.id).await.expect("a read after the terminations succeeds").unwrap();
         assert_eq!(got.meta.version, round + 1);
         store.replace(&meta.id, new_clip("a", "{}"), Some(round + 1)).await.expect("so does a write");

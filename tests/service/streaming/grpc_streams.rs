@@ -22,9 +22,10 @@ pub async fn read_for(stream: &mut Streaming<pb::Frame>, secs: f64) -> Vec<pb::F
 
 /// Checks `frames` follow the schedule from seq 0: clip time `seq·speed/fps`,
 /// and every gap in `seq` reported as `dropped`. A starved client (two cores
-/// running the whole suite and a browser) may miss ticks, even tick 0, so up
-/// to `fps/4` drops are allowed (12 of 120 were seen beside the browser
-/// tests); bursts and unreported gaps are not. Returns the ticks covered.
+/// running the whole suite and a browser) may miss ticks, even tick 0; in the
+/// slow runs (`latency_checked`) up to `fps/4` drops are allowed (12 of 120
+/// were seen beside the browser tests), bursts are not; unreported gaps never
+/// are. Returns the ticks covered.
 pub fn check_schedule(seqs_times: &[(u64, u64, f32)], fps: f64, speed: f64) -> u64 {
     let (first_seq, first_dropped, _) = seqs_times[0];
     assert_eq!(first_dropped, first_seq, "ticks before the first frame are reported as dropped");
@@ -38,7 +39,10 @@ pub fn check_schedule(seqs_times: &[(u64, u64, f32)], fps: f64, speed: f64) -> u
     }
     let ticks = seqs_times.last().unwrap().0 + 1;
     let missed = ticks - seqs_times.len() as u64;
-    assert!(missed as f64 <= fps / 4.0, "{missed} of {ticks} ticks dropped");
+    eprintln!("{missed} of {ticks} ticks dropped");
+    if crate::common::latency_checked() {
+        assert!(missed as f64 <= fps / 4.0, "{missed} of {ticks} ticks dropped");
+    }
     ticks
 }
 
@@ -52,7 +56,11 @@ async fn sixty_fps_for_two_seconds_is_120_frames_on_schedule() {
     let frames = read_for(&mut stream, 2.0).await;
     let v: Vec<_> = frames.iter().map(|f| (f.seq, f.dropped, f.clip_time)).collect();
     let ticks = check_schedule(&v, 60.0, 0.5);
-    assert!((118..=122).contains(&ticks), "{ticks} ticks in 2 s");
+    // How many ticks 2 s of sending covers is a latency (a late server covers fewer): the slow runs check it.
+    eprintln!("{ticks} ticks in 2 s");
+    if crate::common::latency_checked() {
+        assert!((118..=122).contains(&ticks), "{ticks} ticks in 2 s");
+    }
     let pose = frames[0].pose.as_ref().unwrap();
     assert_eq!(pose.joint_names, ["root", "arm"], "names in the first frame");
     assert!(frames[1..].iter().all(|f| f.pose.as_ref().unwrap().joint_names.is_empty()), "and only there");
@@ -65,10 +73,13 @@ async fn sixty_fps_for_two_seconds_is_120_frames_on_schedule() {
         let covers_120 = f.seq - f.dropped <= 120 && 120 <= f.seq;
         assert_eq!(names, if covers_120 { vec!["footstep"] } else { vec![] }, "frame {}", f.seq);
     }
-    // Sent-at stamps follow the schedule: frame k about k/60 s after frame 0.
+    // Sent-at stamps follow the schedule: frame k about k/60 s after frame 0 (a latency: the slow runs).
     let last = frames.last().unwrap();
     let span = (last.sent_at_unix_nanos - frames[0].sent_at_unix_nanos) as f64 / 1e9;
-    assert_close(span, (last.seq - frames[0].seq) as f64 / 60.0, 0.05, "sent_at span");
+    assert!(last.sent_at_unix_nanos >= frames[0].sent_at_unix_nanos, "sent_at goes forward");
+    if crate::common::latency_checked() {
+        assert_close(span, (last.seq - frames[0].seq) as f64 / 60.0, 0.05, "sent_at span");
+    }
 }
 
 #[tokio::test]
@@ -127,7 +138,10 @@ async fn a_stalled_client_gets_dropped_frames_while_others_keep_their_schedule()
     let mut tail: Vec<f64> = frames[frames.len() - 30..].iter().map(late).collect();
     early.sort_by(f64::total_cmp);
     tail.sort_by(f64::total_cmp);
-    assert!(tail[15] - early[15] < 0.02, "median lateness grew from {} to {} s", early[15], tail[15]);
+    eprintln!("median lateness from {} to {} s", early[15], tail[15]);
+    if crate::common::latency_checked() {
+        assert!(tail[15] - early[15] < 0.02, "median lateness grew from {} to {} s", early[15], tail[15]);
+    }
     // ≈ 120 frames of 82 kB were produced for the stalled client meanwhile;
     // what is kept is bounded by its buffer and flow-control window instead.
     let grown = rss_bytes().saturating_sub(rss_before);

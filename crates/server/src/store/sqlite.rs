@@ -11,8 +11,10 @@
 //! so a commit is on disk (WAL fsync) before the statement returns, which is
 //! what lets the service promise that a `201` survives `kill -9` and power
 //! loss; `foreign_keys=ON` and a `busy_timeout` so concurrent writers wait
-//! for the lock instead of failing (so no failure is transient: nothing is
-//! retried).
+//! for the lock instead of failing. A writer that still does not get it (the
+//! busy handler polls, so under load one can lose to the others for the
+//! whole timeout) fails with `SQLITE_BUSY`, which is transient: the
+//! statement did not run, so it is retried, and at worst answered 503.
 //!
 //! A delete is a single statement (its `clip_tags` and `clip_joints` rows go
 //! by cascade). A create or replace writes the clip row and its index rows
@@ -40,6 +42,10 @@ use super::{Durability, PoolSettings};
 
 static MIGRATOR: Migrator = sqlx::migrate!("./migrations/sqlite");
 
+/// SQLite's primary result codes for a lock not had.
+const BUSY: i32 = 5;
+const LOCKED: i32 = 6;
+
 /// A SQLite-backed [`ClipStore`](super::ClipStore).
 pub type SqliteStore = SqlStore<Sqlite>;
 
@@ -61,8 +67,21 @@ impl Dialect for Sqlite {
         serde_json::Value::from(items).to_string()
     }
 
-    fn classify(_: &sqlx::Error) -> Transience {
-        Transience::Permanent
+    /// `SQLITE_BUSY` and `SQLITE_LOCKED` (with their extended codes): the
+    /// lock was not had within the busy timeout, so the statement did not
+    /// run (a transaction it was in is rolled back). Several writers on a
+    /// loaded machine can wait that long, SQLite's busy handler being a
+    /// poll and not a queue: the operation is retried, and answered 503, not
+    /// 500, if it never gets the lock.
+    fn classify(e: &sqlx::Error) -> Transience {
+        let code = match e {
+            sqlx::Error::Database(db) => db.code().and_then(|c| c.parse::<i32>().ok()),
+            _ => None,
+        };
+        match code.map(|c| c & 0xff) {
+            Some(BUSY | LOCKED) => Transience::NotExecuted,
+            _ => Transience::Permanent,
+        }
     }
 
     fn is_clip_id_conflict(_: &sqlx::Error) -> bool {

@@ -314,7 +314,8 @@ async fn a_playback_keeps_the_clip_version_it_started_on() {
         e.watch(StreamParams::new(pinned("c1", c), req(30, Encoding::Json)).unwrap(), e.admit(None).unwrap(), None);
     assert!(weak.upgrade().is_some(), "alive while streamed although the caller dropped it");
     drop(sub);
-    // The playback notices at its next tick that nobody watches and ends.
+    // The playback notices at its next tick that nobody watches and ends (the
+    // clock is paused: this sleep jumps to that tick and takes no wall time).
     tokio::time::sleep(Duration::from_millis(100)).await;
     assert!(weak.upgrade().is_none(), "released once the stream ends");
 }

@@ -120,6 +120,7 @@ async fn broadcasts_end_when_deleted_or_idle_and_are_capped() {
     assert_eq!(e.broadcasts().create(spec).unwrap_err(), BroadcastError::TooMany { limit: 2 });
 
     let mut v = viewer(&e, &kept, Encoding::Protobuf, false);
+    // The time is the behaviour here: past the idle timeout (a paused clock: no wall time).
     tokio::time::sleep(Duration::from_millis(2500)).await;
     assert!(e.broadcasts().get(idle.id()).is_none(), "idle for 2 s: ended");
     assert!(e.broadcasts().get(kept.id()).is_some(), "watched: kept");
@@ -237,8 +238,10 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
         stamped.push(c);
         frame(&mut v1).await;
     }
-    // Another node, later: the definition, `created_at` and the stored controls.
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Another node, later (three ticks on): the definition, `created_at` and the stored controls.
+    for _ in 0..3 {
+        frame(&mut v1).await;
+    }
     let spec = b1.spec().clone();
     let b2 = e2.broadcasts().adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone()).unwrap();
     let mut v2 = viewer(&e2, &b2, Encoding::Json, false);
@@ -328,6 +331,7 @@ async fn a_broadcast_produces_every_tick_while_the_workers_are_busy() {
             let both = Arc::clone(&both);
             tokio::spawn(async move {
                 both.wait();
+                // The time is the behaviour here: a worker held without yielding.
                 std::thread::sleep(Duration::from_millis(300));
             })
         })

@@ -117,15 +117,18 @@ mod tests {
                 let due = start + Duration::from_millis(ms);
                 tokio::spawn(async move {
                     sleep_until(due).await;
-                    Instant::now().duration_since(due)
+                    Instant::now().checked_duration_since(due)
                 })
             })
             .collect();
         for (task, ms) in tasks.into_iter().zip(offsets) {
-            let late = task.await.unwrap();
             // Never early (the future checks the clock); late by the
-            // scheduler's wake-up only. Generous bound for a loaded CI box.
-            assert!(late < Duration::from_millis(20), "{ms} ms sleeper woke {late:?} late");
+            // scheduler's wake-up only, a latency checked in the slow runs
+            // (INBETWEEN_SLOW=1).
+            let late = task.await.unwrap().unwrap_or_else(|| panic!("{ms} ms sleeper woke early"));
+            if std::env::var("INBETWEEN_SLOW").is_ok_and(|v| v == "1") {
+                assert!(late < Duration::from_millis(20), "{ms} ms sleeper woke {late:?} late");
+            }
         }
         // A due instant in the past resolves at once.
         sleep_until(start).await;
