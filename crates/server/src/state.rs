@@ -66,6 +66,9 @@ pub struct Shared {
     pub arrivals: super::shed::Arrivals,
     /// Where every clip build runs (off the async workers, a few at once).
     pub builds: Arc<Builds>,
+    /// Where poses are evaluated, and what the node and each caller may
+    /// spend on them (`server::work`).
+    pub work: Arc<crate::work::Work>,
 }
 
 impl AppState {
