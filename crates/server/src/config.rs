@@ -302,7 +302,7 @@ settings! {
             "max_concurrent_builds", "max-concurrent-builds", "INBETWEEN_MAX_CONCURRENT_BUILDS", "N",
             shown "one per core",
             "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait";
-        max_request_work: u64 = 200_000_000 => positive -> u64,
+        max_request_work: u64 = 100_000_000 => positive -> u64,
             "max_request_work", "max-request-work", "INBETWEEN_MAX_REQUEST_WORK", "UNITS",
             "Work one request may cost, and one stream per second of playback, in work units (docs/api.md, \
              “Work and its price”; over it: 422 too_much_work)";
@@ -963,7 +963,7 @@ mod tests {
             ik_max_effectors: 16,
             ik_max_iterations: 1000,
             max_concurrent_builds: cores,
-            max_request_work: 200_000_000,
+            max_request_work: 100_000_000,
             node_work_per_sec: 0,
             caller_work_share: 0.5,
             work_threads: cores,

@@ -20,6 +20,7 @@ mod builds;
 mod connections;
 mod imports;
 mod viewers;
+mod work;
 
 use std::path::PathBuf;
 use std::sync::Arc;

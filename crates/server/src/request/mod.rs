@@ -44,9 +44,9 @@ mod stream;
 
 pub use body::parse_json;
 pub use broadcast::RawBroadcast;
-pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 #[cfg(test)]
 pub use cost::Estimate;
+pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use list::{Page, RawPage};
 pub use motion::{Composed, RawMotion};
 pub use raw::{

@@ -97,8 +97,8 @@ impl RawStream<'_> {
     ///
     /// # Errors
     /// As [`RawStream::check`], then `clip_not_found`, `fps_out_of_range`;
-    /// the cost model's `too_much_work`, `frame_too_large`,
-    /// `stream_rate_too_high`; `caller_work_limit`, `overloaded`; then the
+    /// the cost model's `frame_too_large`, `stream_rate_too_high`,
+    /// `too_much_work`; `caller_work_limit`, `overloaded`; then the
     /// stream rules (`speed_out_of_range`) and the subset's.
     pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Admitted, ApiError> {
         let request = self.check()?;
@@ -147,9 +147,9 @@ impl RawStream<'_> {
     /// As [`RawStream::open_motion`], but the caller's share and the caps.
     pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
         let (composed, request, frame) = self.composed(state, motion).await?;
+        check_stream(frame, request.fps, &state.config.limits, self.at)?;
         let per_sec = stream_work(price::motion_pose(&composed.motion), frame, request.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
-        check_stream(frame, request.fps, &state.config.limits, self.at)?;
         self.motion_stream(composed, request, state)
     }
 
@@ -196,7 +196,7 @@ impl RawStream<'_> {
     /// permit holding the charge.
     ///
     /// # Errors
-    /// `too_much_work`, `frame_too_large`, `stream_rate_too_high`,
+    /// `frame_too_large`, `stream_rate_too_high`, `too_much_work`,
     /// `caller_work_limit`, `overloaded`; the caps' refusal is the inner error.
     fn admit(
         &self,
@@ -206,9 +206,9 @@ impl RawStream<'_> {
         state: &AppState,
         caller: &Caller,
     ) -> Result<Result<StreamPermit, AdmitError>, ApiError> {
+        check_stream(frame, fps, &state.config.limits, self.at)?;
         let per_sec = stream_work(per_frame, frame, fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
-        check_stream(frame, fps, &state.config.limits, self.at)?;
         let ticket = state.work.charge(&caller.key(), per_sec)?;
         Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.holding(ticket)))
     }

@@ -269,9 +269,11 @@ async fn open(
     };
     let admitted = raw.open_motion(state, motion, caller).await?;
     let engine = &state.streams;
-    Ok(admitted.map(|Opening { params, permit }| {
-        if params.paused { engine.play(params, permit, lane) } else { engine.watch(params, permit, lane) }
-    }))
+    Ok(admitted.map(
+        |Opening { params, permit }| {
+            if params.paused { engine.play(params, permit, lane) } else { engine.watch(params, permit, lane) }
+        },
+    ))
 }
 
 /// Inbound messages are small controls; outbound messages are buffered up

@@ -28,7 +28,7 @@ const ANALYTIC: u64 = 20;
 /// Units per joint of the ancestry an analytic solve walks to model space.
 const ANALYTIC_PER_JOINT: u64 = 2;
 /// Units of one chain iteration, per joint on the chain and per effector.
-const CHAIN_STEP: u64 = 12;
+const CHAIN_STEP: u64 = 30;
 /// Bytes of an answer's size bound encoded per unit.
 const BYTES_PER_UNIT: u64 = 8;
 

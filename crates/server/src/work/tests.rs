@@ -48,8 +48,13 @@ fn chain_clip(n: usize, ik: Vec<anim::KeyedIkSpec>) -> Clip {
         playback: anim::Playback::Loop,
         ..Default::default()
     };
-    Clip::build_limited(&spec, u64::MAX, &anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() }, &std::sync::atomic::AtomicBool::new(false))
-        .unwrap()
+    Clip::build_limited(
+        &spec,
+        u64::MAX,
+        &anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() },
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .unwrap()
 }
 
 /// A motion of `layers` layers of `clip`, with request-time `ik`.
@@ -78,7 +83,14 @@ fn two_bone(n: usize) -> IkSpec {
 
 fn aim(n: usize) -> IkSpec {
     let target = Vec3::new(3.0, n as f32, 1.0);
-    IkSpec::Aim(AimSpec { joint: format!("j{}", n - 1), target, forward: None, up: None, up_direction: None, weight: None })
+    IkSpec::Aim(AimSpec {
+        joint: format!("j{}", n - 1),
+        target,
+        forward: None,
+        up: None,
+        up_direction: None,
+        weight: None,
+    })
 }
 
 #[test]
@@ -170,10 +182,16 @@ fn cases() -> Vec<Case> {
     let far = Vec3::new(1e4, 1e4, 0.0);
     for (n, iterations) in [(20, 100), (64, 100), (256, 50), (1024, 10)] {
         let ik = vec![chain(&[n - 1], far, iterations)];
-        cases.push(case(format!("chain IK, {n} joints, {iterations} iterations"), motion(chain_clip(n, Vec::new()), 1, ik)));
+        cases.push(case(
+            format!("chain IK, {n} joints, {iterations} iterations"),
+            motion(chain_clip(n, Vec::new()), 1, ik),
+        ));
     }
     let ik = vec![chain(&[63, 40, 20], far, 100)];
-    cases.push(case("chain IK, 64 joints, 3 effectors, 100 iterations".into(), motion(chain_clip(64, Vec::new()), 1, ik)));
+    cases.push(case(
+        "chain IK, 64 joints, 3 effectors, 100 iterations".into(),
+        motion(chain_clip(64, Vec::new()), 1, ik),
+    ));
     cases
 }
 
@@ -207,7 +225,10 @@ fn price_table() {
     if std::env::var_os("INBETWEEN_SLOW").is_none() || cfg!(debug_assertions) {
         return;
     }
-    println!("| work (one pose, model space, JSON) | price (units) | price × {} ns | measured | ratio | chain iterations run |", price::NS_PER_UNIT);
+    println!(
+        "| work (one pose, model space, JSON) | price (units) | price × {} ns | measured | ratio | chain iterations run |",
+        price::NS_PER_UNIT
+    );
     println!("|---|---:|---:|---:|---:|---:|");
     let mut worst: f64 = 1.0;
     for case in cases() {
