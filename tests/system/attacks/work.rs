@@ -29,9 +29,15 @@ fn chain_clip(joints: usize, ik: Value) -> String {
     .to_string()
 }
 
+/// `n` chain constraints over the whole chain, `iterations` at most each.
+fn chains(n: usize, iterations: u32) -> Value {
+    let one = json!({"kind": "chain", "effectors": [{"joint": "j4095", "target": [50, 50, 0]}],
+                     "max_iterations": iterations, "tolerance": 1e-9});
+    Value::Array(vec![one; n])
+}
+
 fn chain_ik(iterations: u32) -> Value {
-    json!([{"kind": "chain", "effectors": [{"joint": "j4095", "target": [50, 50, 0]}],
-            "max_iterations": iterations, "tolerance": 1e-9}])
+    chains(1, iterations)
 }
 
 /// The server's CPU time so far (user + system), from `/proc/PID/stat`.
@@ -49,7 +55,7 @@ async fn ik_chains_over_4096_joints_are_refused_by_their_price() {
     let mut target = target(&[]).await;
     let http = crate::common::http_client();
     let id = target.server.create(&http, &chain_clip(4096, json!([]))).await;
-    let body = json!({"motion": {"layers": [{"clip": id}], "ik": chain_ik(1000)}, "time": 0.5}).to_string();
+    let body = json!({"motion": {"layers": [{"clip": id}], "ik": chains(4, 1000)}, "time": 0.5}).to_string();
     let probes = target.probes().await;
     let until = Instant::now() + Duration::from_secs(2);
     let attacker = |http: reqwest::Client, url: String, body: String| async move {
@@ -139,7 +145,7 @@ async fn four_heavy_pose_requests_share_the_node_and_stop_when_abandoned() {
 async fn refused_heavy_stream_opens_cost_less_than_a_pose() {
     let mut target = target(&[]).await;
     let http = crate::common::http_client();
-    let heavy = target.server.create(&http, &chain_clip(4096, chain_ik(1000))).await;
+    let heavy = target.server.create(&http, &chain_clip(4096, chains(4, 1000))).await;
     let plain = target.server.create(&http, &chain_clip(4096, json!([]))).await;
     // What one pose of the plain clip costs the server.
     let poses = 64;

@@ -24,11 +24,11 @@ pub const NS_PER_UNIT: u64 = 10;
 /// of the conversion to the answer's space.
 const JOINT: u64 = 1;
 /// Units of one analytic solve (two-bone, aim), besides its ancestry.
-const ANALYTIC: u64 = 20;
+const ANALYTIC: u64 = 4;
 /// Units per joint of the ancestry an analytic solve walks to model space.
-const ANALYTIC_PER_JOINT: u64 = 2;
+const ANALYTIC_PER_JOINT: u64 = 1;
 /// Units of one chain iteration, per joint on the chain and per effector.
-const CHAIN_STEP: u64 = 30;
+const CHAIN_STEP: u64 = 15;
 /// Bytes of an answer's size bound encoded per unit.
 const BYTES_PER_UNIT: u64 = 8;
 
