@@ -291,6 +291,12 @@ impl Clip {
         self.ik.as_ref().map_or(0, KeyedIk::len)
     }
 
+    /// The IK constraints each sample solves, in order (keyed targets not
+    /// filled in): their joints, effectors and iteration budgets.
+    pub fn ik_constraints(&self) -> &[super::ik::IkConstraint] {
+        self.ik.as_ref().map_or(&[], KeyedIk::constraints)
+    }
+
     /// The clip's name.
     pub fn name(&self) -> &str {
         &self.name

@@ -448,6 +448,21 @@ settings! {
             "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait",
             doc "Clip builds (uploads, imports, cache misses) running at once, each on a blocking thread, never on the \
              async workers";
+        max_request_work: u64 = 100_000_000 => positive -> u64,
+            "max_request_work", "max-request-work", "INBETWEEN_MAX_REQUEST_WORK", "UNITS",
+            "Work one request may cost, and one stream per second of playback, in work units (docs/api.md, \
+             “Work and its price”; over it: 422 too_much_work)";
+        node_work_per_sec: u64 = 0 => as_given -> u64,
+            "node_work_per_sec", "node-work-per-sec", "INBETWEEN_NODE_WORK_PER_SEC", "UNITS",
+            "Work units per second this node can do, all work threads together; 0 measures it at startup (logged). \
+             Work held over it is refused 503 overloaded";
+        caller_work_share: f64 = 0.5 => fraction -> f64,
+            "caller_work_share", "caller-work-share", "INBETWEEN_CALLER_WORK_SHARE", "FRACTION",
+            "Share of the node's work capacity one caller's requests and streams may hold at once (over it: 429 \
+             caller_work_limit)";
+        work_threads: usize = cores() => positive -> usize,
+            "work_threads", "work-threads", "INBETWEEN_WORK_THREADS", "N", shown "one per core",
+            "Threads that evaluate poses, solve IK and encode answers; more work waits for them in order";
         max_streams: usize = 1024 => positive -> usize,
             "max_streams", "max-streams", "INBETWEEN_MAX_STREAMS", "N",
             "Concurrent streams (gRPC and WebSocket together)",
@@ -1131,6 +1146,10 @@ mod tests {
             ik_max_effectors: 16,
             ik_max_iterations: 1000,
             max_concurrent_builds: cores,
+            max_request_work: 100_000_000,
+            node_work_per_sec: 0,
+            caller_work_share: 0.5,
+            work_threads: cores,
             max_streams: 1024,
             max_streams_per_client: 64,
             max_streams_per_token: 64,

@@ -97,6 +97,16 @@ pub enum ApiError {
          retry after {retry_after} s"
     )]
     ClientInFlight { limit: usize, retry_after: u64 },
+    /// The caller already holds its share of the node's work
+    /// (`caller_work_share`; docs/api.md, “Work and its price”).
+    #[error(
+        "this caller holds {held} work units and asks for {units} more; its share is {share} (caller_work_share, \
+         --caller-work-share); retry after {retry_after} s"
+    )]
+    CallerWorkLimit { held: u64, units: u64, share: u64, retry_after: u64 },
+    /// The node's work capacity is taken (`node_work_per_sec`).
+    #[error("the server's work capacity is taken; retry after {retry_after} s")]
+    WorkOverloaded { retry_after: u64 },
     #[error("service unavailable")]
     Unavailable(#[source] Option<anyhow::Error>),
     /// A write without a precondition that lost the race to other writes of
@@ -160,8 +170,8 @@ impl ApiError {
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Timeout { .. } | Unavailable(_) | WriteRace { .. } => StatusCode::SERVICE_UNAVAILABLE,
             BodyTimeout { .. } | UploadTooSlow { .. } => StatusCode::REQUEST_TIMEOUT,
-            Overloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
-            RateLimited { .. } | ClientInFlight { .. } => StatusCode::TOO_MANY_REQUESTS,
+            Overloaded { .. } | WorkOverloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            RateLimited { .. } | ClientInFlight { .. } | CallerWorkLimit { .. } => StatusCode::TOO_MANY_REQUESTS,
             Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -190,7 +200,8 @@ impl ApiError {
             Timeout { .. } => "request_timeout",
             Unavailable(_) | WriteRace { .. } => "unavailable",
             BodyTimeout { .. } | UploadTooSlow { .. } => "body_timeout",
-            Overloaded { .. } => "overloaded",
+            Overloaded { .. } | WorkOverloaded { .. } => "overloaded",
+            CallerWorkLimit { .. } => "caller_work_limit",
             RateLimited { .. } => "rate_limited",
             ClientInFlight { .. } => "client_in_flight_limit",
             Internal(_) => "internal",
@@ -322,7 +333,9 @@ impl IntoResponse for ApiError {
         if let ApiError::Overloaded { retry_after }
         | ApiError::RateLimited { retry_after }
         | ApiError::ClientInFlight { retry_after, .. }
-        | ApiError::WriteRace { retry_after, .. } = &self
+        | ApiError::WriteRace { retry_after, .. }
+        | ApiError::CallerWorkLimit { retry_after, .. }
+        | ApiError::WorkOverloaded { retry_after } = &self
         {
             response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after));
         }
@@ -371,7 +384,11 @@ impl ApiError {
             Timeout { .. } => Code::DeadlineExceeded,
             Unavailable(_) | WriteRace { .. } => Code::Unavailable,
             BodyTimeout { .. } | UploadTooSlow { .. } => Code::DeadlineExceeded,
-            Overloaded { .. } | RateLimited { .. } | ClientInFlight { .. } => Code::ResourceExhausted,
+            Overloaded { .. } | RateLimited { .. } | ClientInFlight { .. } | CallerWorkLimit { .. } => {
+                Code::ResourceExhausted
+            }
+            // The node, not the caller, is short: another node may serve it.
+            WorkOverloaded { .. } => Code::Unavailable,
             Internal(_) => Code::Internal,
         }
     }

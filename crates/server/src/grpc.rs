@@ -35,6 +35,7 @@ use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
 use crate::store::{ClipMeta, is_clip_id};
 use crate::stream::{self, Control, ControlError, Engine, StreamParams, WireFrame};
+use crate::work::{Cancel, Ticket};
 use anim::{SampleOptions, Sampler};
 use formats::import::warning::in_document;
 use formats::wire::json::{ClipDoc, ParameterValues, parse_clip_doc};
@@ -149,8 +150,8 @@ impl GrpcService {
                 raw.open_motion(&self.state, motion, caller).await?
             }
         };
-        let Opening { params, permit } = opening;
-        Ok((params, permit.map_err(ApiError::from)?))
+        let Opening { params, permit } = opening.map_err(ApiError::from)?;
+        Ok((params, permit))
     }
 }
 
@@ -158,7 +159,14 @@ impl GrpcService {
 const STREAM_BATCH_BYTES: u64 = 1024 * 1024;
 
 /// The poses `range` of `sampling` as one `PoseBatch`, names if `names`.
-fn batch(cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>, names: bool) -> pb::PoseBatch {
+/// Stops early (fewer poses) once `cancel` is raised.
+fn batch(
+    cached: &CachedClip,
+    sampling: &Sampling,
+    range: std::ops::Range<usize>,
+    names: bool,
+    cancel: &Cancel,
+) -> pb::PoseBatch {
     let (mut sampler, mut matrices) = (Sampler::new(), Vec::new());
     let (options, format) = (sampling.options, sampling.format);
     let layout = cached.clip.parameters();
@@ -168,18 +176,21 @@ fn batch(cached: &CachedClip, sampling: &Sampling, range: std::ops::Range<usize>
         parameter_widths: if names { layout.widths().to_vec() } else { Vec::new() },
         poses: sampling.times[range]
             .iter()
+            .take_while(|_| cancel.proceed())
             .map(|&t| pose(cached, t, &options, format, false, &mut sampler, &mut matrices))
             .collect(),
     }
 }
 
 /// A `SampleStream` answer, evaluated a message at a time: the next
-/// message is evaluated (on the blocking pool) only when tonic asks for it,
+/// message is evaluated (on the work pool) only when tonic asks for it,
 /// which HTTP/2 flow control holds back while the client does not read; a
 /// client that goes away (or a cancelled call) drops the stream and the
 /// rest of the work with it (counted as abandoned).
 struct Batches {
     state: AppState,
+    /// The answer's price, charged until it is sent or dropped.
+    _ticket: Ticket,
     job: Arc<(Sampling, Arc<CachedClip>)>,
     per_batch: usize,
     next: usize,
@@ -187,10 +198,10 @@ struct Batches {
 }
 
 impl Batches {
-    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>) -> Batches {
+    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>, ticket: Ticket) -> Batches {
         let per_pose = sampling.answer_bytes / sampling.times.len().max(1) as u64;
         let per_batch = (STREAM_BATCH_BYTES / per_pose.max(1)).max(1) as usize;
-        Batches { state, job: Arc::new((sampling, cached)), per_batch, next: 0, done: false }
+        Batches { state, _ticket: ticket, job: Arc::new((sampling, cached)), per_batch, next: 0, done: false }
     }
 
     /// The next message, `None` after the last. An empty request is one
@@ -202,11 +213,16 @@ impl Batches {
         let n = self.job.0.times.len();
         let range = self.next..(self.next + self.per_batch).min(n);
         let job = Arc::clone(&self.job);
-        let built = tokio::task::spawn_blocking(move || {
-            let names = range.start == 0;
-            batch(&job.1, &job.0, range, names)
-        })
-        .await;
+        let deadline = self.state.config.limits.request_timeout;
+        let built = self
+            .state
+            .work
+            .pool()
+            .run(deadline, move |cancel| {
+                let names = range.start == 0;
+                batch(&job.1, &job.0, range, names, cancel)
+            })
+            .await;
         Some(match built {
             Ok(batch) => {
                 self.state.counters.poses.increment(batch.poses.len() as u64);
@@ -216,7 +232,7 @@ impl Batches {
             }
             Err(e) => {
                 self.done = true;
-                Err(Status::from(crate::metrics::join_failed(e)))
+                Err(Status::from(e))
             }
         })
     }
@@ -357,7 +373,7 @@ fn refused(e: &ControlError) -> Status {
 #[tonic::async_trait]
 impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
-        self.read(&request)?;
+        let caller = self.read(&request)?;
         let req = request.into_inner();
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
@@ -367,39 +383,39 @@ impl Animation for GrpcService {
         };
         let (sample, cached) = raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?;
         let (t, options, format) = (sample.t, sample.options, sample.format);
-        let pose = pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
+        let evaluate = move |_: &Cancel| pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
+        let pose = self.state.work.spend(&caller.key(), sample.work, evaluate).await?;
         self.state.counters.poses.increment(1);
         Ok(Response::new(pose))
     }
 
     async fn sample_motion(&self, request: Request<pb::SampleMotionRequest>) -> Result<Response<pb::Pose>, Status> {
-        self.read(&request)?;
-        Ok(Response::new(super::grpc_motion::sample(&self.state, request.into_inner()).await?))
+        let caller = self.read(&request)?;
+        Ok(Response::new(super::grpc_motion::sample(&self.state, &caller, request.into_inner()).await?))
     }
 
     async fn sample_motion_batch(
         &self,
         request: Request<pb::SampleMotionBatchRequest>,
     ) -> Result<Response<pb::PoseBatch>, Status> {
-        self.read(&request)?;
-        Ok(Response::new(super::grpc_motion::sample_batch(&self.state, request.into_inner()).await?))
+        let caller = self.read(&request)?;
+        Ok(Response::new(super::grpc_motion::sample_batch(&self.state, &caller, request.into_inner()).await?))
     }
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
-        self.read(&request)?;
+        let caller = self.read(&request)?;
         let (sampling, cached) = self.sampling(&request.into_inner()).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
             let (bytes, limit) = (sampling.answer_bytes, MAX_UNARY_ANSWER_BYTES);
             return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "SampleStream" }.into());
         }
-        let n = sampling.times.len();
-        let blocking = sampling.is_blocking();
-        let build = move || batch(&cached, &sampling, 0..n, true);
-        let batch = if blocking {
-            tokio::task::spawn_blocking(build).await.map_err(|e| Status::from(crate::metrics::join_failed(e)))?
-        } else {
-            build()
-        };
+        let (n, work) = (sampling.times.len(), sampling.work);
+        let build = move |cancel: &Cancel| batch(&cached, &sampling, 0..n, true, cancel);
+        let batch = self.state.work.spend(&caller.key(), work, build).await?;
+        if batch.poses.len() < n {
+            // Cancelled: the call is gone, nobody reads this.
+            return Err(Status::cancelled("the call was cancelled"));
+        }
         self.state.counters.poses.increment(n as u64);
         Ok(Response::new(batch))
     }
@@ -410,9 +426,10 @@ impl Animation for GrpcService {
         &self,
         request: Request<pb::SampleBatchRequest>,
     ) -> Result<Response<Self::SampleStreamStream>, Status> {
-        self.read(&request)?;
+        let caller = self.read(&request)?;
         let (sampling, cached) = self.sampling(&request.into_inner()).await?;
-        let batches = Batches::new(self.state.clone(), sampling, cached);
+        let ticket = self.state.work.charge(&caller.key(), sampling.work)?;
+        let batches = Batches::new(self.state.clone(), sampling, cached, ticket);
         let stream = futures_util::stream::unfold(batches, |mut batches| async move {
             let next = batches.next().await?;
             Some((next, batches))

@@ -2,18 +2,21 @@
 //! `SampleMotionBatch`, the gRPC mirror of `POST /v1/poses` and
 //! `/v1/samples`. The motion message is converted in `wire::proto`, checked
 //! and priced by `server::request` (`RawPose`, `RawBatch`, `RawMotion`) with
-//! the same codes as REST, and each pose is packed from the motion
+//! the same codes as REST, charged to the caller and run on the work pool
+//! (`server::work`), and each pose is packed from the motion
 //! sampler's buffers with its joint subset, root motion and IK reports (the
 //! clips' constraints, then the request's `motion.ik`).
 
 use glam::Mat4;
 
+use crate::auth::Caller;
 use crate::error::ApiError;
 use crate::request::{
     Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire,
     in_batch_message, in_body, in_pose_body,
 };
 use crate::state::AppState;
+use crate::work::Cancel;
 use anim::motion::MotionOptions;
 use anim::{MotionSampler, Space};
 use std::sync::Arc;
@@ -67,16 +70,18 @@ pub async fn crossfade_target(
 ///
 /// # Errors
 /// As `POST /v1/poses`, with the same codes.
-pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb::Pose, ApiError> {
+pub async fn sample(state: &AppState, caller: &Caller, req: pb::SampleMotionRequest) -> Result<pb::Pose, ApiError> {
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
             .check()?;
     let composed = compose(state, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
-    composed.cost(1, checked.format, Wire::Protobuf).check(&state.config.limits, Field::Time, in_pose_body)?;
-    let mut packer = Packer::new(&composed, checked.options.space, checked.format);
+    let cost = composed.cost(1, checked.format, Wire::Protobuf);
+    cost.check(&state.config.limits, Field::Time, in_pose_body)?;
+    let pack = move |_: &Cancel| Packer::new(&composed, checked.options.space, checked.format).pose(checked.t, true);
+    let pose = state.work.spend(&caller.key(), cost.work(), pack).await?;
     state.counters.poses.increment(1);
-    Ok(packer.pose(checked.t, true))
+    Ok(pose)
 }
 
 /// `SampleMotionBatch`: many poses, the names once.
@@ -84,7 +89,11 @@ pub async fn sample(state: &AppState, req: pb::SampleMotionRequest) -> Result<pb
 /// # Errors
 /// As `POST /v1/samples`, and `use_sample_stream`-like refusal of an answer
 /// over the unary limit (REST's `/v1/samples` sends any size).
-pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -> Result<pb::PoseBatch, ApiError> {
+pub async fn sample_batch(
+    state: &AppState,
+    caller: &Caller,
+    req: pb::SampleMotionBatchRequest,
+) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
     let (times, range) = match &req.when {
         Some(When::Times(t)) => (Some(t), None),
@@ -104,17 +113,14 @@ pub async fn sample_batch(state: &AppState, req: pb::SampleMotionBatchRequest) -
         return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });
     }
     let (space, format) = (sampling.options.space, sampling.format);
-    let pack = move || {
+    let pack = move |cancel: &Cancel| {
         let mut packer = Packer::new(&composed, space, format);
-        let poses: Vec<pb::Pose> = sampling.times.iter().map(|&t| packer.pose(t, false)).collect();
+        let times = sampling.times.iter().take_while(|_| cancel.proceed());
+        let poses: Vec<pb::Pose> = times.map(|&t| packer.pose(t, false)).collect();
         let (parameter_names, parameter_widths) = packer.parameter_names();
         pb::PoseBatch { joint_names: packer.names(), poses, parameter_names, parameter_widths }
     };
-    let batch = if n > crate::request::BLOCKING_POSES {
-        tokio::task::spawn_blocking(pack).await.map_err(crate::metrics::join_failed)?
-    } else {
-        pack()
-    };
+    let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
     state.counters.poses.increment(n as u64);
     Ok(batch)
 }

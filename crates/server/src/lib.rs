@@ -11,6 +11,8 @@
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `motion_cache` built motions over them; `cache_budget` the one
 //! byte budget those caches share; `builds` where clips are built (blocking threads, a few at once);
+//! `work` the price of work, the node's capacity and the pool where poses,
+//! IK and answers are worked out;
 //! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
 //! Prometheus; `listen` the accept loop (hyper, with a header-read timeout);
 //! `request` the sampling and stream rules both transports share, with their
@@ -73,6 +75,7 @@ pub(crate) mod spool;
 pub(crate) mod state;
 pub(crate) mod tls;
 pub mod tokens;
+pub(crate) mod work;
 
 pub mod store;
 pub mod stream;
@@ -146,6 +149,7 @@ impl Application {
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
         let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
+        let work = Arc::new(work::Work::new(&config.limits));
         // The recorder first: handles registered before it would count nothing.
         let prometheus = metrics::handle();
         let counters = metrics::Counters::new();
@@ -168,6 +172,7 @@ impl Application {
             streams,
             builds,
             patches: sync::Turns::default(),
+            work,
         });
         // Broadcasts are kept in the store: resumed after a restart, shared by every node.
         let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };

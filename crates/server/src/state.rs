@@ -71,6 +71,9 @@ pub struct Shared {
     pub builds: Arc<Builds>,
     /// Patches of one clip take turns on this node (`rest::patch`).
     pub patches: crate::sync::Turns,
+    /// Where poses are evaluated, and what the node and each caller may
+    /// spend on them (`server::work`).
+    pub work: Arc<crate::work::Work>,
 }
 
 impl AppState {

@@ -119,6 +119,7 @@ async fn a_client_that_hangs_up_stops_the_evaluation() {
             c.limits.max_poses = POSES;
             c.limits.max_joint_poses = usize::MAX;
             c.limits.max_answer_bytes = usize::MAX;
+            c.limits.max_request_work = u64::MAX;
         })
         .start()
         .await;

@@ -28,6 +28,7 @@ mod security;
 mod shared_parts;
 mod strict;
 mod warnings;
+mod work;
 
 use serde_json::Value;
 

@@ -66,6 +66,8 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::RateLimited { retry_after: 1 },
         ApiError::AnswerTooLargeForUnary { bytes: 20, limit: 10, stream: "SampleStream" },
         ApiError::ClientInFlight { limit: 32, retry_after: 1 },
+        ApiError::CallerWorkLimit { held: 10, units: 5, share: 12, retry_after: 1 },
+        ApiError::WorkOverloaded { retry_after: 1 },
         ApiError::ClipNotFoundAt { at: At::Pointer("/motion/layers/1/clip".into()), detail: "x".into() },
         ApiError::Unavailable(None),
         ApiError::WriteRace { attempts: 9, retry_after: 1 },
@@ -101,6 +103,8 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::TooManyBroadcasts(_) => 22,
         ApiError::WriteRace { .. } => 23,
         ApiError::UploadTooSlow { .. } => 24,
+        ApiError::CallerWorkLimit { .. } => 25,
+        ApiError::WorkOverloaded { .. } => 26,
     }
 }
 
@@ -108,7 +112,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 25, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 27, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));

@@ -21,6 +21,7 @@ mod connections;
 mod imports;
 mod memory;
 mod viewers;
+mod work;
 
 use std::path::PathBuf;
 use std::sync::Arc;

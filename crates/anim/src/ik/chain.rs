@@ -254,7 +254,11 @@ impl ChainSolver {
         let mut energy = energy_at(&self.targets, &self.model);
         let mut damping = Damping { mu: DAMPING_START, nu: 2.0 };
         let mut iterations = 0;
-        while iterations < max_iterations && energy.sqrt() > tolerance && !self.slots.is_empty() {
+        while iterations < max_iterations
+            && energy.sqrt() > tolerance
+            && !self.slots.is_empty()
+            && !super::stop::stopped()
+        {
             iterations += 1;
             let scale = self.linearise();
             if scale <= 0.0 {

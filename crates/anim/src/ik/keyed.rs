@@ -138,6 +138,12 @@ impl KeyedIk {
         self.constraints.len()
     }
 
+    /// The constraints as built (keyed targets still unset): what a solve
+    /// walks and iterates, for pricing it before it runs.
+    pub(crate) fn constraints(&self) -> &[IkConstraint] {
+        &self.constraints
+    }
+
     /// Bytes held on the heap (curves, timelines, constraint lists), roughly.
     pub(crate) fn heap_bytes(&self) -> usize {
         let curve = |c: &KeyedCurve| {

@@ -20,7 +20,8 @@
 //! `error` why one is refused; `keyed` IK keyed in clips (target and
 //! weight tracks); `model` model space along one ancestry and
 //! the shared rotation tools; `two_bone`, `aim`, `chain` the three solvers;
-//! `linalg` the chain's small `f64` systems.
+//! `linalg` the chain's small `f64` systems; `stop` the flag that ends
+//! chain solves early when their caller has given up.
 
 mod aim;
 mod chain;
@@ -31,6 +32,7 @@ mod linalg;
 mod model;
 mod report;
 mod spec;
+mod stop;
 mod two_bone;
 
 pub use self::aim::AIM_TOLERANCE;
@@ -44,6 +46,7 @@ pub(crate) use self::keyed::KeyedIk;
 pub use self::keyed::KeyedIkState;
 pub use self::report::IkReport;
 pub use self::spec::{AimSpec, ChainSpec, EffectorSpec, IkSpec, LimitSpec, TwoBoneSpec, build_constraints};
+pub use self::stop::stoppable;
 pub use self::two_bone::TWO_BONE_TOLERANCE;
 
 use self::chain::{ChainSolver, WarmChain};

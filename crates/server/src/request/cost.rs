@@ -1,6 +1,7 @@
 //! The cost model: the encoded size of an answer that produces poses, and
-//! the evaluation work it takes, worked out from the clip and the request
-//! before anything is evaluated, and checked against the limits.
+//! the work it takes in work units (`work::price`: evaluation, IK,
+//! encoding), worked out from the clip and the request before anything is
+//! evaluated, and checked against the limits.
 //!
 //! The sizes are upper bounds, not guesses: every number is counted at the
 //! longest text it can print as (an `f32` at [`F32_TEXT`] bytes, an `f64`
@@ -13,6 +14,7 @@ use super::raw::{Field, Format, Locate, unprocessable};
 use crate::config::Limits;
 use crate::error::ApiError;
 use crate::stream::{Encoding, MAX_EVENTS_PER_FRAME};
+use crate::work::price;
 use anim::Clip;
 
 /// The longest JSON text of a finite `f32` (`-1.17549435e-38`, with room).
@@ -180,23 +182,44 @@ fn proto_pose(clip: &Clip, format: Format) -> u64 {
 pub struct Cost {
     pub poses: u64,
     pub joints: u64,
+    /// Work units of one pose's evaluation (`work::price`).
+    pub per_pose: u64,
     /// The encoded answer's upper bound.
     pub bytes: u64,
 }
 
 impl Cost {
+    /// The request's whole price in work units: its poses, then the
+    /// encoding of its answer.
+    pub fn work(&self) -> u64 {
+        self.poses.saturating_mul(self.per_pose).saturating_add(price::encoding(self.bytes))
+    }
+
     /// # Errors
-    /// `too_many_poses` over `max_joint_poses` (the work), then
-    /// `answer_too_large` over `max_answer_bytes`; both at `field`, the
+    /// `too_many_poses` over `max_joint_poses` (poses × joints), then
+    /// `too_much_work` over `max_request_work` (the price), then
+    /// `answer_too_large` over `max_answer_bytes`; all at `field`, the
     /// request's times or range.
     pub fn check(&self, limits: &Limits, field: Field, at: Locate) -> Result<(), ApiError> {
-        let work = self.poses.saturating_mul(self.joints);
-        if work > limits.max_joint_poses as u64 {
+        let joint_poses = self.poses.saturating_mul(self.joints);
+        if joint_poses > limits.max_joint_poses as u64 {
             let detail = format!(
-                "{} poses × {} joints = {work} joint poses; the limit (max_joint_poses, --max-joint-poses) is {}",
+                "{} poses × {} joints = {joint_poses} joint poses; the limit (max_joint_poses, --max-joint-poses) is {}",
                 self.poses, self.joints, limits.max_joint_poses
             );
             return Err(unprocessable("too_many_poses", field, at, detail));
+        }
+        let work = self.work();
+        if work > limits.max_request_work {
+            let detail = format!(
+                "this request costs {work} work units ({} poses × {} units, and {} to encode the answer); the limit \
+                 (max_request_work, --max-request-work) is {}",
+                self.poses,
+                self.per_pose,
+                price::encoding(self.bytes),
+                limits.max_request_work
+            );
+            return Err(unprocessable("too_much_work", field, at, detail));
         }
         if self.bytes > limits.max_answer_bytes as u64 {
             let detail = format!(
@@ -207,6 +230,28 @@ impl Cost {
         }
         Ok(())
     }
+}
+
+/// The work of one second of a stream: `fps` frames of `per_frame` units
+/// of evaluation, each encoded at most `frame_bytes` long.
+pub fn stream_work(per_frame: u64, frame_bytes: u64, fps: u32) -> u64 {
+    per_frame.saturating_add(price::encoding(frame_bytes)).saturating_mul(u64::from(fps))
+}
+
+/// Checks a stream's price per second of playback.
+///
+/// # Errors
+/// `too_much_work` over `max_request_work`, at `fps`.
+pub fn check_stream_work(per_sec: u64, limits: &Limits, at: Locate) -> Result<(), ApiError> {
+    if per_sec > limits.max_request_work {
+        let detail = format!(
+            "this stream costs {per_sec} work units per second of playback; the limit (max_request_work, \
+             --max-request-work) is {}",
+            limits.max_request_work
+        );
+        return Err(unprocessable("too_much_work", Field::Fps, at, detail));
+    }
+    Ok(())
 }
 
 /// Checks a stream's frame estimate and its rate at `fps`.

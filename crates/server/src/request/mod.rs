@@ -18,7 +18,8 @@
 //!   `unknown_parameter` (a subset's name the clip lacks);
 //!   and the cost model's (`cost`, checked once the clip is known, before
 //!   anything is evaluated): `too_many_poses` (over `max_joint_poses`),
-//!   `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
+//!   `too_much_work` (the price over `max_request_work`, for a stream per
+//!   second), `answer_too_large`, `frame_too_large`, `stream_rate_too_high`.
 //!
 //! Composed requests (`motion`, docs/motion.md) look up every layer's clip, build
 //! the motion (its refusals pointed at `/motion/…`) and price the answer the
@@ -43,6 +44,8 @@ mod stream;
 
 pub use body::parse_json;
 pub use broadcast::RawBroadcast;
+#[cfg(test)]
+pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use list::{Page, RawPage};
 pub use motion::{Composed, RawMotion};
@@ -50,7 +53,7 @@ pub use raw::{
     Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,
 };
-pub use sample::{BLOCKING_POSES, RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
+pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{Opening, RawStream};
 
 #[cfg(test)]

@@ -50,7 +50,7 @@ impl Composed {
     }
 
     /// What `poses` poses of this motion cost, sent as `format` over `wire`:
-    /// work counts every layer's joints; the size bound is the first clip's
+    /// work counts every layer's joints and IK and the motion's IK; the size bound is the first clip's
     /// (a subset only shrinks it) plus the root motion.
     pub fn cost(&self, poses: u64, format: Format, wire: Wire) -> Cost {
         let first = self.motion.first_clip().clip();
@@ -63,7 +63,8 @@ impl Composed {
         let more_reports = self.motion.ik_report_count() - first.ik_count();
         estimate.per_pose += super::cost::ik_reports(more_reports as u64, wire) + 8;
         let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
-        Cost { poses, joints, bytes: estimate.total(poses) }
+        let per_pose = crate::work::price::motion_pose(&self.motion);
+        Cost { poses, joints, per_pose, bytes: estimate.total(poses) }
     }
 }
 

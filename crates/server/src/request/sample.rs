@@ -12,12 +12,9 @@ use crate::cache::CachedClip;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
+use crate::work::price;
 use anim::{Clip, SampleOptions, Sampler, frame_count, frame_times};
 use formats::wire::proto::pb;
-
-/// Sample requests with more poses than this are evaluated on the blocking
-/// pool, so a big batch does not hold up the async workers.
-pub const BLOCKING_POSES: usize = 256;
 
 /// The frame rates of a `{start, end, fps}` range: a stream's (docs/api.md).
 pub const FPS_RANGE: RangeInclusive<f64> = 1.0..=MAX_FPS as f64;
@@ -74,6 +71,8 @@ pub struct PoseRequest {
     pub t: f64,
     pub options: SampleOptions,
     pub format: Format,
+    /// Its price in work units, once bound to a clip (0 before).
+    pub work: u64,
 }
 
 impl RawPose<'_> {
@@ -84,7 +83,7 @@ impl RawPose<'_> {
         let t = finite(t, Field::Time, self.at)?;
         let options = self.modes.check(self.at)?;
         let format = Format::decode(self.format, self.at)?;
-        Ok(PoseRequest { t, options, format })
+        Ok(PoseRequest { t, options, format, work: 0 })
     }
 
     /// Checks the request, then binds it to the clip `id` at its current
@@ -102,9 +101,10 @@ impl RawPose<'_> {
         let request = self.check()?;
         let cached = clip_for(state, id, request.format, self.at).await?;
         let estimate = Estimate::pose(&cached.clip, &cached.meta.id, request.format, wire);
-        let cost = Cost { poses: 1, joints: cached.clip.joint_count() as u64, bytes: estimate.total(1) };
+        let (joints, per_pose) = (cached.clip.joint_count() as u64, price::clip_pose(&cached.clip));
+        let cost = Cost { poses: 1, joints, per_pose, bytes: estimate.total(1) };
         cost.check(&state.config.limits, Field::Time, self.at)?;
-        Ok((request, cached))
+        Ok((PoseRequest { work: cost.work(), ..request }, cached))
     }
 }
 
@@ -130,14 +130,11 @@ pub struct Sampling {
     pub format: Format,
     /// The answer's size bound, once bound to a clip (0 before).
     pub answer_bytes: u64,
+    /// Its price in work units, once bound to a clip (0 before).
+    pub work: u64,
 }
 
 impl Sampling {
-    /// Whether to evaluate it on the blocking pool.
-    pub fn is_blocking(&self) -> bool {
-        self.times.len() > BLOCKING_POSES
-    }
-
     /// Whether its answer is big enough to be streamed in pieces (chunked
     /// REST, `SampleStream`) rather than built whole.
     pub fn is_large(&self) -> bool {
@@ -179,7 +176,7 @@ impl RawBatch<'_> {
         let options = self.modes.check(self.at)?;
         let format = Format::decode(self.format, self.at)?;
         let times = self.times(max_poses)?;
-        Ok(Sampling { times, options, format, answer_bytes: 0 })
+        Ok(Sampling { times, options, format, answer_bytes: 0, work: 0 })
     }
 
     /// Checks the request against the configured pose limit, then binds it to
@@ -199,10 +196,12 @@ impl RawBatch<'_> {
         let cached = clip_for(state, id, sampling.format, self.at).await?;
         let estimate = Estimate::batch(&cached.clip, &cached.meta.id, sampling.format, wire);
         let poses = sampling.times.len() as u64;
-        let cost = Cost { poses, joints: cached.clip.joint_count() as u64, bytes: estimate.total(poses) };
+        let (joints, per_pose) = (cached.clip.joint_count() as u64, price::clip_pose(&cached.clip));
+        let cost = Cost { poses, joints, per_pose, bytes: estimate.total(poses) };
         let field = if self.times.is_some() { Field::Times } else { Field::When };
         cost.check(&state.config.limits, field, self.at)?;
         sampling.answer_bytes = cost.bytes;
+        sampling.work = cost.work();
         Ok((sampling, cached))
     }
 

@@ -1,5 +1,6 @@
 //! Opening a stream (the WebSocket `GET …/stream`, `StreamFrames`, `Play`):
-//! the request checked, bound to the clip at its current version, and
+//! the request checked, bound to the clip at its current version, priced
+//! per second of playback and charged to its caller (`server::work`), and
 //! admitted by the stream caps.
 //!
 //! The stream rules themselves (docs/api.md: the fps range, a finite start, the
@@ -8,13 +9,14 @@
 
 use std::sync::Arc;
 
-use super::cost::{Estimate, check_stream};
-use super::motion::{ROOT_MOTION_BYTES, RawMotion};
+use super::cost::{Estimate, check_stream, check_stream_work, stream_work};
+use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
 use crate::auth::Caller;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{AdmitError, Encoding, MAX_FPS, ParamError, StreamParams, StreamPermit, StreamRequest};
+use crate::work::price;
 
 /// The frame rate of a stream that names none (the WebSocket's default;
 /// gRPC's `fps` is always given, 0 included).
@@ -44,14 +46,18 @@ pub struct RawStream<'a> {
 }
 
 /// A stream ready to start: its parameters, bound to the clip version it
-/// plays, and the permit the stream caps gave it — or why they did not,
-/// which each transport reports its own way (gRPC `RESOURCE_EXHAUSTED`, the
-/// WebSocket a close frame after the upgrade).
+/// plays, and the permit the stream caps gave it (holding the stream's
+/// price per second, charged to its caller).
 #[derive(Debug)]
 pub struct Opening {
     pub params: StreamParams,
-    pub permit: Result<StreamPermit, AdmitError>,
+    pub permit: StreamPermit,
 }
+
+/// An opening, or why the stream caps refused it, which each transport
+/// reports its own way (gRPC `RESOURCE_EXHAUSTED`, the WebSocket a close
+/// frame after the upgrade).
+pub type Admitted = Result<Opening, AdmitError>;
 
 impl RawStream<'_> {
     /// # Errors
@@ -84,18 +90,27 @@ impl RawStream<'_> {
 
     /// Checks the request, binds it to the clip `id` at its current
     /// version (the cache entry: the stream keeps it even if the clip is
-    /// replaced) and asks the caps for a permit for `caller`.
+    /// replaced), prices it and charges its price per second to `caller`,
+    /// and asks the caps for a permit. Everything that can refuse it by
+    /// counts alone (the price, the caller's share, the caps) comes before
+    /// the stream's motion is built, so a refusal costs less than a pose.
     ///
     /// # Errors
-    /// As [`RawStream::check`], then `clip_not_found`, then the stream
-    /// rules: `fps_out_of_range`, `speed_out_of_range`; then the cost
-    /// model's `frame_too_large`, `stream_rate_too_high`.
-    pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Opening, ApiError> {
+    /// As [`RawStream::check`], then `clip_not_found`, `fps_out_of_range`;
+    /// the cost model's `frame_too_large`, `stream_rate_too_high`,
+    /// `too_much_work`; `caller_work_limit`, `overloaded`; then the
+    /// stream rules (`speed_out_of_range`) and the subset's.
+    pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Admitted, ApiError> {
         let request = self.check()?;
         let cached = super::raw::clip(state, id).await?;
+        self.check_fps(request.fps)?;
         let frame = Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into());
+        let permit = match self.admit(price::clip_pose(&cached.clip), frame, request.fps, state, caller)? {
+            Ok(permit) => permit,
+            Err(refused) => return Ok(Err(refused)),
+        };
         let params = StreamParams::new(cached, request).map_err(|e| self.refused(e))?;
-        self.admit(params, frame, state, caller)
+        Ok(Ok(Opening { params: self.bind(params, state)?, permit }))
     }
 
     /// As [`RawStream::open`] for a composed motion (docs/motion.md): its clips
@@ -112,25 +127,45 @@ impl RawStream<'_> {
         state: &AppState,
         motion: RawMotion<'_>,
         caller: &Caller,
-    ) -> Result<Opening, ApiError> {
-        let params = self.motion_params(state, motion).await?;
-        let permit = state.streams.admit_for(caller.addr, caller.token.clone());
-        Ok(Opening { params, permit })
+    ) -> Result<Admitted, ApiError> {
+        let (composed, request, frame) = self.composed(state, motion).await?;
+        let per_frame = price::motion_pose(&composed.motion);
+        let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
+            Ok(permit) => permit,
+            Err(refused) => return Ok(Err(refused)),
+        };
+        let params = self.motion_stream(composed, request, state)?;
+        Ok(Ok(Opening { params, permit }))
     }
 
     /// A composed motion's stream parameters, checked, bound and priced as
-    /// [`RawStream::open_motion`] does, without a permit: a broadcast's
-    /// (docs/broadcasts.md), whose viewers are admitted one by one as they join.
+    /// [`RawStream::open_motion`] does, without a permit or a charge: a
+    /// broadcast's (docs/broadcasts.md), whose viewers are admitted one by
+    /// one as they join.
     ///
     /// # Errors
-    /// As [`RawStream::open_motion`].
+    /// As [`RawStream::open_motion`], but the caller's share and the caps.
     pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
+        let (composed, request, frame) = self.composed(state, motion).await?;
+        check_stream(frame, request.fps, &state.config.limits, self.at)?;
+        let per_sec = stream_work(price::motion_pose(&composed.motion), frame, request.fps);
+        check_stream_work(per_sec, &state.config.limits, self.at)?;
+        self.motion_stream(composed, request, state)
+    }
+
+    /// The request checked, its motion resolved, and a bound of its frames.
+    async fn composed(
+        &self,
+        state: &AppState,
+        motion: RawMotion<'_>,
+    ) -> Result<(Composed, StreamRequest, u64), ApiError> {
         if self.modes.playback.is_some() {
             let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
             return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
         }
         let request = self.check()?;
         let composed = motion.resolve(state).await?;
+        self.check_fps(request.fps)?;
         let mut frame =
             Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());
         if composed.motion.has_root_motion() {
@@ -141,27 +176,57 @@ impl RawStream<'_> {
             (composed.motion.ik_report_count() - first_reports) as u64,
             request.encoding.into(),
         ) + 8;
+        Ok((composed, request, frame))
+    }
+
+    /// A composed motion's stream parameters, its subsets applied.
+    fn motion_stream(
+        &self,
+        composed: Composed,
+        request: StreamRequest,
+        state: &AppState,
+    ) -> Result<StreamParams, ApiError> {
         let identity = format!("motion {:p}", Arc::as_ptr(&composed.motion));
         let params = StreamParams::of_motion(composed.motion, identity.into(), request).map_err(|e| self.refused(e))?;
-        self.bind(params, frame, state)
+        self.bind(params, state)
     }
 
-    /// The joint subset applied, the stream priced (a frame at most `frame`
-    /// bytes) and a permit asked of the caps.
-    fn admit(&self, params: StreamParams, frame: u64, state: &AppState, caller: &Caller) -> Result<Opening, ApiError> {
-        let params = self.bind(params, frame, state)?;
-        let permit = state.streams.admit_for(caller.addr, caller.token.clone());
-        Ok(Opening { params, permit })
+    /// Prices a stream of frames of `per_frame` units and at most `frame`
+    /// bytes at `fps`, charges it to `caller` and asks the caps for a
+    /// permit holding the charge.
+    ///
+    /// # Errors
+    /// `frame_too_large`, `stream_rate_too_high`, `too_much_work`,
+    /// `caller_work_limit`, `overloaded`; the caps' refusal is the inner error.
+    fn admit(
+        &self,
+        per_frame: u64,
+        frame: u64,
+        fps: u32,
+        state: &AppState,
+        caller: &Caller,
+    ) -> Result<Result<StreamPermit, AdmitError>, ApiError> {
+        check_stream(frame, fps, &state.config.limits, self.at)?;
+        let per_sec = stream_work(per_frame, frame, fps);
+        check_stream_work(per_sec, &state.config.limits, self.at)?;
+        let ticket = state.work.charge(&caller.key(), per_sec)?;
+        Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.holding(ticket)))
     }
 
-    /// The joint subset applied and the stream priced (a frame at most `frame` bytes).
-    fn bind(&self, params: StreamParams, frame: u64, state: &AppState) -> Result<StreamParams, ApiError> {
+    /// The joint and parameter subsets applied.
+    fn bind(&self, params: StreamParams, state: &AppState) -> Result<StreamParams, ApiError> {
         let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
         let parameters =
             self.parameters.map(|names| parameter_subset(params.motion.parameters(), names, self.at)).transpose()?;
-        let params = params.with_joints(joints).with_parameters(parameters).with_ik_limits(state.config.limits.ik());
-        check_stream(frame, params.fps, &state.config.limits, self.at)?;
-        Ok(params)
+        Ok(params.with_joints(joints).with_parameters(parameters).with_ik_limits(state.config.limits.ik()))
+    }
+
+    /// The engine's frame-rate rule, checked before anything is built.
+    fn check_fps(&self, fps: u32) -> Result<(), ApiError> {
+        if (1..=MAX_FPS).contains(&fps) {
+            return Ok(());
+        }
+        Err(self.refused(ParamError { field: "fps", detail: String::new() }))
     }
 
     /// # Errors

@@ -102,13 +102,6 @@ fn a_batch_is_times_or_a_range_within_the_limits() {
     assert_eq!(refused(batch(None, Some((f64::NAN, 1.0, 30.0)))), (400, "bad_number", pointer("/start")));
 }
 
-#[test]
-fn big_batches_move_to_the_blocking_pool() {
-    let times: &'static [f64] = Box::leak(vec![0.0; BLOCKING_POSES + 1].into_boxed_slice());
-    assert!(batch(Some(times), None).check(10_000).unwrap().is_blocking());
-    assert!(!batch(Some(&times[1..]), None).check(10_000).unwrap().is_blocking());
-}
-
 fn stream(fps: Option<Raw<'static>>) -> RawStream<'static> {
     RawStream {
         fps,

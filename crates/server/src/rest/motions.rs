@@ -1,9 +1,10 @@
 //! Composed poses (docs/motion.md): `POST /v1/poses` (one pose of a motion) and
 //! `POST /v1/samples` (many). Both are reads. The body is decoded here, the
 //! rules and the motion come from `server::request` (`RawPose`, `RawBatch`,
-//! `RawMotion`), and poses are written straight from the motion sampler's
-//! buffers with the joint subset and the root motion; a large answer is
-//! sent in pieces as the client reads.
+//! `RawMotion`), the price charged to the caller and poses written on the
+//! work pool (`server::work`) straight from the motion sampler's buffers with
+//! the joint subset and the root motion; a large answer is sent in pieces
+//! as the client reads.
 
 use std::ops::Range;
 
@@ -19,6 +20,7 @@ use crate::request::{
     Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body, parse_json,
 };
 use crate::state::AppState;
+use crate::work::Cancel;
 use anim::motion::MotionOptions;
 use anim::{MotionSampler, Space};
 use formats::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson, SpaceDoc};
@@ -87,13 +89,15 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
         (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it", body = super::schemas::PoseSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
         (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `answer_too_large`", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`", body = super::schemas::Problem),
+        (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
+        (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
 pub async fn pose(
     State(state): State<AppState>,
-    _: ReadAccess,
+    ReadAccess(caller): ReadAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: PoseOfMotion = parse_json(&body)?;
@@ -111,8 +115,15 @@ pub async fn pose(
     let cost = composed.cost(1, checked.format, Wire::Json);
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
-    let mut body = Vec::with_capacity(usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20));
-    writer.write(&mut body, 0..1);
+    let capacity = usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20);
+    let body = state
+        .work
+        .spend(&caller.key(), cost.work(), move |cancel| {
+            let mut body = Vec::with_capacity(capacity);
+            writer.write(&mut body, 0..1, cancel);
+            body
+        })
+        .await?;
     state.counters.poses.increment(1);
     Ok(json_response(body))
 }
@@ -131,7 +142,7 @@ pub async fn pose(
 )]
 pub async fn samples(
     State(state): State<AppState>,
-    _: ReadAccess,
+    ReadAccess(caller): ReadAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SamplesOfMotion = parse_json(&body)?;
@@ -160,14 +171,10 @@ pub async fn samples(
     let (space, format) = (sampling.options.space, sampling.format);
     let mut writer = MotionPoses::new(composed, sampling.times, space, format, cost.bytes);
     if cost.bytes > crate::request::STREAM_ABOVE_BYTES {
-        return Ok(Pieces::new(state, Box::new(writer)).into_response());
+        let ticket = state.work.charge(&caller.key(), cost.work())?;
+        return Ok(Pieces::new(state, Box::new(writer), ticket).into_response());
     }
-    let mut render = move || pieces::whole(&mut writer);
-    let body = if n > crate::request::BLOCKING_POSES {
-        tokio::task::spawn_blocking(render).await.map_err(crate::metrics::join_failed)?
-    } else {
-        render()
-    };
+    let body = state.work.spend(&caller.key(), cost.work(), move |cancel| pieces::whole(&mut writer, cancel)).await?;
     state.counters.poses.increment(n as u64);
     Ok(json_response(body))
 }
@@ -236,8 +243,11 @@ impl PoseWriter for MotionPoses {
         self.bound
     }
 
-    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>) {
+    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>, cancel: &Cancel) {
         for k in range {
+            if !cancel.proceed() {
+                return;
+            }
             if k > 0 {
                 out.push(b',');
             }

@@ -1,9 +1,11 @@
 //! Large answers, evaluated a piece at a time: the next piece is evaluated
-//! (on the blocking pool) only when the client has taken the last one, so
+//! (on the work pool, `server::work`) only when the client has taken the last one, so
 //! the memory a request holds is a piece, not its answer, and no thread
 //! waits on a slow reader. A client that goes away drops the body, and with
-//! it the rest of the work (counted as abandoned). Clip samples and composed
-//! samples alike: each is a [`PoseWriter`].
+//! it the rest of the work (counted as abandoned), and the piece being
+//! evaluated stops at its next pose. The answer's price stays charged to
+//! its caller until then. Clip samples and composed samples alike: each is
+//! a [`PoseWriter`].
 
 use std::ops::Range;
 use std::sync::{Arc, Mutex};
@@ -17,6 +19,7 @@ use futures_util::StreamExt;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::sync::lock;
+use crate::work::{Cancel, Ticket};
 
 /// Bytes of JSON per piece of a streamed answer (at least one pose).
 const PIECE_BYTES: u64 = 64 * 1024;
@@ -28,16 +31,17 @@ pub trait PoseWriter: Send + 'static {
     /// The answer's size bound.
     fn bound(&self) -> u64;
     /// Appends poses `range`, comma-separated as inside `{"poses":[…]}`
-    /// (a comma before each but pose 0). Called in order.
-    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>);
+    /// (a comma before each but pose 0). Called in order. Stops early
+    /// (leaving the output unfinished) once `cancel` is raised.
+    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>, cancel: &Cancel);
 }
 
 /// A whole `{"poses":[…]}` document from `writer`, on the calling thread.
-pub fn whole(writer: &mut dyn PoseWriter) -> Vec<u8> {
+pub fn whole(writer: &mut dyn PoseWriter, cancel: &Cancel) -> Vec<u8> {
     let mut body = Vec::with_capacity(usize::try_from(writer.bound()).unwrap_or(0).min(1 << 20));
     body.extend_from_slice(b"{\"poses\":[");
     let n = writer.count();
-    writer.write(&mut body, 0..n);
+    writer.write(&mut body, 0..n, cancel);
     body.extend_from_slice(b"]}");
     body
 }
@@ -45,6 +49,8 @@ pub fn whole(writer: &mut dyn PoseWriter) -> Vec<u8> {
 /// An answer being sent in pieces.
 pub struct Pieces {
     state: AppState,
+    /// The answer's price, charged until it is sent or dropped.
+    _ticket: Ticket,
     job: Arc<Mutex<Box<dyn PoseWriter>>>,
     count: usize,
     /// Poses per piece.
@@ -55,11 +61,11 @@ pub struct Pieces {
 }
 
 impl Pieces {
-    pub fn new(state: AppState, writer: Box<dyn PoseWriter>) -> Pieces {
+    pub fn new(state: AppState, writer: Box<dyn PoseWriter>, ticket: Ticket) -> Pieces {
         let count = writer.count();
         let per_pose = writer.bound() / count.max(1) as u64;
         let per_piece = (PIECE_BYTES / per_pose.max(1)).max(1) as usize;
-        Pieces { state, job: Arc::new(Mutex::new(writer)), count, per_piece, next: 0, done: false }
+        Pieces { state, _ticket: ticket, job: Arc::new(Mutex::new(writer)), count, per_piece, next: 0, done: false }
     }
 
     /// The next piece of the document, `None` after its end.
@@ -69,18 +75,19 @@ impl Pieces {
         }
         let (n, range) = (self.count, self.next..(self.next + self.per_piece).min(self.count));
         let job = Arc::clone(&self.job);
-        let render = move || {
+        let render = move |cancel: &Cancel| {
             let mut out = Vec::with_capacity(PIECE_BYTES as usize + 64);
             if range.start == 0 {
                 out.extend_from_slice(b"{\"poses\":[");
             }
-            lock(&job).write(&mut out, range.clone());
+            lock(&job).write(&mut out, range.clone(), cancel);
             if range.end == n {
                 out.extend_from_slice(b"]}");
             }
             (out, range.len())
         };
-        let piece = tokio::task::spawn_blocking(render).await.map_err(crate::metrics::join_failed);
+        let deadline = self.state.config.limits.request_timeout;
+        let piece = self.state.work.pool().run(deadline, render).await;
         Some(piece.map(|(out, evaluated)| {
             self.state.counters.poses.increment(evaluated as u64);
             self.next += evaluated;

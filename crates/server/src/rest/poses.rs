@@ -4,9 +4,11 @@
 //! rules and codes gRPC shares); this module renders the JSON. The clip comes from the cache (compiled once per version); sampling uses a
 //! per-thread [`Sampler`] and matrix buffer, so a request allocates only its
 //! response body, and poses are serialised straight from the core's buffers
-//! into it. Large sample requests run on the blocking pool; answers whose
-//! size bound is over [`crate::request::STREAM_ABOVE_BYTES`] are sent chunked, a piece at a
-//! time as the client reads (see [`Pieces`]).
+//! into it. Each request is priced before it runs and charged to its caller
+//! (`server::work`); all but the smallest are evaluated on the work pool, and
+//! stop at the next pose once the client leaves or the request times out.
+//! Answers whose size bound is over [`crate::request::STREAM_ABOVE_BYTES`]
+//! are sent chunked, a piece at a time as the client reads (see [`Pieces`]).
 
 use std::cell::RefCell;
 use std::sync::Arc;
@@ -27,6 +29,7 @@ use crate::request::{
     parameter_subset, parse_json,
 };
 use crate::state::AppState;
+use crate::work::Cancel;
 use anim::{SampleOptions, Sampler};
 use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc};
 
@@ -112,13 +115,15 @@ pub(super) fn json_response(body: Vec<u8>) -> Response {
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
         (status = 400, description = "A parameter does not parse (`missing_parameter`, `bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`); an answer over `max_answer_bytes` (`answer_too_large`)", body = super::schemas::Problem),
+        (status = 422, description = "format=skinning without inverse binds (`no_inverse_binds`); a price over `max_request_work` (`too_much_work`); an answer over `max_answer_bytes` (`answer_too_large`)", body = super::schemas::Problem),
+        (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
+        (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
 pub async fn get_pose(
     State(state): State<AppState>,
-    _: ReadAccess,
+    ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
     Query(q): Query,
 ) -> Result<Response, ApiError> {
@@ -133,8 +138,15 @@ pub async fn get_pose(
     let joints = list("joints").map(|names| joint_subset(cached.clip.skeleton(), &names, in_query)).transpose()?;
     let parameters =
         list("parameters").map(|names| parameter_subset(cached.clip.parameters(), &names, in_query)).transpose()?;
-    let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
-    write_pose(&mut body, &cached, req.t, (&req.options, req.format), &Subsets { joints, parameters });
+    let subsets = Subsets { joints, parameters };
+    let body = state
+        .work
+        .spend(&caller.key(), req.work, move |_| {
+            let mut body = Vec::with_capacity(POSE_HEADER_BYTES + JOINT_BYTES * cached.clip.joint_count());
+            write_pose(&mut body, &cached, req.t, (&req.options, req.format), &subsets);
+            body
+        })
+        .await?;
     state.counters.poses.increment(1);
     Ok(json_response(body))
 }
@@ -203,13 +215,15 @@ impl SampleRequest {
         (status = 200, description = "`{\"poses\": [pose, ...]}`; sent chunked, as it is evaluated, when the answer may exceed 1 MiB", body = super::schemas::PosesSchema),
         (status = 400, description = "Not JSON, or a value that does not parse (`bad_parameter` for an unknown space, playback, ease or format)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses` (over `max_poses`, or poses × joints over `max_joint_poses`), `answer_too_large` (the answer's size bound over `max_answer_bytes`), `no_inverse_binds`", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type (`invalid_field`), `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses` (over `max_poses`, or poses × joints over `max_joint_poses`), `too_much_work` (the price over `max_request_work`), `answer_too_large` (the answer's size bound over `max_answer_bytes`), `no_inverse_binds`", body = super::schemas::Problem),
+        (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
+        (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
 pub async fn sample(
     State(state): State<AppState>,
-    _: ReadAccess,
+    ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
@@ -219,17 +233,13 @@ pub async fn sample(
     let parameters = (req.parameters.as_deref())
         .map(|names| parameter_subset(cached.clip.parameters(), names, in_body))
         .transpose()?;
-    let (large, blocking, n) = (sampling.is_large(), sampling.is_blocking(), sampling.times.len());
+    let (large, work, n) = (sampling.is_large(), sampling.work, sampling.times.len());
     let mut writer = ClipPoses { sampling, cached, subsets: Subsets { joints, parameters } };
     if large {
-        return Ok(Pieces::new(state, Box::new(writer)).into_response());
+        let ticket = state.work.charge(&caller.key(), work)?;
+        return Ok(Pieces::new(state, Box::new(writer), ticket).into_response());
     }
-    let mut render = move || pieces::whole(&mut writer);
-    let body = if blocking {
-        tokio::task::spawn_blocking(render).await.map_err(crate::metrics::join_failed)?
-    } else {
-        render()
-    };
+    let body = state.work.spend(&caller.key(), work, move |cancel| pieces::whole(&mut writer, cancel)).await?;
     state.counters.poses.increment(n as u64);
     Ok(json_response(body))
 }
@@ -250,8 +260,11 @@ impl PoseWriter for ClipPoses {
         self.sampling.answer_bytes
     }
 
-    fn write(&mut self, out: &mut Vec<u8>, range: std::ops::Range<usize>) {
+    fn write(&mut self, out: &mut Vec<u8>, range: std::ops::Range<usize>, cancel: &Cancel) {
         for k in range {
+            if !cancel.proceed() {
+                return;
+            }
             if k > 0 {
                 out.push(b',');
             }

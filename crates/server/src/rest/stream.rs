@@ -81,7 +81,9 @@ fn ws_write_buffer(l: &Limits) -> usize {
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
         (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, `too_much_work` (the price per second of playback over `max_request_work`), `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
+        (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
+        (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -117,11 +119,12 @@ pub async fn stream(
     // The peer address, when served with connect info (`Application` is);
     // the caps count the caller (auth's `Caller`: its address and its token).
     let peer = connect.map(|Extension(ConnectInfo(addr))| addr);
-    let Opening { params, permit } = raw.open(&state, &id, &caller).await?;
+    let admitted = raw.open(&state, &id, &caller).await?;
     // The playback is chosen now, so that the response can say its phase;
     // each WebSocket has its own connection, whose port is its lane.
     let engine = &state.streams;
-    let watched = permit.map(|permit| engine.watch(params, permit, peer.map(|a| u64::from(a.port()))));
+    let lane = peer.map(|a| u64::from(a.port()));
+    let watched = admitted.map(|Opening { params, permit }| engine.watch(params, permit, lane));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
     let motions = resolver(&state);
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
@@ -264,10 +267,10 @@ async fn open(
         format: Format::Trs,
         at: in_body,
     };
-    let Opening { params, permit } = raw.open_motion(state, motion, caller).await?;
+    let admitted = raw.open_motion(state, motion, caller).await?;
     let engine = &state.streams;
-    Ok(permit.map(
-        |permit| {
+    Ok(admitted.map(
+        |Opening { params, permit }| {
             if params.paused { engine.play(params, permit, lane) } else { engine.watch(params, permit, lane) }
         },
     ))

@@ -51,6 +51,17 @@ pub struct StreamPermit {
     limits: Arc<Limits>,
     client: Option<IpAddr>,
     token: Option<Arc<str>>,
+    /// The stream's price per second, charged to its caller while it is
+    /// open (`server::work`).
+    ticket: Option<crate::work::Ticket>,
+}
+
+impl StreamPermit {
+    /// This permit, also holding `ticket` until the stream ends.
+    pub fn holding(mut self, ticket: crate::work::Ticket) -> StreamPermit {
+        self.ticket = Some(ticket);
+        self
+    }
 }
 
 impl Limits {
@@ -101,7 +112,7 @@ impl Limits {
         }
         c.total += 1;
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
-        Ok(StreamPermit { limits: Arc::clone(self), client, token })
+        Ok(StreamPermit { limits: Arc::clone(self), client, token, ticket: None })
     }
 
     /// Refuses new streams from now on.

@@ -1,0 +1,252 @@
+//! The prices of `price`, against counts worked out by hand, and (with
+//! `INBETWEEN_SLOW=1`, in a release build) against the CPU time the work
+//! really takes: the table of BENCHMARKS.md, “Work and its price”.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use anim::ik::{AimSpec, ChainSpec, EffectorSpec, IkSpec, TwoBoneSpec};
+use anim::motion::{LayerSpec, MotionOptions, MotionSpec};
+use anim::{
+    Channel, Clip, ClipSpec, Interpolation, JointSpec, Keys, MotionSampler, SkeletonSpec, Space, TrackSpec, Transform,
+};
+use glam::{Quat, Vec3, Vec4};
+
+use super::price;
+use crate::request::Wire;
+use crate::stream::{Pinned, PinnedClip, StreamMotion};
+
+/// A chain of `n` joints (each the child of the one before, one unit
+/// apart) with a translation and a rotation track of 30 keys on every
+/// joint, and `ik` keyed in it.
+fn chain_clip(n: usize, ik: Vec<anim::KeyedIkSpec>) -> Clip {
+    let joints = (0..n)
+        .map(|j| JointSpec {
+            name: format!("j{j}"),
+            parent: j.checked_sub(1).map(|p| format!("j{p}")),
+            rest: Transform { translation: Vec3::Y, rotation: Quat::IDENTITY, scale: Vec3::ONE },
+            inverse_bind: None,
+        })
+        .collect();
+    let times: Vec<f32> = (0..30).map(|k| k as f32 / 30.0).collect();
+    let tracks = (0..n)
+        .flat_map(|j| {
+            let name = format!("j{j}");
+            let v3 = Keys::Vec3(times.iter().map(|&t| Vec3::new(0.1 * t, 1.0, 0.0)).collect());
+            let q = Keys::Vec4(times.iter().map(|&t| Vec4::new(0.0, 0.0, (t * 0.1).sin(), (t * 0.1).cos())).collect());
+            [
+                TrackSpec::new(&name, Channel::Translation, Interpolation::Linear, times.clone(), v3),
+                TrackSpec::new(&name, Channel::Rotation, Interpolation::Linear, times.clone(), q),
+            ]
+        })
+        .collect();
+    let spec = ClipSpec {
+        name: "chain".into(),
+        skeleton: Some(SkeletonSpec { joints }),
+        tracks,
+        ik,
+        playback: anim::Playback::Loop,
+        ..Default::default()
+    };
+    Clip::build_limited(
+        &spec,
+        u64::MAX,
+        &anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() },
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .unwrap()
+}
+
+/// A motion of `layers` layers of `clip`, with request-time `ik`.
+fn motion(clip: Clip, layers: usize, ik: Vec<IkSpec>) -> StreamMotion {
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(clip)));
+    let layers = (0..layers).map(|_| LayerSpec::new(Arc::clone(&pinned))).collect();
+    let limits = anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() };
+    anim::Motion::build_limited(MotionSpec { layers, root_motion: None, ik }, &limits).unwrap()
+}
+
+fn chain(effectors: &[usize], target: Vec3, iterations: u32) -> IkSpec {
+    IkSpec::Chain(ChainSpec {
+        effectors: effectors.iter().map(|&j| EffectorSpec { joint: format!("j{j}"), target, tip: None }).collect(),
+        joints: None,
+        limits: Vec::new(),
+        max_iterations: Some(iterations),
+        tolerance: Some(1e-9),
+        weight: None,
+    })
+}
+
+fn two_bone(n: usize) -> IkSpec {
+    let joints = [format!("j{}", n - 3), format!("j{}", n - 2), format!("j{}", n - 1)];
+    IkSpec::TwoBone(TwoBoneSpec { joints, target: Vec3::new(0.5, n as f32 - 1.5, 0.0), pole: None, weight: None })
+}
+
+fn aim(n: usize) -> IkSpec {
+    let target = Vec3::new(3.0, n as f32, 1.0);
+    IkSpec::Aim(AimSpec {
+        joint: format!("j{}", n - 1),
+        target,
+        forward: None,
+        up: None,
+        up_direction: None,
+        weight: None,
+    })
+}
+
+#[test]
+fn a_pose_costs_its_joints_per_layer() {
+    assert_eq!(price::clip_pose(&chain_clip(16, Vec::new())), 16);
+    assert_eq!(price::motion_pose(&motion(chain_clip(16, Vec::new()), 3, Vec::new())), 48);
+}
+
+#[test]
+fn analytic_ik_costs_its_ancestry_and_chains_their_budget() {
+    let m = motion(chain_clip(10, Vec::new()), 1, vec![two_bone(10)]);
+    // The end joint j9 has 10 joints up to the root.
+    let two_bone_units = price::motion_pose(&m) - 10;
+    let m = motion(chain_clip(10, Vec::new()), 1, vec![aim(10)]);
+    assert_eq!(price::motion_pose(&m) - 10, two_bone_units, "both walk 10 joints");
+    // Two effectors on one branch share their path: j0..=j9 once.
+    let one = motion(chain_clip(10, Vec::new()), 1, vec![chain(&[9], Vec3::X, 50)]);
+    let two = motion(chain_clip(10, Vec::new()), 1, vec![chain(&[9, 5], Vec3::X, 50)]);
+    let (one, two) = (price::motion_pose(&one) - 10, price::motion_pose(&two) - 10);
+    assert_eq!(two, 2 * one, "the same 10 joints, twice the effectors");
+    let long = motion(chain_clip(10, Vec::new()), 1, vec![chain(&[9], Vec3::X, 100)]);
+    assert_eq!(price::motion_pose(&long) - 10, 2 * one, "twice the iterations");
+    let short = motion(chain_clip(10, Vec::new()), 1, vec![chain(&[4], Vec3::X, 50)]);
+    assert_eq!(2 * (price::motion_pose(&short) - 10), one, "half the joints");
+}
+
+#[test]
+fn ik_keyed_in_a_clip_is_priced_like_a_requests() {
+    let keyed = anim::KeyedIkSpec {
+        constraint: chain(&[9], Vec3::X, 50),
+        targets: vec![anim::IkTarget::Fixed(Vec3::X)],
+        weight: None,
+    };
+    let in_clip = price::clip_pose(&chain_clip(10, vec![keyed]));
+    let in_request = price::motion_pose(&motion(chain_clip(10, Vec::new()), 1, vec![chain(&[9], Vec3::X, 50)]));
+    assert_eq!(in_clip, in_request);
+}
+
+#[test]
+fn encoding_is_priced_per_byte_and_compression_per_level() {
+    assert_eq!(price::encoding(0), 0);
+    assert!(price::encoding(1) >= 1);
+    assert_eq!(price::encoding(8000), 1000);
+    assert_eq!(price::compression(8000, 0), 0);
+    assert_eq!(price::compression(8000, 6), 3 * price::compression(8000, 2));
+}
+
+/// Pricing reads counts: a 4,096-joint clip with a chain over all of it is
+/// priced in far less time than one of its poses takes.
+#[test]
+fn pricing_costs_less_than_a_pose() {
+    let m = motion(chain_clip(4096, Vec::new()), 1, vec![chain(&[4095], Vec3::X, 1)]);
+    let time = |f: &mut dyn FnMut()| {
+        let started = Instant::now();
+        for _ in 0..20 {
+            f();
+        }
+        started.elapsed() / 20
+    };
+    let priced = time(&mut || {
+        std::hint::black_box(price::motion_pose(&m));
+    });
+    let mut sampler = MotionSampler::new();
+    let posed = time(&mut || {
+        std::hint::black_box(m.sample(0.5, &MotionOptions::default(), &mut sampler));
+    });
+    assert!(priced * 4 < posed, "pricing took {priced:?}, a pose {posed:?}");
+}
+
+/// One case of the table: what it is, its motion, and how it is encoded.
+struct Case {
+    what: String,
+    motion: StreamMotion,
+}
+
+fn cases() -> Vec<Case> {
+    let case = |what: String, motion| Case { what, motion };
+    let mut cases = Vec::new();
+    for n in [16, 64, 256, 1024, 4096] {
+        cases.push(case(format!("clip, {n} joints"), motion(chain_clip(n, Vec::new()), 1, Vec::new())));
+    }
+    for n in [64, 1024] {
+        cases.push(case(format!("3 layers × {n} joints"), motion(chain_clip(n, Vec::new()), 3, Vec::new())));
+    }
+    for n in [16, 256] {
+        cases.push(case(format!("{n} joints + two-bone IK"), motion(chain_clip(n, Vec::new()), 1, vec![two_bone(n)])));
+        cases.push(case(format!("{n} joints + aim IK"), motion(chain_clip(n, Vec::new()), 1, vec![aim(n)])));
+    }
+    let far = Vec3::new(1e4, 1e4, 0.0);
+    for (n, iterations) in [(20, 100), (64, 100), (256, 50), (1024, 10)] {
+        let ik = vec![chain(&[n - 1], far, iterations)];
+        cases.push(case(
+            format!("chain IK, {n} joints, {iterations} iterations"),
+            motion(chain_clip(n, Vec::new()), 1, ik),
+        ));
+    }
+    let ik = vec![chain(&[63, 40, 20], far, 100)];
+    cases.push(case(
+        "chain IK, 64 joints, 3 effectors, 100 iterations".into(),
+        motion(chain_clip(64, Vec::new()), 1, ik),
+    ));
+    cases
+}
+
+/// Nanoseconds of the fastest of a few runs of one pose, sampled and
+/// written as JSON, and the iterations its chain solves ran.
+fn measure(m: &StreamMotion) -> (f64, u32) {
+    let mut sampler = MotionSampler::new();
+    let mut out = Vec::with_capacity(1 << 20);
+    let mut best = f64::INFINITY;
+    let options = MotionOptions { space: Space::Model, ..MotionOptions::default() };
+    for run in 0..7 {
+        out.clear();
+        let started = Instant::now();
+        let clip_time = m.sample(0.37 + run as f64 * 0.01, &options, &mut sampler);
+        let extras = formats::wire::json::Extras { ik: sampler.ik_reports(), ..Default::default() };
+        let (skeleton, pose) = (m.skeleton(), sampler.pose());
+        formats::wire::json::PoseJson { clip: "c", time: 0.37, clip_time, space: Space::Model, skeleton, pose }
+            .write_with(&mut out, extras);
+        best = best.min(started.elapsed().as_nanos() as f64);
+    }
+    let iterations = sampler.ik_reports().iter().map(|r| r.iterations).max().unwrap_or(0);
+    (best, iterations)
+}
+
+/// The table of BENCHMARKS.md: each case's price (in units and in the
+/// nanoseconds they stand for) against its measured time. Release builds
+/// only, with `INBETWEEN_SLOW=1`:
+/// `INBETWEEN_SLOW=1 cargo test --release -p inbetween-server --lib work::tests::price_table -- --nocapture`.
+#[test]
+fn price_table() {
+    if std::env::var_os("INBETWEEN_SLOW").is_none() || cfg!(debug_assertions) {
+        return;
+    }
+    println!(
+        "| work (one pose, model space, JSON) | price (units) | price × {} ns | measured | ratio | chain iterations run |",
+        price::NS_PER_UNIT
+    );
+    println!("|---|---:|---:|---:|---:|---:|");
+    let mut worst: f64 = 1.0;
+    for case in cases() {
+        let first = case.motion.first_clip().clip();
+        let bytes = crate::request::Estimate::pose(first, "c", crate::request::Format::Trs, Wire::Json).total(1);
+        let units = price::motion_pose(&case.motion) + price::encoding(bytes);
+        let (ns, iterations) = measure(&case.motion);
+        let priced = (units * price::NS_PER_UNIT) as f64;
+        let ratio = priced / ns;
+        worst = if (ratio.ln()).abs() > worst.ln().abs() { ratio } else { worst };
+        println!(
+            "| {} | {units} | {:.1} µs | {:.1} µs | {ratio:.2} | {} |",
+            case.what,
+            priced / 1e3,
+            ns / 1e3,
+            if iterations > 0 { iterations.to_string() } else { "–".into() }
+        );
+    }
+    println!("worst ratio {worst:.2}");
+    assert!((0.5..=2.0).contains(&worst), "a price is off its measured time by {worst:.2}×");
+}
