@@ -139,7 +139,8 @@ async fn patch_one(app: &TestApp, id: &str, i: usize) -> (u16, Option<String>, b
         .await
         .unwrap();
     let (status, retry_after) = (resp.status().as_u16(), resp.headers().contains_key("retry-after"));
-    let code = if status == 200 { None } else { resp.json::<Value>().await.unwrap()["code"].as_str().map(str::to_owned) };
+    let code =
+        if status == 200 { None } else { resp.json::<Value>().await.unwrap()["code"].as_str().map(str::to_owned) };
     (status, code, retry_after)
 }
 
@@ -159,10 +160,17 @@ async fn patches_without_if_match_are_never_412_and_none_is_lost() {
     let ok: Vec<usize> = (0..PATCHES).filter(|&i| answers[i].0 == 200).collect();
     let refused = answers.iter().filter(|r| r.0 == 412).count();
     let others: Vec<_> = answers.iter().filter(|r| r.0 != 200).collect();
-    println!("FIGURE {PATCHES} concurrent PATCHes without If-Match on two nodes: {} answered 200, {refused} 412, others {others:?}", ok.len());
+    println!(
+        "FIGURE {PATCHES} concurrent PATCHes without If-Match on two nodes: {} answered 200, {refused} 412, others {others:?}",
+        ok.len()
+    );
     assert_eq!(refused, 0, "a PATCH without If-Match was answered 412");
     for (status, code, retry_after) in &others {
-        assert_eq!((*status, code.as_deref(), *retry_after), (503, Some("unavailable"), true), "only a lost race may refuse");
+        assert_eq!(
+            (*status, code.as_deref(), *retry_after),
+            (503, Some("unavailable"), true),
+            "only a lost race may refuse"
+        );
     }
     // The stored clip, read from the store (the caches of two servers without a change feed may lag).
     let stored = a.state.store.get(&id).await.unwrap().unwrap();

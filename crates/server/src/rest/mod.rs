@@ -81,7 +81,10 @@ pub fn router(state: AppState) -> Router {
                         per_caller: limits.max_import_uploads_per_caller,
                         wait: limits.import_slot_wait,
                     },
-                    spool::PaceLimit { min_per_sec: limits.min_upload_bytes_per_sec, window: limits.upload_rate_window },
+                    spool::PaceLimit {
+                        min_per_sec: limits.min_upload_bytes_per_sec,
+                        window: limits.upload_rate_window,
+                    },
                 )),
             },
             body_guard::guard,
