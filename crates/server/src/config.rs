@@ -407,22 +407,20 @@ settings! {
             doc "Compiled clips in memory";
         cache_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "cache_bytes", "cache-bytes", "INBETWEEN_CACHE_BYTES", "BYTES",
-            "Heap bytes of the compiled clips kept in memory (least recently used leave first)",
-            doc "Heap bytes of the compiled clips in memory, least recently used evicted first (`inbetween_cache_bytes` \
-             on `/metrics`)";
-        motion_cache_entries: usize = 1024 => positive -> usize,
-            "motion_cache_entries", "motion-cache-entries", "INBETWEEN_MOTION_CACHE_ENTRIES", "N",
-            "Built motions (composed requests' layer stacks) kept in memory, keyed by the motion and its clip \
-             versions (least recently used leave first)",
-            doc "Built motions in memory, keyed by the motion and its layers' clip versions, so a composed request \
-             repeated every frame is not rebuilt; a replaced, deleted or evicted clip drops its motions \
-             (`inbetween_motion_cache_{hits,misses}_total`, `inbetween_motion_cache_entries` on `/metrics`)";
+            "Heap bytes the caches keep together: compiled clips and built motions (additive layers' reference \
              poses included); the least recently used entry of any of them leaves first, and an entry larger than \
-             this is used once and not kept";
+             this is used once and not kept",
+            doc "Heap bytes the caches keep together: compiled clips and built motions (additive layers' reference \
+             poses included), the least recently used entry of either evicted first; an entry larger than this is \
+             used once and not kept (`inbetween_cache_bytes` on `/metrics`)";
         motion_cache_entries: usize = 1024 => positive -> usize,
             "motion_cache_entries", "motion-cache-entries", "INBETWEEN_MOTION_CACHE_ENTRIES", "N",
             "Built motions (composed requests' layer stacks) kept in memory, keyed by the motion and its clip \
-             versions (least recently used leave first); their bytes count on cache_bytes";
+             versions (least recently used leave first); their bytes count on cache_bytes",
+            doc "Built motions in memory, keyed by the motion and its layers' clip versions, so a composed request \
+             repeated every frame is not rebuilt; their bytes count on `cache_bytes`; a replaced, deleted or evicted \
+             clip drops its motions (`inbetween_motion_cache_{hits,misses}_total`, `inbetween_motion_cache_entries` \
+             on `/metrics`)";
         max_build_work: u64 = anim::DEFAULT_BUILD_WORK => positive -> u64,
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
