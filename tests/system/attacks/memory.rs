@@ -74,8 +74,18 @@ async fn distinct_additive_motions_over_256_wide_parameters_stay_in_the_cache_bu
 
 #[tokio::test(flavor = "multi_thread")]
 async fn sixty_four_concurrent_big_answers_asking_for_br_are_compressed_within_the_cap() {
-    // All 64 admitted from one address (the default admits 32 per caller).
-    let mut target = target(&["--max-in-flight-per-client", "64"]).await;
+    // All 64 admitted from one address, with room for the prober on the same
+    // address (the default admits 32 requests per caller, and half the
+    // node's work): this attack is on the compressors' memory.
+    let mut target = target(&[
+        "--max-in-flight-per-client",
+        "72",
+        "--caller-work-share",
+        "1",
+        "--node-work-per-sec",
+        "1000000000000",
+    ])
+    .await;
     let http = crate::common::http_client();
     let id = target.server.create(&http, &wide_clip(4096, 16)).await;
     let url = target.server.url(&format!("/v1/clips/{id}/sample"));
