@@ -118,7 +118,11 @@ fn the_crates_depend_on_each_other_in_one_direction() {
 /// without its inline test module (whose `super` is the file itself).
 fn code_of(path: &str) -> String {
     let text = read(path);
-    let code = text.split("#[cfg(test)]\nmod tests {").next().unwrap_or("");
+    let test_module = ["", "pub(crate) ", "pub(super) ", "pub "]
+        .iter()
+        .filter_map(|vis| text.find(&format!("#[cfg(test)]\n{vis}mod tests {{")))
+        .min();
+    let code = &text[..test_module.unwrap_or(text.len())];
     code.lines().map(|line| line.split("//").next().unwrap_or("")).collect::<Vec<_>>().join("\n")
 }
 
