@@ -201,3 +201,18 @@ pub fn metric(text: &str, name: &str) -> Option<f64> {
 fn corpus_dir(root: &Path) -> PathBuf {
     std::env::var_os("INBETWEEN_TESTDATA").map(PathBuf::from).unwrap_or_else(|| root.join("../shared/testdata"))
 }
+
+/// A chain of `joints` joints, each the child of the one before, with `ik`
+/// keyed in the clip: the IK price tests' clip.
+pub fn chain_clip(joints: usize, ik: serde_json::Value) -> String {
+    let skeleton: Vec<serde_json::Value> = (0..joints)
+        .map(|j| {
+            let parent = j.checked_sub(1).map(|p| format!("j{p}"));
+            serde_json::json!({"name": format!("j{j}"), "parent": parent, "rest": {"translation": [0, 0.01, 0]}})
+        })
+        .collect();
+    serde_json::json!({"name": "chain", "skeleton": {"joints": skeleton}, "ik": ik,
+           "tracks": [{"joint": "j0", "channel": "translation", "interpolation": "linear",
+                       "times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}]})
+    .to_string()
+}

@@ -11,26 +11,7 @@ use serde_json::{Value, json};
 use tonic::Code;
 
 use super::TestApp;
-use crate::common::eventually;
-
-/// A chain of `joints` joints, each the child of the one before, with
-/// `ik` keyed in the clip.
-fn chain_clip(joints: usize, ik: Value) -> String {
-    let skeleton: Vec<Value> = (0..joints)
-        .map(|j| {
-            let parent = j.checked_sub(1).map(|p| format!("j{p}"));
-            json!({"name": format!("j{j}"), "parent": parent, "rest": {"translation": [0, 0.01, 0]}})
-        })
-        .collect();
-    json!({
-        "name": "chain",
-        "skeleton": {"joints": skeleton},
-        "tracks": [{"joint": "j0", "channel": "translation", "interpolation": "linear",
-                    "times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}],
-        "ik": ik
-    })
-    .to_string()
-}
+use crate::common::{chain_clip, eventually};
 
 /// `n` chain constraints on the last of `joints` joints toward a point
 /// out of reach, `iterations` at most each.

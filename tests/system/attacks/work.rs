@@ -13,21 +13,7 @@ use futures_util::future::join_all;
 use serde_json::{Value, json};
 
 use super::{Target, target};
-
-/// A chain of `joints` joints, each the child of the one before, with `ik`
-/// keyed in the clip.
-fn chain_clip(joints: usize, ik: Value) -> String {
-    let skeleton: Vec<Value> = (0..joints)
-        .map(|j| {
-            let parent = j.checked_sub(1).map(|p| format!("j{p}"));
-            json!({"name": format!("j{j}"), "parent": parent, "rest": {"translation": [0, 0.01, 0]}})
-        })
-        .collect();
-    json!({"name": "chain", "skeleton": {"joints": skeleton}, "ik": ik,
-           "tracks": [{"joint": "j0", "channel": "translation", "interpolation": "linear",
-                       "times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}]})
-    .to_string()
-}
+use crate::common::chain_clip;
 
 /// `n` chain constraints over the whole chain, `iterations` at most each.
 fn chains(n: usize, iterations: u32) -> Value {
