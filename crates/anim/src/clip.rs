@@ -19,7 +19,7 @@ use super::ik::{IkLimits, IkReport, KeyedIk, KeyedIkState};
 use super::parameters::{ParameterLayout, Parameters};
 use super::path::Path;
 use super::skeleton::{NO_PARENT, Pose, Skeleton};
-use super::spec::{Channel, ClipSpec, Ease, EventSpec, MAX_NAME_CHARS, Playback, Space, TrackSpec};
+use super::spec::{Channel, ClipSpec, Ease, EventSpec, MAX_NAME_CHARS, Playback, SkeletonSpec, Space, TrackSpec};
 use super::time::TimeRange;
 use super::timeline::{Span, Timeline};
 use super::tracks::{QuatTracks, Spans, Vec3Tracks};
@@ -768,6 +768,22 @@ fn build_skeleton(spec: &ClipSpec) -> Result<Skeleton, ClipError> {
         let n = names.len();
         return Ok(Skeleton::new(names, vec![NO_PARENT; n], Pose::identity(n), None));
     };
+    skeleton_from_spec(skel)
+}
+
+impl Skeleton {
+    /// A skeleton on its own, such as a character's, under the rules of a clip's
+    /// skeleton; a refusal's path points into it as into a clip (`/skeleton/joints/3/parent`).
+    ///
+    /// # Errors
+    /// The first rule of docs/clip-format.md, “Data model”, the joints break.
+    pub fn build(spec: &SkeletonSpec) -> Result<Skeleton, ClipError> {
+        skeleton_from_spec(spec)
+    }
+}
+
+/// The joints of `skel`, checked: names, parents before children, finite rests.
+fn skeleton_from_spec(skel: &SkeletonSpec) -> Result<Skeleton, ClipError> {
     let joints = &skel.joints;
     let mut index: HashMap<&str, usize> = HashMap::with_capacity(joints.len());
     for (j, joint) in joints.iter().enumerate() {

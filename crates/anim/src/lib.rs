@@ -112,6 +112,7 @@
 //! ```
 
 mod arc;
+pub mod character;
 mod clip;
 mod compile;
 mod curve;
