@@ -84,6 +84,7 @@ const MOTIONBUILDER: Family = Family {
         ("leg", LeftLowerLeg),
         ("foot", LeftFoot),
         ("toebase", LeftToes),
+        ("handindex1", LeftIndexProximal),
     ],
 };
 

@@ -1,24 +1,24 @@
 //! Roles from the shape of the rest pose, for rigs whose names say nothing
 //! (CesiumMan's joints are `node2`, `node11`, …).
 //!
-//! In the rest pose's model space (glTF's frame: `+Y` up, the character's
-//! left at `+X`):
+//! In the rest pose's model space (`+Y` up):
 //! - the **hips** are the first joint (parents come first, so the root-most)
 //!   with three or more children whose subtrees hold two joints or more;
 //! - the **legs** are the two of those subtrees reaching lowest, below the
-//!   hips, on opposite sides; along each one's main chain the **foot** is the
-//!   first joint within a quarter of the leg's height of its lowest point,
-//!   the two joints above it the lower and upper leg, the one after it the
-//!   toes;
+//!   hips, on opposite sides of them; each is its main chain (the largest
+//!   child at each fork) past the joints at the hips: upper leg, lower leg,
+//!   foot and toes. Their sides come from the character's left, `up ×
+//!   forward` with forward the way the toes point from the feet (glTF's
+//!   `+Z` without toes, so the left is `+X`);
 //! - the **spine** is the subtree reaching highest; its chain runs to the
 //!   first joint with more than one child (the chest, where the arms
 //!   branch): one joint is the spine, two are spine and chest, three add the
-//!   upper chest, more leave the middle ones unmapped;
+//!   upper chest, more leave the ones between chest and upper chest unmapped;
 //! - of the branch's children, the one nearest the middle is the **neck**
 //!   (its chain's last joint the head, or the head alone if it has one
-//!   joint), and the lateral two the **arms**, each followed to its first
-//!   fork or leaf (the hand), the three joints above it the lower and upper
-//!   arm and the shoulder.
+//!   joint), and two lateral ones on opposite sides the **arms**, each
+//!   followed to its first fork or leaf (the hand), the three joints above
+//!   it the lower and upper arm and the shoulder.
 //!
 //! Each step needs the one before it; where the shape is not what a step
 //! expects, it and the steps after it give nothing.
@@ -59,18 +59,23 @@ impl Shape<'_> {
         roles[Role::Hips.index()] = Some(hips);
         let mut limbs: Vec<usize> = self.children[hips].iter().copied().filter(|&c| self.size(c) >= 2).collect();
         limbs.sort_by(|&a, &b| self.lowest(a).total_cmp(&self.lowest(b)));
-        let hips_y = self.positions[hips].y;
+        let hips_at = self.positions[hips];
+        let mut left = Vec3A::X;
         if let [a, b, ..] = limbs[..]
-            && self.lowest(b) < hips_y
-            && let Some((left, right)) = self.sides(a, b, self.positions[hips].x)
+            && self.lowest(b) < hips_at.y
+            && let (Some(leg_a), Some(leg_b)) = (self.leg(a, hips_at), self.leg(b, hips_at))
         {
-            self.leg(left, Side::Left, roles);
-            self.leg(right, Side::Right, roles);
-            limbs.drain(..2);
+            left = self.left(&leg_a, &leg_b);
+            if let Some(a_is_left) = self.opposite(a, b, hips_at, left) {
+                let (l, r) = if a_is_left { (leg_a, leg_b) } else { (leg_b, leg_a) };
+                put(roles, &LEG, &l, Side::Left);
+                put(roles, &LEG, &r, Side::Right);
+                limbs.drain(..2);
+            }
         }
         let top = limbs.iter().copied().max_by(|&a, &b| self.highest(a).total_cmp(&self.highest(b)));
-        if let Some(spine) = top.filter(|&s| self.highest(s) > hips_y) {
-            self.torso(spine, roles);
+        if let Some(spine) = top.filter(|&s| self.highest(s) > hips_at.y) {
+            self.torso(spine, left, roles);
         }
     }
 
@@ -79,35 +84,41 @@ impl Shape<'_> {
         (0..self.children.len()).find(|&j| self.children[j].iter().filter(|&&c| self.size(c) >= 2).count() >= 3)
     }
 
-    /// `(left, right)` of two subtrees on opposite sides of `x = x0`.
-    fn sides(&self, a: usize, b: usize, x0: f32) -> Option<(usize, usize)> {
-        let (xa, xb) = (self.mean_x(a) - x0, self.mean_x(b) - x0);
-        match (xa > 0.0, xb > 0.0) {
-            (true, false) if xb < 0.0 => Some((a, b)),
-            (false, true) if xa < 0.0 => Some((b, a)),
+    /// The character's left: up × forward, forward being the way the toes
+    /// point from the feet (else glTF's `+Z`).
+    fn left(&self, a: &[usize], b: &[usize]) -> Vec3A {
+        let toes = |leg: &[usize]| match leg {
+            [_, _, foot, toes] => self.positions[*toes] - self.positions[*foot],
+            _ => Vec3A::ZERO,
+        };
+        let forward = toes(a) + toes(b);
+        let forward = Vec3A::new(forward.x, 0.0, forward.z).try_normalize().unwrap_or(Vec3A::Z);
+        Vec3A::Y.cross(forward)
+    }
+
+    /// Whether subtree `a` is on the left of `b`, when they lie on opposite
+    /// sides of `centre`.
+    fn opposite(&self, a: usize, b: usize, centre: Vec3A, left: Vec3A) -> Option<bool> {
+        let (sa, sb) = ((self.mean(a) - centre).dot(left), (self.mean(b) - centre).dot(left));
+        match (sa > 0.0, sb > 0.0) {
+            (true, false) if sb < 0.0 => Some(true),
+            (false, true) if sa < 0.0 => Some(false),
             _ => None,
         }
     }
 
-    fn leg(&self, start: usize, side: Side, roles: &mut [Option<usize>; Role::COUNT]) {
+    /// A leg's upper, lower, foot and toes (the last when there is one):
+    /// from `start` down its main chain, past joints at the hips.
+    fn leg(&self, start: usize, hips: Vec3A) -> Option<Vec<usize>> {
         let chain = self.chain(start, false);
-        let ys: Vec<f32> = chain.iter().map(|&j| self.positions[j].y).collect();
-        let low = ys.iter().copied().fold(f32::INFINITY, f32::min);
-        let high = ys.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let Some(foot) = ys.iter().position(|&y| y <= low + 0.25 * (high - low)) else { return };
-        if foot < 2 {
-            return;
-        }
-        let mut put = |role: Role, j: usize| roles[role.on(side).index()] = Some(chain[j]);
-        put(Role::LeftUpperLeg, foot - 2);
-        put(Role::LeftLowerLeg, foot - 1);
-        put(Role::LeftFoot, foot);
-        if foot + 1 < chain.len() {
-            put(Role::LeftToes, foot + 1);
-        }
+        let low = chain.iter().map(|&j| self.positions[j].y).fold(f32::INFINITY, f32::min);
+        let near = 0.05 * (hips.y - low);
+        let first = chain.iter().position(|&j| self.positions[j].distance(hips) > near)?;
+        let leg: Vec<usize> = chain[first..].iter().copied().take(4).collect();
+        (leg.len() >= 3).then_some(leg)
     }
 
-    fn torso(&self, start: usize, roles: &mut [Option<usize>; Role::COUNT]) {
+    fn torso(&self, start: usize, left: Vec3A, roles: &mut [Option<usize>; Role::COUNT]) {
         let spine = self.chain(start, true);
         let Some(&branch) = spine.last().filter(|&&b| self.children[b].len() >= 2) else { return };
         let slots: &[Role] = match spine.len() {
@@ -119,9 +130,10 @@ impl Shape<'_> {
             let j = if k + 1 == slots.len() { spine.len() - 1 } else { k };
             roles[role.index()] = Some(spine[j]);
         }
-        let x0 = self.positions[branch].x;
+        let centre = self.positions[branch];
+        let lateral = |k: usize| (self.mean(k) - centre).dot(left).abs();
         let mut kids = self.children[branch].clone();
-        kids.sort_by(|&a, &b| (self.mean_x(a) - x0).abs().total_cmp(&(self.mean_x(b) - x0).abs()));
+        kids.sort_by(|&a, &b| lateral(a).total_cmp(&lateral(b)));
         let neck = self.chain(kids[0], false);
         if let [head] = neck[..] {
             roles[Role::Head.index()] = Some(head);
@@ -130,10 +142,11 @@ impl Shape<'_> {
             roles[Role::Head.index()] = Some(h);
         }
         if let [_, a, b, ..] = kids[..]
-            && let Some((left, right)) = self.sides(a, b, x0)
+            && let Some(a_is_left) = self.opposite(a, b, centre, left)
         {
-            self.arm(left, Side::Left, roles);
-            self.arm(right, Side::Right, roles);
+            let (l, r) = if a_is_left { (a, b) } else { (b, a) };
+            self.arm(l, Side::Left, roles);
+            self.arm(r, Side::Right, roles);
         }
     }
 
@@ -178,15 +191,25 @@ impl Shape<'_> {
         self.fold(j, &f32::max, f32::NEG_INFINITY)
     }
 
-    /// The mean `x` of the subtree of `j`.
-    fn mean_x(&self, j: usize) -> f32 {
+    /// The mean position of the subtree of `j`.
+    fn mean(&self, j: usize) -> Vec3A {
         let mut stack = vec![j];
-        let (mut sum, mut n) = (0.0, 0.0);
+        let (mut sum, mut n) = (Vec3A::ZERO, 0.0);
         while let Some(k) = stack.pop() {
-            sum += self.positions[k].x;
+            sum += self.positions[k];
             n += 1.0;
             stack.extend(&self.children[k]);
         }
         sum / n
+    }
+}
+
+/// The roles of a leg's joints, upper first (the left ones).
+const LEG: [Role; 4] = [Role::LeftUpperLeg, Role::LeftLowerLeg, Role::LeftFoot, Role::LeftToes];
+
+/// Gives `joints` the roles `slots` on `side`, in order.
+fn put(roles: &mut [Option<usize>; Role::COUNT], slots: &[Role], joints: &[usize], side: Side) {
+    for (role, &joint) in slots.iter().zip(joints) {
+        roles[role.on(side).index()] = Some(joint);
     }
 }

@@ -22,6 +22,7 @@ mod alloc;
 mod b_spline;
 mod behaviour;
 mod budget;
+mod character;
 mod composition_reference;
 mod crossfade;
 mod ik;
