@@ -13,8 +13,8 @@
 //! The hips' model position is `p⁰_d + k·(p_s(t) − p⁰_s)` with `k = h_d/h_s`,
 //! `h` the height (`+Y`) of the hips above the lower foot in each reference
 //! pose, or, when either side lacks feet, the length of the leg chain from
-//! the hips down (the left leg, else the right); `k = 1` when neither can
-//! be measured. [`Translation::All`] also moves every other mapped joint's
+//! the hips down through the leg joints both sides map (the left leg, else
+//! the right); `k = 1` when neither can be measured. [`Translation::All`] also moves every other mapped joint's
 //! local translation by `k` times its source's change; [`Translation::None`]
 //! keeps the hips at `p⁰_d`.
 //!
@@ -358,21 +358,28 @@ fn hips_ratio(source: &Rig<'_>, source_model: &Pose, target: &Rig<'_>, target_mo
     };
     let ratio = match (by_feet(source, source_model), by_feet(target, target_model)) {
         (Some(s), Some(d)) => d / s,
-        _ => leg_length(target, target_model) / leg_length(source, source_model),
+        _ => {
+            let leg = leg_side(source, target);
+            leg_length(target, target_model, &leg) / leg_length(source, source_model, &leg)
+        }
     };
     if ratio.is_finite() && ratio > 0.0 { ratio } else { 1.0 }
 }
 
-/// The length of the leg chain from the hips through the mapped leg joints
-/// (the left leg, else the right).
-fn leg_length(rig: &Rig<'_>, model: &Pose) -> f32 {
-    let chain = |upper: Role| {
-        let side = upper.side().unwrap_or(Side::Left);
-        let roles = [Role::Hips, upper, Role::LeftLowerLeg.on(side), Role::LeftFoot.on(side)];
-        let points: Vec<Vec3A> =
-            roles.iter().filter_map(|r| rig.roles.joint(*r)).map(|j| model.translations[j]).collect();
-        points.windows(2).map(|w| w[0].distance(w[1])).sum::<f32>()
+/// The leg joints both rigs map, hips first: the left leg's, else the right's.
+fn leg_side(source: &Rig<'_>, target: &Rig<'_>) -> Vec<Role> {
+    let leg = |side: Side| -> Vec<Role> {
+        [Role::Hips, Role::LeftUpperLeg.on(side), Role::LeftLowerLeg.on(side), Role::LeftFoot.on(side)]
+            .into_iter()
+            .filter(|&r| source.roles.joint(r).is_some() && target.roles.joint(r).is_some())
+            .collect()
     };
-    let left = chain(Role::LeftUpperLeg);
-    if left > 0.0 { left } else { chain(Role::RightUpperLeg) }
+    let left = leg(Side::Left);
+    if left.len() >= 2 { left } else { leg(Side::Right) }
+}
+
+/// The length of the chain through `roles`' joints.
+fn leg_length(rig: &Rig<'_>, model: &Pose, roles: &[Role]) -> f32 {
+    let points: Vec<Vec3A> = roles.iter().filter_map(|r| rig.roles.joint(*r)).map(|j| model.translations[j]).collect();
+    points.windows(2).map(|w| w[0].distance(w[1])).sum::<f32>()
 }

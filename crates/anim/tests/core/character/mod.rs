@@ -23,12 +23,12 @@ use glam::{Quat, Vec3};
 pub type Joint = (&'static str, Option<&'static str>, [f64; 3], [f64; 4]);
 
 /// A skeleton from table rows.
-pub fn skeleton(rows: &[Joint]) -> Skeleton {
+pub fn skeleton<N: AsRef<str>>(rows: &[(N, Option<N>, [f64; 3], [f64; 4])]) -> Skeleton {
     let joints = rows
         .iter()
-        .map(|&(name, parent, t, q)| JointSpec {
-            name: name.into(),
-            parent: parent.map(Into::into),
+        .map(|(name, parent, t, q)| JointSpec {
+            name: name.as_ref().into(),
+            parent: parent.as_ref().map(|p| p.as_ref().into()),
             rest: Transform {
                 translation: Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32),
                 rotation: Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32),
@@ -124,7 +124,3 @@ pub fn roles_of(pairs: &[(Role, &str)]) -> Vec<Role> {
     pairs.iter().map(|p| p.0).collect()
 }
 
-/// A unit quaternion from `[x, y, z, w]`.
-pub fn quat(q: [f64; 4]) -> Quat {
-    Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32).normalize()
-}

@@ -81,7 +81,7 @@ fn daz_bvh_reads_side_letters_in_front_of_capitals_and_the_fingers() {
 /// The 22 joints of a synthetic humanoid: parent slot and offset (Y up,
 /// its left at +X), in slot order: hips, the four trunk joints, head, then
 /// each arm (shoulder, upper, lower, hand) and each leg (upper, lower, foot, toes).
-const SLOTS: [(Option<usize>, [f32; 3]); 22] = [
+pub const SLOTS: [(Option<usize>, [f32; 3]); 22] = [
     (None, [0.0, 1.0, 0.0]),
     (Some(0), [0.0, 0.1, 0.0]),
     (Some(1), [0.0, 0.1, 0.0]),
@@ -107,7 +107,7 @@ const SLOTS: [(Option<usize>, [f32; 3]); 22] = [
 ];
 
 /// The roles of the slots, in slot order.
-const SLOT_ROLES: [Role; 22] = [
+pub const SLOT_ROLES: [Role; 22] = [
     Hips,
     Spine,
     Chest,
