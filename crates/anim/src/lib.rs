@@ -22,6 +22,9 @@
 //!   and weight ramps.
 //! - [`ik`]: the `two_bone`, `aim` and `chain` solvers ([`ik::IkSolver`])
 //!   applied to local poses, with targets in model space (docs/ik.md).
+//! - [`character`]: the humanoid roles of a skeleton ([`character::RoleMap`],
+//!   given, read from joint names or from the rest pose's shape) and the
+//!   [`character::Retargeter`] that plays one skeleton's poses on another.
 //!
 //! It is pure: no I/O, no async runtime, no wire format (glam is its only
 //! dependency). Servers, importers and wire formats wrap it; they never reach

@@ -12,17 +12,21 @@
 //!   essential roles it lacks.
 //! - [`Retargeter`]: built once from two [`Rig`]s (skeleton, reference
 //!   pose, role map), then [`Retargeter::retarget`] turns each source pose
-//!   into a target pose, allocation-free.
+//!   into a target pose, allocation-free; a [`FootPlanter`] then keeps the
+//!   feet still while the source's are in contact.
 //!
 //! Module map: `roles` the role enum; `names` and `structure` the two
-//! inferences; `map` the role map; `retarget` the retargeter.
+//! inferences; `map` the role map; `retarget` the retargeter;
+//! `feet` planted feet.
 
+mod feet;
 mod map;
 mod names;
 mod retarget;
 mod roles;
 mod structure;
 
+pub use self::feet::{FeetOptions, FootPlanter, FootReport, lowest_feet};
 pub use self::map::{ESSENTIAL_ROLES, FoundBy, RoleError, RoleJoint, RoleMap};
 pub use self::retarget::{
     MIN_SHARED_ROLES, RetargetError, RetargetOptions, Retargeter, Rig, Translation, rest_with_rotations,

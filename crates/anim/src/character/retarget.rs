@@ -229,6 +229,16 @@ impl Retargeter {
         (s != UNMAPPED).then_some(s as usize)
     }
 
+    /// The source's model-space pose of the last [`Retargeter::retarget`].
+    pub fn source_model(&self) -> &Pose {
+        &self.source_model
+    }
+
+    /// The target's model-space pose of the last [`Retargeter::retarget`].
+    pub fn target_model(&self) -> &Pose {
+        &self.target_model
+    }
+
     /// The number of target joints.
     pub fn target_len(&self) -> usize {
         self.target_parents.len()

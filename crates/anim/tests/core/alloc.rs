@@ -133,3 +133,31 @@ fn a_warm_player_allocates_nothing_per_tick_through_a_ramp_and_mid_crossfade() {
     assert_eq!(player.fades(), 1);
     assert!(player.alpha() > 0.0 && player.alpha() < 1.0, "still mid-fade: α = {}", player.alpha());
 }
+
+#[test]
+fn a_warm_retargeter_and_foot_planter_allocate_nothing_per_pose() {
+    use crate::character::reference::{random_pose, random_rig};
+    use anim::character::{FeetOptions, FootPlanter, RetargetOptions, Retargeter, Rig, Translation};
+    let mut rng = Rng::new(3131);
+    for translation in [Translation::Hips, Translation::None, Translation::All] {
+        let (source, source_roles) = random_rig(&mut rng, true);
+        let (target, target_roles) = random_rig(&mut rng, true);
+        let (source_rig, target_rig) = (Rig::at_rest(&source, &source_roles), Rig::at_rest(&target, &target_roles));
+        let mut retargeter = Retargeter::new(source_rig, target_rig, RetargetOptions { translation }).unwrap();
+        let poses: Vec<Pose> = (0..50).map(|_| random_pose(&mut rng, &source, 2.0, true)).collect();
+        // Thresholds no foot exceeds: both legs are solved every frame.
+        let always = FeetOptions { contact_height: f32::MAX, contact_speed: f32::MAX };
+        let mut planter = FootPlanter::new(&source_roles, &target_roles, [0.0; 2], always);
+        let mut out = Pose::default();
+        retargeter.retarget(&poses[0], &mut out); // warm: the output and the solver take their size
+        planter.plant(&retargeter, None, &target, &mut out);
+        let (before, bytes) = (allocations(), live_bytes());
+        for pose in &poses {
+            retargeter.retarget(pose, &mut out);
+            planter.plant(&retargeter, Some(1.0 / 60.0), &target, &mut out);
+            std::hint::black_box(&out);
+        }
+        assert_eq!(planter.reports().iter().filter(|r| r.planted).count(), 2);
+        assert_eq!((allocations() - before, live_bytes() - bytes), (0, 0), "{translation:?}: (allocations, bytes)");
+    }
+}

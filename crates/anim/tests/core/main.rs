@@ -11,7 +11,9 @@
 //! third-party files; `parameters` holds parameters (docs/clip-format.md,
 //! “Parameters”) to hand-computed values; `ik` holds the IK solvers to
 //! docs/ik.md (and the chain to seed 003's own algorithm); `root_motion` and
-//! `root_motion_cycles` hold root motion to a planar `f64` reference.
+//! `root_motion_cycles` hold root motion to a planar `f64` reference;
+//! `character` reads roles from real and synthetic rigs and holds
+//! retargeting to an `f64` reference and its properties.
 //!
 //! The counting allocator lives here because `#[global_allocator]` is
 //! per binary. It counts per thread, so tests running in parallel do not
@@ -22,7 +24,7 @@ mod alloc;
 mod b_spline;
 mod behaviour;
 mod budget;
-mod character;
+pub mod character;
 mod composition_reference;
 mod crossfade;
 mod ik;

@@ -7,9 +7,10 @@
 //! hierarchies by a reader of a few lines (joint names, parents, offsets),
 //! the glTF rigs as tables of their nodes (`rigs`, copied from the files).
 
+mod feet;
 mod names;
 mod properties;
-mod reference;
+pub mod reference;
 mod rigs;
 mod structure;
 
