@@ -39,14 +39,8 @@ pub struct RoleJoint {
 
 /// The roles a retarget cannot do well without: a skeleton lacking one of
 /// these is reported (`missing_role`).
-pub const ESSENTIAL_ROLES: [Role; 6] = [
-    Role::Hips,
-    Role::Spine,
-    Role::LeftUpperLeg,
-    Role::LeftLowerLeg,
-    Role::RightUpperLeg,
-    Role::RightLowerLeg,
-];
+pub const ESSENTIAL_ROLES: [Role; 6] =
+    [Role::Hips, Role::Spine, Role::LeftUpperLeg, Role::LeftLowerLeg, Role::RightUpperLeg, Role::RightLowerLeg];
 
 /// Role → joint for one skeleton. No joint plays two roles.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -33,7 +33,8 @@ use crate::{Pose, Skeleton};
 /// A retarget needs the hips and at least this many roles in common.
 pub const MIN_SHARED_ROLES: usize = 8;
 
-const UNMAPPED: u32 = u32::MAX;
+/// No parent, or no source joint.
+const NO_JOINT: u32 = u32::MAX;
 
 /// What happens to translations (the hips' by default).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -150,7 +151,7 @@ struct Hips {
 pub struct Retargeter {
     source_parents: Vec<u32>,
     target_parents: Vec<u32>,
-    /// Per target joint, the source joint driving it, or `UNMAPPED`.
+    /// Per target joint, the source joint driving it, or `NO_JOINT`.
     source_of: Vec<u32>,
     /// Per target joint, `(G⁰_s)⁻¹·G⁰_d` (identity when unmapped).
     offsets: Vec<Quat>,
@@ -185,7 +186,7 @@ impl Retargeter {
         }
         let (source_model, target_model) = (model(&source), model(&target));
         let n = target.skeleton.len();
-        let mut source_of = vec![UNMAPPED; n];
+        let mut source_of = vec![NO_JOINT; n];
         let mut offsets = vec![Quat::IDENTITY; n];
         let mut source_translations = target.reference.translations.clone();
         for role in source.roles.shared(target.roles) {
@@ -226,7 +227,7 @@ impl Retargeter {
     /// If `joint` is not a target joint.
     pub fn source_joint(&self, joint: usize) -> Option<usize> {
         let s = self.source_of[joint];
-        (s != UNMAPPED).then_some(s as usize)
+        (s != NO_JOINT).then_some(s as usize)
     }
 
     /// The source's model-space pose of the last [`Retargeter::retarget`].
@@ -258,7 +259,7 @@ impl Retargeter {
         let hips_position = self.hips_position();
         for j in 0..n {
             let parent = self.target_parents[j];
-            let (pt, pq, ps) = if parent == UNMAPPED {
+            let (pt, pq, ps) = if parent == NO_JOINT {
                 (Vec3A::ZERO, Quat::IDENTITY, Vec3A::ONE)
             } else {
                 let p = parent as usize;
@@ -266,7 +267,7 @@ impl Retargeter {
                 (m.translations[p], m.rotations[p], m.scales[p])
             };
             let s = self.source_of[j];
-            let (q, g) = if s == UNMAPPED {
+            let (q, g) = if s == NO_JOINT {
                 let q = self.reference.rotations[j];
                 (q, pq * q)
             } else {
@@ -275,7 +276,7 @@ impl Retargeter {
             };
             let t = if j == self.hips.target {
                 divide(pq.conjugate() * (hips_position - pt), ps)
-            } else if s != UNMAPPED && self.translation == Translation::All {
+            } else if s != NO_JOINT && self.translation == Translation::All {
                 let delta = source.translations[s as usize] - self.source_translations[j];
                 self.reference.translations[j] + self.hips.k * delta
             } else {
@@ -308,7 +309,7 @@ impl Retargeter {
         let m = &mut self.source_model;
         for (j, &p) in self.source_parents.iter().enumerate() {
             let (t, q, s) = (local.translations[j], local.rotations[j], local.scales[j]);
-            if p == UNMAPPED {
+            if p == NO_JOINT {
                 (m.translations[j], m.rotations[j], m.scales[j]) = (t, q, s);
             } else {
                 let p = p as usize;
@@ -328,7 +329,7 @@ fn divide(v: Vec3A, s: Vec3A) -> Vec3A {
 }
 
 fn parents(skeleton: &Skeleton) -> Vec<u32> {
-    (0..skeleton.len()).map(|j| skeleton.parent(j).map_or(UNMAPPED, |p| p as u32)).collect()
+    (0..skeleton.len()).map(|j| skeleton.parent(j).map_or(NO_JOINT, |p| p as u32)).collect()
 }
 
 fn model(rig: &Rig<'_>) -> Pose {

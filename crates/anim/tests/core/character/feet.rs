@@ -13,8 +13,11 @@ use super::skeleton_of;
 /// The names tests' humanoid, each slot's offset scaled by `size(slot)`, its roles given.
 fn rig(size: impl Fn(usize) -> f32) -> (Skeleton, RoleMap) {
     let name = |slot: usize| format!("slot{slot}");
-    let joints: Vec<_> =
-        SLOTS.iter().enumerate().map(|(i, (parent, t))| (name(i), parent.map(name), Vec3::from(*t) * size(i))).collect();
+    let joints: Vec<_> = SLOTS
+        .iter()
+        .enumerate()
+        .map(|(i, (parent, t))| (name(i), parent.map(name), Vec3::from(*t) * size(i)))
+        .collect();
     let skeleton = skeleton_of(&joints);
     let names: Vec<String> = (0..SLOTS.len()).map(name).collect();
     let given: Vec<_> = SLOT_ROLES.iter().zip(&names).map(|(r, n)| (*r, Some(n.as_str()))).collect();
@@ -65,8 +68,7 @@ fn a_planted_foot_stays_on_its_anchor_where_an_unplanted_one_slides() {
         frames.iter().map(|p| model(&source, p).translations[f].y).fold(rest, f32::min)
     });
     let rigs = (Rig::at_rest(&source, &source_roles), Rig::at_rest(&target, &target_roles));
-    let mut retargeter =
-        Retargeter::new(rigs.0, rigs.1, RetargetOptions { translation: Translation::Hips }).unwrap();
+    let mut retargeter = Retargeter::new(rigs.0, rigs.1, RetargetOptions { translation: Translation::Hips }).unwrap();
     assert!((retargeter.k() - (0.05 + 0.45 * 1.6 + 0.42) / 0.92).abs() < 1e-5, "k = {}", retargeter.k());
     let mut planter = FootPlanter::new(&source_roles, &target_roles, lowest, FeetOptions::default());
     let left = target_roles.joint(Role::LeftFoot).unwrap();
@@ -81,7 +83,10 @@ fn a_planted_foot_stays_on_its_anchor_where_an_unplanted_one_slides() {
         let off = planted.distance(*first_planted.get_or_insert(planted));
         drift = drift.max(off);
         let reports = planter.reports();
-        assert_eq!(reports.iter().map(|r| (r.side, r.planted)).collect::<Vec<_>>(), [(Side::Left, true), (Side::Right, false)]);
+        assert_eq!(
+            reports.iter().map(|r| (r.side, r.planted)).collect::<Vec<_>>(),
+            [(Side::Left, true), (Side::Right, false)]
+        );
         assert!((reports[0].slide - off).abs() < 1e-5, "frame {f}: reported slide {} for {off}", reports[0].slide);
     }
     assert!(slid > 0.02, "unplanted, the foot slides ({slid}): a test that cannot fail is a defect");
@@ -92,7 +97,8 @@ fn a_planted_foot_stays_on_its_anchor_where_an_unplanted_one_slides() {
 fn a_foot_lifted_or_moving_fast_is_not_planted() {
     let (source, roles) = rig(|_| 1.0);
     let mut retargeter =
-        Retargeter::new(Rig::at_rest(&source, &roles), Rig::at_rest(&source, &roles), RetargetOptions::default()).unwrap();
+        Retargeter::new(Rig::at_rest(&source, &roles), Rig::at_rest(&source, &roles), RetargetOptions::default())
+            .unwrap();
     let foot = roles.joint(Role::LeftFoot).unwrap();
     let rest_y = model(&source, source.rest()).translations[foot].y;
     let mut planter = FootPlanter::new(&roles, &roles, [rest_y, rest_y], FeetOptions::default());

@@ -21,10 +21,13 @@ use anim::{JointSpec, Skeleton, SkeletonSpec, Transform};
 use glam::{Quat, Vec3};
 
 /// A joint as a table row: name, parent, rest translation, rest rotation `[x, y, z, w]`.
-pub type Joint = (&'static str, Option<&'static str>, [f64; 3], [f64; 4]);
+pub type Row<N> = (N, Option<N>, [f64; 3], [f64; 4]);
+
+/// A row of a constant table.
+pub type Joint = Row<&'static str>;
 
 /// A skeleton from table rows.
-pub fn skeleton<N: AsRef<str>>(rows: &[(N, Option<N>, [f64; 3], [f64; 4])]) -> Skeleton {
+pub fn skeleton<N: AsRef<str>>(rows: &[Row<N>]) -> Skeleton {
     let joints = rows
         .iter()
         .map(|(name, parent, t, q)| JointSpec {
@@ -59,7 +62,8 @@ pub fn skeleton_of(joints: &[(String, Option<String>, Vec3)]) -> Skeleton {
 /// beside the clone, as the other suites).
 pub fn testdata(rel: &str) -> PathBuf {
     let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
-    let dir = std::env::var_os("INBETWEEN_TESTDATA").map(PathBuf::from).unwrap_or_else(|| root.join("../shared/testdata"));
+    let dir =
+        std::env::var_os("INBETWEEN_TESTDATA").map(PathBuf::from).unwrap_or_else(|| root.join("../shared/testdata"));
     dir.join(rel)
 }
 
@@ -124,4 +128,3 @@ pub fn expect(pairs: &[(Role, &str)]) -> Vec<(Role, Option<String>)> {
 pub fn roles_of(pairs: &[(Role, &str)]) -> Vec<Role> {
     pairs.iter().map(|p| p.0).collect()
 }
-

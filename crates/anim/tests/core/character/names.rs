@@ -9,7 +9,11 @@ use super::{bvh_skeleton, expect, inferred, named, roles_of, skeleton_of};
 use Role::*;
 
 /// The roles a humanoid's limbs and trunk must get, left and right.
-fn body(trunk: [(Role, &'static str); 6], left: [&'static str; 8], right: [&'static str; 8]) -> Vec<(Role, &'static str)> {
+fn body(
+    trunk: [(Role, &'static str); 6],
+    left: [&'static str; 8],
+    right: [&'static str; 8],
+) -> Vec<(Role, &'static str)> {
     let limb = [LeftShoulder, LeftUpperArm, LeftLowerArm, LeftHand, LeftUpperLeg, LeftLowerLeg, LeftFoot, LeftToes];
     let mut out = trunk.to_vec();
     out.extend(limb.iter().zip(left).map(|(r, n)| (*r, n)));
@@ -30,11 +34,26 @@ fn check_bvh(file: &str, family: &str, pairs: &[(Role, &str)]) {
 
 #[test]
 fn cmu_motionbuilder_bvh_reads_lowerback_as_the_spine_and_spine_as_the_chest() {
-    let trunk =
-        [(Hips, "Hips"), (Spine, "LowerBack"), (Chest, "Spine"), (UpperChest, "Spine1"), (Neck, "Neck"), (Head, "Head")];
-    let left = ["LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"];
-    let right =
-        ["RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase"];
+    let trunk = [
+        (Hips, "Hips"),
+        (Spine, "LowerBack"),
+        (Chest, "Spine"),
+        (UpperChest, "Spine1"),
+        (Neck, "Neck"),
+        (Head, "Head"),
+    ];
+    let left =
+        ["LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"];
+    let right = [
+        "RightShoulder",
+        "RightArm",
+        "RightForeArm",
+        "RightHand",
+        "RightUpLeg",
+        "RightLeg",
+        "RightFoot",
+        "RightToeBase",
+    ];
     check_bvh("bvh/05_20-mb.bvh", "motionbuilder", &body(trunk, left, right));
 }
 
@@ -58,7 +77,8 @@ fn cmu_asf_bvh_reads_the_shoulder_as_the_upper_arm_and_the_collar_as_the_shoulde
 
 #[test]
 fn daz_bvh_reads_side_letters_in_front_of_capitals_and_the_fingers() {
-    let trunk = [(Hips, "hip"), (Spine, "abdomen"), (Chest, "chest"), (Neck, "neck"), (Head, "head"), (LeftEye, "leftEye")];
+    let trunk =
+        [(Hips, "hip"), (Spine, "abdomen"), (Chest, "chest"), (Neck, "neck"), (Head, "head"), (LeftEye, "leftEye")];
     let left = ["lCollar", "lShldr", "lForeArm", "lHand", "lThigh", "lShin", "lFoot"];
     let right = ["rCollar", "rShldr", "rForeArm", "rHand", "rThigh", "rShin", "rFoot"];
     let mut pairs = trunk.to_vec();
@@ -165,9 +185,28 @@ fn all_roles() -> [Option<Role>; 22] {
 fn mixamo_names_with_either_namespace_and_spine2() {
     for ns in ["mixamorig:", "mixamorig1:", ""] {
         let names = [
-            "Hips", "Spine", "Spine1", "Spine2", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand",
-            "RightShoulder", "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-            "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
+            "Hips",
+            "Spine",
+            "Spine1",
+            "Spine2",
+            "Neck",
+            "Head",
+            "LeftShoulder",
+            "LeftArm",
+            "LeftForeArm",
+            "LeftHand",
+            "RightShoulder",
+            "RightArm",
+            "RightForeArm",
+            "RightHand",
+            "LeftUpLeg",
+            "LeftLeg",
+            "LeftFoot",
+            "LeftToeBase",
+            "RightUpLeg",
+            "RightLeg",
+            "RightFoot",
+            "RightToeBase",
         ]
         .map(|n| format!("{ns}{n}"));
         check_family("mixamo", names.each_ref().map(String::as_str), all_roles(), &[]);
@@ -178,17 +217,55 @@ fn mixamo_names_with_either_namespace_and_spine2() {
 fn spine_is_the_spine_unless_a_lowerback_makes_the_rig_motionbuilder() {
     // Without `LowerBack` or `Spine2`, the tie goes to Mixamo: `Spine` is the spine.
     let names = [
-        "Hips", "Spine", "Spine1", "Neck1", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand",
-        "RightShoulder", "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-        "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
+        "Hips",
+        "Spine",
+        "Spine1",
+        "Neck1",
+        "Neck",
+        "Head",
+        "LeftShoulder",
+        "LeftArm",
+        "LeftForeArm",
+        "LeftHand",
+        "RightShoulder",
+        "RightArm",
+        "RightForeArm",
+        "RightHand",
+        "LeftUpLeg",
+        "LeftLeg",
+        "LeftFoot",
+        "LeftToeBase",
+        "RightUpLeg",
+        "RightLeg",
+        "RightFoot",
+        "RightToeBase",
     ];
     // `Neck1` carries the shoulders: the upper chest by shape.
     check_family("mixamo", names, all_roles(), &[3]);
     // With it, the same names shift up one: MotionBuilder's reading.
     let names = [
-        "Hips", "LowerBack", "Spine", "Spine1", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand",
-        "RightShoulder", "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-        "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
+        "Hips",
+        "LowerBack",
+        "Spine",
+        "Spine1",
+        "Neck",
+        "Head",
+        "LeftShoulder",
+        "LeftArm",
+        "LeftForeArm",
+        "LeftHand",
+        "RightShoulder",
+        "RightArm",
+        "RightForeArm",
+        "RightHand",
+        "LeftUpLeg",
+        "LeftLeg",
+        "LeftFoot",
+        "LeftToeBase",
+        "RightUpLeg",
+        "RightLeg",
+        "RightFoot",
+        "RightToeBase",
     ];
     check_family("motionbuilder", names, all_roles(), &[]);
 }
@@ -196,9 +273,28 @@ fn spine_is_the_spine_unless_a_lowerback_makes_the_rig_motionbuilder() {
 #[test]
 fn unreal_names() {
     let names = [
-        "pelvis", "spine_01", "spine_02", "spine_03", "neck_01", "head", "clavicle_l", "upperarm_l", "lowerarm_l",
-        "hand_l", "clavicle_r", "upperarm_r", "lowerarm_r", "hand_r", "thigh_l", "calf_l", "foot_l", "ball_l", "thigh_r",
-        "calf_r", "foot_r", "ball_r",
+        "pelvis",
+        "spine_01",
+        "spine_02",
+        "spine_03",
+        "neck_01",
+        "head",
+        "clavicle_l",
+        "upperarm_l",
+        "lowerarm_l",
+        "hand_l",
+        "clavicle_r",
+        "upperarm_r",
+        "lowerarm_r",
+        "hand_r",
+        "thigh_l",
+        "calf_l",
+        "foot_l",
+        "ball_l",
+        "thigh_r",
+        "calf_r",
+        "foot_r",
+        "ball_r",
     ];
     check_family("unreal", names, all_roles(), &[]);
 }
@@ -206,16 +302,53 @@ fn unreal_names() {
 #[test]
 fn vrm_names_and_vroid_names() {
     let names = [
-        "hips", "spine", "chest", "upperChest", "neck", "head", "leftShoulder", "leftUpperArm", "leftLowerArm",
-        "leftHand", "rightShoulder", "rightUpperArm", "rightLowerArm", "rightHand", "leftUpperLeg", "leftLowerLeg",
-        "leftFoot", "leftToes", "rightUpperLeg", "rightLowerLeg", "rightFoot", "rightToes",
+        "hips",
+        "spine",
+        "chest",
+        "upperChest",
+        "neck",
+        "head",
+        "leftShoulder",
+        "leftUpperArm",
+        "leftLowerArm",
+        "leftHand",
+        "rightShoulder",
+        "rightUpperArm",
+        "rightLowerArm",
+        "rightHand",
+        "leftUpperLeg",
+        "leftLowerLeg",
+        "leftFoot",
+        "leftToes",
+        "rightUpperLeg",
+        "rightLowerLeg",
+        "rightFoot",
+        "rightToes",
     ];
     check_family("vrm", names, all_roles(), &[]);
     let names = [
-        "J_Bip_C_Hips", "J_Bip_C_Spine", "J_Bip_C_Chest", "J_Bip_C_UpperChest", "J_Bip_C_Neck", "J_Bip_C_Head",
-        "J_Bip_L_Shoulder", "J_Bip_L_UpperArm", "J_Bip_L_LowerArm", "J_Bip_L_Hand", "J_Bip_R_Shoulder",
-        "J_Bip_R_UpperArm", "J_Bip_R_LowerArm", "J_Bip_R_Hand", "J_Bip_L_UpperLeg", "J_Bip_L_LowerLeg", "J_Bip_L_Foot",
-        "J_Bip_L_ToeBase", "J_Bip_R_UpperLeg", "J_Bip_R_LowerLeg", "J_Bip_R_Foot", "J_Bip_R_ToeBase",
+        "J_Bip_C_Hips",
+        "J_Bip_C_Spine",
+        "J_Bip_C_Chest",
+        "J_Bip_C_UpperChest",
+        "J_Bip_C_Neck",
+        "J_Bip_C_Head",
+        "J_Bip_L_Shoulder",
+        "J_Bip_L_UpperArm",
+        "J_Bip_L_LowerArm",
+        "J_Bip_L_Hand",
+        "J_Bip_R_Shoulder",
+        "J_Bip_R_UpperArm",
+        "J_Bip_R_LowerArm",
+        "J_Bip_R_Hand",
+        "J_Bip_L_UpperLeg",
+        "J_Bip_L_LowerLeg",
+        "J_Bip_L_Foot",
+        "J_Bip_L_ToeBase",
+        "J_Bip_R_UpperLeg",
+        "J_Bip_R_LowerLeg",
+        "J_Bip_R_Foot",
+        "J_Bip_R_ToeBase",
     ];
     check_family("vrm", names, all_roles(), &[]);
 }
@@ -228,7 +361,8 @@ fn blender_names_with_each_way_of_writing_the_side() {
         let r = |n: &str| format!("{rp}{n}{rs}");
         let limb = ["shoulder", "upper_arm", "forearm", "hand"];
         let leg = ["thigh", "shin", "foot", "toe"];
-        let mut names: Vec<String> = ["pelvis", "spine", "chest", "upper_chest", "neck", "head"].map(String::from).to_vec();
+        let mut names: Vec<String> =
+            ["pelvis", "spine", "chest", "upper_chest", "neck", "head"].map(String::from).to_vec();
         names.extend(limb.iter().map(|n| l(n)));
         names.extend(limb.iter().map(|n| r(n)));
         names.extend(leg.iter().map(|n| l(n)));
@@ -253,9 +387,28 @@ fn daz_names_leave_a_second_abdomen_unmapped() {
 
 fn mixamo() -> anim::Skeleton {
     humanoid(&[
-        "Hips", "Spine", "Spine1", "Spine2", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand",
-        "RightShoulder", "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
-        "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase",
+        "Hips",
+        "Spine",
+        "Spine1",
+        "Spine2",
+        "Neck",
+        "Head",
+        "LeftShoulder",
+        "LeftArm",
+        "LeftForeArm",
+        "LeftHand",
+        "RightShoulder",
+        "RightArm",
+        "RightForeArm",
+        "RightHand",
+        "LeftUpLeg",
+        "LeftLeg",
+        "LeftFoot",
+        "LeftToeBase",
+        "RightUpLeg",
+        "RightLeg",
+        "RightFoot",
+        "RightToeBase",
     ])
 }
 
@@ -279,10 +432,7 @@ fn given_roles_win_and_a_given_none_stays_unmapped() {
 fn given_roles_are_checked() {
     let skeleton = mixamo();
     let refusal = |given: &[(Role, Option<&str>)]| RoleMap::infer(&skeleton, given).unwrap_err();
-    assert_eq!(
-        refusal(&[(Hips, Some("pelvis"))]),
-        RoleError::UnknownJoint { role: Hips, joint: "pelvis".into() }
-    );
+    assert_eq!(refusal(&[(Hips, Some("pelvis"))]), RoleError::UnknownJoint { role: Hips, joint: "pelvis".into() });
     assert_eq!(refusal(&[(Hips, None), (Hips, Some("Hips"))]), RoleError::DuplicateRole { role: Hips });
     let twice = refusal(&[(Hips, Some("Hips")), (Spine, Some("Hips"))]);
     assert_eq!(twice, RoleError::JointHasTwoRoles { joint: "Hips".into(), roles: [Hips, Spine] });

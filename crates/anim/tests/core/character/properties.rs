@@ -3,9 +3,7 @@
 //! source's own rig is the identity; the hips move by `k = h_d/h_s`; rigs
 //! without enough roles in common are refused.
 
-use anim::character::{
-    MIN_SHARED_ROLES, RetargetError, RetargetOptions, Retargeter, Rig, Role, RoleMap, Translation,
-};
+use anim::character::{MIN_SHARED_ROLES, RetargetError, RetargetOptions, Retargeter, Rig, Role, RoleMap, Translation};
 use anim::{Pose, Skeleton};
 use glam::{Quat, Vec3, Vec3A};
 
@@ -37,7 +35,8 @@ fn bone_lengths_are_the_targets_and_mapped_joints_turn_as_their_sources() {
     for case in 0..40 {
         let (source, source_roles) = random_rig(&mut rng, case % 2 == 0);
         let (target, target_roles) = random_rig(&mut rng, true);
-        let mut r = retargeter(Rig::at_rest(&source, &source_roles), Rig::at_rest(&target, &target_roles), Translation::Hips);
+        let mut r =
+            retargeter(Rig::at_rest(&source, &source_roles), Rig::at_rest(&target, &target_roles), Translation::Hips);
         let (source_rest, target_rest) = (model(&source, source.rest()), model(&target, target.rest()));
         let hips = target_roles.joint(Role::Hips).unwrap();
         let mut out = Pose::default();
@@ -46,8 +45,10 @@ fn bone_lengths_are_the_targets_and_mapped_joints_turn_as_their_sources() {
         let (s, d) = (model(&source, &pose), model(&target, &out));
         for j in (0..target.len()).filter(|&j| j != hips) {
             let Some(p) = target.parent(j) else { continue };
-            let (now, rest) =
-                (d.translations[j].distance(d.translations[p]), target_rest.translations[j].distance(target_rest.translations[p]));
+            let (now, rest) = (
+                d.translations[j].distance(d.translations[p]),
+                target_rest.translations[j].distance(target_rest.translations[p]),
+            );
             assert!((now - rest).abs() <= 1e-5 * rest.max(1.0), "case {case}: bone {j} is {now}, rest {rest}");
         }
         for (role, entry) in target_roles.iter() {
@@ -97,8 +98,8 @@ fn scaled_humanoid(size: f32, names: &[&str; 22]) -> (Skeleton, RoleMap) {
 }
 
 const NAMES: [&str; 22] = [
-    "h", "s", "c", "u", "n", "hd", "ls", "lu", "ll", "lh", "rs", "ru", "rl", "rh", "lul", "lll", "lf", "lt", "rul", "rll",
-    "rf", "rt",
+    "h", "s", "c", "u", "n", "hd", "ls", "lu", "ll", "lh", "rs", "ru", "rl", "rh", "lul", "lll", "lf", "lt", "rul",
+    "rll", "rf", "rt",
 ];
 
 #[test]
@@ -151,7 +152,9 @@ fn rigs_that_share_too_few_roles_are_refused_naming_what_the_source_lacks() {
         let given: Vec<_> = SLOT_ROLES.iter().zip(NAMES).take(n).map(|(r, n)| (*r, Some(n))).collect();
         RoleMap::given(&rig, &given).unwrap()
     };
-    let new = |source: &RoleMap| Retargeter::new(Rig::at_rest(&rig, source), Rig::at_rest(&rig, &all_roles), RetargetOptions::default());
+    let new = |source: &RoleMap| {
+        Retargeter::new(Rig::at_rest(&rig, source), Rig::at_rest(&rig, &all_roles), RetargetOptions::default())
+    };
     // The hips and seven other roles are enough; the hips and six are not.
     assert!(new(&first(MIN_SHARED_ROLES)).is_ok());
     let refusal = new(&first(MIN_SHARED_ROLES - 1)).unwrap_err();

@@ -161,8 +161,8 @@ pub fn retarget(source: &Side, target: &Side, pose: &[T], mode: Translation) -> 
     };
     let mut out: Vec<T> = Vec::new();
     let mut m: Vec<T> = Vec::new();
-    for j in 0..target.parents.len() {
-        let parent = target.parents[j].map_or(T { t: [0.0; 3], q: [0.0, 0.0, 0.0, 1.0], s: [1.0; 3] }, |p| m[p]);
+    for (j, parent) in target.parents.iter().enumerate() {
+        let parent = parent.map_or(T { t: [0.0; 3], q: [0.0, 0.0, 0.0, 1.0], s: [1.0; 3] }, |p| m[p]);
         let source_joint = Role::ALL.iter().find(|r| target.joint(**r) == Some(j)).and_then(|r| source.joint(*r));
         let reference = target.reference[j];
         let g = match source_joint {
@@ -178,7 +178,11 @@ pub fn retarget(source: &Side, target: &Side, pose: &[T], mode: Translation) -> 
             reference.t
         };
         let local = T { t, q: mul(conj(parent.q), g), s: reference.s };
-        m.push(T { t: add(parent.t, rotate(parent.q, hadamard(parent.s, t))), q: g, s: hadamard(parent.s, reference.s) });
+        m.push(T {
+            t: add(parent.t, rotate(parent.q, hadamard(parent.s, t))),
+            q: g,
+            s: hadamard(parent.s, reference.s),
+        });
         out.push(local);
     }
     out
@@ -188,7 +192,7 @@ pub fn retarget(source: &Side, target: &Side, pose: &[T], mode: Translation) -> 
 /// and rest rotations; with `extras`, a root above the hips and joints
 /// without a role between some slots, and scales on a few joints.
 pub fn random_rig(rng: &mut Rng, extras: bool) -> (Skeleton, RoleMap) {
-    let mut rows: Vec<(String, Option<String>, [f64; 3], [f64; 4])> = Vec::new();
+    let mut rows: Vec<super::Row<String>> = Vec::new();
     let rotation = |rng: &mut Rng, max: f64| -> [f64; 4] {
         let q = Quat::from_axis_angle(rng.axis(), rng.range(0.0, max) as f32);
         [q.x as f64, q.y as f64, q.z as f64, q.w as f64]
@@ -290,7 +294,8 @@ fn the_core_agrees_with_the_f64_reference_on_random_rigs_and_poses() {
         let source_rig = Rig { skeleton: &source, reference: &source_reference, roles: &source_roles };
         let target_rig = Rig::at_rest(&target, &target_roles);
         let mut retargeter = Retargeter::new(source_rig, target_rig, RetargetOptions { translation: mode }).unwrap();
-        let (s, d) = (Side::new(&source, &source_reference, &source_roles), Side::new(&target, target.rest(), &target_roles));
+        let (s, d) =
+            (Side::new(&source, &source_reference, &source_roles), Side::new(&target, target.rest(), &target_roles));
         assert!((retargeter.k() as f64 - hips_ratio(&s, &d)).abs() < 1e-5 * hips_ratio(&s, &d), "case {case}: k");
         let mut out = Pose::default();
         for _ in 0..5 {

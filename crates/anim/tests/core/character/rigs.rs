@@ -4,9 +4,12 @@
 //! its rotation (both are rotations without scale). Unnamed nodes are
 //! `node<i>`, as the glTF importer names them.
 
+use std::f64::consts::FRAC_1_SQRT_2;
+
 use super::Joint;
 
 /// Fox.glb: a quadruped (24 joints in its skin), in centimetres.
+#[rustfmt::skip]
 pub const FOX: &[Joint] = &[
     ("root", None, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
     ("_rootJoint", Some("root"), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
@@ -36,8 +39,9 @@ pub const FOX: &[Joint] = &[
 ];
 
 /// CesiumMan.gltf: a humanoid with unnamed joints (19 in its skin), under a Z-up to Y-up matrix.
+#[rustfmt::skip]
 pub const CESIUM_MAN: &[Joint] = &[
-    ("node0", None, [0.0, 0.0, 0.0], [-0.7071067811865475, 0.0, 0.0, 0.7071067811865476]),
+    ("node0", None, [0.0, 0.0, 0.0], [-FRAC_1_SQRT_2, 0.0, 0.0, FRAC_1_SQRT_2]), // the matrix: −90° about X
     ("node21", Some("node0"), [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
     ("node2", Some("node21"), [-3.352759847530251e-08, 0.00499989278614521, 0.6789997816085815], [-0.026794714853167537, -0.026732556521892548, -0.7065613865852356, -0.706638753414154]),
     ("node11", Some("node2"), [-1.02445003591356e-08, 1.4901200273698123e-08, 0.14541690051555634], [-0.6572523713111877, -0.00017969288455788046, -0.00010428010864416136, -0.7536706328392029]),

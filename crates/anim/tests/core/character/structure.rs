@@ -2,8 +2,8 @@
 //! (unnamed joints), the CMU skeletons with their names hidden, the Fox's
 //! legs, and shapes that are not humanoid.
 
-use anim::character::{FoundBy, Role, RoleMap};
 use anim::Skeleton;
+use anim::character::{FoundBy, Role, RoleMap};
 use glam::Vec3;
 
 use super::rigs::{CESIUM_MAN, FOX};
@@ -54,8 +54,20 @@ fn cesium_man_gets_its_trunk_arms_and_legs_from_its_shape() {
 fn the_cmu_skeletons_without_their_names_get_the_roles_their_names_give() {
     // The roles structure can see: trunk ends, arms from the upper arm, legs.
     let seen = [
-        Hips, Head, LeftUpperArm, LeftLowerArm, RightUpperArm, RightLowerArm, LeftUpperLeg, LeftLowerLeg, LeftFoot,
-        LeftToes, RightUpperLeg, RightLowerLeg, RightFoot, RightToes,
+        Hips,
+        Head,
+        LeftUpperArm,
+        LeftLowerArm,
+        RightUpperArm,
+        RightLowerArm,
+        LeftUpperLeg,
+        LeftLowerLeg,
+        LeftFoot,
+        LeftToes,
+        RightUpperLeg,
+        RightLowerLeg,
+        RightFoot,
+        RightToes,
     ];
     for file in ["bvh/05_20-mb.bvh", "bvh/131_03.bvh"] {
         let named_skeleton = bvh_skeleton(file);
@@ -141,4 +153,3 @@ fn structure_fills_only_roles_and_joints_names_left_free() {
     assert_eq!(map.role_of(at("node9")), None);
     assert_eq!(map.joint(LeftLowerLeg), Some(at("node8")));
 }
-
