@@ -1,7 +1,7 @@
 //! Retargeting benchmark (the `character` module): a CMU take (`131_01.bvh`,
-//! 31 joints, roles by name) played on CesiumMan (`CesiumMan.gltf`, 22 joints
-//! in its clip's skeleton, roles given by node name), both imported as a user
-//! would from `../shared/testdata`.
+//! 38 joints as imported, end sites included; roles by name) played on
+//! CesiumMan (`CesiumMan.gltf`, 21 joints in its clip's skeleton; roles given
+//! by node name), both imported as a user would from `../shared/testdata`.
 //!
 //! - `sample_and_retarget`: sampling the take and retargeting the pose, what
 //!   a stream of the take on the character does per frame;
