@@ -14,9 +14,9 @@
 //! `h` the height (`+Y`) of the hips above the lower foot in each reference
 //! pose, or, when either side lacks feet, the length of the leg chain from
 //! the hips down through the leg joints both sides map (the left leg, else
-//! the right); `k = 1` when neither can be measured. [`Translation::All`] also moves every other mapped joint's
-//! local translation by `k` times its source's change; [`Translation::None`]
-//! keeps the hips at `p⁰_d`.
+//! the right); `k = 1` when neither can be measured. [`Translation::All`]
+//! also moves every other mapped joint's local translation by `k` times its
+//! source's change; [`Translation::None`] keeps the hips at `p⁰_d`.
 //!
 //! [`Retargeter::new`] measures both references once; [`Retargeter::retarget`]
 //! is then one model-space pass over the source and one over the target,
