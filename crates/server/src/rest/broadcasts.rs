@@ -61,6 +61,9 @@ pub struct BroadcastSummary {
     pub space: String,
     /// The joints frames carry (`null`: all).
     pub joints: Option<Vec<String>>,
+    /// Its price now, in work units per second, charged to its creator
+    /// (docs/api.md, "Work and its price").
+    pub work_per_sec: u64,
 }
 
 /// `GET /v1/broadcasts`.
@@ -94,6 +97,7 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
         motion: described["motion"].clone(),
         space: described["space"].as_str().unwrap_or("local").to_owned(),
         joints: b.params().joints.as_ref().map(|_| b.params().joint_names()),
+        work_per_sec: b.tick_price().saturating_mul(u64::from(b.params().fps)),
     }
 }
 

@@ -79,4 +79,6 @@ mod tests;
 #[cfg(test)]
 mod tests_broadcast;
 #[cfg(test)]
+mod tests_broadcast_budget;
+#[cfg(test)]
 mod tests_ws;

@@ -166,6 +166,29 @@ mod tests {
     }
 
     #[test]
+    fn a_ticket_resized_up_is_checked_like_a_charge_and_down_always_succeeds() {
+        let meter = Meter::new(1000, 0.5);
+        let mut a = meter.charge(&key(1), 300).unwrap();
+        let other = meter.charge(&key(1), 100).unwrap();
+        assert_eq!(a.resize(401).unwrap_err().code(), "caller_work_limit", "400 + 101 over the share of 500");
+        assert_eq!((a.units(), meter.held()), (300, 400), "a refused resize holds what it held");
+        a.resize(400).unwrap();
+        let b = meter.charge(&key(2), 500).unwrap();
+        drop(other);
+        assert_eq!(a.resize(501).unwrap_err().code(), "overloaded", "900 + 101 over the node's 1000");
+        a.resize(10).unwrap();
+        assert_eq!(meter.held(), 510);
+        // Alone on the meter, a ticket may grow past the share (as one charge may).
+        drop(b);
+        a.resize(5000).unwrap();
+        let held = meter.hold(&key(3), 7);
+        assert_eq!(meter.held(), 5007, "held whatever the node holds");
+        drop((a, held));
+        assert_eq!(meter.held(), 0);
+        assert!(lock(&meter.held).callers.is_empty());
+    }
+
+    #[test]
     fn an_idle_caller_on_an_idle_node_may_take_one_charge_over_its_share() {
         let meter = Meter::new(1000, 0.5);
         let big = meter.charge(&key(1), 5000).unwrap();
