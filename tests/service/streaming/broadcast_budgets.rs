@@ -137,7 +137,7 @@ async fn a_broadcast_is_charged_to_its_creator_until_it_ends() {
     let (s4, problem, retry) = create(&app, &clip, Some(ADMIN)).await;
     assert_eq!((s4, problem["code"].as_str()), (503, Some("overloaded")), "{problem}");
     assert!(retry.is_some());
-    // Deleted, its charge is given back.
+    // Deleted, its charge is given back at once.
     let url = app.url(&format!("/v1/broadcasts/{}", first["id"].as_str().unwrap()));
     assert_eq!(app.http.delete(&url).bearer_auth(WRITER).send().await.unwrap().status(), 204);
     let (s5, b, _) = create(&app, &clip, Some(WRITER)).await;

@@ -26,6 +26,13 @@
 //! ([`Broadcasts::adopt`], [`Broadcast::heard`]); one heard for a tick
 //! already stepped makes the task replay from scratch.
 //!
+//! Its work is priced and charged to its creator for its life, re-priced
+//! by the controls that change it, and each tick's CPU is metered against
+//! that price: one that overruns it ends alone ([`EndReason::TooMuchWork`];
+//! `broadcast_budget`). A control takes a place in its bounded store queue
+//! ([`STORE_QUEUE`]) before it is applied, and is withdrawn if the store
+//! refuses it, so every control applied is stored.
+//!
 //! After `idle_timeout` with no viewers and no controls it ends (with a
 //! [`Journal`], only when no node had viewers either). It also ends when
 //! deleted (viewers get [`EndReason::Ended`]: close 1000 / gRPC OK) and at
@@ -356,6 +363,7 @@ impl Broadcasts {
         let Some(broadcast) = self.lock().remove(id) else { return false };
         // Stops a long solve of its tick under way (`anim::ik::stoppable`).
         broadcast.stop.store(true, Ordering::Relaxed);
+        broadcast.desk().budget.release();
         broadcast.deleted.notify_one();
         true
     }
@@ -749,6 +757,7 @@ impl Task {
     async fn run(mut self) {
         let reason = self.ticks().await;
         self.broadcast.ended.store(true, Ordering::Release);
+        self.broadcast.desk().budget.release();
         self.registry.unlist(&self.broadcast);
         for tx in [&self.broadcast.json, &self.broadcast.protobuf] {
             let _ = tx.send(Item::End(reason));

@@ -132,6 +132,12 @@ impl Budget {
         Ok(())
     }
 
+    /// Gives its charge back (it ended): what it held is the node's again
+    /// at once, whoever still holds the broadcast.
+    pub(crate) fn release(&mut self) {
+        self.tickets.clear();
+    }
+
     /// Every ticket holds `per_sec`, or none changes.
     fn resize(&mut self, per_sec: u64) -> Result<(), ControlError> {
         let before = self.per_tick().saturating_mul(self.fps);

@@ -174,3 +174,19 @@ fn a_crossfade_or_ik_control_re_prices_the_broadcast_and_one_over_the_limit_is_r
     assert_eq!(refused.code(), "too_much_work");
     assert_eq!(budget.per_tick(), 100, "a refused control changes nothing");
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_broadcast_holds_its_charge_until_it_is_deleted() {
+    let e = engine();
+    let meter = crate::work::Meter::new(1000, 1.0);
+    let caller = crate::auth::CallerKey::Addr([10, 0, 0, 1].into());
+    let ticket = meter.charge(&caller, 300).unwrap();
+    let charge = BroadcastCharge { per_tick: 30, limit_per_sec: u64::MAX, ns_per_unit: 0.0, tickets: vec![ticket] };
+    let b = e.broadcasts().create(spec(10), charge).unwrap();
+    let mut v = viewer(&e, &b);
+    frame(&mut v).await;
+    assert_eq!(meter.held(), 300, "held while it lives");
+    assert!(e.broadcasts().delete(b.id()));
+    assert_eq!(meter.held(), 0, "given back at the delete, while a viewer and this test still hold the broadcast");
+    assert_eq!(v.next().await, Next::End(EndReason::Ended));
+}
