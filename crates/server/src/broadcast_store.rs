@@ -196,7 +196,8 @@ pub async fn control(state: &AppState, b: &Broadcast, body: &[u8]) -> Result<u64
     let message: Value = serde_json::from_slice(body).map_err(ApiError::internal)?;
     let text = serde_json::to_string(&Stored { message, versions: fade_versions }).map_err(ApiError::internal)?;
     let id = new_control_id();
-    let refused = |e: ControlError| ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string());
+    let refused = |e: ControlError| ApiError::from_control(&e);
+    let _slot = b.store_slot().map_err(refused)?;
     let seq = b.take(control, Arc::clone(&id)).map_err(refused)?;
     match state.store.add_broadcast_control(b.id(), StoredControl { id: id.to_string(), seq, control: text }).await {
         Ok(()) => Ok(seq),
@@ -258,7 +259,11 @@ pub async fn adopt(state: &AppState, stored: StoredBroadcast) -> Result<Arc<Broa
             Err(e) => tracing::warn!(broadcast = %stored.id, control = %c.id, error = %e, "a stored control skipped"),
         }
     }
-    broadcasts.adopt(&stored.id, spec, stored.created_at, controls).map_err(ApiError::TooManyBroadcasts)
+    let charge = match &live {
+        Some(_) => crate::stream::BroadcastCharge::free(),
+        None => super::broadcast_work::hold(state, &spec),
+    };
+    broadcasts.adopt(&stored.id, spec, stored.created_at, controls, charge).map_err(ApiError::TooManyBroadcasts)
 }
 
 /// A stored control built again.
@@ -353,15 +358,27 @@ impl Journal for StoreJournal {
         id: &str,
         json: Value,
         fade_to: Option<&StreamMotion>,
-    ) -> BoxFuture<'static, ()> {
+    ) -> BoxFuture<'static, Result<(), ControlError>> {
         let store = Arc::clone(&self.store);
         let (broadcast, id) = (broadcast.to_owned(), id.to_owned());
         let versions = fade_to.map(versions).unwrap_or_default();
         async move {
             let stored = Stored { message: json, versions };
-            let Ok(text) = serde_json::to_string(&stored) else { return };
-            if let Err(e) = store.add_broadcast_control(&broadcast, StoredControl { id, seq, control: text }).await {
-                tracing::warn!(%broadcast, error = %e, "a viewer's broadcast control was not stored");
+            let text = serde_json::to_string(&stored).map_err(|e| ApiError::internal(e).to_control())?;
+            let written = store.add_broadcast_control(&broadcast, StoredControl { id, seq, control: text }).await;
+            written.map_err(|e| {
+                tracing::warn!(%broadcast, error = %e, "a viewer's broadcast control was not stored; withdrawn");
+                ApiError::from(e).to_control()
+            })
+        }
+        .boxed()
+    }
+
+    fn ended(&self, broadcast: &str) -> BoxFuture<'static, ()> {
+        let (store, broadcast) = (Arc::clone(&self.store), broadcast.to_owned());
+        async move {
+            if let Err(e) = store.delete_broadcast(&broadcast).await {
+                tracing::warn!(%broadcast, error = %e, "cannot delete a broadcast that overran its price");
             }
         }
         .boxed()

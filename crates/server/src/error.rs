@@ -113,6 +113,14 @@ pub enum ApiError {
     /// the same clip every time it started again (`unavailable`, with `Retry-After`).
     #[error("the clip kept changing while this write was applied ({attempts} attempts); retry after {retry_after} s")]
     WriteRace { attempts: u32, retry_after: u64 },
+    /// A broadcast's store queue is full (docs/broadcasts.md, "Control"):
+    /// the control is refused, never applied (`unavailable`, with `Retry-After`).
+    #[error("{limit} controls of this broadcast are waiting to be stored; retry after {retry_after} s")]
+    StoreQueueFull { limit: usize, retry_after: u64 },
+    /// A refusal of this server's carried as a broadcast control's
+    /// (`stream::ControlError::Refused`), answered as it was made.
+    #[error("{detail}")]
+    Relayed { status: u16, code: &'static str, detail: String },
     #[error("internal error")]
     Internal(#[source] anyhow::Error),
 }
@@ -149,6 +157,25 @@ struct Problem<'a> {
 }
 
 impl ApiError {
+    /// A refused stream or broadcast control: its own code (422), or the
+    /// server's refusal it carries, answered as it was made.
+    pub fn from_control(e: &crate::stream::ControlError) -> ApiError {
+        match e {
+            crate::stream::ControlError::Refused { code, problem } => ApiError::Relayed {
+                status: problem["status"].as_u64().map_or(500, |s| s as u16),
+                code,
+                detail: e.to_string(),
+            },
+            e => ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()),
+        }
+    }
+
+    /// This refusal as a broadcast control's, its problem carried whole
+    /// (to a socket as `{"error": problem}`; back by [`ApiError::from_control`]).
+    pub fn to_control(&self) -> crate::stream::ControlError {
+        crate::stream::ControlError::Refused { code: self.code(), problem: std::sync::Arc::new(self.problem_json()) }
+    }
+
     pub fn status(&self) -> StatusCode {
         use ApiError::*;
         match self {
@@ -168,7 +195,10 @@ impl ApiError {
             Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
-            Timeout { .. } | Unavailable(_) | WriteRace { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            Timeout { .. } | Unavailable(_) | WriteRace { .. } | StoreQueueFull { .. } => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+            Relayed { status, .. } => StatusCode::from_u16(*status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR),
             BodyTimeout { .. } | UploadTooSlow { .. } => StatusCode::REQUEST_TIMEOUT,
             Overloaded { .. } | WorkOverloaded { .. } => StatusCode::SERVICE_UNAVAILABLE,
             RateLimited { .. } | ClientInFlight { .. } | CallerWorkLimit { .. } => StatusCode::TOO_MANY_REQUESTS,
@@ -198,7 +228,8 @@ impl ApiError {
             TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => "shutting_down",
             TooManyBroadcasts(_) => "too_many_broadcasts",
             Timeout { .. } => "request_timeout",
-            Unavailable(_) | WriteRace { .. } => "unavailable",
+            Unavailable(_) | WriteRace { .. } | StoreQueueFull { .. } => "unavailable",
+            Relayed { code, .. } => code,
             BodyTimeout { .. } | UploadTooSlow { .. } => "body_timeout",
             Overloaded { .. } | WorkOverloaded { .. } => "overloaded",
             CallerWorkLimit { .. } => "caller_work_limit",
@@ -334,10 +365,14 @@ impl IntoResponse for ApiError {
         | ApiError::RateLimited { retry_after }
         | ApiError::ClientInFlight { retry_after, .. }
         | ApiError::WriteRace { retry_after, .. }
+        | ApiError::StoreQueueFull { retry_after, .. }
         | ApiError::CallerWorkLimit { retry_after, .. }
         | ApiError::WorkOverloaded { retry_after } = &self
         {
             response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(*retry_after));
+        }
+        if let ApiError::Relayed { status: 429 | 503, .. } = &self {
+            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(1));
         }
         response
     }
@@ -382,7 +417,14 @@ impl ApiError {
             TooManyBroadcasts(crate::stream::BroadcastError::ShuttingDown) => Code::Unavailable,
             TooManyBroadcasts(_) => Code::ResourceExhausted,
             Timeout { .. } => Code::DeadlineExceeded,
-            Unavailable(_) | WriteRace { .. } => Code::Unavailable,
+            Unavailable(_) | WriteRace { .. } | StoreQueueFull { .. } => Code::Unavailable,
+            Relayed { status, .. } => match *status {
+                429 => Code::ResourceExhausted,
+                503 => Code::Unavailable,
+                404 => Code::NotFound,
+                400..=499 => Code::InvalidArgument,
+                _ => Code::Internal,
+            },
             BodyTimeout { .. } | UploadTooSlow { .. } => Code::DeadlineExceeded,
             Overloaded { .. } | RateLimited { .. } | ClientInFlight { .. } | CallerWorkLimit { .. } => {
                 Code::ResourceExhausted

@@ -367,7 +367,7 @@ fn bad_control(detail: impl Into<String>) -> Status {
 /// A control the stream refused, with the code and pointer the WebSocket
 /// sends (`bad_control`, or an IK rule's code at `/constraints/…`).
 fn refused(e: &ControlError) -> Status {
-    ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()).into()
+    ApiError::from_control(e).into()
 }
 
 #[tonic::async_trait]
@@ -511,7 +511,7 @@ impl Animation for GrpcService {
         let caller = self.read(&request)?;
         let b = live_broadcast(&self.state, &request.get_ref().broadcast_id).await?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
-        let sub = b.watch(stream::Encoding::Protobuf, permit, false);
+        let sub = b.watch(stream::Encoding::Protobuf, permit, None);
         Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.phase_ms()))
     }
 
@@ -642,7 +642,8 @@ impl GrpcService {
     ) -> Result<Response<FrameStream>, Status> {
         let b = live_broadcast(&self.state, id).await?;
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
-        let sub = b.watch(stream::Encoding::Protobuf, permit, true);
+        // Its controls go to the broadcast from the task below, not through the subscription.
+        let sub = b.watch(stream::Encoding::Protobuf, permit, None);
         let phase_ms = b.phase_ms();
         let (abort_tx, abort_rx) = oneshot::channel::<Status>();
         let state = self.state.clone();
@@ -652,14 +653,33 @@ impl GrpcService {
                     let _ = abort_tx.send(Status::ok("stopped"));
                     return;
                 }
-                let sent = control_from_pb(&state, msg.op).await.and_then(|c| b.control(c).map_err(|e| refused(&e)));
-                if let Err(status) = sent {
+                if let Err(status) = broadcast_control(&state, &caller, &b, msg.op).await {
                     let _ = abort_tx.send(status);
                     return;
                 }
             }
         });
         Ok(with_phase(Response::new(Box::pin(with_abort(stream::grpc::frames(sub), abort_rx))), phase_ms))
+    }
+}
+
+/// One control a `Play` bound to broadcast `b` sent: drawn on `caller`'s
+/// write budget, applied, and stored before the next is read.
+///
+/// # Errors
+/// Its refusal, or the store's (the control then withdrawn).
+async fn broadcast_control(
+    state: &AppState,
+    caller: &Caller,
+    b: &stream::Broadcast,
+    op: Option<pb::playback_control::Op>,
+) -> Result<(), Status> {
+    state.writes.admit(caller)?;
+    let control = control_from_pb(state, op).await?;
+    let (_, storing) = b.control(control).map_err(|e| refused(&e))?;
+    match storing {
+        Some(outcome) => outcome.await.map_or(Ok(()), |refusal| Err(refused(&refusal))),
+        None => Ok(()),
     }
 }
 

@@ -51,6 +51,7 @@ pub(crate) mod access_log;
 pub mod auth;
 pub(crate) mod body_guard;
 pub(crate) mod broadcast_store;
+pub(crate) mod broadcast_work;
 pub(crate) mod builds;
 pub(crate) mod cache;
 pub(crate) mod cache_budget;

@@ -71,6 +71,8 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::ClipNotFoundAt { at: At::Pointer("/motion/layers/1/clip".into()), detail: "x".into() },
         ApiError::Unavailable(None),
         ApiError::WriteRace { attempts: 9, retry_after: 1 },
+        ApiError::StoreQueueFull { limit: 64, retry_after: 1 },
+        ApiError::Relayed { status: 429, code: "rate_limited", detail: "x".into() },
         ApiError::UploadTooSlow { received: 3, window_secs: 3, min_per_sec: 16384 },
         ApiError::internal(anyhow::anyhow!("disk on fire")),
     ]
@@ -105,6 +107,8 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::UploadTooSlow { .. } => 24,
         ApiError::CallerWorkLimit { .. } => 25,
         ApiError::WorkOverloaded { .. } => 26,
+        ApiError::StoreQueueFull { .. } => 27,
+        ApiError::Relayed { .. } => 28,
     }
 }
 
@@ -112,7 +116,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 27, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 29, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));

@@ -6,6 +6,7 @@
 //! tests run on real time and real sockets, so their timing checks have
 //! tolerances, and every wait is bounded so a bug fails rather than hangs.
 
+mod broadcast_budgets;
 mod broadcasts;
 mod grpc_api;
 mod grpc_ik;

@@ -16,6 +16,7 @@
 //! time (a lock), so one attack's load never shows up in another's probes.
 
 mod answers;
+mod broadcasts;
 mod builds;
 mod connections;
 mod imports;
@@ -77,6 +78,11 @@ pub async fn target(extra: &[&str]) -> Target {
 }
 
 impl Target {
+    /// The server's `--data-dir` (its SQLite store is `inbetween.db` there).
+    pub fn data_dir(&self) -> PathBuf {
+        self._dir.path().join("data")
+    }
+
     /// Peak resident set size so far (`VmHWM`).
     pub fn peak_rss(&self) -> u64 {
         proc_status_kib(self.server.pid(), "VmHWM:") * 1024

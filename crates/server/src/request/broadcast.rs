@@ -53,11 +53,12 @@ impl RawBroadcast<'_> {
         let idle = self.idle_timeout()?;
         // Priced as JSON, the larger encoding: viewers may ask for either.
         let stream = RawStream { encoding: None, ..self.stream };
-        let params = stream.motion_params(state, motion).await?;
+        let (params, work_per_sec) = stream.motion_params(state, motion).await?;
         Ok(BroadcastSpec {
             params: crate::stream::StreamParams { encoding: Encoding::Json, ..params },
             idle_timeout: idle,
             description,
+            work_per_sec,
         })
     }
 

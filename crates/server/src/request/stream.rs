@@ -141,16 +141,22 @@ impl RawStream<'_> {
     /// A composed motion's stream parameters, checked, bound and priced as
     /// [`RawStream::open_motion`] does, without a permit or a charge: a
     /// broadcast's (docs/broadcasts.md), whose viewers are admitted one by
-    /// one as they join.
+    /// one as they join and whose price (per second, returned) is charged
+    /// to its creator by the server.
     ///
     /// # Errors
     /// As [`RawStream::open_motion`], but the caller's share and the caps.
-    pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
+    pub async fn motion_params(
+        &self,
+        state: &AppState,
+        motion: RawMotion<'_>,
+    ) -> Result<(StreamParams, u64), ApiError> {
         let (composed, request, frame) = self.composed(state, motion).await?;
         check_stream(frame, request.fps, &state.config.limits, self.at)?;
-        let per_sec = stream_work(price::motion_pose(&composed.motion), frame, request.fps);
+        let per_frame = price::motion_pose(&composed.motion).saturating_add(price::BROADCAST_TICK);
+        let per_sec = stream_work(per_frame, frame, request.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
-        self.motion_stream(composed, request, state)
+        Ok((self.motion_stream(composed, request, state)?, per_sec))
     }
 
     /// The request checked, its motion resolved, and a bound of its frames.

@@ -24,11 +24,11 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::auth::{Identity, ReadAccess, Scope, WriteAccess};
-use crate::broadcast_store;
 use crate::error::ApiError;
 use crate::request::Raw;
 use crate::state::AppState;
 use crate::stream::{Broadcast, Encoding};
+use crate::{broadcast_store, broadcast_work};
 
 use super::extract::JsonBody;
 use super::query::Query;
@@ -61,6 +61,9 @@ pub struct BroadcastSummary {
     pub space: String,
     /// The joints frames carry (`null`: all).
     pub joints: Option<Vec<String>>,
+    /// Its price now, in work units per second, charged to its creator
+    /// (docs/api.md, "Work and its price").
+    pub work_per_sec: u64,
 }
 
 /// `GET /v1/broadcasts`.
@@ -94,6 +97,7 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
         motion: described["motion"].clone(),
         space: described["space"].as_str().unwrap_or("local").to_owned(),
         joints: b.params().joints.as_ref().map(|_| b.params().joint_names()),
+        work_per_sec: b.tick_price().saturating_mul(u64::from(b.params().fps)),
     }
 }
 
@@ -111,17 +115,19 @@ pub async fn live(state: &AppState, id: &str) -> Result<Arc<Broadcast>, ApiError
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
         (status = 404, description = "A layer's clip does not exist (`clip_not_found`)", body = super::schemas::Problem),
         (status = 422, description = "`invalid_field`, a motion rule at `/motion/…`, `fps_out_of_range`, `unknown_joint`, `format_not_streamable`, `idle_timeout_out_of_range`, `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
-        (status = 429, description = "`too_many_broadcasts` (max_broadcasts)", body = super::schemas::Problem),
+        (status = 429, description = "`too_many_broadcasts` (max_broadcasts); `caller_work_limit` (its price over the caller's share of the node)", body = super::schemas::Problem),
+        (status = 503, description = "`overloaded`: the node's or the broadcasts' thread's work capacity is taken (`Retry-After`)", body = super::schemas::Problem),
     ),
     security(("bearer" = []))
 )]
 pub async fn create(
     State(state): State<AppState>,
-    _: WriteAccess,
+    WriteAccess(caller): WriteAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let spec = broadcast_store::spec_from_body(&state, &body).await?;
-    let b = state.streams.broadcasts().create(spec).map_err(ApiError::TooManyBroadcasts)?;
+    let charge = broadcast_work::charge(&state, &spec, &caller.key())?;
+    let b = state.streams.broadcasts().create(spec, charge).map_err(ApiError::TooManyBroadcasts)?;
     if let Err(e) = broadcast_store::store_created(&state, &b, &body).await {
         state.streams.broadcasts().delete(b.id());
         return Err(e);
@@ -191,7 +197,9 @@ pub async fn delete(
         (status = 200, description = "The tick from which it applies for every viewer", body = ControlApplied),
         (status = 400, description = "Not JSON", body = super::schemas::Problem),
         (status = 404, description = "`broadcast_not_found`; a crossfade's clip (`clip_not_found` at `/to/…`)", body = super::schemas::Problem),
-        (status = 422, description = "`bad_control` (not a control, out of range, `stop`, a crossfade to another skeleton, a layer the motion lacks, too many pending); an `ik` rule's code at `/constraints/…`", body = super::schemas::Problem),
+        (status = 422, description = "`bad_control` (not a control, out of range, `stop`, a crossfade to another skeleton, a layer the motion lacks, too many pending); an `ik` rule's code at `/constraints/…`; `too_much_work` (a crossfade or `ik` control that would price the broadcast over `max_request_work`)", body = super::schemas::Problem),
+        (status = 429, description = "`rate_limited` (the write budget); `caller_work_limit` (a re-priced broadcast over its creator's share)", body = super::schemas::Problem),
+        (status = 503, description = "`unavailable`: the broadcast's store queue is full or the store failed (not applied; `Retry-After`); `overloaded`", body = super::schemas::Problem),
     ),
     security(("bearer" = []))
 )]
@@ -235,9 +243,9 @@ pub async fn watch(
         Some(_) => return Err(ApiError::parameter("bad_parameter", "encoding", "expected one of: json, protobuf")),
     };
     let b = live(&state, &id).await?;
-    let may_control = identity.authorize(Scope::Write).is_ok();
+    let gate = identity.authorize(Scope::Write).is_ok().then(|| broadcast_work::gate(&state, caller.clone()));
     let watched =
-        state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| b.watch(encoding, permit, may_control));
+        state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| b.watch(encoding, permit, gate));
     let motions = resolver(&state);
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {

@@ -26,6 +26,13 @@
 //! ([`Broadcasts::adopt`], [`Broadcast::heard`]); one heard for a tick
 //! already stepped makes the task replay from scratch.
 //!
+//! Its work is priced and charged to its creator for its life, re-priced
+//! by the controls that change it, and each tick's CPU is metered against
+//! that price: one that overruns it ends alone ([`EndReason::TooMuchWork`];
+//! `broadcast_budget`). A control takes a place in its bounded store queue
+//! ([`STORE_QUEUE`]) before it is applied, and is withdrawn if the store
+//! refuses it, so every control applied is stored.
+//!
 //! After `idle_timeout` with no viewers and no controls it ends (with a
 //! [`Journal`], only when no node had viewers either). It also ends when
 //! deleted (viewers get [`EndReason::Ended`]: close 1000 / gRPC OK) and at
@@ -41,9 +48,10 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use futures_util::future::BoxFuture;
-use tokio::sync::{Notify, broadcast, watch};
+use tokio::sync::{Notify, OwnedSemaphorePermit, Semaphore, broadcast, oneshot, watch};
 use tokio::time::Instant;
 
+use super::broadcast_budget::{BroadcastCharge, Budget, Overrun, thread_cpu_ns};
 use super::broadcast_program::{ControlLog, Program, StampedControl};
 use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
@@ -52,10 +60,19 @@ use super::limits::StreamPermit;
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
 use super::schedule::{Grid, Schedule};
-use super::subscription::{ControlSink, Source, Subscription};
+use super::subscription::{ControlSink, Source, StoreOutcome, Subscription};
 
 /// Controls accepted but not yet applied, per broadcast, at most.
 const PENDING_CONTROLS: usize = 64;
+
+/// Store writes of one broadcast's controls under way, at most: a control
+/// beyond is refused (`unavailable`, 503 with `Retry-After`), never applied.
+pub const STORE_QUEUE: usize = 64;
+
+/// What a controlling viewer's controls must pass before they reach the
+/// broadcast (the server's write budget); `None` in [`Broadcast::watch`]:
+/// a read-only viewer.
+pub type ControlGate = Arc<dyn Fn() -> Result<(), ControlError> + Send + Sync>;
 
 /// A catch-up longer than this many ticks runs on a blocking thread.
 const BLOCKING_CATCH_UP: u64 = 256;
@@ -77,6 +94,7 @@ pub trait Journal: Send + Sync + 'static {
     /// Stores a control a viewer's socket sent (`json` is its message;
     /// `fade_to`, a crossfade's motion, whose clips' versions go with it),
     /// already applied here; the other nodes hear of it from the store.
+    /// A refusal is what its sender is told (the control is withdrawn).
     fn record(
         &self,
         broadcast: &str,
@@ -84,7 +102,10 @@ pub trait Journal: Send + Sync + 'static {
         id: &str,
         json: serde_json::Value,
         fade_to: Option<&StreamMotion>,
-    ) -> BoxFuture<'static, ()>;
+    ) -> BoxFuture<'static, Result<(), ControlError>>;
+    /// The broadcast ended here for a reason every node shares (its work
+    /// overran its price): ends it everywhere.
+    fn ended(&self, broadcast: &str) -> BoxFuture<'static, ()>;
     /// The broadcast has viewers on this node now.
     fn touch(&self, broadcast: &str) -> BoxFuture<'static, ()>;
     /// Ends the broadcast everywhere if no node has had viewers and nobody
@@ -101,6 +122,8 @@ pub struct BroadcastSpec {
     /// The request as the server describes it back (`GET`): the motion as
     /// sent, space, joints. Opaque here.
     pub description: serde_json::Value,
+    /// Its price per second of playback as created, in work units.
+    pub work_per_sec: u64,
 }
 
 /// A broadcast's state as `GET /v1/broadcasts/{id}` reports it.
@@ -181,7 +204,7 @@ impl Broadcasts {
     ///
     /// # Errors
     /// `max` broadcasts are live, or the engine is shutting down.
-    pub fn create(&self, spec: BroadcastSpec) -> Result<Arc<Broadcast>, BroadcastError> {
+    pub fn create(&self, spec: BroadcastSpec, charge: BroadcastCharge) -> Result<Arc<Broadcast>, BroadcastError> {
         let id: Arc<str> = uuid::Uuid::now_v7().hyphenated().to_string().into();
         let fps = spec.params.fps;
         // Spread broadcasts over the period like playbacks (see `schedule`).
@@ -191,14 +214,14 @@ impl Broadcasts {
         let first = grid.next_at_or_after(now);
         let created_at = now_unix + grid.at(first).saturating_duration_since(now).as_nanos() as i64;
         let placement = Placement { grid, first, base: 0, phase_ms };
-        self.start(id, spec, created_at, placement, Vec::new())
+        self.start(id, spec, created_at, placement, Vec::new(), charge)
     }
 
     /// Runs here a broadcast created elsewhere (another node, or this one
     /// before a restart): `id`, created at `created_at` (Unix ns, its tick
     /// 0), with its `controls` so far. Its frames are computed from them
     /// (`broadcast_program`), from the tick the wall clock says on.
-    /// Already live: the controls are added to it.
+    /// Already live: the controls are added to it (and `charge` dropped).
     ///
     /// # Errors
     /// As [`Broadcasts::create`].
@@ -208,6 +231,7 @@ impl Broadcasts {
         spec: BroadcastSpec,
         created_at: i64,
         controls: Vec<StampedControl>,
+        charge: BroadcastCharge,
     ) -> Result<Arc<Broadcast>, BroadcastError> {
         if let Some(live) = self.get(id) {
             for c in controls {
@@ -216,7 +240,7 @@ impl Broadcasts {
             return Ok(live);
         }
         let placement = self.placement(spec.params.fps, created_at);
-        self.start(id.into(), spec, created_at, placement, controls)
+        self.start(id.into(), spec, created_at, placement, controls, charge)
     }
 
     /// Where the ticks of a broadcast created at `created_at` (Unix ns) fall
@@ -252,6 +276,7 @@ impl Broadcasts {
         created_at: i64,
         placement: Placement,
         controls: Vec<StampedControl>,
+        charge: BroadcastCharge,
     ) -> Result<Arc<Broadcast>, BroadcastError> {
         if *self.inner.shutdown.borrow() {
             return Err(BroadcastError::ShuttingDown);
@@ -262,7 +287,8 @@ impl Broadcasts {
             created_at,
             json: broadcast::channel(self.inner.buffer).0,
             protobuf: broadcast::channel(self.inner.buffer).0,
-            desk: Mutex::new(Desk {
+            desk: Arc::new(Mutex::new(Desk {
+                budget: Budget::new(charge, &spec.params.motion, spec.params.fps),
                 next: placement.base,
                 inbox: Vec::new(),
                 revoked: Vec::new(),
@@ -271,7 +297,9 @@ impl Broadcasts {
                 paused: spec.params.paused,
                 speed: spec.params.speed,
                 last_control: Instant::now(),
-            }),
+            })),
+            store_slots: Arc::new(Semaphore::new(STORE_QUEUE)),
+            stop: Arc::new(AtomicBool::new(false)),
             deleted: Notify::new(),
             ended: AtomicBool::new(false),
             placement,
@@ -333,6 +361,9 @@ impl Broadcasts {
     /// Returns whether it was live.
     pub fn delete(&self, id: &str) -> bool {
         let Some(broadcast) = self.lock().remove(id) else { return false };
+        // Stops a long solve of its tick under way (`anim::ik::stoppable`).
+        broadcast.stop.store(true, Ordering::Relaxed);
+        broadcast.desk().budget.release();
         broadcast.deleted.notify_one();
         true
     }
@@ -375,6 +406,8 @@ struct Desk {
     /// Ids of every control accepted (one heard twice is taken once).
     known: HashSet<Arc<str>>,
     check: ControlCheck,
+    /// Its price, raised or lowered by the controls that change it.
+    budget: Budget,
     paused: bool,
     speed: f64,
     last_control: Instant,
@@ -392,7 +425,11 @@ pub struct Broadcast {
     journal: Option<Arc<dyn Journal>>,
     json: broadcast::Sender<Item>,
     protobuf: broadcast::Sender<Item>,
-    desk: Mutex<Desk>,
+    desk: Arc<Mutex<Desk>>,
+    /// Its controls' store writes under way ([`STORE_QUEUE`]).
+    store_slots: Arc<Semaphore>,
+    /// Raised when it is deleted: a chain solve under way stops.
+    stop: Arc<AtomicBool>,
     deleted: Notify,
     ended: AtomicBool,
 }
@@ -460,9 +497,14 @@ impl Broadcast {
     }
 
     /// A viewer of `encoding` from the next tick on; `controls`: its
-    /// controls reach the broadcast (the transport checked the write
-    /// scope), else they are refused.
-    pub fn watch(self: &Arc<Self>, encoding: Encoding, permit: StreamPermit, controls: bool) -> Subscription {
+    /// controls reach the broadcast once they pass the gate (the transport
+    /// checked the write scope), `None`: they are refused.
+    pub fn watch(
+        self: &Arc<Self>,
+        encoding: Encoding,
+        permit: StreamPermit,
+        controls: Option<ControlGate>,
+    ) -> Subscription {
         let rx = self.channel(encoding).subscribe();
         if self.ended.load(Ordering::Acquire) {
             // It ended between the lookup and the subscription: say so at once.
@@ -471,7 +513,7 @@ impl Broadcast {
             return self.subscription(encoding, rx, None, permit);
         }
         metrics::counter!("inbetween_broadcast_viewers_total").increment(1);
-        let sink = controls.then(|| Arc::clone(self) as Arc<dyn ControlSink>);
+        let sink = controls.map(|gate| Arc::new(Gated { broadcast: Arc::clone(self), gate }) as Arc<dyn ControlSink>);
         self.subscription(encoding, rx, sink, permit)
     }
 
@@ -533,11 +575,16 @@ impl Broadcast {
         })
     }
 
+    /// Checks and prices `control` (nothing changes if either refuses it)
+    /// and stamps it.
     fn stamp(desk: &mut Desk, control: Control, ahead: Option<u64>) -> Result<(u64, Control), ControlError> {
         if desk.inbox.len() >= PENDING_CONTROLS {
             return Err(ControlError::Busy);
         }
-        let control = desk.check.check(control)?;
+        let mut check = desk.check.clone();
+        let control = check.check(control)?;
+        desk.budget.reprice(&control, check.motion())?;
+        desk.check = check;
         Ok((ahead.unwrap_or(0).max(desk.next), control))
     }
 
@@ -577,9 +624,23 @@ impl Broadcast {
     /// failed (its sender is told so): the frames from its stamp on are
     /// computed again without it, as every other node computes them.
     pub fn revoke(&self, id: &Arc<str>) {
-        let mut desk = self.desk();
-        desk.inbox.retain(|c| &c.id != id);
-        desk.revoked.push(Arc::clone(id));
+        revoke(&self.desk, id);
+    }
+
+    /// A place in its store queue, held until the control's write ends.
+    ///
+    /// # Errors
+    /// [`STORE_QUEUE`] writes are under way: `unavailable`, never applied.
+    pub fn store_slot(&self) -> Result<OwnedSemaphorePermit, ControlError> {
+        Arc::clone(&self.store_slots).try_acquire_owned().map_err(|_| {
+            metrics::counter!("inbetween_broadcast_controls_refused_total", "reason" => "store_queue").increment(1);
+            crate::error::ApiError::StoreQueueFull { limit: STORE_QUEUE, retry_after: 1 }.to_control()
+        })
+    }
+
+    /// Work units of one tick now (its price).
+    pub fn tick_price(&self) -> u64 {
+        self.desk().budget.per_tick()
     }
 
     /// The ids of every control it has accepted.
@@ -589,12 +650,16 @@ impl Broadcast {
 
     /// Accepts `control` for every viewer at once (a viewer socket's, or
     /// without a journal); returns its stamp. With a journal it is stored
-    /// as well, as the message that says it again (`Control::to_json`).
+    /// as well, as the message that says it again (`Control::to_json`),
+    /// through the store queue: the outcome yields the refusal its sender
+    /// is told if the write fails (the control is then withdrawn here and
+    /// no other node ever hears of it).
     ///
     /// # Errors
-    /// As [`Broadcast::prepare`]; a control no message says again (a
-    /// crossfade whose motion was not written down) cannot be stored.
-    pub fn control(&self, control: Control) -> Result<u64, ControlError> {
+    /// As [`Broadcast::prepare`]; the store queue is full; a control no
+    /// message says again (a crossfade whose motion was not written down)
+    /// cannot be stored.
+    pub fn control(&self, control: Control) -> Result<(u64, Option<StoreOutcome>), ControlError> {
         let json = match &self.journal {
             Some(_) => Some(control.to_json().ok_or(ControlError::Invalid(
                 "this control cannot be stored for the broadcast's other nodes; send it with POST /v1/broadcasts/{id}/controls",
@@ -605,18 +670,41 @@ impl Broadcast {
             Control::Crossfade(fade) => Some(Arc::clone(&fade.to)),
             _ => None,
         };
+        let slot = json.as_ref().map(|_| self.store_slot()).transpose()?;
         let id = new_control_id();
         let seq = self.take(control, Arc::clone(&id))?;
-        if let (Some(journal), Some(json)) = (&self.journal, json) {
-            tokio::spawn(journal.record(&self.id, seq, &id, json, fade_to.as_deref()));
-        }
-        Ok(seq)
+        let (Some(journal), Some(json), Some(slot)) = (&self.journal, json, slot) else { return Ok((seq, None)) };
+        let (tx, outcome) = oneshot::channel();
+        let (write, desk) = (journal.record(&self.id, seq, &id, json, fade_to.as_deref()), Arc::clone(&self.desk));
+        tokio::spawn(async move {
+            let _slot = slot;
+            if let Err(refusal) = write.await {
+                metrics::counter!("inbetween_broadcast_controls_refused_total", "reason" => "store").increment(1);
+                revoke(&desk, &id);
+                let _ = tx.send(refusal);
+            }
+        });
+        Ok((seq, Some(outcome)))
     }
 }
 
-impl ControlSink for Broadcast {
-    fn send(&self, control: Control) -> Result<u64, ControlError> {
-        self.control(control)
+/// Withdraws control `id` from the desk (see [`Broadcast::revoke`]).
+fn revoke(desk: &Mutex<Desk>, id: &Arc<str>) {
+    let mut desk = crate::sync::lock(desk);
+    desk.inbox.retain(|c| &c.id != id);
+    desk.revoked.push(Arc::clone(id));
+}
+
+/// A controlling viewer's way to the broadcast: its gate, then the broadcast.
+struct Gated {
+    broadcast: Arc<Broadcast>,
+    gate: ControlGate,
+}
+
+impl ControlSink for Gated {
+    fn send(&self, control: Control) -> Result<Option<StoreOutcome>, ControlError> {
+        (self.gate)()?;
+        self.broadcast.control(control).map(|(_, outcome)| outcome)
     }
 }
 
@@ -634,6 +722,8 @@ struct Task {
     journaled: Instant,
     /// Viewers counted into `inbetween_broadcast_viewers` at the last tick.
     counted: usize,
+    /// Its ticks' CPU against their price.
+    overrun: Overrun,
     /// The runtime the broadcast was created from: what the task starts
     /// besides its ticks (store writes, long catch-ups) runs there.
     origin: tokio::runtime::Handle,
@@ -647,6 +737,7 @@ impl Task {
         shutdown: watch::Receiver<bool>,
     ) -> Self {
         let program = Some(Box::new(Program::new(&broadcast.spec.params)));
+        let overrun = Overrun::new(broadcast.spec.params.fps);
         let now = Instant::now();
         Task {
             broadcast,
@@ -658,6 +749,7 @@ impl Task {
             last_watched: now,
             journaled: now,
             counted: 0,
+            overrun,
             origin: tokio::runtime::Handle::current(),
         }
     }
@@ -665,12 +757,18 @@ impl Task {
     async fn run(mut self) {
         let reason = self.ticks().await;
         self.broadcast.ended.store(true, Ordering::Release);
+        self.broadcast.desk().budget.release();
         self.registry.unlist(&self.broadcast);
         for tx in [&self.broadcast.json, &self.broadcast.protobuf] {
             let _ = tx.send(Item::End(reason));
         }
         self.count_viewers(0);
         metrics::gauge!("inbetween_broadcasts").decrement(1.0);
+        if reason == EndReason::TooMuchWork
+            && let Some(journal) = &self.broadcast.journal
+        {
+            drop(self.origin.spawn(journal.ended(&self.broadcast.id)));
+        }
     }
 
     /// Ticks until the broadcast ends; returns why.
@@ -684,29 +782,42 @@ impl Task {
                 tick = self.schedule.next() => tick,
             };
             let k = b.placement.base + tick.k;
-            let (controls, revoked, last_control) = {
+            let cpu = thread_cpu_ns();
+            let (controls, revoked, last_control, allowed_ns) = {
                 let mut desk = b.desk();
                 desk.next = k + 1;
                 let revoked = std::mem::take(&mut desk.revoked);
-                (std::mem::take(&mut desk.inbox), revoked, desk.last_control)
+                (std::mem::take(&mut desk.inbox), revoked, desk.last_control, desk.budget.tick_allowed_ns())
             };
+            let stepped_here = self.program.as_ref().is_some_and(|p| k.saturating_sub(p.next()) <= BLOCKING_CATCH_UP);
             self.catch_up(controls, &revoked, k).await;
             let viewers = b.viewers();
             self.count_viewers(viewers);
             if let Some(reason) = self.idle(viewers, last_control) {
                 return reason;
             }
-            if viewers == 0 {
-                continue;
+            if viewers > 0 {
+                self.publish();
             }
-            let sent_at = unix_nanos();
-            metrics::counter!("inbetween_broadcast_ticks_total").increment(1);
-            let program = self.program.as_mut().expect("the program is back after each catch-up");
-            for encoding in [Encoding::Json, Encoding::Protobuf] {
-                let tx = b.channel(encoding);
-                if tx.receiver_count() > 0 {
-                    let _ = tx.send(Item::Frame(program.encode(encoding, sent_at)));
-                }
+            // A catch-up on a blocking thread is not this tick's work.
+            if stepped_here && self.overrun.over(thread_cpu_ns().saturating_sub(cpu), allowed_ns) {
+                metrics::counter!("inbetween_broadcasts_overrun_total").increment(1);
+                tracing::warn!(broadcast = %b.id, allowed_ns, "a broadcast's ticks overran their price; it ends");
+                return EndReason::TooMuchWork;
+            }
+        }
+    }
+
+    /// Encodes the tick stepped, once per encoding with viewers, and sends it.
+    fn publish(&mut self) {
+        let b = &self.broadcast;
+        let sent_at = unix_nanos();
+        metrics::counter!("inbetween_broadcast_ticks_total").increment(1);
+        let program = self.program.as_mut().expect("the program is back after each catch-up");
+        for encoding in [Encoding::Json, Encoding::Protobuf] {
+            let tx = b.channel(encoding);
+            if tx.receiver_count() > 0 {
+                let _ = tx.send(Item::Frame(program.encode(encoding, sent_at)));
             }
         }
     }
@@ -739,11 +850,11 @@ impl Task {
             metrics::counter!("inbetween_broadcast_replayed_ticks_total").increment(again);
         }
         if k.saturating_sub(program.next()) > BLOCKING_CATCH_UP {
-            let log = self.log.clone();
+            let (log, stop) = (self.log.clone(), Arc::clone(&self.broadcast.stop));
             let stepped = self
                 .origin
                 .spawn_blocking(move || {
-                    program.step_to(k, &log);
+                    anim::ik::stoppable(&stop, || program.step_to(k, &log));
                     program
                 })
                 .await;
@@ -755,7 +866,7 @@ impl Task {
                 }
             };
         } else {
-            program.step_to(k, &self.log);
+            anim::ik::stoppable(&self.broadcast.stop, || program.step_to(k, &self.log));
         }
         self.program = Some(program);
     }

@@ -349,6 +349,16 @@ pub enum ControlError {
     /// A broadcast viewer without the write scope sent a control.
     #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
     ReadOnly,
+    /// Refused by the server before it was applied, or withdrawn because
+    /// it could not be stored (docs/broadcasts.md, "Control"): the write
+    /// budget, the broadcast's work, its store queue. `problem` is the
+    /// server's problem document, sent to the socket as it is.
+    #[error("{}", problem_detail(problem))]
+    Refused { code: &'static str, problem: Arc<serde_json::Value> },
+}
+
+fn problem_detail(problem: &serde_json::Value) -> &str {
+    problem["detail"].as_str().unwrap_or("the control was refused")
 }
 
 impl ControlError {
@@ -358,6 +368,7 @@ impl ControlError {
             ControlError::Ik(e) => e.kind.code(),
             ControlError::ReadOnly => "insufficient_scope",
             ControlError::Invalid(_) | ControlError::Busy => "bad_control",
+            ControlError::Refused { code, .. } => code,
         }
     }
 
@@ -365,7 +376,9 @@ impl ControlError {
     pub fn pointer(&self) -> Option<String> {
         match self {
             ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
-            ControlError::Invalid(_) | ControlError::Busy | ControlError::ReadOnly => None,
+            ControlError::Invalid(_) | ControlError::Busy | ControlError::ReadOnly | ControlError::Refused { .. } => {
+                None
+            }
         }
     }
 }
@@ -388,6 +401,11 @@ impl ControlCheck {
             layers: params.motion.layer_count(),
             ik_limits: params.ik_limits,
         }
+    }
+
+    /// The motion whose skeleton controls are checked against.
+    pub(crate) fn motion(&self) -> &StreamMotion {
+        &self.skeleton
     }
 
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {

@@ -13,12 +13,20 @@ use super::hub::EndReason;
 use super::subscription::{Next, Subscription};
 use formats::wire::frame::WireFrame;
 
+/// Why a broadcast's viewers were ended for its work.
+pub const TOO_MUCH_WORK: &str = "the broadcast's ticks took far more CPU than its price; it was ended";
+
 /// The status a stream ends with, or `None` for a clean OK.
 pub fn end_status(reason: EndReason) -> Option<Status> {
     match reason {
         EndReason::MaxFrames | EndReason::Stopped | EndReason::Ended => None,
         EndReason::Shutdown => Some(Status::unavailable("the server is shutting down; reconnect to resume")),
         EndReason::Failed => Some(Status::internal("the stream failed")),
+        EndReason::TooMuchWork => {
+            let mut status = Status::resource_exhausted(format!("too_much_work: {TOO_MUCH_WORK}"));
+            status.metadata_mut().insert("x-error-code", tonic::metadata::MetadataValue::from_static("too_much_work"));
+            Some(status)
+        }
     }
 }
 

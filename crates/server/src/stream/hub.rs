@@ -56,6 +56,9 @@ pub enum EndReason {
     Shutdown,
     /// The broadcast watched was deleted or ended (docs/broadcasts.md).
     Ended,
+    /// The broadcast watched ended because its ticks took far more CPU
+    /// than its price (docs/broadcasts.md, "Work").
+    TooMuchWork,
     /// The playback ended unexpectedly (a bug; logged).
     Failed,
 }

@@ -34,6 +34,7 @@
 //! is ever a mix of two versions.
 
 mod broadcast;
+mod broadcast_budget;
 mod broadcast_program;
 mod control;
 mod encode;
@@ -52,7 +53,11 @@ mod subscription;
 mod ticker;
 pub mod ws;
 
-pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Journal, new_control_id};
+pub use broadcast::{
+    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, ControlGate, Journal, STORE_QUEUE,
+    new_control_id,
+};
+pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
 pub use control::{Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, parse_control};
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
@@ -65,7 +70,7 @@ pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use pinned::{Pinned, PinnedClip, StreamMotion};
 pub use playhead::{MAX_SPEED, Playhead};
 pub use schedule::{Grid, Schedule, Tick};
-pub use subscription::{Controller, Delivered, Next, Subscription};
+pub use subscription::{Controller, Delivered, Next, StoreOutcome, Subscription};
 
 pub use formats::wire::grid::PHASE_HEADER;
 
@@ -73,5 +78,7 @@ pub use formats::wire::grid::PHASE_HEADER;
 mod tests;
 #[cfg(test)]
 mod tests_broadcast;
+#[cfg(test)]
+mod tests_broadcast_budget;
 #[cfg(test)]
 mod tests_ws;

@@ -31,12 +31,18 @@ pub enum Next {
 }
 
 /// Where a broadcast viewer's controls go (the broadcast, which stamps
-/// each with the tick it applies from). Defined here, implemented by the
-/// broadcast, so that a subscription never imports it.
+/// each with the tick it applies from, or the server's gate in front of
+/// it). Defined here, implemented by the broadcast, so that a subscription
+/// never imports it.
 pub(crate) trait ControlSink: Send + Sync {
-    /// Queues `control` for every viewer; returns the tick it applies from.
-    fn send(&self, control: Control) -> Result<u64, ControlError>;
+    /// Queues `control` for every viewer. Its store write may still fail
+    /// (the control is then withdrawn): the receiver, if any, then yields
+    /// the refusal its sender is told; it closes without one once stored.
+    fn send(&self, control: Control) -> Result<Option<StoreOutcome>, ControlError>;
 }
+
+/// A control's store write still under way: yields the refusal if it fails.
+pub type StoreOutcome = oneshot::Receiver<ControlError>;
 
 /// A sender of controls to a private playback, usable from another task
 /// (gRPC `Play` reads controls and frames on different tasks).
@@ -85,6 +91,9 @@ pub struct Subscription {
     /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
     /// whose controls are refused), never into a fork.
     broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,
+    /// This viewer's broadcast controls whose store writes are under way,
+    /// until its transport takes them ([`Subscription::storing`]).
+    storing: Vec<StoreOutcome>,
     check: ControlCheck,
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
@@ -146,6 +155,7 @@ impl Subscription {
             handback,
             controls,
             broadcast,
+            storing: Vec::new(),
             shutdown,
             last_seq: None,
             delivered: 0,
@@ -247,7 +257,9 @@ impl Subscription {
                 self.stopped = true;
                 return Ok(());
             }
-            return sink.as_ref().ok_or(ControlError::ReadOnly)?.send(control).map(drop);
+            let storing = sink.as_ref().ok_or(ControlError::ReadOnly)?.send(control)?;
+            self.storing.extend(storing);
+            return Ok(());
         }
         let control = self.check.check(control)?;
         if self.controls.is_none() {
@@ -262,6 +274,13 @@ impl Subscription {
             Ok(()) | Err(mpsc::error::TrySendError::Closed(_)) => Ok(()),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
         }
+    }
+
+    /// The store writes of this viewer's broadcast controls sent since
+    /// the last call: each yields the refusal to tell its sender if the
+    /// control could not be stored (and was withdrawn).
+    pub(crate) fn storing(&mut self) -> std::vec::Drain<'_, StoreOutcome> {
+        self.storing.drain(..)
     }
 
     /// A controller for another task (private playbacks only).

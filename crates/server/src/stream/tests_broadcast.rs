@@ -7,6 +7,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use serde_json::Value::Null;
+
 use super::tests::{clip, pinned};
 use super::*;
 
@@ -17,12 +19,17 @@ fn engine(max_broadcasts: usize) -> Engine {
 fn create(e: &Engine, fps: u32, idle_secs: u64) -> Arc<Broadcast> {
     let params = StreamParams::new(pinned("c1", clip()), StreamRequest { fps, ..Default::default() }).unwrap();
     let spec =
-        BroadcastSpec { params, idle_timeout: Duration::from_secs(idle_secs), description: serde_json::Value::Null };
-    e.broadcasts().create(spec).unwrap()
+        BroadcastSpec { params, idle_timeout: Duration::from_secs(idle_secs), description: Null, work_per_sec: 0 };
+    e.broadcasts().create(spec, BroadcastCharge::free()).unwrap()
+}
+
+/// A gate every control passes.
+fn open_gate() -> ControlGate {
+    Arc::new(|| Ok(()))
 }
 
 fn viewer(e: &Engine, b: &Arc<Broadcast>, encoding: Encoding, controls: bool) -> Subscription {
-    b.watch(encoding, e.admit(None).unwrap(), controls)
+    b.watch(encoding, e.admit(None).unwrap(), controls.then(open_gate))
 }
 
 async fn frame(sub: &mut Subscription) -> Delivered {
@@ -79,7 +86,7 @@ async fn controls_apply_from_their_stamp_for_every_viewer() {
         frame(&mut c).await;
     }
     // Tick 2 is out: the next control is stamped 3, whoever sends it.
-    assert_eq!(b.control(Control::Seek(5.0)), Ok(3));
+    assert_eq!(b.control(Control::Seek(5.0)).map(|(seq, _)| seq), Ok(3));
     let mut times = Vec::new();
     for seq in 3..7 {
         let (fa, fc) = (frame(&mut a).await, frame(&mut c).await);
@@ -116,8 +123,8 @@ async fn broadcasts_end_when_deleted_or_idle_and_are_capped() {
     let kept = create(&e, 10, 300);
     let idle = create(&e, 10, 2);
     let params = kept.params().clone();
-    let spec = BroadcastSpec { params, idle_timeout: Duration::from_secs(1), description: serde_json::Value::Null };
-    assert_eq!(e.broadcasts().create(spec).unwrap_err(), BroadcastError::TooMany { limit: 2 });
+    let spec = BroadcastSpec { params, idle_timeout: Duration::from_secs(1), description: Null, work_per_sec: 0 };
+    assert_eq!(e.broadcasts().create(spec, BroadcastCharge::free()).unwrap_err(), BroadcastError::TooMany { limit: 2 });
 
     let mut v = viewer(&e, &kept, Encoding::Protobuf, false);
     // The time is the behaviour here: past the idle timeout (a paused clock: no wall time).
@@ -143,7 +150,7 @@ async fn a_seek_stamped_for_a_skipped_tick_shows_where_it_would_be_by_now() {
     for _ in 0..3 {
         frame(&mut a).await;
     }
-    assert_eq!(b.control(Control::Seek(5.0)), Ok(3));
+    assert_eq!(b.control(Control::Seek(5.0)).map(|(seq, _)| seq), Ok(3));
     // The task wakes 350 ms late: ticks 3 and 4 are never produced.
     tokio::time::advance(Duration::from_millis(350)).await;
     let f = frame(&mut a).await;
@@ -243,7 +250,10 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
         frame(&mut v1).await;
     }
     let spec = b1.spec().clone();
-    let b2 = e2.broadcasts().adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone()).unwrap();
+    let b2 = e2
+        .broadcasts()
+        .adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone(), BroadcastCharge::free())
+        .unwrap();
     let mut v2 = viewer(&e2, &b2, Encoding::Json, false);
     let strip = |f: &Delivered| {
         let mut v: serde_json::Value = serde_json::from_slice(&f.bytes).unwrap();

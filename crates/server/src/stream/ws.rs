@@ -20,7 +20,9 @@
 //! A bad control is answered with a text message
 //! `{"error":{"code":"bad_control","detail":"..."}}` (a crossfade's motion
 //! with the problem of its lookup: `clip_not_found` at `/to/layers/1/clip`)
-//! and the stream goes on.
+//! and the stream goes on. So is a broadcast control refused by the
+//! server's budgets, or withdrawn because it could not be stored: with the
+//! server's whole problem (`{"error":{"status":429,"code":"rate_limited",…}}`).
 
 use std::collections::VecDeque;
 use std::future::Future;
@@ -34,13 +36,14 @@ use futures_util::{Sink, SinkExt, Stream, StreamExt};
 use tokio::time::{Instant, MissedTickBehavior, interval_at, timeout};
 
 use futures_util::future::{BoxFuture, poll_fn};
+use futures_util::stream::FuturesUnordered;
 use futures_util::task::AtomicWaker;
 
 use super::control::{Control, ControlError, ControlMsg, Crossfade, ParsedControl, not_a_control};
 use super::encode::Encoding;
 use super::hub::EndReason;
 use super::pinned::StreamMotion;
-use super::subscription::{Next, Subscription};
+use super::subscription::{Next, StoreOutcome, Subscription};
 
 /// Builds the motion a control names (a crossfade's `to`): the transport's
 /// lookup of its clips. A refusal is the problem document to send back, its
@@ -90,6 +93,8 @@ struct Controls {
     motions: Option<Arc<dyn MotionResolver>>,
     lookup: Option<Lookup>,
     queued: VecDeque<ControlMsg>,
+    /// Broadcast controls sent whose store writes are under way.
+    storing: FuturesUnordered<StoreOutcome>,
 }
 
 impl Controls {
@@ -112,7 +117,11 @@ impl Controls {
     /// Applies `msg` now, or starts its motion's lookup.
     fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
         match msg.parse() {
-            Ok(ParsedControl::Ready(control)) => sub.control(control).err().map(|e| refusal(&e)),
+            Ok(ParsedControl::Ready(control)) => {
+                let sent = sub.control(control);
+                self.storing.extend(sub.storing());
+                sent.err().map(|e| refusal(&e))
+            }
             Err(e) => Some(problem_message(e.code, Some(e.pointer), &e.detail)),
             Ok(ParsedControl::Crossfade { to, duration, ease }) => {
                 let Some(motions) = &self.motions else {
@@ -136,6 +145,7 @@ impl Controls {
             Ok(to) => {
                 let fade = Control::Crossfade(Crossfade { to, duration, ease, source: Some(source) });
                 errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
+                self.storing.extend(sub.storing());
             }
             Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
         }
@@ -145,6 +155,19 @@ impl Controls {
             errors.extend(self.apply(msg, sub));
         }
         errors
+    }
+}
+
+/// Waits for a control whose store write failed (it was withdrawn); never
+/// resolves while none does. Cancel-safe.
+async fn not_stored(storing: &mut FuturesUnordered<StoreOutcome>) -> ControlError {
+    loop {
+        match storing.next().await {
+            Some(Ok(refusal)) => return refusal,
+            // Stored: its sender has nothing more to hear.
+            Some(Err(_)) => {}
+            None => std::future::pending().await,
+        }
     }
 }
 
@@ -164,6 +187,7 @@ pub fn close_frame(reason: EndReason) -> CloseFrame {
         EndReason::Ended => (close::NORMAL, "the broadcast ended"),
         EndReason::Shutdown => (close::GOING_AWAY, "the server is shutting down"),
         EndReason::Failed => (close::INTERNAL, "the stream failed"),
+        EndReason::TooMuchWork => (close::POLICY, "too_much_work: the broadcast's ticks overran their price"),
     };
     CloseFrame { code, reason: Utf8Bytes::from_static(reason) }
 }
@@ -172,8 +196,12 @@ fn error_message(detail: &str) -> Message {
     problem_message("bad_control", None, detail)
 }
 
-/// A refused control's `{"error": {code, detail, pointer?}}`.
+/// A refused control's `{"error": {code, detail, pointer?}}` (the server's
+/// whole problem document for a refusal of its budgets).
 fn refusal(e: &ControlError) -> Message {
+    if let ControlError::Refused { problem, .. } = e {
+        return Message::Text(serde_json::json!({ "error": problem }).to_string().into());
+    }
     problem_message(e.code(), e.pointer(), &e.to_string())
 }
 
@@ -223,7 +251,7 @@ pub async fn serve<S, E>(
     let mut ping = interval_at(Instant::now() + config.keepalive, config.keepalive);
     ping.set_missed_tick_behavior(MissedTickBehavior::Delay);
     let mut awaiting_pong = false;
-    let mut controls = Controls { motions, lookup: None, queued: VecDeque::new() };
+    let mut controls = Controls { motions, lookup: None, queued: VecDeque::new(), storing: FuturesUnordered::new() };
     let mut outbox: VecDeque<Message> = VecDeque::new();
     let mut reads = ReadGate::new();
     loop {
@@ -269,6 +297,7 @@ pub async fn serve<S, E>(
                         None => continue,
                     },
                 },
+                refused = not_stored(&mut controls.storing) => refusal(&refused),
                 done = lookup_done(&mut controls.lookup) => {
                     outbox.extend(controls.looked_up(done, &mut sub));
                     continue;

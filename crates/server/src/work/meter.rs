@@ -46,6 +46,28 @@ impl Ticket {
     pub fn units(&self) -> u64 {
         self.units
     }
+
+    /// Holds `units` from now on instead (a broadcast re-priced by a
+    /// control): a rise is checked like a new charge of the difference,
+    /// a fall always succeeds.
+    ///
+    /// # Errors
+    /// As [`Meter::charge`]; the ticket then holds what it held.
+    pub fn resize(&mut self, units: u64) -> Result<(), ApiError> {
+        let meter = Arc::clone(&self.meter);
+        let mut held = lock(&meter.held);
+        if units > self.units {
+            let more = units - self.units;
+            let mine = held.callers.get(&self.caller).copied().unwrap_or(0);
+            let others = mine.saturating_sub(self.units);
+            meter.admits(&held, others, mine, more)?;
+        }
+        held.total = held.total.saturating_sub(self.units).saturating_add(units);
+        let mine = held.callers.entry(self.caller.clone()).or_insert(0);
+        *mine = mine.saturating_sub(self.units).saturating_add(units);
+        self.units = units;
+        Ok(())
+    }
 }
 
 impl Meter {
@@ -73,18 +95,38 @@ impl Meter {
     pub fn charge(self: &Arc<Self>, caller: &CallerKey, units: u64) -> Result<Ticket, ApiError> {
         let mut held = lock(&self.held);
         let mine = held.callers.get(caller).copied().unwrap_or(0);
-        if mine > 0 && mine.saturating_add(units) > self.share {
+        self.admits(&held, mine, mine, units)?;
+        Ok(self.take(&mut held, caller, units))
+    }
+
+    /// Charges `units` to `caller` whatever is held: work admitted
+    /// elsewhere (a broadcast another node created) that runs here anyway,
+    /// counted so that what is admitted next sees it.
+    pub fn hold(self: &Arc<Self>, caller: &CallerKey, units: u64) -> Ticket {
+        let mut held = lock(&self.held);
+        self.take(&mut held, caller, units)
+    }
+
+    /// Whether `more` units fit: the caller holding `mine` (`before` of
+    /// them besides the charge being raised), the node `held.total`.
+    fn admits(&self, held: &Held, before: u64, mine: u64, more: u64) -> Result<(), ApiError> {
+        if before > 0 && mine.saturating_add(more) > self.share {
             metrics::counter!("inbetween_work_refused_total", "reason" => "caller").increment(1);
             let (share, retry_after) = (self.share, RETRY_AFTER_SECS);
-            return Err(ApiError::CallerWorkLimit { held: mine, units, share, retry_after });
+            return Err(ApiError::CallerWorkLimit { held: mine, units: more, share, retry_after });
         }
-        if held.total > 0 && held.total.saturating_add(units) > self.capacity {
+        let others = held.total.saturating_sub(mine.saturating_sub(before));
+        if others > 0 && held.total.saturating_add(more) > self.capacity {
             metrics::counter!("inbetween_work_refused_total", "reason" => "node").increment(1);
             return Err(ApiError::WorkOverloaded { retry_after: RETRY_AFTER_SECS });
         }
+        Ok(())
+    }
+
+    fn take(self: &Arc<Self>, held: &mut Held, caller: &CallerKey, units: u64) -> Ticket {
         held.total = held.total.saturating_add(units);
         *held.callers.entry(caller.clone()).or_insert(0) += units;
-        Ok(Ticket { meter: Arc::clone(self), caller: caller.clone(), units })
+        Ticket { meter: Arc::clone(self), caller: caller.clone(), units }
     }
 }
 
@@ -120,6 +162,29 @@ mod tests {
         assert_eq!(meter.held(), 1000);
         drop((a, b, c));
         assert_eq!(meter.held(), 0, "every ticket gave its units back");
+        assert!(lock(&meter.held).callers.is_empty());
+    }
+
+    #[test]
+    fn a_ticket_resized_up_is_checked_like_a_charge_and_down_always_succeeds() {
+        let meter = Meter::new(1000, 0.5);
+        let mut a = meter.charge(&key(1), 300).unwrap();
+        let other = meter.charge(&key(1), 100).unwrap();
+        assert_eq!(a.resize(401).unwrap_err().code(), "caller_work_limit", "400 + 101 over the share of 500");
+        assert_eq!((a.units(), meter.held()), (300, 400), "a refused resize holds what it held");
+        a.resize(400).unwrap();
+        let b = meter.charge(&key(2), 500).unwrap();
+        drop(other);
+        assert_eq!(a.resize(501).unwrap_err().code(), "overloaded", "900 + 101 over the node's 1000");
+        a.resize(10).unwrap();
+        assert_eq!(meter.held(), 510);
+        // Alone on the meter, a ticket may grow past the share (as one charge may).
+        drop(b);
+        a.resize(5000).unwrap();
+        let held = meter.hold(&key(3), 7);
+        assert_eq!(meter.held(), 5007, "held whatever the node holds");
+        drop((a, held));
+        assert_eq!(meter.held(), 0);
         assert!(lock(&meter.held).callers.is_empty());
     }
 

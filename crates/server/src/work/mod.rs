@@ -28,10 +28,19 @@ use crate::error::ApiError;
 /// enough never to hold up an async worker noticeably.
 pub const INLINE_UNITS: u64 = 4096;
 
+/// The share of one core that broadcasts' ticks may take together: they
+/// all run on the producers' thread (`stream::producer`), and what is left
+/// keeps every tick on time when the machine is busy.
+const PRODUCERS_SHARE: f64 = 0.5;
+
 /// The pool, the meter and the deadline every job shares.
 pub struct Work {
     pool: Pool,
     meter: Arc<Meter>,
+    /// The producers' thread's capacity, which broadcasts are charged to
+    /// besides the node's meter.
+    producers: Arc<Meter>,
+    ns_per_unit: f64,
     deadline: Duration,
 }
 
@@ -40,17 +49,19 @@ impl Work {
     /// if `node_work_per_sec` is 0).
     pub fn new(limits: &Limits) -> Work {
         let threads = limits.work_threads;
-        let capacity = match limits.node_work_per_sec {
+        let (capacity, ns_per_unit) = match limits.node_work_per_sec {
             0 => {
                 let ns = measure_ns_per_unit();
                 let capacity = (threads as f64 * 1e9 / ns) as u64;
                 tracing::info!(ns_per_unit = ns, threads, capacity, "measured the node's work capacity (units/s)");
-                capacity
+                (capacity, ns)
             }
-            configured => configured,
+            configured => (configured, threads.max(1) as f64 * 1e9 / configured.max(1) as f64),
         };
         let meter = Meter::new(capacity, limits.caller_work_share);
-        Work { pool: Pool::new(threads), meter, deadline: limits.request_timeout }
+        let one_core = capacity / threads.max(1) as u64;
+        let producers = Meter::new((one_core as f64 * PRODUCERS_SHARE) as u64, 1.0);
+        Work { pool: Pool::new(threads), meter, producers, ns_per_unit, deadline: limits.request_timeout }
     }
 
     /// Charges `units` to `caller` (see `meter`).
@@ -104,6 +115,18 @@ impl Work {
 
     pub fn meter(&self) -> &Meter {
         &self.meter
+    }
+
+    /// The meters a broadcast is charged to: the node's, and the
+    /// producers' thread's (see [`PRODUCERS_SHARE`]).
+    pub fn broadcast_meters(&self) -> [&Arc<Meter>; 2] {
+        [&self.meter, &self.producers]
+    }
+
+    /// Nanoseconds of one core a work unit takes on this node (measured
+    /// at startup, or what `node_work_per_sec` implies).
+    pub fn ns_per_unit(&self) -> f64 {
+        self.ns_per_unit
     }
 }
 

@@ -32,6 +32,11 @@ const CHAIN_STEP: u64 = 15;
 /// Bytes of an answer's size bound encoded per unit.
 const BYTES_PER_UNIT: u64 = 8;
 
+/// Units of one broadcast tick besides its pose and frame: waking on its
+/// timer, filing its controls, publishing (measured on the producers'
+/// thread; BENCHMARKS.md). Without it a one-joint broadcast looked free.
+pub const BROADCAST_TICK: u64 = 500;
+
 /// The work of one pose of `clip` alone: its joints, its keyed IK.
 pub fn clip_pose(clip: &Clip) -> u64 {
     (clip.joint_count() as u64 * JOINT).saturating_add(ik(clip.ik_constraints(), clip.skeleton()))
