@@ -75,3 +75,8 @@ impl Glb {
 
 /// The Fox of the repository's examples.
 pub const FOX: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb");
+
+/// The Fox with its texture replaced by `image`, as a `data:` URI.
+pub fn fox_with_image(image: &[u8]) -> Vec<u8> {
+    formats::testing::glb_with_image(&std::fs::read(FOX).unwrap(), image)
+}

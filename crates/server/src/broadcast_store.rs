@@ -7,7 +7,7 @@
 //!   as sent (REST's body, or what a socket's control says again) plus, for
 //!   a crossfade, its clips' versions. A node builds both again with the
 //!   very rules REST applies (`RawBroadcast`, `parse_control`,
-//!   `RawMotion::resolve`), and refuses to run one whose clips are no
+//!   `request::crossfade_target`), and refuses to run one whose clips are no
 //!   longer at those versions (it could not compute the same frames).
 //! - With PostgreSQL every insert and delete is announced on the schema's
 //!   channel (`migrations/postgres/0004_broadcasts.sql`); `server::notify`
@@ -29,7 +29,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::error::ApiError;
-use super::request::{Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, in_body, parse_json};
+use super::request::{
+    Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, crossfade_target, in_body, parse_json,
+};
 use super::state::AppState;
 use crate::store::{ClipStore, StoredBroadcast, StoredControl};
 use crate::stream::{
@@ -126,14 +128,7 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         idle_timeout_secs: req.idle_timeout_secs.map(Raw::Number),
         at: in_body,
     };
-    let motion = RawMotion {
-        spec: req.motion.to_spec("/motion")?,
-        joints: None,
-        parameters: None,
-        format: Format::Trs,
-        at: in_body,
-    };
-    raw.spec(state, motion, description).await
+    raw.spec(state, RawMotion::of(req.motion.to_spec("/motion")?), description).await
 }
 
 /// The control a control message asks for (a crossfade's motion looked up).
@@ -147,15 +142,7 @@ pub async fn control_from_body(state: &AppState, body: &[u8]) -> Result<Control,
     match parse_control(text) {
         Ok(ParsedControl::Ready(control)) => Ok(control),
         Ok(ParsedControl::Crossfade { to, duration, ease }) => {
-            let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
-            let raw = RawMotion {
-                spec: doc.to_spec("/motion")?,
-                joints: None,
-                parameters: None,
-                format: Format::Trs,
-                at: in_body,
-            };
-            let motion = raw.resolve(state).await.map_err(|e| e.moved("/motion", "/to"))?.motion;
+            let motion = crossfade_target(state, &to).await?;
             Ok(Control::Crossfade(Crossfade { to: motion, duration, ease, source: Some(Arc::new(to)) }))
         }
         Err(e) => Err(ApiError::invalid(e.code, e.pointer.unwrap_or_default(), e.detail)),

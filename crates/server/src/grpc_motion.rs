@@ -46,7 +46,7 @@ async fn compose(
 /// # Errors
 /// The message's enums or numbers out of range, at `/motion/…`.
 pub fn raw_motion(motion: &pb::Motion) -> Result<RawMotion<'static>, ApiError> {
-    Ok(RawMotion { spec: motion_from_pb(motion)?, joints: None, parameters: None, format: Format::Trs, at: in_body })
+    Ok(RawMotion::of(motion_from_pb(motion)?))
 }
 
 /// A `Play` crossfade's target, looked up and built; pointers under `/to`.

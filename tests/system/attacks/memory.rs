@@ -13,6 +13,8 @@ use reqwest::multipart::{Form, Part};
 use serde_json::{Value, json};
 
 use super::{target, wide_clip};
+use crate::common::glb::fox_with_image;
+use formats::testing::png_header;
 
 /// `reads` pose reads of a 32-layer additive motion over the clip `doc`,
 /// each with a new reference time (a new cache key): every one is answered,
@@ -113,37 +115,6 @@ async fn sixty_four_concurrent_big_answers_asking_for_br_are_compressed_within_t
     println!("FIGURE 64 concurrent sample answers asking for br: {br} compressed, {:.0} MB sent", bytes as f64 / 1e6);
     assert!(br >= 1, "some answers were compressed");
     target.assert_survived("64 concurrent big answers with Accept-Encoding: br", &report);
-}
-
-/// A PNG's signature and IHDR declaring `width` × `height` (8-bit RGBA).
-fn png_header(width: u32, height: u32) -> Vec<u8> {
-    let mut png = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A, 0, 0, 0, 13];
-    png.extend_from_slice(b"IHDR");
-    png.extend_from_slice(&width.to_be_bytes());
-    png.extend_from_slice(&height.to_be_bytes());
-    png.extend_from_slice(&[8, 6, 0, 0, 0, 0, 0, 0, 0]);
-    png
-}
-
-/// The Fox with its texture replaced by `image`, as a data: URI.
-fn fox_with_image(image: &[u8]) -> Vec<u8> {
-    use base64::Engine as _;
-    const FOX: &[u8] = include_bytes!("../../../examples/gltf/Fox/Fox.glb");
-    let json_len = u32::from_le_bytes(FOX[12..16].try_into().unwrap()) as usize;
-    let mut doc: Value = serde_json::from_slice(&FOX[20..20 + json_len]).unwrap();
-    let uri = format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(image));
-    doc["images"][0] = json!({ "uri": uri });
-    let mut json = serde_json::to_vec(&doc).unwrap();
-    json.resize(json.len().next_multiple_of(4), b' ');
-    let bin = &FOX[20 + json_len..];
-    let mut out = b"glTF".to_vec();
-    for n in [2, (20 + json.len() + bin.len()) as u32, json.len() as u32] {
-        out.extend_from_slice(&n.to_le_bytes());
-    }
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    out.extend_from_slice(bin);
-    out
 }
 
 #[tokio::test(flavor = "multi_thread")]

@@ -101,33 +101,9 @@ fn jpeg(bytes: &[u8]) -> Result<ImageHeader, HeaderError> {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-
-    /// A PNG of `width` × `height`: signature and an IHDR chunk (8-bit RGBA),
-    /// as much of a file as the header check reads.
-    pub(crate) fn png_header(width: u32, height: u32) -> Vec<u8> {
-        let mut png = PNG_SIGNATURE.to_vec();
-        png.extend_from_slice(&[0, 0, 0, 13]);
-        png.extend_from_slice(b"IHDR");
-        png.extend_from_slice(&width.to_be_bytes());
-        png.extend_from_slice(&height.to_be_bytes());
-        png.extend_from_slice(&[8, 6, 0, 0, 0]);
-        png.extend_from_slice(&[0, 0, 0, 0]); // CRC, not checked
-        png
-    }
-
-    /// A JPEG: SOI, an APP0 segment, then a baseline SOF0 of `width` × `height`.
-    pub(crate) fn jpeg_header(width: u16, height: u16) -> Vec<u8> {
-        let mut jpeg = vec![0xFF, 0xD8];
-        jpeg.extend_from_slice(&[0xFF, 0xE0, 0, 16, b'J', b'F', b'I', b'F', 0, 1, 1, 0, 0, 1, 0, 1, 0, 0]);
-        jpeg.extend_from_slice(&[0xFF, 0xFF]); // a fill byte
-        jpeg.extend_from_slice(&[0xFF, 0xC0, 0, 11, 8]);
-        jpeg.extend_from_slice(&height.to_be_bytes());
-        jpeg.extend_from_slice(&width.to_be_bytes());
-        jpeg.extend_from_slice(&[1, 1, 0x11, 0]);
-        jpeg
-    }
+    use crate::testing::{jpeg_header, png_header};
 
     #[test]
     fn png_and_jpeg_sizes_come_from_their_headers() {

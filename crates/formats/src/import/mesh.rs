@@ -501,6 +501,7 @@ impl Palette {
 #[cfg(test)]
 mod tests {
     use crate::import::{Format, ImportOptions, import};
+    use crate::testing::{glb_with, glb_with_image};
     use crate::wire::mesh::decode;
 
     const FOX: &[u8] = include_bytes!("../../../../examples/gltf/Fox/Fox.glb");
@@ -529,16 +530,9 @@ mod tests {
         assert!(imported.warnings.iter().any(|w| w.pointer == "/images/0" && w.code == "not_imported"));
     }
 
-    /// The Fox with its texture replaced by `image` (a data: URI).
-    fn fox_with_image(image: &[u8]) -> Vec<u8> {
-        use base64::Engine as _;
-        let uri = format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(image));
-        fox_with(|d| d["images"][0] = serde_json::json!({ "uri": uri }))
-    }
-
     #[test]
     fn a_texture_declaring_too_many_pixels_or_a_malformed_header_is_left_out_with_the_mesh_kept() {
-        use crate::import::image::tests::{jpeg_header, png_header};
+        use crate::testing::{jpeg_header, png_header};
         let huge_png = png_header(16_000, 16_000);
         let mut malformed = png_header(64, 64);
         malformed[12..16].copy_from_slice(b"IDAT");
@@ -549,7 +543,7 @@ mod tests {
             ("neither", b"GIF89a".to_vec(), "neither PNG nor JPEG"),
         ];
         for (what, image, why) in cases {
-            let imported = import(&fox_with_image(&image), Format::Glb, &ImportOptions::default()).unwrap();
+            let imported = import(&glb_with_image(FOX, &image), Format::Glb, &ImportOptions::default()).unwrap();
             assert_eq!(imported.clips.len(), 3, "{what}");
             let mesh = decode(imported.meshes[0].as_ref().expect("the mesh is kept")).unwrap();
             assert!(mesh.textures.is_empty() && mesh.uvs.is_none(), "{what}");
@@ -562,7 +556,7 @@ mod tests {
         }
         // At the limit, kept: 4096 × 4096, and a JPEG.
         for image in [png_header(4096, 4096), jpeg_header(4096, 4096)] {
-            let imported = import(&fox_with_image(&image), Format::Glb, &ImportOptions::default()).unwrap();
+            let imported = import(&glb_with_image(FOX, &image), Format::Glb, &ImportOptions::default()).unwrap();
             let mesh = decode(imported.meshes[0].as_ref().unwrap()).unwrap();
             assert_eq!(mesh.textures.len(), 1);
             assert!(imported.warnings.iter().all(|w| w.pointer != "/images/0"), "{:?}", imported.warnings);
@@ -571,24 +565,6 @@ mod tests {
 
     /// A change to a glTF document.
     type Edit = dyn FnOnce(&mut serde_json::Value);
-
-    /// The Fox with its JSON chunk changed by `edit`.
-    fn fox_with(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
-        let json_len = u32::from_le_bytes(FOX[12..16].try_into().unwrap()) as usize;
-        let mut doc: serde_json::Value = serde_json::from_slice(&FOX[20..20 + json_len]).unwrap();
-        edit(&mut doc);
-        let mut json = serde_json::to_vec(&doc).unwrap();
-        json.resize(json.len().next_multiple_of(4), b' ');
-        let bin = &FOX[20 + json_len..];
-        let mut out = b"glTF".to_vec();
-        for n in [2, (20 + json.len() + bin.len()) as u32, json.len() as u32] {
-            out.extend_from_slice(&n.to_le_bytes());
-        }
-        out.extend_from_slice(b"JSON");
-        out.extend_from_slice(&json);
-        out.extend_from_slice(bin);
-        out
-    }
 
     #[test]
     fn a_mesh_that_cannot_be_kept_leaves_the_clips_and_a_warning() {
@@ -605,7 +581,7 @@ mod tests {
             ),
         ];
         for (what, edit) in cases {
-            let imported = import(&fox_with(edit), Format::Glb, &ImportOptions::default())
+            let imported = import(&glb_with(FOX, edit), Format::Glb, &ImportOptions::default())
                 .unwrap_or_else(|e| panic!("{what}: {e}"));
             assert_eq!(imported.clips.len(), 3, "{what}");
             assert!(imported.meshes.iter().all(Option::is_none), "{what}");

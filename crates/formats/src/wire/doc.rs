@@ -46,6 +46,80 @@ wire_enum!(#[derive(Default)] PlaybackDoc => Playback { #[default] Once = "once"
 wire_enum!(EaseDoc => Ease { Linear = "linear", EaseIn = "ease_in", EaseOut = "ease_out", EaseInOut = "ease_in_out" });
 wire_enum!(SpaceDoc => Space { Local = "local", Model = "model" });
 
+/// Declares a document of keys (a joint track, an IK target's or weight's
+/// keys): its own fields, then the fields every keyed track shares, said once
+/// here (`interpolation`, `times`, `values`, the tangents, `ends`, `tension`,
+/// `speed`; docs/clip-format.md §1), with the conversions to and from the
+/// core's track, each key list's rows checked and shaped by the caller. The
+/// caller imports `InterpolationDoc`, `EndsDoc`, `SpeedDoc` and `DocError`.
+macro_rules! keys_doc {
+    ($(#[$m:meta])* $doc:ident { $($field:ident: $ty:ident),* $(,)? }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+        #[serde(deny_unknown_fields)]
+        pub struct $doc {
+            $(pub $field: $ty,)*
+            #[serde(default)]
+            pub interpolation: InterpolationDoc,
+            pub times: Vec<f32>,
+            pub values: Vec<Vec<f32>>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub in_tangents: Option<Vec<Vec<f32>>>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub out_tangents: Option<Vec<Vec<f32>>>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub ends: Option<EndsDoc>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub tension: Option<f32>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub speed: Option<SpeedDoc>,
+        }
+
+        impl $doc {
+            /// The core's track of these keys; `rows(list, field)` makes each key list.
+            fn keys_to_track(
+                &self,
+                (joint, channel): (String, anim::Channel),
+                rows: impl Fn(&[Vec<f32>], &str) -> Result<anim::Keys, DocError>,
+            ) -> Result<anim::TrackSpec, DocError> {
+                let tangents = |t: &Option<Vec<Vec<f32>>>, field| t.as_deref().map(|t| rows(t, field)).transpose();
+                Ok(anim::TrackSpec {
+                    joint,
+                    channel,
+                    interpolation: self.interpolation.into(),
+                    times: self.times.clone(),
+                    values: rows(&self.values, "values")?,
+                    in_tangents: tangents(&self.in_tangents, "in_tangents")?,
+                    out_tangents: tangents(&self.out_tangents, "out_tangents")?,
+                    ends: self.ends.map(Into::into),
+                    tension: self.tension,
+                    speed: self.speed.map_or(anim::Speed::Keyed, Into::into),
+                })
+            }
+
+            /// The document of `track`'s keys with its own fields; `rows` makes each key list's rows.
+            fn keys_of_track(
+                track: &anim::TrackSpec,
+                rows: impl Fn(&anim::Keys) -> Vec<Vec<f32>>,
+                $($field: $ty),*
+            ) -> $doc {
+                $doc {
+                    $($field,)*
+                    interpolation: track.interpolation.into(),
+                    times: track.times.clone(),
+                    values: rows(&track.values),
+                    in_tangents: track.in_tangents.as_ref().map(&rows),
+                    out_tangents: track.out_tangents.as_ref().map(&rows),
+                    ends: track.ends.map(Into::into),
+                    tension: track.tension,
+                    speed: (track.speed != anim::Speed::Keyed).then_some(track.speed.into()),
+                }
+            }
+        }
+    };
+}
+pub(super) use keys_doc;
+
 /// A clip document that cannot be accepted: a stable `code`, the JSON
 /// pointer of the offending field (empty for the whole body) and a message.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -13,10 +13,10 @@ use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
-use super::doc::{DocError, EndsDoc, InterpolationDoc, SpeedDoc};
+use super::doc::{DocError, EndsDoc, InterpolationDoc, SpeedDoc, keys_doc};
 use super::float::write_float;
 use anim::ik::{AimSpec, ChainSpec, EffectorSpec, IkReport, IkSpec, LimitSpec, TwoBoneSpec};
-use anim::{Channel, IkTarget, KeyedIkSpec, Keys, Speed, TrackSpec};
+use anim::{Channel, IkTarget, KeyedIkSpec, Keys, TrackSpec};
 
 /// One constraint. Which fields apply depends on `kind` (`docs/ik.md`):
 /// `two_bone` {joints: [upper, middle, end], target, pole?, weight?};
@@ -99,27 +99,12 @@ pub struct LimitDoc {
     pub max: [f32; 3],
 }
 
-/// Keys of a target or weight, as a joint track's (`docs/clip-format.md`),
-/// without its joint and channel: targets have 3-number values, weights
-/// 1-number ones.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct KeysDoc {
-    #[serde(default)]
-    pub interpolation: InterpolationDoc,
-    pub times: Vec<f32>,
-    pub values: Vec<Vec<f32>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub in_tangents: Option<Vec<Vec<f32>>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub out_tangents: Option<Vec<Vec<f32>>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ends: Option<EndsDoc>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tension: Option<f32>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub speed: Option<SpeedDoc>,
-}
+keys_doc!(
+    /// Keys of a target or weight, as a joint track's (`docs/clip-format.md`),
+    /// without its joint and channel: targets have 3-number values, weights
+    /// 1-number ones.
+    KeysDoc {}
+);
 
 /// A point `[x, y, z]`, or (in clips) keys of points.
 #[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
@@ -418,19 +403,7 @@ impl KeysDoc {
             let pad = |r: &Vec<f32>| if width == 1 { Vec3::new(r[0], 0.0, 0.0) } else { Vec3::from_slice(r) };
             Ok(Keys::Vec3(rows.iter().map(pad).collect()))
         };
-        let tangents = |t: &Option<Vec<Vec<f32>>>, field| t.as_deref().map(|t| rows(t, field)).transpose();
-        Ok(TrackSpec {
-            joint: String::new(),
-            channel: Channel::Translation,
-            interpolation: self.interpolation.into(),
-            times: self.times.clone(),
-            values: rows(&self.values, "values")?,
-            in_tangents: tangents(&self.in_tangents, "in_tangents")?,
-            out_tangents: tangents(&self.out_tangents, "out_tangents")?,
-            ends: self.ends.map(Into::into),
-            tension: self.tension,
-            speed: self.speed.map_or(Speed::Keyed, Into::into),
-        })
+        self.keys_to_track((String::new(), Channel::Translation), rows)
     }
 
     /// The keys of a target (3 numbers a row) or weight (`[w, 0, 0]` → `[w]`) track.
@@ -441,16 +414,7 @@ impl KeysDoc {
                 Keys::Vec4(v) => v.iter().map(|x| x.to_array().to_vec()).collect(),
             }
         };
-        KeysDoc {
-            interpolation: track.interpolation.into(),
-            times: track.times.clone(),
-            values: rows(&track.values),
-            in_tangents: track.in_tangents.as_ref().map(rows),
-            out_tangents: track.out_tangents.as_ref().map(rows),
-            ends: track.ends.map(Into::into),
-            tension: track.tension,
-            speed: (track.speed != Speed::Keyed).then_some(track.speed.into()),
-        }
+        KeysDoc::keys_of_track(track, rows)
     }
 }
 

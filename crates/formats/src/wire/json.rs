@@ -11,6 +11,7 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use serde::ser::{SerializeMap, SerializeSeq};
 use serde::{Deserialize, Serialize, Serializer};
 
+use super::doc::keys_doc;
 pub use super::doc::{ChannelDoc, DocError, EaseDoc, EndsDoc, InterpolationDoc, PlaybackDoc, SpaceDoc, SpeedDoc};
 pub use super::float::write_float;
 use super::float::{common_text, finite_stand_in};
@@ -19,7 +20,7 @@ use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{
     Channel, ClipSpec, EventSpec, JointSpec, Keys, ParameterLayout, ParameterSpec, Pose, Skeleton, SkeletonSpec, Space,
-    Speed, TrackSpec, Transform,
+    Transform,
 };
 
 /// A clip document: joints' keyframe tracks, an optional skeleton, events,
@@ -94,26 +95,7 @@ impl RestDoc {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct TrackDoc {
-    pub joint: String,
-    pub channel: ChannelDoc,
-    #[serde(default)]
-    pub interpolation: InterpolationDoc,
-    pub times: Vec<f32>,
-    pub values: Vec<Vec<f32>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub in_tangents: Option<Vec<Vec<f32>>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub out_tangents: Option<Vec<Vec<f32>>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ends: Option<EndsDoc>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tension: Option<f32>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub speed: Option<SpeedDoc>,
-}
+keys_doc!(TrackDoc { joint: String, channel: ChannelDoc });
 
 /// A parameter track (docs/clip-format.md §3): every key a row of the same width
 /// (1 to 256 numbers), each number interpolated as a translation component.
@@ -245,22 +227,8 @@ impl ClipDoc {
         for (i, t) in self.tracks.iter().enumerate() {
             let channel = Channel::from(t.channel);
             let width = channel.width();
-            let at = |field: &str| format!("/tracks/{i}/{field}");
-            let tangents = |rows: &Option<Vec<Vec<f32>>>, field| {
-                rows.as_ref().map(|r| keys(r, width, &at(field), channel)).transpose()
-            };
-            tracks.push(TrackSpec {
-                joint: t.joint.clone(),
-                channel,
-                interpolation: t.interpolation.into(),
-                times: t.times.clone(),
-                values: keys(&t.values, width, &at("values"), channel)?,
-                in_tangents: tangents(&t.in_tangents, "in_tangents")?,
-                out_tangents: tangents(&t.out_tangents, "out_tangents")?,
-                ends: t.ends.map(Into::into),
-                tension: t.tension,
-                speed: t.speed.map_or(Speed::Keyed, Into::into),
-            });
+            let rows = |rows: &[Vec<f32>], field: &str| keys(rows, width, &format!("/tracks/{i}/{field}"), channel);
+            tracks.push(t.keys_to_track((t.joint.clone(), channel), rows)?);
         }
         Ok(ClipSpec {
             name: self.name.clone(),
@@ -305,18 +273,7 @@ impl ClipDoc {
             tracks: spec
                 .tracks
                 .iter()
-                .map(|t| TrackDoc {
-                    joint: t.joint.clone(),
-                    channel: t.channel.into(),
-                    interpolation: t.interpolation.into(),
-                    times: t.times.clone(),
-                    values: rows(&t.values),
-                    in_tangents: t.in_tangents.as_ref().map(rows),
-                    out_tangents: t.out_tangents.as_ref().map(rows),
-                    ends: t.ends.map(Into::into),
-                    tension: t.tension,
-                    speed: (t.speed != Speed::Keyed).then_some(t.speed.into()),
-                })
+                .map(|t| TrackDoc::keys_of_track(t, rows, t.joint.clone(), t.channel.into()))
                 .collect(),
             events: spec.events.iter().map(|e| EventDoc { time: e.time, name: e.name.clone() }).collect(),
             playback: spec.playback.into(),

@@ -48,7 +48,7 @@ pub use broadcast::RawBroadcast;
 pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use list::{Page, RawPage};
-pub use motion::{Composed, RawMotion};
+pub use motion::{Composed, RawMotion, crossfade_target};
 pub use raw::{
     Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,

@@ -2,13 +2,14 @@
 //! versions and pinned, the motion built (its refusals pointed at
 //! `/motion/…`) or found built for those versions in the motion cache
 //! (`server::motion_cache`), the joint subset checked, and the answer priced
-//! before any pose is evaluated. REST's `POST /v1/poses` and `/v1/samples`
-//! and gRPC's `SampleMotion*` use it.
+//! before any pose is evaluated. REST's `POST /v1/poses` and `/v1/samples`,
+//! gRPC's `SampleMotion*`, streams, broadcasts and crossfades use it.
 
 use std::sync::Arc;
 
+use super::body::parse_json;
 use super::cost::{Cost, Estimate, F64_TEXT, Wire};
-use super::raw::{Field, Format, Locate, joint_subset, parameter_subset};
+use super::raw::{Field, Format, Locate, in_body, joint_subset, parameter_subset};
 use crate::cache::CachedClip;
 use crate::error::{ApiError, At};
 use crate::motion_cache::MotionKey;
@@ -17,6 +18,7 @@ use crate::stream::{PinnedClip, StreamMotion};
 use anim::Motion;
 use anim::ik::IkLimits;
 use anim::motion::MotionSpec;
+use formats::wire::motion::MotionDoc;
 
 /// A motion and the joints asked for, as a transport decoded them.
 #[derive(Debug, Clone)]
@@ -68,7 +70,13 @@ impl Composed {
     }
 }
 
-impl RawMotion<'_> {
+impl<'a> RawMotion<'a> {
+    /// The motion of a body or message: every joint and parameter, `trs`
+    /// poses (a sampling request narrows them with its own fields).
+    pub fn of(spec: MotionSpec<String>) -> RawMotion<'a> {
+        RawMotion { spec, joints: None, parameters: None, format: Format::Trs, at: in_body }
+    }
+
     /// Looks up each layer's clip, finds the motion built over those
     /// versions (or builds and caches it) and checks the subset.
     ///
@@ -108,6 +116,17 @@ impl RawMotion<'_> {
             self.parameters.map(|names| parameter_subset(motion.parameters(), names, self.at)).transpose()?;
         Ok(Composed { motion, joints, parameters })
     }
+}
+
+/// A crossfade's target sent as JSON (a control's `to`), looked up and
+/// built like a request's motion, every refusal pointed under `/to`.
+///
+/// # Errors
+/// As [`RawMotion::resolve`], and the motion document's own refusals.
+pub async fn crossfade_target(state: &AppState, to: &serde_json::Value) -> Result<Arc<StreamMotion>, ApiError> {
+    let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
+    let built = async { Ok(RawMotion::of(doc.to_spec("/motion")?).resolve(state).await?.motion) };
+    built.await.map_err(|e: ApiError| e.moved("/motion", "/to"))
 }
 
 /// `spec` with each layer's clip id swapped for the clip looked up for it.

@@ -81,6 +81,18 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
     v.as_deref().map(Raw::Text)
 }
 
+/// The body's motion with its joint and parameter subsets, looked up and built.
+async fn compose(
+    state: &AppState,
+    motion: &MotionDoc,
+    (joints, parameters): (&Option<Vec<String>>, &Option<Vec<String>>),
+    format: Format,
+) -> Result<Composed, ApiError> {
+    let spec = motion.to_spec("/motion")?;
+    let raw = RawMotion { joints: joints.as_deref(), parameters: parameters.as_deref(), format, ..RawMotion::of(spec) };
+    raw.resolve(state).await
+}
+
 /// One pose of a motion (`docs/motion.md`).
 #[utoipa::path(
     post, path = "/v1/poses", tag = "poses",
@@ -104,14 +116,7 @@ pub async fn pose(
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
-    let motion = RawMotion {
-        spec: req.motion.to_spec("/motion")?,
-        joints: req.joints.as_deref(),
-        parameters: req.parameters.as_deref(),
-        format: checked.format,
-        at: in_body,
-    };
-    let composed = motion.resolve(&state).await?;
+    let composed = compose(&state, &req.motion, (&req.joints, &req.parameters), checked.format).await?;
     let cost = composed.cost(1, checked.format, Wire::Json);
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
@@ -156,14 +161,7 @@ pub async fn samples(
         at: in_body,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let motion = RawMotion {
-        spec: req.motion.to_spec("/motion")?,
-        joints: req.joints.as_deref(),
-        parameters: req.parameters.as_deref(),
-        format: sampling.format,
-        at: in_body,
-    };
-    let composed = motion.resolve(&state).await?;
+    let composed = compose(&state, &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Json);
     let field = if req.times.is_some() { Field::Times } else { Field::When };

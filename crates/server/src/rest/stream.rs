@@ -32,7 +32,7 @@ use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use crate::auth::{Caller, ReadAccess};
 use crate::config::Limits;
 use crate::error::ApiError;
-use crate::request::{Format, Opening, Raw, RawModes, RawMotion, RawStream, in_body, in_query, parse_json};
+use crate::request::{Opening, Raw, RawModes, RawMotion, RawStream, crossfade_target, in_body, in_query, parse_json};
 use crate::state::AppState;
 use crate::stream::ws::{MotionResolver, WsConfig, close};
 use crate::stream::{StreamMotion, Subscription};
@@ -260,14 +260,7 @@ async fn open(
         parameters: msg.parameters.as_deref(),
         at: in_body,
     };
-    let motion = RawMotion {
-        spec: msg.motion.to_spec("/motion")?,
-        joints: None,
-        parameters: None,
-        format: Format::Trs,
-        at: in_body,
-    };
-    let admitted = raw.open_motion(state, motion, caller).await?;
+    let admitted = raw.open_motion(state, RawMotion::of(msg.motion.to_spec("/motion")?), caller).await?;
     let engine = &state.streams;
     Ok(admitted.map(
         |Opening { params, permit }| {
@@ -310,28 +303,6 @@ pub(super) fn resolver(state: &AppState) -> Arc<dyn MotionResolver> {
 impl MotionResolver for StateMotions {
     fn resolve(&self, motion: serde_json::Value) -> BoxFuture<'static, Result<Arc<StreamMotion>, serde_json::Value>> {
         let state = self.0.clone();
-        Box::pin(async move {
-            let built = async {
-                let doc: MotionDoc = parse_json(motion.to_string().as_bytes())?;
-                let raw = RawMotion {
-                    spec: doc.to_spec("/motion")?,
-                    joints: None,
-                    parameters: None,
-                    format: Format::Trs,
-                    at: in_body,
-                };
-                Ok::<_, ApiError>(raw.resolve(&state).await?.motion)
-            };
-            built.await.map_err(|e| under_to(e.problem_json()))
-        })
+        Box::pin(async move { crossfade_target(&state, &motion).await.map_err(|e| e.problem_json()) })
     }
-}
-
-/// A crossfade motion's problem, its pointer moved under the control's `to`.
-fn under_to(mut problem: serde_json::Value) -> serde_json::Value {
-    if let Some(serde_json::Value::String(pointer)) = problem.get_mut("pointer") {
-        let inner = pointer.strip_prefix("/motion").unwrap_or(pointer);
-        *pointer = format!("/to{inner}");
-    }
-    problem
 }
