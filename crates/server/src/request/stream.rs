@@ -12,7 +12,7 @@ use std::sync::Arc;
 use super::cost::{Estimate, check_stream, check_stream_work, stream_work};
 use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
-use crate::auth::Caller;
+use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{AdmitError, Encoding, MAX_FPS, ParamError, StreamParams, StreamPermit, StreamRequest};
@@ -128,7 +128,7 @@ impl RawStream<'_> {
         motion: RawMotion<'_>,
         caller: &Caller,
     ) -> Result<Admitted, ApiError> {
-        let (composed, request, frame) = self.composed(state, motion).await?;
+        let (composed, request, frame) = self.composed(state, motion, &caller.key()).await?;
         let per_frame = price::motion_pose(&composed.motion);
         let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
             Ok(permit) => permit,
@@ -146,7 +146,7 @@ impl RawStream<'_> {
     /// # Errors
     /// As [`RawStream::open_motion`], but the caller's share and the caps.
     pub async fn motion_params(&self, state: &AppState, motion: RawMotion<'_>) -> Result<StreamParams, ApiError> {
-        let (composed, request, frame) = self.composed(state, motion).await?;
+        let (composed, request, frame) = self.composed(state, motion, &CallerKey::Node).await?;
         check_stream(frame, request.fps, &state.config.limits, self.at)?;
         let per_sec = stream_work(price::motion_pose(&composed.motion), frame, request.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
@@ -158,13 +158,14 @@ impl RawStream<'_> {
         &self,
         state: &AppState,
         motion: RawMotion<'_>,
+        caller: &CallerKey,
     ) -> Result<(Composed, StreamRequest, u64), ApiError> {
         if self.modes.playback.is_some() {
             let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
             return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
         }
         let request = self.check()?;
-        let composed = motion.resolve(state).await?;
+        let composed = motion.resolve_for(state, caller).await?;
         self.check_fps(request.fps)?;
         let mut frame =
             Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());

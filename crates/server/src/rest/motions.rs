@@ -9,12 +9,14 @@
 use std::ops::Range;
 
 use axum::extract::State;
+use axum::http::HeaderMap;
 use axum::response::Response;
 use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::auth::ReadAccess;
+use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
     Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body, parse_json,
@@ -98,6 +100,7 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
 pub async fn pose(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
+    headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: PoseOfMotion = parse_json(&body)?;
@@ -111,8 +114,9 @@ pub async fn pose(
         format: checked.format,
         at: in_body,
     };
-    let composed = motion.resolve(&state).await?;
+    let composed = motion.resolve_for(&state, &caller.key()).await?;
     let cost = composed.cost(1, checked.format, Wire::Json);
+    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
     let capacity = usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20);
@@ -143,6 +147,7 @@ pub async fn pose(
 pub async fn samples(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
+    headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SamplesOfMotion = parse_json(&body)?;
@@ -163,9 +168,10 @@ pub async fn samples(
         format: sampling.format,
         at: in_body,
     };
-    let composed = motion.resolve(&state).await?;
+    let composed = motion.resolve_for(&state, &caller.key()).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Json);
+    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     let field = if req.times.is_some() { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_body)?;
     let (space, format) = (sampling.options.space, sampling.format);
