@@ -364,9 +364,20 @@ fn bad_control(detail: impl Into<String>) -> Status {
 }
 
 /// A control the stream refused, with the code and pointer the WebSocket
-/// sends (`bad_control`, or an IK rule's code at `/constraints/…`).
+/// sends (`bad_control`, or an IK rule's code at `/constraints/…`); a work
+/// limit's with its own status (`RESOURCE_EXHAUSTED` for the caller's
+/// share, `UNAVAILABLE` for the node's capacity).
 fn refused(e: &ControlError) -> Status {
-    ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()).into()
+    let code = match e.status() {
+        Some(429) => tonic::Code::ResourceExhausted,
+        Some(503) => tonic::Code::Unavailable,
+        _ => return ApiError::invalid(e.code(), e.pointer().unwrap_or_default(), e.to_string()).into(),
+    };
+    let mut status = Status::new(code, format!("{}: {e}", e.code()));
+    if let Ok(v) = tonic::metadata::MetadataValue::try_from(e.code()) {
+        status.metadata_mut().insert("x-error-code", v);
+    }
+    status
 }
 
 #[tonic::async_trait]

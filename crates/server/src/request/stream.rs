@@ -7,7 +7,9 @@
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+
+use anim::ik::IkConstraint;
 
 use super::cost::{Estimate, check_stream, check_stream_work, stream_work};
 use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
@@ -15,8 +17,47 @@ use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, par
 use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
-use crate::stream::{AdmitError, Encoding, MAX_FPS, ParamError, StreamParams, StreamPermit, StreamRequest};
-use crate::work::price;
+use crate::stream::{
+    AdmitError, ControlError, Encoding, MAX_FPS, ParamError, Repricing, StreamMotion, StreamParams, StreamPermit,
+    StreamRequest,
+};
+use crate::work::{Ticket, price};
+
+/// A stream's price per second, held against its caller's share and the
+/// node's capacity while it is open, and priced again when a control
+/// changes what its frames evaluate (a crossfade, an `ik` control): over
+/// `max_request_work` the control is refused `too_much_work`, over the
+/// caller's share `caller_work_limit`, and the stream goes on as it was.
+#[derive(Debug)]
+struct StreamCharge {
+    ticket: Mutex<Ticket>,
+    /// The bound of one frame, in bytes (a control keeps the skeleton).
+    frame: u64,
+    fps: u32,
+    /// `max_request_work`, per second of playback.
+    limit: u64,
+}
+
+impl Repricing for StreamCharge {
+    fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError> {
+        let layers = motions.iter().flat_map(|m| m.layers()).map(|c| price::clip_pose(c.clip()));
+        let constraints = motions.first().map_or(0, |m| price::ik(ik, m.skeleton()));
+        let per_frame = layers.fold(constraints, u64::saturating_add);
+        let per_sec = stream_work(per_frame, self.frame, self.fps);
+        if per_sec > self.limit {
+            let detail = format!(
+                "this control would make the stream cost {per_sec} work units per second of playback; the limit \
+                 (max_request_work, --max-request-work) is {}",
+                self.limit
+            );
+            return Err(ControlError::Work { code: "too_much_work", status: 422, detail });
+        }
+        crate::sync::lock(&self.ticket).change(per_sec).map_err(|e| {
+            let detail = format!("this control would make the stream cost {per_sec} work units per second: {e}");
+            ControlError::Work { code: e.code(), status: e.status().as_u16(), detail }
+        })
+    }
+}
 
 /// The frame rate of a stream that names none (the WebSocket's default;
 /// gRPC's `fps` is always given, 0 included).
@@ -211,7 +252,9 @@ impl RawStream<'_> {
         let per_sec = stream_work(per_frame, frame, fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         let ticket = state.work.charge(&caller.key(), per_sec)?;
-        Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.holding(ticket)))
+        let limit = state.config.limits.max_request_work;
+        let charge = Arc::new(StreamCharge { ticket: Mutex::new(ticket), frame, fps, limit });
+        Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.priced(charge)))
     }
 
     /// The joint and parameter subsets applied.

@@ -172,9 +172,17 @@ fn error_message(detail: &str) -> Message {
     problem_message("bad_control", None, detail)
 }
 
-/// A refused control's `{"error": {code, detail, pointer?}}`.
+/// A refused control's `{"error": {code, detail, pointer?, status?}}` (the
+/// status of a work limit's refusal: 422, 429, 503).
 fn refusal(e: &ControlError) -> Message {
-    problem_message(e.code(), e.pointer(), &e.to_string())
+    let mut problem = serde_json::json!({"code": e.code(), "detail": e.to_string()});
+    if let Some(pointer) = e.pointer() {
+        problem["pointer"] = pointer.into();
+    }
+    if let Some(status) = e.status() {
+        problem["status"] = status.into();
+    }
+    Message::Text(serde_json::json!({ "error": problem }).to_string().into())
 }
 
 fn problem_message(code: &str, pointer: Option<String>, detail: &str) -> Message {

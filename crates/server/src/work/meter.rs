@@ -46,6 +46,34 @@ impl Ticket {
     pub fn units(&self) -> u64 {
         self.units
     }
+
+    /// Holds `units` from now on instead (a stream whose control changed
+    /// its price): more is charged as a new charge would be, except that
+    /// what this ticket held already counts as its caller's and the node's.
+    ///
+    /// # Errors
+    /// As [`Meter::charge`], and the ticket holds what it held.
+    pub fn change(&mut self, units: u64) -> Result<(), ApiError> {
+        let meter = Arc::clone(&self.meter);
+        let mut held = lock(&meter.held);
+        let mine = held.callers.get(&self.caller).copied().unwrap_or(0);
+        if units > self.units {
+            let more = units - self.units;
+            if mine > self.units && mine.saturating_add(more) > meter.share {
+                metrics::counter!("inbetween_work_refused_total", "reason" => "caller").increment(1);
+                let (share, retry_after) = (meter.share, RETRY_AFTER_SECS);
+                return Err(ApiError::CallerWorkLimit { held: mine, units: more, share, retry_after });
+            }
+            if held.total > self.units && held.total.saturating_add(more) > meter.capacity {
+                metrics::counter!("inbetween_work_refused_total", "reason" => "node").increment(1);
+                return Err(ApiError::WorkOverloaded { retry_after: RETRY_AFTER_SECS });
+            }
+        }
+        held.total = held.total.saturating_sub(self.units).saturating_add(units);
+        held.callers.insert(self.caller.clone(), mine.saturating_sub(self.units).saturating_add(units));
+        self.units = units;
+        Ok(())
+    }
 }
 
 impl Meter {
@@ -120,6 +148,29 @@ mod tests {
         assert_eq!(meter.held(), 1000);
         drop((a, b, c));
         assert_eq!(meter.held(), 0, "every ticket gave its units back");
+        assert!(lock(&meter.held).callers.is_empty());
+    }
+
+    #[test]
+    fn a_ticket_changed_is_charged_for_what_it_adds() {
+        let meter = Meter::new(1000, 0.5);
+        let mut stream = meter.charge(&key(1), 100).unwrap();
+        stream.change(5000).unwrap();
+        assert_eq!(meter.held(), 5000, "alone, a caller's one charge may grow past its share");
+        stream.change(100).unwrap();
+        let other = meter.charge(&key(1), 300).unwrap();
+        assert_eq!(stream.change(201).unwrap_err().code(), "caller_work_limit", "300 + 201 > 500");
+        assert_eq!((stream.units(), meter.held()), (100, 400), "a refused change holds what it held");
+        stream.change(200).unwrap();
+        let b = meter.charge(&key(2), 500).unwrap();
+        assert_eq!(stream.change(201).unwrap_err().code(), "caller_work_limit");
+        drop(other);
+        // Alone on its caller now, so only the node's capacity holds it.
+        assert_eq!(stream.change(601).unwrap_err().code(), "overloaded", "601 + 500 > 1000");
+        stream.change(300).unwrap();
+        assert_eq!(meter.held(), 800);
+        drop((stream, b));
+        assert_eq!(meter.held(), 0);
         assert!(lock(&meter.held).callers.is_empty());
     }
 
