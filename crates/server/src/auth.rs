@@ -89,6 +89,9 @@ pub enum CallerKey {
     Addr(IpAddr),
     /// Neither a token nor an address: such callers share one count.
     Unknown,
+    /// The node's own work, done for whoever waits on it: a cache miss's
+    /// build, shared by every request that missed on the clip.
+    Node,
 }
 
 impl Caller {

@@ -28,6 +28,7 @@ use futures_util::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::auth::CallerKey;
 use super::error::ApiError;
 use super::request::{
     Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, crossfade_target, in_body, parse_json,
@@ -142,7 +143,7 @@ pub async fn control_from_body(state: &AppState, body: &[u8]) -> Result<Control,
     match parse_control(text) {
         Ok(ParsedControl::Ready(control)) => Ok(control),
         Ok(ParsedControl::Crossfade { to, duration, ease }) => {
-            let motion = crossfade_target(state, &to).await?;
+            let motion = crossfade_target(state, &CallerKey::Node, &to).await?;
             Ok(Control::Crossfade(Crossfade { to: motion, duration, ease, source: Some(Arc::new(to)) }))
         }
         Err(e) => Err(ApiError::invalid(e.code, e.pointer.unwrap_or_default(), e.detail)),

@@ -38,11 +38,10 @@
 //! is noted; the caller takes the notes after each insert or invalidation
 //! ([`ClipCache::take_departed`]) and drops the motions over those ids.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::Mutex;
 
-use crate::cache_budget::{Budgeted, CacheBudget};
+use crate::cache_budget::{Budgeted, CacheBudget, Entries};
 use crate::store::ClipMeta;
 use anim::Clip;
 
@@ -79,18 +78,8 @@ impl crate::stream::PinnedClip for CachedClip {
 }
 
 #[derive(Debug)]
-struct Entry {
-    clip: Arc<CachedClip>,
-    /// `clip.bytes()`, computed once.
-    bytes: usize,
-    last_used: u64,
-}
-
-#[derive(Debug, Default)]
 struct Inner {
-    entries: HashMap<String, Entry>,
-    /// The sum of the entries' `bytes`.
-    bytes: usize,
+    entries: Entries<String, Arc<CachedClip>>,
     /// Bumped by every write and invalidation.
     epoch: u64,
     /// True while invalidations may be missed: nothing is cached.
@@ -102,8 +91,6 @@ struct Inner {
 /// The clip cache; see the module docs for its consistency rules.
 #[derive(Debug)]
 pub struct ClipCache {
-    capacity: usize,
-    budget: Arc<CacheBudget>,
     inner: Mutex<Inner>,
 }
 
@@ -118,7 +105,8 @@ impl ClipCache {
     /// If `capacity` is 0.
     pub fn new(capacity: usize, budget: Arc<CacheBudget>) -> Self {
         assert!(capacity > 0, "a cache needs room for one clip");
-        ClipCache { capacity, budget, inner: Mutex::new(Inner::default()) }
+        let entries = Entries::new(capacity, budget);
+        ClipCache { inner: Mutex::new(Inner { entries, epoch: 0, suspended: false, departed: Vec::new() }) }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
@@ -126,10 +114,7 @@ impl ClipCache {
     }
 
     pub fn get(&self, id: &str) -> Option<Arc<CachedClip>> {
-        let mut inner = self.lock();
-        let entry = inner.entries.get_mut(id)?;
-        entry.last_used = self.budget.tick();
-        Some(entry.clip.clone())
+        self.lock().entries.get(id).cloned()
     }
 
     /// The current epoch, to pass to [`ClipCache::insert_loaded`].
@@ -187,7 +172,7 @@ impl ClipCache {
     /// Whether `clip` is the very entry cached for its id (not merely the
     /// same version of it), without touching its recency.
     pub fn holds(&self, clip: &Arc<CachedClip>) -> bool {
-        self.lock().entries.get(&clip.meta.id).is_some_and(|e| Arc::ptr_eq(&e.clip, clip))
+        self.lock().entries.peek(clip.meta.id.as_str()).is_some_and(|cached| Arc::ptr_eq(cached, clip))
     }
 
     /// The ids whose entry left the cache since the last call (each once;
@@ -198,7 +183,7 @@ impl ClipCache {
 
     /// The cached version of `id`, without touching its recency.
     pub fn version_of(&self, id: &str) -> Option<u64> {
-        self.lock().entries.get(id).map(|e| e.clip.meta.version)
+        self.lock().entries.peek(id).map(|cached| cached.meta.version)
     }
 
     pub fn len(&self) -> usize {
@@ -211,68 +196,47 @@ impl ClipCache {
 
     /// Heap bytes of the cached clips (see [`CachedClip::bytes`]).
     pub fn bytes(&self) -> usize {
-        self.lock().bytes
+        self.lock().entries.bytes()
     }
 
-    /// Puts `clip` in, unless a newer version of it is cached; then evicts
-    /// the least recently used others until the entry bound holds (the
+    /// Puts `clip` in, unless a newer version of it is cached; the least
+    /// recently used others leave while the entry bound is reached (the
     /// shared byte budget is trimmed by the caller, `cache_budget::trim`).
     /// A clip over the whole budget is not cached, and takes its older
     /// version out.
     fn put(&self, inner: &mut Inner, clip: Arc<CachedClip>) {
-        let tick = self.budget.tick();
         let id = clip.meta.id.clone();
-        if let Some(e) = inner.entries.get_mut(&id) {
-            e.last_used = tick;
-            if e.clip.meta.version >= clip.meta.version {
-                return;
-            }
-            self.remove(inner, &id);
-        }
-        let bytes = clip.bytes();
-        if !self.budget.admits(bytes) {
+        if inner.entries.get(id.as_str()).is_some_and(|cached| cached.meta.version >= clip.meta.version) {
             return;
         }
-        while inner.entries.len() >= self.capacity {
-            match Self::least_recent(inner) {
-                Some(id) => self.remove(inner, &id),
-                None => break,
-            }
+        self.remove(inner, &id);
+        let bytes = clip.bytes();
+        if let Ok(left) = inner.entries.insert(id, clip, bytes) {
+            inner.departed.extend(left.into_iter().map(|gone| gone.meta.id.clone()));
         }
-        inner.bytes += bytes;
-        self.budget.charge(bytes);
-        inner.entries.insert(id, Entry { clip, bytes, last_used: tick });
-    }
-
-    fn least_recent(inner: &Inner) -> Option<String> {
-        inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(id, _)| id.clone())
     }
 
     fn remove(&self, inner: &mut Inner, id: &str) {
-        if let Some(e) = inner.entries.remove(id) {
-            inner.bytes -= e.bytes;
-            self.budget.refund(e.bytes);
-            inner.departed.push(e.clip.meta.id.clone());
+        if let Some(gone) = inner.entries.remove(id) {
+            inner.departed.push(gone.meta.id.clone());
         }
     }
 
     fn clear(&self, inner: &mut Inner) {
         inner.entries.clear();
-        self.budget.refund(inner.bytes);
-        inner.bytes = 0;
         inner.departed.clear();
     }
 }
 
 impl Budgeted for ClipCache {
     fn oldest(&self) -> Option<u64> {
-        self.lock().entries.values().map(|e| e.last_used).min()
+        self.lock().entries.oldest()
     }
 
     fn evict_oldest(&self) {
         let mut inner = self.lock();
-        if let Some(id) = Self::least_recent(&inner) {
-            self.remove(&mut inner, &id);
+        if let Some(gone) = inner.entries.evict_oldest() {
+            inner.departed.push(gone.meta.id.clone());
         }
     }
 }

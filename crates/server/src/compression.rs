@@ -30,9 +30,10 @@
 //! level 1 of each, where the CPU per megabyte is what counts. br is always
 //! at quality 1: from quality 2 up its encoder allocates its full window
 //! tables whatever the answer's size (≈ 40 MB at quality 4, tower-http's
-//! default; 64 of them killed a 1 GiB server). [`state_bytes`] and
-//! [`compression_price`] give an answer's memory and CPU in the units the
-//! rest of the server budgets in (figures: BENCHMARKS.md, “Compression”).
+//! default; 64 of them killed a 1 GiB server). [`state_bytes`] gives an
+//! answer's encoder memory; its CPU is in its price (`work::price::compression`,
+//! which a pose request charges as [`AnswerCoding`] says; figures:
+//! BENCHMARKS.md, “Compression”).
 //!
 //! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
 //! that ask, except stream frames ([`frames_uncompressed`]), and decodes
@@ -69,6 +70,7 @@ use tonic::codec::CompressionEncoding;
 
 use super::config::Compression;
 use super::error::ApiError;
+use crate::work::price::{self, Coding};
 use formats::wire::proto::server::animation_server::{Animation, AnimationServer};
 
 /// The codings we produce and decode, in our order of preference.
@@ -149,7 +151,7 @@ pub fn responses(config: Compression) -> Stack<CompressionLayer<Answers>, Compre
 /// Bytes one encoder holds while it compresses, by coding and level
 /// (window plus match tables; BENCHMARKS.md, “Compression”): what [`Gate`]
 /// lets at most `max_compressed_answers` answers hold at once.
-#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
+#[allow(dead_code, reason = "the figures of docs/operations.md, “Memory”; tested here")]
 pub fn state_bytes(coding: &str, level: i32) -> u64 {
     const KIB: u64 = 1024;
     match (coding, level) {
@@ -167,29 +169,46 @@ pub fn state_bytes(coding: &str, level: i32) -> u64 {
     }
 }
 
-/// The CPU of compressing `bytes` in `coding` at `level`, in work units
-/// (one unit ≈ one joint sample, ≈ 20 ns of a core), from
-/// the nanoseconds per megabyte measured in BENCHMARKS.md, “Compression”.
-/// Identity (or an unknown coding) costs nothing.
-#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
-pub fn compression_price(coding: &str, level: i32, bytes: u64) -> u64 {
-    // Nanoseconds per byte, rounded up.
-    let ns_per_byte: u64 = match (coding, level) {
-        ("zstd", ..=1) => 8,
-        ("zstd", _) => 13,
-        ("br", ..=1) => 14,
-        ("br", 2..=4) => 90,
-        ("br", _) => 5500,
-        ("gzip", ..=1) => 10,
-        ("gzip", _) => 39,
-        _ => 0,
-    };
-    (bytes.saturating_mul(ns_per_byte) / NS_PER_WORK_UNIT).max(u64::from(ns_per_byte > 0))
+/// The coding [`negotiate`] chose for a request's answer (it rewrote
+/// `Accept-Encoding` to that one, or to none), whose level [`responses`]
+/// picks by the answer's size: what a pose request's price charges for
+/// compressing (`work::price::compression`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct AnswerCoding {
+    coding: Option<Coding>,
+    min_bytes: u64,
 }
 
-/// Nanoseconds of CPU one work unit stands for (about one joint sample).
-#[allow(dead_code, reason = "the work price (request/cost.rs) calls it")]
-pub const NS_PER_WORK_UNIT: u64 = 20;
+impl AnswerCoding {
+    /// The coding of a request with `headers` (after [`negotiate`]) on a
+    /// server compressing answers of `min_bytes` and more.
+    pub fn of(headers: &HeaderMap, min_bytes: usize) -> AnswerCoding {
+        let coding = match headers.get(ACCEPT_ENCODING).and_then(|v| v.to_str().ok()) {
+            Some("zstd") => Some(Coding::Zstd),
+            Some("br") => Some(Coding::Br),
+            Some("gzip") => Some(Coding::Gzip),
+            _ => None,
+        };
+        AnswerCoding { coding, min_bytes: min_bytes as u64 }
+    }
+
+    /// How an answer of at most `bound` bytes is compressed; `None` when
+    /// it goes as it is (no coding, or under `compression_min_bytes`).
+    pub fn at(self, bound: u64) -> Option<price::Compression> {
+        let coding = self.coding.filter(|_| bound >= self.min_bytes)?;
+        let level = match coding {
+            Coding::Br => LARGE_LEVEL,
+            _ if bound >= SMALL_ANSWER_BYTES => LARGE_LEVEL,
+            Coding::Zstd => SMALL_ZSTD_LEVEL,
+            Coding::Gzip => SMALL_GZIP_LEVEL,
+        };
+        Some(price::Compression { coding, level })
+    }
+}
+
+/// The usual levels small answers get (tower-http's defaults).
+const SMALL_ZSTD_LEVEL: i32 = 3;
+const SMALL_GZIP_LEVEL: i32 = 6;
 
 /// The cap on answers compressed at once; handed to [`negotiate`].
 #[derive(Debug, Clone)]
@@ -474,20 +493,42 @@ mod tests {
         assert_eq!(coding_of(&small), Some("br"), "small answers asking for br get it (at quality 1)");
     }
 
+    fn negotiated(coding: &str) -> HeaderMap {
+        let mut headers = HeaderMap::new();
+        headers.insert(ACCEPT_ENCODING, HeaderValue::from_str(coding).unwrap());
+        headers
+    }
+
+    #[test]
+    fn an_answer_is_priced_at_the_level_its_size_gets() {
+        let at = |coding, level| Some(price::Compression { coding, level });
+        let of = |coding: &str, bound| AnswerCoding::of(&negotiated(coding), 1024).at(bound);
+        assert_eq!(of("zstd", 10_000), at(Coding::Zstd, 3), "small answers at the usual level");
+        assert_eq!(of("gzip", 10_000), at(Coding::Gzip, 6));
+        assert_eq!(of("br", 10_000), at(Coding::Br, 1), "br always at quality 1");
+        assert_eq!(of("zstd", SMALL_ANSWER_BYTES), at(Coding::Zstd, 1), "large ones at level 1");
+        assert_eq!(of("gzip", 1 << 20), at(Coding::Gzip, 1));
+        assert_eq!(of("br", 1023), None, "under compression_min_bytes: sent as it is");
+        assert_eq!(AnswerCoding::of(&HeaderMap::new(), 1024).at(1 << 20), None, "nothing negotiated");
+        assert_eq!(AnswerCoding::default().at(1 << 20), None);
+        assert_eq!(of("identity", 1 << 20), None);
+    }
+
     #[test]
     fn compressing_is_priced_by_coding_level_and_bytes() {
+        use crate::work::price::compression;
         const MB: u64 = 1_000_000;
-        assert_eq!(compression_price("identity", 0, MB), 0);
-        let price = |coding, level| compression_price(coding, level, MB);
+        assert_eq!(compression(None, MB), 0);
+        let price = |coding, level| compression(Some(price::Compression { coding, level }), MB);
         // The measured order (BENCHMARKS.md, “Compression”).
-        assert!(price("zstd", 1) < price("gzip", 1) && price("gzip", 1) < price("br", 1));
-        assert!(
-            price("br", 1) < price("gzip", 6) && price("gzip", 6) < price("br", 4) && price("br", 4) < price("br", 11)
-        );
-        // 14 ns a byte at br 1: 14 ms a megabyte, 700,000 units of 20 ns.
-        assert_eq!(price("br", 1), 700_000);
-        assert_eq!(compression_price("gzip", 1, 3 * MB), 3 * price("gzip", 1));
-        assert_eq!(compression_price("zstd", 1, 1), 1, "any compressed byte costs something");
+        assert!(price(Coding::Zstd, 1) < price(Coding::Gzip, 1) && price(Coding::Gzip, 1) < price(Coding::Br, 1));
+        assert!(price(Coding::Br, 1) < price(Coding::Gzip, 6) && price(Coding::Gzip, 6) < price(Coding::Br, 4));
+        assert!(price(Coding::Br, 4) < price(Coding::Br, 11));
+        // 14 ns a byte at br 1: 14 ms a megabyte, 1,400,000 units of 10 ns.
+        assert_eq!(price(Coding::Br, 1), 1_400_000);
+        let gzip = Some(price::Compression { coding: Coding::Gzip, level: 1 });
+        assert_eq!(compression(gzip, 3 * MB), 3 * price(Coding::Gzip, 1));
+        assert_eq!(compression(gzip, 1), 1, "any compressed byte costs something");
         assert!(state_bytes("br", 1) < state_bytes("gzip", 6) && state_bytes("br", 4) > 32 << 20);
     }
 }

@@ -440,12 +440,6 @@ settings! {
             "ik_max_iterations", "ik-max-iterations", "INBETWEEN_IK_MAX_ITERATIONS", "N",
             "The largest max_iterations a chain constraint may ask for (over it: 422 too_many_iterations)",
             doc "The largest `max_iterations` a `chain` may ask for (over it: 422 `too_many_iterations`)";
-        max_concurrent_builds: usize = cores() => positive -> usize,
-            "max_concurrent_builds", "max-concurrent-builds", "INBETWEEN_MAX_CONCURRENT_BUILDS", "N",
-            shown "one per core",
-            "Clip builds (uploads, imports, cache misses) run at once, each on a blocking thread; more wait",
-            doc "Clip builds (uploads, imports, cache misses) running at once, each on a blocking thread, never on the \
-             async workers";
         max_request_work: u64 = 100_000_000 => positive -> u64,
             "max_request_work", "max-request-work", "INBETWEEN_MAX_REQUEST_WORK", "UNITS",
             "Work one request may cost, and one stream per second of playback, in work units (docs/api.md, \
@@ -1143,7 +1137,6 @@ mod tests {
             ik_max_constraints: 32,
             ik_max_effectors: 16,
             ik_max_iterations: 1000,
-            max_concurrent_builds: cores,
             max_request_work: 100_000_000,
             node_work_per_sec: 0,
             caller_work_share: 0.5,

@@ -26,7 +26,6 @@ use tonic::{Request, Response, Status, Streaming};
 use crate::auth::{Caller, Identity, Scope};
 use crate::cache::CachedClip;
 use crate::error::{ApiError, At};
-use crate::limits::admit_doc;
 use crate::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
     Sampling, Wire, clip as request_clip, evaluate, in_body, in_pose_body,
@@ -365,7 +364,9 @@ fn bad_control(detail: impl Into<String>) -> Status {
 }
 
 /// A control the stream refused, with the code and pointer the WebSocket
-/// sends (`bad_control`, or an IK rule's code at `/constraints/…`).
+/// sends (`bad_control`, or an IK rule's code at `/constraints/…`); a work
+/// limit's with its own status (`RESOURCE_EXHAUSTED` for the caller's
+/// share, `UNAVAILABLE` for the node's capacity).
 fn refused(e: &ControlError) -> Status {
     ApiError::from_control(e).into()
 }
@@ -574,15 +575,16 @@ impl Animation for GrpcService {
     }
 
     async fn put_clip(&self, request: Request<pb::PutClipRequest>) -> Result<Response<pb::ClipSummary>, Status> {
-        self.write(&request)?;
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
         let req = request.into_inner();
         let clip = req.clip.ok_or_else(|| ApiError::invalid("missing_clip", "/clip", "a PutClip needs a clip"))?;
         let spec = clip_from_pb(&clip).map_err(ApiError::from)?;
         let mut doc = ClipDoc::from_spec(&spec);
         doc.tags = req.tags;
         doc.metadata = metadata_from_pb(&req.metadata_json)?;
-        let limits = self.state.config.limits.clone();
-        let admitted = self.state.builds.run(move |cancel| admit_doc(doc, &limits, cancel)).await?;
+        let limits = &self.state.config.limits;
+        let admitted = crate::builds::document(&self.state.work, &caller.key(), limits, doc).await?;
         let meta = if req.clip_id.is_empty() {
             self.state.store.create(admitted.new_clip).await.map_err(ApiError::from)?
         } else {

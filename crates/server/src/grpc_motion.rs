@@ -31,6 +31,7 @@ use formats::wire::proto::{
 /// The request's motion and joints, looked up and built.
 async fn compose(
     state: &AppState,
+    caller: &Caller,
     motion: Option<&pb::Motion>,
     (joints, parameters): (&[String], &[String]),
     format: Format,
@@ -38,7 +39,7 @@ async fn compose(
     let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
     let joints = (!joints.is_empty()).then_some(joints);
     let parameters = (!parameters.is_empty()).then_some(parameters);
-    RawMotion { spec, joints, parameters, format, at: in_body }.resolve(state).await
+    RawMotion { spec, joints, parameters, format, at: in_body }.resolve_for(state, &caller.key()).await
 }
 
 /// A stream's motion (`StreamRequest.motion`), still to be looked up.
@@ -75,7 +76,7 @@ pub async fn sample(state: &AppState, caller: &Caller, req: pb::SampleMotionRequ
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
             .check()?;
-    let composed = compose(state, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
+    let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
     let cost = composed.cost(1, checked.format, Wire::Protobuf);
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let pack = move |_: &Cancel| Packer::new(&composed, checked.options.space, checked.format).pose(checked.t, true);
@@ -103,7 +104,7 @@ pub async fn sample_batch(
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let raw = RawBatch::of_message(times, range, modes, req.format);
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(state, req.motion.as_ref(), (&req.joints, &req.parameters), sampling.format).await?;
+    let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Protobuf);
     let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };

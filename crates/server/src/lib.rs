@@ -10,7 +10,7 @@
 //! Codemap: `config` layered settings; `error` the one `ApiError` (the only
 //! place statuses are chosen); `state` what handlers share; `cache` compiled
 //! clips; `motion_cache` built motions over them; `cache_budget` the one
-//! byte budget those caches share; `builds` where clips are built (blocking threads, a few at once);
+//! byte budget those caches share; `builds` where clips are built and what a build costs (on the work pool);
 //! `work` the price of work, the node's capacity and the pool where poses,
 //! IK and answers are worked out;
 //! `tokens` token specs and hashes; `auth` the caller of each request and its scopes; `limits` admission of uploads; `metrics`
@@ -149,7 +149,6 @@ impl Application {
             ..EngineConfig::default()
         });
         let writes = Arc::new(ratelimit::WriteLimiter::new(config.limits.write_rate, config.limits.write_burst));
-        let builds = Arc::new(builds::Builds::new(config.limits.max_concurrent_builds));
         let work = Arc::new(work::Work::new(&config.limits));
         // The recorder first: handles registered before it would count nothing.
         let prometheus = metrics::handle();
@@ -171,7 +170,6 @@ impl Application {
             ready: Arc::new(AtomicBool::new(true)),
             loads: Arc::default(),
             streams,
-            builds,
             patches: sync::Turns::default(),
             work,
         });

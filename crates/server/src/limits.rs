@@ -11,7 +11,7 @@ use crate::store::{ClipStats, MeshWrite, NewClip};
 use anim::ik::IkLimits;
 use anim::lint::{Lint, lint};
 use anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
-use formats::wire::json::{ClipDoc, DocError, parse_clip_doc};
+use formats::wire::json::{ClipDoc, DocError};
 
 use super::config::Limits;
 use super::error::ApiError;
@@ -26,24 +26,34 @@ pub struct Admitted {
     pub lints: Vec<Lint>,
 }
 
-/// Validates an uploaded clip document.
-///
-/// # Errors
-/// `malformed_json` (400); a type error, a documented rule or a limit (422), each
-/// with the JSON pointer of the offending field.
-pub fn admit(body: &[u8], limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
-    admit_doc(parse_clip_doc(body)?, limits, cancel)
-}
-
 /// Validates a parsed document (importers: `ClipDoc::from_spec`, then this).
 /// The build stops early once `cancel` is raised (its caller gave up).
 ///
 /// # Errors
-/// As [`admit`], less the JSON syntax.
+/// A type error, a documented rule or a limit (422), each with the JSON
+/// pointer of the offending field.
 pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
-    check(&doc, limits)?;
-    let spec = doc.to_spec()?;
-    let clip = build(&spec, limits.max_build_work, &limits.ik(), cancel)?;
+    let spec = checked_spec(&doc, limits)?;
+    admit_spec(doc, &spec, limits, cancel)
+}
+
+/// The spec of a document within the limits on its counts (tracks, keys,
+/// labels): what a build's price is worked out from.
+///
+/// # Errors
+/// A limit, or a documented rule the spec's conversion checks (422).
+pub fn checked_spec(doc: &ClipDoc, limits: &Limits) -> Result<ClipSpec, ApiError> {
+    check(doc, limits)?;
+    Ok(doc.to_spec()?)
+}
+
+/// Builds `spec` (of `doc`, checked by [`checked_spec`]) and makes the
+/// clip to store.
+///
+/// # Errors
+/// As [`admit_doc`], less the limits on counts.
+pub fn admit_spec(doc: ClipDoc, spec: &ClipSpec, limits: &Limits, cancel: &AtomicBool) -> Result<Admitted, ApiError> {
+    let clip = build(spec, limits.max_build_work, &limits.ik(), cancel)?;
     if clip.joint_count() > limits.max_joints {
         return Err(too_many("too_many_joints", "/tracks", "joints", clip.joint_count(), limits.max_joints));
     }
@@ -58,7 +68,7 @@ pub fn admit_doc(doc: ClipDoc, limits: &Limits, cancel: &AtomicBool) -> Result<A
     };
     let joint_names = clip.skeleton().names().to_vec();
     let new_clip = NewClip { name: doc.name, doc_json, stats, tags: doc.tags, joint_names, mesh: MeshWrite::None };
-    Ok(Admitted { new_clip, clip, lints: lint(&spec) })
+    Ok(Admitted { new_clip, clip, lints: lint(spec) })
 }
 
 /// `Clip::build_limited` within `max_work` and the IK ceilings, the budget

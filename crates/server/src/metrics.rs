@@ -93,15 +93,6 @@ pub fn panic_caught(source: &'static str) {
     crate::panics::caught(source);
 }
 
-/// A failed blocking task's error: a panic is counted, either way it is an
-/// internal error (the client sees only "internal error").
-pub fn join_failed(e: tokio::task::JoinError) -> crate::error::ApiError {
-    if e.is_panic() {
-        panic_caught("task");
-    }
-    crate::error::ApiError::internal(e)
-}
-
 /// Handles to the unlabelled metrics the hot paths touch, registered once so
 /// a pose request does no registry lookup for them.
 #[derive(Clone)]

@@ -37,10 +37,9 @@
 //! lookup. Invalidation scans every entry's layers; it happens only on
 //! writes and evictions.
 
-use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use crate::cache_budget::{Budgeted, CacheBudget};
+use crate::cache_budget::{Budgeted, CacheBudget, Entries};
 use crate::stream::{PinnedClip, StreamMotion};
 use anim::Playback;
 use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
@@ -161,35 +160,21 @@ impl KeyWriter {
     }
 }
 
-#[derive(Debug)]
-struct Entry {
-    motion: Arc<StreamMotion>,
-    /// [`motion_bytes`], computed once.
-    bytes: usize,
-    last_used: u64,
-}
-
-#[derive(Debug, Default)]
-struct Inner {
-    entries: HashMap<MotionKey, Entry>,
-    /// The sum of the entries' `bytes`.
-    bytes: usize,
-}
-
 /// The motion cache; see the module docs for its key and invalidation rules.
 #[derive(Debug)]
 pub struct MotionCache {
-    capacity: usize,
-    budget: Arc<CacheBudget>,
-    inner: Mutex<Inner>,
+    entries: Mutex<Entries<MotionKey, Arc<StreamMotion>>>,
 }
 
 /// The bytes a cached motion keeps alive: its key, the motion itself and
 /// its own heap (not its layers' clips: the clip cache counts those, and a
 /// motion never outlives their entries there).
 pub fn motion_bytes(key: &MotionKey, motion: &StreamMotion) -> usize {
-    std::mem::size_of::<Entry>() + key.0.len() + std::mem::size_of::<StreamMotion>() + motion.heap_bytes()
+    ENTRY_BYTES + key.0.len() + std::mem::size_of::<StreamMotion>() + motion.heap_bytes()
 }
+
+/// An entry's own record: its handle on the motion, weight and stamp.
+const ENTRY_BYTES: usize = std::mem::size_of::<(Arc<StreamMotion>, usize, u64)>();
 
 impl MotionCache {
     /// A cache of at most `capacity` motions, whose bytes count on `budget`.
@@ -198,18 +183,15 @@ impl MotionCache {
     /// If `capacity` is 0.
     pub fn new(capacity: usize, budget: Arc<CacheBudget>) -> Self {
         assert!(capacity > 0, "a motion cache needs room for one motion");
-        MotionCache { capacity, budget, inner: Mutex::new(Inner::default()) }
+        MotionCache { entries: Mutex::new(Entries::new(capacity, budget)) }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
-        crate::sync::lock(&self.inner)
+    fn lock(&self) -> std::sync::MutexGuard<'_, Entries<MotionKey, Arc<StreamMotion>>> {
+        crate::sync::lock(&self.entries)
     }
 
     pub fn get(&self, key: &MotionKey) -> Option<Arc<StreamMotion>> {
-        let mut inner = self.lock();
-        let entry = inner.entries.get_mut(key)?;
-        entry.last_used = self.budget.tick();
-        Some(Arc::clone(&entry.motion))
+        self.lock().get(key).cloned()
     }
 
     /// Puts `motion` in under `key` if `still_current()` holds, asked under
@@ -220,21 +202,8 @@ impl MotionCache {
     /// Returns whether it went in.
     pub fn insert_if(&self, key: MotionKey, motion: Arc<StreamMotion>, still_current: impl FnOnce() -> bool) -> bool {
         let bytes = motion_bytes(&key, &motion);
-        let mut inner = self.lock();
-        if !still_current() || !self.budget.admits(bytes) {
-            return false;
-        }
-        self.remove(&mut inner, &key);
-        while inner.entries.len() >= self.capacity {
-            match Self::least_recent(&inner) {
-                Some(oldest) => self.remove(&mut inner, &oldest),
-                None => break,
-            }
-        }
-        inner.bytes += bytes;
-        self.budget.charge(bytes);
-        inner.entries.insert(key, Entry { motion, bytes, last_used: self.budget.tick() });
-        true
+        let mut entries = self.lock();
+        still_current() && entries.insert(key, motion, bytes).is_ok()
     }
 
     /// Drops every motion with a layer of one of `clip_ids`; returns how many.
@@ -242,59 +211,37 @@ impl MotionCache {
         if clip_ids.is_empty() {
             return 0;
         }
-        let mut inner = self.lock();
-        let uses = |motion: &StreamMotion| motion.layers().any(|c| clip_ids.iter().any(|id| id.as_ref() == c.id()));
-        let gone: Vec<MotionKey> =
-            inner.entries.iter().filter(|(_, e)| uses(&e.motion)).map(|(k, _)| k.clone()).collect();
-        for key in &gone {
-            self.remove(&mut inner, key);
-        }
-        gone.len()
+        let uses =
+            |motion: &Arc<StreamMotion>| motion.layers().any(|c| clip_ids.iter().any(|id| id.as_ref() == c.id()));
+        self.lock().remove_where(uses).len()
     }
 
     /// Drops everything (the clip cache was suspended or resumed).
     pub fn clear(&self) {
-        let mut inner = self.lock();
-        inner.entries.clear();
-        self.budget.refund(inner.bytes);
-        inner.bytes = 0;
+        self.lock().clear();
     }
 
     pub fn len(&self) -> usize {
-        self.lock().entries.len()
+        self.lock().len()
     }
 
     /// Bytes of the cached motions (see [`motion_bytes`]).
     pub fn bytes(&self) -> usize {
-        self.lock().bytes
-    }
-
-    fn least_recent(inner: &Inner) -> Option<MotionKey> {
-        inner.entries.iter().min_by_key(|(_, e)| e.last_used).map(|(k, _)| k.clone())
-    }
-
-    fn remove(&self, inner: &mut Inner, key: &MotionKey) {
-        if let Some(e) = inner.entries.remove(key) {
-            inner.bytes -= e.bytes;
-            self.budget.refund(e.bytes);
-        }
+        self.lock().bytes()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.lock().is_empty()
     }
 }
 
 impl Budgeted for MotionCache {
     fn oldest(&self) -> Option<u64> {
-        self.lock().entries.values().map(|e| e.last_used).min()
+        self.lock().oldest()
     }
 
     fn evict_oldest(&self) {
-        let mut inner = self.lock();
-        if let Some(key) = Self::least_recent(&inner) {
-            self.remove(&mut inner, &key);
-        }
+        self.lock().evict_oldest();
     }
 }
 

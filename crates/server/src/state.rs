@@ -10,12 +10,9 @@ use futures_util::FutureExt;
 use futures_util::future::{self, BoxFuture};
 use metrics_exporter_prometheus::PrometheusHandle;
 
-use crate::store::{ClipStore, StoredClip};
-use anim::ik::IkLimits;
-use formats::wire::json::{DocError, parse_clip};
+use crate::store::ClipStore;
 
 use super::auth::Auth;
-use super::builds::Builds;
 use super::cache::{CachedClip, ClipCache};
 use super::cache_budget::{CacheBudget, trim};
 use super::config::Config;
@@ -67,12 +64,10 @@ pub struct Shared {
     pub in_flight: Arc<super::shed::Clients>,
     /// Request bodies and first gRPC messages held at once, in bytes (`shed::Arrivals`).
     pub arrivals: super::shed::Arrivals,
-    /// Where every clip build runs (off the async workers, a few at once).
-    pub builds: Arc<Builds>,
     /// Patches of one clip take turns on this node (`rest::patch`).
     pub patches: crate::sync::Turns,
-    /// Where poses are evaluated, and what the node and each caller may
-    /// spend on them (`server::work`).
+    /// Where poses are evaluated and clips and motions built, and what the
+    /// node and each caller may spend on them (`server::work`).
     pub work: Arc<crate::work::Work>,
 }
 
@@ -107,6 +102,8 @@ impl AppState {
             LoadFailure::NotFound => ApiError::NotFound { what: "clip" },
             LoadFailure::Unavailable => ApiError::Unavailable(None),
             LoadFailure::OverBudget => over_budget_stored(id, self.config.limits.max_build_work),
+            LoadFailure::Busy => ApiError::WorkOverloaded { retry_after: 1 },
+            LoadFailure::TimedOut { secs } => ApiError::Timeout { secs },
             LoadFailure::Internal => ApiError::Internal(anyhow::anyhow!("loading clip {id} failed (logged above)")),
         })
     }
@@ -120,7 +117,7 @@ impl AppState {
             let result = async {
                 let stored = state.store.get(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
                 let max_work = state.config.limits.max_build_work;
-                let cached = state.builds.run(move |cancel| compile_stored(stored, max_work, cancel)).await?;
+                let cached = super::builds::stored(&state.work, max_work, stored).await?;
                 Ok::<_, ApiError>(Arc::new(cached))
             }
             .await;
@@ -136,6 +133,8 @@ impl AppState {
                     Err(LoadFailure::OverBudget)
                 }
                 Err(ApiError::NotFound { .. }) => Err(LoadFailure::NotFound),
+                Err(ApiError::WorkOverloaded { .. } | ApiError::CallerWorkLimit { .. }) => Err(LoadFailure::Busy),
+                Err(ApiError::Timeout { secs }) => Err(LoadFailure::TimedOut { secs }),
                 Err(e @ ApiError::Unavailable(_)) => {
                     tracing::warn!(%id, error = %e, "clip load: store unavailable");
                     Err(LoadFailure::Unavailable)
@@ -230,6 +229,12 @@ pub enum LoadFailure {
     Unavailable,
     /// A stored clip costs more to build than `max_build_work` now allows.
     OverBudget,
+    /// The node's work capacity was taken: its build was not started.
+    Busy,
+    /// Its build outlived `request_timeout_secs`.
+    TimedOut {
+        secs: u64,
+    },
     Internal,
 }
 
@@ -238,23 +243,6 @@ pub type Load = future::Shared<BoxFuture<'static, Result<Arc<CachedClip>, LoadFa
 
 /// In-flight loads by clip id.
 pub type Loads = Arc<Mutex<HashMap<String, Load>>>;
-
-/// Compiles a stored document within `max_work`. It was accepted once, so
-/// failure here means the store was corrupted or the rules changed: an
-/// internal error, unless the build budget was lowered since (422).
-fn compile_stored(stored: StoredClip, max_work: u64, cancel: &AtomicBool) -> Result<CachedClip, ApiError> {
-    let (_, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(|e: DocError| {
-        ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id))
-    })?;
-    // A stored clip's constraints were admitted under the limits of their
-    // day: IK ceilings apply to what comes in, not to what is kept.
-    let ik = IkLimits { max_constraints: usize::MAX, max_iterations: u32::MAX, max_effectors: usize::MAX };
-    let clip = super::limits::build(&spec, max_work, &ik, cancel).map_err(|e| match e {
-        e @ ApiError::TooMany { .. } => e,
-        e => ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e:?}", stored.meta.id)),
-    })?;
-    Ok(CachedClip { meta: stored.meta, clip })
-}
 
 /// A stored clip whose build is over the configured budget: refused like
 /// an upload would be, so the caller learns which limit (never a 500).

@@ -77,7 +77,7 @@ async fn two_concurrent_hostile_uploads_are_refused_while_the_probes_answer() {
     if crate::common::latency_checked() {
         assert!(worst < Duration::from_millis(100), "probe p99 {worst:?} over {n} probes");
     }
-    assert_eq!(app.state.builds.available(), app.state.config.limits.max_concurrent_builds, "every permit came back");
+    assert_eq!(app.state.work.meter().held(), 0, "every build gave its price back");
     app.stop().await;
 }
 
@@ -176,6 +176,7 @@ async fn a_timed_out_upload_stops_its_build_instead_of_finishing_it() {
     let app = TestApp::builder()
         .configure(|c| {
             c.limits.max_build_work = 1_000_000_000;
+            c.limits.max_request_work = u64::MAX;
             c.limits.request_timeout = Duration::from_secs(1);
         })
         .start()
@@ -184,8 +185,8 @@ async fn a_timed_out_upload_stops_its_build_instead_of_finishing_it() {
     let response = upload.body(looping_hermite("slow", 40, 17, 3000.0)).send().await.unwrap();
     assert_eq!(response.status(), 503, "the request timed out");
     let started = Instant::now();
-    let permits = app.state.config.limits.max_concurrent_builds;
-    let stopped = || async { app.state.builds.available() >= permits };
+    // A build holds its price until its thread lets go of it.
+    let stopped = || async { app.state.work.meter().held() == 0 };
     crate::common::eventually(Duration::from_secs(5), "the abandoned build stops", stopped).await;
     eprintln!("the abandoned build stopped {:?} after the 503", started.elapsed());
     app.stop().await;

@@ -24,6 +24,7 @@ mod numbers;
 mod operations;
 mod parameters;
 mod poses;
+mod priced_builds;
 mod security;
 mod shared_parts;
 mod strict;

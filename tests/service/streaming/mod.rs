@@ -14,6 +14,7 @@ mod grpc_streams;
 mod ik;
 mod limits;
 mod motions;
+mod priced_controls;
 mod seam;
 mod websocket;
 

@@ -2,8 +2,8 @@
 //! constant-speed Hermite tracks once froze `/healthz` and gRPC `Ping` for
 //! 12 s (arc-length tables were capped per track, not per clip, and small
 //! bodies were compiled on the async workers), and 16 of them left 546 MB in
-//! a cache bounded by entry count. Now builds have a per-clip budget, run
-//! on blocking threads a few at a time, and the cache is bounded in bytes.
+//! a cache bounded by entry count. Now builds have a per-clip budget and a
+//! price, run on the work threads, and the cache is bounded in bytes.
 //!
 //! A debug build does a unit of build work about 75 times slower than the
 //! shipped release build, so this test scales the budget and the cache down
@@ -29,7 +29,11 @@ async fn upload(http: &reqwest::Client, url: &str, body: String) -> u16 {
 
 #[tokio::test(flavor = "multi_thread")]
 async fn expensive_builds_never_stall_the_probes_and_the_cache_stays_bounded() {
-    let mut target = target(&["--max-build-work", "1000000", "--cache-bytes", "4000000"]).await;
+    // Both builds admitted from one address (each is priced about 2.5M
+    // units, over the share of a debug build's measured capacity): this
+    // attack is on the probes while two builds run.
+    let args = ["--max-build-work", "1000000", "--cache-bytes", "4000000", "--node-work-per-sec", "1000000000000"];
+    let mut target = target(&args).await;
     let http = crate::common::http_client();
     let url = target.server.url("/v1/clips");
     let hostile = looping_hermite("loops", 40, 25, 900.0);

@@ -186,13 +186,27 @@ pub struct Cost {
     pub per_pose: u64,
     /// The encoded answer's upper bound.
     pub bytes: u64,
+    /// How the answer will be compressed (`None`: as it is).
+    pub compression: Option<price::Compression>,
 }
 
 impl Cost {
+    /// What `poses` poses of `per_pose` units over `joints` joints cost,
+    /// answered in at most `bytes` bytes sent as they are.
+    pub fn new(poses: u64, joints: u64, per_pose: u64, bytes: u64) -> Cost {
+        Cost { poses, joints, per_pose, bytes, compression: None }
+    }
+
+    /// The same answer compressed as `compression` says.
+    pub fn compressed(self, compression: Option<price::Compression>) -> Cost {
+        Cost { compression, ..self }
+    }
+
     /// The request's whole price in work units: its poses, then the
-    /// encoding of its answer.
+    /// encoding of its answer and its compression.
     pub fn work(&self) -> u64 {
-        self.poses.saturating_mul(self.per_pose).saturating_add(price::encoding(self.bytes))
+        let answer = price::encoding(self.bytes).saturating_add(price::compression(self.compression, self.bytes));
+        self.poses.saturating_mul(self.per_pose).saturating_add(answer)
     }
 
     /// # Errors
@@ -212,11 +226,12 @@ impl Cost {
         let work = self.work();
         if work > limits.max_request_work {
             let detail = format!(
-                "this request costs {work} work units ({} poses × {} units, and {} to encode the answer); the limit \
-                 (max_request_work, --max-request-work) is {}",
+                "this request costs {work} work units ({} poses × {} units, {} to encode the answer and {} to compress \
+                 it); the limit (max_request_work, --max-request-work) is {}",
                 self.poses,
                 self.per_pose,
                 price::encoding(self.bytes),
+                price::compression(self.compression, self.bytes),
                 limits.max_request_work
             );
             return Err(unprocessable("too_much_work", field, at, detail));

@@ -10,6 +10,7 @@ use std::sync::Arc;
 use super::body::parse_json;
 use super::cost::{Cost, Estimate, F64_TEXT, Wire};
 use super::raw::{Field, Format, Locate, in_body, joint_subset, parameter_subset};
+use crate::auth::CallerKey;
 use crate::cache::CachedClip;
 use crate::error::{ApiError, At};
 use crate::motion_cache::MotionKey;
@@ -66,7 +67,7 @@ impl Composed {
         estimate.per_pose += super::cost::ik_reports(more_reports as u64, wire) + 8;
         let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
         let per_pose = crate::work::price::motion_pose(&self.motion);
-        Cost { poses, joints, per_pose, bytes: estimate.total(poses) }
+        Cost::new(poses, joints, per_pose, estimate.total(poses))
     }
 }
 
@@ -86,6 +87,16 @@ impl<'a> RawMotion<'a> {
     /// `unknown_joint` at `/joints/{i}`; `no_inverse_binds` for skinning
     /// matrices of a skeleton without them.
     pub async fn resolve(self, state: &AppState) -> Result<Composed, ApiError> {
+        self.resolve_for(state, &CallerKey::Node).await
+    }
+
+    /// [`RawMotion::resolve`], a motion build (a miss of the motion cache)
+    /// priced and charged to `caller` and run on the work pool.
+    ///
+    /// # Errors
+    /// As [`RawMotion::resolve`]; `too_much_work` (422) for a build over
+    /// `max_request_work`, `caller_work_limit` (429), `overloaded` (503).
+    pub async fn resolve_for(self, state: &AppState, caller: &CallerKey) -> Result<Composed, ApiError> {
         let spec = self.spec;
         let mut clips = Vec::with_capacity(spec.layers.len());
         for (i, layer) in spec.layers.iter().enumerate() {
@@ -102,7 +113,12 @@ impl<'a> RawMotion<'a> {
         let motion = match state.cached_motion(&key) {
             Some(hit) => hit,
             None => {
-                let motion = Arc::new(build(pinned, &state.config.limits.ik())?);
+                let (limits, units) = (&state.config.limits, crate::work::price::motion_build(&pinned));
+                let ik = limits.ik();
+                let building = crate::builds::run(&state.work, caller, limits, units, "building this motion", {
+                    move |_| build(pinned, &ik)
+                });
+                let motion = Arc::new(building.await?);
                 state.cache_motion(key, Arc::clone(&motion), &clips);
                 motion
             }
@@ -123,9 +139,13 @@ impl<'a> RawMotion<'a> {
 ///
 /// # Errors
 /// As [`RawMotion::resolve`], and the motion document's own refusals.
-pub async fn crossfade_target(state: &AppState, to: &serde_json::Value) -> Result<Arc<StreamMotion>, ApiError> {
+pub async fn crossfade_target(
+    state: &AppState,
+    caller: &CallerKey,
+    to: &serde_json::Value,
+) -> Result<Arc<StreamMotion>, ApiError> {
     let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
-    let built = async { Ok(RawMotion::of(doc.to_spec("/motion")?).resolve(state).await?.motion) };
+    let built = async { Ok(RawMotion::of(doc.to_spec("/motion")?).resolve_for(state, caller).await?.motion) };
     built.await.map_err(|e: ApiError| e.moved("/motion", "/to"))
 }
 

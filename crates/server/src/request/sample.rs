@@ -9,6 +9,7 @@ use glam::Mat4;
 use super::cost::{Cost, Estimate, Wire};
 use super::raw::{Field, Format, Locate, Raw, RawModes, finite, malformed, unprocessable};
 use crate::cache::CachedClip;
+use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
@@ -98,11 +99,26 @@ impl RawPose<'_> {
         id: &str,
         wire: Wire,
     ) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
+        self.resolve_compressed(state, id, wire, AnswerCoding::default()).await
+    }
+
+    /// [`RawPose::resolve`] for an answer compressed in `coding`,
+    /// which its price includes.
+    ///
+    /// # Errors
+    /// As [`RawPose::resolve`].
+    pub async fn resolve_compressed(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+        coding: AnswerCoding,
+    ) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
         let request = self.check()?;
         let cached = clip_for(state, id, request.format, self.at).await?;
         let estimate = Estimate::pose(&cached.clip, &cached.meta.id, request.format, wire);
         let (joints, per_pose) = (cached.clip.joint_count() as u64, price::clip_pose(&cached.clip));
-        let cost = Cost { poses: 1, joints, per_pose, bytes: estimate.total(1) };
+        let cost = Cost::new(1, joints, per_pose, estimate.total(1)).compressed(coding.at(estimate.total(1)));
         cost.check(&state.config.limits, Field::Time, self.at)?;
         Ok((PoseRequest { work: cost.work(), ..request }, cached))
     }
@@ -192,12 +208,28 @@ impl RawBatch<'_> {
         id: &str,
         wire: Wire,
     ) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
+        self.resolve_compressed(state, id, wire, AnswerCoding::default()).await
+    }
+
+    /// [`RawBatch::resolve`] for an answer compressed in `coding`, which
+    /// its price includes.
+    ///
+    /// # Errors
+    /// As [`RawBatch::resolve`].
+    pub async fn resolve_compressed(
+        &self,
+        state: &AppState,
+        id: &str,
+        wire: Wire,
+        coding: AnswerCoding,
+    ) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
         let mut sampling = self.check(state.config.limits.max_poses)?;
         let cached = clip_for(state, id, sampling.format, self.at).await?;
         let estimate = Estimate::batch(&cached.clip, &cached.meta.id, sampling.format, wire);
         let poses = sampling.times.len() as u64;
         let (joints, per_pose) = (cached.clip.joint_count() as u64, price::clip_pose(&cached.clip));
-        let cost = Cost { poses, joints, per_pose, bytes: estimate.total(poses) };
+        let cost =
+            Cost::new(poses, joints, per_pose, estimate.total(poses)).compressed(coding.at(estimate.total(poses)));
         let field = if self.times.is_some() { Field::Times } else { Field::When };
         cost.check(&state.config.limits, field, self.at)?;
         sampling.answer_bytes = cost.bytes;

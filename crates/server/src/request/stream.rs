@@ -7,16 +7,57 @@
 //! speed bound) are the engine's, [`StreamParams::new`]; this maps its
 //! refusals onto the stable codes.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+
+use anim::ik::IkConstraint;
 
 use super::cost::{Estimate, check_stream, check_stream_work, stream_work};
 use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
-use crate::auth::Caller;
+use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
-use crate::stream::{AdmitError, Encoding, MAX_FPS, ParamError, StreamParams, StreamPermit, StreamRequest};
-use crate::work::price;
+use crate::stream::{
+    AdmitError, ControlError, Encoding, MAX_FPS, ParamError, Repricing, StreamMotion, StreamParams, StreamPermit,
+    StreamRequest,
+};
+use crate::work::{Ticket, price};
+
+/// A stream's price per second, held against its caller's share and the
+/// node's capacity while it is open, and priced again when a control
+/// changes what its frames evaluate (a crossfade, an `ik` control): over
+/// `max_request_work` the control is refused `too_much_work`, over the
+/// caller's share `caller_work_limit`, and the stream goes on as it was.
+#[derive(Debug)]
+struct StreamCharge {
+    ticket: Mutex<Ticket>,
+    /// The bound of one frame, in bytes (a control keeps the skeleton).
+    frame: u64,
+    fps: u32,
+    /// `max_request_work`, per second of playback.
+    limit: u64,
+}
+
+impl Repricing for StreamCharge {
+    fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError> {
+        let layers = motions.iter().flat_map(|m| m.layers()).map(|c| price::clip_pose(c.clip()));
+        let constraints = motions.first().map_or(0, |m| price::ik(ik, m.skeleton()));
+        let per_frame = layers.fold(constraints, u64::saturating_add);
+        let per_sec = stream_work(per_frame, self.frame, self.fps);
+        if per_sec > self.limit {
+            let detail = format!(
+                "this control would make the stream cost {per_sec} work units per second of playback; the limit \
+                 (max_request_work, --max-request-work) is {}",
+                self.limit
+            );
+            return Err(ApiError::Relayed { status: 422, code: "too_much_work", detail }.to_control());
+        }
+        crate::sync::lock(&self.ticket).resize(per_sec).map_err(|e| {
+            let detail = format!("this control would make the stream cost {per_sec} work units per second: {e}");
+            ApiError::Relayed { status: e.status().as_u16(), code: e.code(), detail }.to_control()
+        })
+    }
+}
 
 /// The frame rate of a stream that names none (the WebSocket's default;
 /// gRPC's `fps` is always given, 0 included).
@@ -128,7 +169,7 @@ impl RawStream<'_> {
         motion: RawMotion<'_>,
         caller: &Caller,
     ) -> Result<Admitted, ApiError> {
-        let (composed, request, frame) = self.composed(state, motion).await?;
+        let (composed, request, frame) = self.composed(state, motion, &caller.key()).await?;
         let per_frame = price::motion_pose(&composed.motion);
         let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
             Ok(permit) => permit,
@@ -151,7 +192,7 @@ impl RawStream<'_> {
         state: &AppState,
         motion: RawMotion<'_>,
     ) -> Result<(StreamParams, u64), ApiError> {
-        let (composed, request, frame) = self.composed(state, motion).await?;
+        let (composed, request, frame) = self.composed(state, motion, &CallerKey::Node).await?;
         check_stream(frame, request.fps, &state.config.limits, self.at)?;
         let per_frame = price::motion_pose(&composed.motion).saturating_add(price::BROADCAST_TICK);
         let per_sec = stream_work(per_frame, frame, request.fps);
@@ -164,13 +205,14 @@ impl RawStream<'_> {
         &self,
         state: &AppState,
         motion: RawMotion<'_>,
+        caller: &CallerKey,
     ) -> Result<(Composed, StreamRequest, u64), ApiError> {
         if self.modes.playback.is_some() {
             let detail = "a motion stream has no `playback`: each layer of the motion has its own".to_owned();
             return Err(super::raw::malformed("unknown_parameter", Field::Playback, self.at, detail));
         }
         let request = self.check()?;
-        let composed = motion.resolve(state).await?;
+        let composed = motion.resolve_for(state, caller).await?;
         self.check_fps(request.fps)?;
         let mut frame =
             Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());
@@ -216,7 +258,9 @@ impl RawStream<'_> {
         let per_sec = stream_work(per_frame, frame, fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         let ticket = state.work.charge(&caller.key(), per_sec)?;
-        Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.holding(ticket)))
+        let limit = state.config.limits.max_request_work;
+        let charge = Arc::new(StreamCharge { ticket: Mutex::new(ticket), frame, fps, limit });
+        Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.priced(charge)))
     }
 
     /// The joint and parameter subsets applied.

@@ -1,8 +1,9 @@
 //! Clip routes: create, list, get, replace, delete (docs/api.md).
 //!
-//! Every write validates fully ([`admit`]) before the store is touched, and
-//! answers only after the store committed; the cache is updated after the
-//! commit (write-through), never before.
+//! Every write validates fully (`limits::admit_doc`, priced and run by
+//! `builds`) before the store is touched, and answers only after the store
+//! committed; the cache is updated after the commit (write-through), never
+//! before.
 
 use std::sync::Arc;
 
@@ -14,10 +15,10 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::auth::{ReadAccess, WriteAccess};
+use crate::auth::{CallerKey, ReadAccess, WriteAccess};
 use crate::cache::CachedClip;
 use crate::error::ApiError;
-use crate::limits::{Admitted, admit};
+use crate::limits::Admitted;
 use crate::request::{Page, RawPage, in_query};
 use crate::state::AppState;
 use crate::store::ClipMeta;
@@ -50,9 +51,12 @@ pub struct ClipWritten {
 
 /// Parses, checks and builds an upload through the build gate (never on
 /// the async workers, whatever its size).
-pub(super) async fn admit_body(state: &AppState, body: axum::body::Bytes) -> Result<Admitted, ApiError> {
-    let limits = state.config.limits.clone();
-    state.builds.run(move |cancel| admit(&body, &limits, cancel)).await
+pub(super) async fn admit_body(
+    state: &AppState,
+    caller: &CallerKey,
+    body: axum::body::Bytes,
+) -> Result<Admitted, ApiError> {
+    crate::builds::upload(&state.work, caller, &state.config.limits, body).await
 }
 
 pub(super) fn with_etag(
@@ -104,10 +108,10 @@ fn written(meta: &ClipMeta, status: StatusCode, location: bool, lints: &[Lint]) 
 )]
 pub async fn create_clip(
     State(state): State<AppState>,
-    _: WriteAccess,
+    WriteAccess(caller): WriteAccess,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
-    let Admitted { new_clip, clip, lints } = admit_body(&state, body).await?;
+    let Admitted { new_clip, clip, lints } = admit_body(&state, &caller.key(), body).await?;
     let meta = state.store.create(new_clip).await?;
     tracing::info!(id = %meta.id, name = %meta.name, warnings = lints.len(), "clip created");
     let response = written(&meta, StatusCode::CREATED, true, &lints);
@@ -229,13 +233,13 @@ pub(super) async fn expected_version(
 )]
 pub async fn replace_clip(
     State(state): State<AppState>,
-    _: WriteAccess,
+    WriteAccess(caller): WriteAccess,
     ClipId(id): ClipId,
     headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let condition = precondition(&headers, IF_MATCH, false)?;
-    let Admitted { new_clip, clip, lints } = admit_body(&state, body).await?;
+    let Admitted { new_clip, clip, lints } = admit_body(&state, &caller.key(), body).await?;
     let expected = expected_version(&state, &id, condition).await?;
     let meta = state.store.replace(&id, new_clip, expected).await?;
     tracing::info!(id = %meta.id, version = meta.version, warnings = lints.len(), "clip replaced");

@@ -84,7 +84,7 @@ pub struct ImportResult {
 )]
 pub async fn import_clips(
     State(state): State<AppState>,
-    _: WriteAccess,
+    WriteAccess(caller): WriteAccess,
     Query(params): Query,
     request: Request,
 ) -> Result<Response, ApiError> {
@@ -137,9 +137,9 @@ pub async fn import_clips(
     };
     let limits = state.config.limits.clone();
     let bytes = document.len();
-    let (format, admitted, warnings) = state
-        .builds
-        .run(move |cancel| -> Result<_, ApiError> {
+    let (units, key) = (crate::work::price::import(bytes), caller.key());
+    let importing = crate::builds::run(&state.work, &key, &state.config.limits, units, "importing this file", {
+        move |cancel| -> Result<_, ApiError> {
             let format = match format {
                 Some(format) => format,
                 None => sniff(&document.head(SNIFF_BYTES).map_err(ApiError::internal)?, content_type.as_deref())
@@ -169,8 +169,9 @@ pub async fn import_clips(
             }
             // The importer's warnings point into the file; the documents' own are the same findings.
             Ok((format, admitted, imported.warnings))
-        })
-        .await?;
+        }
+    });
+    let (format, admitted, warnings) = importing.await?;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
     let metas = state.store.create_all(new_clips).await?;

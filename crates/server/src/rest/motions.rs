@@ -9,12 +9,14 @@
 use std::ops::Range;
 
 use axum::extract::State;
+use axum::http::HeaderMap;
 use axum::response::Response;
 use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use crate::auth::ReadAccess;
+use crate::auth::{CallerKey, ReadAccess};
+use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
     Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body, parse_json,
@@ -84,13 +86,14 @@ fn text(v: &Option<String>) -> Option<Raw<'_>> {
 /// The body's motion with its joint and parameter subsets, looked up and built.
 async fn compose(
     state: &AppState,
+    caller: &CallerKey,
     motion: &MotionDoc,
     (joints, parameters): (&Option<Vec<String>>, &Option<Vec<String>>),
     format: Format,
 ) -> Result<Composed, ApiError> {
     let spec = motion.to_spec("/motion")?;
     let raw = RawMotion { joints: joints.as_deref(), parameters: parameters.as_deref(), format, ..RawMotion::of(spec) };
-    raw.resolve(state).await
+    raw.resolve_for(state, caller).await
 }
 
 /// One pose of a motion (`docs/motion.md`).
@@ -110,14 +113,16 @@ async fn compose(
 pub async fn pose(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
+    headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: PoseOfMotion = parse_json(&body)?;
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
-    let composed = compose(&state, &req.motion, (&req.joints, &req.parameters), checked.format).await?;
+    let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), checked.format).await?;
     let cost = composed.cost(1, checked.format, Wire::Json);
+    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
     let capacity = usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20);
@@ -148,6 +153,7 @@ pub async fn pose(
 pub async fn samples(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
+    headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SamplesOfMotion = parse_json(&body)?;
@@ -161,9 +167,10 @@ pub async fn samples(
         at: in_body,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(&state, &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
+    let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(n as u64, sampling.format, Wire::Json);
+    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     let field = if req.times.is_some() { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_body)?;
     let (space, format) = (sampling.options.space, sampling.format);

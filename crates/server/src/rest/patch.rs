@@ -26,7 +26,7 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use serde_json::{Map, Value};
 
-use crate::auth::WriteAccess;
+use crate::auth::{CallerKey, WriteAccess};
 use crate::cache::CachedClip;
 use crate::error::ApiError;
 use crate::limits::Admitted;
@@ -72,7 +72,7 @@ const RETRY_AFTER_SECS: u64 = 1;
 )]
 pub async fn patch_clip(
     State(state): State<AppState>,
-    _: WriteAccess,
+    WriteAccess(caller): WriteAccess,
     ClipId(id): ClipId,
     headers: HeaderMap,
     JsonBody(body): JsonBody,
@@ -87,7 +87,7 @@ pub async fn patch_clip(
         if retry > 0 {
             tokio::time::sleep(BACKOFF.backoff(retry - 1)).await;
         }
-        if let Some(response) = patch_once(&state, &id, condition.as_ref(), &patch).await? {
+        if let Some(response) = patch_once(&state, &caller.key(), &id, condition.as_ref(), &patch).await? {
             return Ok(response);
         }
     }
@@ -99,6 +99,7 @@ pub async fn patch_clip(
 /// `If-Match` lost the race to another write (it may start again).
 async fn patch_once(
     state: &AppState,
+    caller: &CallerKey,
     id: &str,
     condition: Option<&Precondition>,
     patch: &Map<String, Value>,
@@ -116,7 +117,7 @@ async fn patch_once(
         return Ok(Some(with_etag(&stored.meta, StatusCode::OK, None)));
     }
     let merged = serde_json::to_vec(&doc).map_err(ApiError::internal)?;
-    let Admitted { mut new_clip, clip, .. } = admit_body(state, merged.into()).await?;
+    let Admitted { mut new_clip, clip, .. } = admit_body(state, caller, merged.into()).await?;
     // A patch cannot touch the skeleton: the mesh bound to it stays.
     new_clip.mesh = MeshWrite::Keep;
     if new_clip.doc_json == stored.doc_json {

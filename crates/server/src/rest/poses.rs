@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
-use axum::http::{HeaderValue, StatusCode};
+use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use glam::Mat4;
 use serde::Deserialize;
@@ -23,6 +23,7 @@ use utoipa::ToSchema;
 
 use crate::auth::ReadAccess;
 use crate::cache::CachedClip;
+use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
     Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
@@ -125,10 +126,12 @@ pub async fn get_pose(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
+    headers: HeaderMap,
     Query(q): Query,
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
-    let (req, cached) = raw.resolve(&state, &id, Wire::Json).await?;
+    let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
+    let (req, cached) = raw.resolve_compressed(&state, &id, Wire::Json, coding).await?;
     let list = |name: &str| -> Option<Vec<&str>> {
         q.raw(name).map(|raw| match raw {
             Raw::Text(text) => text.split(',').collect(),
@@ -225,10 +228,12 @@ pub async fn sample(
     State(state): State<AppState>,
     ReadAccess(caller): ReadAccess,
     ClipId(id): ClipId,
+    headers: HeaderMap,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
-    let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json).await?;
+    let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
+    let (sampling, cached) = req.raw().resolve_compressed(&state, &id, Wire::Json, coding).await?;
     let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;
     let parameters = (req.parameters.as_deref())
         .map(|names| parameter_subset(cached.clip.parameters(), names, in_body))

@@ -29,7 +29,7 @@ use futures_util::{SinkExt, StreamExt};
 use serde::Deserialize;
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 
-use crate::auth::{Caller, ReadAccess};
+use crate::auth::{Caller, CallerKey, ReadAccess};
 use crate::config::Limits;
 use crate::error::ApiError;
 use crate::request::{Opening, Raw, RawModes, RawMotion, RawStream, crossfade_target, in_body, in_query, parse_json};
@@ -126,7 +126,7 @@ pub async fn stream(
     let lane = peer.map(|a| u64::from(a.port()));
     let watched = admitted.map(|Opening { params, permit }| engine.watch(params, permit, lane));
     let phase_ms = watched.as_ref().ok().map(|sub| sub.grid().phase_ms);
-    let motions = resolver(&state);
+    let motions = resolver_for(&state, caller.key());
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {
             Ok(sub) => serve(socket, sub, motions).await,
@@ -173,7 +173,7 @@ pub async fn motion_stream(
                     "joints": sub.params().joint_names(),
                 }});
                 if socket.send(Message::Text(hello.to_string().into())).await.is_ok() {
-                    serve(socket, sub, resolver(&state)).await;
+                    serve(socket, sub, resolver_for(&state, caller.key())).await;
                 }
             }
             Ok(Err(refused)) => refuse(socket, close::TRY_AGAIN_LATER, refused.to_string()).await,
@@ -293,16 +293,23 @@ pub(super) async fn refuse(mut socket: StreamSocket, code: u16, reason: String) 
     let _ = socket.send(Message::Close(Some(frame))).await;
 }
 
-/// Crossfade targets, looked up like a composed request's motion.
-struct StateMotions(AppState);
+/// Crossfade targets, looked up like a composed request's motion, their
+/// builds charged to the stream's caller.
+struct StateMotions(AppState, CallerKey);
 
+/// Crossfade targets whose builds the node pays for.
 pub(super) fn resolver(state: &AppState) -> Arc<dyn MotionResolver> {
-    Arc::new(StateMotions(state.clone()))
+    resolver_for(state, CallerKey::Node)
+}
+
+/// Crossfade targets whose builds `caller` pays for.
+pub(super) fn resolver_for(state: &AppState, caller: CallerKey) -> Arc<dyn MotionResolver> {
+    Arc::new(StateMotions(state.clone(), caller))
 }
 
 impl MotionResolver for StateMotions {
     fn resolve(&self, motion: serde_json::Value) -> BoxFuture<'static, Result<Arc<StreamMotion>, serde_json::Value>> {
-        let state = self.0.clone();
-        Box::pin(async move { crossfade_target(&state, &motion).await.map_err(|e| e.problem_json()) })
+        let (state, caller) = (self.0.clone(), self.1.clone());
+        Box::pin(async move { crossfade_target(&state, &caller, &motion).await.map_err(|e| e.problem_json()) })
     }
 }

@@ -383,23 +383,44 @@ impl ControlError {
     }
 }
 
+/// What a control may make a stream cost: the service prices what a
+/// control leaves the stream evaluating and charges its caller for it in
+/// place of what it held (`request::stream`). A crossfade is priced at both
+/// motions (the fade evaluates both), an `ik` control at the motion playing
+/// with the new constraints.
+pub trait Repricing: Send + Sync + std::fmt::Debug {
+    /// Charges the stream for evaluating `motions` each frame under the
+    /// stream's constraints `ik`, from now on.
+    ///
+    /// # Errors
+    /// [`ControlError::Work`]: over the stream's limit, its caller's share
+    /// or the node's capacity; the stream holds what it held.
+    fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError>;
+}
+
 /// Checks controls against the stream's motions: numbers in range, a
 /// crossfade target with the stream's skeleton, a ramp of a layer the
-/// motion playing has.
+/// motion playing has; and, for a priced stream, what a crossfade or an
+/// `ik` control would make it cost ([`Repricing`]).
 #[derive(Debug, Clone)]
 pub(crate) struct ControlCheck {
     skeleton: Arc<StreamMotion>,
-    /// Layers of the motion the latest accepted control left playing.
-    layers: usize,
+    /// The motion the latest accepted control left playing.
+    playing: Arc<StreamMotion>,
+    /// The stream's constraints, as the latest accepted control left them.
+    ik: Arc<[IkConstraint]>,
     ik_limits: IkLimits,
+    repricing: Option<Arc<dyn Repricing>>,
 }
 
 impl ControlCheck {
     pub(crate) fn new(params: &StreamParams) -> Self {
         ControlCheck {
             skeleton: Arc::clone(&params.motion),
-            layers: params.motion.layer_count(),
+            playing: Arc::clone(&params.motion),
+            ik: params.motion.ik().into(),
             ik_limits: params.ik_limits,
+            repricing: None,
         }
     }
 
@@ -408,19 +429,31 @@ impl ControlCheck {
         &self.skeleton
     }
 
+    /// The same check, pricing controls with `repricing` (`None`: unpriced).
+    pub(crate) fn priced_by(self, repricing: Option<Arc<dyn Repricing>>) -> Self {
+        ControlCheck { repricing, ..self }
+    }
+
+    fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError> {
+        self.repricing.as_ref().map_or(Ok(()), |r| r.reprice(motions, ik))
+    }
+
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         let control = control.validate().map_err(ControlError::Invalid)?;
         match &control {
             Control::Crossfade(fade) => {
                 self.check_fade(fade)?;
-                self.layers = fade.to.layer_count();
+                self.reprice(&[&self.playing, &fade.to], &self.ik)?;
+                self.playing = Arc::clone(&fade.to);
             }
-            Control::Layer { index, .. } if *index >= self.layers => {
+            Control::Layer { index, .. } if *index >= self.playing.layer_count() => {
                 return Err(ControlError::Invalid("no such layer in the motion playing"));
             }
             Control::Ik(specs) => {
                 let skeleton = self.skeleton.skeleton();
                 let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
+                self.reprice(&[&self.playing], &constraints)?;
+                self.ik = constraints.as_slice().into();
                 return Ok(Control::SetIk(constraints));
             }
             Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),

@@ -15,6 +15,8 @@ use std::sync::{Arc, Mutex};
 
 use tokio::sync::Notify;
 
+use super::control::Repricing;
+
 /// Why a stream was refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum AdmitError {
@@ -54,6 +56,9 @@ pub struct StreamPermit {
     /// The stream's price per second, charged to its caller while it is
     /// open (`server::work`).
     ticket: Option<crate::work::Ticket>,
+    /// The stream's charge, priced again by its controls (it holds the
+    /// stream's ticket until the stream ends).
+    repricing: Option<Arc<dyn Repricing>>,
 }
 
 impl StreamPermit {
@@ -61,6 +66,18 @@ impl StreamPermit {
     pub fn holding(mut self, ticket: crate::work::Ticket) -> StreamPermit {
         self.ticket = Some(ticket);
         self
+    }
+
+    /// This permit, also holding `charge` until the stream ends; the
+    /// stream's controls are priced by it.
+    pub fn priced(mut self, charge: Arc<dyn Repricing>) -> StreamPermit {
+        self.repricing = Some(charge);
+        self
+    }
+
+    /// What prices the stream's controls, if anything does.
+    pub(crate) fn repricing(&self) -> Option<Arc<dyn Repricing>> {
+        self.repricing.clone()
     }
 }
 
@@ -112,7 +129,7 @@ impl Limits {
         }
         c.total += 1;
         metrics::gauge!("inbetween_streams_active").set(c.total as f64);
-        Ok(StreamPermit { limits: Arc::clone(self), client, token, ticket: None })
+        Ok(StreamPermit { limits: Arc::clone(self), client, token, ticket: None, repricing: None })
     }
 
     /// Refuses new streams from now on.

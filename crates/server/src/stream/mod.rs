@@ -59,7 +59,9 @@ pub use broadcast::{
 };
 pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
-pub use control::{Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, parse_control};
+pub use control::{
+    Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, Repricing, parse_control,
+};
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};

@@ -147,7 +147,7 @@ impl Subscription {
             }
         };
         Subscription {
-            check: ControlCheck::new(&params),
+            check: ControlCheck::new(&params).priced_by(permit.repricing()),
             params,
             schedule,
             rx,

@@ -45,6 +45,11 @@ impl Cancel {
         self.flag.load(Ordering::Relaxed)
     }
 
+    /// The flag itself, for work that watches one (`Clip::build_limited`).
+    pub fn flag(&self) -> &AtomicBool {
+        &self.flag
+    }
+
     fn raise(&self) {
         self.flag.store(true, Ordering::Relaxed);
     }
@@ -273,6 +278,11 @@ mod tests {
         let bound = if std::env::var_os("INBETWEEN_SLOW").is_some() { 10 } else { 1000 };
         let ran_on = stopped.saturating_duration_since(answered);
         assert!(ran_on < Duration::from_millis(bound), "the job ran on for {ran_on:?}");
+        // Counted by the work thread just after the job returns.
+        let counted = Instant::now();
+        while pool.cancelled() == 0 && counted.elapsed() < Duration::from_secs(5) {
+            std::thread::yield_now();
+        }
         assert_eq!(pool.cancelled(), 1);
     }
 

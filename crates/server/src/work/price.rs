@@ -10,12 +10,18 @@
 //! an analytic IK solve walks the joint's ancestry; a chain solve pays its
 //! whole iteration budget (whether it converges early cannot be known
 //! before it runs) over every joint on the chain, for each effector; an
-//! answer pays per byte of its size bound, more per byte when compressed.
+//! answer pays per byte of its size bound, more per byte when compressed;
+//! a clip build pays per key value it checks and compiles, and a bound on
+//! its constant-speed tables; a motion build pays per joint each layer maps
+//! by name, and an additive layer the pose it samples for its reference.
+
+use std::sync::Arc;
 
 use anim::ik::IkConstraint;
-use anim::{Clip, Skeleton};
+use anim::motion::{LayerMode, MotionSpec};
+use anim::{Clip, ClipSpec, Skeleton, Speed};
 
-use crate::stream::StreamMotion;
+use crate::stream::{PinnedClip, StreamMotion};
 
 /// Nanoseconds of one core a work unit stands for (measured; BENCHMARKS.md).
 pub const NS_PER_UNIT: u64 = 10;
@@ -36,6 +42,25 @@ const BYTES_PER_UNIT: u64 = 8;
 /// timer, filing its controls, publishing (measured on the producers'
 /// thread; BENCHMARKS.md). Without it a one-joint broadcast looked free.
 pub const BROADCAST_TICK: u64 = 500;
+/// Units per key value component a clip build checks and compiles (a
+/// rotation key is four, a parameter row its width).
+const BUILD_PER_VALUE: u64 = 1;
+/// Units per joint and per track of a clip build (names, the skeleton,
+/// the track lists), besides its keys.
+const BUILD_PER_NAME: u64 = 8;
+/// Units per segment of a constant-speed track: its arc-length table, at
+/// most `max_build_work` for the whole clip (the core's build unit is
+/// about [`CORE_BUILD_NS`] nanoseconds).
+const ARC_SEGMENT: u64 = 100_000;
+/// Nanoseconds of one unit of the core's build work (`Clip::build_work`).
+const CORE_BUILD_NS: u64 = 25;
+/// Units per byte of a document read (JSON parsed, checked, converted).
+const PARSE_PER_BYTE: u64 = 1;
+/// Bytes of an imported file per unit.
+const IMPORT_BYTES_PER_UNIT: u64 = 4;
+/// Units per joint of each layer a motion build maps by name, and per
+/// output joint its mask resolves.
+const MOTION_PER_JOINT: u64 = 6;
 
 /// The work of one pose of `clip` alone: its joints, its keyed IK.
 pub fn clip_pose(clip: &Clip) -> u64 {
@@ -65,17 +90,93 @@ pub fn ik(constraints: &[IkConstraint], skeleton: &Skeleton) -> u64 {
     each.fold(0, u64::saturating_add)
 }
 
+/// The work of building the clip `spec` says, within `max_build_work`
+/// units of the core's table work: every key value, every name, and for
+/// constant-speed tracks their arc-length tables at their bound (how
+/// soon a table converges cannot be known before it is built).
+pub fn clip_build(spec: &ClipSpec, max_build_work: u64) -> u64 {
+    let values = |keys: &anim::Keys| keys.len() as u64 * if matches!(keys, anim::Keys::Vec4(_)) { 4 } else { 3 };
+    let tracks = spec.tracks.iter().map(|t| {
+        let tangents = [&t.in_tangents, &t.out_tangents].into_iter().flatten().map(values).sum::<u64>();
+        values(&t.values) + tangents
+    });
+    let parameters = spec.parameters.iter().map(|p| p.values.iter().map(|row| row.len() as u64).sum::<u64>());
+    let values = tracks.chain(parameters).fold(0, u64::saturating_add);
+    let segments = (spec.tracks.iter())
+        .filter(|t| t.speed == Speed::Constant)
+        .map(|t| t.times.len().saturating_sub(1) as u64)
+        .fold(0, u64::saturating_add);
+    let arc_ns = segments.saturating_mul(ARC_SEGMENT).min(max_build_work).saturating_mul(CORE_BUILD_NS);
+    let joints = spec.skeleton.as_ref().map_or(0, |s| s.joints.len() as u64);
+    let names = (joints + spec.tracks.len() as u64 + spec.ik.len() as u64).saturating_mul(BUILD_PER_NAME);
+    values.saturating_mul(BUILD_PER_VALUE).saturating_add(names).saturating_add(arc_ns / NS_PER_UNIT)
+}
+
+/// The work of building the motion `spec` says over its pinned clips:
+/// each layer's joints mapped by name onto the output's, its mask
+/// resolved, and an additive layer's reference pose sampled.
+pub fn motion_build(spec: &MotionSpec<Arc<dyn PinnedClip>>) -> u64 {
+    let Some(first) = spec.layers.first() else { return 0 };
+    let output = first.clip.clip().joint_count() as u64;
+    let each = spec.layers.iter().map(|layer| {
+        let clip = layer.clip.clip();
+        let map = (output + clip.joint_count() as u64 + clip.parameters().total_width() as u64) * MOTION_PER_JOINT;
+        let reference = if layer.mode == LayerMode::Additive { clip.joint_count() as u64 * JOINT } else { 0 };
+        map + reference
+    });
+    each.fold(0, u64::saturating_add)
+}
+
+/// The work of reading a clip document of `bytes` bytes (JSON parsed,
+/// checked and converted), before its build is priced.
+pub fn parse(bytes: u64) -> u64 {
+    bytes.saturating_mul(PARSE_PER_BYTE)
+}
+
+/// The work of importing a file of `bytes` bytes (glTF, BVH): its reading
+/// and the builds of the clips in it, whose sizes the file only tells once
+/// read. Per byte of the file, less than a document's: an importer skips
+/// what is not animation (meshes, images).
+pub fn import(bytes: u64) -> u64 {
+    bytes.div_ceil(IMPORT_BYTES_PER_UNIT)
+}
+
 /// The work of encoding an answer of at most `bytes` bytes.
 pub fn encoding(bytes: u64) -> u64 {
     bytes.div_ceil(BYTES_PER_UNIT)
 }
 
-/// The work of compressing `bytes` bytes at `level` (0 none; a level costs
-/// roughly one more encoding pass per step). For answer and frame
-/// compression to charge on top of an answer's price.
-#[allow(dead_code)]
-pub fn compression(bytes: u64, level: u32) -> u64 {
-    encoding(bytes).saturating_mul(u64::from(level))
+/// A content coding an answer is compressed in (`server::compression`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coding {
+    Zstd,
+    Br,
+    Gzip,
+}
+
+/// How an answer is compressed: its coding at a level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Compression {
+    pub coding: Coding,
+    pub level: i32,
+}
+
+/// The work of compressing `bytes` bytes as `compression` says (`None`:
+/// sent as it is, free), from the nanoseconds per byte each coding and
+/// level took in BENCHMARKS.md, “Compression”.
+pub fn compression(compression: Option<Compression>, bytes: u64) -> u64 {
+    let Some(Compression { coding, level }) = compression else { return 0 };
+    // Nanoseconds per byte, rounded up.
+    let ns_per_byte: u64 = match (coding, level) {
+        (Coding::Zstd, ..=1) => 8,
+        (Coding::Zstd, _) => 13,
+        (Coding::Br, ..=1) => 14,
+        (Coding::Br, 2..=4) => 90,
+        (Coding::Br, _) => 5500,
+        (Coding::Gzip, ..=1) => 10,
+        (Coding::Gzip, _) => 39,
+    };
+    bytes.saturating_mul(ns_per_byte).div_ceil(NS_PER_UNIT)
 }
 
 /// Joints from `joint` up to its root, itself included.

@@ -130,12 +130,14 @@ fn ik_keyed_in_a_clip_is_priced_like_a_requests() {
 }
 
 #[test]
-fn encoding_is_priced_per_byte_and_compression_per_level() {
+fn encoding_is_priced_per_byte_and_compression_per_coding_and_level() {
     assert_eq!(price::encoding(0), 0);
     assert!(price::encoding(1) >= 1);
     assert_eq!(price::encoding(8000), 1000);
-    assert_eq!(price::compression(8000, 0), 0);
-    assert_eq!(price::compression(8000, 6), 3 * price::compression(8000, 2));
+    let gzip = |level| Some(price::Compression { coding: price::Coding::Gzip, level });
+    assert_eq!(price::compression(None, 8000), 0, "sent as it is");
+    // 10 and 39 ns a byte (BENCHMARKS.md, “Compression”), in units of 10 ns.
+    assert_eq!((price::compression(gzip(1), 8000), price::compression(gzip(6), 8000)), (8000, 31_200));
 }
 
 /// Pricing reads counts: a 4,096-joint clip with a chain over all of it is
