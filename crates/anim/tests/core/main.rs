@@ -29,6 +29,7 @@ mod lecture;
 mod motion;
 mod parameters;
 mod playback;
+mod player_state;
 mod properties;
 mod random;
 mod reference;
