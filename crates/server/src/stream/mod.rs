@@ -35,6 +35,7 @@
 
 mod broadcast;
 mod broadcast_program;
+mod checkpoint;
 mod control;
 mod encode;
 mod engine;
@@ -52,8 +53,11 @@ mod subscription;
 mod ticker;
 pub mod ws;
 
-pub use broadcast::{Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Journal, new_control_id};
+pub use broadcast::{
+    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Checkpointing, Journal, new_control_id,
+};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
+pub use checkpoint::{Checkpoint, CheckpointError};
 pub use control::{Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, parse_control};
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
@@ -73,5 +77,7 @@ pub use formats::wire::grid::PHASE_HEADER;
 mod tests;
 #[cfg(test)]
 mod tests_broadcast;
+#[cfg(test)]
+mod tests_checkpoint;
 #[cfg(test)]
 mod tests_ws;

@@ -203,7 +203,7 @@ fn frames_are_a_function_of_the_definition_the_controls_and_the_tick() {
             for c in heard {
                 log.insert(c.clone());
             }
-            let again = late.rewind_before(earliest);
+            let again = late.rewind_before(earliest).expect("after the start");
             assert!(again <= k - earliest + super::broadcast_program::SNAPSHOT_EVERY, "{again} ticks again");
         }
         let got = bytes_at(&mut late, k, &log);
@@ -243,7 +243,7 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
         frame(&mut v1).await;
     }
     let spec = b1.spec().clone();
-    let b2 = e2.broadcasts().adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone()).unwrap();
+    let b2 = e2.broadcasts().adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone(), None).unwrap();
     let mut v2 = viewer(&e2, &b2, Encoding::Json, false);
     let strip = |f: &Delivered| {
         let mut v: serde_json::Value = serde_json::from_slice(&f.bytes).unwrap();
