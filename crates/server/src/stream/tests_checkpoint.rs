@@ -5,12 +5,13 @@
 //! nested in crossfades — two programs write the same text for the same
 //! tick, a control heard late goes back to the latest checkpoint before it
 //! (never before the one a program started from), and the controls before
-//! that are let go.
+//! that are let go. The clips have events, so a frame also shows the
+//! events crossed since the tick before the checkpoint.
 
 use std::sync::Arc;
 
 use anim::motion::{LayerSpec, MotionSpec, RootMotionSpec};
-use anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Motion, Playback, TrackSpec};
+use anim::{Channel, Clip, ClipSpec, EventSpec, Interpolation, Keys, Motion, Playback, TrackSpec};
 use glam::Vec3;
 
 use super::broadcast_program::CHECKPOINTS;
@@ -31,6 +32,10 @@ fn line(duration: f32, from: Vec3, to: Vec3) -> Arc<Clip> {
     let spec = ClipSpec {
         name: "line".into(),
         tracks: vec![track("root"), track("tip")],
+        events: vec![
+            EventSpec { time: duration * 0.25, name: "step".into() },
+            EventSpec { time: duration * 0.75, name: "step".into() },
+        ],
         playback: Playback::Loop,
         ..Default::default()
     };
