@@ -98,8 +98,9 @@ async fn a_restarted_node_replays_from_the_last_checkpoint_not_from_the_start() 
     let replayed = metric_of(&http, &server, "inbetween_broadcast_replayed_ticks_total").await as u64;
     assert!(replayed <= bound, "replayed {replayed} ticks, at most {bound} (down {down:?}, the broadcast at tick {k})");
     assert!(replayed + 3 * FPS <= k, "replayed {replayed} ticks of a broadcast {k} ticks old: from a checkpoint");
-    // The controls' effect, from the checkpoint: 2.0 at the seek, half speed from `slow` on.
-    let want = 2.0 + (slow - seek) as f64 / FPS as f64 + (k - slow) as f64 * 0.5 / FPS as f64;
+    // The controls' effect, from the checkpoint: 2.0 at the seek, then half speed from tick `slow − 1`'s time on.
+    let at_speed = 2.0 + (slow - 1 - seek) as f64 / FPS as f64;
+    let want = at_speed + (k - (slow - 1)) as f64 * 0.5 / FPS as f64;
     let time = first["pose"]["time"].as_f64().unwrap();
     assert!((time - want).abs() < 1e-9, "tick {k}: time {time}, the controls say {want}");
     if latency_checked() {

@@ -27,8 +27,8 @@
 //! already stepped makes the task step again from the latest state it kept
 //! before that tick. A copy adopted from the store starts from the newest
 //! stored checkpoint (`checkpoint`); the task stores one every checkpoint
-//! interval, one interval after its tick (so that every control stamped
-//! before it has been heard), and forgets the controls before the oldest
+//! interval, a second plus the control lead after its tick (so that every
+//! control stamped before it has been heard), and forgets the controls before the oldest
 //! state it keeps. A long catch-up stops between ticks when the broadcast
 //! is deleted or the server shuts down.
 //!
@@ -66,6 +66,10 @@ const PENDING_CONTROLS: usize = 64;
 
 /// A catch-up longer than this many ticks runs on a blocking thread.
 const BLOCKING_CATCH_UP: u64 = 256;
+
+/// How long after its tick (beyond the control lead) a checkpoint is
+/// stored: every control stamped before it has been heard by then.
+const SETTLE: Duration = Duration::from_secs(1);
 
 /// Why a broadcast could not be created.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -870,13 +874,15 @@ impl Task {
         rewind
     }
 
-    /// Hands the journal the checkpoint one interval behind the newest the
-    /// program kept, once: by then every control stamped before it has
-    /// been heard (a control's lead is far shorter than an interval).
+    /// Hands the journal the newest checkpoint the program kept at least
+    /// [`SETTLE`] plus the control lead ago, once: by then every control
+    /// stamped before it has been heard.
     fn checkpoint(&mut self) {
         let Some(journal) = &self.broadcast.journal else { return };
         let program = self.program.as_ref().expect("the program is back after each catch-up");
-        let Some(tick) = program.settled_checkpoint() else { return };
+        let fps = u128::from(self.broadcast.spec.params.fps);
+        let margin = ((SETTLE + self.broadcast.lead).as_nanos() * fps / 1_000_000_000) as u64;
+        let Some(tick) = program.settled_checkpoint(margin) else { return };
         if self.checkpointed.is_some_and(|done| done >= tick) {
             return;
         }

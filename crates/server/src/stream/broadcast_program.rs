@@ -343,14 +343,12 @@ impl Program {
         self.checkpoints.back().unwrap_or(&self.floor).next()
     }
 
-    /// The tick of the checkpoint one interval behind the newest kept: the
-    /// one to store (see `broadcast`).
-    pub fn settled_checkpoint(&self) -> Option<u64> {
-        match self.checkpoints.len() {
-            0 => None,
-            1 => self.floor.stepped,
-            n => self.checkpoints[n - 2].stepped,
-        }
+    /// The tick of the newest checkpoint kept at least `margin` ticks
+    /// before the last tick stepped: the one to store (see `broadcast`).
+    pub fn settled_checkpoint(&self, margin: u64) -> Option<u64> {
+        let now = self.state.stepped?;
+        let kept = self.checkpoints.iter().rev().chain([&self.floor]);
+        kept.filter_map(|s| s.stepped).find(|&c| c + margin <= now)
     }
 
     /// The checkpoint of the last tick stepped.
