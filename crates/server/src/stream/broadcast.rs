@@ -349,6 +349,11 @@ impl Broadcasts {
             return Ok(already);
         }
         let program = self.program(&broadcast, checkpoint.as_ref(), &controls);
+        // Restored from a checkpoint, it plays as its state says (the controls that paused it may be gone).
+        {
+            let mut desk = broadcast.desk();
+            (desk.paused, desk.speed) = program.playing();
+        }
         for c in controls {
             broadcast.heard(c);
         }

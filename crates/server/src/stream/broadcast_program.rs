@@ -285,6 +285,11 @@ impl Program {
         self
     }
 
+    /// Whether it is paused, and its speed, as of the last tick stepped.
+    pub fn playing(&self) -> (bool, f64) {
+        (self.state.playhead.paused(), self.state.playhead.speed())
+    }
+
     /// The next tick to step.
     pub fn next(&self) -> u64 {
         self.state.next()
