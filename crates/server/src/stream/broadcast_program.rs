@@ -310,7 +310,7 @@ impl Program {
     /// whether it reached `k`.
     pub fn step_to_unless(&mut self, k: u64, log: &ControlLog, cancelled: &dyn Fn() -> bool) -> bool {
         for j in self.next()..=k {
-            if j % 64 == 0 && cancelled() {
+            if j.is_multiple_of(64) && cancelled() {
                 return false;
             }
             self.step(j, log.at(j));
@@ -321,13 +321,13 @@ impl Program {
 
     /// Keeps the snapshot or checkpoint state due after tick `j`.
     fn keep(&mut self, j: u64) {
-        if (j + 1) % SNAPSHOT_EVERY == 0 {
+        if (j + 1).is_multiple_of(SNAPSHOT_EVERY) {
             if self.snapshots.len() == SNAPSHOTS {
                 self.snapshots.pop_front();
             }
             self.snapshots.push_back(self.state.clone());
         }
-        if self.checkpoint_every > 0 && (j + 1) % self.checkpoint_every == 0 {
+        if self.checkpoint_every > 0 && (j + 1).is_multiple_of(self.checkpoint_every) {
             if self.checkpoints.len() == CHECKPOINTS
                 && let Some(oldest) = self.checkpoints.pop_front()
             {

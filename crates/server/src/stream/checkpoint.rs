@@ -227,7 +227,7 @@ fn planar_bits(p: Planar) -> PlanarBits {
 
 fn planar(b: PlanarBits) -> Planar {
     let [x, y, z, yaw] = b.map(f64::from_bits);
-    Planar { translation: glam::DVec3::new(x, y, z), yaw: yaw }
+    Planar { translation: glam::DVec3::new(x, y, z), yaw }
 }
 
 fn root_bits(r: RootMotion) -> RootBits {
