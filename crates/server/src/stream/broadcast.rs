@@ -868,6 +868,9 @@ impl Task {
             }
         };
         for c in controls {
+            if c.seq < floor {
+                tracing::debug!(broadcast = %self.broadcast.id, control = %c.id, "a control from before the oldest kept state skipped");
+            }
             past(c.seq);
             self.log.insert(c);
         }
