@@ -486,8 +486,8 @@ settings! {
             "broadcast_checkpoint_secs", "broadcast-checkpoint-secs", "INBETWEEN_BROADCAST_CHECKPOINT_SECS", "SECS",
             "Seconds of broadcast time between a broadcast's stored checkpoints, from which a restarted or late node \
              steps on",
-            doc "Broadcast time between a broadcast's checkpoints; a restarted or late node replays at most about two \
-             of these ([broadcasts.md](broadcasts.md#checkpoints))";
+            doc "Broadcast time between a broadcast's checkpoints; a restarted or late node replays at most about one \
+             of these, a second and the time it was down ([broadcasts.md](broadcasts.md#checkpoints))";
         broadcast_max_journal: usize = 1024 => positive -> usize,
             "broadcast_max_journal", "broadcast-max-journal", "INBETWEEN_BROADCAST_MAX_JOURNAL", "N",
             "Controls a broadcast holds since its newest checkpoint; more are refused (422 broadcast_journal_full)",
