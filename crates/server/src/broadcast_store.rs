@@ -16,8 +16,11 @@
 //!   copy with the store: adopts what it lacks, adds the controls it has
 //!   not heard, ends what was deleted.
 //! - [`StoreJournal`] is the stream engine's [`Journal`]: a viewer socket's
-//!   controls stored, the viewers' liveness (`active_at`) and the idle end
-//!   decided in one conditional delete across all nodes.
+//!   controls stored, the viewers' liveness (`active_at`), the idle end
+//!   decided in one conditional delete across all nodes, and checkpoints
+//!   (`migrations/*/0005_broadcast_checkpoints.sql`): each replaces the one
+//!   before and deletes the controls it makes unnecessary. A node adopting
+//!   a broadcast starts from its newest checkpoint.
 
 use std::collections::{BTreeMap, HashSet};
 use std::sync::Arc;
@@ -28,16 +31,16 @@ use futures_util::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::auth::CallerKey;
 use super::error::ApiError;
 use super::request::{
     Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, crossfade_target, in_body, parse_json,
 };
 use super::state::AppState;
-use crate::store::{ClipStore, StoredBroadcast, StoredControl};
+use crate::auth::CallerKey;
+use crate::store::{ClipStore, StoredBroadcast, StoredCheckpoint, StoredControl};
 use crate::stream::{
-    Broadcast, BroadcastSpec, Control, ControlError, Crossfade, Journal, ParsedControl, StampedControl, StreamMotion,
-    new_control_id, parse_control, unix_nanos,
+    Broadcast, BroadcastSpec, Checkpoint, Control, ControlError, Crossfade, Journal, ParsedControl, StampedControl,
+    StreamMotion, new_control_id, parse_control, unix_nanos,
 };
 use formats::wire::json::SpaceDoc;
 use formats::wire::motion::MotionDoc;
@@ -247,11 +250,36 @@ pub async fn adopt(state: &AppState, stored: StoredBroadcast) -> Result<Arc<Broa
             Err(e) => tracing::warn!(broadcast = %stored.id, control = %c.id, error = %e, "a stored control skipped"),
         }
     }
-    let charge = match &live {
-        Some(_) => crate::stream::BroadcastCharge::free(),
-        None => super::broadcast_work::hold(state, &spec),
+    let (charge, checkpoint) = match &live {
+        Some(_) => (crate::stream::BroadcastCharge::free(), None),
+        None => (super::broadcast_work::hold(state, &spec), newest_checkpoint(state, &stored.id).await),
     };
-    broadcasts.adopt(&stored.id, spec, stored.created_at, controls, charge).map_err(ApiError::TooManyBroadcasts)
+    broadcasts
+        .adopt(&stored.id, spec, stored.created_at, controls, charge, checkpoint)
+        .map_err(ApiError::TooManyBroadcasts)
+}
+
+/// Broadcast `id`'s newest stored checkpoint; `None` (with a warning: the
+/// broadcast then steps from tick 0) if it cannot be read.
+async fn newest_checkpoint(state: &AppState, id: &str) -> Option<Checkpoint> {
+    let stored = match state.store.broadcast_checkpoint(id).await {
+        Ok(stored) => stored?,
+        Err(e) => {
+            tracing::warn!(broadcast = %id, error = %e, "cannot read a broadcast checkpoint");
+            return None;
+        }
+    };
+    match Checkpoint::from_text(&stored.state) {
+        Ok(checkpoint) if checkpoint.tick == stored.seq => Some(checkpoint),
+        Ok(_) => {
+            tracing::warn!(broadcast = %id, seq = stored.seq, "a broadcast checkpoint of another tick than its row's");
+            None
+        }
+        Err(e) => {
+            tracing::warn!(broadcast = %id, error = %e, "a broadcast checkpoint not readable");
+            None
+        }
+    }
 }
 
 /// A stored control built again.
@@ -377,6 +405,18 @@ impl Journal for StoreJournal {
         async move {
             if let Err(e) = store.touch_broadcast(&broadcast, unix_nanos() / 1_000_000).await {
                 tracing::debug!(%broadcast, error = %e, "broadcast liveness not stored");
+            }
+        }
+        .boxed()
+    }
+
+    fn checkpoint(&self, broadcast: &str, checkpoint: &Checkpoint) -> BoxFuture<'static, ()> {
+        let (store, broadcast) = (Arc::clone(&self.store), broadcast.to_owned());
+        let named = checkpoint.controls();
+        let stored = StoredCheckpoint { seq: checkpoint.tick, state: checkpoint.to_text() };
+        async move {
+            if let Err(e) = store.put_broadcast_checkpoint(&broadcast, stored, &named).await {
+                tracing::warn!(%broadcast, error = %e, "a broadcast checkpoint was not stored");
             }
         }
         .boxed()

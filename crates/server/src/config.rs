@@ -476,6 +476,17 @@ settings! {
             "How far ahead a broadcast control is stamped, so that it is stored and every node hears of it before its tick (0..=10000)",
             doc "A broadcast control is stamped with the first tick due this long from now, so that it is stored and \
              every node hears of it first (0..=10000; [broadcasts.md](broadcasts.md#many-nodes))";
+        broadcast_checkpoint: u64 = 10 => seconds -> Duration,
+            "broadcast_checkpoint_secs", "broadcast-checkpoint-secs", "INBETWEEN_BROADCAST_CHECKPOINT_SECS", "SECS",
+            "Seconds of broadcast time between a broadcast's stored checkpoints, from which a restarted or late node \
+             steps on",
+            doc "Broadcast time between a broadcast's checkpoints; a restarted or late node replays at most about one \
+             of these, a second and the time it was down ([broadcasts.md](broadcasts.md#checkpoints))";
+        broadcast_max_journal: usize = 1024 => positive -> usize,
+            "broadcast_max_journal", "broadcast-max-journal", "INBETWEEN_BROADCAST_MAX_JOURNAL", "N",
+            "Controls a broadcast holds since its newest checkpoint; more are refused (422 broadcast_journal_full)",
+            doc "Controls a broadcast holds since its newest checkpoint; more are refused with 422 \
+             `broadcast_journal_full` until the next one";
         body_read_timeout: u64 = 10 => seconds -> Duration,
             "body_read_timeout_secs", "body-read-timeout-secs", "INBETWEEN_BODY_READ_TIMEOUT_SECS", "SECS",
             "Seconds a client may take to send a request's body, once its head is in (answered 408)",
@@ -1146,6 +1157,8 @@ mod tests {
             max_streams_per_token: 64,
             max_broadcasts: 64,
             broadcast_control_lead: Duration::from_millis(50),
+            broadcast_checkpoint: Duration::from_secs(10),
+            broadcast_max_journal: 1024,
             body_read_timeout: Duration::from_secs(10),
             max_in_flight: 64 * cores,
             write_rate: 100,

@@ -145,6 +145,10 @@ impl Application {
             max_streams_per_token: config.limits.max_streams_per_token,
             max_broadcasts: config.limits.max_broadcasts,
             broadcast_lead: config.limits.broadcast_control_lead,
+            checkpointing: stream::Checkpointing {
+                every: config.limits.broadcast_checkpoint,
+                max_journal: config.limits.broadcast_max_journal,
+            },
             precise_timer: true,
             ..EngineConfig::default()
         });

@@ -680,3 +680,45 @@ async fn a_sockets_crossfade_and_ik_are_stored_and_survive_a_restart() {
     drop(ws);
     app.stop().await;
 }
+
+/// docs/broadcasts.md "Checkpoints": a broadcast holding `broadcast_max_journal`
+/// controls since its newest checkpoint refuses more with a stable code (and
+/// the broadcast plays on); once a checkpoint lets the old ones go, it takes
+/// controls again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broadcast_with_a_full_journal_refuses_controls_until_its_next_checkpoint() {
+    let app = TestApp::builder()
+        .configure(|c| {
+            c.limits.broadcast_max_journal = 3;
+            c.limits.broadcast_checkpoint = Duration::from_secs(1);
+        })
+        .start()
+        .await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let id = broadcast_of(&app, &clip, None).await;
+    let accepted = std::sync::atomic::AtomicU32::new(0);
+    let refusal = eventually_some(Duration::from_secs(5), "a refusal", || async {
+        let (status, answer) = control(&app, &id, json!({"op": "speed", "speed": 1.0}), None).await;
+        match status {
+            200 => {
+                accepted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                None
+            }
+            _ => Some((status, answer)),
+        }
+    })
+    .await;
+    let accepted = accepted.into_inner();
+    assert_eq!(refusal.0, 422, "{}", refusal.1);
+    assert_eq!(refusal.1["code"], "broadcast_journal_full", "{}", refusal.1);
+    assert!(refusal.1["detail"].as_str().unwrap().contains("broadcast_max_journal"), "{}", refusal.1);
+    assert!(accepted >= 3, "{accepted} controls taken before the refusal");
+    // The broadcast plays on; after the checkpoints that let those controls go, controls are taken again.
+    let at = tick(&app, &id).await;
+    until_tick(&app, &id, at + 1).await;
+    eventually(Duration::from_secs(10), "a control taken after the next checkpoints", || async {
+        control(&app, &id, json!({"op": "speed", "speed": 1.0}), None).await.0 == 200
+    })
+    .await;
+    app.stop().await;
+}

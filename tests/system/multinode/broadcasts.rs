@@ -5,6 +5,8 @@
 //! equal apart from `sent_at_unix_nanos` and `dropped`. A fourth node
 //! started after the controls computes the same frames from the stored
 //! ones; a DELETE on one node closes the viewers on the others with 1000.
+//! A node started long after the controls steps on from the stored
+//! checkpoint and sends the same frames.
 //! A control stored for a tick already past makes every node rewind and
 //! converge; the idle timeout counts the viewers of every node.
 //!
@@ -392,5 +394,69 @@ async fn the_idle_timeout_counts_viewers_on_every_node() {
     .await;
     assert!(started.elapsed() > Duration::from_millis(1000), "not before its idle timeout");
     drop((a, b));
+    schema.drop_now().await;
+}
+
+/// docs/broadcasts.md "Checkpoints", across nodes: A and B run a broadcast
+/// checkpointed every second; its seek, speed and crossfade are long behind
+/// the newest checkpoint (their rows let go) when a node D starts. D steps
+/// on from the stored checkpoint — a few seconds of ticks, not the
+/// broadcast's age — and its frames equal A's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_late_node_steps_on_from_the_stored_checkpoint_and_sends_the_same_frames() {
+    let Some(schema) = Schema::create("bckpt").await else { return };
+    let start = |name: &'static str| {
+        Node::serve()
+            .name(name)
+            .args(["--db-max-connections", "4", "--broadcast-control-lead-ms", LEAD_MS])
+            .args(["--broadcast-checkpoint-secs", "1", "--database-url"])
+            .arg(schema.url(&format!("application_name={name}")))
+            .start()
+    };
+    let (a, b) = (start("node-a").await, start("node-b").await);
+    let http = crate::common::http_client();
+    for n in [&a, &b] {
+        super::until_subscribed(&http, n).await;
+    }
+    let (x, y) = (upload(&http, &a, line_doc(0)).await, upload(&http, &a, line_doc(1)).await);
+    let body = json!({"motion": {"layers": [{"clip": x}, {"clip": y, "weight": 0.5}]}, "fps": FPS});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let limit = Duration::from_secs(60);
+    let watched = viewer(&a, &id, limit);
+    until_watching(&[&watched]).await;
+    post_control(&http, &b, &id, json!({"op": "seek", "time": 3.0})).await;
+    post_control(&http, &a, &id, json!({"op": "speed", "speed": 1.5})).await;
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": y}]}, "duration": 2.0, "ease": "ease_in_out"});
+    let faded = post_control(&http, &b, &id, fade).await;
+    // Six checkpoints later every control is long behind the newest stored one.
+    let age = faded + 6 * FPS;
+    until_seen(&[&watched], age, "six checkpoint intervals past the controls").await;
+    eventually(PROGRESS, "A stored checkpoints", || async {
+        metric(&http, &a, "inbetween_broadcast_checkpoints_total").await >= 4.0
+    })
+    .await;
+
+    let d = start("node-d").await;
+    let late = viewer(&d, &id, limit);
+    until_watching(&[&late]).await;
+    let first = late.first().unwrap();
+    until_seen(&[&watched, &late], first + 20, "D and A share frames").await;
+    let replayed = metric(&http, &d, "inbetween_broadcast_replayed_ticks_total").await as u64;
+    // The newest checkpoint is at most two intervals behind, plus D's start and a second of slack.
+    assert!(replayed <= 5 * FPS, "D replayed {replayed} ticks of a broadcast {first} ticks old");
+    assert!(replayed + 3 * FPS < first, "D replayed {replayed} of {first} ticks: from a checkpoint");
+
+    let resp = http.delete(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let (mine, _) = tokio::time::timeout(Duration::from_secs(5), watched.task).await.unwrap().unwrap();
+    let (theirs, _) = tokio::time::timeout(Duration::from_secs(5), late.task).await.unwrap().unwrap();
+    let shared: Vec<u64> = theirs.keys().filter(|k| mine.contains_key(k)).copied().collect();
+    assert!(shared.len() >= 20, "D shares {} frames with A", shared.len());
+    for k in shared {
+        assert_eq!(mine[&k], theirs[&k], "seq {k}: A and D");
+    }
+    drop((a, b, d));
     schema.drop_now().await;
 }

@@ -8,6 +8,7 @@
 mod answers;
 mod builds;
 mod caller;
+mod checkpoints;
 mod connections;
 mod crash;
 mod overload;

@@ -120,4 +120,24 @@ impl IkSolver {
         let warm = self.warm.get(index)?;
         (!warm.joints.is_empty() || !warm.angles.is_empty()).then_some((&warm.joints, &warm.angles))
     }
+
+    /// Every constraint's warm start, in list order (empty for one that is
+    /// not a chain): what the next [`ChainStart::Warm`] solve starts from.
+    pub fn warm_starts(&self) -> Vec<WarmStart> {
+        self.warm.iter().map(|w| WarmStart { joints: w.joints.clone(), angles: w.angles.clone() }).collect()
+    }
+
+    /// Puts back warm starts [`IkSolver::warm_starts`] took, so the next
+    /// warm solve is the one the solver they came from would have made.
+    pub fn set_warm_starts(&mut self, starts: Vec<WarmStart>) {
+        self.warm = starts.into_iter().map(|w| WarmChain { joints: w.joints, angles: w.angles }).collect();
+    }
+}
+
+/// A chain's last solved angles (three per joint, radians), with the joints
+/// they belong to: what a warm start carries from one solve to the next.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct WarmStart {
+    pub joints: Vec<usize>,
+    pub angles: Vec<f32>,
 }

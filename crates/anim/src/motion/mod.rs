@@ -32,7 +32,7 @@ mod sync;
 use std::sync::Arc;
 
 pub use error::{MotionError, MotionErrorKind};
-pub use player::{LayerPosition, MAX_FADES, Player, PlayerError};
+pub use player::{DeckState, FadeState, LayerPosition, MAX_FADES, Player, PlayerError, PlayerState, RampState};
 pub use root::Planar;
 pub use sampler::{MotionOptions, MotionSampler, RootMotion};
 pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};

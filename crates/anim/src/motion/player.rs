@@ -22,6 +22,9 @@
 use std::fmt;
 use std::sync::Arc;
 
+mod state;
+pub use state::{DeckState, FadeState, PlayerState, RampState};
+
 use super::layering::{self, Joint};
 use super::root::Planar;
 use super::{ClipSource, Motion, MotionOptions, MotionSampler, RootMotion, UpAxis};
@@ -108,12 +111,17 @@ struct StreamIk {
 /// Why a live change was refused.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PlayerError {
-    NoSuchLayer { index: usize, layers: usize },
+    NoSuchLayer {
+        index: usize,
+        layers: usize,
+    },
     Weight(f32),
     Duration(f64),
     Skeleton,
     Parameters,
     CrossfadeIk,
+    /// A [`PlayerState`] that does not fit its motions (a list of the wrong length).
+    State(&'static str),
 }
 
 impl<C: ClipSource> Deck<C> {
@@ -482,6 +490,7 @@ impl fmt::Display for PlayerError {
                 f,
                 "the motion's parameters differ from the stream's: a crossfade needs the same parameter names and widths in the same order"
             ),
+            PlayerError::State(what) => write!(f, "a player state that does not fit its motion: {what}"),
             PlayerError::CrossfadeIk => {
                 write!(f, "a crossfade's motion carries no `ik`: a stream's constraints change with an `ik` control")
             }

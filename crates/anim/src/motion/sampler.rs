@@ -100,6 +100,18 @@ impl MotionSampler {
         self.previous.clear();
     }
 
+    /// What root motion carries to the next sample: each layer's root at
+    /// the last sample (empty after a jump) and the last root motion.
+    pub(crate) fn root_state(&self) -> (Vec<Option<RootAt>>, Option<RootMotion>) {
+        (self.previous.clone(), self.root_motion)
+    }
+
+    /// Puts back what [`MotionSampler::root_state`] took.
+    pub(crate) fn set_root_state(&mut self, previous: Vec<Option<RootAt>>, root_motion: Option<RootMotion>) {
+        self.previous = previous;
+        self.root_motion = root_motion;
+    }
+
     /// The next sample starts the root motion afresh: delta and total 0.
     pub fn restart_root(&mut self) {
         self.previous.clear();

@@ -32,6 +32,7 @@ mod lecture;
 mod motion;
 mod parameters;
 mod playback;
+mod player_state;
 mod properties;
 mod random;
 mod reference;

@@ -1,5 +1,6 @@
-//! The stored form of broadcasts (docs/broadcasts.md, `migrations/*/0004_broadcasts.sql`):
-//! a definition row and one row per stamped control. The store keeps the
+//! The stored form of broadcasts (docs/broadcasts.md, `migrations/*/0004_broadcasts.sql`,
+//! `migrations/*/0005_broadcast_checkpoints.sql`): a definition row, one row
+//! per stamped control, and the newest checkpoint. The store keeps the
 //! JSON it is handed and parses none of it; the server (`server::broadcast_sync`)
 //! writes and reads it back.
 
@@ -24,6 +25,15 @@ pub struct StoredControl {
     pub seq: u64,
     /// The control as the server will parse it again (opaque here).
     pub control: String,
+}
+
+/// A broadcast's checkpoint as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredCheckpoint {
+    /// The last tick it has stepped.
+    pub seq: u64,
+    /// The state as the server reads it again (opaque here).
+    pub state: String,
 }
 
 /// A `broadcasts` row (without its controls).

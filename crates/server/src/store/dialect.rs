@@ -25,6 +25,9 @@ pub trait Dialect: Database {
     /// The name column compared bytewise (code-point order), as the index
     /// the list's prefix range uses sorts it.
     const BYTEWISE_NAME: &'static str;
+    /// `$1` a broadcast id, `$2` a tick, `$3` control ids ([`Dialect::string_list`]):
+    /// deletes its controls stamped at or before `$2` except those.
+    const FORGET_CONTROLS: &'static str;
     /// `f(haystack, needle)`: the 1-based position of a substring, 0 if absent.
     const POSITION_FN: &'static str;
 

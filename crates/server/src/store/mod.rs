@@ -39,7 +39,7 @@ mod retry;
 pub mod sql;
 pub mod sqlite;
 
-pub use broadcast::{StoredBroadcast, StoredControl};
+pub use broadcast::{StoredBroadcast, StoredCheckpoint, StoredControl};
 pub use retry::{RetryPolicy, Transience};
 
 /// Whether the store insists on durable commits.
@@ -253,6 +253,20 @@ pub trait ClipStore: Send + Sync + 'static {
     /// Deletes broadcast `id` if it has not been active since `before_ms`;
     /// returns whether it did.
     fn expire_broadcast<'a>(&'a self, id: &'a str, before_ms: i64) -> BoxFuture<'a, Result<bool, StoreError>>;
+
+    /// Stores broadcast `id`'s checkpoint of tick `checkpoint.seq` (the
+    /// same row again replaces itself), deletes its older checkpoints and
+    /// its controls stamped at or before it except `named` (those the
+    /// checkpoint refers to); nothing if the broadcast is gone.
+    fn put_broadcast_checkpoint<'a>(
+        &'a self,
+        id: &'a str,
+        checkpoint: StoredCheckpoint,
+        named: &'a [String],
+    ) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// Broadcast `id`'s newest checkpoint, or `None`.
+    fn broadcast_checkpoint<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredCheckpoint>, StoreError>>;
 
     /// Succeeds when the store answers a trivial query.
     fn ping(&self) -> BoxFuture<'_, Result<(), StoreError>>;

@@ -54,6 +54,8 @@ impl Dialect for Postgres {
     /// `clips_by_name_bytewise` is built `COLLATE "C"`, whatever the database's locale.
     const BYTEWISE_NAME: &'static str = "c.name COLLATE \"C\"";
     const POSITION_FN: &'static str = "strpos";
+    const FORGET_CONTROLS: &'static str =
+        "DELETE FROM broadcast_controls WHERE broadcast_id = $1 AND seq <= $2 AND id <> ALL($3::text[])";
 
     fn string_list(items: &[String]) -> Vec<String> {
         items.to_vec()

@@ -30,8 +30,8 @@ use super::dialect::Dialect;
 use super::filter::list_query;
 use super::retry::{Retry, RetryPolicy, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast, StoredClip,
-    StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
+    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast, StoredCheckpoint,
+    StoredClip, StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
 };
 
 /// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
@@ -68,6 +68,12 @@ const EXPIRE_BROADCAST: &str = "DELETE FROM broadcasts WHERE id = $1 AND active_
 const ALL_BROADCASTS: &str = "SELECT id, definition, created_at FROM broadcasts ORDER BY id";
 const ONE_BROADCAST: &str = "SELECT id, definition, created_at FROM broadcasts WHERE id = $1";
 const CONTROLS: &str = "SELECT id, seq, control FROM broadcast_controls WHERE broadcast_id = $1 ORDER BY seq, id";
+const PUT_CHECKPOINT: &str = "INSERT INTO broadcast_checkpoints (broadcast_id, seq, state) SELECT $1, $2, $3 \
+     WHERE EXISTS (SELECT 1 FROM broadcasts WHERE id = $1) \
+     ON CONFLICT (broadcast_id, seq) DO UPDATE SET state = excluded.state";
+const FORGET_CHECKPOINTS: &str = "DELETE FROM broadcast_checkpoints WHERE broadcast_id = $1 AND seq < $2";
+const NEWEST_CHECKPOINT: &str =
+    "SELECT seq, state FROM broadcast_checkpoints WHERE broadcast_id = $1 ORDER BY seq DESC LIMIT 1";
 
 /// A [`ClipStore`] on a sqlx pool of either backend
 /// ([`super::sqlite::SqliteStore`], [`super::postgres::PgStore`]).
@@ -519,6 +525,46 @@ where
             let started = Instant::now();
             let r = sqlx::query(EXPIRE_BROADCAST).bind(id).bind(before_ms).execute(&self.pool).await;
             timed::<DB, _>("expire_broadcast", started, r.map(|d| DB::rows_affected(&d) == 1))
+        }
+        .boxed()
+    }
+
+    fn put_broadcast_checkpoint<'a>(
+        &'a self,
+        id: &'a str,
+        checkpoint: StoredCheckpoint,
+        named: &'a [String],
+    ) -> BoxFuture<'a, Result<(), StoreError>> {
+        async move {
+            let started = Instant::now();
+            let seq = checkpoint.seq as i64;
+            let r = async {
+                let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
+                let put = sqlx::query(PUT_CHECKPOINT).bind(id).bind(seq).bind(&checkpoint.state);
+                if DB::rows_affected(&put.execute(&mut *tx).await?) == 1 {
+                    sqlx::query(FORGET_CHECKPOINTS).bind(id).bind(seq).execute(&mut *tx).await?;
+                    let forget = sqlx::query(DB::FORGET_CONTROLS).bind(id).bind(seq).bind(DB::string_list(named));
+                    forget.execute(&mut *tx).await?;
+                }
+                tx.commit().await
+            }
+            .await;
+            timed::<DB, _>("put_broadcast_checkpoint", started, r)
+        }
+        .boxed()
+    }
+
+    fn broadcast_checkpoint<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredCheckpoint>, StoreError>> {
+        async move {
+            self.run("broadcast_checkpoint", Retry::Always, |_| async move {
+                let row = sqlx::query(NEWEST_CHECKPOINT).bind(id).fetch_optional(&self.pool).await?;
+                row.map(|row| {
+                    let seq: i64 = row.try_get("seq")?;
+                    Ok(StoredCheckpoint { seq: seq.max(0) as u64, state: row.try_get("state")? })
+                })
+                .transpose()
+            })
+            .await
         }
         .boxed()
     }

@@ -62,6 +62,8 @@ impl Dialect for Sqlite {
         "INSERT INTO clip_joints (clip_id, joint) SELECT DISTINCT $1, value FROM json_each($2)";
     const BYTEWISE_NAME: &'static str = "c.name";
     const POSITION_FN: &'static str = "instr";
+    const FORGET_CONTROLS: &'static str = "DELETE FROM broadcast_controls WHERE broadcast_id = $1 AND seq <= $2 \
+         AND id NOT IN (SELECT value FROM json_each($3))";
 
     fn string_list(items: &[String]) -> String {
         serde_json::Value::from(items).to_string()

@@ -24,7 +24,13 @@
 //! sender is told. Controls come from this node ([`Broadcast::prepare`] +
 //! [`Broadcast::accept`], or [`Broadcast::control`]) or from the store
 //! ([`Broadcasts::adopt`], [`Broadcast::heard`]); one heard for a tick
-//! already stepped makes the task replay from scratch.
+//! already stepped makes the task step again from the latest state it kept
+//! before that tick. A copy adopted from the store starts from the newest
+//! stored checkpoint (`checkpoint`); the task stores one every checkpoint
+//! interval, a second plus the control lead after its tick (so that every
+//! control stamped before it has been heard), and forgets the controls before the oldest
+//! state it keeps. A long catch-up stops between ticks when the broadcast
+//! is deleted or the server shuts down.
 //!
 //! Its work is priced and charged to its creator for its life, re-priced
 //! by the controls that change it, and each tick's CPU is metered against
@@ -43,7 +49,7 @@
 //! never across an await.
 
 use std::collections::{HashMap, HashSet};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -53,6 +59,7 @@ use tokio::time::Instant;
 
 use super::broadcast_budget::{BroadcastCharge, Budget, Overrun, thread_cpu_ns};
 use super::broadcast_program::{ControlLog, Program, StampedControl};
+use super::checkpoint::Checkpoint;
 use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
 use super::hub::{EndReason, Item, unix_nanos};
@@ -76,6 +83,10 @@ pub type ControlGate = Arc<dyn Fn() -> Result<(), ControlError> + Send + Sync>;
 
 /// A catch-up longer than this many ticks runs on a blocking thread.
 const BLOCKING_CATCH_UP: u64 = 256;
+
+/// How long after its tick (beyond the control lead) a checkpoint is
+/// stored: every control stamped before it has been heard by then.
+const SETTLE: Duration = Duration::from_secs(1);
 
 /// Why a broadcast could not be created.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -111,6 +122,35 @@ pub trait Journal: Send + Sync + 'static {
     /// Ends the broadcast everywhere if no node has had viewers and nobody
     /// a control for `idle`; returns whether it did.
     fn expire(&self, broadcast: &str, idle: Duration) -> BoxFuture<'static, bool>;
+    /// Stores `checkpoint` (idempotent: every node writes the same one) and
+    /// lets go of the controls it makes unnecessary.
+    fn checkpoint(&self, broadcast: &str, checkpoint: &Checkpoint) -> BoxFuture<'static, ()> {
+        let _ = (broadcast, checkpoint);
+        Box::pin(async {})
+    }
+}
+
+/// How often broadcasts are checkpointed, and how many controls one may
+/// hold between checkpoints (docs/broadcasts.md "Checkpoints").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Checkpointing {
+    /// Broadcast time between checkpoints.
+    pub every: Duration,
+    /// Controls a broadcast keeps since its newest checkpoint, at most.
+    pub max_journal: usize,
+}
+
+impl Default for Checkpointing {
+    fn default() -> Self {
+        Checkpointing { every: Duration::from_secs(10), max_journal: 1024 }
+    }
+}
+
+impl Checkpointing {
+    /// Ticks between checkpoints at `fps` (at least one).
+    fn ticks(&self, fps: u32) -> u64 {
+        ((self.every.as_nanos() * u128::from(fps) / 1_000_000_000) as u64).max(1)
+    }
 }
 
 /// What a broadcast is, as its creator asked: the stream parameters (motion,
@@ -152,6 +192,7 @@ struct Registry {
     /// How far ahead of now a control is stamped (with many nodes, so the
     /// others hear of it before its tick).
     lead: Duration,
+    checkpointing: Checkpointing,
     journal: OnceLock<Arc<dyn Journal>>,
     shutdown: watch::Receiver<bool>,
 }
@@ -160,6 +201,13 @@ impl std::fmt::Debug for Broadcasts {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Broadcasts").field("max", &self.inner.max).finish_non_exhaustive()
     }
+}
+
+/// What a broadcast started here has behind it: the controls so far, and
+/// the newest stored checkpoint (whose controls are among them).
+struct Past {
+    controls: Vec<StampedControl>,
+    checkpoint: Option<Checkpoint>,
 }
 
 /// Where a broadcast's ticks fall on this node: its tick `base + k` is
@@ -183,10 +231,12 @@ impl Broadcasts {
         buffer: usize,
         precise: bool,
         lead: Duration,
+        checkpointing: Checkpointing,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
-        let registry =
-            Registry { live: Mutex::default(), max, epoch, buffer, precise, lead, journal: OnceLock::new(), shutdown };
+        let journal = OnceLock::new();
+        let live = Mutex::default();
+        let registry = Registry { live, max, epoch, buffer, precise, lead, checkpointing, journal, shutdown };
         Broadcasts { inner: Arc::new(registry) }
     }
 
@@ -214,14 +264,16 @@ impl Broadcasts {
         let first = grid.next_at_or_after(now);
         let created_at = now_unix + grid.at(first).saturating_duration_since(now).as_nanos() as i64;
         let placement = Placement { grid, first, base: 0, phase_ms };
-        self.start(id, spec, created_at, placement, Vec::new(), charge)
+        self.start(id, spec, created_at, placement, charge, Past { controls: Vec::new(), checkpoint: None })
     }
 
     /// Runs here a broadcast created elsewhere (another node, or this one
     /// before a restart): `id`, created at `created_at` (Unix ns, its tick
-    /// 0), with its `controls` so far. Its frames are computed from them
-    /// (`broadcast_program`), from the tick the wall clock says on.
-    /// Already live: the controls are added to it (and `charge` dropped).
+    /// 0), with its `controls` so far and its newest stored `checkpoint`
+    /// (the controls it names among `controls`). Its frames are computed
+    /// from them (`broadcast_program`), stepping from the checkpoint (else
+    /// from tick 0) to the tick the wall clock says. Already live: the
+    /// controls are added to it (and `charge` dropped).
     ///
     /// # Errors
     /// As [`Broadcasts::create`].
@@ -232,6 +284,7 @@ impl Broadcasts {
         created_at: i64,
         controls: Vec<StampedControl>,
         charge: BroadcastCharge,
+        checkpoint: Option<Checkpoint>,
     ) -> Result<Arc<Broadcast>, BroadcastError> {
         if let Some(live) = self.get(id) {
             for c in controls {
@@ -240,7 +293,7 @@ impl Broadcasts {
             return Ok(live);
         }
         let placement = self.placement(spec.params.fps, created_at);
-        self.start(id.into(), spec, created_at, placement, controls, charge)
+        self.start(id.into(), spec, created_at, placement, charge, Past { controls, checkpoint })
     }
 
     /// Where the ticks of a broadcast created at `created_at` (Unix ns) fall
@@ -275,8 +328,8 @@ impl Broadcasts {
         spec: BroadcastSpec,
         created_at: i64,
         placement: Placement,
-        controls: Vec<StampedControl>,
         charge: BroadcastCharge,
+        Past { controls, checkpoint }: Past,
     ) -> Result<Arc<Broadcast>, BroadcastError> {
         if *self.inner.shutdown.borrow() {
             return Err(BroadcastError::ShuttingDown);
@@ -302,6 +355,8 @@ impl Broadcasts {
             stop: Arc::new(AtomicBool::new(false)),
             deleted: Notify::new(),
             ended: AtomicBool::new(false),
+            journal_len: AtomicUsize::new(0),
+            max_journal: self.inner.checkpointing.max_journal,
             placement,
             schedule: schedule.clone(),
             lead: self.inner.lead,
@@ -326,12 +381,18 @@ impl Broadcasts {
             }
             return Ok(already);
         }
+        let program = self.program(&broadcast, checkpoint.as_ref(), &controls);
+        // Restored from a checkpoint, it plays as its state says (the controls that paused it may be gone).
+        {
+            let mut desk = broadcast.desk();
+            (desk.paused, desk.speed) = program.playing();
+        }
         for c in controls {
             broadcast.heard(c);
         }
         metrics::gauge!("inbetween_broadcasts").increment(1.0);
         metrics::counter!("inbetween_broadcasts_total").increment(1);
-        let task = Task::new(Arc::clone(&broadcast), self.clone(), schedule, self.inner.shutdown.clone());
+        let task = Task::new(Arc::clone(&broadcast), self.clone(), schedule, self.inner.shutdown.clone(), program);
         let run = async move {
             crate::panics::guarded("broadcast", task.run()).await;
         };
@@ -343,6 +404,25 @@ impl Broadcasts {
             tokio::spawn(run);
         }
         Ok(broadcast)
+    }
+
+    /// The program a broadcast starts with: restored from `checkpoint`
+    /// (whose controls are among `controls`), else before its tick 0.
+    fn program(&self, b: &Broadcast, checkpoint: Option<&Checkpoint>, controls: &[StampedControl]) -> Box<Program> {
+        let params = &b.spec.params;
+        let every = self.inner.checkpointing.ticks(params.fps);
+        let Some(checkpoint) = checkpoint else { return Box::new(Program::new(params).checkpointing(every)) };
+        let mut log = ControlLog::default();
+        for c in controls {
+            log.insert(c.clone());
+        }
+        match Program::from_checkpoint(params, checkpoint, &log) {
+            Ok(program) => Box::new(program.checkpointing(every)),
+            Err(error) => {
+                tracing::warn!(broadcast = %b.id, %error, "a broadcast checkpoint not used: replaying from tick 0");
+                Box::new(Program::new(params).checkpointing(every))
+            }
+        }
     }
 
     /// The live broadcast `id`.
@@ -362,7 +442,7 @@ impl Broadcasts {
     pub fn delete(&self, id: &str) -> bool {
         let Some(broadcast) = self.lock().remove(id) else { return false };
         // Stops a long solve of its tick under way (`anim::ik::stoppable`).
-        broadcast.stop.store(true, Ordering::Relaxed);
+        broadcast.stop.store(true, Ordering::Release);
         broadcast.desk().budget.release();
         broadcast.deleted.notify_one();
         true
@@ -428,10 +508,14 @@ pub struct Broadcast {
     desk: Arc<Mutex<Desk>>,
     /// Its controls' store writes under way ([`STORE_QUEUE`]).
     store_slots: Arc<Semaphore>,
-    /// Raised when it is deleted: a chain solve under way stops.
+    /// Raised when it is deleted: a chain solve under way stops, and a
+    /// catch-up stops between ticks.
     stop: Arc<AtomicBool>,
     deleted: Notify,
     ended: AtomicBool,
+    /// Controls it holds since its newest checkpoint (kept by its task).
+    journal_len: AtomicUsize,
+    max_journal: usize,
 }
 
 impl std::fmt::Debug for Broadcast {
@@ -563,6 +647,9 @@ impl Broadcast {
         }
         if self.ended.load(Ordering::Acquire) {
             return Err(ControlError::Invalid("the broadcast has ended"));
+        }
+        if self.journal_len.load(Ordering::Relaxed) >= self.max_journal {
+            return Err(ControlError::JournalFull);
         }
         Ok(())
     }
@@ -727,6 +814,8 @@ struct Task {
     /// The runtime the broadcast was created from: what the task starts
     /// besides its ticks (store writes, long catch-ups) runs there.
     origin: tokio::runtime::Handle,
+    /// The newest checkpoint handed to the journal.
+    checkpointed: Option<u64>,
 }
 
 impl Task {
@@ -735,9 +824,11 @@ impl Task {
         registry: Broadcasts,
         schedule: Schedule,
         shutdown: watch::Receiver<bool>,
+        program: Box<Program>,
     ) -> Self {
-        let program = Some(Box::new(Program::new(&broadcast.spec.params)));
+        let checkpointed = program.floor().checked_sub(1);
         let overrun = Overrun::new(broadcast.spec.params.fps);
+        let program = Some(program);
         let now = Instant::now();
         Task {
             broadcast,
@@ -751,6 +842,7 @@ impl Task {
             counted: 0,
             overrun,
             origin: tokio::runtime::Handle::current(),
+            checkpointed,
         }
     }
 
@@ -790,7 +882,10 @@ impl Task {
                 (std::mem::take(&mut desk.inbox), revoked, desk.last_control, desk.budget.tick_allowed_ns())
             };
             let stepped_here = self.program.as_ref().is_some_and(|p| k.saturating_sub(p.next()) <= BLOCKING_CATCH_UP);
-            self.catch_up(controls, &revoked, k).await;
+            if !self.catch_up(controls, &revoked, k).await {
+                return if *self.shutdown.borrow() { EndReason::Shutdown } else { EndReason::Ended };
+            }
+            self.checkpoint();
             let viewers = b.viewers();
             self.count_viewers(viewers);
             if let Some(reason) = self.idle(viewers, last_control) {
@@ -823,52 +918,99 @@ impl Task {
     }
 
     /// Files `controls` (and drops the `revoked` ones) and steps the program
-    /// through tick `k`: again from before the earliest stamp if one is for
-    /// a tick already stepped, on a
-    /// blocking thread if that is many ticks (a node that joined late, a
-    /// restart).
-    async fn catch_up(&mut self, controls: Vec<StampedControl>, revoked: &[Arc<str>], k: u64) {
+    /// through tick `k`: again from the latest state kept before the
+    /// earliest stamp if one is for a tick already stepped, on a blocking
+    /// thread if that is many ticks (a node that joined late, a restart).
+    /// Returns `false` if it was cancelled (deleted, shutting down) first.
+    async fn catch_up(&mut self, controls: Vec<StampedControl>, revoked: &[Arc<str>], k: u64) -> bool {
         let mut program = self.program.take().expect("the program is back after each catch-up");
+        let rewind = self.file(&program, controls, revoked);
+        if let Some(stamp) = rewind
+            && program.rewind_before(stamp).is_some()
+        {
+            metrics::counter!("inbetween_broadcast_replays_total").increment(1);
+            // A checkpoint stored from before the control is written again.
+            self.checkpointed = self.checkpointed.filter(|&c| c < stamp);
+        }
+        let behind = k.saturating_sub(program.next());
+        if behind > 0 {
+            // Ticks stepped besides `k` itself: a late start, a restart, a late wake, a rewind.
+            metrics::counter!("inbetween_broadcast_replayed_ticks_total").increment(behind);
+        }
+        let reached = if behind > BLOCKING_CATCH_UP {
+            let (log, stop, shutdown) = (self.log.clone(), Arc::clone(&self.broadcast.stop), self.shutdown.clone());
+            let stepped = self
+                .origin
+                .spawn_blocking(move || {
+                    let halted = || stop.load(Ordering::Acquire) || *shutdown.borrow();
+                    let reached = anim::ik::stoppable(&stop, || program.step_to_unless(k, &log, &halted));
+                    (program, reached)
+                })
+                .await;
+            match stepped {
+                Ok((p, reached)) => {
+                    program = p;
+                    reached
+                }
+                Err(e) => {
+                    tracing::error!(error = %e, broadcast = %self.broadcast.id, "a broadcast catch-up failed");
+                    return false;
+                }
+            }
+        } else {
+            anim::ik::stoppable(&self.broadcast.stop, || program.step_to(k, &self.log));
+            true
+        };
+        self.log.forget_before(program.floor());
+        self.broadcast.journal_len.store(self.log.since(program.newest_checkpoint()), Ordering::Relaxed);
+        self.program = Some(program);
+        reached
+    }
+
+    /// Files `controls` and drops the `revoked` ones; returns the earliest
+    /// stamp among them for a tick already stepped that the program can
+    /// still go back to. One from before its floor is already in the state
+    /// it started from (a control a checkpoint names), or too late to step
+    /// here (heard after the state before it was let go): it is skipped.
+    fn file(&mut self, program: &Program, controls: Vec<StampedControl>, revoked: &[Arc<str>]) -> Option<u64> {
+        let (next, floor) = (program.next(), program.floor());
         let mut rewind = None::<u64>;
-        let mut past = |seq: u64, next: u64| {
-            if seq < next {
+        let mut past = |seq: u64| {
+            if (floor..next).contains(&seq) {
                 rewind = Some(rewind.map_or(seq, |r: u64| r.min(seq)));
             }
         };
         for c in controls {
-            past(c.seq, program.next());
+            if c.seq < floor {
+                tracing::debug!(broadcast = %self.broadcast.id, control = %c.id, "a control from before the oldest kept state skipped");
+            }
+            past(c.seq);
             self.log.insert(c);
         }
         for id in revoked {
             if let Some(seq) = self.log.remove(id) {
-                past(seq, program.next());
+                past(seq);
             }
         }
-        if let Some(stamp) = rewind {
-            let again = program.rewind_before(stamp);
-            metrics::counter!("inbetween_broadcast_replays_total").increment(1);
-            metrics::counter!("inbetween_broadcast_replayed_ticks_total").increment(again);
+        rewind
+    }
+
+    /// Hands the journal the newest checkpoint the program kept at least
+    /// [`SETTLE`] plus the control lead ago, once: by then every control
+    /// stamped before it has been heard.
+    fn checkpoint(&mut self) {
+        let Some(journal) = &self.broadcast.journal else { return };
+        let program = self.program.as_ref().expect("the program is back after each catch-up");
+        let fps = u128::from(self.broadcast.spec.params.fps);
+        let margin = ((SETTLE + self.broadcast.lead).as_nanos() * fps / 1_000_000_000) as u64;
+        let Some(tick) = program.settled_checkpoint(margin) else { return };
+        if self.checkpointed.is_some_and(|done| done >= tick) {
+            return;
         }
-        if k.saturating_sub(program.next()) > BLOCKING_CATCH_UP {
-            let (log, stop) = (self.log.clone(), Arc::clone(&self.broadcast.stop));
-            let stepped = self
-                .origin
-                .spawn_blocking(move || {
-                    anim::ik::stoppable(&stop, || program.step_to(k, &log));
-                    program
-                })
-                .await;
-            program = match stepped {
-                Ok(p) => p,
-                Err(e) => {
-                    tracing::error!(error = %e, broadcast = %self.broadcast.id, "a broadcast catch-up failed");
-                    Box::new(Program::replay(&self.broadcast.spec.params, &self.log, Some(k)))
-                }
-            };
-        } else {
-            anim::ik::stoppable(&self.broadcast.stop, || program.step_to(k, &self.log));
-        }
-        self.program = Some(program);
+        let Some(checkpoint) = program.checkpoint_of(tick) else { return };
+        self.checkpointed = Some(tick);
+        metrics::counter!("inbetween_broadcast_checkpoints_total").increment(1);
+        drop(self.origin.spawn(journal.checkpoint(&self.broadcast.id, &checkpoint)));
     }
 
     /// Whether the broadcast ends idle now. Without a journal: no viewers

@@ -18,15 +18,20 @@
 //! from is the same everywhere.
 //!
 //! A control that arrives for a tick already stepped (a node that heard it
-//! late) is slotted into the past by going back to the latest snapshot of
-//! the state before its stamp (one every [`SNAPSHOT_EVERY`] ticks, the last
-//! few kept; the player clones whole, warm starts included) and stepping
-//! again up to now; older than every snapshot, from tick 0. A node's copy
-//! of a broadcast created elsewhere, or resumed after a restart, steps from
-//! tick 0 likewise ([`Program::replay`]): one sample per tick of its age.
+//! late) is slotted into the past by going back to the latest state kept
+//! from before its stamp — a snapshot (one every [`SNAPSHOT_EVERY`] ticks,
+//! the last few kept; the player clones whole, warm starts included), a
+//! checkpoint (one every checkpoint interval, the last [`CHECKPOINTS`]
+//! kept), or the state the program started from — and stepping again up to
+//! now. A node's copy of a broadcast created elsewhere, or resumed after a
+//! restart, starts from the newest stored checkpoint (`checkpoint`,
+//! [`Program::from_checkpoint`]) and steps from there: its work is bounded
+//! by the checkpoint interval, not by the broadcast's age.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 
+use super::checkpoint::{Checkpoint, CheckpointError, Lookup, Naming, Source};
 use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameEncoder};
 use super::hub::{TickStamp, frame_data, sample_tick};
@@ -84,6 +89,23 @@ impl ControlLog {
         &self.controls[from..to]
     }
 
+    /// Control `id`.
+    pub fn find(&self, id: &str) -> Option<&StampedControl> {
+        self.controls.iter().find(|c| &*c.id == id)
+    }
+
+    /// Forgets the controls stamped before `seq` (a program no longer
+    /// steps them: it never goes back before `seq`).
+    pub fn forget_before(&mut self, seq: u64) {
+        let before = self.controls.partition_point(|c| c.seq < seq);
+        self.controls.drain(..before);
+    }
+
+    /// How many are stamped at or after `seq`.
+    pub fn since(&self, seq: u64) -> usize {
+        self.controls.len() - self.controls.partition_point(|c| c.seq < seq)
+    }
+
     pub fn len(&self) -> usize {
         self.controls.len()
     }
@@ -99,6 +121,10 @@ pub const SNAPSHOT_EVERY: u64 = 64;
 /// Snapshots kept (the latest `SNAPSHOTS · SNAPSHOT_EVERY` ticks).
 const SNAPSHOTS: usize = 8;
 
+/// Checkpoint states kept in memory: the one being written, the newest
+/// stored, and the one before it (a control heard late goes back to it).
+pub const CHECKPOINTS: usize = 3;
+
 /// Everything a tick's frame depends on, as of the last tick stepped.
 #[derive(Clone)]
 struct State {
@@ -111,6 +137,12 @@ struct State {
     clip_time: f32,
     /// The last tick stepped.
     stepped: Option<u64>,
+    /// The latest crossfades applied, with their controls' ids, oldest
+    /// first: how a checkpoint names the motions on the player (it holds
+    /// at most this many).
+    fades: VecDeque<(Arc<StreamMotion>, Arc<str>)>,
+    /// The `ik` control whose list the player has (`None`: the definition's).
+    ik_from: Option<Arc<str>>,
 }
 
 impl State {
@@ -122,7 +154,68 @@ impl State {
             crossed: Vec::new(),
             clip_time: 0.0,
             stepped: None,
+            fades: VecDeque::new(),
+            ik_from: None,
         }
+    }
+
+    /// Where a motion on the player came from.
+    fn source_of(&self, motion: &Arc<StreamMotion>) -> Source {
+        match self.fades.iter().rev().find(|(m, _)| Arc::ptr_eq(m, motion)) {
+            Some((_, id)) => Source::Control(id.to_string()),
+            None => Source::Definition,
+        }
+    }
+
+    fn checkpoint(&self) -> Option<Checkpoint> {
+        let tick = self.stepped?;
+        let ik = self.ik_from.as_ref().map_or(Source::Definition, |id| Source::Control(id.to_string()));
+        let naming = Naming { motion: &|m| self.source_of(m), ik };
+        let prev = self.prev.as_ref().map(|(x, _)| *x);
+        Some(Checkpoint::capture(tick, &self.playhead, &self.player, prev, self.clip_time, &naming))
+    }
+
+    /// The state `checkpoint` describes, its motions and IK list found in
+    /// `params` and `log`.
+    fn restore(params: &StreamParams, checkpoint: &Checkpoint, log: &ControlLog) -> Result<Self, CheckpointError> {
+        let motion = |source: &Source| match source {
+            Source::Definition => Some(Arc::clone(&params.motion)),
+            Source::Control(id) => match &log.find(id)?.control {
+                Control::Crossfade(fade) => Some(Arc::clone(&fade.to)),
+                _ => None,
+            },
+        };
+        let ik = |source: &Source| match source {
+            Source::Definition => Some(params.motion.ik().to_vec()),
+            Source::Control(id) => match &log.find(id)?.control {
+                Control::SetIk(list) => Some(list.clone()),
+                _ => None,
+            },
+        };
+        let restored = checkpoint.restore(params.fps, &Lookup { motion: &motion, ik: &ik })?;
+        let named = checkpoint.controls();
+        let fades = named
+            .iter()
+            .filter_map(|id| {
+                let c = log.find(id)?;
+                let Control::Crossfade(fade) = &c.control else { return None };
+                Some(((c.seq, Arc::clone(&c.id)), (Arc::clone(&fade.to), Arc::clone(&c.id))))
+            })
+            .collect::<std::collections::BTreeMap<_, _>>()
+            .into_values()
+            .collect();
+        let ik_from = named.iter().filter_map(|id| log.find(id)).find(|c| matches!(c.control, Control::SetIk(_)));
+        let top = Arc::clone(restored.player.motion());
+        Ok(State {
+            playhead: restored.playhead,
+            player: restored.player,
+            prev: restored.prev.map(|x| (x, top)),
+            crossed: Vec::new(),
+            clip_time: restored.clip_time,
+            stepped: Some(checkpoint.tick),
+            fades,
+            ik_from: ik_from.map(|c| Arc::clone(&c.id)),
+        })
     }
 
     fn next(&self) -> u64 {
@@ -131,15 +224,22 @@ impl State {
 }
 
 /// A broadcast's playback: its state, snapshots of it every
-/// [`SNAPSHOT_EVERY`] ticks (so a control heard late replays from the
-/// latest snapshot before its stamp, not from tick 0), and one encoder per
-/// encoding (each reused, so a tick allocates only the bytes it sends —
-/// and, every [`SNAPSHOT_EVERY`] ticks, a snapshot).
+/// [`SNAPSHOT_EVERY`] ticks and checkpoints every checkpoint interval (so a
+/// control heard late replays from the latest state kept before its stamp),
+/// and one encoder per encoding (each reused, so a tick allocates only the
+/// bytes it sends — and, every [`SNAPSHOT_EVERY`] ticks, a snapshot).
 pub struct Program {
     params: StreamParams,
     state: State,
     /// Oldest first; each taken after stepping a multiple of `SNAPSHOT_EVERY` − 1.
-    snapshots: std::collections::VecDeque<State>,
+    snapshots: VecDeque<State>,
+    /// Ticks between checkpoints (0: none).
+    checkpoint_every: u64,
+    /// Oldest first; each taken after stepping a multiple of `checkpoint_every` − 1.
+    checkpoints: VecDeque<State>,
+    /// The oldest state the program can go back to: its start, then the
+    /// oldest checkpoint kept once older ones are let go.
+    floor: State,
     json: FrameEncoder,
     protobuf: FrameEncoder,
 }
@@ -147,13 +247,47 @@ pub struct Program {
 impl Program {
     /// Before its tick 0.
     pub fn new(params: &StreamParams) -> Self {
+        Self::starting_at(params, State::new(params))
+    }
+
+    fn starting_at(params: &StreamParams, state: State) -> Self {
         Program {
-            state: State::new(params),
+            floor: state.clone(),
+            state,
             params: params.clone(),
-            snapshots: std::collections::VecDeque::new(),
+            snapshots: VecDeque::new(),
+            checkpoint_every: 0,
+            checkpoints: VecDeque::new(),
             json: FrameEncoder::new(Encoding::Json),
             protobuf: FrameEncoder::new(Encoding::Protobuf),
         }
+    }
+
+    /// The program `checkpoint` describes: its next tick is the one after
+    /// the checkpoint's, and it never goes back before it. The controls it
+    /// names must be in `log`.
+    ///
+    /// # Errors
+    /// The checkpoint is unreadable, names a control `log` lacks, or does
+    /// not fit the motions.
+    pub fn from_checkpoint(
+        params: &StreamParams,
+        checkpoint: &Checkpoint,
+        log: &ControlLog,
+    ) -> Result<Self, CheckpointError> {
+        Ok(Self::starting_at(params, State::restore(params, checkpoint, log)?))
+    }
+
+    /// Keeps a checkpoint state after every tick `c` with `(c + 1) % every == 0`.
+    #[must_use]
+    pub fn checkpointing(mut self, every: u64) -> Self {
+        self.checkpoint_every = every;
+        self
+    }
+
+    /// Whether it is paused, and its speed, as of the last tick stepped.
+    pub fn playing(&self) -> (bool, f64) {
+        (self.state.playhead.paused(), self.state.playhead.speed())
     }
 
     /// The next tick to step.
@@ -161,32 +295,91 @@ impl Program {
         self.state.next()
     }
 
+    /// The first tick the program can step again (see [`Self::rewind_before`]):
+    /// controls stamped before it are no longer needed.
+    pub fn floor(&self) -> u64 {
+        self.floor.next()
+    }
+
     /// Steps every tick from [`Self::next`] to `k` (nothing if `k` is behind).
     pub fn step_to(&mut self, k: u64, log: &ControlLog) {
+        self.step_to_unless(k, log, &|| false);
+    }
+
+    /// As [`Self::step_to`], asking `cancelled` between ticks; returns
+    /// whether it reached `k`.
+    pub fn step_to_unless(&mut self, k: u64, log: &ControlLog, cancelled: &dyn Fn() -> bool) -> bool {
         for j in self.next()..=k {
-            self.step(j, log.at(j));
-            if (j + 1) % SNAPSHOT_EVERY == 0 {
-                if self.snapshots.len() == SNAPSHOTS {
-                    self.snapshots.pop_front();
-                }
-                self.snapshots.push_back(self.state.clone());
+            if j.is_multiple_of(64) && cancelled() {
+                return false;
             }
+            self.step(j, log.at(j));
+            self.keep(j);
+        }
+        true
+    }
+
+    /// Keeps the snapshot or checkpoint state due after tick `j`.
+    fn keep(&mut self, j: u64) {
+        if (j + 1).is_multiple_of(SNAPSHOT_EVERY) {
+            if self.snapshots.len() == SNAPSHOTS {
+                self.snapshots.pop_front();
+            }
+            self.snapshots.push_back(self.state.clone());
+        }
+        if self.checkpoint_every > 0 && (j + 1).is_multiple_of(self.checkpoint_every) {
+            if self.checkpoints.len() == CHECKPOINTS
+                && let Some(oldest) = self.checkpoints.pop_front()
+            {
+                self.floor = oldest;
+            }
+            self.checkpoints.push_back(self.state.clone());
         }
     }
 
-    /// Goes back to a state from before tick `k` (the latest snapshot
-    /// before it, or the start), so that a control stamped `k` heard late
-    /// is stepped in its place. Returns the ticks to step again.
-    pub fn rewind_before(&mut self, k: u64) -> u64 {
+    /// The checkpoint of tick `c`, if the program kept that state.
+    pub fn checkpoint_of(&self, c: u64) -> Option<Checkpoint> {
+        let kept = self.checkpoints.iter().chain([&self.floor, &self.state]);
+        kept.filter(|s| s.stepped == Some(c)).find_map(State::checkpoint)
+    }
+
+    /// The first tick after the newest checkpoint state kept (or the floor).
+    pub fn newest_checkpoint(&self) -> u64 {
+        self.checkpoints.back().unwrap_or(&self.floor).next()
+    }
+
+    /// The tick of the newest checkpoint kept at least `margin` ticks
+    /// before the last tick stepped: the one to store (see `broadcast`).
+    pub fn settled_checkpoint(&self, margin: u64) -> Option<u64> {
+        let now = self.state.stepped?;
+        let kept = self.checkpoints.iter().rev().chain([&self.floor]);
+        kept.filter_map(|s| s.stepped).find(|&c| c + margin <= now)
+    }
+
+    /// The checkpoint of the last tick stepped.
+    pub fn checkpoint(&self) -> Option<Checkpoint> {
+        self.state.checkpoint()
+    }
+
+    /// Goes back to a state from before tick `k` (the latest snapshot or
+    /// checkpoint before it, or the floor), so that a control stamped `k`
+    /// heard late is stepped in its place. Returns the ticks to step again;
+    /// `None` if `k` is before the floor (the program cannot go back there:
+    /// nothing changes).
+    pub fn rewind_before(&mut self, k: u64) -> Option<u64> {
+        if k < self.floor.next() {
+            return None;
+        }
         let now = self.next();
         while self.snapshots.back().is_some_and(|s| s.next() > k) {
             self.snapshots.pop_back();
         }
-        self.state = match self.snapshots.back() {
-            Some(s) => s.clone(),
-            None => State::new(&self.params),
-        };
-        now - self.next()
+        while self.checkpoints.back().is_some_and(|s| s.next() > k) {
+            self.checkpoints.pop_back();
+        }
+        let latest = [self.snapshots.back(), self.checkpoints.back()].into_iter().flatten().max_by_key(|s| s.next());
+        self.state = latest.unwrap_or(&self.floor).clone();
+        Some(now - self.next())
     }
 
     /// A fresh program of `params` stepped through tick `k` (none if `k` is
@@ -204,7 +397,7 @@ impl Program {
     fn step(&mut self, k: u64, controls: &[StampedControl]) {
         let mut jumped = false;
         for c in controls {
-            jumped |= self.apply(c.control.clone(), k);
+            jumped |= self.apply(c, k);
         }
         let st = &mut self.state;
         let time = st.playhead.time_at(k);
@@ -215,12 +408,30 @@ impl Program {
     /// Applies a control stamped for tick `k`; returns whether time jumped.
     /// One the player refuses (a ramp of a layer a crossfade stamped just
     /// before took away) is skipped — the same way on every node.
-    fn apply(&mut self, control: Control, k: u64) -> bool {
+    fn apply(&mut self, c: &StampedControl, k: u64) -> bool {
         let st = &mut self.state;
+        let control = c.control.clone();
+        let named = match &control {
+            Control::Crossfade(fade) => Some(Some(Arc::clone(&fade.to))),
+            Control::SetIk(_) => Some(None),
+            _ => None,
+        };
         match control.apply(&mut st.playhead, &mut st.player, k) {
             Ok(Applied::Jumped) => true,
             // A broadcast refuses `stop` (`Control::refused_on_broadcast`).
-            Ok(Applied::Continued | Applied::Stopped) => false,
+            Ok(Applied::Continued | Applied::Stopped) => {
+                match named {
+                    Some(Some(to)) => {
+                        if st.fades.len() > anim::motion::MAX_FADES {
+                            st.fades.pop_front();
+                        }
+                        st.fades.push_back((to, Arc::clone(&c.id)));
+                    }
+                    Some(None) => st.ik_from = Some(Arc::clone(&c.id)),
+                    None => {}
+                }
+                false
+            }
             Err(Refused { what, error }) => {
                 tracing::warn!(%error, "a broadcast {what} skipped");
                 false

@@ -342,6 +342,13 @@ pub enum ControlError {
     Invalid(&'static str),
     #[error("too many controls pending; wait for a frame before sending more")]
     Busy,
+    /// A broadcast holds its most controls since its newest checkpoint
+    /// (`broadcast_max_journal`, docs/broadcasts.md "Checkpoints").
+    #[error(
+        "this broadcast holds as many controls as it keeps between two checkpoints (broadcast_max_journal); \
+         send more after its next checkpoint"
+    )]
+    JournalFull,
     /// An `ik` control's constraint breaks a rule of docs/ik.md (its path
     /// is relative to the control's `constraints`).
     #[error("{}", .0.kind)]
@@ -369,6 +376,7 @@ impl ControlError {
             ControlError::ReadOnly => "insufficient_scope",
             ControlError::Invalid(_) | ControlError::Busy => "bad_control",
             ControlError::Refused { code, .. } => code,
+            ControlError::JournalFull => "broadcast_journal_full",
         }
     }
 
@@ -376,9 +384,11 @@ impl ControlError {
     pub fn pointer(&self) -> Option<String> {
         match self {
             ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
-            ControlError::Invalid(_) | ControlError::Busy | ControlError::ReadOnly | ControlError::Refused { .. } => {
-                None
-            }
+            ControlError::Invalid(_)
+            | ControlError::Busy
+            | ControlError::ReadOnly
+            | ControlError::Refused { .. }
+            | ControlError::JournalFull => None,
         }
     }
 }

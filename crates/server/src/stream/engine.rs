@@ -55,6 +55,8 @@ pub struct EngineConfig {
     /// How far ahead a broadcast control is stamped (many nodes: so that
     /// the others hear of it before its tick); zero stamps the next tick.
     pub broadcast_lead: std::time::Duration,
+    /// Broadcast checkpoints: how often, and the controls held between two.
+    pub checkpointing: super::broadcast::Checkpointing,
 }
 
 impl Default for EngineConfig {
@@ -67,6 +69,7 @@ impl Default for EngineConfig {
             precise_timer: false,
             max_broadcasts: 64,
             broadcast_lead: std::time::Duration::ZERO,
+            checkpointing: super::broadcast::Checkpointing::default(),
         }
     }
 }
@@ -106,6 +109,7 @@ impl Engine {
             config.buffer,
             config.precise_timer,
             config.broadcast_lead,
+            config.checkpointing,
             shutdown.subscribe(),
         );
         Engine {

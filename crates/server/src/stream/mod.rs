@@ -36,6 +36,7 @@
 mod broadcast;
 mod broadcast_budget;
 mod broadcast_program;
+mod checkpoint;
 mod control;
 mod encode;
 mod engine;
@@ -54,11 +55,12 @@ mod ticker;
 pub mod ws;
 
 pub use broadcast::{
-    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, ControlGate, Journal, STORE_QUEUE,
-    new_control_id,
+    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Checkpointing, ControlGate, Journal,
+    STORE_QUEUE, new_control_id,
 };
 pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
+pub use checkpoint::{Checkpoint, CheckpointError};
 pub use control::{
     Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, Repricing, parse_control,
 };
@@ -82,5 +84,7 @@ mod tests;
 mod tests_broadcast;
 #[cfg(test)]
 mod tests_broadcast_budget;
+#[cfg(test)]
+mod tests_checkpoint;
 #[cfg(test)]
 mod tests_ws;

@@ -71,6 +71,16 @@ impl Playhead {
         (self.anchor_k, self.anchor_t) = (k, t);
     }
 
+    /// Its anchor tick and time, speed and pause (a broadcast checkpoint).
+    pub(super) fn parts(&self) -> (u64, f64, f64, bool) {
+        (self.anchor_k, self.anchor_t, self.speed, self.paused)
+    }
+
+    /// A playhead at `fps` from [`Playhead::parts`].
+    pub(super) fn from_parts(fps: u32, (anchor_k, anchor_t, speed, paused): (u64, f64, f64, bool)) -> Self {
+        Playhead { fps: f64::from(fps), anchor_k, anchor_t, speed, paused }
+    }
+
     /// Anchors at tick `k - 1` and the time it shows now (before a change
     /// of speed or pause takes effect).
     fn reanchor(&mut self, k: u64) {

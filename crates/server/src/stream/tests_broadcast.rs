@@ -210,7 +210,7 @@ fn frames_are_a_function_of_the_definition_the_controls_and_the_tick() {
             for c in heard {
                 log.insert(c.clone());
             }
-            let again = late.rewind_before(earliest);
+            let again = late.rewind_before(earliest).expect("after the start");
             assert!(again <= k - earliest + super::broadcast_program::SNAPSHOT_EVERY, "{again} ticks again");
         }
         let got = bytes_at(&mut late, k, &log);
@@ -252,7 +252,7 @@ async fn a_copy_adopted_from_the_stored_controls_sends_the_same_bytes() {
     let spec = b1.spec().clone();
     let b2 = e2
         .broadcasts()
-        .adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone(), BroadcastCharge::free())
+        .adopt(b1.id(), spec, b1.created_at_unix_nanos(), stamped.clone(), BroadcastCharge::free(), None)
         .unwrap();
     let mut v2 = viewer(&e2, &b2, Encoding::Json, false);
     let strip = |f: &Delivered| {
