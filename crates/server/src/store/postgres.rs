@@ -54,6 +54,9 @@ impl Dialect for Postgres {
     /// `clips_by_name_bytewise` is built `COLLATE "C"`, whatever the database's locale.
     const BYTEWISE_NAME: &'static str = "c.name COLLATE \"C\"";
     const POSITION_FN: &'static str = "strpos";
+    /// A transaction-scoped advisory lock on the name's 64-bit hash (a
+    /// collision only makes two names wait for each other).
+    const LOCK_NAME: Option<&'static str> = Some("SELECT pg_advisory_xact_lock(hashtextextended($1, 0))");
 
     fn string_list(items: &[String]) -> Vec<String> {
         items.to_vec()

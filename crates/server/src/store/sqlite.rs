@@ -62,6 +62,8 @@ impl Dialect for Sqlite {
         "INSERT INTO clip_joints (clip_id, joint) SELECT DISTINCT $1, value FROM json_each($2)";
     const BYTEWISE_NAME: &'static str = "c.name";
     const POSITION_FN: &'static str = "instr";
+    /// `BEGIN IMMEDIATE` takes the database's write lock: writers are serial.
+    const LOCK_NAME: Option<&'static str> = None;
 
     fn string_list(items: &[String]) -> String {
         serde_json::Value::from(items).to_string()
