@@ -31,9 +31,10 @@ use anyhow::{Context, bail};
 use clap::Args;
 use serde::Serialize;
 
-use anim::Interpolation;
+use anim::{Interpolation, Playback};
 use formats::import::{
-    Format, ImportLimits, ImportOptions, SNIFF_BYTES, Source, Warning, file_stem, import_from, sniff,
+    Format, ImportError, ImportLimits, ImportOptions, SCALE_RANGE, SNIFF_BYTES, Source, UpAxis, Warning, detect,
+    file_stem, import_from,
 };
 use formats::wire::json::ClipDoc;
 
@@ -53,6 +54,26 @@ pub struct ImportArgs {
     /// named after the file).
     #[arg(long)]
     name: Option<String>,
+    /// Prepended to every clip's name: a folder such as `fox/`.
+    #[arg(long)]
+    name_prefix: Option<String>,
+    /// The file's up axis: y (glTF's), or z to turn Z-up data into Y-up
+    /// (−90° about X at the roots: rest, keys, mesh).
+    #[arg(long, default_value = "y", value_parser = ["y", "z"])]
+    up: String,
+    /// Every length times this (translations, mesh positions, inverse
+    /// binds): 0.01 for a file in centimetres.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_scale)]
+    scale: f32,
+    /// Every clip's playback: loop (as three.js plays actions), once or
+    /// ping_pong.
+    #[arg(long, default_value = "loop", value_parser = ["once", "loop", "ping_pong"])]
+    playback: String,
+    /// With --server: a clip whose name a stored clip has becomes its new
+    /// version (same id), so the command can be run again; without it such
+    /// an import is refused (409 name_taken).
+    #[arg(long, requires = "server")]
+    replace: bool,
     /// Upload each clip to this server (e.g. http://127.0.0.1:8080)
     /// instead of printing the documents.
     #[arg(long)]
@@ -90,6 +111,14 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
         name: args.name.clone(),
         file_name: path.file_name().and_then(|n| file_stem(&n.to_string_lossy())),
         fix_hemispheres: args.fix.is_some(),
+        name_prefix: args.name_prefix.clone(),
+        up: if args.up == "z" { UpAxis::Z } else { UpAxis::Y },
+        scale: args.scale,
+        playback: match args.playback.as_str() {
+            "once" => Playback::Once,
+            "ping_pong" => Playback::PingPong,
+            _ => Playback::Loop,
+        },
         limits,
     };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -121,6 +150,16 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--scale`: a finite factor within the importer's range.
+fn parse_scale(text: &str) -> Result<f32, String> {
+    let scale: f32 = text.parse().map_err(|_| format!("`{text}` is not a number"))?;
+    if SCALE_RANGE.contains(&scale) {
+        Ok(scale)
+    } else {
+        Err(format!("must be within {:?} (0.01 turns centimetres into metres)", SCALE_RANGE))
+    }
+}
+
 /// The file at `path` as a source read by range, if it is within `max_bytes`.
 fn open(path: &Path, max_bytes: u64) -> Result<Source, String> {
     let file = std::fs::File::open(path).map_err(|e| format!("reading {}: {e}", path.display()))?;
@@ -138,9 +177,14 @@ fn format_of(path: &Path, source: &Source) -> anyhow::Result<Format> {
         return Ok(f);
     }
     let head = source.head(SNIFF_BYTES).with_context(|| format!("reading {}", path.display()))?;
-    match sniff(&head, None) {
-        Some(f) => Ok(f),
-        None => bail!("{}: cannot tell the format; pass --format gltf|glb|bvh", path.display()),
+    match detect(&head, None) {
+        Ok(f) => Ok(f),
+        // An FBX file needs converting, not another --format.
+        Err(e @ ImportError::Fbx) => bail!("{}: {e} ({})", path.display(), e.code()),
+        Err(_) if ext.as_deref() == Some("fbx") => {
+            bail!("{}: {} ({})", path.display(), ImportError::Fbx, ImportError::Fbx.code())
+        }
+        Err(_) => bail!("{}: cannot tell the format; pass --format gltf|glb|bvh", path.display()),
     }
 }
 
@@ -203,6 +247,15 @@ impl Upload<'_> {
         }
         if let Some(fix) = &self.args.fix {
             query.push(("fix", fix.clone()));
+        }
+        if let Some(prefix) = &self.args.name_prefix {
+            query.push(("name_prefix", prefix.clone()));
+        }
+        query.push(("up", self.args.up.clone()));
+        query.push(("scale", self.args.scale.to_string()));
+        query.push(("playback", self.args.playback.clone()));
+        if self.args.replace {
+            query.push(("replace", "true".into()));
         }
         query
     }

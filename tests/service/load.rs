@@ -177,8 +177,10 @@ async fn motion_streams_play_three_layers_at_the_asked_rate() {
     let listed = app.list_all(100, None).await;
     let names: Vec<&str> = listed.iter().filter_map(|c| c["name"].as_str()).collect();
     for name in ["load-chain-20", "load-run-20", "load-upper-20"] {
-        assert_eq!(names.iter().filter(|n| **n == name).count(), 3, "{name} uploaded once per run: {names:?}");
+        assert_eq!(names.iter().filter(|n| **n == name).count(), 1, "{name} held by one clip: {names:?}");
     }
+    let versions: Vec<u64> = listed.iter().filter_map(|c| c["version"].as_u64()).collect();
+    assert!(versions.iter().all(|&v| v == 3), "each run uploaded a new version of each: {versions:?}");
 }
 
 /// Streams of the foot-ik motion (issue 17): the load uploads its walk and
@@ -195,7 +197,8 @@ async fn foot_ik_streams_play_at_the_asked_rate() {
     }
     let listed = app.list_all(100, None).await;
     let names: Vec<&str> = listed.iter().filter_map(|c| c["name"].as_str()).collect();
-    assert_eq!(names, ["load-walk-20"; 3], "the walk uploaded once per run");
+    assert_eq!(names, ["load-walk-20"], "names identify clips: one walk");
+    assert_eq!(listed[0]["version"], 3, "uploaded once per run, each a new version");
 }
 
 /// Viewers of one broadcast (docs/broadcasts.md; issue 19): the load creates a

@@ -21,19 +21,34 @@ fn import_ok(args: &[&str]) -> Value {
 
 #[test]
 fn prints_clip_documents_that_parse_and_build() {
-    for (rel, clips) in
-        [("gltf/InterpolationTest/InterpolationTest.gltf", 9), ("gltf/Fox/Fox.glb", 3), ("bvh/05_20-daz.bvh", 1)]
-    {
+    // Fox and the DAZ take are in centimetres: said, and silenced by the scale the warning names.
+    for (rel, clips, units) in [
+        ("gltf/InterpolationTest/InterpolationTest.gltf", 9, None),
+        ("gltf/Fox/Fox.glb", 3, Some("/nodes")),
+        ("bvh/05_20-daz.bvh", 1, Some("/HIERARCHY")),
+    ] {
         let path = testdata(rel);
         let out = import_ok(&[path.to_str().unwrap()]);
         let docs = out["clips"].as_array().unwrap();
         assert_eq!(docs.len(), clips, "{rel}");
-        assert_eq!(out["warnings"], json!([]));
+        let expected = units.map_or(json!([]), |at| json!([["units_look_like_centimeters", at]]));
+        let codes: Vec<Value> =
+            (out["warnings"].as_array().unwrap().iter()).map(|w| json!([w["code"], w["pointer"]])).collect();
+        assert_eq!(Value::from(codes), expected, "{rel}");
+        let scaled = import_ok(&[path.to_str().unwrap(), "--scale", "0.01"]);
+        assert_eq!(scaled["warnings"], json!([]), "{rel} with --scale 0.01");
         for doc in docs {
+            assert_eq!(doc["playback"], "loop", "imports loop by default");
             let (_, spec) = parse_clip(&serde_json::to_vec(doc).unwrap()).unwrap();
             Clip::build(&spec).unwrap();
         }
     }
+    let once =
+        import_ok(&[testdata("gltf/Fox/Fox.glb").to_str().unwrap(), "--playback", "once", "--name-prefix", "fox/"]);
+    assert_eq!(
+        (once["clips"][1]["name"].as_str(), once["clips"][1]["playback"].as_str()),
+        (Some("fox/Walk"), Some("once"))
+    );
     let bvh = import_ok(&[testdata("bvh/131_01.bvh").to_str().unwrap(), "--interpolation", "catmull_rom"]);
     assert_eq!(bvh["clips"][0]["name"], "131_01", "BVH clips are named after the file");
     assert_eq!(bvh["clips"][0]["tracks"][0]["interpolation"], "catmull_rom");
@@ -89,4 +104,27 @@ fn reports_bad_files_on_stderr_with_the_code() {
     assert!(!out.status.success());
     assert!(out.stdout.is_empty());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad_frame_time"));
+}
+
+/// An FBX file is refused by name with the conversion, not with a hint to
+/// pass `--format`, whatever its extension.
+#[test]
+fn an_fbx_file_is_refused_with_the_conversion() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, body) in [
+        ("hero.fbx", &b"Kaydara FBX Binary  \x00\x1a\x00\xe8\x1c\x00\x00"[..]),
+        ("hero.dat", &b"; FBX 7.4.0 project file\nFBXHeaderExtension:  {\n"[..]),
+        ("ascii.fbx", &b"FBXHeaderExtension:  {\n"[..]),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, body).unwrap();
+        let out = inbetween(&["import", path.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name}");
+        assert!(
+            stderr.contains("fbx_not_supported") && stderr.contains("FBX2glTF") && stderr.contains("Blender"),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("--format"), "{name}: converting, not --format, is the fix: {stderr}");
+    }
 }

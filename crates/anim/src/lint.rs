@@ -86,10 +86,13 @@ pub const NORM_TOLERANCE: f64 = 0.01;
 pub const W_FIRST_MIN_KEYS: usize = 3;
 pub const W_FIRST_FAR_DEG: f64 = 120.0;
 pub const W_FIRST_NEAR_DEG: f64 = 60.0;
-/// Frame-number rule: at least this many keys, spanning at least
-/// [`FRAMES_MIN_SPAN`] "seconds", at consecutive integer times.
-pub const FRAMES_MIN_KEYS: usize = 10;
+/// Frame-number rule: at least [`FRAMES_MIN_KEYS`] keys at evenly spaced
+/// whole-number times (0, 6, 12, …) spanning at least [`FRAMES_MIN_SPAN`]
+/// "seconds", or a run of at least [`FRAMES_MIN_RUN`] consecutive whole
+/// numbers, however short (0, 1, 2, 3, 4: five frames, not five seconds).
+pub const FRAMES_MIN_KEYS: usize = 3;
 pub const FRAMES_MIN_SPAN: f64 = 10.0;
+pub const FRAMES_MIN_RUN: usize = 5;
 
 /// Every warning about `spec`, track by track, in track order.
 pub fn lint(spec: &ClipSpec) -> Vec<Lint> {
@@ -127,24 +130,29 @@ pub fn times(spec: &ClipSpec) -> Option<Lint> {
         field: "times",
         key: None,
         detail: format!(
-            "the {} keys of the '{}' {} track{also} sit at consecutive whole numbers {t0}..{tn}: these look \
-             like frame numbers, not seconds, so the clip lasts {} s; divide the times by the frame rate",
+            "the {} keys of the '{}' {} track{also} sit at {} whole numbers {t0}, {}, …, {tn}: these look like \
+             frame numbers, not seconds, so the clip lasts {} s; divide the times by the frame rate",
             track.times.len(),
             track.joint,
             track.channel.as_str(),
+            if track.times[1] - t0 == 1.0 { "consecutive" } else { "evenly spaced" },
+            track.times[1],
             tn - t0
         ),
     })
 }
 
-/// At least [`FRAMES_MIN_KEYS`] times, each a whole number one more than
-/// the last, spanning at least [`FRAMES_MIN_SPAN`].
+/// Whole-number times a whole step apart: at least [`FRAMES_MIN_KEYS`]
+/// spanning at least [`FRAMES_MIN_SPAN`], or at least [`FRAMES_MIN_RUN`]
+/// one apart.
 fn looks_like_frames(times: &[f32]) -> bool {
     let (Some(&first), Some(&last)) = (times.first(), times.last()) else { return false };
-    times.len() >= FRAMES_MIN_KEYS
-        && f64::from(last - first) >= FRAMES_MIN_SPAN
-        && times.iter().all(|t| t.fract() == 0.0)
-        && times.windows(2).all(|w| w[1] - w[0] == 1.0)
+    if times.len() < FRAMES_MIN_KEYS || !times.iter().all(|t| t.fract() == 0.0) {
+        return false;
+    }
+    let step = times[1] - first;
+    let even = step >= 1.0 && times.windows(2).all(|w| w[1] - w[0] == step);
+    even && (f64::from(last - first) >= FRAMES_MIN_SPAN || (step == 1.0 && times.len() >= FRAMES_MIN_RUN))
 }
 
 /// The joint's rest rotation as given (identity without a skeleton entry).
@@ -316,7 +324,7 @@ mod tests {
     }
 
     #[test]
-    fn consecutive_whole_seconds_over_ten_seconds_look_like_frames() {
+    fn evenly_spaced_whole_numbers_and_short_runs_look_like_frames() {
         let track = |n: usize, step: f32| {
             let times = (0..n).map(|i| i as f32 * step).collect();
             TrackSpec::new(
@@ -327,10 +335,15 @@ mod tests {
                 Keys::Vec3(vec![glam::Vec3::ZERO; n]),
             )
         };
-        assert_eq!(codes(&clip(vec![track(11, 1.0)])), [("times_look_like_frames", "/tracks/0/times".into())]);
-        assert_eq!(codes(&clip(vec![track(10, 1.0)])), [], "9 s is not long");
+        let frames = [("times_look_like_frames", "/tracks/0/times".into())];
+        assert_eq!(codes(&clip(vec![track(11, 1.0)])), frames);
+        assert_eq!(codes(&clip(vec![track(5, 1.0)])), frames, "a short run: 0..4");
+        assert_eq!(codes(&clip(vec![track(3, 6.0)])), frames, "0, 6, 12: every sixth frame");
+        assert_eq!(codes(&clip(vec![track(11, 2.0)])), frames, "every other frame");
+        assert_eq!(codes(&clip(vec![track(4, 1.0)])), [], "0..3: a few seconds, keyed each second");
+        assert_eq!(codes(&clip(vec![track(3, 4.0)])), [], "0, 4, 8: under 10 s");
+        assert_eq!(codes(&clip(vec![track(2, 20.0)])), [], "two keys say nothing");
         assert_eq!(codes(&clip(vec![track(30, 0.5)])), []);
-        assert_eq!(codes(&clip(vec![track(11, 2.0)])), [], "not 1 apart");
     }
 
     #[test]

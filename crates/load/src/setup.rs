@@ -36,9 +36,10 @@ async fn upload_layer_clips(http: &Url, joints: usize) -> anyhow::Result<LayerCl
     })
 }
 
-/// Uploads a clip document and returns its id.
+/// Uploads a clip document and returns its id: a new version of the clip
+/// of that name when an earlier run left it (names identify clips).
 pub async fn upload_clip(http: &Url, clip: &Value) -> anyhow::Result<String> {
-    let url = http.join("/v1/clips")?;
+    let url = http.join("/v1/clips?replace=true")?;
     let resp = reqwest::Client::new()
         .post(url.clone())
         .json(clip)
@@ -47,7 +48,7 @@ pub async fn upload_clip(http: &Url, clip: &Value) -> anyhow::Result<String> {
         .with_context(|| format!("uploading the load clip to {url}"))?;
     let status = resp.status();
     let body: Value = resp.json().await.context("reading the upload reply")?;
-    if status != 201 {
+    if status != 201 && status != 200 {
         bail!("uploading the load clip: {status}: {body}");
     }
     body["id"].as_str().map(str::to_owned).context("the upload reply has no id")

@@ -48,6 +48,10 @@ pub enum ApiError {
     ClipNotFoundAt { at: At, detail: String },
     #[error("method not allowed")]
     MethodNotAllowed,
+    /// A write whose name another clip has (`name_taken`), or one that
+    /// names a clip by a name several share (`ambiguous_name`): 409.
+    #[error("{detail}")]
+    NameConflict { code: &'static str, pointer: String, detail: String },
     #[error("the clip is at version {current}; If-Match did not match")]
     PreconditionFailed { current: u64 },
     /// A body over a size limit: `setting` names the limit (`max_body_bytes`,
@@ -185,6 +189,7 @@ impl ApiError {
             Forbidden { .. } => StatusCode::FORBIDDEN,
             NotFound { .. } | ClipNotFoundAt { .. } => StatusCode::NOT_FOUND,
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+            NameConflict { .. } => StatusCode::CONFLICT,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
@@ -195,6 +200,7 @@ impl ApiError {
             Import { class: ErrorClass::Malformed, .. } => StatusCode::BAD_REQUEST,
             Import { class: ErrorClass::TooLarge, .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Import { class: ErrorClass::Unprocessable, .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            Import { class: ErrorClass::UnsupportedFormat, .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             Timeout { .. } | Unavailable(_) | WriteRace { .. } | StoreQueueFull { .. } => {
                 StatusCode::SERVICE_UNAVAILABLE
             }
@@ -211,7 +217,11 @@ impl ApiError {
         use ApiError::*;
         match self {
             MalformedJson { .. } => "malformed_json",
-            Invalid { code, .. } | BadParameter { code, .. } | TooMany { code, .. } | Import { code, .. } => code,
+            Invalid { code, .. }
+            | BadParameter { code, .. }
+            | TooMany { code, .. }
+            | Import { code, .. }
+            | NameConflict { code, .. } => code,
             Unauthorized => "unauthorized",
             Forbidden { .. } => "insufficient_scope",
             NotFound { what: "route" } => "route_not_found",
@@ -241,7 +251,9 @@ impl ApiError {
 
     fn pointer(&self) -> Option<&str> {
         match self {
-            ApiError::MalformedJson { pointer, .. } | ApiError::TooMany { pointer, .. } => Some(pointer),
+            ApiError::MalformedJson { pointer, .. }
+            | ApiError::TooMany { pointer, .. }
+            | ApiError::NameConflict { pointer, .. } => Some(pointer),
             ApiError::Invalid { at: At::Pointer(pointer), .. }
             | ApiError::ClipNotFoundAt { at: At::Pointer(pointer), .. }
             | ApiError::BadParameter { at: At::Pointer(pointer), .. } => Some(pointer),
@@ -296,6 +308,23 @@ impl From<StoreError> for ApiError {
         match e {
             StoreError::NotFound => ApiError::NotFound { what: "clip" },
             StoreError::VersionMismatch { current } => ApiError::PreconditionFailed { current },
+            StoreError::NameTaken { name, id } => ApiError::NameConflict {
+                code: "name_taken",
+                pointer: "/name".into(),
+                detail: format!(
+                    "a clip named {name:?} exists ({id}): names identify clips; choose another name, or write with \
+                     replace=true to make this a new version of that clip"
+                ),
+            },
+            StoreError::AmbiguousName { name, ids } => ApiError::NameConflict {
+                code: "ambiguous_name",
+                pointer: "/name".into(),
+                detail: format!(
+                    "several clips are named {name:?} ({}), stored before names were unique: address one by id, or \
+                     delete or rename the others",
+                    ids.join(", ")
+                ),
+            },
             StoreError::Unavailable(cause) => ApiError::Unavailable(Some(anyhow::Error::from_boxed(cause))),
             StoreError::Backend(cause) => ApiError::Internal(anyhow::Error::from_boxed(cause)),
         }
@@ -408,6 +437,8 @@ impl ApiError {
             Forbidden { .. } => Code::PermissionDenied,
             NotFound { .. } | ClipNotFoundAt { .. } => Code::NotFound,
             MethodNotAllowed => Code::Unimplemented,
+            NameConflict { code: "name_taken", .. } => Code::AlreadyExists,
+            NameConflict { .. } => Code::FailedPrecondition,
             PreconditionFailed { .. } => Code::FailedPrecondition,
             PayloadTooLarge { .. } | AnswerTooLargeForUnary { .. } => Code::ResourceExhausted,
             Import { class: ErrorClass::TooLarge, .. } => Code::ResourceExhausted,

@@ -32,7 +32,7 @@ use crate::request::{
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
-use crate::store::{ClipMeta, is_clip_id};
+use crate::store::{ClipMeta, OnName, is_clip_id};
 use crate::stream::{self, Control, ControlError, Engine, StreamParams, WireFrame};
 use crate::work::{Cancel, Ticket};
 use anim::{SampleOptions, Sampler};
@@ -586,7 +586,8 @@ impl Animation for GrpcService {
         let limits = &self.state.config.limits;
         let admitted = crate::builds::document(&self.state.work, &caller.key(), limits, doc).await?;
         let meta = if req.clip_id.is_empty() {
-            self.state.store.create(admitted.new_clip).await.map_err(ApiError::from)?
+            let on_name = if req.replace { OnName::Replace } else { OnName::Refuse };
+            self.state.store.create(admitted.new_clip, on_name).await.map_err(ApiError::from)?
         } else {
             if !is_clip_id(&req.clip_id) {
                 return Err(ApiError::NotFound { what: "clip" }.into());

@@ -73,7 +73,9 @@ async fn a_b_spline_clip_is_stored_and_posed_over_rest_and_grpc() {
     assert_eq!(pb::Interpolation::BSpline as i32, 5, "the wire number is part of the contract");
     assert_eq!(pb::Interpolation::BSpline.as_str_name(), "INTERPOLATION_B_SPLINE");
     let (_, spec) = formats::wire::json::parse_clip(clip().to_string().as_bytes()).unwrap();
-    let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
+    // The import above named it `smooth`: a new version of that clip.
+    let put =
+        pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), replace: true, ..Default::default() };
     assert!(put.clip.as_ref().unwrap().tracks.iter().all(|t| t.interpolation == pb::Interpolation::BSpline as i32));
     let created = grpc.put_clip(put).await.unwrap().into_inner();
     for t in [0, 1] {

@@ -147,8 +147,9 @@ async fn put_clip_over_the_budget_gets_the_rest_code() {
     let small = looping_hermite("under", 1, 2, 1.0);
     assert_eq!(app.create(&small, None).await["name"], "under");
     let spec = parse_clip(small.as_bytes()).unwrap().1;
-    let put = pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), ..Default::default() };
-    assert_eq!(app.grpc().await.put_clip(put).await.unwrap().into_inner().version, 1);
+    let put =
+        pb::PutClipRequest { clip: Some(formats::wire::proto::clip_to_pb(&spec)), replace: true, ..Default::default() };
+    assert_eq!(app.grpc().await.put_clip(put).await.unwrap().into_inner().version, 2, "a new version of `under`");
     app.stop().await;
 }
 

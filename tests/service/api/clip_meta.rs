@@ -101,7 +101,7 @@ async fn tags_and_metadata_round_trip_and_are_checked() {
     let listed = app.get_json("/v1/clips?tag=greeting").await;
     assert_eq!(listed["clips"][0]["tags"], json!(["greeting", "upper body"]));
     // Without either, the document has neither and the summary an empty list.
-    let plain = app.create(WAVE, None).await;
+    let plain = app.create(&WAVE.replacen("\"wave\"", "\"plain\"", 1), None).await;
     assert_eq!(plain["tags"], json!([]));
     let plain_doc = app.get_json(&format!("/v1/clips/{}", plain["id"].as_str().unwrap())).await;
     assert!(plain_doc.get("tags").is_none() && plain_doc.get("metadata").is_none(), "{plain_doc}");

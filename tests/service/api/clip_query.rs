@@ -185,6 +185,7 @@ async fn grpc_list_clips_filters_like_rest() {
     let clip = crate::security::wave_pb();
     let put = pb::PutClipRequest {
         clip: Some(clip),
+        replace: true,
         tags: vec!["grpc".into()],
         metadata_json: r#"{"from":"grpc"}"#.into(),
         ..Default::default()

@@ -47,8 +47,8 @@ async fn pagination_walks_every_clip_exactly_once_in_creation_order() {
     let app = TestApp::start().await;
     let mut ids = Vec::new();
     for i in 0..23 {
-        let name = if i % 3 == 0 { "even-third" } else { "other" };
-        let s = app.create(&uniform_clip(name, 1, 2, i as f32), None).await;
+        let name = if i % 3 == 0 { format!("even-third/{i}") } else { format!("other/{i}") };
+        let s = app.create(&uniform_clip(&name, 1, 2, i as f32), None).await;
         ids.push(s["id"].as_str().unwrap().to_owned());
     }
     for page in [1, 5, 23, 100] {
@@ -56,11 +56,11 @@ async fn pagination_walks_every_clip_exactly_once_in_creation_order() {
             app.list_all(page, None).await.iter().map(|s| s["id"].as_str().unwrap().to_owned()).collect();
         assert_eq!(listed, ids, "page size {page}");
     }
-    let body: Value = app.get_json("/v1/clips?name=even-third&limit=3").await;
+    let body: Value = app.get_json("/v1/clips?name_prefix=even-third/&limit=3").await;
     let first: Vec<&str> = body["clips"].as_array().unwrap().iter().map(|c| c["id"].as_str().unwrap()).collect();
     assert_eq!(first, [&ids[0], &ids[3], &ids[6]]);
     let next = body["next_cursor"].as_str().unwrap();
-    let body: Value = app.get_json(&format!("/v1/clips?name=even-third&limit=10&cursor={next}")).await;
+    let body: Value = app.get_json(&format!("/v1/clips?name_prefix=even-third/&limit=10&cursor={next}")).await;
     let rest: Vec<&str> = body["clips"].as_array().unwrap().iter().map(|c| c["id"].as_str().unwrap()).collect();
     let expected: Vec<&str> = ids.iter().skip(9).step_by(3).map(String::as_str).collect();
     assert_eq!(rest, expected);

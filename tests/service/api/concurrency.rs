@@ -19,7 +19,8 @@ const READS_EACH: usize = 12;
 /// that every value in it agrees (a torn write would mix two `k`s).
 fn whole_version(doc: &Value) -> f64 {
     let name = doc["name"].as_str().unwrap();
-    let k: f64 = name.trim_start_matches('v').parse().unwrap();
+    // `v{k}`, or `v{k}/{c}` for the c-th clip of the same start.
+    let k: f64 = name.trim_start_matches('v').split('/').next().unwrap().parse().unwrap();
     for track in doc["tracks"].as_array().unwrap() {
         for v in track["values"].as_array().unwrap() {
             for x in v.as_array().unwrap() {
@@ -85,8 +86,9 @@ async fn concurrent_writers_and_readers_see_whole_monotonic_versions() {
     let app = TestApp::builder().configure(|c| c.limits.max_in_flight_per_client = 64).start().await;
     let mut ids = Vec::new();
     for c in 0..CLIPS {
-        ids.push(app.create(&uniform_clip("v0", 2, 2, 0.0), None).await["id"].as_str().unwrap().to_owned());
-        let _ = c;
+        ids.push(
+            app.create(&uniform_clip(&format!("v0/{c}"), 2, 2, 0.0), None).await["id"].as_str().unwrap().to_owned(),
+        );
     }
     let writers = (0..WRITERS).map(|w| writer(&app, &ids, w));
     let readers = (0..READERS).map(|r| reader(&app, &ids, r));

@@ -27,7 +27,9 @@ async fn every_self_contained_testdata_file_imports_and_poses_like_the_library()
     for &(file, format, clips) in FILES {
         let bytes = testdata(file);
         // No ?format: the server infers it from the bytes.
-        let resp = app.http.post(app.url("/v1/clips/import")).body(bytes.clone()).send().await.unwrap();
+        // Unnamed animations of two files are both `animation0`: each file in a folder of its own.
+        let url = app.url(&format!("/v1/clips/import?name_prefix={file}/"));
+        let resp = app.http.post(url).body(bytes.clone()).send().await.unwrap();
         assert_eq!(resp.status(), 201, "{file}: {}", resp.text().await.unwrap());
         let body: Value = resp.json().await.unwrap();
         let stored = body["clips"].as_array().unwrap();
@@ -36,7 +38,7 @@ async fn every_self_contained_testdata_file_imports_and_poses_like_the_library()
         let expected = import(&bytes, format, &ImportOptions::default()).unwrap();
         for (summary, spec) in stored.iter().zip(&expected.clips) {
             let clip = Clip::build(spec).unwrap();
-            assert_eq!(summary["name"], spec.name.as_str(), "{file}");
+            assert_eq!(summary["name"], format!("{file}/{}", spec.name), "{file}");
             assert_eq!(summary["joints"], clip.joint_count(), "{file}");
             let id = summary["id"].as_str().unwrap();
             let mut sampler = Sampler::new();
@@ -67,12 +69,12 @@ async fn every_self_contained_testdata_file_imports_and_poses_like_the_library()
 #[tokio::test]
 async fn bvh_options_and_morph_free_results() {
     let app = TestApp::start().await;
-    let url = app.url("/v1/clips/import?format=bvh&interpolation=catmull_rom&name=walk");
+    let url = app.url("/v1/clips/import?format=bvh&interpolation=catmull_rom&name=walk&scale=0.0564");
     let resp = app.http.post(url).body(testdata("bvh/131_03.bvh")).send().await.unwrap();
     assert_eq!(resp.status(), 201);
     let body: Value = resp.json().await.unwrap();
     assert_eq!(body["clips"][0]["name"], "walk");
-    assert_eq!(body["warnings"], json!([]), "warnings are always listed, and a CMU take has none");
+    assert_eq!(body["warnings"], json!([]), "warnings are always listed, and a CMU take in metres has none");
     let id = body["clips"][0]["id"].as_str().unwrap();
     let doc: Value = app.get_json(&format!("/v1/clips/{id}")).await;
     assert!(doc["tracks"].as_array().unwrap().iter().all(|t| t["interpolation"] == "catmull_rom"));
@@ -92,10 +94,13 @@ async fn bad_files_are_refused_whole_and_store_nothing() {
         ErrorClass::Malformed => 400,
         ErrorClass::TooLarge => 413,
         ErrorClass::Unprocessable => 422,
+        ErrorClass::UnsupportedFormat => 415,
     };
     let cases: Vec<(&str, Vec<u8>, u16, &str)> = vec![
         ("short GLB header", b"glTF\x02\0\0\0".to_vec(), 400, ""),
         ("not a known format", b"hello, world".to_vec(), 400, "unknown_format"),
+        ("a binary FBX", b"Kaydara FBX Binary  \x00\x1a\x00\xe8\x1c\x00\x00".to_vec(), 415, "fbx_not_supported"),
+        ("an ASCII FBX", b"; FBX 7.4.0 project file\nFBXHeaderExtension:  {\n".to_vec(), 415, "fbx_not_supported"),
         ("external .bin buffer", interpolation_test, status_of(external.class()), external.code()),
         ("truncated BVH", truncated, status_of(cut.class()), cut.code()),
     ];

@@ -136,7 +136,7 @@ async fn post_file(addr: SocketAddr, path: &Path) -> (u16, Value) {
     let len = std::fs::metadata(path).unwrap().len();
     let mut s = TcpStream::connect(addr).await.unwrap();
     let head = format!(
-        "POST /v1/clips/import HTTP/1.1\r\nHost: x\r\nContent-Type: model/gltf-binary\r\n\
+        "POST /v1/clips/import?replace=true HTTP/1.1\r\nHost: x\r\nContent-Type: model/gltf-binary\r\n\
          Content-Length: {len}\r\nConnection: close\r\n\r\n"
     );
     s.write_all(head.as_bytes()).await.unwrap();
@@ -385,7 +385,7 @@ async fn a_small_upload_refused_for_its_token_is_read_so_the_client_gets_the_401
     let app = TestApp::builder().write_token("w").start().await;
     let body = vec![0u8; 512 * 1024];
     let head = format!(
-        "POST /v1/clips/import HTTP/1.1\r\nHost: x\r\nContent-Type: model/gltf-binary\r\n\
+        "POST /v1/clips/import?replace=true HTTP/1.1\r\nHost: x\r\nContent-Type: model/gltf-binary\r\n\
          Authorization: Bearer wrong\r\nContent-Length: {}\r\n\r\n",
         body.len()
     );

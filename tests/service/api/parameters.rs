@@ -282,7 +282,8 @@ fn morph_gltf() -> Vec<u8> {
 #[tokio::test]
 async fn gltf_morph_weights_import_as_a_parameter_per_node() {
     let app = TestApp::start().await;
-    let resp = app.http.post(app.url("/v1/clips/import?format=gltf")).body(morph_gltf()).send().await.unwrap();
+    let resp =
+        app.http.post(app.url("/v1/clips/import?format=gltf&playback=once")).body(morph_gltf()).send().await.unwrap();
     let status = resp.status().as_u16();
     let body: Value = resp.json().await.unwrap();
     assert_eq!(status, 201, "{body}");

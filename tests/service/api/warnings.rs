@@ -110,7 +110,7 @@ fn gltf_channel(path: &str, interpolation: &str, times: &[f32], output: &[f32]) 
     g.finish(json!({
         "scene": 0, "scenes": [{"nodes": [0]}],
         "nodes": [{"name": "root", "children": [1]}, {"name": "bone"}],
-        "animations": [{"name": "take",
+        "animations": [{"name": "lift",
             "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}},
                          {"sampler": 1, "target": {"node": 1, "path": path}}],
             "samplers": [{"input": still_times, "output": still},
@@ -224,11 +224,18 @@ fn pairs(list: &[(&str, &str)]) -> Vec<(String, String)> {
 
 /// `POST /v1/clips/import{query}` with `bytes`; asserts 201.
 async fn import(app: &TestApp, query: &str, bytes: Vec<u8>) -> Value {
+    // The tests import one file several ways: each a new version of its clip.
+    let query = if query.is_empty() { "?replace=true".to_owned() } else { format!("{query}&replace=true") };
     let resp = app.http.post(app.url(&format!("/v1/clips/import{query}"))).body(bytes).send().await.unwrap();
     let status = resp.status();
     let body: Value = resp.json().await.unwrap();
     assert_eq!(status, 201, "{body}");
     body
+}
+
+/// `doc` (a clip named `w`) named `name` instead: names identify clips.
+fn renamed(doc: &str, name: &str) -> String {
+    doc.replacen("\"name\":\"w\"", &format!("\"name\":\"{name}\""), 1)
 }
 
 /// The rotation of joint `joint` at `time` of clip `id`, local space.
@@ -260,7 +267,8 @@ async fn clip_uploads_answer_each_code_at_its_pointer_and_store_the_document_unc
         (frames_doc(), ("times_look_like_frames", "/tracks/0/times")),
         (hemisphere_doc(), ("rotation_hemisphere_flips", "/tracks/0/values/1")),
     ];
-    for (doc, expected) in &cases {
+    for (i, (doc, expected)) in cases.iter().enumerate() {
+        let doc = &renamed(doc, &format!("w{i}"));
         let created = app.create(doc, None).await;
         assert_eq!(codes(&created), pairs(&[*expected]), "{doc}");
         let id = created["id"].as_str().unwrap();
@@ -276,7 +284,7 @@ async fn clip_uploads_answer_each_code_at_its_pointer_and_store_the_document_unc
         assert_eq!((codes(&replaced), &replaced["version"]), (pairs(&[*expected]), &json!(2)));
     }
     // Keys off the unit sphere are normalised when sampled: key 0 (norm 2) is the identity.
-    let id = app.create_id(&not_unit_doc(), None).await;
+    let id = app.create_id(&renamed(&not_unit_doc(), "normalised"), None).await;
     assert_same_rotation(rotation_at(&app, &id, "bone", 0.0).await, [0.0, 0.0, 0.0, 1.0], 1e-6, "normalised key");
     // The documented example and a list of clips have none.
     assert_eq!(codes(&app.create(WAVE, None).await), []);
@@ -335,7 +343,7 @@ async fn more_warnings_than_the_cap_end_with_too_many_warnings() {
     let imported = import(&app, "?format=gltf", many_not_unit_gltf(150)).await;
     check(&imported, &|i| format!("/animations/0/channels/{i}"));
     // At the cap exactly, nothing is cut: 100 warnings, the last a track's own.
-    let at_cap = app.create(&many_not_unit_doc(100), None).await;
+    let at_cap = app.create(&many_not_unit_doc(100).replacen("\"many\"", "\"at cap\"", 1), None).await;
     assert_eq!(codes(&at_cap).last().unwrap(), &("rotation_not_unit".to_owned(), "/tracks/99/values/0".to_owned()));
     assert_eq!(codes(&at_cap).len(), 100);
     app.stop().await;
@@ -365,7 +373,8 @@ async fn fix_hemisphere_turns_the_short_way() {
     let id = as_given["clips"][0]["id"].as_str().unwrap();
     assert_same_rotation(rotation_at(&app, id, "bone", 0.5).await, long_way, 1e-5, "keys as given");
 
-    let fixed = import(&app, "?format=gltf&fix=hemisphere", hemisphere_gltf()).await;
+    // Played once, so the clip's end is its last key (a loop would be back at the first).
+    let fixed = import(&app, "?format=gltf&fix=hemisphere&playback=once", hemisphere_gltf()).await;
     assert_eq!(codes(&fixed), pairs(&[("rotation_hemisphere_flips", "/animations/0/channels/1")]));
     assert!(fixed["warnings"][0]["detail"].as_str().unwrap().contains("flipped"), "{fixed}");
     let id = fixed["clips"][0]["id"].as_str().unwrap();
@@ -421,7 +430,7 @@ async fn the_cli_reports_warnings_and_fixes_hemispheres() {
         let (out, stderr) = cli(&[path]).await;
         assert_eq!(codes(&out), pairs(&[*expected]), "{name}");
         assert!(stderr.contains(&format!("{} at {}", expected.0, expected.1)), "{name}: {stderr}");
-        let (uploaded, _) = cli(&[path, "--server", &app.url("")]).await;
+        let (uploaded, _) = cli(&[path, "--server", &app.url(""), "--replace"]).await;
         assert_eq!(codes(&uploaded), pairs(&[*expected]), "{name} --server");
         assert!(uploaded["clips"][0]["id"].is_string(), "{uploaded}");
     }

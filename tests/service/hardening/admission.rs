@@ -317,7 +317,7 @@ async fn creates_from_two_forwarded_clients(trusted: bool) -> (u16, u16) {
             .post(app.url("/v1/clips"))
             .header("content-type", "application/json")
             .header("x-forwarded-for", format!("{client}, 127.0.0.1"))
-            .body(WAVE)
+            .body(WAVE.replacen("\"wave\"", &format!("\"wave from {client}\""), 1))
             .send()
             .await
             .unwrap();

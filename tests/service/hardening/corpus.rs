@@ -88,11 +88,12 @@ impl Server {
     /// with a proper problem body.
     async fn send(&self, area: &str, name: &str, data: Vec<u8>, clip_id: &str) -> Outcome {
         match area {
-            "json" => self.post("/v1/clips", "application/json", data).await,
-            "gltf" => self.post("/v1/clips/import?format=gltf", "model/gltf+json", data).await,
-            "glb" => self.post("/v1/clips/import?format=glb", "model/gltf-binary", data).await,
-            "bvh" => self.post("/v1/clips/import?format=bvh", "application/octet-stream", data).await,
-            "sniff" => self.post("/v1/clips/import", "application/octet-stream", data).await,
+            // Valid documents may share a name: each a new version of that clip.
+            "json" => self.post("/v1/clips?replace=true", "application/json", data).await,
+            "gltf" => self.post("/v1/clips/import?format=gltf&replace=true", "model/gltf+json", data).await,
+            "glb" => self.post("/v1/clips/import?format=glb&replace=true", "model/gltf-binary", data).await,
+            "bvh" => self.post("/v1/clips/import?format=bvh&replace=true", "application/octet-stream", data).await,
+            "sniff" => self.post("/v1/clips/import?replace=true", "application/octet-stream", data).await,
             "http" => self.raw_http(&with_id(data, clip_id)).await,
             "grpc" => {
                 let method = name.split_once('-').map_or(name, |(_, rest)| rest).split('.').next().unwrap();

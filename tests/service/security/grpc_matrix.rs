@@ -11,7 +11,7 @@ use server::auth::Scope;
 use server::routes::ROUTES;
 use tonic::Code;
 
-use super::{ADMIN, Need, Outcome, Role, TestApp, WAVE, expected, scoped_tokens, snapshot, wave_pb, with_token};
+use super::{ADMIN, Need, Outcome, Role, TestApp, expected, fresh_wave, scoped_tokens, snapshot, wave_pb, with_token};
 
 /// The RPCs of the route table (`server::routes`) and what each needs.
 fn rpcs() -> Vec<(&'static str, Need)> {
@@ -36,7 +36,7 @@ fn stream_request(id: &str) -> pb::StreamRequest {
 /// Calls `rpc` as `role` on a fresh clip; `Ok` when the call (and, for
 /// streams, its first frame) succeeded.
 async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status> {
-    let id = app.create_id(WAVE, Some(ADMIN)).await;
+    let id = app.create_id(&fresh_wave(), Some(ADMIN)).await;
     let mut grpc = app.grpc().await;
     let t = role.token();
     match rpc {
@@ -111,7 +111,8 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             other => other.map(drop),
         },
         "PutClip" => {
-            let req = pb::PutClipRequest { clip_id: id, clip: Some(wave_pb()), ..Default::default() };
+            let clip = pb::Clip { name: format!("wave {}", server::store::new_clip_id()), ..wave_pb() };
+            let req = pb::PutClipRequest { clip_id: id, clip: Some(clip), ..Default::default() };
             grpc.put_clip(with_token(req, t)).await.map(drop)
         }
         "DeleteClip" => grpc.delete_clip(with_token(pb::DeleteClipRequest { clip_id: id }, t)).await.map(drop),

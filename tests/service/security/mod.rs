@@ -115,6 +115,12 @@ pub fn with_token<T>(msg: T, token: Option<&str>) -> tonic::Request<T> {
     req
 }
 
+/// The wave clip under a name of its own (names identify clips), for
+/// tests that make a clip per request.
+pub fn fresh_wave() -> String {
+    WAVE.replacen("\"wave\"", &format!("\"wave {}\"", server::store::new_clip_id()), 1)
+}
+
 /// The wave clip as a protobuf `Clip`.
 pub fn wave_pb() -> pb::Clip {
     formats::wire::proto::clip_to_pb(&formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1)

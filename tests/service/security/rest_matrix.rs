@@ -11,7 +11,7 @@ use server::routes::{Class, ROUTES, Route};
 use tokio_tungstenite::tungstenite;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use super::{ADMIN, Need, Outcome, Role, TINY_BVH, TestApp, WAVE, expected, scoped_tokens, snapshot};
+use super::{ADMIN, Need, Outcome, Role, TINY_BVH, TestApp, expected, fresh_wave, scoped_tokens, snapshot};
 
 /// The REST routes of the route table (`server::routes`): method, path,
 /// what each needs and the status it answers when allowed. A route added to
@@ -62,7 +62,7 @@ async fn documented_operations(app: &TestApp) -> Vec<(String, String, bool)> {
 /// refusals, the problem body.
 async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Option<(String, Value)>) {
     // Each call gets its own clip, so a delete or replace cannot disturb the next one.
-    let id = app.create_id(WAVE, Some(ADMIN)).await;
+    let id = app.create_id(&fresh_wave(), Some(ADMIN)).await;
     let motion = serde_json::json!({"layers": [{"clip": id}]});
     // Broadcast routes get a fresh broadcast of that clip, made by the admin.
     let id = if path.starts_with("/v1/broadcasts/") {
@@ -83,10 +83,13 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
     }
     let mut req = app.http.request(method.to_uppercase().parse::<Method>().unwrap(), app.url(&path));
     req = match (method, path.as_str()) {
-        ("post", "/v1/clips") | ("put", _) => req.header("content-type", "application/json").body(WAVE),
+        ("post", "/v1/clips") | ("put", _) => req.header("content-type", "application/json").body(fresh_wave()),
         ("patch", _) => req.header("content-type", "application/merge-patch+json").body(r#"{"tags":["x"]}"#),
         ("post", "/v1/clips/import") => {
-            req.query(&[("format", "bvh")]).header("content-type", "application/octet-stream").body(TINY_BVH)
+            let name = server::store::new_clip_id();
+            req.query(&[("format", "bvh"), ("name", &name)])
+                .header("content-type", "application/octet-stream")
+                .body(TINY_BVH)
         }
         ("post", p) if p.ends_with("/sample") => req.json(&serde_json::json!({"times": [0.0, 0.5]})),
         ("post", "/v1/poses") => req.json(&serde_json::json!({"motion": motion, "time": 0.25})),

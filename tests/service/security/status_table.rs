@@ -23,6 +23,8 @@ pub fn grpc_codes_for(status: u16) -> &'static [Code] {
         404 => &[Code::NotFound],
         405 => &[Code::Unimplemented],
         412 => &[Code::FailedPrecondition],
+        // A name another clip has (ALREADY_EXISTS), or one several share.
+        409 => &[Code::AlreadyExists, Code::FailedPrecondition],
         413 | 429 => &[Code::ResourceExhausted],
         500 => &[Code::Internal],
         // Overloaded or stopping, or a request past its deadline.
@@ -60,6 +62,14 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::Import { class: ErrorClass::Malformed, code: "bad_glb", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::TooLarge, code: "too_many_keys", pointer: None, detail: "x".into() },
         ApiError::Import { class: ErrorClass::Unprocessable, code: "no_animations", pointer: None, detail: "x".into() },
+        ApiError::Import {
+            class: ErrorClass::UnsupportedFormat,
+            code: "fbx_not_supported",
+            pointer: None,
+            detail: "x".into(),
+        },
+        ApiError::NameConflict { code: "name_taken", pointer: "/name".into(), detail: "x".into() },
+        ApiError::NameConflict { code: "ambiguous_name", pointer: "/name".into(), detail: "x".into() },
         ApiError::Timeout { secs: 30 },
         ApiError::BodyTimeout { secs: 10 },
         ApiError::Overloaded { retry_after: 1 },
@@ -109,6 +119,7 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::WorkOverloaded { .. } => 26,
         ApiError::StoreQueueFull { .. } => 27,
         ApiError::Relayed { .. } => 28,
+        ApiError::NameConflict { .. } => 29,
     }
 }
 
@@ -116,7 +127,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 29, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 30, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));

@@ -11,14 +11,17 @@ use crate::common::pg::Schema;
 /// A SQLite file in a temporary directory.
 pub struct Sqlite {
     pub store: Arc<dyn ClipStore>,
+    /// The database file, for tests that write rows as an older server did.
+    pub path: std::path::PathBuf,
     _dir: tempfile::TempDir,
 }
 
 impl Sqlite {
     pub async fn open() -> Sqlite {
         let dir = tempfile::tempdir().unwrap();
-        let store = SqliteStore::open(&dir.path().join("clips.db"), &PoolSettings::default()).await.unwrap();
-        Sqlite { store: Arc::new(store), _dir: dir }
+        let path = dir.path().join("clips.db");
+        let store = SqliteStore::open(&path, &PoolSettings::default()).await.unwrap();
+        Sqlite { store: Arc::new(store), path, _dir: dir }
     }
 }
 

@@ -6,7 +6,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use anim::Playback;
-use server::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError};
+use server::store::{ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, OnName, StoreError};
 
 /// One fixture clip: name, tags, joint names, duration.
 struct Fixture {
@@ -62,7 +62,7 @@ fn new_clip(f: &Fixture) -> NewClip {
 async fn store_fixture(store: &Arc<dyn ClipStore>) -> Vec<String> {
     let mut ids = Vec::new();
     for f in FIXTURE {
-        ids.push(store.create(new_clip(f)).await.unwrap().id);
+        ids.push(store.create(new_clip(f), OnName::Refuse).await.unwrap().id);
     }
     ids
 }

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use anim::Playback;
 use server::store::{
-    ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, StoreError, StoredBroadcast, StoredControl, StoredMesh,
+    ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, OnName, StoreError, StoredBroadcast, StoredControl, StoredMesh,
 };
 
 /// Runs each listed test once per backend: `sqlite::name` and `postgres::name`.
@@ -48,6 +48,7 @@ for_both_backends!(
     create_all_stores_every_clip_in_order,
     concurrent_conditional_replaces_let_exactly_one_win,
     concurrent_creates_all_land,
+    a_name_is_held_by_one_clip_even_under_concurrent_writes,
     ping_answers_until_closed,
     every_filter_pages_through_exactly_its_clips,
     tags_and_joints_follow_replace_and_delete,
@@ -84,7 +85,7 @@ async fn a_created_clip_reads_back_exactly(store: Arc<dyn ClipStore>) {
         joint_names: vec!["root".into()],
         mesh: MeshWrite::None,
     };
-    let meta = store.create(clip).await.unwrap();
+    let meta = store.create(clip, OnName::Refuse).await.unwrap();
     assert_eq!(meta.version, 1);
     assert!(server::store::is_clip_id(&meta.id));
     assert_eq!(meta.created_at, meta.updated_at);
@@ -105,8 +106,8 @@ async fn an_unknown_id_is_none_and_writes_to_it_are_not_found(store: Arc<dyn Cli
 async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn ClipStore>) {
     let mut ids = Vec::new();
     for i in 0..7 {
-        let name = if i % 2 == 0 { "even" } else { "odd" };
-        ids.push(store.create(new_clip(name, &format!("{{\"i\":{i}}}"))).await.unwrap().id);
+        let name = if i % 2 == 0 { format!("even/{i}") } else { format!("odd/{i}") };
+        ids.push(store.create(new_clip(&name, &format!("{{\"i\":{i}}}")), OnName::Refuse).await.unwrap().id);
     }
     let mut seen = Vec::new();
     let mut after = None;
@@ -122,7 +123,7 @@ async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn Clip
     }
     assert_eq!(seen, ids, "every clip once, in creation order");
     let odd = store
-        .list(ListQuery { after: None, name: Some("odd".into()), limit: 100, ..ListQuery::default() })
+        .list(ListQuery { after: None, name_prefix: Some("odd/".into()), limit: 100, ..ListQuery::default() })
         .await
         .unwrap();
     assert_eq!(
@@ -130,15 +131,22 @@ async fn listing_pages_in_creation_order_and_filters_by_name(store: Arc<dyn Clip
         vec![ids[1].clone(), ids[3].clone(), ids[5].clone()]
     );
     let after_first_odd = store
-        .list(ListQuery { after: Some(ids[1].clone()), name: Some("odd".into()), limit: 1, ..ListQuery::default() })
+        .list(ListQuery {
+            after: Some(ids[1].clone()),
+            name_prefix: Some("odd/".into()),
+            limit: 1,
+            ..ListQuery::default()
+        })
         .await
         .unwrap();
     assert_eq!(after_first_odd.len(), 1);
     assert_eq!(after_first_odd[0].id, ids[3]);
+    let one = store.list(ListQuery { name: Some("odd/3".into()), limit: 100, ..ListQuery::default() }).await.unwrap();
+    assert_eq!(one.iter().map(|m| m.id.as_str()).collect::<Vec<_>>(), [ids[3].as_str()]);
 }
 
 async fn replace_bumps_the_version_and_honours_the_expected_one(store: Arc<dyn ClipStore>) {
-    let v1 = store.create(new_clip("a", "{\"v\":1}")).await.unwrap();
+    let v1 = store.create(new_clip("a", "{\"v\":1}"), OnName::Refuse).await.unwrap();
     let replacement = NewClip { doc_json: "{\"v\":2}".into(), stats: stats(9, Playback::Once), ..new_clip("b", "") };
     let v2 = store.replace(&v1.id, replacement, Some(1)).await.unwrap();
     assert_eq!((v2.id.as_str(), v2.version, v2.name.as_str()), (v1.id.as_str(), 2, "b"));
@@ -156,7 +164,7 @@ async fn replace_bumps_the_version_and_honours_the_expected_one(store: Arc<dyn C
 }
 
 async fn delete_honours_the_expected_version(store: Arc<dyn ClipStore>) {
-    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    let meta = store.create(new_clip("a", "{}"), OnName::Refuse).await.unwrap();
     store.replace(&meta.id, new_clip("a", "{\"v\":2}"), None).await.unwrap();
     match store.delete(&meta.id, Some(1)).await {
         Err(StoreError::VersionMismatch { current }) => assert_eq!(current, 2),
@@ -170,7 +178,7 @@ async fn delete_honours_the_expected_version(store: Arc<dyn ClipStore>) {
 
 async fn create_all_stores_every_clip_in_order(store: Arc<dyn ClipStore>) {
     let clips: Vec<NewClip> = (0..5).map(|i| new_clip(&format!("anim{i}"), &format!("{{\"i\":{i}}}"))).collect();
-    let metas = store.create_all(clips).await.unwrap();
+    let metas = store.create_all(clips, OnName::Refuse).await.unwrap();
     assert_eq!(metas.len(), 5);
     let listed = store.list(ListQuery { after: None, name: None, limit: 10, ..ListQuery::default() }).await.unwrap();
     assert_eq!(listed, metas, "listed in creation order, exactly as returned");
@@ -180,7 +188,7 @@ async fn create_all_stores_every_clip_in_order(store: Arc<dyn ClipStore>) {
 }
 
 async fn concurrent_conditional_replaces_let_exactly_one_win(store: Arc<dyn ClipStore>) {
-    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    let meta = store.create(new_clip("a", "{}"), OnName::Refuse).await.unwrap();
     let tasks: Vec<_> = (0..8)
         .map(|i| {
             let (store, id) = (store.clone(), meta.id.clone());
@@ -206,7 +214,9 @@ async fn concurrent_creates_all_land(store: Arc<dyn ClipStore>) {
     let tasks: Vec<_> = (0..16)
         .map(|i| {
             let store = store.clone();
-            tokio::spawn(async move { store.create(new_clip("c", &format!("{{\"i\":{i}}}"))).await.unwrap().id })
+            tokio::spawn(async move {
+                store.create(new_clip(&format!("c/{i}"), &format!("{{\"i\":{i}}}")), OnName::Refuse).await.unwrap().id
+            })
         })
         .collect();
     let mut ids = Vec::new();
@@ -214,13 +224,65 @@ async fn concurrent_creates_all_land(store: Arc<dyn ClipStore>) {
         ids.push(t.await.unwrap());
     }
     let listed = store
-        .list(ListQuery { after: None, name: Some("c".into()), limit: 100, ..ListQuery::default() })
+        .list(ListQuery { after: None, name_prefix: Some("c/".into()), limit: 100, ..ListQuery::default() })
         .await
         .unwrap();
     let mut listed: Vec<String> = listed.into_iter().map(|m| m.id).collect();
     listed.sort();
     ids.sort();
     assert_eq!(listed, ids);
+}
+
+/// Names identify clips: of concurrent creates of one new name exactly one
+/// lands, every other is refused naming it; `Replace` makes a new version
+/// of the clip holding the name (same id, one row), also under contention;
+/// a rename to a taken name is refused, a replace keeping its name is not.
+async fn a_name_is_held_by_one_clip_even_under_concurrent_writes(store: Arc<dyn ClipStore>) {
+    let tasks: Vec<_> = (0..8)
+        .map(|i| {
+            let store = store.clone();
+            tokio::spawn(async move { store.create(new_clip("walk", &format!("{{\"i\":{i}}}")), OnName::Refuse).await })
+        })
+        .collect();
+    let (mut won, mut taken) = (Vec::new(), 0);
+    for t in tasks {
+        match t.await.unwrap() {
+            Ok(meta) => won.push(meta),
+            Err(StoreError::NameTaken { name, .. }) if name == "walk" => taken += 1,
+            Err(e) => panic!("unexpected {e:?}"),
+        }
+    }
+    assert_eq!((won.len(), taken), (1, 7), "one create of a new name lands");
+    let holder = won.pop().unwrap();
+    match store.create(new_clip("walk", "{}"), OnName::Refuse).await {
+        Err(StoreError::NameTaken { id, .. }) => assert_eq!(id, holder.id),
+        other => panic!("a taken name must be refused, got {other:?}"),
+    }
+    let replaces: Vec<_> = (0..6)
+        .map(|i| {
+            let store = store.clone();
+            tokio::spawn(
+                async move { store.create(new_clip("walk", &format!("{{\"r\":{i}}}")), OnName::Replace).await },
+            )
+        })
+        .collect();
+    let mut versions = Vec::new();
+    for t in replaces {
+        let meta = t.await.unwrap().unwrap();
+        assert_eq!(meta.id, holder.id, "a replace by name keeps the id");
+        versions.push(meta.version);
+    }
+    versions.sort();
+    assert_eq!(versions, [2, 3, 4, 5, 6, 7], "each replace one new version");
+    let named = store.list(ListQuery { name: Some("walk".into()), limit: 10, ..ListQuery::default() }).await.unwrap();
+    assert_eq!(named.len(), 1);
+    let fresh = store.create(new_clip("run", "{}"), OnName::Replace).await.unwrap();
+    assert_eq!(fresh.version, 1, "replace=true of a new name creates");
+    match store.replace(&fresh.id, new_clip("walk", "{}"), None).await {
+        Err(StoreError::NameTaken { id, .. }) => assert_eq!(id, holder.id),
+        other => panic!("a rename to a taken name must be refused, got {other:?}"),
+    }
+    assert_eq!(store.replace(&fresh.id, new_clip("run", "{\"v\":2}"), None).await.unwrap().version, 2);
 }
 
 async fn ping_answers_until_closed(store: Arc<dyn ClipStore>) {
@@ -233,6 +295,58 @@ mod durability;
 mod postgres_only;
 mod upgrade;
 
+const SHARE_A_NAME: &str = "UPDATE clips SET name = 'dup' WHERE id = $1 OR id = $2";
+
+/// Two clips made to share a name behind the store's back, as a server
+/// from before names were unique could store them: their ids.
+async fn two_named_dup(store: &Arc<dyn ClipStore>) -> (String, String) {
+    let a = store.create(new_clip("a", "{}"), OnName::Refuse).await.unwrap().id;
+    let b = store.create(new_clip("b", "{}"), OnName::Refuse).await.unwrap().id;
+    (a, b)
+}
+
+/// Clips that already share a name keep it (and may be replaced keeping
+/// it); a new clip of that name is refused, and a replace by the name
+/// cannot tell which is meant: `AmbiguousName` with both ids.
+async fn shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous(
+    store: Arc<dyn ClipStore>,
+    a: String,
+    b: String,
+) {
+    let named = store.list(ListQuery { name: Some("dup".into()), limit: 10, ..ListQuery::default() }).await.unwrap();
+    assert_eq!(named.len(), 2);
+    assert!(matches!(store.create(new_clip("dup", "{}"), OnName::Refuse).await, Err(StoreError::NameTaken { .. })));
+    match store.create(new_clip("dup", "{}"), OnName::Replace).await {
+        Err(StoreError::AmbiguousName { name, mut ids }) => {
+            ids.sort();
+            let mut expected = vec![a.clone(), b.clone()];
+            expected.sort();
+            assert_eq!((name.as_str(), ids), ("dup", expected));
+        }
+        other => panic!("a replace by a shared name must be ambiguous, got {other:?}"),
+    }
+    assert_eq!(store.replace(&a, new_clip("dup", "{\"v\":2}"), None).await.unwrap().version, 2, "kept name");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sqlite_shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous() {
+    let backend = backend::Sqlite::open().await;
+    let (a, b) = two_named_dup(&backend.store).await;
+    let raw = sqlx::SqlitePool::connect(&format!("sqlite://{}", backend.path.display())).await.unwrap();
+    sqlx::query(SHARE_A_NAME).bind(&a).bind(&b).execute(&raw).await.unwrap();
+    raw.close().await;
+    shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous(backend.store.clone(), a, b).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn postgres_shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous() {
+    let Some(backend) = backend::Postgres::open("sharednames").await else { return };
+    let (a, b) = two_named_dup(&backend.store).await;
+    sqlx::query(SHARE_A_NAME).bind(&a).bind(&b).execute(backend.pg.pool()).await.unwrap();
+    shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous(backend.store.clone(), a, b).await;
+    backend.finish().await;
+}
+
 /// A mesh is written in its clip's transaction, read back byte for byte,
 /// kept by a replace that says `Keep` (a PATCH), dropped by one that does
 /// not (a PUT), and gone with its clip.
@@ -240,8 +354,11 @@ async fn a_mesh_is_written_kept_dropped_and_deleted_with_its_clip(store: Arc<dyn
     let bytes: Vec<u8> = (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect();
     let mesh = StoredMesh { etag: "\"m-1\"".into(), bytes: bytes.clone().into() };
     let with_mesh = NewClip { mesh: MeshWrite::Set(mesh.clone()), ..new_clip("fox", "{}") };
-    let plain = store.create(new_clip("plain", "{}")).await.unwrap();
-    let metas = store.create_all(vec![with_mesh.clone(), with_mesh]).await.unwrap();
+    let plain = store.create(new_clip("plain", "{}"), OnName::Refuse).await.unwrap();
+    let metas = store
+        .create_all(vec![with_mesh.clone(), NewClip { name: "fox 2".into(), ..with_mesh }], OnName::Refuse)
+        .await
+        .unwrap();
     let id = &metas[0].id;
     assert_eq!(store.mesh(id).await.unwrap(), Some(mesh.clone()));
     assert_eq!(store.mesh_tag(id).await.unwrap(), Some(Some(mesh.etag.clone())));

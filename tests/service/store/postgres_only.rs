@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use server::store::PoolSettings;
+use server::store::{OnName, PoolSettings};
 use sqlx::postgres::PgListener;
 
 use super::backend::Postgres;
@@ -22,7 +22,7 @@ async fn every_committed_change_is_announced_on_the_schema_channel() {
     listener.listen(backend.pg.channel()).await.unwrap();
     assert!(backend.pg.channel().ends_with(&backend.schema.name), "one channel per schema");
 
-    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    let meta = store.create(new_clip("a", "{}"), OnName::Refuse).await.unwrap();
     assert_eq!(next_payload(&mut listener).await, format!("create 1 {}", meta.id));
     store.replace(&meta.id, new_clip("a", "{\"v\":2}"), None).await.unwrap();
     assert_eq!(next_payload(&mut listener).await, format!("replace 2 {}", meta.id));
@@ -30,7 +30,7 @@ async fn every_committed_change_is_announced_on_the_schema_channel() {
     assert!(store.replace(&meta.id, new_clip("a", "{}"), Some(1)).await.is_err());
     store.delete(&meta.id, Some(2)).await.unwrap();
     assert_eq!(next_payload(&mut listener).await, format!("delete 2 {}", meta.id));
-    let metas = store.create_all(vec![new_clip("x", "{}"), new_clip("y", "{}")]).await.unwrap();
+    let metas = store.create_all(vec![new_clip("x", "{}"), new_clip("y", "{}")], OnName::Refuse).await.unwrap();
     for m in &metas {
         assert_eq!(next_payload(&mut listener).await, format!("create 1 {}", m.id));
     }
@@ -68,7 +68,7 @@ async fn the_store_rides_out_terminated_connections() {
         return;
     };
     let store = &backend.store;
-    let meta = store.create(new_clip("a", "{}")).await.unwrap();
+    let meta = store.create(new_clip("a", "{}"), OnName::Refuse).await.unwrap();
     // Warm several pooled connections, then have the server kill them all.
     let reads: Vec<_> = (0..3).map(|_| store.get(&meta.id)).collect();
     for r in futures_util::future::join_all(reads).await {

@@ -123,6 +123,16 @@ async fn errors_map_to_grpc_status_codes() {
         req.metadata_mut().insert("authorization", "Bearer s3cret".parse().unwrap());
         req
     }
+    // Names identify clips: the wave uploaded above holds its name (ALREADY_EXISTS, as REST's 409).
+    let taken = grpc.put_clip(authed(put)).await.unwrap_err();
+    assert_eq!(
+        (taken.code(), taken.metadata().get("x-error-code").unwrap().to_str().unwrap()),
+        (Code::AlreadyExists, "name_taken")
+    );
+    assert!(taken.message().contains("(at /name)"), "{}", taken.message());
+    let mut clip = clip;
+    clip.as_mut().unwrap().name = "wave over grpc".into();
+    let put = pb::PutClipRequest { clip: clip.clone(), ..Default::default() };
     let created = grpc.put_clip(authed(put)).await.unwrap().into_inner();
     assert_eq!((created.version, created.joints, created.tracks, created.end), (1, 2, 2, 3.0));
 

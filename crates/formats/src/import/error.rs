@@ -2,7 +2,7 @@
 //!
 //! Every variant but [`ImportError::Read`] is the client's fault (a
 //! malformed, hostile, oversized or unsupported file): the edge maps
-//! [`ErrorClass`] to 400, 413 or 422 and sends [`ImportError::code`] with the
+//! [`ErrorClass`] to 400, 413, 415 or 422 and sends [`ImportError::code`] with the
 //! message. `Read` is the caller's own source failing (its file could not be
 //! read), which the server answers as an internal error. The
 //! messages name the offending object by its glTF index or BVH line so a
@@ -10,7 +10,7 @@
 
 use anim::{ClipError, ClipErrorKind};
 
-/// How an edge should treat an [`ImportError`] (HTTP: 400, 413, 422).
+/// How an edge should treat an [`ImportError`] (HTTP: 400, 413, 415, 422).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ErrorClass {
     /// The bytes are not a well-formed file of the format (400).
@@ -19,6 +19,8 @@ pub enum ErrorClass {
     TooLarge,
     /// Well-formed, but its content cannot be imported (422).
     Unprocessable,
+    /// A file of a format the importers do not read (415).
+    UnsupportedFormat,
 }
 
 /// An upload that cannot be imported. `code()` is stable for clients.
@@ -26,6 +28,11 @@ pub enum ErrorClass {
 pub enum ImportError {
     #[error("the format could not be recognised: expected glTF JSON, GLB or BVH")]
     UnknownFormat,
+    #[error(
+        "this is an FBX file, which is not imported: convert it to glTF (GLB) first, with Blender's glTF exporter \
+         (File ▸ Import ▸ FBX, then File ▸ Export ▸ glTF 2.0) or FBX2glTF (`FBX2glTF --binary file.fbx`)"
+    )]
+    Fbx,
     #[error("too large: {what} is {found}, the limit is {max}")]
     TooLarge { what: &'static str, max: u64, found: u64 },
     #[error(
@@ -84,6 +91,7 @@ impl ImportError {
         use ImportError::*;
         match self {
             UnknownFormat => "unknown_format",
+            Fbx => "fbx_not_supported",
             TooLarge { .. } => "too_large",
             ResolvedTooLarge { .. } => "resolved_bytes_too_large",
             DocumentTooLarge { .. } => "document_too_large",
@@ -118,6 +126,7 @@ impl ImportError {
             TooLarge { .. } | ResolvedTooLarge { .. } | DocumentTooLarge { .. } | TooDeep { .. } => {
                 ErrorClass::TooLarge
             }
+            Fbx => ErrorClass::UnsupportedFormat,
             UnknownFormat | Container(_) | Json(_) | DataUri { .. } | BvhSyntax { .. } => ErrorClass::Malformed,
             _ => ErrorClass::Unprocessable,
         }

@@ -18,12 +18,13 @@ use glam::{DMat4, Mat4, Quat, Vec3, Vec4};
 use super::accessor::{Expect, read_f32};
 use super::budget::{Budget, read_document};
 use super::buffers::{Buffers, split_glb};
+use super::convention;
 use super::error::ImportError;
 use super::mesh::{MeshPlan, MeshReader, Palette};
-use super::names::{clip_name, unique_names};
+use super::names::{clip_name, is_generic_animation_name, unique_names};
 use super::source::Source;
 use super::spec::{Format, ImportOptions, Imported, Resolver};
-use super::warning::{NOT_IMPORTED, Warning};
+use super::warning::{GENERIC_ANIMATION_NAME, NOT_IMPORTED, Warning};
 use anim::lint::{self, Lint, LintCode};
 use anim::{
     Channel, ClipSpec, Interpolation, JointSpec, Keys, MAX_PARAMETER_WIDTH, ParameterSpec, Playback, SkeletonSpec,
@@ -88,6 +89,9 @@ pub fn import(
         mesh_plan,
         meshes: HashMap::new(),
         mesh_bytes: 0,
+        scene_name: (doc.default_scene().or_else(|| doc.scenes().next()))
+            .and_then(|s| s.name().map(str::to_owned))
+            .filter(|n| !n.trim().is_empty() && !is_generic_animation_name(n)),
     };
     let (mut clips, mut meshes) = (Vec::new(), Vec::new());
     for animation in doc.animations() {
@@ -260,6 +264,9 @@ struct Ctx<'d, 'r> {
     /// their bytes together (bounded by `max_mesh_bytes`).
     meshes: HashMap<Vec<usize>, Option<bytes::Bytes>>,
     mesh_bytes: u64,
+    /// The default (or first) scene's name, if it says something: what an
+    /// animation is named after when neither it nor the file has a name.
+    scene_name: Option<String>,
 }
 
 /// Where a clip's track came from: its channel and that channel's sampler.
@@ -290,15 +297,27 @@ impl Ctx<'_, '_> {
         let a = animation.index();
         let own = animation.name().filter(|s| !s.is_empty());
         let base = own.map_or_else(|| format!("animation{a}"), str::to_owned);
-        let name = match (&self.options.name, animation_count, own, &self.options.file_name) {
+        let generic = own.filter(|own| is_generic_animation_name(own));
+        // An unnamed or generically named animation is named after its file, else its scene.
+        let file = self.options.file_name.as_ref().or(self.scene_name.as_ref());
+        let name = match (&self.options.name, animation_count, own.filter(|_| generic.is_none()), file) {
             (Some(prefix), 1, ..) => prefix.clone(),
             (Some(prefix), ..) => format!("{prefix}/{base}"),
             (None, _, Some(own), _) => own.to_owned(),
-            // An unnamed animation is named after its file.
             (None, 1, None, Some(file)) => file.clone(),
             (None, _, None, Some(file)) => format!("{file}/{base}"),
             (None, _, None, None) => base.clone(),
         };
+        if let (Some(generic), None) = (generic, &self.options.name) {
+            self.warnings.push(Warning::new(
+                GENERIC_ANIMATION_NAME,
+                format!("/animations/{a}/name"),
+                format!(
+                    "animation {a} is named '{generic}', a name exporters give every animation: the clip is named \
+                     '{name}' instead (after the file, else the scene); choose one with name="
+                ),
+            ));
+        }
         let Channels { tracks, refs, parameters, animated } = self.channel_tracks(animation, &base)?;
         if tracks.is_empty() && parameters.is_empty() {
             self.warnings.push(Warning::new(
@@ -324,6 +343,7 @@ impl Ctx<'_, '_> {
         };
         let lints = lint::lint(&clip);
         self.warnings.extend(lints.iter().map(|l| Warning::from_lint(l, lint_pointer(a, &refs, l))));
+        self.warnings.extend(scaled_translation(&clip, &refs, a));
         Ok(Some((clip, skins)))
     }
 
@@ -697,6 +717,35 @@ impl Ctx<'_, '_> {
         }
         Ok(self.inverse_binds.get_or_insert_with(HashMap::new))
     }
+}
+
+/// The first translation track whose joint's parents scale it far from 1
+/// (a Mixamo file through Blender: `Armature` scaled 0.01 over hips keyed in
+/// centimetres), as a warning: its keys, and root motion read from them, are
+/// not in the pose's units.
+fn scaled_translation(clip: &ClipSpec, refs: &[ChannelRef], a: usize) -> Option<Warning> {
+    let (i, track, parents) = (clip.tracks.iter().enumerate())
+        .filter(|(_, t)| t.channel == Channel::Translation)
+        .find_map(|(i, t)| convention::parent_scale(clip, &t.joint).map(|s| (i, t, s)))?;
+    let (code, unit) = if (parents.ln() - 0.0254f32.ln()).abs() < (parents.ln() - 0.01f32.ln()).abs() {
+        (convention::UNITS_INCHES, "inches")
+    } else {
+        (convention::UNITS_CENTIMETERS, "centimetres")
+    };
+    let pointer =
+        refs.get(i).map_or_else(|| format!("/animations/{a}"), |r| format!("/animations/{a}/channels/{}", r.channel));
+    Some(Warning::new(
+        code,
+        pointer,
+        format!(
+            "the translation keys of '{}' are in {unit} while the pose is in metres: its parents scale it by {parents} \
+             (a Mixamo file exported through Blender does this), so root motion read from them moves {} times too \
+             far; apply the armature's scale before exporting (Blender: Object ▸ Apply ▸ All Transforms on the \
+             armature, then export glTF again)",
+            track.joint,
+            1.0 / parents
+        ),
+    ))
 }
 
 /// Where in the glTF file a lint about track `lint.track` of animation `a`

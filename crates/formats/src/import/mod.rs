@@ -49,6 +49,7 @@ mod accessor;
 mod budget;
 mod buffers;
 mod bvh;
+pub mod convention;
 mod error;
 mod gltf;
 mod image;
@@ -60,9 +61,9 @@ pub mod warning;
 
 pub use budget::{Budget, read_document};
 pub use error::{ErrorClass, ImportError};
-pub use names::{clip_name, unique_names};
+pub use names::{clip_name, is_generic_animation_name, unique_names};
 pub use source::Source;
-pub use spec::{Format, ImportLimits, ImportOptions, Imported, Resolver};
+pub use spec::{Format, ImportLimits, ImportOptions, Imported, Resolver, SCALE_RANGE, UpAxis};
 pub use warning::Warning;
 
 /// Guesses the format of an upload: the magic bytes first (they cannot
@@ -87,6 +88,41 @@ pub fn sniff(bytes: &[u8], content_type: Option<&str>) -> Option<Format> {
     } else {
         None
     }
+}
+
+/// [`sniff`], or why not: an FBX file by name ([`ImportError::Fbx`]),
+/// anything else [`ImportError::UnknownFormat`].
+///
+/// # Errors
+/// As said.
+pub fn detect(head: &[u8], content_type: Option<&str>) -> Result<Format, ImportError> {
+    if is_fbx(head) {
+        return Err(ImportError::Fbx);
+    }
+    sniff(head, content_type).ok_or(ImportError::UnknownFormat)
+}
+
+/// Prefixes every clip's name, then makes the names unique within the
+/// file (a later clip of a taken name gets `#<i>`): names identify clips.
+fn name_clips(clips: &mut [anim::ClipSpec], prefix: Option<&str>) {
+    let names = clips.iter().map(|c| clip_name(&format!("{}{}", prefix.unwrap_or(""), c.name))).collect();
+    for (clip, name) in clips.iter_mut().zip(unique_names(names)) {
+        clip.name = name;
+    }
+}
+
+/// Whether the bytes begin an FBX file: binary (`Kaydara FBX Binary`) or
+/// ASCII (its `; FBX 7.4.0 project file` comment, or `FBXHeaderExtension:`
+/// as its first key). FBX is refused by name ([`ImportError::Fbx`]), with the
+/// conversion that makes it importable, rather than as an unknown format.
+pub fn is_fbx(head: &[u8]) -> bool {
+    if head.starts_with(b"Kaydara FBX Binary") {
+        return true;
+    }
+    let text = head.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(head);
+    let start = text.iter().position(|b| !b.is_ascii_whitespace()).map_or(&[][..], |i| &text[i..]);
+    let upper = |n: usize| start[..start.len().min(n)].to_ascii_uppercase();
+    upper(5).starts_with(b"; FBX") || upper(19).starts_with(b"FBXHEADEREXTENSION")
 }
 
 /// A file name without its directory and extension (`walk.bvh` → `walk`),
@@ -139,13 +175,22 @@ pub fn import_from(
     resolver: Option<Resolver<'_>>,
 ) -> Result<Imported, ImportError> {
     let limits = &options.limits;
+    if is_fbx(&source.head(64)?) {
+        return Err(ImportError::Fbx);
+    }
     if source.len() > limits.max_bytes {
         return Err(ImportError::TooLarge { what: "the upload (bytes)", max: limits.max_bytes, found: source.len() });
     }
-    let mut imported = match format {
-        Format::Gltf | Format::Glb => gltf::import(source, format, options, resolver)?,
-        Format::Bvh => bvh::import(&read_document(source, "the BVH file", limits)?, options)?,
+    if !SCALE_RANGE.contains(&options.scale) {
+        let detail = format!("scale must be within {SCALE_RANGE:?}, got {}", options.scale);
+        return Err(ImportError::Unsupported(detail));
+    }
+    let (mut imported, skeleton_pointer) = match format {
+        Format::Gltf | Format::Glb => (gltf::import(source, format, options, resolver)?, "/nodes"),
+        Format::Bvh => (bvh::import(&read_document(source, "the BVH file", limits)?, options)?, "/HIERARCHY"),
     };
+    convention::apply(&mut imported, options, skeleton_pointer);
+    name_clips(&mut imported.clips, options.name_prefix.as_deref());
     imported.warnings = warning::capped(std::mem::take(&mut imported.warnings));
     for clip in &imported.clips {
         Clip::build_within(clip, limits.max_build_work)

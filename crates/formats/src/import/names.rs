@@ -42,3 +42,47 @@ pub fn unique_names(names: Vec<String>) -> Vec<String> {
         })
         .collect()
 }
+
+/// Whether an animation name says nothing of the motion: what exporters
+/// write when the author named nothing (`mixamo.com`, `Take 001`,
+/// `Armature|…`, `ArmatureAction`, `Action`, `Action.001`, `animation_0`,
+/// `Animation`, `Scene`, `default`). Such a name is replaced, with a
+/// `generic_animation_name` warning.
+pub fn is_generic_animation_name(name: &str) -> bool {
+    let lower = name.trim().to_ascii_lowercase();
+    // Blender's `.001` suffixes and trailing numbers add nothing.
+    let stem =
+        lower.split('.').next().unwrap_or("").trim_end_matches(|c: char| c.is_ascii_digit() || c == '_' || c == ' ');
+    lower == "mixamo.com"
+        || lower.starts_with("armature|")
+        || lower.starts_with("armatureaction")
+        || matches!(stem, "take" | "action" | "animation" | "anim" | "scene" | "default" | "clip" | "")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exporters_default_names_are_generic_and_authored_ones_are_not() {
+        for generic in [
+            "mixamo.com",
+            "Take 001",
+            "Armature|mixamo.com|Layer0",
+            "Armature|Walk",
+            "ArmatureAction",
+            "Action",
+            "Action.001",
+            "animation_0",
+            "Animation",
+            "Scene",
+            "default",
+            "take",
+        ] {
+            assert!(is_generic_animation_name(generic), "{generic}");
+        }
+        for named in ["Walk", "Run", "Survey", "Take off", "Actions of a hero", "fox/walk", "wave"] {
+            assert!(!is_generic_animation_name(named), "{named}");
+        }
+    }
+}

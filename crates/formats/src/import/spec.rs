@@ -2,7 +2,7 @@
 //! and limits, the imported clips, and the resolver for external buffers.
 //! Every importer reads these, so they live apart from the entry points.
 
-use anim::{ClipSpec, Interpolation};
+use anim::{ClipSpec, Interpolation, Playback};
 
 use super::source::Source;
 use super::warning::Warning;
@@ -40,6 +40,31 @@ impl std::str::FromStr for Format {
         }
     }
 }
+
+/// The axis a file calls up. glTF and this server are Y-up; `Z` turns the
+/// file's roots by −90° about X (`import::convention`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UpAxis {
+    #[default]
+    Y,
+    Z,
+}
+
+impl std::str::FromStr for UpAxis {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "y" | "Y" => Ok(UpAxis::Y),
+            "z" | "Z" => Ok(UpAxis::Z),
+            _ => Err(format!("`up` must be y or z, got `{s}`")),
+        }
+    }
+}
+
+/// The bounds of [`ImportOptions::scale`]: a factor outside them is a typo
+/// (or would take lengths past what f32 keeps).
+pub const SCALE_RANGE: std::ops::RangeInclusive<f32> = 1e-6..=1e6;
 
 /// Bounds on what one import may read and produce. Each is checked before
 /// the corresponding allocation, so a small hostile file cannot make the
@@ -133,6 +158,16 @@ pub struct ImportOptions {
     /// turns the short way (Blender 3.x's exporter writes such keys). Off by
     /// default: the glTF spec says to use keys as given.
     pub fix_hemispheres: bool,
+    /// Prepended to every clip's name (a folder such as `fox/`).
+    pub name_prefix: Option<String>,
+    /// The file's up axis (`Z`: turned into Y-up at the roots).
+    pub up: UpAxis,
+    /// Every length times this (translations, mesh positions, inverse
+    /// binds), within [`SCALE_RANGE`]: `0.01` for a file in centimetres.
+    pub scale: f32,
+    /// Every clip's playback mode: `Loop` by default, as three.js plays
+    /// actions (glTF and BVH say nothing of looping).
+    pub playback: Playback,
     pub limits: ImportLimits,
 }
 
@@ -143,6 +178,10 @@ impl Default for ImportOptions {
             name: None,
             file_name: None,
             fix_hemispheres: false,
+            name_prefix: None,
+            up: UpAxis::Y,
+            scale: 1.0,
+            playback: Playback::Loop,
             limits: ImportLimits::default(),
         }
     }

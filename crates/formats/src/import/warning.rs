@@ -27,6 +27,9 @@ pub struct Warning {
 /// A part of a file the importer left out (a channel or animation it does
 /// not support, a conflicting inverse bind matrix).
 pub const NOT_IMPORTED: &str = "not_imported";
+/// An animation named as exporters name every animation (`mixamo.com`,
+/// `Take 001`): the clip was named after the file instead.
+pub const GENERIC_ANIMATION_NAME: &str = "generic_animation_name";
 /// The last warning of a list cut at [`MAX_WARNINGS`].
 pub const TOO_MANY_WARNINGS: &str = "too_many_warnings";
 /// At most this many warnings per answer: a file with a problem on every

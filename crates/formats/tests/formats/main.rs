@@ -5,6 +5,7 @@
 //! forward kinematics), plus a table of hostile inputs.
 
 mod bvh;
+mod conventions;
 mod files;
 mod fuzz_regressions;
 mod gltf_interpolation;

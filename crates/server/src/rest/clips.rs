@@ -95,11 +95,16 @@ fn written(meta: &ClipMeta, status: StatusCode, location: bool, lints: &[Lint]) 
 /// Upload a clip: the JSON document of `docs/clip-format.md`.
 #[utoipa::path(
     post, path = "/v1/clips", tag = "clips",
+    params(
+        ("replace" = Option<bool>, Query, description = "true: when a clip has this name, store the upload as its new version (same id, 200) instead of refusing it (409 name_taken)"),
+    ),
     request_body(content = formats::wire::json::ClipDoc, content_type = "application/json"),
     responses(
         (status = 201, description = "Stored; `Location` names the clip; `warnings` lists what looks valid but probably wrong", body = ClipWritten),
+        (status = 200, description = "With replace=true, stored as the new version of the clip of that name", body = ClipWritten),
         (status = 400, description = "Not JSON", body = super::schemas::Problem),
         (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
+        (status = 409, description = "A clip has this name (name_taken), or several clips stored before names were unique do (ambiguous_name, with replace=true)", body = super::schemas::Problem),
         (status = 413, description = "Body over the limit", body = super::schemas::Problem),
         (status = 415, description = "Not application/json", body = super::schemas::Problem),
         (status = 422, description = "Invalid clip (code and pointer say why and where)", body = super::schemas::Problem),
@@ -109,12 +114,15 @@ fn written(meta: &ClipMeta, status: StatusCode, location: bool, lints: &[Lint]) 
 pub async fn create_clip(
     State(state): State<AppState>,
     WriteAccess(caller): WriteAccess,
+    Query(params): Query,
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
+    let on_name = params.on_name()?;
     let Admitted { new_clip, clip, lints } = admit_body(&state, &caller.key(), body).await?;
-    let meta = state.store.create(new_clip).await?;
-    tracing::info!(id = %meta.id, name = %meta.name, warnings = lints.len(), "clip created");
-    let response = written(&meta, StatusCode::CREATED, true, &lints);
+    let meta = state.store.create(new_clip, on_name).await?;
+    tracing::info!(id = %meta.id, name = %meta.name, version = meta.version, warnings = lints.len(), "clip created");
+    let status = if meta.version == 1 { StatusCode::CREATED } else { StatusCode::OK };
+    let response = written(&meta, status, true, &lints);
     state.cache_written(Arc::new(CachedClip { meta, clip }));
     Ok(response)
 }

@@ -36,20 +36,20 @@ use utoipa::ToSchema;
 use crate::auth::WriteAccess;
 use crate::cache::CachedClip;
 use crate::config::Limits;
-use crate::error::{ApiError, raise_hint};
+use crate::error::{ApiError, At, raise_hint};
 use crate::limits::{Admitted, admit_doc};
 use crate::spool::{SpooledBody, Spooler};
 use crate::state::AppState;
 use crate::store::{MeshWrite, StoredMesh};
-use anim::Interpolation;
+use anim::{Interpolation, Playback};
 use formats::import::{
-    ErrorClass, Format, ImportError, ImportLimits, ImportOptions, Resolver, SNIFF_BYTES, Source, Warning, file_stem,
-    import_from, sniff,
+    ErrorClass, Format, ImportError, ImportLimits, ImportOptions, Resolver, SCALE_RANGE, SNIFF_BYTES, Source, UpAxis,
+    Warning, detect, file_stem, import_from,
 };
-use formats::wire::json::{ClipDoc, InterpolationDoc};
+use formats::wire::json::{ClipDoc, InterpolationDoc, PlaybackDoc};
 use formats::wire::mesh;
 
-use super::query::Query;
+use super::query::{Query, QueryParams};
 use super::summary::ClipSummary;
 
 /// What an import created, and what in the file looked wrong or was left out.
@@ -68,7 +68,12 @@ pub struct ImportResult {
     params(
         ("format" = Option<String>, Query, pattern = "^(gltf|glb|bvh)$", description = "gltf | glb | bvh; inferred from Content-Type or the bytes when absent"),
         ("interpolation" = Option<String>, Query, pattern = "^(linear|catmull_rom|b_spline)$", description = "BVH keys: linear (default), catmull_rom, or b_spline (approximating: smooths capture jitter)"),
-        ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "Clip name (BVH) or name prefix (glTF with several animations)"),
+        ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "The clip's name (a BVH, or a glTF with one animation); with several animations, each is named NAME/<animation>"),
+        ("name_prefix" = Option<String>, Query, min_length = 1, max_length = 256, description = "Prepended to every clip's name: a folder such as fox/"),
+        ("up" = Option<String>, Query, pattern = "^(y|z)$", description = "The file's up axis: y (default) or z (turned into Y-up by -90 degrees about X at the roots: rest, keys, mesh)"),
+        ("scale" = Option<f64>, Query, description = "Every length times this, 1e-6 to 1e6 (translations, mesh positions, inverse binds): 0.01 for a file in centimetres"),
+        ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "Every clip's playback: loop (default, as three.js plays actions), once or ping_pong"),
+        ("replace" = Option<bool>, Query, description = "true: a clip whose name a stored clip has becomes that clip's new version (same id) instead of refusing the import (409 name_taken)"),
         ("fix" = Option<String>, Query, pattern = "^hemisphere$", description = "hemisphere: flip glTF CUBICSPLINE rotation keys that lie in the opposite hemisphere to the key before (value and tangents), so they turn the short way; off by default, as the glTF spec says to use keys as given (docs/warnings.md, rotation_hemisphere_flips)"),
     ),
     request_body(content = super::schemas::FileBytes, content_type = "application/octet-stream",
@@ -77,7 +82,9 @@ pub struct ImportResult {
         (status = 201, description = "Every clip of the file, stored, with warnings about the file (valid but probably wrong)", body = ImportResult),
         (status = 400, description = "Not a well-formed glTF, GLB or BVH file", body = super::schemas::Problem),
         (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
+        (status = 409, description = "A clip has the name of one the file yields (name_taken: import with replace=true, or name it otherwise), or several stored before names were unique do (ambiguous_name)", body = super::schemas::Problem),
         (status = 413, description = "The file over max_import_bytes, its JSON over max_body_bytes, or its content over another limit (the detail names the limit and how to raise it)", body = super::schemas::Problem),
+        (status = 415, description = "An FBX file (fbx_not_supported: the detail says how to convert it to glTF)", body = super::schemas::Problem),
         (status = 422, description = "Well-formed but not importable (code says why)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
@@ -110,31 +117,9 @@ pub async fn import_clips(
         Some(f) => Some(f.parse::<Format>().map_err(|e| ApiError::parameter("bad_format", "format", e))?),
         None => None,
     };
-    let bvh_interpolation = match params.get("interpolation") {
-        None => Interpolation::Linear,
-        Some(text) => match text.parse::<InterpolationDoc>().map(Interpolation::from) {
-            Ok(i @ (Interpolation::Linear | Interpolation::CatmullRom | Interpolation::BSpline)) => i,
-            _ => {
-                let detail = format!("`interpolation` must be linear, catmull_rom or b_spline, got `{text}`");
-                return Err(ApiError::parameter("bad_interpolation", "interpolation", detail));
-            }
-        },
-    };
-    let fix_hemispheres = match params.get("fix") {
-        None => false,
-        Some("hemisphere") => true,
-        Some(other) => {
-            let detail = format!("`fix` must be hemisphere, got `{other}`");
-            return Err(ApiError::parameter("bad_fix", "fix", detail));
-        }
-    };
-    let options = ImportOptions {
-        bvh_interpolation,
-        name: params.get("name").map(str::to_owned),
-        file_name: file_name.as_deref().and_then(file_stem),
-        fix_hemispheres,
-        limits: import_limits(&state.config.limits),
-    };
+    let on_name = params.on_name()?;
+    let mut options = import_options(&params, &state.config.limits)?;
+    options.file_name = file_name.as_deref().and_then(file_stem);
     let limits = state.config.limits.clone();
     let bytes = document.len();
     let (units, key) = (crate::work::price::import(bytes), caller.key());
@@ -142,8 +127,8 @@ pub async fn import_clips(
         move |cancel| -> Result<_, ApiError> {
             let format = match format {
                 Some(format) => format,
-                None => sniff(&document.head(SNIFF_BYTES).map_err(ApiError::internal)?, content_type.as_deref())
-                    .ok_or_else(|| refused(ImportError::UnknownFormat))?,
+                None => detect(&document.head(SNIFF_BYTES).map_err(ApiError::internal)?, content_type.as_deref())
+                    .map_err(refused)?,
             };
             // A shared handle on the part, never a copy: the importer asks once
             // per name and reads the ranges it needs.
@@ -174,13 +159,84 @@ pub async fn import_clips(
     let (format, admitted, warnings) = importing.await?;
 
     let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
-    let metas = state.store.create_all(new_clips).await?;
+    let metas = state.store.create_all(new_clips, on_name).await?;
     tracing::info!(format = format.as_str(), bytes, clips = metas.len(), warnings = warnings.len(), "file imported");
     let summaries = metas.iter().map(ClipSummary::from).collect();
     for (meta, clip) in metas.into_iter().zip(clips) {
         state.cache_written(Arc::new(CachedClip { meta, clip }));
     }
     Ok((StatusCode::CREATED, Json(ImportResult { clips: summaries, warnings })).into_response())
+}
+
+/// The import's options from its query (every one but `format` and
+/// `replace`), each checked: 400 for a value that does not parse, 422 for a
+/// `scale` out of range.
+fn import_options(params: &QueryParams, limits: &Limits) -> Result<ImportOptions, ApiError> {
+    let bvh_interpolation = match params.get("interpolation") {
+        None => Interpolation::Linear,
+        Some(text) => match text.parse::<InterpolationDoc>().map(Interpolation::from) {
+            Ok(i @ (Interpolation::Linear | Interpolation::CatmullRom | Interpolation::BSpline)) => i,
+            _ => {
+                let detail = format!("`interpolation` must be linear, catmull_rom or b_spline, got `{text}`");
+                return Err(ApiError::parameter("bad_interpolation", "interpolation", detail));
+            }
+        },
+    };
+    let fix_hemispheres = match params.get("fix") {
+        None => false,
+        Some("hemisphere") => true,
+        Some(other) => {
+            let detail = format!("`fix` must be hemisphere, got `{other}`");
+            return Err(ApiError::parameter("bad_fix", "fix", detail));
+        }
+    };
+    let up = match params.get("up") {
+        None => UpAxis::Y,
+        Some(text) => text.parse().map_err(|e| ApiError::parameter("bad_parameter", "up", e))?,
+    };
+    let playback = match params.get("playback") {
+        None => Playback::Loop,
+        Some(text) => text.parse::<PlaybackDoc>().map(Playback::from).map_err(|_| {
+            let detail = format!("`playback` must be once, loop or ping_pong, got `{text}`");
+            ApiError::parameter("bad_parameter", "playback", detail)
+        })?,
+    };
+    Ok(ImportOptions {
+        bvh_interpolation,
+        name: name_parameter(params, "name")?,
+        name_prefix: name_parameter(params, "name_prefix")?,
+        file_name: None,
+        fix_hemispheres,
+        up,
+        scale: scale_parameter(params)?,
+        playback,
+        limits: import_limits(limits),
+    })
+}
+
+/// `scale`: a finite number within [`SCALE_RANGE`] (default 1).
+fn scale_parameter(params: &QueryParams) -> Result<f32, ApiError> {
+    let Some(text) = params.get("scale") else { return Ok(1.0) };
+    let value: f64 = text.trim().parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+        ApiError::parameter("bad_number", "scale", format!("`scale` must be a finite number, got `{text}`"))
+    })?;
+    let scale = value as f32;
+    if !SCALE_RANGE.contains(&scale) {
+        let (lo, hi) = (SCALE_RANGE.start(), SCALE_RANGE.end());
+        let detail = format!("`scale` must be within {lo}..={hi} (0.01 turns centimetres into metres), got {text}");
+        return Err(ApiError::Invalid { code: "scale_out_of_range", at: At::Parameter("scale".into()), detail });
+    }
+    Ok(scale)
+}
+
+/// `name` or `name_prefix`: not blank, at most the core's name length.
+fn name_parameter(params: &QueryParams, which: &str) -> Result<Option<String>, ApiError> {
+    let Some(text) = params.get(which) else { return Ok(None) };
+    if text.trim().is_empty() || text.chars().count() > anim::MAX_NAME_CHARS {
+        let detail = format!("`{which}` must be 1 to {} characters, not blank", anim::MAX_NAME_CHARS);
+        return Err(ApiError::parameter("bad_parameter", which, detail));
+    }
+    Ok(Some(text.to_owned()))
 }
 
 /// The document part, the named sibling parts (each spooled to a file of

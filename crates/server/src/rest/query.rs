@@ -21,6 +21,7 @@ use utoipa::openapi::{OpenApi, RefOr};
 
 use crate::error::ApiError;
 use crate::request::{Raw, RawModes};
+use crate::store::OnName;
 
 /// The query parameters each operation accepts, by route and method.
 #[derive(Debug, Clone, Default)]
@@ -128,6 +129,23 @@ impl QueryParams {
     /// The value of `name` for the request layer, if present.
     pub fn raw(&self, name: &str) -> Option<Raw<'_>> {
         self.get(name).map(Raw::Text)
+    }
+
+    /// `replace=true|false` (default false): whether a write whose name a
+    /// clip has makes a new version of it, or is refused (`name_taken`).
+    ///
+    /// # Errors
+    /// `bad_parameter` for any other value.
+    pub fn on_name(&self) -> Result<OnName, ApiError> {
+        match self.get("replace") {
+            None | Some("false") => Ok(OnName::Refuse),
+            Some("true") => Ok(OnName::Replace),
+            Some(other) => Err(ApiError::parameter(
+                "bad_parameter",
+                "replace",
+                format!("`replace` must be true or false, got `{other}`"),
+            )),
+        }
     }
 
     /// `space`, `playback` and `ease`, for the request layer.

@@ -30,6 +30,10 @@ pub trait Dialect: Database {
     const FORGET_CONTROLS: &'static str;
     /// `f(haystack, needle)`: the 1-based position of a substring, 0 if absent.
     const POSITION_FN: &'static str;
+    /// `$1` a clip name: held until the transaction ends, so two writes of
+    /// one name check and write it one after the other. `None` when
+    /// [`Dialect::BEGIN_WRITE`] already serialises every writer.
+    const LOCK_NAME: Option<&'static str>;
 
     fn string_list(items: &[String]) -> Self::StringList;
 

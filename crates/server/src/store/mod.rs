@@ -172,6 +172,17 @@ pub struct ListQuery {
     pub limit: u32,
 }
 
+/// What a create does when a clip already has the new clip's name (names
+/// identify clips: docs/api.md, "Names").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OnName {
+    /// Refuse the write ([`StoreError::NameTaken`]).
+    #[default]
+    Refuse,
+    /// Make the write a new version of that clip (same id).
+    Replace,
+}
+
 /// Why a store operation did not happen. Backend errors carry their cause
 /// for the logs; the service never shows it to clients.
 #[derive(Debug, thiserror::Error)]
@@ -180,6 +191,13 @@ pub enum StoreError {
     NotFound,
     #[error("the clip is at version {current}")]
     VersionMismatch { current: u64 },
+    /// A create or rename to a name another clip has.
+    #[error("a clip named {name:?} exists ({id})")]
+    NameTaken { name: String, id: String },
+    /// A replace by name when several clips (stored before names were
+    /// unique) share it: which one is meant cannot be told.
+    #[error("several clips are named {name:?}")]
+    AmbiguousName { name: String, ids: Vec<String> },
     #[error("the store is unavailable")]
     Unavailable(#[source] Box<dyn std::error::Error + Send + Sync>),
     #[error("the store failed")]
@@ -188,12 +206,19 @@ pub enum StoreError {
 
 /// Durable clip storage. Implementations are cheap to share (`Arc<dyn _>`).
 pub trait ClipStore: Send + Sync + 'static {
-    /// Inserts a new clip at version 1 with a fresh id. Durable on `Ok`.
-    fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>>;
+    /// Inserts a new clip at version 1 with a fresh id, or (`on_name`:
+    /// [`OnName::Replace`]) replaces the clip of that name. Durable on `Ok`.
+    ///
+    /// # Errors
+    /// [`StoreError::NameTaken`], [`StoreError::AmbiguousName`], or a backend failure.
+    fn create(&self, clip: NewClip, on_name: OnName) -> BoxFuture<'_, Result<ClipMeta, StoreError>>;
 
-    /// Inserts several new clips in one transaction (an imported file's
-    /// animations): all are stored, or none. Durable on `Ok`.
-    fn create_all(&self, clips: Vec<NewClip>) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>>;
+    /// [`ClipStore::create`] for several clips in one transaction (an
+    /// imported file's animations): all are stored, or none. Durable on `Ok`.
+    ///
+    /// # Errors
+    /// As [`ClipStore::create`].
+    fn create_all(&self, clips: Vec<NewClip>, on_name: OnName) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>>;
 
     /// The clip and its document, or `None`.
     fn get<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredClip>, StoreError>>;
@@ -206,7 +231,8 @@ pub trait ClipStore: Send + Sync + 'static {
     ///
     /// # Errors
     /// [`StoreError::NotFound`], [`StoreError::VersionMismatch`] with the
-    /// current version, or a backend failure.
+    /// current version, [`StoreError::NameTaken`] for a rename to another
+    /// clip's name, or a backend failure.
     fn replace<'a>(
         &'a self,
         id: &'a str,

@@ -56,6 +56,9 @@ impl Dialect for Postgres {
     const POSITION_FN: &'static str = "strpos";
     const FORGET_CONTROLS: &'static str =
         "DELETE FROM broadcast_controls WHERE broadcast_id = $1 AND seq <= $2 AND id <> ALL($3::text[])";
+    /// A transaction-scoped advisory lock on the name's 64-bit hash (a
+    /// collision only makes two names wait for each other).
+    const LOCK_NAME: Option<&'static str> = Some("SELECT pg_advisory_xact_lock(hashtextextended($1, 0))");
 
     fn string_list(items: &[String]) -> Vec<String> {
         items.to_vec()

@@ -30,8 +30,8 @@ use super::dialect::Dialect;
 use super::filter::list_query;
 use super::retry::{Retry, RetryPolicy, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, PoolSettings, StoreError, StoredBroadcast, StoredCheckpoint,
-    StoredClip, StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
+    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, OnName, PoolSettings, StoreError, StoredBroadcast,
+    StoredCheckpoint, StoredClip, StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
 };
 
 /// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
@@ -52,6 +52,9 @@ const REPLACE_CLIP: &str = concat!(
     "WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2) RETURNING ",
     meta_columns!()
 );
+/// The clips holding a name (at most a few: more say nothing more).
+const NAMED: &str = "SELECT id FROM clips WHERE name = $1 ORDER BY id LIMIT 8";
+const NAME_OF: &str = "SELECT name FROM clips WHERE id = $1";
 const DELETE_CLIP: &str = "DELETE FROM clips WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)";
 const CLIP_VERSION: &str = "SELECT version FROM clips WHERE id = $1";
 const CLIP_JOINTS: &str = "SELECT joints FROM clips WHERE id = $1";
@@ -179,6 +182,7 @@ where
     for<'q> String: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
     for<'q> &'q str: Encode<'q, DB> + Type<DB>,
     for<'q> i64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
+    for<'q> Option<i64>: Encode<'q, DB>,
     for<'q> f64: Encode<'q, DB> + Decode<'q, DB> + Type<DB>,
     for<'q> &'q [u8]: Encode<'q, DB> + Type<DB>,
     for<'q> Vec<u8>: Decode<'q, DB> + Type<DB>,
@@ -240,21 +244,101 @@ where
         Ok(())
     }
 
-    /// Inserts `clips` in one transaction, tolerating the duplicate of an
-    /// earlier attempt that committed them all (all or nothing).
-    async fn insert_all(&self, metas: &[ClipMeta], clips: &[NewClip], attempt: u32) -> Result<(), sqlx::Error> {
+    /// The ids of the clips named `name` (in the caller's transaction, after
+    /// taking the name's lock, so no other write of it can slip in between).
+    async fn holders(db: &mut DB::Connection, name: &str) -> Result<Vec<String>, sqlx::Error> {
+        if let Some(lock) = DB::LOCK_NAME {
+            sqlx::query(lock).bind(name).execute(&mut *db).await?;
+        }
+        sqlx::query_scalar(NAMED).bind(name).fetch_all(&mut *db).await
+    }
+
+    /// Writes `clips` in one transaction, each a new clip, or the new
+    /// version of the one holding its name as `on_name` allows. An earlier
+    /// attempt that committed them is recognised by its own ids.
+    async fn insert_all(
+        &self,
+        metas: &[ClipMeta],
+        clips: &[NewClip],
+        on_name: OnName,
+        attempt: u32,
+    ) -> Result<Result<Vec<ClipMeta>, StoreError>, sqlx::Error> {
         let r = async {
             let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
+            let mut written = Vec::with_capacity(clips.len());
             for (meta, clip) in metas.iter().zip(clips) {
-                Self::insert(&mut tx, meta, clip).await?;
+                let ids = Self::holders(&mut tx, &clip.name).await?;
+                let refused = match (ids.as_slice(), on_name) {
+                    ([], _) => {
+                        Self::insert(&mut tx, meta, clip).await?;
+                        written.push(meta.clone());
+                        continue;
+                    }
+                    (ids, _) if ids.contains(&meta.id) => return Ok(Ok(metas.to_vec())),
+                    ([id], OnName::Replace) => {
+                        let row = Self::update(&mut tx, id, clip, None, meta.updated_at).await?;
+                        written.push(row.ok_or(sqlx::Error::RowNotFound)?);
+                        continue;
+                    }
+                    ([id, ..], OnName::Refuse) => StoreError::NameTaken { name: clip.name.clone(), id: id.clone() },
+                    (ids, _) => StoreError::AmbiguousName { name: clip.name.clone(), ids: ids.to_vec() },
+                };
+                tx.rollback().await?;
+                return Ok(Err(refused));
             }
-            tx.commit().await
+            tx.commit().await?;
+            Ok(Ok(written))
         }
         .await;
         match r {
-            Err(e) if !is_own_duplicate::<DB>(&e, attempt) => Err(e),
-            _ => Ok(()),
+            Err(e) if is_own_duplicate::<DB>(&e, attempt) => Ok(Ok(metas.to_vec())),
+            other => other,
         }
+    }
+
+    /// The replace statement and the index rows, in the caller's
+    /// transaction; `None` when no row matched (no such id, or another version).
+    async fn update(
+        db: &mut DB::Connection,
+        id: &str,
+        clip: &NewClip,
+        expected_version: Option<u64>,
+        now: i64,
+    ) -> Result<Option<ClipMeta>, sqlx::Error> {
+        let s = clip.stats;
+        let row = sqlx::query(REPLACE_CLIP)
+            .bind(id)
+            .bind(expected_version.map(|v| v as i64))
+            .bind(&clip.name)
+            .bind(&clip.doc_json)
+            .bind(s.joints as i64)
+            .bind(s.tracks as i64)
+            .bind(s.events as i64)
+            .bind(s.start as f64)
+            .bind(s.end as f64)
+            .bind(s.playback.as_str())
+            .bind(now)
+            .bind(json_list(&clip.tags))
+            .fetch_optional(&mut *db)
+            .await?;
+        let Some(row) = row else { return Ok(None) };
+        let meta = meta_from_row(&row)?;
+        Self::write_index(db, id, clip, true).await?;
+        Ok(Some(meta))
+    }
+
+    /// Whether clip `id` may take `name`: it has it already (clips stored
+    /// before names were unique keep their shared names), or no other clip has it.
+    async fn rename_refused(db: &mut DB::Connection, id: &str, name: &str) -> Result<Option<StoreError>, sqlx::Error> {
+        let current: Option<String> = sqlx::query_scalar(NAME_OF).bind(id).fetch_optional(&mut *db).await?;
+        if current.is_none_or(|c| c == name) {
+            return Ok(None);
+        }
+        let others = Self::holders(db, name).await?;
+        Ok(others
+            .into_iter()
+            .find(|other| other != id)
+            .map(|other| StoreError::NameTaken { name: name.to_owned(), id: other }))
     }
 
     /// Tells "not found" from "version mismatch" after a conditional write matched no row.
@@ -287,23 +371,21 @@ where
     &'static str: ColumnIndex<DB::Row>,
     usize: ColumnIndex<DB::Row>,
 {
-    fn create(&self, clip: NewClip) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
+    fn create(&self, clip: NewClip, on_name: OnName) -> BoxFuture<'_, Result<ClipMeta, StoreError>> {
         async move {
-            let metas = [new_meta(&clip, now_millis())];
-            let clips = [clip];
-            self.run("create", Retry::Always, |n| self.insert_all(&metas, &clips, n)).await?;
-            let [meta] = metas;
-            Ok(meta)
+            let mut metas = self.create_all(vec![clip], on_name).await?;
+            metas.pop().ok_or_else(|| StoreError::Backend("a create wrote no row".into()))
         }
         .boxed()
     }
 
-    fn create_all(&self, clips: Vec<NewClip>) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
+    fn create_all(&self, clips: Vec<NewClip>, on_name: OnName) -> BoxFuture<'_, Result<Vec<ClipMeta>, StoreError>> {
         async move {
             let now = now_millis();
             let metas: Vec<ClipMeta> = clips.iter().map(|c| new_meta(c, now)).collect();
-            self.run("create_all", Retry::Always, |n| self.insert_all(&metas, &clips, n)).await?;
-            Ok(metas)
+            // A replace must not run twice: retried only when it surely did not run.
+            let mode = if on_name == OnName::Replace { Retry::IfNotExecuted } else { Retry::Always };
+            self.run("create_all", mode, |n| self.insert_all(&metas, &clips, on_name, n)).await?
         }
         .boxed()
     }
@@ -348,31 +430,16 @@ where
         async move {
             let clip = &clip;
             let now = now_millis();
-            let tags = &json_list(&clip.tags);
             self.run("replace", Retry::IfNotExecuted, |_| async move {
-                let s = clip.stats;
                 let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
-                let row = sqlx::query(REPLACE_CLIP)
-                    .bind(id)
-                    .bind(expected_version.map(|v| v as i64))
-                    .bind(&clip.name)
-                    .bind(&clip.doc_json)
-                    .bind(s.joints as i64)
-                    .bind(s.tracks as i64)
-                    .bind(s.events as i64)
-                    .bind(s.start as f64)
-                    .bind(s.end as f64)
-                    .bind(s.playback.as_str())
-                    .bind(now)
-                    .bind(tags)
-                    .fetch_optional(&mut *tx)
-                    .await?;
-                let Some(row) = row else {
+                if let Some(refused) = Self::rename_refused(&mut tx, id, &clip.name).await? {
+                    tx.rollback().await?;
+                    return Ok(Err(refused));
+                }
+                let Some(meta) = Self::update(&mut tx, id, clip, expected_version, now).await? else {
                     tx.rollback().await?;
                     return self.missed(id).await.map(Err);
                 };
-                let meta = meta_from_row(&row)?;
-                Self::write_index(&mut tx, id, clip, true).await?;
                 tx.commit().await?;
                 Ok(Ok(meta))
             })

@@ -64,6 +64,8 @@ impl Dialect for Sqlite {
     const POSITION_FN: &'static str = "instr";
     const FORGET_CONTROLS: &'static str = "DELETE FROM broadcast_controls WHERE broadcast_id = $1 AND seq <= $2 \
          AND id NOT IN (SELECT value FROM json_each($3))";
+    /// `BEGIN IMMEDIATE` takes the database's write lock: writers are serial.
+    const LOCK_NAME: Option<&'static str> = None;
 
     fn string_list(items: &[String]) -> String {
         serde_json::Value::from(items).to_string()
