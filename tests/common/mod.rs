@@ -216,3 +216,15 @@ pub fn chain_clip(joints: usize, ik: serde_json::Value) -> String {
                        "times": [0, 1], "values": [[0, 0, 0], [1, 0, 0]]}]})
     .to_string()
 }
+
+/// `doc` (a clip document) under a name no other clip of this test process
+/// has: names identify clips (docs/import.md), so a test that uploads one
+/// document as several clips names each anew (`wave` → `wave-7`).
+pub fn fresh_name(doc: &str) -> String {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let mut v: serde_json::Value = serde_json::from_str(doc).expect("a clip document");
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = format!("{}-{n}", v["name"].as_str().unwrap_or("clip"));
+    v["name"] = name.into();
+    v.to_string()
+}

@@ -253,12 +253,13 @@ impl ServerProcess {
         }
     }
 
-    /// Uploads a JSON clip; panics unless 201. Returns its id.
+    /// Uploads a JSON clip under a fresh name ([`super::fresh_name`]);
+    /// panics unless 201. Returns its id.
     pub async fn create(&self, http: &reqwest::Client, body: &str) -> String {
         let resp = http
             .post(self.url("/v1/clips"))
             .header("content-type", "application/json")
-            .body(body.to_owned())
+            .body(super::fresh_name(body))
             .send()
             .await
             .unwrap();

@@ -26,15 +26,16 @@ if (typeof WebSocket === "undefined") throw new Error("no WebSocket: use Node 22
 const fps = Number(opts.fps);
 const auth = opts.token ? { Authorization: `Bearer ${opts.token}` } : {};
 
-/** POSTs the clip document; a problem body (RFC 9457) says why when it fails. */
+/** POSTs the clip document (again: a new version of the clip of its name);
+ * a problem body (RFC 9457) says why when it fails. */
 async function upload(path) {
-  const res = await fetch(`${opts.http}/v1/clips`, {
+  const res = await fetch(`${opts.http}/v1/clips?replace=true`, {
     method: "POST",
     headers: { "Content-Type": "application/json", ...auth },
     body: await readFile(path),
   });
   const body = await res.json();
-  if (res.status !== 201) throw new Error(`upload: ${res.status} ${JSON.stringify(body)}`);
+  if (!res.ok) throw new Error(`upload: ${res.status} ${JSON.stringify(body)}`);
   return body;
 }
 

@@ -106,7 +106,7 @@ def main():
     args = parser.parse_args()
 
     rest = Rest(args.http, args.token)
-    summary = rest.call("POST", "/v1/clips", json.loads(pathlib.Path(args.clip).read_text()))
+    summary = rest.call("POST", "/v1/clips?replace=true", json.loads(pathlib.Path(args.clip).read_text()))
     print(f"uploaded {summary['name']!r} as {summary['id']}: {summary['joints']} joints, "
           f"{summary['start']}..{summary['end']} s")
     t = (summary["start"] + summary["end"]) / 2

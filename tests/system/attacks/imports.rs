@@ -140,6 +140,8 @@ async fn imports_from(url: String, from: IpAddr) -> Vec<u16> {
     let http = crate::common::http_builder().local_address(from).build().unwrap();
     let mut statuses = Vec::new();
     for seed in 0..6 {
+        // Each its own clip: names identify clips.
+        let url = format!("{url}?name=from-{from}-{seed}");
         let resp = http.post(&url).header("content-type", "application/x-bvh").body(small_bvh(seed)).send().await;
         statuses.push(resp.unwrap().status().as_u16());
     }

@@ -65,7 +65,7 @@ async fn create(http: &reqwest::Client, node: &Node, marker: u32) -> String {
     let resp = http
         .post(node.url("/v1/clips"))
         .header("content-type", "application/json")
-        .body(marker_doc(marker))
+        .body(crate::common::fresh_name(&marker_doc(marker)))
         .send()
         .await
         .unwrap();
@@ -77,7 +77,7 @@ async fn replace(http: &reqwest::Client, node: &Node, id: &str, marker: u32) {
     let resp = http
         .put(node.url(&format!("/v1/clips/{id}")))
         .header("content-type", "application/json")
-        .body(marker_doc(marker))
+        .body(crate::common::fresh_name(&marker_doc(marker)))
         .send()
         .await
         .unwrap();

@@ -21,12 +21,12 @@ fn client_from(last_octet: u8) -> reqwest::Client {
     crate::common::http_builder().local_address(local).build().unwrap()
 }
 
-/// `POST /v1/clips` of the wave clip with `Authorization: Bearer <token>`.
+/// `POST /v1/clips` of the wave clip (under a fresh name) with `Authorization: Bearer <token>`.
 async fn post_with(server: &ServerProcess, http: &reqwest::Client, token: &str) -> reqwest::Response {
     http.post(server.url("/v1/clips"))
         .header("content-type", "application/json")
         .bearer_auth(token)
-        .body(WAVE)
+        .body(crate::common::fresh_name(WAVE))
         .send()
         .await
         .unwrap()
@@ -61,8 +61,8 @@ async fn without_tokens_fresh_bearer_metadata_does_not_escape_the_grpc_write_lim
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("data"), &LIMIT).await;
     let mut grpc = AnimationClient::connect(server.grpc_url()).await.unwrap();
-    let spec = formats::wire::json::parse_clip(WAVE.as_bytes()).unwrap().1;
     let put = || {
+        let spec = formats::wire::json::parse_clip(crate::common::fresh_name(WAVE).as_bytes()).unwrap().1;
         let clip = Some(formats::wire::proto::clip_to_pb(&spec));
         let mut request = tonic::Request::new(pb::PutClipRequest { clip, ..Default::default() });
         let header = format!("Bearer {}", new_token().unwrap());

@@ -19,7 +19,9 @@ use super::start;
 
 /// One upload: where it goes and its bytes.
 struct Upload {
-    path: &'static str,
+    /// With `replace=true`: names identify clips, so sending an upload
+    /// again makes a new version of its clip (the same document).
+    path: String,
     content_type: &'static str,
     body: Vec<u8>,
 }
@@ -50,7 +52,11 @@ fn json_clip(target: usize, seed: usize) -> Upload {
         "tracks": [{"joint": "root", "channel": "translation", "interpolation": "linear",
                      "times": times, "values": values}],
     });
-    Upload { path: "/v1/clips", content_type: "application/json", body: serde_json::to_vec(&doc).unwrap() }
+    Upload {
+        path: "/v1/clips?replace=true".into(),
+        content_type: "application/json",
+        body: serde_json::to_vec(&doc).unwrap(),
+    }
 }
 
 /// A glTF document animating one node's translation; `buffer` is its bytes
@@ -94,7 +100,11 @@ fn gltf_file(target: usize, seed: usize) -> Upload {
     let uri =
         format!("data:application/octet-stream;base64,{}", base64::engine::general_purpose::STANDARD.encode(&bin));
     let doc = gltf_doc(n, &times, Some(uri), &format!("crash-gltf-{seed}"));
-    Upload { path: "/v1/clips/import", content_type: "model/gltf+json", body: serde_json::to_vec(&doc).unwrap() }
+    Upload {
+        path: "/v1/clips/import?replace=true".into(),
+        content_type: "model/gltf+json",
+        body: serde_json::to_vec(&doc).unwrap(),
+    }
 }
 
 fn glb_file(target: usize, seed: usize) -> Upload {
@@ -118,7 +128,7 @@ fn glb_file(target: usize, seed: usize) -> Upload {
     body.extend_from_slice(&u32::try_from(bin.len()).unwrap().to_le_bytes());
     body.extend_from_slice(b"BIN\0");
     body.extend_from_slice(&bin);
-    Upload { path: "/v1/clips/import", content_type: "model/gltf-binary", body }
+    Upload { path: "/v1/clips/import?replace=true".into(), content_type: "model/gltf-binary", body }
 }
 
 fn bvh_file(target: usize, seed: usize) -> Upload {
@@ -142,7 +152,11 @@ fn bvh_file(target: usize, seed: usize) -> Upload {
             a % 10.0
         ));
     }
-    Upload { path: "/v1/clips/import", content_type: "application/x-bvh", body: text.into_bytes() }
+    Upload {
+        path: format!("/v1/clips/import?replace=true&name=crash-bvh-{seed}"),
+        content_type: "application/x-bvh",
+        body: text.into_bytes(),
+    }
 }
 
 fn uploads() -> Vec<Upload> {
@@ -167,7 +181,7 @@ async fn send(http: &reqwest::Client, base: &str, u: &Upload) -> Result<Vec<Stri
         .map_err(|e| e.to_string())?;
     let status = r.status();
     let v: serde_json::Value = r.json().await.map_err(|e| e.to_string())?;
-    if status != 201 {
+    if status != 201 && status != 200 {
         return Err(format!("{status}: {v}"));
     }
     Ok(match v["clips"].as_array() {

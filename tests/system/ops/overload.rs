@@ -103,7 +103,10 @@ async fn writes_over_the_rate_get_429_with_retry_after_and_reads_do_not() {
     for _ in 0..2 {
         server.create(&http, WAVE).await;
     }
-    let post = || http.post(server.url("/v1/clips")).header("content-type", "application/json").body(WAVE);
+    let post = || {
+        let body = crate::common::fresh_name(WAVE);
+        http.post(server.url("/v1/clips")).header("content-type", "application/json").body(body)
+    };
     let r = post().send().await.unwrap();
     assert_eq!(r.status(), 429);
     let retry: u64 = r.headers()["retry-after"].to_str().unwrap().parse().unwrap();

@@ -46,7 +46,8 @@ async fn sigterm_drains_streams_and_uploads_and_exits_by_the_deadline() {
             let (http, url, acked) = (http.clone(), server.url("/v1/clips"), acked.clone());
             tokio::spawn(async move {
                 loop {
-                    let sent = http.post(&url).header("content-type", "application/json").body(WAVE).send().await;
+                    let body = crate::common::fresh_name(WAVE);
+                    let sent = http.post(&url).header("content-type", "application/json").body(body).send().await;
                     match sent {
                         Ok(r) if r.status() == 201 => {
                             let Ok(v) = r.json::<serde_json::Value>().await else { continue };

@@ -13,13 +13,14 @@ async function upload(fileList) {
   if (!main) return setStatus("choose a .json, .gltf, .glb or .bvh file", true);
   const ext = main.name.split(".").pop().toLowerCase();
   if (ext === "json") {
-    state.pendingUpload = { url: "/v1/clips", body: await main.text(), type: "application/json" };
+    // Dropping a file again makes a new version of the clip it made (names identify clips).
+    state.pendingUpload = { url: "/v1/clips?replace=true", body: await main.text(), type: "application/json" };
   } else {
     // Multipart even for one file: its file name names the clips it does not name itself.
     const form = new FormData();
     form.append("file", main, main.name);
     for (const f of files) if (f !== main) form.append("buffer", f, f.name);
-    state.pendingUpload = { url: `/v1/clips/import?format=${ext}`, body: form };
+    state.pendingUpload = { url: `/v1/clips/import?format=${ext}&replace=true`, body: form };
   }
   await sendUpload();
 }
