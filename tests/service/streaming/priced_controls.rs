@@ -113,7 +113,9 @@ fn crossfade(id: &str, n: usize) -> Value {
 /// `share` units a second; the chain's id.
 async fn sharing(dir: &std::path::Path, share: u64) -> (TestApp, String) {
     let app = TestApp::builder().data_dir(dir).start().await;
-    let id = app.create_id(&chain_clip(JOINTS as usize, json!([])), None).await;
+    // A fresh name: a second server over the same data dir adds its own chain.
+    let chain = crate::common::fresh_name(&chain_clip(JOINTS as usize, json!([])));
+    let id = app.create_id(&chain, None).await;
     app.stop().await;
     let app = TestApp::builder()
         .data_dir(dir)
