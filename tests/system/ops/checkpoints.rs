@@ -66,6 +66,11 @@ async fn a_restarted_node_replays_from_the_last_checkpoint_not_from_the_start() 
     let id = created["id"].as_str().unwrap().to_owned();
     let controls = format!("/v1/broadcasts/{id}/controls");
     let seek = post(&http, &server, &controls, json!({"op": "seek", "time": 2.0})).await["seq"].as_u64().unwrap();
+    // The speed change a few ticks later, not at the seek's own tick (posted at once, both could take one tick).
+    eventually(Duration::from_secs(10), "ticks after the seek", || async {
+        seq_now(&http, &server, &id).await >= seek + 2
+    })
+    .await;
     let slow = post(&http, &server, &controls, json!({"op": "speed", "speed": 0.5})).await["seq"].as_u64().unwrap();
     // Six seconds of broadcast time: checkpoints every 240 ticks, the controls long behind the newest.
     let age = 6 * FPS;
