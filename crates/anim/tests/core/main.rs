@@ -95,3 +95,18 @@ pub fn live_bytes() -> i64 {
 pub fn allocations() -> u64 {
     ALLOCATIONS.with(Cell::get)
 }
+
+/// A joint named `name` under `parent`, at rest `t` from it, unrotated and
+/// unscaled, without an inverse bind: the test rigs' usual joint.
+pub fn rest_joint(name: &str, parent: Option<&str>, t: [f32; 3]) -> anim::JointSpec {
+    anim::JointSpec {
+        name: name.into(),
+        parent: parent.map(Into::into),
+        rest: anim::Transform {
+            translation: glam::Vec3::from(t),
+            rotation: glam::Quat::IDENTITY,
+            scale: glam::Vec3::ONE,
+        },
+        inverse_bind: None,
+    }
+}

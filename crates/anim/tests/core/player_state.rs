@@ -10,8 +10,7 @@ use std::sync::Arc;
 use anim::ik::{ChainSpec, EffectorSpec, IkLimits, IkReport, IkSpec, build_constraints};
 use anim::motion::{LayerSpec, MotionOptions, MotionSpec, Player, PlayerError, RootMotion, RootMotionSpec};
 use anim::{
-    Channel, Clip, ClipSpec, Ease, Interpolation, JointSpec, Keys, Motion, Playback, Pose, SkeletonSpec, Space,
-    TrackSpec, Transform,
+    Channel, Clip, ClipSpec, Ease, Interpolation, Keys, Motion, Playback, Pose, SkeletonSpec, Space, TrackSpec,
 };
 use glam::{Quat, Vec3, Vec4};
 
@@ -20,12 +19,7 @@ type Shared<'a> = Arc<Motion<&'a Clip>>;
 /// hips → thigh → knee → foot; hips travel to `to` and turn by `turn`
 /// about y over `duration`, looping (root motion with a turn).
 fn leg(duration: f32, to: Vec3, turn: f32) -> Clip {
-    let joint = |name: &str, parent: Option<&str>, t: [f32; 3]| JointSpec {
-        name: name.into(),
-        parent: parent.map(Into::into),
-        rest: Transform { translation: Vec3::from(t), rotation: Quat::IDENTITY, scale: Vec3::ONE },
-        inverse_bind: None,
-    };
+    let joint = crate::rest_joint;
     let joints = vec![
         joint("hips", None, [0.0, 0.9, 0.0]),
         joint("thigh", Some("hips"), [0.1, 0.0, 0.0]),

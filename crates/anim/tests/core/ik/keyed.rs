@@ -9,10 +9,10 @@ use std::sync::Arc;
 use anim::ik::{ChainSpec, EffectorSpec, IkConstraint, IkKind, IkLimits, IkSpec, TwoBoneSpec, build_constraints};
 use anim::motion::{LayerSpec, MaskSpec, MotionOptions, MotionSampler, MotionSpec, Player, PlayerError};
 use anim::{
-    Channel, Clip, ClipSpec, Cursor, Ease, IkTarget, Interpolation, JointSpec, KeyedIkSpec, Keys, Motion, Playback,
-    Pose, SkeletonSpec, Space, TrackSpec, Transform,
+    Channel, Clip, ClipSpec, Cursor, Ease, IkTarget, Interpolation, KeyedIkSpec, Keys, Motion, Playback, Pose,
+    SkeletonSpec, Space, TrackSpec,
 };
-use glam::{DVec3, Quat, Vec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 
 use super::{d, model_f64};
 use crate::allocations;
@@ -20,12 +20,7 @@ use crate::allocations;
 /// hips → thigh (+0.1 x) → knee (−0.5 y) → foot (−0.5 y), hips moving along
 /// x at 1 unit/s over [0, 4] s, with `ik`.
 fn leg(ik: Vec<KeyedIkSpec>) -> Clip {
-    let joint = |name: &str, parent: Option<&str>, t: [f32; 3]| JointSpec {
-        name: name.into(),
-        parent: parent.map(Into::into),
-        rest: Transform { translation: Vec3::from(t), rotation: Quat::IDENTITY, scale: Vec3::ONE },
-        inverse_bind: None,
-    };
+    let joint = crate::rest_joint;
     let joints = vec![
         joint("hips", None, [0.0, 0.0, 0.0]),
         joint("thigh", Some("hips"), [0.1, 0.0, 0.0]),
