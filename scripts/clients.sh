@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the client examples in examples/clients/ against a real server: the
-# Python one (REST, gRPC and WebSocket) and the JavaScript one (fetch and a
-# WebSocket stream with a seek). Each checks what it reads and exits non-zero
+# Python one (REST, gRPC and WebSocket; its compact-frame decoder on the test
+# vectors) and the JavaScript ones (fetch and a
+# WebSocket stream with a seek; a graph driven by `set` controls). Each checks what it reads and exits non-zero
 # on a mismatch; this script fails with it.
 #
 #   scripts/clients.sh          # builds the debug binary, a venv for Python
@@ -21,9 +22,17 @@ ib_serve clients --data-dir "$IB_WORK/data"
 echo "== Python client"
 python3 -m venv "$IB_WORK/venv"
 "$IB_WORK/venv/bin/pip" install --quiet --disable-pip-version-check -r examples/clients/python/requirements.txt
+# The compact-frame decoder against docs/compact-frames/ (numpy comes from the venv).
+"$IB_WORK/venv/bin/python" -m unittest discover -s examples/clients/python -p 'test_*.py'
 "$IB_WORK/venv/bin/python" examples/clients/python/inbetween_client.py --http "$IB_HTTP" --grpc "$IB_GRPC" examples/wave.json
+# The Fox's locomotion graph driven from a loop of `set` controls, its blend weights checked.
+"$IB_WORK/venv/bin/python" examples/clients/python/graph.py --http "$IB_HTTP" \
+  --import examples/gltf/Fox/Fox.glb examples/graphs/fox-locomotion.json
 
 echo "== JavaScript client"
 node_flags=()
 node -e 'process.exit(typeof WebSocket === "undefined" ? 1 : 0)' || node_flags+=(--experimental-websocket)
 node "${node_flags[@]}" examples/clients/js/play.mjs --http "$IB_HTTP" examples/wave.json
+# The Fox's locomotion graph driven by a scripted loop of `set` controls, its blend weights checked.
+node "${node_flags[@]}" examples/clients/js/graph.mjs --http "$IB_HTTP" --script \
+  --import examples/gltf/Fox/Fox.glb --file examples/graphs/fox-locomotion.json

@@ -119,6 +119,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
             "ping_pong" => Playback::PingPong,
             _ => Playback::Loop,
         },
+        characters_only: false,
         limits,
     };
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -217,7 +218,7 @@ struct Upload<'a> {
 
 impl Upload<'_> {
     /// POSTs the file and its buffers to `server/v1/clips/import`; returns
-    /// the server's answer (`{clips, warnings}`).
+    /// the server's answer (`{clips, characters, warnings}`: a glTF file's skins become characters).
     fn send(&self, server: &str) -> anyhow::Result<serde_json::Value> {
         let url = format!("{}/v1/clips/import", server.trim_end_matches('/'));
         let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;

@@ -66,6 +66,15 @@ impl Builder {
         self
     }
 
+    /// A fixed work capacity, about a release build's on two cores, for
+    /// tests about something else than prices: a debug build measures about
+    /// 4.7 M units/s, which a page's burst of reads or a matrix's broadcasts
+    /// held until they idle out can take (429 `caller_work_limit`, 503
+    /// `overloaded`), depending on what else runs.
+    pub fn release_capacity(self) -> Self {
+        self.configure(|c| c.limits.node_work_per_sec = 80_000_000)
+    }
+
     /// Any change that needs the data directory's path.
     pub fn configure_in(mut self, f: impl FnOnce(&mut Config, &Path)) -> Self {
         f(&mut self.config, self.dir.path());

@@ -715,6 +715,33 @@ for name, data in HTTP_CASES:
 bad("http", "sample-range-1e20-frames.http", http("POST", f"/v1/clips/{CLIP_ID}/sample",
     ["Content-Type: application/json"], '{"start":0,"end":1e20,"fps":1}'), "422")
 
+
+# Graph documents (docs/graphs.md) refused at upload, each with its status.
+def graph(nodes, parameters=None, **top):
+    doc = {"name": "corpus-graph", "parameters": parameters or {}, "nodes": nodes}
+    doc.update(top or {"output": next(iter(nodes))})
+    return dumps(doc)
+
+
+XY = {"x": {"type": "float", "default": 0, "min": 0, "max": 1}, "y": {"type": "float", "default": 0, "min": 0, "max": 1}}
+GRAPH_CASES = [
+    ("graph-not-json", "{\"name\": \"g\", \"nodes\"", "400"),
+    ("graph-unknown-field", dumps({"name": "g", "nodes": {}, "output": "a", "bogus": 1}), "422"),
+    ("graph-collinear-blend2d", graph({"b": {"blend2d": {"x": "x", "y": "y", "points": [
+        {"clip": CLIP_ID, "at": [0, 0]}, {"clip": CLIP_ID, "at": [0.5, 0.5]}, {"clip": CLIP_ID, "at": [1, 1]}]}}},
+        XY), "422"),
+    ("graph-node-cycle", graph({"a": {"layers": [{"node": "b"}]}, "b": {"layers": [{"node": "a"}]}}), "422"),
+    ("graph-unknown-parameter", graph({"b": {"blend1d": {"parameter": "speed", "points": [
+        {"clip": CLIP_ID, "at": 0}]}}}), "422"),
+    ("graph-missing-clip", graph({"a": {"clip": MISSING_ID}}), "404"),
+    ("graph-too-many-points", graph({"b": {"blend2d": {"x": "x", "y": "y", "points": [
+        {"clip": CLIP_ID, "at": [i / 40, (i * 7 % 40) / 40]} for i in range(40)]}}}, XY), "422"),
+]
+for name, body, status in GRAPH_CASES:
+    bad("http", name + ".http", http("POST", "/v1/graphs", ["Content-Type: application/json"], body), status)
+bad("http", "graph-put-unknown-id.http", http("PUT", f"/v1/graphs/{MISSING_ID}", ["Content-Type: application/json"],
+    graph({"a": {"clip": CLIP_ID}})), "404")
+
 # ---------------------------------------------------------------- gRPC framing
 
 

@@ -475,8 +475,7 @@ fn composition(c: &mut Criterion) {
             "two_layers_blend",
             MotionSpec {
                 layers: vec![LayerSpec::new(&walk), LayerSpec { weight: 0.3, ..LayerSpec::new(&run) }],
-                root_motion: None,
-                ik: Vec::new(),
+                ..MotionSpec::default()
             },
         ),
         (
@@ -487,8 +486,7 @@ fn composition(c: &mut Criterion) {
                     LayerSpec { weight: 0.3, ..synced(&run) },
                     LayerSpec { mode: LayerMode::Additive, weight: 0.5, ..LayerSpec::new(&run) },
                 ],
-                root_motion: None,
-                ik: Vec::new(),
+                ..MotionSpec::default()
             },
         ),
         (
@@ -534,8 +532,7 @@ fn three_layers<'a>(
             LayerSpec { weight: run_weight, ..synced(run) },
             LayerSpec { mask: Some(upper), offset: wave_offset, ..LayerSpec::new(wave) },
         ],
-        root_motion: None,
-        ik: Vec::new(),
+        ..MotionSpec::default()
     }
 }
 

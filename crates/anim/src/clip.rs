@@ -344,6 +344,12 @@ impl Clip {
         timeline.into_iter().flat_map(|t| (0..t.len()).map(|i| t.time(i)))
     }
 
+    /// Every key time of every track (repeats included), for analyses
+    /// that must see each key's pose.
+    pub(crate) fn key_times(&self) -> impl Iterator<Item = f32> + '_ {
+        self.timelines.iter().flat_map(|t| (0..t.len()).map(|i| t.time(i)))
+    }
+
     /// Joint tracks, constant ones included.
     pub fn track_count(&self) -> usize {
         self.track_count

@@ -114,7 +114,11 @@ pub fn three_layers(clips: &LayerClips, joints: usize) -> MotionDoc {
             LayerDoc { mask: Some(mask), ..layer(&clips.upper, 1.0) },
         ],
         root_motion: None,
+        character: None,
+        retarget: None,
         ik: Vec::new(),
+        springs: Vec::new(),
+        spring_substep_hz: None,
     }
 }
 

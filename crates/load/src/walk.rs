@@ -101,7 +101,15 @@ pub fn foot_ik(clip: &str) -> MotionDoc {
         }))
     };
     let ik = LEGS.iter().zip(FOOT_TARGETS.iter().zip(&POLES)).map(plant).collect();
-    MotionDoc { layers: vec![LayerDoc::new(clip)], root_motion: None, ik }
+    MotionDoc {
+        layers: vec![LayerDoc::new(clip)],
+        root_motion: None,
+        ik,
+        springs: Vec::new(),
+        spring_substep_hz: None,
+        character: None,
+        retarget: None,
+    }
 }
 
 fn joint(name: &str, parent: Option<&str>, rest: [f64; 3]) -> Value {

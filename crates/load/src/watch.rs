@@ -2,7 +2,9 @@
 //! stream commands need nothing but the project (no websocat, no jq).
 //!
 //! `--motion FILE` opens `GET /v1/stream` with `{"op":"open","motion":…}`;
-//! `--clip ID` streams `/v1/clips/{ID}/stream`; `--broadcast ID` watches
+//! `--graph ID` opens it with a motion of that graph (docs/graphs.md), its
+//! report asked for, and `--set [SEQ:]NAME=VALUE` sets its parameters as the
+//! stream opens or when frame SEQ arrives; `--clip ID` streams `/v1/clips/{ID}/stream`; `--broadcast ID` watches
 //! `/v1/broadcasts/{ID}/stream` (docs/broadcasts.md: its controls act on the
 //! broadcast for every viewer when the token may write). Each frame is printed as one
 //! compact line (or its JSON with `--raw`) on stdout; the `opened` message,
@@ -42,8 +44,19 @@ pub struct WatchArgs {
     server: String,
     /// A motion document (docs/motion.md) to stream over `GET /v1/stream`; a layer may name its clip
     /// `"clip": "name:NAME"`.
-    #[arg(long, required_unless_present_any = ["clip", "broadcast"], conflicts_with_all = ["clip", "broadcast"])]
+    #[arg(
+        long,
+        required_unless_present_any = ["clip", "broadcast", "graph"],
+        conflicts_with_all = ["clip", "broadcast", "graph"]
+    )]
     motion: Option<PathBuf>,
+    /// Stream this stored graph (an id, or `name:NAME`) over `GET /v1/stream`, each frame with its report.
+    #[arg(long, conflicts_with_all = ["clip", "broadcast"])]
+    graph: Option<String>,
+    /// Set a graph parameter: `NAME=VALUE` as the stream opens, `SEQ:NAME=VALUE` when frame SEQ arrives
+    /// (repeatable; VALUE is a number, `true` or `false`).
+    #[arg(long = "set", value_name = "[SEQ:]NAME=VALUE", value_parser = parse_set, requires = "graph")]
+    set: Vec<Setting>,
     /// Stream this clip (an id, or `name:NAME`) over `/v1/clips/{ID}/stream`.
     #[arg(long, conflicts_with = "broadcast")]
     clip: Option<String>,
@@ -80,6 +93,41 @@ pub struct WatchArgs {
 pub struct Timed {
     seq: u64,
     control: Control,
+}
+
+/// A graph parameter set from the command line: at frame `seq`, or as the
+/// stream opens (`None`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setting {
+    seq: Option<u64>,
+    name: String,
+    value: Value,
+}
+
+/// Parses `--set NAME=VALUE` or `--set SEQ:NAME=VALUE`.
+fn parse_set(text: &str) -> Result<Setting, String> {
+    let (name, value) = text.split_once('=').ok_or("expected NAME=VALUE or SEQ:NAME=VALUE")?;
+    let (seq, name) = match name.split_once(':') {
+        Some((seq, name)) => (Some(seq.trim().parse().map_err(|_| format!("{seq:?} is not a frame number"))?), name),
+        None => (None, name),
+    };
+    let value = match serde_json::from_str(value.trim()) {
+        Ok(value @ (Value::Number(_) | Value::Bool(_))) => value,
+        _ => return Err(format!("{value:?} is not a number, true or false")),
+    };
+    Ok(Setting { seq, name: name.trim().to_owned(), value })
+}
+
+/// The `set` controls of `settings`: those for the stream's opening, then
+/// one per frame number named, in order of frame.
+fn set_controls(settings: &[Setting]) -> (Option<Value>, Vec<(u64, Value)>) {
+    let mut at: BTreeMap<Option<u64>, serde_json::Map<String, Value>> = BTreeMap::new();
+    for s in settings {
+        at.entry(s.seq).or_default().insert(s.name.clone(), s.value.clone());
+    }
+    let control = |parameters| json!({"op": "set", "parameters": Value::Object(parameters)});
+    let opening = at.remove(&None).map(control);
+    (opening, at.into_iter().filter_map(|(seq, p)| Some((seq?, control(p)))).collect())
 }
 
 /// A control as given on the command line: inline JSON or a file of it.
@@ -237,7 +285,31 @@ fn frame_line(frame: &Value) -> String {
     if let Some(reports) = pose["ik"].as_array() {
         line.push_str(&format!(" ik=[{}]", reports.iter().map(ik_report).collect::<Vec<_>>().join(",")));
     }
+    let graph = if frame["graph"].is_object() { &frame["graph"] } else { &pose["graph"] };
+    if graph.is_object() {
+        line.push_str(&graph_report(graph));
+    }
     line
+}
+
+/// A graph's report (docs/graphs.md) as ` state=S` or ` state=FROM>TO@α`,
+/// then each blend's weights, ` NODE=[w,…]`.
+fn graph_report(r: &Value) -> String {
+    let t = &r["transition"];
+    let mut text = match (t["from"].as_str(), t["to"].as_str()) {
+        (Some(from), Some(to)) => format!(" state={from}>{to}@{:.2}", t["alpha"].as_f64().unwrap_or(f64::NAN)),
+        _ => format!(" state={}", r["state"].as_str().unwrap_or("?")),
+    };
+    for (node, weights) in r["weights"].as_object().into_iter().flatten() {
+        let ws: Vec<String> = weights
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|w| format!("{:.2}", w.as_f64().unwrap_or(f64::NAN)))
+            .collect();
+        text.push_str(&format!(" {node}=[{}]", ws.join(",")));
+    }
+    text
 }
 
 /// One IK report (docs/ik.md) as `kind:residual:iterations` with `!` when it
@@ -275,15 +347,15 @@ pub fn run(args: WatchArgs, out: impl Write + Send) -> anyhow::Result<()> {
 
 async fn watch<W: Write + Send>(args: WatchArgs, out: W) -> anyhow::Result<()> {
     let names = Names::new(&args.server, args.token.clone());
-    let mut timed = Vec::with_capacity(args.at.len());
+    let (opening_set, mut timed) = set_controls(&args.set);
     for t in &args.at {
         timed.push((t.seq, names.resolve(load_control(&t.control)?).await?));
     }
     timed.sort_by_key(|&(seq, _)| seq);
     let (path, open) = target(&args, &names).await?;
     let mut socket = connect(&ws_url(&args.server, &path)?, args.token.as_deref()).await?;
-    if let Some(open) = open {
-        socket.send(Message::text(open.to_string())).await.context("sending the open message")?;
+    for message in open.into_iter().chain(opening_set) {
+        socket.send(Message::text(message.to_string())).await.context("sending the open message")?;
     }
     let session = Session { out, raw: args.raw, timed, next_timed: 0, frames: 0 };
     session.run(socket, stdin_lines(), &names).await
@@ -302,7 +374,12 @@ async fn target(args: &WatchArgs, names: &Names) -> anyhow::Result<(String, Opti
         let id = utf8_percent_encode(&id, ENCODED);
         return Ok((format!("/v1/clips/{id}/stream?{}", clip_query(args)), None));
     }
-    let path = args.motion.as_deref().context("--motion FILE or --clip ID")?;
+    if let Some(graph) = &args.graph {
+        let mut open = open_message(json!({"layers": [{"graph": graph}]}), args);
+        open["report"] = json!(true);
+        return Ok(("/v1/stream".to_owned(), Some(open)));
+    }
+    let path = args.motion.as_deref().context("--motion FILE, --graph ID or --clip ID")?;
     let motion = names.resolve(read_json(path)?).await?;
     Ok(("/v1/stream".to_owned(), Some(open_message(motion, args))))
 }
@@ -512,6 +589,42 @@ mod tests {
             parse_at("7=@examples/motions/x.json").unwrap().control,
             Control::File("examples/motions/x.json".into())
         );
+    }
+
+    #[test]
+    fn set_takes_a_parameter_now_or_at_a_frame_and_groups_them_into_set_controls() {
+        let settings: Vec<Setting> = ["speed=2.5", "survey=true", "120:speed=4", "60:speed=1", "60:survey=true"]
+            .into_iter()
+            .map(|s| parse_set(s).unwrap())
+            .collect();
+        assert_eq!(settings[2], Setting { seq: Some(120), name: "speed".into(), value: json!(4) });
+        let (opening, timed) = set_controls(&settings);
+        assert_eq!(opening, Some(json!({"op": "set", "parameters": {"speed": 2.5, "survey": true}})));
+        assert_eq!(
+            timed,
+            [
+                (60, json!({"op": "set", "parameters": {"speed": 1, "survey": true}})),
+                (120, json!({"op": "set", "parameters": {"speed": 4}}))
+            ]
+        );
+        assert_eq!(set_controls(&settings[2..3]).0, None);
+        for (text, why) in [("speed", "NAME=VALUE"), ("x:speed=1", "frame number"), ("speed=fast", "not a number")] {
+            let error = parse_set(text).unwrap_err();
+            assert!(error.contains(why), "{text}: {error}");
+        }
+    }
+
+    #[test]
+    fn a_frame_line_shows_the_graph_state_a_transition_and_the_weights() {
+        let frame = json!({"seq": 9, "clip_time": 0.15, "dropped": 0, "events": [], "pose": {"time": 0.15, "joints": []},
+            "graph": {"state": "move", "transition": {"from": "idle", "to": "move", "alpha": 0.25},
+                      "weights": {"move": [0.75, 0.25]}}});
+        assert_eq!(
+            frame_line(&frame),
+            "seq=9 time=0.1500 clip_time=0.1500 dropped=0 events=[] state=idle>move@0.25 move=[0.75,0.25]"
+        );
+        let settled = json!({"seq": 1, "pose": {"graph": {"state": "idle", "weights": {}}}});
+        assert!(frame_line(&settled).ends_with(" state=idle"), "{}", frame_line(&settled));
     }
 
     #[test]

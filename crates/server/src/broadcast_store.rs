@@ -120,6 +120,8 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         speed: None,
         modes: RawModes { space: req.space.as_deref().map(Raw::Text), ..RawModes::default() },
         encoding: None,
+        max_error: None,
+        distance: None,
         max_frames: None,
         paused: false,
         joints: req.joints.as_deref(),
@@ -132,7 +134,7 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         idle_timeout_secs: req.idle_timeout_secs.map(Raw::Number),
         at: in_body,
     };
-    raw.spec(state, RawMotion::of(req.motion.to_spec("/motion")?), description).await
+    raw.spec(state, RawMotion::of_doc(&req.motion)?, description).await
 }
 
 /// The control a control message asks for (a crossfade's motion looked up).

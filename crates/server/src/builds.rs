@@ -16,6 +16,7 @@
 //! An upload pays twice, each priced before it runs: reading its body
 //! (priced by its bytes), then building what the body turned out to hold.
 
+use anim::spring::SpringsSpec;
 use std::sync::atomic::AtomicBool;
 
 use anim::ClipSpec;
@@ -85,23 +86,30 @@ async fn build_spec(
 /// if the store holds a document that no longer reads or builds.
 pub async fn stored(work: &Work, max_work: u64, stored: StoredClip) -> Result<CachedClip, ApiError> {
     let units = price::parse(stored.doc_json.len() as u64);
-    let (meta, spec) = work.spend(&CallerKey::Node, units, move |_| parse_stored(stored)).await??;
+    let (meta, spec, springs) = work.spend(&CallerKey::Node, units, move |_| parse_stored(stored)).await??;
     let units = price::clip_build(&spec, max_work);
-    work.spend(&CallerKey::Node, units, move |cancel| compile_stored(meta, &spec, max_work, cancel.flag())).await?
+    let compile = move |cancel: &crate::work::Cancel| compile_stored((meta, springs), &spec, max_work, cancel.flag());
+    work.spend(&CallerKey::Node, units, compile).await?
 }
 
 /// A stored document's spec. It was accepted once, so failure here means
 /// the store was corrupted or the rules changed: an internal error.
-fn parse_stored(stored: StoredClip) -> Result<(ClipMeta, ClipSpec), ApiError> {
-    let (_, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(|e: DocError| {
-        ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id))
-    })?;
-    Ok((stored.meta, spec))
+fn parse_stored(stored: StoredClip) -> Result<(ClipMeta, ClipSpec, SpringsSpec), ApiError> {
+    let no_longer =
+        |e: DocError| ApiError::internal(anyhow::anyhow!("stored clip {} no longer parses: {e}", stored.meta.id));
+    let (doc, spec) = parse_clip(stored.doc_json.as_bytes()).map_err(no_longer)?;
+    let springs = doc.springs().map_err(no_longer)?;
+    Ok((stored.meta, spec, springs))
 }
 
 /// Compiles a stored clip's spec within `max_work`: an internal error if it
 /// no longer builds, unless the build budget was lowered since (422).
-fn compile_stored(meta: ClipMeta, spec: &ClipSpec, max_work: u64, cancel: &AtomicBool) -> Result<CachedClip, ApiError> {
+fn compile_stored(
+    (meta, springs): (ClipMeta, SpringsSpec),
+    spec: &ClipSpec,
+    max_work: u64,
+    cancel: &AtomicBool,
+) -> Result<CachedClip, ApiError> {
     // A stored clip's constraints were admitted under the limits of their
     // day: IK ceilings apply to what comes in, not to what is kept.
     let ik = IkLimits { max_constraints: usize::MAX, max_iterations: u32::MAX, max_effectors: usize::MAX };
@@ -109,7 +117,7 @@ fn compile_stored(meta: ClipMeta, spec: &ClipSpec, max_work: u64, cancel: &Atomi
         e @ ApiError::TooMany { .. } => e,
         e => ApiError::internal(anyhow::anyhow!("stored clip {} no longer builds: {e:?}", meta.id)),
     })?;
-    Ok(CachedClip { meta, clip })
+    Ok(CachedClip { meta, clip, springs })
 }
 
 /// Checks `units` of `what` against `max_request_work`, charges them to

@@ -1,5 +1,8 @@
 //! A bounded cache of compiled clips, so a pose request never re-parses or
-//! re-compiles a document and, on a hit, never touches the store.
+//! re-compiles a document and, on a hit, never touches the store. The same
+//! [`Cache`] keeps the built graphs and the checked characters
+//! (`server::graphs`, `server::characters`): anything [`Cacheable`], one
+//! version per id, under the rules below.
 //!
 //! Keyed by clip id; each entry is an immutable `Arc<CachedClip>` at one
 //! version, so a request that took an entry keeps a whole, consistent clip
@@ -38,6 +41,7 @@
 //! is noted; the caller takes the notes after each insert or invalidation
 //! ([`ClipCache::take_departed`]) and drops the motions over those ids.
 
+use anim::spring::SpringsSpec;
 use std::sync::Arc;
 use std::sync::Mutex;
 
@@ -50,6 +54,10 @@ use anim::Clip;
 pub struct CachedClip {
     pub meta: ClipMeta,
     pub clip: Clip,
+    /// The clip's spring chains (docs/springs.md), checked against its
+    /// skeleton when it was admitted; played where the clip is the first
+    /// layer of a motion without chains of its own.
+    pub springs: SpringsSpec,
 }
 
 impl CachedClip {
@@ -75,11 +83,37 @@ impl crate::stream::PinnedClip for CachedClip {
     fn clip(&self) -> &Clip {
         &self.clip
     }
+
+    fn springs(&self) -> &SpringsSpec {
+        &self.springs
+    }
+}
+
+/// What a [`Cache`] keeps: one version of one id, immutable, weighed in bytes.
+pub trait Cacheable: Send + Sync + 'static {
+    fn cache_id(&self) -> &str;
+    fn cache_version(&self) -> u64;
+    /// The heap bytes the entry keeps alive (counted on the shared budget).
+    fn cache_bytes(&self) -> usize;
+}
+
+impl Cacheable for CachedClip {
+    fn cache_id(&self) -> &str {
+        &self.meta.id
+    }
+
+    fn cache_version(&self) -> u64 {
+        self.meta.version
+    }
+
+    fn cache_bytes(&self) -> usize {
+        self.bytes()
+    }
 }
 
 #[derive(Debug)]
-struct Inner {
-    entries: Entries<String, Arc<CachedClip>>,
+struct Inner<T> {
+    entries: Entries<String, Arc<T>>,
     /// Bumped by every write and invalidation.
     epoch: u64,
     /// True while invalidations may be missed: nothing is cached.
@@ -88,17 +122,22 @@ struct Inner {
     departed: Vec<String>,
 }
 
-/// The clip cache; see the module docs for its consistency rules.
+/// A cache of immutable entries by id, one version each; see the module
+/// docs for its consistency rules. Clips, and the built graphs and
+/// characters of `server::documents`, are each kept in one.
 #[derive(Debug)]
-pub struct ClipCache {
-    inner: Mutex<Inner>,
+pub struct Cache<T> {
+    inner: Mutex<Inner<T>>,
 }
+
+/// The cache of compiled clips.
+pub type ClipCache = Cache<CachedClip>;
 
 /// A token taken before a miss reads the store; see [`ClipCache::insert_loaded`].
 #[derive(Debug, Clone, Copy)]
 pub struct Epoch(u64);
 
-impl ClipCache {
+impl<T: Cacheable> Cache<T> {
     /// A cache of at most `capacity` clips, whose bytes count on `budget`.
     ///
     /// # Panics
@@ -106,14 +145,14 @@ impl ClipCache {
     pub fn new(capacity: usize, budget: Arc<CacheBudget>) -> Self {
         assert!(capacity > 0, "a cache needs room for one clip");
         let entries = Entries::new(capacity, budget);
-        ClipCache { inner: Mutex::new(Inner { entries, epoch: 0, suspended: false, departed: Vec::new() }) }
+        Cache { inner: Mutex::new(Inner { entries, epoch: 0, suspended: false, departed: Vec::new() }) }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner<T>> {
         crate::sync::lock(&self.inner)
     }
 
-    pub fn get(&self, id: &str) -> Option<Arc<CachedClip>> {
+    pub fn get(&self, id: &str) -> Option<Arc<T>> {
         self.lock().entries.get(id).cloned()
     }
 
@@ -124,24 +163,46 @@ impl ClipCache {
 
     /// Write-through after a committed create or replace: keeps whichever of
     /// the cached and the new version is newer.
-    pub fn insert_written(&self, clip: Arc<CachedClip>) {
+    pub fn insert_written(&self, clip: Arc<T>) {
+        self.insert_written_if(clip, |_| true);
+    }
+
+    /// [`Cache::insert_written`] if `keep` holds for the entry, asked under
+    /// this cache's lock (a built graph goes in only while its clips are
+    /// still the clip cache's entries).
+    pub fn insert_written_if(&self, entry: Arc<T>, keep: impl FnOnce(&T) -> bool) {
         let mut inner = self.lock();
         inner.epoch += 1;
-        if inner.suspended {
+        if inner.suspended || !keep(&entry) {
             return;
         }
-        self.put(&mut inner, clip);
+        self.put(&mut inner, entry);
     }
 
     /// Inserts what a miss loaded, unless a write happened since `seen` was
     /// taken (the loaded version may then be stale). Returns whether it went in.
-    pub fn insert_loaded(&self, clip: Arc<CachedClip>, seen: Epoch) -> bool {
+    pub fn insert_loaded(&self, clip: Arc<T>, seen: Epoch) -> bool {
+        self.insert_loaded_if(clip, seen, |_| true)
+    }
+
+    /// [`Cache::insert_loaded`] if `keep` holds for the entry, asked under
+    /// this cache's lock.
+    pub fn insert_loaded_if(&self, entry: Arc<T>, seen: Epoch, keep: impl FnOnce(&T) -> bool) -> bool {
         let mut inner = self.lock();
-        if inner.epoch != seen.0 || inner.suspended {
+        if inner.epoch != seen.0 || inner.suspended || !keep(&entry) {
             return false;
         }
-        self.put(&mut inner, clip);
+        self.put(&mut inner, entry);
         true
+    }
+
+    /// Drops every entry `leaves` says (a graph over a clip that left the
+    /// clip cache), noting each as departed.
+    pub fn invalidate_where(&self, leaves: impl FnMut(&Arc<T>) -> bool) {
+        let mut inner = self.lock();
+        inner.epoch += 1;
+        let gone = inner.entries.remove_where(leaves);
+        inner.departed.extend(gone.iter().map(|g| g.cache_id().to_owned()));
     }
 
     /// After a committed delete, or when another node changed `id`.
@@ -171,8 +232,8 @@ impl ClipCache {
 
     /// Whether `clip` is the very entry cached for its id (not merely the
     /// same version of it), without touching its recency.
-    pub fn holds(&self, clip: &Arc<CachedClip>) -> bool {
-        self.lock().entries.peek(clip.meta.id.as_str()).is_some_and(|cached| Arc::ptr_eq(cached, clip))
+    pub fn holds(&self, clip: &Arc<T>) -> bool {
+        self.lock().entries.peek(clip.cache_id()).is_some_and(|cached| Arc::ptr_eq(cached, clip))
     }
 
     /// The ids whose entry left the cache since the last call (each once;
@@ -183,7 +244,7 @@ impl ClipCache {
 
     /// The cached version of `id`, without touching its recency.
     pub fn version_of(&self, id: &str) -> Option<u64> {
-        self.lock().entries.peek(id).map(|cached| cached.meta.version)
+        self.lock().entries.peek(id).map(|cached| cached.cache_version())
     }
 
     pub fn len(&self) -> usize {
@@ -194,7 +255,7 @@ impl ClipCache {
         self.len() == 0
     }
 
-    /// Heap bytes of the cached clips (see [`CachedClip::bytes`]).
+    /// Heap bytes of the cached entries (see [`Cacheable::cache_bytes`]).
     pub fn bytes(&self) -> usize {
         self.lock().entries.bytes()
     }
@@ -204,31 +265,31 @@ impl ClipCache {
     /// shared byte budget is trimmed by the caller, `cache_budget::trim`).
     /// A clip over the whole budget is not cached, and takes its older
     /// version out.
-    fn put(&self, inner: &mut Inner, clip: Arc<CachedClip>) {
-        let id = clip.meta.id.clone();
-        if inner.entries.get(id.as_str()).is_some_and(|cached| cached.meta.version >= clip.meta.version) {
+    fn put(&self, inner: &mut Inner<T>, clip: Arc<T>) {
+        let id = clip.cache_id().to_owned();
+        if inner.entries.get(id.as_str()).is_some_and(|cached| cached.cache_version() >= clip.cache_version()) {
             return;
         }
         self.remove(inner, &id);
-        let bytes = clip.bytes();
+        let bytes = clip.cache_bytes();
         if let Ok(left) = inner.entries.insert(id, clip, bytes) {
-            inner.departed.extend(left.into_iter().map(|gone| gone.meta.id.clone()));
+            inner.departed.extend(left.into_iter().map(|gone| gone.cache_id().to_owned()));
         }
     }
 
-    fn remove(&self, inner: &mut Inner, id: &str) {
+    fn remove(&self, inner: &mut Inner<T>, id: &str) {
         if let Some(gone) = inner.entries.remove(id) {
-            inner.departed.push(gone.meta.id.clone());
+            inner.departed.push(gone.cache_id().to_owned());
         }
     }
 
-    fn clear(&self, inner: &mut Inner) {
+    fn clear(&self, inner: &mut Inner<T>) {
         inner.entries.clear();
         inner.departed.clear();
     }
 }
 
-impl Budgeted for ClipCache {
+impl<T: Cacheable> Budgeted for Cache<T> {
     fn oldest(&self) -> Option<u64> {
         self.lock().entries.oldest()
     }
@@ -236,7 +297,7 @@ impl Budgeted for ClipCache {
     fn evict_oldest(&self) {
         let mut inner = self.lock();
         if let Some(gone) = inner.entries.evict_oldest() {
-            inner.departed.push(gone.meta.id.clone());
+            inner.departed.push(gone.cache_id().to_owned());
         }
     }
 }
@@ -274,7 +335,7 @@ pub(crate) mod tests {
         let stats = ClipStats { joints: 1, tracks: 1, events: 0, start: 0.0, end: 0.0, playback: Playback::Once };
         let meta =
             ClipMeta { id: id.into(), name: "c".into(), version, stats, tags: vec![], created_at: 0, updated_at: 0 };
-        Arc::new(CachedClip { meta, clip: Clip::build(&spec).unwrap() })
+        Arc::new(CachedClip { meta, clip: Clip::build(&spec).unwrap(), springs: SpringsSpec::default() })
     }
 
     #[test]
@@ -285,6 +346,23 @@ pub(crate) mod tests {
         assert_eq!(cache.get("a").unwrap().meta.version, 3);
         cache.insert_written(cached("a", 4));
         assert_eq!(cache.get("a").unwrap().meta.version, 4);
+    }
+
+    #[test]
+    fn a_conditional_insert_keeps_out_what_fails_its_check_and_a_sweep_notes_what_it_drops() {
+        let cache = ClipCache::new(4, unbounded());
+        cache.insert_written_if(cached("a", 1), |_| false);
+        assert!(cache.get("a").is_none(), "refused by its check");
+        let seen = cache.epoch();
+        assert!(!cache.insert_loaded_if(cached("a", 1), seen, |c| c.meta.version > 1));
+        assert!(cache.insert_loaded_if(cached("a", 1), seen, |c| c.meta.version == 1));
+        cache.insert_written(cached("b", 2));
+        cache.insert_written(cached("c", 5));
+        cache.take_departed();
+        cache.invalidate_where(|c| c.meta.version < 5);
+        let mut gone = cache.take_departed();
+        gone.sort();
+        assert_eq!((gone, cache.len(), cache.version_of("c")), (vec!["a".to_owned(), "b".to_owned()], 1, Some(5)));
     }
 
     #[test]

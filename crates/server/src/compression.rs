@@ -35,9 +35,14 @@
 //! which a pose request charges as [`AnswerCoding`] says; figures:
 //! BENCHMARKS.md, “Compression”).
 //!
-//! On the gRPC port, tonic compresses messages (gzip or zstd) for clients
-//! that ask, except stream frames ([`frames_uncompressed`]), and decodes
-//! compressed requests ([`grpc`]).
+//! On the gRPC port, tonic compresses unary answers (gzip or zstd) for
+//! clients that ask and decodes compressed requests ([`grpc`]). tonic
+//! compresses on the async workers at fixed levels (gzip 6, zstd 3), so
+//! [`GrpcAnswers`] lets it do so only for answers that cost a few
+//! milliseconds at most: a unary answer under [`SMALL_ANSWER_BYTES`]
+//! ([`grpc_answer`]), holding one of the same `max_compressed_answers`
+//! permits as REST's, charged in its price as REST's are. Streams of frames
+//! and of pose batches, and larger answers, go uncompressed.
 //!
 //! **Request bodies** may be sent with `Content-Encoding: gzip`, `br` or
 //! `zstd` (uploads of large documents). They are decoded *before* the body
@@ -177,6 +182,8 @@ pub fn state_bytes(coding: &str, level: i32) -> u64 {
 pub struct AnswerCoding {
     coding: Option<Coding>,
     min_bytes: u64,
+    /// Answers this large and larger go as they are (gRPC's; REST: none).
+    max_bytes: Option<u64>,
 }
 
 impl AnswerCoding {
@@ -189,13 +196,20 @@ impl AnswerCoding {
             Some("gzip") => Some(Coding::Gzip),
             _ => None,
         };
-        AnswerCoding { coding, min_bytes: min_bytes as u64 }
+        AnswerCoding { coding, min_bytes: min_bytes as u64, max_bytes: None }
+    }
+
+    /// The coding of a gRPC request after [`GrpcAnswers`] (tonic's levels,
+    /// which are REST's small-answer levels; only small answers).
+    pub fn of_grpc<T>(request: &tonic::Request<T>) -> AnswerCoding {
+        request.extensions().get::<AnswerCoding>().copied().unwrap_or_default()
     }
 
     /// How an answer of at most `bound` bytes is compressed; `None` when
     /// it goes as it is (no coding, or under `compression_min_bytes`).
     pub fn at(self, bound: u64) -> Option<price::Compression> {
-        let coding = self.coding.filter(|_| bound >= self.min_bytes)?;
+        let compressed = bound >= self.min_bytes && self.max_bytes.is_none_or(|max| bound < max);
+        let coding = self.coding.filter(|_| compressed)?;
         let level = match coding {
             Coding::Br => LARGE_LEVEL,
             _ if bound >= SMALL_ANSWER_BYTES => LARGE_LEVEL,
@@ -225,19 +239,19 @@ impl Gate {
 }
 
 /// An answer's body holding its compressor's permit until it is sent (or dropped).
-struct Held {
-    body: Body,
+struct Held<B> {
+    body: B,
     _permit: OwnedSemaphorePermit,
 }
 
-impl HttpBody for Held {
+impl<B: HttpBody<Data = Bytes> + Unpin> HttpBody for Held<B> {
     type Data = Bytes;
-    type Error = axum::Error;
+    type Error = B::Error;
 
     fn poll_frame(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
-    ) -> Poll<Option<Result<http_body::Frame<Bytes>, axum::Error>>> {
+    ) -> Poll<Option<Result<http_body::Frame<Bytes>, B::Error>>> {
         Pin::new(&mut self.body).poll_frame(cx)
     }
 
@@ -271,22 +285,116 @@ pub fn grpc<S: Animation>(server: AnimationServer<S>, config: Compression) -> An
         .send_compressed(CompressionEncoding::Gzip)
 }
 
-/// Frames go uncompressed on gRPC as on the WebSocket: a playback encodes
-/// each frame once for all its viewers, and compressing would cost every
-/// viewer a compressor per tick (a packed 38-joint frame halves under gzip,
-/// ≈ 1.5 KB → 0.7 KB, at tens of µs each, times viewers × fps) — and
-/// grpcio clients ask for gzip by default. The server-side layer drops the
-/// client's `grpc-accept-encoding` on the methods `is_frames` names (the
-/// route table's streams of frames) only; what the client sends compressed
-/// is still decoded.
-pub fn frames_uncompressed<B>(
-    mut request: axum::http::Request<B>,
-    is_frames: fn(&str) -> bool,
-) -> axum::http::Request<B> {
-    if is_frames(request.uri().path()) {
-        request.headers_mut().remove("grpc-accept-encoding");
+/// The gRPC answers' gate (module doc): for a call whose answers may be
+/// compressed (the route table's unary calls) and a client whose
+/// `grpc-accept-encoding` names gzip or zstd, one compressor permit, held
+/// by the answer's body; without a free permit, or for a stream, the
+/// header is dropped and the answer goes as it is. Frames go uncompressed
+/// as on the WebSocket: a playback encodes each frame once for all its
+/// viewers, and compressing would cost every viewer a compressor per tick
+/// (grpcio clients ask for gzip by default). What the client sends
+/// compressed is still decoded.
+#[derive(Clone)]
+pub struct GrpcAnswers {
+    gate: Gate,
+    compresses: fn(&str) -> bool,
+}
+
+impl GrpcAnswers {
+    /// `compresses`: whether the call at a path answers one message.
+    pub fn new(gate: Gate, compresses: fn(&str) -> bool) -> Self {
+        GrpcAnswers { gate, compresses }
     }
-    request
+
+    /// Narrows the request's `grpc-accept-encoding` to the coding its
+    /// answer will use, or removes it; the permit that coding holds.
+    fn admit<B>(&self, request: &mut axum::http::Request<B>) -> Option<OwnedSemaphorePermit> {
+        let wanted = (self.gate.config.enabled && (self.compresses)(request.uri().path()))
+            .then(|| grpc_answer_coding(request.headers()))
+            .flatten();
+        let permit = wanted.and_then(|_| Arc::clone(&self.gate.permits).try_acquire_owned().ok());
+        match wanted.filter(|_| permit.is_some()) {
+            Some((name, coding)) => {
+                request.headers_mut().insert(GRPC_ACCEPT_ENCODING, HeaderValue::from_static(name));
+                let max_bytes = Some(SMALL_ANSWER_BYTES);
+                request.extensions_mut().insert(AnswerCoding { coding: Some(coding), min_bytes: 0, max_bytes });
+            }
+            None => {
+                request.headers_mut().remove(GRPC_ACCEPT_ENCODING);
+            }
+        }
+        permit
+    }
+}
+
+const GRPC_ACCEPT_ENCODING: &str = "grpc-accept-encoding";
+
+/// The first of the client's `grpc-accept-encoding` codings that tonic
+/// sends ([`grpc`]), as tonic picks it: the client's order.
+fn grpc_answer_coding(headers: &HeaderMap) -> Option<(&'static str, Coding)> {
+    let value = headers.get(GRPC_ACCEPT_ENCODING)?.to_str().ok()?;
+    value.split(',').find_map(|name| match name.trim() {
+        "zstd" => Some(("zstd", Coding::Zstd)),
+        "gzip" => Some(("gzip", Coding::Gzip)),
+        _ => None,
+    })
+}
+
+impl<S> tower::Layer<S> for GrpcAnswers {
+    type Service = GrpcAnswersService<S>;
+
+    fn layer(&self, inner: S) -> Self::Service {
+        GrpcAnswersService { inner, layer: self.clone() }
+    }
+}
+
+/// [`GrpcAnswers`] around the gRPC routes.
+#[derive(Clone)]
+pub struct GrpcAnswersService<S> {
+    inner: S,
+    layer: GrpcAnswers,
+}
+
+type GrpcResponse = axum::http::Response<tonic::body::Body>;
+
+impl<S, B> tower::Service<axum::http::Request<B>> for GrpcAnswersService<S>
+where
+    S: tower::Service<axum::http::Request<B>, Response = GrpcResponse>,
+    S::Future: Send + 'static,
+{
+    type Response = GrpcResponse;
+    type Error = S::Error;
+    type Future = futures_util::future::BoxFuture<'static, Result<GrpcResponse, S::Error>>;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), Self::Error>> {
+        self.inner.poll_ready(cx)
+    }
+
+    fn call(&mut self, mut request: axum::http::Request<B>) -> Self::Future {
+        let permit = self.layer.admit(&mut request);
+        let answer = self.inner.call(request);
+        Box::pin(async move {
+            let response = answer.await?;
+            Ok(match permit {
+                Some(permit) if response.headers().contains_key("grpc-encoding") => {
+                    response.map(|body| tonic::body::Body::new(Held { body, _permit: permit }))
+                }
+                _ => response,
+            })
+        })
+    }
+}
+
+/// A unary gRPC answer: compressed (if its client asked and
+/// [`GrpcAnswers`] let it) only under [`SMALL_ANSWER_BYTES`], which costs
+/// the async worker that tonic compresses on at most a few milliseconds.
+pub fn grpc_answer<T: prost::Message>(message: T) -> tonic::Response<T> {
+    let large = message.encoded_len() as u64 >= SMALL_ANSWER_BYTES;
+    let mut response = tonic::Response::new(message);
+    if large {
+        response.extensions_mut().insert(tonic::codec::SingleMessageCompressionOverride::Disable);
+    }
+    response
 }
 
 /// Middleware (outside [`requests`] and [`responses`]): checks the body's

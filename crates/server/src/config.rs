@@ -285,7 +285,7 @@ settings! {
              by grpc-accept-encoding) and decode request bodies and gRPC messages sent compressed, whose byte \
              limits count decoded bytes; false: identity only, both ways",
             doc "Compress answers for clients that ask (REST: zstd, br or gzip by `Accept-Encoding`; gRPC: gzip or zstd \
-             by `grpc-accept-encoding`, stream frames excepted) and decode compressed request bodies and gRPC \
+             by `grpc-accept-encoding`, unary answers under 64 KiB only) and decode compressed request bodies and gRPC \
              messages, their limits counting decoded bytes; `false`: identity only, both ways \
              ([api.md](api.md#compression))";
         compression_min_bytes: usize = 1024 => as_given -> usize,
@@ -421,6 +421,27 @@ settings! {
              repeated every frame is not rebuilt; their bytes count on `cache_bytes`; a replaced, deleted or evicted \
              clip drops its motions (`inbetween_motion_cache_{hits,misses}_total`, `inbetween_motion_cache_entries` \
              on `/metrics`)";
+        max_graph_bytes: usize = 1024 * 1024 => positive -> usize,
+            "max_graph_bytes", "max-graph-bytes", "INBETWEEN_MAX_GRAPH_BYTES", "BYTES",
+            "Largest graph document POST/PUT /v1/graphs accepts (over it: 413 body_too_large)",
+            doc "Bytes of one graph document (docs/graphs.md), REST body or gRPC message (over it: 413 \
+             `body_too_large`, before it is parsed)";
+        max_graph_nodes: usize = 256 => positive -> usize,
+            "max_graph_nodes", "max-graph-nodes", "INBETWEEN_MAX_GRAPH_NODES", "N",
+            "Nodes of one graph (over it: 422 too_many_nodes at /nodes)",
+            doc "Nodes of one graph (over it: 422 `too_many_nodes` at `/nodes`); each is built as a motion when the \
+             graph is checked and again when it is first used";
+        max_blend_points: usize = 32 => positive -> usize,
+            "max_blend_points", "max-blend-points", "INBETWEEN_MAX_BLEND_POINTS", "N",
+            "Points of one blend1d or blend2d node (at most 32: each is a layer; over it: 422 too_many_points)",
+            doc "Points of one `blend1d` or `blend2d` node, at most 32 (each point is a layer of the node's motion): \
+             over it 422 `too_many_points` at the node's `points`, checked before the blend space is triangulated";
+        graph_cache_entries: usize = 256 => positive -> usize,
+            "graph_cache_entries", "graph-cache-entries", "INBETWEEN_GRAPH_CACHE_ENTRIES", "N",
+            "Built graphs and characters kept in memory, each by id at one version; their bytes count on cache_bytes",
+            doc "Built graphs (blend spaces triangulated, every state's motion built) and checked characters kept in \
+             memory, each kind up to this many, by id at one version; their bytes count on `cache_bytes`; a \
+             replaced or deleted one, on any node, leaves";
         max_build_work: u64 = anim::DEFAULT_BUILD_WORK => positive -> u64,
             "max_build_work", "max-build-work", "INBETWEEN_MAX_BUILD_WORK", "UNITS",
             "Work one clip's build may take: quadrature evaluations plus arc-length pieces of its constant-speed \
@@ -452,6 +473,10 @@ settings! {
             "caller_work_share", "caller-work-share", "INBETWEEN_CALLER_WORK_SHARE", "FRACTION",
             "Share of the node's work capacity one caller's requests and streams may hold at once (over it: 429 \
              caller_work_limit)";
+        broadcast_work_share: f64 = 0.5 => fraction -> f64,
+            "broadcast_work_share", "broadcast-work-share", "INBETWEEN_BROADCAST_WORK_SHARE", "FRACTION",
+            "Share of one core that all broadcasts' ticks may take together, on their one producers' thread (over it: \
+             503 overloaded at create or control); the rest keeps every tick on time when the machine is busy";
         work_threads: usize = cores() => positive -> usize,
             "work_threads", "work-threads", "INBETWEEN_WORK_THREADS", "N", shown "one per core",
             "Threads that evaluate poses, solve IK and encode answers; more work waits for them in order";
@@ -554,7 +579,7 @@ settings! {
         max_compressed_answers: usize = 4 * cores() => positive -> usize,
             "max_compressed_answers", "max-compressed-answers", "INBETWEEN_MAX_COMPRESSED_ANSWERS", "N",
             shown "4 per core",
-            "REST answers compressed at once (each holds an encoder: at most 2.5 MiB at the levels used); an \
+            "REST and gRPC answers compressed at once (each holds an encoder: at most 2.5 MiB at the levels used); an \
              answer that finds them all busy is sent uncompressed";
         max_arriving_bytes: usize = 256 * 1024 * 1024 => positive -> usize,
             "max_arriving_bytes", "max-arriving-bytes", "INBETWEEN_MAX_ARRIVING_BYTES", "BYTES",
@@ -720,6 +745,9 @@ impl Limits {
     fn check_buffers(&self) -> anyhow::Result<()> {
         if self.ws_max_write_buffer_bytes <= self.ws_write_buffer_bytes {
             bail!("ws_max_write_buffer_bytes must be larger than ws_write_buffer_bytes");
+        }
+        if self.max_blend_points > anim::motion::MAX_LAYERS {
+            bail!("max_blend_points must be at most {} (each point is a layer)", anim::motion::MAX_LAYERS);
         }
         if self.max_arriving_bytes < self.max_body_bytes {
             bail!("max_arriving_bytes must be at least max_body_bytes");
@@ -1144,6 +1172,10 @@ mod tests {
             cache_entries: 1024,
             cache_bytes: 268_435_456,
             motion_cache_entries: 1024,
+            max_graph_bytes: 1_048_576,
+            max_graph_nodes: 256,
+            max_blend_points: 32,
+            graph_cache_entries: 256,
             max_build_work: 16_000_000,
             ik_max_constraints: 32,
             ik_max_effectors: 16,
@@ -1151,6 +1183,7 @@ mod tests {
             max_request_work: 100_000_000,
             node_work_per_sec: 0,
             caller_work_share: 0.5,
+            broadcast_work_share: 0.5,
             work_threads: cores,
             max_streams: 1024,
             max_streams_per_client: 64,

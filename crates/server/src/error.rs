@@ -46,6 +46,14 @@ pub enum ApiError {
     /// the field naming it (a motion layer's `clip`, `compatible_with`).
     #[error("{detail}")]
     ClipNotFoundAt { at: At, detail: String },
+    /// A motion's `character` that does not exist: `character_not_found`
+    /// at `/motion/character`.
+    #[error("{detail}")]
+    CharacterNotFoundAt { at: At, detail: String },
+    /// A graph named in a request that does not exist: `graph_not_found`
+    /// at the field naming it (a motion layer's `graph`).
+    #[error("{detail}")]
+    GraphNotFoundAt { at: At, detail: String },
     #[error("method not allowed")]
     MethodNotAllowed,
     /// A write whose name another clip has (`name_taken`), or one that
@@ -187,7 +195,9 @@ impl ApiError {
             Invalid { .. } | TooMany { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Unauthorized => StatusCode::UNAUTHORIZED,
             Forbidden { .. } => StatusCode::FORBIDDEN,
-            NotFound { .. } | ClipNotFoundAt { .. } => StatusCode::NOT_FOUND,
+            NotFound { .. } | ClipNotFoundAt { .. } | CharacterNotFoundAt { .. } | GraphNotFoundAt { .. } => {
+                StatusCode::NOT_FOUND
+            }
             MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             NameConflict { .. } => StatusCode::CONFLICT,
             PreconditionFailed { .. } => StatusCode::PRECONDITION_FAILED,
@@ -227,6 +237,9 @@ impl ApiError {
             NotFound { what: "route" } => "route_not_found",
             NotFound { what: "broadcast" } => "broadcast_not_found",
             NotFound { what: "mesh" } => "no_mesh",
+            NotFound { what: "character" } => "character_not_found",
+            CharacterNotFoundAt { .. } => "character_not_found",
+            NotFound { what: "graph" } | GraphNotFoundAt { .. } => "graph_not_found",
             NotFound { .. } | ClipNotFoundAt { .. } => "clip_not_found",
             MethodNotAllowed => "method_not_allowed",
             PreconditionFailed { .. } => "version_mismatch",
@@ -256,6 +269,8 @@ impl ApiError {
             | ApiError::NameConflict { pointer, .. } => Some(pointer),
             ApiError::Invalid { at: At::Pointer(pointer), .. }
             | ApiError::ClipNotFoundAt { at: At::Pointer(pointer), .. }
+            | ApiError::CharacterNotFoundAt { at: At::Pointer(pointer), .. }
+            | ApiError::GraphNotFoundAt { at: At::Pointer(pointer), .. }
             | ApiError::BadParameter { at: At::Pointer(pointer), .. } => Some(pointer),
             ApiError::Import { pointer, .. } => pointer.as_deref(),
             _ => None,
@@ -308,19 +323,19 @@ impl From<StoreError> for ApiError {
         match e {
             StoreError::NotFound => ApiError::NotFound { what: "clip" },
             StoreError::VersionMismatch { current } => ApiError::PreconditionFailed { current },
-            StoreError::NameTaken { name, id } => ApiError::NameConflict {
+            StoreError::NameTaken { name, id, what } => ApiError::NameConflict {
                 code: "name_taken",
                 pointer: "/name".into(),
                 detail: format!(
-                    "a clip named {name:?} exists ({id}): names identify clips; choose another name, or write with \
-                     replace=true to make this a new version of that clip"
+                    "a {what} named {name:?} exists ({id}): names identify {what}s; choose another name, or write \
+                     with replace=true to make this a new version of that {what}"
                 ),
             },
-            StoreError::AmbiguousName { name, ids } => ApiError::NameConflict {
+            StoreError::AmbiguousName { name, ids, what } => ApiError::NameConflict {
                 code: "ambiguous_name",
                 pointer: "/name".into(),
                 detail: format!(
-                    "several clips are named {name:?} ({}), stored before names were unique: address one by id, or \
+                    "several {what}s are named {name:?} ({}), stored before names were unique: address one by id, or \
                      delete or rename the others",
                     ids.join(", ")
                 ),
@@ -369,6 +384,12 @@ impl ApiError {
             ApiError::MalformedJson { pointer, detail } => ApiError::MalformedJson { pointer: shift(pointer), detail },
             ApiError::ClipNotFoundAt { at: At::Pointer(pointer), detail } => {
                 ApiError::ClipNotFoundAt { at: At::Pointer(shift(pointer)), detail }
+            }
+            ApiError::CharacterNotFoundAt { at: At::Pointer(pointer), detail } => {
+                ApiError::CharacterNotFoundAt { at: At::Pointer(shift(pointer)), detail }
+            }
+            ApiError::GraphNotFoundAt { at: At::Pointer(pointer), detail } => {
+                ApiError::GraphNotFoundAt { at: At::Pointer(shift(pointer)), detail }
             }
             other => other,
         }
@@ -435,7 +456,9 @@ impl ApiError {
             TooMany { .. } => Code::InvalidArgument,
             Unauthorized => Code::Unauthenticated,
             Forbidden { .. } => Code::PermissionDenied,
-            NotFound { .. } | ClipNotFoundAt { .. } => Code::NotFound,
+            NotFound { .. } | ClipNotFoundAt { .. } | CharacterNotFoundAt { .. } | GraphNotFoundAt { .. } => {
+                Code::NotFound
+            }
             MethodNotAllowed => Code::Unimplemented,
             NameConflict { code: "name_taken", .. } => Code::AlreadyExists,
             NameConflict { .. } => Code::FailedPrecondition,

@@ -18,13 +18,14 @@
 use std::pin::Pin;
 use std::sync::Arc;
 
-use futures_util::Stream;
+use futures_util::{Stream, StreamExt};
 use tokio::sync::oneshot;
 use tonic::metadata::MetadataMap;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::auth::{Caller, Identity, Scope};
 use crate::cache::CachedClip;
+use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
 use crate::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
@@ -81,15 +82,16 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 impl GrpcService {
     /// A `SampleBatchRequest` checked and bound to its clip (`SampleBatch`
     /// and `SampleStream` alike).
-    async fn sampling(&self, req: &pb::SampleBatchRequest) -> Result<(Sampling, Arc<CachedClip>), Status> {
+    async fn sampling(&self, request: &Request<pb::SampleBatchRequest>) -> Result<(Sampling, Arc<CachedClip>), Status> {
         use pb::sample_batch_request::When;
+        let (req, coding) = (request.get_ref(), AnswerCoding::of_grpc(request));
         let (times, range) = match &req.when {
             Some(When::Times(t)) => (Some(t), None),
             Some(When::Range(r)) => (None, Some(r)),
             None => (None, None),
         };
         let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
-        Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?)
+        Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf, coding).await?)
     }
 
     /// The RPC's caller (worked out once per call, as REST's middleware
@@ -126,8 +128,10 @@ impl GrpcService {
             start: req.start_time.map(Raw::Number),
             speed: req.speed.map(Raw::Number),
             modes: modes(req.space, req.playback, req.ease),
-            // gRPC frames are always protobuf `Frame`s.
-            encoding: Some(Raw::Text("protobuf")),
+            // `Frame`s with a pose, or with compact bytes.
+            encoding: Some(Raw::Enum(req.encoding)),
+            max_error: req.max_error.map(Raw::Number),
+            distance: req.distance.map(Raw::Number),
             // 0: no limit.
             max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
@@ -374,7 +378,7 @@ fn refused(e: &ControlError) -> Status {
 #[tonic::async_trait]
 impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
-        let caller = self.read(&request)?;
+        let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
         let req = request.into_inner();
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
@@ -382,30 +386,30 @@ impl Animation for GrpcService {
             format: Some(Raw::Enum(req.format)),
             at: in_pose_body,
         };
-        let (sample, cached) = raw.resolve(&self.state, &req.clip_id, Wire::Protobuf).await?;
+        let (sample, cached) = raw.resolve(&self.state, &req.clip_id, Wire::Protobuf, coding).await?;
         let (t, options, format) = (sample.t, sample.options, sample.format);
         let evaluate = move |_: &Cancel| pose(&cached, t, &options, format, true, &mut Sampler::new(), &mut Vec::new());
         let pose = self.state.work.spend(&caller.key(), sample.work, evaluate).await?;
         self.state.counters.poses.increment(1);
-        Ok(Response::new(pose))
+        Ok(grpc_answer(pose))
     }
 
     async fn sample_motion(&self, request: Request<pb::SampleMotionRequest>) -> Result<Response<pb::Pose>, Status> {
-        let caller = self.read(&request)?;
-        Ok(Response::new(super::grpc_motion::sample(&self.state, &caller, request.into_inner()).await?))
+        let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
+        Ok(grpc_answer(super::grpc_motion::sample(&self.state, &caller, request.into_inner(), coding).await?))
     }
 
     async fn sample_motion_batch(
         &self,
         request: Request<pb::SampleMotionBatchRequest>,
     ) -> Result<Response<pb::PoseBatch>, Status> {
-        let caller = self.read(&request)?;
-        Ok(Response::new(super::grpc_motion::sample_batch(&self.state, &caller, request.into_inner()).await?))
+        let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
+        Ok(grpc_answer(super::grpc_motion::sample_batch(&self.state, &caller, request.into_inner(), coding).await?))
     }
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
         let caller = self.read(&request)?;
-        let (sampling, cached) = self.sampling(&request.into_inner()).await?;
+        let (sampling, cached) = self.sampling(&request).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
             let (bytes, limit) = (sampling.answer_bytes, MAX_UNARY_ANSWER_BYTES);
             return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "SampleStream" }.into());
@@ -418,7 +422,7 @@ impl Animation for GrpcService {
             return Err(Status::cancelled("the call was cancelled"));
         }
         self.state.counters.poses.increment(n as u64);
-        Ok(Response::new(batch))
+        Ok(grpc_answer(batch))
     }
 
     type SampleStreamStream = Pin<Box<dyn Stream<Item = Result<pb::PoseBatch, Status>> + Send + 'static>>;
@@ -428,7 +432,7 @@ impl Animation for GrpcService {
         request: Request<pb::SampleBatchRequest>,
     ) -> Result<Response<Self::SampleStreamStream>, Status> {
         let caller = self.read(&request)?;
-        let (sampling, cached) = self.sampling(&request.into_inner()).await?;
+        let (sampling, cached) = self.sampling(&request).await?;
         let ticket = self.state.work.charge(&caller.key(), sampling.work)?;
         let batches = Batches::new(self.state.clone(), sampling, cached, ticket);
         let stream = futures_util::stream::unfold(batches, |mut batches| async move {
@@ -510,10 +514,40 @@ impl Animation for GrpcService {
 
     async fn watch(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchStream>, Status> {
         let caller = self.read(&request)?;
-        let b = live_broadcast(&self.state, &request.get_ref().broadcast_id).await?;
+        let req = request.get_ref();
+        let b = live_broadcast(&self.state, &req.broadcast_id).await?;
+        let compact = match req.encoding {
+            0 | 1 => None,
+            2 => {
+                let asked = (req.max_error.map(Raw::Number), req.distance.map(Raw::Number));
+                Some(crate::request::compact_watch(&self.state, b.params(), asked, in_body, &caller).await?)
+            }
+            n => {
+                let detail = format!("`encoding`: unknown frame encoding {n}");
+                return Err(ApiError::BadParameter {
+                    code: "bad_parameter",
+                    at: At::Pointer("/encoding".into()),
+                    detail,
+                }
+                .into());
+            }
+        };
         let permit = self.engine.admit_for(caller.addr, caller.token.clone()).map_err(ApiError::from)?;
-        let sub = b.watch(stream::Encoding::Protobuf, permit, None);
-        Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.phase_ms()))
+        let Some((layout, ticket)) = compact else {
+            let sub = b.watch(stream::Encoding::Protobuf, permit, None);
+            return Ok(with_phase(Response::new(Box::pin(stream::grpc::frames(sub))), b.phase_ms()));
+        };
+        let sub = b.watch_compact(layout, permit, None).map_err(|e| ApiError::Invalid {
+            code: e.code,
+            at: At::Pointer(format!("/{}", e.field)),
+            detail: e.detail,
+        })?;
+        // The compact encoding's price is held while the viewer watches.
+        let frames = stream::grpc::frames(sub).map(move |frame| {
+            let _held = &ticket;
+            frame
+        });
+        Ok(with_phase(Response::new(Box::pin(frames)), b.phase_ms()))
     }
 
     async fn get_clip(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipRecord>, Status> {
@@ -529,13 +563,13 @@ impl Animation for GrpcService {
         let spec = doc.to_spec().map_err(|e| ApiError::internal(anyhow::anyhow!("stored clip {id}: {e}")))?;
         let metadata_json = doc.metadata.map(|m| serde_json::Value::Object(m).to_string()).unwrap_or_default();
         let (summary, clip) = (Some(summary(&stored.meta)), Some(clip_to_pb(&spec)));
-        Ok(Response::new(pb::ClipRecord { summary, clip, metadata_json }))
+        Ok(grpc_answer(pb::ClipRecord { summary, clip, metadata_json }))
     }
 
     async fn get_skeleton(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipSkeleton>, Status> {
         self.read(&request)?;
         let cached = request_clip(&self.state, &request.get_ref().clip_id).await?;
-        Ok(Response::new(skeleton_to_pb(&cached)))
+        Ok(grpc_answer(skeleton_to_pb(&cached)))
     }
 
     async fn get_mesh(&self, request: Request<pb::GetClipRequest>) -> Result<Response<pb::ClipMesh>, Status> {
@@ -547,7 +581,7 @@ impl Animation for GrpcService {
         let store = &self.state.store;
         store.mesh_tag(id).await.map_err(ApiError::from)?.ok_or(ApiError::NotFound { what: "clip" })?;
         let mesh = store.mesh(id).await.map_err(ApiError::from)?.ok_or(ApiError::NotFound { what: "mesh" })?;
-        Ok(Response::new(pb::ClipMesh { data: mesh.bytes.into(), etag: mesh.etag }))
+        Ok(grpc_answer(pb::ClipMesh { data: mesh.bytes.into(), etag: mesh.etag }))
     }
 
     async fn list_clips(
@@ -571,7 +605,7 @@ impl Animation for GrpcService {
         };
         let Page { clips, next_cursor } = raw.read(&self.state).await?;
         let clips = clips.iter().map(summary).collect();
-        Ok(Response::new(pb::ListClipsResponse { clips, next_cursor: next_cursor.unwrap_or_default() }))
+        Ok(grpc_answer(pb::ListClipsResponse { clips, next_cursor: next_cursor.unwrap_or_default() }))
     }
 
     async fn put_clip(&self, request: Request<pb::PutClipRequest>) -> Result<Response<pb::ClipSummary>, Status> {
@@ -599,8 +633,8 @@ impl Animation for GrpcService {
         reply.warnings = (in_document(&admitted.lints).into_iter())
             .map(|w| pb::Warning { code: w.code, pointer: w.pointer, detail: w.detail })
             .collect();
-        self.state.cache_written(Arc::new(CachedClip { meta, clip: admitted.clip }));
-        Ok(Response::new(reply))
+        self.state.cache_written(Arc::new(CachedClip { meta, clip: admitted.clip, springs: admitted.springs }));
+        Ok(grpc_answer(reply))
     }
 
     async fn delete_clip(
@@ -615,11 +649,101 @@ impl Animation for GrpcService {
         self.state.store.delete(&id, None).await.map_err(ApiError::from)?;
         self.state.cache_invalidate(&id);
         tracing::info!(%id, "clip deleted over gRPC");
-        Ok(Response::new(pb::DeleteClipResponse {}))
+        Ok(grpc_answer(pb::DeleteClipResponse {}))
+    }
+
+    async fn create_character(
+        &self,
+        request: Request<pb::CreateCharacterRequest>,
+    ) -> Result<Response<pb::CharacterSummary>, Status> {
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
+        Ok(Response::new(super::grpc_character::create(&self.state, &caller, request.into_inner()).await?))
+    }
+
+    async fn get_character(
+        &self,
+        request: Request<pb::GetCharacterRequest>,
+    ) -> Result<Response<pb::CharacterRecord>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_character::get(&self.state, request.into_inner()).await?))
+    }
+
+    async fn list_characters(
+        &self,
+        request: Request<pb::ListCharactersRequest>,
+    ) -> Result<Response<pb::ListCharactersResponse>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_character::list(&self.state, request.into_inner()).await?))
+    }
+
+    async fn replace_character(
+        &self,
+        request: Request<pb::ReplaceCharacterRequest>,
+    ) -> Result<Response<pb::CharacterSummary>, Status> {
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
+        Ok(Response::new(super::grpc_character::replace(&self.state, &caller, request.into_inner()).await?))
+    }
+
+    async fn delete_character(
+        &self,
+        request: Request<pb::DeleteCharacterRequest>,
+    ) -> Result<Response<pb::DeleteCharacterResponse>, Status> {
+        self.write(&request)?;
+        Ok(Response::new(super::grpc_character::delete(&self.state, request.into_inner()).await?))
+    }
+
+    async fn import_character(
+        &self,
+        request: Request<pb::ImportCharacterRequest>,
+    ) -> Result<Response<pb::ImportCharacterResponse>, Status> {
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
+        Ok(Response::new(super::grpc_character::import(&self.state, &caller, request.into_inner()).await?))
+    }
+
+    async fn create_graph(
+        &self,
+        request: Request<pb::CreateGraphRequest>,
+    ) -> Result<Response<pb::GraphSummary>, Status> {
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
+        Ok(Response::new(super::grpc_graph::create(&self.state, &caller, request.into_inner()).await?))
+    }
+
+    async fn get_graph(&self, request: Request<pb::GetGraphRequest>) -> Result<Response<pb::GraphRecord>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_graph::get(&self.state, request.into_inner()).await?))
+    }
+
+    async fn list_graphs(
+        &self,
+        request: Request<pb::ListGraphsRequest>,
+    ) -> Result<Response<pb::ListGraphsResponse>, Status> {
+        self.read(&request)?;
+        Ok(Response::new(super::grpc_graph::list(&self.state, request.into_inner()).await?))
+    }
+
+    async fn replace_graph(
+        &self,
+        request: Request<pb::ReplaceGraphRequest>,
+    ) -> Result<Response<pb::GraphSummary>, Status> {
+        let caller = self.caller(&request, Scope::Write)?;
+        self.state.writes.admit(&caller)?;
+        Ok(Response::new(super::grpc_graph::replace(&self.state, &caller, request.into_inner()).await?))
+    }
+
+    async fn delete_graph(
+        &self,
+        request: Request<pb::DeleteGraphRequest>,
+    ) -> Result<Response<pb::DeleteGraphResponse>, Status> {
+        self.write(&request)?;
+        Ok(Response::new(super::grpc_graph::delete(&self.state, request.into_inner()).await?))
     }
 
     async fn ping(&self, _request: Request<pb::PingRequest>) -> Result<Response<pb::PingResponse>, Status> {
-        Ok(Response::new(pb::PingResponse {
+        Ok(grpc_answer(pb::PingResponse {
             server_unix_nanos: stream::unix_nanos(),
             server_monotonic_nanos: self.engine.uptime().as_nanos() as u64,
         }))

@@ -10,6 +10,7 @@
 use glam::Mat4;
 
 use crate::auth::Caller;
+use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
     Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire,
@@ -39,7 +40,7 @@ async fn compose(
     let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
     let joints = (!joints.is_empty()).then_some(joints);
     let parameters = (!parameters.is_empty()).then_some(parameters);
-    RawMotion { spec, joints, parameters, format, at: in_body }.resolve_for(state, &caller.key()).await
+    RawMotion { spec, joints, parameters, format, at: in_body, character: None }.resolve_for(state, &caller.key()).await
 }
 
 /// A stream's motion (`StreamRequest.motion`), still to be looked up.
@@ -71,13 +72,19 @@ pub async fn crossfade_target(
 ///
 /// # Errors
 /// As `POST /v1/poses`, with the same codes.
-pub async fn sample(state: &AppState, caller: &Caller, req: pb::SampleMotionRequest) -> Result<pb::Pose, ApiError> {
+pub async fn sample(
+    state: &AppState,
+    caller: &Caller,
+    req: pb::SampleMotionRequest,
+    coding: AnswerCoding,
+) -> Result<pb::Pose, ApiError> {
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
             .check()?;
     let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
-    let cost = composed.cost(1, checked.format, Wire::Protobuf);
+    let cost = composed.cost(&[checked.t], checked.format, Wire::Protobuf);
+    let cost = cost.compressed(coding.at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let pack = move |_: &Cancel| Packer::new(&composed, checked.options.space, checked.format).pose(checked.t, true);
     let pose = state.work.spend(&caller.key(), cost.work(), pack).await?;
@@ -94,6 +101,7 @@ pub async fn sample_batch(
     state: &AppState,
     caller: &Caller,
     req: pb::SampleMotionBatchRequest,
+    coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
     let (times, range) = match &req.when {
@@ -106,7 +114,8 @@ pub async fn sample_batch(
     let sampling = raw.check(state.config.limits.max_poses)?;
     let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
-    let cost = composed.cost(n as u64, sampling.format, Wire::Protobuf);
+    let cost = composed.cost(&sampling.times, sampling.format, Wire::Protobuf);
+    let cost = cost.compressed(coding.at(cost.bytes));
     let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_batch_message)?;
     if cost.bytes > MAX_UNARY_ANSWER_BYTES {

@@ -53,14 +53,20 @@ pub(crate) mod body_guard;
 pub(crate) mod broadcast_store;
 pub(crate) mod broadcast_work;
 pub(crate) mod builds;
+pub mod built;
 pub(crate) mod cache;
 pub(crate) mod cache_budget;
+pub mod characters;
 pub(crate) mod compression;
 pub mod config;
 pub(crate) mod connections;
+pub(crate) mod documents;
 pub mod error;
+pub mod graphs;
 pub(crate) mod grpc;
+pub(crate) mod grpc_character;
 pub(crate) mod grpc_edge;
+pub(crate) mod grpc_graph;
 pub(crate) mod grpc_motion;
 pub(crate) mod limits;
 mod listen;
@@ -158,11 +164,14 @@ impl Application {
         let prometheus = metrics::handle();
         let counters = metrics::Counters::new();
         counters.cache_limit(config.limits.cache_bytes);
+        let compressors = compression::Gate::new(config.compression, config.limits.max_compressed_answers);
         let config = Arc::new(config);
         let state = AppState::new(state::Shared {
             store,
             cache,
             motions: motion_cache::MotionCache::new(config.limits.motion_cache_entries, cache_budget.clone()),
+            graphs: cache::Cache::new(config.limits.graph_cache_entries, cache_budget.clone()),
+            characters: cache::Cache::new(config.limits.graph_cache_entries, cache_budget.clone()),
             cache_budget,
             writes,
             in_flight: shed::Clients::new(config.limits.max_in_flight_per_client),
@@ -176,6 +185,7 @@ impl Application {
             streams,
             patches: sync::Turns::default(),
             work,
+            compressors,
         });
         // Broadcasts are kept in the store: resumed after a restart, shared by every node.
         let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };
@@ -346,11 +356,10 @@ async fn serve_grpc(
         .http2_keepalive_interval(Some(Duration::from_secs(30)))
         .max_concurrent_streams(limits.http2_max_concurrent_streams)
         .layer(connections::GrpcConnLayer)
-        .layer(tower::util::MapRequestLayer::new(|request| {
-            compression::frames_uncompressed(request, crate::routes::is_frame_rpc)
-        }))
         .layer(grpc_edge::layer())
         .layer(admission)
+        // Next to the routes: a call that admission sheds takes no compressor.
+        .layer(compression::GrpcAnswers::new(state.compressors.clone(), crate::routes::is_unary_rpc))
         .add_routes(routes)
         .serve_with_incoming_shutdown(incoming, async move {
             let _ = stop.wait_for(Option::is_some).await;

@@ -10,6 +10,7 @@ use std::sync::atomic::AtomicBool;
 use crate::store::{ClipStats, MeshWrite, NewClip};
 use anim::ik::IkLimits;
 use anim::lint::{Lint, lint};
+use anim::spring::SpringsSpec;
 use anim::{Clip, ClipError, ClipErrorKind, ClipSpec};
 use formats::wire::json::{ClipDoc, DocError};
 
@@ -23,6 +24,8 @@ use super::error::ApiError;
 pub struct Admitted {
     pub new_clip: NewClip,
     pub clip: Clip,
+    /// Its spring chains, checked against the clip's skeleton.
+    pub springs: SpringsSpec,
     pub lints: Vec<Lint>,
 }
 
@@ -57,6 +60,8 @@ pub fn admit_spec(doc: ClipDoc, spec: &ClipSpec, limits: &Limits, cancel: &Atomi
     if clip.joint_count() > limits.max_joints {
         return Err(too_many("too_many_joints", "/tracks", "joints", clip.joint_count(), limits.max_joints));
     }
+    let springs = doc.springs()?;
+    formats::wire::spring::compile_springs(&springs, clip.skeleton(), "")?;
     let doc_json = serde_json::to_string(&doc).map_err(ApiError::internal)?;
     let stats = ClipStats {
         joints: clip.joint_count() as u32,
@@ -68,7 +73,7 @@ pub fn admit_spec(doc: ClipDoc, spec: &ClipSpec, limits: &Limits, cancel: &Atomi
     };
     let joint_names = clip.skeleton().names().to_vec();
     let new_clip = NewClip { name: doc.name, doc_json, stats, tags: doc.tags, joint_names, mesh: MeshWrite::None };
-    Ok(Admitted { new_clip, clip, lints: lint(spec) })
+    Ok(Admitted { new_clip, clip, springs, lints: lint(spec) })
 }
 
 /// `Clip::build_limited` within `max_work` and the IK ceilings, the budget

@@ -70,6 +70,11 @@ fn describe() {
         "Composed requests whose motion had to be built (not cached for these clip versions)."
     );
     describe_gauge!("inbetween_motion_cache_entries", "Built motions held in memory.");
+    describe_gauge!("inbetween_graph_cache_entries", "Built graphs held in memory, each by id at one version.");
+    describe_gauge!(
+        "inbetween_character_cache_entries",
+        "Checked characters held in memory, each by id at one version."
+    );
     describe_gauge!(
         "inbetween_bodies_awaited",
         "Requests whose body (a gRPC call's first message) is still arriving: they hold no in-flight slot yet."
@@ -141,6 +146,12 @@ impl Counters {
     /// The motion cache's size.
     pub fn motion_cache_gauge(&self, entries: usize) {
         self.motion_cache_entries.set(entries as f64);
+    }
+
+    /// The sizes of the caches of built graphs and characters.
+    pub fn document_cache_gauges(&self, graphs: usize, characters: usize) {
+        metrics::gauge!("inbetween_graph_cache_entries").set(graphs as f64);
+        metrics::gauge!("inbetween_character_cache_entries").set(characters as f64);
     }
 
     /// The cache's byte bound, set once at startup.

@@ -5,7 +5,8 @@
 //!
 //! **The key** ([`MotionKey`]) is the motion as the request gave it, every
 //! field of it (floats by their bits), together with the id *and version* of
-//! each layer's pinned clip. The versions are those the clip lookups just
+//! each layer's pinned clip and of the stored character it plays on (checked
+//! once per version: `server::characters::resolve`). The versions are those the clip lookups just
 //! returned, so a cached motion is only ever found for the very clip versions
 //! the request would build on: a motion over a replaced version can never be
 //! served, even before any invalidation reaches this cache. Mask joints enter
@@ -42,7 +43,10 @@ use std::sync::{Arc, Mutex};
 use crate::cache_budget::{Budgeted, CacheBudget, Entries};
 use crate::stream::{PinnedClip, StreamMotion};
 use anim::Playback;
-use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+use anim::character::Translation;
+use anim::motion::{
+    LayerMode, LayerSpec, MaskSpec, MotionSpec, RetargetSpec, RootMode, RootMotionSpec, SourcePose, UpAxis,
+};
 
 /// What identifies a built motion: the request's motion, field by field,
 /// and each layer's pinned clip id and version, in an unambiguous byte
@@ -51,10 +55,13 @@ use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMot
 pub struct MotionKey(Box<[u8]>);
 
 impl MotionKey {
-    /// The key of `spec` over the clips its layers were looked up at.
-    pub fn of<P: PinnedClip + ?Sized>(spec: &MotionSpec<Arc<P>>) -> Self {
+    /// The key of `spec` over the clips its layers were looked up at, and
+    /// the stored character it plays on (its id and version: a character
+    /// is checked once per version, so that names its skeleton, roles and
+    /// reference exactly).
+    pub fn of<P: PinnedClip + ?Sized>(spec: &MotionSpec<Arc<P>>, character: Option<(&str, u64)>) -> Self {
         // Destructured without `..`: a field added to the spec cannot be left out of the key.
-        let MotionSpec { layers, root_motion, ik } = spec;
+        let MotionSpec { layers, root_motion, ik, character: _, retarget, springs } = spec;
         let mut key = KeyWriter(Vec::with_capacity(64 * layers.len()));
         key.len(layers.len());
         for layer in layers {
@@ -64,6 +71,14 @@ impl MotionKey {
         // Every field of every constraint, floats in their shortest exact
         // form: two lists give the same text only if they are the same.
         key.str(&format!("{ik:?}"));
+        key.option(character, |key, (id, version)| {
+            key.str(id);
+            key.u64(version);
+        });
+        key.retarget(retarget);
+        // Every chain, parameter and collider, floats in their shortest exact
+        // form; nothing but the option's mark without chains (which run nothing).
+        key.option((!springs.chains.is_empty()).then_some(springs), |key, s| key.str(&format!("{s:?}")));
         MotionKey(key.0.into_boxed_slice())
     }
 }
@@ -73,7 +88,7 @@ struct KeyWriter(Vec<u8>);
 
 impl KeyWriter {
     fn layer<P: PinnedClip + ?Sized>(&mut self, layer: &LayerSpec<Arc<P>>) {
-        let LayerSpec { clip, weight, mode, mask, offset, speed, playback, sync, reference_time } = layer;
+        let LayerSpec { clip, weight, mode, mask, offset, speed, playback, sync, reference_time, retarget } = layer;
         self.str(clip.id());
         self.u64(clip.version());
         self.f32(*weight);
@@ -92,6 +107,31 @@ impl KeyWriter {
         });
         self.option(sync.as_deref(), Self::str);
         self.option(*reference_time, Self::f64);
+        self.option(retarget.as_ref(), Self::retarget);
+    }
+
+    fn retarget(&mut self, retarget: &RetargetSpec) {
+        let RetargetSpec { source_pose, translation } = retarget;
+        match source_pose {
+            SourcePose::Rest => self.tag(0),
+            SourcePose::Time(t) => {
+                self.tag(1);
+                self.f64(*t);
+            }
+            SourcePose::Rotations(rotations) => {
+                self.tag(2);
+                self.len(rotations.len());
+                for (name, q) in rotations {
+                    self.str(name);
+                    q.to_array().iter().for_each(|x| self.f32(*x));
+                }
+            }
+        }
+        self.tag(match translation {
+            Translation::Hips => 0,
+            Translation::None => 1,
+            Translation::All => 2,
+        });
     }
 
     fn mask(&mut self, mask: Option<&MaskSpec>) {
@@ -286,7 +326,7 @@ mod tests {
     }
 
     fn built(spec: MotionSpec<Arc<dyn PinnedClip>>) -> (MotionKey, Arc<StreamMotion>) {
-        (MotionKey::of(&spec), Arc::new(Motion::build(spec).unwrap()))
+        (MotionKey::of(&spec, None), Arc::new(Motion::build(spec).unwrap()))
     }
 
     fn mask(joints: &[(&str, f32)]) -> Option<MaskSpec> {
@@ -301,14 +341,18 @@ mod tests {
         masked.layers[1].mask = mask(&[("j", 0.5), ("k", 1.0)]);
         let mut again = spec(&[pinned("a", 1), pinned("b", 1)]);
         again.layers[1].mask = mask(&[("k", 1.0), ("j", 0.5)]);
-        assert_eq!(MotionKey::of(&masked), MotionKey::of(&again), "other copies of the same versions, mask reordered");
+        assert_eq!(
+            MotionKey::of(&masked, None),
+            MotionKey::of(&again, None),
+            "other copies of the same versions, mask reordered"
+        );
     }
 
     #[test]
     fn any_difference_in_the_motion_or_its_versions_is_another_key() {
         let (a, b) = (pinned("a", 1), pinned("b", 1));
         let base = spec(&[a.clone(), b.clone()]);
-        let key = MotionKey::of(&base);
+        let key = MotionKey::of(&base, None);
         let changed: Vec<(&str, MotionSpec<Arc<dyn PinnedClip>>)> = vec![
             ("a weight", {
                 let mut s = base.clone();
@@ -352,14 +396,24 @@ mod tests {
             ("root motion", MotionSpec { root_motion: Some(RootMotionSpec::default()), ..base.clone() }),
         ];
         for (what, spec) in &changed {
-            assert_ne!(MotionKey::of(spec), key, "{what}");
+            assert_ne!(MotionKey::of(spec, None), key, "{what}");
         }
         // And the changed ones differ from one another (no two collapse).
         for (i, (what, s)) in changed.iter().enumerate() {
             for (other, t) in &changed[i + 1..] {
-                assert_ne!(MotionKey::of(s), MotionKey::of(t), "{what} vs {other}");
+                assert_ne!(MotionKey::of(s, None), MotionKey::of(t, None), "{what} vs {other}");
             }
         }
+    }
+
+    #[test]
+    fn a_character_is_keyed_by_its_id_and_version() {
+        let base = spec(&[pinned("a", 1)]);
+        let keys = [None, Some(("c", 1)), Some(("c", 2)), Some(("d", 1))].map(|c| MotionKey::of(&base, c));
+        for (i, k) in keys.iter().enumerate() {
+            assert!(keys[i + 1..].iter().all(|other| other != k), "character {i} collides");
+        }
+        assert_eq!(MotionKey::of(&base, Some(("c", 2))), keys[2]);
     }
 
     #[test]
@@ -368,7 +422,7 @@ mod tests {
         one.layers[0].sync = Some("c".into());
         let mut other = spec(&[pinned("a", 1)]);
         other.layers[0].sync = Some("bc".into());
-        assert_ne!(MotionKey::of(&one), MotionKey::of(&other));
+        assert_ne!(MotionKey::of(&one, None), MotionKey::of(&other, None));
     }
 
     #[test]

@@ -20,6 +20,11 @@
 //! sends a `ping` on the channel every [`HEARTBEAT`], and a listener that has
 //! heard nothing for [`SILENCE_LIMIT`] treats its connection as lost.
 //!
+//! Graphs and characters are announced alike
+//! (`migrations/postgres/0007_graphs.sql`); their ids are UUIDs like clips',
+//! so each change is handed to every cache, and the one holding the id at
+//! an older version lets it go (`AppState::document_heard`).
+//!
 //! Streams are not touched: each holds the compiled clip it started on
 //! (`Arc<CachedClip>`) until it ends, exactly as after a local replace.
 //!
@@ -86,12 +91,16 @@ pub fn apply(state: &AppState, change: &Change<'_>) {
     tracing::debug!(?change, "clip change heard");
     match *change {
         Change::Written { id, version } => {
+            state.document_heard(id, Some(version));
             if state.cache.version_of(id).is_some_and(|cached| cached >= version) {
                 return;
             }
             state.cache_invalidate(id);
         }
-        Change::Deleted { id } => state.cache_invalidate(id),
+        Change::Deleted { id } => {
+            state.document_heard(id, None);
+            state.cache_invalidate(id);
+        }
         Change::Broadcast { id } => return broadcast_store::heard(state, Heard::Changed(id.to_owned())),
         Change::BroadcastDeleted { id } => return broadcast_store::heard(state, Heard::Deleted(id.to_owned())),
         Change::Ping => return,

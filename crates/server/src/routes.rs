@@ -15,7 +15,9 @@ use axum::http::Method;
 use axum::routing::MethodRouter;
 
 use crate::auth::Scope;
-use crate::rest::{broadcasts, clips, health, import, mesh, motions, patch, poses, skeleton, stream, viewer};
+use crate::rest::{
+    broadcasts, characters, clips, graphs, health, import, mesh, motions, patch, poses, skeleton, stream, viewer,
+};
 use crate::state::AppState;
 
 /// What a route does, as the limits see it.
@@ -30,6 +32,10 @@ pub enum Class {
     /// Frames at a fixed rate: over gRPC, uncompressed and holding no
     /// in-flight slot once started (the stream caps govern them).
     FrameStream,
+    /// Poses sent as a stream of messages (gRPC `SampleStream`): a read
+    /// that holds its in-flight slot until its last message, uncompressed
+    /// (a message is up to a megabyte).
+    PoseStream,
     /// Probes and metrics: never shed, so an overloaded server looks alive.
     Operations,
     /// The viewer page, served with its files by `rest::viewer::router`.
@@ -134,6 +140,18 @@ routes! {
         (post, "/v1/clips/{id}/sample", poses::sample, Read, Read, "SampleBatch"),
         (get, "/v1/clips/{id}/stream", stream::stream, Read, FrameStream, "StreamFrames"),
         (get, "/v1/stream", stream::motion_stream, Read, FrameStream, -),
+        (post, "/v1/characters", characters::create_character, Write, Write, "CreateCharacter"),
+        (get, "/v1/characters", characters::list_characters, Read, Read, "ListCharacters"),
+        (post, "/v1/characters/import", import::import_characters, Write, Import, "ImportCharacter"),
+        (get, "/v1/characters/{id}", characters::get_character, Read, Read, "GetCharacter"),
+        (put, "/v1/characters/{id}", characters::replace_character, Write, Write, "ReplaceCharacter"),
+        (delete, "/v1/characters/{id}", characters::delete_character, Write, Write, "DeleteCharacter"),
+        (get, "/v1/characters/{id}/mesh", mesh::get_character_mesh, Read, Read, -),
+        (post, "/v1/graphs", graphs::create_graph, Write, Write, "CreateGraph"),
+        (get, "/v1/graphs", graphs::list_graphs, Read, Read, "ListGraphs"),
+        (get, "/v1/graphs/{id}", graphs::get_graph, Read, Read, "GetGraph"),
+        (put, "/v1/graphs/{id}", graphs::replace_graph, Write, Write, "ReplaceGraph"),
+        (delete, "/v1/graphs/{id}", graphs::delete_graph, Write, Write, "DeleteGraph"),
         (post, "/v1/broadcasts", broadcasts::create, Write, Write, -),
         (get, "/v1/broadcasts", broadcasts::list, Read, Read, -),
         (get, "/v1/broadcasts/{id}", broadcasts::get, Read, Read, -),
@@ -148,10 +166,9 @@ routes! {
         (get, "/viewer", viewer::viewer_page, Open, Page, -),
     }
     grpc {
-        ("SampleStream", Read, Read),
+        ("SampleStream", Read, PoseStream),
         ("Play", Read, FrameStream),
-        // Its frames are compressed and hold their in-flight slot, as they always have.
-        ("Watch", Read, Read),
+        ("Watch", Read, FrameStream),
         ("Ping", Open, Read),
     }
 }
@@ -223,9 +240,9 @@ fn rest_route(method: &Method, path: &str) -> Option<&'static Route> {
     route_where(path, |r| r.rest.is_some_and(|(m, _)| method.as_str().eq_ignore_ascii_case(m)))
 }
 
-/// The one import route's path (its bodies are spooled).
-pub fn import_path() -> &'static str {
-    ROUTES.iter().find(|r| r.class == Class::Import).and_then(|r| r.rest).map_or("", |(_, path)| path)
+/// The import routes' paths (their bodies are spooled).
+pub fn import_paths() -> Vec<&'static str> {
+    ROUTES.iter().filter(|r| r.class == Class::Import).filter_map(|r| r.rest).map(|(_, path)| path).collect()
 }
 
 /// Whether the write rate limit counts `method path`: its route's class, or
@@ -246,10 +263,20 @@ pub fn never_shed(path: &str) -> bool {
     route_where(path, |r| r.class == Class::Operations).is_some()
 }
 
+/// The class of the gRPC call to `path`, if it is one of ours.
+fn rpc_class(path: &str) -> Option<Class> {
+    RPCS.get(path.strip_prefix("/inbetween.v1.Animation/")?).copied()
+}
+
 /// Whether the gRPC request to `path` is a stream of frames.
 pub fn is_frame_rpc(path: &str) -> bool {
-    let Some(method) = path.strip_prefix("/inbetween.v1.Animation/") else { return false };
-    RPCS.get(method) == Some(&Class::FrameStream)
+    rpc_class(path) == Some(Class::FrameStream)
+}
+
+/// Whether the gRPC call to `path` answers one message, which tonic may
+/// compress (`compression::GrpcAnswers`); health and reflection included.
+pub fn is_unary_rpc(path: &str) -> bool {
+    !matches!(rpc_class(path), Some(Class::FrameStream | Class::PoseStream))
 }
 
 #[cfg(test)]
@@ -279,9 +306,12 @@ mod tests {
         assert!(!never_shed("/v1/clips") && !never_shed("/healthz/x"));
         assert!(is_frame_rpc("/inbetween.v1.Animation/StreamFrames"));
         assert!(is_frame_rpc("/inbetween.v1.Animation/Play"));
-        assert!(!is_frame_rpc("/inbetween.v1.Animation/Watch"));
+        assert!(is_frame_rpc("/inbetween.v1.Animation/Watch"));
         assert!(!is_frame_rpc("/inbetween.v1.Animation/SampleStream"));
-        assert_eq!(import_path(), "/v1/clips/import");
+        assert!(is_unary_rpc("/inbetween.v1.Animation/Sample") && is_unary_rpc("/grpc.health.v1.Health/Check"));
+        assert!(!is_unary_rpc("/inbetween.v1.Animation/SampleStream"));
+        assert!(!is_unary_rpc("/inbetween.v1.Animation/Watch"));
+        assert_eq!(import_paths(), ["/v1/clips/import", "/v1/characters/import"]);
     }
 
     /// The tree answers as a scan of the table with [`template_matches`] would.

@@ -52,8 +52,8 @@ const PACE_CHECK: Duration = Duration::from_secs(1);
 /// The route whose bodies are spooled, its limit, and the upload slots.
 #[derive(Debug, Clone)]
 pub struct SpoolRoute {
-    /// The `POST` path spooled.
-    pub path: &'static str,
+    /// The `POST` paths spooled (the import routes).
+    pub paths: Vec<&'static str>,
     pub max_bytes: usize,
     /// The setting `max_bytes` comes from, named in a 413.
     pub setting: &'static str,
@@ -79,17 +79,17 @@ pub struct PaceLimit {
 
 impl SpoolRoute {
     pub fn new(
-        path: &'static str,
+        paths: Vec<&'static str>,
         (max_bytes, setting): (usize, &'static str),
         limits: UploadLimits,
         pace: PaceLimit,
     ) -> SpoolRoute {
-        SpoolRoute { path, max_bytes, setting, slots: UploadSlots::new(limits), pace }
+        SpoolRoute { paths, max_bytes, setting, slots: UploadSlots::new(limits), pace }
     }
 
     /// Whether `request` is one this route spools.
     pub fn matches(&self, request: &Request) -> bool {
-        request.method() == Method::POST && request.uri().path() == self.path
+        request.method() == Method::POST && self.paths.contains(&request.uri().path())
     }
 
     /// An upload slot for `caller`, held until the request ends.

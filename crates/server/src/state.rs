@@ -13,11 +13,14 @@ use metrics_exporter_prometheus::PrometheusHandle;
 use crate::store::ClipStore;
 
 use super::auth::Auth;
-use super::cache::{CachedClip, ClipCache};
+use super::built::BuiltCharacter;
+use super::built::BuiltGraph;
+use super::cache::{Cache, CachedClip, ClipCache, Epoch};
 use super::cache_budget::{CacheBudget, trim};
 use super::config::Config;
 use super::error::ApiError;
 use super::motion_cache::{MotionCache, MotionKey};
+use crate::store::DocKind;
 use crate::stream::StreamMotion;
 
 /// What every handler shares. One `Arc` around everything: extractors clone
@@ -45,7 +48,11 @@ pub struct Shared {
     pub cache: Arc<ClipCache>,
     /// Built motions over the clip cache's entries (`server::motion_cache`).
     pub motions: MotionCache,
-    /// The byte budget both caches draw on (`server::cache_budget`).
+    /// Built graphs by id at one version, over the clip cache's entries (`server::graphs`).
+    pub graphs: Cache<BuiltGraph>,
+    /// Checked characters by id at one version (`server::characters`).
+    pub characters: Cache<BuiltCharacter>,
+    /// The byte budget every cache draws on (`server::cache_budget`).
     pub cache_budget: Arc<CacheBudget>,
     pub config: Arc<Config>,
     /// Identifies callers from the configured tokens (REST and gRPC).
@@ -69,6 +76,8 @@ pub struct Shared {
     /// Where poses are evaluated and clips and motions built, and what the
     /// node and each caller may spend on them (`server::work`).
     pub work: Arc<crate::work::Work>,
+    /// The answers compressed at once, REST's and gRPC's (`server::compression`).
+    pub compressors: crate::compression::Gate,
 }
 
 impl AppState {
@@ -167,10 +176,13 @@ impl AppState {
         self.cache_gauges();
     }
 
-    /// Stops caching clips and motions: changes may go unheard from now on.
+    /// Stops caching clips, motions, graphs and characters: changes may go
+    /// unheard from now on.
     pub fn cache_suspend(&self) {
         self.cache.suspend();
         self.motions.clear();
+        self.graphs.suspend();
+        self.characters.suspend();
         self.cache_gauges();
     }
 
@@ -178,7 +190,47 @@ impl AppState {
     pub fn cache_resume(&self) {
         self.cache.resume();
         self.motions.clear();
+        self.graphs.resume();
+        self.characters.resume();
         self.cache_gauges();
+    }
+
+    /// After a committed write or delete of document `id` of `kind` on this
+    /// node: its built form leaves (the next use builds the new version).
+    pub fn document_changed(&self, kind: DocKind, id: &str) {
+        match kind {
+            DocKind::Graph => self.graphs.invalidate(id),
+            DocKind::Character => self.characters.invalidate(id),
+        }
+        self.forget_departed_motions();
+        self.cache_gauges();
+    }
+
+    /// Another node changed `id` (to `version`; `None`: deleted): if it is
+    /// a built graph or character older than that, it leaves. Idempotent,
+    /// as the clip cache's handling (`server::notify`).
+    pub fn document_heard(&self, id: &str, version: Option<u64>) {
+        let stale = |cached: Option<u64>| cached.is_some() && version.is_none_or(|v| cached.is_some_and(|c| c < v));
+        if stale(self.graphs.version_of(id)) {
+            self.graphs.invalidate(id);
+        }
+        if stale(self.characters.version_of(id)) {
+            self.characters.invalidate(id);
+        }
+        self.forget_departed_motions();
+        self.cache_gauges();
+    }
+
+    /// Caches a graph just built (after a write, or by a use that missed),
+    /// unless one of its clips is no longer the clip cache's entry, or (a
+    /// miss) a change of graphs was heard since `seen` was taken.
+    pub fn cache_graph(&self, built: Arc<BuiltGraph>, seen: Option<Epoch>) {
+        let held = |g: &BuiltGraph| g.clips.iter().all(|c| self.cache.holds(c));
+        match seen {
+            Some(seen) => drop(self.graphs.insert_loaded_if(built, seen, held)),
+            None => self.graphs.insert_written_if(built, held),
+        }
+        self.trim_caches();
     }
 
     /// The built motion cached under `key`, counted as a hit or a miss.
@@ -201,7 +253,7 @@ impl AppState {
     /// Evicts the least recently used entries of every cache until they fit
     /// `cache_bytes` together, then drops the motions over clips that left.
     fn trim_caches(&self) {
-        trim(&self.cache_budget, &[&*self.cache, &self.motions]);
+        trim(&self.cache_budget, &[&*self.cache, &self.motions, &self.graphs, &self.characters]);
         self.forget_departed_motions();
         self.cache_gauges();
     }
@@ -210,11 +262,21 @@ impl AppState {
     pub fn cache_gauges(&self) {
         self.counters.cache_gauges(self.cache.len(), self.cache_budget.used());
         self.counters.motion_cache_gauge(self.motions.len());
+        self.counters.document_cache_gauges(self.graphs.len(), self.characters.len());
     }
 
-    /// Drops the motions over clips that left the clip cache.
+    /// Drops the graphs over clips that left the clip cache, then the
+    /// motions over clips or graphs that left (a motion names what it was
+    /// built on by id). Characters are held by the motions built on them
+    /// (keyed by their version), so their departures need nothing more.
     fn forget_departed_motions(&self) {
-        self.motions.invalidate(&self.cache.take_departed());
+        let mut departed = self.cache.take_departed();
+        if !departed.is_empty() {
+            self.graphs.invalidate_where(|g| departed.iter().any(|id| g.uses_clip(id)));
+        }
+        departed.extend(self.graphs.take_departed());
+        self.motions.invalidate(&departed);
+        drop(self.characters.take_departed());
     }
 
     fn forget_load(&self, id: &str) {

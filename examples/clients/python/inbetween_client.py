@@ -3,7 +3,9 @@
 
 Uploads a clip over REST, samples one pose over REST and the same pose over
 gRPC (they must agree), then plays the clip over a WebSocket for a few frames,
-printing each and checking its clip time against the schedule (docs/api.md).
+printing each and checking its clip time against the schedule (docs/api.md),
+and plays it again in compact frames (docs/compact-frames.md) beside a JSON
+stream of the same ticks, each decoded pose within the stated bound.
 
     python3 -m pip install -r examples/clients/python/requirements.txt
     python3 examples/clients/python/inbetween_client.py \
@@ -50,8 +52,11 @@ class Rest:
         self.headers = {"Authorization": f"Bearer {token}"} if token else {}
 
     def call(self, method, path, body=None):
-        data = json.dumps(body).encode() if body is not None else None
-        headers = dict(self.headers, **({"Content-Type": "application/json"} if data else {}))
+        """`body`: a JSON value, or bytes sent as they are (a file to import)."""
+        raw = isinstance(body, bytes)
+        data = body if raw else json.dumps(body).encode() if body is not None else None
+        kind = "application/octet-stream" if raw else "application/json"
+        headers = dict(self.headers, **({"Content-Type": kind} if data else {}))
         req = urllib.request.Request(self.base + path, data=data, method=method, headers=headers)
         try:
             with urllib.request.urlopen(req) as resp:
@@ -95,6 +100,44 @@ async def play(http_base, summary, fps, frames, token=None):
         await ws.send(json.dumps({"op": "stop"}))
 
 
+async def play_compact(http_base, summary, fps, frames, token=None, max_error=1e-4):
+    """A compact stream and a JSON stream of the same ticks: every compact
+    frame decodes (compact.py) to within `max_error` of the JSON pose, each
+    joint's translation directly, its rotation as the angle that moves a
+    point at the layout's `distance`."""
+    from compact import CompactDecoder
+
+    base = http_base.replace("http", "ws", 1) + f"/v1/clips/{summary['id']}/stream"
+    query = f"fps={fps}&start={summary['start']}&playback=loop&max_frames={frames}"
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    async with websockets.connect(f"{base}?{query}&encoding=compact&max_error={max_error}",
+                                  additional_headers=headers) as compact, \
+            websockets.connect(f"{base}?{query}", additional_headers=headers) as plain:
+        layout = json.loads(await compact.recv())["opened"]["compact"]
+        decoder = CompactDecoder(layout)
+        decoded = {}
+        for _ in range(frames):
+            frame = decoder.decode(await compact.recv())
+            decoded[frame.seq] = frame
+        reference = {}
+        for _ in range(frames):
+            frame = json.loads(await plain.recv())
+            reference[frame["seq"]] = frame["pose"]["joints"]
+    keys = sum(1 for f in decoded.values() if f.key)
+    worst = 0.0
+    for seq in decoded.keys() & reference.keys():
+        for j, joint in enumerate(reference[seq]):
+            got = decoded[seq]
+            worst = max(worst, max(abs(a - b) for a, b in zip(joint["translation"], got.translations[j])))
+            # The angle between two unit quaternions is about twice their distance (sign aligned).
+            sign = math.copysign(1.0, sum(float(a) * b for a, b in zip(got.rotations[j], joint["rotation"])))
+            gap = math.dist([float(a) for a in got.rotations[j]], [sign * b for b in joint["rotation"]])
+            worst = max(worst, 2 * gap * layout["distance"])
+    assert worst <= max_error * 1.01, (worst, max_error)
+    assert keys >= 1 and len(decoded) == frames, (keys, len(decoded))
+    print(f"compact: {len(decoded)} frames ({keys} key), worst {worst:.2e} m of {max_error} against the JSON stream")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("clip", help="a clip document (JSON), e.g. examples/wave.json")
@@ -114,6 +157,7 @@ def main():
     compare(pose, grpc_pose(load_stubs(), args.grpc, summary["id"], t, args.token))
     print(f"pose at t={t}: REST and gRPC agree on {len(pose['joints'])} joints")
     asyncio.run(play(args.http, summary, args.fps, args.frames, args.token))
+    asyncio.run(play_compact(args.http, summary, args.fps, 2 * args.fps + 5, args.token))
 
 
 if __name__ == "__main__":

@@ -309,6 +309,61 @@ async fn grpc_compression_is_accepted_and_offered_but_not_for_frames() {
     app.stop().await;
 }
 
+/// The messages of a call to `method` sent with `grpc-accept-encoding:
+/// gzip`, as they arrive: each one's compressed flag and its bytes.
+async fn raw_messages(app: &TestApp, method: &str, message: impl Message) -> Vec<(bool, Vec<u8>)> {
+    use http_body_util::BodyExt;
+    use tower::{Service, ServiceExt};
+    let mut body = vec![0];
+    body.extend((message.encoded_len() as u32).to_be_bytes());
+    body.extend(message.encode_to_vec());
+    let request = axum::http::Request::post(format!("/inbetween.v1.Animation/{method}"))
+        .header("content-type", "application/grpc")
+        .header("te", "trailers")
+        .header("grpc-accept-encoding", "gzip")
+        .body(tonic::body::Body::new(http_body_util::Full::new(bytes::Bytes::from(body))))
+        .unwrap();
+    let mut channel = app.channel().await;
+    let response = channel.ready().await.unwrap().call(request).await.unwrap();
+    let bytes = within(10, method, response.into_body().collect()).await.unwrap().to_bytes();
+    let mut messages = Vec::new();
+    let mut rest = &bytes[..];
+    while rest.len() >= 5 {
+        let len = u32::from_be_bytes(rest[1..5].try_into().unwrap()) as usize;
+        messages.push((rest[0] == 1, rest[5..5 + len].to_vec()));
+        rest = &rest[5 + len..];
+    }
+    messages
+}
+
+/// tonic compresses on the async workers, so only small unary answers are
+/// compressed; large ones and streams go as they are, whatever the client asks.
+#[tokio::test]
+async fn grpc_compresses_small_answers_only() {
+    let app = TestApp::start().await;
+    let id = import_131_03(&app).await;
+    let pose = pb::SampleRequest { clip_id: id.clone(), time: 0.5, ..Default::default() };
+    let small = raw_messages(&app, "Sample", pose.clone()).await;
+    assert_eq!(small.len(), 1);
+    assert!(small[0].0, "a pose of 31 joints is compressed");
+    let plain = app.grpc().await.sample(pose).await.unwrap().into_inner();
+    let mut inflated = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&small[0].1[..]), &mut inflated).unwrap();
+    assert_eq!(pb::Pose::decode(&inflated[..]).unwrap(), plain, "the compressed pose decodes to the plain one");
+
+    let record = raw_messages(&app, "GetClip", pb::GetClipRequest { clip_id: id.clone() }).await;
+    assert_eq!(record.len(), 1);
+    assert!(!record[0].0, "the take's record ({} bytes) goes as it is", record[0].1.len());
+    assert!(record[0].1.len() >= 64 * 1024, "over the 64 KiB of a small answer");
+    assert!(pb::ClipRecord::decode(&record[0].1[..]).is_ok());
+
+    let batches = raw_messages(&app, "SampleStream", range_300(&id)).await;
+    assert!(!batches.is_empty() && batches.iter().all(|(compressed, _)| !compressed), "SampleStream goes as it is");
+    let poses: usize = batches.iter().map(|(_, b)| pb::PoseBatch::decode(&b[..]).unwrap().poses.len()).sum();
+    assert_eq!(poses, 300);
+    app.stop().await;
+}
+
 #[tokio::test]
 async fn a_compressed_grpc_message_is_limited_by_its_decoded_size() {
     let app = TestApp::start().await;

@@ -164,3 +164,43 @@ async fn a_compressed_answer_is_priced_for_its_compression() {
     assert_eq!((status, code.as_str()), (422, "too_much_work"), "{detail}");
     app.stop().await;
 }
+
+/// The detail of a gRPC refusal of `Sample` (one pose of `id`) or, with
+/// `poses`, of `SampleBatch`, from a client that accepts `coding`.
+async fn grpc_refusal(app: &TestApp, id: &str, coding: tonic::codec::CompressionEncoding, poses: u32) -> String {
+    let mut grpc = app.grpc().await.accept_compressed(coding);
+    let status = if poses == 1 {
+        grpc.sample(pb::SampleRequest { clip_id: id.into(), time: 0.5, ..Default::default() }).await.unwrap_err()
+    } else {
+        let times = (0..poses).map(|k| f64::from(k) * 0.005).collect();
+        let when = Some(pb::sample_batch_request::When::Times(pb::Times { values: times }));
+        grpc.sample_batch(pb::SampleBatchRequest { clip_id: id.into(), when, ..Default::default() }).await.unwrap_err()
+    };
+    assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
+    status.message().to_owned()
+}
+
+/// tonic compresses small unary answers at gzip 6 and zstd 3 (REST's
+/// small-answer levels), larger ones not at all: the price says the same.
+#[tokio::test]
+async fn a_grpc_answer_is_priced_for_the_compression_tonic_gives_it() {
+    use tonic::codec::CompressionEncoding::{Gzip, Zstd};
+    let dir = tempfile::tempdir().unwrap();
+    let (app, id) = limited_with_clip(dir.path(), 1).await;
+    let plain = app.grpc().await.sample(pb::SampleRequest { clip_id: id.clone(), ..Default::default() }).await;
+    let (whole, encode, compress) = parts(plain.unwrap_err().message());
+    assert_eq!(compress, 0);
+    let bytes = (8 * (encode - 1) + 1)..=(8 * encode);
+    for (coding, ns_per_byte) in [(Gzip, 39), (Zstd, 13)] {
+        let detail = grpc_refusal(&app, &id, coding, 1).await;
+        let (priced, encoded, compressed) = parts(&detail);
+        assert_eq!(encoded, encode, "{detail}");
+        let (least, most) = (bytes.start() * ns_per_byte / 10, (bytes.end() * ns_per_byte).div_ceil(10));
+        assert!((least..=most).contains(&compressed), "{coding:?}: {compressed} not in {least}..={most}");
+        assert_eq!(priced, whole + compressed, "{detail}");
+        // 200 poses of 64 joints: over 64 KiB, sent as they are, so nothing to compress.
+        let (_, _, compressed) = parts(&grpc_refusal(&app, &id, coding, 200).await);
+        assert_eq!(compressed, 0, "{coding:?}: a large answer is not compressed");
+    }
+    app.stop().await;
+}

@@ -51,6 +51,18 @@ fn grpc_error_code(status: &tonic::Status) -> String {
 }
 
 /// [`chain_ik`] as a gRPC motion.
+/// The chain constraint's point target mirrored in x.
+fn flip_x(constraint: &mut pb::IkConstraint) {
+    use pb::ik_constraint::Kind;
+    use pb::ik_target::Target;
+    let Some(Kind::Chain(chain)) = &mut constraint.kind else { return };
+    for effector in &mut chain.effectors {
+        if let Some(pb::IkTarget { target: Some(Target::Point(point)) }) = &mut effector.target {
+            point.x = -point.x;
+        }
+    }
+}
+
 fn motion_pb(id: &str, joints: usize, iterations: u32) -> pb::Motion {
     let target = pb::Vec3 { x: 50.0, y: 50.0, z: 0.0 };
     let effector = pb::IkEffector {
@@ -109,10 +121,15 @@ async fn ik_keyed_in_a_clip_is_priced_when_read() {
     assert_eq!(app.state.work.pool().steps(), 0, "no pose was evaluated");
 }
 
-/// One pose of 32 chains over 4,096 joints toward a point out of reach:
-/// many seconds of work.
+/// One pose of 32 chains over 4,096 joints toward points out of reach,
+/// on alternate sides (x = ±50), so that every solve starts far from its
+/// target and runs its iterations: many seconds of work on any machine.
 fn heavy_pose(id: &str) -> Value {
-    json!({"motion": motion(id, chains(32, 4096, 1000)), "time": 0.5})
+    let mut ik = chains(32, 4096, 1000);
+    for chain in ik.as_array_mut().unwrap().iter_mut().skip(1).step_by(2) {
+        chain["effectors"][0]["target"] = json!([-50, 50, 0]);
+    }
+    json!({"motion": motion(id, ik), "time": 0.5})
 }
 
 /// A server that admits the heavy request (its price is within the limit),
@@ -153,6 +170,9 @@ async fn work_past_the_request_timeout_is_answered_503_and_stops() {
     // gRPC: DEADLINE_EXCEEDED, the same code.
     let mut motion = motion_pb(&id, 4096, 1000);
     motion.ik = vec![motion.ik[0].clone(); 32];
+    for constraint in motion.ik.iter_mut().skip(1).step_by(2) {
+        flip_x(constraint);
+    }
     let request = pb::SampleMotionRequest { motion: Some(motion), time: 0.5, ..Default::default() };
     let refused = app.grpc().await.sample_motion(request).await.unwrap_err();
     assert_eq!((refused.code(), grpc_error_code(&refused).as_str()), (Code::DeadlineExceeded, "request_timeout"));

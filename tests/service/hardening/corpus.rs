@@ -121,7 +121,12 @@ impl Server {
         let mut response = Vec::new();
         let read = tokio::time::timeout(Duration::from_secs(5), stream.read_to_end(&mut response)).await;
         if read.is_err() {
-            return Outcome { result: "no response within 5 s".into(), problem: false, grpc: None };
+            return Outcome {
+                result: "no response within 5 s".into(),
+                problem: false,
+                grpc: None,
+                said: String::new(),
+            };
         }
         let text = String::from_utf8_lossy(&response);
         let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
@@ -151,8 +156,11 @@ impl Server {
         let status = tonic::Status::from_header_map(&parts.headers)
             .or_else(|| trailers.as_ref().and_then(tonic::Status::from_header_map));
         match status {
-            Some(status) => Outcome { result: format!("{:?}", status.code()), problem: true, grpc: Some(status) },
-            None => Outcome { result: "no-status".into(), problem: false, grpc: None },
+            Some(status) => {
+                let said = status.message().to_owned();
+                Outcome { result: format!("{:?}", status.code()), problem: true, grpc: Some(status), said }
+            }
+            None => Outcome { result: "no-status".into(), problem: false, grpc: None, said: String::new() },
         }
     }
 }
@@ -193,13 +201,17 @@ struct Outcome {
     /// HTTP: a problem+json body with a `code`; gRPC: a status was sent.
     problem: bool,
     grpc: Option<tonic::Status>,
+    /// The problem's `code` and `detail` (HTTP), for a failure's message.
+    said: String,
 }
 
 impl Outcome {
     fn http(status: u16, content_type: Option<&str>, body: &[u8]) -> Outcome {
+        let parsed = serde_json::from_slice::<Value>(body).ok();
         let problem = content_type == Some("application/problem+json")
-            && serde_json::from_slice::<Value>(body).is_ok_and(|v| v["code"].is_string() && v["status"] == status);
-        Outcome { result: status.to_string(), problem, grpc: None }
+            && parsed.as_ref().is_some_and(|v| v["code"].is_string() && v["status"] == status);
+        let said = parsed.map_or_else(String::new, |v| format!("{} {}", v["code"], v["detail"]));
+        Outcome { result: status.to_string(), problem, grpc: None, said }
     }
 
     /// A server error: a 5xx, or its gRPC equivalents.
@@ -312,7 +324,8 @@ async fn every_malformed_input_is_refused_and_every_valid_one_accepted() {
         if !outcome.is_client_error() || !outcome.problem {
             failures.push(format!("{}: got {} (problem body: {})", entry.file, outcome.result, outcome.problem));
         } else if !record && entry.expect != "4xx" && entry.expect != outcome.result {
-            failures.push(format!("{}: expected {}, got {}", entry.file, entry.expect, outcome.result));
+            failures
+                .push(format!("{}: expected {}, got {} ({})", entry.file, entry.expect, outcome.result, outcome.said));
         }
         observed.insert(entry.file.clone(), outcome.result);
         let now = server.snapshot().await;

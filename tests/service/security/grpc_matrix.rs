@@ -11,7 +11,9 @@ use server::auth::Scope;
 use server::routes::ROUTES;
 use tonic::Code;
 
-use super::{ADMIN, Need, Outcome, Role, TestApp, expected, fresh_wave, scoped_tokens, snapshot, wave_pb, with_token};
+use super::{
+    ADMIN, Need, Outcome, Role, TINY_BVH, TestApp, expected, fresh_wave, scoped_tokens, snapshot, wave_pb, with_token,
+};
 
 /// The RPCs of the route table (`server::routes`) and what each needs.
 fn rpcs() -> Vec<(&'static str, Need)> {
@@ -97,7 +99,8 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             let created = app.http.post(app.url("/v1/broadcasts")).bearer_auth(ADMIN);
             let body = serde_json::json!({"motion": {"layers": [{"clip": id}]}, "fps": 60});
             let created: serde_json::Value = created.json(&body).send().await.unwrap().json().await.unwrap();
-            let req = pb::WatchRequest { broadcast_id: created["id"].as_str().unwrap().to_owned() };
+            let req =
+                pb::WatchRequest { broadcast_id: created["id"].as_str().unwrap().to_owned(), ..Default::default() };
             let mut frames = grpc.watch(with_token(req, t)).await?.into_inner();
             frames.message().await?.expect("a first frame");
             Ok(())
@@ -117,8 +120,80 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
         }
         "DeleteClip" => grpc.delete_clip(with_token(pb::DeleteClipRequest { clip_id: id }, t)).await.map(drop),
         "Ping" => grpc.ping(with_token(pb::PingRequest::default(), t)).await.map(drop),
+        "CreateCharacter" => {
+            let req = pb::CreateCharacterRequest { character: Some(fresh_character()), replace: false };
+            grpc.create_character(with_token(req, t)).await.map(drop)
+        }
+        "ListCharacters" => grpc.list_characters(with_token(pb::ListCharactersRequest::default(), t)).await.map(drop),
+        "GetCharacter" => {
+            let character_id = admin_character(&mut grpc).await;
+            grpc.get_character(with_token(pb::GetCharacterRequest { character_id }, t)).await.map(drop)
+        }
+        "ReplaceCharacter" => {
+            let character_id = admin_character(&mut grpc).await;
+            let req =
+                pb::ReplaceCharacterRequest { character_id, character: Some(fresh_character()), if_version: None };
+            grpc.replace_character(with_token(req, t)).await.map(drop)
+        }
+        "DeleteCharacter" => {
+            let character_id = admin_character(&mut grpc).await;
+            let req = pb::DeleteCharacterRequest { character_id, if_version: None };
+            grpc.delete_character(with_token(req, t)).await.map(drop)
+        }
+        "ImportCharacter" => {
+            let name = server::store::new_clip_id();
+            let req =
+                pb::ImportCharacterRequest { data: TINY_BVH.into(), format: "bvh".into(), name, ..Default::default() };
+            grpc.import_character(with_token(req, t)).await.map(drop)
+        }
+        "CreateGraph" => {
+            let req = pb::CreateGraphRequest { document: fresh_graph(&id), replace: false };
+            grpc.create_graph(with_token(req, t)).await.map(drop)
+        }
+        "ListGraphs" => grpc.list_graphs(with_token(pb::ListGraphsRequest::default(), t)).await.map(drop),
+        "GetGraph" => {
+            let graph_id = admin_graph(&mut grpc, &id).await;
+            grpc.get_graph(with_token(pb::GetGraphRequest { graph_id }, t)).await.map(drop)
+        }
+        "ReplaceGraph" => {
+            let graph_id = admin_graph(&mut grpc, &id).await;
+            let req = pb::ReplaceGraphRequest { graph_id, document: fresh_graph(&id), if_version: None };
+            grpc.replace_graph(with_token(req, t)).await.map(drop)
+        }
+        "DeleteGraph" => {
+            let graph_id = admin_graph(&mut grpc, &id).await;
+            let req = pb::DeleteGraphRequest { graph_id, if_version: None };
+            grpc.delete_graph(with_token(req, t)).await.map(drop)
+        }
         other => panic!("no call for {other}"),
     }
+}
+
+/// A one-joint character under a name no other has.
+fn fresh_character() -> pb::Character {
+    let joint = pb::Joint { name: "root".into(), ..Default::default() };
+    let skeleton = pb::Skeleton { joints: vec![joint] };
+    pb::Character { name: server::store::new_clip_id(), skeleton: Some(skeleton), ..Default::default() }
+}
+
+/// A one-node graph document over `clip` under a name no other has.
+fn fresh_graph(clip: &str) -> String {
+    serde_json::json!({"name": server::store::new_clip_id(), "nodes": {"a": {"clip": clip}}, "output": "a"}).to_string()
+}
+
+/// A fresh graph over `clip` made by the admin; its id.
+async fn admin_graph(
+    grpc: &mut pb::animation_client::AnimationClient<tonic::transport::Channel>,
+    clip: &str,
+) -> String {
+    let req = pb::CreateGraphRequest { document: fresh_graph(clip), replace: false };
+    grpc.create_graph(with_token(req, Some(ADMIN))).await.unwrap().into_inner().id
+}
+
+/// A fresh character made by the admin; its id.
+async fn admin_character(grpc: &mut pb::animation_client::AnimationClient<tonic::transport::Channel>) -> String {
+    let req = pb::CreateCharacterRequest { character: Some(fresh_character()), replace: false };
+    grpc.create_character(with_token(req, Some(ADMIN))).await.unwrap().into_inner().id
 }
 
 #[tokio::test]

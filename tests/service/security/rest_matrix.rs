@@ -27,10 +27,18 @@ fn allowed_status(route: &Route, method: &str, path: &str) -> u16 {
     match (method, path) {
         // Checked at the upgrade (for `/v1/stream`, the motion comes in the first message).
         _ if route.class == Class::FrameStream => 101,
-        ("post", "/v1/clips" | "/v1/clips/import" | "/v1/broadcasts") => 201,
+        (
+            "post",
+            "/v1/clips"
+            | "/v1/clips/import"
+            | "/v1/broadcasts"
+            | "/v1/characters"
+            | "/v1/characters/import"
+            | "/v1/graphs",
+        ) => 201,
         ("delete", _) => 204,
         // The clip `call` makes is JSON, without a mesh: allowed is `404 no_mesh` (tests/service/api/mesh.rs: 200).
-        ("get", "/v1/clips/{id}/mesh") => 404,
+        ("get", "/v1/clips/{id}/mesh" | "/v1/characters/{id}/mesh") => 404,
         // The viewer page is public; it asks for a token only when an upload answers 401.
         _ => 200,
     }
@@ -68,11 +76,28 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
     let id = if path.starts_with("/v1/broadcasts/") {
         let created = app.http.post(app.url("/v1/broadcasts")).bearer_auth(ADMIN);
         let created = created.json(&serde_json::json!({"motion": motion, "fps": 30})).send().await.unwrap();
+        let status = created.status();
+        let created = created.json::<Value>().await.unwrap();
+        assert_eq!(status, 201, "{created}");
+        created["id"].as_str().unwrap().to_owned()
+    } else if path.starts_with("/v1/characters/") {
+        // Character routes get a fresh character, made by the admin.
+        let created = app.http.post(app.url("/v1/characters")).bearer_auth(ADMIN).json(&fresh_character());
+        let created = created.send().await.unwrap();
         assert_eq!(created.status(), 201);
         created.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned()
+    } else if path.starts_with("/v1/graphs/") {
+        // Graph routes get a fresh graph over the call's clip, made by the admin.
+        let created = app.http.post(app.url("/v1/graphs")).bearer_auth(ADMIN).json(&fresh_graph(&id));
+        let created = created.send().await.unwrap();
+        let status = created.status();
+        let created = created.json::<Value>().await.unwrap();
+        assert_eq!(status, 201, "{created}");
+        created["id"].as_str().unwrap().to_owned()
     } else {
         id
     };
+    let clip = motion["layers"][0]["clip"].as_str().unwrap().to_owned();
     let path = path.replace("{id}", &id);
     if path.ends_with("/stream") {
         // A browser's way (the token as a subprotocol) answers as the header does.
@@ -83,9 +108,13 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
     }
     let mut req = app.http.request(method.to_uppercase().parse::<Method>().unwrap(), app.url(&path));
     req = match (method, path.as_str()) {
+        ("post", "/v1/characters") => req.json(&fresh_character()),
+        ("put", p) if p.starts_with("/v1/characters/") => req.json(&fresh_character()),
+        ("post", "/v1/graphs") => req.json(&fresh_graph(&clip)),
+        ("put", p) if p.starts_with("/v1/graphs/") => req.json(&fresh_graph(&clip)),
         ("post", "/v1/clips") | ("put", _) => req.header("content-type", "application/json").body(fresh_wave()),
         ("patch", _) => req.header("content-type", "application/merge-patch+json").body(r#"{"tags":["x"]}"#),
-        ("post", "/v1/clips/import") => {
+        ("post", "/v1/clips/import" | "/v1/characters/import") => {
             let name = server::store::new_clip_id();
             req.query(&[("format", "bvh"), ("name", &name)])
                 .header("content-type", "application/octet-stream")
@@ -114,6 +143,16 @@ async fn call(app: &TestApp, method: &str, path: &str, role: Role) -> (u16, Opti
         assert_eq!(www.as_deref(), Some("Bearer"), "401 without WWW-Authenticate");
     }
     (status, Some((ct, body)))
+}
+
+/// A one-joint character under a name no other has.
+/// A one-node graph over `clip` under a name no other has.
+fn fresh_graph(clip: &str) -> Value {
+    serde_json::json!({"name": server::store::new_clip_id(), "nodes": {"a": {"clip": clip}}, "output": "a"})
+}
+
+fn fresh_character() -> Value {
+    serde_json::json!({"name": server::store::new_clip_id(), "skeleton": {"joints": [{"name": "root"}]}})
 }
 
 /// Opens the stream as `role`, its token in `Authorization` or, as a browser
@@ -156,7 +195,8 @@ async fn websocket(app: &TestApp, path: &str, role: Role, as_protocol: bool) -> 
 
 #[tokio::test]
 async fn every_rest_route_checks_its_scope() {
-    let app = TestApp::builder().configure(scoped_tokens).start().await;
+    // Each call's broadcast holds its price until it idles out.
+    let app = TestApp::builder().configure(scoped_tokens).release_capacity().start().await;
 
     // The matrix covers exactly the documented operations, and the document
     // declares the bearer scheme on exactly the guarded ones.

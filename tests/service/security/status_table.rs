@@ -79,6 +79,8 @@ fn one_of_each() -> Vec<ApiError> {
         ApiError::CallerWorkLimit { held: 10, units: 5, share: 12, retry_after: 1 },
         ApiError::WorkOverloaded { retry_after: 1 },
         ApiError::ClipNotFoundAt { at: At::Pointer("/motion/layers/1/clip".into()), detail: "x".into() },
+        ApiError::CharacterNotFoundAt { at: At::Pointer("/motion/character".into()), detail: "x".into() },
+        ApiError::GraphNotFoundAt { at: At::Pointer("/motion/layers/0/graph".into()), detail: "x".into() },
         ApiError::Unavailable(None),
         ApiError::WriteRace { attempts: 9, retry_after: 1 },
         ApiError::StoreQueueFull { limit: 64, retry_after: 1 },
@@ -120,6 +122,8 @@ fn variant_index(e: &ApiError) -> usize {
         ApiError::StoreQueueFull { .. } => 27,
         ApiError::Relayed { .. } => 28,
         ApiError::NameConflict { .. } => 29,
+        ApiError::CharacterNotFoundAt { .. } => 30,
+        ApiError::GraphNotFoundAt { .. } => 31,
     }
 }
 
@@ -127,7 +131,7 @@ fn variant_index(e: &ApiError) -> usize {
 async fn every_variant_pairs_its_status_with_the_matching_grpc_code() {
     let errors = one_of_each();
     let covered: std::collections::BTreeSet<usize> = errors.iter().map(variant_index).collect();
-    assert_eq!(covered.len(), 30, "one_of_each misses a variant");
+    assert_eq!(covered.len(), 32, "one_of_each misses a variant");
     for k in 0..errors.len() {
         // `ApiError` is not `Clone`: one fresh copy per mapping.
         let (e, twin) = (one_of_each().swap_remove(k), one_of_each().swap_remove(k));

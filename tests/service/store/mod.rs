@@ -5,6 +5,7 @@
 //! recovery from terminated connections.
 
 mod backend;
+mod characters;
 mod filters;
 
 use std::sync::Arc;
@@ -55,7 +56,18 @@ for_both_backends!(
     a_mesh_is_written_kept_dropped_and_deleted_with_its_clip,
     broadcasts_and_their_controls_read_back_in_order,
     an_idle_broadcast_expires_and_a_touched_one_does_not,
+    a_character_reads_back_and_versions_like_a_clip,
+    characters_list_by_name_in_creation_order,
+    a_character_name_is_held_by_one_even_under_concurrent_writes,
+    a_character_mesh_is_kept_and_dropped_by_a_replace,
+    an_import_writes_its_clips_and_characters_together_or_not_at_all,
 );
+
+use characters::{
+    a_character_mesh_is_kept_and_dropped_by_a_replace, a_character_name_is_held_by_one_even_under_concurrent_writes,
+    a_character_reads_back_and_versions_like_a_clip, an_import_writes_its_clips_and_characters_together_or_not_at_all,
+    characters_list_by_name_in_creation_order,
+};
 
 use filters::{every_filter_pages_through_exactly_its_clips, tags_and_joints_follow_replace_and_delete};
 
@@ -317,7 +329,7 @@ async fn shared_names_from_before_stay_and_a_replace_by_one_is_ambiguous(
     assert_eq!(named.len(), 2);
     assert!(matches!(store.create(new_clip("dup", "{}"), OnName::Refuse).await, Err(StoreError::NameTaken { .. })));
     match store.create(new_clip("dup", "{}"), OnName::Replace).await {
-        Err(StoreError::AmbiguousName { name, mut ids }) => {
+        Err(StoreError::AmbiguousName { name, mut ids, .. }) => {
             ids.sort();
             let mut expected = vec![a.clone(), b.clone()];
             expected.sort();

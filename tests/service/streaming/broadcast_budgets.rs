@@ -146,6 +146,32 @@ async fn a_broadcast_is_charged_to_its_creator_until_it_ends() {
 }
 
 #[tokio::test]
+async fn the_broadcasts_thread_holds_the_configured_share_of_a_core() {
+    let app = TestApp::start().await;
+    let clip = app.create_id(&line_clip(1), None).await;
+    let (_, b, _) = create(&app, &clip, None).await;
+    let n = b["work_per_sec"].as_u64().unwrap();
+    app.stop().await;
+    // 8 prices a second on one thread, a quarter of it for broadcasts: room for two, whoever asks.
+    let app = TestApp::builder()
+        .configure(scoped_tokens)
+        .configure(move |c| {
+            c.limits.node_work_per_sec = 8 * n;
+            c.limits.work_threads = 1;
+            c.limits.broadcast_work_share = 0.25;
+        })
+        .start()
+        .await;
+    let clip = app.create_id(&line_clip(1), Some(ADMIN)).await;
+    let (s1, _, _) = create(&app, &clip, Some(WRITER)).await;
+    let (s2, _, _) = create(&app, &clip, Some(ADMIN)).await;
+    let (s3, problem, _) = create(&app, &clip, Some(ADMIN)).await;
+    assert_eq!((s1, s2, s3), (201, 201, 503), "{problem}");
+    assert_eq!(problem["code"], "overloaded");
+    app.stop().await;
+}
+
+#[tokio::test]
 async fn a_broadcast_whose_ticks_overrun_their_price_ends_with_too_much_work() {
     // A node that says a unit of work takes a femtosecond: every real tick overruns its price.
     let app = TestApp::builder().configure(|c| c.limits.node_work_per_sec = 1 << 60).start().await;
@@ -154,7 +180,7 @@ async fn a_broadcast_whose_ticks_overrun_their_price_ends_with_too_much_work() {
     assert_eq!(status, 201, "{b}");
     let id = b["id"].as_str().unwrap();
     let mut ws = app.ws(&format!("/v1/broadcasts/{id}/stream")).await;
-    let watch = pb::WatchRequest { broadcast_id: id.to_owned() };
+    let watch = pb::WatchRequest { broadcast_id: id.to_owned(), ..Default::default() };
     let mut grpc = app.grpc().await.watch(watch).await.unwrap().into_inner();
     let (code, reason) = close_frame(&mut ws).await;
     assert_eq!(code, 1008);

@@ -79,7 +79,7 @@ async fn watch_ws(app: &TestApp, id: &str, query: &str, token: Option<&str>) -> 
 }
 
 async fn watch_grpc(app: &TestApp, id: &str, token: Option<&str>) -> Streaming<pb::Frame> {
-    let req = with_token(pb::WatchRequest { broadcast_id: id.to_owned() }, token);
+    let req = with_token(pb::WatchRequest { broadcast_id: id.to_owned(), ..Default::default() }, token);
     app.grpc().await.watch(req).await.unwrap().into_inner()
 }
 
@@ -520,7 +520,12 @@ async fn bad_requests_are_refused_with_stable_codes() {
         panic!("a bad encoding is refused before the upgrade");
     };
     assert_eq!(resp.status(), 400);
-    let status = app.grpc().await.watch(pb::WatchRequest { broadcast_id: missing.into() }).await.unwrap_err();
+    let status = app
+        .grpc()
+        .await
+        .watch(pb::WatchRequest { broadcast_id: missing.into(), ..Default::default() })
+        .await
+        .unwrap_err();
     assert_eq!(status.code(), tonic::Code::NotFound);
 
     // max_broadcasts = 2: the third is refused until one ends.

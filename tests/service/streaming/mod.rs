@@ -8,6 +8,7 @@
 
 mod broadcast_budgets;
 mod broadcasts;
+mod compact;
 mod grpc_api;
 mod grpc_ik;
 mod grpc_streams;
@@ -16,6 +17,7 @@ mod limits;
 mod motions;
 mod priced_controls;
 mod seam;
+mod springs;
 mod websocket;
 
 use formats::wire::proto::pb;

@@ -33,10 +33,22 @@ pub fn chromium_path() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
+/// Browsers run side by side (a read turn each), except one that measures
+/// how the page keeps up, which runs alone (the write turn): other
+/// Chromiums rendering beside it on a 2-core machine would be what it measured.
+static TURNS: tokio::sync::RwLock<()> = tokio::sync::RwLock::const_new(());
+
+/// A browser's turn, held while it runs.
+enum Turn {
+    Shared(#[allow(dead_code)] tokio::sync::RwLockReadGuard<'static, ()>),
+    Alone(#[allow(dead_code)] tokio::sync::RwLockWriteGuard<'static, ()>),
+}
+
 /// A headless Chromium and the WebSocket of its page; killed on drop.
 pub struct Browser {
     child: Child,
     _profile: TempDir,
+    _turn: Turn,
     port: u16,
     pub page: Page,
 }
@@ -45,6 +57,21 @@ impl Browser {
     /// Starts Chromium, or returns `None` (with a message) when it is not
     /// installed and [`REQUIRE_ENV`] is not set.
     pub async fn launch() -> Option<Browser> {
+        if chromium_path().is_none() {
+            return Self::start(None).await;
+        }
+        Self::start(Some(Turn::Shared(TURNS.read().await))).await
+    }
+
+    /// As [`Browser::launch`], once no other browser of this suite runs, and none starts until it is dropped.
+    pub async fn launch_alone() -> Option<Browser> {
+        if chromium_path().is_none() {
+            return Self::start(None).await;
+        }
+        Self::start(Some(Turn::Alone(TURNS.write().await))).await
+    }
+
+    async fn start(turn: Option<Turn>) -> Option<Browser> {
         let Some(binary) = chromium_path() else {
             let required = std::env::var(REQUIRE_ENV).is_ok_and(|v| v == "1");
             assert!(!required, "{REQUIRE_ENV}=1 but no Chromium found (install Debian `chromium`)");
@@ -80,7 +107,8 @@ impl Browser {
         let port = devtools_port(profile.path()).await;
         let page_url = page_websocket(port).await;
         let page = Page::connect(&page_url).await;
-        Some(Browser { child: browser.0.take().unwrap(), _profile: profile, port, page })
+        let _turn = turn.expect("a turn whenever Chromium is found");
+        Some(Browser { child: browser.0.take().unwrap(), _profile: profile, _turn, port, page })
     }
 
     /// Another tab of this browser (its own `sessionStorage`).

@@ -31,7 +31,7 @@ async fn a_once_clip_shows_its_end_and_play_starts_it_over() {
     assert_eq!(text(page, "play").await, "Play", "the button offers to play again");
     assert_eq!(text(page, "clip-time").await, "3.000 s");
     let status = text(page, "status").await;
-    assert!(status.contains("ended at 3.000 s"), "status: {status}");
+    assert!(status.contains("ended at 3 s"), "status: {status}");
     assert_eq!(page.eval("window.inbetweenViewer.state.ws").await, json!(null), "the stream is closed");
 
     // Play starts over from the start: early clip times, then the end again.
@@ -41,8 +41,18 @@ async fn a_once_clip_shows_its_end_and_play_starts_it_over() {
     let first = page.eval("window.inbetweenViewer.state.firstClipTime").await.as_f64().unwrap();
     assert!(first < 0.2, "restarted from the start: first clip time {first}");
     assert_eq!(page.eval("window.inbetweenViewer.state.ended").await, false);
+    // The status says what is true now: no end while it plays again, the header names the clip playing.
+    let (status, header) = (text(page, "status").await, text(page, "now-playing").await);
+    assert!(!status.contains("ended"), "status while playing again: {status}");
+    assert_eq!(header, "playing: wave");
     page.wait_for("window.inbetweenViewer.state.ended === true", 10).await;
     assert_eq!(text(page, "play").await, "Play");
+    assert_eq!(text(page, "now-playing").await, "ended: wave");
+    // Looping from here: the end is no longer said.
+    set_value(page, "playback", "loop").await;
+    page.eval("document.getElementById('play').click()").await;
+    page.wait_for("(s => s.ws && s.frames >= 3)(window.inbetweenViewer.state)", 10).await;
+    assert_eq!(text(page, "status").await, "wave: 2 joints, 0–3 s", "the range rounded, no stale end");
 }
 
 /// A server whose reads need [`READ`] (and writes [`TOKEN`]).
@@ -110,8 +120,9 @@ async fn problem_bodies_show_their_detail_and_code() {
     set_value(page, "token", TOKEN).await;
     page.eval("document.getElementById('token-form').requestSubmit()").await;
     page.set_files("#file", &[bad.path()]).await;
-    page.wait_for("document.getElementById('status').textContent.includes('upload refused')", 20).await;
-    let status = text(page, "status").await;
+    // The status as it says so: the stream's events replace it soon after.
+    let refused = "(s => s.includes('upload refused') && s)(document.getElementById('status').textContent)";
+    let status = page.wait_for(refused, 20).await.as_str().unwrap().to_owned();
     assert!(status.contains("422") && status.contains("/tracks/0/times"), "detail, code, status and pointer: {status}");
     assert!(!status.contains("[object"), "status: {status}");
 
@@ -200,18 +211,7 @@ async fn a_late_answer_for_an_earlier_seek_does_not_replace_the_pose_shown() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_fox_is_drawn_with_solid_bones_and_no_stray_one() {
     let app = start().await;
-    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
-    let imported = app
-        .http
-        .post(app.url("/v1/clips/import?format=glb"))
-        .bearer_auth(TOKEN)
-        .header("content-type", "application/octet-stream")
-        .body(glb)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(imported.status(), 201);
-    let imported: serde_json::Value = imported.json().await.unwrap();
+    let imported = super::import_fox(&app).await;
     let id = imported["clips"][0]["id"].as_str().unwrap().to_owned();
     let Some(mut browser) = viewer_on_clip(&app, &id).await else { return };
     let page = &mut browser.page;

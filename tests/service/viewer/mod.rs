@@ -12,11 +12,18 @@
 //! composition panel with the Fox (docs/viewer.md's docs/viewer-panel.png).
 
 mod cdp;
+mod character;
+mod compact;
 mod curves;
 mod flows;
+mod graph;
+mod lag;
+mod library;
 mod mesh;
 mod panel;
+mod springs;
 mod units;
+mod view;
 
 use std::path::Path;
 use std::time::Duration;
@@ -30,11 +37,13 @@ const TOKEN: &str = "viewer-test-write-token";
 const BACKGROUND: [u8; 3] = [0x10, 0x12, 0x16];
 
 /// The page's other ES modules (`viewer.js` imports them, `index.html` preloads them).
-const MODULES: [&str; 14] = [
+const MODULES: [&str; 18] = [
     "/viewer/math.js",
     "/viewer/dom.js",
     "/viewer/events.js",
+    "/viewer/status.js",
     "/viewer/state.js",
+    "/viewer/render.js",
     "/viewer/api.js",
     "/viewer/settings.js",
     "/viewer/pose.js",
@@ -43,13 +52,20 @@ const MODULES: [&str; 14] = [
     "/viewer/player.js",
     "/viewer/controls.js",
     "/viewer/clips.js",
+    "/viewer/thumbs.js",
+    "/viewer/library.js",
     "/viewer/upload.js",
     "/viewer/composition.js",
 ];
 
 /// A server whose writes need [`TOKEN`].
 async fn start() -> TestApp {
-    TestApp::builder().write_token(TOKEN).configure(|c| c.drain_timeout = Duration::from_secs(2)).start().await
+    TestApp::builder()
+        .write_token(TOKEN)
+        .release_capacity()
+        .configure(|c| c.drain_timeout = Duration::from_secs(2))
+        .start()
+        .await
 }
 
 /// `POST path` with a JSON body; panics unless 200. Returns the JSON answer.
@@ -121,7 +137,12 @@ async fn plays_a_clip_and_plots_the_sampled_curves() {
     assert_eq!(page.eval("document.querySelectorAll('#clips li').length").await, 0);
     set_value(page, "filter", "WAV").await;
     page.eval(&format!("document.querySelector('#clips li[data-id={}]').click()", json!(id))).await;
-    page.wait_for(&format!("window.inbetweenViewer.curve?.clip === {}", json!(id)), 10).await;
+    // The clip selected (its listeners have run), then its curve: a curve of `id` alone may be an earlier selection's.
+    let selected = format!(
+        "window.inbetweenViewer.state.clip?.id === {0} && window.inbetweenViewer.curve?.clip === {0}",
+        json!(id)
+    );
+    page.wait_for(&selected, 10).await;
 
     set_value(page, "fps", "60").await;
     page.eval("document.getElementById('play').click()").await;
@@ -266,13 +287,39 @@ async fn viewer_on_clip(app: &TestApp, id: &str) -> Option<Browser> {
 async fn select_clip(page: &mut Page, id: &str) {
     page.wait_for(&format!("document.querySelector('#clips li[data-id={}]')", json!(id)), 10).await;
     page.eval(&format!("document.querySelector('#clips li[data-id={}]').click()", json!(id))).await;
-    page.wait_for(&format!("window.inbetweenViewer.curve?.clip === {}", json!(id)), 10).await;
+    // The clip selected (its listeners have run), then its curve: a curve of `id` alone may be an earlier selection's.
+    let selected = format!(
+        "window.inbetweenViewer.state.clip?.id === {0} && window.inbetweenViewer.curve?.clip === {0}",
+        json!(id)
+    );
+    page.wait_for(&selected, 10).await;
 }
 
 /// The text of the element `id`.
 async fn text(page: &mut Page, id: &str) -> String {
     let value = page.eval(&format!("document.getElementById({}).textContent", json!(id))).await;
     value.as_str().unwrap_or_default().to_owned()
+}
+
+/// The Fox sample imported with the write token: the import's answer.
+async fn import_fox(app: &TestApp) -> Value {
+    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
+    let imported = app
+        .http
+        .post(app.url("/v1/clips/import?format=glb"))
+        .bearer_auth(TOKEN)
+        .header("content-type", "application/octet-stream")
+        .body(glb)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(imported.status(), 201);
+    imported.json().await.unwrap()
+}
+
+/// Clicks the element `id`.
+async fn click(page: &mut Page, id: &str) {
+    page.eval(&format!("document.getElementById({}).click()", json!(id))).await;
 }
 
 /// Sets a form control's value and fires `input` and `change`, as typing would.

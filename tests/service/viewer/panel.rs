@@ -11,7 +11,7 @@ use std::time::Duration;
 use serde_json::{Value, json};
 
 use super::cdp::{Browser, Page};
-use super::{TOKEN, floats, select_clip, set_value, start, text};
+use super::{TOKEN, click, floats, select_clip, set_value, start, text};
 use crate::common::WAVE;
 
 /// wave.json's skeleton with other tracks: its root held far away, so its
@@ -42,10 +42,6 @@ fn joint<'a>(pose: &'a Value, name: &str) -> &'a Value {
 
 fn distance(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
-}
-
-async fn click(page: &mut Page, id: &str) {
-    page.eval(&format!("document.getElementById({}).click()", json!(id))).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -284,6 +280,9 @@ async fn a_broadcast_link_shows_the_same_seq_and_pose_in_a_second_page() {
     // (the two read a moment apart, on a machine that may be busy).
     let shown =
         "(v => [Number(document.getElementById('seq').textContent), v.panel.lastFrame.seq])(window.inbetweenViewer)";
+    // The frames shown come at the tabs' animation frames (or their fallback timer).
+    page.wait_for("window.inbetweenViewer.panel.lastFrame", 10).await;
+    second.wait_for("window.inbetweenViewer.panel.lastFrame", 10).await;
     let mut shown_seqs = vec![];
     for tab in [&mut *page, &mut second] {
         let [on_screen, last]: [u64; 2] = serde_json::from_value(tab.eval(shown).await).unwrap();
@@ -326,19 +325,7 @@ async fn a_broadcast_link_shows_the_same_seq_and_pose_in_a_second_page() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_fox_walks_a_root_motion_trail_with_a_layer_and_a_handle_on_a_1366_by_768_screen() {
     let app = start().await;
-    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
-    let imported: Value = app
-        .http
-        .post(app.url("/v1/clips/import?format=glb"))
-        .bearer_auth(TOKEN)
-        .header("content-type", "application/octet-stream")
-        .body(glb)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let imported = super::import_fox(&app).await;
     let id_of = |name: &str| {
         let clips = imported["clips"].as_array().unwrap();
         clips.iter().find(|c| c["name"] == name).unwrap_or_else(|| panic!("{name} in {imported}"))["id"]
@@ -423,4 +410,42 @@ async fn root_motion_is_a_trail_the_skeleton_walks_along_with_extract_on_or_off(
         );
         assert_eq!(sent[0] > 0.3, pose_moves, "{mode}: the frames' root at x = {}", sent[0]);
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_gizmos_arrow_moves_the_target_along_its_axis_only() {
+    let app = start().await;
+    let arm = app.create_id(ARM, Some(TOKEN)).await;
+    let Some(mut browser) = Browser::launch().await else { return };
+    let page = &mut browser.page;
+    page.navigate(&app.url("/viewer")).await;
+    select_clip(page, &arm).await;
+    set_value(page, "ik-joint", "hand").await;
+    set_value(page, "ik-kind", "two_bone").await;
+    click(page, "ik-add").await;
+    let start_target = floats(&page.eval("window.inbetweenViewer.panel.ik.target").await);
+
+    // The up (Y) arrow (60 px long at the handle's depth), base and tip, on the page: grab
+    // it halfway and drag 30 px down the screen, and 12 px sideways.
+    let arrow = page
+        .eval(
+            "(v => { const cam = v.sceneCamera(), t = v.panel.ik.target, L = 60 * cam.dpr * v.toCamera(cam, t)[2] / cam.focal; \
+             const r = document.getElementById('scene').getBoundingClientRect(); \
+             const s = p => { const [x, y] = v.toScreen(cam, v.toCamera(cam, p)); return [r.left + x / cam.dpr, r.top + y / cam.dpr]; }; \
+             return [s(t), s([t[0], t[1] + L, t[2]])]; })(window.inbetweenViewer)",
+        )
+        .await;
+    let [base, tip]: [[f64; 2]; 2] = serde_json::from_value(arrow).unwrap();
+    assert!(tip[1] < base[1] - 20.0, "the Y arrow points up the screen: {base:?} → {tip:?}");
+    let yaw = page.eval("window.inbetweenViewer.state.camera.yaw").await;
+    let grab = [(base[0] + tip[0]) / 2.0, (base[1] + tip[1]) / 2.0];
+    page.drag(grab, [grab[0] + 12.0, grab[1] + 30.0], 6).await;
+    assert_eq!(page.eval("window.inbetweenViewer.state.camera.yaw").await, yaw, "no orbit");
+    let target = floats(&page.eval("window.inbetweenViewer.panel.ik.target").await);
+    // Along Y only: X and Z exactly as they were (the drag went sideways too).
+    assert_eq!((target[0], target[2]), (start_target[0], start_target[2]));
+    assert!(target[1] < start_target[1] - 0.05, "moved down: {start_target:?} → {target:?}");
+    // The paused view's pose solves for it: the hand on the new target.
+    let hand_at = "(v => v.state.positions[v.state.names.indexOf('hand')])(window.inbetweenViewer)";
+    page.wait_for(&format!("Math.hypot(...{hand_at}.map((x, k) => x - {}[k])) < 1e-3", json!(target)), 10).await;
 }

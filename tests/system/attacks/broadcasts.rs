@@ -14,7 +14,7 @@ use futures_util::{SinkExt, StreamExt};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
-use super::{Target, target};
+use super::{Target, nodes, target};
 use crate::common::chain_clip;
 
 type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
@@ -146,6 +146,71 @@ async fn an_ik_heavy_broadcast_is_refused_and_a_bystander_keeps_its_frames() {
     target.assert_survived("an IK-heavy broadcast", &report);
 }
 
+/// What one flooding socket saw: controls sent, refused, and refused 429.
+struct Flood {
+    sent: u64,
+    refused: u64,
+    limited: u64,
+}
+
+impl Flood {
+    fn acknowledged(&self) -> u64 {
+        self.sent - self.refused
+    }
+
+    /// Counts a refusal, asserting it is one of the documented three: past
+    /// the write budget; or, within it, past the pending controls or the store queue.
+    fn refusal(&mut self, problem: &Value) {
+        let code = problem["code"].as_str().unwrap_or_default();
+        assert!(["rate_limited", "unavailable", "bad_control"].contains(&code), "{problem}");
+        self.limited += u64::from(code == "rate_limited");
+        self.refused += 1;
+    }
+}
+
+/// Floods broadcast `id` on `target` with `sent` pause/play controls from
+/// one socket, reading its answers meanwhile; returns once frames came
+/// after the flood and every control has been answered or applied.
+async fn flood(target: &Target, id: &str, sent: u64) -> Flood {
+    let url = target.server.ws_url(&format!("/v1/broadcasts/{id}/stream"));
+    let (ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let (mut tx, mut rx) = ws.split();
+    let sender = tokio::spawn(async move {
+        for k in 0..sent {
+            let op = if k % 2 == 0 { "pause" } else { "play" };
+            tx.send(Message::Text(json!({"op": op}).to_string().into())).await.unwrap();
+        }
+        tx
+    });
+    let mut flood = Flood { sent, refused: 0, limited: 0 };
+    let mut frames_after = 0;
+    // Read while the flood is sent, until frames still come after it.
+    while frames_after < 30 {
+        let msg = tokio::time::timeout(Duration::from_secs(5), rx.next()).await;
+        let msg = msg.expect("the socket keeps answering").expect("the socket stays open").unwrap();
+        let Message::Text(text) = msg else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        match v.get("error") {
+            Some(problem) => flood.refusal(problem),
+            None if sender.is_finished() && flood.refused > 0 => frames_after += 1,
+            None => {}
+        }
+    }
+    // A message that is no control, answered after every control before it.
+    let mut tx = sender.await.unwrap();
+    tx.send(Message::Text(json!({"op": "last"}).to_string().into())).await.unwrap();
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(10), rx.next()).await;
+        let Message::Text(text) = msg.expect("answered").expect("open").unwrap() else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        let Some(problem) = v.get("error") else { continue };
+        if problem["detail"].as_str().is_some_and(|d| d.contains("last")) {
+            return flood;
+        }
+        flood.refusal(problem);
+    }
+}
+
 /// (c) A socket flooding its broadcast with controls: refused 429
 /// `rate_limited` past the write budget (`unavailable` past the store
 /// queue, `bad_control` past the pending controls), the socket stays open, memory
@@ -156,56 +221,11 @@ async fn a_socket_flooding_controls_is_rate_limited_stays_open_and_stores_what_i
     let http = crate::common::http_client();
     let clip = target.server.create(&http, &chain_clip(8, json!([]))).await;
     let (id, _) = bystander(&target, &http, &clip).await;
-    let url = target.server.ws_url(&format!("/v1/broadcasts/{id}/stream"));
-    let (ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
-    let (mut tx, mut rx) = ws.split();
     let probes = target.probes().await;
-    let sent = 49_000u64;
-    let flood = tokio::spawn(async move {
-        for k in 0..sent {
-            let op = if k % 2 == 0 { "pause" } else { "play" };
-            tx.send(Message::Text(json!({"op": op}).to_string().into())).await.unwrap();
-        }
-        tx
-    });
-    let (mut refused, mut limited, mut frames_after) = (0u64, 0u64, 0u64);
     let started = Instant::now();
-    // Read while the flood is sent, until frames still come after it.
-    while frames_after < 30 {
-        let msg = tokio::time::timeout(Duration::from_secs(5), rx.next()).await;
-        let msg = msg.expect("the socket keeps answering").expect("the socket stays open").unwrap();
-        let Message::Text(text) = msg else { continue };
-        let v: Value = serde_json::from_str(&text).unwrap();
-        match v.get("error") {
-            Some(problem) => {
-                // Past the write budget; or, within it, past the pending controls or the store queue.
-                let code = problem["code"].as_str().unwrap_or_default();
-                assert!(["rate_limited", "unavailable", "bad_control"].contains(&code), "{problem}");
-                limited += u64::from(code == "rate_limited");
-                refused += 1;
-            }
-            None if flood.is_finished() && refused > 0 => frames_after += 1,
-            None => {}
-        }
-    }
-    // A message that is no control, answered after every control before it.
-    let mut tx = flood.await.unwrap();
-    tx.send(Message::Text(json!({"op": "last"}).to_string().into())).await.unwrap();
-    loop {
-        let msg = tokio::time::timeout(Duration::from_secs(10), rx.next()).await;
-        let Message::Text(text) = msg.expect("answered").expect("open").unwrap() else { continue };
-        let v: Value = serde_json::from_str(&text).unwrap();
-        let Some(problem) = v.get("error") else { continue };
-        if problem["detail"].as_str().is_some_and(|d| d.contains("last")) {
-            break;
-        }
-        let code = problem["code"].as_str().unwrap_or_default();
-        assert!(["rate_limited", "unavailable", "bad_control"].contains(&code), "{problem}");
-        limited += u64::from(code == "rate_limited");
-        refused += 1;
-    }
+    let flood = flood(&target, &id, 49_000).await;
     let report = probes.finish();
-    let acknowledged = sent - refused;
+    let (sent, refused, limited, acknowledged) = (flood.sent, flood.refused, flood.limited, flood.acknowledged());
     println!(
         "FIGURE {sent} socket controls in {:.1} s: {refused} refused ({limited} of them 429), {acknowledged} applied",
         started.elapsed().as_secs_f64()
@@ -226,4 +246,72 @@ async fn a_socket_flooding_controls_is_rate_limited_stays_open_and_stores_what_i
     let applied = target.metric("inbetween_broadcast_controls_total").await.unwrap_or(0.0) as u64;
     assert_eq!((stored as u64, applied), (acknowledged, acknowledged), "stored and applied = acknowledged");
     target.assert_survived("a socket flooding controls", &report);
+}
+
+/// A new viewer's frames on `target` for `secs`, by `seq`, without the
+/// fields that are its own (`sent_at_unix_nanos`, `dropped`).
+async fn frames_by_seq(target: &Target, id: &str, secs: u64) -> std::collections::BTreeMap<u64, Value> {
+    let url = target.server.ws_url(&format!("/v1/broadcasts/{id}/stream"));
+    let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let until = Instant::now() + Duration::from_secs(secs);
+    let mut frames = std::collections::BTreeMap::new();
+    while Instant::now() < until {
+        let msg = tokio::time::timeout(Duration::from_secs(2), ws.next()).await;
+        let Message::Text(text) = msg.expect("frames keep coming").expect("open").unwrap() else { continue };
+        let mut v: Value = serde_json::from_str(&text).unwrap();
+        let Some(seq) = v["seq"].as_u64() else { continue };
+        let own = v.as_object_mut().unwrap();
+        own.remove("sent_at_unix_nanos");
+        own.remove("dropped");
+        frames.insert(seq, v);
+    }
+    frames
+}
+
+/// (d) Sockets on three nodes of one PostgreSQL store flooding one
+/// broadcast at once: each node refuses past its write budget and store
+/// queue, every node survives in its cage, the controls acknowledged are
+/// exactly the ones stored, and afterwards every node sends the same frames.
+#[tokio::test(flavor = "multi_thread")]
+async fn sockets_on_three_nodes_flooding_one_broadcast_leave_them_agreeing() {
+    let Some(schema) = crate::common::pg::Schema::create("attack_flood").await else { return };
+    let mut nodes = nodes(&schema, ["flood-a", "flood-b", "flood-c"], &[]).await;
+    let http = crate::common::http_client();
+    let clip = nodes[0].server.create(&http, &chain_clip(8, json!([]))).await;
+    let (id, _) = bystander(&nodes[0], &http, &clip).await;
+    let mut probes = Vec::new();
+    for node in &nodes {
+        probes.push(node.probes().await);
+    }
+    let started = Instant::now();
+    let floods = futures_util::future::join_all(nodes.iter().map(|node| flood(node, &id, 12_000))).await;
+    let reports: Vec<_> = probes.into_iter().map(super::Probes::finish).collect();
+    let acknowledged: u64 = floods.iter().map(Flood::acknowledged).sum();
+    let refused: Vec<u64> = floods.iter().map(|f| f.refused).collect();
+    println!(
+        "FIGURE 3 × 12000 socket controls on three PostgreSQL nodes in {:.1} s: refused {refused:?}, {acknowledged} applied",
+        started.elapsed().as_secs_f64()
+    );
+    assert!(floods.iter().all(|f| f.limited > 0 && f.acknowledged() > 0), "every node limits and applies");
+    let count = format!("SELECT COUNT(*) FROM \"{}\".broadcast_controls WHERE broadcast_id = $1", schema.name);
+    let stored = crate::common::eventually_some(Duration::from_secs(10), "the stored controls", || async {
+        let row: (i64,) =
+            sqlx::query_as(sqlx::AssertSqlSafe(count.as_str())).bind(&id).fetch_one(&schema.admin).await.unwrap();
+        (row.0 as u64 == acknowledged).then_some(row.0)
+    })
+    .await;
+    assert_eq!(stored as u64, acknowledged, "stored = acknowledged");
+    // Every node sends the same frame for every seq its viewer saw.
+    let seen = futures_util::future::join_all(nodes.iter().map(|node| frames_by_seq(node, &id, 3))).await;
+    for (node, frames) in seen.iter().enumerate().skip(1) {
+        let shared: Vec<_> = frames.keys().filter(|seq| seen[0].contains_key(seq)).collect();
+        assert!(shared.len() >= 30, "node {node} and node 0 share {} frames", shared.len());
+        for seq in shared {
+            assert_eq!(frames[seq], seen[0][seq], "node {node}, seq {seq}");
+        }
+    }
+    for (node, report) in nodes.iter_mut().zip(&reports) {
+        let attack = format!("sockets on three nodes flooding one broadcast ({})", node.server.name);
+        node.assert_survived(&attack, report);
+    }
 }

@@ -32,7 +32,19 @@ async fn expensive_builds_never_stall_the_probes_and_the_cache_stays_bounded() {
     // Both builds admitted from one address (each is priced about 2.5M
     // units, over the share of a debug build's measured capacity): this
     // attack is on the probes while two builds run.
-    let args = ["--max-build-work", "1000000", "--cache-bytes", "4000000", "--node-work-per-sec", "1000000000000"];
+    // A long request timeout: on a machine loaded by other builds a debug
+    // build of an admitted clip may take longer than 30 s, and this attack
+    // is on the probes and the cache, not on the timeout (attacks::work).
+    let args = [
+        "--max-build-work",
+        "1000000",
+        "--cache-bytes",
+        "4000000",
+        "--node-work-per-sec",
+        "1000000000000",
+        "--request-timeout-secs",
+        "300",
+    ];
     let mut target = target(&args).await;
     let http = crate::common::http_client();
     let url = target.server.url("/v1/clips");

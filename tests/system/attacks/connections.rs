@@ -12,6 +12,7 @@ use std::time::Duration;
 use bytes::Bytes;
 use formats::wire::proto::pb;
 use formats::wire::proto::pb::animation_client::AnimationClient;
+use futures_util::StreamExt;
 
 use super::{grpc_code, target};
 use crate::common::WAVE;
@@ -54,7 +55,10 @@ async fn bodyless_posts_on_one_http2_connection_shed_nobody() {
     // The held ones are in, awaiting their bodies, before the probes.
     target.server.until_metric(&http, "inbetween_bodies_awaited", 128.0).await;
     let url = target.server.url(&format!("/v1/clips/{id}/pose?t=1"));
-    let answers = futures_util::future::join_all((0..240).map(|_| http.get(&url).send())).await;
+    // 240 normal requests, 16 at a time: within this caller's own in-flight
+    // limit (32), so any refusal is the held requests' doing.
+    let answers: Vec<_> =
+        futures_util::stream::iter((0..240).map(|_| http.get(&url).send())).buffer_unordered(16).collect().await;
     let statuses: Vec<u16> = answers.into_iter().map(|r| r.unwrap().status().as_u16()).collect();
     let report = probes.finish();
     assert!(statuses.iter().all(|s| *s == 200), "normal requests refused: {:?}", shed(&statuses));
@@ -91,14 +95,16 @@ async fn grpc_calls_that_never_send_their_message_time_out_and_shed_nobody() {
     let play = tokio::spawn(async move { player.play(futures_util::stream::pending::<pb::PlaybackControl>()).await });
     // The held ones and the Play are in, awaiting their first messages, before the probes.
     target.server.until_metric(&http, "inbetween_bodies_awaited", 129.0).await;
+    // 240 honest calls, 16 at a time: within this caller's own in-flight
+    // limit (32), so any refusal is the held calls' doing.
     let client = AnimationClient::connect(target.server.grpc_url()).await.unwrap();
     let calls = (0..240).map(|_| {
         let mut client = client.clone();
         let request = pb::SampleRequest { clip_id: id.clone(), time: 1.0, ..Default::default() };
-        async move { client.sample(request).await.map(|_| ()).map_err(|s| s.code()) }
+        async move { client.sample(request).await.map(|_| ()).map_err(|s| format!("{:?}: {}", s.code(), s.message())) }
     });
-    let results = futures_util::future::join_all(calls).await;
-    let refused: Vec<_> = results.iter().filter_map(|r| r.err()).collect();
+    let results: Vec<_> = futures_util::stream::iter(calls).buffer_unordered(16).collect().await;
+    let refused: Vec<_> = results.iter().filter_map(|r| r.as_ref().err()).collect();
     assert!(refused.is_empty(), "{} of 240 calls refused: {:?}", refused.len(), &refused[..refused.len().min(5)]);
 
     // The silent calls end with the timeout, as REST's 408 does.

@@ -19,8 +19,10 @@ mod answers;
 mod broadcasts;
 mod builds;
 mod connections;
+mod graphs;
 mod imports;
 mod memory;
+mod springs;
 mod viewers;
 mod work;
 
@@ -55,20 +57,46 @@ pub struct Target {
     pub server: ServerProcess,
     cage: Option<Cage>,
     _dir: tempfile::TempDir,
-    _serial: tokio::sync::MutexGuard<'static, ()>,
+    _serial: Arc<tokio::sync::MutexGuard<'static, ()>>,
 }
 
 /// Starts `inbetween serve` with default limits plus `extra`, caged.
 pub async fn target(extra: &[&str]) -> Target {
-    let serial = SERIAL.lock().await;
+    let serial = Arc::new(SERIAL.lock().await);
     let dir = tempfile::tempdir().unwrap();
-    let server = ServerProcess::serve()
-        .alone()
-        .data_dir(&dir.path().join("data"))
-        .args(extra)
-        .log_to(&dir.path().join("server.log"))
-        .start()
-        .await;
+    let server = ServerProcess::serve().alone().data_dir(&dir.path().join("data"));
+    caged(server.args(extra), dir, serial).await
+}
+
+/// Starts the named nodes on one PostgreSQL `schema` with default limits
+/// plus `extra`, each in a cage of its own: an attack on many nodes. They
+/// do not run alone (each would wait for the others), so their probes'
+/// latency is judged in the slow runs only, as every attack's is.
+pub async fn nodes<const N: usize>(
+    schema: &crate::common::pg::Schema,
+    names: [&str; N],
+    extra: &[&str],
+) -> [Target; N] {
+    let serial = Arc::new(SERIAL.lock().await);
+    let mut nodes = Vec::with_capacity(N);
+    for name in names {
+        let server = ServerProcess::serve()
+            .name(name)
+            .arg("--database-url")
+            .arg(schema.url(&format!("application_name={name}")));
+        nodes.push(caged(server.args(extra), tempfile::tempdir().unwrap(), Arc::clone(&serial)).await);
+    }
+    let Ok(nodes) = nodes.try_into() else { unreachable!("N names, N nodes") };
+    nodes
+}
+
+/// Starts `server`, logging to `dir`, and moves it into a cage.
+async fn caged(
+    server: crate::common::process::ProcessBuilder,
+    dir: tempfile::TempDir,
+    serial: Arc<tokio::sync::MutexGuard<'static, ()>>,
+) -> Target {
+    let server = server.log_to(&dir.path().join("server.log")).start().await;
     let cage = Cage::new(CAP_BYTES);
     match &cage {
         Some(cage) => cage.add(server.pid()),
@@ -148,7 +176,8 @@ impl Cage {
     /// filesystem is not writable.
     fn new(limit: u64) -> Option<Cage> {
         let own = std::fs::read_to_string("/proc/self/cgroup").ok()?;
-        let name = format!("inbetween-attack-{}", std::process::id());
+        static CAGES: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let name = format!("inbetween-attack-{}-{}", std::process::id(), CAGES.fetch_add(1, Ordering::Relaxed));
         // cgroup v1: "N:memory:/path"; v2: "0::/path".
         let (dir, v2) = if let Some(path) = own.lines().find_map(|l| l.split_once(":memory:").map(|(_, p)| p)) {
             (PathBuf::from(format!("/sys/fs/cgroup/memory{path}")).join(name), false)

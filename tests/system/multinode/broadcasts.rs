@@ -460,3 +460,97 @@ async fn a_late_node_steps_on_from_the_stored_checkpoint_and_sends_the_same_fram
     drop((a, b, d));
     schema.drop_now().await;
 }
+
+/// A clip whose tail (three 0.1 m bones behind `hips`) hangs under gravity
+/// while `hips` swings along x, with the tail as a spring chain
+/// (docs/springs.md): every frame's tail depends on the whole simulation
+/// before it.
+fn tailed_doc() -> String {
+    json!({
+        "name": "tailed",
+        "skeleton": {"joints": [
+            {"name": "hips", "parent": null},
+            {"name": "tail0", "parent": "hips", "rest": {"translation": [0, 0, -0.1]}},
+            {"name": "tail1", "parent": "tail0", "rest": {"translation": [0, 0, -0.1]}},
+            {"name": "tail_end", "parent": "tail1", "rest": {"translation": [0, 0, -0.1]}}
+        ]},
+        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
+                    "times": [0, 0.5, 1], "values": [[0, 0, 0], [0.3, 0, 0], [0, 0, 0]]}],
+        "playback": "loop",
+        "springs": [{"name": "tail", "joints": ["tail0", "tail1", "tail_end"], "gravity": [0, -9.81, 0]}]
+    })
+    .to_string()
+}
+
+/// docs/springs.md "Time", across nodes: a broadcast of a clip with a spring
+/// chain, watched on A and B, sends the same bytes for every frame both
+/// received (after a pause and a seek, which restarts the chain); a node D
+/// started after several checkpoints steps on from the stored one (which
+/// carries the chain's state) and sends the same frames as A.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broadcast_with_springs_is_the_same_on_every_node_and_after_a_checkpoint() {
+    let Some(schema) = Schema::create("bsprng").await else { return };
+    let start = |name: &'static str| {
+        Node::serve()
+            .name(name)
+            .args(["--db-max-connections", "4", "--broadcast-control-lead-ms", LEAD_MS])
+            .args(["--broadcast-checkpoint-secs", "1", "--database-url"])
+            .arg(schema.url(&format!("application_name={name}")))
+            .start()
+    };
+    let (a, b) = (start("node-a").await, start("node-b").await);
+    let http = crate::common::http_client();
+    for n in [&a, &b] {
+        super::until_subscribed(&http, n).await;
+    }
+    let clip = upload(&http, &a, tailed_doc()).await;
+    let body = json!({"motion": {"layers": [{"clip": clip}]}, "fps": FPS, "space": "model"});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let limit = Duration::from_secs(60);
+    let (on_a, on_b) = (viewer(&a, &id, limit), viewer(&b, &id, limit));
+    until_watching(&[&on_a, &on_b]).await;
+    let paused = post_control(&http, &b, &id, json!({"op": "pause"})).await;
+    until_seen(&[&on_a, &on_b], paused + FPS, "a second of settling while paused").await;
+    post_control(&http, &a, &id, json!({"op": "play"})).await;
+    let sought = post_control(&http, &b, &id, json!({"op": "seek", "time": 0.25})).await;
+    until_seen(&[&on_a, &on_b], sought + 6 * FPS, "six checkpoint intervals past the controls").await;
+    eventually(PROGRESS, "A stored checkpoints", || async {
+        metric(&http, &a, "inbetween_broadcast_checkpoints_total").await >= 4.0
+    })
+    .await;
+    let d = start("node-d").await;
+    let late = viewer(&d, &id, limit);
+    until_watching(&[&late]).await;
+    let first = late.first().unwrap();
+    until_seen(&[&on_a, &on_b, &late], first + 20, "D, A and B share frames").await;
+    let replayed = metric(&http, &d, "inbetween_broadcast_replayed_ticks_total").await as u64;
+    assert!(replayed + 3 * FPS < first, "D replayed {replayed} of {first} ticks: from a checkpoint");
+
+    let resp = http.delete(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let take =
+        |v: Viewer| async move { tokio::time::timeout(Duration::from_secs(5), v.task).await.unwrap().unwrap().0 };
+    let (seen_a, seen_b, seen_d) = (take(on_a).await, take(on_b).await, take(late).await);
+    // The tail really swings: a frame's tail is not where its rest pose puts it.
+    let tail_end = |frame: &Value| frame["pose"]["joints"][3]["translation"].clone();
+    let last = seen_a.values().last().unwrap();
+    assert!(tail_end(last)[1].as_f64().unwrap() < -0.01, "the tail hangs under gravity: {last}");
+    let sought_frame = &seen_a[&sought];
+    let rest = [0.25 * 0.6, 0.0, -0.3];
+    let at_seek: Vec<f64> = tail_end(sought_frame).as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(
+        at_seek.iter().zip(rest).all(|(x, r)| (x - r).abs() < 1e-6),
+        "the seek's tick shows the rest pose: {at_seek:?}"
+    );
+    for (other, name) in [(&seen_b, "B"), (&seen_d, "D")] {
+        let shared: Vec<u64> = other.keys().filter(|k| seen_a.contains_key(k)).copied().collect();
+        assert!(shared.len() >= 20, "{name} shares {} frames with A", shared.len());
+        for k in shared {
+            assert_eq!(seen_a[&k], other[&k], "seq {k}: A and {name}");
+        }
+    }
+    drop((a, b, d));
+    schema.drop_now().await;
+}

@@ -4,13 +4,15 @@
 //! others serving and streaming, and a node whose database connections are
 //! terminated recovers without ever serving a stale version afterwards. A
 //! composed motion cached on one node follows a clip replaced on another.
-//! Broadcasts played by every node alike: `broadcasts.rs`.
+//! Broadcasts played by every node alike: `broadcasts.rs`; graphs and
+//! characters held built on every node: `documents.rs`.
 //!
 //! Skips (with a message) without PostgreSQL, unless
 //! `INBETWEEN_REQUIRE_POSTGRES=1`.
 
 mod balancer;
 mod broadcasts;
+mod documents;
 
 use std::time::Duration;
 

@@ -29,7 +29,7 @@ mod constraint;
 mod error;
 mod keyed;
 mod linalg;
-mod model;
+pub(crate) mod model;
 mod report;
 mod spec;
 mod stop;

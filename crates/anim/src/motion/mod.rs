@@ -16,7 +16,7 @@
 //! layer must sample (its mask, and the layers above that hide it);
 //! `sampler` the sampling loop;
 //! `root` root motion; `player` a stream's live motions, weight ramps and
-//! crossfades.
+//! crossfades; `springs` the spring chains run on the composed pose.
 
 mod coverage;
 mod error;
@@ -24,26 +24,37 @@ mod joint_map;
 mod layering;
 mod mask;
 mod player;
+mod retarget;
 pub mod root;
 mod sampler;
 mod spec;
+mod springs;
 mod sync;
+mod warning;
 
 use std::sync::Arc;
 
 pub use error::{MotionError, MotionErrorKind};
+pub(crate) use player::mix;
 pub use player::{DeckState, FadeState, LayerPosition, MAX_FADES, Player, PlayerError, PlayerState, RampState};
 pub use root::Planar;
 pub use sampler::{MotionOptions, MotionSampler, RootMotion};
-pub use spec::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+pub use spec::{
+    CharacterSpec, LayerMode, LayerSpec, MaskSpec, MotionSpec, RetargetSpec, RootMode, RootMotionSpec, SourcePose,
+    UpAxis,
+};
+pub use springs::SpringRun;
+pub use warning::MotionWarning;
 
 use self::coverage::Reach;
 use self::error::MotionErrorKind as K;
-use self::joint_map::joint_map;
+use self::joint_map::{UNMAPPED, joint_map};
 use self::root::motion_transform;
 use self::sync::SyncGroup;
+use super::character::Retargeter;
 use super::heap::vec_bytes;
 use super::ik::{IkConstraint, IkLimits, build_constraints};
+use super::spring::{Springs, SpringsSpec};
 use super::{Clip, Cursor, Path, Playback, Pose, Skeleton};
 
 /// Most layers in one motion.
@@ -87,6 +98,12 @@ pub struct Motion<C> {
     root: Option<RootSetup>,
     /// Request-time IK (docs/ik.md), solved on the layered pose.
     ik: Vec<IkConstraint>,
+    /// Layers whose clips have joints the output skeleton lacks.
+    warnings: Vec<MotionWarning>,
+    /// The output rig when the motion names a character.
+    character: Option<Arc<spec::CharacterSpec>>,
+    /// Spring chains on the output skeleton (docs/springs.md), if any.
+    springs: Option<Springs>,
 }
 
 /// Root motion as built: the output skeleton's root-motion joint.
@@ -125,6 +142,9 @@ struct Layer<C> {
     root: Option<LayerRoot>,
     /// The output's parameters this layer's clip also has (docs/clip-format.md, “Parameters”).
     parameters: Vec<ParameterMap>,
+    /// Onto the character, for a clip of another skeleton: its poses are
+    /// then in the output's joints (each sampler works on its own copy).
+    retarget: Option<Box<Retargeter>>,
 }
 
 /// One parameter of a layer: its entries in the layer clip's pose and in the
@@ -169,48 +189,92 @@ impl<C: ClipSource> Motion<C> {
         }
         let mut groups: Vec<SyncGroup> = Vec::new();
         let (mut layers, mut durations, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+        let mut warnings = Vec::new();
+        let character = spec.character;
         for (i, layer) in spec.layers.into_iter().enumerate() {
             let path = layers_path.clone().index(i);
             weights.push(mask::check_weight(layer.weight, &path.clone().field("weight"))?);
             check_layer_numbers(&layer, &path)?;
-            let output = layers.first().map_or(layer.clip.clip().skeleton(), |l: &Layer<C>| l.clip.clip().skeleton());
+            let first_skeleton =
+                layers.first().map_or(layer.clip.clip().skeleton(), |l: &Layer<C>| l.clip.clip().skeleton());
+            let output = character.as_ref().map_or(first_skeleton, |c| &c.skeleton);
             let time = layer_time(&layer, i, &mut groups);
             durations.push(layer.clip.clip().range().duration());
             let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
-            let map = joint_map(output, layer.clip.clip().skeleton());
+            let clip_path = path.clone().field("clip");
+            let retarget = match &character {
+                Some(c) if !retarget::same_rig(c, layer.clip.clip()) => {
+                    let (options, at) = match &layer.retarget {
+                        Some(own) => (own, path.clone().field("retarget")),
+                        None => (&spec.retarget, Path::root().field("retarget")),
+                    };
+                    Some(Box::new(retarget::layer_retargeter(c, layer.clip.clip(), options, &path, &at)?))
+                }
+                _ => None,
+            };
+            let (map, joint_count) = match &retarget {
+                Some(_) => ((0..output.len() as u32).collect(), output.len()),
+                None => {
+                    let map = joint_map(output, layer.clip.clip().skeleton());
+                    check_shared_joints(&map, output, layer.clip.clip().skeleton(), &clip_path)?;
+                    warnings.extend(MotionWarning::for_layer(clip_path, output, layer.clip.clip().skeleton()));
+                    (map, layer.clip.clip().joint_count())
+                }
+            };
             let first = layers.first().map_or(layer.clip.clip(), |l: &Layer<C>| l.clip.clip());
             let parameters = parameter_map(first.parameters(), layer.clip.clip().parameters(), &path)?;
+            let reference = (layer.mode == LayerMode::Additive)
+                .then(|| reference_pose(layer.clip.clip(), layer.reference_time, retarget.as_deref().cloned()));
             layers.push(Layer {
                 parameters,
-                reach: Reach::new(layer.mode, &map, &mask, layer.clip.clip().joint_count()),
+                reach: Reach::new(layer.mode, &map, &mask, joint_count),
                 unmasked: mask.iter().all(|m| *m >= 1.0),
                 mask,
                 map,
                 time,
-                reference: (layer.mode == LayerMode::Additive)
-                    .then(|| reference_pose(layer.clip.clip(), layer.reference_time)),
+                reference,
                 mode: layer.mode,
                 root: None,
                 clip: layer.clip,
+                retarget,
             });
         }
-        let root = root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?;
-        let ik = build_constraints(&spec.ik, layers[0].clip.clip().skeleton(), ik_limits).map_err(|e| {
+        let root = match &character {
+            Some(c) => character_root_setup(spec.root_motion.as_ref(), c)?,
+            None => root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?,
+        };
+        let output = character.as_ref().map_or(layers[0].clip.clip().skeleton(), |c| &c.skeleton);
+        let ik = build_constraints(&spec.ik, output, ik_limits).map_err(|e| {
             let e = e.under(Path::root().field("ik"));
             MotionError::new(e.path, K::Ik(e.kind))
         })?;
+        let springs = build_springs(&spec.springs, output)?;
         if let Some(setup) = root {
-            let name = layers[0].clip.clip().skeleton().names()[setup.joint].clone();
+            let name = output.names()[setup.joint].clone();
             for layer in &mut layers {
-                layer.root = layer_root(layer.clip.clip(), &name, setup.up);
+                layer.root = match layer.retarget.as_deref().cloned() {
+                    Some(retargeter) => retargeted_root(layer.clip.clip(), retargeter, setup.joint, setup.up),
+                    None => layer_root(layer.clip.clip(), &name, setup.up),
+                };
             }
         }
-        Ok(Motion { layers, groups, durations, weights, root, ik })
+        Ok(Motion { layers, groups, durations, weights, root, ik, warnings, character, springs })
     }
 
-    /// The output skeleton: the first layer's clip's.
+    /// Layers whose clips have joints the output skeleton lacks, bottom to
+    /// top (what an answer shows as warnings).
+    pub fn warnings(&self) -> &[MotionWarning] {
+        &self.warnings
+    }
+
+    /// The output skeleton: the character's, else the first layer's clip's.
     pub fn skeleton(&self) -> &Skeleton {
-        self.layers[0].clip.clip().skeleton()
+        self.character.as_ref().map_or(self.layers[0].clip.clip().skeleton(), |c| &c.skeleton)
+    }
+
+    /// Whether layer `i` is retargeted onto the character.
+    pub fn is_retargeted(&self, i: usize) -> bool {
+        self.layers[i].retarget.is_some()
     }
 
     /// The output's parameters (docs/clip-format.md, “Parameters”): the first layer's clip's.
@@ -233,6 +297,11 @@ impl<C: ClipSource> Motion<C> {
         &self.ik
     }
 
+    /// The spring chains simulated on the composed pose, if any.
+    pub fn springs(&self) -> Option<&Springs> {
+        self.springs.as_ref()
+    }
+
     /// Bytes this motion holds on the heap beyond its layers' clips (which
     /// it shares): per layer the mask, joint map, coverage bits and an
     /// additive layer's reference pose; the sync groups and IK constraints.
@@ -244,6 +313,7 @@ impl<C: ClipSource> Motion<C> {
                 + std::mem::size_of_val(&*l.reach.hides)
                 + l.reference.as_ref().map_or(0, Pose::heap_bytes)
                 + vec_bytes(&l.parameters)
+                + l.retarget.as_deref().map_or(0, retargeter_bytes)
         };
         let group = |g: &SyncGroup| g.name.capacity() + vec_bytes(&g.members);
         vec_bytes(&self.layers)
@@ -254,6 +324,9 @@ impl<C: ClipSource> Motion<C> {
             + vec_bytes(&self.weights)
             + vec_bytes(&self.ik)
             + self.ik.iter().map(IkConstraint::heap_bytes).sum::<usize>()
+            + vec_bytes(&self.warnings)
+            + self.warnings.iter().map(MotionWarning::heap_bytes).sum::<usize>()
+            + self.springs.as_ref().map_or(0, Springs::heap_bytes)
     }
 
     /// IK reports each sample gives: every layer's clip constraints, bottom
@@ -310,6 +383,15 @@ impl<C: ClipSource> Motion<C> {
     }
 }
 
+/// The chains of `spec` on the output skeleton; `None` without chains.
+fn build_springs(spec: &SpringsSpec, output: &Skeleton) -> Result<Option<Springs>, MotionError> {
+    if spec.chains.is_empty() {
+        spec.check().map_err(|e| MotionError::new(e.path, K::Spring(e.kind)))?;
+        return Ok(None);
+    }
+    Springs::build(spec, output).map(Some).map_err(|e| MotionError::new(e.path, K::Spring(e.kind)))
+}
+
 fn check_layer_numbers<C>(layer: &LayerSpec<C>, path: &Path) -> Result<(), MotionError> {
     for (value, field) in
         [(layer.offset, "offset"), (layer.speed, "speed"), (layer.reference_time.unwrap_or(0.0), "reference_time")]
@@ -323,6 +405,27 @@ fn check_layer_numbers<C>(layer: &LayerSpec<C>, path: &Path) -> Result<(), Motio
         return Err(MotionError::new(path.clone().field("speed"), kind));
     }
     Ok(())
+}
+
+/// Bytes a retargeter holds: per target joint its source, offset,
+/// reference transform, source translation and model transform; per source
+/// joint its parent and model transform.
+fn retargeter_bytes(r: &Retargeter) -> usize {
+    let record = size_of::<Retargeter>();
+    let transform = 3 * size_of::<glam::Vec3A>();
+    let target = r.target_len() * (2 * size_of::<u32>() + size_of::<glam::Quat>() + 3 * transform);
+    record + target + r.source_model().translations.len() * (size_of::<u32>() + transform)
+}
+
+/// Refuses a layer that maps no joint of the output skeleton although its
+/// clip has joints: another rig, of which nothing would play.
+fn check_shared_joints(map: &[u32], output: &Skeleton, layer: &Skeleton, path: &Path) -> Result<(), MotionError> {
+    if layer.is_empty() || map.iter().any(|&j| j != UNMAPPED) {
+        return Ok(());
+    }
+    let first = |s: &Skeleton| s.names().iter().take(error::NAMES_SHOWN + 1).cloned().collect();
+    let kind = K::IncompatibleSkeleton { layer: first(layer), output: first(output) };
+    Err(MotionError::new(path.clone(), kind))
 }
 
 /// How layer `index` finds its clip time; a synced layer joins (or
@@ -354,9 +457,22 @@ fn root_setup(spec: Option<&RootMotionSpec>, first: &Clip) -> Result<Option<Root
         })?,
         None => (0..skeleton.len())
             .find(|&j| skeleton.parent(j).is_none() && first.has_translation_track(j))
-            .ok_or_else(|| MotionError::new(Path::root().field("root_motion"), K::NoRootJoint))?,
+            .ok_or_else(|| MotionError::new(Path::root().field("root_motion"), no_root_joint(first)))?,
     };
     Ok(Some(RootSetup { joint, mode: spec.mode, up: spec.up }))
+}
+
+/// Why no root-motion joint was found, with the candidates: the root
+/// joints (which lack translation tracks) and the joints that have one.
+fn no_root_joint(clip: &Clip) -> K {
+    let skeleton = clip.skeleton();
+    let names = |keep: &dyn Fn(usize) -> bool| -> Vec<String> {
+        let joints = (0..skeleton.len()).filter(|&j| keep(j)).take(error::NAMES_SHOWN + 1);
+        joints.map(|j| skeleton.names()[j].clone()).collect()
+    };
+    let roots = names(&|j| skeleton.parent(j).is_none());
+    let translated = names(&|j| clip.has_translation_track(j));
+    K::NoRootJoint { roots, translated }
 }
 
 /// The most samples of a root's yaw along its clip: a root rotation with more
@@ -368,14 +484,53 @@ const MAX_YAW_SAMPLES: usize = 4096;
 fn layer_root(clip: &Clip, name: &str, up: UpAxis) -> Option<LayerRoot> {
     let joint = clip.skeleton().index_of(name)?;
     let (mut cursor, mut pose) = (Cursor::default(), Pose::default());
-    let mut at = |t: f32| {
+    let at = |t: f32| {
         clip.sample_joints_into(t, &mut cursor, &mut pose, |j| j as usize == joint);
         motion_transform(up, pose.translations[joint], pose.rotations[joint])
     };
+    Some(LayerRoot { joint, cycle: cycle_of(clip, &yaw_times(clip, joint), at, up) })
+}
+
+/// A retargeted layer's root: the character's joint `joint` in the poses
+/// the retarget makes, its yaw summed at the times of the source's root.
+fn retargeted_root(clip: &Clip, mut retargeter: Retargeter, joint: usize, up: UpAxis) -> Option<LayerRoot> {
+    let source_root = (0..clip.joint_count()).find(|&j| clip.skeleton().parent(j).is_none()).unwrap_or(0);
+    let (mut cursor, mut source, mut target) = (Cursor::default(), Pose::default(), Pose::default());
+    let at = |t: f32| {
+        clip.sample_into(t, &mut cursor, &mut source);
+        retargeter.retarget(&source, &mut target);
+        motion_transform(up, target.translations[joint], target.rotations[joint])
+    };
+    Some(LayerRoot { joint, cycle: cycle_of(clip, &yaw_times(clip, source_root), at, up) })
+}
+
+/// The cycle of a root whose motion transform at clip time `t` is `at(t)`,
+/// its yaw summed at `times`.
+fn cycle_of(clip: &Clip, times: &[f32], mut at: impl FnMut(f32) -> root::Planar, up: UpAxis) -> root::Cycle {
     let (start, end) = (at(clip.start()), at(clip.end()));
-    let along: Vec<(f32, f64)> = yaw_times(clip, joint).into_iter().map(|t| (t, at(t).yaw)).collect();
+    let along: Vec<(f32, f64)> = times.iter().map(|&t| (t, at(t).yaw)).collect();
     let yaw = root::Unwrapped::new((clip.start(), start.yaw), along);
-    Some(LayerRoot { joint, cycle: root::Cycle::new(start, end, yaw, up) })
+    root::Cycle::new(start, end, yaw, up)
+}
+
+/// The root-motion joint of a character: the named one, else its hips.
+fn character_root_setup(
+    spec: Option<&RootMotionSpec>,
+    character: &spec::CharacterSpec,
+) -> Result<Option<RootSetup>, MotionError> {
+    let Some(spec) = spec else { return Ok(None) };
+    let skeleton = &character.skeleton;
+    let joint = match &spec.joint {
+        Some(name) => skeleton.index_of(name).ok_or_else(|| {
+            MotionError::new(Path::root().field("root_motion").field("joint"), K::UnknownJoint { joint: name.clone() })
+        })?,
+        None => character.roles.joint(crate::character::Role::Hips).ok_or_else(|| {
+            let roots = (0..skeleton.len()).filter(|&j| skeleton.parent(j).is_none());
+            let roots = roots.take(error::NAMES_SHOWN + 1).map(|j| skeleton.names()[j].clone()).collect();
+            MotionError::new(Path::root().field("root_motion"), K::NoRootJoint { roots, translated: Vec::new() })
+        })?,
+    };
+    Ok(Some(RootSetup { joint, mode: spec.mode, up: spec.up }))
 }
 
 /// The clip times after the start at which the root's yaw is summed
@@ -421,10 +576,17 @@ fn parameter_map(
 
 /// `clip`'s local pose at `time` (default its start), clamped to its range
 /// with no playback mapping.
-fn reference_pose(clip: &Clip, time: Option<f64>) -> Pose {
+fn reference_pose(clip: &Clip, time: Option<f64>, retarget: Option<Retargeter>) -> Pose {
     let range = clip.range();
     let t = time.map_or(range.start(), |t| (t as f32).clamp(range.start(), range.end()));
     let mut pose = Pose::default();
     clip.sample_into(t, &mut Cursor::default(), &mut pose);
-    pose
+    match retarget {
+        Some(mut retargeter) => {
+            let mut target = pose.clone();
+            retargeter.retarget(&pose, &mut target);
+            target
+        }
+        None => pose,
+    }
 }

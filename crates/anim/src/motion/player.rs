@@ -27,7 +27,7 @@ pub use state::{DeckState, FadeState, PlayerState, RampState};
 
 use super::layering::{self, Joint};
 use super::root::Planar;
-use super::{ClipSource, Motion, MotionOptions, MotionSampler, RootMotion, UpAxis};
+use super::{ClipSource, Motion, MotionOptions, MotionSampler, RootMotion, SpringRun, UpAxis};
 use crate::ik::{ChainStart, IkConstraint, IkReport, IkSolver};
 use crate::{Ease, Playback, Pose, Space};
 
@@ -93,6 +93,20 @@ pub struct Player<C> {
     root: Option<RootMotion>,
     up: UpAxis,
     ik: StreamIk,
+    springs: StreamSprings,
+}
+
+/// The current motion's spring chains (docs/springs.md, “Time”), run in
+/// the clock the caller gives (stream time); a crossfade to a motion with
+/// the same chains keeps them going.
+#[derive(Debug, Clone, Default)]
+struct StreamSprings {
+    run: Option<Box<SpringRun>>,
+    /// Whether the next frame's substeps cannot follow the last frame's
+    /// motion time (a seek or a change of motion).
+    jumped: bool,
+    /// Whether the player's `local` holds the last tick's sprung pose.
+    applied: bool,
 }
 
 /// The stream's request-time IK (docs/ik.md, “Streams”): solved on the
@@ -183,6 +197,7 @@ impl<C: ClipSource> Player<C> {
     pub fn new(motion: Arc<Motion<C>>) -> Self {
         let up = motion.root_up().unwrap_or_default();
         let ik = StreamIk { constraints: motion.ik().to_vec(), ..StreamIk::default() };
+        let springs = StreamSprings { run: motion_springs(&motion), ..StreamSprings::default() };
         Player {
             top: Deck { origin: Some(0.0), ..Deck::new(motion) },
             fade: None,
@@ -195,6 +210,7 @@ impl<C: ClipSource> Player<C> {
             root: None,
             up,
             ik,
+            springs,
         }
     }
 
@@ -248,8 +264,13 @@ impl<C: ClipSource> Player<C> {
             root: None,
             up: self.up,
             ik: StreamIk::default(),
+            springs: StreamSprings::default(),
         };
         self.up = self.top.motion.root_up().unwrap_or(self.up);
+        if self.top.motion.springs() != under.top.motion.springs() {
+            self.springs.run = motion_springs(&self.top.motion);
+        }
+        self.springs.jumped = true;
         self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
         Ok(())
     }
@@ -307,10 +328,20 @@ impl<C: ClipSource> Player<C> {
     /// Samples every motion at stream time `s` and mixes them; returns the
     /// current motion's first layer's clip time.
     pub fn sample(&mut self, s: f64, options: &MotionOptions) -> f32 {
+        self.sample_clocked(s, s, options)
+    }
+
+    /// [`Player::sample`] with the springs run in `clock` (the stream's
+    /// time, which pause and speed do not change; docs/springs.md, “Time”).
+    pub fn sample_clocked(&mut self, s: f64, clock: f64, options: &MotionOptions) -> f32 {
         let jump = self.take_seek(s);
+        if jump {
+            self.reset_springs();
+        }
         let ds = if jump { 0.0 } else { self.last_s.map_or(0.0, |last| s - last) };
         self.advance(s, ds, options.ease);
         self.solve_ik();
+        self.run_springs(clock, options.ease);
         let delta = self.delta();
         if self.has_root_motion() {
             let total = self.root.map_or(Planar::IDENTITY, |r| r.total).then(delta, self.up);
@@ -318,7 +349,7 @@ impl<C: ClipSource> Player<C> {
         }
         self.space = options.space;
         if options.space == Space::Model {
-            let local = if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() };
+            let local = if self.mixed_in_local() { &self.local } else { self.top.sampler.local() };
             self.top.motion.skeleton().to_model(local, &mut self.model);
         }
         self.top.sampler.clip_times()[0]
@@ -392,7 +423,38 @@ impl<C: ClipSource> Player<C> {
 
     /// The mixed local pose of the last tick.
     fn local_pose(&self) -> &Pose {
-        if self.fade.is_some() || self.ik.applied { &self.local } else { self.top.sampler.local() }
+        if self.mixed_in_local() { &self.local } else { self.top.sampler.local() }
+    }
+
+    /// Whether the last tick's pose is in `local` rather than the top
+    /// deck's sampler (a fade mixed it, IK or springs changed it).
+    fn mixed_in_local(&self) -> bool {
+        self.fade.is_some() || self.ik.applied || self.springs.applied
+    }
+
+    /// The springs start again at rest at the next tick, whose frame shows
+    /// their joints' rest rotations (a seek, `reset_springs`).
+    pub fn reset_springs(&mut self) {
+        if let Some(run) = self.springs.run.as_mut() {
+            run.restart();
+        }
+        self.springs.jumped = true;
+    }
+
+    /// Runs the current motion's springs for the tick at `clock` on the
+    /// mixed pose (into `local`).
+    fn run_springs(&mut self, clock: f64, ease: Ease) {
+        let (Some(run), Some(springs)) = (self.springs.run.as_mut(), self.top.motion.springs()) else {
+            self.springs.applied = false;
+            return;
+        };
+        if !(self.fade.is_some() || self.ik.applied) {
+            self.local.copy_from(self.top.sampler.local());
+        }
+        let tau = self.last_s.zip(self.top.origin).map_or(0.0, |(s, o)| s - o);
+        let same = !std::mem::take(&mut self.springs.jumped);
+        run.clocked_frame(&self.top.motion, springs, (clock, tau, same), ease, &mut self.local);
+        self.springs.applied = true;
     }
 
     /// The last tick's layered root delta: the fade's sides lerped by `α`.
@@ -454,10 +516,15 @@ impl<C: ClipSource> Player<C> {
     }
 }
 
+/// A fresh run of `motion`'s springs, if it has any.
+fn motion_springs<C: ClipSource>(motion: &Motion<C>) -> Option<Box<SpringRun>> {
+    motion.springs().map(|springs| Box::new(SpringRun::new(springs)))
+}
+
 /// `out = blend(a, b, α)` joint by joint (lerp, short-way slerp), written
 /// straight into `out` (a crossfade's sides have the same joints; `a`'s
 /// are copied first only if they did not).
-fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
+pub(crate) fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
     if a.len() != b.len() || out.len() != a.len() {
         out.copy_from(a);
     }

@@ -10,6 +10,7 @@ use super::layering::{self, Joint};
 use super::root::{Planar, RootAt, motion_transform};
 use super::sync::position;
 use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode};
+use crate::character::Retargeter;
 use crate::ik::{ChainStart, IkReport, IkSolver};
 use crate::{Clip, Cursor, Ease, Playback, Pose, Space};
 
@@ -57,6 +58,12 @@ pub struct MotionSampler {
     /// the motion's own (requests only).
     ik_reports: Vec<IkReport>,
     solved: Vec<IkReport>,
+    /// Per layer, its own copy of the layer's retargeter (made at the
+    /// first sample), and the source pose a retargeted layer samples into.
+    retargeters: Vec<Option<Retargeter>>,
+    source: Pose,
+    /// A stateless request's spring simulation (motions with springs).
+    springs: Option<Box<super::SpringRun>>,
 }
 
 impl MotionSampler {
@@ -112,6 +119,13 @@ impl MotionSampler {
         self.root_motion = root_motion;
     }
 
+    /// The next sample starts the springs afresh from rest (its warmup).
+    pub fn restart_springs(&mut self) {
+        if let Some(run) = self.springs.as_mut() {
+            run.restart();
+        }
+    }
+
     /// The next sample starts the root motion afresh: delta and total 0.
     pub fn restart_root(&mut self) {
         self.previous.clear();
@@ -132,17 +146,33 @@ impl MotionSampler {
 impl<C: ClipSource> Motion<C> {
     /// The pose at motion time `tau` with the motion's own weights (a
     /// request's answer). Returns the first layer's clip time.
+    ///
+    /// With spring chains, the sampler runs one simulation through the
+    /// times it is given in order, from rest `warmup` before the first
+    /// (docs/springs.md, “Time”); a time before the last starts it again.
     pub fn sample(&self, tau: f64, options: &MotionOptions, sampler: &mut MotionSampler) -> f32 {
+        let clip_time = self.sample_local(tau, options.ease, sampler);
+        if let Some(springs) = &self.springs {
+            let MotionSampler { springs: run, local, .. } = sampler;
+            let run = run.get_or_insert_with(|| Box::new(super::SpringRun::new(springs)));
+            run.stateless_frame(self, springs, tau, options.ease, local);
+        }
+        sampler.finish(self.skeleton(), options.space);
+        clip_time
+    }
+
+    /// The layered local pose at `tau` with the motion's own weights and
+    /// its IK solved: what springs run on.
+    pub(super) fn sample_local(&self, tau: f64, ease: Ease, sampler: &mut MotionSampler) -> f32 {
         let mut phases = std::mem::take(&mut sampler.phases);
         self.phases_at(tau, &self.weights, &mut phases);
-        let clip_time = self.layer_into(tau, &phases, &self.weights, options.ease, sampler);
+        let clip_time = self.layer_into(tau, &phases, &self.weights, ease, sampler);
         sampler.phases = phases;
         if !self.ik.is_empty() {
             let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;
             ik.solve(self.skeleton(), local, &self.ik, ChainStart::Cold, solved);
             ik_reports.extend_from_slice(solved);
         }
-        sampler.finish(self.skeleton(), options.space);
         clip_time
     }
 
@@ -171,8 +201,22 @@ impl<C: ClipSource> Motion<C> {
     /// clip time.
     fn layer_into(&self, tau: f64, phases: &[f64], weights: &[f32], ease: Ease, sampler: &mut MotionSampler) -> f32 {
         let MotionSampler {
-            cursors, layer: scratch, local, clip_times, roots, needs, hidden, kept, ik_reports, ..
+            cursors,
+            layer: scratch,
+            local,
+            clip_times,
+            roots,
+            needs,
+            hidden,
+            kept,
+            ik_reports,
+            retargeters,
+            source,
+            ..
         } = sampler;
+        if retargeters.len() != self.layers.len() {
+            *retargeters = self.layers.iter().map(|l| l.retarget.as_deref().cloned()).collect();
+        }
         let words = coverage::words(self.skeleton().len());
         coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
         cursors.resize_with(self.layers.len(), Cursor::default);
@@ -188,7 +232,8 @@ impl<C: ClipSource> Motion<C> {
             if direct {
                 // The common case, and the bit-for-bit promise: the first
                 // full-weight layer is the clip's own pose.
-                layer.sample_needed(t, need, kept, &mut cursors[0], local);
+                let sampling = Sampling { need, kept, source, retargeter: retargeters[0].as_mut() };
+                layer.sample_needed(t, sampling, &mut cursors[0], local);
                 ik_reports.extend_from_slice(cursors[0].ik_reports());
                 roots.push(self.take_root(layer, (cycle, t), local));
                 continue;
@@ -207,7 +252,8 @@ impl<C: ClipSource> Motion<C> {
                 roots.push(None);
                 continue;
             }
-            layer.sample_needed(t, need, kept, &mut cursors[i], scratch);
+            let sampling = Sampling { need, kept, source, retargeter: retargeters[i].as_mut() };
+            layer.sample_needed(t, sampling, &mut cursors[i], scratch);
             ik_reports.extend_from_slice(cursors[i].ik_reports());
             roots.push(self.take_root(layer, (cycle, t), scratch));
             layer.apply(scratch, weights[i], need, local);
@@ -291,12 +337,31 @@ impl<C: ClipSource> Motion<C> {
     }
 }
 
+/// What sampling one layer needs besides its clip: the output joints it
+/// must give, scratch, and for a retargeted layer the sampler's copy of
+/// its retargeter and the source pose it samples into.
+struct Sampling<'a> {
+    need: &'a [u64],
+    kept: &'a mut Vec<u64>,
+    source: &'a mut Pose,
+    retargeter: Option<&'a mut Retargeter>,
+}
+
 impl<C: ClipSource> super::Layer<C> {
     /// Samples the layer's clip at clip time `t` into `pose` (its clip's
     /// joints) for the output joints in `need` and its root-motion joint;
-    /// the whole clip when that is every joint it has. `kept` is scratch.
-    fn sample_needed(&self, t: f32, need: &[u64], kept: &mut Vec<u64>, cursor: &mut Cursor, pose: &mut Pose) {
+    /// the whole clip when that is every joint it has. A retargeted layer
+    /// samples its whole clip and retargets it: `pose` is then in the
+    /// character's joints, with the clip's parameters.
+    fn sample_needed(&self, t: f32, sampling: Sampling<'_>, cursor: &mut Cursor, pose: &mut Pose) {
+        let Sampling { need, kept, source, retargeter } = sampling;
         let clip = self.clip.clip();
+        if let Some(retargeter) = retargeter {
+            clip.sample_into(t, cursor, source);
+            pose.parameters.clone_from(&source.parameters);
+            retargeter.retarget(source, pose);
+            return;
+        }
         if self.reach.whole && *need == *self.reach.reaches {
             clip.sample_into(t, cursor, pose);
             return;

@@ -1,8 +1,14 @@
 //! The authoring form of a motion (docs/motion.md): what a request or a stream
 //! control says, unchecked. [`Motion::build`](super::Motion::build) checks it.
 
-use crate::Playback;
+use std::sync::Arc;
+
+use glam::Quat;
+
+use crate::character::{RoleMap, Translation};
 use crate::ik::IkSpec;
+use crate::spring::SpringsSpec;
+use crate::{Playback, Pose, Skeleton};
 
 /// Layers bottom to top, what to do with the root's motion, and the IK
 /// constraints solved on the layered pose.
@@ -12,12 +18,57 @@ pub struct MotionSpec<C> {
     pub root_motion: Option<RootMotionSpec>,
     /// Request-time constraints (docs/ik.md), after layering and root motion.
     pub ik: Vec<IkSpec>,
+    /// The output rig, instead of the first layer's clip's: every layer of
+    /// another skeleton is retargeted onto it.
+    pub character: Option<Arc<CharacterSpec>>,
+    /// How layers are retargeted onto the character, unless a layer says.
+    pub retarget: RetargetSpec,
+    /// Spring chains (docs/springs.md) on the output skeleton, simulated
+    /// on the composed pose; none by default.
+    pub springs: SpringsSpec,
 }
 
 impl<C> Default for MotionSpec<C> {
     fn default() -> Self {
-        MotionSpec { layers: Vec::new(), root_motion: None, ik: Vec::new() }
+        MotionSpec {
+            layers: Vec::new(),
+            root_motion: None,
+            ik: Vec::new(),
+            character: None,
+            retarget: RetargetSpec::default(),
+            springs: SpringsSpec::default(),
+        }
     }
+}
+
+/// A motion's output rig: a skeleton with its roles and reference pose,
+/// resolved by the caller (a stored character).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CharacterSpec {
+    pub skeleton: Skeleton,
+    pub roles: RoleMap,
+    /// Its reference pose for retargeting (local); `None`: its rest pose.
+    pub reference: Option<Pose>,
+}
+
+/// How a layer's clip is retargeted onto the character.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RetargetSpec {
+    pub source_pose: SourcePose,
+    pub translation: Translation,
+}
+
+/// The source side's reference pose.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum SourcePose {
+    /// The clip's rest pose; a root at the origin with a translation track
+    /// (a BVH's) at its first frame's position.
+    #[default]
+    Rest,
+    /// The clip's pose at this clip time (clamped to its range).
+    Time(f64),
+    /// The rest pose with these joints' local rotations replaced.
+    Rotations(Vec<(String, Quat)>),
 }
 
 impl<C> MotionSpec<C> {
@@ -42,10 +93,12 @@ impl<C> MotionSpec<C> {
                     playback: l.playback,
                     sync: l.sync,
                     reference_time: l.reference_time,
+                    retarget: l.retarget,
                 })
             })
             .collect::<Result<_, E>>()?;
-        Ok(MotionSpec { layers, root_motion: self.root_motion, ik: self.ik })
+        let (root_motion, ik, character, retarget) = (self.root_motion, self.ik, self.character, self.retarget);
+        Ok(MotionSpec { layers, root_motion, ik, character, retarget, springs: self.springs })
     }
 }
 
@@ -68,6 +121,8 @@ pub struct LayerSpec<C> {
     /// Additive layers: the clip time of the reference pose (`None`: the
     /// clip's start).
     pub reference_time: Option<f64>,
+    /// This layer's retargeting, instead of the motion's.
+    pub retarget: Option<RetargetSpec>,
 }
 
 impl<C> LayerSpec<C> {
@@ -83,6 +138,7 @@ impl<C> LayerSpec<C> {
             playback: None,
             sync: None,
             reference_time: None,
+            retarget: None,
         }
     }
 }

@@ -140,6 +140,7 @@ pub fn random_layers_over(rng: &mut Rng, pool: &Pool, first: usize) -> Vec<Layer
                 sync: rng.chance(0.45).then(|| ["a", "b"][rng.below(2)].to_string()),
                 reference_time: (mode == LayerMode::Additive && rng.chance(0.6))
                     .then(|| rng.range(r.start - 1.0, r.end + 1.0)),
+                retarget: None,
             }
         })
         .collect()

@@ -25,6 +25,7 @@ mod b_spline;
 mod behaviour;
 mod budget;
 pub mod character;
+mod compact;
 mod composition_reference;
 mod crossfade;
 mod ik;
@@ -39,6 +40,7 @@ mod reference;
 mod root_motion;
 mod root_motion_cycles;
 mod soa;
+mod springs;
 
 extern crate inbetween_anim as anim;
 

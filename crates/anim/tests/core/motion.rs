@@ -301,6 +301,80 @@ fn refusals_name_the_field() {
     assert_eq!(err.kind.code(), "no_layers");
 }
 
+/// A clip over joints `names` (each a root, each with a one-key
+/// translation track).
+fn rig(names: &[&str]) -> Clip {
+    let track = |name: &&str| {
+        TrackSpec::new(name, Channel::Translation, Interpolation::Linear, vec![0.0], Keys::Vec3(vec![Vec3::X]))
+    };
+    Clip::build(&ClipSpec { name: "rig".into(), tracks: names.iter().map(track).collect(), ..Default::default() })
+        .unwrap()
+}
+
+#[test]
+fn a_layer_of_another_rig_is_refused_and_one_that_shares_some_joints_warns_naming_the_rest() {
+    let walk = body("walk", 1.0, 0.0, 2.0, 0.0);
+    let (other, partial) = (rig(&["Hips", "Spine"]), rig(&["hips", "tail", "ear"]));
+    fn build<'a>(walk: &'a Clip, top: &'a Clip) -> Result<Motion<&'a Clip>, anim::motion::MotionError> {
+        Motion::build(MotionSpec { layers: vec![LayerSpec::new(walk), LayerSpec::new(top)], ..Default::default() })
+    }
+    let err = build(&walk, &other).unwrap_err();
+    assert_eq!((err.path.to_pointer().as_str(), err.kind.code()), ("/layers/1/clip", "incompatible_skeleton"));
+    let detail = err.kind.to_string();
+    assert!(detail.contains("'Hips', 'Spine'") && detail.contains("'hips'") && detail.contains("`character`"));
+    let motion = build(&walk, &partial).unwrap();
+    let [warning] = motion.warnings() else { panic!("one warning: {:?}", motion.warnings()) };
+    assert_eq!(warning.path.to_pointer(), "/layers/1/clip");
+    assert_eq!((warning.joints.as_slice(), warning.count), (&["tail".to_owned(), "ear".to_owned()][..], 2));
+    assert!(warning.to_string().contains("2 joints") && warning.to_string().contains("'tail', 'ear'"));
+    // The layer still plays the joint it shares; the first layer never warns.
+    assert_eq!(sample(&motion, 0.0).pose().translations[0], Vec3::X.into());
+    assert!(build(&walk, &walk).unwrap().warnings().is_empty());
+    // Many missing joints: the first five are named, and the count is exact.
+    let names: Vec<String> = (0..9).map(|i| format!("j{i}")).collect();
+    let wide = rig(&names.iter().map(String::as_str).chain(["arm"]).collect::<Vec<_>>());
+    let motion = build(&walk, &wide).unwrap();
+    assert_eq!(motion.warnings()[0].count, 9);
+    assert!(motion.warnings()[0].to_string().contains("'j0', 'j1', 'j2', 'j3', 'j4', …"));
+}
+
+#[test]
+fn no_root_joint_names_the_candidates() {
+    let walk = body("walk", 1.0, 0.0, 2.0, 0.0);
+    let rooted = rig(&["a"]);
+    // `walk`'s root, hips, has a translation track; a clip whose only
+    // translated joint is not a root is refused, naming both kinds.
+    let arm = TrackSpec::new("arm", Channel::Translation, Interpolation::Linear, vec![0.0], Keys::Vec3(vec![Vec3::X]));
+    let mut spec = ClipSpec { name: "arm".into(), tracks: vec![arm], ..Default::default() };
+    spec.skeleton = Some(SkeletonSpec {
+        joints: ["hips", "arm"]
+            .iter()
+            .enumerate()
+            .map(|(i, name)| JointSpec {
+                name: (*name).into(),
+                parent: (i > 0).then(|| "hips".into()),
+                rest: Transform::IDENTITY,
+                inverse_bind: None,
+            })
+            .collect(),
+    });
+    let clip = Clip::build(&spec).unwrap();
+    let root = Some(anim::motion::RootMotionSpec::default());
+    let err = Motion::build(MotionSpec {
+        layers: vec![LayerSpec::new(&clip)],
+        root_motion: root.clone(),
+        ..Default::default()
+    })
+    .unwrap_err();
+    assert_eq!((err.path.to_pointer().as_str(), err.kind.code()), ("/root_motion", "no_root_joint"));
+    let detail = err.kind.to_string();
+    assert!(detail.contains("root joints: 'hips'") && detail.contains("`root_motion.joint`: 'arm'"), "{detail}");
+    for ok in [&walk, &rooted] {
+        let spec = MotionSpec { layers: vec![LayerSpec::new(ok)], root_motion: root.clone(), ..Default::default() };
+        assert!(Motion::build(spec).is_ok());
+    }
+}
+
 #[test]
 fn sampling_a_warm_motion_allocates_nothing() {
     let walk = body("walk", 1.0, 0.0, 2.0, 0.0);

@@ -21,7 +21,7 @@ use glam::{DQuat, DVec3, Vec3, Vec4};
 use super::budget::Budget;
 use super::error::ImportError;
 use super::names::{clip_name, unique_names};
-use super::spec::{ImportLimits, ImportOptions, Imported};
+use super::spec::{ImportLimits, ImportOptions, Imported, ImportedCharacter};
 use super::warning::Warning;
 use anim::lint;
 use anim::{Channel, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
@@ -88,7 +88,24 @@ pub fn import(bytes: &[u8], options: &ImportOptions) -> Result<Imported, ImportE
     };
     // The importer computes every rotation itself, so only the times can look wrong.
     let warnings = lint::times(&clip).map(|l| Warning::from_lint(&l, FRAME_TIME_POINTER)).into_iter().collect();
-    Ok(Imported { clips: vec![clip], meshes: vec![None], warnings })
+    let characters = if options.characters_only { vec![character(&clip)] } else { Vec::new() };
+    Ok(Imported { clips: vec![clip], meshes: vec![None], springs: vec![Vec::new()], characters, warnings })
+}
+
+/// The hierarchy as a character: the offsets unrotated, each root where
+/// the first frame puts it (a BVH root's OFFSET is usually 0, its height
+/// in the motion).
+fn character(clip: &ClipSpec) -> ImportedCharacter {
+    let mut skeleton = clip.skeleton.clone().unwrap_or_default();
+    for joint in skeleton.joints.iter_mut().filter(|j| j.parent.is_none()) {
+        let first = clip.tracks.iter().find(|t| t.joint == joint.name && t.channel == Channel::Translation);
+        if let Some(Keys::Vec3(values)) = first.map(|t| &t.values)
+            && let Some(&at) = values.first()
+        {
+            joint.rest.translation = at;
+        }
+    }
+    ImportedCharacter { name: clip.name.clone(), skeleton, mesh: None }
 }
 
 /// Where a BVH warning about key times points: the header line that set

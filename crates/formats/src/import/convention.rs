@@ -22,6 +22,7 @@ use glam::{Mat4, Quat, Vec3, Vec4};
 use super::spec::{ImportOptions, Imported, UpAxis};
 use super::warning::Warning;
 use crate::wire::mesh;
+use anim::spring::{ChainSpec, ColliderShape};
 use anim::{Channel, ClipSpec, Keys, SkeletonSpec, TrackSpec};
 
 /// Warned about: a skeleton lying along Z (its model-space extent along Z
@@ -80,8 +81,15 @@ pub fn apply(imported: &mut Imported, options: &ImportOptions, skeleton_pointer:
         for clip in &mut imported.clips {
             convert_clip(clip, change);
         }
+        for chain in imported.springs.iter_mut().flatten() {
+            convert_chain(chain, change);
+        }
+        for character in &mut imported.characters {
+            convert_skeleton(&mut character.skeleton, change);
+        }
         let mut done: Vec<(Bytes, Bytes)> = Vec::new();
-        for kept in imported.meshes.iter_mut().flatten() {
+        let character_meshes = imported.characters.iter_mut().filter_map(|c| c.mesh.as_mut());
+        for kept in imported.meshes.iter_mut().flatten().chain(character_meshes) {
             // Clips of one skin share their mesh's bytes: converted once.
             if let Some((_, converted)) = done.iter().find(|(old, _)| old.as_ptr() == kept.as_ptr()) {
                 *kept = converted.clone();
@@ -92,8 +100,14 @@ pub fn apply(imported: &mut Imported, options: &ImportOptions, skeleton_pointer:
         }
     }
     let mut seen: Vec<&'static str> = Vec::new();
-    for clip in &imported.clips {
-        for warning in skeleton_warnings(clip, options, skeleton_pointer) {
+    // What is kept is checked: the clips, or importing characters only, the characters (bind poses).
+    let skeletons: Vec<&SkeletonSpec> = if options.characters_only {
+        imported.characters.iter().map(|c| &c.skeleton).collect()
+    } else {
+        imported.clips.iter().filter_map(|c| c.skeleton.as_ref()).collect()
+    };
+    for skeleton in skeletons {
+        for warning in skeleton_warnings(skeleton, options, skeleton_pointer) {
             let code = if warning.code == LOOKS_Z_UP { LOOKS_Z_UP } else { UNITS_CENTIMETERS };
             // Once per import: every clip of a file shares its skeleton's conventions.
             if !seen.contains(&code) {
@@ -104,9 +118,42 @@ pub fn apply(imported: &mut Imported, options: &ImportOptions, skeleton_pointer:
     }
 }
 
+/// A spring chain's lengths scaled and its gravity (model space) turned;
+/// collider offsets are in their joints' frames, so only scaled.
+fn convert_chain(chain: &mut ChainSpec, change: Change) {
+    let s = change.scale;
+    // A vector of model space changes as a point does (`C·g`).
+    chain.params.gravity = change.point(chain.params.gravity);
+    chain.params.radius *= s;
+    for (_, p) in &mut chain.joint_params {
+        p.gravity = p.gravity.map(|g| change.point(g));
+        p.radius = p.radius.map(|r| r * s);
+    }
+    for collider in &mut chain.colliders {
+        collider.shape = match collider.shape {
+            ColliderShape::Sphere { offset, radius } => {
+                ColliderShape::Sphere { offset: offset * s, radius: radius * s }
+            }
+            ColliderShape::Capsule { offset, tail, radius } => {
+                ColliderShape::Capsule { offset: offset * s, tail: tail * s, radius: radius * s }
+            }
+        };
+    }
+}
+
 /// The rest pose, keys and inverse binds of one clip, changed by `change`.
 fn convert_clip(clip: &mut ClipSpec, change: Change) {
     let Some(skeleton) = &mut clip.skeleton else { return };
+    let roots = convert_skeleton(skeleton, change);
+    for track in &mut clip.tracks {
+        let root = roots.contains(&track.joint);
+        convert_track(track, change, root);
+    }
+}
+
+/// The rest pose and inverse binds of one skeleton, changed by `change`;
+/// returns its roots' names.
+fn convert_skeleton(skeleton: &mut SkeletonSpec, change: Change) -> Vec<String> {
     let roots: Vec<String> = skeleton.joints.iter().filter(|j| j.parent.is_none()).map(|j| j.name.clone()).collect();
     for joint in &mut skeleton.joints {
         joint.rest.translation *= change.scale;
@@ -116,10 +163,7 @@ fn convert_clip(clip: &mut ClipSpec, change: Change) {
         }
         joint.inverse_bind = joint.inverse_bind.map(|b| change.inverse_bind(b));
     }
-    for track in &mut clip.tracks {
-        let root = roots.contains(&track.joint);
-        convert_track(track, change, root);
-    }
+    roots
 }
 
 /// One track's keys (and tangents, which transform as the keys do: the map is linear).
@@ -175,8 +219,7 @@ fn extent(points: &[Vec3]) -> Vec3 {
 
 /// The unit and up-axis warnings about one clip's skeleton: only for a
 /// character (a skin, or a BVH body), not for a scene of animated objects.
-fn skeleton_warnings(clip: &ClipSpec, options: &ImportOptions, pointer: &str) -> Vec<Warning> {
-    let Some(skeleton) = &clip.skeleton else { return Vec::new() };
+fn skeleton_warnings(skeleton: &SkeletonSpec, options: &ImportOptions, pointer: &str) -> Vec<Warning> {
     let character = skeleton.joints.iter().any(|j| j.inverse_bind.is_some()) || pointer == "/HIERARCHY";
     if !character || skeleton.joints.len() < 3 {
         return Vec::new();
@@ -322,7 +365,7 @@ mod tests {
             j.inverse_bind = Some(Mat4::IDENTITY);
         }
         let codes = |c: &ClipSpec, o: &ImportOptions| -> Vec<String> {
-            skeleton_warnings(c, o, "/nodes").into_iter().map(|w| w.code).collect()
+            skeleton_warnings(c.skeleton.as_ref().unwrap(), o, "/nodes").into_iter().map(|w| w.code).collect()
         };
         assert_eq!(codes(&skinned, &ImportOptions::default()), [LOOKS_Z_UP]);
         assert_eq!(codes(&clip, &ImportOptions::default()), Vec::<String>::new(), "not a character: no skin");

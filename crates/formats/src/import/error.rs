@@ -75,6 +75,8 @@ pub enum ImportError {
     TooDeep { max: usize },
     #[error("the file has no animation that can be imported")]
     NoAnimations,
+    #[error("the file has no skin (a glTF file) or hierarchy (a BVH file) to make a character of")]
+    NoSkins,
     #[error("line {line}: {detail}")]
     BvhSyntax { line: usize, detail: String },
     #[error("line {line}: {detail}")]
@@ -108,6 +110,7 @@ impl ImportError {
             NotATree(_) => "not_a_tree",
             TooDeep { .. } => "too_deep",
             NoAnimations => "no_animations",
+            NoSkins => "no_skins",
             BvhSyntax { .. } => "bvh_syntax",
             CountMismatch { .. } => "count_mismatch",
             BadFrameTime { .. } => "bad_frame_time",

@@ -23,7 +23,7 @@ use super::error::ImportError;
 use super::mesh::{MeshPlan, MeshReader, Palette};
 use super::names::{clip_name, is_generic_animation_name, unique_names};
 use super::source::Source;
-use super::spec::{Format, ImportOptions, Imported, Resolver};
+use super::spec::{Format, ImportOptions, Imported, ImportedCharacter, Resolver};
 use super::warning::{GENERIC_ANIMATION_NAME, NOT_IMPORTED, Warning};
 use anim::lint::{self, Lint, LintCode};
 use anim::{
@@ -66,6 +66,8 @@ pub fn import(
         });
     }
     let forest = Forest::new(&doc)?;
+    let mut spring_warnings = Vec::new();
+    let (spring_chains, spring_nodes) = super::vrm::chains(json, &forest.names, &mut spring_warnings)?;
     let mut skins_of: Vec<Vec<usize>> = vec![Vec::new(); doc.nodes().len()];
     for skin in doc.skins() {
         for joint in skin.joints() {
@@ -89,23 +91,71 @@ pub fn import(
         mesh_plan,
         meshes: HashMap::new(),
         mesh_bytes: 0,
+        spring_nodes,
         scene_name: (doc.default_scene().or_else(|| doc.scenes().next()))
             .and_then(|s| s.name().map(str::to_owned))
             .filter(|n| !n.trim().is_empty() && !is_generic_animation_name(n)),
     };
-    let (mut clips, mut meshes) = (Vec::new(), Vec::new());
-    for animation in doc.animations() {
-        if let Some((clip, skins)) = ctx.animation(&animation, animation_count)? {
-            clips.push(clip);
-            meshes.push(ctx.mesh(skins)?);
+    let (mut clips, mut meshes, mut springs) = (Vec::new(), Vec::new(), Vec::new());
+    if !options.characters_only {
+        for animation in doc.animations() {
+            if let Some((clip, skins)) = ctx.animation(&animation, animation_count)? {
+                clips.push(clip);
+                // A skinned character's clips carry its spring chains.
+                springs.push(if skins.is_empty() { Vec::new() } else { spring_chains.clone() });
+                meshes.push(ctx.mesh(skins)?);
+            }
+        }
+        if clips.is_empty() {
+            return Err(ImportError::NoAnimations);
         }
     }
-    if clips.is_empty() {
-        return Err(ImportError::NoAnimations);
+    let characters = ctx.characters()?;
+    if options.characters_only && characters.is_empty() {
+        return Err(ImportError::NoSkins);
     }
     let mut warnings = std::mem::take(&mut ctx.mesh_plan.warnings);
     warnings.append(&mut ctx.warnings);
-    Ok(Imported { clips, meshes, warnings })
+    warnings.append(&mut spring_warnings);
+    Ok(Imported { clips, meshes, springs, characters, warnings })
+}
+
+/// Makes `joints`' rest (parents first) their bind pose: a joint with an
+/// inverse bind matrix `B` has the model transform `X·B⁻¹` (where skinning
+/// leaves its vertices as authored, in the skeleton's frame), one without
+/// keeps its node's place under its parent; each local rest is then its
+/// parent's model inverse times its own model transform, in f64. `X` takes
+/// the mesh's bind space into the skeleton's: the first bound joint's own
+/// node transform times its `B` (exporters put a rotation such as Blender's
+/// Z-up to Y-up on a node above the joints, which `B` does not see, so
+/// `B⁻¹` alone would lay CesiumMan on its back while its clips stand).
+/// A matrix that cannot be inverted or decomposed leaves the node's own rest.
+fn bind_pose(joints: &mut [JointSpec]) {
+    let index: HashMap<String, usize> = joints.iter().enumerate().map(|(i, j)| (j.name.clone(), i)).collect();
+    let mut model: Vec<DMat4> = Vec::with_capacity(joints.len());
+    let mut frame: Option<DMat4> = None;
+    for joint in joints.iter_mut() {
+        let parent = joint.parent.as_ref().and_then(|p| index.get(p)).map_or(DMat4::IDENTITY, |&p| model[p]);
+        let r = joint.rest;
+        let local = DMat4::from_scale_rotation_translation(
+            r.scale.as_dvec3(),
+            r.rotation.as_dquat().normalize(),
+            r.translation.as_dvec3(),
+        );
+        let bound = joint.inverse_bind.map(|b| b.as_dmat4()).filter(|b| b.determinant().abs() > 1e-12);
+        let Some(b) = bound else {
+            model.push(parent * local);
+            continue;
+        };
+        let world = *frame.get_or_insert(parent * local * b) * b.inverse();
+        let (s, q, t) = (parent.inverse() * world).to_scale_rotation_translation();
+        if s.is_finite() && q.is_finite() && t.is_finite() {
+            joint.rest = Transform { translation: t.as_vec3(), rotation: q.normalize().as_quat(), scale: s.as_vec3() };
+            model.push(world);
+        } else {
+            model.push(parent * local);
+        }
+    }
 }
 
 /// Per node, the morph targets of its mesh (its first primitive's: glTF
@@ -264,6 +314,9 @@ struct Ctx<'d, 'r> {
     /// their bytes together (bounded by `max_mesh_bytes`).
     meshes: HashMap<Vec<usize>, Option<bytes::Bytes>>,
     mesh_bytes: u64,
+    /// The nodes `VRMC_springBone` chains and colliders use: part of every
+    /// skinned clip's skeleton.
+    spring_nodes: Vec<usize>,
     /// The default (or first) scene's name, if it says something: what an
     /// animation is named after when neither it nor the file has a name.
     scene_name: Option<String>,
@@ -345,6 +398,34 @@ impl Ctx<'_, '_> {
         self.warnings.extend(lints.iter().map(|l| Warning::from_lint(l, lint_pointer(a, &refs, l))));
         self.warnings.extend(scaled_translation(&clip, &refs, a));
         Ok(Some((clip, skins)))
+    }
+
+    /// One character per skin: its joints and their ancestors at the bind
+    /// pose, with the mesh bound to it. Named after `name` (importing
+    /// characters only), else the file, else the scene, plus `/<skin name>`
+    /// when the file has several skins; without any of these, after the skin.
+    fn characters(&mut self) -> Result<Vec<ImportedCharacter>, ImportError> {
+        let skins: Vec<(usize, Option<String>, Vec<usize>)> = (self.doc.skins())
+            .map(|s| (s.index(), s.name().map(str::to_owned), s.joints().map(|j| j.index()).collect()))
+            .collect();
+        let own_name = self.options.name.as_ref().filter(|_| self.options.characters_only);
+        let base = own_name.or(self.options.file_name.as_ref()).or(self.scene_name.as_ref()).cloned();
+        let several = skins.len() > 1;
+        let mut characters = Vec::with_capacity(skins.len());
+        for (index, skin_name, skin_joints) in skins {
+            let (nodes, skins) = self.clip_nodes(&skin_joints)?;
+            let mut joints = self.joints(&nodes, true)?;
+            bind_pose(&mut joints);
+            let skin_name = skin_name.filter(|n| !n.trim().is_empty()).unwrap_or_else(|| format!("skin{index}"));
+            let name = match (&base, several) {
+                (Some(base), false) => base.clone(),
+                (Some(base), true) => format!("{base}/{skin_name}"),
+                (None, _) => skin_name,
+            };
+            let mesh = self.mesh(skins)?;
+            characters.push(ImportedCharacter { name: clip_name(&name), skeleton: SkeletonSpec { joints }, mesh });
+        }
+        Ok(characters)
     }
 
     /// The mesh of the primitives bound to `skins` (their joints all in the
@@ -506,6 +587,12 @@ impl Ctx<'_, '_> {
                 if included.len() > limits.max_joints {
                     return Err(too_many(included.len()));
                 }
+            }
+        }
+        if !skins.is_empty() {
+            included.extend(self.spring_nodes.iter().copied());
+            if included.len() > limits.max_joints {
+                return Err(too_many(included.len()));
             }
         }
         if included.iter().any(|&n| self.forest.depth[n] >= limits.max_depth) {

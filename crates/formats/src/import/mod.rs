@@ -29,6 +29,9 @@
 //!   matrices come from the skin (identity when it has none). Samplers map
 //!   STEP/LINEAR/CUBICSPLINE to `step`/`linear`/`cubic_hermite`; morph
 //!   target weight channels are reported as `not_imported` warnings.
+//!   VRM 1.0's `VRMC_springBone` becomes each skinned clip's spring chains
+//!   (`Imported::springs`, docs/springs.md, “Import”), their nodes part of
+//!   its skeleton; a chain that does not fit is left out with a warning.
 //! - BVH: one clip. OFFSET is the rest translation; position channels give
 //!   translation keys (a missing axis keeps its OFFSET value); rotation
 //!   channels multiply in the order listed (`Zrotation Xrotation Yrotation`
@@ -44,6 +47,7 @@
 //! [`ImportOptions::fix_hemispheres`], is the caller's choice.
 
 use anim::Clip;
+use anim::spring::{ChainSpec, Springs, SpringsSpec};
 
 mod accessor;
 mod budget;
@@ -57,13 +61,14 @@ mod mesh;
 mod names;
 mod source;
 mod spec;
+mod vrm;
 pub mod warning;
 
 pub use budget::{Budget, read_document};
 pub use error::{ErrorClass, ImportError};
 pub use names::{clip_name, is_generic_animation_name, unique_names};
 pub use source::Source;
-pub use spec::{Format, ImportLimits, ImportOptions, Imported, Resolver, SCALE_RANGE, UpAxis};
+pub use spec::{Format, ImportLimits, ImportOptions, Imported, ImportedCharacter, Resolver, SCALE_RANGE, UpAxis};
 pub use warning::Warning;
 
 /// Guesses the format of an upload: the magic bytes first (they cannot
@@ -108,6 +113,14 @@ fn name_clips(clips: &mut [anim::ClipSpec], prefix: Option<&str>) {
     let names = clips.iter().map(|c| clip_name(&format!("{}{}", prefix.unwrap_or(""), c.name))).collect();
     for (clip, name) in clips.iter_mut().zip(unique_names(names)) {
         clip.name = name;
+    }
+}
+
+/// As [`name_clips`], for the characters (names identify them too).
+fn name_characters(characters: &mut [ImportedCharacter], prefix: Option<&str>) {
+    let names = characters.iter().map(|c| clip_name(&format!("{}{}", prefix.unwrap_or(""), c.name))).collect();
+    for (character, name) in characters.iter_mut().zip(unique_names(names)) {
+        character.name = name;
     }
 }
 
@@ -190,11 +203,34 @@ pub fn import_from(
         Format::Bvh => (bvh::import(&read_document(source, "the BVH file", limits)?, options)?, "/HIERARCHY"),
     };
     convention::apply(&mut imported, options, skeleton_pointer);
-    name_clips(&mut imported.clips, options.name_prefix.as_deref());
-    imported.warnings = warning::capped(std::mem::take(&mut imported.warnings));
-    for clip in &imported.clips {
-        Clip::build_within(clip, limits.max_build_work)
-            .map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
+    if options.characters_only {
+        (imported.clips, imported.meshes, imported.springs) = (Vec::new(), Vec::new(), Vec::new());
     }
+    name_clips(&mut imported.clips, options.name_prefix.as_deref());
+    name_characters(&mut imported.characters, options.name_prefix.as_deref());
+    for (clip, springs) in imported.clips.iter().zip(&mut imported.springs) {
+        let built = Clip::build_within(clip, limits.max_build_work)
+            .map_err(|error| ImportError::InvalidClip { clip: clip.name.clone(), error })?;
+        keep_fitting_springs(springs, built.skeleton(), &mut imported.warnings);
+    }
+    imported.warnings = warning::capped(std::mem::take(&mut imported.warnings));
     Ok(imported)
+}
+
+/// Keeps the chains that fit the clip's skeleton together with those kept
+/// before them (docs/springs.md, “Fields”); each other is left out with a
+/// warning (once per chain, whichever clips it failed on).
+fn keep_fitting_springs(chains: &mut Vec<ChainSpec>, skeleton: &anim::Skeleton, warnings: &mut Vec<Warning>) {
+    let mut spec = SpringsSpec::default();
+    for (k, chain) in std::mem::take(chains).into_iter().enumerate() {
+        spec.chains.push(chain);
+        let Err(error) = Springs::build(&spec, skeleton) else { continue };
+        let chain = spec.chains.pop().expect("just pushed");
+        let pointer = format!("{}/springs/{k}", vrm::POINTER);
+        if !warnings.iter().any(|w| w.pointer == pointer) {
+            let detail = format!("spring '{}' was not imported: {error} ({})", chain.name, error.kind.code());
+            warnings.push(Warning::new(warning::NOT_IMPORTED, pointer, detail));
+        }
+    }
+    *chains = spec.chains;
 }

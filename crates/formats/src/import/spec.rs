@@ -2,7 +2,7 @@
 //! and limits, the imported clips, and the resolver for external buffers.
 //! Every importer reads these, so they live apart from the entry points.
 
-use anim::{ClipSpec, Interpolation, Playback};
+use anim::{ClipSpec, Interpolation, Playback, SkeletonSpec};
 
 use super::source::Source;
 use super::warning::Warning;
@@ -168,6 +168,10 @@ pub struct ImportOptions {
     /// Every clip's playback mode: `Loop` by default, as three.js plays
     /// actions (glTF and BVH say nothing of looping).
     pub playback: Playback,
+    /// Import characters only (`POST /v1/characters/import`): a glTF file's
+    /// skins, its animations not read (a file without any is fine); a BVH
+    /// file's `HIERARCHY` as one character.
+    pub characters_only: bool,
     pub limits: ImportLimits,
 }
 
@@ -182,6 +186,7 @@ impl Default for ImportOptions {
             up: UpAxis::Y,
             scale: 1.0,
             playback: Playback::Loop,
+            characters_only: false,
             limits: ImportLimits::default(),
         }
     }
@@ -198,7 +203,25 @@ pub struct Imported {
     /// a glTF skin with triangles bound to it (shared bytes when several
     /// clips drive one skin).
     pub meshes: Vec<Option<bytes::Bytes>>,
+    /// Per clip (in step with `clips`): its spring chains (glTF
+    /// `VRMC_springBone`, docs/springs.md), each one checked against the
+    /// clip's skeleton; a chain that does not fit was left out with a warning.
+    pub springs: Vec<Vec<anim::spring::ChainSpec>>,
+    /// glTF: one per skin, its joints (and their ancestors) at their bind
+    /// pose; with [`ImportOptions::characters_only`], a BVH's hierarchy.
+    pub characters: Vec<ImportedCharacter>,
     pub warnings: Vec<Warning>,
+}
+
+/// A character a file holds: a named skeleton whose rest is its bind pose
+/// (glTF: every joint's model transform the inverse of its inverse bind
+/// matrix; BVH: the offsets, unrotated, the root where the first frame has
+/// it), and the skinned mesh bound to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportedCharacter {
+    pub name: String,
+    pub skeleton: SkeletonSpec,
+    pub mesh: Option<bytes::Bytes>,
 }
 
 /// Supplies the bytes of an external glTF buffer URI (exactly as written in

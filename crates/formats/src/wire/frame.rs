@@ -91,6 +91,7 @@ mod tests {
             dropped: 1,
             events: vec![pb::Event { time: 0.5, name: "hit".into() }],
             pose: Some(pb::Pose { translations: vec![1.0, 2.0, 3.0], time: 0.5, ..Default::default() }),
+            ..Default::default()
         };
         let bytes = Bytes::from(frame.encode_to_vec());
         let wire = WireFrame(bytes.clone());

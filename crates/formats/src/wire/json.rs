@@ -16,8 +16,10 @@ pub use super::doc::{ChannelDoc, DocError, EaseDoc, EndsDoc, InterpolationDoc, P
 pub use super::float::write_float;
 use super::float::{common_text, finite_stand_in};
 use super::ik::IkDoc;
+use super::spring::{SpringDoc, springs_spec};
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
+use anim::spring::SpringsSpec;
 use anim::{
     Channel, ClipSpec, EventSpec, JointSpec, Keys, ParameterLayout, ParameterSpec, Pose, Skeleton, SkeletonSpec, Space,
     Transform,
@@ -45,6 +47,9 @@ pub struct ClipDoc {
     /// camera's field of view. Poses carry their values under `parameters`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub parameters: Vec<ParameterDoc>,
+    /// Spring chains on the clip's skeleton (`docs/springs.md`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub springs: Vec<SpringDoc>,
     /// Labels to find the clip by (`GET /v1/clips?tag=`); never evaluated.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tags: Vec<String>,
@@ -158,14 +163,20 @@ pub struct EventDoc {
 
 /// Parses a clip document, reporting the JSON pointer of any type error.
 pub fn parse_clip_doc(body: &[u8]) -> Result<ClipDoc, DocError> {
+    parse_document(body)
+}
+
+/// Parses one JSON document of type `T` (clip, character), reporting the
+/// JSON pointer of any type error; only whitespace may follow it.
+pub(crate) fn parse_document<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, DocError> {
     let de = &mut serde_json::Deserializer::from_slice(body);
-    let doc: ClipDoc = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
+    let doc: T = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         let pointer = pointer_of(e.path());
         let inner = e.into_inner();
         let code = if inner.is_syntax() || inner.is_eof() { "malformed_json" } else { "invalid_field" };
         DocError { code, pointer, detail: inner.to_string() }
     })?;
-    // Only whitespace may follow the document: `{...} x` is not a clip.
+    // Only whitespace may follow the document: `{...} x` is not a document.
     de.end().map_err(|e| DocError { code: "malformed_json", pointer: String::new(), detail: e.to_string() })?;
     Ok(doc)
 }
@@ -279,9 +290,22 @@ impl ClipDoc {
             playback: spec.playback.into(),
             ik: spec.ik.iter().map(IkDoc::from_keyed_spec).collect(),
             parameters: spec.parameters.iter().map(ParameterDoc::from_spec).collect(),
+            springs: Vec::new(),
             tags: Vec::new(),
             metadata: None,
         }
+    }
+}
+
+impl ClipDoc {
+    /// The clip's spring chains in the core's form (substeps at the default
+    /// rate), the rules that need no skeleton checked; compile them against
+    /// the built clip's skeleton with [`super::spring::compile_springs`].
+    ///
+    /// # Errors
+    /// A chain that breaks a rule of `docs/springs.md`, at its pointer.
+    pub fn springs(&self) -> Result<SpringsSpec, DocError> {
+        springs_spec(&self.springs, None, "")
     }
 }
 
@@ -349,6 +373,7 @@ impl PoseJson<'_> {
         extras.write_parameters(out);
         extras.write_root_motion(out);
         super::ik::write_reports(out, extras.ik);
+        out.put_slice(extras.tail);
         out.put_u8(b'}');
     }
 }
@@ -363,6 +388,9 @@ pub struct Extras<'a> {
     pub ik: &'a [IkReport],
     /// Parameter values (docs/clip-format.md §3), written when the clip has parameters.
     pub parameters: Option<ParameterValues<'a>>,
+    /// JSON members written last, before the closing brace (a composed
+    /// pose's `,"warnings":[…]`); empty for none.
+    pub tail: &'a [u8],
 }
 
 /// A pose's parameters as an answer shows them: `"parameters": {"name":
@@ -458,7 +486,7 @@ fn write_planar(out: &mut impl BufMut, p: Planar) {
 }
 
 /// A JSON string, escaped as serde_json escapes it.
-fn write_json_str(out: &mut impl BufMut, s: &str) {
+pub(crate) fn write_json_str(out: &mut impl BufMut, s: &str) {
     if s.bytes().all(|b| b >= 0x20 && b != b'"' && b != b'\\') {
         out.put_u8(b'"');
         out.put_slice(s.as_bytes());
@@ -621,6 +649,7 @@ impl MatricesJson<'_> {
         out.put_u8(b']');
         extras.write_parameters(out);
         extras.write_root_motion(out);
+        out.put_slice(extras.tail);
         out.put_u8(b'}');
     }
 }

@@ -8,7 +8,12 @@ use serde::{Deserialize, Serialize};
 
 use super::doc::{DocError, PlaybackDoc};
 use super::ik::IkDoc;
-use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec, UpAxis};
+use super::spring::{SpringDoc, springs_spec};
+use anim::character::Translation;
+use anim::motion::{
+    LayerMode, LayerSpec, MaskSpec, MotionSpec, RetargetSpec, RootMode, RootMotionSpec, SourcePose, UpAxis,
+};
+use anim::spring::{DEFAULT_SUBSTEP_HZ, SpringsSpec};
 
 /// A composed motion: layers of clips with weights, masks, sync groups,
 /// root motion and IK, as `docs/motion.md` describes it.
@@ -23,13 +28,95 @@ pub struct MotionDoc {
     /// model space.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ik: Vec<IkDoc>,
+    /// Spring chains simulated on the composed pose (`docs/springs.md`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub springs: Vec<SpringDoc>,
+    /// Substeps per second of the springs' simulation (default 120).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spring_substep_hz: Option<f64>,
+    /// The output rig (a character id or `name:…`): every layer of another
+    /// skeleton is retargeted onto it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub character: Option<String>,
+    /// How layers are retargeted onto the character.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retarget: Option<RetargetDoc>,
+}
+
+/// How a layer's clip plays on the motion's character (docs/motion.md, “Characters”).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RetargetDoc {
+    /// The clip's reference pose: its rest pose by default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source_pose: Option<SourcePoseDoc>,
+    #[serde(default)]
+    pub translation: TranslationDoc,
+}
+
+/// `{"time": t}` (the clip at `t`) or `{"rotations": {joint: [x, y, z, w]}}`
+/// (local rotations replacing the rest's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, rename_all = "snake_case")]
+pub enum SourcePoseDoc {
+    Time(f64),
+    Rotations(BTreeMap<String, [f32; 4]>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum TranslationDoc {
+    #[default]
+    Hips,
+    None,
+    All,
+}
+
+impl RetargetDoc {
+    fn to_spec(&self) -> RetargetSpec {
+        let source_pose = match &self.source_pose {
+            None => SourcePose::Rest,
+            Some(SourcePoseDoc::Time(t)) => SourcePose::Time(*t),
+            Some(SourcePoseDoc::Rotations(r)) => {
+                SourcePose::Rotations(r.iter().map(|(n, q)| (n.clone(), glam::Quat::from_array(*q))).collect())
+            }
+        };
+        let translation = match self.translation {
+            TranslationDoc::Hips => Translation::Hips,
+            TranslationDoc::None => Translation::None,
+            TranslationDoc::All => Translation::All,
+        };
+        RetargetSpec { source_pose, translation }
+    }
+
+    fn from_spec(spec: &RetargetSpec) -> RetargetDoc {
+        let source_pose = match &spec.source_pose {
+            SourcePose::Rest => None,
+            SourcePose::Time(t) => Some(SourcePoseDoc::Time(*t)),
+            SourcePose::Rotations(r) => {
+                Some(SourcePoseDoc::Rotations(r.iter().map(|(n, q)| (n.clone(), q.to_array())).collect()))
+            }
+        };
+        let translation = match spec.translation {
+            Translation::Hips => TranslationDoc::Hips,
+            Translation::None => TranslationDoc::None,
+            Translation::All => TranslationDoc::All,
+        };
+        RetargetDoc { source_pose, translation }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LayerDoc {
     /// A clip id; the version is pinned when the request or stream starts.
+    /// Required unless the layer names a `graph`.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub clip: String,
+    /// A stored graph's id (or `name:<name>`) instead of a clip (docs/graphs.md, “Using a graph”): only a
+    /// sampling request's only layer, with the layer's defaults, may name one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<String>,
     /// In [0, 1].
     #[serde(default = "one")]
     pub weight: f32,
@@ -51,6 +138,9 @@ pub struct LayerDoc {
     /// Additive layers: the clip time of the reference pose (default the clip's start).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_time: Option<f64>,
+    /// This layer's retargeting onto the motion's character, instead of the motion's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retarget: Option<RetargetDoc>,
 }
 
 impl LayerDoc {
@@ -59,6 +149,7 @@ impl LayerDoc {
     pub fn new(clip: &str) -> Self {
         LayerDoc {
             clip: clip.to_owned(),
+            graph: None,
             weight: one(),
             mode: LayerModeDoc::Blend,
             mask: None,
@@ -67,6 +158,7 @@ impl LayerDoc {
             playback: None,
             sync: None,
             reference_time: None,
+            retarget: None,
         }
     }
 }
@@ -130,17 +222,21 @@ pub enum UpAxisDoc {
 }
 
 impl MotionDoc {
-    /// The core's authoring form, with clip ids in place of clips;
+    /// The core's authoring form, with clip ids in place of clips (and no
+    /// character: the service looks `character` up and puts it in);
     /// `pointer` is the motion's place in its message (`/motion`).
     ///
     /// # Errors
-    /// An `ik` constraint of the wrong shape (see [`IkDoc::to_spec`]).
+    /// An `ik` constraint of the wrong shape (see [`IkDoc::to_spec`]); a
+    /// spring chain breaking a rule that needs no skeleton.
     pub fn to_spec(&self, pointer: &str) -> Result<MotionSpec<String>, DocError> {
         let ik = (self.ik.iter().enumerate())
             .map(|(i, c)| c.to_spec(&format!("{pointer}/ik/{i}")))
             .collect::<Result<_, _>>()?;
         Ok(MotionSpec {
-            layers: self.layers.iter().map(LayerDoc::to_spec).collect(),
+            layers: (self.layers.iter().enumerate())
+                .map(|(i, layer)| layer.to_spec(&format!("{pointer}/layers/{i}")))
+                .collect::<Result<_, _>>()?,
             root_motion: self.root_motion.as_ref().map(|r| RootMotionSpec {
                 joint: r.joint.clone(),
                 mode: match r.mode {
@@ -153,6 +249,9 @@ impl MotionDoc {
                 },
             }),
             ik,
+            character: None,
+            retarget: self.retarget.as_ref().map(RetargetDoc::to_spec).unwrap_or_default(),
+            springs: self.springs(pointer)?,
         })
     }
 }
@@ -176,7 +275,22 @@ impl MotionDoc {
                 },
             }),
             ik: spec.ik.iter().map(IkDoc::from_spec).collect(),
+            springs: spec.springs.chains.iter().map(SpringDoc::from_spec).collect(),
+            spring_substep_hz: (spec.springs.substep_hz != DEFAULT_SUBSTEP_HZ).then_some(spec.springs.substep_hz),
+            character: None,
+            retarget: (spec.retarget != RetargetSpec::default()).then(|| RetargetDoc::from_spec(&spec.retarget)),
         }
+    }
+
+    /// The motion's spring chains and substep rate in the core's form, the
+    /// rules that need no skeleton checked (`pointer` as for
+    /// [`MotionDoc::to_spec`]); compile them against the output skeleton
+    /// with [`super::spring::compile_springs`].
+    ///
+    /// # Errors
+    /// A chain or rate that breaks a rule of `docs/springs.md`, at its pointer.
+    pub fn springs(&self, pointer: &str) -> Result<SpringsSpec, DocError> {
+        springs_spec(&self.springs, self.spring_substep_hz, pointer)
     }
 }
 
@@ -184,6 +298,7 @@ impl LayerDoc {
     fn from_spec(layer: &LayerSpec<String>) -> LayerDoc {
         LayerDoc {
             clip: layer.clip.clone(),
+            graph: None,
             weight: layer.weight,
             mode: match layer.mode {
                 LayerMode::Blend => LayerModeDoc::Blend,
@@ -199,11 +314,28 @@ impl LayerDoc {
             playback: layer.playback.map(Into::into),
             sync: layer.sync.clone(),
             reference_time: layer.reference_time,
+            retarget: layer.retarget.as_ref().map(RetargetDoc::from_spec),
         }
     }
 
-    fn to_spec(&self) -> LayerSpec<String> {
-        LayerSpec {
+    /// # Errors
+    /// `graph_unsupported` for a layer naming a graph (what plays graphs
+    /// takes them before this), `missing_field` for one naming nothing.
+    fn to_spec(&self, pointer: &str) -> Result<LayerSpec<String>, DocError> {
+        if self.graph.is_some() {
+            let detail = "a graph plays only as the only layer of a sampling request's motion (POST /v1/poses, \
+                          /v1/samples), with the layer's defaults (docs/graphs.md)";
+            return Err(DocError {
+                code: "graph_unsupported",
+                pointer: format!("{pointer}/graph"),
+                detail: detail.into(),
+            });
+        }
+        if self.clip.is_empty() {
+            let detail = "a layer names a `clip` (or a `graph`)".to_owned();
+            return Err(DocError { code: "missing_field", pointer: format!("{pointer}/clip"), detail });
+        }
+        Ok(LayerSpec {
             clip: self.clip.clone(),
             weight: self.weight,
             mode: match self.mode {
@@ -220,7 +352,8 @@ impl LayerDoc {
             playback: self.playback.map(Into::into),
             sync: self.sync.clone(),
             reference_time: self.reference_time,
-        }
+            retarget: self.retarget.as_ref().map(RetargetDoc::to_spec),
+        })
     }
 }
 

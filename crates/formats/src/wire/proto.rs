@@ -112,6 +112,7 @@ pub fn motion_from_pb(motion: &pb::Motion) -> Result<MotionSpec<String>, DocErro
                 playback: playback_from_pb(l.playback, &at("playback"))?,
                 sync: (!l.sync.is_empty()).then(|| l.sync.clone()),
                 reference_time: l.reference_time,
+                retarget: None,
             })
         })
         .collect::<Result<Vec<_>, DocError>>()?;
@@ -123,7 +124,7 @@ pub fn motion_from_pb(motion: &pb::Motion) -> Result<MotionSpec<String>, DocErro
             up: up_axis_from_pb(r.up, "/motion/root_motion/up")?.unwrap_or_default(),
         }),
     };
-    Ok(MotionSpec { layers, root_motion, ik: ik_from_pb(&motion.ik, "/motion/ik")? })
+    Ok(MotionSpec { layers, root_motion, ik: ik_from_pb(&motion.ik, "/motion/ik")?, ..MotionSpec::default() })
 }
 
 /// A composed pose's root motion on the wire.

@@ -5,14 +5,18 @@
 //! forward kinematics), plus a table of hostile inputs.
 
 mod bvh;
+mod compact;
 mod conventions;
+mod feet;
 mod files;
 mod fuzz_regressions;
 mod gltf_interpolation;
 mod gltf_skinned;
+mod graph;
 mod hostile;
 pub mod reference;
 
+mod springs;
 mod validation;
 
 extern crate inbetween_formats as formats;

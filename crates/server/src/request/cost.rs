@@ -42,7 +42,8 @@ impl From<Encoding> for Wire {
     fn from(e: Encoding) -> Wire {
         match e {
             Encoding::Json => Wire::Json,
-            Encoding::Protobuf => Wire::Protobuf,
+            // A compact frame's envelope on gRPC is a protobuf `Frame`.
+            Encoding::Protobuf | Encoding::Compact => Wire::Protobuf,
         }
     }
 }
@@ -98,6 +99,16 @@ impl Estimate {
             }
         }
     }
+}
+
+/// The most a compact stream sends in one tick (docs/compact-frames.md):
+/// a key frame a viewer missed and the delta frame after it, each a
+/// header of varints at their widest and a clip time, and per joint its
+/// changed bit, a rotation's largest index and every channel at 24 bits.
+pub fn compact_frame(clip: &Clip) -> u64 {
+    let header = 1 + 4 * 10 + 4;
+    let joint_bits = 1 + 2 + 9 * u64::from(anim::compact::MAX_BITS);
+    2 * (header + (clip.joint_count() as u64 * joint_bits).div_ceil(8))
 }
 
 /// The JSON text of one pose, names included.

@@ -51,7 +51,7 @@ impl RawPage<'_> {
     /// `bad_filter` (an empty, over-long or NUL-carrying text filter),
     /// `bad_number` (a duration that is not a finite number), and, 422,
     /// `bad_duration_range` (a negative bound, or min above max).
-    fn check(&self) -> Result<ListQuery, ApiError> {
+    pub fn check(&self) -> Result<ListQuery, ApiError> {
         let limit = match self.limit {
             None => DEFAULT_PAGE,
             Some(raw) => whole(raw, Field::Limit, self.at)

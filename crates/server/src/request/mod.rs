@@ -36,6 +36,7 @@
 mod body;
 mod broadcast;
 mod cost;
+mod graph;
 mod list;
 mod motion;
 mod raw;
@@ -47,14 +48,15 @@ pub use broadcast::RawBroadcast;
 #[cfg(test)]
 pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
+pub use graph::{GraphSampling, RawGraphSampling, graph_layer};
 pub use list::{Page, RawPage};
-pub use motion::{Composed, RawMotion, crossfade_target};
+pub use motion::{Composed, RawMotion, crossfade_target, warnings};
 pub use raw::{
     Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,
 };
 pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
-pub use stream::{Opening, RawStream};
+pub use stream::{Opening, RawStream, compact_watch};
 
 #[cfg(test)]
 mod tests;

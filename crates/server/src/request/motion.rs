@@ -32,6 +32,8 @@ pub struct RawMotion<'a> {
     pub parameters: Option<&'a [String]>,
     pub format: Format,
     pub at: Locate,
+    /// The character to play on (an id or `name:…`), still to be looked up.
+    pub character: Option<String>,
 }
 
 /// A built motion over pinned clips, and the output joints to send.
@@ -41,6 +43,8 @@ pub struct Composed {
     pub joints: Option<Vec<usize>>,
     /// Output parameter indices, in the first clip's order; `None`: all.
     pub parameters: Option<Vec<usize>>,
+    /// The motion's `,"warnings":[…]` member (empty without warnings).
+    pub warnings: Vec<u8>,
 }
 
 /// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
@@ -55,7 +59,10 @@ impl Composed {
     /// What `poses` poses of this motion cost, sent as `format` over `wire`:
     /// work counts every layer's joints and IK and the motion's IK; the size bound is the first clip's
     /// (a subset only shrinks it) plus the root motion.
-    pub fn cost(&self, poses: u64, format: Format, wire: Wire) -> Cost {
+    /// Spring chains add the substeps of one simulation through `times`
+    /// (docs/springs.md, “Time”), spread over the poses.
+    pub fn cost(&self, times: &[f64], format: Format, wire: Wire) -> Cost {
+        let poses = times.len() as u64;
         let first = self.motion.first_clip().clip();
         let mut estimate = Estimate::batch(first, self.clip_id(), format, wire);
         if self.motion.has_root_motion() {
@@ -66,8 +73,9 @@ impl Composed {
         let more_reports = self.motion.ik_report_count() - first.ik_count();
         estimate.per_pose += super::cost::ik_reports(more_reports as u64, wire) + 8;
         let joints = self.motion.layers().map(|c| c.clip().joint_count() as u64).sum();
-        let per_pose = crate::work::price::motion_pose(&self.motion);
-        Cost::new(poses, joints, per_pose, estimate.total(poses))
+        let springs = crate::work::price::spring_run(&self.motion, times).div_ceil(poses.max(1));
+        let per_pose = crate::work::price::motion_pose(&self.motion).saturating_add(springs);
+        Cost::new(poses, joints, per_pose, estimate.total(poses) + self.warnings.len() as u64)
     }
 }
 
@@ -75,7 +83,16 @@ impl<'a> RawMotion<'a> {
     /// The motion of a body or message: every joint and parameter, `trs`
     /// poses (a sampling request narrows them with its own fields).
     pub fn of(spec: MotionSpec<String>) -> RawMotion<'a> {
-        RawMotion { spec, joints: None, parameters: None, format: Format::Trs, at: in_body }
+        RawMotion { spec, joints: None, parameters: None, format: Format::Trs, at: in_body, character: None }
+    }
+
+    /// The motion of a JSON document (`/motion`), with its character.
+    ///
+    /// # Errors
+    /// The document's own refusals (an `ik` constraint of the wrong shape,
+    /// a spring chain breaking a rule that needs no skeleton).
+    pub fn of_doc(doc: &MotionDoc) -> Result<RawMotion<'a>, formats::wire::json::DocError> {
+        Ok(RawMotion { character: doc.character.clone(), ..RawMotion::of(doc.to_spec("/motion")?) })
     }
 
     /// Looks up each layer's clip, finds the motion built over those
@@ -108,8 +125,19 @@ impl<'a> RawMotion<'a> {
                 other => other,
             })?);
         }
-        let pinned = pin(spec, &clips)?;
-        let key = MotionKey::of(&pinned);
+        let mut pinned = pin(spec, &clips)?;
+        let mut character = None;
+        if let Some(reference) = &self.character {
+            let built = crate::characters::resolve(state, caller, reference).await?;
+            pinned.character = Some(Arc::clone(&built.spec));
+            character = Some(built);
+        } else if let Some(first) = clips.first()
+            && pinned.springs.chains.is_empty()
+        {
+            // The first clip's own chains play unless the motion names some.
+            pinned.springs.chains.clone_from(&first.springs.chains);
+        }
+        let key = MotionKey::of(&pinned, character.as_ref().map(|c| (c.meta.id.as_str(), c.meta.version)));
         let motion = match state.cached_motion(&key) {
             Some(hit) => hit,
             None => {
@@ -130,8 +158,32 @@ impl<'a> RawMotion<'a> {
         let joints = self.joints.map(|names| joint_subset(motion.skeleton(), names, self.at)).transpose()?;
         let parameters =
             self.parameters.map(|names| parameter_subset(motion.parameters(), names, self.at)).transpose()?;
-        Ok(Composed { motion, joints, parameters })
+        let warnings = warnings_member(&motion);
+        Ok(Composed { motion, joints, parameters, warnings })
     }
+}
+
+/// The motion's warnings as an answer shows them (docs/warnings.md):
+/// `{code, pointer, detail}`, pointers under `pointer` (`/motion`).
+pub fn warnings(motion: &StreamMotion, pointer: &str) -> Vec<serde_json::Value> {
+    let warning = |w: &anim::motion::MotionWarning| {
+        serde_json::json!({
+            "code": anim::motion::MotionWarning::CODE,
+            "pointer": format!("{pointer}{}", w.path.to_pointer()),
+            "detail": w.to_string(),
+        })
+    };
+    motion.warnings().iter().map(warning).collect()
+}
+
+/// `,"warnings":[…]`, the member a composed answer ends with, or nothing
+/// when the motion has no warnings (so plain answers stay as they were).
+pub fn warnings_member(motion: &StreamMotion) -> Vec<u8> {
+    let warnings = warnings(motion, "/motion");
+    if warnings.is_empty() {
+        return Vec::new();
+    }
+    format!(",\"warnings\":{}", serde_json::Value::Array(warnings)).into_bytes()
 }
 
 /// A crossfade's target sent as JSON (a control's `to`), looked up and
@@ -145,7 +197,7 @@ pub async fn crossfade_target(
     to: &serde_json::Value,
 ) -> Result<Arc<StreamMotion>, ApiError> {
     let doc: MotionDoc = parse_json(to.to_string().as_bytes()).map_err(|e| e.moved("", "/to"))?;
-    let built = async { Ok(RawMotion::of(doc.to_spec("/motion")?).resolve_for(state, caller).await?.motion) };
+    let built = async { Ok(RawMotion::of_doc(&doc)?.resolve_for(state, caller).await?.motion) };
     built.await.map_err(|e: ApiError| e.moved("/motion", "/to"))
 }
 

@@ -38,6 +38,9 @@ pub enum Field {
     Speed,
     Encoding,
     MaxFrames,
+    /// Compact frames' error bound and distance (docs/compact-frames.md).
+    MaxError,
+    Distance,
     /// A page of the clip list: its size and where it starts.
     Limit,
     Cursor,
@@ -74,6 +77,8 @@ impl Field {
             Field::Speed => "speed",
             Field::Encoding => "encoding",
             Field::MaxFrames => "max_frames",
+            Field::MaxError => "max_error",
+            Field::Distance => "distance",
             Field::Limit => "limit",
             Field::Cursor => "cursor",
             Field::Name => "name",

@@ -88,26 +88,13 @@ impl RawPose<'_> {
     }
 
     /// Checks the request, then binds it to the clip `id` at its current
-    /// version and checks what its answer, sent as `wire`, would cost.
+    /// version and checks what its answer, sent as `wire` and compressed as
+    /// `coding` says, would cost.
     ///
     /// # Errors
     /// As [`RawPose::check`], then `clip_not_found`, `no_inverse_binds`,
     /// `answer_too_large`.
     pub async fn resolve(
-        &self,
-        state: &AppState,
-        id: &str,
-        wire: Wire,
-    ) -> Result<(PoseRequest, Arc<CachedClip>), ApiError> {
-        self.resolve_compressed(state, id, wire, AnswerCoding::default()).await
-    }
-
-    /// [`RawPose::resolve`] for an answer compressed in `coding`,
-    /// which its price includes.
-    ///
-    /// # Errors
-    /// As [`RawPose::resolve`].
-    pub async fn resolve_compressed(
         &self,
         state: &AppState,
         id: &str,
@@ -197,26 +184,13 @@ impl RawBatch<'_> {
 
     /// Checks the request against the configured pose limit, then binds it to
     /// the clip `id` at its current version and checks what its answer, sent
-    /// as `wire`, would cost (before anything is evaluated).
+    /// as `wire` and compressed as `coding` says, would cost (before
+    /// anything is evaluated).
     ///
     /// # Errors
     /// As [`RawBatch::check`], then `clip_not_found`, `no_inverse_binds`,
     /// then `too_many_poses` (over `max_joint_poses`), `answer_too_large`.
     pub async fn resolve(
-        &self,
-        state: &AppState,
-        id: &str,
-        wire: Wire,
-    ) -> Result<(Sampling, Arc<CachedClip>), ApiError> {
-        self.resolve_compressed(state, id, wire, AnswerCoding::default()).await
-    }
-
-    /// [`RawBatch::resolve`] for an answer compressed in `coding`, which
-    /// its price includes.
-    ///
-    /// # Errors
-    /// As [`RawBatch::resolve`].
-    pub async fn resolve_compressed(
         &self,
         state: &AppState,
         id: &str,

@@ -11,15 +11,15 @@ use std::sync::{Arc, Mutex};
 
 use anim::ik::IkConstraint;
 
-use super::cost::{Estimate, check_stream, check_stream_work, stream_work};
+use super::cost::{Estimate, check_stream, check_stream_work, compact_frame, stream_work};
 use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
 use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
-    AdmitError, ControlError, Encoding, MAX_FPS, ParamError, Repricing, StreamMotion, StreamParams, StreamPermit,
-    StreamRequest,
+    AdmitError, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, MAX_FPS, ParamError, Repricing,
+    StreamMotion, StreamParams, StreamPermit, StreamRequest, layout_samples, plain_clip,
 };
 use crate::work::{Ticket, price};
 
@@ -42,7 +42,9 @@ impl Repricing for StreamCharge {
     fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError> {
         let layers = motions.iter().flat_map(|m| m.layers()).map(|c| price::clip_pose(c.clip()));
         let constraints = motions.first().map_or(0, |m| price::ik(ik, m.skeleton()));
-        let per_frame = layers.fold(constraints, u64::saturating_add);
+        // The springs of the motion playing (the last one) run every frame.
+        let springs = motions.last().map_or(0, |m| price::motion_frame(m, self.fps) - price::motion_pose(m));
+        let per_frame = layers.fold(constraints.saturating_add(springs), u64::saturating_add);
         let per_sec = stream_work(per_frame, self.frame, self.fps);
         if per_sec > self.limit {
             let detail = format!(
@@ -59,6 +61,52 @@ impl Repricing for StreamCharge {
     }
 }
 
+/// A broadcast viewer's compact frames (docs/compact-frames.md): the
+/// layout of `params`' clip at the bound and distance asked for, chosen as
+/// a stream's is, and the ticket that holds the encoding's price per
+/// second of playback against `caller` while it watches (the broadcast's
+/// own price, its creator's, covers its JSON and protobuf frames).
+///
+/// # Errors
+/// As a compact stream's: `bad_number`, `max_error_out_of_range`,
+/// `distance_out_of_range`, `compact_unsupported`; `too_much_work`,
+/// `caller_work_limit`, `overloaded`.
+pub async fn compact_watch(
+    state: &AppState,
+    params: &StreamParams,
+    (max_error, distance): (Option<Raw<'_>>, Option<Raw<'_>>),
+    at: Locate,
+    caller: &Caller,
+) -> Result<(Arc<CompactLayout>, Ticket), ApiError> {
+    let raw = RawStream {
+        fps: None,
+        start: None,
+        speed: None,
+        modes: RawModes::default(),
+        encoding: Some(Raw::Text("compact")),
+        max_error,
+        distance,
+        max_frames: None,
+        paused: false,
+        joints: None,
+        parameters: None,
+        at,
+    };
+    let request = StreamRequest { space: params.space, encoding: Encoding::Compact, ..StreamRequest::default() };
+    let compact = raw.compact(&request)?;
+    if params.joints.is_some() {
+        let detail = "compact frames carry the whole local pose; this broadcast sends a joint subset".to_owned();
+        return Err(unprocessable("compact_unsupported", Field::Encoding, at, detail));
+    }
+    let clip = plain_clip(&params.motion).map_err(|e| raw.compact_refused(e))?;
+    let per_sec = stream_work(price::compact_frame(clip.joint_count()), compact_frame(clip), params.fps);
+    check_stream_work(per_sec, &state.config.limits, at)?;
+    let ticket = state.work.charge(&caller.key(), per_sec)?;
+    let with = raw.with_layout(params.clone(), compact, state, &caller.key()).await?;
+    let layout = with.compact.expect("a compact request has its layout");
+    Ok((layout, ticket))
+}
+
 /// The frame rate of a stream that names none (the WebSocket's default;
 /// gRPC's `fps` is always given, 0 included).
 pub const DEFAULT_FPS: u32 = 30;
@@ -73,8 +121,11 @@ pub struct RawStream<'a> {
     /// `None`: 1.
     pub speed: Option<Raw<'a>>,
     pub modes: RawModes<'a>,
-    /// `json` or `protobuf`; `None`: JSON.
+    /// `json`, `protobuf` or `compact`; `None`: JSON.
     pub encoding: Option<Raw<'a>>,
+    /// Compact frames' error bound and distance, metres (docs/compact-frames.md).
+    pub max_error: Option<Raw<'a>>,
+    pub distance: Option<Raw<'a>>,
     /// `None`: no limit; given, at least 1.
     pub max_frames: Option<Raw<'a>>,
     /// Start paused (private playbacks only).
@@ -143,15 +194,21 @@ impl RawStream<'_> {
     /// stream rules (`speed_out_of_range`) and the subset's.
     pub async fn open(&self, state: &AppState, id: &str, caller: &Caller) -> Result<Admitted, ApiError> {
         let request = self.check()?;
+        let compact = self.compact(&request)?;
         let cached = super::raw::clip(state, id).await?;
         self.check_fps(request.fps)?;
-        let frame = Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into());
-        let permit = match self.admit(price::clip_pose(&cached.clip), frame, request.fps, state, caller)? {
+        let (frame, encoding) = match compact {
+            Some(_) => (compact_frame(&cached.clip), price::compact_frame(cached.clip.joint_count())),
+            None => (Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into()), 0),
+        };
+        let per_frame = encoding.saturating_add(price::clip_frame(&cached.clip, &cached.springs, request.fps));
+        let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
             Ok(permit) => permit,
             Err(refused) => return Ok(Err(refused)),
         };
         let params = StreamParams::new(cached, request).map_err(|e| self.refused(e))?;
-        Ok(Ok(Opening { params: self.bind(params, state)?, permit }))
+        let params = self.with_layout(self.bind(params, state)?, compact, state, &caller.key()).await?;
+        Ok(Ok(Opening { params, permit }))
     }
 
     /// As [`RawStream::open`] for a composed motion (docs/motion.md): its clips
@@ -170,12 +227,15 @@ impl RawStream<'_> {
         caller: &Caller,
     ) -> Result<Admitted, ApiError> {
         let (composed, request, frame) = self.composed(state, motion, &caller.key()).await?;
-        let per_frame = price::motion_pose(&composed.motion);
+        let compact = self.compact(&request)?;
+        let per_frame =
+            price::motion_frame(&composed.motion, request.fps).saturating_add(self.compact_work(&composed, compact));
         let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
             Ok(permit) => permit,
             Err(refused) => return Ok(Err(refused)),
         };
         let params = self.motion_stream(composed, request, state)?;
+        let params = self.with_layout(params, compact, state, &caller.key()).await?;
         Ok(Ok(Opening { params, permit }))
     }
 
@@ -194,7 +254,7 @@ impl RawStream<'_> {
     ) -> Result<(StreamParams, u64), ApiError> {
         let (composed, request, frame) = self.composed(state, motion, &CallerKey::Node).await?;
         check_stream(frame, request.fps, &state.config.limits, self.at)?;
-        let per_frame = price::motion_pose(&composed.motion).saturating_add(price::BROADCAST_TICK);
+        let per_frame = price::motion_frame(&composed.motion, request.fps).saturating_add(price::BROADCAST_TICK);
         let per_sec = stream_work(per_frame, frame, request.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         Ok((self.motion_stream(composed, request, state)?, per_sec))
@@ -214,8 +274,11 @@ impl RawStream<'_> {
         let request = self.check()?;
         let composed = motion.resolve_for(state, caller).await?;
         self.check_fps(request.fps)?;
-        let mut frame =
-            Estimate::frame(composed.motion.first_clip().clip(), composed.clip_id(), request.encoding.into());
+        let first = composed.motion.first_clip().clip();
+        let mut frame = match request.encoding {
+            Encoding::Compact => compact_frame(first),
+            _ => Estimate::frame(first, composed.clip_id(), request.encoding.into()),
+        };
         if composed.motion.has_root_motion() {
             frame += ROOT_MOTION_BYTES;
         }
@@ -271,6 +334,91 @@ impl RawStream<'_> {
         Ok(params.with_joints(joints).with_parameters(parameters).with_ik_limits(state.config.limits.ik()))
     }
 
+    /// Compact frames' bound and distance when the stream asks for them
+    /// (`None`: another encoding).
+    ///
+    /// # Errors
+    /// `bad_number`; `max_error_out_of_range`, `distance_out_of_range`;
+    /// `compact_unsupported` for model space or a joint subset (compact
+    /// frames carry the whole local pose); `unknown_parameter` for
+    /// `max_error` or `distance` without compact frames.
+    fn compact(&self, request: &StreamRequest) -> Result<Option<(f32, Option<f32>)>, ApiError> {
+        let at = self.at;
+        let max_error = self.max_error.map(|raw| finite(raw, Field::MaxError, at)).transpose()?;
+        let distance = self.distance.map(|raw| finite(raw, Field::Distance, at)).transpose()?;
+        if request.encoding != Encoding::Compact {
+            if let Some(field) =
+                [(max_error, Field::MaxError), (distance, Field::Distance)].into_iter().find_map(|(v, f)| v.map(|_| f))
+            {
+                let detail = format!("`{}` applies to `encoding=compact` only", field.name());
+                return Err(super::raw::malformed("unknown_parameter", field, at, detail));
+            }
+            return Ok(None);
+        }
+        let unsupported = |field: Field, what: &str| {
+            let detail = format!("compact frames carry the whole local pose; this stream asks for {what}");
+            unprocessable("compact_unsupported", field, at, detail)
+        };
+        if request.space != anim::Space::Local {
+            return Err(unsupported(Field::Space, "model space"));
+        }
+        if self.joints.is_some() {
+            return Err(unsupported(Field::JointAt(0), "a joint subset"));
+        }
+        let checked = CompactRequest { max_error, distance }.check().map_err(|e| self.compact_refused(e))?;
+        Ok(Some(checked))
+    }
+
+    fn compact_refused(&self, e: CompactRefusal) -> ApiError {
+        let field = match e.field {
+            "max_error" => Field::MaxError,
+            "distance" => Field::Distance,
+            _ => Field::Encoding,
+        };
+        unprocessable(e.code, field, self.at, e.detail)
+    }
+
+    /// A compact frame's work on `composed`'s output skeleton (0 for other encodings).
+    fn compact_work(&self, composed: &Composed, compact: Option<(f32, Option<f32>)>) -> u64 {
+        compact.map_or(0, |_| price::compact_frame(composed.motion.skeleton().len()))
+    }
+
+    /// The stream in compact frames, when asked: its layout chosen from its
+    /// clip's poses, priced and charged to `caller` and run as work.
+    ///
+    /// # Errors
+    /// `compact_unsupported` (a motion that is more than one clip played
+    /// whole); `too_much_work`, `caller_work_limit`, `overloaded`,
+    /// `request_timeout`.
+    async fn with_layout(
+        &self,
+        params: StreamParams,
+        compact: Option<(f32, Option<f32>)>,
+        state: &AppState,
+        caller: &CallerKey,
+    ) -> Result<StreamParams, ApiError> {
+        let Some((max_error, distance)) = compact else { return Ok(params) };
+        let clip = plain_clip(&params.motion).map_err(|e| self.compact_refused(e))?;
+        let units = price::compact_layout(layout_samples(clip), price::clip_pose(clip));
+        if units > state.config.limits.max_request_work {
+            let detail = format!(
+                "choosing this stream's compact layout costs {units} work units; the limit (max_request_work, \
+                 --max-request-work) is {}",
+                state.config.limits.max_request_work
+            );
+            return Err(unprocessable("too_much_work", Field::Encoding, self.at, detail));
+        }
+        let (motion, fps) = (Arc::clone(&params.motion), params.fps);
+        let layout = state
+            .work
+            .spend(caller, units, move |_| {
+                let clip = motion.first_clip().clip();
+                CompactLayout::of_clip(clip, max_error, distance, fps)
+            })
+            .await?;
+        Ok(params.with_compact(Arc::new(layout)))
+    }
+
     /// The engine's frame-rate rule, checked before anything is built.
     fn check_fps(&self, fps: u32) -> Result<(), ApiError> {
         if (1..=MAX_FPS).contains(&fps) {
@@ -285,9 +433,15 @@ impl RawStream<'_> {
         let by_name = |text: &str| match text {
             "json" => Ok(Encoding::Json),
             "protobuf" => Ok(Encoding::Protobuf),
-            _ => Err("expected one of: json, protobuf".to_owned()),
+            "compact" => Ok(Encoding::Compact),
+            _ => Err("expected one of: json, protobuf, compact".to_owned()),
         };
-        let by_number = |n: i32| Err(format!("expected a name, got the number {n}"));
+        // gRPC's `FrameEncoding`: unspecified and protobuf are `Frame`s, compact their `compact` bytes.
+        let by_number = |n: i32| match n {
+            0 | 1 => Ok(Some(Encoding::Protobuf)),
+            2 => Ok(Some(Encoding::Compact)),
+            _ => Err(format!("unknown frame encoding {n}")),
+        };
         Ok(choice(raw, Field::Encoding, at, by_name, by_number)?.unwrap_or_default())
     }
 

@@ -109,6 +109,8 @@ fn stream(fps: Option<Raw<'static>>) -> RawStream<'static> {
         speed: None,
         modes: RawModes::default(),
         encoding: None,
+        max_error: None,
+        distance: None,
         max_frames: None,
         paused: false,
         joints: None,

@@ -15,17 +15,19 @@ use std::sync::Arc;
 
 use axum::Extension;
 use axum::Json;
+use axum::extract::ws::Message;
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::http::header::LOCATION;
 use axum::response::{IntoResponse, Response};
+use futures_util::SinkExt;
 use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::auth::{Identity, ReadAccess, Scope, WriteAccess};
 use crate::error::ApiError;
-use crate::request::Raw;
+use crate::request::{Raw, compact_watch, in_query};
 use crate::state::AppState;
 use crate::stream::{Broadcast, Encoding};
 use crate::{broadcast_store, broadcast_work};
@@ -64,6 +66,11 @@ pub struct BroadcastSummary {
     /// Its price now, in work units per second, charged to its creator
     /// (docs/api.md, "Work and its price").
     pub work_per_sec: u64,
+    /// What looked wrong in its motion (docs/warnings.md,
+    /// `joints_not_in_skeleton`); absent when nothing did.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    #[schema(value_type = Vec<super::schemas::Warning>)]
+    pub warnings: Vec<serde_json::Value>,
 }
 
 /// `GET /v1/broadcasts`.
@@ -98,6 +105,7 @@ pub fn summary(b: &Broadcast) -> BroadcastSummary {
         space: described["space"].as_str().unwrap_or("local").to_owned(),
         joints: b.params().joints.as_ref().map(|_| b.params().joint_names()),
         work_per_sec: b.tick_price().saturating_mul(u64::from(b.params().fps)),
+        warnings: crate::request::warnings(&b.params().motion, "/motion"),
     }
 }
 
@@ -219,12 +227,15 @@ pub async fn control(
     get, path = "/v1/broadcasts/{id}/stream", tag = "broadcasts",
     params(
         ("id" = String, Path, description = "Broadcast id"),
-        ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
+        ("encoding" = Option<String>, Query, pattern = "^(json|protobuf|compact)$", description = "json (default, text frames) | protobuf (binary `Frame`) | compact (binary compact frames, docs/compact-frames.md, after an `{\"opened\":{…,\"compact\":layout}}` text message)"),
+        ("max_error" = Option<f64>, Query, description = "Compact frames: the error bound in metres, at least 1e-6 (default 1e-4)"),
+        ("distance" = Option<f64>, Query, description = "Compact frames: the distance of the checked points, metres, at least 0.01 (default 10 % of the rest height)"),
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow from the next tick (`seq` is the broadcast's tick, the first frame's `dropped` 0). A caller with the write scope may send stream controls (not `stop`, which only ends its own socket) that act on the broadcast for every viewer; a read-only caller's are answered `{\"error\":{\"code\":\"insufficient_scope\"}}`. Close 1000 when the broadcast ends, 1001 at shutdown, 1013 over the stream caps"),
         (status = 400, description = "`websocket_upgrade_required`, `bad_parameter`", body = super::schemas::Problem),
         (status = 404, description = "`broadcast_not_found`", body = super::schemas::Problem),
+        (status = 422, description = "Compact frames: `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported` (a broadcast of more than one clip played whole, or one that played a crossfade, layer or ik control), `too_many_compact_layouts`, `too_much_work`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]
@@ -240,15 +251,46 @@ pub async fn watch(
     let encoding = match q.raw("encoding") {
         None | Some(Raw::Text("json")) => Encoding::Json,
         Some(Raw::Text("protobuf")) => Encoding::Protobuf,
-        Some(_) => return Err(ApiError::parameter("bad_parameter", "encoding", "expected one of: json, protobuf")),
+        Some(Raw::Text("compact")) => Encoding::Compact,
+        Some(_) => {
+            return Err(ApiError::parameter("bad_parameter", "encoding", "expected one of: json, protobuf, compact"));
+        }
     };
+    let compact_asked = (q.raw("max_error"), q.raw("distance"));
     let b = live(&state, &id).await?;
+    let compact = match encoding {
+        Encoding::Compact => Some(compact_watch(&state, b.params(), compact_asked, in_query, &caller).await?),
+        _ if compact_asked.0.is_some() || compact_asked.1.is_some() => {
+            let detail = "`max_error` and `distance` apply to `encoding=compact` only";
+            return Err(ApiError::parameter("unknown_parameter", "max_error", detail));
+        }
+        _ => None,
+    };
     let gate = identity.authorize(Scope::Write).is_ok().then(|| broadcast_work::gate(&state, caller.clone()));
-    let watched =
-        state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| b.watch(encoding, permit, gate));
+    let permit = state.streams.admit_for(caller.addr, caller.token.clone());
+    let (watched, ticket) = match (permit, compact) {
+        (Err(refused), _) => (Err(refused), None),
+        (Ok(permit), None) => (Ok(b.watch(encoding, permit, gate)), None),
+        (Ok(permit), Some((layout, ticket))) => {
+            let sub = b.watch_compact(layout, permit, gate).map_err(|e| ApiError::Invalid {
+                code: e.code,
+                at: crate::error::At::Parameter(e.field.to_owned()),
+                detail: e.detail,
+            })?;
+            (Ok(sub), Some(ticket))
+        }
+    };
     let motions = resolver(&state);
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
+        // The compact encoding's price is held while the viewer watches.
+        let _held = ticket;
         match watched {
+            Ok(sub) if sub.params().compact.is_some() => {
+                let mut socket = socket;
+                if socket.send(Message::Text(super::stream::opened_message(&sub).to_string().into())).await.is_ok() {
+                    serve(socket, sub, motions).await;
+                }
+            }
             Ok(sub) => serve(socket, sub, motions).await,
             Err(refused) => refuse(socket, crate::stream::ws::close::TRY_AGAIN_LATER, refused.to_string()).await,
         }

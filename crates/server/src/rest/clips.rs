@@ -26,7 +26,7 @@ use anim::lint::Lint;
 use formats::import::Warning;
 use formats::import::warning::in_document;
 
-use super::extract::{ClipId, JsonBody, Precondition, etag, precondition, unless_modified};
+use super::extract::{ClipId, JsonBody, Precondition, etag, expected, precondition, unless_modified};
 use super::query::Query;
 use super::summary::ClipSummary;
 
@@ -118,12 +118,12 @@ pub async fn create_clip(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let on_name = params.on_name()?;
-    let Admitted { new_clip, clip, lints } = admit_body(&state, &caller.key(), body).await?;
+    let Admitted { new_clip, clip, springs, lints } = admit_body(&state, &caller.key(), body).await?;
     let meta = state.store.create(new_clip, on_name).await?;
     tracing::info!(id = %meta.id, name = %meta.name, version = meta.version, warnings = lints.len(), "clip created");
     let status = if meta.version == 1 { StatusCode::CREATED } else { StatusCode::OK };
     let response = written(&meta, status, true, &lints);
-    state.cache_written(Arc::new(CachedClip { meta, clip }));
+    state.cache_written(Arc::new(CachedClip { meta, clip, springs }));
     Ok(response)
 }
 
@@ -198,29 +198,17 @@ pub async fn get_clip(
     })
 }
 
-/// The version `expected` must name for a conditional write, resolving a
-/// multi-tag `If-Match` against the current version.
+/// The version `expected` must name for a conditional write of clip `id`.
 pub(super) async fn expected_version(
     state: &AppState,
     id: &str,
     condition: Option<Precondition>,
 ) -> Result<Option<u64>, ApiError> {
-    match condition {
-        None | Some(Precondition::Any) => Ok(None),
-        Some(p) => match p.single() {
-            // One tag that cannot be ours (weak or not a version) never matches.
-            Some(None) => {
-                let stored = state.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
-                Err(ApiError::PreconditionFailed { current: stored.meta.version })
-            }
-            Some(Some(v)) => Ok(Some(v)),
-            None => {
-                let stored = state.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
-                let current = stored.meta.version;
-                if p.matches(current) { Ok(Some(current)) } else { Err(ApiError::PreconditionFailed { current }) }
-            }
-        },
-    }
+    expected(condition, async || {
+        let stored = state.store.get(id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+        Ok(stored.meta.version)
+    })
+    .await
 }
 
 /// Replace a clip's document; the version goes up by one.
@@ -247,12 +235,12 @@ pub async fn replace_clip(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let condition = precondition(&headers, IF_MATCH, false)?;
-    let Admitted { new_clip, clip, lints } = admit_body(&state, &caller.key(), body).await?;
+    let Admitted { new_clip, clip, springs, lints } = admit_body(&state, &caller.key(), body).await?;
     let expected = expected_version(&state, &id, condition).await?;
     let meta = state.store.replace(&id, new_clip, expected).await?;
     tracing::info!(id = %meta.id, version = meta.version, warnings = lints.len(), "clip replaced");
     let response = written(&meta, StatusCode::OK, false, &lints);
-    state.cache_written(Arc::new(CachedClip { meta, clip }));
+    state.cache_written(Arc::new(CachedClip { meta, clip, springs }));
     Ok(response)
 }
 

@@ -84,7 +84,31 @@ impl Precondition {
     }
 }
 
-/// The strong ETag of a clip version.
+/// The version a conditional write must find (`None`: any), resolving a
+/// multi-tag `If-Match` against the current version, read by `current`
+/// only when that is needed.
+///
+/// # Errors
+/// `version_mismatch` (412) when the condition cannot match; what `current` returns.
+pub async fn expected(
+    condition: Option<Precondition>,
+    current: impl AsyncFnOnce() -> Result<u64, ApiError>,
+) -> Result<Option<u64>, ApiError> {
+    match condition {
+        None | Some(Precondition::Any) => Ok(None),
+        Some(p) => match p.single() {
+            // One tag that cannot be ours (weak or not a version) never matches.
+            Some(None) => Err(ApiError::PreconditionFailed { current: current().await? }),
+            Some(Some(v)) => Ok(Some(v)),
+            None => {
+                let current = current().await?;
+                if p.matches(current) { Ok(Some(current)) } else { Err(ApiError::PreconditionFailed { current }) }
+            }
+        },
+    }
+}
+
+/// The strong ETag of a clip (or character) version.
 pub fn etag(version: u64) -> String {
     format!("\"{version}\"")
 }

@@ -33,22 +33,27 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::auth::WriteAccess;
+use std::sync::atomic::AtomicBool;
+
+use crate::auth::{CallerKey, WriteAccess};
 use crate::cache::CachedClip;
+use crate::characters::store_error;
 use crate::config::Limits;
 use crate::error::{ApiError, At, raise_hint};
 use crate::limits::{Admitted, admit_doc};
 use crate::spool::{SpooledBody, Spooler};
 use crate::state::AppState;
-use crate::store::{MeshWrite, StoredMesh};
-use anim::{Interpolation, Playback};
+use crate::store::{MeshWrite, NewCharacter, StoredMesh};
+use anim::{ClipSpec, Interpolation, Playback};
 use formats::import::{
-    ErrorClass, Format, ImportError, ImportLimits, ImportOptions, Resolver, SCALE_RANGE, SNIFF_BYTES, Source, UpAxis,
-    Warning, detect, file_stem, import_from,
+    ErrorClass, Format, ImportError, ImportLimits, ImportOptions, Imported, ImportedCharacter, Resolver, SCALE_RANGE,
+    SNIFF_BYTES, Source, UpAxis, Warning, detect, file_stem, import_from,
 };
-use formats::wire::json::{ClipDoc, InterpolationDoc, PlaybackDoc};
+use formats::wire::character::CharacterDoc;
+use formats::wire::json::{ClipDoc, InterpolationDoc, PlaybackDoc, SkeletonDoc};
 use formats::wire::mesh;
 
+use super::characters::CharacterSummary;
 use super::query::{Query, QueryParams};
 use super::summary::ClipSummary;
 
@@ -56,6 +61,9 @@ use super::summary::ClipSummary;
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ImportResult {
     pub clips: Vec<ClipSummary>,
+    /// One per skin of a glTF file (its bind pose, roles and mesh), named
+    /// after the file, else the scene, plus `/<skin name>` when there are several.
+    pub characters: Vec<CharacterSummary>,
     /// Valid but probably wrong, each with a pointer into the file: parts
     /// not imported (`not_imported`), suspicious keys (docs/warnings.md).
     #[schema(value_type = Vec<super::schemas::Warning>)]
@@ -95,6 +103,124 @@ pub async fn import_clips(
     Query(params): Query,
     request: Request,
 ) -> Result<Response, ApiError> {
+    let on_name = params.on_name()?;
+    let (format, bytes, (admitted, characters, warnings)) =
+        import_request(&state, &caller.key(), &params, request, false, |imported, limits, cancel| {
+            let mut admitted = (imported.clips.iter().zip(&imported.springs))
+                .map(|(spec, chains)| admit_doc(with_springs(ClipDoc::from_spec(spec), chains), limits, cancel))
+                .collect::<Result<Vec<Admitted>, ApiError>>()?;
+            // Each clip of a skin keeps its mesh, stored in the clips' transaction.
+            for (admitted, mesh) in admitted.iter_mut().zip(imported.meshes) {
+                if let Some(bytes) = mesh {
+                    admitted.new_clip.mesh = MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes });
+                }
+            }
+            let characters = admit_characters(imported.characters, limits, cancel)?;
+            // The importer's warnings point into the file; the documents' own are the same findings.
+            let warnings = imported.warnings;
+            Ok((admitted, characters, warnings))
+        })
+        .await?;
+    let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, (a.clip, a.springs))).unzip();
+    let (metas, characters) = state.store.create_clips_and_characters(new_clips, characters, on_name).await?;
+    characters.iter().for_each(|m| state.document_changed(crate::store::DocKind::Character, &m.id));
+    tracing::info!(
+        format = format.as_str(),
+        bytes,
+        clips = metas.len(),
+        characters = characters.len(),
+        warnings = warnings.len(),
+        "file imported"
+    );
+    let summaries = metas.iter().map(ClipSummary::from).collect();
+    for (meta, (clip, springs)) in metas.into_iter().zip(clips) {
+        state.cache_written(Arc::new(CachedClip { meta, clip, springs }));
+    }
+    let characters = characters.iter().map(CharacterSummary::from).collect();
+    Ok((StatusCode::CREATED, Json(ImportResult { clips: summaries, characters, warnings })).into_response())
+}
+
+/// Import the characters of a glTF 2.0 file (one per skin: its joints at the bind pose, with the skinned mesh) or a BVH hierarchy.
+#[utoipa::path(
+    post, path = "/v1/characters/import", tag = "characters",
+    params(
+        ("format" = Option<String>, Query, pattern = "^(gltf|glb|bvh)$", description = "gltf | glb | bvh; inferred from Content-Type or the bytes when absent"),
+        ("name" = Option<String>, Query, min_length = 1, max_length = 256, description = "The character's name; with several skins, each is named NAME/<skin>. Default: the file's name, else the glTF scene's, else the skin's"),
+        ("name_prefix" = Option<String>, Query, min_length = 1, max_length = 256, description = "Prepended to every character's name: a folder such as fox/"),
+        ("up" = Option<String>, Query, pattern = "^(y|z)$", description = "The file's up axis: y (default) or z (turned into Y-up by -90 degrees about X at the roots: rest and mesh)"),
+        ("scale" = Option<f64>, Query, description = "Every length times this, 1e-6 to 1e6 (translations, mesh positions, inverse binds): 0.01 for a file in centimetres"),
+        ("replace" = Option<bool>, Query, description = "true: a character whose name a stored character has becomes its new version (same id) instead of refusing the import (409 name_taken)"),
+    ),
+    request_body(content = super::schemas::FileBytes, content_type = "application/octet-stream",
+        description = "The file, up to max_import_bytes; or multipart/form-data with the .gltf and the buffer files it names"),
+    responses(
+        (status = 201, description = "Every character of the file, stored, with warnings about the file", body = CharacterImportResult),
+        (status = 400, description = "Not a well-formed glTF, GLB or BVH file", body = super::schemas::Problem),
+        (status = 401, description = "Write token missing or wrong", body = super::schemas::Problem),
+        (status = 409, description = "A character has the name of one the file yields (name_taken)", body = super::schemas::Problem),
+        (status = 413, description = "The file or its content over a limit (the detail names it)", body = super::schemas::Problem),
+        (status = 415, description = "An FBX file (fbx_not_supported)", body = super::schemas::Problem),
+        (status = 422, description = "Well-formed but not importable: no skin (no_skins), or a skeleton a clip could not have", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn import_characters(
+    State(state): State<AppState>,
+    WriteAccess(caller): WriteAccess,
+    Query(params): Query,
+    request: Request,
+) -> Result<Response, ApiError> {
+    let on_name = params.on_name()?;
+    let (format, bytes, (characters, warnings)) =
+        import_request(&state, &caller.key(), &params, request, true, |imported, limits, cancel| {
+            Ok((admit_characters(imported.characters, limits, cancel)?, imported.warnings))
+        })
+        .await?;
+    let metas = state.store.create_characters(characters, on_name).await.map_err(store_error)?;
+    metas.iter().for_each(|m| state.document_changed(crate::store::DocKind::Character, &m.id));
+    tracing::info!(format = format.as_str(), bytes, characters = metas.len(), "characters imported");
+    let characters = metas.iter().map(CharacterSummary::from).collect();
+    Ok((StatusCode::CREATED, Json(CharacterImportResult { characters, warnings })).into_response())
+}
+
+/// What a character import created, and what in the file looked wrong.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct CharacterImportResult {
+    pub characters: Vec<CharacterSummary>,
+    #[schema(value_type = Vec<super::schemas::Warning>)]
+    pub warnings: Vec<Warning>,
+}
+
+/// The imported characters, each checked as an uploaded one, with its mesh.
+pub(crate) fn admit_characters(
+    characters: Vec<ImportedCharacter>,
+    limits: &Limits,
+    cancel: &AtomicBool,
+) -> Result<Vec<NewCharacter>, ApiError> {
+    characters
+        .into_iter()
+        .map(|c| {
+            let spec = ClipSpec { name: c.name.clone(), skeleton: Some(c.skeleton), ..Default::default() };
+            let skeleton = ClipDoc::from_spec(&spec).skeleton.unwrap_or(SkeletonDoc { joints: Vec::new() });
+            let doc = CharacterDoc { name: c.name, skeleton, roles: Default::default() };
+            let mesh =
+                c.mesh.map_or(MeshWrite::None, |bytes| MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes }));
+            Ok(crate::characters::admit(doc, mesh, limits, cancel)?.new_character)
+        })
+        .collect()
+}
+
+/// Reads an import request's file (the body, or its multipart parts),
+/// imports it on the work pool, priced by its size, and hands the result to
+/// `admit` there: the format, the file's size and what `admit` made.
+async fn import_request<T: Send + 'static>(
+    state: &AppState,
+    caller: &CallerKey,
+    params: &QueryParams,
+    request: Request,
+    characters_only: bool,
+    admit: impl FnOnce(Imported, &Limits, &AtomicBool) -> Result<T, ApiError> + Send + 'static,
+) -> Result<(Format, u64, T), ApiError> {
     let content_type = request.headers().get(CONTENT_TYPE).and_then(|v| v.to_str().ok()).map(str::to_owned);
     // The guard spooled the body; a request without one has none to spool.
     let spooled = request.extensions().get::<SpooledBody>().cloned();
@@ -106,7 +232,7 @@ pub async fn import_clips(
                 None => Body::empty(),
             };
             let (parts, _) = request.into_parts();
-            let multipart = Multipart::from_request(Request::from_parts(parts, body), &state)
+            let multipart = Multipart::from_request(Request::from_parts(parts, body), state)
                 .await
                 .map_err(|e| rejected(e.status(), e.body_text(), max_import_bytes))?;
             read_parts(multipart, max_import_bytes).await?
@@ -117,13 +243,37 @@ pub async fn import_clips(
         Some(f) => Some(f.parse::<Format>().map_err(|e| ApiError::parameter("bad_format", "format", e))?),
         None => None,
     };
-    let on_name = params.on_name()?;
-    let mut options = import_options(&params, &state.config.limits)?;
+    let mut options = import_options(params, &state.config.limits)?;
     options.file_name = file_name.as_deref().and_then(file_stem);
+    options.characters_only = characters_only;
+    let file = ImportFile { document, siblings, content_type, format };
+    run_import(state, caller, file, options, admit).await
+}
+
+/// A file to import: its document, the parts its buffers may name, and
+/// what says its format.
+pub(crate) struct ImportFile {
+    pub document: Source,
+    pub siblings: Vec<(String, Source)>,
+    pub content_type: Option<String>,
+    /// Given; `None`: detected from the bytes and the content type.
+    pub format: Option<Format>,
+}
+
+/// Imports `file` on the work pool, priced by its size, and hands the
+/// result to `admit` there: the format, the file's size and what `admit` made.
+pub(crate) async fn run_import<T: Send + 'static>(
+    state: &AppState,
+    caller: &CallerKey,
+    file: ImportFile,
+    options: ImportOptions,
+    admit: impl FnOnce(Imported, &Limits, &AtomicBool) -> Result<T, ApiError> + Send + 'static,
+) -> Result<(Format, u64, T), ApiError> {
+    let ImportFile { document, siblings, content_type, format } = file;
     let limits = state.config.limits.clone();
     let bytes = document.len();
-    let (units, key) = (crate::work::price::import(bytes), caller.key());
-    let importing = crate::builds::run(&state.work, &key, &state.config.limits, units, "importing this file", {
+    let units = crate::work::price::import(bytes);
+    let importing = crate::builds::run(&state.work, caller, &state.config.limits, units, "importing this file", {
         move |cancel| -> Result<_, ApiError> {
             let format = match format {
                 Some(format) => format,
@@ -141,31 +291,11 @@ pub async fn import_clips(
             };
             let resolver: Option<Resolver<'_>> = if siblings.is_empty() { None } else { Some(&mut resolve) };
             let imported = import_from(&document, format, &options, resolver).map_err(refused)?;
-            let mut admitted = imported
-                .clips
-                .iter()
-                .map(|spec| admit_doc(ClipDoc::from_spec(spec), &limits, cancel))
-                .collect::<Result<Vec<Admitted>, ApiError>>()?;
-            // Each clip of a skin keeps its mesh, stored in the clips' transaction.
-            for (admitted, mesh) in admitted.iter_mut().zip(imported.meshes) {
-                if let Some(bytes) = mesh {
-                    admitted.new_clip.mesh = MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes });
-                }
-            }
-            // The importer's warnings point into the file; the documents' own are the same findings.
-            Ok((format, admitted, imported.warnings))
+            Ok((format, admit(imported, &limits, cancel)?))
         }
     });
-    let (format, admitted, warnings) = importing.await?;
-
-    let (new_clips, clips): (Vec<_>, Vec<_>) = admitted.into_iter().map(|a| (a.new_clip, a.clip)).unzip();
-    let metas = state.store.create_all(new_clips, on_name).await?;
-    tracing::info!(format = format.as_str(), bytes, clips = metas.len(), warnings = warnings.len(), "file imported");
-    let summaries = metas.iter().map(ClipSummary::from).collect();
-    for (meta, clip) in metas.into_iter().zip(clips) {
-        state.cache_written(Arc::new(CachedClip { meta, clip }));
-    }
-    Ok((StatusCode::CREATED, Json(ImportResult { clips: summaries, warnings })).into_response())
+    let (format, made) = importing.await?;
+    Ok((format, bytes, made))
 }
 
 /// The import's options from its query (every one but `format` and
@@ -210,6 +340,7 @@ fn import_options(params: &QueryParams, limits: &Limits) -> Result<ImportOptions
         up,
         scale: scale_parameter(params)?,
         playback,
+        characters_only: false,
         limits: import_limits(limits),
     })
 }
@@ -220,7 +351,11 @@ fn scale_parameter(params: &QueryParams) -> Result<f32, ApiError> {
     let value: f64 = text.trim().parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
         ApiError::parameter("bad_number", "scale", format!("`scale` must be a finite number, got `{text}`"))
     })?;
-    let scale = value as f32;
+    checked_scale(value as f32, text)
+}
+
+/// `scale` within [`SCALE_RANGE`] (`text`: as the caller wrote it).
+pub(crate) fn checked_scale(scale: f32, text: &str) -> Result<f32, ApiError> {
     if !SCALE_RANGE.contains(&scale) {
         let (lo, hi) = (SCALE_RANGE.start(), SCALE_RANGE.end());
         let detail = format!("`scale` must be within {lo}..={hi} (0.01 turns centimetres into metres), got {text}");
@@ -231,7 +366,12 @@ fn scale_parameter(params: &QueryParams) -> Result<f32, ApiError> {
 
 /// `name` or `name_prefix`: not blank, at most the core's name length.
 fn name_parameter(params: &QueryParams, which: &str) -> Result<Option<String>, ApiError> {
-    let Some(text) = params.get(which) else { return Ok(None) };
+    checked_name(params.get(which), which)
+}
+
+/// A name option (`which`: `name` or `name_prefix`): not blank, at most the core's name length.
+pub(crate) fn checked_name(text: Option<&str>, which: &str) -> Result<Option<String>, ApiError> {
+    let Some(text) = text else { return Ok(None) };
     if text.trim().is_empty() || text.chars().count() > anim::MAX_NAME_CHARS {
         let detail = format!("`{which}` must be 1 to {} characters, not blank", anim::MAX_NAME_CHARS);
         return Err(ApiError::parameter("bad_parameter", which, detail));
@@ -319,7 +459,7 @@ fn setting_of(what: &str) -> Option<&'static str> {
 
 /// The importer's bounds, from the server's: a clip an import produces
 /// obeys the same limits as one uploaded as JSON.
-fn import_limits(limits: &Limits) -> ImportLimits {
+pub(crate) fn import_limits(limits: &Limits) -> ImportLimits {
     ImportLimits {
         max_bytes: limits.max_import_bytes as u64,
         max_document_bytes: limits.max_body_bytes as u64,
@@ -332,4 +472,12 @@ fn import_limits(limits: &Limits) -> ImportLimits {
         max_texture_pixels: limits.max_texture_pixels,
         ..ImportLimits::default()
     }
+}
+
+/// An imported clip's document with the file's spring chains for it
+/// (docs/springs.md, “Import”): the importer kept those that fit its
+/// skeleton, so the clip's admission checks them again and stores them.
+fn with_springs(mut doc: ClipDoc, chains: &[anim::spring::ChainSpec]) -> ClipDoc {
+    doc.springs = chains.iter().map(formats::wire::spring::SpringDoc::from_spec).collect();
+    doc
 }

@@ -1,6 +1,6 @@
-//! `GET /v1/clips/{id}/mesh`: the skinned mesh a glTF import kept with the
-//! clip, in the binary form of docs/mesh-format.md, for the viewer to skin
-//! on the GPU.
+//! `GET /v1/clips/{id}/mesh` and `GET /v1/characters/{id}/mesh`: the
+//! skinned mesh a glTF import kept with the clip or character, in the
+//! binary form of docs/mesh-format.md, for the viewer to skin on the GPU.
 //!
 //! The bytes are served as the import stored them. Their entity tag is a
 //! hash of them, so it survives a `PATCH` (which keeps the mesh) and a
@@ -14,8 +14,10 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 
 use crate::auth::ReadAccess;
+use crate::characters::store_error;
 use crate::error::ApiError;
 use crate::state::AppState;
+use crate::store::StoredMesh;
 use formats::wire::mesh::CONTENT_TYPE as MESH_TYPE;
 
 use super::extract::ClipId;
@@ -48,6 +50,44 @@ pub async fn get_mesh(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let tag = state.store.mesh_tag(&id).await?.ok_or(ApiError::NotFound { what: "clip" })?;
+    serve(&headers, tag, async || Ok(state.store.mesh(&id).await?)).await
+}
+
+/// The character's skinned mesh, as a clip's is served.
+#[utoipa::path(
+    get, path = "/v1/characters/{id}/mesh", tag = "characters",
+    params(
+        ("id" = String, Path, description = "Character id"),
+        ("If-None-Match" = Option<String>, Header, description = "The `ETag` of a mesh held: `304` while it is still the character's"),
+    ),
+    responses(
+        (status = 200, description = "The mesh: an `INBM` header, JSON and little-endian arrays (docs/mesh-format.md)",
+            content_type = "application/vnd.inbetween.mesh", body = super::schemas::FileBytes),
+        (status = 304, description = "`If-None-Match` matched"),
+        (status = 401, description = "Read token missing or wrong", body = super::schemas::Problem),
+        (status = 404, description = "No such character (`character_not_found`), or it has no mesh (`no_mesh`: only an import of a glTF skin with triangles keeps one)", body = super::schemas::Problem),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn get_character_mesh(
+    State(state): State<AppState>,
+    _: ReadAccess,
+    ClipId(id): ClipId,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let store = &state.store;
+    let tag = store.character_mesh_tag(&id).await.map_err(store_error)?;
+    let tag = tag.ok_or(ApiError::NotFound { what: "character" })?;
+    serve(&headers, tag, async || store.character_mesh(&id).await.map_err(store_error)).await
+}
+
+/// A mesh whose tag is `tag` (`None`: no mesh): `304` when `headers`
+/// revalidate it, else the bytes `fetch` reads.
+async fn serve(
+    headers: &HeaderMap,
+    tag: Option<String>,
+    fetch: impl AsyncFnOnce() -> Result<Option<StoredMesh>, ApiError>,
+) -> Result<Response, ApiError> {
     let tag = tag.ok_or(ApiError::NotFound { what: "mesh" })?;
     let common = |tag: &str| {
         [
@@ -55,11 +95,11 @@ pub async fn get_mesh(
             (CACHE_CONTROL, HeaderValue::from_static(CACHE)),
         ]
     };
-    if matches_etag(&headers, &tag) {
+    if matches_etag(headers, &tag) {
         return Ok((StatusCode::NOT_MODIFIED, common(&tag)).into_response());
     }
     // Dropped or replaced since the tag was read: as if asked a moment later.
-    let mesh = state.store.mesh(&id).await?.ok_or(ApiError::NotFound { what: "mesh" })?;
+    let mesh = fetch().await?.ok_or(ApiError::NotFound { what: "mesh" })?;
     let content_type = [(CONTENT_TYPE, HeaderValue::from_static(MESH_TYPE))];
     Ok((StatusCode::OK, common(&mesh.etag), content_type, mesh.bytes).into_response())
 }

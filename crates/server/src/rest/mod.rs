@@ -26,8 +26,11 @@ use super::state::AppState;
 use super::{auth, body_guard, compression, ratelimit, routes, shed, spool};
 
 pub mod broadcasts;
+pub mod characters;
 pub mod clips;
+pub mod documents;
 pub mod extract;
+pub mod graphs;
 pub mod health;
 pub mod import;
 pub mod mesh;
@@ -74,7 +77,7 @@ pub fn router(state: AppState) -> Router {
                 read_timeout: limits.body_read_timeout,
                 arrivals: state.arrivals.clone(),
                 spool: Some(spool::SpoolRoute::new(
-                    routes::import_path(),
+                    routes::import_paths(),
                     (limits.max_import_bytes, "max_import_bytes"),
                     spool::UploadLimits {
                         node: limits.max_import_uploads,
@@ -104,10 +107,7 @@ pub fn router(state: AppState) -> Router {
         }))
         .layer(middleware::from_fn_with_state(AccessLog::new(state.config.access_log_sample), access_log::log))
         .layer(compression::responses(state.config.compression))
-        .layer(middleware::from_fn_with_state(
-            compression::Gate::new(state.config.compression, limits.max_compressed_answers),
-            compression::negotiate,
-        ))
+        .layer(middleware::from_fn_with_state(state.compressors.clone(), compression::negotiate))
         .layer(TraceLayer::new_for_http())
         .layer(PropagateRequestIdLayer::new(request_id.clone()))
         .layer(SetRequestIdLayer::new(request_id, MakeRequestUuid))

@@ -7,6 +7,7 @@
 //! as the client reads.
 
 use std::ops::Range;
+use std::sync::Arc;
 
 use axum::extract::State;
 use axum::http::HeaderMap;
@@ -19,12 +20,16 @@ use crate::auth::{CallerKey, ReadAccess};
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Composed, Field, Format, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire, in_body, in_pose_body, parse_json,
+    Composed, Field, Format, GraphSampling, Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose, Wire,
+    graph_layer, in_body, in_pose_body, parse_json,
 };
 use crate::state::AppState;
+use crate::stream::PinnedClip;
 use crate::work::Cancel;
+use anim::graph::GraphPlayer;
 use anim::motion::MotionOptions;
-use anim::{MotionSampler, Space};
+use anim::{MotionSampler, Pose, Space};
+use formats::wire::graph_inputs::{InputDoc, write_report};
 use formats::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson, SpaceDoc};
 use formats::wire::motion::MotionDoc;
 
@@ -77,6 +82,13 @@ pub struct SamplesOfMotion {
     /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
+    /// A graph's timed settings, `[{"time", "set": {name: value}}]` (docs/graphs.md, “Using a graph”).
+    #[serde(default)]
+    #[schema(value_type = Option<Vec<Object>>)]
+    pub inputs: Option<Vec<InputDoc>>,
+    /// A graph's poses carry the tick's `graph` report.
+    #[serde(default)]
+    pub report: bool,
 }
 
 fn text(v: &Option<String>) -> Option<Raw<'_>> {
@@ -91,8 +103,8 @@ async fn compose(
     (joints, parameters): (&Option<Vec<String>>, &Option<Vec<String>>),
     format: Format,
 ) -> Result<Composed, ApiError> {
-    let spec = motion.to_spec("/motion")?;
-    let raw = RawMotion { joints: joints.as_deref(), parameters: parameters.as_deref(), format, ..RawMotion::of(spec) };
+    let raw = RawMotion::of_doc(motion)?;
+    let raw = RawMotion { joints: joints.as_deref(), parameters: parameters.as_deref(), format, ..raw };
     raw.resolve_for(state, caller).await
 }
 
@@ -104,7 +116,7 @@ async fn compose(
         (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it", body = super::schemas::PoseSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
         (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, `incompatible_skeleton` (a layer of another rig), …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`", body = super::schemas::Problem),
         (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
         (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
@@ -121,10 +133,11 @@ pub async fn pose(
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
     let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), checked.format).await?;
-    let cost = composed.cost(1, checked.format, Wire::Json);
+    let cost = composed.cost(&[checked.t], checked.format, Wire::Json);
     let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
+    writer.warn_in_the_pose();
     let capacity = usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20);
     let body = state
         .work
@@ -157,6 +170,14 @@ pub async fn samples(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SamplesOfMotion = parse_json(&body)?;
+    if let Some(reference) = graph_layer(&req.motion)? {
+        return graph_samples(state, caller.key(), &headers, &req, reference).await;
+    }
+    if req.inputs.is_some() || req.report {
+        let (field, detail) = if req.report { ("/report", "`report`") } else { ("/inputs", "`inputs`") };
+        let detail = format!("{detail} drives a graph: the motion's layer names no `graph`");
+        return Err(ApiError::invalid("graph_unsupported", field, detail));
+    }
     let raw = RawBatch {
         times: req.times.as_deref(),
         start: req.start,
@@ -169,7 +190,7 @@ pub async fn samples(
     let sampling = raw.check(state.config.limits.max_poses)?;
     let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
-    let cost = composed.cost(n as u64, sampling.format, Wire::Json);
+    let cost = composed.cost(&sampling.times, sampling.format, Wire::Json);
     let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
     let field = if req.times.is_some() { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_body)?;
@@ -184,6 +205,124 @@ pub async fn samples(
     Ok(json_response(body))
 }
 
+/// `POST /v1/samples` over a graph: its ticks played on the work pool, the
+/// answered ones written as they are played.
+async fn graph_samples(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    req: &SamplesOfMotion,
+    reference: &str,
+) -> Result<Response, ApiError> {
+    let raw = RawGraphSampling {
+        reference,
+        inputs: req.inputs.as_deref().unwrap_or_default(),
+        times: req.times.as_deref(),
+        start: req.start,
+        end: req.end,
+        fps: req.fps,
+        format: text(&req.format),
+        space: text(&req.space),
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        report: req.report,
+    };
+    let sampling = raw.resolve(&state, &caller).await?;
+    let coding = AnswerCoding::of(headers, state.config.compression.min_bytes);
+    let cost = sampling.cost.compressed(coding.at(sampling.cost.bytes));
+    cost.check(&state.config.limits, Field::When, in_body)?;
+    let n = sampling.range.answered();
+    let mut writer = GraphPoses::new(sampling, cost.bytes);
+    if cost.bytes > crate::request::STREAM_ABOVE_BYTES {
+        let ticket = state.work.charge(&caller, cost.work())?;
+        return Ok(Pieces::new(state, Box::new(writer), ticket).into_response());
+    }
+    let body = state.work.spend(&caller, cost.work(), move |cancel| pieces::whole(&mut writer, cancel)).await?;
+    state.counters.poses.increment(n);
+    Ok(json_response(body))
+}
+
+/// A graph's answered ticks, in order: the player is made on the work pool
+/// at the first piece and goes on from tick to tick, so the answer is the
+/// one [`GraphPlayer::play`] gives, however it is cut into pieces.
+struct GraphPoses {
+    sampling: GraphSampling,
+    bound: u64,
+    player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
+    next_input: usize,
+    model: Pose,
+    matrices: Vec<Mat4>,
+    report: Vec<u8>,
+}
+
+impl GraphPoses {
+    fn new(sampling: GraphSampling, bound: u64) -> GraphPoses {
+        let (model, matrices, report) = (Pose::default(), Vec::new(), Vec::new());
+        GraphPoses { sampling, bound, player: None, next_input: 0, model, matrices, report }
+    }
+
+    /// Appends answered pose `i` (tick `range.first + i`).
+    fn write_one(&mut self, out: &mut Vec<u8>, i: usize) {
+        let s = &self.sampling;
+        let k = s.range.first + i as u64;
+        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
+        // The inputs were checked against this graph, so no setting fails.
+        let _ = player.play_to(k, &s.range, &s.inputs, &mut self.next_input);
+        self.report.clear();
+        if s.report {
+            write_report(&mut self.report, &player.report());
+        }
+        let extras =
+            Extras { joints: s.joints.as_deref(), root_motion: None, ik: &[], parameters: None, tail: &self.report };
+        let (clip, skeleton, time) = (s.built.meta.id.as_str(), s.built.graph.skeleton(), s.range.time(k));
+        let clip_time = time as f32;
+        match s.format {
+            Format::Trs => {
+                let pose = if s.space == Space::Model {
+                    skeleton.to_model(player.pose(), &mut self.model);
+                    &self.model
+                } else {
+                    player.pose()
+                };
+                PoseJson { clip, time, clip_time, space: s.space, skeleton, pose }.write_with(out, extras);
+            }
+            Format::Matrix | Format::Skinning => {
+                let skinning = s.format == Format::Skinning;
+                if skinning {
+                    skeleton.skinning_matrices(player.pose(), &mut self.matrices);
+                } else {
+                    skeleton.model_matrices(player.pose(), &mut self.matrices);
+                }
+                let format = if skinning { "skinning" } else { "matrix" };
+                let doc = MatricesJson { clip, time, clip_time, format, skeleton, matrices: &self.matrices };
+                doc.write_with(out, extras);
+            }
+        }
+    }
+}
+
+impl PoseWriter for GraphPoses {
+    fn count(&self) -> usize {
+        usize::try_from(self.sampling.range.answered()).unwrap_or(usize::MAX)
+    }
+
+    fn bound(&self) -> u64 {
+        self.bound
+    }
+
+    fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>, cancel: &Cancel) {
+        for i in range {
+            if !cancel.proceed() {
+                return;
+            }
+            if i > 0 {
+                out.push(b',');
+            }
+            self.write_one(out, i);
+        }
+    }
+}
+
 /// A motion's poses at a request's times, in order (root motion runs from
 /// each pose to the next).
 struct MotionPoses {
@@ -194,12 +333,23 @@ struct MotionPoses {
     bound: u64,
     sampler: MotionSampler,
     matrices: Vec<Mat4>,
+    /// The motion's `,"warnings":[…]` after the poses (a samples answer)…
+    trailer: Vec<u8>,
+    /// …or in the pose (a single pose's answer).
+    pose_tail: Vec<u8>,
 }
 
 impl MotionPoses {
     fn new(composed: Composed, times: Vec<f64>, space: Space, format: Format, bound: u64) -> MotionPoses {
         let (sampler, matrices) = (MotionSampler::new(), Vec::new());
-        MotionPoses { composed, times, space, format, bound, sampler, matrices }
+        let trailer = composed.warnings.clone();
+        MotionPoses { composed, times, space, format, bound, sampler, matrices, trailer, pose_tail: Vec::new() }
+    }
+
+    /// Puts the warnings in the pose (a single pose's answer) rather than
+    /// after the poses.
+    fn warn_in_the_pose(&mut self) {
+        self.pose_tail = std::mem::take(&mut self.trailer);
     }
 
     /// Appends pose `k`.
@@ -217,6 +367,7 @@ impl MotionPoses {
                 self.sampler.pose(),
                 self.composed.parameters.as_deref(),
             ),
+            tail: &self.pose_tail,
         };
         let (clip, skeleton) = (self.composed.clip_id(), motion.skeleton());
         match self.format {
@@ -246,6 +397,10 @@ impl PoseWriter for MotionPoses {
 
     fn bound(&self) -> u64 {
         self.bound
+    }
+
+    fn trailer(&self) -> &[u8] {
+        &self.trailer
     }
 
     fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>, cancel: &Cancel) {

@@ -97,6 +97,8 @@ fn problem_response(description: &str) -> RefOr<Response> {
         (name = "clips", description = "Store and fetch keyframe clips (the document: `docs/clip-format.md`)"),
         (name = "poses", description = "Evaluate poses of a clip (`docs/clip-format.md`, the pose: its §4) or of a composed motion (`docs/motion.md`)"),
         (name = "streams", description = "Fixed-rate frames over a WebSocket (`docs/api.md`, \"Streams\"; motions: `docs/motion.md`, \"Streams\")"),
+        (name = "characters", description = "Skeletons with humanoid roles, to play any take on (`docs/characters.md`)"),
+        (name = "graphs", description = "Animation graphs: parameters, blend spaces and state machines, stored and versioned (`docs/graphs.md`)"),
         (name = "broadcasts", description = "One shared playback, many viewers (`docs/broadcasts.md`)"),
         (name = "operations", description = "Health and metrics"),
         (name = "viewer", description = "The browser viewer page"),

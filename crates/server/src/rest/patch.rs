@@ -117,7 +117,7 @@ async fn patch_once(
         return Ok(Some(with_etag(&stored.meta, StatusCode::OK, None)));
     }
     let merged = serde_json::to_vec(&doc).map_err(ApiError::internal)?;
-    let Admitted { mut new_clip, clip, .. } = admit_body(state, caller, merged.into()).await?;
+    let Admitted { mut new_clip, clip, springs, .. } = admit_body(state, caller, merged.into()).await?;
     // A patch cannot touch the skeleton: the mesh bound to it stays.
     new_clip.mesh = MeshWrite::Keep;
     if new_clip.doc_json == stored.doc_json {
@@ -128,7 +128,7 @@ async fn patch_once(
         Ok(meta) => {
             tracing::info!(id = %meta.id, version = meta.version, "clip patched");
             let response = with_etag(&meta, StatusCode::OK, None);
-            state.cache_written(Arc::new(CachedClip { meta, clip }));
+            state.cache_written(Arc::new(CachedClip { meta, clip, springs }));
             Ok(Some(response))
         }
         // Another write landed since the read: patch that version instead.

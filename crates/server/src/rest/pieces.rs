@@ -34,6 +34,10 @@ pub trait PoseWriter: Send + 'static {
     /// (a comma before each but pose 0). Called in order. Stops early
     /// (leaving the output unfinished) once `cancel` is raised.
     fn write(&mut self, out: &mut Vec<u8>, range: Range<usize>, cancel: &Cancel);
+    /// JSON members after `"poses"` (a composed answer's `,"warnings":[…]`).
+    fn trailer(&self) -> &[u8] {
+        &[]
+    }
 }
 
 /// A whole `{"poses":[…]}` document from `writer`, on the calling thread.
@@ -42,7 +46,9 @@ pub fn whole(writer: &mut dyn PoseWriter, cancel: &Cancel) -> Vec<u8> {
     body.extend_from_slice(b"{\"poses\":[");
     let n = writer.count();
     writer.write(&mut body, 0..n, cancel);
-    body.extend_from_slice(b"]}");
+    body.extend_from_slice(b"]");
+    body.extend_from_slice(writer.trailer());
+    body.extend_from_slice(b"}");
     body
 }
 
@@ -80,9 +86,12 @@ impl Pieces {
             if range.start == 0 {
                 out.extend_from_slice(b"{\"poses\":[");
             }
-            lock(&job).write(&mut out, range.clone(), cancel);
+            let mut job = lock(&job);
+            job.write(&mut out, range.clone(), cancel);
             if range.end == n {
-                out.extend_from_slice(b"]}");
+                out.extend_from_slice(b"]");
+                out.extend_from_slice(job.trailer());
+                out.extend_from_slice(b"}");
             }
             (out, range.len())
         };

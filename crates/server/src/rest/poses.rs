@@ -67,7 +67,7 @@ fn write_pose(
         let clip_time = evaluate(clip, t, options, format, sampler, matrices);
         let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), subsets.parameters.as_deref());
         let joints = subsets.joints.as_deref();
-        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters };
+        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters, tail: &[] };
         match format {
             Format::Trs => {
                 let pose = PoseJson {
@@ -131,7 +131,7 @@ pub async fn get_pose(
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
-    let (req, cached) = raw.resolve_compressed(&state, &id, Wire::Json, coding).await?;
+    let (req, cached) = raw.resolve(&state, &id, Wire::Json, coding).await?;
     let list = |name: &str| -> Option<Vec<&str>> {
         q.raw(name).map(|raw| match raw {
             Raw::Text(text) => text.split(',').collect(),
@@ -233,7 +233,7 @@ pub async fn sample(
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
-    let (sampling, cached) = req.raw().resolve_compressed(&state, &id, Wire::Json, coding).await?;
+    let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json, coding).await?;
     let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;
     let parameters = (req.parameters.as_deref())
         .map(|names| parameter_subset(cached.clip.parameters(), names, in_body))

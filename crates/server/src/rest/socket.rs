@@ -115,7 +115,7 @@ impl FrameSocket for StreamSocket {
     async fn send_frame(&mut self, encoding: Encoding, bytes: Bytes) -> Result<(), ts::Error> {
         let opcode = match encoding {
             Encoding::Json => OP_TEXT,
-            Encoding::Protobuf => OP_BINARY,
+            Encoding::Protobuf | Encoding::Compact => OP_BINARY,
         };
         self.ws.get_mut().push_frame(opcode, bytes);
         // Written out and flushed (TLS keeps records until flushed), as a

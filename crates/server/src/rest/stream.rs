@@ -6,7 +6,8 @@
 //! upgrade, so a bad request is an ordinary 4xx problem. The motion route
 //! upgrades first (a browser cannot send a body with the handshake) and
 //! answers a bad `open` with `{"error": problem}` and close 1008; a good one
-//! with `{"opened":{"grid_phase_ms","clip","joints"}}` before the frames. A request over the stream caps is
+//! with `{"opened":{"grid_phase_ms","clip","joints"}}` before the frames (the clip
+//! route too when its frames are compact, with the layout under `compact`). A request over the stream caps is
 //! upgraded and then closed at once with code 1013 ("try again later") and
 //! the reason, because a browser's WebSocket API cannot read the body of a
 //! refused handshake. After the upgrade, `crate::stream::ws::serve` owns the
@@ -72,7 +73,9 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("playback" = Option<String>, Query, pattern = "^(once|loop|ping_pong)$", description = "once | loop | ping_pong (default: the clip's)"),
         ("space" = Option<String>, Query, pattern = "^(local|model)$", description = "local (default) | model"),
         ("ease" = Option<String>, Query, pattern = "^(linear|ease_in|ease_out|ease_in_out)$", description = "linear (default) | ease_in | ease_out | ease_in_out"),
-        ("encoding" = Option<String>, Query, pattern = "^(json|protobuf)$", description = "json (default, text frames) | protobuf (binary `Frame`)"),
+        ("encoding" = Option<String>, Query, pattern = "^(json|protobuf|compact)$", description = "json (default, text frames) | protobuf (binary `Frame`) | compact (binary compact frames, docs/compact-frames.md; the first message is `{\"opened\":{…,\"compact\":layout}}`)"),
+        ("max_error" = Option<f64>, Query, description = "Compact frames: the error bound in metres, at least 1e-6 (default 1e-4)"),
+        ("distance" = Option<f64>, Query, description = "Compact frames: the distance of the checked points along each joint's axes, metres, at least 0.01 (default 10 % of the rest height)"),
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
         ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): frames carry only those parameters, in the clip's order"),
@@ -81,7 +84,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
         (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, `too_much_work` (the price per second of playback over `max_request_work`), `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, compact frames' `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported`, `too_much_work` (the price per second of playback over `max_request_work`), `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
         (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
         (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`)", body = super::schemas::Problem),
     ),
@@ -110,6 +113,8 @@ pub async fn stream(
         speed: q.raw("speed"),
         modes: q.modes(),
         encoding: q.raw("encoding"),
+        max_error: q.raw("max_error"),
+        distance: q.raw("distance"),
         max_frames: q.raw("max_frames"),
         paused: false,
         joints: joints.as_deref(),
@@ -129,6 +134,13 @@ pub async fn stream(
     let motions = resolver_for(&state, caller.key());
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {
+            // A compact stream states its layout first (docs/compact-frames.md).
+            Ok(sub) if sub.params().compact.is_some() => {
+                let mut socket = socket;
+                if socket.send(Message::Text(opened_message(&sub).to_string().into())).await.is_ok() {
+                    serve(socket, sub, motions).await;
+                }
+            }
             Ok(sub) => serve(socket, sub, motions).await,
             Err(refused) => refuse(socket, close::TRY_AGAIN_LATER, refused.to_string()).await,
         }
@@ -143,7 +155,7 @@ pub async fn stream(
 #[utoipa::path(
     get, path = "/v1/stream", tag = "streams",
     responses(
-        (status = 101, description = "Switching to WebSocket. The client's first text message is a `StreamOpen` (the fields of the clip stream's query, but `playback`, which each layer has); the server answers `{\"opened\":{\"grid_phase_ms\",\"clip\",\"joints\"}}` and frames follow, or `{\"error\":problem}` (pointers into the message: `/motion/layers/1/clip`) and close 1008. Controls as on the clip stream."),
+        (status = 101, description = "Switching to WebSocket. The client's first text message is a `StreamOpen` (the fields of the clip stream's query, but `playback`, which each layer has); the server answers `{\"opened\":{\"grid_phase_ms\",\"clip\",\"joints\",\"warnings\"?}}` (`warnings` when a layer has joints the output skeleton lacks) and frames follow, or `{\"error\":problem}` (pointers into the message: `/motion/layers/1/clip`) and close 1008. Controls as on the clip stream."),
         (status = 400, description = "Not a WebSocket upgrade (`websocket_upgrade_required`)", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
@@ -167,11 +179,11 @@ pub async fn motion_stream(
         };
         match opened {
             Ok(Ok(sub)) => {
-                let hello = serde_json::json!({"opened": {
-                    "grid_phase_ms": sub.grid().phase_ms,
-                    "clip": &*sub.params().clip_id,
-                    "joints": sub.params().joint_names(),
-                }});
+                let mut hello = opened_message(&sub);
+                let warnings = crate::request::warnings(&sub.params().motion, "/motion");
+                if !warnings.is_empty() {
+                    hello["opened"]["warnings"] = warnings.into();
+                }
                 if socket.send(Message::Text(hello.to_string().into())).await.is_ok() {
                     serve(socket, sub, resolver_for(&state, caller.key())).await;
                 }
@@ -184,6 +196,21 @@ pub async fn motion_stream(
             }
         }
     }))
+}
+
+/// `{"opened":{"grid_phase_ms","clip","joints","compact"?}}`: what a stream
+/// plays, and a compact stream's layout document.
+pub(super) fn opened_message(sub: &Subscription) -> serde_json::Value {
+    let mut hello = serde_json::json!({"opened": {
+        "grid_phase_ms": sub.grid().phase_ms,
+        "clip": &*sub.params().clip_id,
+        "joints": sub.params().joint_names(),
+    }});
+    if let Some(compact) = &sub.params().compact {
+        let layout: serde_json::Value = serde_json::from_str(&compact.document).expect("a layout document is JSON");
+        hello["opened"]["compact"] = layout;
+    }
+    hello
 }
 
 /// The first message of `GET /v1/stream`: what to play and how.
@@ -205,8 +232,12 @@ pub struct StreamOpen {
     space: Option<String>,
     /// Applied to every layer's clip time: `linear` (default), `ease_in`, `ease_out`, `ease_in_out`.
     ease: Option<String>,
-    /// `json` (default, text frames) or `protobuf` (binary `Frame`s).
+    /// `json` (default, text frames), `protobuf` (binary `Frame`s) or `compact` (docs/compact-frames.md).
     encoding: Option<String>,
+    /// Compact frames: the error bound, metres (default 1e-4, at least 1e-6).
+    max_error: Option<f64>,
+    /// Compact frames: the distance of the checked points, metres (default 10 % of the rest height).
+    distance: Option<f64>,
     /// End after this many frames (close 1000).
     max_frames: Option<f64>,
     /// Only these joints in every frame, in skeleton order (default: all).
@@ -254,13 +285,15 @@ async fn open(
             ease: msg.ease.as_deref().map(Raw::Text),
         },
         encoding: msg.encoding.as_deref().map(Raw::Text),
+        max_error: msg.max_error.map(Raw::Number),
+        distance: msg.distance.map(Raw::Number),
         max_frames: msg.max_frames.map(Raw::Number),
         paused: msg.paused,
         joints: msg.joints.as_deref(),
         parameters: msg.parameters.as_deref(),
         at: in_body,
     };
-    let admitted = raw.open_motion(state, RawMotion::of(msg.motion.to_spec("/motion")?), caller).await?;
+    let admitted = raw.open_motion(state, RawMotion::of_doc(&msg.motion)?, caller).await?;
     let engine = &state.streams;
     Ok(admitted.map(
         |Opening { params, permit }| {

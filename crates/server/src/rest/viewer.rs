@@ -54,26 +54,34 @@ const SCRIPT: Asset = asset!("viewer/viewer.js", "text/javascript; charset=utf-8
 /// The page's files other than the page itself, by path. The scripts are
 /// ES modules importing each other (`viewer.js` lists them); their unit
 /// tests (`viewer/tests/`) and `viewer/package.json` are not served.
-const FILES: [(&str, &Asset); 20] = [
+const FILES: [(&str, &Asset); 28] = [
     ("/viewer/viewer.js", &SCRIPT),
     ("/viewer/viewer.css", &STYLE),
     ("/viewer/panel.css", &PANEL_STYLE),
     module!("math.js"),
     module!("dom.js"),
     module!("events.js"),
+    module!("status.js"), // what the header and status line say
     module!("state.js"),
+    module!("render.js"), // the one animation-frame loop
     module!("api.js"),
     module!("settings.js"),
     module!("pose.js"),
     module!("scene.js"),
-    module!("mesh.js"), // the clip's skinned mesh
+    module!("mesh.js"), // the clip's or character's skinned mesh
     module!("curves.js"),
     module!("player.js"),
     module!("controls.js"),
     module!("clips.js"),
+    module!("thumbs.js"),  // a pose thumbnail per clip version
+    module!("library.js"), // the clip list's rows and their actions
     module!("upload.js"),
     module!("composition.js"),
     module!("panel.js"),     // composition and IK handles
+    module!("character.js"), // the character the motion plays on
+    module!("graph.js"),     // the graph played and its parameters
+    module!("springs.js"),   // spring chains on the motion
+    module!("compact.js"), // compact frames: a link to the JavaScript client's decoder, examples/clients/js/compact.mjs
     module!("broadcast.js"), // creating and watching broadcasts
 ];
 

@@ -40,7 +40,7 @@ pub trait Dialect: Database {
     /// Whether a failure is worth a retry, and whether the statement may have run.
     fn classify(e: &sqlx::Error) -> Transience;
 
-    /// Whether `e` is the clips primary-key conflict.
+    /// Whether `e` is the primary-key conflict of clips, characters or graphs (ids a write chose).
     fn is_clip_id_conflict(e: &sqlx::Error) -> bool;
 
     fn rows_affected(done: &Self::QueryResult) -> u64;

@@ -16,8 +16,9 @@
 
 use sqlx::{Encode, QueryBuilder, Type};
 
-use super::ListQuery;
 use super::dialect::Dialect;
+use super::document::DocQuery;
+use super::{ListQuery, NameFilters};
 
 /// `SELECT <columns> FROM clips c WHERE <filters> ORDER BY id LIMIT n`.
 /// `reference_joints` is the joint count of `q.compatible_with`'s clip
@@ -31,21 +32,7 @@ where
     for<'t> i64: Encode<'t, DB> + Type<DB>,
 {
     let mut qb = QueryBuilder::new(format!("SELECT {columns} FROM clips c WHERE TRUE"));
-    if let Some(after) = &q.after {
-        qb.push(" AND c.id > ").push_bind(after.clone());
-    }
-    if let Some(name) = &q.name {
-        qb.push(" AND c.name = ").push_bind(name.clone());
-    }
-    if let Some(prefix) = &q.name_prefix {
-        qb.push(format_args!(" AND {} >= ", DB::BYTEWISE_NAME)).push_bind(prefix.clone());
-        if let Some(end) = prefix_end(prefix) {
-            qb.push(format_args!(" AND {} < ", DB::BYTEWISE_NAME)).push_bind(end);
-        }
-    }
-    if let Some(part) = &q.name_contains {
-        qb.push(format_args!(" AND {}(c.name, ", DB::POSITION_FN)).push_bind(part.clone()).push(") > 0");
-    }
+    push_names(&mut qb, &q.names());
     if let Some(tag) = &q.tag {
         qb.push(" AND c.id IN (SELECT t.clip_id FROM clip_tags t WHERE t.tag = ").push_bind(tag.clone()).push(")");
     }
@@ -63,6 +50,46 @@ where
     }
     qb.push(" ORDER BY c.id LIMIT ").push_bind(i64::from(q.limit));
     qb
+}
+
+/// `<select> WHERE <filters> ORDER BY id LIMIT n` over a table of
+/// documents aliased `c` (`store::sql_document`): the name filters as the
+/// clip list has them, on its `<table>_by_name` index.
+pub(crate) fn document_query<DB>(select: &str, q: &DocQuery) -> QueryBuilder<DB>
+where
+    DB: Dialect,
+    DB::Arguments: Default,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+{
+    let mut qb = QueryBuilder::new(format!("{select} WHERE TRUE"));
+    push_names(&mut qb, &q.names);
+    qb.push(" ORDER BY c.id LIMIT ").push_bind(i64::from(q.limit));
+    qb
+}
+
+/// The cursor and name filters of a list over a table aliased `c`.
+fn push_names<DB>(qb: &mut QueryBuilder<DB>, q: &NameFilters)
+where
+    DB: Dialect,
+    DB::Arguments: Default,
+    for<'t> String: Encode<'t, DB> + Type<DB>,
+{
+    if let Some(after) = &q.after {
+        qb.push(" AND c.id > ").push_bind(after.clone());
+    }
+    if let Some(name) = &q.name {
+        qb.push(" AND c.name = ").push_bind(name.clone());
+    }
+    if let Some(prefix) = &q.name_prefix {
+        qb.push(format_args!(" AND {} >= ", DB::BYTEWISE_NAME)).push_bind(prefix.clone());
+        if let Some(end) = prefix_end(prefix) {
+            qb.push(format_args!(" AND {} < ", DB::BYTEWISE_NAME)).push_bind(end);
+        }
+    }
+    if let Some(part) = &q.name_contains {
+        qb.push(format_args!(" AND {}(c.name, ", DB::POSITION_FN)).push_bind(part.clone()).push(") > 0");
+    }
 }
 
 /// The least string above every string that starts with `prefix`, in

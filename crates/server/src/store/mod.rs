@@ -31,15 +31,21 @@ use futures_util::future::BoxFuture;
 use anim::Playback;
 
 pub mod broadcast;
+pub mod character;
 pub mod dialect;
+pub mod document;
 pub mod feed;
 mod filter;
 pub mod postgres;
 mod retry;
 pub mod sql;
+mod sql_character;
+mod sql_document;
 pub mod sqlite;
 
 pub use broadcast::{StoredBroadcast, StoredCheckpoint, StoredControl};
+pub use character::{CharacterMeta, CharacterQuery, NewCharacter, StoredCharacter};
+pub use document::{DocKind, DocMeta, DocQuery, NewDoc, StoredDoc, name_reference};
 pub use retry::{RetryPolicy, Transience};
 
 /// Whether the store insists on durable commits.
@@ -172,6 +178,33 @@ pub struct ListQuery {
     pub limit: u32,
 }
 
+impl ListQuery {
+    /// The cursor and name filters, which every list of named rows has.
+    pub fn names(&self) -> NameFilters {
+        NameFilters {
+            after: self.after.clone(),
+            name: self.name.clone(),
+            name_prefix: self.name_prefix.clone(),
+            name_contains: self.name_contains.clone(),
+        }
+    }
+}
+
+/// The cursor and name filters of a list (clips, characters).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NameFilters {
+    pub after: Option<String>,
+    /// Exactly this name.
+    pub name: Option<String>,
+    /// Names starting with this (case-sensitive; an index range).
+    pub name_prefix: Option<String>,
+    /// Names containing this (case-sensitive).
+    pub name_contains: Option<String>,
+}
+
+/// What a glTF import wrote: its clips and the characters of its skins.
+pub type ImportWritten = (Vec<ClipMeta>, Vec<CharacterMeta>);
+
 /// What a create does when a clip already has the new clip's name (names
 /// identify clips: docs/api.md, "Names").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -192,12 +225,12 @@ pub enum StoreError {
     #[error("the clip is at version {current}")]
     VersionMismatch { current: u64 },
     /// A create or rename to a name another clip has.
-    #[error("a clip named {name:?} exists ({id})")]
-    NameTaken { name: String, id: String },
+    #[error("a {what} named {name:?} exists ({id})")]
+    NameTaken { name: String, id: String, what: &'static str },
     /// A replace by name when several clips (stored before names were
     /// unique) share it: which one is meant cannot be told.
-    #[error("several clips are named {name:?}")]
-    AmbiguousName { name: String, ids: Vec<String> },
+    #[error("several {what}s are named {name:?}")]
+    AmbiguousName { name: String, ids: Vec<String>, what: &'static str },
     #[error("the store is unavailable")]
     Unavailable(#[source] Box<dyn std::error::Error + Send + Sync>),
     #[error("the store failed")]
@@ -252,6 +285,132 @@ pub trait ClipStore: Send + Sync + 'static {
 
     /// The clip's mesh, or `None` (no such clip, or no mesh).
     fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>>;
+
+    /// Inserts new documents of `kind` at version 1, or (`on_name`:
+    /// [`OnName::Replace`]) replaces those holding their names, all in one
+    /// transaction. Durable on `Ok`.
+    ///
+    /// # Errors
+    /// As [`ClipStore::create`].
+    fn create_docs(
+        &self,
+        kind: DocKind,
+        docs: Vec<NewDoc>,
+        on_name: OnName,
+    ) -> BoxFuture<'_, Result<Vec<DocMeta>, StoreError>>;
+
+    /// The document of `kind` and its text, or `None`.
+    fn doc<'a>(&'a self, kind: DocKind, id: &'a str) -> BoxFuture<'a, Result<Option<StoredDoc>, StoreError>>;
+
+    /// The document of `kind` that `reference` names: `name:<name>` by its
+    /// name, else by id; `None` when none does.
+    ///
+    /// # Errors
+    /// [`StoreError::AmbiguousName`] when several share the name (which the
+    /// name rule prevents, but a store is trusted no further than its
+    /// schema), or a backend failure.
+    fn doc_by_ref<'a>(
+        &'a self,
+        kind: DocKind,
+        reference: &'a str,
+    ) -> BoxFuture<'a, Result<Option<StoredDoc>, StoreError>>;
+
+    /// One page of documents of `kind` (without their text), at most `query.limit`.
+    fn list_docs(&self, kind: DocKind, query: DocQuery) -> BoxFuture<'_, Result<Vec<DocMeta>, StoreError>>;
+
+    /// Replaces a document (and a character's mesh, as `doc.mesh` says)
+    /// and bumps its version; with `expected_version`, only at that version.
+    ///
+    /// # Errors
+    /// As [`ClipStore::replace`].
+    fn replace_doc<'a>(
+        &'a self,
+        kind: DocKind,
+        id: &'a str,
+        doc: NewDoc,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<DocMeta, StoreError>>;
+
+    /// Deletes a document (with its mesh); with `expected_version`, only at that version.
+    ///
+    /// # Errors
+    /// As [`ClipStore::delete`].
+    fn delete_doc<'a>(
+        &'a self,
+        kind: DocKind,
+        id: &'a str,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<(), StoreError>>;
+
+    /// [`ClipStore::create_docs`] of characters.
+    fn create_characters(
+        &self,
+        characters: Vec<NewCharacter>,
+        on_name: OnName,
+    ) -> BoxFuture<'_, Result<Vec<CharacterMeta>, StoreError>> {
+        let docs = characters.into_iter().map(NewDoc::from).collect();
+        let created = self.create_docs(DocKind::Character, docs, on_name);
+        Box::pin(async move { Ok(created.await?.into_iter().map(Into::into).collect()) })
+    }
+
+    /// [`ClipStore::create_all`] for a file's clips with the characters of
+    /// its skins, in one transaction under one name rule (a glTF import).
+    ///
+    /// # Errors
+    /// As [`ClipStore::create`].
+    fn create_clips_and_characters(
+        &self,
+        clips: Vec<NewClip>,
+        characters: Vec<NewCharacter>,
+        on_name: OnName,
+    ) -> BoxFuture<'_, Result<ImportWritten, StoreError>>;
+
+    /// [`ClipStore::doc`] of a character.
+    fn character<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredCharacter>, StoreError>> {
+        let read = self.doc(DocKind::Character, id);
+        Box::pin(async move { Ok(read.await?.map(Into::into)) })
+    }
+
+    /// [`ClipStore::doc_by_ref`] of a character.
+    fn character_by_ref<'a>(
+        &'a self,
+        reference: &'a str,
+    ) -> BoxFuture<'a, Result<Option<StoredCharacter>, StoreError>> {
+        let read = self.doc_by_ref(DocKind::Character, reference);
+        Box::pin(async move { Ok(read.await?.map(Into::into)) })
+    }
+
+    /// [`ClipStore::list_docs`] of characters.
+    fn list_characters(&self, query: CharacterQuery) -> BoxFuture<'_, Result<Vec<CharacterMeta>, StoreError>> {
+        let listed = self.list_docs(DocKind::Character, query);
+        Box::pin(async move { Ok(listed.await?.into_iter().map(Into::into).collect()) })
+    }
+
+    /// [`ClipStore::replace_doc`] of a character.
+    fn replace_character<'a>(
+        &'a self,
+        id: &'a str,
+        character: NewCharacter,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<CharacterMeta, StoreError>> {
+        let replaced = self.replace_doc(DocKind::Character, id, character.into(), expected_version);
+        Box::pin(async move { Ok(replaced.await?.into()) })
+    }
+
+    /// [`ClipStore::delete_doc`] of a character.
+    fn delete_character<'a>(
+        &'a self,
+        id: &'a str,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<(), StoreError>> {
+        self.delete_doc(DocKind::Character, id, expected_version)
+    }
+
+    /// As [`ClipStore::mesh_tag`], for a character.
+    fn character_mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>>;
+
+    /// As [`ClipStore::mesh`], for a character.
+    fn character_mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>>;
 
     /// Stores a new broadcast (`broadcast.controls` empty). Durable on `Ok`.
     fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>>;

@@ -83,7 +83,7 @@ impl Dialect for Postgres {
     }
 
     fn is_clip_id_conflict(e: &sqlx::Error) -> bool {
-        matches!(e, sqlx::Error::Database(db) if db.constraint() == Some("clips_pkey"))
+        matches!(e, sqlx::Error::Database(db) if matches!(db.constraint(), Some("clips_pkey" | "characters_pkey" | "graphs_pkey")))
     }
 
     fn rows_affected(done: &PgQueryResult) -> u64 {

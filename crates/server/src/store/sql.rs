@@ -30,8 +30,9 @@ use super::dialect::Dialect;
 use super::filter::list_query;
 use super::retry::{Retry, RetryPolicy, Transience, with_retry};
 use super::{
-    ClipMeta, ClipStore, ListQuery, MeshWrite, NewClip, OnName, PoolSettings, StoreError, StoredBroadcast,
-    StoredCheckpoint, StoredClip, StoredControl, StoredMesh, meta_from_row, new_clip_id, now_millis,
+    ClipMeta, ClipStore, DocKind, DocMeta, DocQuery, ImportWritten, ListQuery, MeshWrite, NewCharacter, NewClip,
+    NewDoc, OnName, PoolSettings, StoreError, StoredBroadcast, StoredCheckpoint, StoredClip, StoredControl, StoredDoc,
+    StoredMesh, meta_from_row, new_clip_id, now_millis,
 };
 
 /// The row columns of [`ClipMeta`], as a literal so queries stay `&'static str`.
@@ -52,15 +53,22 @@ const REPLACE_CLIP: &str = concat!(
     "WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2) RETURNING ",
     meta_columns!()
 );
-/// The clips holding a name (at most a few: more say nothing more).
-const NAMED: &str = "SELECT id FROM clips WHERE name = $1 ORDER BY id LIMIT 8";
-const NAME_OF: &str = "SELECT name FROM clips WHERE id = $1";
 const DELETE_CLIP: &str = "DELETE FROM clips WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)";
-const CLIP_VERSION: &str = "SELECT version FROM clips WHERE id = $1";
+/// The name checks of clips.
+const CLIPS: Named = Named {
+    what: "clip",
+    holders: "SELECT id FROM clips WHERE name = $1 ORDER BY id LIMIT 8",
+    name_of: "SELECT name FROM clips WHERE id = $1",
+    version_of: "SELECT version FROM clips WHERE id = $1",
+};
 const CLIP_JOINTS: &str = "SELECT joints FROM clips WHERE id = $1";
-const MESH_TAG: &str = "SELECT m.etag FROM clips c LEFT JOIN clip_meshes m ON m.clip_id = c.id WHERE c.id = $1";
-const MESH: &str = "SELECT etag, bytes FROM clip_meshes WHERE clip_id = $1";
-const INSERT_MESH: &str = "INSERT INTO clip_meshes (clip_id, etag, bytes) VALUES ($1, $2, $3)";
+/// The clips' meshes.
+const CLIP_MESHES: Meshes = Meshes {
+    tag: "SELECT m.etag FROM clips c LEFT JOIN clip_meshes m ON m.clip_id = c.id WHERE c.id = $1",
+    get: "SELECT etag, bytes FROM clip_meshes WHERE clip_id = $1",
+    insert: "INSERT INTO clip_meshes (clip_id, etag, bytes) VALUES ($1, $2, $3)",
+    delete: "DELETE FROM clip_meshes WHERE clip_id = $1",
+};
 
 const INSERT_BROADCAST: &str = "INSERT INTO broadcasts (id, definition, created_at, active_at) VALUES ($1, $2, $3, $4)";
 const INSERT_CONTROL: &str = "INSERT INTO broadcast_controls (id, broadcast_id, seq, control) SELECT $1, $2, $3, $4 \
@@ -77,6 +85,75 @@ const PUT_CHECKPOINT: &str = "INSERT INTO broadcast_checkpoints (broadcast_id, s
 const FORGET_CHECKPOINTS: &str = "DELETE FROM broadcast_checkpoints WHERE broadcast_id = $1 AND seq < $2";
 const NEWEST_CHECKPOINT: &str =
     "SELECT seq, state FROM broadcast_checkpoints WHERE broadcast_id = $1 ORDER BY seq DESC LIMIT 1";
+
+/// The statements that check names in a table of named, versioned rows
+/// (clips, characters): names identify rows the same way in each.
+pub(super) struct Named {
+    /// What a row is, in refusals (`clip`, `character`).
+    pub what: &'static str,
+    /// `$1` a name: the ids holding it (at most a few: more say nothing more).
+    pub holders: &'static str,
+    /// `$1` an id: its name.
+    pub name_of: &'static str,
+    /// `$1` an id: its version.
+    pub version_of: &'static str,
+}
+
+/// The statements of a table of skinned meshes kept one per row of another
+/// (clips, characters), written in that row's transaction.
+pub(super) struct Meshes {
+    /// `$1` an owner id: the mesh's tag, NULL without a mesh, no row without the owner.
+    pub tag: &'static str,
+    /// `$1` an owner id: `etag, bytes`.
+    pub get: &'static str,
+    /// `$1` an owner id, `$2` the tag, `$3` the bytes.
+    pub insert: &'static str,
+    /// `$1` an owner id.
+    pub delete: &'static str,
+}
+
+/// What a named write did in its transaction.
+pub(super) enum Written<T> {
+    Done(T),
+    /// An earlier attempt of this very write committed (its own id holds the name).
+    Ours,
+    Refused(StoreError),
+}
+
+impl<T> Written<T> {
+    pub(super) fn map<U>(self, f: impl FnOnce(T) -> U) -> Written<U> {
+        match self {
+            Written::Done(done) => Written::Done(f(done)),
+            Written::Ours => Written::Ours,
+            Written::Refused(refused) => Written::Refused(refused),
+        }
+    }
+}
+
+/// What a create does with a name, given the ids holding it.
+pub(super) enum NameCheck {
+    /// No row has it: insert.
+    Free,
+    /// Our own id has it: an earlier attempt of this write committed.
+    Ours,
+    /// Make the write a new version of this row.
+    Replace(String),
+    Refused(StoreError),
+}
+
+impl NameCheck {
+    /// The one rule of names (docs/api.md, "Names"), for every table.
+    pub(super) fn of(table: &Named, holders: &[String], own_id: &str, name: &str, on_name: OnName) -> NameCheck {
+        let (name, what) = (name.to_owned(), table.what);
+        match (holders, on_name) {
+            ([], _) => NameCheck::Free,
+            (ids, _) if ids.iter().any(|id| id == own_id) => NameCheck::Ours,
+            ([id], OnName::Replace) => NameCheck::Replace(id.clone()),
+            ([id, ..], OnName::Refuse) => NameCheck::Refused(StoreError::NameTaken { name, id: id.clone(), what }),
+            (ids, _) => NameCheck::Refused(StoreError::AmbiguousName { name, ids: ids.to_vec(), what }),
+        }
+    }
+}
 
 /// A [`ClipStore`] on a sqlx pool of either backend
 /// ([`super::sqlite::SqliteStore`], [`super::postgres::PgStore`]).
@@ -136,7 +213,11 @@ impl<DB: Dialect> SqlStore<DB> {
 }
 
 /// Records an operation's duration and maps its error.
-fn timed<DB: Dialect, T>(op: &'static str, started: Instant, r: Result<T, sqlx::Error>) -> Result<T, StoreError> {
+pub(super) fn timed<DB: Dialect, T>(
+    op: &'static str,
+    started: Instant,
+    r: Result<T, sqlx::Error>,
+) -> Result<T, StoreError> {
     metrics::histogram!("inbetween_store_operation_duration_seconds", "op" => op)
         .record(started.elapsed().as_secs_f64());
     r.map_err(to_store_error::<DB>)
@@ -152,11 +233,11 @@ fn to_store_error<DB: Dialect>(e: sqlx::Error) -> StoreError {
 
 /// Whether `e` is the primary-key conflict of an insert whose earlier
 /// attempt committed (then the row is ours).
-fn is_own_duplicate<DB: Dialect>(e: &sqlx::Error, attempt: u32) -> bool {
+pub(super) fn is_own_duplicate<DB: Dialect>(e: &sqlx::Error, attempt: u32) -> bool {
     attempt > 0 && DB::is_clip_id_conflict(e)
 }
 
-fn new_meta(clip: &NewClip, now: i64) -> ClipMeta {
+pub(super) fn new_meta(clip: &NewClip, now: i64) -> ClipMeta {
     ClipMeta {
         id: new_clip_id(),
         name: clip.name.clone(),
@@ -189,7 +270,7 @@ where
     &'static str: ColumnIndex<DB::Row>,
     usize: ColumnIndex<DB::Row>,
 {
-    async fn run<T, F, Fut>(&self, op: &'static str, mode: Retry, attempt: F) -> Result<T, StoreError>
+    pub(super) async fn run<T, F, Fut>(&self, op: &'static str, mode: Retry, attempt: F) -> Result<T, StoreError>
     where
         F: FnMut(u32) -> Fut,
         Fut: Future<Output = Result<T, sqlx::Error>>,
@@ -227,71 +308,117 @@ where
         }
         sqlx::query(DB::INSERT_TAGS).bind(id).bind(DB::string_list(&clip.tags)).execute(&mut *db).await?;
         sqlx::query(DB::INSERT_JOINTS).bind(id).bind(DB::string_list(&clip.joint_names)).execute(&mut *db).await?;
-        Self::write_mesh(db, id, &clip.mesh, replace).await
+        Self::write_mesh(db, &CLIP_MESHES, id, &clip.mesh, replace).await
     }
 
     /// The clip's `clip_meshes` row as [`MeshWrite`] says.
-    async fn write_mesh(db: &mut DB::Connection, id: &str, mesh: &MeshWrite, replace: bool) -> Result<(), sqlx::Error> {
+    pub(super) async fn write_mesh(
+        db: &mut DB::Connection,
+        table: &Meshes,
+        id: &str,
+        mesh: &MeshWrite,
+        replace: bool,
+    ) -> Result<(), sqlx::Error> {
         if *mesh == MeshWrite::Keep {
             return Ok(());
         }
         if replace {
-            sqlx::query("DELETE FROM clip_meshes WHERE clip_id = $1").bind(id).execute(&mut *db).await?;
+            sqlx::query(table.delete).bind(id).execute(&mut *db).await?;
         }
         if let MeshWrite::Set(m) = mesh {
-            sqlx::query(INSERT_MESH).bind(id).bind(&m.etag).bind(m.bytes.as_ref()).execute(&mut *db).await?;
+            sqlx::query(table.insert).bind(id).bind(&m.etag).bind(m.bytes.as_ref()).execute(&mut *db).await?;
         }
         Ok(())
     }
 
-    /// The ids of the clips named `name` (in the caller's transaction, after
-    /// taking the name's lock, so no other write of it can slip in between).
-    async fn holders(db: &mut DB::Connection, name: &str) -> Result<Vec<String>, sqlx::Error> {
+    /// The tag of row `id`'s mesh: `None` without the row, `Some(None)` without a mesh.
+    pub(super) async fn read_mesh_tag(&self, table: &Meshes, id: &str) -> Result<Option<Option<String>>, StoreError> {
+        self.run("mesh_tag", Retry::Always, |_| async move {
+            sqlx::query_scalar::<_, Option<String>>(table.tag).bind(id).fetch_optional(&self.pool).await
+        })
+        .await
+    }
+
+    /// Row `id`'s mesh, or `None`.
+    pub(super) async fn read_mesh(&self, table: &Meshes, id: &str) -> Result<Option<StoredMesh>, StoreError> {
+        self.run("mesh", Retry::Always, |_| async move {
+            let row = sqlx::query(table.get).bind(id).fetch_optional(&self.pool).await?;
+            row.map(|row| {
+                let bytes: Vec<u8> = row.try_get("bytes")?;
+                Ok(StoredMesh { etag: row.try_get("etag")?, bytes: bytes.into() })
+            })
+            .transpose()
+        })
+        .await
+    }
+
+    /// The ids of the rows of `table` named `name` (in the caller's
+    /// transaction, after taking the name's lock, so no other write of it
+    /// can slip in between).
+    pub(super) async fn holders(
+        db: &mut DB::Connection,
+        table: &Named,
+        name: &str,
+    ) -> Result<Vec<String>, sqlx::Error> {
         if let Some(lock) = DB::LOCK_NAME {
             sqlx::query(lock).bind(name).execute(&mut *db).await?;
         }
-        sqlx::query_scalar(NAMED).bind(name).fetch_all(&mut *db).await
+        sqlx::query_scalar(table.holders).bind(name).fetch_all(&mut *db).await
     }
 
-    /// Writes `clips` in one transaction, each a new clip, or the new
-    /// version of the one holding its name as `on_name` allows. An earlier
-    /// attempt that committed them is recognised by its own ids.
-    async fn insert_all(
-        &self,
+    /// Writes `clips` in the caller's transaction, each a new clip, or the
+    /// new version of the one holding its name as `on_name` allows.
+    pub(super) async fn write_clips(
+        db: &mut DB::Connection,
         metas: &[ClipMeta],
         clips: &[NewClip],
         on_name: OnName,
+    ) -> Result<Written<Vec<ClipMeta>>, sqlx::Error> {
+        let mut written = Vec::with_capacity(clips.len());
+        for (meta, clip) in metas.iter().zip(clips) {
+            let ids = Self::holders(db, &CLIPS, &clip.name).await?;
+            match NameCheck::of(&CLIPS, &ids, &meta.id, &clip.name, on_name) {
+                NameCheck::Free => {
+                    Self::insert(db, meta, clip).await?;
+                    written.push(meta.clone());
+                }
+                NameCheck::Ours => return Ok(Written::Ours),
+                NameCheck::Replace(id) => {
+                    let row = Self::update(db, &id, clip, None, meta.updated_at).await?;
+                    written.push(row.ok_or(sqlx::Error::RowNotFound)?);
+                }
+                NameCheck::Refused(refused) => return Ok(Written::Refused(refused)),
+            }
+        }
+        Ok(Written::Done(written))
+    }
+
+    /// Runs `write` in one write transaction, committed when it is done.
+    /// An earlier attempt that committed (`attempt` > 0) is recognised by
+    /// its own ids, and answered with what it wrote (`earlier`).
+    pub(super) async fn in_write<T>(
+        &self,
         attempt: u32,
-    ) -> Result<Result<Vec<ClipMeta>, StoreError>, sqlx::Error> {
+        earlier: impl Fn() -> T,
+        write: impl AsyncFnOnce(&mut DB::Connection) -> Result<Written<T>, sqlx::Error>,
+    ) -> Result<Result<T, StoreError>, sqlx::Error> {
         let r = async {
             let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
-            let mut written = Vec::with_capacity(clips.len());
-            for (meta, clip) in metas.iter().zip(clips) {
-                let ids = Self::holders(&mut tx, &clip.name).await?;
-                let refused = match (ids.as_slice(), on_name) {
-                    ([], _) => {
-                        Self::insert(&mut tx, meta, clip).await?;
-                        written.push(meta.clone());
-                        continue;
-                    }
-                    (ids, _) if ids.contains(&meta.id) => return Ok(Ok(metas.to_vec())),
-                    ([id], OnName::Replace) => {
-                        let row = Self::update(&mut tx, id, clip, None, meta.updated_at).await?;
-                        written.push(row.ok_or(sqlx::Error::RowNotFound)?);
-                        continue;
-                    }
-                    ([id, ..], OnName::Refuse) => StoreError::NameTaken { name: clip.name.clone(), id: id.clone() },
-                    (ids, _) => StoreError::AmbiguousName { name: clip.name.clone(), ids: ids.to_vec() },
-                };
-                tx.rollback().await?;
-                return Ok(Err(refused));
+            match write(&mut tx).await? {
+                Written::Done(done) => {
+                    tx.commit().await?;
+                    Ok(Ok(done))
+                }
+                Written::Ours => Ok(Ok(earlier())),
+                Written::Refused(refused) => {
+                    tx.rollback().await?;
+                    Ok(Err(refused))
+                }
             }
-            tx.commit().await?;
-            Ok(Ok(written))
         }
         .await;
         match r {
-            Err(e) if is_own_duplicate::<DB>(&e, attempt) => Ok(Ok(metas.to_vec())),
+            Err(e) if is_own_duplicate::<DB>(&e, attempt) => Ok(Ok(earlier())),
             other => other,
         }
     }
@@ -327,23 +454,29 @@ where
         Ok(Some(meta))
     }
 
-    /// Whether clip `id` may take `name`: it has it already (clips stored
-    /// before names were unique keep their shared names), or no other clip has it.
-    async fn rename_refused(db: &mut DB::Connection, id: &str, name: &str) -> Result<Option<StoreError>, sqlx::Error> {
-        let current: Option<String> = sqlx::query_scalar(NAME_OF).bind(id).fetch_optional(&mut *db).await?;
+    /// Whether row `id` of `table` may take `name`: it has it already (clips
+    /// stored before names were unique keep their shared names), or no other row has it.
+    pub(super) async fn rename_refused(
+        db: &mut DB::Connection,
+        table: &Named,
+        id: &str,
+        name: &str,
+    ) -> Result<Option<StoreError>, sqlx::Error> {
+        let current: Option<String> = sqlx::query_scalar(table.name_of).bind(id).fetch_optional(&mut *db).await?;
         if current.is_none_or(|c| c == name) {
             return Ok(None);
         }
-        let others = Self::holders(db, name).await?;
-        Ok(others
-            .into_iter()
-            .find(|other| other != id)
-            .map(|other| StoreError::NameTaken { name: name.to_owned(), id: other }))
+        let others = Self::holders(db, table, name).await?;
+        Ok(others.into_iter().find(|other| other != id).map(|other| StoreError::NameTaken {
+            name: name.to_owned(),
+            id: other,
+            what: table.what,
+        }))
     }
 
     /// Tells "not found" from "version mismatch" after a conditional write matched no row.
-    async fn missed(&self, id: &str) -> Result<StoreError, sqlx::Error> {
-        let version: Option<i64> = sqlx::query_scalar(CLIP_VERSION).bind(id).fetch_optional(&self.pool).await?;
+    pub(super) async fn missed(&self, table: &Named, id: &str) -> Result<StoreError, sqlx::Error> {
+        let version: Option<i64> = sqlx::query_scalar(table.version_of).bind(id).fetch_optional(&self.pool).await?;
         Ok(match version {
             None => StoreError::NotFound,
             Some(current) => StoreError::VersionMismatch { current: current as u64 },
@@ -385,7 +518,10 @@ where
             let metas: Vec<ClipMeta> = clips.iter().map(|c| new_meta(c, now)).collect();
             // A replace must not run twice: retried only when it surely did not run.
             let mode = if on_name == OnName::Replace { Retry::IfNotExecuted } else { Retry::Always };
-            self.run("create_all", mode, |n| self.insert_all(&metas, &clips, on_name, n)).await?
+            self.run("create_all", mode, |n| {
+                self.in_write(n, || metas.clone(), async |db| Self::write_clips(db, &metas, &clips, on_name).await)
+            })
+            .await?
         }
         .boxed()
     }
@@ -432,13 +568,13 @@ where
             let now = now_millis();
             self.run("replace", Retry::IfNotExecuted, |_| async move {
                 let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
-                if let Some(refused) = Self::rename_refused(&mut tx, id, &clip.name).await? {
+                if let Some(refused) = Self::rename_refused(&mut tx, &CLIPS, id, &clip.name).await? {
                     tx.rollback().await?;
                     return Ok(Err(refused));
                 }
                 let Some(meta) = Self::update(&mut tx, id, clip, expected_version, now).await? else {
                     tx.rollback().await?;
-                    return self.missed(id).await.map(Err);
+                    return self.missed(&CLIPS, id).await.map(Err);
                 };
                 tx.commit().await?;
                 Ok(Ok(meta))
@@ -456,7 +592,7 @@ where
                     .bind(expected_version.map(|v| v as i64))
                     .execute(&self.pool)
                     .await?;
-                if DB::rows_affected(&done) == 1 { Ok(Ok(())) } else { self.missed(id).await.map(Err) }
+                if DB::rows_affected(&done) == 1 { Ok(Ok(())) } else { self.missed(&CLIPS, id).await.map(Err) }
             })
             .await?
         }
@@ -464,28 +600,72 @@ where
     }
 
     fn mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>> {
-        async move {
-            self.run("mesh_tag", Retry::Always, |_| async move {
-                sqlx::query_scalar::<_, Option<String>>(MESH_TAG).bind(id).fetch_optional(&self.pool).await
-            })
-            .await
-        }
-        .boxed()
+        self.read_mesh_tag(&CLIP_MESHES, id).boxed()
     }
 
     fn mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>> {
-        async move {
-            self.run("mesh", Retry::Always, |_| async move {
-                let row = sqlx::query(MESH).bind(id).fetch_optional(&self.pool).await?;
-                row.map(|row| {
-                    let bytes: Vec<u8> = row.try_get("bytes")?;
-                    Ok(StoredMesh { etag: row.try_get("etag")?, bytes: bytes.into() })
-                })
-                .transpose()
-            })
-            .await
-        }
-        .boxed()
+        self.read_mesh(&CLIP_MESHES, id).boxed()
+    }
+
+    fn create_docs(
+        &self,
+        kind: DocKind,
+        docs: Vec<NewDoc>,
+        on_name: OnName,
+    ) -> BoxFuture<'_, Result<Vec<DocMeta>, StoreError>> {
+        self.create_docs_now(kind, docs, on_name).boxed()
+    }
+
+    fn doc<'a>(&'a self, kind: DocKind, id: &'a str) -> BoxFuture<'a, Result<Option<StoredDoc>, StoreError>> {
+        self.doc_now(kind, id).boxed()
+    }
+
+    fn doc_by_ref<'a>(
+        &'a self,
+        kind: DocKind,
+        reference: &'a str,
+    ) -> BoxFuture<'a, Result<Option<StoredDoc>, StoreError>> {
+        self.doc_by_ref_now(kind, reference).boxed()
+    }
+
+    fn list_docs(&self, kind: DocKind, query: DocQuery) -> BoxFuture<'_, Result<Vec<DocMeta>, StoreError>> {
+        self.list_docs_now(kind, query).boxed()
+    }
+
+    fn replace_doc<'a>(
+        &'a self,
+        kind: DocKind,
+        id: &'a str,
+        doc: NewDoc,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<DocMeta, StoreError>> {
+        self.replace_doc_now(kind, id, doc, expected_version).boxed()
+    }
+
+    fn delete_doc<'a>(
+        &'a self,
+        kind: DocKind,
+        id: &'a str,
+        expected_version: Option<u64>,
+    ) -> BoxFuture<'a, Result<(), StoreError>> {
+        self.delete_doc_now(kind, id, expected_version).boxed()
+    }
+
+    fn create_clips_and_characters(
+        &self,
+        clips: Vec<NewClip>,
+        characters: Vec<NewCharacter>,
+        on_name: OnName,
+    ) -> BoxFuture<'_, Result<ImportWritten, StoreError>> {
+        self.create_import_now(clips, characters, on_name).boxed()
+    }
+
+    fn character_mesh_tag<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<Option<String>>, StoreError>> {
+        self.character_mesh_tag_now(id).boxed()
+    }
+
+    fn character_mesh<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredMesh>, StoreError>> {
+        self.character_mesh_now(id).boxed()
     }
 
     fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>> {

@@ -60,6 +60,7 @@ use tokio::time::Instant;
 use super::broadcast_budget::{BroadcastCharge, Budget, Overrun, thread_cpu_ns};
 use super::broadcast_program::{ControlLog, Program, StampedControl};
 use super::checkpoint::Checkpoint;
+use super::compact::{CompactLayout, CompactRefusal};
 use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
 use super::hub::{EndReason, Item, unix_nanos};
@@ -340,6 +341,8 @@ impl Broadcasts {
             created_at,
             json: broadcast::channel(self.inner.buffer).0,
             protobuf: broadcast::channel(self.inner.buffer).0,
+            compact: Mutex::new(Vec::new()),
+            buffer: self.inner.buffer,
             desk: Arc::new(Mutex::new(Desk {
                 budget: Budget::new(charge, &spec.params.motion, spec.params.fps),
                 next: placement.base,
@@ -493,6 +496,15 @@ struct Desk {
     last_control: Instant,
 }
 
+/// Layouts of compact frames one broadcast encodes at once.
+pub const MAX_COMPACT_LAYOUTS: usize = 4;
+
+/// The viewers of one compact layout.
+struct CompactChannel {
+    layout: Arc<CompactLayout>,
+    tx: broadcast::Sender<Item>,
+}
+
 /// One live broadcast.
 pub struct Broadcast {
     id: Arc<str>,
@@ -505,6 +517,10 @@ pub struct Broadcast {
     journal: Option<Arc<dyn Journal>>,
     json: broadcast::Sender<Item>,
     protobuf: broadcast::Sender<Item>,
+    /// Compact viewers' channels, one per layout (at most [`MAX_COMPACT_LAYOUTS`]).
+    compact: Mutex<Vec<CompactChannel>>,
+    /// Frames a viewer's channel holds.
+    buffer: usize,
     desk: Arc<Mutex<Desk>>,
     /// Its controls' store writes under way ([`STORE_QUEUE`]).
     store_slots: Arc<Semaphore>,
@@ -551,15 +567,82 @@ impl Broadcast {
         self.placement.phase_ms
     }
 
+    /// The channel of JSON or protobuf frames (compact frames have one per layout).
     fn channel(&self, encoding: Encoding) -> &broadcast::Sender<Item> {
         match encoding {
             Encoding::Json => &self.json,
-            Encoding::Protobuf => &self.protobuf,
+            Encoding::Protobuf | Encoding::Compact => &self.protobuf,
         }
     }
 
     fn viewers(&self) -> usize {
-        self.json.receiver_count() + self.protobuf.receiver_count()
+        let compact: usize = crate::sync::lock(&self.compact).iter().map(|c| c.tx.receiver_count()).sum();
+        self.json.receiver_count() + self.protobuf.receiver_count() + compact
+    }
+
+    /// A viewer of compact frames of `layout` from the next tick on, as
+    /// [`Broadcast::watch`]. Refused while the broadcast plays anything but
+    /// its clip (a crossfade, layer or ik control was applied), and beyond
+    /// [`MAX_COMPACT_LAYOUTS`] layouts at once.
+    ///
+    /// # Errors
+    /// `compact_unsupported`, `too_many_compact_layouts`.
+    pub fn watch_compact(
+        self: &Arc<Self>,
+        layout: Arc<CompactLayout>,
+        permit: StreamPermit,
+        controls: Option<ControlGate>,
+    ) -> Result<Subscription, CompactRefusal> {
+        // Under the desk's lock, so no control that leaves the clip is stamped meanwhile.
+        let desk = self.desk();
+        if desk.check.departed() {
+            return Err(CompactRefusal {
+                code: "compact_unsupported",
+                field: "encoding",
+                detail: "this broadcast has played a crossfade, layer or ik control: its poses are no longer its \
+                         clip's, which a compact layout holds"
+                    .into(),
+            });
+        }
+        let rx = {
+            let mut channels = crate::sync::lock(&self.compact);
+            if self.ended.load(Ordering::Acquire) {
+                let (tx, rx) = broadcast::channel(1);
+                let _ = tx.send(Item::End(EndReason::Ended));
+                drop((channels, desk));
+                return Ok(self.subscription(Encoding::Compact, rx, None, permit));
+            }
+            channels.retain(|c| c.tx.receiver_count() > 0);
+            match channels.iter().find(|c| c.layout.key() == layout.key()) {
+                Some(c) => c.tx.subscribe(),
+                None if channels.len() >= MAX_COMPACT_LAYOUTS => {
+                    return Err(CompactRefusal {
+                        code: "too_many_compact_layouts",
+                        field: "max_error",
+                        detail: format!(
+                            "this broadcast already sends compact frames of {MAX_COMPACT_LAYOUTS} layouts; ask for \
+                             the `max_error` and `distance` of one of them"
+                        ),
+                    });
+                }
+                None => {
+                    let (tx, rx) = broadcast::channel(self.buffer);
+                    channels.push(CompactChannel { layout: Arc::clone(&layout), tx });
+                    rx
+                }
+            }
+        };
+        drop(desk);
+        metrics::counter!("inbetween_broadcast_viewers_total").increment(1);
+        let sink = controls.map(|gate| Arc::new(Gated { broadcast: Arc::clone(self), gate }) as Arc<dyn ControlSink>);
+        let params = StreamParams { max_frames: None, ..self.spec.params.clone() }.with_compact(layout);
+        let shutdown = watch::Sender::new(false).subscribe();
+        Ok(Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls: sink }, shutdown, permit))
+    }
+
+    /// Whether compact viewers watch: controls that would leave the clip are refused then.
+    fn has_compact_viewers(&self) -> bool {
+        crate::sync::lock(&self.compact).iter().any(|c| c.tx.receiver_count() > 0)
     }
 
     fn desk(&self) -> MutexGuard<'_, Desk> {
@@ -644,6 +727,12 @@ impl Broadcast {
     fn admissible(&self, control: &Control) -> Result<(), ControlError> {
         if let Some(refusal) = control.refused_on_broadcast() {
             return Err(ControlError::Invalid(refusal));
+        }
+        if control.leaves_the_clip() && self.has_compact_viewers() {
+            return Err(ControlError::Invalid(
+                "compact viewers watch this broadcast, whose layout holds its clip's poses only: crossfade, layer \
+                 and ik controls are refused while they do",
+            ));
         }
         if self.ended.load(Ordering::Acquire) {
             return Err(ControlError::Invalid("the broadcast has ended"));
@@ -854,6 +943,10 @@ impl Task {
         for tx in [&self.broadcast.json, &self.broadcast.protobuf] {
             let _ = tx.send(Item::End(reason));
         }
+        // Under the lock a compact watch checks `ended` under: each viewer hears the end.
+        for c in crate::sync::lock(&self.broadcast.compact).iter() {
+            let _ = c.tx.send(Item::End(reason));
+        }
         self.count_viewers(0);
         metrics::gauge!("inbetween_broadcasts").decrement(1.0);
         if reason == EndReason::TooMuchWork
@@ -915,6 +1008,13 @@ impl Task {
                 let _ = tx.send(Item::Frame(program.encode(encoding, sent_at)));
             }
         }
+        // Once per layout watched, whatever its viewers' number.
+        let mut channels = crate::sync::lock(&b.compact);
+        channels.retain(|c| c.tx.receiver_count() > 0);
+        for c in channels.iter() {
+            let _ = c.tx.send(Item::Frame(program.encode_compact(&c.layout, sent_at)));
+        }
+        program.keep_compact(|key| channels.iter().any(|c| c.layout.key() == key));
     }
 
     /// Files `controls` (and drops the `revoked` ones) and steps the program

@@ -65,7 +65,7 @@ pub(crate) struct Budget {
 impl Budget {
     /// The budget of a broadcast of `motion` at `fps`, admitted as `charge` says.
     pub(crate) fn new(charge: BroadcastCharge, motion: &StreamMotion, fps: u32) -> Self {
-        let motion = price::motion_pose(motion);
+        let motion = price::motion_frame(motion, fps);
         Budget {
             fps: u64::from(fps),
             base: charge.per_tick.saturating_sub(motion),
@@ -106,7 +106,7 @@ impl Budget {
         match control {
             Control::Crossfade(fade) => {
                 next.fading_from = self.motion;
-                next.motion = price::motion_pose(&fade.to);
+                next.motion = price::motion_frame(&fade.to, self.fps as u32);
             }
             Control::SetIk(constraints) => next.ik = price::ik(constraints, skeleton_of.skeleton()),
             Control::Play
@@ -115,7 +115,8 @@ impl Budget {
             | Control::Speed(_)
             | Control::Stop
             | Control::Layer { .. }
-            | Control::Ik(_) => return Ok(()),
+            | Control::Ik(_)
+            | Control::ResetSprings => return Ok(()),
         }
         let per_sec = next.per_tick().saturating_mul(self.fps);
         if per_sec > self.limit_per_sec {

@@ -32,6 +32,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use super::checkpoint::{Checkpoint, CheckpointError, Lookup, Naming, Source};
+use super::compact::CompactLayout;
 use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameEncoder};
 use super::hub::{TickStamp, frame_data, sample_tick};
@@ -242,6 +243,8 @@ pub struct Program {
     floor: State,
     json: FrameEncoder,
     protobuf: FrameEncoder,
+    /// Compact frames' encoders, one per layout its viewers asked for.
+    compact: Vec<((u32, u32), FrameEncoder)>,
 }
 
 impl Program {
@@ -260,6 +263,7 @@ impl Program {
             checkpoints: VecDeque::new(),
             json: FrameEncoder::new(Encoding::Json),
             protobuf: FrameEncoder::new(Encoding::Protobuf),
+            compact: Vec::new(),
         }
     }
 
@@ -400,7 +404,7 @@ impl Program {
             jumped |= self.apply(c, k);
         }
         let st = &mut self.state;
-        let time = st.playhead.time_at(k);
+        let time = (st.playhead.time_at(k), super::hub::stream_clock(&self.params, k));
         st.clip_time = sample_tick(&mut st.player, &self.params, time, jumped, &mut st.prev, &mut st.crossed);
         st.stepped = Some(k);
     }
@@ -439,7 +443,8 @@ impl Program {
         }
     }
 
-    /// The last stepped tick in `encoding`: `dropped` 0 and no joint names
+    /// The last stepped tick in `encoding`, JSON or protobuf (compact
+    /// frames: [`Program::encode_compact`]): `dropped` 0 and no joint names
     /// (each viewer's patch adds its own, see `encode`).
     pub fn encode(&mut self, encoding: Encoding, sent_at: i64) -> Encoded {
         let st = &self.state;
@@ -447,7 +452,29 @@ impl Program {
         let data = frame_data(&st.player, &self.params, &st.crossed, tick, false);
         match encoding {
             Encoding::Json => self.json.encode(&data),
-            Encoding::Protobuf => self.protobuf.encode(&data),
+            Encoding::Protobuf | Encoding::Compact => self.protobuf.encode(&data),
         }
+    }
+
+    /// The last stepped tick as a compact frame of `layout` (a key frame
+    /// when this layout's encoder is new, or its key interval is up).
+    pub fn encode_compact(&mut self, layout: &CompactLayout, sent_at: i64) -> Encoded {
+        let key = layout.key();
+        let at = match self.compact.iter().position(|(k, _)| *k == key) {
+            Some(at) => at,
+            None => {
+                self.compact.push((key, FrameEncoder::compact(&layout.layout, layout.key_interval)));
+                self.compact.len() - 1
+            }
+        };
+        let st = &self.state;
+        let tick = TickStamp { seq: st.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: st.clip_time };
+        let data = frame_data(&st.player, &self.params, &st.crossed, tick, false);
+        self.compact[at].1.encode(&data)
+    }
+
+    /// Drops the compact encoders of layouts nobody watches any more.
+    pub fn keep_compact(&mut self, watched: impl Fn((u32, u32)) -> bool) {
+        self.compact.retain(|(k, _)| watched(*k));
     }
 }

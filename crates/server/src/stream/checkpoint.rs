@@ -14,8 +14,8 @@
 //!
 //! The text is a pure function of the state (fields in a fixed order, no
 //! maps), so two nodes that checkpoint the same tick write the same text
-//! and either's write may win. Springs, when motions have them, add their
-//! state as one more field of [`Checkpoint`] beside the player's.
+//! and either's write may win. Springs, when the motion has them, add
+//! their state (bits as well) to the player's.
 
 use std::sync::Arc;
 
@@ -27,6 +27,7 @@ use anim::Ease;
 use anim::ik::{IkConstraint, WarmStart};
 use anim::motion::root::RootAt;
 use anim::motion::{DeckState, FadeState, Planar, Player, PlayerState, RampState, RootMotion, UpAxis};
+use anim::spring::SpringState;
 
 /// The checkpoint format; a checkpoint of another is not used (the
 /// broadcast replays from an older one or from its start).
@@ -91,6 +92,24 @@ struct PlayerBits {
     ik: Option<Source>,
     /// Per constraint: joints and angle bits.
     warm: Vec<(Vec<usize>, Vec<u32>)>,
+    /// The current motion's spring simulation, when it has springs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    springs: Option<SpringBits>,
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    springs_jumped: bool,
+}
+
+/// A spring simulation (docs/springs.md, “Determinism and its limits”):
+/// the next substep, per turning joint its tail now and one substep
+/// before and its rotation, and the last frame's clock and motion time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SpringBits {
+    next: Option<i64>,
+    current: Vec<[u32; 3]>,
+    previous: Vec<[u32; 3]>,
+    rotations: Vec<[u32; 4]>,
+    frame: Option<(u64, u64)>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -262,7 +281,31 @@ fn player_bits(
         up_z: s.up == UpAxis::Z,
         ik: (top && !s.ik.is_empty()).then(|| naming.ik.clone()),
         warm: s.warm.into_iter().map(|w| (w.joints, w.angles.into_iter().map(f32::to_bits).collect())).collect(),
+        springs: s.springs.map(spring_bits),
+        springs_jumped: s.springs_jumped,
     }
+}
+
+fn spring_bits((state, frame): (SpringState, Option<(f64, f64)>)) -> SpringBits {
+    let point = |v: &glam::Vec3A| v.to_array().map(f32::to_bits);
+    SpringBits {
+        next: state.next,
+        current: state.current.iter().map(point).collect(),
+        previous: state.previous.iter().map(point).collect(),
+        rotations: state.rotations.iter().map(|q| q.to_array().map(f32::to_bits)).collect(),
+        frame: frame.map(|(clock, tau)| (clock.to_bits(), tau.to_bits())),
+    }
+}
+
+fn spring_state(b: &SpringBits) -> (SpringState, Option<(f64, f64)>) {
+    let point = |v: &[u32; 3]| glam::Vec3A::from_array(v.map(f32::from_bits));
+    let state = SpringState {
+        next: b.next,
+        current: b.current.iter().map(point).collect(),
+        previous: b.previous.iter().map(point).collect(),
+        rotations: b.rotations.iter().map(|q| glam::Quat::from_array(q.map(f32::from_bits))).collect(),
+    };
+    (state, b.frame.map(|(clock, tau)| (f64::from_bits(clock), f64::from_bits(tau))))
 }
 
 fn deck_bits(d: DeckState<std::sync::Arc<dyn super::pinned::PinnedClip>>, naming: &Naming<'_>) -> DeckBits {
@@ -320,6 +363,8 @@ fn player_state(
                 angles: angles.iter().copied().map(f32::from_bits).collect(),
             })
             .collect(),
+        springs: p.springs.as_ref().map(spring_state),
+        springs_jumped: p.springs_jumped,
     })
 }
 

@@ -47,6 +47,8 @@ pub enum Control {
     Ik(Vec<IkSpec>),
     /// Replace the stream's IK constraints, resolved against its skeleton.
     SetIk(Vec<IkConstraint>),
+    /// Restart the spring chains at rest (docs/springs.md, “Time”).
+    ResetSprings,
 }
 
 /// A crossfade asked for: its target, already built over pinned clips.
@@ -99,8 +101,19 @@ impl Control {
                     (!(0.0..=1.0).contains(&weight)).then_some("a layer weight must be in [0, 1]")
                 }
             }
-            Control::Play | Control::Pause | Control::Stop | Control::Ik(_) | Control::SetIk(_) => None,
+            Control::Play
+            | Control::Pause
+            | Control::Stop
+            | Control::Ik(_)
+            | Control::SetIk(_)
+            | Control::ResetSprings => None,
         }
+    }
+
+    /// Whether it makes the stream play something other than its clip's
+    /// poses (which a compact layout's ranges hold: docs/compact-frames.md).
+    pub(crate) fn leaves_the_clip(&self) -> bool {
+        matches!(self, Control::Crossfade(_) | Control::Layer { .. } | Control::Ik(_) | Control::SetIk(_))
     }
 
     /// Why a broadcast refuses this control, if it does (its viewers share
@@ -115,7 +128,8 @@ impl Control {
             | Control::Crossfade(_)
             | Control::Layer { .. }
             | Control::Ik(_)
-            | Control::SetIk(_) => None,
+            | Control::SetIk(_)
+            | Control::ResetSprings => None,
         }
     }
 
@@ -131,7 +145,8 @@ impl Control {
             | Control::Crossfade(_)
             | Control::Layer { .. }
             | Control::Ik(_)
-            | Control::SetIk(_) => (paused, speed),
+            | Control::SetIk(_)
+            | Control::ResetSprings => (paused, speed),
         }
     }
 
@@ -157,6 +172,7 @@ impl Control {
                 player.ramp(index, weight, duration).map_err(|error| Refused { what: "weight ramp", error })?;
             }
             Control::SetIk(constraints) => player.set_ik(constraints),
+            Control::ResetSprings => player.reset_springs(),
             // The stream's check resolves every `ik` control before it is queued.
             Control::Ik(_) => tracing::error!("IK constraints reached a playback unresolved"),
         }
@@ -179,6 +195,7 @@ impl Control {
                 ControlMsg::Layer { index: *index, weight: *weight, duration: *duration }
             }
             Control::Ik(specs) => ControlMsg::Ik { constraints: specs.iter().map(IkDoc::from_spec).collect() },
+            Control::ResetSprings => ControlMsg::ResetSprings,
             Control::Stop | Control::Crossfade(Crossfade { source: None, .. }) | Control::SetIk(_) => return None,
         };
         Some(serde_json::to_value(msg).expect("a control message is JSON"))
@@ -235,6 +252,8 @@ pub(crate) enum ControlMsg {
     Ik {
         constraints: Vec<IkDoc>,
     },
+    /// Restarts the spring chains at rest at the next tick.
+    ResetSprings,
 }
 
 fn linear() -> EaseDoc {
@@ -242,7 +261,7 @@ fn linear() -> EaseDoc {
 }
 
 /// The ops a control message may name, as its refusal lists them.
-const OPS: [&str; 8] = ["play", "pause", "seek", "speed", "stop", "crossfade", "layer", "ik"];
+const OPS: [&str; 9] = ["play", "pause", "seek", "speed", "stop", "crossfade", "layer", "ik", "reset_springs"];
 
 /// The refusal of a text that is no control message; `stop` is listed only
 /// where it is taken (a stream's socket, not a broadcast's REST control).
@@ -263,6 +282,7 @@ impl ControlMsg {
             ControlMsg::Seek { time } => Control::Seek(time),
             ControlMsg::Speed { speed } => Control::Speed(speed),
             ControlMsg::Stop => Control::Stop,
+            ControlMsg::ResetSprings => Control::ResetSprings,
             ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
             ControlMsg::Crossfade { to, duration, ease } => {
                 return Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() });
@@ -298,6 +318,7 @@ impl ParsedControl<Option<pb::Motion>> {
             Some(Op::Seek(s)) => Control::Seek(s.time),
             Some(Op::Speed(s)) => Control::Speed(s.speed),
             Some(Op::Stop(_)) => Control::Stop,
+            Some(Op::ResetSprings(_)) => Control::ResetSprings,
             Some(Op::Layer(l)) => Control::Layer { index: l.index as usize, weight: l.weight, duration: l.duration },
             Some(Op::Crossfade(fade)) => {
                 let ease = ease_from_pb(fade.ease, "/ease")?.unwrap_or_default();
@@ -421,6 +442,10 @@ pub(crate) struct ControlCheck {
     ik: Arc<[IkConstraint]>,
     ik_limits: IkLimits,
     repricing: Option<Arc<dyn Repricing>>,
+    /// A compact stream plays only the poses its layout's ranges hold.
+    compact: bool,
+    /// A control that leaves the stream's clip was accepted (a crossfade, a layer ramp, an `ik` control).
+    departed: bool,
 }
 
 impl ControlCheck {
@@ -431,7 +456,16 @@ impl ControlCheck {
             ik: params.motion.ik().into(),
             ik_limits: params.ik_limits,
             repricing: None,
+            compact: params.compact.is_some(),
+            departed: false,
         }
+    }
+
+    /// Whether a control that leaves the stream's clip passed this check
+    /// (one a later rule refused may count too, which only ever refuses
+    /// compact viewers more).
+    pub(crate) fn departed(&self) -> bool {
+        self.departed
     }
 
     /// The motion whose skeleton controls are checked against.
@@ -450,6 +484,15 @@ impl ControlCheck {
 
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         let control = control.validate().map_err(ControlError::Invalid)?;
+        if control.leaves_the_clip() {
+            if self.compact {
+                return Err(ControlError::Invalid(
+                    "a compact stream's layout holds its clip's poses only: crossfade, layer and ik controls are \
+                     refused",
+                ));
+            }
+            self.departed = true;
+        }
         match &control {
             Control::Crossfade(fade) => {
                 self.check_fade(fade)?;
@@ -472,6 +515,7 @@ impl ControlCheck {
             | Control::Seek(_)
             | Control::Speed(_)
             | Control::Stop
+            | Control::ResetSprings
             | Control::Layer { .. } => {}
         }
         Ok(control)
@@ -515,6 +559,7 @@ mod tests {
             Control::Seek(time) => Op::Seek(pb::Seek { time: *time }),
             Control::Speed(speed) => Op::Speed(pb::SetSpeed { speed: *speed }),
             Control::Stop => Op::Stop(pb::Stop {}),
+            Control::ResetSprings => Op::ResetSprings(pb::ResetSprings {}),
             Control::Crossfade(fade) => {
                 Op::Crossfade(pb::Crossfade { to: None, duration: fade.duration, ease: ease_to_pb(fade.ease) as i32 })
             }
@@ -559,6 +604,7 @@ mod tests {
                 {"kind": "two_bone", "joints": ["hip", "knee", "foot"], "target": [0.25, -1.5, 0.125]},
                 {"kind": "aim", "joint": "head", "target": [1.0, 2.0, 3.0], "weight": 0.5}
             ]}),
+            json!({"op": "reset_springs"}),
         ]
     }
 
@@ -599,15 +645,12 @@ mod tests {
     #[test]
     fn refusals_list_the_ops() {
         let e = serde_json::from_str::<ControlMsg>("{}").unwrap_err();
-        assert!(
-            not_a_control(&e, true).starts_with(
-                r#"expected {"op": "play"|"pause"|"seek"|"speed"|"stop"|"crossfade"|"layer"|"ik", ...}: "#
-            )
-        );
-        assert!(
-            not_a_control(&e, false)
-                .starts_with(r#"expected {"op": "play"|"pause"|"seek"|"speed"|"crossfade"|"layer"|"ik", ...}: "#)
-        );
+        assert!(not_a_control(&e, true).starts_with(
+            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"stop"|"crossfade"|"layer"|"ik"|"reset_springs", ...}: "#
+        ));
+        assert!(not_a_control(&e, false).starts_with(
+            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"crossfade"|"layer"|"ik"|"reset_springs", ...}: "#
+        ));
     }
 
     #[test]

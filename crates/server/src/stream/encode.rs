@@ -9,9 +9,13 @@
 //! repeated later in a message overrides the earlier value, and a repeated
 //! embedded message field merges, so `shared bytes + [dropped] + [pose with
 //! joint names]` decodes as the patched frame in every conforming decoder.
-//! JSON records where its `dropped` number sits and splices a new one in.
+//! JSON records where its `dropped` number sits and splices a new one in,
+//! and so do compact frames (docs/compact-frames.md) their `dropped` varint.
+//! A compact delta frame carries its key frame along, for a viewer that
+//! missed it.
 
 use std::io::Write;
+use std::sync::Arc;
 
 use bytes::{BufMut, Bytes, BytesMut};
 use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
@@ -19,6 +23,7 @@ use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, k
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{Event, Pose, Skeleton, Space};
+use formats::wire::compact::{CompactEncoder, Header, KEY_FRAME};
 use formats::wire::json::{Extras, ParameterValues, PoseJson};
 use formats::wire::proto::{ik_kind_to_pb, space_to_pb};
 
@@ -30,6 +35,8 @@ pub enum Encoding {
     Json,
     /// An encoded `inbetween.v1.Frame`.
     Protobuf,
+    /// A compact frame (docs/compact-frames.md) of the stream's layout.
+    Compact,
 }
 
 /// The names a stream's first protobuf frame carries (its joints', and its
@@ -78,8 +85,13 @@ pub struct Encoded {
     pub bytes: Bytes,
     /// Whether the joint names are in it (protobuf).
     pub has_names: bool,
-    /// JSON: the byte range of the `dropped` number.
+    /// JSON and compact: the byte range of the `dropped` number.
     dropped_at: (u32, u32),
+    /// Compact: the `seq` of the key frame this frame is relative to (its
+    /// own for a key frame).
+    pub key_seq: Option<u64>,
+    /// Compact delta frames: that key frame, for a viewer that missed it.
+    pub key: Option<Arc<Encoded>>,
 }
 
 /// A reusable encoder: the buffer's storage is recycled once viewers drop
@@ -88,11 +100,26 @@ pub struct Encoded {
 pub struct FrameEncoder {
     encoding: Encoding,
     buf: BytesMut,
+    compact: Option<Compact>,
+}
+
+/// A compact stream's encoder and its last key frame.
+#[derive(Debug)]
+struct Compact {
+    encoder: CompactEncoder,
+    key: Option<Arc<Encoded>>,
 }
 
 impl FrameEncoder {
+    /// A JSON or protobuf encoder (compact frames need a layout: [`FrameEncoder::compact`]).
     pub fn new(encoding: Encoding) -> Self {
-        FrameEncoder { encoding, buf: BytesMut::new() }
+        FrameEncoder { encoding, buf: BytesMut::new(), compact: None }
+    }
+
+    /// A compact encoder of `layout`, a key frame at least every `key_interval` frames.
+    pub fn compact(layout: &anim::compact::Layout, key_interval: u64) -> Self {
+        let compact = Compact { encoder: CompactEncoder::new(layout.clone(), key_interval), key: None };
+        FrameEncoder { encoding: Encoding::Compact, buf: BytesMut::new(), compact: Some(compact) }
     }
 
     pub fn encode(&mut self, f: &FrameData<'_>) -> Encoded {
@@ -102,6 +129,7 @@ impl FrameEncoder {
                 write_protobuf(&mut self.buf, f);
                 (0, 0)
             }
+            Encoding::Compact => return self.encode_compact(f),
         };
         Encoded {
             seq: f.seq,
@@ -111,8 +139,44 @@ impl FrameEncoder {
             bytes: self.buf.split().freeze(),
             has_names: f.with_names || self.encoding == Encoding::Json,
             dropped_at,
+            key_seq: None,
+            key: None,
         }
     }
+
+    /// A key or delta frame of the whole local pose; a key frame is kept
+    /// for the delta frames after it.
+    fn encode_compact(&mut self, f: &FrameData<'_>) -> Encoded {
+        let compact = self.compact.as_mut().expect("a compact encoder has its layout");
+        let header =
+            Header { seq: f.seq, dropped: f.dropped, sent_at_unix_nanos: f.sent_at_unix_nanos, clip_time: f.clip_time };
+        let frame = compact.encoder.encode(&header, f.pose, false);
+        let is_key = frame[0] & KEY_FRAME != 0;
+        self.buf.extend_from_slice(frame);
+        let key_seq = if is_key { f.seq } else { compact.key.as_ref().map_or(f.seq, |k| k.seq) };
+        let encoded = Encoded {
+            seq: f.seq,
+            dropped: f.dropped,
+            clip_time: f.clip_time,
+            encoding: Encoding::Compact,
+            bytes: self.buf.split().freeze(),
+            has_names: true,
+            dropped_at: compact_dropped_at(f.seq, f.dropped),
+            key_seq: Some(key_seq),
+            key: if is_key { None } else { compact.key.clone() },
+        };
+        if is_key {
+            compact.key = Some(Arc::new(encoded.clone()));
+        }
+        encoded
+    }
+}
+
+/// Where a compact frame's `dropped` varint sits: after the flags byte and
+/// the `seq` varint.
+fn compact_dropped_at(seq: u64, dropped: u64) -> (u32, u32) {
+    let a = 1 + encoded_len_varint(seq) as u32;
+    (a, a + encoded_len_varint(dropped) as u32)
 }
 
 impl Encoded {
@@ -130,6 +194,12 @@ impl Encoded {
                 let (a, b) = (self.dropped_at.0 as usize, self.dropped_at.1 as usize);
                 out.put_slice(&self.bytes[..a]);
                 write!((&mut out).writer(), "{dropped}").expect("writing to memory");
+                out.put_slice(&self.bytes[b..]);
+            }
+            Encoding::Compact => {
+                let (a, b) = (self.dropped_at.0 as usize, self.dropped_at.1 as usize);
+                out.put_slice(&self.bytes[..a]);
+                encode_varint(dropped, &mut out);
                 out.put_slice(&self.bytes[b..]);
             }
             Encoding::Protobuf => {
@@ -185,7 +255,7 @@ fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
         skeleton: f.skeleton,
         pose: f.pose,
     };
-    let extras = Extras { joints: f.joints, root_motion: f.root_motion, ik: f.ik, parameters: f.parameters };
+    let extras = Extras { joints: f.joints, root_motion: f.root_motion, ik: f.ik, parameters: f.parameters, tail: &[] };
     pose.write_with(*w.get_mut(), extras);
     w.write_all(b"}").expect(io);
     (a, b)
@@ -487,6 +557,7 @@ mod tests {
             dropped,
             events: vec![pb::Event { time: 1.0, name: "footstep".into() }],
             pose: Some(pose),
+            ..Default::default()
         };
         (encoded, expected)
     }

@@ -114,7 +114,7 @@ impl Hub {
             player: Player::new(Arc::clone(&params.motion)),
             prev: None,
             crossed: Vec::new(),
-            encoder: FrameEncoder::new(params.encoding),
+            encoder: params.encoder(),
             with_names: params.encoding == Encoding::Protobuf,
             tx,
             controls,
@@ -224,7 +224,7 @@ impl Hub {
 
     /// Evaluates and encodes tick `k`.
     fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
-        let time = self.playhead.time_at(k);
+        let time = (self.playhead.time_at(k), stream_clock(&self.params, k));
         let clip_time = sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed);
         let tick = TickStamp { seq: k, dropped: skipped, sent_at: unix_nanos(), clip_time };
         let with_names = std::mem::take(&mut self.with_names);
@@ -240,19 +240,26 @@ pub(super) struct TickStamp {
     pub clip_time: f32,
 }
 
-/// Samples `player` at request time `time` and lists in `crossed` the first
-/// layer's events since `prev` (none across a jump or a change of motion);
-/// returns the clip time. One step for playbacks and broadcasts alike.
+/// The stream time of tick `k`, the clock springs run on (docs/springs.md,
+/// “Time”): pause, speed and seeks do not change it.
+pub(super) fn stream_clock(params: &StreamParams, k: u64) -> f64 {
+    k as f64 / f64::from(params.fps)
+}
+
+/// Samples `player` at request time `time.0` (springs at stream time
+/// `time.1`) and lists in `crossed` the first layer's events since `prev`
+/// (none across a jump or a change of motion); returns the clip time. One
+/// step for playbacks and broadcasts alike.
 pub(super) fn sample_tick(
     player: &mut StreamPlayer,
     params: &StreamParams,
-    time: f64,
+    (time, clock): (f64, f64),
     jumped: bool,
     prev: &mut Option<(f64, Arc<StreamMotion>)>,
     crossed_out: &mut Vec<u32>,
 ) -> f32 {
     let options = MotionOptions { ease: params.ease, space: params.space };
-    let clip_time = player.sample(time, &options);
+    let clip_time = player.sample_clocked(time, clock, &options);
     let motion = player.motion();
     let position = player.first_layer_position();
     let from = prev.as_ref().filter(|(_, m)| !jumped && Arc::ptr_eq(m, motion)).map(|(x, _)| *x);

@@ -13,7 +13,8 @@
 //! count the rest as dropped) — as its own task while it is shared, driven
 //! by its viewer when it has only one —, moves its playhead (`playhead`: controls act on the next tick),
 //! samples its `anim::motion::Player` once (crossfades and weight ramps live there), collects the events crossed since the previous
-//! frame (`events`), encodes once (`encode`: JSON or protobuf) and
+//! frame (`events`), encodes once (`encode`: JSON, protobuf or compact frames
+//! of the layout `compact` chose) and
 //! publishes the bytes to a small broadcast buffer. Each subscription
 //! reads from that buffer, turning overwritten frames into its own
 //! `dropped` count, and its transport sends the bytes: `grpc` as a
@@ -37,6 +38,7 @@ mod broadcast;
 mod broadcast_budget;
 mod broadcast_program;
 mod checkpoint;
+mod compact;
 mod control;
 mod encode;
 mod engine;
@@ -61,6 +63,7 @@ pub use broadcast::{
 pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
 pub use checkpoint::{Checkpoint, CheckpointError};
+pub use compact::{CompactLayout, CompactRefusal, CompactRequest, RANGE_RATE, layout_samples, plain_clip};
 pub use control::{
     Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, Repricing, parse_control,
 };
@@ -86,5 +89,7 @@ mod tests_broadcast;
 mod tests_broadcast_budget;
 #[cfg(test)]
 mod tests_checkpoint;
+#[cfg(test)]
+mod tests_compact;
 #[cfg(test)]
 mod tests_ws;

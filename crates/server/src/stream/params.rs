@@ -5,7 +5,8 @@
 
 use std::sync::Arc;
 
-use super::encode::{Encoding, Names};
+use super::compact::CompactLayout;
+use super::encode::{Encoding, FrameEncoder, Names};
 use super::pinned::{PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
 use anim::ik::IkLimits;
@@ -68,6 +69,8 @@ pub struct StreamParams {
     pub parameters: Option<Arc<[usize]>>,
     /// Ceilings on the constraints of `ik` controls.
     pub ik_limits: IkLimits,
+    /// Compact frames' layout (`encoding` compact).
+    pub compact: Option<Arc<CompactLayout>>,
 }
 
 impl std::fmt::Debug for StreamParams {
@@ -94,9 +97,11 @@ impl StreamParams {
     pub fn new(pinned: Arc<dyn PinnedClip>, req: StreamRequest) -> Result<Self, ParamError> {
         let playback = req.playback.unwrap_or(pinned.clip().playback());
         let identity = format!("clip {}@{} {}", pinned.id(), pinned.version(), playback.as_str());
+        let springs = pinned.springs().clone();
         let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
-        let motion = Motion::build(MotionSpec { layers: vec![layer], root_motion: None, ..Default::default() })
-            .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;
+        let motion =
+            Motion::build(MotionSpec { layers: vec![layer], root_motion: None, springs, ..Default::default() })
+                .map_err(|e| ParamError { field: "motion", detail: e.to_string() })?;
         Self::of_motion(Arc::new(motion), identity.into(), req)
     }
 
@@ -132,6 +137,7 @@ impl StreamParams {
             joints: None,
             parameters: None,
             ik_limits: IkLimits::default(),
+            compact: None,
             motion,
         })
     }
@@ -141,6 +147,22 @@ impl StreamParams {
     /// The same stream with `ik` controls held to `limits`.
     pub fn with_ik_limits(self, limits: IkLimits) -> Self {
         StreamParams { ik_limits: limits, ..self }
+    }
+
+    /// The same stream in compact frames of `layout` (a program of its own:
+    /// only viewers of the same bound and distance share a playback).
+    pub fn with_compact(self, layout: Arc<CompactLayout>) -> Self {
+        let (max_error, distance) = layout.key();
+        let identity = format!("{} compact {max_error:08x} {distance:08x}", self.identity).into();
+        StreamParams { encoding: Encoding::Compact, compact: Some(layout), identity, ..self }
+    }
+
+    /// An encoder of this stream's frames.
+    pub fn encoder(&self) -> FrameEncoder {
+        match (&self.compact, self.encoding) {
+            (Some(c), Encoding::Compact) => FrameEncoder::compact(&c.layout, c.key_interval),
+            _ => FrameEncoder::new(self.encoding),
+        }
     }
 
     pub fn with_joints(self, joints: Option<Vec<usize>>) -> Self {

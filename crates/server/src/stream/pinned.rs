@@ -5,6 +5,7 @@
 use std::sync::Arc;
 
 use anim::motion::Player;
+use anim::spring::SpringsSpec;
 use anim::{Clip, Motion};
 
 /// The player of a stream's motion: the one type per-viewer streams and
@@ -17,7 +18,14 @@ pub trait PinnedClip: Send + Sync + 'static {
     fn id(&self) -> &str;
     fn version(&self) -> u64;
     fn clip(&self) -> &Clip;
+    /// The clip's own spring chains (docs/springs.md); none by default.
+    fn springs(&self) -> &SpringsSpec {
+        &NO_SPRINGS
+    }
 }
+
+/// The chains of a clip without any.
+static NO_SPRINGS: SpringsSpec = SpringsSpec { chains: Vec::new(), substep_hz: anim::spring::DEFAULT_SUBSTEP_HZ };
 
 impl std::fmt::Debug for dyn PinnedClip {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -21,6 +21,9 @@ pub struct Delivered {
     pub dropped: u64,
     pub clip_time: f32,
     pub bytes: Bytes,
+    /// Compact frames: the key frame this delta frame is relative to, sent
+    /// before it because this viewer missed it (docs/compact-frames.md).
+    pub prelude: Option<Bytes>,
 }
 
 /// The next thing to send.
@@ -98,6 +101,8 @@ pub struct Subscription {
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
     last_seq: Option<u64>,
+    /// Compact frames: the last key frame this viewer was sent.
+    last_key: Option<u64>,
     delivered: u64,
     stopped: bool,
     /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
@@ -158,6 +163,7 @@ impl Subscription {
             storing: Vec::new(),
             shutdown,
             last_seq: None,
+            last_key: None,
             delivered: 0,
             stopped: false,
             sent: metrics::counter!("inbetween_stream_frames_total"),
@@ -226,7 +232,15 @@ impl Subscription {
             // A broadcast viewer's first frame is the tick after it joined:
             // the ticks before were not its losses.
             let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
+            let prelude = self.missed_key(&frame).map(|key| {
+                let dropped = self.last_seq.map_or(first_dropped.min(key.seq), |last| key.seq - last - 1);
+                self.last_seq = Some(key.seq);
+                key.for_viewer(dropped, None)
+            });
             let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
+            if let Some(key) = frame.key_seq {
+                self.last_key = Some(key);
+            }
             // The names of the joints frames carry, on a protobuf viewer's
             // first frame (made then: kept, they cost every viewer ~1 KiB).
             let first_pb = self.last_seq.is_none() && self.params.encoding == Encoding::Protobuf;
@@ -238,8 +252,17 @@ impl Subscription {
             if dropped > 0 {
                 self.dropped.increment(dropped);
             }
-            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes });
+            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes, prelude });
         }
+    }
+
+    /// A compact delta frame's key frame, when this viewer has not had it.
+    fn missed_key(&self, frame: &super::encode::Encoded) -> Option<std::sync::Arc<super::encode::Encoded>> {
+        frame
+            .key
+            .as_ref()
+            .filter(|key| self.last_key != Some(key.seq) && self.last_seq.is_none_or(|l| l < key.seq))
+            .cloned()
     }
 
     /// Applies `control` at the next tick. A viewer of a shared playback

@@ -1,5 +1,6 @@
-//! The WebSocket side of a stream (docs/api.md): frames out as JSON text or
-//! binary protobuf, control messages in, ping/pong keepalive.
+//! The WebSocket side of a stream (docs/api.md): frames out as JSON text,
+//! binary protobuf or binary compact frames (a delta frame preceded by the
+//! key frame its viewer missed), control messages in, ping/pong keepalive.
 //!
 //! [`serve`] is generic over any `Sink + Stream` of axum WebSocket messages,
 //! so unit tests drive it with in-memory channels and a paused clock while
@@ -233,7 +234,7 @@ pub trait FrameSocket: Sink<Message> + Unpin {
 fn frame_message(encoding: Encoding, bytes: bytes::Bytes) -> Option<Message> {
     match encoding {
         Encoding::Json => text(bytes).map(Message::Text),
-        Encoding::Protobuf => Some(Message::Binary(bytes)),
+        Encoding::Protobuf | Encoding::Compact => Some(Message::Binary(bytes)),
     }
 }
 
@@ -264,7 +265,15 @@ pub async fn serve<S, E>(
                     // socket's own frame path.
                     Next::Frame(f) => {
                         let encoding = sub.encoding();
-                        match timeout(config.keepalive, socket.send_frame(encoding, f.bytes)).await {
+                        let send = async {
+                            if let Some(key) = f.prelude
+                                && let Err(e) = socket.send_frame(encoding, key).await
+                            {
+                                return Err(e);
+                            }
+                            socket.send_frame(encoding, f.bytes).await
+                        };
+                        match timeout(config.keepalive, send).await {
                             Ok(Ok(())) => continue,
                             Ok(Err(_)) => return,
                             Err(_) => return close_slow_consumer(&mut socket).await,

@@ -28,11 +28,6 @@ use crate::error::ApiError;
 /// enough never to hold up an async worker noticeably.
 pub const INLINE_UNITS: u64 = 4096;
 
-/// The share of one core that broadcasts' ticks may take together: they
-/// all run on the producers' thread (`stream::producer`), and what is left
-/// keeps every tick on time when the machine is busy.
-const PRODUCERS_SHARE: f64 = 0.5;
-
 /// The pool, the meter and the deadline every job shares.
 pub struct Work {
     pool: Pool,
@@ -60,7 +55,8 @@ impl Work {
         };
         let meter = Meter::new(capacity, limits.caller_work_share);
         let one_core = capacity / threads.max(1) as u64;
-        let producers = Meter::new((one_core as f64 * PRODUCERS_SHARE) as u64, 1.0);
+        // Broadcasts' ticks all run on the producers' thread (`stream::producer`).
+        let producers = Meter::new((one_core as f64 * limits.broadcast_work_share) as u64, 1.0);
         Work { pool: Pool::new(threads), meter, producers, ns_per_unit, deadline: limits.request_timeout }
     }
 
@@ -118,7 +114,7 @@ impl Work {
     }
 
     /// The meters a broadcast is charged to: the node's, and the
-    /// producers' thread's (see [`PRODUCERS_SHARE`]).
+    /// producers' thread's (`broadcast_work_share` of one core).
     pub fn broadcast_meters(&self) -> [&Arc<Meter>; 2] {
         [&self.meter, &self.producers]
     }

@@ -19,6 +19,7 @@ use std::sync::Arc;
 
 use anim::ik::IkConstraint;
 use anim::motion::{LayerMode, MotionSpec};
+use anim::spring::{DEFAULT_WARMUP, SpringsSpec, warmup_start};
 use anim::{Clip, ClipSpec, Skeleton, Speed};
 
 use crate::stream::{PinnedClip, StreamMotion};
@@ -58,6 +59,13 @@ const CORE_BUILD_NS: u64 = 25;
 const PARSE_PER_BYTE: u64 = 1;
 /// Bytes of an imported file per unit.
 const IMPORT_BYTES_PER_UNIT: u64 = 4;
+/// Units per turning joint of one spring substep: its Verlet step, length
+/// and turn, and its share of placing the free joints above the chains
+/// (about 80–100 ns; BENCHMARKS.md, “Springs”).
+const SPRING_JOINT: u64 = 10;
+/// Units per collider test of one spring substep (each turning joint
+/// against each collider of its chain).
+const SPRING_TEST: u64 = 1;
 /// Units per joint of each layer a motion build maps by name, and per
 /// output joint its mask resolves.
 const MOTION_PER_JOINT: u64 = 6;
@@ -71,7 +79,74 @@ pub fn clip_pose(clip: &Clip) -> u64 {
 /// its own IK), then the motion's constraints on the output skeleton.
 pub fn motion_pose(motion: &StreamMotion) -> u64 {
     let layers = motion.layers().map(|c| clip_pose(c.clip())).fold(0, u64::saturating_add);
-    layers.saturating_add(ik(motion.ik(), motion.skeleton()))
+    layers.saturating_add(ik(motion.ik(), motion.skeleton())).saturating_add(retargets(motion))
+}
+
+/// The work of one spring substep of `motion` (docs/springs.md, “Cost”):
+/// the motion evaluated at the substep's time, then per turning joint its
+/// integration and one test per collider of its chain. 0 without springs.
+pub fn spring_substep(motion: &StreamMotion) -> u64 {
+    let Some(springs) = motion.springs() else { return 0 };
+    substep(motion_pose(motion), springs.substep_work())
+}
+
+/// One substep: the pose at its time, then `joints` integrations and
+/// `tests` collider tests.
+fn substep(pose: u64, (joints, tests): (usize, usize)) -> u64 {
+    let chains =
+        (joints as u64).saturating_mul(SPRING_JOINT).saturating_add((tests as u64).saturating_mul(SPRING_TEST));
+    pose.saturating_add(chains)
+}
+
+/// Substeps one frame at `fps` runs at most.
+fn substeps_per_frame(hz: f64, fps: u32) -> u64 {
+    (hz / f64::from(fps.max(1))).ceil() as u64
+}
+
+/// The work of one stream or broadcast frame of `motion` at `fps`: its
+/// pose, and the spring substeps a frame runs at most (`⌈hz / fps⌉`).
+pub fn motion_frame(motion: &StreamMotion, fps: u32) -> u64 {
+    let pose = motion_pose(motion);
+    let Some(springs) = motion.springs() else { return pose };
+    pose.saturating_add(substeps_per_frame(springs.substep_hz(), fps).saturating_mul(spring_substep(motion)))
+}
+
+/// The work of one frame of a clip stream at `fps`: the clip's pose, and
+/// its spring chains' substeps (`springs`, checked against its skeleton).
+pub fn clip_frame(clip: &Clip, springs: &SpringsSpec, fps: u32) -> u64 {
+    let pose = clip_pose(clip);
+    let joints: usize = springs.chains.iter().map(|c| c.joints.len().saturating_sub(1)).sum();
+    let tests = springs.chains.iter().map(|c| c.joints.len().saturating_sub(1) * c.colliders.len()).sum();
+    let substeps = if joints == 0 { 0 } else { substeps_per_frame(springs.substep_hz, fps) };
+    pose.saturating_add(substeps.saturating_mul(substep(pose, (joints, tests))))
+}
+
+/// The work of the spring substeps of a stateless request at `times` (in
+/// the order given): a simulation from rest `warmup` before its first time,
+/// run through the times, started again wherever a time goes back.
+pub fn spring_run(motion: &StreamMotion, times: &[f64]) -> u64 {
+    let Some(springs) = motion.springs() else { return 0 };
+    let hz = springs.substep_hz();
+    let mut seconds = 0.0f64;
+    let mut last: Option<f64> = None;
+    for &t in times {
+        seconds += match last {
+            Some(l) if t >= l => t - l,
+            _ => t - warmup_start(t.min(0.0), t, DEFAULT_WARMUP),
+        };
+        last = Some(t);
+    }
+    let substeps = (seconds * hz).ceil() as u64 + times.len() as u64;
+    substeps.saturating_mul(spring_substep(motion))
+}
+
+/// The work of the retargets of one pose (docs/motion.md, “Characters”): per
+/// retargeted layer, one model-space pass over its clip's skeleton and one
+/// over the character's.
+fn retargets(motion: &StreamMotion) -> u64 {
+    let output = motion.skeleton().len() as u64;
+    let each = motion.layers().enumerate().filter(|(i, _)| motion.is_retargeted(*i));
+    each.map(|(_, c)| (c.clip().joint_count() as u64 + output).saturating_mul(JOINT)).fold(0, u64::saturating_add)
 }
 
 /// The work of solving `constraints` once on `skeleton` (validated
@@ -114,17 +189,35 @@ pub fn clip_build(spec: &ClipSpec, max_build_work: u64) -> u64 {
 
 /// The work of building the motion `spec` says over its pinned clips:
 /// each layer's joints mapped by name onto the output's, its mask
-/// resolved, and an additive layer's reference pose sampled.
+/// resolved, an additive layer's reference pose sampled, and its spring
+/// chains compiled.
 pub fn motion_build(spec: &MotionSpec<Arc<dyn PinnedClip>>) -> u64 {
     let Some(first) = spec.layers.first() else { return 0 };
-    let output = first.clip.clip().joint_count() as u64;
+    let output = spec.character.as_ref().map_or(first.clip.clip().joint_count(), |c| c.skeleton.len()) as u64;
     let each = spec.layers.iter().map(|layer| {
         let clip = layer.clip.clip();
         let map = (output + clip.joint_count() as u64 + clip.parameters().total_width() as u64) * MOTION_PER_JOINT;
         let reference = if layer.mode == LayerMode::Additive { clip.joint_count() as u64 * JOINT } else { 0 };
-        map + reference
+        // With a character, a retargeter's setup: both references in model
+        // space and, with root motion, the root's cycle at up to 4096 poses.
+        let retarget = if spec.character.is_some() {
+            let per_pose = (clip.joint_count() as u64 + output) * JOINT;
+            per_pose * if spec.root_motion.is_some() { 4100 } else { 3 }
+        } else {
+            0
+        };
+        map + reference + retarget
     });
-    each.fold(0, u64::saturating_add)
+    // Spring chains compiled on the output skeleton: its names indexed, then
+    // each chain joint and collider looked up and laid out.
+    let chains = &spec.springs.chains;
+    let springs = if chains.is_empty() {
+        0
+    } else {
+        let named: u64 = chains.iter().map(|c| (c.joints.len() + c.colliders.len()) as u64).sum();
+        (output + named) * MOTION_PER_JOINT
+    };
+    each.fold(springs, u64::saturating_add)
 }
 
 /// The work of reading a clip document of `bytes` bytes (JSON parsed,
@@ -133,12 +226,59 @@ pub fn parse(bytes: u64) -> u64 {
     bytes.saturating_mul(PARSE_PER_BYTE)
 }
 
+/// Units per test of a 2D blend's triangulation: one triple of points
+/// against one point (its empty-circle test, a few products).
+const TRIANGULATE_TEST: u64 = 1;
+
+/// The work of building a graph (docs/graphs.md), once its clips are
+/// found: every node built as a motion, each of its `layers` mapping the
+/// `joints` of the graph's largest clip by name (a node naming another
+/// counts that one's layers again, at most its bound), and every 2D blend
+/// of `n` points triangulated by testing each of its `n³` triples against
+/// each point, so a blend's price grows as `n⁴` (a 32-point one is about a
+/// million units).
+pub fn graph_build(
+    node_layers: impl Iterator<Item = u64>,
+    blend2d_points: impl Iterator<Item = u64>,
+    joints: u64,
+) -> u64 {
+    let per_layer = joints.saturating_mul(2).saturating_mul(MOTION_PER_JOINT);
+    let motions = node_layers.map(|layers| layers.saturating_mul(per_layer)).fold(0, u64::saturating_add);
+    let triangulations =
+        blend2d_points.map(|n| n.saturating_pow(4).saturating_mul(TRIANGULATE_TEST)).fold(0, u64::saturating_add);
+    motions.saturating_add(triangulations)
+}
+
+/// The work of one tick of `graph` (docs/graphs.md, “Using a graph”): its
+/// costliest tick's joint samples ([`anim::graph::Graph::tick_joint_samples`]),
+/// whether or not the tick's pose is answered, since every tick is priced
+/// at the bound.
+pub fn graph_tick<C: anim::motion::ClipSource>(graph: &anim::graph::Graph<C>) -> u64 {
+    graph.tick_joint_samples().saturating_mul(JOINT)
+}
+
 /// The work of importing a file of `bytes` bytes (glTF, BVH): its reading
 /// and the builds of the clips in it, whose sizes the file only tells once
 /// read. Per byte of the file, less than a document's: an importer skips
 /// what is not animation (meshes, images).
 pub fn import(bytes: u64) -> u64 {
     bytes.div_ceil(IMPORT_BYTES_PER_UNIT)
+}
+
+/// Units per joint of a compact frame (docs/compact-frames.md): its
+/// quantisation (the smallest-three rotation, ten channels) and its bits.
+const COMPACT_PER_JOINT: u64 = 2;
+
+/// The work of one compact frame of `joints` joints, besides the encoding
+/// of its bytes.
+pub fn compact_frame(joints: usize) -> u64 {
+    (joints as u64).saturating_mul(COMPACT_PER_JOINT)
+}
+
+/// The work of choosing a compact layout: `samples` poses of a clip whose
+/// pose costs `pose` units, each also widening the ranges.
+pub fn compact_layout(samples: u64, pose: u64) -> u64 {
+    samples.saturating_mul(pose.saturating_add(1))
 }
 
 /// The work of encoding an answer of at most `bytes` bytes.

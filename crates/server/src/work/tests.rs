@@ -62,7 +62,7 @@ fn motion(clip: Clip, layers: usize, ik: Vec<IkSpec>) -> StreamMotion {
     let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(clip)));
     let layers = (0..layers).map(|_| LayerSpec::new(Arc::clone(&pinned))).collect();
     let limits = anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() };
-    anim::Motion::build_limited(MotionSpec { layers, root_motion: None, ik }, &limits).unwrap()
+    anim::Motion::build_limited(MotionSpec { layers, ik, ..Default::default() }, &limits).unwrap()
 }
 
 fn chain(effectors: &[usize], target: Vec3, iterations: u32) -> IkSpec {

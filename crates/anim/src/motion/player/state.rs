@@ -5,17 +5,19 @@
 //! The state is everything a player carries from one tick to the next —
 //! playheads of every deck, sync-group phases, layer weights and ramps,
 //! fades and their progress, a pending seek, the root's last positions and
-//! running total, the IK constraints and their chains' warm starts — and
+//! running total, the IK constraints and their chains' warm starts, the
+//! springs' tails and the last frame's clock — and
 //! nothing a tick computes afresh (poses, reports, cursors' search hints).
 //! So a player restored from the state of another steps on exactly as that
 //! one would, bit for bit.
 
 use std::sync::Arc;
 
-use super::{Deck, Fade, Player, PlayerError, Ramp, StreamIk};
+use super::{Deck, Fade, Player, PlayerError, Ramp, StreamIk, StreamSprings};
 use crate::ik::{IkConstraint, WarmStart};
 use crate::motion::root::RootAt;
-use crate::motion::{ClipSource, Motion, MotionSampler, RootMotion, UpAxis};
+use crate::motion::{ClipSource, Motion, MotionSampler, RootMotion, SpringRun, UpAxis};
+use crate::spring::SpringState;
 use crate::{Ease, Pose, Space};
 
 /// A layer weight on its way to a target (see [`Player::ramp`]).
@@ -74,6 +76,11 @@ pub struct PlayerState<C> {
     pub ik: Vec<IkConstraint>,
     /// Their chains' warm starts, in constraint order.
     pub warm: Vec<WarmStart>,
+    /// The current motion's spring simulation: the solver's state and the
+    /// last frame's clock and motion time (`None`: no springs).
+    pub springs: Option<(SpringState, Option<(f64, f64)>)>,
+    /// Whether the next frame's springs start from a jump.
+    pub springs_jumped: bool,
 }
 
 impl<C: ClipSource> Player<C> {
@@ -91,6 +98,8 @@ impl<C: ClipSource> Player<C> {
             up: self.up,
             ik: self.ik.constraints.clone(),
             warm: self.ik.solver.warm_starts(),
+            springs: self.springs.run.as_ref().map(|run| run.state()),
+            springs_jumped: self.springs.jumped,
         }
     }
 
@@ -111,8 +120,19 @@ impl<C: ClipSource> Player<C> {
         };
         let mut ik = StreamIk { constraints: state.ik, ..StreamIk::default() };
         ik.solver.set_warm_starts(state.warm);
+        let top = Deck::from_state(state.top)?;
+        let run = match (state.springs, top.motion.springs()) {
+            // A faded-out player's springs no longer run.
+            (None, _) => None,
+            (Some((solver, previous)), Some(springs)) => Some(Box::new(
+                SpringRun::from_state(springs, solver, previous)
+                    .map_err(|_| PlayerError::State("a spring state that does not fit the motion's springs"))?,
+            )),
+            (Some(_), None) => return Err(PlayerError::State("a spring state for a motion without springs")),
+        };
+        let springs = StreamSprings { run, jumped: state.springs_jumped, applied: false };
         let player = Player {
-            top: Deck::from_state(state.top)?,
+            top,
             fade,
             seek: state.seek,
             last_s: state.last_s,
@@ -123,6 +143,7 @@ impl<C: ClipSource> Player<C> {
             root: state.root,
             up: state.up,
             ik,
+            springs,
         };
         if player.fades() > super::MAX_FADES {
             return Err(PlayerError::State("more fades than a player keeps"));

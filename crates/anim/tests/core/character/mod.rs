@@ -8,7 +8,8 @@
 //! the glTF rigs as tables of their nodes (`rigs`, copied from the files).
 
 mod feet;
-mod names;
+mod motion;
+pub mod names;
 mod properties;
 pub mod reference;
 mod rigs;

@@ -95,9 +95,10 @@ fn a_clip_solves_inside_a_masked_layer_as_it_does_alone() {
     let plain = leg(Vec::new());
     let leg_only = MaskSpec { joints: vec![("thigh".into(), 1.0)], descendants: true, default: None };
     let layers = vec![LayerSpec::new(&plain), LayerSpec { mask: Some(leg_only), ..LayerSpec::new(&ik_clip) }];
-    let layered = Motion::build(MotionSpec { layers: layers.clone(), root_motion: None, ik: Vec::new() }).unwrap();
+    let layered = Motion::build(MotionSpec { layers: layers.clone(), ..Default::default() }).unwrap();
     let solved =
-        Motion::build(MotionSpec { layers, root_motion: None, ik: vec![chain_to(Vec3::new(1.2, -0.8, 0.1))] }).unwrap();
+        Motion::build(MotionSpec { layers, ik: vec![chain_to(Vec3::new(1.2, -0.8, 0.1))], ..Default::default() })
+            .unwrap();
     let (mut sampler, mut alone, mut cursor) = (MotionSampler::new(), Pose::default(), Cursor::default());
     // The chain's target is within reach while the thigh is near x = 1.2.
     for k in 0..10 {
@@ -157,7 +158,7 @@ fn a_player_warm_starts_its_chains_and_replaces_its_list() {
 fn a_player_takes_its_first_motions_constraints_and_refuses_a_crossfade_that_carries_some() {
     let clip = leg(Vec::new());
     let layers = || vec![LayerSpec::new(&clip)];
-    let with_ik = MotionSpec { layers: layers(), root_motion: None, ik: vec![two_bone(Vec3::new(1.2, -0.8, 0.2))] };
+    let with_ik = MotionSpec { layers: layers(), ik: vec![two_bone(Vec3::new(1.2, -0.8, 0.2))], ..Default::default() };
     let motion = Arc::new(Motion::build(with_ik.clone()).unwrap());
     let mut player = Player::new(Arc::clone(&motion));
     assert_eq!(player.ik().len(), 1);

@@ -49,19 +49,48 @@ export async function request(path, options) {
   }
 }
 
+/// How often a request refused for now (429, 503 with `Retry-After`) is
+/// asked again, and the longest wait the page accepts before each.
+const RETRIES = 3;
+const LONGEST_RETRY_S = 5;
+
 /// A JSON answer, the token sent; a refusal throws its problem as one line.
-export async function api(path, options = {}) {
+/// The page's reads come in bursts (a clip's pose, curves, framing and
+/// thumbnails at once) that can pass the caller's work share for a moment
+/// (docs/api.md, "Work and its price"): such a refusal is waited out.
+export async function api(path, options = {}, retries = RETRIES) {
   const headers = { ...authHeaders(), ...(options.headers || {}) };
   const response = await request(path, { ...options, headers });
+  const after = response.headers.get("retry-after");
+  const wait = after === null ? NaN : Number(after);
+  if ((response.status === 429 || response.status === 503) && retries > 0 && wait >= 0 && wait <= LONGEST_RETRY_S) {
+    await new Promise((resolve) => setTimeout(resolve, Math.max(wait, 0.1) * 1000));
+    return api(path, options, retries - 1);
+  }
   if (response.status === 401) wantToken();
   if (!response.ok) throw new Error(await problemText(response));
-  return response.json();
+  return response.status === 204 ? null : response.json();
 }
 
 /// Points at the token field: the server wants a (different) token.
 export function wantToken() {
   $("token-form").classList.add("wanted");
   $("token").focus();
+}
+
+/// Every item of a listing route (`/v1/clips`, `/v1/characters`, …), page
+/// by page: `key` names the page's array.
+export async function listAll(path, key) {
+  const items = [];
+  let cursor = null;
+  for (let page = 0; page < 20; page++) {
+    const q = cursor ? `&cursor=${encodeURIComponent(cursor)}` : "";
+    const body = await api(`${path}?limit=500${q}`);
+    items.push(...body[key]);
+    cursor = body.next_cursor;
+    if (!cursor) break;
+  }
+  return items;
 }
 
 export const postJson = (path, body) =>

@@ -121,7 +121,7 @@ async function copyLink() {
 /// list is `ready`.
 export function setup(ready) {
   build();
-  on("frame", record);
+  on("received", record);
   // Picking another clip leaves the broadcast.
   on("clipSelected", () => {
     if (state.watching && !broadcast.selecting) leave();

@@ -1,28 +1,19 @@
-// The clip list: loaded page by page, filtered by name; selecting a clip
-// (its document, range, camera, first pose and curves), and adopting the
-// clip a crossfade brought in.
+// The clip list: loaded page by page (library.js shows it); selecting a
+// clip (its document, range, camera, first pose and curves), forgetting a
+// deleted one, and adopting the clip a crossfade brought in.
 
-import { api, savedToken } from "./api.js";
-import { loadCurve, setupCurveSelectors } from "./curves.js";
-import { $, setStatus } from "./dom.js";
+import { api, listAll, savedToken } from "./api.js";
+import { drawCurves, loadCurve, setupCurveSelectors } from "./curves.js";
+import { $, dispatchStatus, setStatus } from "./dom.js";
 import { emit } from "./events.js";
 import { setEnded, showPoseAt, stopStream, updateReadout } from "./player.js";
-import { fitCamera } from "./scene.js";
+import { fitCamera, requestDraw } from "./scene.js";
 import { state } from "./state.js";
 
 export async function loadClips() {
-  const clips = [];
-  let cursor = null;
-  for (let page = 0; page < 20; page++) {
-    const q = cursor ? `&cursor=${encodeURIComponent(cursor)}` : "";
-    const body = await api(`/v1/clips?limit=500${q}`);
-    clips.push(...body.clips);
-    cursor = body.next_cursor;
-    if (!cursor) break;
-  }
-  state.clips = clips;
+  state.clips = await listAll("/v1/clips", "clips");
   $("token-form").classList.remove("wanted");
-  renderClips();
+  emit("listChanged");
 }
 
 /// Loads the list; a refusal says what to do about it.
@@ -35,24 +26,6 @@ export async function loadClipsOrExplain() {
       ? given ? " — the token was refused; enter another" : " — this server needs a read token: enter it under Token"
       : "";
     setStatus(`listing clips: ${e.message}${hint}`, true);
-  }
-}
-
-function renderClips() {
-  const needle = $("filter").value.trim().toLowerCase();
-  const list = $("clips");
-  list.replaceChildren();
-  for (const c of state.clips) {
-    if (needle && !c.name.toLowerCase().includes(needle)) continue;
-    const li = document.createElement("li");
-    li.dataset.id = c.id;
-    li.textContent = c.name;
-    const small = document.createElement("small");
-    small.textContent = `${c.joints} joints · ${c.tracks} tracks · ${c.duration.toFixed(2)} s`;
-    li.append(small);
-    li.classList.toggle("selected", state.clip?.id === c.id);
-    li.addEventListener("click", () => selectClip(c.id).catch((e) => setStatus(e.message, true)));
-    list.append(li);
   }
 }
 
@@ -70,11 +43,11 @@ export async function selectClip(id) {
   seek.value = summary.start;
   seek.disabled = false;
   $("play").disabled = false;
-  renderClips();
+  emit("listChanged");
   setupCurveSelectors();
+  dispatchStatus({ type: "select", clip: summary });
   await Promise.all([fitCamera(), showPoseAt(summary.start), loadCurve()]);
   updateReadout();
-  setStatus(`${summary.name}: ${summary.joints} joints, ${summary.start}–${summary.end} s`);
 }
 
 /// Makes `id` the page's clip while its stream goes on (a crossfade
@@ -84,14 +57,23 @@ export async function adoptClip(id) {
   if (!summary || state.clip?.id === id) return;
   const doc = await api(`/v1/clips/${encodeURIComponent(id)}`);
   Object.assign(state, { clip: summary, doc });
+  dispatchStatus({ type: "adopt", clip: summary });
   emit("clipAdopted", summary);
   $("seek").min = summary.start;
   $("seek").max = summary.end;
-  renderClips();
+  emit("listChanged");
   setupCurveSelectors();
   await loadCurve();
 }
 
-export function setup() {
-  $("filter").addEventListener("input", renderClips);
+/// No clip shown any more (it was deleted): the stream stops, the view empties.
+export function forgetClip() {
+  stopStream();
+  Object.assign(state, { clip: null, doc: null, names: [], parents: [], drawnJoints: [], positions: [], curve: null });
+  $("play").disabled = true;
+  $("seek").disabled = true;
+  dispatchStatus({ type: "deselect" });
+  drawCurves();
+  requestDraw();
+  emit("listChanged");
 }

@@ -21,14 +21,17 @@ export const panel = {
   lastFrame: null,
   openPaused: false, // the next stream opens paused (a change made while paused)
   fading: null, // the layers before a crossfade the server has not shown yet
+  springs: { chains: [], on: true, stiffness: 1, drag: 0.4, gravity: 9.81 }, // the page's chains ({name, joints}) and their settings (springs.js)
   motion, // the motion doc, as `motion()` below (read by the browser test)
 };
 
 /// Whether the page shows more than its clip: another layer, a weight, a
-/// mask, root motion or IK (a plain clip keeps the clip routes).
+/// mask, root motion, IK or a character (a plain clip keeps the clip routes).
 export function composed() {
   const [base, ...rest] = panel.layers;
-  return Boolean(rest.length || (base && (base.weight !== 1 || base.mask)) || panel.rootMode || panel.ik);
+  if (state.graph) return true;
+  const springs = panel.springs.on && panel.springs.chains.length;
+  return Boolean(rest.length || (base && (base.weight !== 1 || base.mask)) || panel.rootMode || panel.ik || state.character || springs);
 }
 
 export function layerDoc(layer, playback) {
@@ -42,12 +45,25 @@ export function layerDoc(layer, playback) {
 /// The motion the page plays (docs/motion.md), IK included unless `ik` is false
 /// (a crossfade's motion carries none: a stream has one IK list).
 export function motion({ ik = true } = {}) {
+  if (state.graph) return { layers: [{ graph: state.graph.id }] };
   const playback = options().playback;
   const doc = { layers: panel.layers.map((l) => layerDoc(l, playback)) };
   if (panel.rootMode) doc.root_motion = { mode: panel.rootMode, ...(panel.rootJoint ? { joint: panel.rootJoint } : {}) };
   if (ik && panel.ik) doc.ik = [constraint()];
+  if (state.character) doc.character = state.character.id;
+  if (panel.springs.on && panel.springs.chains.length) doc.springs = springsDoc(panel.springs);
   return doc;
 }
+
+/// A graph's settings that hold (floats and bools; a trigger lasts one tick),
+/// from its controls (graph.js).
+export const heldSettings = (controls) =>
+  Object.fromEntries(controls.filter((c) => c.kind !== "trigger").map((c) => [c.name, c.value]));
+
+/// The page's chains as the motion's `springs` (docs/springs.md, “Fields”):
+/// one stiffness, drag and downward gravity for all.
+export const springsDoc = (s) =>
+  s.chains.map(({ name, joints }) => ({ name, joints, stiffness: s.stiffness, drag: s.drag, gravity: [0, -s.gravity, 0] }));
 
 /// The handle as an IK constraint.
 export function constraint() {
@@ -73,6 +89,7 @@ export function openMessage() {
     space,
     ease,
     paused: panel.openPaused,
+    ...(state.graph ? { report: true } : {}),
   };
   panel.openPaused = false;
   resetTrail();
@@ -80,6 +97,11 @@ export function openMessage() {
 }
 
 /// The paused view's pose of a composition at `t` (`POST /v1/poses`; ease
-/// is a stream setting), or null for a plain clip.
-export const composedPoseAt = (t) =>
-  composed() ? postJson("/v1/poses", { motion: motion(), time: t, space: options().space }) : null;
+/// is a stream setting), or null for a plain clip. A graph's is played from
+/// 0 with the page's settings (docs/graphs.md).
+export function composedPoseAt(t) {
+  if (!composed()) return null;
+  const body = { motion: motion(), time: t, space: options().space };
+  if (state.graph) Object.assign(body, { inputs: [{ time: 0, set: heldSettings(state.graph.controls) }], fps: fps(), report: true });
+  return postJson("/v1/poses", body);
+}

@@ -5,7 +5,9 @@
 
 import { postJson } from "./api.js";
 import { $, COLORS, setStatus, sizeCanvas, stroke } from "./dom.js";
+import { on } from "./events.js";
 import { eulerDegrees, nearestBranch, nearestIndex, unwrapSeries } from "./math.js";
+import { draw } from "./render.js";
 import { requestTimeOf } from "./settings.js";
 import { state } from "./state.js";
 
@@ -52,7 +54,12 @@ function curveSource(joint, channel) {
   return { track, read: (pose) => pose.joints.find((j) => j.name === joint)[channel] };
 }
 
+/// Curves asked for: answers can come out of order (a setting changed
+/// while another curve was on its way), and only the newest is plotted.
+let curvesAsked = 0;
+
 export async function loadCurve() {
+  const asked = ++curvesAsked;
   const joint = $("curve-joint").value, channel = $("curve-channel").value;
   if (!state.clip || !joint || !channel) {
     state.curve = null;
@@ -63,6 +70,7 @@ export async function loadCurve() {
   const fps = end > start ? Math.min(240, Math.max(1, CURVE_POINTS / (end - start))) : 1;
   const request = { start, end, fps, space: "local", playback: "once", ease: $("ease").value };
   const { poses } = await postJson(`/v1/clips/${encodeURIComponent(id)}/sample`, request);
+  if (asked !== curvesAsked) return;
   const times = poses.map((p) => p.time);
   const raw = poses.map(read);
   const euler = channel === "rotation" && $("curve-rotation").value !== "quaternion" ? $("curve-rotation").value : null;
@@ -98,13 +106,50 @@ function hermiteHandles(track) {
   }));
 }
 
+/// Where the plot's time axis lies on the canvas (for the playhead), as the curve layer last drew it.
+let plot = null;
+/// What the curve layer shows: redrawn only when the curve or the canvas size changes.
+let layerKey = null;
+/// How often the playhead layer may be redrawn while playing (ms): about 30 times a second.
+const PLAYHEAD_INTERVAL = 30;
+
+/// Redraws the curve layer (keys, handles, the curve) at the next animation frame, if the curve or the view changed.
 export function drawCurves() {
-  const canvas = $("curves");
+  draw("curves", () => {
+    const canvas = $("curves");
+    const dpr = sizeCanvas(canvas);
+    const key = [state.curve, canvas.width, canvas.height];
+    if (layerKey && key.every((k, i) => k === layerKey[i])) return;
+    layerKey = key;
+    state.curveLayerDraws = (state.curveLayerDraws || 0) + 1;
+    drawCurveLayer(canvas, dpr);
+    drawPlayhead();
+  });
+}
+
+/// Moves the playhead (its own layer over the curve's), about 30 times a second.
+export function drawPlayhead() {
+  draw("playhead", drawPlayheadNow, PLAYHEAD_INTERVAL);
+}
+
+function drawPlayheadNow() {
+  const canvas = $("curves-playhead");
   const dpr = sizeCanvas(canvas);
+  const ctx = canvas.getContext("2d");
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  if (!plot || !state.curve) return;
+  const { t0, t1, left, right, top, bottom } = plot;
+  const t = requestTimeOf(state.clipTime);
+  const x = left + (t1 > t0 ? ((t - t0) / (t1 - t0)) * (right - left) : 0);
+  stroke(ctx, "#ff8c1a", dpr, () => (ctx.moveTo(x, top), ctx.lineTo(x, bottom)));
+}
+
+function drawCurveLayer(canvas, dpr) {
   const ctx = canvas.getContext("2d");
   const W = canvas.width, H = canvas.height;
   ctx.fillStyle = "#101216";
   ctx.fillRect(0, 0, W, H);
+  plot = null;
   const curve = state.curve;
   if (!curve || !curve.times.length) return;
   const handles = curve.tangents.flatMap((k) => [k.in, k.out].filter(Boolean));
@@ -123,6 +168,7 @@ export function drawCurves() {
   hi += pad;
   const t0 = curve.times[0], t1 = curve.times[curve.times.length - 1];
   const left = 48 * dpr, right = W - 12 * dpr, top = 10 * dpr, bottom = H - 20 * dpr;
+  plot = { t0, t1, left, right, top, bottom };
   const X = (t) => left + (t1 > t0 ? ((t - t0) / (t1 - t0)) * (right - left) : 0);
   const Y = (v) => bottom - ((v - lo) / (hi - lo)) * (bottom - top);
   ctx.font = `${11 * dpr}px system-ui, sans-serif`;
@@ -150,13 +196,21 @@ export function drawCurves() {
     ctx.fillStyle = color;
     for (const k of curve.keys) ctx.fillRect(X(k.time) - 3 * dpr, Y(k.value[c]) - 3 * dpr, 6 * dpr, 6 * dpr);
   }
-  const playhead = X(requestTimeOf(state.clipTime));
-  stroke(ctx, "#ff8c1a", dpr, () => (ctx.moveTo(playhead, top), ctx.lineTo(playhead, bottom)));
+}
+
+/// A joint picked in the view plots its first channel, if it has tracks.
+function showJoint(name) {
+  const select = $("curve-joint");
+  if (!name || select.value === name || ![...select.options].some((o) => o.value === name)) return;
+  select.value = name;
+  setupChannels();
+  loadCurve().catch((e) => setStatus(e.message, true));
 }
 
 /// The selectors: another curve is plotted as soon as it is chosen.
 export function setup() {
   const report = (e) => setStatus(e.message, true);
+  on("jointSelected", showJoint);
   $("curve-joint").addEventListener("change", () => {
     setupChannels();
     loadCurve().catch(report);

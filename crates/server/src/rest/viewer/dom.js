@@ -1,6 +1,9 @@
 // The page's elements: lookup, creation, the status line, and the canvas
 // helpers both views use.
 
+import { state } from "./state.js";
+import { reduceStatus, statusView } from "./status.js";
+
 export const $ = (id) => document.getElementById(id);
 
 /// The plot colours: x, y, z, w, then more parameter components (the ground's axes use the first three).
@@ -15,10 +18,19 @@ export function el(tag, props = {}, ...children) {
 
 export const row = (...children) => el("div", { className: "row" }, ...children);
 
+/// Tells the status (status.js) what happened, and shows what it now says
+/// in the header and the status line.
+export function dispatchStatus(action) {
+  state.status = reduceStatus(state.status, action);
+  const view = statusView(state.status);
+  $("status").textContent = view.line;
+  $("status").classList.toggle("error", view.error);
+  $("now-playing").textContent = view.header;
+}
+
+/// A message on the status line (until the next one, or until playing makes it stale).
 export function setStatus(text, isError = false) {
-  const s = $("status");
-  s.textContent = text;
-  s.classList.toggle("error", isError);
+  dispatchStatus({ type: "message", text, error: isError });
 }
 
 /// Sizes a canvas's pixels to its box (the layout gives it the height the

@@ -1,7 +1,9 @@
-// The selected clip's skinned mesh, drawn on the GPU (WebGL2) on a canvas
-// under the 2D one, which keeps the skeleton as an overlay (issue 20).
+// The selected clip's skinned mesh, or the character's the motion plays on,
+// drawn on the GPU (WebGL2) on a canvas under the 2D one, which keeps the
+// skeleton as an overlay.
 //
-// The mesh comes from GET /v1/clips/{id}/mesh (docs/mesh-format.md: a JSON
+// The mesh comes from GET /v1/clips/{id}/mesh or /v1/characters/{id}/mesh
+// (docs/mesh-format.md: a JSON
 // header and little-endian arrays, read here as typed-array views). Each
 // pose the page shows gives every joint's model matrix M_j (as sent for
 // `space=model`, else composed down the hierarchy); the joint palette's
@@ -22,7 +24,8 @@ import { state } from "./state.js";
 const BACKGROUND = [0x10 / 255, 0x12 / 255, 0x16 / 255];
 
 export const mesh = {
-  clip: null, // the clip whose mesh is loaded (null: none)
+  clip: null, // the clip whose mesh is loaded, or whose motion plays on the character's (null: none)
+  character: null, // the character whose mesh is loaded (null: the clip's own, or none)
   info: null, // { vertices, triangles, joints, textured, normals } (read by the browser test)
   draws: 0, // frames drawn with the mesh
   showMesh: true,
@@ -55,7 +58,8 @@ export function setup() {
   toggle("show-skeleton", "skeleton", "showSkeleton");
 
   on("clipSelected", (clip) => select(clip.id));
-  on("clipAdopted", (clip) => select(clip.id, true)); // a crossfade's clip brings its own mesh
+  on("clipAdopted", (clip) => state.character || select(clip.id, true)); // a crossfade's clip brings its own mesh
+  on("characterChanged", () => state.clip && select(state.clip.id));
   on("pose", (pose) => posed(pose, state.parents));
 }
 
@@ -96,12 +100,13 @@ function parseMesh(buffer) {
   return { header, arrays, textures };
 }
 
-/// Loads the clip's mesh (or learns it has none), as a clip is selected. Never fails the selection: a mesh that cannot be
+/// Loads the clip's mesh, or the character's (or learns it has none), as a clip or character is selected. Never fails the selection: a mesh that cannot be
 /// shown leaves the skeleton view, and the status says why.
 const select = (clipId, sameSkeleton = false) => load(clipId, sameSkeleton).catch((e) => setStatus(`mesh not shown: ${e.message}`, true));
 
 function unload() {
   mesh.clip = null;
+  mesh.character = null;
   mesh.info = null;
   palette = null;
   setActive(false);
@@ -113,7 +118,9 @@ async function load(clipId, sameSkeleton) {
   // so the old mesh may stay drawn until the answer, and usually it is the
   // same mesh (clips of one skin share it: the browser revalidates, 304).
   if (!sameSkeleton) unload();
-  const response = await fetch(`/v1/clips/${encodeURIComponent(clipId)}/mesh`, { headers: authHeaders() });
+  const character = state.character?.id ?? null;
+  const owner = character ? `characters/${encodeURIComponent(character)}` : `clips/${encodeURIComponent(clipId)}`;
+  const response = await fetch(`/v1/${owner}/mesh`, { headers: authHeaders() });
   if (ticket !== loading) return;
   if (!response.ok) unload();
   if (response.status === 404) return; // no mesh (JSON, BVH, unskinned glTF): the skeleton view
@@ -124,6 +131,7 @@ async function load(clipId, sameSkeleton) {
   if (ticket !== loading) return;
   upload(parsed, images);
   mesh.clip = clipId;
+  mesh.character = character;
   const { header, arrays } = parsed;
   mesh.info = {
     vertices: header.vertices,
@@ -219,6 +227,15 @@ const SKIN_FS = `#version 300 es
     color = vec4(base.rgb * light, 1.0);
   }`;
 
+/// The mesh's depth, packed into RGBA8 (WebGL2 cannot read a depth buffer back).
+const DEPTH_FS = `#version 300 es
+  precision highp float;
+  out vec4 color;
+  void main() {
+    vec4 e = fract(gl_FragCoord.z * vec4(1.0, 255.0, 65025.0, 16581375.0));
+    color = e - e.yzww * vec4(1.0 / 255.0, 1.0 / 255.0, 1.0 / 255.0, 0.0);
+  }`;
+
 const LINE_VS = `#version 300 es
   in vec3 aPosition; uniform mat4 uViewProjection;
   void main() { gl_Position = uViewProjection * vec4(aPosition, 1.0); }`;
@@ -227,8 +244,10 @@ const LINE_FS = `#version 300 es
   precision mediump float; uniform vec4 uColor; out vec4 color;
   void main() { color = uColor; }`;
 
-function compile(vs, fs) {
+/// A program; `locations` (attribute → location) makes it share another's vertex arrays.
+function compile(vs, fs, locations = {}) {
   const program = gl.createProgram();
+  for (const [name, location] of Object.entries(locations)) if (location >= 0) gl.bindAttribLocation(program, location, name);
   for (const [type, source] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
     const shader = gl.createShader(type);
     gl.shaderSource(shader, source);
@@ -256,6 +275,9 @@ function context() {
     return null;
   }
   programs = { skin: compile(SKIN_VS, SKIN_FS), line: compile(LINE_VS, LINE_FS) };
+  const skin = programs.skin;
+  const names = ["aPosition", "aNormal", "aUv", "aJoints", "aWeights"];
+  programs.depth = compile(SKIN_VS, DEPTH_FS, Object.fromEntries(names.map((n) => [n, skin.attribute(n)])));
   programs.lineBuffer = gl.createBuffer();
   return gl;
 }
@@ -347,7 +369,83 @@ export function draw(cam, width, height, lines) {
   const vp = viewProjection(cam, state.camera, width, height);
   drawLines(vp, lines);
   if (mesh.showMesh && gpu.posed) drawMesh(vp, cam);
+  depth = mesh.showMesh && gpu.posed && mesh.showSkeleton ? readDepth(vp, width, height) : null;
   return true;
+}
+
+// ---- the mesh's depth, for the skeleton drawn over it (scene.js dims the bones behind it) ----
+
+/// The depth map is read at this fraction of the view's size: enough to tell a leg from the body behind it.
+const DEPTH_SCALE = 4;
+let depth = null; // { width, height, data, near, far } of the last frame drawn with the mesh
+let depthTarget = null; // { fbo, color, depth, width, height }
+
+/// Renders the posed mesh's depth at a quarter of the view's size and reads it back.
+function readDepth(vp, width, height) {
+  const w = Math.max(1, Math.round(width / DEPTH_SCALE)), h = Math.max(1, Math.round(height / DEPTH_SCALE));
+  if (!depthTarget || depthTarget.width !== w || depthTarget.height !== h) makeDepthTarget(w, h);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, depthTarget.fbo);
+  gl.viewport(0, 0, w, h);
+  gl.clearColor(1, 1, 1, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  gl.enable(gl.DEPTH_TEST);
+  const d = programs.depth;
+  gl.useProgram(d.program);
+  gl.uniformMatrix4fv(d.uniforms.uViewProjection, false, vp);
+  gl.activeTexture(gl.TEXTURE0);
+  gl.bindTexture(gl.TEXTURE_2D, gpu.skinning);
+  gl.uniform1i(d.uniforms.uSkinning, 0);
+  gl.bindVertexArray(gpu.vao);
+  for (const p of gpu.primitives) gl.drawElements(gl.TRIANGLES, p.count, gpu.indexType, p.first * gpu.indexSize);
+  gl.bindVertexArray(null);
+  const data = new Uint8Array(4 * w * h);
+  gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, data);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  gl.viewport(0, 0, width, height);
+  // viewProjection's depth range, to turn a stored depth back into a distance along the view.
+  const near = Math.max(state.camera.dist * 1e-3, state.camera.dist * 0.01), far = state.camera.dist + 40 * state.camera.radius;
+  return { width: w, height: h, data, near, far };
+}
+
+function makeDepthTarget(w, h) {
+  if (depthTarget) {
+    gl.deleteFramebuffer(depthTarget.fbo);
+    gl.deleteTexture(depthTarget.color);
+    gl.deleteRenderbuffer(depthTarget.depth);
+  }
+  const color = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, color);
+  gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA8, w, h);
+  const depthBuffer = gl.createRenderbuffer();
+  gl.bindRenderbuffer(gl.RENDERBUFFER, depthBuffer);
+  gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT24, w, h);
+  const fbo = gl.createFramebuffer();
+  gl.bindFramebuffer(gl.FRAMEBUFFER, fbo);
+  gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, color, 0);
+  gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, depthBuffer);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  depthTarget = { fbo, color, depth: depthBuffer, width: w, height: h };
+}
+
+/// The distance along the view to the mesh's nearest surface around
+/// screen point `[x, y]` (the view's pixels, y down), or Infinity where no
+/// mesh is drawn; null when the last frame had no mesh depth.
+export function meshDistanceAt([x, y]) {
+  if (!depth) return null;
+  const { width: w, height: h, data, near, far } = depth;
+  const cx = Math.round(x / DEPTH_SCALE), cy = h - 1 - Math.round(y / DEPTH_SCALE);
+  let nearest = Infinity;
+  for (let j = cy - 1; j <= cy + 1; j++)
+    for (let i = cx - 1; i <= cx + 1; i++) {
+      if (i < 0 || j < 0 || i >= w || j >= h) continue;
+      const k = 4 * (j * w + i);
+      const z = data[k] / 255 + data[k + 1] / 65025 + data[k + 2] / 16581375 + data[k + 3] / 4228250625;
+      if (z >= 0.999999) continue; // cleared: no mesh here
+      const ndc = 2 * z - 1; // back through viewProjection's depth: ndc = a + b / distance
+      const a = (far + near) / (far - near), b = (-2 * far * near) / (far - near);
+      nearest = Math.min(nearest, b / (ndc - a));
+    }
+  return nearest;
 }
 
 function drawLines(vp, lines) {

@@ -8,13 +8,14 @@
 // a chosen joint) are dragged in the 3D view's camera plane and sent as live
 // `ik` controls, at most once a frame.
 
+import { choose } from "./character.js";
 import { adoptClip, selectClip } from "./clips.js";
 import { constraint, layerDoc, motion, panel, resetTrail } from "./composition.js";
 import { send } from "./controls.js";
-import { $, el, row, setStatus } from "./dom.js";
+import { $, COLORS, el, row, setStatus } from "./dom.js";
 import { on } from "./events.js";
 import { IDENTITY, applyTransform, composeTransforms, conj, qmul, toCamera, toScreen, turn, unapplyTransform, yawOf } from "./math.js";
-import { openStream, setPlaying, showPoseAt, stopStream } from "./player.js";
+import { reopen, showPoseAt } from "./player.js";
 import { requestDraw, sceneCamera } from "./scene.js";
 import { fps, options } from "./settings.js";
 import { state } from "./state.js";
@@ -23,6 +24,9 @@ const HANDLE_PX = 9; // the handle's radius on screen, CSS pixels
 const GRAB_PX = 16; // how near a press must be to grab it
 const TRAIL_POINTS = 900; // root-motion trail length, at most
 const HANDLE_COLOR = "#3ad1e6";
+const GIZMO_PX = 60; // the gizmo's arrows' length at the handle's depth, CSS pixels
+const AXIS_GRAB_PX = 8; // how near a press must be to an arrow of the translate gizmo to grab it
+const AXES = [[1, 0, 0], [0, 1, 0], [0, 0, 1]];
 const TRAIL_COLOR = "#ff8c1a";
 
 // ---- the DOM ----
@@ -66,14 +70,7 @@ function build() {
 function recompose() {
   renderLayers();
   if (state.watching) return crossfadeTo(motion({ ik: false }), fadeSeconds());
-  if (state.ws) {
-    const playing = state.playing;
-    panel.openPaused = !playing;
-    stopStream();
-    if (openStream()) setPlaying(playing);
-    return;
-  }
-  if (state.clip) showPoseAt(state.requestTime).catch(report);
+  reopen();
 }
 
 function crossfadeTo(to, duration) {
@@ -176,8 +173,9 @@ function clipSelected(clip) {
   renderLayers();
 }
 
-/// Layers, masks and root motion as a broadcast plays them.
+/// Layers, masks, root motion and character as a broadcast plays them.
 export function adopt(doc) {
+  if ((doc.character ?? null) !== (state.character?.id ?? null)) choose(doc.character ?? "", true).catch(report);
   panel.layers = doc.layers.map((l) => ({ clip: l.clip, weight: l.weight ?? 1, mask: Object.keys(l.mask?.joints || {})[0] ?? null }));
   panel.rootMode = doc.root_motion?.mode ?? "";
   panel.rootJoint = doc.root_motion?.joint ?? panel.rootJoint;
@@ -199,6 +197,7 @@ function crossfade() {
   panel.layers = [{ clip: to, weight: 1, mask: null }];
   const target = { layers: [layerDoc(panel.layers[0], playback)] };
   if (panel.rootMode) target.root_motion = motion().root_motion;
+  if (state.character) target.character = state.character.id;
   crossfadeTo(target, fadeSeconds());
   renderLayers();
 }
@@ -337,8 +336,44 @@ function pointer(e, cam) {
   return [(e.clientX - r.left) * cam.dpr, (e.clientY - r.top) * cam.dpr];
 }
 
+// ---- the translate gizmo: three arrows along the world axes from the handle ----
+
+/// The gizmo's arrows on screen: per axis its base and tip (pixels); each
+/// as long in the world as GIZMO_PX on screen at the handle's depth.
+function gizmoArrows(cam) {
+  const base = toCamera(cam, panel.ik.target);
+  if (base[2] <= cam.near) return [];
+  const length = (GIZMO_PX * cam.dpr * base[2]) / cam.focal;
+  return AXES.map((a, axis) => {
+    const tip = toCamera(cam, panel.ik.target.map((c, k) => c + a[k] * length));
+    return tip[2] <= cam.near ? null : { axis, from: toScreen(cam, base), to: toScreen(cam, tip) };
+  }).filter(Boolean);
+}
+
+/// Distance from point `p` to segment `a`–`b` (pixels).
+function segmentDistance(p, a, b) {
+  const d = [b[0] - a[0], b[1] - a[1]];
+  const len2 = d[0] * d[0] + d[1] * d[1] || 1;
+  const t = Math.max(0, Math.min(1, ((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2));
+  return Math.hypot(p[0] - a[0] - t * d[0], p[1] - a[1] - t * d[1]);
+}
+
+/// Where along the axis line `origin + t·axis` the pointer's ray passes nearest: `t`.
+export function alongAxis(cam, [sx, sy], origin, axis) {
+  const x = (sx - cam.cx) / cam.focal, y = -(sy - cam.cy) / cam.focal;
+  const ray = [0, 1, 2].map((k) => cam.f[k] + x * cam.r[k] + y * cam.u[k]);
+  const n = Math.hypot(...ray);
+  const dir = ray.map((c) => c / n);
+  const w0 = [0, 1, 2].map((k) => origin[k] - cam.eye[k]);
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const b = dot(axis, dir), d = dot(axis, w0), e = dot(dir, w0);
+  const denom = 1 - b * b;
+  return denom < 1e-9 ? 0 : (b * e - d) / denom;
+}
+
 /// Dragging a handle moves its target in the camera's view plane through
-/// it; a press elsewhere orbits as before (scene.js never sees this one).
+/// it; dragging one of the gizmo's arrows moves it along that world axis;
+/// a press elsewhere orbits as before (scene.js never sees this one).
 function setupDrag() {
   const view = $("scene-view");
   let drag = null;
@@ -350,10 +385,15 @@ function setupDrag() {
       const handle = handleOnScreen(cam);
       if (!handle) return;
       const [x, y] = pointer(e, cam);
-      if (Math.hypot(x - handle.at[0], y - handle.at[1]) > GRAB_PX * cam.dpr) return;
+      const onHandle = Math.hypot(x - handle.at[0], y - handle.at[1]) <= GRAB_PX * cam.dpr;
+      const arrow = onHandle ? null : gizmoArrows(cam).find((g) => segmentDistance([x, y], g.from, g.to) <= AXIS_GRAB_PX * cam.dpr);
+      if (!onHandle && !arrow) return;
       e.stopPropagation();
       e.preventDefault();
-      drag = { depth: handle.depth, grab: [handle.at[0] - x, handle.at[1] - y] };
+      if (arrow) {
+        const start = [...panel.ik.target];
+        drag = { axis: AXES[arrow.axis], start, t0: alongAxis(cam, [x, y], start, AXES[arrow.axis]) };
+      } else drag = { depth: handle.depth, grab: [handle.at[0] - x, handle.at[1] - y] };
       view.setPointerCapture(e.pointerId);
     },
     { capture: true },
@@ -362,6 +402,12 @@ function setupDrag() {
     if (!drag || !panel.ik) return;
     const cam = sceneCamera();
     const [x, y] = pointer(e, cam);
+    if (drag.axis) {
+      const t = alongAxis(cam, [x, y], drag.start, drag.axis) - drag.t0;
+      panel.ik.target = drag.start.map((c, k) => c + drag.axis[k] * t);
+      requestDraw();
+      return sendIk();
+    }
     const sx = x + drag.grab[0], sy = y + drag.grab[1];
     const right = ((sx - cam.cx) / cam.focal) * drag.depth, up = (-(sy - cam.cy) / cam.focal) * drag.depth;
     panel.ik.target = [0, 1, 2].map((k) => cam.eye[k] + cam.f[k] * drag.depth + cam.r[k] * right + cam.u[k] * up);
@@ -415,6 +461,18 @@ function overlay(ctx, cam, dpr) {
       ctx.stroke();
     }
   }
+  for (const { axis, from, to } of gizmoArrows(cam)) {
+    ctx.beginPath();
+    ctx.moveTo(...from);
+    ctx.lineTo(...to);
+    ctx.strokeStyle = COLORS[axis];
+    ctx.lineWidth = 2.5 * dpr;
+    ctx.stroke();
+    ctx.beginPath();
+    ctx.arc(to[0], to[1], 3.5 * dpr, 0, 2 * Math.PI);
+    ctx.fillStyle = COLORS[axis];
+    ctx.fill();
+  }
   const r = HANDLE_PX * dpr;
   ctx.beginPath();
   ctx.arc(x, y, r, 0, 2 * Math.PI);
@@ -437,6 +495,9 @@ function overlay(ctx, cam, dpr) {
 export function setup() {
   build();
   on("clipSelected", clipSelected);
+  on("characterChanged", (_, adopted) => adopted || recompose());
+  // A joint picked in the view is the IK joint a new handle goes on.
+  on("jointSelected", (name) => name && [...$("ik-joint").options].some((o) => o.value === name) && ($("ik-joint").value = name));
   on("refused", refused);
   on("pose", () => (panel.model = state.positions));
   on("frame", onFrame);

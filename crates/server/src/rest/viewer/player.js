@@ -3,14 +3,17 @@
 // readout (seq, clip time, dropped ticks, latency, frames).
 
 import { api, describeProblem, socketUrl, streamProtocols } from "./api.js";
-import { composedPoseAt, openMessage } from "./composition.js";
+import { CompactDecoder } from "./compact.js";
+import { composed, composedPoseAt, openMessage, panel } from "./composition.js";
 import { refusedControl, send } from "./controls.js";
-import { drawCurves, loadCurve } from "./curves.js";
-import { $, setStatus } from "./dom.js";
+import { drawPlayhead, loadCurve } from "./curves.js";
+import { $, dispatchStatus, setStatus } from "./dom.js";
 import { emit } from "./events.js";
 import { applyPose } from "./pose.js";
+import { update } from "./render.js";
 import { fps, options, playbackMode, requestTimeOf } from "./settings.js";
 import { state } from "./state.js";
+import { formatBytes, formatMs } from "./status.js";
 
 let seeking = false; // the seek bar is held: the readout leaves it alone
 
@@ -27,11 +30,55 @@ export async function showPoseAt(t) {
   updateReadout();
 }
 
+/// The page's motion changed: a running stream opens again with it, from the
+/// time shown and playing or paused as it was; a paused view asks for its pose.
+export function reopen() {
+  if (state.ws) {
+    const playing = state.playing;
+    panel.openPaused = !playing;
+    stopStream();
+    if (openStream()) setPlaying(playing);
+    return;
+  }
+  if (state.clip) showPoseAt(state.requestTime).catch((e) => setStatus(e.message, true));
+}
+
+/// Whether the stream asks for compact frames (docs/compact-frames.md): when
+/// chosen, for a plain clip (a compact stream plays one clip whole, in local space).
+const compactFrames = () => $("encoding").value === "compact" && !composed() && !state.watching;
+
 /// What a new stream connects to: the watched broadcast's stream, else
 /// `/v1/stream` opened with the page's motion (docs/motion.md).
 function streamTarget() {
   if (state.watching) return { url: socketUrl(`/v1/broadcasts/${encodeURIComponent(state.watching)}/stream`) };
-  return { url: socketUrl("/v1/stream"), open: openMessage() };
+  const open = openMessage();
+  if (compactFrames()) Object.assign(open, { encoding: "compact", space: "local" });
+  return { url: socketUrl("/v1/stream"), open };
+}
+
+/// A compact frame as the page's JSON frame: its header and local pose.
+function fromCompact(decoder, data) {
+  const f = decoder.decode(new Uint8Array(data));
+  const part = (a, n, i) => Array.from(a.subarray(n * i, n * i + n));
+  const joints = decoder.names.map((name, i) => ({
+    name,
+    translation: part(f.translations, 3, i),
+    rotation: part(f.rotations, 4, i),
+    scale: part(f.scales, 3, i),
+  }));
+  const pose = { space: "local", time: f.clipTime, clip_time: f.clipTime, joints };
+  return { seq: f.seq, dropped: f.dropped, clip_time: f.clipTime, sent_at_unix_nanos: Number(f.sentAtUnixNanos), events: [], pose };
+}
+
+/// The bytes a stream received over the last second.
+function byteRate() {
+  const window = []; // [ms, bytes]
+  return (bytes) => {
+    const now = performance.now();
+    window.push([now, bytes]);
+    while (window[0][0] < now - 1000) window.shift();
+    return window.reduce((sum, [, b]) => sum + b, 0);
+  };
 }
 
 /// What the page can check itself before opening a stream (the server
@@ -69,34 +116,58 @@ export function openStream() {
   state.speed = Number($("speed").value) || 1;
   setEnded(false);
   // The readout counts this stream's ticks: each frame's `dropped` is the
-  // ticks skipped since the previous frame, so the total is their sum.
+  // ticks skipped since the previous frame, so the total is their sum. The
+  // counts go into the state with the frame they came with, when it is shown.
   Object.assign(state, { frames: 0, seq: null, dropped: 0 });
+  const tally = { frames: 0, dropped: 0 };
+  const rate = byteRate();
+  let decoder = null; // the compact layout's, from `opened`
+  ws.binaryType = "arraybuffer";
   ws.onmessage = (message) => {
-    if (typeof message.data !== "string") return;
-    const frame = JSON.parse(message.data);
-    if (frame.opened) return;
-    if (frame.error && target.open && !state.frames) return setStatus(`stream refused: ${describeProblem(frame.error)}`, true);
+    const text = typeof message.data === "string";
+    state.bytesPerSecond = rate(text ? message.data.length : message.data.byteLength);
+    if (!text && !decoder) return;
+    const frame = text ? JSON.parse(message.data) : fromCompact(decoder, message.data);
+    if (frame.opened) {
+      decoder = frame.opened.compact ? new CompactDecoder(frame.opened.compact) : null;
+      return emit("opened", frame.opened);
+    }
+    if (frame.error && target.open && !tally.frames) return setStatus(`stream refused: ${describeProblem(frame.error)}`, true);
     if (frame.error) return refusedControl(frame.error);
     const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
-    state.frames += 1;
-    if (state.frames === 1) state.firstClipTime = frame.clip_time;
-    state.seq = frame.seq;
-    state.dropped += frame.dropped;
-    state.latencyMs = (nowNanos - frame.sent_at_unix_nanos) / 1e6;
+    tally.frames += 1;
+    tally.dropped += frame.dropped;
+    if (tally.frames === 1) state.firstClipTime = frame.clip_time;
     if (frame.events?.length) setStatus(`event: ${frame.events.map((e) => e.name).join(", ")}`);
-    applyPose(frame.pose);
-    emit("frame", frame);
-    updateReadout();
-    if (state.playing && reachedEnd(frame.clip_time)) endOnce();
+    emit("received", frame);
+    // Shown at the next animation frame: only the newest of the frames that came meanwhile.
+    const counts = { frames: tally.frames, dropped: tally.dropped, seq: frame.seq, latencyMs: (nowNanos - frame.sent_at_unix_nanos) / 1e6 };
+    state.pendingFrame = { frame, counts };
+    update("frame", showPendingFrame);
   };
   ws.onclose = (e) => {
     if (state.ws !== ws) return;
     state.ws = null;
     setPlaying(false);
-    if (!state.frames && e.code === 1006) explainRefusedStream(e);
+    if (!tally.frames && e.code === 1006) explainRefusedStream(e);
     else if (e.code !== 1000 && e.code !== 1005) setStatus(`stream closed (${e.code}) ${e.reason}`, true);
   };
   return true;
+}
+
+/// Shows the newest frame received (render.js calls it once per animation
+/// frame at most): its pose, the page's listeners, the readout, and how
+/// late it is shown.
+function showPendingFrame() {
+  if (!state.pendingFrame) return;
+  const { frame, counts } = state.pendingFrame;
+  state.pendingFrame = null;
+  Object.assign(state, counts);
+  applyPose(frame.pose);
+  emit("frame", frame);
+  state.lateMs = ((performance.timeOrigin + performance.now()) * 1e6 - frame.sent_at_unix_nanos) / 1e6;
+  updateReadout();
+  if (state.playing && state.ws && reachedEnd(frame.clip_time)) endOnce();
 }
 
 /// Whether a `once` stream has reached the end it is heading for (a `once`
@@ -111,11 +182,12 @@ function reachedEnd(clipTime) {
 function endOnce() {
   stopStream();
   setEnded(true);
-  setStatus(`${state.clip.name} ended at ${state.clipTime.toFixed(3)} s — Play starts it over`);
+  dispatchStatus({ type: "ended", time: state.clipTime });
 }
 
 export function setEnded(ended) {
   state.ended = ended;
+  if (!ended && state.status.mode === "ended") dispatchStatus({ type: "pause" });
   $("play").classList.toggle("ended", ended);
   $("play").title = ended ? "Ended: play again from the start" : "";
 }
@@ -124,6 +196,7 @@ export function stopStream() {
   const ws = state.ws;
   state.ws = null;
   state.playing = false;
+  state.pendingFrame = null;
   if (ws) {
     if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ op: "stop" }));
     ws.close();
@@ -145,6 +218,7 @@ function restartStream() {
 export function setPlaying(playing) {
   state.playing = playing;
   $("play").textContent = playing ? "Pause" : "Play";
+  if (!state.ended || playing) dispatchStatus({ type: playing ? "play" : "pause" });
 }
 
 function togglePlay() {
@@ -206,10 +280,12 @@ export function updateReadout() {
   $("seq").textContent = state.seq ?? "–";
   $("clip-time").textContent = `${state.clipTime.toFixed(3)} s`;
   $("dropped").textContent = state.seq == null ? "–" : state.dropped;
-  $("latency").textContent = state.latencyMs == null ? "–" : `${state.latencyMs.toFixed(1)} ms`;
+  $("latency").textContent = state.latencyMs == null ? "–" : formatMs(state.latencyMs);
+  $("late").textContent = state.lateMs == null ? "–" : formatMs(state.lateMs);
   $("frames").textContent = state.frames;
+  $("rate").textContent = state.ws && state.bytesPerSecond != null ? formatBytes(state.bytesPerSecond) : "–";
   if (!seeking) $("seek").value = requestTimeOf(state.clipTime);
-  drawCurves();
+  drawPlayhead();
 }
 
 /// The play button, the seek bar, the speed box, the keys, and the
@@ -235,5 +311,5 @@ export function setup() {
     send({ op: "speed", speed });
   });
   document.addEventListener("keydown", onKey);
-  for (const id of ["fps", "playback", "space", "ease"]) $(id).addEventListener("change", restartStream);
+  for (const id of ["fps", "playback", "space", "ease", "encoding"]) $(id).addEventListener("change", restartStream);
 }

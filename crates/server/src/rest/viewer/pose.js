@@ -4,10 +4,10 @@
 import { emit } from "./events.js";
 import { modelTransforms } from "./math.js";
 import { requestDraw } from "./scene.js";
-import { state } from "./state.js";
+import { shownSkeleton, state } from "./state.js";
 
 function parentsOf(names) {
-  const joints = state.doc?.skeleton?.joints || [];
+  const joints = shownSkeleton()?.joints || [];
   const parentName = new Map(joints.map((j) => [j.name, j.parent]));
   const index = new Map(names.map((n, i) => [n, i]));
   return names.map((n) => (parentName.get(n) == null ? -1 : index.get(parentName.get(n)) ?? -1));
@@ -20,11 +20,12 @@ function parentsOf(names) {
 /// placement too — the Fox's `root → _rootJoint → b_Root_00`, unweighted
 /// nodes at the floor origin that only place the rig; drawing them gave a
 /// stray bone from the floor to the hip. A bone is drawn from a drawn
-/// joint to a drawn child.
+/// joint to a drawn child. A character has no tracks: only its skin says
+/// which nodes are joints.
 function drawnJoints(names, parents) {
-  const joints = new Map((state.doc?.skeleton?.joints || []).map((j) => [j.name, j]));
+  const joints = new Map((shownSkeleton()?.joints || []).map((j) => [j.name, j]));
   const skinned = [...joints.values()].some((j) => j.inverse_bind);
-  const animated = new Set((state.doc?.tracks || []).map((t) => t.joint));
+  const animated = new Set(state.character ? names : (state.doc?.tracks || []).map((t) => t.joint));
   const children = names.map(() => 0);
   parents.forEach((p) => p >= 0 && (children[p] += 1));
   const placement = [];

@@ -4,31 +4,24 @@
 // canvas below and this one only the skeleton.
 
 import { postJson } from "./api.js";
-import { $, COLORS, sizeCanvas, stroke } from "./dom.js";
+import { $, COLORS, setStatus, sizeCanvas, stroke } from "./dom.js";
 import { emit, on } from "./events.js";
 import { cameraBasis, cross, dot, normalize, sub, toCamera, toScreen } from "./math.js";
 import * as mesh from "./mesh.js";
+import { draw } from "./render.js";
 import { state } from "./state.js";
 
 const FIT_POINTS = 30; // model-space poses sampled to fit the camera
 const BONE_RGB = [200, 208, 220];
 const JOINT_COLOR = "#ff8c1a";
+const SELECTED_COLOR = "#3ee0ff";
 
 /// What the last frame drew of the skeleton (read by the browser test).
 let drawn = null;
 export const drawnSkeleton = () => drawn;
 
-let drawQueued = false;
-
-/// Draws the scene at the next animation frame (once, however often asked).
-export function requestDraw() {
-  if (drawQueued) return;
-  drawQueued = true;
-  requestAnimationFrame(() => {
-    drawQueued = false;
-    drawScene();
-  });
-}
+/// Draws the scene at the next animation frame (once, however often asked; render.js).
+export const requestDraw = () => draw("scene", drawScene);
 
 /// The scene's camera now, in the scene canvas's pixels.
 export function sceneCamera() {
@@ -72,6 +65,7 @@ function groundLines() {
 }
 
 function drawScene() {
+  follow();
   const canvas = $("scene");
   const dpr = sizeCanvas(canvas);
   const ctx = canvas.getContext("2d");
@@ -88,6 +82,7 @@ function drawScene() {
   }
   if (!withMesh || mesh.mesh.showSkeleton) drawSkeleton(ctx, cam);
   else drawn = { bones: [], joints: 0 };
+  drawSelection(ctx, cam, dpr);
   emit("overlay", ctx, cam, dpr);
 }
 
@@ -131,6 +126,13 @@ function boneFaces(a, b, width) {
   return faces;
 }
 
+/// How far behind the mesh's nearest surface, in sphere radii, a part of
+/// the skeleton is on the far side of the body (all bones are inside the
+/// mesh; those just under the near surface stay bright).
+const BEHIND_RADII = 3;
+/// The opacity of the parts behind the mesh.
+const DIMMED = 0.25;
+
 function drawSkeleton(ctx, cam) {
   const { pos, bones, joints, radius } = skeletonItems();
   const light = normalize([cam.u[0] * 0.6 - cam.r[0] * 0.4 - cam.f[0], cam.u[1] * 0.6 - cam.r[1] * 0.4 - cam.f[1], cam.u[2] * 0.6 - cam.r[2] * 0.4 - cam.f[2]]);
@@ -150,8 +152,36 @@ function drawSkeleton(ctx, cam) {
     items.push({ depth: v[2] - radius, center: toScreen(cam, v), r: (radius * cam.focal) / v[2] });
   }
   items.sort((a, b) => b.depth - a.depth);
-  for (const item of items) (item.face ? drawFace : drawSphere)(ctx, item);
-  drawn = { bones: bones.map(([p, i]) => [state.names[p], state.names[i]]), joints: joints.length };
+  let dimmed = 0;
+  for (const item of items) {
+    const behind = behindMesh(item, BEHIND_RADII * radius);
+    dimmed += behind;
+    ctx.globalAlpha = behind ? DIMMED : 1;
+    (item.face ? drawFace : drawSphere)(ctx, item);
+  }
+  ctx.globalAlpha = 1;
+  drawn = { bones: bones.map(([p, i]) => [state.names[p], state.names[i]]), joints: joints.length, items: items.length, dimmed };
+}
+
+/// Whether a face or joint lies more than `margin` behind the mesh's near surface where it is drawn.
+function behindMesh(item, margin) {
+  const at = item.center || [(item.face[0][0] + item.face[1][0] + item.face[2][0]) / 3, (item.face[0][1] + item.face[1][1] + item.face[2][1]) / 3];
+  const surface = mesh.meshDistanceAt(at);
+  return surface != null && item.depth - surface > margin;
+}
+
+/// The selected joint: a cyan ring around it, drawn over everything.
+function drawSelection(ctx, cam, dpr) {
+  const i = state.names.indexOf(state.selectedJoint);
+  if (i < 0 || !state.positions[i]) return;
+  const v = toCamera(cam, state.positions[i]);
+  if (v[2] <= cam.near) return;
+  const [x, y] = toScreen(cam, v);
+  ctx.beginPath();
+  ctx.arc(x, y, 9 * dpr, 0, 2 * Math.PI);
+  ctx.strokeStyle = SELECTED_COLOR;
+  ctx.lineWidth = 2.5 * dpr;
+  ctx.stroke();
 }
 
 function drawFace(ctx, { face, shade }) {
@@ -180,25 +210,119 @@ function drawSphere(ctx, { center: [x, y], r }) {
   ctx.fill();
 }
 
-/// Frames the clip: the bounds of its model-space poses over its range.
+/// The bounds of a set of points: their centre and half-diagonal.
+export function bounds(points) {
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (const p of points)
+    for (let k = 0; k < 3; k++) {
+      lo[k] = Math.min(lo[k], p[k]);
+      hi[k] = Math.max(hi[k], p[k]);
+    }
+  if (!(lo[0] <= hi[0])) return null;
+  return { center: lo.map((l, k) => (l + hi[k]) / 2), radius: Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2 };
+}
+
+/// The orbit distance at which a sphere of `radius` about the target
+/// fills nine tenths of the view's height (45° field of view).
+export const fitDistance = (radius) => radius / (0.9 * Math.tan((22.5 * Math.PI) / 180));
+
+/// The figure's size (the largest of its poses' own bounds over the range)
+/// and where it stands at the start.
+let figure = null;
+
+/// How far a take may travel, against the figure's size, and still be
+/// framed whole; one that goes further is framed on the figure, which the
+/// camera then follows.
+const FRAME_TRAVEL = 1.5;
+
+/// Frames the clip: the whole of its path when it stays near, else the
+/// figure (a BVH walk fills most of the view's height) with the camera
+/// following it.
 export async function fitCamera() {
   const { id, start, end } = state.clip;
   const fps = end > start ? Math.min(240, Math.max(1, FIT_POINTS / (end - start))) : 1;
-  const { poses } = await postJson(`/v1/clips/${encodeURIComponent(id)}/sample`, {
-    start, end, fps, space: "model", playback: "once",
-  });
-  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-  for (const pose of poses)
-    for (const j of pose.joints)
-      for (let k = 0; k < 3; k++) {
-        lo[k] = Math.min(lo[k], j.translation[k]);
-        hi[k] = Math.max(hi[k], j.translation[k]);
-      }
-  if (!(lo[0] <= hi[0])) return;
+  const range = { start, end, fps, space: "model" };
+  // On a character, the clip's poses retargeted onto it (its size, not the clip's).
+  const { poses } = state.character
+    ? await postJson("/v1/samples", { motion: { layers: [{ clip: id, playback: "once" }], character: state.character.id }, ...range })
+    : await postJson(`/v1/clips/${encodeURIComponent(id)}/sample`, { ...range, playback: "once" });
+  const each = poses.map((pose) => bounds(pose.joints.map((j) => j.translation))).filter(Boolean);
+  const travel = bounds(poses.flatMap((pose) => pose.joints.map((j) => j.translation)));
+  if (!each.length || !travel) return;
+  figure = { center: each[0].center, radius: Math.max(...each.map((b) => b.radius), 1e-3) };
+  const near = travel.radius <= FRAME_TRAVEL * figure.radius;
+  const framed = near ? travel : figure;
+  frame(framed.center, framed.radius);
+  state.camera.radius = framed.radius;
+  state.camera.follow = !near;
+}
+
+/// A following camera keeps the figure's centre (as posed now) in view, at the framed height.
+function follow() {
   const cam = state.camera;
-  cam.target = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2];
-  cam.radius = Math.max(Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2, 1e-3);
-  cam.dist = cam.radius * 2.8;
+  if (!cam.follow) return;
+  const b = bounds(state.positions.filter(Boolean));
+  if (b) cam.target = [b.center[0], cam.target[1], b.center[2]];
+}
+
+/// Points the camera at `center`, far enough to see a sphere of `radius` whole.
+function frame(center, radius) {
+  const cam = state.camera;
+  cam.target = [...center];
+  cam.dist = fitDistance(radius);
+  cam.follow = false;
+  requestDraw();
+}
+
+/// Frames the selected joint with what hangs from it (its subtree), no
+/// smaller than a third of the figure, as it is posed now.
+export function frameSelection() {
+  const i = state.names.indexOf(state.selectedJoint);
+  if (i < 0 || !state.positions[i]) return;
+  const inside = state.names.map((_, j) => {
+    for (let k = j; k >= 0; k = state.parents[k]) if (k === i) return true;
+    return false;
+  });
+  const b = bounds(state.positions.filter((p, j) => inside[j] && p));
+  frame(state.positions[i], Math.max(b ? b.radius + Math.hypot(...sub(b.center, state.positions[i])) : 0, (figure?.radius ?? state.camera.radius) / 3));
+}
+
+// ---- picking: a click on a joint (or on the mesh near it) selects it ----
+
+/// The drawn joint nearest to screen point `at` (canvas pixels) within
+/// `reach` pixels, by its screen position; null if none is that near.
+export function nearestJoint(cam, at, reach) {
+  let best = null;
+  state.positions.forEach((p, i) => {
+    if (!p || !state.drawnJoints[i]) return;
+    const v = toCamera(cam, p);
+    if (v[2] <= cam.near) return;
+    const [x, y] = toScreen(cam, v);
+    const d = Math.hypot(x - at[0], y - at[1]);
+    if (d <= reach && (!best || d < best.distance)) best = { index: i, name: state.names[i], distance: d };
+  });
+  return best;
+}
+
+/// How far from a joint a click still picks it (CSS pixels): on the bare
+/// skeleton, a joint's sphere and a little; on a mesh, the part of the body around it.
+const PICK_PX = 14, PICK_MESH_PX = 40;
+
+function pick(e) {
+  const canvas = $("scene");
+  const cam = sceneCamera();
+  const r = canvas.getBoundingClientRect();
+  const at = [(e.clientX - r.left) * cam.dpr, (e.clientY - r.top) * cam.dpr];
+  const onMesh = mesh.mesh.clip && mesh.mesh.showMesh;
+  const hit = nearestJoint(cam, at, (onMesh ? PICK_MESH_PX : PICK_PX) * cam.dpr);
+  selectJoint(hit ? hit.name : null);
+}
+
+/// Selects joint `name` (null: none): the view frames it and marks it; the page is told (`jointSelected`).
+export function selectJoint(name) {
+  state.selectedJoint = name;
+  if (name) frameSelection();
+  emit("jointSelected", name);
   requestDraw();
 }
 
@@ -206,8 +330,10 @@ export async function fitCamera() {
 function setupOrbit() {
   const canvas = $("scene");
   let drag = null;
+  let press = null; // where a press began: a press that does not move is a click, which picks
   canvas.addEventListener("pointerdown", (e) => {
     drag = { x: e.clientX, y: e.clientY };
+    press = { x: e.clientX, y: e.clientY };
     canvas.setPointerCapture(e.pointerId);
   });
   canvas.addEventListener("pointermove", (e) => {
@@ -218,7 +344,11 @@ function setupOrbit() {
     drag = { x: e.clientX, y: e.clientY };
     requestDraw();
   });
-  canvas.addEventListener("pointerup", () => (drag = null));
+  canvas.addEventListener("pointerup", (e) => {
+    drag = null;
+    if (press && Math.hypot(e.clientX - press.x, e.clientY - press.y) < 4 && state.clip) pick(e);
+    press = null;
+  });
   canvas.addEventListener(
     "wheel",
     (e) => {
@@ -229,9 +359,20 @@ function setupOrbit() {
     { passive: false },
   );
   canvas.addEventListener("dblclick", () => state.clip && fitCamera());
+  document.addEventListener("keydown", (e) => {
+    const t = e.target;
+    if (e.key !== "f" || e.ctrlKey || e.metaKey || e.altKey || (t instanceof HTMLElement && t.closest("input, select, textarea"))) return;
+    if (state.selectedJoint) frameSelection();
+    else if (state.clip) fitCamera();
+  });
 }
 
 export function setup() {
   on("redraw", requestDraw);
+  on("clipSelected", () => (state.selectedJoint = null));
+  on("characterChanged", () => {
+    state.selectedJoint = null;
+    if (state.clip) fitCamera().catch((e) => setStatus(`framing the character: ${e.message}`, true));
+  });
   setupOrbit();
 }

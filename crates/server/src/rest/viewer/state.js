@@ -1,6 +1,8 @@
 // The page's state: what is selected, shown and playing, and the broadcast
 // watched. One object each, imported by the modules that read or change them.
 
+import { initialStatus } from "./status.js";
+
 export const state = {
   clips: [],
   clip: null, // the selected clip's summary
@@ -9,6 +11,7 @@ export const state = {
   parents: [], // parent index per joint, -1 for roots
   drawnJoints: [], // per joint: drawn (a joint, not a placement node)
   positions: [], // model-space joint positions to draw
+  selectedJoint: null, // the joint picked in the view (scene.js), if any
   ws: null,
   playing: false,
   ended: false, // a `once` stream reached its end: Play starts it over
@@ -20,12 +23,22 @@ export const state = {
   frames: 0,
   seq: null,
   dropped: 0,
-  latencyMs: null,
+  latencyMs: null, // sent → received, of the newest frame
+  lateMs: null, // sent → shown (the animation frame that drew it): how far the page is behind
+  pendingFrame: null, // the newest frame received, not shown yet (render.js shows it)
+  status: initialStatus, // what the header and status line say (status.js; dom.js dispatchStatus)
   camera: { yaw: 0.7, pitch: 0.35, dist: 5, target: [0, 1, 0], radius: 1 },
   curve: null, // the plotted series (read by the browser test)
   pendingUpload: null,
   watching: null, // the id of the broadcast this page watches (broadcast.js), if any
+  characters: [], // the server's characters' summaries (character.js)
+  graphs: [], // the server's graphs' summaries (graph.js)
+  graph: null, // { id, name, doc, controls } the page plays (docs/graphs.md), or null: the layers
+  character: null, // { id, name, doc } the page's motion plays on (docs/characters.md), or null: the clip's own skeleton
 };
+
+/// The skeleton the poses shown are on: the character's, else the clip's.
+export const shownSkeleton = () => (state.character ? state.character.doc.skeleton : state.doc?.skeleton);
 
 /// The broadcast watched (broadcast.js; its controls in controls.js).
 export const broadcast = {

@@ -7,22 +7,52 @@ import { loadClips, loadClipsOrExplain, selectClip } from "./clips.js";
 import { $, setStatus } from "./dom.js";
 import { state } from "./state.js";
 
-async function upload(fileList) {
-  const files = [...fileList];
+/// Uploads a dropped or chosen file (with a glTF's buffers). With
+/// `replacing` (a clip of the library) it is sent under that clip's name, so
+/// that it becomes its next version: a clip document's `name` is set to it,
+/// an imported file is named after it (a glTF whose animations have names
+/// keeps them, and makes those clips instead).
+export async function uploadFiles(files, replacing = null) {
   const main = files.find((f) => /\.(json|gltf|glb|bvh)$/i.test(f.name));
   if (!main) return setStatus("choose a .json, .gltf, .glb or .bvh file", true);
   const ext = main.name.split(".").pop().toLowerCase();
   if (ext === "json") {
     // Dropping a file again makes a new version of the clip it made (names identify clips).
-    state.pendingUpload = { url: "/v1/clips?replace=true", body: await main.text(), type: "application/json" };
+    let body = await main.text();
+    if (replacing) body = JSON.stringify({ ...JSON.parse(body), name: replacing.name });
+    state.pendingUpload = { url: "/v1/clips?replace=true", body, type: "application/json", replacing };
   } else {
     // Multipart even for one file: its file name names the clips it does not name itself.
     const form = new FormData();
-    form.append("file", main, main.name);
+    form.append("file", main, replacing ? `${replacing.name}.${ext}` : main.name);
     for (const f of files) if (f !== main) form.append("buffer", f, f.name);
-    state.pendingUpload = { url: `/v1/clips/import?format=${ext}&replace=true`, body: form };
+    state.pendingUpload = { url: `/v1/clips/import?format=${ext}&replace=true`, body: form, replacing };
   }
   await sendUpload();
+}
+
+/// The import warnings the page saw, by clip id and version (the server
+/// gives them only in the upload's answer): kept in this browser, for the
+/// up-axis hint (`looks_z_up`, docs/import.md).
+const WARNINGS_KEY = "inbetween.warnings";
+
+export function importWarnings(clip) {
+  try {
+    return JSON.parse(localStorage.getItem(WARNINGS_KEY) || "{}")[`${clip.id}@${clip.version}`] || [];
+  } catch {
+    return [];
+  }
+}
+
+function keepWarnings(clips, warnings) {
+  const codes = [...new Set((warnings || []).map((w) => w.code))];
+  try {
+    const kept = JSON.parse(localStorage.getItem(WARNINGS_KEY) || "{}");
+    for (const c of clips) kept[`${c.id}@${c.version}`] = codes;
+    localStorage.setItem(WARNINGS_KEY, JSON.stringify(kept));
+  } catch {
+    // Storage full or refused: the hint is a convenience.
+  }
 }
 
 async function sendUpload() {
@@ -51,15 +81,19 @@ async function sendUpload() {
   if (!response.ok) return setStatus(`upload refused: ${await problemText(response)}`, true);
   const body = await response.json();
   const created = body.clips || [body];
+  keepWarnings(created, body.warnings);
   await loadClips();
-  setStatus(`uploaded ${created.map((c) => c.name).join(", ")}`);
-  if (created.length) await selectClip(created[0].id);
+  const replaced = req.replacing && created.find((c) => c.id === req.replacing.id);
+  if (created.length) await selectClip((replaced || created[0]).id);
+  if (replaced) setStatus(`replaced ${replaced.name}: now version ${replaced.version}`);
+  else if (req.replacing) setStatus(`the file names its clips itself: uploaded ${created.map((c) => c.name).join(", ")}, ${req.replacing.name} unchanged`, true);
+  else setStatus(`uploaded ${created.map((c) => c.name).join(", ")}`);
 }
 
 export function setup() {
   const drop = $("drop");
   const report = (e) => setStatus(e.message, true);
-  $("file").addEventListener("change", (e) => upload(e.target.files).catch(report));
+  $("file").addEventListener("change", (e) => uploadFiles([...e.target.files]).catch(report));
   for (const type of ["dragenter", "dragover"])
     document.addEventListener(type, (e) => {
       e.preventDefault();
@@ -69,7 +103,7 @@ export function setup() {
   document.addEventListener("drop", (e) => {
     e.preventDefault();
     drop.classList.remove("over");
-    upload(e.dataTransfer.files).catch(report);
+    uploadFiles([...e.dataTransfer.files]).catch(report);
   });
   $("token-form").addEventListener("submit", (e) => {
     e.preventDefault();

@@ -1,7 +1,7 @@
 // The inbetween viewer: lists clips, plays a clip's WebSocket stream as a
 // 3D skeleton (or its skinned mesh) and plots one channel's sampled curve
-// with its keys; composes clips into motions with IK handles, and
-// broadcasts them. It talks only to the REST API and the streams of the
+// with its keys; composes clips into motions with IK handles, plays them on
+// a character, and broadcasts them. It talks only to the REST API and the streams of the
 // server that served it.
 //
 // This is the page's entry module: index.html loads it (and preloads the
@@ -20,28 +20,40 @@
 //   curves.js       the curve plot
 //   player.js       the stream, play/pause/seek/speed/keys, the readout
 //   controls.js     where live controls go (socket or broadcast route), refusals, scope
+//   status.js       what the header and status line say: a reducer of the page's happenings (unit-tested)
+//   render.js       the one animation-frame loop: updates, then draws, some throttled
 //   clips.js        the clip list, selecting and adopting a clip
+//   library.js      the list's rows: facts, filter, duplicates, rename, replace, delete
+//   thumbs.js       a pose thumbnail per clip version (memory and IndexedDB)
 //   upload.js       uploads and the token form
 //   composition.js  the motion played: layers, root motion, IK handle
 //   panel.js        the composition and IK panel
+//   character.js    the character the motion plays on (retargeted on the server)
+//   graph.js        the graph played: a control per parameter, live `set`s, its report
+//   springs.js      spring chains: the clip's and the page's, drawn; on/off, reset
 //   broadcast.js    creating and watching broadcasts
 
 import * as broadcast from "./broadcast.js";
+import * as character from "./character.js";
 import * as clips from "./clips.js";
 import { panel as composition } from "./composition.js";
 import * as curves from "./curves.js";
+import * as graph from "./graph.js";
+import * as library from "./library.js";
 import { toCamera, toScreen } from "./math.js";
 import * as mesh from "./mesh.js";
 import * as panel from "./panel.js";
 import * as player from "./player.js";
 import * as scene from "./scene.js";
+import * as springs from "./springs.js";
+import * as thumbs from "./thumbs.js";
 import { broadcast as watched, state } from "./state.js";
 import * as upload from "./upload.js";
 
 const cspViolations = [];
 document.addEventListener("securitypolicyviolation", (e) => cspViolations.push(`${e.violatedDirective} ${e.blockedURI}`));
 
-clips.setup();
+library.setup();
 player.setup();
 curves.setup();
 scene.setup();
@@ -52,6 +64,9 @@ curves.drawCurves();
 const ready = clips.loadClipsOrExplain();
 // Listeners of one event run in setup order: the panel's, the broadcast's, then the mesh's.
 panel.setup();
+character.setup();
+graph.setup();
+springs.setup();
 broadcast.setup(ready);
 mesh.setup();
 
@@ -64,6 +79,7 @@ window.inbetweenViewer = Object.freeze({
   panel: composition,
   broadcast: watched,
   mesh: mesh.mesh,
+  thumbnails: thumbs.stats,
   cspViolations,
   get curve() {
     return state.curve;

@@ -1,0 +1,194 @@
+//! Sampling requests over a graph (docs/graphs.md, “Using a graph”): a
+//! motion whose only layer names `"graph"`, played on the tick grid `k/fps`
+//! from 0 with the request's timed `inputs`, the poses of the ticks from
+//! `start` to `end` answered. The graph comes built from the cache of built
+//! graphs (`server::graphs`); every tick played, answered or not, is priced
+//! before any is played.
+
+use std::sync::Arc;
+
+use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
+use super::raw::{Field, Format, Raw, RawModes, in_body, joint_subset};
+use super::sample::FPS_RANGE;
+use crate::auth::CallerKey;
+use crate::built::BuiltGraph;
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::stream::MAX_FPS;
+use crate::work::price;
+use anim::Space;
+use anim::graph::{Inputs, TickRange};
+use formats::wire::graph_inputs::InputDoc;
+use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
+
+/// The grid's rate when a request gives none.
+const DEFAULT_GRAPH_FPS: f64 = 60.0;
+
+/// Where a graph layer's reference sits in a request.
+pub const GRAPH_AT: &str = "/motion/layers/0/graph";
+
+fn unsupported(pointer: &str, detail: &str) -> ApiError {
+    ApiError::invalid("graph_unsupported", pointer, detail)
+}
+
+/// The graph `doc` names, when a layer names one: its reference, once the
+/// layer is checked to be the motion's only one, with every default.
+///
+/// # Errors
+/// `graph_unsupported` at the field that is not supported with a graph yet.
+pub fn graph_layer(doc: &MotionDoc) -> Result<Option<&str>, ApiError> {
+    let Some(i) = doc.layers.iter().position(|l| l.graph.is_some()) else { return Ok(None) };
+    if doc.layers.len() != 1 {
+        return Err(unsupported(&format!("/motion/layers/{i}/graph"), "a graph is a motion's only layer"));
+    }
+    let layer = &doc.layers[0];
+    if let Some(field) = layer_field_set(layer) {
+        let detail = format!("a graph layer takes no `{field}` (it plays at weight 1 with the layer's defaults)");
+        return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
+    }
+    let motion_fields = [
+        ("root_motion", doc.root_motion.is_some()),
+        ("ik", !doc.ik.is_empty()),
+        ("springs", !doc.springs.is_empty()),
+        ("spring_substep_hz", doc.spring_substep_hz.is_some()),
+        ("character", doc.character.is_some()),
+        ("retarget", doc.retarget.is_some()),
+    ];
+    if let Some((field, _)) = motion_fields.iter().find(|(_, set)| *set) {
+        let detail = format!("a motion over a graph takes no `{field}` yet");
+        return Err(unsupported(&format!("/motion/{field}"), &detail));
+    }
+    Ok(layer.graph.as_deref())
+}
+
+/// The first field of a graph layer that is not its default.
+fn layer_field_set(layer: &LayerDoc) -> Option<&'static str> {
+    [
+        ("clip", !layer.clip.is_empty()),
+        ("weight", layer.weight != 1.0),
+        ("mode", layer.mode != LayerModeDoc::Blend),
+        ("mask", layer.mask.is_some()),
+        ("offset", layer.offset != 0.0),
+        ("speed", layer.speed != 1.0),
+        ("playback", layer.playback.is_some()),
+        ("sync", layer.sync.is_some()),
+        ("reference_time", layer.reference_time.is_some()),
+        ("retarget", layer.retarget.is_some()),
+    ]
+    .into_iter()
+    .find_map(|(field, set)| set.then_some(field))
+}
+
+/// A graph sampling request's own fields, as a JSON body carried them.
+#[derive(Debug, Clone, Copy)]
+pub struct RawGraphSampling<'a> {
+    pub reference: &'a str,
+    pub inputs: &'a [InputDoc],
+    pub times: Option<&'a [f64]>,
+    pub start: Option<f64>,
+    pub end: Option<f64>,
+    pub fps: Option<f64>,
+    pub format: Option<Raw<'a>>,
+    pub space: Option<Raw<'a>>,
+    pub joints: Option<&'a [String]>,
+    pub parameters: Option<&'a [String]>,
+    pub report: bool,
+}
+
+/// A checked, priced graph sampling request.
+pub struct GraphSampling {
+    pub built: Arc<BuiltGraph>,
+    pub range: TickRange,
+    pub inputs: Inputs,
+    pub format: Format,
+    pub space: Space,
+    pub joints: Option<Vec<usize>>,
+    pub report: bool,
+    pub cost: Cost,
+}
+
+impl RawGraphSampling<'_> {
+    /// The tick range, then the graph (built, from the cache of built
+    /// graphs), the inputs checked against it, the joint subset and the price
+    /// of every tick played.
+    ///
+    /// # Errors
+    /// `graph_needs_ticks` (`times`), `graph_unsupported` (`parameters`),
+    /// `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`;
+    /// the graph's lookup refusals at `/motion/layers/0/graph`; the inputs'
+    /// (`bad_time`, `unknown_parameter`, `parameter_type`,
+    /// `parameter_out_of_range`) at `/inputs/…`; `no_inverse_binds`,
+    /// `unknown_joint`. The caller checks the price, once compressed.
+    pub async fn resolve(&self, state: &AppState, caller: &CallerKey) -> Result<GraphSampling, ApiError> {
+        let format = Format::decode(self.format, in_body)?;
+        let space = RawModes { space: self.space, ..RawModes::default() }.check(in_body)?.space;
+        let range = self.range(state.config.limits.max_poses)?;
+        let built = crate::graphs::resolve(state, caller, self.reference, GRAPH_AT).await?;
+        let inputs = formats::wire::graph_inputs::inputs(&built.graph, self.inputs, range.fps, "/inputs")?;
+        let skeleton = built.graph.skeleton();
+        if format == Format::Skinning && !skeleton.has_inverse_binds() {
+            let detail = "format=skinning needs inverse bind matrices, which the graph's skeleton has not";
+            return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, in_body, detail.into()));
+        }
+        let joints = self.joints.map(|names| joint_subset(skeleton, names, in_body)).transpose()?;
+        let cost = cost(&built, &range, format, self.report);
+        let report = self.report;
+        Ok(GraphSampling { built, range, inputs, format, space, joints, report, cost })
+    }
+
+    fn range(&self, max_poses: usize) -> Result<TickRange, ApiError> {
+        if self.times.is_some() {
+            let detail = "a graph is played on ticks: give `start` and `end` (and `fps`, default 60), not `times`";
+            return Err(ApiError::invalid("graph_needs_ticks", "/times", detail));
+        }
+        if self.parameters.is_some() {
+            return Err(unsupported("/parameters", "a graph's poses carry no parameter subset yet"));
+        }
+        let (Some(start), Some(end)) = (self.start, self.end) else {
+            let detail = "a graph is played on ticks: give `start` and `end` (and `fps`, default 60)";
+            return Err(ApiError::invalid("times_or_range", "", detail));
+        };
+        let fps = self.fps.unwrap_or(DEFAULT_GRAPH_FPS);
+        if !FPS_RANGE.contains(&fps) {
+            return Err(ApiError::invalid(
+                "fps_out_of_range",
+                "/fps",
+                format!("fps must be in 1..={MAX_FPS}, got {fps}"),
+            ));
+        }
+        if !(start.is_finite() && start >= 0.0) {
+            return Err(ApiError::invalid("bad_range", "/start", format!("start is a finite time ≥ 0, got {start}")));
+        }
+        let range = TickRange::new(start, end, fps).ok_or_else(|| {
+            ApiError::invalid("bad_range", "/end", format!("no tick of the grid at {fps} fps lies in [{start}, {end}]"))
+        })?;
+        if range.answered() > max_poses as u64 {
+            let detail = format!("{} poses requested; the limit is {max_poses} per request", range.answered());
+            return Err(ApiError::invalid("too_many_poses", "", detail));
+        }
+        Ok(range)
+    }
+}
+
+/// Every tick played (from 0, answered or not) at the graph's costliest
+/// tick, and an answer as long as the largest of its clips' poses, with
+/// the reports when asked for.
+fn cost(built: &BuiltGraph, range: &TickRange, format: Format, report: bool) -> Cost {
+    let graph = &built.graph;
+    let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, Wire::Json);
+    let per_pose = built.clips.iter().map(|c| pose_bytes(c).per_pose).max().unwrap_or(0)
+        + json_str(&built.meta.id)
+        + if report { report_bytes(built) } else { 0 };
+    let bytes = 12 + per_pose.saturating_mul(range.answered());
+    let ticks = range.last.saturating_add(1);
+    Cost::new(ticks, graph.skeleton().len() as u64, price::graph_tick(graph), bytes)
+}
+
+/// The longest `,"graph":{…}` a tick's report can write.
+fn report_bytes(built: &BuiltGraph) -> u64 {
+    let graph = &built.graph;
+    let state = graph.state_names().map(json_str).max().unwrap_or(2);
+    let weights: u64 =
+        graph.blend_nodes().map(|(name, points)| json_str(name) + 4 + points as u64 * (F64_TEXT + 1)).sum();
+    64 + 3 * state + F32_TEXT + weights
+}

@@ -1,0 +1,1 @@
+../../../../../examples/clients/js/compact.mjs

@@ -1,0 +1,123 @@
+//! Compact frames in the engine on a paused clock (docs/compact-frames.md):
+//! a broadcast encodes each tick once per layout for all its compact
+//! viewers, a viewer that lagged past a key frame is sent that key frame
+//! before the delta frame after it (so every frame it receives decodes), and
+//! controls that would leave the layout's clip are refused.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use formats::wire::compact::{CompactDecoder, LayoutDoc};
+use serde_json::Value::Null;
+
+use super::tests::{clip, pinned};
+use super::*;
+
+fn engine() -> Engine {
+    Engine::new(EngineConfig { max_streams: 100, max_streams_per_client: 100, max_broadcasts: 4, ..Default::default() })
+}
+
+fn broadcast(e: &Engine, fps: u32) -> Arc<Broadcast> {
+    let params = StreamParams::new(pinned("c1", clip()), StreamRequest { fps, ..Default::default() }).unwrap();
+    let spec = BroadcastSpec { params, idle_timeout: Duration::from_secs(300), description: Null, work_per_sec: 0 };
+    e.broadcasts().create(spec, BroadcastCharge::free()).unwrap()
+}
+
+fn layout(b: &Broadcast, max_error: f32) -> Arc<CompactLayout> {
+    Arc::new(CompactLayout::of_clip(b.params().clip(), max_error, None, b.params().fps))
+}
+
+fn decoder(layout: &CompactLayout) -> CompactDecoder {
+    let doc: LayoutDoc = serde_json::from_str(&layout.document).unwrap();
+    CompactDecoder::new(doc.layout())
+}
+
+async fn frame(sub: &mut Subscription) -> Delivered {
+    match sub.next().await {
+        Next::Frame(f) => f,
+        Next::End(r) => panic!("ended early: {r:?}"),
+    }
+}
+
+/// Decodes what a viewer was sent for one tick (a key frame first, if any):
+/// the decoded frames' (seq, key, dropped).
+fn decode(d: &mut CompactDecoder, f: &Delivered) -> Vec<(u64, bool, u64)> {
+    let mut pose = anim::Pose::default();
+    let mut out = Vec::new();
+    for bytes in f.prelude.iter().chain([&f.bytes]) {
+        let decoded = d.decode(bytes, &mut pose).unwrap_or_else(|e| panic!("seq {}: {e}", f.seq));
+        out.push((decoded.header.seq, decoded.key, decoded.header.dropped));
+    }
+    out
+}
+
+#[tokio::test(start_paused = true)]
+async fn viewers_of_a_layout_share_its_bytes_and_a_lagging_one_gets_the_key_frame_first() {
+    let e = engine();
+    let b = broadcast(&e, 10);
+    let l = layout(&b, 1e-4);
+    assert_eq!(l.key_interval, 10, "a key frame at least once a second");
+    let mut steady = b.watch_compact(Arc::clone(&l), e.admit(None).unwrap(), None).unwrap();
+    let mut slow = b.watch_compact(Arc::clone(&l), e.admit(None).unwrap(), None).unwrap();
+    let (mut ds, mut dl) = (decoder(&l), decoder(&l));
+    for seq in 0..3 {
+        let (a, c) = (frame(&mut steady).await, frame(&mut slow).await);
+        assert_eq!(a.bytes.as_ptr(), c.bytes.as_ptr(), "seq {seq}: one encoding for both viewers");
+        assert_eq!(decode(&mut ds, &a), [(seq, seq == 0, 0)]);
+        decode(&mut dl, &c);
+    }
+    // `slow` stops reading while 20 ticks go by: its buffer (8 frames) keeps
+    // the newest only, deltas of the key frame of tick 10 it never had.
+    let mut keys = Vec::new();
+    for seq in 3..23 {
+        let a = frame(&mut steady).await;
+        let decoded = decode(&mut ds, &a);
+        assert_eq!(decoded, [(seq, seq % 10 == 0, 0)], "key frames every 10 ticks, deltas between");
+        keys.extend(decoded.iter().filter(|d| d.1).map(|d| d.0));
+    }
+    assert_eq!(keys, [10, 20]);
+    let late = frame(&mut slow).await;
+    assert!(late.prelude.is_some(), "the key frame it missed comes first");
+    assert!(late.seq > 10 && late.seq < 20, "the oldest frame kept is a delta of tick 10: {}", late.seq);
+    let decoded = decode(&mut dl, &late);
+    assert_eq!(decoded[0], (10, true, 7), "key frame 10, after seq 2: 7 ticks missed");
+    assert_eq!(decoded[1], (late.seq, false, late.seq - 11), "then its delta, the gap since the key frame");
+    // From then on, every frame decodes in order with no key frame sent twice.
+    for _ in 0..12 {
+        let f = frame(&mut slow).await;
+        assert!(f.prelude.is_none(), "seq {}: it has its key frame", f.seq);
+        decode(&mut dl, &f);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn layouts_are_encoded_apart_and_compact_viewers_hold_the_clip() {
+    let e = engine();
+    let b = broadcast(&e, 10);
+    let (fine, coarse) = (layout(&b, 1e-5), layout(&b, 1e-3));
+    let mut a = b.watch_compact(Arc::clone(&fine), e.admit(None).unwrap(), None).unwrap();
+    let mut c = b.watch_compact(Arc::clone(&coarse), e.admit(None).unwrap(), None).unwrap();
+    let (fa, fc) = (frame(&mut a).await, frame(&mut c).await);
+    assert_eq!(fa.seq, fc.seq);
+    assert!(fa.bytes.len() > fc.bytes.len(), "a tighter bound takes more bits: {fa:?} {fc:?}");
+    // A layer ramp (as a crossfade, an `ik` control) would play poses outside the layouts' ranges.
+    let fade = Control::Layer { index: 0, weight: 0.5, duration: 0.0 };
+    assert_eq!(b.control(fade.clone()).unwrap_err().code(), "bad_control");
+    assert_eq!(b.control(Control::Seek(0.5)).map(|_| ()), Ok(()), "a seek stays within the clip");
+    drop((a, c));
+    // Without compact viewers it is accepted, and then a compact watch is refused.
+    b.control(fade).unwrap();
+    let refused = b.watch_compact(fine, e.admit(None).unwrap(), None).unwrap_err();
+    assert_eq!(refused.code, "compact_unsupported");
+}
+
+#[test]
+fn compact_parameters_are_checked() {
+    let check = |max_error, distance| CompactRequest { max_error, distance }.check().map_err(|e| e.code);
+    assert_eq!(check(None, None), Ok((anim::compact::DEFAULT_MAX_ERROR, None)));
+    assert_eq!(check(Some(1e-6), Some(0.01)), Ok((1e-6, Some(0.01))));
+    assert_eq!(check(Some(9.9e-7), None), Err("max_error_out_of_range"));
+    assert_eq!(check(Some(f64::NAN), None), Err("max_error_out_of_range"));
+    assert_eq!(check(None, Some(0.009)), Err("distance_out_of_range"));
+    assert_eq!(check(None, Some(f64::INFINITY)), Err("distance_out_of_range"));
+}

@@ -1,0 +1,48 @@
+// The JavaScript compact-frame decoder against docs/compact-frames/: every
+// frame of every vector decodes to exactly the pose the Rust encoder
+// quantised. Run: node --test examples/clients/js/tests/
+import { test } from "node:test";
+import assert from "node:assert/strict";
+import { readFileSync, readdirSync } from "node:fs";
+import { fileURLToPath } from "node:url";
+import { join, dirname } from "node:path";
+
+import { CompactDecoder, CompactError, fromHex } from "../compact.mjs";
+
+const dir = join(dirname(fileURLToPath(import.meta.url)), "../../../../docs/compact-frames");
+const vectors = readdirSync(dir)
+  .filter((f) => f.endsWith(".json"))
+  .map((f) => JSON.parse(readFileSync(join(dir, f), "utf8")));
+
+const flat = (rows) => Float32Array.from(rows.flat());
+
+test("there are vectors to read", () => {
+  assert.ok(vectors.length >= 4, `${vectors.length} vectors in ${dir}`);
+});
+
+for (const vector of vectors) {
+  test(`${vector.name}: every frame decodes to the stored pose exactly`, () => {
+    const decoder = new CompactDecoder(vector.layout);
+    for (const frame of vector.frames) {
+      const got = decoder.decode(fromHex(frame.hex));
+      assert.equal(got.key, frame.key);
+      assert.equal(got.seq, frame.seq);
+      assert.equal(got.dropped, frame.dropped);
+      assert.equal(got.sentAtUnixNanos, BigInt(frame.sent_at_unix_nanos));
+      assert.equal(got.clipTime, Math.fround(frame.clip_time));
+      assert.deepEqual(got.rotations, flat(frame.pose.rotations));
+      assert.deepEqual(got.translations, flat(frame.pose.translations));
+      assert.deepEqual(got.scales, flat(frame.pose.scales));
+    }
+  });
+}
+
+test("a delta frame without its key frame is refused", () => {
+  const vector = vectors.find((v) => v.name === "bench20");
+  const decoder = new CompactDecoder(vector.layout);
+  assert.throws(() => decoder.decode(fromHex(vector.frames[1].hex)), (e) => e instanceof CompactError && e.code === "compact_missing_key_frame");
+  const key = fromHex(vector.frames[0].hex);
+  assert.throws(() => decoder.decode(key.subarray(0, key.length - 1)), (e) => e.code === "compact_truncated");
+  assert.throws(() => decoder.decode(Uint8Array.from([...key, 0])), (e) => e.code === "compact_trailing_bytes");
+  assert.throws(() => decoder.decode(Uint8Array.from([2, ...key.subarray(1)])), (e) => e.code === "compact_unknown_flags");
+});

@@ -1,0 +1,177 @@
+"""Compact frames (docs/compact-frames.md): a decoder for the binary frames of
+``encoding=compact`` streams, poses out as numpy float32 arrays.
+
+    from compact import CompactDecoder
+    decoder = CompactDecoder(opened["layout"])
+    frame = decoder.decode(message_bytes)   # frame.rotations: (joints, 4)
+
+A decoder keeps the last key frame's values: feed it one stream's frames in order.
+"""
+
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+KEY_FRAME = 1
+
+
+class CompactError(ValueError):
+    """Bytes that are not a compact frame of the layout; ``code`` is stable."""
+
+    def __init__(self, code, message):
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass
+class Frame:
+    seq: int
+    dropped: int
+    sent_at_unix_nanos: int
+    clip_time: float
+    key: bool
+    key_seq: int
+    translations: np.ndarray  # (joints, 3) float32
+    rotations: np.ndarray  # (joints, 4) float32, [x, y, z, w]
+    scales: np.ndarray  # (joints, 3) float32
+
+
+def _value(field, u):
+    """``min + (u * (max - min)) / n`` in doubles; ``min`` when constant."""
+    bits, lo, hi = field
+    if bits == 0:
+        return lo
+    return lo + (u * (hi - lo)) / ((1 << bits) - 1)
+
+
+class _Bits:
+    """Bit fields packed least significant bit first."""
+
+    def __init__(self, data, start):
+        self.data = data
+        self.bit = start * 8
+
+    def read(self, bits):
+        if bits == 0:
+            return 0
+        if self.bit + bits > len(self.data) * 8:
+            raise CompactError("compact_truncated", "the frame ends before its joint values")
+        first, last = self.bit >> 3, (self.bit + bits - 1) >> 3
+        word = int.from_bytes(self.data[first : last + 1], "little") >> (self.bit & 7)
+        self.bit += bits
+        return word & ((1 << bits) - 1)
+
+
+def _varint(data, at, what):
+    value, shift = 0, 0
+    while shift < 64:
+        if at[0] >= len(data):
+            raise CompactError("compact_truncated", f"the frame ends before its {what}")
+        byte = data[at[0]]
+        at[0] += 1
+        value |= (byte & 0x7F) << shift
+        if not byte & 0x80:
+            return value
+        shift += 7
+    raise CompactError("compact_varint_overflow", "a varint is longer than 64 bits")
+
+
+class CompactDecoder:
+    """Decodes one stream's compact frames against its ``opened`` layout."""
+
+    def __init__(self, layout):
+        if layout.get("version") != 1:
+            raise CompactError("compact_version", f"layout version {layout.get('version')}")
+        self.layout = layout
+        self.names = [j["name"] for j in layout["joints"]]
+        self.joints = [self._compile(j) for j in layout["joints"]]
+        self.key = None
+        self.key_seq = None
+
+    @staticmethod
+    def _compile(joint):
+        axes = lambda a: [(a["bits"][k], a["min"][k], a["max"][k]) for k in range(3)]
+        out = {"translation": axes(joint["translation"]), "scale": axes(joint["scale"])}
+        rotation = joint["rotation"]
+        if "constant" in rotation:
+            out["constant"] = rotation["constant"]
+        else:
+            s = rotation["smallest_three"]
+            out["largest"] = s["largest"]
+            out["components"] = [(s["bits"][k], s["min"][k], s["max"][k]) for k in range(4)]
+        out["animated"] = "constant" not in out or any(f[0] > 0 for f in out["translation"] + out["scale"])
+        return out
+
+    def decode(self, data):
+        data = bytes(data)
+        if not data:
+            raise CompactError("compact_truncated", "the frame ends before its flags")
+        flags = data[0]
+        if flags & ~KEY_FRAME:
+            raise CompactError("compact_unknown_flags", f"flags {flags:#04x} use bits other than the key-frame bit")
+        key = bool(flags & KEY_FRAME)
+        at = [1]
+        seq = _varint(data, at, "seq")
+        dropped = _varint(data, at, "dropped")
+        key_seq = seq - _varint(data, at, "key offset")
+        zz = _varint(data, at, "sent_at")
+        sent_at = (zz >> 1) ^ -(zz & 1)
+        if at[0] + 4 > len(data):
+            raise CompactError("compact_truncated", "the frame ends before its clip time")
+        (clip_time,) = struct.unpack_from("<f", data, at[0])
+        bits = _Bits(data, at[0] + 4)
+        if key:
+            values = [self._read_joint(bits, j) for j in self.joints]
+            self.key, self.key_seq = values, seq
+        else:
+            if self.key_seq != key_seq:
+                raise CompactError(
+                    "compact_missing_key_frame",
+                    f"a delta frame refers to key frame {key_seq}, and the last key frame seen is {self.key_seq}",
+                )
+            values = [
+                self._read_joint(bits, j) if j["animated"] and bits.read(1) else v for j, v in zip(self.joints, self.key)
+            ]
+        used = (bits.bit + 7) // 8
+        if used != len(data):
+            raise CompactError("compact_trailing_bytes", f"{len(data) - used} bytes follow the frame's last field")
+        t, r, s = self._dequantise(values)
+        return Frame(seq, dropped, sent_at, clip_time, key, key_seq, t, r, s)
+
+    @staticmethod
+    def _read_joint(bits, joint):
+        largest, rotation = 0, ()
+        if "components" in joint:
+            largest = joint["largest"] if joint["largest"] is not None else bits.read(2)
+            rotation = tuple(bits.read(joint["components"][k][0]) for k in range(4) if k != largest)
+        translation = tuple(bits.read(f[0]) for f in joint["translation"])
+        scale = tuple(bits.read(f[0]) for f in joint["scale"])
+        return largest, rotation, translation, scale
+
+    def _dequantise(self, values):
+        n = len(self.joints)
+        t = np.empty((n, 3), np.float32)
+        r = np.empty((n, 4), np.float32)
+        s = np.empty((n, 3), np.float32)
+        for i, (joint, (largest, rotation, translation, scale)) in enumerate(zip(self.joints, values)):
+            if "constant" in joint:
+                r[i] = joint["constant"]
+            else:
+                others = [k for k in range(4) if k != largest]
+                small = [_value(joint["components"][k], u) for k, u in zip(others, rotation)]
+                total = small[0] * small[0] + small[1] * small[1] + small[2] * small[2]
+                if total < 1.0:
+                    big = math.sqrt(1.0 - total)
+                else:
+                    norm = math.sqrt(total)
+                    small, big = [c / norm for c in small], 0.0
+                q = [0.0] * 4
+                q[largest] = big
+                for k, c in zip(others, small):
+                    q[k] = c
+                r[i] = q  # float64 -> float32: round to nearest, as the other decoders
+            t[i] = [_value(f, u) for f, u in zip(joint["translation"], translation)]
+            s[i] = [_value(f, u) for f, u in zip(joint["scale"], scale)]
+        return t, r, s

@@ -1,0 +1,50 @@
+"""The Python compact decoder against docs/compact-frames/: every frame of every
+vector decodes to exactly the pose the Rust encoder quantised.
+Run: python3 -m unittest discover -s examples/clients/python -p 'test_*.py'"""
+
+import json
+import pathlib
+import unittest
+
+import numpy as np
+
+from compact import CompactDecoder, CompactError
+
+VECTORS = pathlib.Path(__file__).resolve().parents[3] / "docs" / "compact-frames"
+
+
+def load():
+    return [json.loads(p.read_text()) for p in sorted(VECTORS.glob("*.json"))]
+
+
+class CompactVectors(unittest.TestCase):
+    def test_every_frame_decodes_to_the_stored_pose_exactly(self):
+        vectors = load()
+        self.assertGreaterEqual(len(vectors), 4)
+        for vector in vectors:
+            decoder = CompactDecoder(vector["layout"])
+            for frame in vector["frames"]:
+                got = decoder.decode(bytes.fromhex(frame["hex"]))
+                with self.subTest(vector=vector["name"], seq=frame["seq"]):
+                    self.assertEqual((got.key, got.seq, got.dropped), (frame["key"], frame["seq"], frame["dropped"]))
+                    self.assertEqual(got.sent_at_unix_nanos, int(frame["sent_at_unix_nanos"]))
+                    self.assertEqual(got.clip_time, float(np.float32(frame["clip_time"])))
+                    for name in ("rotations", "translations", "scales"):
+                        expected = np.array(frame["pose"][name], dtype=np.float32)
+                        np.testing.assert_array_equal(getattr(got, name), expected, err_msg=name)
+
+    def test_a_delta_frame_without_its_key_frame_is_refused(self):
+        vector = next(v for v in load() if v["name"] == "bench20")
+        decoder = CompactDecoder(vector["layout"])
+        with self.assertRaises(CompactError) as refused:
+            decoder.decode(bytes.fromhex(vector["frames"][1]["hex"]))
+        self.assertEqual(refused.exception.code, "compact_missing_key_frame")
+        key = bytes.fromhex(vector["frames"][0]["hex"])
+        for bad, code in [(key[:-1], "compact_truncated"), (key + b"\0", "compact_trailing_bytes")]:
+            with self.assertRaises(CompactError) as refused:
+                decoder.decode(bad)
+            self.assertEqual(refused.exception.code, code)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,625 @@
+//! `encoding=compact` (docs/compact-frames.md) on a real server: WebSocket
+//! streams, broadcast watches and gRPC `StreamFrames`, each decoded here by a
+//! decoder written from the docs page alone (not the formats crate's) and
+//! held, joint by joint and virtual point by virtual point in model space
+//! (f64), to within `max_error` of the server's own uncompressed frames of
+//! the same stream at the same ticks.
+
+use std::collections::BTreeMap;
+
+use formats::wire::proto::pb;
+use futures_util::StreamExt;
+use prost::Message as _;
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+use super::{TestApp, within};
+use crate::common::app::Ws;
+
+/// A six-joint arm: a translating, turning root, four turning joints (one
+/// scaling), a constant tip, so chains, scales and constant channels all
+/// show.
+const PARENTS: [Option<usize>; 6] = [None, Some(0), Some(1), Some(2), Some(3), Some(4)];
+
+fn arm_clip() -> String {
+    let joint = |name: &str, parent: Option<&str>, y: f64| json!({"name": name, "parent": parent, "rest": {"translation": [0, y, 0]}});
+    let rot = |joint: &str, qs: Value| json!({"joint": joint, "channel": "rotation", "interpolation": "linear", "times": [0, 0.5, 1, 1.5, 2], "values": qs});
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    json!({
+        "name": "compact arm",
+        "playback": "loop",
+        "skeleton": {"joints": [
+            joint("root", None, 0.0), joint("spine", Some("root"), 0.5), joint("neck", Some("spine"), 0.4),
+            joint("upper", Some("neck"), 0.3), joint("lower", Some("upper"), 0.3), joint("tip", Some("lower"), 0.2)
+        ]},
+        "tracks": [
+            {"joint": "root", "channel": "translation", "interpolation": "linear", "times": [0, 1, 2],
+             "values": [[0, 0, 0], [0.4, 0.1, -0.2], [0, 0, 0]]},
+            rot("root", json!([[0, 0, 0, 1], [0, 0.3826834, 0, 0.9238795], [0, s, 0, s], [0, 0.3826834, 0, 0.9238795], [0, 0, 0, 1]])),
+            rot("spine", json!([[0, 0, 0, 1], [0.258819, 0, 0, 0.9659258], [0, 0, 0, 1], [-0.258819, 0, 0, 0.9659258], [0, 0, 0, 1]])),
+            rot("neck", json!([[0, 0, 0.1305262, 0.9914449], [0, 0, -0.1305262, 0.9914449], [0, 0, 0.1305262, 0.9914449], [0, 0, -0.1305262, 0.9914449], [0, 0, 0.1305262, 0.9914449]])),
+            rot("upper", json!([[0.5, 0.5, 0.5, 0.5], [s, 0, 0, s], [0, 0, 0, 1], [0, s, 0, s], [0.5, 0.5, 0.5, 0.5]])),
+            rot("lower", json!([[0, 0, 0, 1], [0, 0, 0.8660254, 0.5], [0, 0, 1, 0], [0, 0, 0.8660254, -0.5], [0, 0, 0, 1]])),
+            {"joint": "upper", "channel": "scale", "interpolation": "linear", "times": [0, 1, 2],
+             "values": [[1, 1, 1], [1.2, 0.9, 1], [1, 1, 1]]}
+        ]
+    })
+    .to_string()
+}
+
+// ------------------------------------------------------------- the decoder
+
+/// A quantised channel: its width and range (docs: "The layout document").
+#[derive(Debug, Clone, Copy)]
+struct Field {
+    bits: u32,
+    min: f64,
+    max: f64,
+}
+
+impl Field {
+    /// `min + (u · (max − min)) / n`, `n = 2^bits − 1`; bits 0: `min`.
+    fn value(&self, u: u64) -> f64 {
+        if self.bits == 0 {
+            self.min
+        } else {
+            self.min + (u as f64 * (self.max - self.min)) / ((1u64 << self.bits) - 1) as f64
+        }
+    }
+}
+
+enum Rotation {
+    Constant([f64; 4]),
+    SmallestThree { largest: Option<usize>, components: [Field; 4] },
+}
+
+struct Joint {
+    rotation: Rotation,
+    translation: [Field; 3],
+    scale: [Field; 3],
+}
+
+impl Joint {
+    fn animated(&self) -> bool {
+        matches!(self.rotation, Rotation::SmallestThree { .. })
+            || self.translation.iter().chain(&self.scale).any(|f| f.bits > 0)
+    }
+}
+
+struct Layout {
+    distance: f64,
+    key_interval: u64,
+    joints: Vec<Joint>,
+}
+
+fn fields<const N: usize>(v: &Value) -> [Field; N] {
+    std::array::from_fn(|k| Field {
+        bits: v["bits"][k].as_u64().unwrap() as u32,
+        min: v["min"][k].as_f64().unwrap(),
+        max: v["max"][k].as_f64().unwrap(),
+    })
+}
+
+fn layout(doc: &Value) -> Layout {
+    assert_eq!(doc["version"], 1);
+    let joints = doc["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| Joint {
+            rotation: match (&j["rotation"]["constant"], &j["rotation"]["smallest_three"]) {
+                (Value::Array(q), _) => Rotation::Constant(std::array::from_fn(|k| q[k].as_f64().unwrap())),
+                (_, r) => Rotation::SmallestThree {
+                    largest: r["largest"].as_u64().map(|l| l as usize),
+                    components: fields(r),
+                },
+            },
+            translation: fields(&j["translation"]),
+            scale: fields(&j["scale"]),
+        })
+        .collect();
+    Layout { distance: doc["distance"].as_f64().unwrap(), key_interval: doc["key_interval"].as_u64().unwrap(), joints }
+}
+
+/// Bits least significant first, each byte from bit 0 (docs: "Bit order").
+struct Bits<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl Bits<'_> {
+    fn read(&mut self, n: u32) -> u64 {
+        let mut v = 0;
+        for i in 0..n as usize {
+            let bit = self.at + i;
+            v |= u64::from((self.bytes[bit / 8] >> (bit % 8)) & 1) << i;
+        }
+        self.at += n as usize;
+        v
+    }
+}
+
+fn varint(bytes: &[u8], at: &mut usize) -> u64 {
+    let mut v = 0;
+    for shift in (0..64).step_by(7) {
+        let b = bytes[*at];
+        *at += 1;
+        v |= u64::from(b & 0x7f) << shift;
+        if b & 0x80 == 0 {
+            return v;
+        }
+    }
+    panic!("a varint over 64 bits")
+}
+
+/// A local pose: per joint its translation, rotation `[x, y, z, w]` and scale.
+type Pose = ([f64; 3], [f64; 4], [f64; 3]);
+
+/// One joint's raw fields: the largest index, three rotation values, translation, scale.
+type Raw = [u64; 10];
+
+/// A decoded frame: header, whether a key frame, the local pose (f32 values).
+#[derive(Debug, Clone)]
+struct Decoded {
+    seq: u64,
+    dropped: u64,
+    key: bool,
+    key_seq: u64,
+    pose: Vec<Pose>,
+}
+
+struct Decoder {
+    layout: Layout,
+    keys: Option<(u64, Vec<Raw>)>,
+}
+
+impl Decoder {
+    fn joint(&self, j: &Joint, bits: &mut Bits<'_>) -> Raw {
+        let mut raw = [0; 10];
+        if let Rotation::SmallestThree { largest, components } = &j.rotation {
+            raw[0] = largest.map_or_else(|| bits.read(2), |l| l as u64);
+            let mut slot = 1;
+            for (k, c) in components.iter().enumerate() {
+                if k as u64 != raw[0] {
+                    raw[slot] = bits.read(c.bits);
+                    slot += 1;
+                }
+            }
+        }
+        for (a, f) in j.translation.iter().chain(&j.scale).enumerate() {
+            raw[4 + a] = bits.read(f.bits);
+        }
+        raw
+    }
+
+    fn decode(&mut self, bytes: &[u8]) -> Decoded {
+        let flags = bytes[0];
+        assert_eq!(flags & !1, 0, "unknown flags");
+        let key = flags & 1 == 1;
+        let mut at = 1;
+        let seq = varint(bytes, &mut at);
+        let dropped = varint(bytes, &mut at);
+        let key_seq = seq - varint(bytes, &mut at);
+        let _sent_at = varint(bytes, &mut at);
+        at += 4; // the clip time
+        let mut bits = Bits { bytes: &bytes[at..], at: 0 };
+        let raws: Vec<Raw> = if key {
+            self.layout.joints.iter().map(|j| self.joint(j, &mut bits)).collect()
+        } else {
+            let (k, base) = self.keys.as_ref().expect("a delta frame after its key frame");
+            assert_eq!(*k, key_seq, "seq {seq}: a delta frame of key frame {key_seq}, and the last seen is {k}");
+            let mut raws = base.clone();
+            for (j, raw) in self.layout.joints.iter().zip(&mut raws) {
+                if j.animated() && bits.read(1) == 1 {
+                    *raw = self.joint(j, &mut bits);
+                }
+            }
+            raws
+        };
+        assert_eq!(bytes.len(), at + bits.at.div_ceil(8), "seq {seq}: no trailing bytes");
+        if key {
+            self.keys = Some((seq, raws.clone()));
+        }
+        let pose = self.layout.joints.iter().zip(&raws).map(|(j, raw)| pose_of(j, raw)).collect();
+        Decoded { seq, dropped, key, key_seq, pose }
+    }
+}
+
+/// docs: "Decoding values": f64 in the order written, rounded to f32 once.
+fn pose_of(j: &Joint, raw: &Raw) -> Pose {
+    let f32_of = |v: f64| f64::from(v as f32);
+    let rotation = match &j.rotation {
+        Rotation::Constant(q) => *q,
+        Rotation::SmallestThree { components, .. } => {
+            let largest = raw[0] as usize;
+            let sent: Vec<usize> = (0..4).filter(|&k| k != largest).collect();
+            let mut v: Vec<f64> = sent.iter().zip(&raw[1..4]).map(|(&k, &u)| components[k].value(u)).collect();
+            let s = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            let big = if s < 1.0 {
+                (1.0 - s).sqrt()
+            } else {
+                v.iter_mut().for_each(|c| *c /= s.sqrt());
+                0.0
+            };
+            let mut q = [0.0; 4];
+            q[largest] = big;
+            for (&k, c) in sent.iter().zip(v) {
+                q[k] = c;
+            }
+            q.map(f32_of)
+        }
+    };
+    let axes = |fs: &[Field; 3], us: &[u64]| std::array::from_fn(|a| f32_of(fs[a].value(us[a])));
+    (axes(&j.translation, &raw[4..7]), rotation, axes(&j.scale, &raw[7..10]))
+}
+
+// ------------------------------------------------------ the error, in model space
+
+type Affine = ([[f64; 3]; 3], [f64; 3]);
+
+fn local(t: [f64; 3], q: [f64; 4], s: [f64; 3]) -> Affine {
+    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+    let [x, y, z, w] = q.map(|c| c / n);
+    let r = [
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+    ];
+    (std::array::from_fn(|i| std::array::from_fn(|k| r[i][k] * s[k])), t)
+}
+
+fn then(parent: &Affine, child: &Affine) -> Affine {
+    let (a, b) = parent;
+    let m = std::array::from_fn(|i| std::array::from_fn(|k| (0..3).map(|l| a[i][l] * child.0[l][k]).sum()));
+    let v = std::array::from_fn(|i| (0..3).map(|l| a[i][l] * child.1[l]).sum::<f64>() + b[i]);
+    (m, v)
+}
+
+/// Each joint's model position and the three points `distance` along its axes.
+fn points(parents: &[Option<usize>], pose: &[Pose], distance: f64) -> Vec<[f64; 3]> {
+    let mut model: Vec<Affine> = Vec::new();
+    let mut out = Vec::new();
+    for (j, &(t, q, s)) in pose.iter().enumerate() {
+        let l = local(t, q, s);
+        let m = parents[j].map_or(l, |p| then(&model[p], &l));
+        out.push(m.1);
+        for axis in 0..3 {
+            out.push(std::array::from_fn(|i| m.1[i] + distance * m.0[i][axis]));
+        }
+        model.push(m);
+    }
+    out
+}
+
+/// The largest distance between matching points of two poses.
+fn worst(parents: &[Option<usize>], a: &[Pose], b: &[Pose], distance: f64) -> f64 {
+    let (pa, pb) = (points(parents, a, distance), points(parents, b, distance));
+    pa.iter().zip(&pb).map(|(x, y)| (0..3).map(|i| (x[i] - y[i]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max)
+}
+
+fn pose_of_pb(p: &pb::Pose) -> Vec<Pose> {
+    let f = |v: &[f32], i: usize| f64::from(v[i]);
+    (0..p.translations.len() / 3)
+        .map(|j| {
+            (
+                std::array::from_fn(|k| f(&p.translations, 3 * j + k)),
+                std::array::from_fn(|k| f(&p.rotations, 4 * j + k)),
+                std::array::from_fn(|k| f(&p.scales, 3 * j + k)),
+            )
+        })
+        .collect()
+}
+
+/// Holds each compact frame to the uncompressed frame of the same seq;
+/// returns the seqs compared, key frames and deltas counted.
+fn compare(
+    compact: &[Decoded],
+    plain: &BTreeMap<u64, Vec<Pose>>,
+    max_error: f64,
+    layout: &Layout,
+) -> (usize, usize, usize) {
+    compare_on(&PARENTS, compact, plain, max_error, layout)
+}
+
+fn compare_on(
+    parents: &[Option<usize>],
+    compact: &[Decoded],
+    plain: &BTreeMap<u64, Vec<Pose>>,
+    max_error: f64,
+    layout: &Layout,
+) -> (usize, usize, usize) {
+    let (mut compared, mut keys, mut deltas) = (0, 0, 0);
+    for d in compact {
+        if d.key {
+            keys += 1
+        } else {
+            deltas += 1
+        }
+        if let Some(p) = plain.get(&d.seq) {
+            let e = worst(parents, &d.pose, p, layout.distance);
+            assert!(e <= max_error, "seq {} (key {}): {e} m off, over {max_error}", d.seq, d.key);
+            compared += 1;
+        }
+    }
+    (compared, keys, deltas)
+}
+
+/// Key frames at least every `key_interval` ticks, each delta frame of the
+/// last one, and every `seq` gap exactly the `dropped` of the frame after it.
+fn check_keys(frames: &[Decoded], key_interval: u64) {
+    let mut last_key = None;
+    for (d, prev) in frames.iter().zip(std::iter::once(None).chain(frames.iter().map(Some))) {
+        if let Some(prev) = prev {
+            assert_eq!(d.dropped, d.seq - prev.seq - 1, "seq {} after {}", d.seq, prev.seq);
+        }
+        if d.key {
+            assert_eq!(d.key_seq, d.seq);
+            last_key = Some(d.seq);
+        } else {
+            assert_eq!(Some(d.key_seq), last_key, "seq {}: relative to the last key frame", d.seq);
+            assert!(d.seq - d.key_seq < key_interval, "seq {}: key frame {} is too old", d.seq, d.key_seq);
+        }
+    }
+}
+
+// ------------------------------------------------------------- the sockets
+
+async fn next_message(ws: &mut Ws) -> Message {
+    loop {
+        match within(5, "a message", ws.next()).await.expect("the socket closed").unwrap() {
+            Message::Ping(_) | Message::Pong(_) => {}
+            other => return other,
+        }
+    }
+}
+
+/// A compact WebSocket's `opened` layout and its next `n` frames, decoded.
+async fn compact_frames(ws: &mut Ws, n: usize) -> (Value, Vec<Decoded>, Vec<usize>) {
+    let Message::Text(opened) = next_message(ws).await else { panic!("the `opened` message first") };
+    let opened: Value = serde_json::from_str(&opened).unwrap();
+    let doc = opened["opened"]["compact"].clone();
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (mut frames, mut sizes) = (Vec::new(), Vec::new());
+    while frames.len() < n {
+        match next_message(ws).await {
+            Message::Binary(b) => {
+                sizes.push(b.len());
+                frames.push(decoder.decode(&b));
+            }
+            other => panic!("expected a compact frame, got {other:?}"),
+        }
+    }
+    (doc, frames, sizes)
+}
+
+async fn protobuf_frames(ws: &mut Ws, n: usize) -> BTreeMap<u64, Vec<Pose>> {
+    let mut out = BTreeMap::new();
+    while out.len() < n {
+        match next_message(ws).await {
+            Message::Binary(b) => {
+                let f = pb::Frame::decode(b).unwrap();
+                out.insert(f.seq, pose_of_pb(f.pose.as_ref().unwrap()));
+            }
+            Message::Close(_) => break,
+            other => panic!("expected a protobuf frame, got {other:?}"),
+        }
+    }
+    out
+}
+
+#[tokio::test]
+async fn websocket_compact_frames_decode_within_max_error_of_the_uncompressed_stream() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&arm_clip(), None).await;
+    for max_error in [1e-4, 1e-3, 1e-5] {
+        let query = "fps=30&start=0&speed=1.3&max_frames=75";
+        let mut compact =
+            app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=compact&max_error={max_error}")).await;
+        let mut plain = app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=protobuf")).await;
+        let (doc, frames, sizes) = compact_frames(&mut compact, 75).await;
+        let plain = protobuf_frames(&mut plain, 75).await;
+        assert_eq!(doc["max_error"].as_f64().unwrap() as f32, max_error as f32);
+        assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
+        assert_eq!(doc["joints"][5]["name"], "tip");
+        assert!(doc["joints"][5]["rotation"]["constant"].is_array(), "the tip never turns: {}", doc["joints"][5]);
+        let l = layout(&doc);
+        assert_eq!(l.key_interval, 30, "a key frame at least once a second");
+        check_keys(&frames, l.key_interval);
+        let (compared, keys, deltas) = compare(&frames, &plain, max_error, &l);
+        assert!(compared >= 60, "{max_error}: only {compared} ticks in both streams");
+        assert!(keys >= 2 && deltas >= 40, "{max_error}: {keys} key frames, {deltas} deltas");
+        eprintln!("max_error {max_error}: key frame {} B, deltas {:?} B", sizes[0], &sizes[1..4]);
+    }
+}
+
+#[tokio::test]
+async fn grpc_compact_frames_decode_within_max_error_of_the_uncompressed_stream() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&arm_clip(), None).await;
+    let mut grpc = app.grpc().await;
+    let request = |encoding: pb::FrameEncoding| pb::StreamRequest {
+        clip_id: id.clone(),
+        fps: 30,
+        start_time: Some(0.25),
+        max_frames: 70,
+        encoding: encoding as i32,
+        max_error: Some(5e-5),
+        ..Default::default()
+    };
+    let mut compact = grpc.stream_frames(request(pb::FrameEncoding::Compact)).await.unwrap().into_inner();
+    let plain_req = pb::StreamRequest { max_error: None, ..request(pb::FrameEncoding::Protobuf) };
+    let mut plain = grpc.stream_frames(plain_req).await.unwrap().into_inner();
+    let mut decoder = None;
+    let mut frames = Vec::new();
+    while let Some(f) = within(10, "a compact frame", compact.message()).await.unwrap() {
+        assert!(f.pose.is_none() && f.seq == 0, "a compact Frame carries its bytes only");
+        if decoder.is_none() {
+            let doc: Value = serde_json::from_str(&f.compact_layout).expect("the layout on the first frame");
+            decoder = Some((Decoder { layout: layout(&doc), keys: None }, layout(&doc)));
+        } else {
+            assert!(f.compact_layout.is_empty(), "the layout once");
+        }
+        frames.push(decoder.as_mut().unwrap().0.decode(&f.compact));
+    }
+    let mut uncompressed = BTreeMap::new();
+    while let Some(f) = within(10, "a frame", plain.message()).await.unwrap() {
+        uncompressed.insert(f.seq, pose_of_pb(f.pose.as_ref().unwrap()));
+    }
+    let (_, l) = decoder.unwrap();
+    check_keys(&frames, l.key_interval);
+    let (compared, keys, deltas) = compare(&frames, &uncompressed, 5e-5, &l);
+    assert_eq!(frames.len(), 70);
+    assert!(compared >= 55 && keys >= 2 && deltas >= 40, "{compared} compared, {keys} keys, {deltas} deltas");
+}
+
+#[tokio::test]
+async fn broadcast_compact_viewers_decode_within_max_error_of_its_protobuf_viewers() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&arm_clip(), None).await;
+    let created = app.post_json("/v1/broadcasts", &json!({"motion": {"layers": [{"clip": id}]}, "fps": 20})).await;
+    let b = created["id"].as_str().expect("a broadcast").to_owned();
+    let mut compact = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=compact&max_error=0.0002")).await;
+    let mut plain = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=protobuf")).await;
+    let (doc, frames, _) = compact_frames(&mut compact, 45).await;
+    let plain = protobuf_frames(&mut plain, 45).await;
+    let l = layout(&doc);
+    assert_eq!(l.key_interval, 20);
+    // A viewer that joins between key frames gets the key frame first.
+    assert!(frames[0].key, "a viewer's first frame is a key frame: {:?}", frames[0].seq);
+    check_keys(&frames, l.key_interval);
+    let (compared, keys, _) = compare(&frames, &plain, 2e-4, &l);
+    assert!(compared >= 30 && keys >= 2, "{compared} compared, {keys} key frames");
+    // While a compact viewer watches, a control leaving the clip is refused.
+    let resp = app
+        .http
+        .post(app.url(&format!("/v1/broadcasts/{b}/controls")))
+        .json(&json!({"op": "layer", "index": 0, "weight": 0.5, "duration": 0}))
+        .send()
+        .await
+        .unwrap();
+    let status = resp.status().as_u16();
+    let problem: Value = resp.json().await.unwrap();
+    assert_eq!((status, problem["code"].as_str()), (422, Some("bad_control")), "{problem}");
+}
+
+#[tokio::test]
+async fn bad_compact_parameters_are_refused_with_stable_codes() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&arm_clip(), None).await;
+    let refused = |query: String| {
+        let url = app.ws_url(&format!("/v1/clips/{id}/stream?{query}"));
+        async move {
+            use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+            let err = tokio_tungstenite::connect_async(url.into_client_request().unwrap()).await.unwrap_err();
+            let tokio_tungstenite::tungstenite::Error::Http(resp) = err else { panic!("not refused: {err}") };
+            let body: Value = serde_json::from_slice(resp.body().as_deref().unwrap_or_default()).unwrap();
+            (resp.status().as_u16(), body["code"].as_str().unwrap().to_owned())
+        }
+    };
+    let cases = [
+        ("encoding=compact&max_error=0.0000009", 422, "max_error_out_of_range"),
+        ("encoding=compact&max_error=-1", 422, "max_error_out_of_range"),
+        ("encoding=compact&distance=0.001", 422, "distance_out_of_range"),
+        ("encoding=compact&max_error=abc", 400, "bad_number"),
+        ("encoding=compact&space=model", 422, "compact_unsupported"),
+        ("encoding=compact&joints=root", 422, "compact_unsupported"),
+        ("encoding=zip", 400, "bad_parameter"),
+        ("encoding=json&max_error=0.001", 400, "unknown_parameter"),
+    ];
+    for (query, status, code) in cases {
+        assert_eq!(refused(query.to_owned()).await, (status, code.to_owned()), "{query}");
+    }
+    // gRPC: the same codes under INVALID_ARGUMENT.
+    let mut grpc = app.grpc().await;
+    let cases = [
+        (pb::StreamRequest { encoding: 2, max_error: Some(1e-7), ..Default::default() }, "max_error_out_of_range"),
+        (pb::StreamRequest { encoding: 2, distance: Some(0.0), ..Default::default() }, "distance_out_of_range"),
+        (pb::StreamRequest { encoding: 9, ..Default::default() }, "bad_parameter"),
+    ];
+    for (req, code) in cases {
+        let req = pb::StreamRequest { clip_id: id.clone(), fps: 30, ..req };
+        let status = grpc.stream_frames(req).await.unwrap_err();
+        assert_eq!(status.code(), tonic::Code::InvalidArgument, "{code}: {status:?}");
+        assert_eq!(status.metadata().get("x-error-code").unwrap().to_str().unwrap(), code);
+    }
+    // A control that would leave the clip is refused on a compact stream, which goes on.
+    let mut ws = app.ws(&format!("/v1/clips/{id}/stream?encoding=compact&fps=30")).await;
+    let (_, _, _) = compact_frames(&mut ws, 1).await;
+    use futures_util::SinkExt;
+    ws.send(Message::Text(r#"{"op":"layer","index":0,"weight":0.5,"duration":0}"#.into())).await.unwrap();
+    loop {
+        if let Message::Text(t) = next_message(&mut ws).await {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            assert_eq!(v["error"]["code"], "bad_control", "{v}");
+            break;
+        }
+    }
+    assert!(matches!(next_message(&mut ws).await, Message::Binary(_)), "the stream goes on");
+}
+
+/// The parents of a stored clip's joints, from its skeleton.
+async fn parents(app: &TestApp, id: &str) -> Vec<Option<usize>> {
+    let skeleton = app.get_json(&format!("/v1/clips/{id}/skeleton")).await;
+    let joints = skeleton["joints"].as_array().unwrap();
+    let index = |name: &str| joints.iter().position(|j| j["name"] == name).unwrap();
+    joints.iter().map(|j| j["parent"].as_str().map(index)).collect()
+}
+
+async fn import(app: &TestApp, query: &str, file: &str, clip_suffix: &str) -> String {
+    let url = app.url(&format!("/v1/clips/import?{query}"));
+    let resp = app.http.post(url).body(crate::common::testdata(file)).send().await.unwrap();
+    assert_eq!(resp.status(), 201, "{file}");
+    let body: Value = resp.json().await.unwrap();
+    let clips = body["clips"].as_array().unwrap();
+    let clip = clips.iter().find(|c| c["name"].as_str().unwrap().ends_with(clip_suffix)).expect("the clip");
+    clip["id"].as_str().unwrap().to_owned()
+}
+
+/// FIGURE lines for BENCHMARKS.md ("Compact frames"): key and delta frames
+/// over the WebSocket for the Fox's walk and a CMU take, at the default
+/// bound, against the protobuf frames of the same stream (without the joint
+/// names of the first), every decoded frame held to the bound.
+/// `cargo test --test service compact::figures -- --nocapture 2>&1 | grep FIGURE`
+#[tokio::test]
+async fn figures_key_and_delta_frames_on_the_wire() {
+    let app = TestApp::start().await;
+    let clips = [
+        ("Fox walk", import(&app, "format=glb&name=fox&scale=0.01", "gltf/Fox/Fox.glb", "Walk").await),
+        ("CMU 131_01", import(&app, "format=bvh&name=cmu&scale=0.05644444", "bvh/131_01.bvh", "cmu").await),
+    ];
+    for (name, id) in clips {
+        let parents = parents(&app, &id).await;
+        let query = "fps=30&start=0&playback=loop&max_frames=90";
+        let mut compact = app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=compact")).await;
+        let mut plain = app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=protobuf")).await;
+        let (doc, frames, sizes) = compact_frames(&mut compact, 90).await;
+        let mut pb_sizes = Vec::new();
+        let mut uncompressed = BTreeMap::new();
+        while uncompressed.len() < 90 {
+            if let Message::Binary(b) = next_message(&mut plain).await {
+                pb_sizes.push(b.len());
+                let f = pb::Frame::decode(b).unwrap();
+                uncompressed.insert(f.seq, pose_of_pb(f.pose.as_ref().unwrap()));
+            }
+        }
+        let l = layout(&doc);
+        check_keys(&frames, l.key_interval);
+        let (compared, _, _) = compare_on(&parents, &frames, &uncompressed, 1e-4, &l);
+        assert!(compared >= 60, "{name}: {compared} ticks compared");
+        let keys: Vec<usize> = frames.iter().zip(&sizes).filter(|(d, _)| d.key).map(|(_, s)| *s).collect();
+        let deltas: Vec<usize> = frames.iter().zip(&sizes).filter(|(d, _)| !d.key).map(|(_, s)| *s).collect();
+        let protobuf = pb_sizes[1..].iter().sum::<usize>() as f64 / (pb_sizes.len() - 1) as f64;
+        let key = keys.iter().sum::<usize>() as f64 / keys.len() as f64;
+        let delta = deltas.iter().sum::<usize>() as f64 / deltas.len() as f64;
+        println!(
+            "FIGURE compact {name}: {} joints, protobuf {protobuf:.0} B, key {key:.0} B (1/{:.1}), delta {delta:.1} B \
+             (1/{:.1}), {} key frames and {} deltas",
+            parents.len(),
+            protobuf / key,
+            protobuf / delta,
+            keys.len(),
+            deltas.len()
+        );
+        assert!(key * 6.0 <= protobuf, "{name}: key frames at most 1/6 of the protobuf frame");
+    }
+}

@@ -1,0 +1,326 @@
+//! Spring chains served (docs/springs.md) with real clients: the chains
+//! checked at upload with pointers, poses and samples simulated from rest a
+//! warmup before, WebSocket streams carrying the simulation in stream time
+//! (the same pose at shared instants whatever the frame rate), and
+//! `reset_springs` showing the rest pose on its tick.
+//!
+//! The rig: `hips` swinging along x (0 → 0.3 → 0 m over 1 s, looping), a
+//! tail of three 0.1 m bones pointing back (−z) from it, under gravity.
+//! The tail's rest rotations are the identity, so a frame shows the rest
+//! pose exactly when every tail joint's local rotation is `[0, 0, 0, 1]`.
+
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+use super::{TestApp, within};
+use crate::common::app::Ws;
+
+const TAIL: [&str; 3] = ["tail0", "tail1", "tail2"];
+
+fn tail_clip() -> String {
+    json!({
+        "name": "tailed",
+        "skeleton": {"joints": [
+            {"name": "hips", "parent": null},
+            {"name": "tail0", "parent": "hips", "rest": {"translation": [0, 0, -0.1]}},
+            {"name": "tail1", "parent": "tail0", "rest": {"translation": [0, 0, -0.1]}},
+            {"name": "tail2", "parent": "tail1", "rest": {"translation": [0, 0, -0.1]}},
+            {"name": "tail_end", "parent": "tail2", "rest": {"translation": [0, 0, -0.1]}}
+        ]},
+        "tracks": [{"joint": "hips", "channel": "translation", "interpolation": "linear",
+                    "times": [0, 0.5, 1], "values": [[0, 0, 0], [0.3, 0, 0], [0, 0, 0]]}],
+        "playback": "loop"
+    })
+    .to_string()
+}
+
+fn chain() -> Value {
+    json!([{"name": "tail", "joints": ["tail0", "tail1", "tail2", "tail_end"],
+            "stiffness": 1.0, "drag": 0.4, "gravity": [0, -9.81, 0]}])
+}
+
+fn sprung(clip: &str) -> Value {
+    json!({"layers": [{"clip": clip}], "springs": chain()})
+}
+
+async fn post(app: &TestApp, path: &str, body: &Value) -> (u16, Value) {
+    let resp = app.http.post(app.url(path)).json(body).send().await.unwrap();
+    (resp.status().as_u16(), resp.json().await.unwrap())
+}
+
+async fn pose(app: &TestApp, motion: &Value, time: f64, space: &str) -> Value {
+    let (status, pose) = post(app, "/v1/poses", &json!({"motion": motion, "time": time, "space": space})).await;
+    assert_eq!(status, 200, "{pose}");
+    pose
+}
+
+fn joint<'a>(pose: &'a Value, name: &str) -> &'a Value {
+    let names = ["hips", "tail0", "tail1", "tail2", "tail_end"];
+    &pose["joints"][names.iter().position(|n| *n == name).unwrap()]
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+fn at_rest(pose: &Value) -> bool {
+    TAIL.iter().all(|j| numbers(&joint(pose, j)["rotation"]) == [0.0, 0.0, 0.0, 1.0])
+}
+
+/// The largest distance between the same joints of two model-space poses.
+fn distance(a: &Value, b: &Value) -> f64 {
+    let joints = a["joints"].as_array().unwrap().len();
+    (0..joints)
+        .map(|j| {
+            let (p, q) = (numbers(&a["joints"][j]["translation"]), numbers(&b["joints"][j]["translation"]));
+            p.iter().zip(&q).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[tokio::test]
+async fn chains_are_checked_at_upload_with_pointers() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&tail_clip(), None).await;
+    let cases = [
+        (
+            json!({"springs": [{"name": "t", "joints": ["tail0", "nowhere"]}]}),
+            "unknown_joint",
+            "/motion/springs/0/joints/1",
+        ),
+        (
+            json!({"springs": [{"name": "t", "joints": ["tail2", "tail0"]}]}),
+            "not_a_chain",
+            "/motion/springs/0/joints/1",
+        ),
+        (
+            json!({"springs": [{"name": "t", "joints": ["tail0", "tail1"], "drag": 2}]}),
+            "drag_out_of_range",
+            "/motion/springs/0/drag",
+        ),
+        (
+            json!({"springs": chain(), "spring_substep_hz": 5000}),
+            "substep_hz_out_of_range",
+            "/motion/spring_substep_hz",
+        ),
+        (
+            json!({"springs": [{"name": "t", "joints": ["tail0", "tail1"], "colliders": [{"joint": "tail0", "sphere": {"radius": 0.1}}]}]}),
+            "collider_on_spring",
+            "/motion/springs/0/colliders/0/joint",
+        ),
+    ];
+    for (springs, code, pointer) in cases {
+        let mut motion = json!({"layers": [{"clip": id}]});
+        motion.as_object_mut().unwrap().extend(springs.as_object().unwrap().clone());
+        let (status, problem) = post(&app, "/v1/poses", &json!({"motion": motion, "time": 0.5})).await;
+        assert_eq!((status, problem["code"].as_str().unwrap()), (422, code), "{problem}");
+        assert_eq!(problem["pointer"], pointer, "{problem}");
+    }
+    // A clip's chains are checked against its own skeleton, and kept.
+    let mut clip: Value = serde_json::from_str(&tail_clip()).unwrap();
+    clip["name"] = json!("tailed-bad");
+    clip["springs"] = json!([{"name": "t", "joints": ["tail0", "hips"]}]);
+    let (status, problem) = post(&app, "/v1/clips", &clip).await;
+    assert_eq!(
+        (status, &problem["code"], &problem["pointer"]),
+        (422, &json!("not_a_chain"), &json!("/springs/0/joints/1"))
+    );
+    clip["name"] = json!("tailed-good");
+    clip["springs"] = chain();
+    let (status, written) = post(&app, "/v1/clips", &clip).await;
+    assert_eq!(status, 201, "{written}");
+    let stored = app.get_json(&format!("/v1/clips/{}", written["id"].as_str().unwrap())).await;
+    assert_eq!(stored["springs"][0]["joints"], chain()[0]["joints"], "{stored}");
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn springs_off_is_the_layered_pose_and_on_only_turns_the_chain() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&tail_clip(), None).await;
+    let plain = json!({"layers": [{"clip": id}]});
+    for t in [0.25, 0.8, 1.6] {
+        let off = pose(&app, &plain, t, "local").await;
+        // Hand-computed layered pose: hips at 0.6·t (first half) or 0.6·(1 − t) (second), looping.
+        let phase = t % 1.0;
+        let x = if phase <= 0.5 { 0.6 * phase } else { 0.6 * (1.0 - phase) };
+        assert!((numbers(&joint(&off, "hips")["translation"])[0] - x).abs() < 1e-6, "{off}");
+        assert!(at_rest(&off), "without springs the tail is its rest pose: {off}");
+        let on = pose(&app, &sprung(&id), t, "local").await;
+        assert_eq!(joint(&on, "hips"), joint(&off, "hips"), "springs turn their chain only");
+        assert_eq!(joint(&on, "tail_end"), joint(&off, "tail_end"), "the last joint only marks a tail");
+        assert!(!at_rest(&on), "gravity and the swing turn the tail: {on}");
+        // Bone lengths are kept: each tail joint stays 0.1 m from the next.
+        let model = pose(&app, &sprung(&id), t, "model").await;
+        let names = ["tail0", "tail1", "tail2", "tail_end"];
+        for pair in names.windows(2) {
+            let (a, b) =
+                (numbers(&joint(&model, pair[0])["translation"]), numbers(&joint(&model, pair[1])["translation"]));
+            let length = a.iter().zip(&b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt();
+            assert!((length - 0.1).abs() < 1e-5, "{} → {}: {length}", pair[0], pair[1]);
+        }
+        // The tail hangs below the hips under gravity.
+        assert!(numbers(&joint(&model, "tail_end")["translation"])[1] < -0.01, "{model}");
+    }
+    app.stop().await;
+}
+
+async fn send(ws: &mut Ws, msg: Value) {
+    ws.send(Message::Text(msg.to_string().into())).await.unwrap();
+}
+
+async fn next_json(ws: &mut Ws) -> Value {
+    loop {
+        match within(5, "a message", ws.next()).await.expect("the socket closed").unwrap() {
+            Message::Text(t) => return serde_json::from_str(&t).unwrap(),
+            Message::Ping(_) | Message::Pong(_) => {}
+            other => panic!("expected a text message, got {other:?}"),
+        }
+    }
+}
+
+/// Every frame of a stream of `motion` opened with `extra`, by seq, until `frames` were sent.
+async fn frames(app: &TestApp, motion: &Value, fps: u32, frames: u64, extra: Value) -> Vec<Option<Value>> {
+    let mut ws = app.ws("/v1/stream").await;
+    let mut open = json!({"op": "open", "motion": motion, "fps": fps, "max_frames": frames, "space": "model"});
+    open.as_object_mut().unwrap().extend(extra.as_object().unwrap().clone());
+    send(&mut ws, open).await;
+    assert!(next_json(&mut ws).await.get("opened").is_some());
+    let mut out = vec![None; frames as usize];
+    loop {
+        match within(10, "a frame", ws.next()).await {
+            Some(Ok(Message::Text(t))) => {
+                let frame: Value = serde_json::from_str(&t).unwrap();
+                let seq = frame["seq"].as_u64().expect("a frame") as usize;
+                // A dropped tick moves the last frames' seq past `frames`.
+                if let Some(slot) = out.get_mut(seq) {
+                    *slot = Some(frame["pose"].clone());
+                }
+            }
+            Some(Ok(Message::Ping(_) | Message::Pong(_))) => {}
+            _ => return out,
+        }
+    }
+}
+
+/// Streams at 30, 60, 120 and 24 fps show the same pose at the instants
+/// they share (every 1/6 s), within 1e-5 of the scene's size (0.4 m).
+#[tokio::test(flavor = "multi_thread")]
+async fn streams_at_any_frame_rate_agree_at_shared_instants() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&tail_clip(), None).await;
+    let motion = sprung(&id);
+    let rates = [30u32, 60, 120, 24];
+    let runs =
+        futures_util::future::join_all(rates.map(|fps| frames(&app, &motion, fps, u64::from(fps) + 1, json!({}))))
+            .await;
+    let mut compared = 0;
+    for k in 0..=6u32 {
+        let poses: Vec<&Value> =
+            rates.iter().zip(&runs).filter_map(|(fps, run)| run[(k * fps / 6) as usize].as_ref()).collect();
+        for pair in poses.windows(2) {
+            assert!(distance(pair[0], pair[1]) <= 1e-5 * 0.4, "at {k}/6 s: {} vs {}", pair[0], pair[1]);
+            compared += 1;
+        }
+        if k > 0 {
+            assert!(!at_local_rest(&app, &id, poses[0]).await, "the tail swings at {k}/6 s");
+        }
+    }
+    assert!(compared >= 12, "too few shared frames arrived: {compared}");
+    app.stop().await;
+}
+
+/// Whether a model-space frame has the tail where its rest rotations put it.
+async fn at_local_rest(app: &TestApp, id: &str, frame: &Value) -> bool {
+    let rest = pose(app, &json!({"layers": [{"clip": id}]}), frame["time"].as_f64().unwrap(), "model").await;
+    distance(frame, &rest) < 1e-6
+}
+
+/// A pose at τ simulates from rest at τ − 1 s (the warmup): the frame of a
+/// stream started at τ − 1 that shows τ is that pose.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_pose_is_the_frame_of_a_stream_started_a_warmup_before() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&tail_clip(), None).await;
+    let motion = sprung(&id);
+    let tau = 1.7;
+    let run = frames(&app, &motion, 60, 61, json!({"start": tau - 1.0})).await;
+    let frame = run[60].as_ref().expect("the frame at τ arrived");
+    assert!((frame["time"].as_f64().unwrap() - tau).abs() < 1e-9);
+    let posed = pose(&app, &motion, tau, "model").await;
+    assert!(distance(frame, &posed) <= 1e-5 * 0.4, "{frame} vs {posed}");
+    // Samples: one simulation from the first time's warmup through them all.
+    let times = [tau, tau + 0.25, tau + 0.5];
+    let (status, samples) =
+        post(&app, "/v1/samples", &json!({"motion": motion, "times": times, "space": "model"})).await;
+    assert_eq!(status, 200, "{samples}");
+    let first = &samples["poses"][0];
+    assert!(distance(first, &posed) <= 1e-5 * 0.4, "the first sample is the pose at τ");
+    let later = run_from(&app, &motion, tau - 1.0, 75).await;
+    assert!(distance(&samples["poses"][1], &later) <= 1e-5 * 0.4, "the second is the same run 0.25 s on");
+    app.stop().await;
+}
+
+/// The model pose a 60 fps stream started at `start` shows at frame `seq`.
+async fn run_from(app: &TestApp, motion: &Value, start: f64, seq: u64) -> Value {
+    let run = frames(app, motion, 60, seq + 1, json!({"start": start})).await;
+    run[seq as usize].clone().expect("the frame arrived")
+}
+
+/// `reset_springs` restarts the chain at rest: the frame of its tick shows
+/// the rest rotations, and the tail swings again after it.
+#[tokio::test]
+async fn reset_springs_shows_the_rest_pose_on_its_tick() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&tail_clip(), None).await;
+    let mut ws = app.ws("/v1/stream").await;
+    send(&mut ws, json!({"op": "open", "motion": sprung(&id), "fps": 30})).await;
+    assert!(next_json(&mut ws).await.get("opened").is_some());
+    let first = next_json(&mut ws).await;
+    assert!(at_rest(&first["pose"]), "a stream's first frame is the rest pose: {first}");
+    for _ in 0..10 {
+        let frame = next_json(&mut ws).await;
+        assert!(!at_rest(&frame["pose"]), "the tail swings: {frame}");
+    }
+    send(&mut ws, json!({"op": "reset_springs"})).await;
+    let mut rested = None;
+    for _ in 0..30 {
+        let frame = next_json(&mut ws).await;
+        if at_rest(&frame["pose"]) {
+            rested = Some(frame["seq"].as_u64().unwrap());
+            break;
+        }
+    }
+    let rested = rested.expect("a frame at rest after reset_springs");
+    let after = next_json(&mut ws).await;
+    assert_eq!(after["seq"].as_u64().unwrap(), rested + 1 + after["dropped"].as_u64().unwrap());
+    assert!(!at_rest(&after["pose"]), "the chain runs again after the reset: {after}");
+    app.stop().await;
+}
+
+/// The example Fox motion (examples/motions/fox-tail-springs.json) on the
+/// Fox imported in metres: its tail swings, nothing else changes.
+#[tokio::test]
+async fn the_fox_example_swings_its_tail() {
+    let app = TestApp::start().await;
+    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
+    let url = app.url("/v1/clips/import?format=glb&scale=0.01");
+    let resp = app.http.post(url).header("content-type", "application/octet-stream").body(glb).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let imported: Value = resp.json().await.unwrap();
+    let walk = imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("a Walk clip");
+    let example = include_str!("../../../examples/motions/fox-tail-springs.json");
+    let mut motion: Value = serde_json::from_str(example).unwrap();
+    assert_eq!(motion["layers"][0]["clip"], "name:Walk");
+    motion["layers"][0]["clip"] = walk["id"].clone();
+    let plain = json!({"layers": motion["layers"]});
+    let (with, without) = (pose(&app, &motion, 1.3, "local").await, pose(&app, &plain, 1.3, "local").await);
+    let names: Vec<&str> = with["joints"].as_array().unwrap().iter().map(|j| j["name"].as_str().unwrap()).collect();
+    for (k, name) in names.iter().enumerate() {
+        let turned = with["joints"][k] != without["joints"][k];
+        let turns = ["b_Tail01_012", "b_Tail02_013"].contains(name);
+        assert_eq!(turned, turns, "{name}: only the tail's turning joints change");
+    }
+    app.stop().await;
+}
