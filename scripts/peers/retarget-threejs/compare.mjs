@@ -2,12 +2,13 @@
 //
 // The server imports a BVH take and a glTF character and plays the take on the character (a motion with
 // `character`); three.js loads the same two files with its own BVHLoader and GLTFLoader and retargets the take
-// with SkeletonUtils.retargetClip, its options set to our documented rule (below). Both answers are compared at
-// every frame of the take: per target joint the model-space rotation (the angle between the two, in degrees) and
-// the hips' model-space position. Exits 1 when a maximum is over its threshold.
+// with SkeletonUtils.retarget and retargetClip, its options set to our documented rule (below). Both answers are
+// compared at every frame of the take: per target joint the model-space rotation (the angle between the two, in
+// degrees) and the hips' model-space position. Exits 1 when a maximum is over its limit (`--max-deg` for
+// `retarget` at the take's keys, `--max-deg-clip` for retargetClip, `--max-hips` for both; none by default).
 //
 //   node compare.mjs --http http://127.0.0.1:8080 --bvh take.bvh --gltf character.gltf \
-//        [--max-deg 0.01] [--max-hips 0.0001] [--token TOKEN]
+//        [--max-deg 7e-5] [--max-deg-clip 1.5e-3] [--max-hips 1e-6] [--token TOKEN]
 //
 // The option mapping. Ours: a mapped target joint's model rotation is G_d(t) = G_s(t)·(G⁰_s)⁻¹·G⁰_d, the hips'
 // model position p⁰_d + k·(p_s(t) − p⁰_s), every other joint keeps its reference local translation and unmapped
@@ -140,6 +141,8 @@ async function compare(label, times, pose, { k, retarget }, limit) {
   const angles = [];
   const hipsOff = [];
   const worst = {};
+  let turned = 0; // how far the server's poses turn a joint from the bind pose, and move the hips
+  let travel = 0;
   const world = new Quaternion();
   const at = new Vector3();
   for (let f = 0; f < times.length; f++) {
@@ -151,10 +154,13 @@ async function compare(label, times, pose, { k, retarget }, limit) {
       const deg = angleDeg(node.getWorldQuaternion(world), joint.rotation);
       angles.push(deg);
       if (!(worst[joint.name]?.deg >= deg)) worst[joint.name] = { deg, frame: f };
+      if (target.rotation[joint.name]) turned = Math.max(turned, angleDeg(target.rotation[joint.name], joint.rotation));
       if (joint.name === targetRoles.hips) {
         const [x, y, z] = joint.translation;
         node.getWorldPosition(at);
         hipsOff.push(Math.hypot(at.x - x, at.y - y, at.z - z));
+        const [x0, y0, z0] = ours[0].joints.find((j) => j.name === joint.name).translation;
+        travel = Math.max(travel, Math.hypot(x - x0, y - y0, z - z0));
       }
     }
   }
@@ -162,6 +168,8 @@ async function compare(label, times, pose, { k, retarget }, limit) {
   const hips = { max: Math.max(...hipsOff), p99: percentile(hipsOff, 0.99) };
   console.log(`== ${label}: take ${stem} (${times.length} frames) on ${basename(args.gltf)}, ` +
     `${ours[0].joints.length} joints, ${Object.keys(names).length} mapped, k = ${k.toFixed(6)}`);
+  console.log(`  the server's poses turn joints up to ${turned.toFixed(1)}° from the bind pose and move the hips up to ` +
+    `${travel.toFixed(3)}`);
   console.log('  per joint, the largest model-space rotation difference (degrees) and its frame:');
   for (const [name, w] of Object.entries(worst)) {
     const role = Object.entries(targetRoles).find(([, j]) => j === name)?.[0] ?? '(unmapped)';
