@@ -33,6 +33,7 @@ peer=scripts/peers/retarget-threejs
 (cd "$peer" && npm ci --no-audit --no-fund --loglevel=error)
 
 ib_bin debug
+ib_workdir # before ib_serve: its --data-dir argument is expanded first
 ib_serve peer-retarget --data-dir "$IB_WORK/data"
 
 node "$peer/compare.mjs" --http "$IB_HTTP" \
