@@ -17,6 +17,7 @@ ib_help "$@"
 cd "$IB_ROOT"
 
 ib_bin debug
+ib_workdir
 ib_serve clients --data-dir "$IB_WORK/data"
 
 echo "== Python client"
