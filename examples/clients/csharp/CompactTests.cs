@@ -37,7 +37,7 @@ static class CompactTests
         Run("a layout of another version is refused compact_version", WrongVersion);
         Run("malformed layouts are refused compact_bad_layout at their JSON pointer", MalformedLayouts);
         Run("an opened message's layout is the vector's", OpenedMessage);
-        Run("GltfToUnity is the mirror of X applied to the local transform", AxisConversionIsTheMirror);
+        Run("GltfToUnity and GltfToUnityMirrorZ are the mirrors of X and Z applied to the local transform", AxisConversionIsTheMirror);
         Console.WriteLine("{0} passed, {1} failed", passes, failures);
         return failures == 0 ? 0 : 1;
     }
@@ -350,11 +350,18 @@ static class CompactTests
         Refused("compact_bad_layout", () => CompactLayout.FromOpened("{\"opened\": {\"clip\": \"x\"}}"));
     }
 
-    // GltfToUnity against the change of basis it stands for: with S = diag(-1, 1, 1), the converted local transform
-    // (T', R') must be (S·T, S·R·S), R from the quaternion by the usual formula (the one Unity's Quaternion uses).
+    // The conversions against the change of basis each stands for: with S the mirror of X (GltfToUnity) or of Z
+    // (GltfToUnityMirrorZ), the converted local transform (T', R') must be (S·T, S·R·S), R from the quaternion by the
+    // usual formula (the one Unity's Quaternion uses).
     static void AxisConversionIsTheMirror()
     {
         var random = new Random(11);
+        var mirrors = new[]
+        {
+            new KeyValuePair<AxisConversion, double[]>(AxisConversion.GltfToUnity, new double[] { -1, 1, 1 }),
+            new KeyValuePair<AxisConversion, double[]>(AxisConversion.GltfToUnityMirrorZ, new double[] { 1, 1, -1 }),
+            new KeyValuePair<AxisConversion, double[]>(AxisConversion.None, new double[] { 1, 1, 1 }),
+        };
         for (int i = 0; i < 1000; i++)
         {
             var q = new double[4];
@@ -366,24 +373,24 @@ static class CompactTests
             }
             var r = q.Select(c => (float)(c / Math.Sqrt(norm))).ToArray();
             var t = new[] { (float)random.NextDouble(), (float)random.NextDouble() - 0.5f, 2f * (float)random.NextDouble() };
-            var rc = (float[])r.Clone();
-            var tc = (float[])t.Clone();
-            UnityAxes.Convert(AxisConversion.GltfToUnity, tc, rc, 1);
-            var s = new double[] { -1, 1, 1 };
-            var m = Matrix(r);
-            var mc = Matrix(rc);
-            for (int a = 0; a < 3; a++)
+            foreach (var mirror in mirrors)
             {
-                Near(new[] { tc[a] }, new[] { (float)(s[a] * t[a]) }, 0, "translation " + a);
-                for (int b = 0; b < 3; b++)
+                var rc = (float[])r.Clone();
+                var tc = (float[])t.Clone();
+                UnityAxes.Convert(mirror.Key, tc, rc, 1);
+                var s = mirror.Value;
+                var m = Matrix(r);
+                var mc = Matrix(rc);
+                for (int a = 0; a < 3; a++)
                 {
-                    double mirrored = s[a] * m[a, b] * s[b];
-                    Check(Math.Abs(mc[a, b] - mirrored) < 1e-6, "rotation matrix [" + a + "," + b + "]: " + mc[a, b] + " vs " + mirrored);
+                    Near(new[] { tc[a] }, new[] { (float)(s[a] * t[a]) }, 0, mirror.Key + " translation " + a);
+                    for (int b = 0; b < 3; b++)
+                    {
+                        double mirrored = s[a] * m[a, b] * s[b];
+                        Check(Math.Abs(mc[a, b] - mirrored) < 1e-6, mirror.Key + " rotation matrix [" + a + "," + b + "]: " + mc[a, b] + " vs " + mirrored);
+                    }
                 }
             }
-            var unchanged = (float[])r.Clone();
-            UnityAxes.Convert(AxisConversion.None, (float[])t.Clone(), unchanged, 1);
-            SameBits(unchanged, r, "None leaves the rotation");
         }
     }
 

@@ -31,15 +31,21 @@ namespace Inbetween
         /// and UnityGLTF import models: translations (−x, y, z), rotations (x, −y, −z, w), scales unchanged.
         /// </summary>
         GltfToUnity,
+        /// <summary>
+        /// glTF to Unity by mirroring Z, as UniGLTF and UniVRM import models: translations (x, y, −z), rotations
+        /// (−x, −y, z, w), scales unchanged.
+        /// </summary>
+        GltfToUnityMirrorZ,
         /// <summary>The values as they are (a rig imported without the conversion, or a right-handed engine).</summary>
         None,
     }
 
     /// <summary>
-    /// The axis conversion of a decoded local pose. Mirroring X is the change of basis S = diag(−1, 1, 1); a local
-    /// transform p' = T + R·p becomes S·p' = S·T + (S·R·S)·(S·p), so T goes to S·T and R to S·R·S. A rotation by
-    /// angle θ about axis a, conjugated by a reflection, is the rotation by θ about det(S)·S·a = (ax, −ay, −az): the
-    /// quaternion (x, −y, −z, w). Scales along the local axes are unchanged.
+    /// The axis conversion of a decoded local pose. Mirroring axis k is the change of basis S (the identity with
+    /// −1 at k); a local transform p' = T + R·p becomes S·p' = S·T + (S·R·S)·(S·p), so T goes to S·T and R to
+    /// S·R·S. A rotation by angle θ about axis a, conjugated by a reflection, is the rotation by θ about
+    /// det(S)·S·a = −S·a: the quaternion's vector part negated except at k (X: (x, −y, −z, w)). Scales along the
+    /// local axes are unchanged.
     /// </summary>
     public static class UnityAxes
     {
@@ -47,11 +53,14 @@ namespace Inbetween
         public static void Convert(AxisConversion conversion, float[] translations, float[] rotations, int joints)
         {
             if (conversion == AxisConversion.None) return;
+            int k = conversion == AxisConversion.GltfToUnity ? 0 : 2;
             for (int j = 0; j < joints; j++)
             {
-                translations[3 * j] = -translations[3 * j];
-                rotations[4 * j + 1] = -rotations[4 * j + 1];
-                rotations[4 * j + 2] = -rotations[4 * j + 2];
+                translations[3 * j + k] = -translations[3 * j + k];
+                for (int c = 0; c < 3; c++)
+                {
+                    if (c != k) rotations[4 * j + c] = -rotations[4 * j + c];
+                }
             }
         }
     }
@@ -343,7 +352,7 @@ namespace Inbetween
         public string token = "";
         [Tooltip("The top of the hierarchy searched for joints by name; this object when empty")]
         public Transform root;
-        [Tooltip("GltfToUnity for models imported by glTFast or UnityGLTF (X mirrored)")]
+        [Tooltip("GltfToUnity for models imported by glTFast or UnityGLTF (X mirrored), GltfToUnityMirrorZ for UniGLTF and UniVRM")]
         public AxisConversion axes = AxisConversion.GltfToUnity;
 
         private CompactStreamClient client;
