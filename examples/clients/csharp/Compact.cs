@@ -528,22 +528,22 @@ namespace Inbetween
         private struct BitReader
         {
             private readonly byte[] bytes;
-            private readonly int start;
-            private readonly long endBit;
-            private long bit;
+            // Bit positions from bytes[0]; a frame is far below 2^28 bytes, so they fit an int.
+            private readonly int endBit;
+            private int bit;
 
             public BitReader(byte[] bytes, int start, int end)
             {
+                if (end > int.MaxValue / 8) throw new ArgumentOutOfRangeException("end", "a frame this far into a buffer");
                 this.bytes = bytes;
-                this.start = start;
-                endBit = (long)end * 8;
-                bit = (long)start * 8;
+                endBit = end * 8;
+                bit = start * 8;
             }
 
             /// <summary>The index just past the last byte the fields read so far touch.</summary>
             public int BytesEnd
             {
-                get { return start + (int)((bit - (long)start * 8 + 7) / 8); }
+                get { return (bit + 7) >> 3; }
             }
 
             // Widths are at most 24 bits and the offset in the first byte at most 7: four bytes hold a field.
@@ -551,11 +551,20 @@ namespace Inbetween
             {
                 if (width == 0) return 0;
                 if (bit + width > endBit) throw Truncated("joint values");
-                int first = (int)(bit >> 3);
-                int last = (int)((bit + width - 1) >> 3);
-                uint word = 0;
-                for (int i = first; i <= last; i++) word |= (uint)bytes[i] << (8 * (i - first));
-                int value = (int)((word >> (int)(bit & 7)) & ((1u << width) - 1));
+                int first = bit >> 3;
+                uint word;
+                if (bit + 32 - (bit & 7) <= endBit)
+                {
+                    word = bytes[first] | ((uint)bytes[first + 1] << 8) | ((uint)bytes[first + 2] << 16) | ((uint)bytes[first + 3] << 24);
+                }
+                else
+                {
+                    // Near the end: only the bytes the field touches.
+                    word = 0;
+                    int last = (bit + width - 1) >> 3;
+                    for (int i = first; i <= last; i++) word |= (uint)bytes[i] << (8 * (i - first));
+                }
+                int value = (int)((word >> (bit & 7)) & ((1u << width) - 1));
                 bit += width;
                 return value;
             }

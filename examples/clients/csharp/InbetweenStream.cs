@@ -99,7 +99,7 @@ namespace Inbetween
         /// <summary>
         /// <c>{server}/v1/clips/{clip}/stream?fps=…&amp;encoding=compact</c>, with <c>max_error</c> and
         /// <c>distance</c> when above 0 (0: the server's defaults, docs/compact-frames.md "The error bound").
-        /// <paramref name="clip"/> is an id or <c>name:NAME</c>.
+        /// <paramref name="clip"/> is a clip id (an upload answers it; <c>GET /v1/clips</c> lists them).
         /// </summary>
         public static Uri ClipUri(string server, string clip, int fps, double maxError, double distance)
         {
@@ -338,7 +338,7 @@ namespace Inbetween
     {
         [Tooltip("The server's WebSocket address")]
         public string server = "ws://127.0.0.1:8080";
-        [Tooltip("A clip id, or name:NAME (the one clip of that name)")]
+        [Tooltip("A clip id (an upload answers it; GET /v1/clips lists them)")]
         public string clip = "";
         [Tooltip("A broadcast id to watch instead of a clip")]
         public string broadcast = "";
@@ -433,7 +433,10 @@ namespace Inbetween
             }
         }
 
-        /// <summary>Controls act on the server's next tick (docs/api.md, "Streams"); a broadcast's go to its REST route.</summary>
+        /// <summary>
+        /// Controls act on the server's next tick (docs/api.md, "Streams"). Not on a broadcast watched: its controls go
+        /// to <c>POST /v1/broadcasts/{id}/controls</c> (docs/broadcasts.md).
+        /// </summary>
         public void Seek(float time)
         {
             Send("{\"op\":\"seek\",\"time\":" + time.ToString("R", CultureInfo.InvariantCulture) + "}");
