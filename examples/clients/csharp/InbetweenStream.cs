@@ -200,21 +200,19 @@ namespace Inbetween
                 TaskContinuationOptions.OnlyOnFaulted);
         }
 
-        /// <summary>Closes the stream (1000) if it is open, and stops reading.</summary>
+        /// <summary>
+        /// Closes the stream (1000) if it is open, and stops reading; returns at once (the game thread never waits on
+        /// the network).
+        /// </summary>
         public void Dispose()
         {
-            if (socket.State == WebSocketState.Open)
+            if (socket.State != WebSocketState.Open)
             {
-                try
-                {
-                    socket.CloseOutputAsync(WebSocketCloseStatus.NormalClosure, "done", CancellationToken.None).Wait(1000);
-                }
-                catch (Exception)
-                {
-                    // The socket failed as it closed: there is nothing left to stop.
-                }
+                stop.Cancel();
+                return;
             }
-            stop.Cancel();
+            socket.CloseOutputAsync(WebSocketCloseStatus.NormalClosure, "done", CancellationToken.None)
+                .ContinueWith(_ => stop.Cancel(), TaskScheduler.Default);
         }
 
         private async Task RunAsync(CancellationToken cancel)
@@ -233,7 +231,11 @@ namespace Inbetween
                         result = await socket.ReceiveAsync(new ArraySegment<byte>(buffer, length, buffer.Length - length), cancel).ConfigureAwait(false);
                         length += result.Count;
                     } while (!result.EndOfMessage);
-                    if (result.MessageType == WebSocketMessageType.Close) break;
+                    if (result.MessageType == WebSocketMessageType.Close)
+                    {
+                        await AnswerClose().ConfigureAwait(false);
+                        break;
+                    }
                     if (result.MessageType == WebSocketMessageType.Text) OnText(Encoding.UTF8.GetString(buffer, 0, length));
                     else OnFrame(buffer, length);
                 }
@@ -249,6 +251,20 @@ namespace Inbetween
             finally
             {
                 finished = true;
+            }
+        }
+
+        // The server closed (a stop, max_frames, shutdown): answer with the same code, as the protocol asks.
+        private async Task AnswerClose()
+        {
+            if (socket.State != WebSocketState.CloseReceived) return;
+            try
+            {
+                await socket.CloseOutputAsync(socket.CloseStatus ?? WebSocketCloseStatus.NormalClosure, "", CancellationToken.None).ConfigureAwait(false);
+            }
+            catch (WebSocketException)
+            {
+                // The server has already gone: the close is complete from its side.
             }
         }
 
