@@ -120,7 +120,10 @@ namespace Inbetween
             return new Uri(server.TrimEnd('/') + path + "?" + query);
         }
 
-        /// <summary>The layout, once the `opened` message has come; null before.</summary>
+        /// <summary>
+        /// The stream's decoder once the `opened` message has come (null before), for its Layout, Names and
+        /// NewFrame(); the client's task decodes with it, so never call its Decode.
+        /// </summary>
         public CompactDecoder Decoder
         {
             get { return decoder; }
