@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Runs the client examples in examples/clients/ against a real server: the
 # Python one (REST, gRPC and WebSocket; its compact-frame decoder on the test
-# vectors) and the JavaScript ones (fetch and a
-# WebSocket stream with a seek; a graph driven by `set` controls). Each checks what it reads and exits non-zero
-# on a mismatch; this script fails with it.
+# vectors), the JavaScript ones (fetch and a
+# WebSocket stream with a seek; a graph driven by `set` controls) and the C#
+# one (a compact stream read as a game loop would, each pose checked against
+# the server's within the error bound). Each checks what it reads and exits non-zero
+# on a mismatch; this script fails with it. The C# one needs Mono's `mcs` and
+# `mono` (scripts/csharp.sh installs them).
 #
 #   scripts/clients.sh          # builds the debug binary, a venv for Python
 #   scripts/clients.sh --help   # this text
@@ -37,3 +40,10 @@ node "${node_flags[@]}" examples/clients/js/play.mjs --http "$IB_HTTP" examples/
 # The Fox's locomotion graph driven by a scripted loop of `set` controls, its blend weights checked.
 node "${node_flags[@]}" examples/clients/js/graph.mjs --http "$IB_HTTP" --script \
   --import examples/gltf/Fox/Fox.glb --file examples/graphs/fox-locomotion.json
+
+echo "== C# client (Mono)"
+mcs -langversion:7 -warnaserror -out:"$IB_WORK/StreamCheck.exe" examples/clients/csharp/Compact.cs \
+  examples/clients/csharp/InbetweenStream.cs examples/clients/csharp/StreamCheck.cs
+# A clip document, and the Fox's first clip imported (a layout whose bound is over max_error).
+mono "$IB_WORK/StreamCheck.exe" --http "$IB_HTTP" examples/wave.json
+mono "$IB_WORK/StreamCheck.exe" --http "$IB_HTTP" --frames 90 examples/gltf/Fox/Fox.glb
