@@ -301,7 +301,16 @@ async fn sockets_on_three_nodes_flooding_one_broadcast_leave_them_agreeing() {
     })
     .await;
     assert_eq!(stored as u64, acknowledged, "stored = acknowledged");
-    // Every node sends the same frame for every seq its viewer saw.
+    // Every node hears every stored control (a node late to hear one has
+    // already sent the frames before it, and replays from its stamp).
+    for node in &nodes {
+        crate::common::eventually_some(Duration::from_secs(30), "every control heard on every node", || async {
+            let applied = node.metric("inbetween_broadcast_controls_total").await.unwrap_or(0.0) as u64;
+            (applied == acknowledged).then_some(())
+        })
+        .await;
+    }
+    // Then every node sends the same frame for every seq its viewer saw.
     let seen = futures_util::future::join_all(nodes.iter().map(|node| frames_by_seq(node, &id, 3))).await;
     for (node, frames) in seen.iter().enumerate().skip(1) {
         let shared: Vec<_> = frames.keys().filter(|seq| seen[0].contains_key(seq)).collect();
