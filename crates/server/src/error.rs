@@ -370,27 +370,28 @@ impl ApiError {
     /// The same error with a JSON pointer under `from` moved under `to`
     /// (a motion checked as a request's `/motion`, sent as a control's `/to`).
     pub fn moved(self, from: &str, to: &str) -> ApiError {
-        let shift = |p: String| match p.strip_prefix(from) {
-            Some(rest) if rest.is_empty() || rest.starts_with('/') => format!("{to}{rest}"),
-            _ => p,
-        };
+        self.relocated(|at| match at {
+            At::Pointer(p) => At::Pointer(match p.strip_prefix(from) {
+                Some(rest) if rest.is_empty() || rest.starts_with('/') => format!("{to}{rest}"),
+                _ => p,
+            }),
+            other => other,
+        })
+    }
+
+    /// The same error with its location replaced by `f(location)` (a
+    /// request answered on another route's behalf, its fields there).
+    pub fn relocated(self, f: impl Fn(At) -> At) -> ApiError {
         match self {
-            ApiError::Invalid { code, at: At::Pointer(p), detail } => {
-                ApiError::Invalid { code, at: At::Pointer(shift(p)), detail }
-            }
-            ApiError::BadParameter { code, at: At::Pointer(p), detail } => {
-                ApiError::BadParameter { code, at: At::Pointer(shift(p)), detail }
-            }
-            ApiError::MalformedJson { pointer, detail } => ApiError::MalformedJson { pointer: shift(pointer), detail },
-            ApiError::ClipNotFoundAt { at: At::Pointer(pointer), detail } => {
-                ApiError::ClipNotFoundAt { at: At::Pointer(shift(pointer)), detail }
-            }
-            ApiError::CharacterNotFoundAt { at: At::Pointer(pointer), detail } => {
-                ApiError::CharacterNotFoundAt { at: At::Pointer(shift(pointer)), detail }
-            }
-            ApiError::GraphNotFoundAt { at: At::Pointer(pointer), detail } => {
-                ApiError::GraphNotFoundAt { at: At::Pointer(shift(pointer)), detail }
-            }
+            ApiError::Invalid { code, at, detail } => ApiError::Invalid { code, at: f(at), detail },
+            ApiError::BadParameter { code, at, detail } => ApiError::BadParameter { code, at: f(at), detail },
+            ApiError::MalformedJson { pointer, detail } => match f(At::Pointer(pointer.clone())) {
+                At::Pointer(moved) => ApiError::MalformedJson { pointer: moved, detail },
+                At::Parameter(_) => ApiError::MalformedJson { pointer, detail },
+            },
+            ApiError::ClipNotFoundAt { at, detail } => ApiError::ClipNotFoundAt { at: f(at), detail },
+            ApiError::CharacterNotFoundAt { at, detail } => ApiError::CharacterNotFoundAt { at: f(at), detail },
+            ApiError::GraphNotFoundAt { at, detail } => ApiError::GraphNotFoundAt { at: f(at), detail },
             other => other,
         }
     }

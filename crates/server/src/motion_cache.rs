@@ -111,7 +111,7 @@ impl KeyWriter {
     }
 
     fn retarget(&mut self, retarget: &RetargetSpec) {
-        let RetargetSpec { source_pose, translation } = retarget;
+        let RetargetSpec { source_pose, translation, target_pose } = retarget;
         match source_pose {
             SourcePose::Rest => self.tag(0),
             SourcePose::Time(t) => {
@@ -132,6 +132,11 @@ impl KeyWriter {
             Translation::None => 1,
             Translation::All => 2,
         });
+        self.len(target_pose.len());
+        for (name, q) in target_pose {
+            self.str(name);
+            q.to_array().iter().for_each(|x| self.f32(*x));
+        }
     }
 
     fn mask(&mut self, mask: Option<&MaskSpec>) {

@@ -7,6 +7,7 @@ use super::error::{MotionError, MotionErrorKind as K};
 use super::spec::{CharacterSpec, RetargetSpec, SourcePose};
 use crate::character::{RetargetOptions, Retargeter, Rig, Role, RoleMap, rest_with_rotations};
 use crate::{Clip, Cursor, Path, Pose, Skeleton};
+use glam::Quat;
 
 /// Whether `clip` is of the character's own skeleton (the same joints in
 /// the same order under the same parents): it plays as it is.
@@ -32,10 +33,29 @@ pub(super) fn layer_retargeter(
     let roles = RoleMap::infer(clip.skeleton(), &[]).unwrap_or_else(|_| RoleMap::empty());
     let reference = source_reference(clip, &roles, &spec.source_pose, at)?;
     let source = Rig { skeleton: clip.skeleton(), reference: &reference, roles: &roles };
-    let target_reference = character.reference.as_ref().unwrap_or(character.skeleton.rest());
-    let target = Rig { skeleton: &character.skeleton, reference: target_reference, roles: &character.roles };
+    let target_reference = target_reference(character, &spec.target_pose, at)?;
+    let target = Rig { skeleton: &character.skeleton, reference: &target_reference, roles: &character.roles };
     let options = RetargetOptions { translation: spec.translation };
     Retargeter::new(source, target, options).map_err(|e| MotionError::new(path.clone().field("clip"), K::Retarget(e)))
+}
+
+/// The character's reference pose (local): its own (the rest), the joints
+/// `rotations` names turned to the local rotations given.
+///
+/// # Errors
+/// `unknown_joint` at `target_pose/rotations/{name}` for a joint the
+/// character lacks.
+fn target_reference(character: &CharacterSpec, rotations: &[(String, Quat)], at: &Path) -> Result<Pose, MotionError> {
+    let skeleton = &character.skeleton;
+    let mut pose = character.reference.clone().unwrap_or_else(|| skeleton.rest().clone());
+    for (name, q) in rotations {
+        let joint = skeleton.index_of(name).ok_or_else(|| {
+            let path = at.clone().field("target_pose").field("rotations").key(name);
+            MotionError::new(path, K::UnknownJoint { joint: name.clone() })
+        })?;
+        pose.rotations[joint] = q.normalize();
+    }
+    Ok(pose)
 }
 
 /// The source side's reference pose (local): as asked, by default the rest

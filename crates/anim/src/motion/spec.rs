@@ -56,6 +56,9 @@ pub struct CharacterSpec {
 pub struct RetargetSpec {
     pub source_pose: SourcePose,
     pub translation: Translation,
+    /// The character's reference pose: its reference (the rest) with these
+    /// joints' local rotations replaced; empty: as it is.
+    pub target_pose: Vec<(String, Quat)>,
 }
 
 /// The source side's reference pose.

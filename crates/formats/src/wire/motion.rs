@@ -52,6 +52,11 @@ pub struct RetargetDoc {
     pub source_pose: Option<SourcePoseDoc>,
     #[serde(default)]
     pub translation: TranslationDoc,
+    /// The character's reference pose: its rest by default;
+    /// `{"rotations": {joint: [x, y, z, w]}}` replaces joints' local rotations
+    /// (a character has no clip time, so `{"time": t}` is refused).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_pose: Option<SourcePoseDoc>,
 }
 
 /// `{"time": t}` (the clip at `t`) or `{"rotations": {joint: [x, y, z, w]}}`
@@ -73,12 +78,18 @@ pub enum TranslationDoc {
 }
 
 impl RetargetDoc {
-    fn to_spec(&self) -> RetargetSpec {
+    /// The core's form; `pointer` is the document's (`/motion/retarget`).
+    ///
+    /// # Errors
+    /// `zero_quaternion` for a rotation that cannot be normalised (as a
+    /// clip's keys, docs/clip-format.md); `target_pose_needs_rotations` for
+    /// a `target_pose` given as a time.
+    fn to_spec(&self, pointer: &str) -> Result<RetargetSpec, DocError> {
         let source_pose = match &self.source_pose {
             None => SourcePose::Rest,
             Some(SourcePoseDoc::Time(t)) => SourcePose::Time(*t),
             Some(SourcePoseDoc::Rotations(r)) => {
-                SourcePose::Rotations(r.iter().map(|(n, q)| (n.clone(), glam::Quat::from_array(*q))).collect())
+                SourcePose::Rotations(rotations(r, &format!("{pointer}/source_pose/rotations"))?)
             }
         };
         let translation = match self.translation {
@@ -86,7 +97,16 @@ impl RetargetDoc {
             TranslationDoc::None => Translation::None,
             TranslationDoc::All => Translation::All,
         };
-        RetargetSpec { source_pose, translation }
+        let target_pose = match &self.target_pose {
+            None => Vec::new(),
+            Some(SourcePoseDoc::Rotations(r)) => rotations(r, &format!("{pointer}/target_pose/rotations"))?,
+            Some(SourcePoseDoc::Time(_)) => {
+                let detail = "a character has no clip time: give its reference pose as `{\"rotations\": {joint: [x, y, z, w]}}`";
+                let pointer = format!("{pointer}/target_pose");
+                return Err(DocError { code: "target_pose_needs_rotations", pointer, detail: detail.into() });
+            }
+        };
+        Ok(RetargetSpec { source_pose, translation, target_pose })
     }
 
     fn from_spec(spec: &RetargetSpec) -> RetargetDoc {
@@ -102,8 +122,29 @@ impl RetargetDoc {
             Translation::None => TranslationDoc::None,
             Translation::All => TranslationDoc::All,
         };
-        RetargetDoc { source_pose, translation }
+        let target_pose = (!spec.target_pose.is_empty())
+            .then(|| SourcePoseDoc::Rotations(spec.target_pose.iter().map(|(n, q)| (n.clone(), q.to_array())).collect()));
+        RetargetDoc { source_pose, translation, target_pose }
     }
+}
+
+/// A pose's named local rotations, each normalised; one that cannot be
+/// (its norm below 1e-6, as a clip's key) is `zero_quaternion` at
+/// `{pointer}/{joint}`.
+fn rotations(named: &BTreeMap<String, [f32; 4]>, pointer: &str) -> Result<Vec<(String, glam::Quat)>, DocError> {
+    named
+        .iter()
+        .map(|(name, q)| {
+            let v = glam::DVec4::from_array(q.map(f64::from));
+            let norm = v.length();
+            if !norm.is_finite() || norm < 1e-6 {
+                let detail = format!("quaternion has norm {norm:e}, below 1e-6");
+                let pointer = format!("{pointer}/{}", name.replace('~', "~0").replace('/', "~1"));
+                return Err(DocError { code: "zero_quaternion", pointer, detail });
+            }
+            Ok((name.clone(), glam::Quat::from_vec4((v / norm).as_vec4())))
+        })
+        .collect()
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -250,7 +291,10 @@ impl MotionDoc {
             }),
             ik,
             character: None,
-            retarget: self.retarget.as_ref().map(RetargetDoc::to_spec).unwrap_or_default(),
+            retarget: match &self.retarget {
+                Some(r) => r.to_spec(&format!("{pointer}/retarget"))?,
+                None => RetargetSpec::default(),
+            },
             springs: self.springs(pointer)?,
         })
     }
@@ -352,7 +396,7 @@ impl LayerDoc {
             playback: self.playback.map(Into::into),
             sync: self.sync.clone(),
             reference_time: self.reference_time,
-            retarget: self.retarget.as_ref().map(RetargetDoc::to_spec),
+            retarget: self.retarget.as_ref().map(|r| r.to_spec(&format!("{pointer}/retarget"))).transpose()?,
         })
     }
 }

@@ -50,7 +50,7 @@ pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use graph::{GraphSampling, RawGraphSampling, graph_layer};
 pub use list::{Page, RawPage};
-pub use motion::{Composed, RawMotion, crossfade_target, warnings};
+pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, on_character, warnings};
 pub use raw::{
     Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,

@@ -213,3 +213,47 @@ fn build(spec: MotionSpec<Arc<dyn PinnedClip>>, ik: &IkLimits) -> Result<StreamM
     Motion::build_limited(spec, ik)
         .map_err(|e| ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string()))
 }
+
+/// What a clip route with `character=` plays (docs/characters.md, “Clip routes on a
+/// character”): the one-layer motion `{"layers":[{"clip":id}],"character":…}`,
+/// the route's `playback` as the layer's.
+pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &str) -> MotionDoc {
+    let mut layer = formats::wire::motion::LayerDoc::new(clip);
+    layer.playback = playback.map(Into::into);
+    MotionDoc {
+        layers: vec![layer],
+        root_motion: None,
+        ik: Vec::new(),
+        springs: Vec::new(),
+        spring_substep_hz: None,
+        character: Some(character.to_owned()),
+        retarget: None,
+    }
+}
+
+/// A refusal of [`on_character`]'s motion, located on the clip route that
+/// asked for it (`at`): whatever the motion path points into `/motion`
+/// (the character not found, a clip it cannot map) is the route's
+/// `character`; the request's own fields keep their names.
+pub fn at_clip_route(e: ApiError, at: Locate) -> ApiError {
+    let to_route = |pointer: &str| {
+        if pointer.starts_with("/motion") {
+            return at(Field::Character);
+        }
+        let mut parts = pointer.trim_start_matches('/').split('/');
+        let (name, index) = (parts.next().unwrap_or(""), parts.next().and_then(|i| i.parse().ok()));
+        match (name, index) {
+            ("joints", Some(i)) => at(Field::JointAt(i)),
+            ("parameters", Some(i)) => at(Field::ParameterAt(i)),
+            ("time", _) => at(Field::Time),
+            ("times", Some(i)) => at(Field::TimeAt(i)),
+            ("times", None) => at(Field::Times),
+            _ if pointer.is_empty() => at(Field::When),
+            _ => At::Pointer(pointer.to_owned()),
+        }
+    };
+    e.relocated(|location| match location {
+        At::Pointer(pointer) => to_route(&pointer),
+        other => other,
+    })
+}

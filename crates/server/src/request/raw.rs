@@ -58,6 +58,8 @@ pub enum Field {
     ParameterAt(usize),
     /// A broadcast's `idle_timeout_secs` (docs/broadcasts.md).
     IdleTimeout,
+    /// The character a clip route plays its clip on (docs/characters.md).
+    Character,
 }
 
 impl Field {
@@ -91,6 +93,7 @@ impl Field {
             Field::JointAt(_) => "joints",
             Field::ParameterAt(_) => "parameters",
             Field::IdleTimeout => "idle_timeout_secs",
+            Field::Character => "character",
         }
     }
 }
@@ -195,7 +198,7 @@ pub struct RawModes<'a> {
 impl RawModes<'_> {
     /// # Errors
     /// `bad_parameter` for a name or number outside an enum.
-    pub(super) fn check(&self, at: Locate) -> Result<SampleOptions, ApiError> {
+    pub(crate) fn check(&self, at: Locate) -> Result<SampleOptions, ApiError> {
         let name = |text: &str| text.parse::<PlaybackDoc>().map(Playback::from);
         let playback =
             choice(self.playback, Field::Playback, at, name, |n| playback_from_pb(n, "").map_err(|e| e.detail))?;

@@ -129,19 +129,30 @@ pub async fn pose(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: PoseOfMotion = parse_json(&body)?;
+    answer_pose(state, caller.key(), &headers, req).await
+}
+
+/// `POST /v1/poses`'s answer to `req` (also a clip's `GET …/pose` with a
+/// `character`, which is this request of a one-layer motion).
+pub(super) async fn answer_pose(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    req: PoseOfMotion,
+) -> Result<Response, ApiError> {
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
-    let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), checked.format).await?;
+    let composed = compose(&state, &caller, &req.motion, (&req.joints, &req.parameters), checked.format).await?;
     let cost = composed.cost(&[checked.t], checked.format, Wire::Json);
-    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
+    let cost = cost.compressed(AnswerCoding::of(headers, state.config.compression.min_bytes).at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
     let mut writer = MotionPoses::new(composed, vec![checked.t], checked.options.space, checked.format, cost.bytes);
     writer.warn_in_the_pose();
     let capacity = usize::try_from(cost.bytes).unwrap_or(0).min(1 << 20);
     let body = state
         .work
-        .spend(&caller.key(), cost.work(), move |cancel| {
+        .spend(&caller, cost.work(), move |cancel| {
             let mut body = Vec::with_capacity(capacity);
             writer.write(&mut body, 0..1, cancel);
             body
@@ -170,8 +181,19 @@ pub async fn samples(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SamplesOfMotion = parse_json(&body)?;
+    answer_samples(state, caller.key(), &headers, req).await
+}
+
+/// `POST /v1/samples`'s answer to `req` (also a clip's `POST …/sample` with
+/// a `character`, which is this request of a one-layer motion).
+pub(super) async fn answer_samples(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    req: SamplesOfMotion,
+) -> Result<Response, ApiError> {
     if let Some(reference) = graph_layer(&req.motion)? {
-        return graph_samples(state, caller.key(), &headers, &req, reference).await;
+        return graph_samples(state, caller, headers, &req, reference).await;
     }
     if req.inputs.is_some() || req.report {
         let (field, detail) = if req.report { ("/report", "`report`") } else { ("/inputs", "`inputs`") };
@@ -188,19 +210,19 @@ pub async fn samples(
         at: in_body,
     };
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(&state, &caller.key(), &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
+    let composed = compose(&state, &caller, &req.motion, (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(&sampling.times, sampling.format, Wire::Json);
-    let cost = cost.compressed(AnswerCoding::of(&headers, state.config.compression.min_bytes).at(cost.bytes));
+    let cost = cost.compressed(AnswerCoding::of(headers, state.config.compression.min_bytes).at(cost.bytes));
     let field = if req.times.is_some() { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_body)?;
     let (space, format) = (sampling.options.space, sampling.format);
     let mut writer = MotionPoses::new(composed, sampling.times, space, format, cost.bytes);
     if cost.bytes > crate::request::STREAM_ABOVE_BYTES {
-        let ticket = state.work.charge(&caller.key(), cost.work())?;
+        let ticket = state.work.charge(&caller, cost.work())?;
         return Ok(Pieces::new(state, Box::new(writer), ticket).into_response());
     }
-    let body = state.work.spend(&caller.key(), cost.work(), move |cancel| pieces::whole(&mut writer, cancel)).await?;
+    let body = state.work.spend(&caller, cost.work(), move |cancel| pieces::whole(&mut writer, cancel)).await?;
     state.counters.poses.increment(n as u64);
     Ok(json_response(body))
 }

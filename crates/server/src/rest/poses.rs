@@ -25,9 +25,10 @@ use crate::auth::ReadAccess;
 use crate::cache::CachedClip;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
+use crate::auth::CallerKey;
 use crate::request::{
-    Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, evaluate, in_body, in_query, joint_subset,
-    parameter_subset, parse_json,
+    Field, Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route, evaluate, in_body, in_query,
+    joint_subset, on_character, parameter_subset, parse_json,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -36,7 +37,8 @@ use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, Playba
 
 use super::extract::{ClipId, JsonBody};
 use super::pieces::{self, Pieces, PoseWriter};
-use super::query::Query;
+use super::motions::{PoseOfMotion, SamplesOfMotion};
+use super::query::{Query, QueryParams};
 
 /// Response-size estimates, so a pose body is written without reallocating.
 const POSE_HEADER_BYTES: usize = 128;
@@ -111,6 +113,7 @@ pub(super) fn json_response(body: Vec<u8>) -> Response {
         ("format" = Option<String>, Query, pattern = "^(trs|matrix|skinning)$", description = "trs (default) | matrix | skinning"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
         ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): only those parameters, in the clip's order"),
+        ("character" = Option<String>, Query, description = "A character id or `name:<name>`: the clip played on it, answered as `POST /v1/poses` answers the one-layer motion `{\"layers\":[{\"clip\":id}],\"character\":…}` (docs/characters.md); refusals `character_not_found` (404), `unmappable_skeleton` (422) at `character`; `ease` is refused with it"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
@@ -130,6 +133,9 @@ pub async fn get_pose(
     Query(q): Query,
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
+    if let Some(character) = q.get("character") {
+        return pose_on_character(state, caller.key(), &headers, (&id, character), &q).await;
+    }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (req, cached) = raw.resolve(&state, &id, Wire::Json, coding).await?;
     let list = |name: &str| -> Option<Vec<&str>> {
@@ -152,6 +158,68 @@ pub async fn get_pose(
         .await?;
     state.counters.poses.increment(1);
     Ok(json_response(body))
+}
+
+/// `ease` with `character`: the one-layer motion a clip route plays on a
+/// character has no ease (a motion's layers have none; its streams do).
+fn no_ease_on_character(at: crate::error::At) -> ApiError {
+    let detail = "`ease` does not apply with `character`: the one-layer motion played has no ease".to_owned();
+    ApiError::BadParameter { code: "unknown_parameter", at, detail }
+}
+
+/// `GET …/pose?character=`: `POST /v1/poses` of the one-layer motion of the
+/// clip on the character (docs/characters.md), refusals at the query's names.
+async fn pose_on_character(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    (id, character): (&str, &str),
+    q: &QueryParams,
+) -> Result<Response, ApiError> {
+    let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
+    let checked = raw.check()?;
+    if q.get("ease").is_some() {
+        return Err(no_ease_on_character(in_query(Field::Ease)));
+    }
+    let list = |name: &str| q.get(name).map(|text| text.split(',').map(str::to_owned).collect());
+    let req = PoseOfMotion {
+        motion: on_character(id, checked.options.playback, character),
+        time: checked.t,
+        space: q.get("space").map(str::to_owned),
+        format: q.get("format").map(str::to_owned),
+        joints: list("joints"),
+        parameters: list("parameters"),
+    };
+    super::motions::answer_pose(state, caller, headers, req).await.map_err(|e| at_clip_route(e, in_query))
+}
+
+/// `POST …/sample` with `character`: `POST /v1/samples` of the one-layer
+/// motion of the clip on the character (docs/characters.md).
+async fn samples_on_character(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    (id, character): (&str, &str),
+    req: SampleRequest,
+) -> Result<Response, ApiError> {
+    let checked = req.raw().check(state.config.limits.max_poses)?;
+    if req.ease.is_some() {
+        return Err(no_ease_on_character(in_body(Field::Ease)));
+    }
+    let samples = SamplesOfMotion {
+        motion: on_character(id, checked.options.playback, character),
+        times: req.times,
+        start: req.start,
+        end: req.end,
+        fps: req.fps,
+        space: req.space,
+        format: req.format,
+        joints: req.joints,
+        parameters: req.parameters,
+        inputs: None,
+        report: false,
+    };
+    super::motions::answer_samples(state, caller, headers, samples).await.map_err(|e| at_clip_route(e, in_body))
 }
 
 /// `POST …/sample`: either `times` or `start`, `end` and `fps`.
@@ -190,6 +258,10 @@ pub struct SampleRequest {
     /// Only these parameters (docs/clip-format.md §3), in the clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
+    /// A character id or `name:<name>`: the clip played on it, as the
+    /// one-layer motion `{"layers":[{"clip":id}],"character":…}` (docs/characters.md).
+    #[serde(default)]
+    pub character: Option<String>,
 }
 
 impl SampleRequest {
@@ -232,6 +304,9 @@ pub async fn sample(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
+    if let Some(character) = req.character.clone() {
+        return samples_on_character(state, caller.key(), &headers, (&id, &character), req).await;
+    }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json, coding).await?;
     let joints = req.joints.as_deref().map(|names| joint_subset(cached.clip.skeleton(), names, in_body)).transpose()?;

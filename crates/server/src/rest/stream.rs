@@ -33,7 +33,10 @@ use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use crate::auth::{Caller, CallerKey, ReadAccess};
 use crate::config::Limits;
 use crate::error::ApiError;
-use crate::request::{Opening, Raw, RawModes, RawMotion, RawStream, crossfade_target, in_body, in_query, parse_json};
+use crate::request::{
+    Opening, Raw, RawModes, RawMotion, RawStream, at_clip_route, crossfade_target, in_body, in_query, on_character,
+    parse_json,
+};
 use crate::state::AppState;
 use crate::stream::ws::{MotionResolver, WsConfig, close};
 use crate::stream::{StreamMotion, Subscription};
@@ -79,6 +82,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
         ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): frames carry only those parameters, in the clip's order"),
+        ("character" = Option<String>, Query, description = "A character id or `name:<name>`: the clip played on it, the stream `GET /v1/stream` opens for the one-layer motion `{\"layers\":[{\"clip\":id}],\"character\":…}` (its `opened` message first; docs/characters.md); refusals `character_not_found` (404), `unmappable_skeleton` (422) at `character`"),
     ),
     responses(
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
@@ -124,7 +128,12 @@ pub async fn stream(
     // The peer address, when served with connect info (`Application` is);
     // the caps count the caller (auth's `Caller`: its address and its token).
     let peer = connect.map(|Extension(ConnectInfo(addr))| addr);
-    let admitted = raw.open(&state, &id, &caller).await?;
+    let on_character = q.get("character");
+    let admitted = match on_character {
+        Some(character) => open_on_character(&state, raw, (&id, character), &caller).await?,
+        None => raw.open(&state, &id, &caller).await?,
+    };
+    let hello_first = on_character.is_some();
     // The playback is chosen now, so that the response can say its phase;
     // each WebSocket has its own connection, whose port is its lane.
     let engine = &state.streams;
@@ -134,8 +143,9 @@ pub async fn stream(
     let motions = resolver_for(&state, caller.key());
     let mut response = upgrade.on_upgrade(configured(&state.config.limits), move |socket| async move {
         match watched {
-            // A compact stream states its layout first (docs/compact-frames.md).
-            Ok(sub) if sub.params().compact.is_some() => {
+            // A compact stream states its layout first (docs/compact-frames.md), and a stream
+            // on a character what it plays, as a motion stream does.
+            Ok(sub) if sub.params().compact.is_some() || hello_first => {
                 let mut socket = socket;
                 if socket.send(Message::Text(opened_message(&sub).to_string().into())).await.is_ok() {
                     serve(socket, sub, motions).await;
@@ -149,6 +159,22 @@ pub async fn stream(
         response.headers_mut().insert(crate::stream::PHASE_HEADER, phase_ms.into());
     }
     Ok(response)
+}
+
+/// `GET …/stream?character=`: the one-layer motion of the clip on the
+/// character (docs/characters.md), opened as `GET /v1/stream` opens it, the
+/// query's `playback` the layer's; refusals at the query's names.
+async fn open_on_character(
+    state: &AppState,
+    raw: RawStream<'_>,
+    (id, character): (&str, &str),
+    caller: &Caller,
+) -> Result<Result<Opening, crate::stream::AdmitError>, ApiError> {
+    let playback = raw.modes.check(in_query)?.playback;
+    let doc = on_character(id, playback, character);
+    let raw = RawStream { modes: RawModes { playback: None, ..raw.modes }, ..raw };
+    let motion = RawMotion::of_doc(&doc).map_err(ApiError::from)?;
+    raw.open_motion(state, motion, caller).await.map_err(|e| at_clip_route(e, in_query))
 }
 
 /// Stream a composed motion: upgrade, then `{"op":"open","motion":…}`.
