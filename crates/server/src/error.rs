@@ -282,7 +282,8 @@ impl ApiError {
         match self {
             ApiError::Invalid { at: At::Parameter(name), .. }
             | ApiError::BadParameter { at: At::Parameter(name), .. }
-            | ApiError::ClipNotFoundAt { at: At::Parameter(name), .. } => Some(name),
+            | ApiError::ClipNotFoundAt { at: At::Parameter(name), .. }
+            | ApiError::CharacterNotFoundAt { at: At::Parameter(name), .. } => Some(name),
             _ => None,
         }
     }

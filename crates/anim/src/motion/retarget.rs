@@ -44,7 +44,7 @@ pub(super) fn layer_retargeter(
 ///
 /// # Errors
 /// `unknown_joint` at `target_pose/rotations/{name}` for a joint the
-/// character lacks.
+/// character lacks. The rotations are unit (the document normalised them).
 fn target_reference(character: &CharacterSpec, rotations: &[(String, Quat)], at: &Path) -> Result<Pose, MotionError> {
     let skeleton = &character.skeleton;
     let mut pose = character.reference.clone().unwrap_or_else(|| skeleton.rest().clone());
@@ -53,7 +53,7 @@ fn target_reference(character: &CharacterSpec, rotations: &[(String, Quat)], at:
             let path = at.clone().field("target_pose").field("rotations").key(name);
             MotionError::new(path, K::UnknownJoint { joint: name.clone() })
         })?;
-        pose.rotations[joint] = q.normalize();
+        pose.rotations[joint] = *q;
     }
     Ok(pose)
 }

@@ -101,7 +101,8 @@ impl RetargetDoc {
             None => Vec::new(),
             Some(SourcePoseDoc::Rotations(r)) => rotations(r, &format!("{pointer}/target_pose/rotations"))?,
             Some(SourcePoseDoc::Time(_)) => {
-                let detail = "a character has no clip time: give its reference pose as `{\"rotations\": {joint: [x, y, z, w]}}`";
+                let detail =
+                    "a character has no clip time: give its reference pose as `{\"rotations\": {joint: [x, y, z, w]}}`";
                 let pointer = format!("{pointer}/target_pose");
                 return Err(DocError { code: "target_pose_needs_rotations", pointer, detail: detail.into() });
             }
@@ -122,15 +123,17 @@ impl RetargetDoc {
             Translation::None => TranslationDoc::None,
             Translation::All => TranslationDoc::All,
         };
-        let target_pose = (!spec.target_pose.is_empty())
-            .then(|| SourcePoseDoc::Rotations(spec.target_pose.iter().map(|(n, q)| (n.clone(), q.to_array())).collect()));
+        let target_pose = (!spec.target_pose.is_empty()).then(|| {
+            SourcePoseDoc::Rotations(spec.target_pose.iter().map(|(n, q)| (n.clone(), q.to_array())).collect())
+        });
         RetargetDoc { source_pose, translation, target_pose }
     }
 }
 
-/// A pose's named local rotations, each normalised; one that cannot be
-/// (its norm below 1e-6, as a clip's key) is `zero_quaternion` at
-/// `{pointer}/{joint}`.
+/// A pose's named local rotations, each normalised in f64 as a skeleton's
+/// rest rotations are (so a pose given as a rest's own rotations is that
+/// rest exactly); one that cannot be (its norm below 1e-6, as a clip's key)
+/// is `zero_quaternion` at `{pointer}/{joint}`.
 fn rotations(named: &BTreeMap<String, [f32; 4]>, pointer: &str) -> Result<Vec<(String, glam::Quat)>, DocError> {
     named
         .iter()

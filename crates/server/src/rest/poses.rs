@@ -21,11 +21,11 @@ use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
 
+use crate::auth::CallerKey;
 use crate::auth::ReadAccess;
 use crate::cache::CachedClip;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
-use crate::auth::CallerKey;
 use crate::request::{
     Field, Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route, evaluate, in_body, in_query,
     joint_subset, on_character, parameter_subset, parse_json,
@@ -36,8 +36,8 @@ use anim::{SampleOptions, Sampler};
 use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc};
 
 use super::extract::{ClipId, JsonBody};
-use super::pieces::{self, Pieces, PoseWriter};
 use super::motions::{PoseOfMotion, SamplesOfMotion};
+use super::pieces::{self, Pieces, PoseWriter};
 use super::query::{Query, QueryParams};
 
 /// Response-size estimates, so a pose body is written without reallocating.
