@@ -111,7 +111,7 @@ impl KeyWriter {
     }
 
     fn retarget(&mut self, retarget: &RetargetSpec) {
-        let RetargetSpec { source_pose, translation, target_pose } = retarget;
+        let RetargetSpec { source_pose, translation, target_pose, feet } = retarget;
         match source_pose {
             SourcePose::Rest => self.tag(0),
             SourcePose::Time(t) => {
@@ -137,6 +137,10 @@ impl KeyWriter {
             self.str(name);
             q.to_array().iter().for_each(|x| self.f32(*x));
         }
+        self.option(feet.as_ref(), |key, feet| {
+            key.f32(feet.contact_height);
+            key.f32(feet.contact_speed);
+        });
     }
 
     fn mask(&mut self, mask: Option<&MaskSpec>) {

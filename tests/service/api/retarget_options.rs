@@ -110,3 +110,112 @@ async fn a_bad_target_pose_is_refused_with_a_pointer() {
     let body: Value = serde_json::from_slice(&body).unwrap();
     assert_eq!((status, body["pointer"].as_str()), (422, Some("/motion/layers/0/retarget/target_pose")), "{body}");
 }
+
+fn position(pose: &Value, joint: usize) -> glam::DVec3 {
+    let t = &pose["joints"][joint]["translation"];
+    glam::DVec3::new(t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap())
+}
+
+/// The take on CesiumMan at 60 fps with `feet: "plant"`: while the server
+/// says a foot is planted, the planted foot stays where its contact began
+/// (mean drift under 1 mm, the take's own feet drift 5 mm × k there), the
+/// unplanted one slides (25 mm in the core's figures, crates/formats/tests/formats/feet.rs).
+#[tokio::test]
+async fn planted_feet_stay_where_their_contact_began_and_unplanted_ones_slide() {
+    let app = TestApp::start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let summary = &app.get_json("/v1/characters?name=cesium").await["characters"][0];
+    let rest = rest_rotations(&app, &cesium).await;
+    let index = |role: &str| {
+        let name = summary["roles"][role]["joint"].as_str().unwrap();
+        rest.iter().position(|(n, _)| n == name).unwrap()
+    };
+    let feet = [("left", index("leftFoot")), ("right", index("rightFoot"))];
+    let run = |retarget: Value| {
+        let motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": retarget});
+        let body = json!({"motion": motion, "start": 0, "end": 8, "fps": 60, "space": "model"});
+        let app = &app;
+        async move {
+            let resp = app.http.post(app.url("/v1/samples")).json(&body).send().await.unwrap();
+            assert_eq!(resp.status(), 200);
+            let answer: Value = resp.json().await.unwrap();
+            answer["poses"].as_array().unwrap().clone()
+        }
+    };
+    let planted = run(json!({"feet": "plant"})).await;
+    let free = run(json!({})).await;
+    assert!(free[0].get("feet").is_none(), "no report without planting");
+    let (mut frames, mut drift_planted, mut drift_free, mut max_slide) = (0u32, 0.0, 0.0, 0.0f64);
+    for (side, joint) in feet {
+        let mut start: Option<(glam::DVec3, glam::DVec3)> = None;
+        for (p, f) in planted.iter().zip(&free) {
+            let report = &p["feet"][side];
+            max_slide = max_slide.max(report["slide"].as_f64().unwrap());
+            if report["planted"] != json!(true) {
+                start = None;
+                continue;
+            }
+            let (now_p, now_f) = (position(p, joint), position(f, joint));
+            match start {
+                None => start = Some((now_p, now_f)),
+                Some((p0, f0)) => {
+                    frames += 1;
+                    drift_planted += now_p.distance(p0);
+                    drift_free += now_f.distance(f0);
+                }
+            }
+        }
+    }
+    let (planted_mm, free_mm) = (drift_planted / f64::from(frames) * 1e3, drift_free / f64::from(frames) * 1e3);
+    println!(
+        "FIGURE served feet 131_01 on CesiumMan: {frames} contact frames, planted {planted_mm:.3} mm, unplanted {free_mm:.2} mm, max slide {max_slide:e}"
+    );
+    assert!(frames > 60, "the take has contacts ({frames} frames)");
+    assert!(planted_mm < 1.0, "planted feet drift {planted_mm} mm");
+    assert!(free_mm > 10.0 * planted_mm.max(0.1), "unplanted feet slide {free_mm} mm");
+
+    // A single pose plants by height alone, the anchor where the foot is.
+    let motion =
+        json!({"layers": [{"clip": take}], "character": cesium, "retarget": {"feet": "plant", "contact_height": 0.05}});
+    let pose = app.post_json("/v1/poses", &json!({"motion": motion, "time": 0.0, "space": "model"})).await;
+    for side in ["left", "right"] {
+        let slide = pose["feet"][side]["slide"].as_f64().unwrap();
+        assert!(slide < 1e-6, "a first frame's anchor is where the foot is: {}", pose["feet"]);
+    }
+}
+
+#[tokio::test]
+async fn planted_feet_show_in_json_frames_and_bad_thresholds_are_refused() {
+    let app = TestApp::start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": {"feet": "plant"}});
+    let mut ws = app.ws("/v1/stream").await;
+    use futures_util::{SinkExt, StreamExt};
+    let open = json!({"op": "open", "motion": motion, "fps": 30, "max_frames": 3});
+    ws.send(tokio_tungstenite::tungstenite::Message::Text(open.to_string().into())).await.unwrap();
+    let mut seen = 0;
+    while seen < 3 {
+        let msg = crate::common::within(10, "a frame", ws.next()).await.unwrap().unwrap();
+        let tokio_tungstenite::tungstenite::Message::Text(text) = msg else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        if let Some(pose) = v.get("pose") {
+            seen += 1;
+            for side in ["left", "right"] {
+                assert!(pose["feet"][side]["planted"].is_boolean(), "{}", pose["feet"]);
+            }
+        }
+    }
+    for (retarget, code, pointer) in [
+        (json!({"feet": "plant", "contact_height": -1}), "contact_out_of_range", "/motion/retarget/contact_height"),
+        (json!({"contact_speed": 0.2}), "feet_not_planted", "/motion/retarget/contact_speed"),
+    ] {
+        let motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": retarget});
+        let (status, body) = samples(&app, &motion, &[0.0]).await;
+        let body: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(
+            (status, body["code"].as_str(), body["pointer"].as_str()),
+            (422, Some(code), Some(pointer)),
+            "{body}"
+        );
+    }
+}

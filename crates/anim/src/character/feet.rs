@@ -116,6 +116,11 @@ impl FootPlanter {
         }
     }
 
+    /// How many feet it plants (the legs both maps have), 0 to 2.
+    pub fn feet(&self) -> usize {
+        self.feet.len()
+    }
+
     /// Forgets the last frame (after a seek): the next contact is new.
     pub fn reset(&mut self) {
         for foot in &mut self.feet {

@@ -51,7 +51,7 @@ use self::error::MotionErrorKind as K;
 use self::joint_map::{UNMAPPED, joint_map};
 use self::root::motion_transform;
 use self::sync::SyncGroup;
-use super::character::Retargeter;
+use super::character::{FootPlanter, Retargeter};
 use super::heap::vec_bytes;
 use super::ik::{IkConstraint, IkLimits, build_constraints};
 use super::spring::{Springs, SpringsSpec};
@@ -145,6 +145,9 @@ struct Layer<C> {
     /// Onto the character, for a clip of another skeleton: its poses are
     /// then in the output's joints (each sampler works on its own copy).
     retarget: Option<Box<Retargeter>>,
+    /// Keeps the retargeted feet planted (`retarget.feet`); each sampler
+    /// works on its own copy, frame after frame.
+    planter: Option<Box<FootPlanter>>,
 }
 
 /// One parameter of a layer: its entries in the layer clip's pose and in the
@@ -202,15 +205,16 @@ impl<C: ClipSource> Motion<C> {
             durations.push(layer.clip.clip().range().duration());
             let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
             let clip_path = path.clone().field("clip");
-            let retarget = match &character {
+            let (retarget, planter) = match &character {
                 Some(c) if !retarget::same_rig(c, layer.clip.clip()) => {
                     let (options, at) = match &layer.retarget {
                         Some(own) => (own, path.clone().field("retarget")),
                         None => (&spec.retarget, Path::root().field("retarget")),
                     };
-                    Some(Box::new(retarget::layer_retargeter(c, layer.clip.clip(), options, &path, &at)?))
+                    let (retargeter, planter) = retarget::layer_retargeter(c, layer.clip.clip(), options, &path, &at)?;
+                    (Some(Box::new(retargeter)), planter.map(Box::new))
                 }
-                _ => None,
+                _ => (None, None),
             };
             let (map, joint_count) = match &retarget {
                 Some(_) => ((0..output.len() as u32).collect(), output.len()),
@@ -237,6 +241,7 @@ impl<C: ClipSource> Motion<C> {
                 root: None,
                 clip: layer.clip,
                 retarget,
+                planter,
             });
         }
         let root = match &character {
@@ -270,6 +275,12 @@ impl<C: ClipSource> Motion<C> {
     /// The output skeleton: the character's, else the first layer's clip's.
     pub fn skeleton(&self) -> &Skeleton {
         self.character.as_ref().map_or(self.layers[0].clip.clip().skeleton(), |c| &c.skeleton)
+    }
+
+    /// How many feet the layers plant (`retarget.feet`): each a two-bone
+    /// solve per pose.
+    pub fn planted_feet(&self) -> usize {
+        self.layers.iter().filter_map(|l| l.planter.as_deref()).map(FootPlanter::feet).sum()
     }
 
     /// Whether layer `i` is retargeted onto the character.

@@ -319,6 +319,12 @@ impl<C: ClipSource> Player<C> {
         &self.ik.reports
     }
 
+    /// The last tick's planted feet (the current motion's; empty when it
+    /// plants none).
+    pub fn feet(&self) -> &[crate::character::FootReport] {
+        self.top.sampler.feet().unwrap_or_default()
+    }
+
     /// The next tick shows the current motion at motion time `tau`; every
     /// motion beneath jumps by as much, and root motion has no delta.
     pub fn seek(&mut self, tau: f64) {

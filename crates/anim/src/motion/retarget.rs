@@ -5,7 +5,9 @@
 
 use super::error::{MotionError, MotionErrorKind as K};
 use super::spec::{CharacterSpec, RetargetSpec, SourcePose};
-use crate::character::{RetargetOptions, Retargeter, Rig, Role, RoleMap, rest_with_rotations};
+use crate::character::{
+    FootPlanter, RetargetOptions, Retargeter, Rig, Role, RoleMap, lowest_feet, rest_with_rotations,
+};
 use crate::{Clip, Cursor, Path, Pose, Skeleton};
 use glam::Quat;
 
@@ -16,8 +18,9 @@ pub(super) fn same_rig(character: &CharacterSpec, clip: &Clip) -> bool {
     a.names() == b.names() && (0..a.len()).all(|j| a.parent(j) == b.parent(j))
 }
 
-/// The retargeter of a layer's `clip` onto `character`; `path` is the
-/// layer's, `at` where its retarget options came from (for pointers).
+/// The retargeter of a layer's `clip` onto `character`, and its foot
+/// planter when the options plant feet; `path` is the layer's, `at` where
+/// its retarget options came from (for pointers).
 ///
 /// # Errors
 /// `unmappable_skeleton` at the layer's `clip` when the clip's roles and
@@ -29,14 +32,17 @@ pub(super) fn layer_retargeter(
     spec: &RetargetSpec,
     path: &Path,
     at: &Path,
-) -> Result<Retargeter, MotionError> {
+) -> Result<(Retargeter, Option<FootPlanter>), MotionError> {
     let roles = RoleMap::infer(clip.skeleton(), &[]).unwrap_or_else(|_| RoleMap::empty());
     let reference = source_reference(clip, &roles, &spec.source_pose, at)?;
     let source = Rig { skeleton: clip.skeleton(), reference: &reference, roles: &roles };
     let target_reference = target_reference(character, &spec.target_pose, at)?;
     let target = Rig { skeleton: &character.skeleton, reference: &target_reference, roles: &character.roles };
     let options = RetargetOptions { translation: spec.translation };
-    Retargeter::new(source, target, options).map_err(|e| MotionError::new(path.clone().field("clip"), K::Retarget(e)))
+    let retargeter = Retargeter::new(source, target, options)
+        .map_err(|e| MotionError::new(path.clone().field("clip"), K::Retarget(e)))?;
+    let planter = spec.feet.map(|feet| FootPlanter::new(&roles, &character.roles, lowest_feet(clip, &roles), feet));
+    Ok((retargeter, planter))
 }
 
 /// The character's reference pose (local): its own (the rest), the joints

@@ -10,9 +10,9 @@ use super::layering::{self, Joint};
 use super::root::{Planar, RootAt, motion_transform};
 use super::sync::position;
 use super::{ClipSource, LayerMode, LayerTime, Motion, RootMode};
-use crate::character::Retargeter;
+use crate::character::{FootPlanter, FootReport, Retargeter};
 use crate::ik::{ChainStart, IkReport, IkSolver};
-use crate::{Clip, Cursor, Ease, Playback, Pose, Space};
+use crate::{Clip, Cursor, Ease, Playback, Pose, Skeleton, Space};
 
 /// How a request samples a motion.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -61,6 +61,9 @@ pub struct MotionSampler {
     /// Per layer, its own copy of the layer's retargeter (made at the
     /// first sample), and the source pose a retargeted layer samples into.
     retargeters: Vec<Option<Retargeter>>,
+    /// Per layer, its own copy of the layer's foot planter and the clip
+    /// time it last planted at (`None`: no frame since a start or a jump).
+    planters: Vec<Option<(FootPlanter, Option<f32>)>>,
     source: Pose,
     /// A stateless request's spring simulation (motions with springs).
     springs: Option<Box<super::SpringRun>>,
@@ -102,9 +105,26 @@ impl MotionSampler {
         self.root_motion
     }
 
-    /// The next sample's delta is 0 (a jump: a seek), the total carries on.
+    /// The next sample's delta is 0 (a jump: a seek), the total carries on;
+    /// planted feet forget their anchors.
     pub fn rebase_root(&mut self) {
         self.previous.clear();
+        self.forget_feet();
+    }
+
+    /// The first planting layer's feet at the last sample (docs/characters.md,
+    /// “Planted feet”); `None` when no layer plants.
+    pub fn feet(&self) -> Option<&[FootReport]> {
+        self.planters.iter().flatten().next().map(|(planter, _)| planter.reports())
+    }
+
+    /// The next sample is a first frame for the foot planters: contact by
+    /// height alone, new anchors.
+    fn forget_feet(&mut self) {
+        for (planter, last) in self.planters.iter_mut().flatten() {
+            planter.reset();
+            *last = None;
+        }
     }
 
     /// What root motion carries to the next sample: each layer's root at
@@ -130,6 +150,7 @@ impl MotionSampler {
     pub fn restart_root(&mut self) {
         self.previous.clear();
         self.root_motion = None;
+        self.forget_feet();
     }
 }
 
@@ -211,12 +232,15 @@ impl<C: ClipSource> Motion<C> {
             kept,
             ik_reports,
             retargeters,
+            planters,
             source,
             ..
         } = sampler;
         if retargeters.len() != self.layers.len() {
             *retargeters = self.layers.iter().map(|l| l.retarget.as_deref().cloned()).collect();
+            *planters = self.layers.iter().map(|l| l.planter.as_deref().map(|p| (p.clone(), None))).collect();
         }
+        let skeleton = self.skeleton();
         let words = coverage::words(self.skeleton().len());
         coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
         cursors.resize_with(self.layers.len(), Cursor::default);
@@ -232,7 +256,8 @@ impl<C: ClipSource> Motion<C> {
             if direct {
                 // The common case, and the bit-for-bit promise: the first
                 // full-weight layer is the clip's own pose.
-                let sampling = Sampling { need, kept, source, retargeter: retargeters[0].as_mut() };
+                let (retargeter, planter) = (retargeters[0].as_mut(), planters[0].as_mut());
+                let sampling = Sampling { need, kept, source, retargeter, planter, skeleton };
                 layer.sample_needed(t, sampling, &mut cursors[0], local);
                 ik_reports.extend_from_slice(cursors[0].ik_reports());
                 roots.push(self.take_root(layer, (cycle, t), local));
@@ -252,7 +277,8 @@ impl<C: ClipSource> Motion<C> {
                 roots.push(None);
                 continue;
             }
-            let sampling = Sampling { need, kept, source, retargeter: retargeters[i].as_mut() };
+            let (retargeter, planter) = (retargeters[i].as_mut(), planters[i].as_mut());
+            let sampling = Sampling { need, kept, source, retargeter, planter, skeleton };
             layer.sample_needed(t, sampling, &mut cursors[i], scratch);
             ik_reports.extend_from_slice(cursors[i].ik_reports());
             roots.push(self.take_root(layer, (cycle, t), scratch));
@@ -345,6 +371,10 @@ struct Sampling<'a> {
     kept: &'a mut Vec<u64>,
     source: &'a mut Pose,
     retargeter: Option<&'a mut Retargeter>,
+    /// The layer's foot planter and the clip time it last planted at.
+    planter: Option<&'a mut (FootPlanter, Option<f32>)>,
+    /// The output skeleton (the character's), which the planter solves on.
+    skeleton: &'a Skeleton,
 }
 
 impl<C: ClipSource> super::Layer<C> {
@@ -354,12 +384,18 @@ impl<C: ClipSource> super::Layer<C> {
     /// samples its whole clip and retargets it: `pose` is then in the
     /// character's joints, with the clip's parameters.
     fn sample_needed(&self, t: f32, sampling: Sampling<'_>, cursor: &mut Cursor, pose: &mut Pose) {
-        let Sampling { need, kept, source, retargeter } = sampling;
+        let Sampling { need, kept, source, retargeter, planter, skeleton } = sampling;
         let clip = self.clip.clip();
         if let Some(retargeter) = retargeter {
             clip.sample_into(t, cursor, source);
             pose.parameters.clone_from(&source.parameters);
             retargeter.retarget(source, pose);
+            if let Some((planter, last)) = planter {
+                // Speed is the source's per second of its clip, whichever way it plays.
+                let dt = last.map(|last| (t - last).abs());
+                planter.plant(retargeter, dt, skeleton, pose);
+                *last = Some(t);
+            }
             return;
         }
         if self.reach.whole && *need == *self.reach.reaches {

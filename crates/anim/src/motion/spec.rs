@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use glam::Quat;
 
-use crate::character::{RoleMap, Translation};
+use crate::character::{FeetOptions, RoleMap, Translation};
 use crate::ik::IkSpec;
 use crate::spring::SpringsSpec;
 use crate::{Playback, Pose, Skeleton};
@@ -59,6 +59,8 @@ pub struct RetargetSpec {
     /// The character's reference pose: its reference (the rest) with these
     /// joints' local rotations replaced; empty: as it is.
     pub target_pose: Vec<(String, Quat)>,
+    /// Plant the feet while the source's are in contact (`None`: don't).
+    pub feet: Option<FeetOptions>,
 }
 
 /// The source side's reference pose.

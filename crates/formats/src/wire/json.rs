@@ -17,6 +17,7 @@ pub use super::float::write_float;
 use super::float::{common_text, finite_stand_in};
 use super::ik::IkDoc;
 use super::spring::{SpringDoc, springs_spec};
+use anim::character::{FootReport, Side};
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::spring::SpringsSpec;
@@ -373,6 +374,7 @@ impl PoseJson<'_> {
         extras.write_parameters(out);
         extras.write_root_motion(out);
         super::ik::write_reports(out, extras.ik);
+        extras.write_feet(out);
         out.put_slice(extras.tail);
         out.put_u8(b'}');
     }
@@ -391,7 +393,14 @@ pub struct Extras<'a> {
     /// JSON members written last, before the closing brace (a composed
     /// pose's `,"warnings":[…]`); empty for none.
     pub tail: &'a [u8],
+    /// Planted feet (docs/characters.md, “Planted feet”), written when there are any.
+    pub feet: &'a [FootReport],
 }
+
+/// Bytes one foot's report adds to a pose at most (`"right":{"planted":false,"slide":…}`,
+/// the number as [`write_float`] writes an f32), and the member around them.
+pub const FOOT_REPORT_BYTES: u64 = 64;
+pub const FEET_MEMBER_BYTES: u64 = 12;
 
 /// A pose's parameters as an answer shows them: `"parameters": {"name":
 /// [values]}`, every parameter or a request's subset (indices in the
@@ -461,6 +470,25 @@ impl Extras<'_> {
     }
 
     /// `,"root_motion":{"delta":{…},"total":{…}}` when there is one.
+    /// `,"feet":{"left":{"planted":true,"slide":s},…}`, when a layer plants feet.
+    fn write_feet(&self, out: &mut impl BufMut) {
+        if self.feet.is_empty() {
+            return;
+        }
+        out.put_slice(b",\"feet\":{");
+        for (i, foot) in self.feet.iter().enumerate() {
+            if i > 0 {
+                out.put_u8(b',');
+            }
+            out.put_slice(if foot.side == Side::Left { b"\"left\":{\"planted\":" } else { b"\"right\":{\"planted\":" });
+            out.put_slice(if foot.planted { b"true" } else { b"false" });
+            out.put_slice(b",\"slide\":");
+            write_float(out, foot.slide);
+            out.put_u8(b'}');
+        }
+        out.put_u8(b'}');
+    }
+
     fn write_root_motion(&self, out: &mut impl BufMut) {
         let Some(root) = self.root_motion else { return };
         out.put_slice(b",\"root_motion\":{\"delta\":");
@@ -649,6 +677,7 @@ impl MatricesJson<'_> {
         out.put_u8(b']');
         extras.write_parameters(out);
         extras.write_root_motion(out);
+        extras.write_feet(out);
         out.put_slice(extras.tail);
         out.put_u8(b'}');
     }

@@ -57,6 +57,25 @@ pub struct RetargetDoc {
     /// (a character has no clip time, so `{"time": t}` is refused).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_pose: Option<SourcePoseDoc>,
+    /// `plant`: each foot stays where it landed while the source's foot is
+    /// in contact (docs/characters.md, “Planted feet”).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub feet: Option<FeetDoc>,
+    /// With `feet: "plant"`: a source foot within this height above its lowest
+    /// (times the hips ratio) is in contact; default 0.02 (the character's units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_height: Option<f32>,
+    /// With `feet: "plant"`: …and slower than this per second; default 0.1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_speed: Option<f32>,
+}
+
+/// What happens to a retargeted foot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum FeetDoc {
+    /// Planted while in contact.
+    Plant,
 }
 
 /// `{"time": t}` (the clip at `t`) or `{"rotations": {joint: [x, y, z, w]}}`
@@ -107,7 +126,34 @@ impl RetargetDoc {
                 return Err(DocError { code: "target_pose_needs_rotations", pointer, detail: detail.into() });
             }
         };
-        Ok(RetargetSpec { source_pose, translation, target_pose })
+        let feet = self.feet(pointer)?;
+        Ok(RetargetSpec { source_pose, translation, target_pose, feet })
+    }
+
+    /// The feet options: `None` unless `feet` is `plant`.
+    ///
+    /// # Errors
+    /// `contact_out_of_range` for a threshold that is negative or not
+    /// finite; `feet_not_planted` for a threshold without `feet: "plant"`.
+    fn feet(&self, pointer: &str) -> Result<Option<anim::character::FeetOptions>, DocError> {
+        let mut options = anim::character::FeetOptions::default();
+        for (name, value, field) in [
+            ("contact_height", self.contact_height, &mut options.contact_height),
+            ("contact_speed", self.contact_speed, &mut options.contact_speed),
+        ] {
+            let Some(value) = value else { continue };
+            let pointer = format!("{pointer}/{name}");
+            if self.feet.is_none() {
+                let detail = format!("`{name}` applies with `feet: \"plant\"`");
+                return Err(DocError { code: "feet_not_planted", pointer, detail });
+            }
+            if !value.is_finite() || value < 0.0 {
+                let detail = format!("`{name}` must be a finite number at least 0, got {value}");
+                return Err(DocError { code: "contact_out_of_range", pointer, detail });
+            }
+            *field = value;
+        }
+        Ok(self.feet.map(|FeetDoc::Plant| options))
     }
 
     fn from_spec(spec: &RetargetSpec) -> RetargetDoc {
@@ -126,7 +172,14 @@ impl RetargetDoc {
         let target_pose = (!spec.target_pose.is_empty()).then(|| {
             SourcePoseDoc::Rotations(spec.target_pose.iter().map(|(n, q)| (n.clone(), q.to_array())).collect())
         });
-        RetargetDoc { source_pose, translation, target_pose }
+        RetargetDoc {
+            source_pose,
+            translation,
+            target_pose,
+            feet: spec.feet.map(|_| FeetDoc::Plant),
+            contact_height: spec.feet.map(|f| f.contact_height),
+            contact_speed: spec.feet.map(|f| f.contact_speed),
+        }
     }
 }
 

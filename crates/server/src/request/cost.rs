@@ -450,6 +450,7 @@ mod tests {
                 parameters: formats::wire::json::ParameterValues::of(clip.parameters(), sampler.pose(), None),
                 root_motion: None,
                 ik: &[],
+                feet: &[],
                 events: clip.events(),
                 crossed: &[0; MAX_EVENTS_PER_FRAME],
                 with_names: true,

@@ -50,6 +50,15 @@ pub struct Composed {
 /// Bytes a pose's `"root_motion"` adds: two planar transforms of four numbers.
 pub(super) const ROOT_MOTION_BYTES: u64 = 80 + 8 * F64_TEXT;
 
+/// Bytes a pose's `"feet"` adds at most (0 when no layer plants feet).
+pub(super) fn feet_bytes(motion: &StreamMotion) -> u64 {
+    use formats::wire::json::{FEET_MEMBER_BYTES, FOOT_REPORT_BYTES};
+    match motion.planted_feet() as u64 {
+        0 => 0,
+        n => FEET_MEMBER_BYTES + n * FOOT_REPORT_BYTES,
+    }
+}
+
 impl Composed {
     /// The first layer's clip id (what a composed pose names).
     pub fn clip_id(&self) -> &str {
@@ -68,6 +77,7 @@ impl Composed {
         if self.motion.has_root_motion() {
             estimate.per_pose += ROOT_MOTION_BYTES;
         }
+        estimate.per_pose += feet_bytes(&self.motion);
         // The first clip's reports are in its estimate; the other layers'
         // and the motion's own come on top.
         let more_reports = self.motion.ik_report_count() - first.ik_count();

@@ -282,6 +282,7 @@ impl RawStream<'_> {
         if composed.motion.has_root_motion() {
             frame += ROOT_MOTION_BYTES;
         }
+        frame += super::motion::feet_bytes(&composed.motion);
         let first_reports = composed.motion.first_clip().clip().ik_count();
         frame += super::cost::ik_reports(
             (composed.motion.ik_report_count() - first_reports) as u64,

@@ -294,8 +294,8 @@ impl GraphPoses {
         if s.report {
             write_report(&mut self.report, &player.report());
         }
-        let extras =
-            Extras { joints: s.joints.as_deref(), root_motion: None, ik: &[], parameters: None, tail: &self.report };
+        let joints = s.joints.as_deref();
+        let extras = Extras { joints, root_motion: None, ik: &[], parameters: None, tail: &self.report, feet: &[] };
         let (clip, skeleton, time) = (s.built.meta.id.as_str(), s.built.graph.skeleton(), s.range.time(k));
         let clip_time = time as f32;
         match s.format {
@@ -390,6 +390,7 @@ impl MotionPoses {
                 self.composed.parameters.as_deref(),
             ),
             tail: &self.pose_tail,
+            feet: self.sampler.feet().unwrap_or_default(),
         };
         let (clip, skeleton) = (self.composed.clip_id(), motion.skeleton());
         match self.format {

@@ -69,7 +69,7 @@ fn write_pose(
         let clip_time = evaluate(clip, t, options, format, sampler, matrices);
         let parameters = ParameterValues::of(clip.parameters(), sampler.pose(), subsets.parameters.as_deref());
         let joints = subsets.joints.as_deref();
-        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters, tail: &[] };
+        let extras = Extras { joints, root_motion: None, ik: sampler.ik_reports(), parameters, tail: &[], feet: &[] };
         match format {
             Format::Trs => {
                 let pose = PoseJson {

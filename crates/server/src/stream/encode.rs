@@ -20,6 +20,7 @@ use std::sync::Arc;
 use bytes::{BufMut, Bytes, BytesMut};
 use prost::encoding::{WireType, encode_key, encode_varint, encoded_len_varint, key_len};
 
+use anim::character::FootReport;
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{Event, Pose, Skeleton, Space};
@@ -68,6 +69,8 @@ pub struct FrameData<'a> {
     pub root_motion: Option<RootMotion>,
     /// IK reports (docs/ik.md): the motion's clip constraints, then the stream's.
     pub ik: &'a [IkReport],
+    /// Planted feet (docs/characters.md, “Planted feet”): JSON frames carry them.
+    pub feet: &'a [FootReport],
     /// Events crossed (all of the clip's events, and indices into them).
     pub events: &'a [Event],
     pub crossed: &'a [u32],
@@ -255,7 +258,8 @@ fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
         skeleton: f.skeleton,
         pose: f.pose,
     };
-    let extras = Extras { joints: f.joints, root_motion: f.root_motion, ik: f.ik, parameters: f.parameters, tail: &[] };
+    let (joints, root_motion, ik, parameters) = (f.joints, f.root_motion, f.ik, f.parameters);
+    let extras = Extras { joints, root_motion, ik, parameters, tail: &[], feet: f.feet };
     pose.write_with(*w.get_mut(), extras);
     w.write_all(b"}").expect(io);
     (a, b)
@@ -529,6 +533,7 @@ mod tests {
             parameters: ParameterValues::of(clip.parameters(), sampler.pose(), None),
             root_motion: None,
             ik,
+            feet: &[],
             events: clip.events(),
             crossed: &crossed,
             with_names,

@@ -292,6 +292,7 @@ pub(super) fn frame_data<'a>(
         parameters: ParameterValues::of(motion.parameters(), player.pose(), params.parameters.as_deref()),
         root_motion: player.root_motion(),
         ik: player.ik_reports(),
+        feet: player.feet(),
         events: first.clip().events(),
         crossed,
         with_names,

@@ -142,11 +142,16 @@ pub fn spring_run(motion: &StreamMotion, times: &[f64]) -> u64 {
 
 /// The work of the retargets of one pose (docs/motion.md, “Characters”): per
 /// retargeted layer, one model-space pass over its clip's skeleton and one
-/// over the character's.
+/// over the character's; per planted foot (docs/characters.md, “Planted
+/// feet”), a two-bone solve as an IK constraint's, its chain as deep as the
+/// character.
 fn retargets(motion: &StreamMotion) -> u64 {
     let output = motion.skeleton().len() as u64;
     let each = motion.layers().enumerate().filter(|(i, _)| motion.is_retargeted(*i));
-    each.map(|(_, c)| (c.clip().joint_count() as u64 + output).saturating_mul(JOINT)).fold(0, u64::saturating_add)
+    let passes =
+        each.map(|(_, c)| (c.clip().joint_count() as u64 + output).saturating_mul(JOINT)).fold(0, u64::saturating_add);
+    let feet = (motion.planted_feet() as u64).saturating_mul(ANALYTIC + ANALYTIC_PER_JOINT * output);
+    passes.saturating_add(feet)
 }
 
 /// The work of solving `constraints` once on `skeleton` (validated
@@ -199,10 +204,13 @@ pub fn motion_build(spec: &MotionSpec<Arc<dyn PinnedClip>>) -> u64 {
         let map = (output + clip.joint_count() as u64 + clip.parameters().total_width() as u64) * MOTION_PER_JOINT;
         let reference = if layer.mode == LayerMode::Additive { clip.joint_count() as u64 * JOINT } else { 0 };
         // With a character, a retargeter's setup: both references in model
-        // space and, with root motion, the root's cycle at up to 4096 poses.
+        // space and, with root motion, the root's cycle at up to 4096 poses;
+        // planted feet find each source foot's lowest over up to 4096 poses.
         let retarget = if spec.character.is_some() {
             let per_pose = (clip.joint_count() as u64 + output) * JOINT;
-            per_pose * if spec.root_motion.is_some() { 4100 } else { 3 }
+            let plants = layer.retarget.as_ref().unwrap_or(&spec.retarget).feet.is_some();
+            let feet = if plants { 4100 * clip.joint_count() as u64 * JOINT } else { 0 };
+            per_pose * if spec.root_motion.is_some() { 4100 } else { 3 } + feet
         } else {
             0
         };
