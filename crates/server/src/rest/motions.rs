@@ -34,8 +34,7 @@ use formats::wire::json::{Extras, MatricesJson, ParameterValues, PoseJson, Space
 use formats::wire::motion::MotionDoc;
 
 use super::extract::JsonBody;
-use super::pieces::{self, Pieces, PoseWriter};
-use super::poses::json_response;
+use super::pieces::{self, Pieces, PoseWriter, json_response};
 
 /// `POST /v1/poses`: one pose of a motion.
 #[derive(Debug, Deserialize, ToSchema)]

@@ -127,3 +127,8 @@ impl Drop for Pieces {
         }
     }
 }
+
+/// A whole JSON answer, 200.
+pub(super) fn json_response(body: Vec<u8>) -> Response {
+    (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
+}

@@ -14,8 +14,7 @@ use std::cell::RefCell;
 use std::sync::Arc;
 
 use axum::extract::State;
-use axum::http::header::CONTENT_TYPE;
-use axum::http::{HeaderMap, HeaderValue, StatusCode};
+use axum::http::HeaderMap;
 use axum::response::{IntoResponse, Response};
 use glam::Mat4;
 use serde::Deserialize;
@@ -37,7 +36,7 @@ use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, Playba
 
 use super::extract::{ClipId, JsonBody};
 use super::motions::{PoseOfMotion, SamplesOfMotion};
-use super::pieces::{self, Pieces, PoseWriter};
+use super::pieces::{self, Pieces, PoseWriter, json_response};
 use super::query::{Query, QueryParams};
 
 /// Response-size estimates, so a pose body is written without reallocating.
@@ -95,10 +94,6 @@ fn write_pose(
             }
         }
     });
-}
-
-pub(super) fn json_response(body: Vec<u8>) -> Response {
-    (StatusCode::OK, [(CONTENT_TYPE, HeaderValue::from_static("application/json"))], body).into_response()
 }
 
 /// One pose at request time `t`.
