@@ -446,6 +446,10 @@ async fn the_same_mistakes_are_refused_with_the_same_codes_on_both_wires() {
         ..Default::default()
     };
     refusals(&app, ("/v1/samples", &body), grpc.sample_motion_batch(req).await).await;
+    // A time JSON cannot send is `bad_number`, as for a pose of clips.
+    let status = grpc.sample_motion(graph_pose(f64::NAN, None, Vec::new())).await.unwrap_err();
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "bad_number", "{status:?}");
+    assert!(status.message().contains("(at /time)"), "{}", status.message());
     // A range's fields sit in `range` on gRPC: the same code at `/range/…`.
     let req = pb::SampleMotionBatchRequest {
         motion: Some(over_graph(&graph)),

@@ -141,7 +141,8 @@ impl RawGraphSampling<'_> {
     /// # Errors
     /// `graph_needs_ticks` (`times`), `graph_unsupported` (`parameters`),
     /// `times_or_range`, `fps_out_of_range`, `bad_range` (also a pose's
-    /// `time` that is not a finite time ≥ 0), `too_many_poses`;
+    /// `time` below 0), `bad_number` (a pose's `time` not a number),
+    /// `too_many_poses`;
     /// the graph's lookup refusals at `/motion/layers/0/graph`; the inputs'
     /// (`bad_time`, `unknown_parameter`, `parameter_type`,
     /// `parameter_out_of_range`) at `/inputs/…`; `no_inverse_binds`,
@@ -206,12 +207,12 @@ impl RawGraphSampling<'_> {
 
     /// One pose's tick: the last at or before `time` (within the grid's
     /// tolerance, so 0.1 s at 60 fps is tick 6), every tick before it
-    /// played.
+    /// played. A time that is not a number is `bad_number`, as any pose's.
     fn tick_at(&self, time: f64) -> Result<TickRange, ApiError> {
+        let time = super::raw::finite(Raw::Number(time), Field::Time, self.at)?;
         let fps = self.fps()?;
-        let played = (time.is_finite() && time >= 0.0).then(|| TickRange::new(0.0, time, fps)).flatten();
-        let Some(played) = played else {
-            let detail = format!("a graph's pose is at a finite time ≥ 0, got {time}");
+        let Some(played) = (time >= 0.0).then(|| TickRange::new(0.0, time, fps)).flatten() else {
+            let detail = format!("a graph's pose is at a time ≥ 0 within the grid's reach, got {time}");
             return Err(unprocessable("bad_range", Field::Time, self.at, detail));
         };
         Ok(TickRange { first: played.last, ..played })
