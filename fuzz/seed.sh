@@ -11,7 +11,7 @@ source "$(dirname "$0")/../scripts/lib.sh"
 ib_help "$@"
 cd "$IB_ROOT/fuzz"
 T=../../shared/testdata
-mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json corpus/import_evaluate corpus/motion_json
+mkdir -p corpus/import_gltf corpus/import_bvh corpus/clip_json corpus/import_evaluate corpus/motion_json corpus/graph_json
 # The hardening corpus (committed, our own files) and past findings seed every target too.
 C=../tests/corpus
 for set in valid malformed; do
@@ -21,7 +21,7 @@ for set in valid malformed; do
   cp "$C/$set"/*/* corpus/import_evaluate/ 2>/dev/null || true
 done
 rm -f corpus/import_evaluate/*.http corpus/import_evaluate/*.bin
-for t in import_gltf import_bvh clip_json import_evaluate motion_json; do
+for t in import_gltf import_bvh clip_json import_evaluate motion_json graph_json; do
   cp corpus-min/$t/* regressions/$t/* corpus/$t/ 2>/dev/null || true
 done
 cp "$T"/gltf/AnimatedTriangle/*.gltf "$T"/gltf/BoxAnimated/*.gltf "$T"/gltf/RiggedSimple/*.gltf \

@@ -11,7 +11,7 @@ ib_help "$@"
 cd "$IB_ROOT/fuzz"
 EACH=${1:-600}
 shift || true
-TARGETS=${*:-import_gltf import_bvh clip_json import_evaluate}
+TARGETS=${*:-import_gltf import_bvh clip_json import_evaluate motion_json graph_json}
 export RUSTC_BOOTSTRAP=1
 bash seed.sh >/dev/null
 for t in $TARGETS; do

@@ -19,6 +19,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("clip_json", clip_json),
     ("import_evaluate", import_evaluate),
     ("motion_json", motion_json),
+    ("graph_json", graph_json),
 ];
 
 /// glTF/GLB import of arbitrary bytes; whatever imports must build.
@@ -120,6 +121,66 @@ pub fn motion_json(data: &[u8]) {
         }
         player.sample(k as f64 / 30.0, &MotionOptions::default());
         check_local(player.pose(), k as f64);
+    }
+}
+
+/// A graph document (docs/graphs.md) over the clips of [`motion_json`]
+/// (clip ids pick them by their length), within the server's default
+/// shape limits (256 nodes, 32 points a blend), built, then played tick by
+/// tick with parameters set from the input's bytes (either type, in and out
+/// of range, not finite) at input-chosen steps. Every local value stays
+/// finite and every rotation a unit quaternion; a blend's weights are
+/// finite, in [0, 1] and sum to 1; a player rebuilt from its state (a
+/// broadcast checkpoint) plays on exactly as the original.
+pub fn graph_json(data: &[u8]) {
+    use anim::graph::{GraphPlayer, Value};
+    use std::sync::Arc;
+    let Ok(doc) = crate::wire::graph::parse_graph_doc(data) else { return };
+    let points = |n: &crate::wire::graph::NodeDoc| {
+        let one = n.blend1d.as_ref().map_or(0, |b| b.points.len());
+        one.max(n.blend2d.as_ref().map_or(0, |b| b.points.len()))
+    };
+    if doc.nodes.len() > 256 || doc.nodes.values().any(|n| points(n) > 32) {
+        return;
+    }
+    let clips = motion_clips();
+    let Ok(graph) = doc.compile("", |id, _| Ok(&clips[id.len() % clips.len()])) else { return };
+    let graph = Arc::new(graph);
+    let mut player = GraphPlayer::new(Arc::clone(&graph));
+    let parameters = graph.parameters().len();
+    let steps = [1.0 / 60.0, 0.0, -1.0, f64::NAN, 0.5, 1e-9];
+    for (k, &b) in data.iter().rev().take(48).enumerate() {
+        if parameters > 0 {
+            let value = match b % 5 {
+                0 => Value::Bool(b & 8 != 0),
+                1 => Value::Float(f64::NAN),
+                2 => Value::Float(if b & 8 != 0 { 1e30 } else { -1e30 }),
+                _ => Value::Float(f64::from(b) / 25.0 - 2.0),
+            };
+            let _ = player.set(usize::from(b) % parameters, value);
+        }
+        player.tick(steps[usize::from(b / 5) % steps.len()]);
+        check_local(player.pose(), k as f64);
+        check_report(&player);
+    }
+    let mut copy = GraphPlayer::from_state(Arc::clone(&graph), player.state()).expect("a player's own state fits");
+    for dt in [1.0 / 60.0, 0.25] {
+        player.tick(dt);
+        copy.tick(dt);
+        assert_eq!(copy.state(), player.state(), "a rebuilt player's state drifts");
+        assert!(copy.pose() == player.pose(), "a rebuilt player's pose differs");
+    }
+}
+
+/// A graph player's report: its state is the graph's, and each blend's
+/// weights are finite, in [0, 1] and sum to 1.
+fn check_report<C: anim::ClipSource>(player: &anim::graph::GraphPlayer<C>) {
+    let report = player.report();
+    assert!(player.graph().state_names().any(|s| s == report.state()), "no state {}", report.state());
+    for (node, weights) in report.weights() {
+        let sum: f64 = weights.iter().sum();
+        assert!(weights.iter().all(|w| (-1e-9..=1.0 + 1e-9).contains(w)), "{node}'s weights {weights:?}");
+        assert!((sum - 1.0).abs() < 1e-6, "{node}'s weights {weights:?} sum to {sum}");
     }
 }
 

@@ -161,6 +161,7 @@ pub fn to_pb(spec: &MotionSpec<String>) -> pb::Motion {
             playback: l.playback.map_or(0, |p| proto::playback_to_pb(p).into()),
             sync: l.sync.clone().unwrap_or_default(),
             reference_time: l.reference_time,
+            ..Default::default()
         })
         .collect();
     let root_motion = spec.root_motion.as_ref().map(|r| pb::RootMotionOptions {
@@ -168,7 +169,7 @@ pub fn to_pb(spec: &MotionSpec<String>) -> pb::Motion {
         mode: proto::root_mode_to_pb(r.mode).into(),
         up: proto::up_axis_to_pb(r.up).into(),
     });
-    pb::Motion { layers, root_motion, ik: spec.ik.iter().map(ik_to_pb).collect() }
+    pb::Motion { layers, root_motion, ik: spec.ik.iter().map(ik_to_pb).collect(), ..Default::default() }
 }
 
 /// A request-time constraint as the proto's, through the clip form's
@@ -191,6 +192,7 @@ mod tests {
     use anim::motion::{Motion, MotionOptions, MotionSampler};
     use anim::{Clip, Cursor, Pose};
     use formats::wire::json::parse_clip;
+    use formats::wire::proto_motion;
 
     const JOINTS: usize = 8;
 
@@ -221,7 +223,8 @@ mod tests {
     fn as_read_from_json_and_protobuf(doc: &MotionDoc) -> (MotionSpec<String>, MotionSpec<String>) {
         let text = serde_json::to_string(doc).unwrap();
         let from_json = serde_json::from_str::<MotionDoc>(&text).unwrap().to_spec("/motion").unwrap();
-        let from_pb = proto::motion_from_pb(&to_pb(&doc.to_spec("/motion").unwrap())).unwrap();
+        let from_pb = proto_motion::motion_doc_from_pb(&to_pb(&doc.to_spec("/motion").unwrap())).unwrap();
+        let from_pb = from_pb.to_spec("/motion").unwrap();
         (from_json, from_pb)
     }
 

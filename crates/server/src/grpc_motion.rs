@@ -1,11 +1,14 @@
 //! The composed-motion RPCs (docs/motion.md): `SampleMotion` and
 //! `SampleMotionBatch`, the gRPC mirror of `POST /v1/poses` and
-//! `/v1/samples`. The motion message is converted in `wire::proto`, checked
-//! and priced by `server::request` (`RawPose`, `RawBatch`, `RawMotion`) with
-//! the same codes as REST, charged to the caller and run on the work pool
-//! (`server::work`), and each pose is packed from the motion
-//! sampler's buffers with its joint subset, root motion and IK reports (the
-//! clips' constraints, then the request's `motion.ik`).
+//! `/v1/samples`. The motion message becomes the JSON motion document in
+//! `wire::proto_motion` (one conversion, so the wires cannot drift), is
+//! checked and priced by `server::request` (`RawPose`, `RawBatch`,
+//! `RawMotion`, and `RawGraphSampling` for a graph layer) with the same
+//! codes as REST, charged to the caller and run on the work pool
+//! (`server::work`), and each pose is packed from the motion sampler's (or
+//! the graph player's) buffers with its joint subset, root motion, IK
+//! reports (the clips' constraints, then the request's `motion.ik`) and
+//! graph report.
 
 use glam::Mat4;
 
@@ -13,42 +16,54 @@ use crate::auth::Caller;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Composed, Field, Format, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawModes, RawMotion, RawPose, Wire,
-    in_batch_message, in_body, in_pose_body,
+    Composed, Field, Format, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawGraphSampling,
+    RawModes, RawMotion, RawPose, Wire, graph_layer, in_batch_message, in_pose_body, no_graph_fields,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
 use anim::motion::MotionOptions;
-use anim::{MotionSampler, Space};
+use anim::{MotionSampler, Pose, Space};
 use std::sync::Arc;
 
 use crate::stream::StreamMotion;
 use formats::wire::json::ParameterValues;
 use formats::wire::motion::MotionDoc;
 use formats::wire::proto::{
-    add_parameters, ik_reports_to_pb, matrices_to_pb, motion_from_pb, pb, pose_to_pb, root_motion_to_pb, select_joints,
+    add_parameters, ik_reports_to_pb, matrices_to_pb, pb, pose_to_pb, root_motion_to_pb, select_joints,
 };
+use formats::wire::proto_graph::report_to_proto;
+use formats::wire::proto_motion::{inputs_from_pb, motion_doc_from_pb};
+
+/// A request's motion message as its JSON document (an absent one: no layers).
+fn motion_doc(motion: Option<&pb::Motion>) -> Result<MotionDoc, ApiError> {
+    Ok(motion_doc_from_pb(motion.unwrap_or(&pb::Motion::default()))?)
+}
+
+/// An empty list is the JSON's absent one.
+fn subset(names: &[String]) -> Option<&[String]> {
+    (!names.is_empty()).then_some(names)
+}
 
 /// The request's motion and joints, looked up and built.
 async fn compose(
     state: &AppState,
     caller: &Caller,
-    motion: Option<&pb::Motion>,
+    doc: &MotionDoc,
     (joints, parameters): (&[String], &[String]),
     format: Format,
 ) -> Result<Composed, ApiError> {
-    let spec = motion_from_pb(motion.unwrap_or(&pb::Motion::default()))?;
-    let joints = (!joints.is_empty()).then_some(joints);
-    let parameters = (!parameters.is_empty()).then_some(parameters);
-    RawMotion { spec, joints, parameters, format, at: in_body, character: None }.resolve_for(state, &caller.key()).await
+    let raw = RawMotion::of_doc(doc)?;
+    let raw = RawMotion { joints: subset(joints), parameters: subset(parameters), format, ..raw };
+    raw.resolve_for(state, &caller.key()).await
 }
 
 /// A stream's motion (`StreamRequest.motion`), still to be looked up.
 ///
 /// # Errors
-/// The message's enums or numbers out of range, at `/motion/…`.
+/// The message's enums or numbers out of range, and the document's own
+/// refusals, at `/motion/…`.
 pub fn raw_motion(motion: &pb::Motion) -> Result<RawMotion<'static>, ApiError> {
-    Ok(RawMotion::of(motion_from_pb(motion)?))
+    Ok(RawMotion::of_doc(&motion_doc_from_pb(motion)?)?)
 }
 
 /// A `Play` crossfade's target, looked up and built; pointers under `/to`.
@@ -61,9 +76,9 @@ pub async fn crossfade_target(
     to: Option<&pb::Motion>,
 ) -> Result<(Arc<StreamMotion>, serde_json::Value), ApiError> {
     let built = async {
-        let raw = raw_motion(to.unwrap_or(&pb::Motion::default()))?;
-        let source = serde_json::to_value(MotionDoc::from_spec(&raw.spec)).map_err(ApiError::internal)?;
-        Ok((raw.resolve(state).await?.motion, source))
+        let doc = motion_doc(to)?;
+        let source = serde_json::to_value(&doc).map_err(ApiError::internal)?;
+        Ok((RawMotion::of_doc(&doc)?.resolve(state).await?.motion, source))
     };
     built.await.map_err(|e: ApiError| e.moved("/motion", "/to"))
 }
@@ -78,11 +93,16 @@ pub async fn sample(
     req: pb::SampleMotionRequest,
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
+    let doc = motion_doc(req.motion.as_ref())?;
+    if let Some(reference) = graph_layer(&doc)? {
+        return graph_pose(state, caller, &req, reference, coding).await;
+    }
+    no_graph_fields(req.report, !req.inputs.is_empty(), req.fps.is_some())?;
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body }
             .check()?;
-    let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), checked.format).await?;
+    let composed = compose(state, caller, &doc, (&req.joints, &req.parameters), checked.format).await?;
     let cost = composed.cost(&[checked.t], checked.format, Wire::Protobuf);
     let cost = cost.compressed(coding.at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
@@ -104,6 +124,11 @@ pub async fn sample_batch(
     coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
+    let doc = motion_doc(req.motion.as_ref())?;
+    if let Some(reference) = graph_layer(&doc)? {
+        return graph_batch(state, caller, &req, reference, coding).await;
+    }
+    no_graph_fields(req.report, !req.inputs.is_empty(), false)?;
     let (times, range) = match &req.when {
         Some(When::Times(t)) => (Some(t), None),
         Some(When::Range(r)) => (None, Some(r)),
@@ -112,7 +137,7 @@ pub async fn sample_batch(
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let raw = RawBatch::of_message(times, range, modes, req.format);
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(state, caller, req.motion.as_ref(), (&req.joints, &req.parameters), sampling.format).await?;
+    let composed = compose(state, caller, &doc, (&req.joints, &req.parameters), sampling.format).await?;
     let n = sampling.times.len();
     let cost = composed.cost(&sampling.times, sampling.format, Wire::Protobuf);
     let cost = cost.compressed(coding.at(cost.bytes));
@@ -133,6 +158,151 @@ pub async fn sample_batch(
     let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
     state.counters.poses.increment(n as u64);
     Ok(batch)
+}
+
+/// `SampleMotion` over a graph: the ticks up to the last at or before
+/// `time` played on the work pool, the last one's pose answered (what
+/// `SampleMotionBatch` answers for that tick).
+async fn graph_pose(
+    state: &AppState,
+    caller: &Caller,
+    req: &pb::SampleMotionRequest,
+    reference: &str,
+    coding: AnswerCoding,
+) -> Result<pb::Pose, ApiError> {
+    let inputs = inputs_from_pb(&req.inputs)?;
+    let raw = RawGraphSampling {
+        reference,
+        inputs: &inputs,
+        time: Some(req.time),
+        times: None,
+        start: None,
+        end: None,
+        fps: req.fps.map(f64::from),
+        format: Some(Raw::Enum(req.format)),
+        space: Some(Raw::Enum(req.space)),
+        joints: subset(&req.joints),
+        parameters: subset(&req.parameters),
+        report: req.report,
+        at: in_pose_body,
+        wire: Wire::Protobuf,
+    };
+    let sampling = raw.resolve(state, &caller.key()).await?;
+    let cost = sampling.cost.compressed(coding.at(sampling.cost.bytes));
+    cost.check(&state.config.limits, Field::Time, in_pose_body)?;
+    let pack = move |_: &Cancel| GraphPacker::new(sampling).pose(0, true);
+    let pose = state.work.spend(&caller.key(), cost.work(), pack).await?;
+    state.counters.poses.increment(1);
+    Ok(pose)
+}
+
+/// `SampleMotionBatch` over a graph: its `range` on the tick grid of
+/// `range.fps`, as `POST /v1/samples` plays it.
+async fn graph_batch(
+    state: &AppState,
+    caller: &Caller,
+    req: &pb::SampleMotionBatchRequest,
+    reference: &str,
+    coding: AnswerCoding,
+) -> Result<pb::PoseBatch, ApiError> {
+    use pb::sample_motion_batch_request::When;
+    let inputs = inputs_from_pb(&req.inputs)?;
+    let (times, range) = match &req.when {
+        Some(When::Times(t)) => (Some(t.values.as_slice()), None),
+        Some(When::Range(r)) => (None, Some(r)),
+        None => (None, None),
+    };
+    let raw = RawGraphSampling {
+        reference,
+        inputs: &inputs,
+        time: None,
+        times,
+        start: range.map(|r| r.start),
+        end: range.map(|r| r.end),
+        fps: range.map(|r| r.fps),
+        format: Some(Raw::Enum(req.format)),
+        space: Some(Raw::Enum(req.space)),
+        joints: subset(&req.joints),
+        parameters: subset(&req.parameters),
+        report: req.report,
+        at: in_batch_message,
+        wire: Wire::Protobuf,
+    };
+    let sampling = raw.resolve(state, &caller.key()).await?;
+    let cost = sampling.cost.compressed(coding.at(sampling.cost.bytes));
+    cost.check(&state.config.limits, Field::When, in_batch_message)?;
+    if cost.bytes > MAX_UNARY_ANSWER_BYTES {
+        let (bytes, limit) = (cost.bytes, MAX_UNARY_ANSWER_BYTES);
+        return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });
+    }
+    let n = sampling.range.answered();
+    let pack = move |cancel: &Cancel| {
+        let mut packer = GraphPacker::new(sampling);
+        let answered = usize::try_from(n).unwrap_or(usize::MAX);
+        let poses = (0..answered).take_while(|_| cancel.proceed()).map(|i| packer.pose(i, false)).collect();
+        let joint_names = packer.names();
+        pb::PoseBatch { joint_names, poses, parameter_names: Vec::new(), parameter_widths: Vec::new() }
+    };
+    let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
+    state.counters.poses.increment(n);
+    Ok(batch)
+}
+
+/// Packs a graph's answered ticks in order (played by [`GraphTicks`]).
+struct GraphPacker {
+    sampling: GraphSampling,
+    ticks: GraphTicks,
+    model: Pose,
+    matrices: Vec<Mat4>,
+}
+
+impl GraphPacker {
+    fn new(sampling: GraphSampling) -> GraphPacker {
+        GraphPacker { sampling, ticks: GraphTicks::default(), model: Pose::default(), matrices: Vec::new() }
+    }
+
+    /// The joint names sent (the subset's, in skeleton order).
+    fn names(&self) -> Vec<String> {
+        let names = self.sampling.built.graph.skeleton().names();
+        match &self.sampling.joints {
+            Some(joints) => joints.iter().map(|&j| names[j].clone()).collect(),
+            None => names.to_vec(),
+        }
+    }
+
+    /// Answered tick `i`'s pose, with its names when `named` and its
+    /// report when asked for.
+    fn pose(&mut self, i: usize, named: bool) -> pb::Pose {
+        let s = &self.sampling;
+        let (player, time) = self.ticks.play(s, i);
+        let skeleton = s.built.graph.skeleton();
+        let names = named.then(|| skeleton.names());
+        let mut pose = match s.format {
+            Format::Trs => {
+                let local = player.pose();
+                let pose = if s.space == Space::Model {
+                    skeleton.to_model(local, &mut self.model);
+                    &self.model
+                } else {
+                    local
+                };
+                pose_to_pb(names, pose, time, time as f32, s.space)
+            }
+            Format::Matrix => {
+                skeleton.model_matrices(player.pose(), &mut self.matrices);
+                matrices_to_pb(names, &self.matrices, time, time as f32)
+            }
+            Format::Skinning => {
+                skeleton.skinning_matrices(player.pose(), &mut self.matrices);
+                matrices_to_pb(names, &self.matrices, time, time as f32)
+            }
+        };
+        pose.graph = s.report.then(|| report_to_proto(&player.report()));
+        match &s.joints {
+            Some(joints) => select_joints(pose, joints),
+            None => pose,
+        }
+    }
 }
 
 /// Packs a motion's poses in order (root motion runs from each to the next).

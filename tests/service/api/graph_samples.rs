@@ -225,12 +225,111 @@ async fn bad_graph_requests_are_422_at_their_pointers() {
     let (status, problem) = send(&app, "/v1/samples", &missing).await;
     assert_eq!((status, problem["code"].as_str()), (404, Some("graph_not_found")), "{problem}");
     assert_eq!(problem["pointer"], "/motion/layers/0/graph");
-    // What does not play graphs yet says so at the layer.
-    let pose = json!({"motion": over(&graph), "time": 0});
-    let (status, problem) = send(&app, "/v1/poses", &pose).await;
-    assert_eq!(
-        (status, problem["code"].as_str(), problem["pointer"].as_str()),
-        (422, Some("graph_unsupported"), Some("/motion/layers/0/graph")),
-        "{problem}"
-    );
+    app.stop().await;
+}
+
+/// A pose's numbers (every joint's translation, rotation and scale) in order.
+fn numbers(pose: &Value) -> Vec<f64> {
+    let joints = pose["joints"].as_array().unwrap();
+    let parts = |j: &Value| ["translation", "rotation", "scale"].map(|p| j[p].as_array().unwrap().clone()).concat();
+    joints.iter().flat_map(parts).map(|x| x.as_f64().unwrap()).collect()
+}
+
+/// `POST /v1/poses` over a graph answers the pose `/v1/samples` answers
+/// for the last tick at or before `time`, report included: on a tick, just
+/// after one and just before the next, at two grids and both spaces.
+#[tokio::test]
+async fn a_graph_pose_is_the_samples_pose_of_the_last_tick_at_or_before_its_time() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let inputs = json!([{"time": 1, "set": {"speed": 2.5}}, {"time": 2, "set": {"survey": true}}]);
+    for (fps, space) in [(60.0, "local"), (24.0, "model")] {
+        let body = json!({"motion": over(&graph), "start": 0, "end": 3, "fps": fps, "space": space,
+                          "inputs": inputs, "report": true});
+        let (status, samples) = send(&app, "/v1/samples", &body).await;
+        assert_eq!(status, 200, "{samples}");
+        let poses = samples["poses"].as_array().unwrap();
+        // 0.1 s at 60 fps is tick 6 (0.1 · 60 is 6.000000000000001 in f64).
+        for (time, tick) in [
+            (0.0, 0),
+            (0.1, (0.1 * fps + 1e-9) as usize),
+            (1.0, fps as usize),
+            (1.0 + 0.4 / fps, fps as usize),
+            (2.0 - 0.01 / fps, 2 * fps as usize - 1),
+            (2.5, (2.5 * fps) as usize),
+            (3.0, 3 * fps as usize),
+        ] {
+            let body = json!({"motion": over(&graph), "time": time, "fps": fps, "space": space,
+                              "inputs": inputs, "report": true});
+            let (status, pose) = send(&app, "/v1/poses", &body).await;
+            assert_eq!(status, 200, "{pose}");
+            let expected = &poses[tick];
+            assert_eq!(pose["graph"], expected["graph"], "t {time}: tick {tick}'s report");
+            assert!((pose["time"].as_f64().unwrap() - tick as f64 / fps).abs() < 1e-12, "t {time}: {}", pose["time"]);
+            let (got, want) = (numbers(&pose), numbers(expected));
+            assert_eq!(got.len(), want.len());
+            let worst = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(worst <= 1e-6, "t {time} at {fps} fps, {space}: {worst}");
+            assert_eq!(&pose, expected, "t {time}: the same writer, the same bytes");
+        }
+    }
+    // The viewer's paused pose: its held settings at 0, the page's fps, a report.
+    let body = json!({"motion": over(&graph), "time": 1.5, "space": "local",
+                      "inputs": [{"time": 0, "set": {"speed": 2.5}}], "fps": 60, "report": true});
+    let (status, pose) = send(&app, "/v1/poses", &body).await;
+    assert_eq!(status, 200, "{pose}");
+    assert_eq!(pose["clip"], json!(graph));
+    assert_eq!(pose["graph"]["state"], "move", "{pose}");
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_graph_pose_prices_every_tick_before_it_and_refuses_as_samples_do() {
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 2_000_000).start().await;
+    let graph = two_speed_graph(&app).await;
+    let late = json!({"motion": over(&graph), "time": 3600, "fps": 240});
+    let (status, problem) = send(&app, "/v1/poses", &late).await;
+    assert_eq!((status, problem["code"].as_str()), (422, Some("too_much_work")), "{problem}");
+    let early = json!({"motion": over(&graph), "time": 0.5, "fps": 240});
+    let (status, pose) = send(&app, "/v1/poses", &early).await;
+    assert_eq!(status, 200, "{pose}");
+    let clip = json!({"layers": [{"clip": "x"}]});
+    let cases = [
+        (json!({"motion": over(&graph), "time": -0.5}), "bad_range", "/time"),
+        (json!({"motion": over(&graph), "time": 1, "fps": 0}), "fps_out_of_range", "/fps"),
+        (json!({"motion": over(&graph), "time": 1, "fps": 241}), "fps_out_of_range", "/fps"),
+        (
+            json!({"motion": over(&graph), "time": 1, "inputs": [{"time": 0, "set": {"nope": true}}]}),
+            "unknown_parameter",
+            "/inputs/0/set/nope",
+        ),
+        (
+            json!({"motion": over(&graph), "time": 1, "inputs": [{"time": 0.2, "set": {"speed": 0}}]}),
+            "parameter_out_of_range",
+            "/inputs/0/set/speed",
+        ),
+        (json!({"motion": over(&graph), "time": 1, "inputs": [{"time": -1, "set": {}}]}), "bad_time", "/inputs/0/time"),
+        (json!({"motion": over(&graph), "time": 1, "parameters": ["p"]}), "graph_unsupported", "/parameters"),
+        (
+            json!({"motion": {"layers": [{"graph": graph, "speed": 2}]}, "time": 1}),
+            "graph_unsupported",
+            "/motion/layers/0/speed",
+        ),
+        (json!({"motion": clip, "time": 1, "report": true}), "graph_unsupported", "/report"),
+        (json!({"motion": clip, "time": 1, "inputs": []}), "graph_unsupported", "/inputs"),
+        (json!({"motion": clip, "time": 1, "fps": 30}), "graph_unsupported", "/fps"),
+    ];
+    for (body, code, pointer) in cases {
+        let (status, problem) = send(&app, "/v1/poses", &body).await;
+        assert_eq!(
+            (status, problem["code"].as_str(), problem["pointer"].as_str()),
+            (422, Some(code), Some(pointer)),
+            "{body}: {problem}"
+        );
+    }
+    let missing = json!({"motion": over("name:nothing"), "time": 0});
+    let (status, problem) = send(&app, "/v1/poses", &missing).await;
+    assert_eq!((status, problem["code"].as_str()), (404, Some("graph_not_found")), "{problem}");
+    assert_eq!(problem["pointer"], "/motion/layers/0/graph");
+    app.stop().await;
 }

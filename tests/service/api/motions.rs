@@ -135,11 +135,7 @@ async fn bad_motions_are_refused_with_their_codes_and_pointers() {
 }
 
 fn one_layer(id: &str) -> pb::Motion {
-    pb::Motion {
-        layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }],
-        root_motion: None,
-        ik: Vec::new(),
-    }
+    pb::Motion { layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }], ..Default::default() }
 }
 
 #[tokio::test]

@@ -2,6 +2,7 @@
 //! “Playing a take on a character”), on the CMU take 131_01 and CesiumMan
 //! through the real server: `target_pose`, the character's reference pose.
 
+use formats::wire::proto::pb;
 use glam::DQuat;
 use serde_json::{Value, json};
 
@@ -218,4 +219,67 @@ async fn planted_feet_show_in_json_frames_and_bad_thresholds_are_refused() {
             "{body}"
         );
     }
+}
+
+/// gRPC's `Retarget` carries `target_pose` and `feet`: a batch over
+/// `SampleMotionBatch` is REST's `POST /v1/samples` answer, number for number
+/// (the planter runs through the batch in order on both), and a target pose
+/// given as a time is refused with REST's code.
+#[tokio::test]
+async fn grpc_retargets_with_a_target_pose_and_planted_feet_as_rest_does() {
+    let app = TestApp::start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let rest_pose = rest_rotations(&app, &cesium).await;
+    let (joint, _) = rest_pose[2].clone();
+    let q = DQuat::from_axis_angle(glam::DVec3::Y, 0.3);
+    let motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": {
+        "target_pose": {"rotations": {joint.clone(): [q.x, q.y, q.z, q.w]}},
+        "feet": "plant", "contact_height": 0.03, "contact_speed": 0.2}});
+    let times: Vec<f64> = (0..90).map(|k| f64::from(k) / 30.0).collect();
+    let body = json!({"motion": motion, "times": times, "space": "model"});
+    let rest: Value = app.http.post(app.url("/v1/samples")).json(&body).send().await.unwrap().json().await.unwrap();
+    let planted = rest["poses"].as_array().unwrap().iter().filter(|p| p["feet"]["left"]["planted"] == json!(true));
+    assert!(planted.count() > 5, "the left foot lands in the first 3 s");
+
+    let pq = pb::Quaternion { x: q.x as f32, y: q.y as f32, z: q.z as f32, w: q.w as f32 };
+    let rotations = pb::JointRotations { joints: [(joint, pq)].into() };
+    let retarget = pb::Retarget {
+        target_pose: Some(pb::SourcePose { pose: Some(pb::source_pose::Pose::Rotations(rotations)) }),
+        feet: Some(pb::PlantFeet { contact_height: Some(0.03), contact_speed: Some(0.2) }),
+        ..Default::default()
+    };
+    let rpc_motion = pb::Motion {
+        layers: vec![pb::Layer { clip_id: take.clone(), ..Default::default() }],
+        character: cesium.clone(),
+        retarget: Some(retarget.clone()),
+        ..Default::default()
+    };
+    let when = pb::sample_motion_batch_request::When::Times(pb::Times { values: times.clone() });
+    let req = pb::SampleMotionBatchRequest {
+        motion: Some(rpc_motion.clone()),
+        when: Some(when),
+        space: pb::Space::Model as i32,
+        ..Default::default()
+    };
+    let mut grpc = app.grpc().await;
+    let batch = grpc.sample_motion_batch(req).await.unwrap().into_inner();
+    assert_eq!(batch.poses.len(), times.len());
+    for (k, (rest, rpc)) in rest["poses"].as_array().unwrap().iter().zip(&batch.poses).enumerate() {
+        let joints = rest["joints"].as_array().unwrap();
+        for (part, got) in [("translation", &rpc.translations), ("rotation", &rpc.rotations)] {
+            let want: Vec<f32> = joints
+                .iter()
+                .flat_map(|j| j[part].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32))
+                .collect();
+            assert_eq!(got, &want, "pose {k}: {part}");
+        }
+    }
+
+    let time = pb::SourcePose { pose: Some(pb::source_pose::Pose::Time(0.0)) };
+    let motion = pb::Motion { retarget: Some(pb::Retarget { target_pose: Some(time), ..retarget }), ..rpc_motion };
+    let req = pb::SampleMotionRequest { motion: Some(motion), time: 0.0, ..Default::default() };
+    let status = grpc.sample_motion(req).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument);
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "target_pose_needs_rotations", "{status:?}");
+    assert!(status.message().contains("/motion/retarget/target_pose"), "{}", status.message());
 }

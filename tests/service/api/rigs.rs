@@ -19,7 +19,7 @@ async fn post(app: &TestApp, path: &str, body: &Value) -> (u16, Value) {
 
 /// Imports `file` from the test data; the id of its clip named `name`, or
 /// of its first clip.
-async fn import(app: &TestApp, file: &str, name: Option<&str>) -> String {
+pub(crate) async fn import(app: &TestApp, file: &str, name: Option<&str>) -> String {
     let url = app.url("/v1/clips/import?replace=true");
     let resp = app.http.post(url).body(testdata(file)).send().await.unwrap();
     assert_eq!(resp.status(), 201, "{file}");
@@ -121,7 +121,7 @@ async fn no_root_joint_names_the_joints_a_client_could_choose() {
 }
 
 /// The character of `file` imported under `name`; its summary.
-async fn import_character(app: &TestApp, file: &str, name: &str) -> Value {
+pub(crate) async fn import_character(app: &TestApp, file: &str, name: &str) -> Value {
     let url = app.url(&format!("/v1/characters/import?name={name}&replace=true"));
     let resp = app.http.post(url).body(testdata(file)).send().await.unwrap();
     assert!(resp.status().is_success(), "{file}: {}", resp.status());

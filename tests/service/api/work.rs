@@ -78,8 +78,8 @@ fn motion_pb(id: &str, joints: usize, iterations: u32) -> pb::Motion {
     };
     pb::Motion {
         layers: vec![pb::Layer { clip_id: id.to_owned(), ..Default::default() }],
-        root_motion: None,
         ik: vec![pb::IkConstraint { kind: Some(pb::ik_constraint::Kind::Chain(chain)) }],
+        ..Default::default()
     }
 }
 

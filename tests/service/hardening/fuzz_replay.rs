@@ -25,7 +25,7 @@ fn areas(target: &str) -> &'static [&'static str] {
         "import_gltf" => &["gltf", "glb"],
         "import_bvh" => &["bvh"],
         "clip_json" => &["json"],
-        "motion_json" => &[],
+        "motion_json" | "graph_json" => &[],
         _ => &["gltf", "glb", "bvh", "json", "sniff"],
     }
 }

@@ -353,7 +353,7 @@ async fn the_motion_refusals_have_one_code_on_both_protocols() {
     let case = |what, layers: Vec<(Value, pb::Layer)>, joints: Vec<&str>, code, status| {
         let (rest_layers, rpc_layers): (Vec<Value>, Vec<pb::Layer>) = layers.into_iter().unzip();
         let body = json!({"motion": {"layers": rest_layers}, "time": 0.5, "joints": joints});
-        let motion = Some(pb::Motion { layers: rpc_layers, root_motion: None, ik: Vec::new() });
+        let motion = Some(pb::Motion { layers: rpc_layers, ..Default::default() });
         let joints: Vec<String> = joints.iter().map(|j| (*j).to_owned()).collect();
         let req =
             pb::SampleMotionRequest { motion: motion.clone(), time: 0.5, joints: joints.clone(), ..Default::default() };

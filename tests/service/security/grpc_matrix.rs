@@ -59,20 +59,14 @@ async fn call(app: &TestApp, rpc: &str, role: Role) -> Result<(), tonic::Status>
             Ok(())
         }
         "SampleMotion" => {
-            let motion = pb::Motion {
-                layers: vec![pb::Layer { clip_id: id, ..Default::default() }],
-                root_motion: None,
-                ik: Vec::new(),
-            };
+            let motion =
+                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], ..Default::default() };
             let req = pb::SampleMotionRequest { motion: Some(motion), time: 0.5, ..Default::default() };
             grpc.sample_motion(with_token(req, t)).await.map(drop)
         }
         "SampleMotionBatch" => {
-            let motion = pb::Motion {
-                layers: vec![pb::Layer { clip_id: id, ..Default::default() }],
-                root_motion: None,
-                ik: Vec::new(),
-            };
+            let motion =
+                pb::Motion { layers: vec![pb::Layer { clip_id: id, ..Default::default() }], ..Default::default() };
             let when = pb::sample_motion_batch_request::When::Times(pb::Times { values: vec![0.0, 1.0] });
             let req = pb::SampleMotionBatchRequest { motion: Some(motion), when: Some(when), ..Default::default() };
             grpc.sample_motion_batch(with_token(req, t)).await.map(drop)

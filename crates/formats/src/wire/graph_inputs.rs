@@ -32,7 +32,7 @@ fn problem(code: &'static str, pointer: String, detail: impl Into<String>) -> Do
 }
 
 /// RFC 6901: a map key in a pointer.
-fn escape(key: &str) -> String {
+pub(super) fn escape(key: &str) -> String {
     key.replace('~', "~0").replace('/', "~1")
 }
 

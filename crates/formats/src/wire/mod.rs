@@ -14,4 +14,6 @@ pub mod json;
 pub mod mesh;
 pub mod motion;
 pub mod proto;
+pub mod proto_graph;
+pub mod proto_motion;
 pub mod spring;

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use crate::wire::ik::{EffectorDoc, IkDoc, IkKindDoc, KeysDoc, LimitDoc, TargetDoc, WeightDoc};
 use crate::wire::json::{DocError, ParameterValues};
 use anim::ik::{IkKind, IkReport, IkSpec};
-use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionSpec, Planar, RootMode, RootMotion, RootMotionSpec, UpAxis};
+use anim::motion::{LayerMode, Planar, RootMode, RootMotion, UpAxis};
 use anim::{
     Channel, ClipSpec, Ease, Ends, EventSpec, Interpolation, JointSpec, KeyedIkSpec, Keys, MAX_PARAMETER_WIDTH,
     ParameterSpec, Playback, Pose, SkeletonSpec, Space, Speed, TrackSpec, Transform,
@@ -84,48 +84,6 @@ proto_enum!(space_from_pb, space_to_pb, Space => Space { Local = Local, Model = 
 proto_enum!(layer_mode_from_pb, layer_mode_to_pb, LayerMode => LayerMode { Blend = Blend, Additive = Additive });
 proto_enum!(root_mode_from_pb, root_mode_to_pb, RootMode => RootMode { Report = Report, Extract = Extract });
 proto_enum!(up_axis_from_pb, up_axis_to_pb, UpAxis => UpAxis { Y = Y, Z = Z });
-
-/// A protobuf motion → the core's authoring form, clip ids still to be
-/// looked up; enum numbers the proto does not define are refused at their
-/// pointer (`/motion/layers/1/mode`).
-///
-/// # Errors
-/// An undefined enum number.
-pub fn motion_from_pb(motion: &pb::Motion) -> Result<MotionSpec<String>, DocError> {
-    let layers = motion
-        .layers
-        .iter()
-        .enumerate()
-        .map(|(i, l)| {
-            let at = |field: &str| format!("/motion/layers/{i}/{field}");
-            Ok(LayerSpec {
-                clip: l.clip_id.clone(),
-                weight: l.weight.unwrap_or(1.0),
-                mode: layer_mode_from_pb(l.mode, &at("mode"))?.unwrap_or_default(),
-                mask: l.mask.as_ref().map(|m| MaskSpec {
-                    joints: m.joints.iter().map(|(name, w)| (name.clone(), *w)).collect(),
-                    descendants: m.descendants,
-                    default: m.default_weight,
-                }),
-                offset: l.offset,
-                speed: l.speed.unwrap_or(1.0),
-                playback: playback_from_pb(l.playback, &at("playback"))?,
-                sync: (!l.sync.is_empty()).then(|| l.sync.clone()),
-                reference_time: l.reference_time,
-                retarget: None,
-            })
-        })
-        .collect::<Result<Vec<_>, DocError>>()?;
-    let root_motion = match &motion.root_motion {
-        None => None,
-        Some(r) => Some(RootMotionSpec {
-            joint: (!r.joint.is_empty()).then(|| r.joint.clone()),
-            mode: root_mode_from_pb(r.mode, "/motion/root_motion/mode")?.unwrap_or_default(),
-            up: up_axis_from_pb(r.up, "/motion/root_motion/up")?.unwrap_or_default(),
-        }),
-    };
-    Ok(MotionSpec { layers, root_motion, ik: ik_from_pb(&motion.ik, "/motion/ik")?, ..MotionSpec::default() })
-}
 
 /// A composed pose's root motion on the wire.
 pub fn root_motion_to_pb(root: RootMotion) -> pb::RootMotion {
@@ -386,7 +344,7 @@ pub fn ik_from_pb(list: &[pb::IkConstraint], pointer: &str) -> Result<Vec<IkSpec
 /// field its kind does not take; empty strings and lists are absent (the
 /// JSON's missing fields). Only flat keys are checked here: their width,
 /// naming the first incomplete key (`/ik/0/target/values/3`).
-fn ik_doc_from_pb(c: &pb::IkConstraint, pointer: &str) -> Result<IkDoc, DocError> {
+pub(super) fn ik_doc_from_pb(c: &pb::IkConstraint, pointer: &str) -> Result<IkDoc, DocError> {
     use pb::ik_constraint::Kind;
     let names = |v: &[String]| (!v.is_empty()).then(|| v.to_vec());
     let target = |t: &Option<pb::IkTarget>, at: String| target_doc(t.as_ref(), &at);
@@ -635,6 +593,12 @@ mod tests {
     use super::*;
     use crate::wire::json::{ClipDoc, parse_clip};
     use anim::Clip;
+
+    /// A motion message read as the service reads it: the JSON document it
+    /// stands for, then that document's spec.
+    fn motion_from_pb(motion: &pb::Motion) -> Result<anim::motion::MotionSpec<String>, DocError> {
+        crate::wire::proto_motion::motion_doc_from_pb(motion)?.to_spec("/motion")
+    }
 
     fn wave() -> ClipSpec {
         let body = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/wave.json")).unwrap();

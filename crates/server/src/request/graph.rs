@@ -1,23 +1,26 @@
 //! Sampling requests over a graph (docs/graphs.md, “Using a graph”): a
 //! motion whose only layer names `"graph"`, played on the tick grid `k/fps`
 //! from 0 with the request's timed `inputs`, the poses of the ticks from
-//! `start` to `end` answered. The graph comes built from the cache of built
-//! graphs (`server::graphs`); every tick played, answered or not, is priced
-//! before any is played.
+//! `start` to `end` answered (or, for one pose, of the last tick at or
+//! before `time`). REST and gRPC alike: each says where its fields sit
+//! ([`Locate`]). The graph comes built from the cache of built graphs
+//! (`server::graphs`); every tick played, answered or not, is priced before
+//! any is played.
 
 use std::sync::Arc;
 
 use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
-use super::raw::{Field, Format, Raw, RawModes, in_body, joint_subset};
+use super::raw::{Field, Format, Locate, Raw, RawModes, joint_subset, unprocessable};
 use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
 use crate::built::BuiltGraph;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
+use crate::stream::PinnedClip;
 use crate::work::price;
 use anim::Space;
-use anim::graph::{Inputs, TickRange};
+use anim::graph::{GraphPlayer, Inputs, TickRange};
 use formats::wire::graph_inputs::InputDoc;
 use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
 
@@ -61,6 +64,21 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<&str>, ApiError> {
     Ok(layer.graph.as_deref())
 }
 
+/// A graph's fields in a request whose motion names no graph: refused
+/// (`graph_unsupported`) at the first of `/report`, `/inputs`, `/fps`
+/// that is set.
+///
+/// # Errors
+/// As said.
+pub fn no_graph_fields(report: bool, inputs: bool, fps: bool) -> Result<(), ApiError> {
+    let fields = [(report, "report"), (inputs, "inputs"), (fps, "fps")];
+    let Some(field) = fields.into_iter().find_map(|(set, field)| set.then_some(field)) else {
+        return Ok(());
+    };
+    let detail = format!("`{field}` drives a graph: the motion's layer names no `graph`");
+    Err(unsupported(&format!("/{field}"), &detail))
+}
+
 /// The first field of a graph layer that is not its default.
 fn layer_field_set(layer: &LayerDoc) -> Option<&'static str> {
     [
@@ -79,11 +97,15 @@ fn layer_field_set(layer: &LayerDoc) -> Option<&'static str> {
     .find_map(|(field, set)| set.then_some(field))
 }
 
-/// A graph sampling request's own fields, as a JSON body carried them.
+/// A graph sampling request's own fields, as a JSON body or a protobuf
+/// message carried them.
 #[derive(Debug, Clone, Copy)]
 pub struct RawGraphSampling<'a> {
     pub reference: &'a str,
     pub inputs: &'a [InputDoc],
+    /// One pose's time (`POST /v1/poses`, `SampleMotion`): the last tick at
+    /// or before it is answered, and `times`, `start` and `end` are absent.
+    pub time: Option<f64>,
     pub times: Option<&'a [f64]>,
     pub start: Option<f64>,
     pub end: Option<f64>,
@@ -93,6 +115,10 @@ pub struct RawGraphSampling<'a> {
     pub joints: Option<&'a [String]>,
     pub parameters: Option<&'a [String]>,
     pub report: bool,
+    /// Where each field sits on the request's wire, and the wire the
+    /// answer is priced on.
+    pub at: Locate,
+    pub wire: Wire,
 }
 
 /// A checked, priced graph sampling request.
@@ -114,24 +140,26 @@ impl RawGraphSampling<'_> {
     ///
     /// # Errors
     /// `graph_needs_ticks` (`times`), `graph_unsupported` (`parameters`),
-    /// `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`;
+    /// `times_or_range`, `fps_out_of_range`, `bad_range` (also a pose's
+    /// `time` below 0), `bad_number` (a pose's `time` not a number),
+    /// `too_many_poses`;
     /// the graph's lookup refusals at `/motion/layers/0/graph`; the inputs'
     /// (`bad_time`, `unknown_parameter`, `parameter_type`,
     /// `parameter_out_of_range`) at `/inputs/…`; `no_inverse_binds`,
     /// `unknown_joint`. The caller checks the price, once compressed.
     pub async fn resolve(&self, state: &AppState, caller: &CallerKey) -> Result<GraphSampling, ApiError> {
-        let format = Format::decode(self.format, in_body)?;
-        let space = RawModes { space: self.space, ..RawModes::default() }.check(in_body)?.space;
+        let format = Format::decode(self.format, self.at)?;
+        let space = RawModes { space: self.space, ..RawModes::default() }.check(self.at)?.space;
         let range = self.range(state.config.limits.max_poses)?;
         let built = crate::graphs::resolve(state, caller, self.reference, GRAPH_AT).await?;
         let inputs = formats::wire::graph_inputs::inputs(&built.graph, self.inputs, range.fps, "/inputs")?;
         let skeleton = built.graph.skeleton();
         if format == Format::Skinning && !skeleton.has_inverse_binds() {
             let detail = "format=skinning needs inverse bind matrices, which the graph's skeleton has not";
-            return Err(super::raw::unprocessable("no_inverse_binds", Field::Format, in_body, detail.into()));
+            return Err(unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
-        let joints = self.joints.map(|names| joint_subset(skeleton, names, in_body)).transpose()?;
-        let cost = cost(&built, &range, format, self.report);
+        let joints = self.joints.map(|names| joint_subset(skeleton, names, self.at)).transpose()?;
+        let cost = cost(&built, &range, (format, self.wire), self.report);
         let report = self.report;
         Ok(GraphSampling { built, range, inputs, format, space, joints, report, cost })
     }
@@ -139,43 +167,86 @@ impl RawGraphSampling<'_> {
     fn range(&self, max_poses: usize) -> Result<TickRange, ApiError> {
         if self.times.is_some() {
             let detail = "a graph is played on ticks: give `start` and `end` (and `fps`, default 60), not `times`";
-            return Err(ApiError::invalid("graph_needs_ticks", "/times", detail));
+            return Err(unprocessable("graph_needs_ticks", Field::Times, self.at, detail.into()));
         }
         if self.parameters.is_some() {
             return Err(unsupported("/parameters", "a graph's poses carry no parameter subset yet"));
         }
+        if let Some(time) = self.time {
+            return self.tick_at(time);
+        }
         let (Some(start), Some(end)) = (self.start, self.end) else {
             let detail = "a graph is played on ticks: give `start` and `end` (and `fps`, default 60)";
-            return Err(ApiError::invalid("times_or_range", "", detail));
+            return Err(unprocessable("times_or_range", Field::When, self.at, detail.into()));
         };
-        let fps = self.fps.unwrap_or(DEFAULT_GRAPH_FPS);
-        if !FPS_RANGE.contains(&fps) {
-            return Err(ApiError::invalid(
-                "fps_out_of_range",
-                "/fps",
-                format!("fps must be in 1..={MAX_FPS}, got {fps}"),
-            ));
-        }
+        let fps = self.fps()?;
         if !(start.is_finite() && start >= 0.0) {
-            return Err(ApiError::invalid("bad_range", "/start", format!("start is a finite time ≥ 0, got {start}")));
+            let detail = format!("start is a finite time ≥ 0, got {start}");
+            return Err(unprocessable("bad_range", Field::Start, self.at, detail));
         }
         let range = TickRange::new(start, end, fps).ok_or_else(|| {
-            ApiError::invalid("bad_range", "/end", format!("no tick of the grid at {fps} fps lies in [{start}, {end}]"))
+            let detail = format!("no tick of the grid at {fps} fps lies in [{start}, {end}]");
+            unprocessable("bad_range", Field::End, self.at, detail)
         })?;
         if range.answered() > max_poses as u64 {
             let detail = format!("{} poses requested; the limit is {max_poses} per request", range.answered());
-            return Err(ApiError::invalid("too_many_poses", "", detail));
+            return Err(unprocessable("too_many_poses", Field::When, self.at, detail));
         }
         Ok(range)
+    }
+
+    /// The grid's rate, 1..=240 (default 60).
+    fn fps(&self) -> Result<f64, ApiError> {
+        let fps = self.fps.unwrap_or(DEFAULT_GRAPH_FPS);
+        if !FPS_RANGE.contains(&fps) {
+            let detail = format!("fps must be in 1..={MAX_FPS}, got {fps}");
+            return Err(unprocessable("fps_out_of_range", Field::Fps, self.at, detail));
+        }
+        Ok(fps)
+    }
+
+    /// One pose's tick: the last at or before `time` (within the grid's
+    /// tolerance, so 0.1 s at 60 fps is tick 6), every tick before it
+    /// played. A time that is not a number is `bad_number`, as any pose's.
+    fn tick_at(&self, time: f64) -> Result<TickRange, ApiError> {
+        let time = super::raw::finite(Raw::Number(time), Field::Time, self.at)?;
+        let fps = self.fps()?;
+        let Some(played) = (time >= 0.0).then(|| TickRange::new(0.0, time, fps)).flatten() else {
+            let detail = format!("a graph's pose is at a time ≥ 0 within the grid's reach, got {time}");
+            return Err(unprocessable("bad_range", Field::Time, self.at, detail));
+        };
+        Ok(TickRange { first: played.last, ..played })
+    }
+}
+
+/// Plays a graph sampling's ticks in order, for any transport: the player
+/// is made at the first answered tick (on the work pool) and goes on from
+/// tick to tick, so an answer, however it is cut into pieces, holds the
+/// poses [`GraphPlayer::play`] gives.
+#[derive(Default)]
+pub struct GraphTicks {
+    player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
+    next_input: usize,
+}
+
+impl GraphTicks {
+    /// The player at answered tick `i` (tick `range.first + i`) and that
+    /// tick's motion time; `i` only grows from call to call.
+    pub fn play(&mut self, s: &GraphSampling, i: usize) -> (&GraphPlayer<Arc<dyn PinnedClip>>, f64) {
+        let k = s.range.first + i as u64;
+        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
+        // The inputs were checked against this graph, so no setting fails.
+        let _ = player.play_to(k, &s.range, &s.inputs, &mut self.next_input);
+        (player, s.range.time(k))
     }
 }
 
 /// Every tick played (from 0, answered or not) at the graph's costliest
 /// tick, and an answer as long as the largest of its clips' poses, with
 /// the reports when asked for.
-fn cost(built: &BuiltGraph, range: &TickRange, format: Format, report: bool) -> Cost {
+fn cost(built: &BuiltGraph, range: &TickRange, (format, wire): (Format, Wire), report: bool) -> Cost {
     let graph = &built.graph;
-    let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, Wire::Json);
+    let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, wire);
     let per_pose = built.clips.iter().map(|c| pose_bytes(c).per_pose).max().unwrap_or(0)
         + json_str(&built.meta.id)
         + if report { report_bytes(built) } else { 0 };

@@ -7,7 +7,6 @@
 //! as the client reads.
 
 use std::ops::Range;
-use std::sync::Arc;
 
 use axum::extract::State;
 use axum::http::HeaderMap;
@@ -20,13 +19,11 @@ use crate::auth::{CallerKey, ReadAccess};
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Composed, Field, Format, GraphSampling, Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose, Wire,
-    graph_layer, in_body, in_pose_body, parse_json,
+    Composed, Field, Format, GraphSampling, GraphTicks, Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose,
+    Wire, graph_layer, in_body, in_pose_body, no_graph_fields, parse_json,
 };
 use crate::state::AppState;
-use crate::stream::PinnedClip;
 use crate::work::Cancel;
-use anim::graph::GraphPlayer;
 use anim::motion::MotionOptions;
 use anim::{MotionSampler, Pose, Space};
 use formats::wire::graph_inputs::{InputDoc, write_report};
@@ -55,6 +52,16 @@ pub struct PoseOfMotion {
     /// Only these parameters (docs/clip-format.md §3), in the first layer's clip's order.
     #[serde(default)]
     pub parameters: Option<Vec<String>>,
+    /// A graph's timed settings, `[{"time", "set": {name: value}}]` (docs/graphs.md, “Using a graph”).
+    #[serde(default)]
+    #[schema(value_type = Option<Vec<Object>>)]
+    pub inputs: Option<Vec<InputDoc>>,
+    /// A graph's tick grid, 1 to 240 (default 60): the pose is the last tick's at or before `time`.
+    #[serde(default)]
+    pub fps: Option<f64>,
+    /// A graph's pose carries the tick's `graph` report.
+    #[serde(default)]
+    pub report: bool,
 }
 
 /// `POST /v1/samples`: many poses of a motion, at `times` or on a frame range.
@@ -112,10 +119,10 @@ async fn compose(
     post, path = "/v1/poses", tag = "poses",
     request_body(content = PoseOfMotion, content_type = "application/json"),
     responses(
-        (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it", body = super::schemas::PoseSchema),
+        (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it; over a graph, the pose of the last tick at or before `time` (its `clip` the graph's id, its `time` the tick's), with the tick's `graph` report when `report` is true", body = super::schemas::PoseSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
-        (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, `incompatible_skeleton` (a layer of another rig), …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`", body = super::schemas::Problem),
+        (status = 404, description = "A layer's clip (`clip_not_found`), graph (`graph_not_found`) or the character does not exist", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, `incompatible_skeleton` (a layer of another rig), …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`; over a graph (docs/graphs.md), `bad_range` (`time` below 0), `fps_out_of_range`, the inputs' `bad_time`, `unknown_parameter`, `parameter_type`, `parameter_out_of_range`, and `graph_unsupported` (what a graph does not take yet; `inputs`, `report` or `fps` without a graph layer)", body = super::schemas::Problem),
         (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
         (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
@@ -139,6 +146,10 @@ pub(super) async fn answer_pose(
     headers: &HeaderMap,
     req: PoseOfMotion,
 ) -> Result<Response, ApiError> {
+    if let Some(reference) = graph_layer(&req.motion)? {
+        return graph_pose(state, caller, headers, &req, reference).await;
+    }
+    no_graph_fields(req.report, req.inputs.is_some(), req.fps.is_some())?;
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
     let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: text(&req.format), at: in_pose_body };
     let checked = raw.check()?;
@@ -194,11 +205,7 @@ pub(super) async fn answer_samples(
     if let Some(reference) = graph_layer(&req.motion)? {
         return graph_samples(state, caller, headers, &req, reference).await;
     }
-    if req.inputs.is_some() || req.report {
-        let (field, detail) = if req.report { ("/report", "`report`") } else { ("/inputs", "`inputs`") };
-        let detail = format!("{detail} drives a graph: the motion's layer names no `graph`");
-        return Err(ApiError::invalid("graph_unsupported", field, detail));
-    }
+    no_graph_fields(req.report, req.inputs.is_some(), false)?;
     let raw = RawBatch {
         times: req.times.as_deref(),
         start: req.start,
@@ -238,6 +245,7 @@ async fn graph_samples(
     let raw = RawGraphSampling {
         reference,
         inputs: req.inputs.as_deref().unwrap_or_default(),
+        time: None,
         times: req.times.as_deref(),
         start: req.start,
         end: req.end,
@@ -247,6 +255,8 @@ async fn graph_samples(
         joints: req.joints.as_deref(),
         parameters: req.parameters.as_deref(),
         report: req.report,
+        at: in_body,
+        wire: Wire::Json,
     };
     let sampling = raw.resolve(&state, &caller).await?;
     let coding = AnswerCoding::of(headers, state.config.compression.min_bytes);
@@ -263,14 +273,54 @@ async fn graph_samples(
     Ok(json_response(body))
 }
 
-/// A graph's answered ticks, in order: the player is made on the work pool
-/// at the first piece and goes on from tick to tick, so the answer is the
-/// one [`GraphPlayer::play`] gives, however it is cut into pieces.
+/// `POST /v1/poses` over a graph: the ticks up to the last at or before
+/// `time` played on the work pool, the last one's pose answered (what
+/// `/v1/samples` answers for that tick).
+async fn graph_pose(
+    state: AppState,
+    caller: CallerKey,
+    headers: &HeaderMap,
+    req: &PoseOfMotion,
+    reference: &str,
+) -> Result<Response, ApiError> {
+    let raw = RawGraphSampling {
+        reference,
+        inputs: req.inputs.as_deref().unwrap_or_default(),
+        time: Some(req.time),
+        times: None,
+        start: None,
+        end: None,
+        fps: req.fps,
+        format: text(&req.format),
+        space: text(&req.space),
+        joints: req.joints.as_deref(),
+        parameters: req.parameters.as_deref(),
+        report: req.report,
+        at: in_pose_body,
+        wire: Wire::Json,
+    };
+    let sampling = raw.resolve(&state, &caller).await?;
+    let coding = AnswerCoding::of(headers, state.config.compression.min_bytes);
+    let cost = sampling.cost.compressed(coding.at(sampling.cost.bytes));
+    cost.check(&state.config.limits, Field::Time, in_pose_body)?;
+    let mut writer = GraphPoses::new(sampling, cost.bytes);
+    let body = state
+        .work
+        .spend(&caller, cost.work(), move |cancel| {
+            let mut body = Vec::new();
+            writer.write(&mut body, 0..1, cancel);
+            body
+        })
+        .await?;
+    state.counters.poses.increment(1);
+    Ok(json_response(body))
+}
+
+/// A graph's answered ticks, in order (played by [`GraphTicks`]), as JSON.
 struct GraphPoses {
     sampling: GraphSampling,
     bound: u64,
-    player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
-    next_input: usize,
+    ticks: GraphTicks,
     model: Pose,
     matrices: Vec<Mat4>,
     report: Vec<u8>,
@@ -279,23 +329,20 @@ struct GraphPoses {
 impl GraphPoses {
     fn new(sampling: GraphSampling, bound: u64) -> GraphPoses {
         let (model, matrices, report) = (Pose::default(), Vec::new(), Vec::new());
-        GraphPoses { sampling, bound, player: None, next_input: 0, model, matrices, report }
+        GraphPoses { sampling, bound, ticks: GraphTicks::default(), model, matrices, report }
     }
 
     /// Appends answered pose `i` (tick `range.first + i`).
     fn write_one(&mut self, out: &mut Vec<u8>, i: usize) {
         let s = &self.sampling;
-        let k = s.range.first + i as u64;
-        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
-        // The inputs were checked against this graph, so no setting fails.
-        let _ = player.play_to(k, &s.range, &s.inputs, &mut self.next_input);
+        let (player, time) = self.ticks.play(s, i);
         self.report.clear();
         if s.report {
             write_report(&mut self.report, &player.report());
         }
         let joints = s.joints.as_deref();
         let extras = Extras { joints, root_motion: None, ik: &[], parameters: None, tail: &self.report, feet: &[] };
-        let (clip, skeleton, time) = (s.built.meta.id.as_str(), s.built.graph.skeleton(), s.range.time(k));
+        let (clip, skeleton) = (s.built.meta.id.as_str(), s.built.graph.skeleton());
         let clip_time = time as f32;
         match s.format {
             Format::Trs => {

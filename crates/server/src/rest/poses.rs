@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use axum::extract::State;
 use axum::http::HeaderMap;
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use glam::Mat4;
 use serde::Deserialize;
 use utoipa::ToSchema;
@@ -184,6 +184,9 @@ async fn pose_on_character(
         format: q.get("format").map(str::to_owned),
         joints: list("joints"),
         parameters: list("parameters"),
+        inputs: None,
+        fps: None,
+        report: false,
     };
     super::motions::answer_pose(state, caller, headers, req).await.map_err(|e| at_clip_route(e, in_query))
 }
