@@ -116,6 +116,13 @@ impl FootPlanter {
         }
     }
 
+    /// Bytes it holds: its record and, per foot, its leg, a constraint, a
+    /// solve and a report.
+    pub fn heap_bytes(&self) -> usize {
+        let per_foot = size_of::<Foot>() + size_of::<IkConstraint>() + size_of::<IkReport>() + size_of::<FootReport>();
+        size_of::<FootPlanter>() + self.feet.len() * per_foot
+    }
+
     /// How many feet it plants (the legs both maps have), 0 to 2.
     pub fn feet(&self) -> usize {
         self.feet.len()

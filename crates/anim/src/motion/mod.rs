@@ -325,6 +325,7 @@ impl<C: ClipSource> Motion<C> {
                 + l.reference.as_ref().map_or(0, Pose::heap_bytes)
                 + vec_bytes(&l.parameters)
                 + l.retarget.as_deref().map_or(0, retargeter_bytes)
+                + l.planter.as_deref().map_or(0, FootPlanter::heap_bytes)
         };
         let group = |g: &SyncGroup| g.name.capacity() + vec_bytes(&g.members);
         vec_bytes(&self.layers)
