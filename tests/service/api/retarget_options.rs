@@ -283,3 +283,29 @@ async fn grpc_retargets_with_a_target_pose_and_planted_feet_as_rest_does() {
     assert_eq!(status.metadata().get("x-error-code").unwrap(), "target_pose_needs_rotations", "{status:?}");
     assert!(status.message().contains("/motion/retarget/target_pose"), "{}", status.message());
 }
+
+/// Planted feet are priced before anything runs: each adds a two-bone solve
+/// to a pose's price, 4 units and 1 per joint of the character (CesiumMan's
+/// 21), so two feet add 50 units a pose (docs/characters.md, “Planted feet”).
+#[tokio::test]
+async fn each_planted_foot_adds_a_two_bone_solve_to_a_pose_s_price() {
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 1_000_000).start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let joints = rest_rotations(&app, &cesium).await.len() as u64;
+    let per_pose = |retarget: Value| {
+        let motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": retarget});
+        let body = json!({"motion": motion, "times": vec![0.0; 10_000]});
+        let app = &app;
+        async move {
+            let resp = app.http.post(app.url("/v1/samples")).json(&body).send().await.unwrap();
+            let (status, problem): (u16, Value) = (resp.status().as_u16(), resp.json().await.unwrap());
+            assert_eq!((status, problem["code"].as_str()), (422, Some("too_much_work")), "{problem}");
+            let detail = problem["detail"].as_str().unwrap();
+            let units = detail.split("poses × ").nth(1).and_then(|s| s.split(' ').next()).unwrap();
+            units.parse::<u64>().unwrap()
+        }
+    };
+    let free = per_pose(json!({})).await;
+    let planted = per_pose(json!({"feet": "plant"})).await;
+    assert_eq!(planted - free, 2 * (4 + joints), "{free} → {planted} units a pose");
+}
