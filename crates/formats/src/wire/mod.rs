@@ -14,4 +14,5 @@ pub mod json;
 pub mod mesh;
 pub mod motion;
 pub mod proto;
+pub mod proto_graph;
 pub mod spring;
