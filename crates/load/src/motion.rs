@@ -161,6 +161,7 @@ pub fn to_pb(spec: &MotionSpec<String>) -> pb::Motion {
             playback: l.playback.map_or(0, |p| proto::playback_to_pb(p).into()),
             sync: l.sync.clone().unwrap_or_default(),
             reference_time: l.reference_time,
+            graph: String::new(),
         })
         .collect();
     let root_motion = spec.root_motion.as_ref().map(|r| pb::RootMotionOptions {

@@ -245,8 +245,8 @@ async fn a_broadcast_set_reaches_every_viewer_at_the_seq_it_answers() {
     let resp = app.http.post(app.url("/v1/broadcasts")).json(&body).send().await.unwrap();
     assert_eq!(resp.status(), 201);
     let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
-    let watch = |app: &TestApp| app.ws(&format!("/v1/broadcasts/{id}/stream"));
-    let (mut a, mut b) = (watch(&app).await, watch(&app).await);
+    let path = format!("/v1/broadcasts/{id}/stream");
+    let (mut a, mut b) = (app.ws(&path).await, app.ws(&path).await);
     next_frame(&mut a).await;
     let control = json!({"op": "set", "parameters": {"speed": 2.5}});
     let answer = app.post_json(&format!("/v1/broadcasts/{id}/controls"), &control).await;

@@ -411,7 +411,7 @@ impl Program {
         }
         let st = &mut self.state;
         st.clip_time = match &mut st.graph {
-            Some(graph) => graph.tick(self.params.fps, st.playhead.paused(), 0),
+            Some(graph) => graph.tick(self.params.fps, st.playhead.paused(), (k, 0)),
             None => {
                 let time = (st.playhead.time_at(k), super::hub::stream_clock(&self.params, k));
                 sample_tick(&mut st.player, &self.params, time, jumped, &mut st.prev, &mut st.crossed)

@@ -58,13 +58,16 @@ impl GraphDeck {
         Ok(GraphDeck { player, report: program.report, space, model: Pose::default() })
     }
 
-    /// One stream tick at `fps`, `skipped` ticks after the previous one was
-    /// shown (those are stepped without a pose); nothing while `paused`
-    /// but the first. Returns the motion time shown, as a frame's `clip_time`.
-    pub(super) fn tick(&mut self, fps: u32, paused: bool, skipped: u64) -> f32 {
+    /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
+    /// shown (those are stepped without a pose, as are the ticks before a
+    /// first tick that came late), so that a stream never paused shows
+    /// graph tick `k` at tick `k`; nothing while `paused` but the first.
+    /// Returns the motion time shown, as a frame's `clip_time`.
+    pub(super) fn tick(&mut self, fps: u32, paused: bool, (k, skipped): (u64, u64)) -> f32 {
         let dt = 1.0 / f64::from(fps);
-        if !paused || self.player.ticks() == 0 {
-            for _ in 0..if self.player.ticks() == 0 { 0 } else { skipped } {
+        let first = self.player.ticks() == 0;
+        if !paused || first {
+            for _ in 0..if first { k } else { skipped } {
                 self.player.step(dt);
             }
             self.player.tick(dt);

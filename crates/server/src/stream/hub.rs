@@ -229,7 +229,7 @@ impl Hub {
     /// Evaluates and encodes tick `k`.
     fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
         let clip_time = match &mut self.graph {
-            Some(graph) => graph.tick(self.params.fps, self.playhead.paused(), skipped),
+            Some(graph) => graph.tick(self.params.fps, self.playhead.paused(), (k, skipped)),
             None => {
                 let time = (self.playhead.time_at(k), stream_clock(&self.params, k));
                 sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed)
