@@ -219,7 +219,8 @@ async fn a_set_flood_on_a_graph_stream_and_broadcast_leaves_the_node_answering()
     let flood = flood_sets(ws, 20_000, &["bad_control"]).await;
     let report = probes.finish();
     println!(
-        "FIGURE 20000 set controls on a graph stream in {:.1} s: {} refused, {} frames meanwhile",
+        "FIGURE {} set controls on a graph stream in {:.1} s: {} refused, {} frames meanwhile",
+        flood.sent,
         started.elapsed().as_secs_f64(),
         flood.refused,
         flood.frames
@@ -236,7 +237,8 @@ async fn a_set_flood_on_a_graph_stream_and_broadcast_leaves_the_node_answering()
     let flood = flood_sets(ws, 20_000, &["rate_limited", "unavailable", "bad_control"]).await;
     let report = probes.finish();
     println!(
-        "FIGURE 20000 set controls on a graph broadcast in {:.1} s: {} refused, {} frames meanwhile",
+        "FIGURE {} set controls on a graph broadcast in {:.1} s: {} refused, {} frames meanwhile",
+        flood.sent,
         started.elapsed().as_secs_f64(),
         flood.refused,
         flood.frames

@@ -96,10 +96,14 @@ struct GraphBits {
     values: Vec<u64>,
     ticks: u64,
     current: usize,
-    /// Bottom to top: state, node time, phases, and (above the bottom) the
-    /// transition that put it there, the state it came from and its elapsed time.
-    chain: Vec<(usize, u64, Vec<u64>, Option<(usize, usize, u64)>)>,
+    /// Bottom to top.
+    chain: Vec<SlotBits>,
 }
+
+/// A state playing: the state, its node time, its phases, and (above the
+/// bottom) the transition that put it there, the state it came from and its
+/// elapsed time.
+type SlotBits = (usize, u64, Vec<u64>, Option<(usize, usize, u64)>);
 
 fn graph_bits(g: GraphState) -> GraphBits {
     GraphBits {
