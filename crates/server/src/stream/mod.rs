@@ -97,4 +97,6 @@ mod tests_checkpoint;
 #[cfg(test)]
 mod tests_compact;
 #[cfg(test)]
+mod tests_graph;
+#[cfg(test)]
 mod tests_ws;
