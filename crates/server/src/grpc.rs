@@ -139,27 +139,26 @@ impl GrpcService {
             parameters: (!req.parameters.is_empty()).then_some(req.parameters.as_slice()),
             at: stream_at,
         };
-        let opening = match &req.motion {
-            None => raw.open(&self.state, &req.clip_id, caller).await?,
-            Some(_) if !req.clip_id.is_empty() => {
+        let graph = req.motion.as_ref().map(graph_of_pb).transpose()?.flatten();
+        if req.report && graph.is_none() {
+            let detail = "`report` is a graph stream's: the motion's layer names no `graph`";
+            return Err(ApiError::invalid("graph_unsupported", "/report", detail).into());
+        }
+        // Unspecified (0) is no playback; any other is refused as on the WebSocket.
+        let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
+        let opening = match (&req.motion, graph) {
+            (None, _) => raw.open(&self.state, &req.clip_id, caller).await?,
+            (Some(_), _) if !req.clip_id.is_empty() => {
                 let detail = "give `clip_id` or `motion`, not both";
                 return Err(ApiError::invalid("clip_or_motion", "/motion", detail).into());
             }
-            Some(motion) if graph_of_pb(motion)?.is_some() => {
-                let reference = graph_of_pb(motion)?.unwrap_or_default();
-                let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
+            (Some(_), Some(reference)) => {
                 let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
                 raw.open_graph(&self.state, RawGraphStream { reference: &reference, report: req.report }, caller)
                     .await?
             }
-            Some(_) if req.report => {
-                let detail = "`report` is a graph stream's: the motion's layer names no `graph`";
-                return Err(ApiError::invalid("graph_unsupported", "/report", detail).into());
-            }
-            Some(motion) => {
+            (Some(motion), None) => {
                 let motion = super::grpc_motion::raw_motion(motion)?;
-                // Unspecified (0) is no playback; any other is refused as on the WebSocket.
-                let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
                 let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
                 raw.open_motion(&self.state, motion, caller).await?
             }

@@ -286,6 +286,26 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     assert_eq!(pose.graph.as_ref().map(|g| g.state.as_str()), Some("idle"));
     assert!(!pose.joint_names.is_empty());
 
+    // The refusals of the WebSocket, with the same codes.
+    let weighted = pb::Layer { graph: graph.clone(), weight: Some(0.5), ..Default::default() };
+    let refusals = [
+        (pb::StreamRequest { start_time: Some(1.0), ..request.clone() }, "graph_unsupported"),
+        (pb::StreamRequest { playback: 2, ..request.clone() }, "graph_unsupported"),
+        (
+            pb::StreamRequest {
+                motion: Some(pb::Motion { layers: vec![weighted], ..Default::default() }),
+                ..request.clone()
+            },
+            "graph_unsupported",
+        ),
+        (pb::StreamRequest { motion: None, clip_id: graph.clone(), ..request.clone() }, "graph_unsupported"),
+    ];
+    for (refused, code) in refusals {
+        let status = app.grpc().await.stream_frames(refused.clone()).await.unwrap_err();
+        assert_eq!(status.code(), tonic::Code::InvalidArgument, "{refused:?}: {status:?}");
+        assert_eq!(status.metadata().get("x-error-code").unwrap(), code, "{refused:?}");
+    }
+
     let plain = pb::StreamRequest { report: false, ..request.clone() };
     let mut frames = app.grpc().await.stream_frames(plain).await.unwrap().into_inner();
     let first = within(5, "a frame", frames.message()).await.unwrap().unwrap();

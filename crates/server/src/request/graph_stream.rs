@@ -42,8 +42,8 @@ impl RawStream<'_> {
     /// resolved and pinned, priced, charged to `caller` and admitted.
     ///
     /// # Errors
-    /// `graph_unsupported` at `/start`, `/speed`, `/ease`, `/encoding` or
-    /// `/parameters`; the stream rules' codes; the graph's lookup refusals
+    /// `graph_unsupported` at `/playback`, `/start`, `/speed`, `/ease`,
+    /// `/encoding` or `/parameters/0`; the stream rules' codes; the graph's lookup refusals
     /// at `/motion/layers/0/graph`; then as [`RawStream::open_motion`].
     pub async fn open_graph(
         &self,
@@ -110,6 +110,9 @@ impl RawStream<'_> {
         let refuse = |field: Field, detail: &str| {
             Err(unprocessable("graph_unsupported", field, self.at, format!("a graph stream {detail}")))
         };
+        if self.modes.playback.is_some() {
+            return refuse(Field::Playback, "plays its nodes' own playbacks: it takes no `playback`");
+        }
         if request.start.is_some_and(|t| t != 0.0) {
             return refuse(Field::Start, "plays from motion time 0: it takes no `start`");
         }
