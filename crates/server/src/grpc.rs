@@ -41,8 +41,8 @@ use formats::import::warning::in_document;
 use formats::wire::json::{ClipDoc, ParameterValues, parse_clip_doc};
 use formats::wire::proto::server::animation_server::{Animation, AnimationServer};
 use formats::wire::proto::{
-    FILE_DESCRIPTOR_SET, add_parameters, clip_from_pb, clip_to_pb, ik_reports_to_pb, matrices_to_pb, motion_from_pb,
-    pb, playback_to_pb, pose_to_pb,
+    FILE_DESCRIPTOR_SET, add_parameters, clip_from_pb, clip_to_pb, ik_reports_to_pb, matrices_to_pb, pb,
+    playback_to_pb, pose_to_pb,
 };
 
 /// The `Animation` service.
@@ -179,10 +179,7 @@ fn graph_of_pb(motion: &pb::Motion) -> Result<Option<String>, ApiError> {
     if motion.layers.iter().all(|l| l.graph.is_empty()) {
         return Ok(None);
     }
-    let mut doc = formats::wire::motion::MotionDoc::from_spec(&motion_from_pb(motion)?);
-    for (layer, pb) in doc.layers.iter_mut().zip(&motion.layers) {
-        layer.graph = (!pb.graph.is_empty()).then(|| pb.graph.clone());
-    }
+    let doc = formats::wire::proto_motion::motion_doc_from_pb(motion)?;
     Ok(graph_layer(&doc)?.map(str::to_owned))
 }
 
