@@ -33,14 +33,15 @@ use serde_json::Value;
 
 use super::error::ApiError;
 use super::request::{
-    Format, Raw, RawBroadcast, RawModes, RawMotion, RawStream, crossfade_target, in_body, parse_json,
+    Format, Raw, RawBroadcast, RawGraphStream, RawModes, RawMotion, RawStream, crossfade_target, graph_layer, in_body,
+    parse_json,
 };
 use super::state::AppState;
 use crate::auth::CallerKey;
 use crate::store::{ClipStore, StoredBroadcast, StoredCheckpoint, StoredControl};
 use crate::stream::{
     Broadcast, BroadcastSpec, Checkpoint, Control, ControlError, Crossfade, Journal, ParsedControl, StampedControl,
-    StreamMotion, new_control_id, parse_control, unix_nanos,
+    StreamMotion, StreamParams, new_control_id, parse_control, unix_nanos,
 };
 use formats::wire::json::SpaceDoc;
 use formats::wire::motion::MotionDoc;
@@ -70,6 +71,9 @@ pub struct CreateBroadcast {
     /// Seconds with no viewers and no controls before it ends, 1..=86400 (default 300).
     #[serde(default)]
     pub idle_timeout_secs: Option<f64>,
+    /// A graph broadcast's frames carry the tick's `graph` report (docs/graphs.md).
+    #[serde(default)]
+    pub report: bool,
 }
 
 /// What the store holds of a broadcast or a control: the message as sent,
@@ -87,19 +91,28 @@ fn versions(motion: &StreamMotion) -> BTreeMap<String, u64> {
     motion.layers().map(|c| (c.id().to_owned(), c.version())).collect()
 }
 
+/// The versions a broadcast's definition is pinned at: its motion's clips,
+/// or its graph's (`graph:ID` at the graph's version, and every clip of
+/// every state).
+fn definition_versions(params: &StreamParams) -> BTreeMap<String, u64> {
+    let Some(g) = &params.graph else { return versions(&params.motion) };
+    let mut all: BTreeMap<String, u64> = g.graph.state_motions().flat_map(|m| versions(m)).collect();
+    all.insert(format!("graph:{}", g.id), g.version);
+    all
+}
+
 /// Refuses a motion built again over other versions than the stored ones:
 /// its frames could not be the ones other nodes compute. The versions it
 /// was made of are gone, so it is the clip that is not found (a 404 with a
 /// stable code, not a server error).
-fn same_versions(motion: &StreamMotion, stored: &BTreeMap<String, u64>) -> Result<(), ApiError> {
-    let now = versions(motion);
+fn same_versions(now: BTreeMap<String, u64>, stored: &BTreeMap<String, u64>) -> Result<(), ApiError> {
     if &now == stored {
         return Ok(());
     }
     Err(ApiError::ClipNotFoundAt {
         at: super::error::At::Pointer("/motion".into()),
         detail: format!(
-            "this broadcast was made of the clip versions {stored:?}, and a clip was replaced since ({now:?} now): \
+            "this broadcast was made of the clip (and graph) versions {stored:?}, and one was replaced since ({now:?} now): \
              its frames cannot be computed again here; delete the broadcast and create it anew"
         ),
     })
@@ -134,7 +147,14 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         idle_timeout_secs: req.idle_timeout_secs.map(Raw::Number),
         at: in_body,
     };
-    raw.spec(state, RawMotion::of_doc(&req.motion)?, description).await
+    match graph_layer(&req.motion)? {
+        Some(reference) => raw.graph_spec(state, RawGraphStream { reference, report: req.report }, description).await,
+        None if req.report => {
+            let detail = "`report` is a graph broadcast's: the motion's layer names no `graph`";
+            Err(ApiError::invalid("graph_unsupported", "/report", detail))
+        }
+        None => raw.spec(state, RawMotion::of_doc(&req.motion)?, description).await,
+    }
 }
 
 /// The control a control message asks for (a crossfade's motion looked up).
@@ -161,7 +181,7 @@ pub async fn control_from_body(state: &AppState, body: &[u8]) -> Result<Control,
 /// The store failed.
 pub async fn store_created(state: &AppState, b: &Broadcast, body: &[u8]) -> Result<(), ApiError> {
     let message: Value = serde_json::from_slice(body).map_err(ApiError::internal)?;
-    let definition = Stored { message, versions: versions(&b.params().motion) };
+    let definition = Stored { message, versions: definition_versions(b.params()) };
     let stored = StoredBroadcast {
         id: b.id().to_owned(),
         definition: serde_json::to_string(&definition).map_err(ApiError::internal)?,
@@ -240,7 +260,7 @@ pub async fn adopt(state: &AppState, stored: StoredBroadcast) -> Result<Arc<Broa
             let definition: Stored = serde_json::from_str(&stored.definition).map_err(ApiError::internal)?;
             let body = serde_json::to_vec(&definition.message).map_err(ApiError::internal)?;
             let spec = spec_from_body(state, &body).await?;
-            same_versions(&spec.params.motion, &definition.versions)?;
+            same_versions(definition_versions(&spec.params), &definition.versions)?;
             spec
         }
     };
@@ -290,7 +310,7 @@ async fn stored_control(state: &AppState, c: &StoredControl) -> Result<Control, 
     let body = serde_json::to_vec(&stored.message).map_err(ApiError::internal)?;
     let control = control_from_body(state, &body).await?;
     if let Control::Crossfade(fade) = &control {
-        same_versions(&fade.to, &stored.versions)?;
+        same_versions(versions(&fade.to), &stored.versions)?;
     }
     Ok(control)
 }

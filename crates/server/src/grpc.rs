@@ -28,8 +28,8 @@ use crate::cache::CachedClip;
 use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
 use crate::request::{
-    Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawModes, RawPage, RawPose, RawStream,
-    Sampling, Wire, clip as request_clip, evaluate, in_body, in_pose_body,
+    Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes, RawPage, RawPose,
+    RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
@@ -139,16 +139,26 @@ impl GrpcService {
             parameters: (!req.parameters.is_empty()).then_some(req.parameters.as_slice()),
             at: stream_at,
         };
-        let opening = match &req.motion {
-            None => raw.open(&self.state, &req.clip_id, caller).await?,
-            Some(_) if !req.clip_id.is_empty() => {
+        let graph = req.motion.as_ref().map(graph_of_pb).transpose()?.flatten();
+        if req.report && graph.is_none() {
+            let detail = "`report` is a graph stream's: the motion's layer names no `graph`";
+            return Err(ApiError::invalid("graph_unsupported", "/report", detail).into());
+        }
+        // Unspecified (0) is no playback; any other is refused as on the WebSocket.
+        let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
+        let opening = match (&req.motion, graph) {
+            (None, _) => raw.open(&self.state, &req.clip_id, caller).await?,
+            (Some(_), _) if !req.clip_id.is_empty() => {
                 let detail = "give `clip_id` or `motion`, not both";
                 return Err(ApiError::invalid("clip_or_motion", "/motion", detail).into());
             }
-            Some(motion) => {
+            (Some(_), Some(reference)) => {
+                let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
+                raw.open_graph(&self.state, RawGraphStream { reference: &reference, report: req.report }, caller)
+                    .await?
+            }
+            (Some(motion), None) => {
                 let motion = super::grpc_motion::raw_motion(motion)?;
-                // Unspecified (0) is no playback; any other is refused as on the WebSocket.
-                let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
                 let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
                 raw.open_motion(&self.state, motion, caller).await?
             }
@@ -156,6 +166,21 @@ impl GrpcService {
         let Opening { params, permit } = opening.map_err(ApiError::from)?;
         Ok((params, permit))
     }
+}
+
+/// The graph a stream's motion plays (docs/graphs.md), when a layer names
+/// one: checked as a JSON motion's graph layer is (`request::graph_layer`),
+/// with the same codes at the same pointers.
+///
+/// # Errors
+/// `graph_unsupported` at the field a graph does not take; the motion's
+/// enums out of range.
+fn graph_of_pb(motion: &pb::Motion) -> Result<Option<String>, ApiError> {
+    if motion.layers.iter().all(|l| l.graph.is_empty()) {
+        return Ok(None);
+    }
+    let doc = formats::wire::proto_motion::motion_doc_from_pb(motion)?;
+    Ok(graph_layer(&doc)?.map(str::to_owned))
 }
 
 /// Bytes of poses per `SampleStream` message (at least one pose).

@@ -1,6 +1,7 @@
 //! `inbetween serve` wiring: the TOML file, environment and flags reach the
 //! server in that order of precedence; JSON logs are JSON. `inbetween watch`
-//! streams docs/motion.md's example motion files from a real server.
+//! streams docs/motion.md's example motion files from a real server, and the
+//! Fox's locomotion graph driven by `--set` (docs/graphs.md).
 
 use serde_json::{Value, json};
 
@@ -165,6 +166,46 @@ async fn watch_follows_a_broadcast_sends_its_controls_and_exits_cleanly_when_it_
     let at = lines.iter().position(|l| field(l, "time") == "0.2500").expect("the seek's frame");
     assert!(at >= 1, "{stdout}");
     assert_eq!(field(lines[at + 1], "time"), "0.3500", "{stdout}");
+}
+
+#[tokio::test]
+async fn watch_drives_a_graph_with_set_and_prints_its_states() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = ServerProcess::serve().data_dir(dir.path()).start().await;
+    let http = crate::common::http_client();
+    let fox = std::fs::read("examples/gltf/Fox/Fox.glb").unwrap();
+    let imported: Value =
+        http.post(server.url("/v1/clips/import")).body(fox).send().await.unwrap().json().await.unwrap();
+    let mut doc = std::fs::read_to_string("examples/graphs/fox-locomotion.json").unwrap();
+    for clip in imported["clips"].as_array().unwrap() {
+        doc = doc.replace(&format!("name:{}", clip["name"].as_str().unwrap()), clip["id"].as_str().unwrap());
+    }
+    let graph: Value = http
+        .post(server.url("/v1/graphs"))
+        .header("content-type", "application/json")
+        .body(doc)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id = graph["id"].as_str().unwrap_or_else(|| panic!("{graph}"));
+    let mut watch = tokio::process::Command::from(ServerProcess::command());
+    watch.args(["watch", "--server", &server.base(), "--graph", id, "--fps", "20", "--max-frames", "30"]);
+    watch.args(["--set", "speed=2.5", "--set", "10:survey=true"]);
+    let out = within(30, "watch", watch.stdin(std::process::Stdio::null()).output()).await.unwrap();
+    let (stdout, stderr) = (String::from_utf8(out.stdout).unwrap(), String::from_utf8(out.stderr).unwrap());
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let states: Vec<(u64, &str)> =
+        stdout.lines().map(|l| (field(l, "seq").parse().unwrap(), field(l, "state"))).collect();
+    assert_eq!(states.len(), 30, "{stdout}");
+    // Idle until the opening set lands, then moving (its transition shown as idle>move@α), then, after
+    // frame 10's survey, looking.
+    let moving = states.iter().position(|(_, s)| s.starts_with("idle>move@")).expect("the move fires");
+    assert!(states[..moving].iter().all(|(_, s)| *s == "idle"), "{stdout}");
+    let look = states.iter().position(|(_, s)| s.starts_with("move>look@")).expect("the survey fires");
+    assert!(states[look].0 > 10, "the survey was sent on frame 10: {stdout}");
 }
 
 /// `inbetween import FILE --server URL [--token T]`, its standard output as

@@ -16,11 +16,22 @@ async fn send(app: &TestApp, path: &str, body: &Value) -> (u16, Value) {
     (status, serde_json::from_str(&text).unwrap_or(Value::Null))
 }
 
-/// Stores `doc` as a graph; its id.
-async fn store_graph(app: &TestApp, doc: &Value) -> String {
-    let (status, created) = send(app, "/v1/graphs", doc).await;
+/// Stores `doc` as a graph (with `token` if given); its id.
+async fn store_graph_as(app: &TestApp, doc: &Value, token: Option<&str>) -> String {
+    let mut req = app.http.post(app.url("/v1/graphs")).json(doc);
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let resp = req.send().await.unwrap();
+    let status = resp.status().as_u16();
+    let created: Value = resp.json().await.unwrap_or(Value::Null);
     assert_eq!(status, 201, "{created}");
     created["id"].as_str().unwrap().to_owned()
+}
+
+/// Stores `doc` as a graph; its id.
+async fn store_graph(app: &TestApp, doc: &Value) -> String {
+    store_graph_as(app, doc, None).await
 }
 
 fn over(graph: &str) -> Value {
@@ -30,8 +41,17 @@ fn over(graph: &str) -> Value {
 /// The Fox imported, and `examples/graphs/fox-locomotion.json` stored with
 /// its `name:X` clips replaced by ids, as docs/graphs.md shows.
 pub(crate) async fn fox_graph(app: &TestApp) -> (String, f64) {
+    fox_graph_as(app, None).await
+}
+
+/// [`fox_graph`] on a server whose writes need `token`.
+pub(crate) async fn fox_graph_as(app: &TestApp, token: Option<&str>) -> (String, f64) {
     let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
-    let resp = app.http.post(app.url("/v1/clips/import?replace=true")).body(glb).send().await.unwrap();
+    let mut req = app.http.post(app.url("/v1/clips/import?replace=true")).body(glb);
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let resp = req.send().await.unwrap();
     assert!(resp.status().is_success(), "{}", resp.text().await.unwrap());
     let mut text =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/graphs/fox-locomotion.json")).unwrap();
@@ -44,7 +64,7 @@ pub(crate) async fn fox_graph(app: &TestApp) -> (String, f64) {
             survey = clip["duration"].as_f64().unwrap();
         }
     }
-    (store_graph(app, &serde_json::from_str(&text).unwrap()).await, survey)
+    (store_graph_as(app, &serde_json::from_str(&text).unwrap(), token).await, survey)
 }
 
 #[tokio::test]

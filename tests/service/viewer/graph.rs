@@ -8,7 +8,7 @@
 use serde_json::json;
 
 use super::{click, set_value, text, viewer_on_clip};
-use crate::api::graph_samples::fox_graph;
+use crate::api::graph_samples::fox_graph_as;
 
 /// Waits until the panel's state line says `want`.
 async fn state_shows(page: &mut super::cdp::Page, want: &str, seconds: u64) {
@@ -18,7 +18,7 @@ async fn state_shows(page: &mut super::cdp::Page, want: &str, seconds: u64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_speed_slider_takes_the_fox_from_idle_to_a_run_and_the_trigger_to_a_look() {
     let app = super::start().await;
-    let (graph, _) = fox_graph(&app).await;
+    let (graph, _) = fox_graph_as(&app, Some(super::TOKEN)).await;
     let listed = app.get_json("/v1/graphs").await;
     let summary = listed["graphs"].as_array().unwrap().iter().find(|g| g["id"] == json!(graph)).unwrap();
     let survey = summary["clips"][0].as_str().unwrap().to_owned();

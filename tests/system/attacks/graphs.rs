@@ -4,11 +4,18 @@
 //! hours of one core. A blend's points are bounded (`max_blend_points`,
 //! checked before anything is built), a graph's nodes too, and what is left
 //! is priced before it runs (docs/api.md, "Work and its price"): the node
-//! refuses or runs it off the async workers, and keeps answering.
+//! refuses or runs it off the async workers, and keeps answering. A graph
+//! playing live takes `set` controls: a socket flooding them meets the
+//! bounds every control has (32 pending per stream; a broadcast's draw on
+//! the write budget and its store queue), and the node keeps answering.
 
+use std::time::{Duration, Instant};
+
+use futures_util::{SinkExt, StreamExt};
 use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
 
-use super::target;
+use super::{Target, target};
 
 /// A clip on the `hips`–`spine` chain.
 fn chain_clip(name: &str) -> String {
@@ -95,4 +102,147 @@ async fn blend_points_are_bounded_and_priced_and_the_node_keeps_answering() {
     }
     assert!(answers.iter().any(|(s, _)| *s == 201), "some graph was admitted: {answers:?}");
     target.assert_survived("eight admitted 48-blend graphs at once", &report);
+}
+
+/// A graph over two chain clips: `x` blends them, the trigger `hop` fades
+/// to the third and back when it has nearly played.
+fn hop_graph(clips: &[String]) -> Value {
+    json!({"name": "hop",
+        "parameters": {"x": {"type": "float", "default": 0, "min": 0, "max": 8}, "hop": {"type": "trigger"}},
+        "nodes": {"walk": {"blend1d": {"parameter": "x", "points": [{"clip": clips[0], "at": 0}, {"clip": clips[1], "at": 8}]}},
+                  "hop": {"clip": clips[2], "playback": "once"}},
+        "machine": {"initial": "walk", "states": {"walk": {"node": "walk"}, "hop": {"node": "hop"}},
+            "transitions": [{"from": "walk", "to": "hop", "when": {"trigger": "hop"}, "duration": 0.2},
+                            {"from": "hop", "to": "walk", "when": {"exit_time": 0.9}, "duration": 0.2}]}})
+}
+
+/// What one socket's flood of `set` controls met: sent, refused, and the
+/// frames that came while it was sent.
+#[derive(Debug)]
+struct SetFlood {
+    sent: u64,
+    refused: u64,
+    frames: u64,
+}
+
+/// Sends `sent` `set` controls on `ws` as fast as it takes them, reading
+/// its answers meanwhile (each refusal one of `allowed`), until frames come
+/// after the flood; then one last `set` of `x` = 8, and waits for a frame
+/// that shows it (the blend all on its second point).
+async fn flood_sets(
+    ws: tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>,
+    sent: u64,
+    allowed: &[&str],
+) -> SetFlood {
+    let (mut tx, mut rx) = ws.split();
+    let sender = tokio::spawn(async move {
+        for k in 0..sent {
+            let set = json!({"op": "set", "parameters": {"x": (k % 80) as f64 / 10.0, "hop": k % 7 == 0}});
+            tx.send(Message::Text(set.to_string().into())).await.unwrap();
+        }
+        tx
+    });
+    let mut flood = SetFlood { sent, refused: 0, frames: 0 };
+    let mut after = 0;
+    while after < 30 {
+        let msg = tokio::time::timeout(Duration::from_secs(5), rx.next()).await;
+        let Message::Text(text) = msg.expect("the socket keeps answering").expect("open").unwrap() else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        match v.get("error") {
+            Some(problem) => {
+                let code = problem["code"].as_str().unwrap_or_default();
+                assert!(allowed.contains(&code), "{problem}");
+                flood.refused += 1;
+            }
+            None => {
+                flood.frames += 1;
+                after += u64::from(sender.is_finished());
+            }
+        }
+    }
+    let mut tx = sender.await.unwrap();
+    let last = Message::Text(json!({"op": "set", "parameters": {"x": 8}}).to_string().into());
+    let until = Instant::now() + Duration::from_secs(20);
+    tx.send(last.clone()).await.unwrap();
+    let mut frames_since = 0;
+    loop {
+        assert!(Instant::now() < until, "the last set never showed: {flood:?}");
+        let msg = tokio::time::timeout(Duration::from_secs(5), rx.next()).await;
+        let Message::Text(text) = msg.expect("answered").expect("open").unwrap() else { continue };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        if let Some(problem) = v.get("error") {
+            // The flood's refusals still on their way, or the last set's own (sent again below).
+            assert!(allowed.contains(&problem["code"].as_str().unwrap_or_default()), "{problem}");
+            flood.refused += 1;
+            continue;
+        }
+        let weights: Vec<f64> = v["graph"]["weights"]["walk"]
+            .as_array()
+            .map_or(Vec::new(), |w| w.iter().map(|x| x.as_f64().unwrap()).collect());
+        if weights == [0.0, 1.0] && v["graph"]["state"] == "walk" {
+            return flood;
+        }
+        frames_since += 1;
+        if frames_since % 30 == 0 {
+            tx.send(last.clone()).await.unwrap();
+        }
+    }
+}
+
+async fn store_hop_graph(target: &Target, http: &reqwest::Client) -> String {
+    let mut clips = Vec::new();
+    for name in ["ha", "hb", "hc"] {
+        clips.push(target.server.create(http, &chain_clip(name)).await);
+    }
+    let (status, graph) = post(http, &target.server.url("/v1/graphs"), &hop_graph(&clips)).await;
+    assert_eq!(status, 201, "{graph}");
+    graph["id"].as_str().unwrap().to_owned()
+}
+
+/// A socket flooding its graph stream and a graph broadcast with `set`
+/// controls: each is checked and queued or refused (`bad_control` past the
+/// 32 pending; a broadcast's `rate_limited` past the write budget,
+/// `unavailable` past its store queue), the frames keep coming, the last
+/// setting shows, and the probes answer throughout.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_set_flood_on_a_graph_stream_and_broadcast_leaves_the_node_answering() {
+    let mut target = target(&[]).await;
+    let http = crate::common::http_client();
+    let graph = store_hop_graph(&target, &http).await;
+    let motion = json!({"layers": [{"graph": graph}]});
+
+    let probes = target.probes().await;
+    let (mut ws, _) = tokio_tungstenite::connect_async(target.server.ws_url("/v1/stream")).await.unwrap();
+    let open = json!({"op": "open", "motion": motion, "fps": 60, "report": true});
+    ws.send(Message::Text(open.to_string().into())).await.unwrap();
+    let started = Instant::now();
+    let flood = flood_sets(ws, 20_000, &["bad_control"]).await;
+    let report = probes.finish();
+    println!(
+        "FIGURE {} set controls on a graph stream in {:.1} s: {} refused, {} frames meanwhile",
+        flood.sent,
+        started.elapsed().as_secs_f64(),
+        flood.refused,
+        flood.frames
+    );
+    target.assert_survived("a set flood on a graph stream", &report);
+
+    let (status, b) =
+        post(&http, &target.server.url("/v1/broadcasts"), &json!({"motion": motion, "report": true})).await;
+    assert_eq!(status, 201, "{b}");
+    let url = target.server.ws_url(&format!("/v1/broadcasts/{}/stream", b["id"].as_str().unwrap()));
+    let probes = target.probes().await;
+    let (ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let started = Instant::now();
+    let flood = flood_sets(ws, 20_000, &["rate_limited", "unavailable", "bad_control"]).await;
+    let report = probes.finish();
+    println!(
+        "FIGURE {} set controls on a graph broadcast in {:.1} s: {} refused, {} frames meanwhile",
+        flood.sent,
+        started.elapsed().as_secs_f64(),
+        flood.refused,
+        flood.frames
+    );
+    assert!(flood.refused > 0, "the write budget refused some: {flood:?}");
+    target.assert_survived("a set flood on a graph broadcast", &report);
 }

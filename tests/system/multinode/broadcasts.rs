@@ -554,3 +554,89 @@ async fn a_broadcast_with_springs_is_the_same_on_every_node_and_after_a_checkpoi
     drop((a, b, d));
     schema.drop_now().await;
 }
+
+/// A graph over the two lines: `s` blends them, the trigger `go` fades to
+/// the second alone, and `s` under 0.5 fades back (docs/graphs.md).
+fn lines_graph(x: &str, y: &str) -> Value {
+    json!({"name": "lines",
+        "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
+        "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": x, "at": 0}, {"clip": y, "at": 1}]}},
+                  "y": {"clip": y}},
+        "machine": {"initial": "mix", "states": {"mix": {"node": "mix"}, "y": {"node": "y"}},
+            "transitions": [{"from": "mix", "to": "y", "when": {"trigger": "go"}, "duration": 0.5},
+                            {"from": "y", "to": "mix", "when": {"parameter": "s", "lt": 0.5}, "duration": 0.5}]}})
+}
+
+/// docs/graphs.md "Streams and broadcasts", across nodes: a graph broadcast
+/// created on A, its `set`s posted to B and A, gives A and B the same
+/// frames, each showing the setting from the seq it answered; a node D
+/// started after several checkpoints steps on from the stored one (which
+/// carries the graph player's state: values, states, node times, the fade)
+/// and sends the same frames as A.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_graph_broadcast_set_on_one_node_gives_every_node_the_same_frames_and_checkpoints() {
+    let Some(schema) = Schema::create("bgraph").await else { return };
+    let start = |name: &'static str| {
+        Node::serve()
+            .name(name)
+            .args(["--db-max-connections", "4", "--broadcast-control-lead-ms", LEAD_MS])
+            .args(["--broadcast-checkpoint-secs", "1", "--database-url"])
+            .arg(schema.url(&format!("application_name={name}")))
+            .start()
+    };
+    let (a, b) = (start("node-a").await, start("node-b").await);
+    let http = crate::common::http_client();
+    for n in [&a, &b] {
+        super::until_subscribed(&http, n).await;
+    }
+    let (x, y) = (upload(&http, &a, line_doc(0)).await, upload(&http, &a, line_doc(1)).await);
+    let resp = http.post(a.url("/v1/graphs")).json(&lines_graph(&x, &y)).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let graph = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let body = json!({"motion": {"layers": [{"graph": graph}]}, "fps": FPS, "report": true});
+    let resp = http.post(a.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let limit = Duration::from_secs(60);
+    let (on_a, on_b) = (viewer(&a, &id, limit), viewer(&b, &id, limit));
+    until_watching(&[&on_a, &on_b]).await;
+    let set = post_control(&http, &b, &id, json!({"op": "set", "parameters": {"s": 0.25}})).await;
+    until_seen(&[&on_a, &on_b], set + FPS, "a second of the blend").await;
+    let went = post_control(&http, &a, &id, json!({"op": "set", "parameters": {"go": true, "s": 0.75}})).await;
+    until_seen(&[&on_a, &on_b], went + 6 * FPS, "six checkpoint intervals past the sets").await;
+    eventually(PROGRESS, "A stored checkpoints", || async {
+        metric(&http, &a, "inbetween_broadcast_checkpoints_total").await >= 4.0
+    })
+    .await;
+    let back = post_control(&http, &b, &id, json!({"op": "set", "parameters": {"s": 0.0}})).await;
+    let d = start("node-d").await;
+    let late = viewer(&d, &id, limit);
+    until_watching(&[&late]).await;
+    let first = late.first().unwrap();
+    until_seen(&[&on_a, &on_b, &late], (first + 20).max(back + 2 * FPS), "D, A and B share frames").await;
+    let replayed = metric(&http, &d, "inbetween_broadcast_replayed_ticks_total").await as u64;
+    assert!(replayed + 3 * FPS < first, "D replayed {replayed} of {first} ticks: from a checkpoint");
+
+    let resp = http.delete(a.url(&format!("/v1/broadcasts/{id}"))).send().await.unwrap();
+    assert_eq!(resp.status(), 204);
+    let take =
+        |v: Viewer| async move { tokio::time::timeout(Duration::from_secs(5), v.task).await.unwrap().unwrap().0 };
+    let (seen_a, seen_b, seen_d) = (take(on_a).await, take(on_b).await, take(late).await);
+    let report = |k: u64| &seen_a[&k]["graph"];
+    let weights = |k: u64| -> Vec<f64> {
+        report(k)["weights"]["mix"].as_array().unwrap().iter().map(|w| w.as_f64().unwrap()).collect()
+    };
+    assert_eq!(weights(set - 1), [1.0, 0.0], "before the set: {}", report(set - 1));
+    assert_eq!(weights(set), [0.75, 0.25], "from the set's seq: {}", report(set));
+    assert_eq!(report(went)["state"], "y", "the trigger fires at its seq: {}", report(went));
+    assert_eq!(report(back)["state"], "mix", "s under 0.5 fades back at its seq: {}", report(back));
+    for (other, name) in [(&seen_b, "B"), (&seen_d, "D")] {
+        let shared: Vec<u64> = other.keys().filter(|k| seen_a.contains_key(k)).copied().collect();
+        assert!(shared.len() >= 20, "{name} shares {} frames with A", shared.len());
+        for k in shared {
+            assert_eq!(seen_a[&k], other[&k], "seq {k}: A and {name}");
+        }
+    }
+    drop((a, b, d));
+    schema.drop_now().await;
+}

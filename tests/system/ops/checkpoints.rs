@@ -7,7 +7,8 @@
 //! (`inbetween_broadcast_replayed_ticks_total`),
 //! far fewer ticks than the broadcast's age, and shows the time the
 //! controls say — which the restarted node read from the checkpoint, as
-//! the journal no longer has them.
+//! the journal no longer has them. A graph broadcast restarted the same way
+//! shows what `POST /v1/samples` plays for its settings.
 
 use std::time::{Duration, Instant};
 
@@ -113,4 +114,80 @@ async fn a_restarted_node_replays_from_the_last_checkpoint_not_from_the_start() 
         assert!(cpu_used < Duration::from_secs(1), "{cpu_used:?} of CPU from the start to the first frame");
     }
     eprintln!("restart: first frame at tick {k}, {replayed} ticks replayed, {cpu_used:?} CPU, down {down:?}");
+}
+
+/// One joint moving along y at 1 unit/s over 100 s, looping.
+const RISE: &str = r#"{"name": "rise", "playback": "loop", "tracks": [{"joint": "j", "channel": "translation",
+    "interpolation": "linear", "times": [0.0, 100.0], "values": [[0, 0, 0], [0, 100, 0]]}]}"#;
+
+/// docs/graphs.md "Streams and broadcasts": a graph broadcast whose `set`s
+/// (a blend's parameter, then a trigger that fades to another state) are
+/// long behind its newest checkpoint is stopped and started again on the
+/// same store; its first frame after the restart, stepped from the
+/// checkpoint (which holds the graph player's state), is the tick `POST
+/// /v1/samples` plays for the same settings at the same ticks.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarted_graph_broadcast_steps_on_from_its_checkpoint_as_samples_play_it() {
+    const GRAPH_FPS: u64 = 30;
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let flags = ["--broadcast-checkpoint-secs", "1", "--broadcast-control-lead-ms", "0"];
+    let http = reqwest::Client::new();
+    let server = start(&data, &flags).await;
+    let (x, y) = (server.create(&http, LINE).await, server.create(&http, RISE).await);
+    let graph = json!({"name": "restart",
+        "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
+        "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": x, "at": 0}, {"clip": y, "at": 1}]}},
+                  "up": {"clip": y}},
+        "machine": {"initial": "mix", "states": {"mix": {"node": "mix"}, "up": {"node": "up"}},
+            "transitions": [{"from": "mix", "to": "up", "when": {"trigger": "go"}, "duration": 2.0}]}});
+    let graph = post(&http, &server, "/v1/graphs", graph).await["id"].as_str().unwrap().to_owned();
+    let motion = json!({"layers": [{"graph": graph}]});
+    let created =
+        post(&http, &server, "/v1/broadcasts", json!({"motion": motion, "fps": GRAPH_FPS, "report": true})).await;
+    let id = created["id"].as_str().unwrap().to_owned();
+    let controls = format!("/v1/broadcasts/{id}/controls");
+    let set = |parameters: Value| json!({"op": "set", "parameters": parameters});
+    let blend = post(&http, &server, &controls, set(json!({"s": 0.6}))).await["seq"].as_u64().unwrap();
+    eventually(Duration::from_secs(10), "ticks after the set", || async {
+        seq_now(&http, &server, &id).await >= blend + 2
+    })
+    .await;
+    let went = post(&http, &server, &controls, set(json!({"go": true}))).await["seq"].as_u64().unwrap();
+    eventually(Duration::from_secs(20), "six seconds of broadcast", || async {
+        seq_now(&http, &server, &id).await >= went + 6 * GRAPH_FPS
+    })
+    .await;
+    server.until_metric(&http, "inbetween_broadcast_checkpoints_total", 4.0).await;
+    server.signal("TERM");
+    let mut server = server;
+    assert!(server.wait_exit(Duration::from_secs(10)).await.is_some_and(|s| s.success()), "a clean stop");
+
+    let server = start(&data, &flags).await;
+    let (mut ws, _) = tokio_tungstenite::connect_async(server.ws_url(&format!("/v1/broadcasts/{id}/stream")))
+        .await
+        .expect("the broadcast resumed");
+    let first: Value = loop {
+        match ws.next().await.expect("a frame").expect("a frame") {
+            Message::Text(text) => break serde_json::from_str(&text).unwrap(),
+            Message::Close(c) => panic!("closed: {c:?}"),
+            _ => continue,
+        }
+    };
+    let k = first["seq"].as_u64().unwrap();
+    let replayed = metric_of(&http, &server, "inbetween_broadcast_replayed_ticks_total").await as u64;
+    assert!(replayed + 3 * GRAPH_FPS <= k, "replayed {replayed} ticks of a broadcast {k} ticks old");
+    let at = |seq: u64| seq as f64 / GRAPH_FPS as f64;
+    let inputs = json!([{"time": at(blend), "set": {"s": 0.6}}, {"time": at(went), "set": {"go": true}}]);
+    let body =
+        json!({"motion": motion, "start": at(k), "end": at(k), "fps": GRAPH_FPS, "report": true, "inputs": inputs});
+    let sampled = post(&http, &server, "/v1/samples", body).await;
+    let pose = &sampled["poses"][0];
+    assert_eq!(first["graph"], pose["graph"], "tick {k}'s report");
+    assert_eq!(first["graph"]["state"], "up", "{first}");
+    let xyz = |v: &Value| -> Vec<f64> {
+        v["joints"][0]["translation"].as_array().unwrap().iter().map(|c| c.as_f64().unwrap()).collect()
+    };
+    let (shown, want) = (xyz(&first["pose"]), xyz(pose));
+    assert!(shown.iter().zip(&want).all(|(a, b)| (a - b).abs() <= 1e-5 * b.abs().max(1.0)), "{shown:?} vs {want:?}");
 }

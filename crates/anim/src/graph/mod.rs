@@ -23,7 +23,7 @@ mod ticks;
 use std::sync::Arc;
 
 pub use error::{Degeneracy, GraphError, GraphErrorKind};
-pub use player::{GraphPlayer, GraphReport, GraphState, SetError, SlotState, TransitionReport};
+pub use player::{FadeProgress, GraphPlayer, GraphReport, GraphState, SetError, SlotState, TransitionReport};
 pub use spec::{
     Blend1dSpec, Blend2dSpec, ClipNodeSpec, Comparison, Condition, EntrySource, EntrySpec, GraphSpec, MachineSpec,
     NodeKind, NodeSpec, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec, Value,
@@ -182,6 +182,18 @@ impl<C: ClipSource> Graph<C> {
         let largest = self.states.iter().map(joints).max().unwrap_or(0);
         let slots = self.max_slots() as u64;
         largest * slots + (slots - 1) * self.skeleton().len() as u64
+    }
+
+    /// The motion each state's node plays, in the states' order (the
+    /// initial state's is what a stream names its skeleton and clips by;
+    /// every state's has its skeleton and parameters).
+    pub fn state_motions(&self) -> impl Iterator<Item = &Arc<Motion<C>>> {
+        self.states.iter().map(|s| &self.stack(s.node).motion)
+    }
+
+    /// The initial state's node's motion.
+    pub fn initial_motion(&self) -> &Arc<Motion<C>> {
+        &self.stack(self.states[self.initial].node).motion
     }
 
     fn stack(&self, node: usize) -> &Stack<C> {

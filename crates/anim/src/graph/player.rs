@@ -420,7 +420,7 @@ impl<C> GraphPlayer<C> {
 
 impl<C: ClipSource> GraphPlayer<C> {
     /// A player of `graph` that steps on from `state` exactly as the one it
-    /// was taken from would.
+    /// was taken from would, showing (pose and report) the tick it was taken after.
     ///
     /// # Errors
     /// A state that does not fit the graph (lengths, indices).
@@ -455,7 +455,19 @@ impl<C: ClipSource> GraphPlayer<C> {
             player.chain.push(i);
         }
         (player.values, player.ticks, player.current) = (state.values, state.ticks, state.current);
+        player.show_again();
         Ok(player)
+    }
+
+    /// The last tick's blend weights, layer weights and pose computed again
+    /// from the state (nothing advances), so that a restored player shows
+    /// the tick it was taken after — a paused stream shows it again.
+    fn show_again(&mut self) {
+        self.blend_weights();
+        for i in 0..self.chain.len() {
+            self.set_layer_weights(self.chain[i]);
+        }
+        self.evaluate();
     }
 }
 

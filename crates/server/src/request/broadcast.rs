@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use super::graph_stream::RawGraphStream;
 use super::motion::RawMotion;
 use super::raw::{Field, Locate, Raw, unprocessable, whole};
 use super::stream::RawStream;
@@ -43,16 +44,7 @@ impl RawBroadcast<'_> {
         motion: RawMotion<'_>,
         description: serde_json::Value,
     ) -> Result<BroadcastSpec, ApiError> {
-        let format = super::raw::Format::decode(self.format, self.at)?;
-        if format != super::raw::Format::Trs {
-            let detail = "broadcast frames are `trs` poses (as every stream's); `matrix` and `skinning` are for \
-                          POST /v1/poses and /v1/samples"
-                .to_owned();
-            return Err(unprocessable("format_not_streamable", Field::Format, self.at, detail));
-        }
-        let idle = self.idle_timeout()?;
-        // Priced as JSON, the larger encoding: viewers may ask for either.
-        let stream = RawStream { encoding: None, ..self.stream };
+        let (stream, idle) = self.checked()?;
         let (params, work_per_sec) = stream.motion_params(state, motion).await?;
         Ok(BroadcastSpec {
             params: crate::stream::StreamParams { encoding: Encoding::Json, ..params },
@@ -60,6 +52,40 @@ impl RawBroadcast<'_> {
             description,
             work_per_sec,
         })
+    }
+
+    /// As [`RawBroadcast::spec`] for a graph (docs/graphs.md).
+    ///
+    /// # Errors
+    /// As [`RawBroadcast::spec`], with a graph stream's refusals
+    /// ([`RawStream::graph_params`]).
+    pub async fn graph_spec(
+        &self,
+        state: &AppState,
+        graph: RawGraphStream<'_>,
+        description: serde_json::Value,
+    ) -> Result<BroadcastSpec, ApiError> {
+        let (stream, idle) = self.checked()?;
+        let (params, work_per_sec) = stream.graph_params(state, graph).await?;
+        Ok(BroadcastSpec {
+            params: crate::stream::StreamParams { encoding: Encoding::Json, ..params },
+            idle_timeout: idle,
+            description,
+            work_per_sec,
+        })
+    }
+
+    /// The format and idle timeout checked, and the stream request to price
+    /// as JSON, the larger encoding: viewers may ask for either.
+    fn checked(&self) -> Result<(RawStream<'_>, Duration), ApiError> {
+        let format = super::raw::Format::decode(self.format, self.at)?;
+        if format != super::raw::Format::Trs {
+            let detail = "broadcast frames are `trs` poses (as every stream's); `matrix` and `skinning` are for \
+                          POST /v1/poses and /v1/samples"
+                .to_owned();
+            return Err(unprocessable("format_not_streamable", Field::Format, self.at, detail));
+        }
+        Ok((RawStream { encoding: None, ..self.stream }, self.idle_timeout()?))
     }
 
     fn idle_timeout(&self) -> Result<Duration, ApiError> {

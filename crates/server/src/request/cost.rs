@@ -454,6 +454,7 @@ mod tests {
                 events: clip.events(),
                 crossed: &[0; MAX_EVENTS_PER_FRAME],
                 with_names: true,
+                graph: None,
             };
             let bytes = FrameEncoder::new(encoding).encode(&frame).bytes.len() as u64;
             let bound = Estimate::frame(&clip, ID, encoding.into());

@@ -256,7 +256,7 @@ fn cost(built: &BuiltGraph, range: &TickRange, (format, wire): (Format, Wire), r
 }
 
 /// The longest `,"graph":{…}` a tick's report can write.
-fn report_bytes(built: &BuiltGraph) -> u64 {
+pub(super) fn report_bytes(built: &BuiltGraph) -> u64 {
     let graph = &built.graph;
     let state = graph.state_names().map(json_str).max().unwrap_or(2);
     let weights: u64 =

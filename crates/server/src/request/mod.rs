@@ -37,6 +37,7 @@ mod body;
 mod broadcast;
 mod cost;
 mod graph;
+mod graph_stream;
 mod list;
 mod motion;
 mod raw;
@@ -49,6 +50,7 @@ pub use broadcast::RawBroadcast;
 pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use graph::{GraphSampling, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
+pub use graph_stream::RawGraphStream;
 pub use list::{Page, RawPage};
 pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, on_character, warnings};
 pub use raw::{

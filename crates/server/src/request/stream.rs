@@ -92,6 +92,10 @@ pub async fn compact_watch(
         parameters: None,
         at,
     };
+    if params.graph.is_some() {
+        let detail = "compact frames hold one clip's poses; this broadcast plays a graph".to_owned();
+        return Err(unprocessable("graph_unsupported", Field::Encoding, at, detail));
+    }
     let request = StreamRequest { space: params.space, encoding: Encoding::Compact, ..StreamRequest::default() };
     let compact = raw.compact(&request)?;
     if params.joints.is_some() {
@@ -310,7 +314,7 @@ impl RawStream<'_> {
     /// # Errors
     /// `frame_too_large`, `stream_rate_too_high`, `too_much_work`,
     /// `caller_work_limit`, `overloaded`; the caps' refusal is the inner error.
-    fn admit(
+    pub(super) fn admit(
         &self,
         per_frame: u64,
         frame: u64,
@@ -328,7 +332,7 @@ impl RawStream<'_> {
     }
 
     /// The joint and parameter subsets applied.
-    fn bind(&self, params: StreamParams, state: &AppState) -> Result<StreamParams, ApiError> {
+    pub(super) fn bind(&self, params: StreamParams, state: &AppState) -> Result<StreamParams, ApiError> {
         let joints = self.joints.map(|names| joint_subset(params.motion.skeleton(), names, self.at)).transpose()?;
         let parameters =
             self.parameters.map(|names| parameter_subset(params.motion.parameters(), names, self.at)).transpose()?;
@@ -370,7 +374,7 @@ impl RawStream<'_> {
         Ok(Some(checked))
     }
 
-    fn compact_refused(&self, e: CompactRefusal) -> ApiError {
+    pub(super) fn compact_refused(&self, e: CompactRefusal) -> ApiError {
         let field = match e.field {
             "max_error" => Field::MaxError,
             "distance" => Field::Distance,
@@ -421,7 +425,7 @@ impl RawStream<'_> {
     }
 
     /// The engine's frame-rate rule, checked before anything is built.
-    fn check_fps(&self, fps: u32) -> Result<(), ApiError> {
+    pub(super) fn check_fps(&self, fps: u32) -> Result<(), ApiError> {
         if (1..=MAX_FPS).contains(&fps) {
             return Ok(());
         }
@@ -447,7 +451,7 @@ impl RawStream<'_> {
     }
 
     /// The engine's refusal, under its stable code.
-    fn refused(&self, e: ParamError) -> ApiError {
+    pub(super) fn refused(&self, e: ParamError) -> ApiError {
         let (code, field, detail) = match e.field {
             "fps" => {
                 let given = self.fps.map_or(String::new(), |raw| match raw {

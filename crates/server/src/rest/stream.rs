@@ -34,8 +34,8 @@ use crate::auth::{Caller, CallerKey, ReadAccess};
 use crate::config::Limits;
 use crate::error::ApiError;
 use crate::request::{
-    Opening, Raw, RawModes, RawMotion, RawStream, at_clip_route, crossfade_target, in_body, in_query, on_character,
-    parse_json,
+    Opening, Raw, RawGraphStream, RawModes, RawMotion, RawStream, at_clip_route, crossfade_target, graph_layer,
+    in_body, in_query, on_character, parse_json,
 };
 use crate::state::AppState;
 use crate::stream::ws::{MotionResolver, WsConfig, close};
@@ -273,6 +273,9 @@ pub struct StreamOpen {
     /// Start paused (a private playback; `play` resumes it).
     #[serde(default)]
     paused: bool,
+    /// A graph stream's frames carry the tick's `graph` report (docs/graphs.md).
+    #[serde(default)]
+    report: bool,
 }
 
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
@@ -319,13 +322,23 @@ async fn open(
         parameters: msg.parameters.as_deref(),
         at: in_body,
     };
-    let admitted = raw.open_motion(state, RawMotion::of_doc(&msg.motion)?, caller).await?;
+    let admitted = match graph_layer(&msg.motion)? {
+        Some(reference) => raw.open_graph(state, RawGraphStream { reference, report: msg.report }, caller).await?,
+        None if msg.report => {
+            let detail = "`report` is a graph stream's: the motion's layer names no `graph`";
+            return Err(ApiError::invalid("graph_unsupported", "/report", detail));
+        }
+        None => raw.open_motion(state, RawMotion::of_doc(&msg.motion)?, caller).await?,
+    };
     let engine = &state.streams;
-    Ok(admitted.map(
-        |Opening { params, permit }| {
-            if params.paused { engine.play(params, permit, lane) } else { engine.watch(params, permit, lane) }
-        },
-    ))
+    // A graph stream is its viewer's own (its `set`s are), and so is a paused one.
+    Ok(admitted.map(|Opening { params, permit }| {
+        if params.paused || params.graph.is_some() {
+            engine.play(params, permit, lane)
+        } else {
+            engine.watch(params, permit, lane)
+        }
+    }))
 }
 
 /// Inbound messages are small controls; outbound messages are buffered up

@@ -116,7 +116,9 @@ impl Budget {
             | Control::Stop
             | Control::Layer { .. }
             | Control::Ik(_)
-            | Control::ResetSprings => return Ok(()),
+            | Control::ResetSprings
+            | Control::Set(_)
+            | Control::SetGraph(_) => return Ok(()),
         }
         let per_sec = next.per_tick().saturating_mul(self.fps);
         if per_sec > self.limit_per_sec {

@@ -35,7 +35,8 @@ use super::checkpoint::{Checkpoint, CheckpointError, Lookup, Naming, Source};
 use super::compact::CompactLayout;
 use super::control::{Applied, Control, Refused};
 use super::encode::{Encoded, Encoding, FrameEncoder};
-use super::hub::{TickStamp, frame_data, sample_tick};
+use super::graph::GraphDeck;
+use super::hub::{Playing, TickStamp, frame_data, sample_tick};
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
 use super::pinned::StreamPlayer;
@@ -131,6 +132,8 @@ pub const CHECKPOINTS: usize = 3;
 struct State {
     playhead: Playhead,
     player: StreamPlayer,
+    /// A graph broadcast's graph, played in place of `player`'s motion.
+    graph: Option<GraphDeck>,
     /// The current motion's first-layer position at the previous tick (for
     /// the events crossed), and which motion that was.
     prev: Option<(f64, Arc<StreamMotion>)>,
@@ -151,6 +154,7 @@ impl State {
         State {
             playhead: Playhead::new(params.start, params.speed, params.fps, params.paused),
             player: Player::new(Arc::clone(&params.motion)),
+            graph: params.graph.as_ref().map(|g| GraphDeck::new(g, params.space)),
             prev: None,
             crossed: Vec::new(),
             clip_time: 0.0,
@@ -173,7 +177,8 @@ impl State {
         let ik = self.ik_from.as_ref().map_or(Source::Definition, |id| Source::Control(id.to_string()));
         let naming = Naming { motion: &|m| self.source_of(m), ik };
         let prev = self.prev.as_ref().map(|(x, _)| *x);
-        Some(Checkpoint::capture(tick, &self.playhead, &self.player, prev, self.clip_time, &naming))
+        let playing = Playing { player: &self.player, graph: self.graph.as_ref() };
+        Some(Checkpoint::capture(tick, &self.playhead, playing, prev, self.clip_time, &naming))
     }
 
     /// The state `checkpoint` describes, its motions and IK list found in
@@ -193,7 +198,7 @@ impl State {
                 _ => None,
             },
         };
-        let restored = checkpoint.restore(params.fps, &Lookup { motion: &motion, ik: &ik })?;
+        let restored = checkpoint.restore(params, &Lookup { motion: &motion, ik: &ik })?;
         let named = checkpoint.controls();
         let fades = named
             .iter()
@@ -210,6 +215,7 @@ impl State {
         Ok(State {
             playhead: restored.playhead,
             player: restored.player,
+            graph: restored.graph,
             prev: restored.prev.map(|x| (x, top)),
             crossed: Vec::new(),
             clip_time: restored.clip_time,
@@ -404,8 +410,13 @@ impl Program {
             jumped |= self.apply(c, k);
         }
         let st = &mut self.state;
-        let time = (st.playhead.time_at(k), super::hub::stream_clock(&self.params, k));
-        st.clip_time = sample_tick(&mut st.player, &self.params, time, jumped, &mut st.prev, &mut st.crossed);
+        st.clip_time = match &mut st.graph {
+            Some(graph) => graph.tick(self.params.fps, st.playhead.paused(), (k, 0)),
+            None => {
+                let time = (st.playhead.time_at(k), super::hub::stream_clock(&self.params, k));
+                sample_tick(&mut st.player, &self.params, time, jumped, &mut st.prev, &mut st.crossed)
+            }
+        };
         st.stepped = Some(k);
     }
 
@@ -420,7 +431,7 @@ impl Program {
             Control::SetIk(_) => Some(None),
             _ => None,
         };
-        match control.apply(&mut st.playhead, &mut st.player, k) {
+        match control.apply(&mut st.playhead, &mut st.player, st.graph.as_mut(), k) {
             Ok(Applied::Jumped) => true,
             // A broadcast refuses `stop` (`Control::refused_on_broadcast`).
             Ok(Applied::Continued | Applied::Stopped) => {
@@ -449,7 +460,8 @@ impl Program {
     pub fn encode(&mut self, encoding: Encoding, sent_at: i64) -> Encoded {
         let st = &self.state;
         let tick = TickStamp { seq: st.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: st.clip_time };
-        let data = frame_data(&st.player, &self.params, &st.crossed, tick, false);
+        let playing = Playing { player: &st.player, graph: st.graph.as_ref() };
+        let data = frame_data(playing, &self.params, &st.crossed, tick, false);
         match encoding {
             Encoding::Json => self.json.encode(&data),
             Encoding::Protobuf | Encoding::Compact => self.protobuf.encode(&data),
@@ -469,7 +481,8 @@ impl Program {
         };
         let st = &self.state;
         let tick = TickStamp { seq: st.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: st.clip_time };
-        let data = frame_data(&st.player, &self.params, &st.crossed, tick, false);
+        let playing = Playing { player: &st.player, graph: st.graph.as_ref() };
+        let data = frame_data(playing, &self.params, &st.crossed, tick, false);
         self.compact[at].1.encode(&data)
     }
 

@@ -15,15 +15,22 @@
 //! The text is a pure function of the state (fields in a fixed order, no
 //! maps), so two nodes that checkpoint the same tick write the same text
 //! and either's write may win. Springs, when the motion has them, add
-//! their state (bits as well) to the player's.
+//! their state (bits as well) to the player's; a graph broadcast adds its
+//! graph player's (parameter values, ticks, current state, and each state
+//! playing with its node time, phases and transition), which a restore
+//! checks against the graph.
 
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::graph::GraphDeck;
+use super::hub::Playing;
+use super::params::StreamParams;
 use super::pinned::{StreamMotion, StreamPlayer};
 use super::playhead::Playhead;
 use anim::Ease;
+use anim::graph::{FadeProgress, GraphState, SlotState};
 use anim::ik::{IkConstraint, WarmStart};
 use anim::motion::root::RootAt;
 use anim::motion::{DeckState, FadeState, Planar, Player, PlayerState, RampState, RootMotion, UpAxis};
@@ -68,14 +75,72 @@ pub struct Checkpoint {
     prev: Option<u64>,
     clip_time: u32,
     player: PlayerBits,
+    /// A graph broadcast's graph player.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    graph: Option<GraphBits>,
 }
 
 /// What a [`Checkpoint`] restores.
 pub(super) struct Restored {
     pub playhead: Playhead,
     pub player: StreamPlayer,
+    pub graph: Option<GraphDeck>,
     pub prev: Option<f64>,
     pub clip_time: f32,
+}
+
+/// A graph player's state (`anim::graph::GraphState`), numbers as bits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GraphBits {
+    values: Vec<u64>,
+    ticks: u64,
+    current: usize,
+    /// Bottom to top.
+    chain: Vec<SlotBits>,
+}
+
+/// A state playing: the state, its node time, its phases, and (above the
+/// bottom) the transition that put it there, the state it came from and its
+/// elapsed time.
+type SlotBits = (usize, u64, Vec<u64>, Option<(usize, usize, u64)>);
+
+fn graph_bits(g: GraphState) -> GraphBits {
+    GraphBits {
+        values: g.values.into_iter().map(f64::to_bits).collect(),
+        ticks: g.ticks,
+        current: g.current,
+        chain: g
+            .chain
+            .into_iter()
+            .map(|s| {
+                let fade = s.fade.map(|f| (f.transition, f.from, f.elapsed.to_bits()));
+                (s.state, s.tau.to_bits(), s.phases.into_iter().map(f64::to_bits).collect(), fade)
+            })
+            .collect(),
+    }
+}
+
+fn graph_state(b: &GraphBits) -> GraphState {
+    GraphState {
+        values: b.values.iter().copied().map(f64::from_bits).collect(),
+        ticks: b.ticks,
+        current: b.current,
+        chain: b
+            .chain
+            .iter()
+            .map(|(state, tau, phases, fade)| SlotState {
+                state: *state,
+                tau: f64::from_bits(*tau),
+                phases: phases.iter().copied().map(f64::from_bits).collect(),
+                fade: fade.map(|(transition, from, elapsed)| FadeProgress {
+                    transition,
+                    from,
+                    elapsed: f64::from_bits(elapsed),
+                }),
+            })
+            .collect(),
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -172,7 +237,7 @@ impl Checkpoint {
     pub(super) fn capture(
         tick: u64,
         playhead: &Playhead,
-        player: &StreamPlayer,
+        playing: Playing<'_>,
         prev: Option<f64>,
         clip_time: f32,
         naming: &Naming<'_>,
@@ -184,7 +249,8 @@ impl Checkpoint {
             playhead: (anchor_k, anchor_t.to_bits(), speed.to_bits(), paused),
             prev: prev.map(f64::to_bits),
             clip_time: clip_time.to_bits(),
-            player: player_bits(player.state(), naming, true),
+            player: player_bits(playing.player.state(), naming, true),
+            graph: playing.graph.map(|g| graph_bits(g.state())),
         }
     }
 
@@ -193,16 +259,26 @@ impl Checkpoint {
     /// # Errors
     /// Another format, a control it names missing, a state that does not
     /// fit the motions.
-    pub(super) fn restore(&self, fps: u32, lookup: &Lookup<'_>) -> Result<Restored, CheckpointError> {
+    pub(super) fn restore(&self, params: &StreamParams, lookup: &Lookup<'_>) -> Result<Restored, CheckpointError> {
         if self.format != FORMAT {
             return Err(CheckpointError::Unreadable(format!("format {} (this server reads {FORMAT})", self.format)));
         }
         let (anchor_k, anchor_t, speed, paused) = self.playhead;
         let state = player_state(&self.player, lookup)?;
         let player = Player::from_state(state).map_err(|e| CheckpointError::Mismatch(e.to_string()))?;
+        let graph = match (&params.graph, &self.graph) {
+            (None, None) => None,
+            (Some(program), Some(bits)) => Some(
+                GraphDeck::from_state(program, params.space, graph_state(bits))
+                    .map_err(|e| CheckpointError::Mismatch(e.to_string()))?,
+            ),
+            _ => return Err(CheckpointError::Mismatch("a graph's state for a motion, or none for a graph".into())),
+        };
+        let fps = params.fps;
         Ok(Restored {
             playhead: Playhead::from_parts(fps, (anchor_k, f64::from_bits(anchor_t), f64::from_bits(speed), paused)),
             player,
+            graph,
             prev: self.prev.map(f64::from_bits),
             clip_time: f32::from_bits(self.clip_time),
         })

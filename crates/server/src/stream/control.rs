@@ -1,5 +1,6 @@
 //! Stream controls, in one place: what a client may ask of a playback
-//! (`pause`, `seek`, `crossfade`, …; docs/motion.md, "Controls"), read
+//! (`pause`, `seek`, `crossfade`, …; docs/motion.md, "Controls"; a graph
+//! stream's `set`, docs/graphs.md), read
 //! from a WebSocket's JSON and a `Play` call's protobuf, checked against
 //! the stream, said again for a broadcast's journal, and applied to a
 //! playback — a per-viewer stream's and a broadcast's alike.
@@ -12,16 +13,20 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::graph::{GraphDeck, StreamGraph};
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
 use super::pinned::StreamPlayer;
 use super::playhead::{MAX_SPEED, Playhead};
 use anim::Ease;
+use anim::graph::Value;
 use anim::ik::{IkConstraint, IkError, IkLimits, IkSpec, build_constraints};
 use anim::motion::PlayerError;
+use formats::wire::graph_inputs::{SetDoc, parameters};
 use formats::wire::ik::IkDoc;
 use formats::wire::json::{DocError, EaseDoc};
 use formats::wire::proto::{ease_from_pb, ik_from_pb, pb};
+use formats::wire::proto_graph::value_from_proto;
 
 /// A change asked of a playback, applied at its next tick.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +54,12 @@ pub enum Control {
     SetIk(Vec<IkConstraint>),
     /// Restart the spring chains at rest (docs/springs.md, “Time”).
     ResetSprings,
+    /// Set a graph stream's parameters from the next tick (docs/graphs.md),
+    /// as a client names them; the stream's check resolves them into
+    /// [`Control::SetGraph`].
+    Set(SetDoc),
+    /// Set a graph stream's parameters, resolved against its graph.
+    SetGraph(Vec<(usize, Value)>),
 }
 
 /// A crossfade asked for: its target, already built over pinned clips.
@@ -106,7 +117,9 @@ impl Control {
             | Control::Stop
             | Control::Ik(_)
             | Control::SetIk(_)
-            | Control::ResetSprings => None,
+            | Control::ResetSprings
+            | Control::Set(_)
+            | Control::SetGraph(_) => None,
         }
     }
 
@@ -129,7 +142,23 @@ impl Control {
             | Control::Layer { .. }
             | Control::Ik(_)
             | Control::SetIk(_)
-            | Control::ResetSprings => None,
+            | Control::ResetSprings
+            | Control::Set(_)
+            | Control::SetGraph(_) => None,
+        }
+    }
+
+    /// Why a graph stream refuses this control, if it does: it plays the
+    /// graph's own time from 0 at speed 1, with its own crossfades.
+    fn refused_on_graph(&self) -> Option<&'static str> {
+        match self {
+            Control::Seek(_) => Some("a graph stream plays its ticks from 0: it has no `seek`"),
+            Control::Speed(_) => Some("a graph stream plays one graph tick per tick: it has no `speed`"),
+            Control::Crossfade(_) => Some("a graph's transitions are its own crossfades: send `set` controls"),
+            Control::Layer { .. } => Some("a graph's blend weights come from its parameters: send `set` controls"),
+            Control::Ik(_) | Control::SetIk(_) => Some("a graph stream takes no `ik` yet"),
+            Control::ResetSprings => Some("a graph stream has no spring chains"),
+            Control::Play | Control::Pause | Control::Stop | Control::Set(_) | Control::SetGraph(_) => None,
         }
     }
 
@@ -146,16 +175,25 @@ impl Control {
             | Control::Layer { .. }
             | Control::Ik(_)
             | Control::SetIk(_)
-            | Control::ResetSprings => (paused, speed),
+            | Control::ResetSprings
+            | Control::Set(_)
+            | Control::SetGraph(_) => (paused, speed),
         }
     }
 
     /// Applies the control to a playback so that it takes effect at tick
-    /// `k` (`k >= 1`): the one step of per-viewer streams and broadcasts.
+    /// `k` (`k >= 1`): the one step of per-viewer streams and broadcasts
+    /// (`graph`: a graph stream's graph).
     ///
     /// # Errors
     /// A crossfade or ramp the player refuses (nothing changed).
-    pub(crate) fn apply(self, playhead: &mut Playhead, player: &mut StreamPlayer, k: u64) -> Result<Applied, Refused> {
+    pub(crate) fn apply(
+        self,
+        playhead: &mut Playhead,
+        player: &mut StreamPlayer,
+        graph: Option<&mut GraphDeck>,
+        k: u64,
+    ) -> Result<Applied, Refused> {
         match self {
             Control::Play => playhead.play(k),
             Control::Pause => playhead.pause(k),
@@ -173,8 +211,13 @@ impl Control {
             }
             Control::SetIk(constraints) => player.set_ik(constraints),
             Control::ResetSprings => player.reset_springs(),
-            // The stream's check resolves every `ik` control before it is queued.
+            Control::SetGraph(values) => match graph {
+                Some(graph) => graph.set(&values),
+                None => tracing::error!("graph settings reached a playback without a graph"),
+            },
+            // The stream's check resolves every `ik` and `set` control before it is queued.
             Control::Ik(_) => tracing::error!("IK constraints reached a playback unresolved"),
+            Control::Set(_) => tracing::error!("graph settings reached a playback unresolved"),
         }
         Ok(Applied::Continued)
     }
@@ -196,7 +239,11 @@ impl Control {
             }
             Control::Ik(specs) => ControlMsg::Ik { constraints: specs.iter().map(IkDoc::from_spec).collect() },
             Control::ResetSprings => ControlMsg::ResetSprings,
-            Control::Stop | Control::Crossfade(Crossfade { source: None, .. }) | Control::SetIk(_) => return None,
+            Control::Set(parameters) => ControlMsg::Set { parameters: parameters.clone() },
+            Control::Stop
+            | Control::Crossfade(Crossfade { source: None, .. })
+            | Control::SetIk(_)
+            | Control::SetGraph(_) => return None,
         };
         Some(serde_json::to_value(msg).expect("a control message is JSON"))
     }
@@ -254,6 +301,10 @@ pub(crate) enum ControlMsg {
     },
     /// Restarts the spring chains at rest at the next tick.
     ResetSprings,
+    /// Sets a graph stream's parameters from the next tick.
+    Set {
+        parameters: SetDoc,
+    },
 }
 
 fn linear() -> EaseDoc {
@@ -261,7 +312,7 @@ fn linear() -> EaseDoc {
 }
 
 /// The ops a control message may name, as its refusal lists them.
-const OPS: [&str; 9] = ["play", "pause", "seek", "speed", "stop", "crossfade", "layer", "ik", "reset_springs"];
+const OPS: [&str; 10] = ["play", "pause", "seek", "speed", "stop", "crossfade", "layer", "ik", "reset_springs", "set"];
 
 /// The refusal of a text that is no control message; `stop` is listed only
 /// where it is taken (a stream's socket, not a broadcast's REST control).
@@ -283,6 +334,7 @@ impl ControlMsg {
             ControlMsg::Speed { speed } => Control::Speed(speed),
             ControlMsg::Stop => Control::Stop,
             ControlMsg::ResetSprings => Control::ResetSprings,
+            ControlMsg::Set { parameters } => Control::Set(parameters),
             ControlMsg::Layer { index, weight, duration } => Control::Layer { index, weight, duration },
             ControlMsg::Crossfade { to, duration, ease } => {
                 return Ok(ParsedControl::Crossfade { to, duration, ease: ease.into() });
@@ -325,12 +377,25 @@ impl ParsedControl<Option<pb::Motion>> {
                 return Ok(ParsedControl::Crossfade { to: fade.to, duration: fade.duration, ease });
             }
             Some(Op::Ik(ik)) => Control::Ik(ik_from_pb(&ik.constraints, "/constraints")?),
+            Some(Op::Set(set)) => Control::Set(set_doc_from_pb(&set)),
             Some(Op::Open(_) | Op::Broadcast(_)) => {
                 return Err(bad("`open` and `broadcast` are only valid as the first message"));
             }
             None => return Err(bad("a PlaybackControl needs an op")),
         }))
     }
+}
+
+/// A `Play` `set`'s parameters as the JSON a WebSocket's would be (so both
+/// are checked, refused and journaled alike): a number, a flag, or null
+/// for a value with neither (refused `parameter_type` by the check).
+fn set_doc_from_pb(set: &pb::SetParameters) -> SetDoc {
+    let json = |v: &pb::GraphValue| match value_from_proto(v) {
+        Some(Value::Float(n)) => serde_json::Number::from_f64(n).map_or(serde_json::Value::Null, Into::into),
+        Some(Value::Bool(b)) => b.into(),
+        None => serde_json::Value::Null,
+    };
+    set.parameters.iter().map(|(name, v)| (name.clone(), json(v))).collect()
 }
 
 /// Why a control message was refused: its stable code, the JSON pointer at
@@ -377,6 +442,14 @@ pub enum ControlError {
     /// A broadcast viewer without the write scope sent a control.
     #[error("controlling a broadcast needs the `write` scope; this viewer may only watch")]
     ReadOnly,
+    /// A control a graph stream does not take, or a `set` on a stream
+    /// without a graph (`graph_unsupported`).
+    #[error("{0}")]
+    Graph(&'static str),
+    /// A `set` control's value its graph refuses (`unknown_parameter`,
+    /// `parameter_type`, `parameter_out_of_range` at `/parameters/<name>`).
+    #[error("{detail}")]
+    Setting { code: &'static str, pointer: String, detail: String },
     /// Refused by the server before it was applied, or withdrawn because
     /// it could not be stored (docs/broadcasts.md, "Control"): the write
     /// budget, the broadcast's work, its store queue. `problem` is the
@@ -398,6 +471,8 @@ impl ControlError {
             ControlError::Invalid(_) | ControlError::Busy => "bad_control",
             ControlError::Refused { code, .. } => code,
             ControlError::JournalFull => "broadcast_journal_full",
+            ControlError::Graph(_) => "graph_unsupported",
+            ControlError::Setting { code, .. } => code,
         }
     }
 
@@ -405,7 +480,9 @@ impl ControlError {
     pub fn pointer(&self) -> Option<String> {
         match self {
             ControlError::Ik(e) => Some(format!("/constraints{}", e.path.to_pointer())),
+            ControlError::Setting { pointer, .. } => Some(pointer.clone()),
             ControlError::Invalid(_)
+            | ControlError::Graph(_)
             | ControlError::Busy
             | ControlError::ReadOnly
             | ControlError::Refused { .. }
@@ -446,6 +523,8 @@ pub(crate) struct ControlCheck {
     compact: bool,
     /// A control that leaves the stream's clip was accepted (a crossfade, a layer ramp, an `ik` control).
     departed: bool,
+    /// A graph stream's graph, which its `set` controls are checked against.
+    graph: Option<Arc<StreamGraph>>,
 }
 
 impl ControlCheck {
@@ -458,6 +537,7 @@ impl ControlCheck {
             repricing: None,
             compact: params.compact.is_some(),
             departed: false,
+            graph: params.graph.as_ref().map(|g| Arc::clone(&g.graph)),
         }
     }
 
@@ -484,6 +564,19 @@ impl ControlCheck {
 
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         let control = control.validate().map_err(ControlError::Invalid)?;
+        if let Some(graph) = &self.graph {
+            if let Some(why) = control.refused_on_graph() {
+                return Err(ControlError::Graph(why));
+            }
+            if let Control::Set(doc) = &control {
+                let values = parameters(graph.as_ref(), doc, "/parameters").map_err(|e| ControlError::Setting {
+                    code: e.code,
+                    pointer: e.pointer,
+                    detail: e.detail,
+                })?;
+                return Ok(Control::SetGraph(values));
+            }
+        }
         if control.leaves_the_clip() {
             if self.compact {
                 return Err(ControlError::Invalid(
@@ -510,6 +603,9 @@ impl ControlCheck {
                 return Ok(Control::SetIk(constraints));
             }
             Control::SetIk(_) => return Err(ControlError::Invalid("constraints must be checked against the stream")),
+            Control::Set(_) | Control::SetGraph(_) => {
+                return Err(ControlError::Graph("`set` drives a graph stream: this stream plays no graph"));
+            }
             Control::Play
             | Control::Pause
             | Control::Seek(_)
@@ -570,7 +666,17 @@ mod tests {
                 let keyed = specs.iter().map(|s| IkDoc::from_spec(s).to_keyed_spec("").expect("a fixed constraint"));
                 Op::Ik(pb::IkControl { constraints: keyed.map(|k| ik_to_pb(&k)).collect() })
             }
-            Control::SetIk(_) => panic!("resolved constraints are never sent"),
+            Control::Set(parameters) => {
+                let value = |v: &serde_json::Value| pb::GraphValue {
+                    value: Some(match v.as_bool() {
+                        Some(b) => pb::graph_value::Value::Flag(b),
+                        None => pb::graph_value::Value::Number(v.as_f64().unwrap()),
+                    }),
+                };
+                let parameters = parameters.iter().map(|(k, v)| (k.clone(), value(v))).collect();
+                Op::Set(pb::SetParameters { parameters })
+            }
+            Control::SetIk(_) | Control::SetGraph(_) => panic!("resolved controls are never sent"),
         }
     }
 
@@ -605,6 +711,7 @@ mod tests {
                 {"kind": "aim", "joint": "head", "target": [1.0, 2.0, 3.0], "weight": 0.5}
             ]}),
             json!({"op": "reset_springs"}),
+            json!({"op": "set", "parameters": {"jump": true, "speed": 2.5}}),
         ]
     }
 
@@ -646,10 +753,10 @@ mod tests {
     fn refusals_list_the_ops() {
         let e = serde_json::from_str::<ControlMsg>("{}").unwrap_err();
         assert!(not_a_control(&e, true).starts_with(
-            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"stop"|"crossfade"|"layer"|"ik"|"reset_springs", ...}: "#
+            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"stop"|"crossfade"|"layer"|"ik"|"reset_springs"|"set", ...}: "#
         ));
         assert!(not_a_control(&e, false).starts_with(
-            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"crossfade"|"layer"|"ik"|"reset_springs", ...}: "#
+            r#"expected {"op": "play"|"pause"|"seek"|"speed"|"crossfade"|"layer"|"ik"|"reset_springs"|"set", ...}: "#
         ));
     }
 

@@ -25,8 +25,14 @@ use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{Event, Pose, Skeleton, Space};
 use formats::wire::compact::{CompactEncoder, Header, KEY_FRAME};
+use formats::wire::graph_inputs::write_report;
 use formats::wire::json::{Extras, ParameterValues, PoseJson};
 use formats::wire::proto::{ik_kind_to_pb, space_to_pb};
+use formats::wire::proto_graph::report_to_proto;
+use prost::Message;
+
+use super::pinned::PinnedClip;
+use anim::graph::GraphReport;
 
 /// How frames travel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -76,6 +82,9 @@ pub struct FrameData<'a> {
     pub crossed: &'a [u32],
     /// Protobuf only: put the joint names in this frame.
     pub with_names: bool,
+    /// A graph stream's report of this tick, when it asked for reports
+    /// (JSON: the frame's `graph` member; protobuf: `Pose.graph`).
+    pub graph: Option<GraphReport<'a, Arc<dyn PinnedClip>>>,
 }
 
 /// One encoded frame, shared by every viewer of its playback.
@@ -261,6 +270,9 @@ fn write_json(buf: &mut BytesMut, f: &FrameData<'_>) -> (u32, u32) {
     let (joints, root_motion, ik, parameters) = (f.joints, f.root_motion, f.ik, f.parameters);
     let extras = Extras { joints, root_motion, ik, parameters, tail: &[], feet: f.feet };
     pose.write_with(*w.get_mut(), extras);
+    if let Some(report) = &f.graph {
+        write_report(*w.get_mut(), report);
+    }
     w.write_all(b"}").expect(io);
     (a, b)
 }
@@ -405,7 +417,18 @@ fn write_protobuf(buf: &mut BytesMut, f: &FrameData<'_>) {
     let space = space_to_pb(f.space) as u64;
     let root = f.root_motion.as_ref().map_or(0, |r| len_field(9, root_motion_len(r)));
     let ik: usize = f.ik.iter().map(|r| len_field(10, report_len(r))).sum();
-    let pose_len = names + 2 * packed(3) + packed(4) + (key_len(5) + 8) + (key_len(6) + 4) + key_len(8) + 1 + root + ik;
+    let graph = f.graph.as_ref().map(report_to_proto);
+    let graph_len = graph.as_ref().map_or(0, |g| len_field(14, g.encoded_len()));
+    let pose_len = names
+        + 2 * packed(3)
+        + packed(4)
+        + (key_len(5) + 8)
+        + (key_len(6) + 4)
+        + key_len(8)
+        + 1
+        + root
+        + ik
+        + graph_len;
     let event_len = |e: &Event| (key_len(1) + 4) + len_field(2, e.name.len());
     let events: usize = f.crossed.iter().map(|&i| len_field(5, event_len(&f.events[i as usize]))).sum();
     buf.reserve(40 + events + len_field(6, pose_len));
@@ -466,6 +489,11 @@ fn write_protobuf(buf: &mut BytesMut, f: &FrameData<'_>) {
                 }
             }
         }
+    }
+    if let Some(g) = graph {
+        encode_key(14, WireType::LengthDelimited, buf);
+        encode_varint(g.encoded_len() as u64, buf);
+        g.encode_raw(buf);
     }
 }
 
@@ -537,6 +565,7 @@ mod tests {
             events: clip.events(),
             crossed: &crossed,
             with_names,
+            graph: None,
         };
         let encoded = FrameEncoder::new(encoding).encode(&data);
         let names = with_names.then(|| clip.skeleton().names());

@@ -42,6 +42,7 @@ use std::sync::Arc;
 use super::pinned::StreamMotion;
 use anim::motion::{MotionOptions, Player};
 
+use super::graph::GraphDeck;
 use super::pinned::StreamPlayer;
 use formats::wire::json::ParameterValues;
 
@@ -75,6 +76,8 @@ pub(crate) struct Hub {
     schedule: Schedule,
     playhead: Playhead,
     player: StreamPlayer,
+    /// A graph stream's graph, played in place of `player`'s motion.
+    graph: Option<GraphDeck>,
     /// The current motion's first-layer position at the previous frame
     /// (for the events crossed), and which motion that was.
     prev: Option<(f64, Arc<StreamMotion>)>,
@@ -112,6 +115,7 @@ impl Hub {
             params: params.clone(),
             schedule,
             player: Player::new(Arc::clone(&params.motion)),
+            graph: params.graph.as_ref().map(|g| GraphDeck::new(g, params.space)),
             prev: None,
             crossed: Vec::new(),
             encoder: params.encoder(),
@@ -180,7 +184,7 @@ impl Hub {
         if let Some(controls) = &mut self.controls {
             let mut stop = false;
             while let Ok(control) = controls.try_recv() {
-                match control.apply(&mut self.playhead, &mut self.player, tick.k) {
+                match control.apply(&mut self.playhead, &mut self.player, self.graph.as_mut(), tick.k) {
                     Ok(Applied::Continued) => {}
                     Ok(Applied::Jumped) => jumped = true,
                     Ok(Applied::Stopped) => stop = true,
@@ -224,11 +228,17 @@ impl Hub {
 
     /// Evaluates and encodes tick `k`.
     fn frame(&mut self, k: u64, skipped: u64, jumped: bool) -> Encoded {
-        let time = (self.playhead.time_at(k), stream_clock(&self.params, k));
-        let clip_time = sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed);
+        let clip_time = match &mut self.graph {
+            Some(graph) => graph.tick(self.params.fps, self.playhead.paused(), (k, skipped)),
+            None => {
+                let time = (self.playhead.time_at(k), stream_clock(&self.params, k));
+                sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed)
+            }
+        };
         let tick = TickStamp { seq: k, dropped: skipped, sent_at: unix_nanos(), clip_time };
         let with_names = std::mem::take(&mut self.with_names);
-        self.encoder.encode(&frame_data(&self.player, &self.params, &self.crossed, tick, with_names))
+        let playing = Playing { player: &self.player, graph: self.graph.as_ref() };
+        self.encoder.encode(&frame_data(playing, &self.params, &self.crossed, tick, with_names))
     }
 }
 
@@ -268,16 +278,49 @@ pub(super) fn sample_tick(
     clip_time
 }
 
-/// The frame of `player`'s current pose, as `params` asks for it.
+/// What a tick played: the motion player, or a graph stream's graph.
+#[derive(Clone, Copy)]
+pub(super) struct Playing<'a> {
+    pub player: &'a StreamPlayer,
+    pub graph: Option<&'a GraphDeck>,
+}
+
+/// The frame of the current pose, as `params` asks for it. A graph's
+/// frame names the graph as its clip, shows the graph's motion time, and
+/// carries its report when asked (no events, root motion or IK: a graph
+/// stream has none).
 pub(super) fn frame_data<'a>(
-    player: &'a StreamPlayer,
+    playing: Playing<'a>,
     params: &'a StreamParams,
     crossed: &'a [u32],
     tick: TickStamp,
     with_names: bool,
 ) -> FrameData<'a> {
+    let player = playing.player;
     let motion = player.motion();
     let first = motion.first_clip();
+    if let Some(graph) = playing.graph {
+        return FrameData {
+            seq: tick.seq,
+            dropped: tick.dropped,
+            sent_at_unix_nanos: tick.sent_at,
+            clip_id: &params.clip_id,
+            time: graph.time(params.fps),
+            clip_time: tick.clip_time,
+            space: params.space,
+            skeleton: motion.skeleton(),
+            pose: graph.pose(),
+            joints: params.joints.as_deref(),
+            parameters: None,
+            root_motion: None,
+            ik: &[],
+            feet: &[],
+            events: &[],
+            crossed: &[],
+            with_names,
+            graph: graph.report(),
+        };
+    }
     FrameData {
         seq: tick.seq,
         dropped: tick.dropped,
@@ -296,6 +339,7 @@ pub(super) fn frame_data<'a>(
         events: first.clip().events(),
         crossed,
         with_names,
+        graph: None,
     }
 }
 

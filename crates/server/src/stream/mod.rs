@@ -21,6 +21,9 @@
 //! response stream of pre-encoded [`WireFrame`]s, `ws` as text or binary
 //! messages.
 //!
+//! A graph stream (docs/graphs.md, `graph`) plays a stored graph in place
+//! of the motion player, one graph tick per tick, driven by `set` controls.
+//!
 //! A broadcast (docs/broadcasts.md, `broadcast`) is a playback made a feature: named,
 //! created and deleted explicitly, joinable at any tick, controlled for all
 //! its viewers with controls stamped by the tick they apply from.
@@ -43,6 +46,7 @@ mod control;
 mod encode;
 mod engine;
 mod events;
+mod graph;
 pub mod grpc;
 mod hub;
 mod limits;
@@ -71,6 +75,7 @@ pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};
 pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use formats::wire::frame::WireFrame;
+pub use graph::{GraphProgram, StreamGraph};
 pub use hub::{EndReason, unix_nanos};
 pub use limits::{AdmitError, StreamPermit};
 pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
@@ -91,5 +96,7 @@ mod tests_broadcast_budget;
 mod tests_checkpoint;
 #[cfg(test)]
 mod tests_compact;
+#[cfg(test)]
+mod tests_graph;
 #[cfg(test)]
 mod tests_ws;

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use super::compact::CompactLayout;
 use super::encode::{Encoding, FrameEncoder, Names};
+use super::graph::GraphProgram;
 use super::pinned::{PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
 use anim::ik::IkLimits;
@@ -71,6 +72,9 @@ pub struct StreamParams {
     pub ik_limits: IkLimits,
     /// Compact frames' layout (`encoding` compact).
     pub compact: Option<Arc<CompactLayout>>,
+    /// A graph stream's graph (docs/graphs.md), played in place of
+    /// `motion` (its initial state's, which names the skeleton).
+    pub graph: Option<GraphProgram>,
 }
 
 impl std::fmt::Debug for StreamParams {
@@ -138,6 +142,7 @@ impl StreamParams {
             parameters: None,
             ik_limits: IkLimits::default(),
             compact: None,
+            graph: None,
             motion,
         })
     }
@@ -155,6 +160,16 @@ impl StreamParams {
         let (max_error, distance) = layout.key();
         let identity = format!("{} compact {max_error:08x} {distance:08x}", self.identity).into();
         StreamParams { encoding: Encoding::Compact, compact: Some(layout), identity, ..self }
+    }
+
+    /// The same stream playing `graph` from motion time 0: frames name the
+    /// graph as their clip, and the stream is a program of its own (a graph
+    /// stream is never shared: its `set` controls are its viewer's).
+    pub fn with_graph(self, graph: GraphProgram) -> Self {
+        static STREAMS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let unique = STREAMS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let identity = format!("graph {}@{} {unique}", graph.id, graph.version).into();
+        StreamParams { clip_id: Arc::clone(&graph.id), identity, graph: Some(graph), start: 0.0, ..self }
     }
 
     /// An encoder of this stream's frames.
@@ -180,6 +195,7 @@ impl StreamParams {
     pub fn names(&self) -> Names {
         let layout = self.motion.parameters();
         let parameters: Vec<usize> = match &self.parameters {
+            _ if self.graph.is_some() => Vec::new(),
             Some(subset) => subset.to_vec(),
             None => (0..layout.len()).collect(),
         };

@@ -15,7 +15,8 @@
 //! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`,
 //! and for composition (docs/motion.md) `{"op":"crossfade","to":motion,
 //! "duration":0.4,"ease":"ease_in_out"}` and `{"op":"layer","index":1,
-//! "weight":0.3,"duration":0.5}`. A crossfade's motion names clips the
+//! "weight":0.3,"duration":0.5}`, and a graph stream's `{"op":"set",
+//! "parameters":{…}}` (docs/graphs.md). A crossfade's motion names clips the
 //! transport must look up ([`MotionResolver`]); while it does, the frames go
 //! on and later controls wait behind it, so they apply in the order sent.
 //! A bad control is answered with a text message

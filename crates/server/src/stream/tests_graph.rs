@@ -1,0 +1,137 @@
+//! Graph programs (docs/graphs.md, “Streams and broadcasts”): a broadcast
+//! of a graph restored from any checkpoint makes the very bytes of the
+//! program that stepped from tick 0 — through settings, a trigger's
+//! transition, a fade back interrupted by nothing, a pause — its frames
+//! carry the report, and a stream's check resolves `set` against the graph
+//! and refuses what a graph stream does not take.
+
+use std::sync::Arc;
+
+use anim::graph::Value;
+use anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Playback, TrackSpec};
+use glam::Vec3;
+
+use super::control::ControlCheck;
+use super::tests::pinned;
+use super::*;
+
+/// `root` moving from 0 to `to` over `duration`, looping.
+fn line(duration: f32, to: Vec3) -> Arc<Clip> {
+    let track = TrackSpec::new(
+        "root",
+        Channel::Translation,
+        Interpolation::Linear,
+        vec![0.0, duration],
+        Keys::Vec3(vec![Vec3::ZERO, to]),
+    );
+    let spec = ClipSpec { name: "line".into(), tracks: vec![track], playback: Playback::Loop, ..Default::default() };
+    Arc::new(Clip::build(&spec).unwrap())
+}
+
+/// `s` blends two lines in one sync group; the trigger `go` fades to the
+/// third, and `s` under 0.5 fades back.
+fn graph_params() -> StreamParams {
+    let doc = serde_json::json!({"name": "g",
+        "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
+        "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": "a", "at": 0}, {"clip": "b", "at": 1}]}},
+                  "c": {"clip": "c"}},
+        "machine": {"initial": "mix", "states": {"mix": {"node": "mix"}, "c": {"node": "c"}},
+            "transitions": [{"from": "mix", "to": "c", "when": {"trigger": "go"}, "duration": 0.3},
+                            {"from": "c", "to": "mix", "when": {"parameter": "s", "lt": 0.5}, "duration": 0.4,
+                             "ease": "ease_in_out"}]}});
+    let clips = [("a", line(1.0, Vec3::X)), ("b", line(0.6, Vec3::new(0.0, 0.0, 2.0))), ("c", line(0.8, Vec3::Y))];
+    let doc = formats::wire::graph::parse_graph_doc(doc.to_string().as_bytes()).unwrap();
+    let graph =
+        doc.compile("", |id, _| Ok(pinned(id, Arc::clone(&clips.iter().find(|(n, _)| *n == id).unwrap().1)))).unwrap();
+    let program = GraphProgram { graph: Arc::new(graph), id: "g".into(), version: 1, report: true };
+    let req = StreamRequest { fps: 30, ..Default::default() };
+    let motion = Arc::clone(program.graph.initial_motion());
+    StreamParams::of_motion(motion, "g".into(), req).unwrap().with_graph(program)
+}
+
+fn log(params: &StreamParams) -> ControlLog {
+    let graph = &params.graph.as_ref().unwrap().graph;
+    let (s, go) = (graph.parameter_index("s").unwrap(), graph.parameter_index("go").unwrap());
+    let schedule = [
+        (5, Control::SetGraph(vec![(s, Value::Float(0.7))])),
+        (12, Control::SetGraph(vec![(go, Value::Bool(true))])),
+        (20, Control::Pause),
+        (26, Control::Play),
+        (40, Control::SetGraph(vec![(s, Value::Float(0.2))])),
+    ];
+    let mut log = ControlLog::default();
+    for (seq, control) in schedule {
+        log.insert(StampedControl { seq, id: new_control_id(), control });
+    }
+    log
+}
+
+fn frame_at(p: &mut Program, k: u64, log: &ControlLog) -> bytes::Bytes {
+    p.step_to(k, log);
+    p.encode(Encoding::Json, 0).bytes
+}
+
+fn report(bytes: &bytes::Bytes) -> serde_json::Value {
+    serde_json::from_slice::<serde_json::Value>(bytes).unwrap()["graph"].clone()
+}
+
+#[test]
+fn a_graph_program_restored_from_any_checkpoint_makes_the_same_bytes() {
+    let params = graph_params();
+    let log = log(&params);
+    const EVERY: u64 = 8;
+    let mut reference = Program::new(&params).checkpointing(EVERY);
+    let mut frames = Vec::new();
+    let mut texts = Vec::new();
+    for k in 0..80 {
+        frames.push(frame_at(&mut reference, k, &log));
+        if (k + 1) % EVERY == 0 {
+            texts.push(reference.checkpoint().unwrap().to_text());
+        }
+    }
+    let weights = |k: usize| -> Vec<f64> {
+        report(&frames[k])["weights"]["mix"].as_array().unwrap().iter().map(|w| w.as_f64().unwrap()).collect()
+    };
+    assert_eq!(weights(4), [1.0, 0.0]);
+    assert_eq!(weights(5), [1.0 - 0.7, 0.7], "the setting from its tick");
+    assert_eq!(report(&frames[12])["transition"]["to"], "c", "the trigger fires at its tick");
+    let shown = |k: usize| {
+        let v = serde_json::from_slice::<serde_json::Value>(&frames[k]).unwrap();
+        (v["pose"].clone(), v["graph"].clone())
+    };
+    assert_eq!(shown(21), shown(25), "paused frames repeat the pose and the report");
+    assert_ne!(shown(26), shown(25), "play goes on");
+    assert_eq!(report(&frames[40])["transition"]["to"], "mix", "s under 0.5 fades back");
+    for (i, text) in texts.iter().enumerate() {
+        let checkpoint = Checkpoint::from_text(text).unwrap();
+        let c = (i as u64 + 1) * EVERY - 1;
+        let mut restored = Program::from_checkpoint(&params, &checkpoint, &log).unwrap();
+        for k in c + 1..80 {
+            assert_eq!(frame_at(&mut restored, k, &log), frames[k as usize], "tick {k} from the checkpoint of {c}");
+        }
+    }
+}
+
+#[test]
+fn a_graph_streams_check_resolves_set_and_refuses_what_a_graph_does_not_take() {
+    let params = graph_params();
+    let mut check = ControlCheck::new(&params);
+    let set = |doc: serde_json::Value| Control::Set(serde_json::from_value(doc).unwrap());
+    let s = params.graph.as_ref().unwrap().graph.parameter_index("s").unwrap();
+    assert_eq!(check.check(set(serde_json::json!({"s": 0.5}))), Ok(Control::SetGraph(vec![(s, Value::Float(0.5))])));
+    for (doc, code, pointer) in [
+        (serde_json::json!({"x": 1}), "unknown_parameter", "/parameters/x"),
+        (serde_json::json!({"s": 2}), "parameter_out_of_range", "/parameters/s"),
+        (serde_json::json!({"go": 0.5}), "parameter_type", "/parameters/go"),
+    ] {
+        let e = check.check(set(doc)).unwrap_err();
+        assert_eq!((e.code(), e.pointer().as_deref()), (code, Some(pointer)));
+    }
+    for control in [Control::Seek(1.0), Control::Speed(2.0), Control::ResetSprings, Control::Ik(Vec::new())] {
+        assert_eq!(check.check(control).unwrap_err().code(), "graph_unsupported");
+    }
+    assert_eq!(check.check(Control::Pause), Ok(Control::Pause));
+    let plain = StreamParams::new(pinned("a", line(1.0, Vec3::X)), StreamRequest { fps: 30, ..Default::default() });
+    let e = ControlCheck::new(&plain.unwrap()).check(set(serde_json::json!({"s": 0.5}))).unwrap_err();
+    assert_eq!(e.code(), "graph_unsupported");
+}

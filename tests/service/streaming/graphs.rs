@@ -1,0 +1,344 @@
+//! Graphs in streams and broadcasts (docs/graphs.md, “Streams and
+//! broadcasts”), with real clients: a WebSocket graph stream driven by
+//! `set` controls shows, tick for tick, what `POST /v1/samples` answers for
+//! the same settings at the same ticks (reports equal, poses within 1e-5);
+//! what a graph stream does not take is refused with its code and pointer;
+//! a broadcast's `set` reaches every viewer at the seq it answers; gRPC
+//! `StreamFrames` carries `Pose.graph` and `Play` takes `set`.
+//!
+//! The graph is the Fox's shipped locomotion (`examples/graphs/fox-locomotion.json`):
+//! it stands (`idle`) until `speed` rises above 0.2, then `move`s at once
+//! (the transition fires on the tick the setting takes effect), and the
+//! `survey` trigger while moving fires `look` on its tick. So the first
+//! frame showing the new state is the tick the `set` took effect, which the
+//! samples request then names as its input's time.
+
+use std::collections::BTreeMap;
+
+use formats::wire::proto::pb;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+use super::{TestApp, within};
+use crate::api::graph_samples::fox_graph;
+use crate::common::app::Ws;
+
+const FPS: u32 = 60;
+
+/// The next text message as JSON (pings skipped).
+async fn next_json(ws: &mut Ws) -> Value {
+    loop {
+        match within(5, "a message", ws.next()).await.expect("the socket closed").unwrap() {
+            Message::Text(t) => return serde_json::from_str(&t).unwrap(),
+            Message::Ping(_) | Message::Pong(_) => {}
+            other => panic!("expected a text message, got {other:?}"),
+        }
+    }
+}
+
+/// The next frame (an error message fails the test).
+async fn next_frame(ws: &mut Ws) -> Value {
+    let v = next_json(ws).await;
+    assert!(v.get("seq").is_some(), "expected a frame, got {v}");
+    v
+}
+
+/// The next error message, frames before it skipped.
+async fn next_error(ws: &mut Ws) -> Value {
+    for _ in 0..400 {
+        let v = next_json(ws).await;
+        if let Some(error) = v.get("error") {
+            return error.clone();
+        }
+    }
+    panic!("no error message within 400 messages");
+}
+
+async fn send(ws: &mut Ws, msg: Value) {
+    ws.send(Message::Text(msg.to_string().into())).await.unwrap();
+}
+
+fn over(graph: &str) -> Value {
+    json!({"layers": [{"graph": graph}]})
+}
+
+/// `GET /v1/stream` opened with `open`: the socket and the first message.
+async fn open(app: &TestApp, open: Value) -> (Ws, Value) {
+    let mut ws = app.ws("/v1/stream").await;
+    send(&mut ws, open).await;
+    let first = next_json(&mut ws).await;
+    (ws, first)
+}
+
+fn state(frame_or_pose: &Value) -> &str {
+    frame_or_pose["graph"]["state"].as_str().unwrap_or_else(|| panic!("no report: {frame_or_pose}"))
+}
+
+/// Reads frames until seq `until`: seq → frame.
+async fn frames_until(ws: &mut Ws, until: u64) -> BTreeMap<u64, Value> {
+    let mut out = BTreeMap::new();
+    loop {
+        let frame = next_frame(ws).await;
+        let seq = frame["seq"].as_u64().unwrap();
+        out.insert(seq, frame);
+        if seq >= until {
+            return out;
+        }
+    }
+}
+
+/// The first seq at or after `from` whose report shows `state`.
+fn first_in(frames: &BTreeMap<u64, Value>, from: u64, want: &str) -> u64 {
+    *frames.range(from..).find(|(_, f)| state(f) == want).unwrap_or_else(|| panic!("no frame in {want}")).0
+}
+
+/// `POST /v1/samples` over `graph` from tick 0 to `last` at `fps` with `inputs`.
+async fn samples(app: &TestApp, graph: &str, last: u64, fps: u32, inputs: Value) -> Vec<Value> {
+    let body = json!({"motion": over(graph), "start": 0, "end": last as f64 / f64::from(fps), "fps": fps,
+                      "report": true, "inputs": inputs});
+    let answer = app.post_json("/v1/samples", &body).await;
+    let poses = answer["poses"].as_array().unwrap_or_else(|| panic!("{answer}")).clone();
+    assert_eq!(poses.len() as u64, last + 1);
+    poses
+}
+
+/// A frame's pose against a sampled pose: the same report exactly, the
+/// same time, every joint's numbers within 1e-5.
+fn assert_same_tick(seq: u64, frame: &Value, pose: &Value) {
+    assert_eq!(frame["graph"], pose["graph"], "the report of tick {seq}");
+    let (a, b) = (&frame["pose"], pose);
+    assert_eq!(a["clip"], b["clip"], "tick {seq} names the graph");
+    assert!((a["time"].as_f64().unwrap() - b["time"].as_f64().unwrap()).abs() < 1e-12, "tick {seq}'s time");
+    let (ja, jb) = (a["joints"].as_array().unwrap(), b["joints"].as_array().unwrap());
+    assert_eq!(ja.len(), jb.len());
+    for (x, y) in ja.iter().zip(jb) {
+        for channel in ["translation", "rotation", "scale"] {
+            for (u, v) in x[channel].as_array().unwrap().iter().zip(y[channel].as_array().unwrap()) {
+                let (u, v) = (u.as_f64().unwrap(), v.as_f64().unwrap());
+                assert!((u - v).abs() <= 1e-5 * v.abs().max(1.0), "tick {seq} {channel}: {u} vs {v}");
+            }
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_websocket_graph_stream_shows_what_samples_answer_for_the_same_settings() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let (mut ws, opened) = open(&app, json!({"op": "open", "motion": over(&graph), "fps": FPS, "report": true})).await;
+    assert_eq!(opened["opened"]["clip"], graph.as_str(), "{opened}");
+    let head = frames_until(&mut ws, 3).await;
+    assert_eq!(state(&head[&0]), "idle");
+    send(&mut ws, json!({"op": "set", "parameters": {"speed": 2.5}})).await;
+    let mut frames = frames_until(&mut ws, 40).await;
+    let moved = first_in(&frames, 0, "move");
+    assert!(moved > 3, "a set applies at a tick after the frames already read: {moved}");
+    let sent_at = *frames.keys().last().unwrap();
+    send(&mut ws, json!({"op": "set", "parameters": {"survey": true}})).await;
+    frames.extend(frames_until(&mut ws, sent_at + 40).await);
+    frames.extend(head);
+    let looked = first_in(&frames, sent_at + 1, "look");
+    let last = *frames.keys().last().unwrap();
+    let t = |k: u64| k as f64 / f64::from(FPS);
+    let inputs = json!([{"time": t(moved), "set": {"speed": 2.5}}, {"time": t(looked), "set": {"survey": true}}]);
+    let poses = samples(&app, &graph, last, FPS, inputs).await;
+    for (seq, frame) in &frames {
+        assert_same_tick(*seq, frame, &poses[*seq as usize]);
+    }
+    let fired = &frames[&moved]["graph"]["transition"];
+    assert_eq!((&fired["from"], &fired["to"], fired["alpha"].as_f64()), (&json!("idle"), &json!("move"), Some(0.0)));
+}
+
+#[tokio::test]
+async fn pause_holds_a_graph_stream_and_play_goes_on_from_its_tick() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let (mut ws, _) = open(&app, json!({"op": "open", "motion": over(&graph), "fps": FPS, "report": true})).await;
+    send(&mut ws, json!({"op": "set", "parameters": {"speed": 3}})).await;
+    frames_until(&mut ws, 10).await;
+    send(&mut ws, json!({"op": "pause"})).await;
+    let frames = frames_until(&mut ws, 40).await;
+    let mut last_two = frames.values().rev().take(2).map(|f| f["pose"].clone());
+    let (held, before) = (last_two.next().unwrap(), last_two.next().unwrap());
+    assert_eq!(before, held, "paused frames repeat one pose and graph time");
+    send(&mut ws, json!({"op": "play"})).await;
+    let after = frames_until(&mut ws, 60).await;
+    let moved = after.values().last().unwrap();
+    let step = moved["pose"]["time"].as_f64().unwrap() - held["time"].as_f64().unwrap();
+    assert!(step > 0.0 && step < 25.0 / f64::from(FPS), "play goes on from the held tick: {step}");
+    send(&mut ws, json!({"op": "stop"})).await;
+    loop {
+        match within(5, "the close", ws.next()).await {
+            Some(Ok(Message::Close(Some(frame)))) => return assert_eq!(u16::from(frame.code), 1000),
+            Some(Ok(_)) => {}
+            other => panic!("expected a close, got {other:?}"),
+        }
+    }
+}
+
+#[tokio::test]
+async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let clip = app.create_id(super::WAVE, None).await;
+    let refusals = [
+        (json!({"start": 1}), "graph_unsupported", "/start"),
+        (json!({"speed": 2}), "graph_unsupported", "/speed"),
+        (json!({"ease": "ease_in"}), "graph_unsupported", "/ease"),
+        (json!({"encoding": "compact"}), "graph_unsupported", "/encoding"),
+        (json!({"parameters": ["fov"]}), "graph_unsupported", "/parameters/0"),
+        (json!({"fps": 0}), "fps_out_of_range", "/fps"),
+        (
+            json!({"motion": {"layers": [{"graph": graph, "weight": 0.5}]}}),
+            "graph_unsupported",
+            "/motion/layers/0/weight",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph}, {"clip": clip}]}}),
+            "graph_unsupported",
+            "/motion/layers/0/graph",
+        ),
+        (json!({"motion": over("0193e0c0-0000-7000-8000-000000000000")}), "graph_not_found", "/motion/layers/0/graph"),
+        (json!({"motion": {"layers": [{"clip": clip}]}}), "graph_unsupported", "/report"),
+    ];
+    for (fields, code, pointer) in refusals {
+        let mut msg = json!({"op": "open", "motion": over(&graph), "report": true});
+        for (k, v) in fields.as_object().unwrap() {
+            msg[k] = v.clone();
+        }
+        let (_, first) = open(&app, msg.clone()).await;
+        let error = &first["error"];
+        assert_eq!((error["code"].as_str(), error["pointer"].as_str()), (Some(code), Some(pointer)), "{msg}: {first}");
+    }
+
+    let (mut ws, _) = open(&app, json!({"op": "open", "motion": over(&graph), "report": true})).await;
+    let controls = [
+        (json!({"op": "seek", "time": 1}), "graph_unsupported", None),
+        (json!({"op": "speed", "speed": 2}), "graph_unsupported", None),
+        (json!({"op": "layer", "index": 0, "weight": 0.5}), "graph_unsupported", None),
+        (json!({"op": "reset_springs"}), "graph_unsupported", None),
+        (json!({"op": "crossfade", "to": {"layers": [{"clip": clip}]}, "duration": 0.2}), "graph_unsupported", None),
+        (json!({"op": "set", "parameters": {"sped": 1}}), "unknown_parameter", Some("/parameters/sped")),
+        (json!({"op": "set", "parameters": {"speed": true}}), "parameter_type", Some("/parameters/speed")),
+        (json!({"op": "set", "parameters": {"survey": 1}}), "parameter_type", Some("/parameters/survey")),
+        (json!({"op": "set", "parameters": {"speed": 4.5}}), "parameter_out_of_range", Some("/parameters/speed")),
+    ];
+    for (control, code, pointer) in controls {
+        send(&mut ws, control.clone()).await;
+        let error = next_error(&mut ws).await;
+        assert_eq!((error["code"].as_str(), error["pointer"].as_str()), (Some(code), pointer), "{control}: {error}");
+    }
+    // The stream goes on, still at the defaults.
+    assert_eq!(state(&next_frame(&mut ws).await), "idle");
+
+    let (mut plain, _) = open(&app, json!({"op": "open", "motion": {"layers": [{"clip": clip}]}})).await;
+    send(&mut plain, json!({"op": "set", "parameters": {"speed": 1}})).await;
+    assert_eq!(next_error(&mut plain).await["code"], "graph_unsupported");
+}
+
+#[tokio::test]
+async fn a_broadcast_set_reaches_every_viewer_at_the_seq_it_answers() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let body = json!({"motion": over(&graph), "fps": 30, "report": true});
+    let resp = app.http.post(app.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let path = format!("/v1/broadcasts/{id}/stream");
+    let (mut a, mut b) = (app.ws(&path).await, app.ws(&path).await);
+    next_frame(&mut a).await;
+    let control = json!({"op": "set", "parameters": {"speed": 2.5}});
+    let answer = app.post_json(&format!("/v1/broadcasts/{id}/controls"), &control).await;
+    let seq = answer["seq"].as_u64().unwrap_or_else(|| panic!("{answer}"));
+    let (fa, fb) = (frames_until(&mut a, seq + 10).await, frames_until(&mut b, seq + 10).await);
+    for (k, frame) in fa.range(..=seq + 10) {
+        let Some(other) = fb.get(k) else { continue };
+        assert_eq!((&frame["pose"], &frame["graph"]), (&other["pose"], &other["graph"]), "tick {k}");
+    }
+    assert_eq!(state(&fa[&seq]), "move", "the set takes effect at the seq it answered");
+    if let Some(before) = fa.get(&(seq - 1)) {
+        assert_eq!(state(before), "idle");
+    }
+    let poses = samples(&app, &graph, seq + 10, 30, json!([{"time": seq as f64 / 30.0, "set": {"speed": 2.5}}])).await;
+    for (k, frame) in fa.range(seq.saturating_sub(2)..) {
+        assert_same_tick(*k, frame, &poses[*k as usize]);
+    }
+    let problem =
+        app.post_json(&format!("/v1/broadcasts/{id}/controls"), &json!({"op": "set", "parameters": {"x": 1}})).await;
+    assert_eq!(
+        (problem["code"].as_str(), problem["pointer"].as_str()),
+        (Some("unknown_parameter"), Some("/parameters/x"))
+    );
+}
+
+#[tokio::test]
+async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let motion =
+        pb::Motion { layers: vec![pb::Layer { graph: graph.clone(), ..Default::default() }], ..Default::default() };
+    let request =
+        pb::StreamRequest { fps: FPS, motion: Some(motion.clone()), report: true, max_frames: 3, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request.clone()).await.unwrap().into_inner();
+    let first = within(5, "a frame", frames.message()).await.unwrap().unwrap();
+    let pose = first.pose.unwrap();
+    assert_eq!(pose.graph.as_ref().map(|g| g.state.as_str()), Some("idle"));
+    assert!(!pose.joint_names.is_empty());
+
+    // The refusals of the WebSocket, with the same codes.
+    let weighted = pb::Layer { graph: graph.clone(), weight: Some(0.5), ..Default::default() };
+    let refusals = [
+        (pb::StreamRequest { start_time: Some(1.0), ..request.clone() }, "graph_unsupported"),
+        (pb::StreamRequest { playback: 2, ..request.clone() }, "graph_unsupported"),
+        (
+            pb::StreamRequest {
+                motion: Some(pb::Motion { layers: vec![weighted], ..Default::default() }),
+                ..request.clone()
+            },
+            "graph_unsupported",
+        ),
+        (pb::StreamRequest { motion: None, clip_id: graph.clone(), ..request.clone() }, "graph_unsupported"),
+    ];
+    for (refused, code) in refusals {
+        let status = app.grpc().await.stream_frames(refused.clone()).await.unwrap_err();
+        assert_eq!(status.code(), tonic::Code::InvalidArgument, "{refused:?}: {status:?}");
+        assert_eq!(status.metadata().get("x-error-code").unwrap(), code, "{refused:?}");
+    }
+
+    let plain = pb::StreamRequest { report: false, ..request.clone() };
+    let mut frames = app.grpc().await.stream_frames(plain).await.unwrap().into_inner();
+    let first = within(5, "a frame", frames.message()).await.unwrap().unwrap();
+    assert_eq!(first.pose.unwrap().graph, None, "no report unless asked");
+
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    let open = pb::StreamRequest { max_frames: 0, ..request };
+    let control = |op| pb::PlaybackControl { op: Some(op) };
+    tx.send(control(pb::playback_control::Op::Open(pb::Open { stream: Some(open), ..Default::default() })))
+        .await
+        .unwrap();
+    let mut play = app.grpc().await.play(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    within(5, "a frame", play.message()).await.unwrap().unwrap();
+    let number = |n| pb::GraphValue { value: Some(pb::graph_value::Value::Number(n)) };
+    let set = pb::SetParameters { parameters: [("speed".to_owned(), number(2.5))].into() };
+    tx.send(control(pb::playback_control::Op::Set(set))).await.unwrap();
+    let moved = loop {
+        let frame = within(5, "a frame", play.message()).await.unwrap().unwrap();
+        let report = frame.pose.unwrap().graph.unwrap();
+        if report.state == "move" {
+            break report;
+        }
+    };
+    assert_eq!(moved.transition.map(|t| (t.from, t.to)), Some(("idle".to_owned(), "move".to_owned())));
+    let bad = pb::SetParameters { parameters: [("speed".to_owned(), number(99.0))].into() };
+    tx.send(control(pb::playback_control::Op::Set(bad))).await.unwrap();
+    let status = loop {
+        match within(5, "the refusal", play.message()).await {
+            Ok(Some(_)) => {}
+            Err(status) => break status,
+            Ok(None) => panic!("the call ended without the refusal"),
+        }
+    };
+    assert_eq!(status.code(), tonic::Code::InvalidArgument);
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "parameter_out_of_range");
+}
