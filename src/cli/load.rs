@@ -3,13 +3,14 @@
 //! sender `load --floor` starts as its own process (`load::floor`).
 
 use std::io::Write;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 
 use load::floor::Kind;
 use load::ramp::RampPlan;
-use load::{ClipChoice, Mode, MotionChoice, Options};
+use load::{ClipChoice, Mode, MotionChoice, Options, SetCycle};
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ModeArg {
@@ -80,6 +81,13 @@ pub struct LoadArgs {
     /// Streams: play this motion of generated clips (--joints each) instead of one clip.
     #[arg(long, value_enum, conflicts_with = "clip")]
     motion: Option<MotionArg>,
+    /// ws-stream: play the motion document of this file instead of a generated clip (a layer may name its clip
+    /// `name:X`, looked up as `watch` does; a graph layer streams from time 0).
+    #[arg(long, conflicts_with_all = ["clip", "motion"])]
+    motion_file: Option<PathBuf>,
+    /// With a graph --motion-file: each stream sets this parameter once a second, cycling through the values.
+    #[arg(long = "set", value_name = "NAME=V1,V2,…", value_parser = SetCycle::parse, requires = "motion_file")]
+    set_cycle: Option<SetCycle>,
     /// Streams: viewers of one playback instead of independent playbacks.
     #[arg(long)]
     shared: bool,
@@ -145,6 +153,8 @@ pub fn run(args: LoadArgs) -> anyhow::Result<()> {
             MotionArg::ThreeLayers => MotionChoice::ThreeLayers,
             MotionArg::FootIk => MotionChoice::FootIk,
         }),
+        motion_file: args.motion_file,
+        set_cycle: args.set_cycle,
         ws_protobuf: args.protobuf,
         ramp: args.ramp.then_some(RampPlan {
             start: args.concurrency,

@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use load::{self, ClipChoice, Mode, MotionChoice, Options, Report, ramp::RampPlan};
+use load::{self, ClipChoice, Mode, MotionChoice, Options, Report, SetCycle, ramp::RampPlan};
 
 use crate::common::{ServerProcess, TestApp};
 
@@ -40,6 +40,8 @@ fn options_at(http: String, grpc: String, mode: Mode) -> Options {
         fps: 30,
         shared: false,
         motion: None,
+        motion_file: None,
+        set_cycle: None,
         ws_protobuf: false,
         ramp: None,
         server_pid: None,
@@ -115,7 +117,10 @@ async fn check_stream(opts: Options) -> Report {
 /// [`check_stream`] for the server process `pid`.
 async fn check_stream_of(opts: Options, pid: u32) -> Report {
     let (mode, shared) = (opts.mode, opts.shared);
-    let motion = opts.motion.map(MotionChoice::as_str);
+    let motion = match &opts.motion_file {
+        Some(path) => Some(path.display().to_string()),
+        None => opts.motion.map(|m| m.as_str().to_owned()),
+    };
     let r = run(opts).await;
     check_common_of(&r, mode.as_str(), pid);
     assert_eq!(r.motion, motion);
@@ -181,6 +186,29 @@ async fn motion_streams_play_three_layers_at_the_asked_rate() {
     }
     let versions: Vec<u64> = listed.iter().filter_map(|c| c["version"].as_u64()).collect();
     assert!(versions.iter().all(|&v| v == 3), "each run uploaded a new version of each: {versions:?}");
+}
+
+/// Streams of a motion file whose layer is a stored graph (`--motion-file`,
+/// `--set`): every stream opens the graph at time 0 and sets `speed` once a
+/// second as it plays; the settings are the server's to check, so a value
+/// out of the parameter's range ends each stream with its refusal (a
+/// `bad_frame`), which shows the sets are sent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn graph_streams_from_a_motion_file_take_a_set_each_second() {
+    let app = spawn_app().await;
+    let (graph, _) = crate::api::graph_samples::fox_graph(&app).await;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("graph.json");
+    std::fs::write(&file, serde_json::json!({"layers": [{"graph": graph}]}).to_string()).unwrap();
+    let motion_file = Some(file);
+    let in_range = SetCycle::parse("speed=0.5,2.5").unwrap();
+    let opts = Options { motion_file: motion_file.clone(), set_cycle: Some(in_range), ..options(&app, Mode::WsStream) };
+    let r = check_stream(Options { duration: Duration::from_secs(2), ..opts }).await;
+    assert_eq!(r.clip_id, graph, "the report names the graph played");
+    let out_of_range = SetCycle::parse("speed=99").unwrap();
+    let opts = Options { motion_file, set_cycle: Some(out_of_range), ..options(&app, Mode::WsStream) };
+    let r = run(Options { duration: Duration::from_secs(2), ..opts }).await;
+    assert!(r.errors.get("bad_frame").is_some_and(|&n| n > 0), "a refused set ends its stream: {:?}", r.errors);
 }
 
 /// Streams of the foot-ik motion (issue 17): the load uploads its walk and

@@ -49,7 +49,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use reqwest::Url;
 
-pub use motion::MotionChoice;
+pub use motion::{MotionChoice, SetCycle};
 pub use report::FloorReport;
 pub use report::Report;
 
@@ -121,6 +121,11 @@ pub struct Options {
     pub shared: bool,
     /// Streams: play this motion of generated clips instead of the clip.
     pub motion: Option<MotionChoice>,
+    /// WebSocket streams: play the motion document of this file (its
+    /// `"clip": "name:X"` looked up) instead of a generated clip.
+    pub motion_file: Option<PathBuf>,
+    /// With a graph motion file: a parameter each stream sets once a second.
+    pub set_cycle: Option<motion::SetCycle>,
     /// WebSocket frames as protobuf instead of JSON.
     pub ws_protobuf: bool,
     pub ramp: Option<ramp::RampPlan>,
@@ -144,6 +149,12 @@ pub async fn run(opts: Options) -> anyhow::Result<Report> {
     let server_pid = opts.server_pid.or_else(|| local_listener(&http));
     let (clip_id, motion) = match (&opts.clip, opts.mode, opts.motion) {
         (_, Mode::GrpcPing | Mode::RestHealth, _) => (String::new(), None),
+        _ if opts.motion_file.is_some() => {
+            let path = opts.motion_file.as_deref().unwrap_or_else(|| unreachable!("checked above"));
+            let doc = watch::Names::new(http.as_str(), None).resolve(watch::read_json(path)?).await?;
+            let playable = motion::Playable::from_json(doc);
+            (playable.first(), Some(playable))
+        }
         (ClipChoice::Generate { joints }, _, Some(choice)) => {
             let clips = setup::upload_motion_clips(&http, choice, *joints).await?;
             (clips.first().to_owned(), Some(motion::Playable::new(&clips, *joints)))
@@ -188,12 +199,21 @@ async fn run_once(opts: &Options, env: &Env, n: usize) -> anyhow::Result<Report>
         ClipChoice::Generate { joints } => Some(joints),
         ClipChoice::Existing(_) => None,
     };
-    report.motion = opts.motion.map(MotionChoice::as_str);
+    report.motion = match &opts.motion_file {
+        Some(path) => Some(path.display().to_string()),
+        None => opts.motion.map(|m| m.as_str().to_owned()),
+    };
     report.loadavg = std::fs::read_to_string("/proc/loadavg").ok().map(|s| s.trim().to_owned());
     Ok(report)
 }
 
 fn check_options(o: &Options) -> anyhow::Result<()> {
+    if o.motion_file.is_some() && (o.mode != Mode::WsStream || o.motion.is_some() || o.floor.is_some()) {
+        bail!("--motion-file plays on ws-stream only, without --motion or --floor");
+    }
+    if o.set_cycle.is_some() && o.motion_file.is_none() {
+        bail!("--set needs a --motion-file whose layer is a graph");
+    }
     if !(1..=MAX_CONCURRENCY).contains(&o.concurrency) {
         bail!("--concurrency must be 1..={MAX_CONCURRENCY}");
     }
@@ -301,6 +321,8 @@ mod tests {
             fps: 60,
             shared: false,
             motion: Some(MotionChoice::ThreeLayers),
+            motion_file: None,
+            set_cycle: None,
             ws_protobuf: false,
             ramp: None,
             server_pid: None,

@@ -128,6 +128,9 @@ pub fn three_layers(clips: &LayerClips, joints: usize) -> MotionDoc {
 pub struct Playable {
     pub json: Value,
     pub pb: pb::Motion,
+    /// Its layer is a stored graph: streams open at time 0 (a graph plays
+    /// from its start) and may take `set` controls.
+    pub graph: bool,
 }
 
 impl Playable {
@@ -138,7 +141,49 @@ impl Playable {
         };
         let json = serde_json::to_value(&doc).unwrap_or_default();
         let spec = doc.to_spec("/motion").expect("the load generator's motions are well formed");
-        Playable { json, pb: to_pb(&spec) }
+        Playable { json, pb: to_pb(&spec), graph: false }
+    }
+
+    /// A motion document as a file holds it (`--motion-file`), its clip
+    /// names already looked up; WebSocket streams only (no protobuf form).
+    pub fn from_json(json: Value) -> Playable {
+        let layers = json["layers"].as_array().map_or(&[][..], Vec::as_slice);
+        let graph = layers.iter().any(|l| l.get("graph").is_some());
+        Playable { json, pb: pb::Motion::default(), graph }
+    }
+
+    /// The first layer's clip or graph (the run's clip id in its report).
+    pub fn first(&self) -> String {
+        let first = &self.json["layers"][0];
+        first["clip"].as_str().or_else(|| first["graph"].as_str()).unwrap_or_default().to_owned()
+    }
+}
+
+/// A graph parameter a stream sets once a second, cycling through its
+/// values (`--set NAME=V1,V2,…`): the settings a game sends as it plays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SetCycle {
+    pub parameter: String,
+    pub values: Vec<Value>,
+}
+
+impl SetCycle {
+    /// Parses `NAME=V1,V2,…`, each value a number or `true`/`false`.
+    pub fn parse(text: &str) -> Result<SetCycle, String> {
+        let (name, values) = text.split_once('=').ok_or("expected NAME=V1,V2,…")?;
+        let values = (values.split(','))
+            .map(|v| serde_json::from_str::<Value>(v.trim()).map_err(|_| format!("{v:?} is not a number or boolean")))
+            .collect::<Result<Vec<_>, _>>()?;
+        if name.is_empty() || values.is_empty() || values.iter().any(|v| !(v.is_number() || v.is_boolean())) {
+            return Err("expected NAME=V1,V2,… with numbers or booleans".into());
+        }
+        Ok(SetCycle { parameter: name.to_owned(), values })
+    }
+
+    /// The `set` control of its `k`th second.
+    pub fn control(&self, k: usize) -> String {
+        let value = &self.values[k % self.values.len()];
+        serde_json::json!({"op": "set", "parameters": {&self.parameter: value}}).to_string()
     }
 }
 
@@ -293,6 +338,24 @@ mod tests {
                 };
                 assert!((got - want).abs() < 1e-5, "τ {tau}, j{j}: {got} vs {want}");
             }
+        }
+    }
+
+    /// `--set NAME=V1,V2,…`: numbers and booleans, cycled one a second; a
+    /// missing name, value or `=`, or a value of another kind, refused.
+    #[test]
+    fn a_set_cycle_parses_and_cycles() {
+        let cycle = SetCycle::parse("speed=0.5, 2.5,true").unwrap();
+        assert_eq!(cycle.parameter, "speed");
+        let controls: Vec<Value> = (0..4).map(|k| serde_json::from_str(&cycle.control(k)).unwrap()).collect();
+        let values: Vec<&Value> = controls.iter().map(|c| &c["parameters"]["speed"]).collect();
+        assert_eq!(
+            values,
+            [&serde_json::json!(0.5), &serde_json::json!(2.5), &serde_json::json!(true), &serde_json::json!(0.5)]
+        );
+        assert!(controls.iter().all(|c| c["op"] == "set"));
+        for bad in ["speed", "=1", "speed=", "speed=fast", "speed=[1]", "speed=1,,2"] {
+            assert!(SetCycle::parse(bad).is_err(), "{bad}");
         }
     }
 }

@@ -21,7 +21,7 @@ pub struct Report {
     /// The clip streamed, or the first layer's clip of the motion.
     pub clip_id: String,
     /// Streams: the motion played instead of the clip (`three-layers`, `foot-ik`).
-    pub motion: Option<&'static str>,
+    pub motion: Option<String>,
     pub joints: Option<usize>,
     /// Unary workers, or streams.
     pub concurrency: usize,
@@ -194,7 +194,7 @@ impl Report {
 
     /// What ran and how much got through: the summary's first lines.
     fn write_load(&self, s: &mut String) {
-        let playing = match self.motion {
+        let playing = match &self.motion {
             Some(m) => format!("motion {m} (first clip {})", self.clip_id),
             None => format!("clip {}", self.clip_id),
         };
@@ -385,7 +385,7 @@ mod tests {
             http: "http://127.0.0.1:8080".into(),
             grpc: "http://127.0.0.1:50051".into(),
             clip_id: "c1".into(),
-            motion: Some("three-layers"),
+            motion: Some("three-layers".into()),
             joints: Some(64),
             concurrency: 64,
             connections: 64,

@@ -55,7 +55,7 @@ use super::clock::{ClockSync, unix_now_ns};
 use super::floor::sender::{MAX_COPIES, Target};
 use super::histogram::Latency;
 use super::lateness::StreamTracker;
-use super::motion::Playable;
+use super::motion::{Playable, SetCycle};
 use super::procstat::{self, ProcSample};
 use super::report::{Report, ServerUsage, StreamStats};
 use super::{Env, Mode, Options, broadcast, setup};
@@ -184,6 +184,8 @@ struct Spec {
     ws_protobuf: bool,
     clip_id: String,
     motion: Option<Arc<Playable>>,
+    /// A graph stream's parameter set once a second.
+    set_cycle: Option<Arc<SetCycle>>,
     fps: u32,
     /// `ws-broadcast`: the broadcast the viewers watch.
     broadcast: Option<String>,
@@ -224,7 +226,7 @@ type WebSocket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsS
 /// An open stream of either transport.
 enum Open {
     Grpc(Box<tonic::Streaming<FrameHead>>),
-    Ws(Box<WebSocket>, bool),
+    Ws(Box<WebSocket>, bool, Option<Setter>),
     /// A stream of a shared floor connection: what its reader hands it.
     Floor(mpsc::UnboundedReceiver<Got>),
 }
@@ -248,8 +250,19 @@ impl Open {
                 Ok(None) => Got::End(Some("ended".into())),
                 Err(status) => Got::End(Some(format!("grpc:{:?}", status.code()))),
             },
-            Open::Ws(ws, protobuf) => loop {
-                match ws.next().await {
+            Open::Ws(ws, protobuf, setter) => loop {
+                let due = setter.as_ref().map(|s| s.due);
+                let message = tokio::select! {
+                    m = ws.next() => m,
+                    () = sleep_until_some(due) => {
+                        let control = setter.as_mut().map(Setter::next).unwrap_or_default();
+                        if ws.send(Message::Text(control.into())).await.is_err() {
+                            return Got::End(Some("ws_error".into()));
+                        }
+                        continue;
+                    }
+                };
+                match message {
                     Some(Ok(Message::Text(t))) if !*protobuf => match json_head(&t) {
                         Some(h) => return Got::Frame(h.seq, h.sent_at_unix_nanos, h.dropped),
                         None => return Got::End(Some("bad_frame".into())),
@@ -272,7 +285,7 @@ impl Open {
     }
 
     async fn close(self) {
-        if let Open::Ws(mut ws, _) = self {
+        if let Open::Ws(mut ws, _, _) = self {
             let _ = tokio::time::timeout(Duration::from_secs(1), ws.close()).await;
         }
     }
@@ -308,12 +321,15 @@ impl Spec {
                 let phase = match self.motion.as_ref().filter(|_| self.broadcast.is_none() && self.floor.is_none()) {
                     None => resp.headers().get(PHASE_HEADER).and_then(|v| v.to_str().ok()?.parse().ok()),
                     Some(motion) => {
+                        // A graph plays from its start: every stream at time 0.
+                        let start = if motion.graph { 0.0 } else { start_time };
                         let open = serde_json::json!({"op": "open", "motion": motion.json, "fps": self.fps,
-                                                      "start": start_time, "encoding": encoding});
+                                                      "start": start, "encoding": encoding});
                         Some(open_motion(&mut ws, open.to_string()).await?)
                     }
                 };
-                Ok((Open::Ws(Box::new(ws), self.ws_protobuf), phase))
+                let setter = self.set_cycle.clone().map(Setter::new);
+                Ok((Open::Ws(Box::new(ws), self.ws_protobuf, setter), phase))
             }
         }
     }
@@ -431,6 +447,34 @@ impl Spec {
                 }
             }
         }
+    }
+}
+
+/// A stream's `set` controls, one a second from a second after it opened.
+struct Setter {
+    cycle: Arc<SetCycle>,
+    sent: usize,
+    due: tokio::time::Instant,
+}
+
+impl Setter {
+    fn new(cycle: Arc<SetCycle>) -> Setter {
+        Setter { cycle, sent: 0, due: tokio::time::Instant::now() + Duration::from_secs(1) }
+    }
+
+    /// The control now due; the next is due a second later.
+    fn next(&mut self) -> String {
+        self.sent += 1;
+        self.due += Duration::from_secs(1);
+        self.cycle.control(self.sent)
+    }
+}
+
+/// Waits until `due`, or forever without one.
+async fn sleep_until_some(due: Option<tokio::time::Instant>) {
+    match due {
+        Some(due) => tokio::time::sleep_until(due).await,
+        None => std::future::pending().await,
     }
 }
 
@@ -674,6 +718,7 @@ impl Spec {
             ws_protobuf: opts.ws_protobuf,
             clip_id: env.clip_id.clone(),
             motion: env.motion.clone().map(Arc::new),
+            set_cycle: opts.set_cycle.clone().map(Arc::new),
             fps: opts.fps,
             broadcast,
             floor,
@@ -770,7 +815,7 @@ async fn take_frame(spec: &Spec, env: &Env) -> anyhow::Result<Bytes> {
         return Ok(frames.message().await?.context("the stream ended at its first frame")?.0);
     }
     let (open, _) = spec.open(&Link::Own, 0.0).await.map_err(anyhow::Error::msg)?;
-    let Open::Ws(mut ws, _) = open else { anyhow::bail!("a WebSocket stream was expected") };
+    let Open::Ws(mut ws, _, _) = open else { anyhow::bail!("a WebSocket stream was expected") };
     let mut seen = 0;
     while let Some(message) = ws.next().await {
         let bytes = match message? {

@@ -391,25 +391,25 @@ fn load_control(control: &Control) -> anyhow::Result<Value> {
     }
 }
 
-fn read_json(path: &Path) -> anyhow::Result<Value> {
+pub(crate) fn read_json(path: &Path) -> anyhow::Result<Value> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))
 }
 
 /// Clip names looked up on the server.
-struct Names {
+pub(crate) struct Names {
     http: reqwest::Client,
     url: String,
     token: Option<String>,
 }
 
 impl Names {
-    fn new(server: &str, token: Option<String>) -> Names {
+    pub(crate) fn new(server: &str, token: Option<String>) -> Names {
         Names { http: reqwest::Client::new(), url: format!("{}/v1/clips", server.trim_end_matches('/')), token }
     }
 
     /// `doc` with every `"clip": "name:X"` replaced by X's id.
-    async fn resolve(&self, mut doc: Value) -> anyhow::Result<Value> {
+    pub(crate) async fn resolve(&self, mut doc: Value) -> anyhow::Result<Value> {
         let mut ids = BTreeMap::new();
         for name in clip_names(&doc) {
             let id = self.lookup(&name).await?;
