@@ -15,57 +15,7 @@ use anim::{
 use glam::{Quat, Vec3, Vec4};
 
 use super::inferred;
-use super::names::humanoid;
-
-const MIXAMO: [&str; 22] = [
-    "Hips",
-    "Spine",
-    "Spine1",
-    "Spine2",
-    "Neck",
-    "Head",
-    "LeftShoulder",
-    "LeftArm",
-    "LeftForeArm",
-    "LeftHand",
-    "RightShoulder",
-    "RightArm",
-    "RightForeArm",
-    "RightHand",
-    "LeftUpLeg",
-    "LeftLeg",
-    "LeftFoot",
-    "LeftToeBase",
-    "RightUpLeg",
-    "RightLeg",
-    "RightFoot",
-    "RightToeBase",
-];
-
-const UNREAL: [&str; 22] = [
-    "pelvis",
-    "spine_01",
-    "spine_02",
-    "spine_03",
-    "neck_01",
-    "head",
-    "clavicle_l",
-    "upperarm_l",
-    "lowerarm_l",
-    "hand_l",
-    "clavicle_r",
-    "upperarm_r",
-    "lowerarm_r",
-    "hand_r",
-    "thigh_l",
-    "calf_l",
-    "foot_l",
-    "ball_l",
-    "thigh_r",
-    "calf_r",
-    "foot_r",
-    "ball_r",
-];
+use super::names::{MIXAMO, UNREAL, humanoid};
 
 /// A take on `skeleton`: the hips walk along z and sway, the left upper
 /// arm and right knee swing, over 2 s, looping.

@@ -177,6 +177,59 @@ fn check_family(family: &str, names: [&str; 22], roles: [Option<Role>; 22], by_s
     assert_eq!(map.family(), Some(family));
 }
 
+/// A Mixamo rig's names in the slot order of the family tests (without its
+/// `mixamorig:` namespace); the motion tests retarget between it and [`UNREAL`].
+pub(super) const MIXAMO: [&str; 22] = [
+    "Hips",
+    "Spine",
+    "Spine1",
+    "Spine2",
+    "Neck",
+    "Head",
+    "LeftShoulder",
+    "LeftArm",
+    "LeftForeArm",
+    "LeftHand",
+    "RightShoulder",
+    "RightArm",
+    "RightForeArm",
+    "RightHand",
+    "LeftUpLeg",
+    "LeftLeg",
+    "LeftFoot",
+    "LeftToeBase",
+    "RightUpLeg",
+    "RightLeg",
+    "RightFoot",
+    "RightToeBase",
+];
+
+/// An Unreal mannequin's names in the same slot order.
+pub(super) const UNREAL: [&str; 22] = [
+    "pelvis",
+    "spine_01",
+    "spine_02",
+    "spine_03",
+    "neck_01",
+    "head",
+    "clavicle_l",
+    "upperarm_l",
+    "lowerarm_l",
+    "hand_l",
+    "clavicle_r",
+    "upperarm_r",
+    "lowerarm_r",
+    "hand_r",
+    "thigh_l",
+    "calf_l",
+    "foot_l",
+    "ball_l",
+    "thigh_r",
+    "calf_r",
+    "foot_r",
+    "ball_r",
+];
+
 fn all_roles() -> [Option<Role>; 22] {
     SLOT_ROLES.map(Some)
 }
@@ -184,31 +237,7 @@ fn all_roles() -> [Option<Role>; 22] {
 #[test]
 fn mixamo_names_with_either_namespace_and_spine2() {
     for ns in ["mixamorig:", "mixamorig1:", ""] {
-        let names = [
-            "Hips",
-            "Spine",
-            "Spine1",
-            "Spine2",
-            "Neck",
-            "Head",
-            "LeftShoulder",
-            "LeftArm",
-            "LeftForeArm",
-            "LeftHand",
-            "RightShoulder",
-            "RightArm",
-            "RightForeArm",
-            "RightHand",
-            "LeftUpLeg",
-            "LeftLeg",
-            "LeftFoot",
-            "LeftToeBase",
-            "RightUpLeg",
-            "RightLeg",
-            "RightFoot",
-            "RightToeBase",
-        ]
-        .map(|n| format!("{ns}{n}"));
+        let names = MIXAMO.map(|n| format!("{ns}{n}"));
         check_family("mixamo", names.each_ref().map(String::as_str), all_roles(), &[]);
     }
 }
@@ -272,31 +301,7 @@ fn spine_is_the_spine_unless_a_lowerback_makes_the_rig_motionbuilder() {
 
 #[test]
 fn unreal_names() {
-    let names = [
-        "pelvis",
-        "spine_01",
-        "spine_02",
-        "spine_03",
-        "neck_01",
-        "head",
-        "clavicle_l",
-        "upperarm_l",
-        "lowerarm_l",
-        "hand_l",
-        "clavicle_r",
-        "upperarm_r",
-        "lowerarm_r",
-        "hand_r",
-        "thigh_l",
-        "calf_l",
-        "foot_l",
-        "ball_l",
-        "thigh_r",
-        "calf_r",
-        "foot_r",
-        "ball_r",
-    ];
-    check_family("unreal", names, all_roles(), &[]);
+    check_family("unreal", UNREAL, all_roles(), &[]);
 }
 
 #[test]
