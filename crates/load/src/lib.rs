@@ -147,20 +147,19 @@ pub async fn run(opts: Options) -> anyhow::Result<Report> {
     let http = checked_url(&opts.http, opts.allow_remote).context("--http")?;
     let grpc = checked_url(&opts.grpc, opts.allow_remote).context("--grpc")?;
     let server_pid = opts.server_pid.or_else(|| local_listener(&http));
-    let (clip_id, motion) = match (&opts.clip, opts.mode, opts.motion) {
-        (_, Mode::GrpcPing | Mode::RestHealth, _) => (String::new(), None),
-        _ if opts.motion_file.is_some() => {
-            let path = opts.motion_file.as_deref().unwrap_or_else(|| unreachable!("checked above"));
+    let (clip_id, motion) = match (&opts.clip, opts.mode, opts.motion, &opts.motion_file) {
+        (_, Mode::GrpcPing | Mode::RestHealth, _, _) => (String::new(), None),
+        (_, _, _, Some(path)) => {
             let doc = watch::Names::new(http.as_str(), None).resolve(watch::read_json(path)?).await?;
             let playable = motion::Playable::from_json(doc);
             (playable.first(), Some(playable))
         }
-        (ClipChoice::Generate { joints }, _, Some(choice)) => {
+        (ClipChoice::Generate { joints }, _, Some(choice), None) => {
             let clips = setup::upload_motion_clips(&http, choice, *joints).await?;
             (clips.first().to_owned(), Some(motion::Playable::new(&clips, *joints)))
         }
-        (ClipChoice::Existing(id), _, _) => (id.clone(), None),
-        (ClipChoice::Generate { joints }, _, None) => (setup::upload_chain(&http, *joints).await?, None),
+        (ClipChoice::Existing(id), _, _, None) => (id.clone(), None),
+        (ClipChoice::Generate { joints }, _, None, None) => (setup::upload_chain(&http, *joints).await?, None),
     };
     let env = Env { http, grpc, clip_id, motion, server_pid };
     let Some(plan) = opts.ramp else {
