@@ -25,7 +25,7 @@ use crate::cache::CachedClip;
 use crate::config::Limits;
 use crate::error::{ApiError, At};
 use crate::state::AppState;
-use crate::store::{DocKind, DocMeta, MeshWrite, NewDoc, StoreError, StoredDoc, name_reference};
+use crate::store::{DocKind, DocMeta, MeshWrite, NewDoc, OnName, StoreError, StoredDoc, name_reference};
 use crate::stream::PinnedClip;
 use crate::work::price;
 use formats::wire::graph::{GraphDoc, ParameterDoc, parse_graph_doc};
@@ -77,6 +77,37 @@ impl CheckedGraph {
     pub fn built(self, meta: DocMeta) -> BuiltGraph {
         let bytes = built_bytes(&self.new_doc.doc_json, &self.clips);
         BuiltGraph { meta, graph: self.graph, clips: self.clips, bytes }
+    }
+
+    /// Stores the graph as a new document (or, as `on_name` allows, the new
+    /// version of the one holding its name), then [`Self::written`]: REST's
+    /// `POST /v1/graphs` and gRPC's `CreateGraph`.
+    ///
+    /// # Errors
+    /// The store's refusal (`name_taken`, …).
+    pub async fn create(self, state: &AppState, on_name: OnName) -> Result<DocMeta, ApiError> {
+        let written = state.store.create_docs(DocKind::Graph, vec![self.new_doc.clone()], on_name).await;
+        let meta = written.map_err(store_error)?.pop();
+        let meta = meta.ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no graph")))?;
+        Ok(self.written(state, meta))
+    }
+
+    /// Stores the graph as graph `id`'s next version (at `expected` if
+    /// given), then [`Self::written`]: `PUT /v1/graphs/{id}` and `ReplaceGraph`.
+    ///
+    /// # Errors
+    /// The store's refusal (not found, a version race).
+    pub async fn replace(self, state: &AppState, id: &str, expected: Option<u64>) -> Result<DocMeta, ApiError> {
+        let meta = state.store.replace_doc(DocKind::Graph, id, self.new_doc.clone(), expected).await;
+        Ok(self.written(state, meta.map_err(store_error)?))
+    }
+
+    /// Tells every node the graph changed and caches what was built, so its
+    /// first use does not build it again.
+    fn written(self, state: &AppState, meta: DocMeta) -> DocMeta {
+        state.document_changed(DocKind::Graph, &meta.id);
+        state.cache_graph(Arc::new(self.built(meta.clone())), None);
+        meta
     }
 }
 

@@ -4,8 +4,6 @@
 //! workers, with refusals at the same JSON pointers and the same codes, and
 //! stored by the same store calls; answers carry the REST summary's fields.
 
-use std::sync::Arc;
-
 use bytes::Bytes;
 
 use crate::auth::Caller;
@@ -26,12 +24,8 @@ pub async fn create(
 ) -> Result<pb::GraphSummary, ApiError> {
     let on_name = if req.replace { OnName::Replace } else { OnName::Refuse };
     let checked = check_body(state, &caller.key(), Bytes::from(req.document.into_bytes())).await?;
-    let written = state.store.create_docs(DocKind::Graph, vec![checked.new_doc.clone()], on_name).await;
-    let meta = written.map_err(store_error)?.pop();
-    let meta = meta.ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no graph")))?;
+    let meta = checked.create(state, on_name).await?;
     tracing::info!(id = %meta.id, version = meta.version, "graph written over gRPC");
-    state.document_changed(DocKind::Graph, &meta.id);
-    state.cache_graph(Arc::new(checked.built(meta.clone())), None);
     Ok(summary_to_pb(&meta))
 }
 
@@ -42,11 +36,7 @@ pub async fn replace(
     req: pb::ReplaceGraphRequest,
 ) -> Result<pb::GraphSummary, ApiError> {
     let checked = check_body(state, &caller.key(), Bytes::from(req.document.into_bytes())).await?;
-    let replaced =
-        state.store.replace_doc(DocKind::Graph, &req.graph_id, checked.new_doc.clone(), req.if_version).await;
-    let meta = replaced.map_err(store_error)?;
-    state.document_changed(DocKind::Graph, &meta.id);
-    state.cache_graph(Arc::new(checked.built(meta.clone())), None);
+    let meta = checked.replace(state, &req.graph_id, req.if_version).await?;
     Ok(summary_to_pb(&meta))
 }
 

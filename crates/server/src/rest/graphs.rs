@@ -5,8 +5,6 @@
 //! built by the core, priced and off the async workers) before the store is
 //! touched, and the graph it built goes into the cache of built graphs.
 
-use std::sync::Arc;
-
 use axum::Json;
 use axum::extract::State;
 use axum::http::header::IF_MATCH;
@@ -18,7 +16,7 @@ use utoipa::ToSchema;
 use crate::auth::{ReadAccess, WriteAccess};
 use crate::documents;
 use crate::error::ApiError;
-use crate::graphs::{GraphReport, check_body, store_error};
+use crate::graphs::{GraphReport, check_body};
 use crate::state::AppState;
 use crate::store::{DocKind, DocMeta};
 
@@ -103,12 +101,8 @@ pub async fn create_graph(
 ) -> Result<Response, ApiError> {
     let on_name = params.on_name()?;
     let checked = check_body(&state, &caller.key(), body).await?;
-    let mut metas =
-        state.store.create_docs(DocKind::Graph, vec![checked.new_doc.clone()], on_name).await.map_err(store_error)?;
-    let meta = metas.pop().ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no graph")))?;
+    let meta = checked.create(&state, on_name).await?;
     tracing::info!(id = %meta.id, name = %meta.name, version = meta.version, "graph created");
-    state.document_changed(DocKind::Graph, &meta.id);
-    state.cache_graph(Arc::new(checked.built(meta.clone())), None);
     let status = if meta.version == 1 { StatusCode::CREATED } else { StatusCode::OK };
     Ok(answer(&meta, status, true))
 }
@@ -186,11 +180,8 @@ pub async fn replace_graph(
     let condition = precondition(&headers, IF_MATCH, false)?;
     let checked = check_body(&state, &caller.key(), body).await?;
     let expected = expected_version(&state, DocKind::Graph, &id, condition).await?;
-    let meta =
-        state.store.replace_doc(DocKind::Graph, &id, checked.new_doc.clone(), expected).await.map_err(store_error)?;
+    let meta = checked.replace(&state, &id, expected).await?;
     tracing::info!(id = %meta.id, version = meta.version, "graph replaced");
-    state.document_changed(DocKind::Graph, &meta.id);
-    state.cache_graph(Arc::new(checked.built(meta.clone())), None);
     Ok(answer(&meta, StatusCode::OK, false))
 }
 
