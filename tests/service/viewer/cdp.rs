@@ -17,6 +17,11 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
 use crate::common::eventually_some;
 
+/// How many times longer than on an idle machine a page may take: software
+/// WebGL on 2 cores shared with compilers and the rest of the suite is that
+/// slow. A wait ends on what it waits for, so this costs nothing when it comes.
+pub const PATIENCE: u64 = 4;
+
 /// Set to `1` (CI does) to fail instead of skipping when Chromium is missing.
 pub const REQUIRE_ENV: &str = "INBETWEEN_REQUIRE_BROWSER";
 
@@ -229,9 +234,10 @@ impl Page {
         result["result"]["value"].clone()
     }
 
-    /// Polls `expression` until it is truthy; returns its value.
+    /// Polls `expression` until it is truthy; returns its value. `secs` is
+    /// what a page on an idle machine needs, stretched by [`PATIENCE`].
     pub async fn wait_for(&mut self, expression: &str, secs: u64) -> Value {
-        let deadline = Instant::now() + Duration::from_secs(secs);
+        let deadline = Instant::now() + Duration::from_secs(secs * PATIENCE);
         loop {
             let value = self.eval(expression).await;
             let truthy = match &value {

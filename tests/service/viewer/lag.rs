@@ -2,14 +2,19 @@
 //! 60 fps, its longest curve plotted, WebGL in software, and the lateness
 //! the page itself shows (from the server sending a frame to the page
 //! drawing it) stays under 100 ms. Before the render loop the page fell
-//! seconds behind on such a take.
+//! seconds behind on such a take, and further behind every second.
+//!
+//! The default suite, often beside compilers on 2 cores, checks the median
+//! and that the page is not behind at the end; the bound on nine readings
+//! in ten is checked with `INBETWEEN_SLOW=1`, which `.ci/run` runs alone.
 
 use serde_json::Value;
 
 use super::{TOKEN, select_clip, set_value, start, text};
-use crate::common::within;
+use crate::common::{latency_checked, within};
 
-/// Lateness the page may show while it keeps up (ms), in nine readings of ten.
+/// Lateness the page may show while it keeps up (ms): in nine readings of
+/// ten on a quiet machine, in half of them on a loaded one.
 const KEEPS_UP_MS: f64 = 100.0;
 /// Lateness no reading may reach: a page that fell behind, as before the
 /// render loop, shows seconds and grows. A single reading between the two is
@@ -57,7 +62,7 @@ async fn a_long_mocap_curve_plays_without_falling_behind() {
 
     // Four seconds of playing, read every 100 ms as a person reads the readout.
     let mut shown = vec![];
-    within(20, "four seconds of lateness readings", async {
+    within(20 * super::cdp::PATIENCE, "four seconds of lateness readings", async {
         for _ in 0..40 {
             let late = text(page, "late").await;
             let ms: f64 =
@@ -69,12 +74,21 @@ async fn a_long_mocap_curve_plays_without_falling_behind() {
     .await;
     let mut sorted = shown.clone();
     sorted.sort_by(f64::total_cmp);
-    let (p90, worst) = (sorted[sorted.len() * 9 / 10 - 1], sorted[sorted.len() - 1]);
-    assert!(p90 < KEEPS_UP_MS, "the page fell {p90} ms behind in a tenth of the readings: {shown:?}");
-    assert!(worst < NEVER_MS, "the page fell {worst} ms behind: {shown:?}");
-    // Nor does it drift: the last second is no later than the first one allows.
-    let last: f64 = shown[30..].iter().sum::<f64>() / 10.0;
-    assert!(last < KEEPS_UP_MS, "lateness over the last second averaged {last} ms: {shown:?}");
+    let at = |share: f64| sorted[((sorted.len() as f64 * share) as usize).saturating_sub(1)];
+    // The last second, whatever came before it: a page that fell behind stays behind.
+    let mut last_second = shown[30..].to_vec();
+    last_second.sort_by(f64::total_cmp);
+    let (median, last) = (at(0.5), last_second[4]);
+    assert!(median < KEEPS_UP_MS, "the page was {median} ms behind in half the readings: {shown:?}");
+    assert!(last < NEVER_MS, "the page was {last} ms behind in half the last second: {shown:?}");
+    let (p90, worst) = (at(0.9), at(1.0));
+    if latency_checked() {
+        // The bound of the quiet run (.ci/run runs it alone): nine readings in ten, and every one.
+        assert!(p90 < KEEPS_UP_MS, "the page fell {p90} ms behind in a tenth of the readings: {shown:?}");
+        assert!(worst < NEVER_MS, "the page fell {worst} ms behind: {shown:?}");
+        let mean: f64 = shown[30..].iter().sum::<f64>() / 10.0;
+        assert!(mean < KEEPS_UP_MS, "lateness over the last second averaged {mean} ms: {shown:?}");
+    }
     let frames = page.eval("window.inbetweenViewer.state.frames").await.as_f64().unwrap();
     assert!(frames >= 150.0, "frames kept coming at 60 fps: {frames}");
     // The 994 keys were drawn once: playing moves only the playhead's layer.

@@ -157,11 +157,13 @@ async fn plays_a_clip_and_plots_the_sampled_curves() {
     // server counted dropped: frames + dropped = seq + 1, read at one instant.
     // On loopback at 60 fps drops are rare; a page starved on a busy 2-core
     // machine (the whole suite beside it) may miss more, never most.
-    let counts = page.eval("(s => [s.seq, s.frames, s.dropped])(window.inbetweenViewer.state)").await;
-    let [seq, frames, dropped]: [u64; 3] = serde_json::from_value(counts).unwrap();
+    let counts = page
+        .eval("(s => [s.seq, s.frames, s.dropped, Number(document.getElementById('dropped').textContent)])(window.inbetweenViewer.state)")
+        .await;
+    let [seq, frames, dropped, shown]: [u64; 4] = serde_json::from_value(counts).unwrap();
     assert_eq!(frames + dropped, seq + 1, "seq {seq}, {frames} frames, {dropped} dropped");
     assert!(dropped * 2 <= seq + 1, "{dropped} of {} ticks dropped", seq + 1);
-    assert_eq!(text_number(page, "dropped").await, dropped as f64, "the readout shows the count");
+    assert_eq!(shown, dropped, "the readout shows the count");
 
     // Pause holds the clip time while frames keep arriving.
     page.eval("document.getElementById('play').click()").await;
@@ -342,7 +344,7 @@ async fn next_frame(page: &mut Page, seq: f64) -> f64 {
 /// Waits until the shown clip time holds across a frame: a pause took effect.
 async fn until_held(page: &mut Page) {
     let clip_time = "document.getElementById('clip-time').textContent";
-    within(10, "the clip time held across a frame", async {
+    within(10 * cdp::PATIENCE, "the clip time held across a frame", async {
         loop {
             let (time, seq) = (page.eval(clip_time).await, text_number(page, "seq").await);
             next_frame(page, seq).await;

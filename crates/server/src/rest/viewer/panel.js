@@ -254,7 +254,13 @@ function onFrame(frame) {
     const i = state.names.indexOf(panel.rootJoint);
     if (!frame.pose.joints[i]) return;
     const { parent, local } = rootFrames(frame.pose, i);
-    panel.anchor = { parent, ground: [local.t[0], 0, local.t[2]], yaw: yawOf(local.q) };
+    // The first frame shown need not be the stream's first (a starved page
+    // shows only the newest): under `report` its root has already moved by
+    // `total`, which is taken back to find where the stream started.
+    const moved = panel.rootMode !== "extract";
+    const yaw = yawOf(local.q) - (moved ? total.yaw : 0);
+    const back = moved ? turn(yaw, total.translation) : [0, 0, 0];
+    panel.anchor = { parent, ground: [local.t[0] - back[0], 0, local.t[2] - back[2]], yaw };
   }
   const { parent, ground, yaw } = panel.anchor;
   const step = turn(yaw, total.translation);
