@@ -280,6 +280,21 @@ impl Page {
     }
 
     /// A PNG of the page, or of the CSS-pixel rectangle `clip`.
+    /// Saves the whole page, drawn at `scale`, to the file the environment
+    /// variable `var` names, after `settle`: the docs' pictures are retaken
+    /// by the tests that reach the state they show. Nothing is checked.
+    pub async fn picture(&mut self, var: &str, settle: Duration, scale: f64) {
+        let Some(path) = std::env::var_os(var) else { return };
+        tokio::time::sleep(settle).await;
+        let size = self.eval("[window.innerWidth, window.innerHeight]").await;
+        let [width, height]: [f64; 2] = serde_json::from_value(size).unwrap();
+        let clip = json!({"x": 0, "y": 0, "width": width, "height": height, "scale": scale});
+        let shot = self.call("Page.captureScreenshot", json!({"format": "png", "clip": clip})).await;
+        let png = base64::engine::general_purpose::STANDARD.decode(shot["data"].as_str().unwrap()).unwrap();
+        std::fs::write(&path, png).unwrap();
+        eprintln!("{var}: the page written to {}", path.to_string_lossy());
+    }
+
     pub async fn screenshot(&mut self, clip: Option<[f64; 4]>) -> Vec<u8> {
         let mut params = json!({"format": "png"});
         if let Some([x, y, width, height]) = clip {

@@ -3,6 +3,9 @@
 //! page then shows CesiumMan's joints, posed as the server retargets the
 //! take (the same model-space positions `POST /v1/poses` answers), and its
 //! skinned mesh moving; back on the take's own skeleton, neither remains.
+//!
+//! `INBETWEEN_CHARACTER_SCREENSHOT=docs/images/viewer-character.png` saves
+//! the page with the take playing on CesiumMan (the README's picture).
 
 use serde_json::{Value, json};
 
@@ -90,6 +93,8 @@ async fn a_cmu_take_plays_on_cesium_man_s_skinned_mesh() {
     assert!(moved >= 300, "CesiumMan changes {moved} pixels in 300 ms");
     let frame_joints = page.eval("window.inbetweenViewer.panel.lastFrame.pose.joints.length").await;
     assert_eq!(frame_joints, json!(joints.len()), "the stream's frames are CesiumMan's");
+    // The README's picture of a take on a character.
+    page.picture("INBETWEEN_CHARACTER_SCREENSHOT", std::time::Duration::from_millis(500), 0.7).await;
 
     // Back on the take's own skeleton: its joints, and no mesh.
     set_value(page, "character", "").await;

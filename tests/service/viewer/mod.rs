@@ -267,12 +267,9 @@ async fn uploads_from_the_page_with_the_write_token_and_plays_in_local_space() {
     page.set_files("#file", &[Path::new(bvh)]).await;
     page.wait_for("window.inbetweenViewer.state.clip?.name === '131_01'", 30).await;
 
-    if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_SCREENSHOT") {
+    if std::env::var_os("INBETWEEN_VIEWER_SCREENSHOT").is_some() {
         page.eval("document.getElementById('play').click()").await;
-        // A moment of playing for the picture: nothing is checked.
-        tokio::time::sleep(Duration::from_millis(300)).await;
-        std::fs::write(&path, page.screenshot(None).await).unwrap();
-        eprintln!("screenshot written to {}", path.to_string_lossy());
+        page.picture("INBETWEEN_VIEWER_SCREENSHOT", Duration::from_millis(300), 1.0).await;
     }
 }
 

@@ -365,12 +365,7 @@ async fn the_fox_walks_a_root_motion_trail_with_a_layer_and_a_handle_on_a_1366_b
     let [scroll_w, scroll_h, client_w, client_h]: [u32; 4] = serde_json::from_value(sizes).unwrap();
     assert!(scroll_w <= client_w && scroll_h <= client_h, "scrolls: {scroll_w}×{scroll_h} in {client_w}×{client_h}");
 
-    if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_PANEL_SCREENSHOT") {
-        // A moment for the picture: nothing is checked.
-        tokio::time::sleep(Duration::from_millis(1500)).await;
-        std::fs::write(&path, page.screenshot(None).await).unwrap();
-        eprintln!("screenshot written to {}", path.to_string_lossy());
-    }
+    page.picture("INBETWEEN_VIEWER_PANEL_SCREENSHOT", Duration::from_millis(1500), 1.0).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

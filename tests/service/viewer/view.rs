@@ -193,9 +193,7 @@ async fn bones_behind_the_mesh_are_dimmed() {
     page.eval("(c => { c.yaw = Math.PI / 2; c.pitch = 0.1; })(window.inbetweenViewer.state.camera)").await;
     page.eval("document.getElementById('show-mesh').dispatchEvent(new Event('change'))").await;
     let drawn = page.wait_for("window.inbetweenViewer.mesh.draws > 0 && window.inbetweenViewer.drawn?.dimmed > 0 && window.inbetweenViewer.drawn", 10).await;
-    if let Some(path) = std::env::var_os("INBETWEEN_VIEWER_DEPTH_SCREENSHOT") {
-        std::fs::write(&path, page.screenshot(None).await).unwrap();
-    }
+    page.picture("INBETWEEN_VIEWER_DEPTH_SCREENSHOT", std::time::Duration::ZERO, 1.0).await;
     let (items, dimmed) = (drawn["items"].as_u64().unwrap(), drawn["dimmed"].as_u64().unwrap());
     assert!(items - dimmed >= 10, "{dimmed} of {items} parts dimmed: the near side stays bright");
     eprintln!("the Fox from the side: {dimmed} of {items} skeleton parts behind the mesh");
