@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the client examples in examples/clients/ against a real server: the
 # Python one (REST, gRPC and WebSocket; its compact-frame decoder on the test
-# vectors), the JavaScript ones (fetch and a
+# vectors), the Godot one's GDScript parsed and linted (gdtoolkit: no engine
+# here), the JavaScript ones (fetch and a
 # WebSocket stream with a seek; a graph driven by `set` controls) and the C#
 # one (a compact stream read as a game loop would, each pose checked against
 # the server's within the error bound). Each checks what it reads and exits non-zero
@@ -32,6 +33,11 @@ python3 -m venv "$IB_WORK/venv"
 # The Fox's locomotion graph driven from a loop of `set` controls, its blend weights checked.
 "$IB_WORK/venv/bin/python" examples/clients/python/graph.py --http "$IB_HTTP" \
   --import examples/gltf/Fox/Fox.glb examples/graphs/fox-locomotion.json
+
+echo "== Godot client: GDScript 4 syntax and lint (gdtoolkit; no Godot engine here, README in examples/clients/godot)"
+"$IB_WORK/venv/bin/pip" install --quiet --disable-pip-version-check gdtoolkit==4.5.0
+"$IB_WORK/venv/bin/gdparse" examples/clients/godot/*.gd examples/clients/godot/tests/*.gd >/dev/null
+"$IB_WORK/venv/bin/gdlint" examples/clients/godot/*.gd examples/clients/godot/tests/*.gd
 
 echo "== JavaScript client"
 node_flags=()

@@ -1,77 +1,191 @@
 # A Godot 4 player of an inbetween stream: attach to a Node3D, point
-# `skeleton_path` at a Skeleton3D whose bone names are the clip's joint names
-# (a character imported from the same glTF or BVH the clip came from), set
-# `clip_id`, and the skeleton moves with the frames the server streams.
+# `skeleton_path` at a Skeleton3D imported from the same glTF or BVH the clip
+# came from, set `clip_id`, and the skeleton moves with the stream.
 #
-# Local space is asked for: each joint's translation, rotation ([x, y, z, w],
-# which is Godot's Quaternion(x, y, z, w) order) and scale are the bone's
-# pose relative to its parent, as Skeleton3D.set_bone_pose_* expects. Both
-# use Y up and right-handed axes, as glTF does, so nothing is converted.
+# - Compact frames by default (docs/compact-frames.md; compact.gd decodes them),
+#   `encoding = "json"` for JSON frames (with clip events and root motion).
+# - Smooth at any frame rate: a snapshot interpolation buffer
+#   (snapshot_buffer.gd) shows the pose two ticks behind the newest frame,
+#   interpolated between frames, extrapolated at most one tick when one is late.
+# - Joints bind to bones by name as Godot's importer renames them
+#   (`mixamorig:Hips` -> `mixamorig_Hips`: names.gd).
+# - A server with tokens: set `token`, or run with `-- --token T` (arguments
+#   after `--` are the game's), or set INBETWEEN_TOKEN; it goes in the
+#   WebSocket handshake as `Authorization: Bearer T`.
+#
+# Local space: each joint's translation, rotation ([x, y, z, w], Godot's
+# Quaternion(x, y, z, w) order) and scale are the bone's pose relative to its
+# parent, as Skeleton3D.set_bone_pose_* expects. Both use Y up and right-handed
+# axes, as glTF does, so nothing is converted.
 extends Node3D
+
+## A clip event (a footstep, a sound cue) crossed since the previous frame (JSON frames).
+signal event_crossed(name: String, time: float)
+
+const Compact = preload("compact.gd")
+const SnapshotBuffer = preload("snapshot_buffer.gd")
+const Names = preload("names.gd")
 
 @export var server := "ws://127.0.0.1:8080"
 @export var clip_id := ""
-@export var fps := 60
+@export var fps := 30
+@export_enum("compact", "json") var encoding := "compact"
+@export var delay_ticks := 2.0
+@export var token := ""
 @export var skeleton_path: NodePath
+
+var missing := PackedStringArray()  # joints the skeleton has no bone for
+var shown := {}  # the last sample: {mode, from, to, alpha}
 
 var _socket := WebSocketPeer.new()
 var _skeleton: Skeleton3D
-var _bones := {}  # joint name -> bone index, filled from the first frame
+var _decoder: Compact
+var _buffer: SnapshotBuffer
+var _pose := {}
+var _bones := PackedInt32Array()  # bone index per joint, -1 for none
+var _origin: Transform3D
+
 
 func _ready() -> void:
 	_skeleton = get_node(skeleton_path) as Skeleton3D
-	var url := "%s/v1/clips/%s/stream?fps=%d&space=local" % [server, clip_id, fps]
+	_buffer = SnapshotBuffer.new(fps, delay_ticks)
+	_origin = transform
+	var url := (
+		"%s/v1/clips/%s/stream?fps=%d&encoding=%s" % [server, clip_id.uri_encode(), fps, encoding]
+	)
+	var bearer := Names.token_from(
+		token, OS.get_cmdline_user_args(), OS.get_environment("INBETWEEN_TOKEN")
+	)
+	if bearer != "":
+		_socket.handshake_headers = PackedStringArray(["Authorization: Bearer %s" % bearer])
 	var err := _socket.connect_to_url(url)
 	if err != OK:
 		push_error("inbetween: cannot connect to %s (%s)" % [url, error_string(err)])
+
 
 func _process(_delta: float) -> void:
 	_socket.poll()
 	match _socket.get_ready_state():
 		WebSocketPeer.STATE_OPEN:
-			# Apply only the newest frame: a game renders at its own rate.
-			var newest = null
+			var now := Time.get_ticks_usec() / 1000.0
 			while _socket.get_available_packet_count() > 0:
-				newest = JSON.parse_string(_socket.get_packet().get_string_from_utf8())
-			if newest is Dictionary:
-				_apply(newest)
+				var packet := _socket.get_packet()
+				if _socket.was_string_packet():
+					_receive_text(packet.get_string_from_utf8(), now)
+				elif _decoder != null:
+					_take(_decoder.decode(packet), now)
+			_show(now)
 		WebSocketPeer.STATE_CLOSED:
 			if _socket.get_close_code() != 1000:
-				push_warning("inbetween: stream closed %d %s" % [_socket.get_close_code(), _socket.get_close_reason()])
+				push_warning(
+					(
+						"inbetween: stream closed %d %s"
+						% [_socket.get_close_code(), _socket.get_close_reason()]
+					)
+				)
 			set_process(false)
 
-func _apply(frame: Dictionary) -> void:
-	if frame.has("error"):
-		push_error("inbetween: %s" % frame["error"])
-		return
-	for joint in frame["pose"]["joints"]:
-		var bone: int = _bones.get(joint["name"], -2)
-		if bone == -2:
-			bone = _skeleton.find_bone(joint["name"])
-			_bones[joint["name"]] = bone
-		if bone < 0:
-			continue  # a joint the model does not have
-		var t: Array = joint["translation"]
-		var r: Array = joint["rotation"]
-		var s: Array = joint["scale"]
-		_skeleton.set_bone_pose_position(bone, Vector3(t[0], t[1], t[2]))
-		_skeleton.set_bone_pose_rotation(bone, Quaternion(r[0], r[1], r[2], r[3]))
-		_skeleton.set_bone_pose_scale(bone, Vector3(s[0], s[1], s[2]))
-	for event in frame["events"]:
-		event_crossed.emit(event["name"], event["time"])
 
-## A clip event (a footstep, a sound cue) crossed since the previous frame.
-signal event_crossed(name: String, time: float)
+func _receive_text(text: String, now: float) -> void:
+	var message = JSON.parse_string(text)
+	if not message is Dictionary:
+		return
+	if message.has("error"):
+		push_error("inbetween: %s" % message["error"])
+	elif message.has("opened"):
+		var opened: Dictionary = message["opened"]
+		if opened.has("compact"):
+			_decoder = Compact.new(opened["compact"])
+			_bind(_decoder.names)
+	elif message.has("pose"):
+		_take(_json_frame(message), now)
+
+
+func _take(frame: Dictionary, now: float) -> void:
+	if frame.has("error"):
+		push_error("inbetween: %s: %s" % [frame["error"], frame["detail"]])
+		return
+	_buffer.push(frame, now)
+
+
+func _bind(names: PackedStringArray) -> void:
+	var bone_names := PackedStringArray()
+	for b in _skeleton.get_bone_count():
+		bone_names.append(_skeleton.get_bone_name(b))
+	_bones = Names.match_names(names, bone_names)
+	missing = PackedStringArray()
+	for j in names.size():
+		if _bones[j] < 0:
+			missing.append(names[j])
+	if not missing.is_empty():
+		push_warning("inbetween: no bone for %s" % ", ".join(missing))
+	_pose = SnapshotBuffer.empty_pose(names.size())
+
+
+## Puts the pose at the render time for `now` on the skeleton (and root motion on this node).
+func _show(now: float) -> void:
+	var time := _buffer.render_time(now)
+	if is_nan(time) or _pose.is_empty():
+		return
+	shown = _buffer.sample(time, _pose)
+	var t: PackedFloat64Array = _pose["translations"]
+	var r: PackedFloat64Array = _pose["rotations"]
+	var s: PackedFloat64Array = _pose["scales"]
+	for j in _bones.size():
+		var bone := _bones[j]
+		if bone < 0:
+			continue
+		_skeleton.set_bone_pose_position(bone, Vector3(t[3 * j], t[3 * j + 1], t[3 * j + 2]))
+		var q := Quaternion(r[4 * j], r[4 * j + 1], r[4 * j + 2], r[4 * j + 3])
+		_skeleton.set_bone_pose_rotation(bone, q)
+		_skeleton.set_bone_pose_scale(bone, Vector3(s[3 * j], s[3 * j + 1], s[3 * j + 2]))
+	if _pose["has_root"]:
+		var root: PackedFloat64Array = _pose["root"]
+		var moved := Transform3D(Basis(Vector3.UP, root[3]), Vector3(root[0], root[1], root[2]))
+		transform = _origin * moved
+
+
+## A JSON frame as flat arrays (the decoder's shape); its events re-emitted as they arrive.
+func _json_frame(message: Dictionary) -> Dictionary:
+	var joints: Array = message["pose"]["joints"]
+	if _pose.is_empty():
+		var names := PackedStringArray()
+		for joint in joints:
+			names.append(joint["name"])
+		_bind(names)
+	var frame := {
+		"seq": int(message["seq"]),
+		"clip_time": message["clip_time"],
+		"translations": [],
+		"rotations": [],
+		"scales": [],
+		"root": null,
+	}
+	for joint in joints:
+		frame["translations"].append_array(joint["translation"])
+		frame["rotations"].append_array(joint["rotation"])
+		frame["scales"].append_array(joint["scale"])
+	var root_motion = message["pose"].get("root_motion")
+	if root_motion is Dictionary:
+		var total: Dictionary = root_motion["total"]
+		frame["root"] = total["translation"] + [total["yaw"]]
+	for event in message.get("events", []):
+		event_crossed.emit(event["name"], event["time"])
+	return frame
+
 
 ## Controls act on the server's next tick (docs/api.md, streaming).
 func seek(time: float) -> void:
 	_socket.send_text(JSON.stringify({"op": "seek", "time": time}))
 
+
 func set_speed(speed: float) -> void:
 	_socket.send_text(JSON.stringify({"op": "speed", "speed": speed}))
 
+
 func pause() -> void:
 	_socket.send_text(JSON.stringify({"op": "pause"}))
+
 
 func play() -> void:
 	_socket.send_text(JSON.stringify({"op": "play"}))

@@ -22,6 +22,7 @@ mod library;
 mod mesh;
 mod panel;
 mod springs;
+mod three_client;
 mod units;
 mod view;
 
