@@ -17,6 +17,7 @@ mod hostile;
 pub mod reference;
 
 mod springs;
+mod vrm;
 mod validation;
 
 extern crate inbetween_formats as formats;
