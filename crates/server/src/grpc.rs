@@ -88,7 +88,9 @@ impl GrpcService {
         let (req, coding) = (request.get_ref(), AnswerCoding::of_grpc(request));
         if req.character.is_some() {
             let detail = "`character` does not apply to SampleStream: ask SampleMotionBatch (or SampleBatch) for the clip's motion on the character".to_owned();
-            return Err(ApiError::BadParameter { code: "unknown_parameter", at: in_body(Field::Character), detail }.into());
+            return Err(
+                ApiError::BadParameter { code: "unknown_parameter", at: in_body(Field::Character), detail }.into()
+            );
         }
         let (times, range) = match &req.when {
             Some(When::Times(t)) => (Some(t), None),

@@ -13,13 +13,13 @@
 use glam::Mat4;
 
 use crate::auth::Caller;
-use crate::grpc::modes;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
+use crate::grpc::modes;
 use crate::request::{
     Composed, Field, Format, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawGraphSampling,
-    RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body, no_ease_on_character,
-    no_graph_fields, on_character,
+    RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
+    no_ease_on_character, no_graph_fields, on_character,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -199,7 +199,8 @@ pub async fn sample_on_character(
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
     let modes = modes(req.space, req.playback, req.ease);
-    let checked = RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
+    let checked =
+        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
     let checked = checked.check()?;
     if req.ease != 0 {
         return Err(no_ease_on_character(in_pose_body(Field::Ease)));

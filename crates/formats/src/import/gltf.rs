@@ -429,7 +429,8 @@ impl Ctx<'_, '_> {
                 (None, _) => skin_name,
             };
             let mesh = self.mesh(skins)?;
-            let roles = vrm_humanoid::character_roles(&self.human_bones, &nodes, &self.forest.names, &mut self.warnings);
+            let roles =
+                vrm_humanoid::character_roles(&self.human_bones, &nodes, &self.forest.names, &mut self.warnings);
             let skeleton = SkeletonSpec { joints };
             characters.push(ImportedCharacter { name: clip_name(&name), skeleton, mesh, roles });
         }

@@ -17,8 +17,8 @@ mod hostile;
 pub mod reference;
 
 mod springs;
-mod vrm;
 mod validation;
+mod vrm;
 
 extern crate inbetween_formats as formats;
 

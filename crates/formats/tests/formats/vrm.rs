@@ -55,7 +55,10 @@ fn the_characters_roles_are_the_vrm_humanoids_bones() {
     let map = RoleMap::infer(clip.skeleton(), &given).unwrap();
     for (role, joint) in &expected {
         let found = map.get(Role::from_name(role).unwrap()).unwrap();
-        assert_eq!((clip.skeleton().names()[found.joint].as_str(), found.by), (joint.as_deref().unwrap(), FoundBy::Given));
+        assert_eq!(
+            (clip.skeleton().names()[found.joint].as_str(), found.by),
+            (joint.as_deref().unwrap(), FoundBy::Given)
+        );
     }
     let by_names = RoleMap::infer(clip.skeleton(), &[]).unwrap();
     assert!(by_names.iter().all(|(_, j)| j.by != FoundBy::Name), "J00… are no family's names");
