@@ -573,7 +573,7 @@ async fn a_refused_character_is_refused_alike_on_both_wires() {
         character: Some("name:cesium".into()),
         ..Default::default()
     };
-    let status = grpc.sample_stream(stream).await.err().expect("SampleStream takes no character");
+    let Err(status) = grpc.sample_stream(stream).await else { panic!("SampleStream takes no character") };
     assert_eq!(status.metadata().get("x-error-code").unwrap(), "unknown_parameter");
     assert!(status.message().contains("(at /character)"), "{}", status.message());
     app.stop().await;

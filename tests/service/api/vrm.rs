@@ -57,6 +57,7 @@ async fn a_cmu_take_plays_on_the_vrm_humanoid_with_its_bone_lengths() {
     }
     assert_eq!(roles.len(), BONES.len(), "no role is guessed beside the humanoid's: {roles:?}");
     assert!(character["warnings"].as_array().is_none_or(Vec::is_empty), "{character}");
+    assert_eq!(character["mesh"], true, "its boxes are a skinned mesh the viewer draws");
     let id = character["id"].as_str().unwrap();
     let skeleton = app.get_json(&format!("/v1/characters/{id}")).await["skeleton"]["joints"].clone();
     let joints = skeleton.as_array().unwrap();

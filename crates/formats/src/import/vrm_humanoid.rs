@@ -56,25 +56,32 @@ pub fn human_bones(json: &[u8], nodes: usize, warnings: &mut Vec<Warning>) -> Re
     }
     let doc: Document = serde_json::from_slice(json).map_err(|e| invalid(format!("{POINTER}: {e}")))?;
     let Some(humanoid) = doc.extensions.and_then(|e| e.vrm).and_then(|v| v.humanoid) else { return Ok(Vec::new()) };
-    let mut bones: Vec<(Role, usize)> = Vec::with_capacity(humanoid.human_bones.len());
+    let mut named: Vec<(Role, usize)> = Vec::with_capacity(humanoid.human_bones.len());
     for (name, bone) in &humanoid.human_bones {
         let at = format!("{POINTER}/{name}");
         if bone.node >= nodes {
             return Err(invalid(format!("{at}/node: node {} does not exist", bone.node)));
         }
-        let Some(role) = Role::from_name(name) else {
-            let detail = format!("humanoid bone '{name}' is not a VRM 1.0 humanoid bone; its node plays no role");
-            warnings.push(Warning::new(NOT_IMPORTED, at, detail));
-            continue;
-        };
-        if let Some((other, _)) = bones.iter().find(|(_, n)| *n == bone.node) {
-            let detail = format!("humanoid bone '{name}' names the node of '{}'; a joint plays one role", other.name());
-            warnings.push(Warning::new(NOT_IMPORTED, at, detail));
+        match Role::from_name(name) {
+            Some(role) => named.push((role, bone.node)),
+            None => {
+                let detail = format!("humanoid bone '{name}' is not a VRM 1.0 humanoid bone; its node plays no role");
+                warnings.push(Warning::new(NOT_IMPORTED, at, detail));
+            }
+        }
+    }
+    // Of two bones on one node, the first in the roles' order keeps it.
+    named.sort_by_key(|(role, _)| role.index());
+    let mut bones: Vec<(Role, usize)> = Vec::with_capacity(named.len());
+    for (role, node) in named {
+        if let Some((other, _)) = bones.iter().find(|(_, n)| *n == node) {
+            let detail =
+                format!("humanoid bone '{}' names the node of '{}'; a joint plays one role", role.name(), other.name());
+            warnings.push(Warning::new(NOT_IMPORTED, format!("{POINTER}/{}", role.name()), detail));
             continue;
         }
-        bones.push((role, bone.node));
+        bones.push((role, node));
     }
-    bones.sort_by_key(|(role, _)| role.index());
     Ok(bones)
 }
 
@@ -119,7 +126,8 @@ mod tests {
         let (got, warnings) = bones(json);
         assert_eq!(got, vec![(Role::Hips, 0), (Role::Spine, 1)]);
         let pointers: Vec<&str> = warnings.iter().map(|w| w.pointer.as_str()).collect();
-        assert_eq!(pointers, [format!("{POINTER}/chest"), format!("{POINTER}/tail")]);
+        // Spine comes before chest among the roles: it keeps node 1.
+        assert_eq!(pointers, [format!("{POINTER}/tail"), format!("{POINTER}/chest")]);
     }
 
     #[test]
