@@ -81,10 +81,17 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 
 impl GrpcService {
     /// A `SampleBatchRequest` checked and bound to its clip (`SampleBatch`
-    /// and `SampleStream` alike).
+    /// and `SampleStream` alike). `character` is `SampleBatch`'s alone (it
+    /// answers in one message); here it is refused.
     async fn sampling(&self, request: &Request<pb::SampleBatchRequest>) -> Result<(Sampling, Arc<CachedClip>), Status> {
         use pb::sample_batch_request::When;
         let (req, coding) = (request.get_ref(), AnswerCoding::of_grpc(request));
+        if req.character.is_some() {
+            let detail = "`character` does not apply to SampleStream: ask SampleMotionBatch (or SampleBatch) for the clip's motion on the character".to_owned();
+            return Err(
+                ApiError::BadParameter { code: "unknown_parameter", at: in_body(Field::Character), detail }.into()
+            );
+        }
         let (times, range) = match &req.when {
             Some(When::Times(t)) => (Some(t), None),
             Some(When::Range(r)) => (None, Some(r)),
@@ -275,8 +282,8 @@ impl Drop for Batches {
     }
 }
 
-/// The modes of a request message, for the request layer.
-fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
+/// A clip request's space, playback and ease numbers, to be checked.
+pub(crate) fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
     RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
 }
 
@@ -404,7 +411,11 @@ fn refused(e: &ControlError) -> Status {
 impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
         let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
-        let req = request.into_inner();
+        let mut req = request.into_inner();
+        if let Some(character) = req.character.take() {
+            let on = (req, character.as_str());
+            return Ok(grpc_answer(super::grpc_motion::sample_on_character(&self.state, &caller, on, coding).await?));
+        }
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
             modes: modes(req.space, req.playback, req.ease),
@@ -434,6 +445,14 @@ impl Animation for GrpcService {
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
         let caller = self.read(&request)?;
+        if request.get_ref().character.is_some() {
+            let coding = AnswerCoding::of_grpc(&request);
+            let mut req = request.into_inner();
+            let character = req.character.take().unwrap_or_default();
+            let on = (req, character.as_str());
+            let batch = super::grpc_motion::sample_batch_on_character(&self.state, &caller, on, coding).await?;
+            return Ok(grpc_answer(batch));
+        }
         let (sampling, cached) = self.sampling(&request).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
             let (bytes, limit) = (sampling.answer_bytes, MAX_UNARY_ANSWER_BYTES);

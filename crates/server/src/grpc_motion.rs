@@ -15,9 +15,11 @@ use glam::Mat4;
 use crate::auth::Caller;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
+use crate::grpc::modes;
 use crate::request::{
     Composed, Field, Format, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawGraphSampling,
-    RawModes, RawMotion, RawPose, Wire, graph_layer, in_batch_message, in_pose_body, no_graph_fields,
+    RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
+    no_ease_on_character, no_graph_fields, on_character,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -94,6 +96,18 @@ pub async fn sample(
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
     let doc = motion_doc(req.motion.as_ref())?;
+    sample_doc(state, caller, doc, req, coding).await
+}
+
+/// `SampleMotion` of the motion `doc` (the request's own, or the one-layer
+/// motion of a clip on a character).
+async fn sample_doc(
+    state: &AppState,
+    caller: &Caller,
+    doc: MotionDoc,
+    req: pb::SampleMotionRequest,
+    coding: AnswerCoding,
+) -> Result<pb::Pose, ApiError> {
     if let Some(reference) = graph_layer(&doc)? {
         return graph_pose(state, caller, &req, reference, coding).await;
     }
@@ -123,8 +137,19 @@ pub async fn sample_batch(
     req: pb::SampleMotionBatchRequest,
     coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
-    use pb::sample_motion_batch_request::When;
     let doc = motion_doc(req.motion.as_ref())?;
+    sample_batch_doc(state, caller, doc, req, coding).await
+}
+
+/// `SampleMotionBatch` of the motion `doc`, as [`sample_doc`].
+async fn sample_batch_doc(
+    state: &AppState,
+    caller: &Caller,
+    doc: MotionDoc,
+    req: pb::SampleMotionBatchRequest,
+    coding: AnswerCoding,
+) -> Result<pb::PoseBatch, ApiError> {
+    use pb::sample_motion_batch_request::When;
     if let Some(reference) = graph_layer(&doc)? {
         return graph_batch(state, caller, &req, reference, coding).await;
     }
@@ -158,6 +183,64 @@ pub async fn sample_batch(
     let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
     state.counters.poses.increment(n as u64);
     Ok(batch)
+}
+
+/// `Sample` with `character`: `SampleMotion` of the one-layer motion of the
+/// clip on the character (docs/characters.md, “Clip routes on a
+/// character”), as REST's `GET …/pose?character=`, its refusals at the
+/// request's field names.
+///
+/// # Errors
+/// As `SampleMotion`; `unknown_parameter` for an `ease`.
+pub async fn sample_on_character(
+    state: &AppState,
+    caller: &Caller,
+    (req, character): (pb::SampleRequest, &str),
+    coding: AnswerCoding,
+) -> Result<pb::Pose, ApiError> {
+    let modes = modes(req.space, req.playback, req.ease);
+    let checked =
+        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
+    let checked = checked.check()?;
+    if req.ease != 0 {
+        return Err(no_ease_on_character(in_pose_body(Field::Ease)));
+    }
+    let doc = on_character(&req.clip_id, checked.options.playback, character);
+    let motion = pb::SampleMotionRequest { time: req.time, space: req.space, format: req.format, ..Default::default() };
+    sample_doc(state, caller, doc, motion, coding).await.map_err(|e| at_clip_route(e, in_pose_body))
+}
+
+/// `SampleBatch` with `character`: `SampleMotionBatch` of the one-layer
+/// motion of the clip on the character, as REST's `POST …/sample` with
+/// `character`.
+///
+/// # Errors
+/// As `SampleMotionBatch`; `unknown_parameter` for an `ease`.
+pub async fn sample_batch_on_character(
+    state: &AppState,
+    caller: &Caller,
+    (req, character): (pb::SampleBatchRequest, &str),
+    coding: AnswerCoding,
+) -> Result<pb::PoseBatch, ApiError> {
+    use pb::sample_batch_request::When as ClipWhen;
+    use pb::sample_motion_batch_request::When;
+    let (times, range) = match &req.when {
+        Some(ClipWhen::Times(t)) => (Some(t), None),
+        Some(ClipWhen::Range(r)) => (None, Some(r)),
+        None => (None, None),
+    };
+    let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
+    let playback = raw.check(state.config.limits.max_poses)?.options.playback;
+    if req.ease != 0 {
+        return Err(no_ease_on_character(in_batch_message(Field::Ease)));
+    }
+    let doc = on_character(&req.clip_id, playback, character);
+    let when = req.when.map(|when| match when {
+        ClipWhen::Times(times) => When::Times(times),
+        ClipWhen::Range(range) => When::Range(range),
+    });
+    let motion = pb::SampleMotionBatchRequest { when, space: req.space, format: req.format, ..Default::default() };
+    sample_batch_doc(state, caller, doc, motion, coding).await.map_err(|e| at_clip_route(e, in_batch_message))
 }
 
 /// `SampleMotion` over a graph: the ticks up to the last at or before

@@ -463,3 +463,118 @@ async fn the_same_mistakes_are_refused_with_the_same_codes_on_both_wires() {
     assert!(status.message().contains("(at /range/end)"), "{}", status.message());
     app.stop().await;
 }
+
+/// A clip's `Sample` and `SampleBatch` with `character` answer what REST's
+/// clip routes with `character=` answer, number for number: the CMU take on
+/// CesiumMan, by id and by `name:`, in both spaces, a clip `playback` carried
+/// into the layer.
+#[tokio::test]
+async fn a_clip_on_a_character_samples_the_same_over_grpc_as_over_rest() {
+    let app = TestApp::start().await;
+    let cesium = import_character(&app, "gltf/CesiumMan/CesiumMan.gltf", "cesium").await;
+    let take = import(&app, "bvh/131_01.bvh", None).await;
+    let mut grpc = app.grpc().await;
+    for character in [cesium["id"].as_str().unwrap().to_owned(), "name:cesium".to_owned()] {
+        for (space, rpc_space) in [("local", pb::Space::Local), ("model", pb::Space::Model)] {
+            for t in [0.0, 0.75, 9.5] {
+                let url = format!("/v1/clips/{take}/pose?t={t}&space={space}&playback=loop&character={character}");
+                let resp = app.http.get(app.url(&url)).send().await.unwrap();
+                assert_eq!(resp.status(), 200, "{url}");
+                let rest: Value = resp.json().await.unwrap();
+                let req = pb::SampleRequest {
+                    clip_id: take.clone(),
+                    time: t,
+                    space: rpc_space as i32,
+                    playback: pb::Playback::Loop as i32,
+                    character: Some(character.clone()),
+                    ..Default::default()
+                };
+                let rpc = grpc.sample(req).await.unwrap().into_inner();
+                assert_same_pose(&rest, &rpc, &format!("{character} {space} at {t}"));
+            }
+        }
+        let times = vec![0.1, 0.5, 1.25, 2.0];
+        let body = json!({"times": times, "space": "model", "character": character});
+        let rest = rest_ok(&app, &format!("/v1/clips/{take}/sample"), &body).await;
+        let req = pb::SampleBatchRequest {
+            clip_id: take.clone(),
+            when: Some(pb::sample_batch_request::When::Times(pb::Times { values: times.clone() })),
+            space: pb::Space::Model as i32,
+            character: Some(character.clone()),
+            ..Default::default()
+        };
+        let batch = grpc.sample_batch(req).await.unwrap().into_inner();
+        let poses = rest["poses"].as_array().unwrap();
+        assert_eq!(batch.poses.len(), poses.len());
+        let names: Vec<&str> =
+            poses[0]["joints"].as_array().unwrap().iter().map(|j| j["name"].as_str().unwrap()).collect();
+        assert_eq!(batch.joint_names, names, "CesiumMan's joints, named once");
+        for (k, (rest, rpc)) in poses.iter().zip(&batch.poses).enumerate() {
+            assert_same_pose(rest, rpc, &format!("{character} batch pose {k}"));
+        }
+    }
+    // On the take's own skeleton, another pose: the character was played on.
+    let own = grpc.sample(own_request(&take)).await.unwrap().into_inner();
+    let on = pb::SampleRequest { character: Some("name:cesium".into()), ..own_request(&take) };
+    let on = grpc.sample(on).await.unwrap().into_inner();
+    assert_ne!(own.joint_names, on.joint_names);
+    app.stop().await;
+}
+
+fn own_request(clip: &str) -> pb::SampleRequest {
+    pb::SampleRequest { clip_id: clip.to_owned(), time: 0.75, ..Default::default() }
+}
+
+/// The refusals of a clip on a character are REST's, with the same codes at
+/// `/character`: a character that does not exist, a clip it cannot map; an
+/// `ease` is refused with it; `SampleStream` does not take it.
+#[tokio::test]
+async fn a_refused_character_is_refused_alike_on_both_wires() {
+    let app = TestApp::start().await;
+    import_character(&app, "gltf/CesiumMan/CesiumMan.gltf", "cesium").await;
+    let tailed = app.create_id(&tail_clip(), None).await;
+    let take = import(&app, "bvh/131_01.bvh", None).await;
+    let mut grpc = app.grpc().await;
+    let when = || Some(pb::sample_batch_request::When::Times(pb::Times { values: vec![0.5] }));
+    for (clip, character) in [(&take, "name:nobody"), (&tailed, "name:cesium")] {
+        let body = json!({"times": [0.5], "character": character});
+        let path = format!("/v1/clips/{clip}/sample");
+        let pose = pb::SampleRequest { character: Some(character.into()), ..own_request(clip) };
+        refusals(&app, (&path, &body), grpc.sample(pose).await).await;
+        let batch = pb::SampleBatchRequest {
+            clip_id: clip.clone(),
+            when: when(),
+            character: Some(character.into()),
+            ..Default::default()
+        };
+        refusals(&app, (&path, &body), grpc.sample_batch(batch).await).await;
+    }
+    let (status, problem) =
+        post(&app, &format!("/v1/clips/{tailed}/sample"), &json!({"times": [0.5], "character": "name:cesium"})).await;
+    assert_eq!((status, problem["code"].as_str()), (422, Some("unmappable_skeleton")), "{problem}");
+    // `ease` with a character: 400 `unknown_parameter` at `/ease` on both.
+    let body = json!({"times": [0.5], "ease": "ease_in", "character": "name:cesium"});
+    let (status, problem) = post(&app, &format!("/v1/clips/{take}/sample"), &body).await;
+    assert_eq!(
+        (status, problem["code"].as_str(), problem["pointer"].as_str()),
+        (400, Some("unknown_parameter"), Some("/ease"))
+    );
+    let pose =
+        pb::SampleRequest { ease: pb::Ease::In as i32, character: Some("name:cesium".into()), ..own_request(&take) };
+    let status = grpc.sample(pose).await.unwrap_err();
+    assert_eq!(
+        (status.code(), status.metadata().get("x-error-code").unwrap().to_str().unwrap()),
+        (tonic::Code::InvalidArgument, "unknown_parameter")
+    );
+    assert!(status.message().contains("(at /ease)"), "{}", status.message());
+    let stream = pb::SampleBatchRequest {
+        clip_id: take.clone(),
+        when: when(),
+        character: Some("name:cesium".into()),
+        ..Default::default()
+    };
+    let Err(status) = grpc.sample_stream(stream).await else { panic!("SampleStream takes no character") };
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "unknown_parameter");
+    assert!(status.message().contains("(at /character)"), "{}", status.message());
+    app.stop().await;
+}

@@ -35,6 +35,7 @@ pub(crate) mod rigs;
 mod security;
 mod shared_parts;
 mod strict;
+mod vrm;
 mod warnings;
 mod work;
 

@@ -105,7 +105,7 @@ fn character(clip: &ClipSpec) -> ImportedCharacter {
             joint.rest.translation = at;
         }
     }
-    ImportedCharacter { name: clip.name.clone(), skeleton, mesh: None }
+    ImportedCharacter { name: clip.name.clone(), skeleton, mesh: None, roles: Default::default() }
 }
 
 /// Where a BVH warning about key times points: the header line that set

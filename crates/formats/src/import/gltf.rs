@@ -24,6 +24,7 @@ use super::mesh::{MeshPlan, MeshReader, Palette};
 use super::names::{clip_name, is_generic_animation_name, unique_names};
 use super::source::Source;
 use super::spec::{Format, ImportOptions, Imported, ImportedCharacter, Resolver};
+use super::vrm_humanoid;
 use super::warning::{GENERIC_ANIMATION_NAME, NOT_IMPORTED, Warning};
 use anim::lint::{self, Lint, LintCode};
 use anim::{
@@ -66,8 +67,9 @@ pub fn import(
         });
     }
     let forest = Forest::new(&doc)?;
-    let mut spring_warnings = Vec::new();
-    let (spring_chains, spring_nodes) = super::vrm::chains(json, &forest.names, &mut spring_warnings)?;
+    let mut vrm_warnings = Vec::new();
+    let (spring_chains, spring_nodes) = super::vrm::chains(json, &forest.names, &mut vrm_warnings)?;
+    let human_bones = vrm_humanoid::human_bones(json, forest.names.len(), &mut vrm_warnings)?;
     let mut skins_of: Vec<Vec<usize>> = vec![Vec::new(); doc.nodes().len()];
     for skin in doc.skins() {
         for joint in skin.joints() {
@@ -92,6 +94,7 @@ pub fn import(
         meshes: HashMap::new(),
         mesh_bytes: 0,
         spring_nodes,
+        human_bones,
         scene_name: (doc.default_scene().or_else(|| doc.scenes().next()))
             .and_then(|s| s.name().map(str::to_owned))
             .filter(|n| !n.trim().is_empty() && !is_generic_animation_name(n)),
@@ -116,7 +119,7 @@ pub fn import(
     }
     let mut warnings = std::mem::take(&mut ctx.mesh_plan.warnings);
     warnings.append(&mut ctx.warnings);
-    warnings.append(&mut spring_warnings);
+    warnings.append(&mut vrm_warnings);
     Ok(Imported { clips, meshes, springs, characters, warnings })
 }
 
@@ -317,6 +320,9 @@ struct Ctx<'d, 'r> {
     /// The nodes `VRMC_springBone` chains and colliders use: part of every
     /// skinned clip's skeleton.
     spring_nodes: Vec<usize>,
+    /// The roles a VRM humanoid gives its nodes (each character takes those
+    /// in its skeleton).
+    human_bones: Vec<(anim::character::Role, usize)>,
     /// The default (or first) scene's name, if it says something: what an
     /// animation is named after when neither it nor the file has a name.
     scene_name: Option<String>,
@@ -423,7 +429,10 @@ impl Ctx<'_, '_> {
                 (None, _) => skin_name,
             };
             let mesh = self.mesh(skins)?;
-            characters.push(ImportedCharacter { name: clip_name(&name), skeleton: SkeletonSpec { joints }, mesh });
+            let roles =
+                vrm_humanoid::character_roles(&self.human_bones, &nodes, &self.forest.names, &mut self.warnings);
+            let skeleton = SkeletonSpec { joints };
+            characters.push(ImportedCharacter { name: clip_name(&name), skeleton, mesh, roles });
         }
         Ok(characters)
     }

@@ -222,6 +222,9 @@ pub struct ImportedCharacter {
     pub name: String,
     pub skeleton: SkeletonSpec,
     pub mesh: Option<bytes::Bytes>,
+    /// The roles the file gives (a VRM humanoid's `humanBones`): role name →
+    /// joint name, as a character document's `roles`; empty: none given.
+    pub roles: std::collections::BTreeMap<String, Option<String>>,
 }
 
 /// Supplies the bytes of an external glTF buffer URI (exactly as written in

@@ -18,6 +18,7 @@ pub mod reference;
 
 mod springs;
 mod validation;
+mod vrm;
 
 extern crate inbetween_formats as formats;
 

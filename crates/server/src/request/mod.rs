@@ -52,7 +52,7 @@ pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use graph::{GraphSampling, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
 pub use graph_stream::RawGraphStream;
 pub use list::{Page, RawPage};
-pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, on_character, warnings};
+pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, no_ease_on_character, on_character, warnings};
 pub use raw::{
     Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,

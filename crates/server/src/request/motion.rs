@@ -241,6 +241,13 @@ pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &st
     }
 }
 
+/// `ease` with `character`: the one-layer motion a clip route plays on a
+/// character has no ease (a motion's layers have none; its streams do).
+pub fn no_ease_on_character(at: At) -> ApiError {
+    let detail = "`ease` does not apply with `character`: the one-layer motion played has no ease".to_owned();
+    ApiError::BadParameter { code: "unknown_parameter", at, detail }
+}
+
 /// A refusal of [`on_character`]'s motion, located on the clip route that
 /// asked for it (`at`): whatever the motion path points into `/motion`
 /// (the character not found, a clip it cannot map) is the route's

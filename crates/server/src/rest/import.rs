@@ -202,7 +202,7 @@ pub(crate) fn admit_characters(
         .map(|c| {
             let spec = ClipSpec { name: c.name.clone(), skeleton: Some(c.skeleton), ..Default::default() };
             let skeleton = ClipDoc::from_spec(&spec).skeleton.unwrap_or(SkeletonDoc { joints: Vec::new() });
-            let doc = CharacterDoc { name: c.name, skeleton, roles: Default::default() };
+            let doc = CharacterDoc { name: c.name, skeleton, roles: c.roles };
             let mesh =
                 c.mesh.map_or(MeshWrite::None, |bytes| MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes }));
             Ok(crate::characters::admit(doc, mesh, limits, cancel)?.new_character)

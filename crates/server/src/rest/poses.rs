@@ -27,7 +27,7 @@ use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
     Field, Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route, evaluate, in_body, in_query,
-    joint_subset, on_character, parameter_subset, parse_json,
+    joint_subset, no_ease_on_character, on_character, parameter_subset, parse_json,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -153,13 +153,6 @@ pub async fn get_pose(
         .await?;
     state.counters.poses.increment(1);
     Ok(json_response(body))
-}
-
-/// `ease` with `character`: the one-layer motion a clip route plays on a
-/// character has no ease (a motion's layers have none; its streams do).
-fn no_ease_on_character(at: crate::error::At) -> ApiError {
-    let detail = "`ease` does not apply with `character`: the one-layer motion played has no ease".to_owned();
-    ApiError::BadParameter { code: "unknown_parameter", at, detail }
 }
 
 /// `GET …/pose?character=`: `POST /v1/poses` of the one-layer motion of the
