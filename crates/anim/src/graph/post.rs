@@ -102,6 +102,13 @@ impl PostRun {
         Ok(PostRun { springs, ..PostRun::default() })
     }
 
+    /// The springs start again at rest at the next tick (`reset_springs`).
+    pub fn restart_springs(&mut self) {
+        if let Some(solver) = self.springs.as_mut() {
+            solver.reset();
+        }
+    }
+
     /// The springs' state (none without springs).
     pub fn spring_state(&self) -> Option<SpringState> {
         self.springs.as_ref().map(SpringSolver::state)
