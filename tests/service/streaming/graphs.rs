@@ -374,6 +374,31 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
         assert_eq!(status.metadata().get("x-error-code").unwrap(), code, "{refused:?}");
     }
 
+    // A motion's springs on the graph: the frames of `StreamFrames` are what REST samples answer.
+    let joints = ["b_Tail01_012", "b_Tail02_013", "b_Tail03_014"];
+    let gravity = Some(pb::Vec3 { x: 0.0, y: -9.81, z: 0.0 });
+    let spring =
+        pb::Spring { name: "tail".into(), joints: joints.map(Into::into).to_vec(), gravity, ..Default::default() };
+    let sprung = pb::Motion { springs: vec![spring], ..motion.clone() };
+    let sprung_request = pb::StreamRequest { motion: Some(sprung), max_frames: 30, report: false, ..request.clone() };
+    let mut frames = app.grpc().await.stream_frames(sprung_request).await.unwrap().into_inner();
+    let json_motion = json!({"layers": [{"graph": graph}], "springs": [{"name": "tail", "joints": joints, "gravity": [0, -9.81, 0]}]});
+    // Frame `seq` is tick `seq`, a tick the server woke late for evaluated all the same.
+    let poses = samples_of(&app, json_motion, 120, FPS, json!([])).await;
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let k = frame.seq as usize;
+        let Some(pose) = poses.get(k) else { break };
+        let rotations: Vec<f32> = pose["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|j| {
+                j["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect::<Vec<_>>()
+            })
+            .collect();
+        assert_eq!(frame.pose.unwrap().rotations, rotations, "tick {k}'s rotations");
+    }
+
     let plain = pb::StreamRequest { report: false, ..request.clone() };
     let mut frames = app.grpc().await.stream_frames(plain).await.unwrap().into_inner();
     let first = within(5, "a frame", frames.message()).await.unwrap().unwrap();
