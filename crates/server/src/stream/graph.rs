@@ -79,7 +79,7 @@ impl GraphDeck {
         let mut deck = GraphDeck { player, post, run, report: program.report, space, model: Pose::default() };
         if deck.player.ticks() > 0 {
             deck.run_post(clock);
-            deck.to_space();
+            deck.put_in_space();
         }
         Ok(deck)
     }
@@ -107,10 +107,10 @@ impl GraphDeck {
             }
             self.player.tick(dt);
             self.run_post(clock(k));
-            self.to_space();
+            self.put_in_space();
         } else if self.post.springs().is_some() {
             self.run.settle(&self.post, clock(k));
-            self.to_space();
+            self.put_in_space();
         }
         self.time(fps) as f32
     }
@@ -123,7 +123,7 @@ impl GraphDeck {
     }
 
     /// The local pose in the stream's space.
-    fn to_space(&mut self) {
+    fn put_in_space(&mut self) {
         if self.space == Space::Model {
             let local = if self.post.is_empty() { self.player.pose() } else { self.run.pose() };
             self.player.graph().skeleton().to_model(local, &mut self.model);
