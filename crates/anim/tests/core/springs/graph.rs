@@ -139,3 +139,27 @@ fn a_request_runs_its_springs_from_rest_a_warmup_before_its_first_tick() {
     assert_eq!(sprung.first_run(&range(0.5)), 0);
     assert_eq!(plain.first_run(&range(3.0)), 180, "without springs, the first answered tick");
 }
+
+#[test]
+fn a_restart_shows_the_rest_rotations_and_the_chain_runs_on_from_them() {
+    let clip = swinging();
+    let graph = one_clip(&clip);
+    let sprung = post(&clip, &[], &tail_springs());
+    let (mut player, mut run) = (GraphPlayer::new(Arc::clone(&graph)), PostRun::new(&sprung));
+    let tail = |pose: &Pose| [1, 2, 3].map(|j| pose.rotations[j]);
+    let dt = 1.0 / 60.0;
+    for k in 0..=90u32 {
+        if k == 60 {
+            run.restart_springs();
+        }
+        player.tick(dt);
+        run.run(&sprung, graph.skeleton(), player.pose(), f64::from(k) / 60.0);
+        // The clip keys only the body: its tail is at rest rotations.
+        let at_rest = tail(run.pose()) == tail(player.pose());
+        match k {
+            0 | 60 => assert!(at_rest, "tick {k} shows the rest rotations"),
+            59 | 61.. => assert!(!at_rest, "tick {k}: the chain swings"),
+            _ => {}
+        }
+    }
+}
