@@ -148,7 +148,10 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         at: in_body,
     };
     match graph_layer(&req.motion)? {
-        Some(reference) => raw.graph_spec(state, RawGraphStream { reference, report: req.report }, description).await,
+        Some(layer) => {
+            let graph = RawGraphStream { reference: layer.reference, stages: &layer.stages, report: req.report };
+            raw.graph_spec(state, graph, description).await
+        }
         None if req.report => {
             let detail = "`report` is a graph broadcast's: the motion's layer names no `graph`";
             Err(ApiError::invalid("graph_unsupported", "/report", detail))

@@ -28,8 +28,8 @@ use crate::cache::CachedClip;
 use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
 use crate::request::{
-    Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes, RawPage, RawPose,
-    RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
+    Field, Format, GraphStages, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes,
+    RawPage, RawPose, RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
@@ -159,10 +159,10 @@ impl GrpcService {
                 let detail = "give `clip_id` or `motion`, not both";
                 return Err(ApiError::invalid("clip_or_motion", "/motion", detail).into());
             }
-            (Some(_), Some(reference)) => {
+            (Some(_), Some((reference, stages))) => {
                 let raw = RawStream { modes: RawModes { playback, ..raw.modes }, ..raw };
-                raw.open_graph(&self.state, RawGraphStream { reference: &reference, report: req.report }, caller)
-                    .await?
+                let graph = RawGraphStream { reference: &reference, stages: &stages, report: req.report };
+                raw.open_graph(&self.state, graph, caller).await?
             }
             (Some(motion), None) => {
                 let motion = super::grpc_motion::raw_motion(motion)?;
@@ -182,12 +182,12 @@ impl GrpcService {
 /// # Errors
 /// `graph_unsupported` at the field a graph does not take; the motion's
 /// enums out of range.
-fn graph_of_pb(motion: &pb::Motion) -> Result<Option<String>, ApiError> {
+fn graph_of_pb(motion: &pb::Motion) -> Result<Option<(String, GraphStages)>, ApiError> {
     if motion.layers.iter().all(|l| l.graph.is_empty()) {
         return Ok(None);
     }
     let doc = formats::wire::proto_motion::motion_doc_from_pb(motion)?;
-    Ok(graph_layer(&doc)?.map(str::to_owned))
+    Ok(graph_layer(&doc)?.map(|layer| (layer.reference.to_owned(), layer.stages)))
 }
 
 /// Bytes of poses per `SampleStream` message (at least one pose).

@@ -17,8 +17,8 @@ use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::grpc::modes;
 use crate::request::{
-    Composed, Field, Format, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch, RawGraphSampling,
-    RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
+    Composed, Field, Format, GraphLayer, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch,
+    RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
     no_ease_on_character, no_graph_fields, on_character,
 };
 use crate::state::AppState;
@@ -108,8 +108,8 @@ async fn sample_doc(
     req: pb::SampleMotionRequest,
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
-    if let Some(reference) = graph_layer(&doc)? {
-        return graph_pose(state, caller, &req, reference, coding).await;
+    if let Some(layer) = graph_layer(&doc)? {
+        return graph_pose(state, caller, &req, &layer, coding).await;
     }
     no_graph_fields(req.report, !req.inputs.is_empty(), req.fps.is_some())?;
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
@@ -150,8 +150,8 @@ async fn sample_batch_doc(
     coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
-    if let Some(reference) = graph_layer(&doc)? {
-        return graph_batch(state, caller, &req, reference, coding).await;
+    if let Some(layer) = graph_layer(&doc)? {
+        return graph_batch(state, caller, &req, &layer, coding).await;
     }
     no_graph_fields(req.report, !req.inputs.is_empty(), false)?;
     let (times, range) = match &req.when {
@@ -250,12 +250,13 @@ async fn graph_pose(
     state: &AppState,
     caller: &Caller,
     req: &pb::SampleMotionRequest,
-    reference: &str,
+    layer: &GraphLayer<'_>,
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
     let inputs = inputs_from_pb(&req.inputs)?;
     let raw = RawGraphSampling {
-        reference,
+        reference: layer.reference,
+        stages: &layer.stages,
         inputs: &inputs,
         time: Some(req.time),
         times: None,
@@ -285,7 +286,7 @@ async fn graph_batch(
     state: &AppState,
     caller: &Caller,
     req: &pb::SampleMotionBatchRequest,
-    reference: &str,
+    layer: &GraphLayer<'_>,
     coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
     use pb::sample_motion_batch_request::When;
@@ -296,7 +297,8 @@ async fn graph_batch(
         None => (None, None),
     };
     let raw = RawGraphSampling {
-        reference,
+        reference: layer.reference,
+        stages: &layer.stages,
         inputs: &inputs,
         time: None,
         times,
@@ -357,12 +359,13 @@ impl GraphPacker {
     /// report when asked for.
     fn pose(&mut self, i: usize, named: bool) -> pb::Pose {
         let s = &self.sampling;
-        let (player, time) = self.ticks.play(s, i);
+        let tick = self.ticks.play(s, i);
+        let time = tick.time;
         let skeleton = s.built.graph.skeleton();
         let names = named.then(|| skeleton.names());
         let mut pose = match s.format {
             Format::Trs => {
-                let local = player.pose();
+                let local = tick.pose;
                 let pose = if s.space == Space::Model {
                     skeleton.to_model(local, &mut self.model);
                     &self.model
@@ -372,15 +375,16 @@ impl GraphPacker {
                 pose_to_pb(names, pose, time, time as f32, s.space)
             }
             Format::Matrix => {
-                skeleton.model_matrices(player.pose(), &mut self.matrices);
+                skeleton.model_matrices(tick.pose, &mut self.matrices);
                 matrices_to_pb(names, &self.matrices, time, time as f32)
             }
             Format::Skinning => {
-                skeleton.skinning_matrices(player.pose(), &mut self.matrices);
+                skeleton.skinning_matrices(tick.pose, &mut self.matrices);
                 matrices_to_pb(names, &self.matrices, time, time as f32)
             }
         };
-        pose.graph = s.report.then(|| report_to_proto(&player.report()));
+        pose.graph = s.report.then(|| report_to_proto(&tick.player.report()));
+        pose.ik = ik_reports_to_pb(tick.ik);
         match &s.joints {
             Some(joints) => select_joints(pose, joints),
             None => pose,

@@ -4,7 +4,9 @@
 //! the same settings at the same ticks (reports and joints equal to the number);
 //! what a graph stream does not take is refused with its code and pointer;
 //! a broadcast's `set` reaches every viewer at the seq it answers; gRPC
-//! `StreamFrames` carries `Pose.graph` and `Play` takes `set`.
+//! `StreamFrames` carries `Pose.graph` and `Play` takes `set`. A motion's
+//! springs and IK on a graph stream are what samples answer from tick 0,
+//! and a graph pose warms its springs up as a samples request from its tick.
 //!
 //! The graph is the Fox's shipped locomotion (`examples/graphs/fox-locomotion.json`):
 //! it stands (`idle`) until `speed` rises above 0.2, then `move`s at once
@@ -95,7 +97,12 @@ fn first_in(frames: &BTreeMap<u64, Value>, from: u64, want: &str) -> u64 {
 
 /// `POST /v1/samples` over `graph` from tick 0 to `last` at `fps` with `inputs`.
 async fn samples(app: &TestApp, graph: &str, last: u64, fps: u32, inputs: Value) -> Vec<Value> {
-    let body = json!({"motion": over(graph), "start": 0, "end": last as f64 / f64::from(fps), "fps": fps,
+    samples_of(app, over(graph), last, fps, inputs).await
+}
+
+/// `POST /v1/samples` of `motion` (over a graph) from tick 0 to `last`.
+async fn samples_of(app: &TestApp, motion: Value, last: u64, fps: u32, inputs: Value) -> Vec<Value> {
+    let body = json!({"motion": motion, "start": 0, "end": last as f64 / f64::from(fps), "fps": fps,
                       "report": true, "inputs": inputs});
     let answer = app.post_json("/v1/samples", &body).await;
     let poses = answer["poses"].as_array().unwrap_or_else(|| panic!("{answer}")).clone();
@@ -139,6 +146,67 @@ async fn a_websocket_graph_stream_shows_what_samples_answer_for_the_same_setting
     }
     let fired = &frames[&moved]["graph"]["transition"];
     assert_eq!((&fired["from"], &fired["to"], fired["alpha"].as_f64()), (&json!("idle"), &json!("move"), Some(0.0)));
+}
+
+/// A motion over `graph` with the Fox's tail chain (`examples/motions/fox-tail-springs.json`)
+/// and its leg and head constraints (`examples/motions/walk-look-and-plant.json`).
+fn with_tail_and_ik(graph: &str) -> Value {
+    let read = |file: &str| -> Value {
+        let path = format!("{}/examples/motions/{file}", env!("CARGO_MANIFEST_DIR"));
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    };
+    let mut motion = read("fox-tail-springs.json");
+    motion["layers"] = json!([{"graph": graph}]);
+    motion["ik"] = read("walk-look-and-plant.json")["ik"].clone();
+    motion
+}
+
+#[tokio::test]
+async fn springs_and_ik_on_a_graph_stream_are_what_samples_answer_from_tick_0() {
+    // A stream's springs run from its tick 0; a samples request's from a
+    // warm-up (1 s) before its first tick, not before 0: from tick 0 the two
+    // are one simulation, and IK solves each tick from its pose alone.
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let motion = with_tail_and_ik(&graph);
+    let (mut ws, opened) = open(&app, json!({"op": "open", "motion": motion, "fps": FPS, "report": true})).await;
+    assert!(opened.get("opened").is_some(), "{opened}");
+    let mut frames = frames_until(&mut ws, 3).await;
+    send(&mut ws, json!({"op": "set", "parameters": {"speed": 2.5}})).await;
+    frames.extend(frames_until(&mut ws, 70).await);
+    let moved = first_in(&frames, 0, "move");
+    let last = *frames.keys().last().unwrap();
+    let inputs = json!([{"time": moved as f64 / f64::from(FPS), "set": {"speed": 2.5}}]);
+    let poses = samples_of(&app, motion, last, FPS, inputs.clone()).await;
+    for (seq, frame) in &frames {
+        assert_same_tick(*seq, frame, &poses[*seq as usize]);
+        assert_eq!(frame["pose"]["ik"], poses[*seq as usize]["ik"], "tick {seq}'s IK reports");
+    }
+    let plain = samples(&app, &graph, last, FPS, inputs).await;
+    let joints = |pose: &Value| pose["joints"].as_array().unwrap().clone();
+    let (sprung, unsprung) = (joints(&poses[last as usize]), joints(&plain[last as usize]));
+    let named = |j: &Value, part: &str| j["name"].as_str().unwrap().contains(part);
+    let differ = |part: &str| sprung.iter().zip(&unsprung).any(|(a, b)| named(a, part) && a != b);
+    assert!(differ("Tail"), "the tail swings");
+    assert!(differ("Head"), "the head aims");
+    let untouched = sprung.iter().zip(&unsprung).filter(|(a, _)| named(a, "Spine") || named(a, "Right"));
+    assert!(untouched.clone().count() > 0 && untouched.into_iter().all(|(a, b)| a == b), "the rest is the graph's");
+    assert_eq!(poses[0]["ik"].as_array().map(Vec::len), Some(2), "each pose reports the two constraints");
+}
+
+#[tokio::test]
+async fn a_graph_pose_warms_its_springs_up_as_a_samples_request_from_its_tick() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let motion = with_tail_and_ik(&graph);
+    let inputs = json!([{"time": 0.5, "set": {"speed": 3}}]);
+    let body = json!({"motion": motion, "time": 2.5, "fps": FPS, "inputs": inputs});
+    let pose = app.post_json("/v1/poses", &body).await;
+    let body = json!({"motion": motion, "start": 2.5, "end": 3, "fps": FPS, "inputs": inputs});
+    let sampled = app.post_json("/v1/samples", &body).await;
+    assert_eq!(pose["joints"], sampled["poses"][0]["joints"], "both run from rest at 1.5 s: {pose}");
+    let from_zero = samples_of(&app, motion, 150, FPS, inputs).await;
+    assert_ne!(pose["joints"], from_zero[150]["joints"], "a run from 0 differs: the chains were not at rest at 1.5 s");
 }
 
 #[tokio::test]
@@ -191,6 +259,16 @@ async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
             "/motion/layers/0/graph",
         ),
         (json!({"motion": over("0193e0c0-0000-7000-8000-000000000000")}), "graph_not_found", "/motion/layers/0/graph"),
+        (
+            json!({"motion": {"layers": [{"graph": graph}], "root_motion": {}}}),
+            "graph_unsupported",
+            "/motion/root_motion",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph}], "springs": [{"name": "t", "joints": ["nope", "b_Tail01_012"]}]}}),
+            "unknown_joint",
+            "/motion/springs/0/joints/0",
+        ),
         (json!({"motion": {"layers": [{"clip": clip}]}}), "graph_unsupported", "/report"),
     ];
     for (fields, code, pointer) in refusals {
@@ -208,7 +286,6 @@ async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
         (json!({"op": "seek", "time": 1}), "graph_unsupported", None),
         (json!({"op": "speed", "speed": 2}), "graph_unsupported", None),
         (json!({"op": "layer", "index": 0, "weight": 0.5}), "graph_unsupported", None),
-        (json!({"op": "reset_springs"}), "graph_unsupported", None),
         (json!({"op": "crossfade", "to": {"layers": [{"clip": clip}]}, "duration": 0.2}), "graph_unsupported", None),
         (json!({"op": "set", "parameters": {"sped": 1}}), "unknown_parameter", Some("/parameters/sped")),
         (json!({"op": "set", "parameters": {"speed": true}}), "parameter_type", Some("/parameters/speed")),
@@ -295,6 +372,31 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
         let status = app.grpc().await.stream_frames(refused.clone()).await.unwrap_err();
         assert_eq!(status.code(), tonic::Code::InvalidArgument, "{refused:?}: {status:?}");
         assert_eq!(status.metadata().get("x-error-code").unwrap(), code, "{refused:?}");
+    }
+
+    // A motion's springs on the graph: the frames of `StreamFrames` are what REST samples answer.
+    let joints = ["b_Tail01_012", "b_Tail02_013", "b_Tail03_014"];
+    let gravity = Some(pb::Vec3 { x: 0.0, y: -9.81, z: 0.0 });
+    let spring =
+        pb::Spring { name: "tail".into(), joints: joints.map(Into::into).to_vec(), gravity, ..Default::default() };
+    let sprung = pb::Motion { springs: vec![spring], ..motion.clone() };
+    let sprung_request = pb::StreamRequest { motion: Some(sprung), max_frames: 30, report: false, ..request.clone() };
+    let mut frames = app.grpc().await.stream_frames(sprung_request).await.unwrap().into_inner();
+    let json_motion = json!({"layers": [{"graph": graph}], "springs": [{"name": "tail", "joints": joints, "gravity": [0, -9.81, 0]}]});
+    // Frame `seq` is tick `seq`, a tick the server woke late for evaluated all the same.
+    let poses = samples_of(&app, json_motion, 120, FPS, json!([])).await;
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let k = frame.seq as usize;
+        let Some(pose) = poses.get(k) else { break };
+        let rotations: Vec<f32> = pose["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|j| {
+                j["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect::<Vec<_>>()
+            })
+            .collect();
+        assert_eq!(frame.pose.unwrap().rotations, rotations, "tick {k}'s rotations");
     }
 
     let plain = pb::StreamRequest { report: false, ..request.clone() };

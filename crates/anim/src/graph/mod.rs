@@ -12,11 +12,12 @@
 //!
 //! Module map: `spec` the authoring types (indices, not names); `error` why
 //! a graph is refused; `blend` the blend spaces; `player` the evaluator and
-//! its state; `ticks` the tick grid and timed inputs of a sampling request.
+//! its state; `post` the motion's IK and springs on its pose; `ticks` the tick grid and timed inputs of a sampling request.
 
 mod blend;
 mod error;
 mod player;
+mod post;
 mod spec;
 mod ticks;
 
@@ -24,6 +25,7 @@ use std::sync::Arc;
 
 pub use error::{Degeneracy, GraphError, GraphErrorKind};
 pub use player::{FadeProgress, GraphPlayer, GraphReport, GraphState, SetError, SlotState, TransitionReport};
+pub use post::{GraphPost, PostRun};
 pub use spec::{
     Blend1dSpec, Blend2dSpec, ClipNodeSpec, Comparison, Condition, EntrySource, EntrySpec, GraphSpec, MachineSpec,
     NodeKind, NodeSpec, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec, Value,

@@ -113,6 +113,23 @@ impl<C: ClipSource> GraphPlayer<C> {
     /// # Errors
     /// As [`GraphPlayer::play`].
     pub fn play_to(&mut self, k: u64, range: &TickRange, inputs: &Inputs, next: &mut usize) -> Result<(), SetError> {
+        self.play_through(k, (range, range.first), inputs, next, |_, _| {})
+    }
+
+    /// [`GraphPlayer::play_to`] evaluating the ticks from `evaluated` on
+    /// (a motion's springs warm up before the first answered tick), and
+    /// calling `each` with every tick evaluated.
+    ///
+    /// # Errors
+    /// As [`GraphPlayer::play`].
+    pub fn play_through(
+        &mut self,
+        k: u64,
+        (range, evaluated): (&TickRange, u64),
+        inputs: &Inputs,
+        next: &mut usize,
+        mut each: impl FnMut(u64, &Self),
+    ) -> Result<(), SetError> {
         let dt = 1.0 / range.fps;
         while self.ticks() <= k {
             let tick = self.ticks();
@@ -120,7 +137,12 @@ impl<C: ClipSource> GraphPlayer<C> {
                 self.set(parameter, value)?;
                 *next += 1;
             }
-            if tick < range.first { self.step(dt) } else { self.tick(dt) }
+            if tick < evaluated {
+                self.step(dt);
+            } else {
+                self.tick(dt);
+                each(tick, self);
+            }
         }
         Ok(())
     }

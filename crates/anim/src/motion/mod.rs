@@ -249,11 +249,7 @@ impl<C: ClipSource> Motion<C> {
             None => root_setup(spec.root_motion.as_ref(), layers[0].clip.clip())?,
         };
         let output = character.as_ref().map_or(layers[0].clip.clip().skeleton(), |c| &c.skeleton);
-        let ik = build_constraints(&spec.ik, output, ik_limits).map_err(|e| {
-            let e = e.under(Path::root().field("ik"));
-            MotionError::new(e.path, K::Ik(e.kind))
-        })?;
-        let springs = build_springs(&spec.springs, output)?;
+        let (ik, springs) = post_stages(&spec.ik, &spec.springs, output, ik_limits)?;
         if let Some(setup) = root {
             let name = output.names()[setup.joint].clone();
             for layer in &mut layers {
@@ -393,6 +389,26 @@ impl<C: ClipSource> Motion<C> {
             *phase += group.rate(&self.durations, weights) * dtau;
         }
     }
+}
+
+/// The stages that run on a layered pose (docs/motion.md): the IK
+/// constraints and the spring chains, checked against the output skeleton
+/// (paths `ik/0/joints/1`, `springs/0/joints/2`). A motion's and a graph's
+/// alike (docs/graphs.md, “What composes with a graph”).
+///
+/// # Errors
+/// The first rule of docs/ik.md or docs/springs.md broken.
+pub(crate) fn post_stages(
+    ik: &[crate::ik::IkSpec],
+    springs: &SpringsSpec,
+    output: &Skeleton,
+    ik_limits: &IkLimits,
+) -> Result<(Vec<IkConstraint>, Option<Springs>), MotionError> {
+    let ik = build_constraints(ik, output, ik_limits).map_err(|e| {
+        let e = e.under(Path::root().field("ik"));
+        MotionError::new(e.path, K::Ik(e.kind))
+    })?;
+    Ok((ik, build_springs(springs, output)?))
 }
 
 /// The chains of `spec` on the output skeleton; `None` without chains.

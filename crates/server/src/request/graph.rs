@@ -9,7 +9,7 @@
 
 use std::sync::Arc;
 
-use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, json_str};
+use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, ik_reports, json_str};
 use super::raw::{Field, Format, Locate, Raw, RawModes, joint_subset, unprocessable};
 use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
@@ -19,8 +19,9 @@ use crate::state::AppState;
 use crate::stream::MAX_FPS;
 use crate::stream::PinnedClip;
 use crate::work::price;
+use anim::Pose;
 use anim::Space;
-use anim::graph::{GraphPlayer, Inputs, TickRange};
+use anim::graph::{GraphPlayer, GraphPost, Inputs, PostRun, TickRange};
 use formats::wire::graph_inputs::InputDoc;
 use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
 
@@ -34,12 +35,31 @@ fn unsupported(pointer: &str, detail: &str) -> ApiError {
     ApiError::invalid("graph_unsupported", pointer, detail)
 }
 
-/// The graph `doc` names, when a layer names one: its reference, once the
-/// layer is checked to be the motion's only one, with every default.
+/// A motion's graph layer: the graph's reference, and the stages the
+/// motion runs on the graph's pose (docs/graphs.md, “What composes with a
+/// graph”).
+#[derive(Debug, Clone)]
+pub struct GraphLayer<'a> {
+    pub reference: &'a str,
+    pub stages: GraphStages,
+}
+
+/// A motion's IK constraints and spring chains, checked against the graph's
+/// skeleton once it is resolved.
+#[derive(Debug, Clone, Default)]
+pub struct GraphStages {
+    ik: Vec<anim::ik::IkSpec>,
+    springs: anim::spring::SpringsSpec,
+}
+
+/// The graph `doc` names, when a layer names one: its reference and the
+/// motion's stages, once the layer is checked to be the motion's only one,
+/// with every default.
 ///
 /// # Errors
-/// `graph_unsupported` at the field that is not supported with a graph yet.
-pub fn graph_layer(doc: &MotionDoc) -> Result<Option<&str>, ApiError> {
+/// `graph_unsupported` at the field that is not supported with a graph yet;
+/// the `ik` and `springs` documents' own refusals.
+pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> {
     let Some(i) = doc.layers.iter().position(|l| l.graph.is_some()) else { return Ok(None) };
     if doc.layers.len() != 1 {
         return Err(unsupported(&format!("/motion/layers/{i}/graph"), "a graph is a motion's only layer"));
@@ -50,18 +70,41 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<&str>, ApiError> {
         return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
     }
     let motion_fields = [
-        ("root_motion", doc.root_motion.is_some()),
-        ("ik", !doc.ik.is_empty()),
-        ("springs", !doc.springs.is_empty()),
-        ("spring_substep_hz", doc.spring_substep_hz.is_some()),
-        ("character", doc.character.is_some()),
-        ("retarget", doc.retarget.is_some()),
+        ("root_motion", doc.root_motion.is_some(), "root motion"),
+        ("character", doc.character.is_some(), "a character"),
+        ("retarget", doc.retarget.is_some(), "retargeting"),
     ];
-    if let Some((field, _)) = motion_fields.iter().find(|(_, set)| *set) {
-        let detail = format!("a motion over a graph takes no `{field}` yet");
+    if let Some((field, _, what)) = motion_fields.iter().find(|(_, set, _)| *set) {
+        let detail = format!(
+            "a motion over a graph takes no `{field}` yet: {what} needs the graph's nodes built for it; \
+             `ik` and `springs` run on a graph's pose"
+        );
         return Err(unsupported(&format!("/motion/{field}"), &detail));
     }
-    Ok(layer.graph.as_deref())
+    let ik = (doc.ik.iter().enumerate())
+        .map(|(i, c)| c.to_spec(&format!("/motion/ik/{i}")))
+        .collect::<Result<_, _>>()
+        .map_err(ApiError::from)?;
+    let springs = doc.springs("/motion").map_err(ApiError::from)?;
+    let Some(reference) = layer.graph.as_deref() else { return Ok(None) };
+    Ok(Some(GraphLayer { reference, stages: GraphStages { ik, springs } }))
+}
+
+impl GraphStages {
+    /// The stages built on `graph`'s skeleton, as a motion's are on its
+    /// output skeleton, refusals pointed into `/motion`.
+    ///
+    /// # Errors
+    /// As a motion's `ik` and `springs`.
+    pub fn build(
+        &self,
+        graph: &anim::graph::Graph<Arc<dyn PinnedClip>>,
+        state: &AppState,
+    ) -> Result<GraphPost, ApiError> {
+        GraphPost::build(&self.ik, &self.springs, graph.skeleton(), &state.config.limits.ik()).map_err(|e| {
+            ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string())
+        })
+    }
 }
 
 /// A graph's fields in a request whose motion names no graph: refused
@@ -102,6 +145,7 @@ fn layer_field_set(layer: &LayerDoc) -> Option<&'static str> {
 #[derive(Debug, Clone, Copy)]
 pub struct RawGraphSampling<'a> {
     pub reference: &'a str,
+    pub stages: &'a GraphStages,
     pub inputs: &'a [InputDoc],
     /// One pose's time (`POST /v1/poses`, `SampleMotion`): the last tick at
     /// or before it is answered, and `times`, `start` and `end` are absent.
@@ -124,6 +168,8 @@ pub struct RawGraphSampling<'a> {
 /// A checked, priced graph sampling request.
 pub struct GraphSampling {
     pub built: Arc<BuiltGraph>,
+    /// The motion's IK and springs on the graph's pose.
+    pub post: Arc<GraphPost>,
     pub range: TickRange,
     pub inputs: Inputs,
     pub format: Format,
@@ -159,9 +205,10 @@ impl RawGraphSampling<'_> {
             return Err(unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(skeleton, names, self.at)).transpose()?;
-        let cost = cost(&built, &range, (format, self.wire), self.report);
+        let post = Arc::new(self.stages.build(&built.graph, state)?);
+        let cost = cost(&built, &post, &range, (format, self.wire), self.report);
         let report = self.report;
-        Ok(GraphSampling { built, range, inputs, format, space, joints, report, cost })
+        Ok(GraphSampling { built, post, range, inputs, format, space, joints, report, cost })
     }
 
     fn range(&self, max_poses: usize) -> Result<TickRange, ApiError> {
@@ -222,37 +269,65 @@ impl RawGraphSampling<'_> {
 /// Plays a graph sampling's ticks in order, for any transport: the player
 /// is made at the first answered tick (on the work pool) and goes on from
 /// tick to tick, so an answer, however it is cut into pieces, holds the
-/// poses [`GraphPlayer::play`] gives.
+/// poses [`GraphPlayer::play`] gives. The motion's IK and springs run on
+/// every tick evaluated: the answered ones, and with springs the ticks of
+/// their warm-up before the first (docs/springs.md, “Time”).
 #[derive(Default)]
 pub struct GraphTicks {
     player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
+    post: Option<PostRun>,
     next_input: usize,
 }
 
 impl GraphTicks {
-    /// The player at answered tick `i` (tick `range.first + i`) and that
-    /// tick's motion time; `i` only grows from call to call.
-    pub fn play(&mut self, s: &GraphSampling, i: usize) -> (&GraphPlayer<Arc<dyn PinnedClip>>, f64) {
+    /// Answered tick `i` (tick `range.first + i`); `i` only grows from
+    /// call to call.
+    pub fn play(&mut self, s: &GraphSampling, i: usize) -> GraphTick<'_> {
         let k = s.range.first + i as u64;
         let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
+        let run = self.post.get_or_insert_with(|| PostRun::new(&s.post));
+        let skeleton = s.built.graph.skeleton();
+        let evaluated = (&s.range, s.post.first_run(&s.range));
+        let each = |tick, p: &GraphPlayer<_>| {
+            if !s.post.is_empty() {
+                run.run(&s.post, skeleton, p.pose(), s.range.time(tick));
+            }
+        };
         // The inputs were checked against this graph, so no setting fails.
-        let _ = player.play_to(k, &s.range, &s.inputs, &mut self.next_input);
-        (player, s.range.time(k))
+        let _ = player.play_through(k, evaluated, &s.inputs, &mut self.next_input, each);
+        let pose = if s.post.is_empty() { player.pose() } else { run.pose() };
+        GraphTick { player, pose, ik: run.ik_reports(), time: s.range.time(k) }
     }
+}
+
+/// One answered tick of a graph sampling.
+pub struct GraphTick<'a> {
+    /// The player after the tick (its report).
+    pub player: &'a GraphPlayer<Arc<dyn PinnedClip>>,
+    /// The tick's local pose after the motion's IK and springs.
+    pub pose: &'a Pose,
+    /// The motion's IK reports, one per constraint.
+    pub ik: &'a [anim::ik::IkReport],
+    /// Its motion time `k/fps`.
+    pub time: f64,
 }
 
 /// Every tick played (from 0, answered or not) at the graph's costliest
 /// tick, and an answer as long as the largest of its clips' poses, with
 /// the reports when asked for.
-fn cost(built: &BuiltGraph, range: &TickRange, (format, wire): (Format, Wire), report: bool) -> Cost {
+fn cost(built: &BuiltGraph, post: &GraphPost, range: &TickRange, (format, wire): (Format, Wire), report: bool) -> Cost {
     let graph = &built.graph;
     let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, wire);
     let per_pose = built.clips.iter().map(|c| pose_bytes(c).per_pose).max().unwrap_or(0)
         + json_str(&built.meta.id)
+        + ik_reports(post.ik().len() as u64, wire)
         + if report { report_bytes(built) } else { 0 };
     let bytes = 12 + per_pose.saturating_mul(range.answered());
     let ticks = range.last.saturating_add(1);
-    Cost::new(ticks, graph.skeleton().len() as u64, price::graph_tick(graph), bytes)
+    let stages =
+        (range.last - post.first_run(range) + 1).saturating_mul(price::graph_post(post, graph.skeleton(), range.fps));
+    let per_tick = price::graph_tick(graph).saturating_add(stages.div_ceil(ticks));
+    Cost::new(ticks, graph.skeleton().len() as u64, per_tick, bytes)
 }
 
 /// The longest `,"graph":{…}` a tick's report can write.

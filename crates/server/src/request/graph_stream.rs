@@ -10,8 +10,8 @@
 
 use std::sync::Arc;
 
-use super::cost::{Estimate, F64_TEXT, check_stream, check_stream_work, json_str, stream_work};
-use super::graph::{GRAPH_AT, report_bytes};
+use super::cost::{Estimate, F64_TEXT, check_stream, check_stream_work, ik_reports, json_str, stream_work};
+use super::graph::{GRAPH_AT, GraphStages, report_bytes};
 use super::raw::{Field, unprocessable};
 use super::stream::{Admitted, Opening, RawStream};
 use crate::auth::{Caller, CallerKey};
@@ -25,6 +25,8 @@ use crate::work::price;
 pub struct RawGraphStream<'a> {
     /// The graph's id, or `name:<name>`.
     pub reference: &'a str,
+    /// The motion's IK and springs, run on the graph's pose.
+    pub stages: &'a GraphStages,
     /// Each frame carries the tick's report.
     pub report: bool,
 }
@@ -91,10 +93,14 @@ impl RawStream<'_> {
         let pose = built.clips.iter().map(|c| Estimate::frame(&c.clip, id, wire)).max().unwrap_or(0);
         // The report's JSON bound also bounds its protobuf (floats of 4 bytes, not text).
         let report = if graph.report { report_bytes(&built) } else { 0 };
-        let frame = pose.saturating_add(report).saturating_add(2 * F64_TEXT + json_str(id));
-        let per_frame = price::graph_tick(&built.graph);
+        let post = Arc::new(graph.stages.build(&built.graph, state)?);
+        let ik = ik_reports(post.ik().len() as u64, wire);
+        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(2 * F64_TEXT + json_str(id));
+        let stages = price::graph_post(&post, built.graph.skeleton(), f64::from(request.fps));
+        let per_frame = price::graph_tick(&built.graph).saturating_add(stages);
         let program = GraphProgram {
             graph: Arc::new(built.graph.clone()),
+            post,
             id: id.into(),
             version: built.meta.version,
             report: graph.report,

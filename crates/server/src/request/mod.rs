@@ -49,7 +49,7 @@ pub use broadcast::RawBroadcast;
 #[cfg(test)]
 pub use cost::Estimate;
 pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
-pub use graph::{GraphSampling, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
+pub use graph::{GraphLayer, GraphSampling, GraphStages, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
 pub use graph_stream::RawGraphStream;
 pub use list::{Page, RawPage};
 pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, no_ease_on_character, on_character, warnings};

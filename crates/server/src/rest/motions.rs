@@ -19,8 +19,8 @@ use crate::auth::{CallerKey, ReadAccess};
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Composed, Field, Format, GraphSampling, GraphTicks, Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose,
-    Wire, graph_layer, in_body, in_pose_body, no_graph_fields, parse_json,
+    Composed, Field, Format, GraphLayer, GraphSampling, GraphTicks, Raw, RawBatch, RawGraphSampling, RawModes,
+    RawMotion, RawPose, Wire, graph_layer, in_body, in_pose_body, no_graph_fields, parse_json,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -146,8 +146,8 @@ pub(super) async fn answer_pose(
     headers: &HeaderMap,
     req: PoseOfMotion,
 ) -> Result<Response, ApiError> {
-    if let Some(reference) = graph_layer(&req.motion)? {
-        return graph_pose(state, caller, headers, &req, reference).await;
+    if let Some(layer) = graph_layer(&req.motion)? {
+        return graph_pose(state, caller, headers, &req, &layer).await;
     }
     no_graph_fields(req.report, req.inputs.is_some(), req.fps.is_some())?;
     let modes = RawModes { space: text(&req.space), ..RawModes::default() };
@@ -202,8 +202,8 @@ pub(super) async fn answer_samples(
     headers: &HeaderMap,
     req: SamplesOfMotion,
 ) -> Result<Response, ApiError> {
-    if let Some(reference) = graph_layer(&req.motion)? {
-        return graph_samples(state, caller, headers, &req, reference).await;
+    if let Some(layer) = graph_layer(&req.motion)? {
+        return graph_samples(state, caller, headers, &req, &layer).await;
     }
     no_graph_fields(req.report, req.inputs.is_some(), false)?;
     let raw = RawBatch {
@@ -240,10 +240,11 @@ async fn graph_samples(
     caller: CallerKey,
     headers: &HeaderMap,
     req: &SamplesOfMotion,
-    reference: &str,
+    layer: &GraphLayer<'_>,
 ) -> Result<Response, ApiError> {
     let raw = RawGraphSampling {
-        reference,
+        reference: layer.reference,
+        stages: &layer.stages,
         inputs: req.inputs.as_deref().unwrap_or_default(),
         time: None,
         times: req.times.as_deref(),
@@ -281,10 +282,11 @@ async fn graph_pose(
     caller: CallerKey,
     headers: &HeaderMap,
     req: &PoseOfMotion,
-    reference: &str,
+    layer: &GraphLayer<'_>,
 ) -> Result<Response, ApiError> {
     let raw = RawGraphSampling {
-        reference,
+        reference: layer.reference,
+        stages: &layer.stages,
         inputs: req.inputs.as_deref().unwrap_or_default(),
         time: Some(req.time),
         times: None,
@@ -335,31 +337,32 @@ impl GraphPoses {
     /// Appends answered pose `i` (tick `range.first + i`).
     fn write_one(&mut self, out: &mut Vec<u8>, i: usize) {
         let s = &self.sampling;
-        let (player, time) = self.ticks.play(s, i);
+        let tick = self.ticks.play(s, i);
+        let time = tick.time;
         self.report.clear();
         if s.report {
-            write_report(&mut self.report, &player.report());
+            write_report(&mut self.report, &tick.player.report());
         }
         let joints = s.joints.as_deref();
-        let extras = Extras { joints, root_motion: None, ik: &[], parameters: None, tail: &self.report, feet: &[] };
+        let extras = Extras { joints, root_motion: None, ik: tick.ik, parameters: None, tail: &self.report, feet: &[] };
         let (clip, skeleton) = (s.built.meta.id.as_str(), s.built.graph.skeleton());
         let clip_time = time as f32;
         match s.format {
             Format::Trs => {
                 let pose = if s.space == Space::Model {
-                    skeleton.to_model(player.pose(), &mut self.model);
+                    skeleton.to_model(tick.pose, &mut self.model);
                     &self.model
                 } else {
-                    player.pose()
+                    tick.pose
                 };
                 PoseJson { clip, time, clip_time, space: s.space, skeleton, pose }.write_with(out, extras);
             }
             Format::Matrix | Format::Skinning => {
                 let skinning = s.format == Format::Skinning;
                 if skinning {
-                    skeleton.skinning_matrices(player.pose(), &mut self.matrices);
+                    skeleton.skinning_matrices(tick.pose, &mut self.matrices);
                 } else {
-                    skeleton.model_matrices(player.pose(), &mut self.matrices);
+                    skeleton.model_matrices(tick.pose, &mut self.matrices);
                 }
                 let format = if skinning { "skinning" } else { "matrix" };
                 let doc = MatricesJson { clip, time, clip_time, format, skeleton, matrices: &self.matrices };

@@ -323,7 +323,10 @@ async fn open(
         at: in_body,
     };
     let admitted = match graph_layer(&msg.motion)? {
-        Some(reference) => raw.open_graph(state, RawGraphStream { reference, report: msg.report }, caller).await?,
+        Some(layer) => {
+            let graph = RawGraphStream { reference: layer.reference, stages: &layer.stages, report: msg.report };
+            raw.open_graph(state, graph, caller).await?
+        }
         None if msg.report => {
             let detail = "`report` is a graph stream's: the motion's layer names no `graph`";
             return Err(ApiError::invalid("graph_unsupported", "/report", detail));

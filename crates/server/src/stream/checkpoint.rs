@@ -78,6 +78,9 @@ pub struct Checkpoint {
     /// A graph broadcast's graph player.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     graph: Option<GraphBits>,
+    /// The springs of a graph broadcast's motion, when it has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    graph_springs: Option<SpringBits>,
 }
 
 /// What a [`Checkpoint`] restores.
@@ -250,7 +253,8 @@ impl Checkpoint {
             prev: prev.map(f64::to_bits),
             clip_time: clip_time.to_bits(),
             player: player_bits(playing.player.state(), naming, true),
-            graph: playing.graph.map(|g| graph_bits(g.state())),
+            graph: playing.graph.map(|g| graph_bits(g.state().0)),
+            graph_springs: playing.graph.and_then(|g| g.state().1).map(|s| spring_bits((s, None))),
         }
     }
 
@@ -269,8 +273,13 @@ impl Checkpoint {
         let graph = match (&params.graph, &self.graph) {
             (None, None) => None,
             (Some(program), Some(bits)) => Some(
-                GraphDeck::from_state(program, params.space, graph_state(bits))
-                    .map_err(|e| CheckpointError::Mismatch(e.to_string()))?,
+                GraphDeck::from_state(
+                    program,
+                    params.space,
+                    (graph_state(bits), self.graph_springs.as_ref().map(|b| spring_state(b).0)),
+                    super::hub::stream_clock(params, self.tick),
+                )
+                .map_err(|e| CheckpointError::Mismatch(e.to_string()))?,
             ),
             _ => return Err(CheckpointError::Mismatch("a graph's state for a motion, or none for a graph".into())),
         };

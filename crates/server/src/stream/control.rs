@@ -156,9 +156,13 @@ impl Control {
             Control::Speed(_) => Some("a graph stream plays one graph tick per tick: it has no `speed`"),
             Control::Crossfade(_) => Some("a graph's transitions are its own crossfades: send `set` controls"),
             Control::Layer { .. } => Some("a graph's blend weights come from its parameters: send `set` controls"),
-            Control::Ik(_) | Control::SetIk(_) => Some("a graph stream takes no `ik` yet"),
-            Control::ResetSprings => Some("a graph stream has no spring chains"),
-            Control::Play | Control::Pause | Control::Stop | Control::Set(_) | Control::SetGraph(_) => None,
+            Control::Ik(_) | Control::SetIk(_) => Some("a graph stream's IK is its motion's `ik`, fixed when it opens"),
+            Control::Play
+            | Control::Pause
+            | Control::Stop
+            | Control::ResetSprings
+            | Control::Set(_)
+            | Control::SetGraph(_) => None,
         }
     }
 
@@ -210,7 +214,10 @@ impl Control {
                 player.ramp(index, weight, duration).map_err(|error| Refused { what: "weight ramp", error })?;
             }
             Control::SetIk(constraints) => player.set_ik(constraints),
-            Control::ResetSprings => player.reset_springs(),
+            Control::ResetSprings => match graph {
+                Some(graph) => graph.reset_springs(),
+                None => player.reset_springs(),
+            },
             Control::SetGraph(values) => match graph {
                 Some(graph) => graph.set(&values),
                 None => tracing::error!("graph settings reached a playback without a graph"),

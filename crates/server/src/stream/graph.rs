@@ -7,24 +7,32 @@
 //! steps the ticks before its `start`. A pause holds the pose and the
 //! graph's time (the first tick is always played: it shows node time 0).
 //!
-//! The player's state is plain values (`anim::graph::GraphState`), which a
-//! broadcast checkpoint keeps exactly (`checkpoint`).
+//! The motion's IK and springs run on each tick's pose (docs/graphs.md,
+//! “What composes with a graph”), the springs in stream time.
+//!
+//! The player's state is plain values (`anim::graph::GraphState`), and so is
+//! the springs' (`anim::spring::SpringState`), which a broadcast checkpoint
+//! keeps exactly (`checkpoint`).
 
 use std::sync::Arc;
 
 use super::pinned::PinnedClip;
-use anim::graph::{Graph, GraphPlayer, GraphReport, GraphState, SetError, Value};
+use anim::graph::{Graph, GraphPlayer, GraphPost, GraphReport, GraphState, PostRun, SetError, Value};
+use anim::ik::IkReport;
+use anim::spring::SpringState;
 use anim::{Pose, Space};
 
 /// A graph over clips pinned at their versions.
 pub type StreamGraph = Graph<Arc<dyn PinnedClip>>;
 
 /// What a graph stream plays: the graph at the version it opened on (it
-/// keeps it, replaced or not, as a clip stream keeps its clip), and whether
-/// each frame carries the tick's report.
+/// keeps it, replaced or not, as a clip stream keeps its clip), the
+/// motion's IK and springs on its pose, and whether each frame carries the
+/// tick's report.
 #[derive(Debug, Clone)]
 pub struct GraphProgram {
     pub graph: Arc<StreamGraph>,
+    pub post: Arc<GraphPost>,
     /// The stored graph's id (frames name it as their clip) and version.
     pub id: Arc<str>,
     pub version: u64,
@@ -35,6 +43,10 @@ pub struct GraphProgram {
 #[derive(Debug, Clone)]
 pub(crate) struct GraphDeck {
     player: GraphPlayer<Arc<dyn PinnedClip>>,
+    post: Arc<GraphPost>,
+    /// The motion's IK and springs on the player's pose, run in stream
+    /// time (docs/springs.md, “Time”).
+    run: PostRun,
     report: bool,
     space: Space,
     /// The pose in model space, when frames are.
@@ -42,40 +54,86 @@ pub(crate) struct GraphDeck {
 }
 
 impl GraphDeck {
-    /// Before its tick 0, every parameter at its default.
+    /// Before its tick 0, every parameter at its default, the springs at rest.
     pub(super) fn new(program: &GraphProgram, space: Space) -> Self {
         let player = GraphPlayer::new(Arc::clone(&program.graph));
-        GraphDeck { player, report: program.report, space, model: Pose::default() }
+        let (post, run) = (Arc::clone(&program.post), PostRun::new(&program.post));
+        GraphDeck { player, post, run, report: program.report, space, model: Pose::default() }
     }
 
-    /// The deck a checkpoint's `state` describes (its next tick evaluates
-    /// the pose).
+    /// The deck a checkpoint's `state` and `springs` describe, showing the
+    /// tick it was taken after, at stream time `clock`.
     ///
     /// # Errors
-    /// A state that does not fit the graph.
-    pub(super) fn from_state(program: &GraphProgram, space: Space, state: GraphState) -> Result<Self, SetError> {
+    /// A state that does not fit the graph, or springs that do not fit the motion's.
+    pub(super) fn from_state(
+        program: &GraphProgram,
+        space: Space,
+        (state, springs): (GraphState, Option<SpringState>),
+        clock: f64,
+    ) -> Result<Self, SetError> {
         let player = GraphPlayer::from_state(Arc::clone(&program.graph), state)?;
-        Ok(GraphDeck { player, report: program.report, space, model: Pose::default() })
+        let run = PostRun::from_state(&program.post, springs)
+            .map_err(|_| SetError::State("a spring state that does not fit the motion's springs"))?;
+        let post = Arc::clone(&program.post);
+        let mut deck = GraphDeck { player, post, run, report: program.report, space, model: Pose::default() };
+        if deck.player.ticks() > 0 {
+            deck.run_post(clock);
+            deck.put_in_space();
+        }
+        Ok(deck)
     }
 
     /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
     /// shown (those are stepped without a pose, as are the ticks before a
-    /// first tick that came late), so that a stream never paused shows
-    /// graph tick `k` at tick `k`; nothing while `paused` but the first.
+    /// first tick that came late — but with springs they are evaluated, so
+    /// that the chains see every tick), so that a stream never paused shows
+    /// graph tick `k` at tick `k`; while `paused` only the springs go on
+    /// settling on the held pose (the first tick is always played).
     /// Returns the motion time shown, as a frame's `clip_time`.
     pub(super) fn tick(&mut self, fps: u32, paused: bool, (k, skipped): (u64, u64)) -> f32 {
         let dt = 1.0 / f64::from(fps);
+        let clock = |tick: u64| tick as f64 / f64::from(fps);
         let first = self.player.ticks() == 0;
         if !paused || first {
-            for _ in 0..if first { k } else { skipped } {
-                self.player.step(dt);
+            let n = if first { k } else { skipped };
+            for j in 0..n {
+                if self.post.springs().is_some() {
+                    self.player.tick(dt);
+                    self.run_post(clock(k - n + j));
+                } else {
+                    self.player.step(dt);
+                }
             }
             self.player.tick(dt);
-            if self.space == Space::Model {
-                self.player.graph().skeleton().to_model(self.player.pose(), &mut self.model);
-            }
+            self.run_post(clock(k));
+            self.put_in_space();
+        } else if self.post.springs().is_some() {
+            self.run.settle(&self.post, clock(k));
+            self.put_in_space();
         }
         self.time(fps) as f32
+    }
+
+    /// The motion's stages on the player's pose of the tick at `clock`.
+    fn run_post(&mut self, clock: f64) {
+        if !self.post.is_empty() {
+            self.run.run(&self.post, self.player.graph().skeleton(), self.player.pose(), clock);
+        }
+    }
+
+    /// The local pose in the stream's space.
+    fn put_in_space(&mut self) {
+        if self.space == Space::Model {
+            let local = if self.post.is_empty() { self.player.pose() } else { self.run.pose() };
+            self.player.graph().skeleton().to_model(local, &mut self.model);
+        }
+    }
+
+    /// The springs start again at rest at the next tick, whose frame shows
+    /// their joints' rest rotations (`reset_springs`).
+    pub(super) fn reset_springs(&mut self) {
+        self.run.restart_springs();
     }
 
     /// Sets parameters from the next tick on (each checked against the
@@ -95,7 +153,16 @@ impl GraphDeck {
 
     /// The last tick's pose, in the stream's space.
     pub(super) fn pose(&self) -> &Pose {
-        if self.space == Space::Model { &self.model } else { self.player.pose() }
+        match (self.space, self.post.is_empty()) {
+            (Space::Model, _) => &self.model,
+            (Space::Local, true) => self.player.pose(),
+            (Space::Local, false) => self.run.pose(),
+        }
+    }
+
+    /// The last tick's IK reports (the motion's constraints).
+    pub(super) fn ik_reports(&self) -> &[IkReport] {
+        self.run.ik_reports()
     }
 
     /// The last tick's report, when the stream asked for it.
@@ -103,8 +170,8 @@ impl GraphDeck {
         self.report.then(|| self.player.report())
     }
 
-    /// What a checkpoint keeps.
-    pub(super) fn state(&self) -> GraphState {
-        self.player.state()
+    /// What a checkpoint keeps: the graph player's state and the springs'.
+    pub(super) fn state(&self) -> (GraphState, Option<SpringState>) {
+        (self.player.state(), self.run.spring_state())
     }
 }

@@ -287,8 +287,8 @@ pub(super) struct Playing<'a> {
 
 /// The frame of the current pose, as `params` asks for it. A graph's
 /// frame names the graph as its clip, shows the graph's motion time, and
-/// carries its report when asked (no events, root motion or IK: a graph
-/// stream has none).
+/// carries its report when asked, and the motion's IK reports (no events
+/// or root motion: a graph stream has none).
 pub(super) fn frame_data<'a>(
     playing: Playing<'a>,
     params: &'a StreamParams,
@@ -313,7 +313,7 @@ pub(super) fn frame_data<'a>(
             joints: params.joints.as_deref(),
             parameters: None,
             root_motion: None,
-            ik: &[],
+            ik: graph.ik_reports(),
             feet: &[],
             events: &[],
             crossed: &[],

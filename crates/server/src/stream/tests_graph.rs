@@ -7,8 +7,10 @@
 
 use std::sync::Arc;
 
+use anim::graph::GraphPost;
 use anim::graph::Value;
-use anim::{Channel, Clip, ClipSpec, Interpolation, Keys, Playback, TrackSpec};
+use anim::spring::{ChainSpec, SpringsSpec};
+use anim::{Channel, Clip, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 use glam::Vec3;
 
 use super::control::ControlCheck;
@@ -24,13 +26,29 @@ fn line(duration: f32, to: Vec3) -> Arc<Clip> {
         vec![0.0, duration],
         Keys::Vec3(vec![Vec3::ZERO, to]),
     );
-    let spec = ClipSpec { name: "line".into(), tracks: vec![track], playback: Playback::Loop, ..Default::default() };
+    let joint = |name: &str, parent: Option<&str>, z: f32| JointSpec {
+        name: name.into(),
+        parent: parent.map(Into::into),
+        rest: Transform { translation: Vec3::new(0.0, 0.0, z), ..Transform::IDENTITY },
+        inverse_bind: None,
+    };
+    let joints =
+        vec![joint("root", None, 0.0), joint("tail0", Some("root"), -0.1), joint("tail1", Some("tail0"), -0.1)];
+    let joints = [joints, vec![joint("tip", Some("tail1"), -0.1)]].concat();
+    let spec = ClipSpec {
+        name: "line".into(),
+        skeleton: Some(SkeletonSpec { joints }),
+        tracks: vec![track],
+        playback: Playback::Loop,
+        ..Default::default()
+    };
     Arc::new(Clip::build(&spec).unwrap())
 }
 
 /// `s` blends two lines in one sync group; the trigger `go` fades to the
-/// third, and `s` under 0.5 fades back.
-fn graph_params() -> StreamParams {
+/// third, and `s` under 0.5 fades back; with `springs`, the motion's tail
+/// swings on it.
+fn graph_params(springs: bool) -> StreamParams {
     let doc = serde_json::json!({"name": "g",
         "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
         "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": "a", "at": 0}, {"clip": "b", "at": 1}]}},
@@ -43,7 +61,12 @@ fn graph_params() -> StreamParams {
     let doc = formats::wire::graph::parse_graph_doc(doc.to_string().as_bytes()).unwrap();
     let graph =
         doc.compile("", |id, _| Ok(pinned(id, Arc::clone(&clips.iter().find(|(n, _)| *n == id).unwrap().1)))).unwrap();
-    let program = GraphProgram { graph: Arc::new(graph), id: "g".into(), version: 1, report: true };
+    let mut chain = ChainSpec::new("tail", &["tail0", "tail1", "tip"]);
+    chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
+    let chains = if springs { vec![chain] } else { Vec::new() };
+    let spec = SpringsSpec { chains, ..SpringsSpec::default() };
+    let post = Arc::new(GraphPost::build(&[], &spec, graph.skeleton(), &Default::default()).unwrap());
+    let program = GraphProgram { graph: Arc::new(graph), post, id: "g".into(), version: 1, report: true };
     let req = StreamRequest { fps: 30, ..Default::default() };
     let motion = Arc::clone(program.graph.initial_motion());
     StreamParams::of_motion(motion, "g".into(), req).unwrap().with_graph(program)
@@ -75,20 +98,39 @@ fn report(bytes: &bytes::Bytes) -> serde_json::Value {
     serde_json::from_slice::<serde_json::Value>(bytes).unwrap()["graph"].clone()
 }
 
-#[test]
-fn a_graph_program_restored_from_any_checkpoint_makes_the_same_bytes() {
-    let params = graph_params();
-    let log = log(&params);
-    const EVERY: u64 = 8;
-    let mut reference = Program::new(&params).checkpointing(EVERY);
+/// Frames 0..80 of `params` under `log`, and a checkpoint every `EVERY` ticks.
+fn uninterrupted(params: &StreamParams, log: &ControlLog) -> (Vec<bytes::Bytes>, Vec<String>) {
+    let mut reference = Program::new(params).checkpointing(EVERY);
     let mut frames = Vec::new();
     let mut texts = Vec::new();
     for k in 0..80 {
-        frames.push(frame_at(&mut reference, k, &log));
+        frames.push(frame_at(&mut reference, k, log));
         if (k + 1) % EVERY == 0 {
             texts.push(reference.checkpoint().unwrap().to_text());
         }
     }
+    (frames, texts)
+}
+
+const EVERY: u64 = 8;
+
+/// Every checkpoint of `texts` restored steps on to `frames`' very bytes.
+fn assert_restores(params: &StreamParams, log: &ControlLog, frames: &[bytes::Bytes], texts: &[String]) {
+    for (i, text) in texts.iter().enumerate() {
+        let checkpoint = Checkpoint::from_text(text).unwrap();
+        let c = (i as u64 + 1) * EVERY - 1;
+        let mut restored = Program::from_checkpoint(params, &checkpoint, log).unwrap();
+        for k in c + 1..80 {
+            assert_eq!(frame_at(&mut restored, k, log), frames[k as usize], "tick {k} from the checkpoint of {c}");
+        }
+    }
+}
+
+#[test]
+fn a_graph_program_restored_from_any_checkpoint_makes_the_same_bytes() {
+    let params = graph_params(false);
+    let log = log(&params);
+    let (frames, texts) = uninterrupted(&params, &log);
     let weights = |k: usize| -> Vec<f64> {
         report(&frames[k])["weights"]["mix"].as_array().unwrap().iter().map(|w| w.as_f64().unwrap()).collect()
     };
@@ -102,19 +144,28 @@ fn a_graph_program_restored_from_any_checkpoint_makes_the_same_bytes() {
     assert_eq!(shown(21), shown(25), "paused frames repeat the pose and the report");
     assert_ne!(shown(26), shown(25), "play goes on");
     assert_eq!(report(&frames[40])["transition"]["to"], "mix", "s under 0.5 fades back");
-    for (i, text) in texts.iter().enumerate() {
-        let checkpoint = Checkpoint::from_text(text).unwrap();
-        let c = (i as u64 + 1) * EVERY - 1;
-        let mut restored = Program::from_checkpoint(&params, &checkpoint, &log).unwrap();
-        for k in c + 1..80 {
-            assert_eq!(frame_at(&mut restored, k, &log), frames[k as usize], "tick {k} from the checkpoint of {c}");
-        }
-    }
+    assert_restores(&params, &log, &frames, &texts);
+}
+
+#[test]
+fn springs_on_a_graph_swing_and_a_restored_program_makes_the_same_bytes() {
+    let (plain, sprung) = (graph_params(false), graph_params(true));
+    let log = log(&sprung);
+    let (frames, texts) = uninterrupted(&sprung, &log);
+    let (unsprung, _) = uninterrupted(&plain, &log);
+    let pose = |bytes: &bytes::Bytes| serde_json::from_slice::<serde_json::Value>(bytes).unwrap()["pose"].clone();
+    assert_eq!(pose(&frames[0]), pose(&unsprung[0]), "the chains start at rest: the first frame is the graph's");
+    let turned = (1..80).filter(|&k| pose(&frames[k]) != pose(&unsprung[k])).count();
+    assert!(turned >= 70, "the tail swings on {turned} of 79 ticks");
+    let (a, b) = (pose(&frames[22]), pose(&frames[24]));
+    assert_ne!(a, b, "paused, the graph's pose holds and the chains go on settling");
+    assert_eq!(a["joints"][0], b["joints"][0], "…the graph's own joints held");
+    assert_restores(&sprung, &log, &frames, &texts);
 }
 
 #[test]
 fn a_graph_streams_check_resolves_set_and_refuses_what_a_graph_does_not_take() {
-    let params = graph_params();
+    let params = graph_params(false);
     let mut check = ControlCheck::new(&params);
     let set = |doc: serde_json::Value| Control::Set(serde_json::from_value(doc).unwrap());
     let s = params.graph.as_ref().unwrap().graph.parameter_index("s").unwrap();
@@ -127,9 +178,10 @@ fn a_graph_streams_check_resolves_set_and_refuses_what_a_graph_does_not_take() {
         let e = check.check(set(doc)).unwrap_err();
         assert_eq!((e.code(), e.pointer().as_deref()), (code, Some(pointer)));
     }
-    for control in [Control::Seek(1.0), Control::Speed(2.0), Control::ResetSprings, Control::Ik(Vec::new())] {
+    for control in [Control::Seek(1.0), Control::Speed(2.0), Control::Ik(Vec::new())] {
         assert_eq!(check.check(control).unwrap_err().code(), "graph_unsupported");
     }
+    assert_eq!(check.check(Control::ResetSprings), Ok(Control::ResetSprings), "a motion's springs on a graph restart");
     assert_eq!(check.check(Control::Pause), Ok(Control::Pause));
     let plain = StreamParams::new(pinned("a", line(1.0, Vec3::X)), StreamRequest { fps: 30, ..Default::default() });
     let e = ControlCheck::new(&plain.unwrap()).check(set(serde_json::json!({"s": 0.5}))).unwrap_err();

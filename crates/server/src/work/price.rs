@@ -265,6 +265,17 @@ pub fn graph_tick<C: anim::motion::ClipSource>(graph: &anim::graph::Graph<C>) ->
     graph.tick_joint_samples().saturating_mul(JOINT)
 }
 
+/// The work a motion's IK and springs add to one tick of a graph played at
+/// `fps` (docs/graphs.md, “What composes with a graph”): its constraints
+/// solved once, and the spring substeps a tick runs at most, each on the
+/// tick's pose (a substep evaluates no pose of its own).
+pub fn graph_post(post: &anim::graph::GraphPost, skeleton: &Skeleton, fps: f64) -> u64 {
+    let solve = ik(post.ik(), skeleton);
+    let Some(springs) = post.springs() else { return solve };
+    let substeps = (springs.substep_hz() / fps.max(1.0)).ceil() as u64;
+    solve.saturating_add(substeps.saturating_mul(substep(0, springs.substep_work())))
+}
+
 /// The work of importing a file of `bytes` bytes (glTF, BVH): its reading
 /// and the builds of the clips in it, whose sizes the file only tells once
 /// read. Per byte of the file, less than a document's: an importer skips

@@ -118,6 +118,27 @@ fn analytic_ik_costs_its_ancestry_and_chains_their_budget() {
 }
 
 #[test]
+fn a_graphs_ik_and_springs_are_priced_as_a_motions() {
+    let clip = chain_clip(10, Vec::new());
+    let skeleton = clip.skeleton().clone();
+    let limits = anim::ik::IkLimits { max_iterations: 100_000, ..Default::default() };
+    let post = |ik: Vec<IkSpec>, springs: &anim::spring::SpringsSpec| {
+        anim::graph::GraphPost::build(&ik, springs, &skeleton, &limits).unwrap()
+    };
+    let none = anim::spring::SpringsSpec::default();
+    assert_eq!(price::graph_post(&post(Vec::new(), &none), &skeleton, 60.0), 0, "nothing to run");
+    let ik_units = price::motion_pose(&motion(clip.clone(), 1, vec![two_bone(10)])) - 10;
+    assert_eq!(price::graph_post(&post(vec![two_bone(10)], &none), &skeleton, 60.0), ik_units, "a motion's IK");
+    // A chain j5..j9 turns 4 joints, 10 units each per substep; 120 substeps a second.
+    let chain = anim::spring::ChainSpec::new("tail", &["j5", "j6", "j7", "j8", "j9"]);
+    let springs = anim::spring::SpringsSpec { chains: vec![chain], ..Default::default() };
+    let sprung = post(Vec::new(), &springs);
+    for (fps, substeps) in [(60.0, 2), (120.0, 1), (50.0, 3), (240.0, 1)] {
+        assert_eq!(price::graph_post(&sprung, &skeleton, fps), substeps * 4 * 10, "{fps} fps");
+    }
+}
+
+#[test]
 fn ik_keyed_in_a_clip_is_priced_like_a_requests() {
     let keyed = anim::KeyedIkSpec {
         constraint: chain(&[9], Vec3::X, 50),

@@ -4,6 +4,7 @@
 //! no chains change nothing, a restored state steps on bit for bit, a
 //! frame allocates nothing.
 
+mod graph;
 mod player;
 mod reference;
 

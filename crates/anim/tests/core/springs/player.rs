@@ -14,7 +14,7 @@ use glam::{Quat, Vec3};
 
 /// `body` swinging along x (0 → 0.3 → 0 over 1 s, looping) and turning;
 /// a tail of three 0.1 m bones behind it.
-fn swinging() -> Clip {
+pub(super) fn swinging() -> Clip {
     let joint = crate::rest_joint;
     let joints = vec![
         joint("body", None, [0.0, 1.0, 0.0]),
@@ -43,7 +43,7 @@ fn swinging() -> Clip {
 
 const TAIL: [usize; 3] = [1, 2, 3];
 
-fn motion(clip: &Clip, springs: bool) -> Arc<Motion<&Clip>> {
+pub(super) fn motion(clip: &Clip, springs: bool) -> Arc<Motion<&Clip>> {
     let mut chain = ChainSpec::new("tail", &["tail0", "tail1", "tail2", "tip"]);
     chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
     let chains = if springs { vec![chain] } else { Vec::new() };
@@ -60,18 +60,18 @@ fn options(space: Space) -> MotionOptions {
 }
 
 /// Model positions of every joint.
-fn model(clip: &Clip, local: &Pose) -> Vec<Vec3> {
+pub(super) fn model(clip: &Clip, local: &Pose) -> Vec<Vec3> {
     let mut out = Pose::default();
     clip.skeleton().to_model(local, &mut out);
     out.translations.iter().map(|t| Vec3::from(*t)).collect()
 }
 
-fn farthest(a: &[Vec3], b: &[Vec3]) -> f32 {
+pub(super) fn farthest(a: &[Vec3], b: &[Vec3]) -> f32 {
     a.iter().zip(b).map(|(p, q)| p.distance(*q)).fold(0.0, f32::max)
 }
 
 /// A stream of `motion` at `fps` from motion time `start`: each tick's local pose.
-fn stream(motion: &Arc<Motion<&Clip>>, fps: u32, start: f64, ticks: u32) -> Vec<Pose> {
+pub(super) fn stream(motion: &Arc<Motion<&Clip>>, fps: u32, start: f64, ticks: u32) -> Vec<Pose> {
     let mut player = Player::new(Arc::clone(motion));
     (0..=ticks)
         .map(|n| {
