@@ -127,7 +127,8 @@ async fn a_websocket_graph_stream_shows_what_samples_answer_for_the_same_setting
     let (mut ws, opened) = open(&app, json!({"op": "open", "motion": over(&graph), "fps": FPS, "report": true})).await;
     assert_eq!(opened["opened"]["clip"], graph.as_str(), "{opened}");
     let head = frames_until(&mut ws, 3).await;
-    assert_eq!(state(&head[&0]), "idle");
+    // Before any set the graph idles (a starved client may have missed tick 0 itself).
+    assert_eq!(state(head.values().next().unwrap()), "idle");
     send(&mut ws, json!({"op": "set", "parameters": {"speed": 2.5}})).await;
     let mut frames = frames_until(&mut ws, 40).await;
     let moved = first_in(&frames, 0, "move");
