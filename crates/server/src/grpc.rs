@@ -29,7 +29,7 @@ use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
 use crate::request::{
     Field, Format, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes, RawPage, RawPose,
-    RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
+    RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body, runs_springs,
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
@@ -276,6 +276,25 @@ impl Drop for Batches {
 }
 
 /// The modes of a request message, for the request layer.
+/// A clip's `SampleBatch` as the `SampleMotionBatch` of its one-layer
+/// motion (its spring chains running).
+fn clip_motion_batch(req: &pb::SampleBatchRequest) -> Result<pb::SampleMotionBatchRequest, ApiError> {
+    use pb::sample_batch_request::When;
+    use pb::sample_motion_batch_request::When as MotionWhen;
+    let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
+    let when = req.when.clone().map(|when| match when {
+        When::Times(times) => MotionWhen::Times(times),
+        When::Range(range) => MotionWhen::Range(range),
+    });
+    Ok(pb::SampleMotionBatchRequest {
+        motion: Some(motion),
+        when,
+        space: req.space,
+        format: req.format,
+        ..Default::default()
+    })
+}
+
 fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
     RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
 }
@@ -405,6 +424,12 @@ impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
         let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
         let req = request.into_inner();
+        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
+            let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
+            let (time, space, format) = (req.time, req.space, req.format);
+            let req = pb::SampleMotionRequest { motion: Some(motion), time, space, format, ..Default::default() };
+            return Ok(grpc_answer(super::grpc_motion::sample(&self.state, &caller, req, coding).await?));
+        }
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
             modes: modes(req.space, req.playback, req.ease),
@@ -434,6 +459,12 @@ impl Animation for GrpcService {
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
         let caller = self.read(&request)?;
+        let req = request.get_ref();
+        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
+            let batch = clip_motion_batch(req)?;
+            let coding = AnswerCoding::of_grpc(&request);
+            return Ok(grpc_answer(super::grpc_motion::sample_batch(&self.state, &caller, batch, coding).await?));
+        }
         let (sampling, cached) = self.sampling(&request).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
             let (bytes, limit) = (sampling.answer_bytes, MAX_UNARY_ANSWER_BYTES);

@@ -112,6 +112,21 @@ pub async fn sample(
     Ok(pose)
 }
 
+/// The one-layer motion a clip's `Sample` or `SampleBatch` plays when the
+/// clip's spring chains run (docs/springs.md, “Clip routes”): the clip
+/// with the request's `playback`, as `SampleMotion` takes it.
+///
+/// # Errors
+/// `unknown_parameter` for an `ease` (a motion's layers have none).
+pub fn clip_motion(clip_id: &str, playback: i32, ease: i32) -> Result<pb::Motion, ApiError> {
+    if ease != 0 {
+        let why = "to a clip's spring chains (`without_springs` eases its keyed pose)";
+        return Err(crate::request::no_ease_in_motion(in_pose_body(Field::Ease), why));
+    }
+    let layer = pb::Layer { clip_id: clip_id.to_owned(), playback, ..pb::Layer::default() };
+    Ok(pb::Motion { layers: vec![layer], ..pb::Motion::default() })
+}
+
 /// `SampleMotionBatch`: many poses, the names once.
 ///
 /// # Errors
