@@ -416,3 +416,21 @@ async fn grpc_sample_runs_a_clip_s_chains_as_sample_motion_does() {
     assert_eq!(batch, composed);
     app.stop().await;
 }
+
+/// A clip route whose chains run is priced as its one-layer motion: over
+/// a limit its keyed pose stays under, both are refused with the same
+/// price in the detail.
+#[tokio::test]
+async fn a_clip_route_s_chains_are_priced_as_the_motion_s() {
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 2_000).start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let keyed = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1.3&springs=false"))).send().await.unwrap();
+    assert_eq!(keyed.status(), 200, "the keyed pose is far under the limit");
+    let route = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1.3"))).send().await.unwrap();
+    let (status, route): (u16, Value) = (route.status().as_u16(), route.json().await.unwrap());
+    let motion = json!({"motion": {"layers": [{"clip": id}]}, "time": 1.3});
+    let (motion_status, composed) = post(&app, "/v1/poses", &motion).await;
+    assert_eq!((status, &route["code"]), (422, &json!("too_much_work")), "{route}");
+    assert_eq!((motion_status, &route["detail"]), (422, &composed["detail"]), "{composed}");
+    app.stop().await;
+}
