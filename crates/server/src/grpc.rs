@@ -30,6 +30,7 @@ use crate::error::{ApiError, At};
 use crate::request::{
     Field, Format, GraphStages, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes,
     RawPage, RawPose, RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
+    runs_springs,
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
@@ -282,6 +283,25 @@ impl Drop for Batches {
     }
 }
 
+/// A clip's `SampleBatch` as the `SampleMotionBatch` of its one-layer
+/// motion (its spring chains running).
+fn clip_motion_batch(req: &pb::SampleBatchRequest) -> Result<pb::SampleMotionBatchRequest, ApiError> {
+    use pb::sample_batch_request::When;
+    use pb::sample_motion_batch_request::When as MotionWhen;
+    let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
+    let when = req.when.clone().map(|when| match when {
+        When::Times(times) => MotionWhen::Times(times),
+        When::Range(range) => MotionWhen::Range(range),
+    });
+    Ok(pb::SampleMotionBatchRequest {
+        motion: Some(motion),
+        when,
+        space: req.space,
+        format: req.format,
+        ..Default::default()
+    })
+}
+
 /// A clip request's space, playback and ease numbers, to be checked.
 pub(crate) fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
     RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
@@ -416,6 +436,12 @@ impl Animation for GrpcService {
             let on = (req, character.as_str());
             return Ok(grpc_answer(super::grpc_motion::sample_on_character(&self.state, &caller, on, coding).await?));
         }
+        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
+            let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
+            let (time, space, format) = (req.time, req.space, req.format);
+            let req = pb::SampleMotionRequest { motion: Some(motion), time, space, format, ..Default::default() };
+            return Ok(grpc_answer(super::grpc_motion::sample(&self.state, &caller, req, coding).await?));
+        }
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
             modes: modes(req.space, req.playback, req.ease),
@@ -452,6 +478,12 @@ impl Animation for GrpcService {
             let on = (req, character.as_str());
             let batch = super::grpc_motion::sample_batch_on_character(&self.state, &caller, on, coding).await?;
             return Ok(grpc_answer(batch));
+        }
+        let req = request.get_ref();
+        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
+            let batch = clip_motion_batch(req)?;
+            let coding = AnswerCoding::of_grpc(&request);
+            return Ok(grpc_answer(super::grpc_motion::sample_batch(&self.state, &caller, batch, coding).await?));
         }
         let (sampling, cached) = self.sampling(&request).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {

@@ -19,7 +19,7 @@ use crate::grpc::modes;
 use crate::request::{
     Composed, Field, Format, GraphLayer, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch,
     RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
-    no_ease_on_character, no_graph_fields, on_character,
+    no_graph_fields, on_character,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -126,6 +126,21 @@ async fn sample_doc(
     Ok(pose)
 }
 
+/// The one-layer motion a clip's `Sample` or `SampleBatch` plays when the
+/// clip's spring chains run (docs/springs.md, “Clip routes”): the clip
+/// with the request's `playback`, as `SampleMotion` takes it.
+///
+/// # Errors
+/// `unknown_parameter` for an `ease` (a motion's layers have none).
+pub fn clip_motion(clip_id: &str, playback: i32, ease: i32) -> Result<pb::Motion, ApiError> {
+    if ease != 0 {
+        let why = "to a clip's spring chains (`without_springs` eases its keyed pose)";
+        return Err(crate::request::no_ease_in_motion(in_pose_body(Field::Ease), why));
+    }
+    let layer = pb::Layer { clip_id: clip_id.to_owned(), playback, ..pb::Layer::default() };
+    Ok(pb::Motion { layers: vec![layer], ..pb::Motion::default() })
+}
+
 /// `SampleMotionBatch`: many poses, the names once.
 ///
 /// # Errors
@@ -203,7 +218,7 @@ pub async fn sample_on_character(
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
     let checked = checked.check()?;
     if req.ease != 0 {
-        return Err(no_ease_on_character(in_pose_body(Field::Ease)));
+        return Err(crate::request::no_ease_in_motion(in_pose_body(Field::Ease), "with `character`"));
     }
     let doc = on_character(&req.clip_id, checked.options.playback, character);
     let motion = pb::SampleMotionRequest { time: req.time, space: req.space, format: req.format, ..Default::default() };
@@ -232,7 +247,7 @@ pub async fn sample_batch_on_character(
     let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
     let playback = raw.check(state.config.limits.max_poses)?.options.playback;
     if req.ease != 0 {
-        return Err(no_ease_on_character(in_batch_message(Field::Ease)));
+        return Err(crate::request::no_ease_in_motion(in_batch_message(Field::Ease), "with `character`"));
     }
     let doc = on_character(&req.clip_id, playback, character);
     let when = req.when.map(|when| match when {

@@ -324,3 +324,113 @@ async fn the_fox_example_swings_its_tail() {
     }
     app.stop().await;
 }
+
+/// The tail clip carrying its own chain.
+fn sprung_clip() -> String {
+    let mut clip: Value = serde_json::from_str(&tail_clip()).unwrap();
+    clip["name"] = json!("tailed-with-chains");
+    clip["springs"] = chain();
+    clip.to_string()
+}
+
+async fn bytes(resp: reqwest::Response) -> (u16, Vec<u8>) {
+    (resp.status().as_u16(), resp.bytes().await.unwrap().to_vec())
+}
+
+/// A clip's pose and samples routes run its chains exactly as `POST
+/// /v1/poses` and `/v1/samples` run its one-layer motion (byte for byte),
+/// and `springs=false` answers the keyed pose, the tail at rest.
+#[tokio::test]
+async fn a_clip_s_routes_run_its_chains_as_its_one_layer_motion_does() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let one_layer = json!({"layers": [{"clip": id}]});
+    for (t, space) in [(0.4, "local"), (1.3, "model"), (2.05, "local")] {
+        let route = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t={t}&space={space}"))).send().await.unwrap();
+        let motion = json!({"motion": one_layer, "time": t, "space": space});
+        let composed = app.http.post(app.url("/v1/poses")).json(&motion).send().await.unwrap();
+        let ((s1, a), (s2, b)) = (bytes(route).await, bytes(composed).await);
+        assert_eq!((s1, s2), (200, 200), "{}", String::from_utf8_lossy(&a));
+        assert_eq!(a, b, "the clip route at {t} is the one-layer motion's pose, byte for byte");
+        let pose: Value = serde_json::from_slice(&a).unwrap();
+        if space == "local" {
+            assert!(!at_rest(&pose), "the chain swings at {t}: {pose}");
+        }
+        // Off: the keyed pose — the hips where the keys put them (hand-computed), the tail at rest.
+        let off = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&springs=false")).await;
+        let phase = t % 1.0;
+        let x = if phase <= 0.5 { 0.6 * phase } else { 0.6 * (1.0 - phase) };
+        assert!((numbers(&joint(&off, "hips")["translation"])[0] - x).abs() < 1e-6, "{off}");
+        assert!(at_rest(&off), "springs=false: the keyed pose: {off}");
+    }
+    let times = json!([0.5, 1.0, 1.7]);
+    let route = app.http.post(app.url(&format!("/v1/clips/{id}/sample"))).json(&json!({"times": times}));
+    let composed = app.http.post(app.url("/v1/samples")).json(&json!({"motion": one_layer, "times": times}));
+    let ((s1, a), (s2, b)) = (bytes(route.send().await.unwrap()).await, bytes(composed.send().await.unwrap()).await);
+    assert_eq!((s1, s2, &a), (200, 200, &b), "samples: the one-layer motion's, byte for byte");
+    let off = json!({"times": times, "springs": false});
+    let (status, off) = post(&app, &format!("/v1/clips/{id}/sample"), &off).await;
+    assert_eq!(status, 200, "{off}");
+    assert!(off["poses"].as_array().unwrap().iter().all(at_rest), "{off}");
+    // A motion has no ease: refused while the chains run, fine with them off; a bad switch is refused.
+    let eased = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=0.3&ease=ease_in"))).send().await.unwrap();
+    let (status, problem): (u16, Value) = (eased.status().as_u16(), eased.json().await.unwrap());
+    assert_eq!((status, &problem["code"]), (400, &json!("unknown_parameter")), "{problem}");
+    let eased = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=0.3&ease=ease_in&springs=false")));
+    assert_eq!(eased.send().await.unwrap().status(), 200);
+    let bad = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=0.3&springs=maybe"))).send().await.unwrap();
+    let (status, problem): (u16, Value) = (bad.status().as_u16(), bad.json().await.unwrap());
+    assert_eq!((status, &problem["code"]), (400, &json!("bad_parameter")), "{problem}");
+    app.stop().await;
+}
+
+/// gRPC's `Sample` and `SampleBatch` of a clip with chains are
+/// `SampleMotion` and `SampleMotionBatch` of its one-layer motion;
+/// `without_springs` gives the keyed pose.
+#[tokio::test]
+async fn grpc_sample_runs_a_clip_s_chains_as_sample_motion_does() {
+    use formats::wire::proto::pb;
+    let app = TestApp::start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let mut grpc = app.grpc().await;
+    let motion =
+        pb::Motion { layers: vec![pb::Layer { clip_id: id.clone(), ..Default::default() }], ..Default::default() };
+    for t in [0.4, 1.3] {
+        let route = grpc.sample(pb::SampleRequest { clip_id: id.clone(), time: t, ..Default::default() });
+        let route = route.await.unwrap().into_inner();
+        let composed = pb::SampleMotionRequest { motion: Some(motion.clone()), time: t, ..Default::default() };
+        assert_eq!(route, grpc.sample_motion(composed).await.unwrap().into_inner(), "at {t}");
+        let off = pb::SampleRequest { clip_id: id.clone(), time: t, without_springs: true, ..Default::default() };
+        let off = grpc.sample(off).await.unwrap().into_inner();
+        assert_ne!(route, off, "the chain turns the tail at {t}");
+        let tail_rotations = |pose: &pb::Pose| pose.rotations[4..16].to_vec();
+        assert_eq!(tail_rotations(&off), [0.0, 0.0, 0.0, 1.0].repeat(3), "without_springs: the tail at rest");
+    }
+    let times = pb::Times { values: vec![0.5, 1.0, 1.7] };
+    let when = Some(pb::sample_batch_request::When::Times(times.clone()));
+    let batch = pb::SampleBatchRequest { clip_id: id.clone(), when, ..Default::default() };
+    let batch = grpc.sample_batch(batch).await.unwrap().into_inner();
+    let motion_when = Some(pb::sample_motion_batch_request::When::Times(times));
+    let composed = pb::SampleMotionBatchRequest { motion: Some(motion), when: motion_when, ..Default::default() };
+    let composed = grpc.sample_motion_batch(composed).await.unwrap().into_inner();
+    assert_eq!(batch, composed);
+    app.stop().await;
+}
+
+/// A clip route whose chains run is priced as its one-layer motion: over
+/// a limit its keyed pose stays under, both are refused with the same
+/// price in the detail.
+#[tokio::test]
+async fn a_clip_route_s_chains_are_priced_as_the_motion_s() {
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 2_000).start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let keyed = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1.3&springs=false"))).send().await.unwrap();
+    assert_eq!(keyed.status(), 200, "the keyed pose is far under the limit");
+    let route = app.http.get(app.url(&format!("/v1/clips/{id}/pose?t=1.3"))).send().await.unwrap();
+    let (status, route): (u16, Value) = (route.status().as_u16(), route.json().await.unwrap());
+    let motion = json!({"motion": {"layers": [{"clip": id}]}, "time": 1.3});
+    let (motion_status, composed) = post(&app, "/v1/poses", &motion).await;
+    assert_eq!((status, &route["code"]), (422, &json!("too_much_work")), "{route}");
+    assert_eq!((motion_status, &route["detail"]), (422, &composed["detail"]), "{composed}");
+    app.stop().await;
+}

@@ -56,6 +56,26 @@ struct Deck<C> {
     sampler: MotionSampler,
     /// Whether the next sample starts afresh (first tick or a jump).
     fresh: bool,
+    /// The spring substeps between the previous tick and this one.
+    between: Between,
+}
+
+/// Where a deck was at its previous tick, and its pose at a spring substep
+/// between that tick and the last (docs/springs.md, “Time”): its motion
+/// time moves on by the share `u` of the interval, its sync phases at the
+/// rate of the previous tick's weights (as a tick's do), its layer weights
+/// from the previous tick's to the last's.
+#[derive(Debug, Clone, Default)]
+struct Between {
+    /// The previous tick's motion time and the stream time moved since;
+    /// `None`: no previous tick to start from (a first tick or a jump).
+    from: Option<(f64, f64)>,
+    phases: Vec<f64>,
+    weights: Vec<f32>,
+    /// Scratch: the substep's phases and weights, and its pose.
+    at_phases: Vec<f64>,
+    at_weights: Vec<f32>,
+    sampler: MotionSampler,
 }
 
 /// A fade in progress: the previous player, fading out.
@@ -64,8 +84,20 @@ struct Fade<C> {
     under: Player<C>,
     /// Stream time moved (`Σ|Δs|`) since the fade's first tick.
     elapsed: f64,
+    /// `elapsed` at the previous tick (the spring substeps' `α`).
+    elapsed_before: f64,
     duration: f64,
     ease: Ease,
+}
+
+impl<C> Fade<C> {
+    /// The fade's `α` at the share `u` of the way from the previous tick
+    /// to the last.
+    fn alpha_between(&self, u: f64) -> f32 {
+        let elapsed = self.elapsed_before + u * (self.elapsed - self.elapsed_before);
+        let progress = if self.duration > 0.0 { (elapsed / self.duration).min(1.0) } else { 1.0 };
+        self.ease.apply(progress) as f32
+    }
 }
 
 /// Where the current motion's first layer is in its clip, unwrapped: the
@@ -83,6 +115,9 @@ pub struct LayerPosition {
 pub struct Player<C> {
     top: Deck<C>,
     fade: Option<Box<Fade<C>>>,
+    /// A fade that ended at the last tick: the spring substeps before that
+    /// tick still see it.
+    ended: Option<Box<Fade<C>>>,
     /// The motion time the next tick must show (a seek), if any.
     seek: Option<f64>,
     last_s: Option<f64>,
@@ -107,6 +142,10 @@ struct StreamSprings {
     jumped: bool,
     /// Whether the player's `local` holds the last tick's sprung pose.
     applied: bool,
+    /// The stream's IK solved cold on a substep's pose (the tick's warm
+    /// starts untouched).
+    ik: IkSolver,
+    reports: Vec<IkReport>,
 }
 
 /// The stream's request-time IK (docs/ik.md, “Streams”): solved on the
@@ -148,6 +187,7 @@ impl<C: ClipSource> Deck<C> {
             origin: None,
             sampler: MotionSampler::new(),
             fresh: true,
+            between: Between::default(),
         }
     }
 }
@@ -174,6 +214,9 @@ impl<C: ClipSource> Deck<C> {
     fn sample(&mut self, s: f64, ds: f64, ease: Ease) {
         let origin = *self.origin.get_or_insert(s);
         let tau = s - origin;
+        self.between.from = (!self.fresh).then_some((tau - ds, ds));
+        self.between.phases.clone_from(&self.phases);
+        self.between.weights.clone_from(&self.weights);
         if self.fresh {
             self.motion.phases_at(tau, &self.weights, &mut self.phases);
         } else {
@@ -190,6 +233,23 @@ impl<C: ClipSource> Deck<C> {
     fn delta(&self) -> Planar {
         self.sampler.root_motion().map_or(Planar::IDENTITY, |r| r.delta)
     }
+
+    /// The deck's local pose at the share `u` of the way from its previous
+    /// tick to its last (see [`Between`]); the last tick's own pose when
+    /// it had no previous one.
+    fn sample_between(&mut self, u: f64, ease: Ease) -> &Pose {
+        let Some((tau, ds)) = self.between.from else { return self.sampler.local() };
+        let b = &mut self.between;
+        b.at_phases.clone_from(&b.phases);
+        self.motion.advance_phases(&mut b.at_phases, u * ds, &b.weights);
+        b.at_weights.clone_from(&b.weights);
+        for (w, last) in b.at_weights.iter_mut().zip(&self.weights) {
+            *w += (*last - *w) * u as f32;
+        }
+        let options = MotionOptions { ease, space: Space::Local };
+        self.motion.sample_with(tau + u * ds, &b.at_phases, &b.at_weights, &options, &mut b.sampler);
+        b.sampler.local()
+    }
 }
 
 impl<C: ClipSource> Player<C> {
@@ -201,6 +261,7 @@ impl<C: ClipSource> Player<C> {
         Player {
             top: Deck { origin: Some(0.0), ..Deck::new(motion) },
             fade: None,
+            ended: None,
             seek: None,
             last_s: None,
             alpha: 1.0,
@@ -255,6 +316,7 @@ impl<C: ClipSource> Player<C> {
         let under = Player {
             top: std::mem::replace(&mut self.top, Deck::new(to)),
             fade: self.fade.take(),
+            ended: None,
             seek: None,
             last_s: self.last_s,
             alpha: self.alpha,
@@ -270,8 +332,7 @@ impl<C: ClipSource> Player<C> {
         if self.top.motion.springs() != under.top.motion.springs() {
             self.springs.run = motion_springs(&self.top.motion);
         }
-        self.springs.jumped = true;
-        self.fade = Some(Box::new(Fade { under, elapsed: 0.0, duration, ease }));
+        self.fade = Some(Box::new(Fade { under, elapsed: 0.0, elapsed_before: 0.0, duration, ease }));
         Ok(())
     }
 
@@ -403,6 +464,7 @@ impl<C: ClipSource> Player<C> {
     /// Samples the decks at `s`, then mixes the fade into `local`.
     fn advance(&mut self, s: f64, ds: f64, ease: Ease) {
         self.last_s = Some(s);
+        self.ended = None;
         // A fade starts at its target's first tick (B at motion time 0,
         // α = 0, the pose still A's): the interval before it is not part
         // of it.
@@ -413,13 +475,14 @@ impl<C: ClipSource> Player<C> {
             return;
         };
         fade.under.advance(s, ds, ease);
+        fade.elapsed_before = fade.elapsed;
         if !fade_starts {
             fade.elapsed += ds.abs();
         }
         let progress = if fade.duration > 0.0 { (fade.elapsed / fade.duration).min(1.0) } else { 1.0 };
         self.alpha = fade.ease.apply(progress) as f32;
         if progress >= 1.0 {
-            self.fade = None;
+            self.ended = self.fade.take();
             self.alpha = 1.0;
             return;
         }
@@ -448,19 +511,54 @@ impl<C: ClipSource> Player<C> {
     }
 
     /// Runs the current motion's springs for the tick at `clock` on the
-    /// mixed pose (into `local`).
+    /// mixed pose (into `local`); the substeps before it see the mix
+    /// between the ticks ([`Player::pose_between`]).
     fn run_springs(&mut self, clock: f64, ease: Ease) {
-        let (Some(run), Some(springs)) = (self.springs.run.as_mut(), self.top.motion.springs()) else {
+        let motion = Arc::clone(&self.top.motion);
+        let (Some(mut run), Some(springs)) = (self.springs.run.take(), motion.springs()) else {
             self.springs.applied = false;
             return;
         };
         if !(self.fade.is_some() || self.ik.applied) {
             self.local.copy_from(self.top.sampler.local());
         }
-        let tau = self.last_s.zip(self.top.origin).map_or(0.0, |(s, o)| s - o);
+        let tau = self.motion_time();
         let same = !std::mem::take(&mut self.springs.jumped);
-        run.clocked_frame(&self.top.motion, springs, (clock, tau, same), ease, &mut self.local);
+        let mut local = std::mem::take(&mut self.local);
+        run.clocked_frame(springs, (clock, tau, same), &mut local, |u, pose| {
+            self.pose_between(u, ease, pose);
+            self.solve_ik_between(pose);
+        });
+        (self.local, self.springs.run) = (local, Some(run));
         self.springs.applied = true;
+    }
+
+    /// The mixed local pose at the share `u` of the way from the previous
+    /// tick to the last, into `out`: every deck at its time and weights
+    /// then, every fade (one that ended at the last tick included) at its
+    /// `α` then (docs/springs.md, “Time”).
+    fn pose_between(&mut self, u: f64, ease: Ease, out: &mut Pose) {
+        let top = self.top.sample_between(u, ease);
+        match self.fade.as_deref_mut().or(self.ended.as_deref_mut()) {
+            None => out.copy_from(top),
+            Some(fade) => {
+                let alpha = fade.alpha_between(u);
+                fade.under.pose_between(u, ease, out);
+                if alpha > 0.0 {
+                    blend_into(out, top, alpha);
+                }
+            }
+        }
+    }
+
+    /// The stream's IK on a substep's pose, solved cold by a solver of its
+    /// own.
+    fn solve_ik_between(&mut self, pose: &mut Pose) {
+        if self.ik.constraints.is_empty() {
+            return;
+        }
+        let StreamSprings { ik, reports, .. } = &mut self.springs;
+        ik.solve(self.top.motion.skeleton(), pose, &self.ik.constraints, ChainStart::Cold, reports);
     }
 
     /// The last tick's layered root delta: the fade's sides lerped by `α`.
@@ -542,6 +640,20 @@ pub(crate) fn mix(a: &Pose, b: &Pose, alpha: f32, out: &mut Pose) {
     }
     // Both sides have the same parameters (`crossfade` checks it).
     out.parameters.clone_from(&a.parameters);
+    for (o, b) in out.parameters.iter_mut().zip(&b.parameters) {
+        *o = layering::lerp(*o, *b, alpha);
+    }
+}
+
+/// `out = blend(out, b, α)` joint by joint (lerp, short-way slerp).
+fn blend_into(out: &mut Pose, b: &Pose, alpha: f32) {
+    for j in 0..b.len().min(out.len()) {
+        let mut joint = Joint { t: out.translations[j], q: out.rotations[j], s: out.scales[j] };
+        let other = Joint { t: b.translations[j], q: b.rotations[j], s: b.scales[j] };
+        layering::blend(&mut joint, &other, alpha);
+        (out.translations[j], out.rotations[j], out.scales[j]) = (joint.t, joint.q, joint.s);
+    }
+    // Both sides have the same parameters (`crossfade` checks it).
     for (o, b) in out.parameters.iter_mut().zip(&b.parameters) {
         *o = layering::lerp(*o, *b, alpha);
     }

@@ -2,7 +2,8 @@
 //! “Time”): one [`SpringRun`] per simulation, stateless (a request's times
 //! in order, from rest `warmup` before the first) or clocked (a stream's
 //! ticks in stream time). The substeps between two frames evaluate the
-//! motion at their own times with a sampler of their own, so the frame's
+//! motion at their own times with a sampler of their own (a stream's: the
+//! player's mix between its ticks, crossfades included), so the frame's
 //! root motion and IK warm starts are untouched.
 
 use super::{ClipSource, Motion, MotionSampler};
@@ -96,29 +97,27 @@ impl SpringRun {
         });
     }
 
-    /// A stream's frame at stream time `clock` showing `motion` at motion
-    /// time `tau`, into `local` (its pose of that tick). A substep between
-    /// the previous frame and this one sees the motion (with its own
-    /// weights) at the motion time interpolated between theirs; `same`
-    /// says whether the previous frame showed this motion without a jump
-    /// (else the substeps see `tau`).
-    pub fn clocked_frame<C: ClipSource>(
+    /// A stream's frame at stream time `clock` (showing its motion at
+    /// motion time `tau`, recorded with the clock) into `local`, its pose
+    /// of that tick. A substep between the previous frame and this one
+    /// sees `between(u, pose)`: the stream's pose at the share `u` of the
+    /// way from the previous tick to this one (its decks' times and
+    /// weights, a crossfade's `α`); `same` says whether the previous frame
+    /// can be interpolated from (else the substeps see `u = 1`).
+    pub fn clocked_frame(
         &mut self,
-        motion: &Motion<C>,
         springs: &Springs,
         (clock, tau, same): (f64, f64, bool),
-        ease: Ease,
         local: &mut Pose,
+        mut between: impl FnMut(f64, &mut Pose),
     ) {
-        let (c0, t0) = match self.previous {
-            Some((c0, t0)) if same && clock > c0 => (c0, t0),
-            _ => (clock, tau),
+        let c0 = match self.previous {
+            Some((c0, _)) if same && clock > c0 => c0,
+            _ => clock,
         };
-        let rate = if clock > c0 { (tau - t0) / (clock - c0) } else { 0.0 };
-        let SpringRun { solver, scratch, .. } = self;
-        solver.frame(springs, clock, local, |c, pose| {
-            motion.sample_local(tau - (clock - c) * rate, ease, scratch);
-            pose.copy_from(scratch.local());
+        self.solver.frame(springs, clock, local, |c, pose| {
+            let u = if clock > c0 { (c - c0) / (clock - c0) } else { 1.0 };
+            between(u, pose);
         });
         self.previous = Some((clock, tau));
     }

@@ -52,12 +52,14 @@ pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
 pub use graph::{GraphLayer, GraphSampling, GraphStages, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
 pub use graph_stream::RawGraphStream;
 pub use list::{Page, RawPage};
-pub use motion::{Composed, RawMotion, at_clip_route, crossfade_target, no_ease_on_character, on_character, warnings};
+pub use motion::{
+    Composed, RawMotion, at_clip_route, at_clip_route_as, crossfade_target, of_clip, on_character, warnings,
+};
 pub use raw::{
-    Field, Format, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
+    Field, Format, Locate, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,
 };
-pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
+pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate, no_ease_in_motion, runs_springs};
 pub use stream::{Opening, RawStream, compact_watch};
 
 #[cfg(test)]

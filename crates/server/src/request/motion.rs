@@ -224,10 +224,10 @@ fn build(spec: MotionSpec<Arc<dyn PinnedClip>>, ik: &IkLimits) -> Result<StreamM
         .map_err(|e| ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string()))
 }
 
-/// What a clip route with `character=` plays (docs/characters.md, “Clip routes on a
-/// character”): the one-layer motion `{"layers":[{"clip":id}],"character":…}`,
-/// the route's `playback` as the layer's.
-pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &str) -> MotionDoc {
+/// What a clip route plays as a motion: the one-layer motion
+/// `{"layers":[{"clip":id}]}`, the route's `playback` as the layer's. Its
+/// clip's own spring chains run in it (docs/springs.md, “Clip routes”).
+pub fn of_clip(clip: &str, playback: Option<anim::Playback>) -> MotionDoc {
     let mut layer = formats::wire::motion::LayerDoc::new(clip);
     layer.playback = playback.map(Into::into);
     MotionDoc {
@@ -236,16 +236,15 @@ pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &st
         ik: Vec::new(),
         springs: Vec::new(),
         spring_substep_hz: None,
-        character: Some(character.to_owned()),
+        character: None,
         retarget: None,
     }
 }
 
-/// `ease` with `character`: the one-layer motion a clip route plays on a
-/// character has no ease (a motion's layers have none; its streams do).
-pub fn no_ease_on_character(at: At) -> ApiError {
-    let detail = "`ease` does not apply with `character`: the one-layer motion played has no ease".to_owned();
-    ApiError::BadParameter { code: "unknown_parameter", at, detail }
+/// What a clip route with `character=` plays (docs/characters.md, “Clip routes on a
+/// character”): [`of_clip`]'s motion with `"character":…`.
+pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &str) -> MotionDoc {
+    MotionDoc { character: Some(character.to_owned()), ..of_clip(clip, playback) }
 }
 
 /// A refusal of [`on_character`]'s motion, located on the clip route that
@@ -253,9 +252,15 @@ pub fn no_ease_on_character(at: At) -> ApiError {
 /// (the character not found, a clip it cannot map) is the route's
 /// `character`; the request's own fields keep their names.
 pub fn at_clip_route(e: ApiError, at: Locate) -> ApiError {
+    at_clip_route_as(e, at, Field::Character)
+}
+
+/// [`at_clip_route`], a motion path pointed at `motion` (the route's
+/// `character`, or its `springs` when the clip's chains made the motion).
+pub fn at_clip_route_as(e: ApiError, at: Locate, motion: Field) -> ApiError {
     let to_route = |pointer: &str| {
         if pointer.starts_with("/motion") {
-            return at(Field::Character);
+            return at(motion);
         }
         let mut parts = pointer.trim_start_matches('/').split('/');
         let (name, index) = (parts.next().unwrap_or(""), parts.next().and_then(|i| i.parse().ok()));

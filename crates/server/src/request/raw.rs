@@ -60,6 +60,8 @@ pub enum Field {
     IdleTimeout,
     /// The character a clip route plays its clip on (docs/characters.md).
     Character,
+    /// Whether a clip route runs the clip's spring chains (docs/springs.md).
+    Springs,
 }
 
 impl Field {
@@ -94,6 +96,7 @@ impl Field {
             Field::ParameterAt(_) => "parameters",
             Field::IdleTimeout => "idle_timeout_secs",
             Field::Character => "character",
+            Field::Springs => "springs",
         }
     }
 }

@@ -57,6 +57,24 @@ pub fn evaluate(
     }
 }
 
+/// Whether a clip route plays the clip `id` as its one-layer motion so
+/// that the clip's own spring chains run (docs/springs.md, “Clip routes”):
+/// the caller did not turn them off (`springs`, default on) and the clip
+/// has some.
+///
+/// # Errors
+/// `clip_not_found`.
+pub async fn runs_springs(state: &AppState, id: &str, springs: bool) -> Result<bool, ApiError> {
+    Ok(springs && !super::raw::clip(state, id).await?.springs.chains.is_empty())
+}
+
+/// `ease` on a clip route that plays a motion (a character, or the clip's
+/// spring chains): a motion's layers have no ease (its streams do).
+pub fn no_ease_in_motion(at: crate::error::At, why: &str) -> ApiError {
+    let detail = format!("`ease` does not apply {why}: the one-layer motion played has no ease");
+    ApiError::BadParameter { code: "unknown_parameter", at, detail }
+}
+
 /// One pose, as a transport decoded it.
 #[derive(Debug, Clone, Copy)]
 pub struct RawPose<'a> {

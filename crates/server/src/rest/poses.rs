@@ -26,13 +26,14 @@ use crate::cache::CachedClip;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Field, Format, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route, evaluate, in_body, in_query,
-    joint_subset, no_ease_on_character, on_character, parameter_subset, parse_json,
+    Field, Format, Locate, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route_as, evaluate, in_body,
+    in_query, joint_subset, no_ease_in_motion, of_clip, on_character, parameter_subset, parse_json, runs_springs,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
 use anim::{SampleOptions, Sampler};
 use formats::wire::json::{EaseDoc, Extras, MatricesJson, ParameterValues, PlaybackDoc, PoseJson, SpaceDoc};
+use formats::wire::motion::MotionDoc;
 
 use super::extract::{ClipId, JsonBody};
 use super::motions::{PoseOfMotion, SamplesOfMotion};
@@ -109,6 +110,7 @@ fn write_pose(
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: only those joints, in skeleton order (model space still goes through the whole hierarchy)"),
         ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): only those parameters, in the clip's order"),
         ("character" = Option<String>, Query, description = "A character id or `name:<name>`: the clip played on it, answered as `POST /v1/poses` answers the one-layer motion `{\"layers\":[{\"clip\":id}],\"character\":…}` (docs/characters.md); refusals `character_not_found` (404), `unmappable_skeleton` (422) at `character`; `ease` is refused with it"),
+        ("springs" = Option<bool>, Query, description = "true (default) | false. A clip with spring chains is answered as `POST /v1/poses` answers the one-layer motion `{\"layers\":[{\"clip\":id}]}`, its chains running (docs/springs.md, “Clip routes”; `ease` is refused then); false: the keyed pose"),
     ),
     responses(
         (status = 200, description = "The pose", body = super::schemas::PoseSchema),
@@ -129,7 +131,10 @@ pub async fn get_pose(
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
     if let Some(character) = q.get("character") {
-        return pose_on_character(state, caller.key(), &headers, (&id, character), &q).await;
+        return pose_as_motion(state, caller.key(), &headers, (&id, Some(character)), &q).await;
+    }
+    if runs_springs(&state, &id, q.springs()?).await? {
+        return pose_as_motion(state, caller.key(), &headers, (&id, None), &q).await;
     }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (req, cached) = raw.resolve(&state, &id, Wire::Json, coding).await?;
@@ -155,23 +160,44 @@ pub async fn get_pose(
     Ok(json_response(body))
 }
 
-/// `GET …/pose?character=`: `POST /v1/poses` of the one-layer motion of the
-/// clip on the character (docs/characters.md), refusals at the query's names.
-async fn pose_on_character(
+/// The one-layer motion a clip route plays instead of its clip: on
+/// `character` (docs/characters.md), else with the clip's own spring
+/// chains (docs/springs.md); `ease` refused at `at`, the motion's
+/// refusals pointed at the route's `character` or `springs`.
+fn motion_of_route(
+    id: &str,
+    playback: Option<anim::Playback>,
+    character: Option<&str>,
+    ease: Option<Locate>,
+) -> Result<(MotionDoc, Field), ApiError> {
+    let (why, field) = match character {
+        Some(_) => ("with `character`", Field::Character),
+        None => ("to a clip's spring chains (`springs=false` eases its keyed pose)", Field::Springs),
+    };
+    if let Some(at) = ease {
+        return Err(no_ease_in_motion(at(Field::Ease), why));
+    }
+    let motion = character.map_or_else(|| of_clip(id, playback), |c| on_character(id, playback, c));
+    Ok((motion, field))
+}
+
+/// `GET …/pose` as `POST /v1/poses` of the one-layer motion of the clip
+/// (on a character, or running its spring chains), refusals at the
+/// query's names.
+async fn pose_as_motion(
     state: AppState,
     caller: CallerKey,
     headers: &HeaderMap,
-    (id, character): (&str, &str),
+    (id, character): (&str, Option<&str>),
     q: &QueryParams,
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
     let checked = raw.check()?;
-    if q.get("ease").is_some() {
-        return Err(no_ease_on_character(in_query(Field::Ease)));
-    }
+    let ease = q.get("ease").map(|_| in_query as Locate);
+    let (motion, field) = motion_of_route(id, checked.options.playback, character, ease)?;
     let list = |name: &str| q.get(name).map(|text| text.split(',').map(str::to_owned).collect());
     let req = PoseOfMotion {
-        motion: on_character(id, checked.options.playback, character),
+        motion,
         time: checked.t,
         space: q.get("space").map(str::to_owned),
         format: q.get("format").map(str::to_owned),
@@ -181,24 +207,23 @@ async fn pose_on_character(
         fps: None,
         report: false,
     };
-    super::motions::answer_pose(state, caller, headers, req).await.map_err(|e| at_clip_route(e, in_query))
+    super::motions::answer_pose(state, caller, headers, req).await.map_err(|e| at_clip_route_as(e, in_query, field))
 }
 
-/// `POST …/sample` with `character`: `POST /v1/samples` of the one-layer
-/// motion of the clip on the character (docs/characters.md).
-async fn samples_on_character(
+/// `POST …/sample` as `POST /v1/samples` of the one-layer motion of the
+/// clip (on a character, or running its spring chains).
+async fn samples_as_motion(
     state: AppState,
     caller: CallerKey,
     headers: &HeaderMap,
-    (id, character): (&str, &str),
+    (id, character): (&str, Option<&str>),
     req: SampleRequest,
 ) -> Result<Response, ApiError> {
     let checked = req.raw().check(state.config.limits.max_poses)?;
-    if req.ease.is_some() {
-        return Err(no_ease_on_character(in_body(Field::Ease)));
-    }
+    let ease = req.ease.as_ref().map(|_| in_body as Locate);
+    let (motion, field) = motion_of_route(id, checked.options.playback, character, ease)?;
     let samples = SamplesOfMotion {
-        motion: on_character(id, checked.options.playback, character),
+        motion,
         times: req.times,
         start: req.start,
         end: req.end,
@@ -210,7 +235,9 @@ async fn samples_on_character(
         inputs: None,
         report: false,
     };
-    super::motions::answer_samples(state, caller, headers, samples).await.map_err(|e| at_clip_route(e, in_body))
+    super::motions::answer_samples(state, caller, headers, samples)
+        .await
+        .map_err(|e| at_clip_route_as(e, in_body, field))
 }
 
 /// `POST …/sample`: either `times` or `start`, `end` and `fps`.
@@ -253,6 +280,11 @@ pub struct SampleRequest {
     /// one-layer motion `{"layers":[{"clip":id}],"character":…}` (docs/characters.md).
     #[serde(default)]
     pub character: Option<String>,
+    /// Whether the clip's own spring chains run (default true): the clip
+    /// answered as `POST /v1/samples` answers its one-layer motion
+    /// (docs/springs.md, “Clip routes”); false: the keyed poses.
+    #[serde(default)]
+    pub springs: Option<bool>,
 }
 
 impl SampleRequest {
@@ -296,7 +328,10 @@ pub async fn sample(
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
     if let Some(character) = req.character.clone() {
-        return samples_on_character(state, caller.key(), &headers, (&id, &character), req).await;
+        return samples_as_motion(state, caller.key(), &headers, (&id, Some(&character)), req).await;
+    }
+    if runs_springs(&state, &id, req.springs != Some(false)).await? {
+        return samples_as_motion(state, caller.key(), &headers, (&id, None), req).await;
     }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json, coding).await?;

@@ -148,6 +148,23 @@ impl QueryParams {
         }
     }
 
+    /// `springs=true|false` (default true): whether a clip route runs the
+    /// clip's own spring chains (docs/springs.md, “Clip routes”).
+    ///
+    /// # Errors
+    /// `bad_parameter` for any other value.
+    pub fn springs(&self) -> Result<bool, ApiError> {
+        match self.get("springs") {
+            None | Some("true") => Ok(true),
+            Some("false") => Ok(false),
+            Some(other) => Err(ApiError::parameter(
+                "bad_parameter",
+                "springs",
+                format!("`springs` must be true or false, got `{other}`"),
+            )),
+        }
+    }
+
     /// `space`, `playback` and `ease`, for the request layer.
     pub fn modes(&self) -> RawModes<'_> {
         RawModes { space: self.raw("space"), playback: self.raw("playback"), ease: self.raw("ease") }

@@ -115,7 +115,8 @@ impl<C: ClipSource> Player<C> {
             None => None,
             Some(f) => {
                 let FadeState { under, elapsed, duration, ease } = *f;
-                Some(Box::new(Fade { under: Player::from_state(under)?, elapsed, duration, ease }))
+                let under = Player::from_state(under)?;
+                Some(Box::new(Fade { under, elapsed, elapsed_before: elapsed, duration, ease }))
             }
         };
         let mut ik = StreamIk { constraints: state.ik, ..StreamIk::default() };
@@ -130,10 +131,11 @@ impl<C: ClipSource> Player<C> {
             )),
             (Some(_), None) => return Err(PlayerError::State("a spring state for a motion without springs")),
         };
-        let springs = StreamSprings { run, jumped: state.springs_jumped, applied: false };
+        let springs = StreamSprings { run, jumped: state.springs_jumped, ..StreamSprings::default() };
         let player = Player {
             top,
             fade,
+            ended: None,
             seek: state.seek,
             last_s: state.last_s,
             alpha: state.alpha,
@@ -197,6 +199,7 @@ impl<C: ClipSource> Deck<C> {
             ramps,
             sampler,
             fresh: s.fresh,
+            between: super::Between::default(),
         })
     }
 }

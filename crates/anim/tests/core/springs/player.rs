@@ -44,11 +44,20 @@ pub(super) fn swinging() -> Clip {
 const TAIL: [usize; 3] = [1, 2, 3];
 
 pub(super) fn motion(clip: &Clip, springs: bool) -> Arc<Motion<&Clip>> {
+    layer_motion(clip, springs, 0.0, 1.0)
+}
+
+fn chain() -> ChainSpec {
     let mut chain = ChainSpec::new("tail", &["tail0", "tail1", "tail2", "tip"]);
     chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
-    let chains = if springs { vec![chain] } else { Vec::new() };
+    chain
+}
+
+/// One layer of `clip` at `offset` and `speed`, with the tail's chain or none.
+fn layer_motion(clip: &Clip, springs: bool, offset: f64, speed: f64) -> Arc<Motion<&Clip>> {
+    let chains = if springs { vec![chain()] } else { Vec::new() };
     let spec = MotionSpec {
-        layers: vec![LayerSpec::new(clip)],
+        layers: vec![LayerSpec { offset, speed, ..LayerSpec::new(clip) }],
         springs: SpringsSpec { chains, ..SpringsSpec::default() },
         ..MotionSpec::default()
     };
@@ -176,6 +185,109 @@ fn without_chains_the_motion_is_the_layered_pose_and_chains_turn_only_their_join
             let changed = (a.local().rotations[j], a.local().translations[j])
                 != (b.local().rotations[j], b.local().translations[j]);
             assert_eq!(changed, TAIL.contains(&j), "joint {j} at {t}");
+        }
+    }
+}
+
+/// The crossfade of the tests below: from the swinging motion to the same
+/// clip a third of a cycle on and 1.5 times as fast (the same chains, so
+/// they run on), asked for just before the tick at 0.5 s, over 0.75 s.
+const FADE_AT: f64 = 0.5;
+const FADE_FOR: f64 = 0.75;
+const FADE_EASE: anim::Ease = anim::Ease::EaseInOut;
+const HURRIED: (f64, f64) = (0.3, 1.5);
+
+/// A stream of the swinging motion at `fps` for `ticks`, crossfading as
+/// above: each tick's local pose.
+fn fading_stream(clip: &Clip, fps: u32, ticks: u32) -> Vec<Pose> {
+    let mut player = Player::new(motion(clip, true));
+    let to = layer_motion(clip, true, HURRIED.0, HURRIED.1);
+    (0..=ticks)
+        .map(|n| {
+            if f64::from(n) == FADE_AT * f64::from(fps) {
+                player.crossfade(Arc::clone(&to), FADE_FOR, FADE_EASE).unwrap();
+            }
+            let s = f64::from(n) / f64::from(fps);
+            player.sample_clocked(s, s, &options(Space::Local));
+            player.pose().clone()
+        })
+        .collect()
+}
+
+#[test]
+fn during_a_crossfade_stream_frames_at_any_rate_agree_at_shared_instants() {
+    let clip = swinging();
+    let rates = [30u32, 120, 60, 24];
+    let runs: Vec<Vec<Pose>> = rates.iter().map(|&fps| fading_stream(&clip, fps, 2 * fps)).collect();
+    // Every 1/6 s from the fade's start to past its end (0.5 s to 1.5 s).
+    for k in 3..=9u32 {
+        let at: Vec<Vec<Vec3>> =
+            rates.iter().zip(&runs).map(|(fps, run)| model(&clip, &run[(k * fps / 6) as usize])).collect();
+        for (fps, other) in rates.iter().zip(&at).skip(1) {
+            assert!(farthest(&at[0], other) <= 1e-5 * 0.5, "at {k}/6 s, 30 vs {fps} fps: {:?} vs {other:?}", at[0]);
+        }
+    }
+}
+
+/// The swinging clip in `f64` for the reference.
+fn reference_rig(clip: &Clip) -> super::reference::RefSkeleton {
+    let skeleton = clip.skeleton();
+    let rest = skeleton.rest();
+    super::reference::RefSkeleton {
+        names: skeleton.names().to_vec(),
+        parents: (0..skeleton.len()).map(|j| skeleton.parent(j)).collect(),
+        rest_t: rest.translations.iter().map(|t| Vec3::from(*t).as_dvec3()).collect(),
+        rest_q: rest.rotations.iter().map(|q| q.as_dquat()).collect(),
+    }
+}
+
+/// The clip's keyed pose at clip time `t` (looping), in `f64`.
+fn keyed(clip: &Clip, t: f64) -> super::reference::RefPose {
+    let (mut cursor, mut pose) = (anim::Cursor::default(), Pose::default());
+    clip.sample_into(t.rem_euclid(1.0) as f32, &mut cursor, &mut pose);
+    super::reference::RefPose {
+        t: pose.translations.iter().map(|t| Vec3::from(*t).as_dvec3()).collect(),
+        q: pose.rotations.iter().map(|q| q.as_dquat()).collect(),
+    }
+}
+
+/// The crossfade's input at stream time `s`, mixed in `f64`: the swinging
+/// motion at `s`, the hurried one at `s − 0.5`, `α` the eased share of
+/// the fade (docs/motion.md, “Crossfades”).
+fn faded(clip: &Clip, s: f64) -> super::reference::RefPose {
+    let from = keyed(clip, s);
+    if s <= FADE_AT {
+        return from;
+    }
+    let to = keyed(clip, HURRIED.0 + HURRIED.1 * (s - FADE_AT));
+    let x = ((s - FADE_AT) / FADE_FOR).min(1.0);
+    let alpha = x * x * (3.0 - 2.0 * x);
+    let t = from.t.iter().zip(&to.t).map(|(a, b)| a.lerp(*b, alpha)).collect();
+    let q = from.q.iter().zip(&to.q).map(|(a, b)| a.slerp(*b, alpha)).collect();
+    super::reference::RefPose { t, q }
+}
+
+#[test]
+fn a_crossfade_s_substeps_see_the_mix_at_their_own_time_as_an_f64_run_does() {
+    let clip = swinging();
+    let rig = reference_rig(&clip);
+    let hz = 120.0;
+    let mut reference = super::reference::RefSprings::new(&rig, &[chain()], hz, &faded(&clip, 0.0));
+    let fps = 30u32;
+    let frames = fading_stream(&clip, fps, 2 * fps);
+    let mut k = 1u32;
+    for (n, frame) in frames.iter().enumerate().skip(1) {
+        let s = n as f64 / f64::from(fps);
+        // Every substep up to the frame, each on the mix at its own time.
+        while f64::from(k) / hz <= s + 1e-9 {
+            reference.step(&faded(&clip, f64::from(k) / hz));
+            k += 1;
+        }
+        let expected = reference.positions(&faded(&clip, s));
+        let core: Vec<Vec3> = model(&clip, frame);
+        for &j in &[2usize, 3, 4] {
+            let error = (core[j].as_dvec3() - expected[j]).length();
+            assert!(error <= 2e-5, "frame {n} ({s} s), joint {j}: {:?} vs {:?} ({error} m)", core[j], expected[j]);
         }
     }
 }
