@@ -8,6 +8,7 @@
 
 mod broadcast_budgets;
 mod broadcasts;
+mod control_budget;
 mod compact;
 mod graphs;
 mod grpc_api;

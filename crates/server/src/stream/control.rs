@@ -504,6 +504,14 @@ pub trait Repricing: Send + Sync + std::fmt::Debug {
     /// [`ControlError::Work`]: over the stream's limit, its caller's share
     /// or the node's capacity; the stream holds what it held.
     fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError>;
+
+    /// Takes one write of the caller's write budget for a control, as a
+    /// REST control (or a broadcast socket's) does: a socket's controls
+    /// are writes however they are sent.
+    ///
+    /// # Errors
+    /// [`ControlError::Refused`] with `rate_limited` (429) past the budget.
+    fn admit(&self) -> Result<(), ControlError>;
 }
 
 /// Checks controls against the stream's motions: numbers in range, a
@@ -563,6 +571,12 @@ impl ControlCheck {
     }
 
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        // Before any work on it; `stop` ends the stream, so it cannot flood.
+        if control != Control::Stop
+            && let Some(priced) = &self.repricing
+        {
+            priced.admit()?;
+        }
         let control = control.validate().map_err(ControlError::Invalid)?;
         if let Some(graph) = &self.graph {
             if let Some(why) = control.refused_on_graph() {
