@@ -8,8 +8,8 @@
 
 mod broadcast_budgets;
 mod broadcasts;
-mod control_budget;
 mod compact;
+mod control_budget;
 mod graphs;
 mod grpc_api;
 mod grpc_ik;
