@@ -28,8 +28,10 @@
 //! before that tick. A copy adopted from the store starts from the newest
 //! stored checkpoint (`checkpoint`); the task stores one every checkpoint
 //! interval, a second plus the control lead after its tick (so that every
-//! control stamped before it has been heard), and forgets the controls before the oldest
-//! state it keeps. A long catch-up stops between ticks when the broadcast
+//! control stamped before it has been heard; the store keeps it only if it
+//! holds exactly the stored controls of its ticks, and refuses a control
+//! for a tick a stored checkpoint has passed: [`Journal::checkpoint`]), and
+//! forgets the controls before the oldest state it keeps. A long catch-up stops between ticks when the broadcast
 //! is deleted or the server shuts down.
 //!
 //! Its work is priced and charged to its creator for its life, re-priced
