@@ -56,7 +56,7 @@ async fn a_flood_of_controls_on_a_private_stream_is_refused_rate_limited_and_oth
         while started.elapsed() < FLOOD {
             every.tick().await;
             for _ in 0..20 {
-                let op = if sent % 2 == 0 {
+                let op = if sent.is_multiple_of(2) {
                     json!({"op": "seek", "time": 1.0})
                 } else {
                     json!({"op": "speed", "speed": 2.0})
