@@ -491,9 +491,10 @@ impl ControlError {
     }
 }
 
-/// What a control may make a stream cost: the service prices what a
-/// control leaves the stream evaluating and charges its caller for it in
-/// place of what it held (`request::stream`). A crossfade is priced at both
+/// What a control may make a stream cost: one write of its caller's
+/// write budget, and what it leaves the stream evaluating, which the
+/// service prices and charges its caller for in place of what it held
+/// (`request::stream`). A crossfade is priced at both
 /// motions (the fade evaluates both), an `ik` control at the motion playing
 /// with the new constraints.
 pub trait Repricing: Send + Sync + std::fmt::Debug {
