@@ -22,7 +22,9 @@ bs_serve() {
   ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
   ib_bin release
   ib_workdir
-  ib_serve server --data-dir "$IB_WORK/data" --max-streams 40000 --max-streams-per-client 40000 --max-connections 40000
+  # One caller (loopback) drives every stream, and each stream's controls are writes of its budget.
+  ib_serve server --data-dir "$IB_WORK/data" --max-streams 40000 --max-streams-per-client 40000 --max-connections 40000 \
+    --write-rate 100000 --write-burst 100000
   pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
   echo "server pid $pid, $http, $grpc; reports in $out"
 }

@@ -38,7 +38,7 @@ use super::request::{
 };
 use super::state::AppState;
 use crate::auth::CallerKey;
-use crate::store::{ClipStore, StoredBroadcast, StoredCheckpoint, StoredControl};
+use crate::store::{ClipStore, Covers, StoredBroadcast, StoredCheckpoint, StoredControl};
 use crate::stream::{
     Broadcast, BroadcastSpec, Checkpoint, Control, ControlError, Crossfade, Journal, ParsedControl, StampedControl,
     StreamMotion, StreamParams, new_control_id, parse_control, unix_nanos,
@@ -435,13 +435,24 @@ impl Journal for StoreJournal {
         .boxed()
     }
 
-    fn checkpoint(&self, broadcast: &str, checkpoint: &Checkpoint) -> BoxFuture<'static, ()> {
+    fn checkpoint(
+        &self,
+        broadcast: &str,
+        checkpoint: &Checkpoint,
+        from: u64,
+        controls: Vec<(String, u64)>,
+    ) -> BoxFuture<'static, ()> {
         let (store, broadcast) = (Arc::clone(&self.store), broadcast.to_owned());
+        let covers = Covers { from, controls };
         let named = checkpoint.controls();
         let stored = StoredCheckpoint { seq: checkpoint.tick, state: checkpoint.to_text() };
         async move {
-            if let Err(e) = store.put_broadcast_checkpoint(&broadcast, stored, &named).await {
-                tracing::warn!(%broadcast, error = %e, "a broadcast checkpoint was not stored");
+            match store.put_broadcast_checkpoint(&broadcast, stored, &named, &covers).await {
+                Ok(true) => {}
+                // Another node's came first, or this node's controls differ from the stored ones (it has not
+                // heard one yet, or one it applied is not stored): the next checkpoint, or another node's.
+                Ok(false) => tracing::debug!(%broadcast, "a broadcast checkpoint not stored: another's, or unsettled"),
+                Err(e) => tracing::warn!(%broadcast, error = %e, "a broadcast checkpoint was not stored"),
             }
         }
         .boxed()

@@ -12,7 +12,8 @@ use std::sync::Arc;
 
 use anim::Playback;
 use server::store::{
-    ClipStats, ClipStore, ListQuery, MeshWrite, NewClip, OnName, StoreError, StoredBroadcast, StoredControl, StoredMesh,
+    ClipStats, ClipStore, Covers, ListQuery, MeshWrite, NewClip, OnName, StoreError, StoredBroadcast, StoredCheckpoint,
+    StoredControl, StoredMesh,
 };
 
 /// Runs each listed test once per backend: `sqlite::name` and `postgres::name`.
@@ -56,6 +57,7 @@ for_both_backends!(
     a_mesh_is_written_kept_dropped_and_deleted_with_its_clip,
     broadcasts_and_their_controls_read_back_in_order,
     an_idle_broadcast_expires_and_a_touched_one_does_not,
+    a_stored_checkpoint_holds_exactly_the_stored_controls_of_its_ticks,
     a_character_reads_back_and_versions_like_a_clip,
     characters_list_by_name_in_creation_order,
     a_character_name_is_held_by_one_even_under_concurrent_writes,
@@ -440,4 +442,46 @@ async fn an_idle_broadcast_expires_and_a_touched_one_does_not(store: Arc<dyn Cli
     assert!(!store.expire_broadcast(b, now + 30_000).await.unwrap(), "touched later than that");
     assert!(store.expire_broadcast(b, now + 90_000).await.unwrap(), "idle since before then");
     assert!(store.broadcast(b).await.unwrap().is_none());
+}
+
+/// A node restoring the newest checkpoint plays what every node plays: a
+/// checkpoint is stored only if the controls stored for its ticks (since
+/// the previous one) are exactly those its state applied, and a control
+/// for a tick a stored checkpoint has passed is refused (its sender's node
+/// withdraws it), never kept beside a state that lacks it.
+async fn a_stored_checkpoint_holds_exactly_the_stored_controls_of_its_ticks(store: Arc<dyn ClipStore>) {
+    let b = "01a20000-0000-7000-8000-0000000000cc";
+    store.create_broadcast(broadcast(b, 0)).await.unwrap();
+    store.add_broadcast_control(b, stored_control("a", 5)).await.unwrap();
+    let at = |seq: u64| StoredCheckpoint { seq, state: format!("state {seq}") };
+    let covers = |list: &[(&str, u64)]| Covers {
+        from: 0,
+        controls: list.iter().map(|(id, seq)| ((*id).to_owned(), *seq)).collect(),
+    };
+    let newest = || async { store.broadcast_checkpoint(b).await.unwrap().map(|c| c.seq) };
+
+    // A node that has not heard `a`, or that applied `x`, which is not stored: nothing stored.
+    assert!(!store.put_broadcast_checkpoint(b, at(10), &[], &covers(&[])).await.unwrap());
+    assert!(!store.put_broadcast_checkpoint(b, at(10), &[], &covers(&[("a", 5), ("x", 7)])).await.unwrap());
+    assert_eq!(newest().await, None);
+    // Exactly the stored ones (a control after the tick is not its business).
+    assert!(store.put_broadcast_checkpoint(b, at(10), &[], &covers(&[("a", 5), ("y", 12)])).await.unwrap());
+    assert_eq!(newest().await, Some(10));
+    assert!(store.broadcast(b).await.unwrap().unwrap().controls.is_empty(), "`a` is in the state now");
+
+    // Heard after the checkpoint was stored: too late for its tick (or the checkpoint's own).
+    for (id, seq) in [("late", 8), ("at", 10)] {
+        let refused = store.add_broadcast_control(b, stored_control(id, seq)).await;
+        assert!(matches!(refused, Err(StoreError::Unavailable(_))), "{id}: {refused:?}");
+    }
+    store.add_broadcast_control(b, stored_control("next", 11)).await.unwrap();
+    let ids: Vec<String> = store.broadcast(b).await.unwrap().unwrap().controls.into_iter().map(|c| c.id).collect();
+    assert_eq!(ids, ["next"]);
+
+    // The first of a tick stays; an older one never replaces a newer.
+    assert!(!store.put_broadcast_checkpoint(b, at(10), &[], &covers(&[])).await.unwrap());
+    assert!(store.put_broadcast_checkpoint(b, at(20), &[], &covers(&[("a", 5), ("next", 11)])).await.unwrap());
+    assert!(!store.put_broadcast_checkpoint(b, at(15), &[], &covers(&[("next", 11)])).await.unwrap());
+    let stored = store.broadcast_checkpoint(b).await.unwrap().unwrap();
+    assert_eq!((stored.seq, stored.state.as_str()), (20, "state 20"));
 }

@@ -9,6 +9,7 @@
 mod broadcast_budgets;
 mod broadcasts;
 mod compact;
+mod control_budget;
 mod graphs;
 mod grpc_api;
 mod grpc_ik;

@@ -200,8 +200,8 @@ async fn store_hop_graph(target: &Target, http: &reqwest::Client) -> String {
 }
 
 /// A socket flooding its graph stream and a graph broadcast with `set`
-/// controls: each is checked and queued or refused (`bad_control` past the
-/// 32 pending; a broadcast's `rate_limited` past the write budget,
+/// controls: each is checked and queued or refused (`rate_limited` past the
+/// write budget, `bad_control` past the 32 pending; a broadcast's
 /// `unavailable` past its store queue), the frames keep coming, the last
 /// setting shows, and the probes answer throughout.
 #[tokio::test(flavor = "multi_thread")]
@@ -216,7 +216,7 @@ async fn a_set_flood_on_a_graph_stream_and_broadcast_leaves_the_node_answering()
     let open = json!({"op": "open", "motion": motion, "fps": 60, "report": true});
     ws.send(Message::Text(open.to_string().into())).await.unwrap();
     let started = Instant::now();
-    let flood = flood_sets(ws, 20_000, &["bad_control"]).await;
+    let flood = flood_sets(ws, 20_000, &["rate_limited", "bad_control"]).await;
     let report = probes.finish();
     println!(
         "FIGURE {} set controls on a graph stream in {:.1} s: {} refused, {} frames meanwhile",

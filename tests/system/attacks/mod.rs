@@ -18,6 +18,7 @@
 mod answers;
 mod broadcasts;
 mod builds;
+mod compact;
 mod connections;
 mod graphs;
 mod imports;

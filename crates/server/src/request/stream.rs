@@ -36,6 +36,9 @@ struct StreamCharge {
     fps: u32,
     /// `max_request_work`, per second of playback.
     limit: u64,
+    /// Whose write budget its controls draw on.
+    caller: Caller,
+    writes: Arc<crate::ratelimit::WriteLimiter>,
 }
 
 impl Repricing for StreamCharge {
@@ -58,6 +61,10 @@ impl Repricing for StreamCharge {
             let detail = format!("this control would make the stream cost {per_sec} work units per second: {e}");
             ApiError::Relayed { status: e.status().as_u16(), code: e.code(), detail }.to_control()
         })
+    }
+
+    fn admit(&self) -> Result<(), ControlError> {
+        self.writes.admit(&self.caller).map_err(|e| e.to_control())
     }
 }
 
@@ -327,7 +334,8 @@ impl RawStream<'_> {
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         let ticket = state.work.charge(&caller.key(), per_sec)?;
         let limit = state.config.limits.max_request_work;
-        let charge = Arc::new(StreamCharge { ticket: Mutex::new(ticket), frame, fps, limit });
+        let (writes, payer) = (Arc::clone(&state.writes), caller.clone());
+        let charge = Arc::new(StreamCharge { ticket: Mutex::new(ticket), frame, fps, limit, caller: payer, writes });
         Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.priced(charge)))
     }
 

@@ -27,6 +27,15 @@ pub struct StoredControl {
     pub control: String,
 }
 
+/// The controls a checkpoint's state has applied, as the node that wrote
+/// it knows them: every control it heard stamped from `from` on, up to the
+/// checkpoint's tick, as (id, seq).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Covers {
+    pub from: u64,
+    pub controls: Vec<(String, u64)>,
+}
+
 /// A broadcast's checkpoint as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StoredCheckpoint {

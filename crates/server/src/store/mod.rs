@@ -43,7 +43,7 @@ mod sql_character;
 mod sql_document;
 pub mod sqlite;
 
-pub use broadcast::{StoredBroadcast, StoredCheckpoint, StoredControl};
+pub use broadcast::{Covers, StoredBroadcast, StoredCheckpoint, StoredControl};
 pub use character::{CharacterMeta, CharacterQuery, NewCharacter, StoredCharacter};
 pub use document::{DocKind, DocMeta, DocQuery, NewDoc, StoredDoc, name_reference};
 pub use retry::{RetryPolicy, Transience};
@@ -416,7 +416,9 @@ pub trait ClipStore: Send + Sync + 'static {
     fn create_broadcast(&self, broadcast: StoredBroadcast) -> BoxFuture<'_, Result<(), StoreError>>;
 
     /// Stores a control of broadcast `id`; [`StoreError::NotFound`] if the
-    /// broadcast is gone. Marks the broadcast active. Durable on `Ok`.
+    /// broadcast is gone, [`StoreError::Unavailable`] if a checkpoint of
+    /// its tick or later is stored (it came too late: the checkpoint does
+    /// not hold it). Marks the broadcast active. Durable on `Ok`.
     fn add_broadcast_control<'a>(
         &'a self,
         id: &'a str,
@@ -439,16 +441,22 @@ pub trait ClipStore: Send + Sync + 'static {
     /// returns whether it did.
     fn expire_broadcast<'a>(&'a self, id: &'a str, before_ms: i64) -> BoxFuture<'a, Result<bool, StoreError>>;
 
-    /// Stores broadcast `id`'s checkpoint of tick `checkpoint.seq` (the
-    /// same row again replaces itself), deletes its older checkpoints and
-    /// its controls stamped at or before it except `named` (those the
-    /// checkpoint refers to); nothing if the broadcast is gone.
+    /// Stores broadcast `id`'s checkpoint of tick `checkpoint.seq`, deletes
+    /// its older checkpoints and its controls stamped at or before it
+    /// except `named` (those the checkpoint refers to). `covers` are the
+    /// controls the checkpoint's state has applied: it is stored only if
+    /// the controls stored since the previous checkpoint (and from
+    /// `covers.from`) up to its tick are exactly those, and no checkpoint of that tick or later is
+    /// stored (so a node restoring it plays what every node plays).
+    /// Returns whether it was stored (not: a mismatch, or the broadcast is
+    /// gone).
     fn put_broadcast_checkpoint<'a>(
         &'a self,
         id: &'a str,
         checkpoint: StoredCheckpoint,
         named: &'a [String],
-    ) -> BoxFuture<'a, Result<(), StoreError>>;
+        covers: &'a Covers,
+    ) -> BoxFuture<'a, Result<bool, StoreError>>;
 
     /// Broadcast `id`'s newest checkpoint, or `None`.
     fn broadcast_checkpoint<'a>(&'a self, id: &'a str) -> BoxFuture<'a, Result<Option<StoredCheckpoint>, StoreError>>;

@@ -25,6 +25,7 @@ use sqlx::migrate::{Migrate, Migrator};
 use sqlx::pool::PoolOptions;
 use sqlx::{ColumnIndex, Connection, Decode, Encode, Executor, IntoArguments, Pool, Row, Type};
 
+use super::broadcast::Covers;
 use super::broadcast::{broadcast_from_row, control_from_row};
 use super::dialect::Dialect;
 use super::filter::list_query;
@@ -85,6 +86,29 @@ const PUT_CHECKPOINT: &str = "INSERT INTO broadcast_checkpoints (broadcast_id, s
 const FORGET_CHECKPOINTS: &str = "DELETE FROM broadcast_checkpoints WHERE broadcast_id = $1 AND seq < $2";
 const NEWEST_CHECKPOINT: &str =
     "SELECT seq, state FROM broadcast_checkpoints WHERE broadcast_id = $1 ORDER BY seq DESC LIMIT 1";
+const CHECKPOINTS_FROM: &str = "SELECT seq FROM broadcast_checkpoints WHERE broadcast_id = $1 AND seq >= $2 LIMIT 1";
+const CHECKPOINTS_BEFORE: &str = "SELECT seq FROM broadcast_checkpoints WHERE broadcast_id = $1 AND seq < $2 \
+     ORDER BY seq DESC LIMIT 1";
+const CONTROLS_BETWEEN: &str =
+    "SELECT id, seq FROM broadcast_controls WHERE broadcast_id = $1 AND seq > $2 AND seq <= $3";
+
+/// What a broadcast's control and checkpoint writes lock (PostgreSQL), so
+/// that each sees the other's: a control is never stored for a tick a
+/// stored checkpoint has passed, nor a checkpoint without a control stored
+/// for its ticks.
+fn broadcast_lock(id: &str) -> String {
+    format!("broadcast {id}")
+}
+
+/// Whether the controls `stored` after the previous checkpoint (`since`)
+/// up to a new one's tick `seq` are exactly those it `covers` in that span.
+fn same_controls(mut stored: Vec<(String, u64)>, covers: &[(String, u64)], since: i64, seq: i64) -> bool {
+    let span = |c: &&(String, u64)| (since + 1..=seq).contains(&(c.1 as i64));
+    let mut covered: Vec<(String, u64)> = covers.iter().filter(span).cloned().collect();
+    stored.sort();
+    covered.sort();
+    stored == covered
+}
 
 /// The statements that check names in a table of named, versioned rows
 /// (clips, characters): names identify rows the same way in each.
@@ -692,7 +716,15 @@ where
         async move {
             let started = Instant::now();
             let r = async {
-                let mut tx = self.pool.begin().await?;
+                let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
+                if let Some(lock) = DB::LOCK_NAME {
+                    sqlx::query(lock).bind(broadcast_lock(id)).execute(&mut *tx).await?;
+                }
+                // A checkpoint of its tick or later is stored without it: too late to play everywhere.
+                let later = sqlx::query(CHECKPOINTS_FROM).bind(id).bind(control.seq as i64);
+                if later.fetch_optional(&mut *tx).await?.is_some() {
+                    return Ok(None);
+                }
                 let done = sqlx::query(INSERT_CONTROL)
                     .bind(&control.id)
                     .bind(id)
@@ -702,12 +734,16 @@ where
                     .await?;
                 sqlx::query(TOUCH_BROADCAST).bind(id).bind(now_millis()).execute(&mut *tx).await?;
                 tx.commit().await?;
-                Ok(DB::rows_affected(&done) == 1)
+                Ok(Some(DB::rows_affected(&done) == 1))
             }
             .await;
             match timed::<DB, _>("add_broadcast_control", started, r)? {
-                true => Ok(()),
-                false => Err(StoreError::NotFound),
+                Some(true) => Ok(()),
+                Some(false) => Err(StoreError::NotFound),
+                None => Err(StoreError::Unavailable(
+                    "a checkpoint of the control's tick was stored first: it came too late to be played on every node"
+                        .into(),
+                )),
             }
         }
         .boxed()
@@ -781,19 +817,44 @@ where
         id: &'a str,
         checkpoint: StoredCheckpoint,
         named: &'a [String],
-    ) -> BoxFuture<'a, Result<(), StoreError>> {
+        covers: &'a Covers,
+    ) -> BoxFuture<'a, Result<bool, StoreError>> {
         async move {
             let started = Instant::now();
             let seq = checkpoint.seq as i64;
             let r = async {
                 let mut tx = self.pool.begin_with(DB::BEGIN_WRITE).await?;
-                let put = sqlx::query(PUT_CHECKPOINT).bind(id).bind(seq).bind(&checkpoint.state);
-                if DB::rows_affected(&put.execute(&mut *tx).await?) == 1 {
-                    sqlx::query(FORGET_CHECKPOINTS).bind(id).bind(seq).execute(&mut *tx).await?;
-                    let forget = sqlx::query(DB::FORGET_CONTROLS).bind(id).bind(seq).bind(DB::string_list(named));
-                    forget.execute(&mut *tx).await?;
+                if let Some(lock) = DB::LOCK_NAME {
+                    sqlx::query(lock).bind(broadcast_lock(id)).execute(&mut *tx).await?;
                 }
-                tx.commit().await
+                // The first checkpoint of a tick stored stays: it was checked as this one is.
+                if sqlx::query(CHECKPOINTS_FROM).bind(id).bind(seq).fetch_optional(&mut *tx).await?.is_some() {
+                    return Ok(false);
+                }
+                let before = sqlx::query(CHECKPOINTS_BEFORE).bind(id).bind(seq).fetch_optional(&mut *tx).await?;
+                let previous = match before {
+                    Some(row) => row.try_get::<i64, _>("seq")?,
+                    None => -1,
+                };
+                // Before `from` the node has let its controls go: it vouches from there on.
+                let since = previous.max(covers.from as i64 - 1);
+                let rows = sqlx::query(CONTROLS_BETWEEN).bind(id).bind(since).bind(seq).fetch_all(&mut *tx).await?;
+                let mut stored = Vec::with_capacity(rows.len());
+                for row in &rows {
+                    stored.push((row.try_get::<String, _>("id")?, row.try_get::<i64, _>("seq")?.max(0) as u64));
+                }
+                if !same_controls(stored, &covers.controls, since, seq) {
+                    return Ok(false);
+                }
+                let put = sqlx::query(PUT_CHECKPOINT).bind(id).bind(seq).bind(&checkpoint.state);
+                if DB::rows_affected(&put.execute(&mut *tx).await?) == 0 {
+                    return Ok(false);
+                }
+                sqlx::query(FORGET_CHECKPOINTS).bind(id).bind(seq).execute(&mut *tx).await?;
+                let forget = sqlx::query(DB::FORGET_CONTROLS).bind(id).bind(seq).bind(DB::string_list(named));
+                forget.execute(&mut *tx).await?;
+                tx.commit().await?;
+                Ok(true)
             }
             .await;
             timed::<DB, _>("put_broadcast_checkpoint", started, r)

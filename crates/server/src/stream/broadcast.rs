@@ -28,8 +28,10 @@
 //! before that tick. A copy adopted from the store starts from the newest
 //! stored checkpoint (`checkpoint`); the task stores one every checkpoint
 //! interval, a second plus the control lead after its tick (so that every
-//! control stamped before it has been heard), and forgets the controls before the oldest
-//! state it keeps. A long catch-up stops between ticks when the broadcast
+//! control stamped before it has been heard; the store keeps it only if it
+//! holds exactly the stored controls of its ticks, and refuses a control
+//! for a tick a stored checkpoint has passed: [`Journal::checkpoint`]), and
+//! forgets the controls before the oldest state it keeps. A long catch-up stops between ticks when the broadcast
 //! is deleted or the server shuts down.
 //!
 //! Its work is priced and charged to its creator for its life, re-priced
@@ -123,10 +125,21 @@ pub trait Journal: Send + Sync + 'static {
     /// Ends the broadcast everywhere if no node has had viewers and nobody
     /// a control for `idle`; returns whether it did.
     fn expire(&self, broadcast: &str, idle: Duration) -> BoxFuture<'static, bool>;
-    /// Stores `checkpoint` (idempotent: every node writes the same one) and
-    /// lets go of the controls it makes unnecessary.
-    fn checkpoint(&self, broadcast: &str, checkpoint: &Checkpoint) -> BoxFuture<'static, ()> {
-        let _ = (broadcast, checkpoint);
+    /// Stores `checkpoint`, whose state has applied `controls` (id, seq:
+    /// every one this node heard stamped from `from` to its tick), and lets go of the controls it makes unnecessary. The
+    /// store keeps it only if the controls stored for its ticks are
+    /// exactly those (a node that has not heard one, or applied one not
+    /// stored, writes nothing), and refuses a control for a tick a stored
+    /// checkpoint has passed: a node restoring it plays what every node
+    /// plays.
+    fn checkpoint(
+        &self,
+        broadcast: &str,
+        checkpoint: &Checkpoint,
+        from: u64,
+        controls: Vec<(String, u64)>,
+    ) -> BoxFuture<'static, ()> {
+        let _ = (broadcast, checkpoint, from, controls);
         Box::pin(async {})
     }
 }
@@ -1070,8 +1083,9 @@ impl Task {
     /// Files `controls` and drops the `revoked` ones; returns the earliest
     /// stamp among them for a tick already stepped that the program can
     /// still go back to. One from before its floor is already in the state
-    /// it started from (a control a checkpoint names), or too late to step
-    /// here (heard after the state before it was let go): it is skipped.
+    /// it started from: a stored checkpoint holds every control stored for
+    /// its ticks, and the store refuses one for a tick a stored checkpoint
+    /// has passed (`Journal::checkpoint`). It is skipped.
     fn file(&mut self, program: &Program, controls: Vec<StampedControl>, revoked: &[Arc<str>]) -> Option<u64> {
         let (next, floor) = (program.next(), program.floor());
         let mut rewind = None::<u64>;
@@ -1110,7 +1124,8 @@ impl Task {
         let Some(checkpoint) = program.checkpoint_of(tick) else { return };
         self.checkpointed = Some(tick);
         metrics::counter!("inbetween_broadcast_checkpoints_total").increment(1);
-        drop(self.origin.spawn(journal.checkpoint(&self.broadcast.id, &checkpoint)));
+        let controls = self.log.through(tick).map(|c| (c.id.to_string(), c.seq)).collect();
+        drop(self.origin.spawn(journal.checkpoint(&self.broadcast.id, &checkpoint, program.floor(), controls)));
     }
 
     /// Whether the broadcast ends idle now. Without a journal: no viewers

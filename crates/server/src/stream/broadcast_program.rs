@@ -103,6 +103,11 @@ impl ControlLog {
         self.controls.drain(..before);
     }
 
+    /// The controls stamped at or before `seq`, in order.
+    pub fn through(&self, seq: u64) -> impl Iterator<Item = &StampedControl> {
+        self.controls.iter().take_while(move |c| c.seq <= seq)
+    }
+
     /// How many are stamped at or after `seq`.
     pub fn since(&self, seq: u64) -> usize {
         self.controls.len() - self.controls.partition_point(|c| c.seq < seq)

@@ -498,9 +498,10 @@ impl ControlError {
     }
 }
 
-/// What a control may make a stream cost: the service prices what a
-/// control leaves the stream evaluating and charges its caller for it in
-/// place of what it held (`request::stream`). A crossfade is priced at both
+/// What a control may make a stream cost: one write of its caller's
+/// write budget, and what it leaves the stream evaluating, which the
+/// service prices and charges its caller for in place of what it held
+/// (`request::stream`). A crossfade is priced at both
 /// motions (the fade evaluates both), an `ik` control at the motion playing
 /// with the new constraints.
 pub trait Repricing: Send + Sync + std::fmt::Debug {
@@ -511,6 +512,14 @@ pub trait Repricing: Send + Sync + std::fmt::Debug {
     /// [`ControlError::Work`]: over the stream's limit, its caller's share
     /// or the node's capacity; the stream holds what it held.
     fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError>;
+
+    /// Takes one write of the caller's write budget for a control, as a
+    /// REST control (or a broadcast socket's) does: a socket's controls
+    /// are writes however they are sent.
+    ///
+    /// # Errors
+    /// [`ControlError::Refused`] with `rate_limited` (429) past the budget.
+    fn admit(&self) -> Result<(), ControlError>;
 }
 
 /// Checks controls against the stream's motions: numbers in range, a
@@ -570,6 +579,12 @@ impl ControlCheck {
     }
 
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        // Before any work on it; `stop` ends the stream, so it cannot flood.
+        if control != Control::Stop
+            && let Some(priced) = &self.repricing
+        {
+            priced.admit()?;
+        }
         let control = control.validate().map_err(ControlError::Invalid)?;
         if let Some(graph) = &self.graph {
             if let Some(why) = control.refused_on_graph() {
