@@ -330,8 +330,10 @@ pub async fn delete(state: &AppState, id: &str) -> Result<bool, ApiError> {
 
 /// Brings every copy here in step with the store: stored broadcasts
 /// started (at startup: resumed at the tick the wall clock says) or given
-/// the controls not heard, deleted ones ended.
+/// the controls not heard, deleted ones ended. A broadcast created here
+/// since the resync began is not in the store's answer yet, and is kept.
 pub async fn resync(state: &AppState) {
+    let began = std::time::SystemTime::now();
     let stored = match state.store.broadcasts().await {
         Ok(all) => all,
         Err(e) => {
@@ -341,7 +343,7 @@ pub async fn resync(state: &AppState) {
     };
     let ids: HashSet<String> = stored.iter().map(|b| b.id.clone()).collect();
     for b in state.streams.broadcasts().list() {
-        if !ids.contains(b.id()) {
+        if !ids.contains(b.id()) && b.created_at() < began {
             state.streams.broadcasts().delete(b.id());
         }
     }
