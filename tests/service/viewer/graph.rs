@@ -127,7 +127,7 @@ async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_
     shows_at(page, TAIL_TIP, &sprung).await;
     let keyed = graph_pose(&app, &json!({"layers": [{"graph": graph}]}), time, 3.0, TAIL_TIP).await;
     let swing = sprung.iter().zip(&keyed).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
-    assert!(swing > 1e-3, "the sprung tail tip is {swing} m from the graph's own");
+    assert!(swing > 1e-3, "the sprung tail tip is {swing} units from the graph's own");
 
     // Back to idle, then played: the stream opens (from tick 0) with the chain, and the slider takes the Fox to a run.
     set_value(page, "graph-speed", "0").await;
