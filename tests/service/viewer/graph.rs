@@ -3,11 +3,18 @@
 //! dragged and the trigger pressed. The page sends `set` controls; the
 //! frames' reports take the graph from `idle` through the fade to `move`,
 //! with the weights the blend's definition gives for the speed set, and the
-//! trigger to `look`; the panel shows each.
+//! trigger to `look`; the panel shows each. With a chain on the Fox's tail
+//! from the springs panel, the graph's motion carries it: the pose the page
+//! shows is the server's pose of the graph with those springs, its tail away
+//! from the same graph's without them at the same tick, and the stream the
+//! slider takes to a run opens with the chain.
+//!
+//! `INBETWEEN_GRAPH_SCREENSHOT=docs/images/viewer-graph.png` saves the page
+//! with the Fox running on the graph, its tail on springs (docs/viewer.md).
 
-use serde_json::json;
+use serde_json::{Value, json};
 
-use super::{click, set_value, text, viewer_on_clip};
+use super::{click, floats, post_json, set_value, text, viewer_on_clip};
 use crate::api::graph_samples::fox_graph_as;
 
 /// Waits until the panel's state line says `want`.
@@ -52,4 +59,108 @@ async fn the_speed_slider_takes_the_fox_from_idle_to_a_run_and_the_trigger_to_a_
     let motion = page.eval("window.inbetweenViewer.panel.motion()").await;
     assert_eq!(motion["layers"][0]["clip"], json!(survey), "{motion}");
     assert_eq!(text(page, "graph-state").await, "");
+}
+
+const TAIL_TIP: &str = "b_Tail03_014";
+
+/// The server's model-space position of `joint` in the graph `motion` at
+/// `time`, with `speed` set at time 0 (the page's paused view: its settings
+/// as inputs at 0, at its 30 fps).
+async fn graph_pose(app: &crate::common::TestApp, motion: &Value, time: f64, speed: f64, joint: &str) -> Vec<f64> {
+    let body = json!({"motion": motion, "time": time, "space": "model", "fps": 30,
+                      "inputs": [{"time": 0, "set": {"speed": speed}}]});
+    let pose = post_json(app, "/v1/poses", &body).await;
+    let joint = pose["joints"].as_array().unwrap().iter().find(|j| j["name"] == joint).unwrap();
+    floats(&joint["translation"])
+}
+
+/// Waits until the page shows `joint` within 1e-6 of `want` (model space).
+async fn shows_at(page: &mut super::cdp::Page, joint: &str, want: &[f64]) {
+    page.wait_for(
+        &format!(
+            "(() => {{ const s = window.inbetweenViewer.state; const p = s.positions[s.names.indexOf({})]; \
+             return p && Math.hypot(p[0] - {}, p[1] - {}, p[2] - {}) < 1e-6; }})()",
+            json!(joint),
+            want[0],
+            want[1],
+            want[2]
+        ),
+        10,
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_to_a_run() {
+    let app = super::start().await;
+    let (graph, _) = fox_graph_as(&app, Some(super::TOKEN)).await;
+    let listed = app.get_json("/v1/graphs").await;
+    let summary = listed["graphs"].as_array().unwrap().iter().find(|g| g["id"] == json!(graph)).unwrap();
+    let survey = summary["clips"][0].as_str().unwrap().to_owned();
+    let Some(mut browser) = viewer_on_clip(&app, &survey).await else { return };
+    let page = &mut browser.page;
+    assert_eq!(page.eval("document.getElementById('fps').value").await, json!("30"));
+
+    let option = format!("[...document.getElementById('graph').options].some(o => o.value === {})", json!(graph));
+    page.wait_for(&option, 10).await;
+    set_value(page, "graph", &graph).await;
+    page.wait_for("document.body.classList.contains('graphing') && document.getElementById('graph-speed')", 10).await;
+    state_shows(page, "idle", 10).await;
+
+    // The springs panel stays beside the graph; its chain on the tail goes into the graph's motion.
+    assert!(page.eval("document.getElementById('springs-panel').offsetParent !== null").await.as_bool().unwrap());
+    page.wait_for("document.getElementById('spring-root').value === 'b_Tail01_012'", 10).await;
+    click(page, "spring-add").await;
+    let motion = page
+        .wait_for("window.inbetweenViewer.panel.motion().springs && window.inbetweenViewer.panel.motion()", 10)
+        .await;
+    assert_eq!(motion["layers"], json!([{"graph": graph}]), "{motion}");
+    assert_eq!(motion["springs"][0]["joints"], json!(["b_Tail01_012", "b_Tail02_013", TAIL_TIP]), "{motion}");
+
+    // Paused at speed 3, 0.9 s in: the server's pose of the graph with the chain, the tail tip off the springless one's.
+    let time = 0.9;
+    set_value(page, "seek", &time.to_string()).await;
+    page.wait_for(&format!("window.inbetweenViewer.state.requestTime === {time}"), 10).await;
+    set_value(page, "graph-speed", "3").await; // a new paused pose at the time shown
+    state_shows(page, "move", 10).await;
+    let sprung = graph_pose(&app, &motion, time, 3.0, TAIL_TIP).await;
+    shows_at(page, TAIL_TIP, &sprung).await;
+    let keyed = graph_pose(&app, &json!({"layers": [{"graph": graph}]}), time, 3.0, TAIL_TIP).await;
+    let swing = sprung.iter().zip(&keyed).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+    assert!(swing > 1e-3, "the sprung tail tip is {swing} units from the graph's own");
+
+    // Back to idle, then played: the stream opens (from tick 0) with the chain, and the slider takes the Fox to a run.
+    set_value(page, "graph-speed", "0").await;
+    state_shows(page, "idle", 10).await;
+    // The open messages the page sends, kept as sent.
+    page.eval(
+        "(() => { window.sentOpens = []; const send = WebSocket.prototype.send; \
+         WebSocket.prototype.send = function (m) { \
+           if (JSON.parse(m).op === 'open') window.sentOpens.push(JSON.parse(m)); return send.call(this, m); }; \
+         return true; })()",
+    )
+    .await;
+    click(page, "play").await;
+    page.wait_for("window.inbetweenViewer.state.frames > 0", 10).await;
+    let open = page.eval("window.sentOpens[0]").await;
+    assert_eq!(open["motion"], motion, "{open}");
+    assert_eq!(open["start"], json!(0), "{open}");
+    set_value(page, "graph-speed", "2").await;
+    state_shows(page, "move", 10).await;
+    set_value(page, "graph-speed", "3").await;
+    page.wait_for("document.getElementById('graph-weights').textContent === 'move: Run 1.00'", 10).await;
+    assert!(
+        page.eval("window.inbetweenViewer.state.ws !== null && window.inbetweenViewer.state.playing")
+            .await
+            .as_bool()
+            .unwrap()
+    );
+    page.picture("INBETWEEN_GRAPH_SCREENSHOT", std::time::Duration::from_millis(700), 0.7).await;
+
+    // Springs off: the graph plays on without the chain.
+    click(page, "springs-on").await;
+    page.wait_for("window.sentOpens.length === 2", 10).await;
+    let open = page.eval("window.sentOpens[1]").await;
+    assert!(open["motion"].get("springs").is_none(), "{open}");
+    page.wait_for("window.inbetweenViewer.state.frames > 0 && window.inbetweenViewer.state.playing", 10).await;
 }

@@ -45,14 +45,20 @@ export function layerDoc(layer, playback) {
 /// The motion the page plays (docs/motion.md), IK included unless `ik` is false
 /// (a crossfade's motion carries none: a stream has one IK list).
 export function motion({ ik = true } = {}) {
-  if (state.graph) return { layers: [{ graph: state.graph.id }] };
+  if (state.graph) return withSprings({ layers: [{ graph: state.graph.id }] }, panel.springs);
   const playback = options().playback;
   const doc = { layers: panel.layers.map((l) => layerDoc(l, playback)) };
   if (panel.rootMode) doc.root_motion = { mode: panel.rootMode, ...(panel.rootJoint ? { joint: panel.rootJoint } : {}) };
   if (ik && panel.ik) doc.ik = [constraint()];
   if (state.character) doc.character = state.character.id;
-  if (panel.springs.on && panel.springs.chains.length) doc.springs = springsDoc(panel.springs);
-  return doc;
+  return withSprings(doc, panel.springs);
+}
+
+/// A motion `doc` with the page's chains as its `springs` when they are on:
+/// a graph's pose takes them as a clip's does (docs/graphs.md, “What
+/// composes with a graph”).
+export function withSprings(doc, springs) {
+  return springs.on && springs.chains.length ? { ...doc, springs: springsDoc(springs) } : doc;
 }
 
 /// A graph's settings that hold (floats and bools; a trigger lasts one tick),
@@ -85,7 +91,7 @@ export function openMessage() {
     motion: motion(),
     fps: fps(),
     speed: Number($("speed").value) || 1,
-    start: state.requestTime,
+    start: state.graph ? 0 : state.requestTime, // a graph plays from its tick 0 (docs/graphs.md)
     space,
     ease,
     paused: panel.openPaused,

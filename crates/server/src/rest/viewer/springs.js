@@ -48,7 +48,7 @@ export function chainRoots(joints, taken = new Set()) {
 // ---- the panel ----
 
 const joints = () => shownSkeleton()?.joints ?? [];
-const ownChains = () => (state.character ? [] : (state.doc?.springs ?? []));
+const ownChains = () => (state.character || state.graph ? [] : (state.doc?.springs ?? []));
 const taken = () => new Set(springs.chains.flatMap((c) => c.joints.slice(0, -1)));
 
 function renderChains() {

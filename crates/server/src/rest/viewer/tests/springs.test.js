@@ -3,7 +3,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { springsDoc } from "../composition.js";
+import { springsDoc, withSprings } from "../composition.js";
 import { chainFrom, chainRoots } from "../springs.js";
 
 // The Fox's tail and a leg, in skeleton order (a parent before its children).
@@ -36,4 +36,17 @@ test("roots are joints with a child, in no chain yet, swingy names first", () =>
 test("the page's chains become the motion's springs with one stiffness, drag and downward gravity", () => {
   const settings = { chains: [{ name: "tail1", joints: ["tail1", "tail2", "tail3"] }], on: true, stiffness: 0.8, drag: 0.3, gravity: 9.81 };
   assert.deepEqual(springsDoc(settings), [{ name: "tail1", joints: ["tail1", "tail2", "tail3"], stiffness: 0.8, drag: 0.3, gravity: [0, -9.81, 0] }]);
+});
+
+test("a graph's motion takes the chains when they are on, and none when off or empty", () => {
+  const graph = { layers: [{ graph: "g1" }] };
+  const chains = [{ name: "tail1", joints: ["tail1", "tail2"] }];
+  const on = { chains, on: true, stiffness: 1, drag: 0.4, gravity: 9.81 };
+  assert.deepEqual(withSprings(graph, on), {
+    layers: [{ graph: "g1" }],
+    springs: [{ name: "tail1", joints: ["tail1", "tail2"], stiffness: 1, drag: 0.4, gravity: [0, -9.81, 0] }],
+  });
+  assert.equal(withSprings(graph, { ...on, on: false }), graph);
+  assert.equal(withSprings(graph, { ...on, chains: [] }), graph);
+  assert.deepEqual(graph, { layers: [{ graph: "g1" }] }, "the motion given is left as it was");
 });
