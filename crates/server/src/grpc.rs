@@ -98,7 +98,7 @@ impl GrpcService {
             Some(When::Range(r)) => (None, Some(r)),
             None => (None, None),
         };
-        let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
+        let raw = RawBatch::of_message(times, range, RawModes::of_enums(req.space, req.playback, req.ease), req.format);
         Ok(raw.resolve(&self.state, &req.clip_id, Wire::Protobuf, coding).await?)
     }
 
@@ -135,7 +135,7 @@ impl GrpcService {
             fps: Some(Raw::Number(f64::from(req.fps))),
             start: req.start_time.map(Raw::Number),
             speed: req.speed.map(Raw::Number),
-            modes: modes(req.space, req.playback, req.ease),
+            modes: RawModes::of_enums(req.space, req.playback, req.ease),
             // `Frame`s with a pose, or with compact bytes.
             encoding: Some(Raw::Enum(req.encoding)),
             max_error: req.max_error.map(Raw::Number),
@@ -302,11 +302,6 @@ fn clip_motion_batch(req: &pb::SampleBatchRequest) -> Result<pb::SampleMotionBat
     })
 }
 
-/// A clip request's space, playback and ease numbers, to be checked.
-pub(crate) fn modes(space: i32, playback: i32, ease: i32) -> RawModes<'static> {
-    RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
-}
-
 /// Where the fields of `StreamRequest` sit.
 fn stream_at(field: Field) -> At {
     match field {
@@ -444,7 +439,7 @@ impl Animation for GrpcService {
         }
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
-            modes: modes(req.space, req.playback, req.ease),
+            modes: RawModes::of_enums(req.space, req.playback, req.ease),
             format: Some(Raw::Enum(req.format)),
             at: in_pose_body,
         };

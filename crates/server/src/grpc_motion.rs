@@ -15,7 +15,6 @@ use glam::Mat4;
 use crate::auth::Caller;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
-use crate::grpc::modes;
 use crate::request::{
     Composed, Field, Format, GraphLayer, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch,
     RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
@@ -213,7 +212,7 @@ pub async fn sample_on_character(
     (req, character): (pb::SampleRequest, &str),
     coding: AnswerCoding,
 ) -> Result<pb::Pose, ApiError> {
-    let modes = modes(req.space, req.playback, req.ease);
+    let modes = RawModes::of_enums(req.space, req.playback, req.ease);
     let checked =
         RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
     let checked = checked.check()?;
@@ -244,7 +243,7 @@ pub async fn sample_batch_on_character(
         Some(ClipWhen::Range(r)) => (None, Some(r)),
         None => (None, None),
     };
-    let raw = RawBatch::of_message(times, range, modes(req.space, req.playback, req.ease), req.format);
+    let raw = RawBatch::of_message(times, range, RawModes::of_enums(req.space, req.playback, req.ease), req.format);
     let playback = raw.check(state.config.limits.max_poses)?.options.playback;
     if req.ease != 0 {
         return Err(crate::request::no_ease_in_motion(in_batch_message(Field::Ease), "with `character`"));

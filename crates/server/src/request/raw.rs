@@ -198,6 +198,13 @@ pub struct RawModes<'a> {
     pub ease: Option<Raw<'a>>,
 }
 
+impl RawModes<'static> {
+    /// A gRPC clip request's space, playback and ease enum numbers, to be checked.
+    pub fn of_enums(space: i32, playback: i32, ease: i32) -> Self {
+        RawModes { space: Some(Raw::Enum(space)), playback: Some(Raw::Enum(playback)), ease: Some(Raw::Enum(ease)) }
+    }
+}
+
 impl RawModes<'_> {
     /// # Errors
     /// `bad_parameter` for a name or number outside an enum.
