@@ -155,6 +155,13 @@ async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_
             .as_bool()
             .unwrap()
     );
+    // The header and the composition column name the graph, not the clip whose skeleton it plays on.
+    let graph_name = "document.getElementById('now-playing').textContent === 'playing: graph fox-locomotion'";
+    page.wait_for(
+        &format!("{graph_name} && document.getElementById('playing').textContent === 'playing: graph fox-locomotion'"),
+        10,
+    )
+    .await;
     page.picture("INBETWEEN_GRAPH_SCREENSHOT", std::time::Duration::from_millis(700), 0.7).await;
 
     // Springs off: the graph plays on without the chain.

@@ -10,7 +10,7 @@ import { api, listAll } from "./api.js";
 import { selectClip } from "./clips.js";
 import { heldSettings } from "./composition.js";
 import { send } from "./controls.js";
-import { $, el, row, setStatus } from "./dom.js";
+import { $, dispatchStatus, el, row, setStatus } from "./dom.js";
 import { on } from "./events.js";
 import { reopen, showPoseAt } from "./player.js";
 import { fps } from "./settings.js";
@@ -87,6 +87,7 @@ export async function choose(id) {
     choosing = false;
   }
   state.graph = { id, name: summary.name, doc, controls: parameterControls(doc) };
+  dispatchStatus({ type: "graph", name: summary.name });
   renderControls();
   showGraphing();
   restart();
@@ -98,6 +99,7 @@ let choosing = false; // selecting the graph's clip (which is not leaving the gr
 function forget(quiet = false) {
   if (!state.graph) return;
   state.graph = null;
+  dispatchStatus({ type: "graph", name: null });
   renderControls();
   showGraphing();
   if (!quiet) restart();

@@ -81,7 +81,8 @@ const fadeSeconds = () => Math.max(0, Number($("fade-duration").value) || 0);
 const report = (e) => setStatus(e.message, true);
 /// The paused view's pose again, at most once a frame.
 const refreshThrottled = throttled(() => showPoseAt(state.requestTime).catch(report));
-const clipName = (id) => state.clips.find((c) => c.id === id)?.name ?? id;
+/// What the page calls clip (or graph) `id`.
+const clipName = (id) => (id === state.graph?.id ? `graph ${state.graph.name}` : state.clips.find((c) => c.id === id)?.name ?? id);
 
 // ---- layers ----
 
@@ -246,7 +247,7 @@ function onFrame(frame) {
     panel.playingClip = frame.pose.clip;
     $("playing").textContent = `playing: ${clipName(frame.pose.clip)}`;
     // A crossfade's clip becomes the page's: its range (a `once` end), list entry and curves.
-    if (frame.pose.clip !== state.clip?.id) adoptClip(frame.pose.clip).catch(report);
+    if (frame.pose.clip !== state.clip?.id && frame.pose.clip !== state.graph?.id) adoptClip(frame.pose.clip).catch(report);
   }
   const total = frame.pose.root_motion?.total;
   if (!total || !panel.rootMode) return;

@@ -29,6 +29,7 @@ export function formatBytes(perSecond) {
 
 /// The next status after `action`:
 /// `select {clip}`, `deselect` (it was deleted), `adopt {clip}` (a crossfade's clip is now the page's),
+/// `graph {name}` (a graph plays on the clip's skeleton; `null`: the clip again),
 /// `play`, `pause`, `ended {time}`, `message {text, error}`.
 export function reduceStatus(s, action) {
   switch (action.type) {
@@ -38,6 +39,8 @@ export function reduceStatus(s, action) {
       return { ...initialStatus, message: s.message };
     case "adopt":
       return { ...s, clip: action.clip, playing: action.clip.name };
+    case "graph":
+      return { ...s, playing: action.name ? `graph ${action.name}` : s.clip?.name ?? null };
     case "play":
       // Playing again makes an end, and any words that were not an error, stale.
       return { ...s, mode: "playing", endedAt: null, message: s.message?.error ? s.message : null };

@@ -49,6 +49,13 @@ test("after a crossfade the header names the clip the frames show", () => {
   assert.equal(statusView(s).line, "Survey: 24 joints, 0–3.417 s");
 });
 
+test("a graph playing on a clip's skeleton is what the header names", () => {
+  const s = run({ type: "select", clip: survey }, { type: "graph", name: "fox-locomotion" }, { type: "play" });
+  assert.equal(statusView(s).header, "playing: graph fox-locomotion");
+  assert.equal(statusView(s).line, "Survey: 24 joints, 0–3.417 s", "the skeleton's clip, for its joints and range");
+  assert.equal(statusView(reduceStatus(s, { type: "graph", name: null })).header, "playing: Survey");
+});
+
 test("playing clears a message but keeps an error", () => {
   const info = run({ type: "select", clip: walk }, { type: "message", text: "event: step" }, { type: "play" });
   assert.equal(statusView(info).line, "Walk: 24 joints, 0–0.708 s");
