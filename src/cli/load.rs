@@ -85,7 +85,8 @@ pub struct LoadArgs {
     /// `name:X`, looked up as `watch` does; a graph layer streams from time 0).
     #[arg(long, conflicts_with_all = ["clip", "motion"])]
     motion_file: Option<PathBuf>,
-    /// With a graph --motion-file: each stream sets this parameter once a second, cycling through the values.
+    /// With a graph --motion-file: each stream sets this parameter once a second, cycling through the values
+    /// (stream i of n at 1 s + i/n s after it opened, then every second: the sets spread over the second).
     #[arg(long = "set", value_name = "NAME=V1,V2,…", value_parser = SetCycle::parse, requires = "motion_file")]
     set_cycle: Option<SetCycle>,
     /// Streams: viewers of one playback instead of independent playbacks.

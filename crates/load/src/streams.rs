@@ -186,6 +186,9 @@ struct Spec {
     motion: Option<Arc<Playable>>,
     /// A graph stream's parameter set once a second.
     set_cycle: Option<Arc<SetCycle>>,
+    /// When in its second this stream sends its sets: the streams' sets
+    /// spread over the second, as players' inputs are, not all at once.
+    set_phase: Duration,
     fps: u32,
     /// `ws-broadcast`: the broadcast the viewers watch.
     broadcast: Option<String>,
@@ -328,7 +331,7 @@ impl Spec {
                         Some(open_motion(&mut ws, open.to_string()).await?)
                     }
                 };
-                let setter = self.set_cycle.clone().map(Setter::new);
+                let setter = self.set_cycle.clone().map(|cycle| Setter::new(cycle, self.set_phase));
                 Ok((Open::Ws(Box::new(ws), self.ws_protobuf, setter), phase))
             }
         }
@@ -450,7 +453,8 @@ impl Spec {
     }
 }
 
-/// A stream's `set` controls, one a second from a second after it opened.
+/// A stream's `set` controls, one a second from a second (and its phase)
+/// after it opened.
 struct Setter {
     cycle: Arc<SetCycle>,
     sent: usize,
@@ -458,8 +462,8 @@ struct Setter {
 }
 
 impl Setter {
-    fn new(cycle: Arc<SetCycle>) -> Setter {
-        Setter { cycle, sent: 0, due: tokio::time::Instant::now() + Duration::from_secs(1) }
+    fn new(cycle: Arc<SetCycle>, phase: Duration) -> Setter {
+        Setter { cycle, sent: 0, due: tokio::time::Instant::now() + Duration::from_secs(1) + phase }
     }
 
     /// The control now due; the next is due a second later.
@@ -630,7 +634,8 @@ fn spawn_streams(
             let start_time = if opts.shared { 0.0 } else { i as f64 * 0.001 };
             let link = links[i % links.len()].clone();
             let hists = Arc::clone(&groups[i / GROUP]);
-            tokio::spawn(spec.clone().run(link, start_time, hists, stop.clone()))
+            let set_phase = Duration::from_secs_f64(i as f64 / n as f64);
+            tokio::spawn(Spec { set_phase, ..spec.clone() }.run(link, start_time, hists, stop.clone()))
         })
         .collect()
 }
@@ -719,6 +724,7 @@ impl Spec {
             clip_id: env.clip_id.clone(),
             motion: env.motion.clone().map(Arc::new),
             set_cycle: opts.set_cycle.clone().map(Arc::new),
+            set_phase: Duration::ZERO,
             fps: opts.fps,
             broadcast,
             floor,
