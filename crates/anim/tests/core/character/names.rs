@@ -391,30 +391,7 @@ fn daz_names_leave_a_second_abdomen_unmapped() {
 }
 
 fn mixamo() -> anim::Skeleton {
-    humanoid(&[
-        "Hips",
-        "Spine",
-        "Spine1",
-        "Spine2",
-        "Neck",
-        "Head",
-        "LeftShoulder",
-        "LeftArm",
-        "LeftForeArm",
-        "LeftHand",
-        "RightShoulder",
-        "RightArm",
-        "RightForeArm",
-        "RightHand",
-        "LeftUpLeg",
-        "LeftLeg",
-        "LeftFoot",
-        "LeftToeBase",
-        "RightUpLeg",
-        "RightLeg",
-        "RightFoot",
-        "RightToeBase",
-    ])
+    humanoid(&MIXAMO)
 }
 
 #[test]
