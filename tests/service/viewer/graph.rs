@@ -22,20 +22,32 @@ async fn state_shows(page: &mut super::cdp::Page, want: &str, seconds: u64) {
     page.wait_for(&format!("document.getElementById('graph-state').textContent === {}", json!(want)), seconds).await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_speed_slider_takes_the_fox_from_idle_to_a_run_and_the_trigger_to_a_look() {
-    let app = super::start().await;
-    let (graph, _) = fox_graph_as(&app, Some(super::TOKEN)).await;
+/// The Fox's locomotion graph stored on `app`, its first clip, and a
+/// browser on the viewer with that clip (`None` where no browser can run).
+async fn fox_graph_viewer(app: &crate::common::TestApp) -> Option<(String, String, super::cdp::Browser)> {
+    let (graph, _) = fox_graph_as(app, Some(super::TOKEN)).await;
     let listed = app.get_json("/v1/graphs").await;
     let summary = listed["graphs"].as_array().unwrap().iter().find(|g| g["id"] == json!(graph)).unwrap();
     let survey = summary["clips"][0].as_str().unwrap().to_owned();
-    let Some(mut browser) = viewer_on_clip(&app, &survey).await else { return };
-    let page = &mut browser.page;
+    let browser = viewer_on_clip(app, &survey).await?;
+    Some((graph, survey, browser))
+}
 
+/// Picks `graph` in the graph panel, once it is listed: its controls show.
+async fn pick_graph(page: &mut super::cdp::Page, graph: &str) {
     let option = format!("[...document.getElementById('graph').options].some(o => o.value === {})", json!(graph));
     page.wait_for(&option, 10).await;
-    set_value(page, "graph", &graph).await;
+    set_value(page, "graph", graph).await;
     page.wait_for("document.body.classList.contains('graphing') && document.getElementById('graph-speed')", 10).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_speed_slider_takes_the_fox_from_idle_to_a_run_and_the_trigger_to_a_look() {
+    let app = super::start().await;
+    let Some((graph, survey, mut browser)) = fox_graph_viewer(&app).await else { return };
+    let page = &mut browser.page;
+
+    pick_graph(page, &graph).await;
     state_shows(page, "idle", 10).await; // the paused pose's report
     assert!(page.eval("document.getElementById('layers').offsetParent === null").await.as_bool().unwrap());
 
@@ -93,18 +105,11 @@ async fn shows_at(page: &mut super::cdp::Page, joint: &str, want: &[f64]) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_to_a_run() {
     let app = super::start().await;
-    let (graph, _) = fox_graph_as(&app, Some(super::TOKEN)).await;
-    let listed = app.get_json("/v1/graphs").await;
-    let summary = listed["graphs"].as_array().unwrap().iter().find(|g| g["id"] == json!(graph)).unwrap();
-    let survey = summary["clips"][0].as_str().unwrap().to_owned();
-    let Some(mut browser) = viewer_on_clip(&app, &survey).await else { return };
+    let Some((graph, _, mut browser)) = fox_graph_viewer(&app).await else { return };
     let page = &mut browser.page;
     assert_eq!(page.eval("document.getElementById('fps').value").await, json!("30"));
 
-    let option = format!("[...document.getElementById('graph').options].some(o => o.value === {})", json!(graph));
-    page.wait_for(&option, 10).await;
-    set_value(page, "graph", &graph).await;
-    page.wait_for("document.body.classList.contains('graphing') && document.getElementById('graph-speed')", 10).await;
+    pick_graph(page, &graph).await;
     state_shows(page, "idle", 10).await;
 
     // The springs panel stays beside the graph; its chain on the tail goes into the graph's motion.
