@@ -62,6 +62,7 @@ mod names;
 mod source;
 mod spec;
 mod vrm;
+mod vrm_extension;
 mod vrm_humanoid;
 pub mod warning;
 

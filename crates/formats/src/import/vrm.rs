@@ -14,6 +14,7 @@ use serde::Deserialize;
 
 use super::error::ImportError;
 use super::names::unique_names;
+use super::vrm_extension::{extensions, invalid};
 use super::warning::{NOT_IMPORTED, Warning};
 use anim::spring::{ChainSpec, ColliderShape, ColliderSpec, JointParams, SpringParams};
 use glam::Vec3;
@@ -29,12 +30,6 @@ const GRAVITY_DIR: [f32; 3] = [0.0, -1.0, 0.0];
 const DRAG_FORCE: f32 = 0.5;
 /// VRM's updates per second that `gravityPower` is converted at.
 const VRM_RATE: f32 = 60.0;
-
-#[derive(Deserialize)]
-struct Document {
-    #[serde(default)]
-    extensions: Option<Extensions>,
-}
 
 #[derive(Deserialize)]
 struct Extensions {
@@ -124,11 +119,8 @@ pub fn chains(
     names: &[String],
     warnings: &mut Vec<Warning>,
 ) -> Result<(Vec<ChainSpec>, Vec<usize>), ImportError> {
-    if !json.windows(15).any(|w| w == b"VRMC_springBone") {
-        return Ok((Vec::new(), Vec::new()));
-    }
-    let doc: Document = serde_json::from_slice(json).map_err(|e| invalid(format!("{POINTER}: {e}")))?;
-    let Some(bone) = doc.extensions.and_then(|e| e.spring_bone) else { return Ok((Vec::new(), Vec::new())) };
+    let extensions = extensions::<Extensions>(json, "VRMC_springBone", POINTER)?;
+    let Some(bone) = extensions.and_then(|e| e.spring_bone) else { return Ok((Vec::new(), Vec::new())) };
     let node =
         |n: usize, at: String| names.get(n).map(|_| n).ok_or_else(|| invalid(format!("{at}: node {n} does not exist")));
     let mut nodes = Vec::new();
@@ -213,8 +205,4 @@ fn differences(p: SpringParams, base: SpringParams) -> JointParams {
         gravity: (p.gravity != base.gravity).then_some(p.gravity),
         radius: (p.radius != base.radius).then_some(p.radius),
     }
-}
-
-fn invalid(detail: String) -> ImportError {
-    ImportError::InvalidGltf(detail)
 }

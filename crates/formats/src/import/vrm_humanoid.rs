@@ -10,17 +10,12 @@ use std::collections::BTreeMap;
 use serde::Deserialize;
 
 use super::error::ImportError;
+use super::vrm_extension::{extensions, invalid};
 use super::warning::{NOT_IMPORTED, Warning};
 use anim::character::Role;
 
 /// Where the humanoid's bones sit in a glTF document.
 pub const POINTER: &str = "/extensions/VRMC_vrm/humanoid/humanBones";
-
-#[derive(Deserialize)]
-struct Document {
-    #[serde(default)]
-    extensions: Option<Extensions>,
-}
 
 #[derive(Deserialize)]
 struct Extensions {
@@ -51,11 +46,8 @@ struct HumanBone {
 /// # Errors
 /// The extension is malformed or names a node that does not exist.
 pub fn human_bones(json: &[u8], nodes: usize, warnings: &mut Vec<Warning>) -> Result<Vec<(Role, usize)>, ImportError> {
-    if !json.windows(8).any(|w| w == b"VRMC_vrm") {
-        return Ok(Vec::new());
-    }
-    let doc: Document = serde_json::from_slice(json).map_err(|e| invalid(format!("{POINTER}: {e}")))?;
-    let Some(humanoid) = doc.extensions.and_then(|e| e.vrm).and_then(|v| v.humanoid) else { return Ok(Vec::new()) };
+    let extensions = extensions::<Extensions>(json, "VRMC_vrm", POINTER)?;
+    let Some(humanoid) = extensions.and_then(|e| e.vrm).and_then(|v| v.humanoid) else { return Ok(Vec::new()) };
     let mut named: Vec<(Role, usize)> = Vec::with_capacity(humanoid.human_bones.len());
     for (name, bone) in &humanoid.human_bones {
         let at = format!("{POINTER}/{name}");
@@ -104,10 +96,6 @@ pub fn character_roles(
         }
     }
     roles
-}
-
-fn invalid(detail: String) -> ImportError {
-    ImportError::InvalidGltf(detail)
 }
 
 #[cfg(test)]
