@@ -26,7 +26,9 @@ use crate::config::Limits;
 use crate::error::{ApiError, At};
 use crate::limits::{Admitted, admit_spec, checked_spec};
 use crate::state::AppState;
-use crate::store::{DocKind, MeshWrite, NewCharacter, StoreError, StoredCharacter, name_reference};
+use crate::store::{
+    CharacterMeta, DocKind, MeshWrite, NewCharacter, OnName, StoreError, StoredCharacter, name_reference,
+};
 use anim::character::{Role, RoleError, RoleMap};
 use anim::motion::CharacterSpec;
 use anim::{Channel, Clip, Interpolation, Keys, Skeleton, TrackSpec};
@@ -123,12 +125,71 @@ impl RoleReport {
     }
 }
 
-/// Parses and admits an uploaded character document.
+/// Admits the document `read` makes (an upload parsed, a gRPC message
+/// converted) on the work pool, priced as a clip document's reading of
+/// `bytes` bytes (its skeleton's build is part of that price: one key, and
+/// names and rest values the bytes bound); `what` names the work in a
+/// refusal of its price. REST's and gRPC's creates and replaces.
 ///
 /// # Errors
-/// As [`admit`]; malformed JSON (400) or a field of the wrong type (422).
-pub fn admit_body(body: &[u8], limits: &Limits, cancel: &AtomicBool) -> Result<AdmittedCharacter, ApiError> {
-    admit(parse_character_doc(body)?, MeshWrite::None, limits, cancel)
+/// `too_much_work` over `max_request_work`; what `read` returns; as [`admit`].
+pub async fn admit_priced<F>(
+    state: &AppState,
+    caller: &CallerKey,
+    bytes: usize,
+    what: &str,
+    read: F,
+) -> Result<NewCharacter, ApiError>
+where
+    F: FnOnce() -> Result<CharacterDoc, ApiError> + Send + 'static,
+{
+    let limits = state.config.limits.clone();
+    let units = crate::work::price::parse(bytes as u64);
+    crate::builds::run(&state.work, caller, &state.config.limits, units, what, move |cancel| {
+        Ok(admit(read()?, MeshWrite::None, &limits, cancel)?.new_character)
+    })
+    .await
+}
+
+/// Stores `characters` in one transaction, each a new character or, as
+/// `on_name` allows, the new version of the one holding its name, and
+/// tells every node: the creates and imports of REST and gRPC.
+///
+/// # Errors
+/// The store's refusal (`name_taken`, …).
+pub async fn create_all(
+    state: &AppState,
+    characters: Vec<NewCharacter>,
+    on_name: OnName,
+) -> Result<Vec<CharacterMeta>, ApiError> {
+    let metas = state.store.create_characters(characters, on_name).await.map_err(store_error)?;
+    metas.iter().for_each(|m| state.document_changed(DocKind::Character, &m.id));
+    Ok(metas)
+}
+
+/// [`create_all`] of one character: `POST /v1/characters` and `CreateCharacter`.
+///
+/// # Errors
+/// As [`create_all`].
+pub async fn create(state: &AppState, character: NewCharacter, on_name: OnName) -> Result<CharacterMeta, ApiError> {
+    let meta = create_all(state, vec![character], on_name).await?.pop();
+    meta.ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no character")))
+}
+
+/// Stores `character` as character `id`'s next version (at `expected` if
+/// given) and tells every node: `PUT /v1/characters/{id}` and `ReplaceCharacter`.
+///
+/// # Errors
+/// The store's refusal (not found, a version race, `name_taken`).
+pub async fn replace(
+    state: &AppState,
+    id: &str,
+    character: NewCharacter,
+    expected: Option<u64>,
+) -> Result<CharacterMeta, ApiError> {
+    let meta = state.store.replace_character(id, character, expected).await.map_err(store_error)?;
+    state.document_changed(DocKind::Character, &meta.id);
+    Ok(meta)
 }
 
 /// Checks `doc` (its skeleton by the clip rules and limits, its given

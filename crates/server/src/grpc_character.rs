@@ -11,15 +11,14 @@ use bytes::Bytes;
 use prost::Message;
 
 use crate::auth::Caller;
-use crate::characters::{admit, store_error};
+use crate::characters::{self, store_error};
 use crate::documents::{page, raw_page};
 use crate::error::ApiError;
 use crate::request::{Raw, in_body};
 use crate::rest::characters::CharacterSummary;
 use crate::rest::import::{ImportFile, admit_characters, checked_name, checked_scale, import_limits, run_import};
 use crate::state::AppState;
-use crate::store::{CharacterMeta, DocKind, MeshWrite, OnName};
-use crate::work::price;
+use crate::store::{CharacterMeta, DocKind, NewCharacter, OnName};
 use formats::import::{ImportOptions, Source, Warning, file_stem};
 use formats::wire::character::{CharacterDoc, parse_character_doc};
 use formats::wire::json::{ClipDoc, SkeletonDoc};
@@ -32,10 +31,8 @@ pub async fn create(
     req: pb::CreateCharacterRequest,
 ) -> Result<pb::CharacterSummary, ApiError> {
     let on_name = if req.replace { OnName::Replace } else { OnName::Refuse };
-    let admitted = admit_message(state, caller, req.character).await?;
-    let mut metas = state.store.create_characters(vec![admitted], on_name).await.map_err(store_error)?;
-    let meta = metas.pop().ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no character")))?;
-    state.document_changed(DocKind::Character, &meta.id);
+    let character = admit_message(state, caller, req.character).await?;
+    let meta = characters::create(state, character, on_name).await?;
     tracing::info!(id = %meta.id, version = meta.version, "character written over gRPC");
     Ok(summary_to_pb(&meta))
 }
@@ -46,10 +43,8 @@ pub async fn replace(
     caller: &Caller,
     req: pb::ReplaceCharacterRequest,
 ) -> Result<pb::CharacterSummary, ApiError> {
-    let admitted = admit_message(state, caller, req.character).await?;
-    let meta =
-        (state.store.replace_character(&req.character_id, admitted, req.if_version).await).map_err(store_error)?;
-    state.document_changed(DocKind::Character, &meta.id);
+    let character = admit_message(state, caller, req.character).await?;
+    let meta = characters::replace(state, &req.character_id, character, req.if_version).await?;
     Ok(summary_to_pb(&meta))
 }
 
@@ -128,29 +123,25 @@ pub async fn import(
         Ok((admit_characters(imported.characters, limits, cancel)?, imported.warnings))
     })
     .await?;
-    let metas = state.store.create_characters(characters, on_name).await.map_err(store_error)?;
-    metas.iter().for_each(|m| state.document_changed(DocKind::Character, &m.id));
+    let metas = characters::create_all(state, characters, on_name).await?;
     Ok(pb::ImportCharacterResponse {
         characters: metas.iter().map(summary_to_pb).collect(),
         warnings: warnings.into_iter().map(warning_to_pb).collect(),
     })
 }
 
-/// A `Character` message admitted as a document, priced as a clip
-/// document's reading by its encoded size, on the work pool.
+/// A `Character` message admitted as a document: [`characters::admit_priced`]
+/// of its encoded size.
 async fn admit_message(
     state: &AppState,
     caller: &Caller,
     character: Option<pb::Character>,
-) -> Result<crate::store::NewCharacter, ApiError> {
+) -> Result<NewCharacter, ApiError> {
     let character = character
         .ok_or_else(|| ApiError::invalid("missing_character", "/character", "the request needs a character"))?;
-    let units = price::parse(character.encoded_len() as u64);
-    let limits = state.config.limits.clone();
-    crate::builds::run(&state.work, &caller.key(), &state.config.limits, units, "reading this character", {
-        move |cancel| Ok(admit(doc_from_pb(character)?, MeshWrite::None, &limits, cancel)?.new_character)
-    })
-    .await
+    let bytes = character.encoded_len();
+    characters::admit_priced(state, &caller.key(), bytes, "reading this character", move || doc_from_pb(character))
+        .await
 }
 
 /// The document of a `Character` message: its skeleton as a clip's.

@@ -13,12 +13,12 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::auth::{CallerKey, ReadAccess, WriteAccess};
-use crate::characters::{AdmittedCharacter, RoleReport, admit_body, store_error};
+use crate::characters::{self, RoleReport};
 use crate::error::ApiError;
 use crate::state::AppState;
-use crate::store::{CharacterMeta, DocKind};
-use crate::work::price;
+use crate::store::{CharacterMeta, DocKind, NewCharacter};
 use formats::import::Warning;
+use formats::wire::character::parse_character_doc;
 
 use super::documents;
 use super::extract::{ClipId, JsonBody, etag, precondition};
@@ -81,18 +81,10 @@ fn written(meta: &CharacterMeta, status: StatusCode, location: bool) -> Response
     documents::written(DocKind::Character, (&meta.id, meta.version), status, location, CharacterSummary::from(meta))
 }
 
-/// Checks an uploaded document on the work pool, priced as a clip
-/// document's reading (its skeleton's build is part of that price: one
-/// key, and names and rest values the bytes bound).
-async fn admit_upload(
-    state: &AppState,
-    caller: &CallerKey,
-    body: axum::body::Bytes,
-) -> Result<AdmittedCharacter, ApiError> {
-    let limits = state.config.limits.clone();
-    let units = price::parse(body.len() as u64);
-    crate::builds::run(&state.work, caller, &state.config.limits, units, "reading this character document", {
-        move |cancel| admit_body(&body, &limits, cancel)
+/// Checks an uploaded document: [`characters::admit_priced`] of its bytes.
+async fn admit_upload(state: &AppState, caller: &CallerKey, body: axum::body::Bytes) -> Result<NewCharacter, ApiError> {
+    characters::admit_priced(state, caller, body.len(), "reading this character document", move || {
+        Ok(parse_character_doc(&body)?)
     })
     .await
 }
@@ -123,10 +115,8 @@ pub async fn create_character(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let on_name = params.on_name()?;
-    let admitted = admit_upload(&state, &caller.key(), body).await?;
-    let mut metas = state.store.create_characters(vec![admitted.new_character], on_name).await.map_err(store_error)?;
-    let meta = metas.pop().ok_or_else(|| ApiError::internal(anyhow::anyhow!("a create wrote no character")))?;
-    state.document_changed(DocKind::Character, &meta.id);
+    let character = admit_upload(&state, &caller.key(), body).await?;
+    let meta = characters::create(&state, character, on_name).await?;
     tracing::info!(id = %meta.id, name = %meta.name, version = meta.version, "character created");
     let status = if meta.version == 1 { StatusCode::CREATED } else { StatusCode::OK };
     Ok(written(&meta, status, true))
@@ -204,10 +194,9 @@ pub async fn replace_character(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let condition = precondition(&headers, IF_MATCH, false)?;
-    let admitted = admit_upload(&state, &caller.key(), body).await?;
+    let character = admit_upload(&state, &caller.key(), body).await?;
     let expected = documents::expected_version(&state, DocKind::Character, &id, condition).await?;
-    let meta = state.store.replace_character(&id, admitted.new_character, expected).await.map_err(store_error)?;
-    state.document_changed(DocKind::Character, &meta.id);
+    let meta = characters::replace(&state, &id, character, expected).await?;
     tracing::info!(id = %meta.id, version = meta.version, "character replaced");
     Ok(written(&meta, StatusCode::OK, false))
 }

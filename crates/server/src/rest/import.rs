@@ -37,7 +37,6 @@ use std::sync::atomic::AtomicBool;
 
 use crate::auth::{CallerKey, WriteAccess};
 use crate::cache::CachedClip;
-use crate::characters::store_error;
 use crate::config::Limits;
 use crate::error::{ApiError, At, raise_hint};
 use crate::limits::{Admitted, admit_doc};
@@ -176,8 +175,7 @@ pub async fn import_characters(
             Ok((admit_characters(imported.characters, limits, cancel)?, imported.warnings))
         })
         .await?;
-    let metas = state.store.create_characters(characters, on_name).await.map_err(store_error)?;
-    metas.iter().for_each(|m| state.document_changed(crate::store::DocKind::Character, &m.id));
+    let metas = crate::characters::create_all(&state, characters, on_name).await?;
     tracing::info!(format = format.as_str(), bytes, characters = metas.len(), "characters imported");
     let characters = metas.iter().map(CharacterSummary::from).collect();
     Ok((StatusCode::CREATED, Json(CharacterImportResult { characters, warnings })).into_response())
