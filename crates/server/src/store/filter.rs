@@ -31,8 +31,7 @@ where
     for<'t> f64: Encode<'t, DB> + Type<DB>,
     for<'t> i64: Encode<'t, DB> + Type<DB>,
 {
-    let mut qb = QueryBuilder::new(format!("SELECT {columns} FROM clips c WHERE TRUE"));
-    push_names(&mut qb, &q.names());
+    let mut qb = filtered(format!("SELECT {columns} FROM clips c"), &q.names());
     if let Some(tag) = &q.tag {
         qb.push(" AND c.id IN (SELECT t.clip_id FROM clip_tags t WHERE t.tag = ").push_bind(tag.clone()).push(")");
     }
@@ -48,8 +47,7 @@ where
         qb.push(" AND NOT EXISTS (SELECT 1 FROM clip_joints r WHERE r.clip_id = ").push_bind(reference.clone());
         qb.push(" AND NOT EXISTS (SELECT 1 FROM clip_joints j WHERE j.clip_id = c.id AND j.joint = r.joint))");
     }
-    qb.push(" ORDER BY c.id LIMIT ").push_bind(i64::from(q.limit));
-    qb
+    page(qb, q.limit)
 }
 
 /// `<select> WHERE <filters> ORDER BY id LIMIT n` over a table of
@@ -62,19 +60,18 @@ where
     for<'t> String: Encode<'t, DB> + Type<DB>,
     for<'t> i64: Encode<'t, DB> + Type<DB>,
 {
-    let mut qb = QueryBuilder::new(format!("{select} WHERE TRUE"));
-    push_names(&mut qb, &q.names);
-    qb.push(" ORDER BY c.id LIMIT ").push_bind(i64::from(q.limit));
-    qb
+    page(filtered(select.to_owned(), &q.names), q.limit)
 }
 
-/// The cursor and name filters of a list over a table aliased `c`.
-fn push_names<DB>(qb: &mut QueryBuilder<DB>, q: &NameFilters)
+/// `<select> WHERE` the cursor and name filters of a list over a table
+/// aliased `c`, to which a list adds its own filters, then [`page`].
+fn filtered<DB>(select: String, q: &NameFilters) -> QueryBuilder<DB>
 where
     DB: Dialect,
     DB::Arguments: Default,
     for<'t> String: Encode<'t, DB> + Type<DB>,
 {
+    let mut qb = QueryBuilder::new(select + " WHERE TRUE");
     if let Some(after) = &q.after {
         qb.push(" AND c.id > ").push_bind(after.clone());
     }
@@ -90,6 +87,18 @@ where
     if let Some(part) = &q.name_contains {
         qb.push(format_args!(" AND {}(c.name, ", DB::POSITION_FN)).push_bind(part.clone()).push(") > 0");
     }
+    qb
+}
+
+/// A list's end: its page of at most `limit` rows, in id order.
+fn page<DB>(mut qb: QueryBuilder<DB>, limit: u32) -> QueryBuilder<DB>
+where
+    DB: Dialect,
+    DB::Arguments: Default,
+    for<'t> i64: Encode<'t, DB> + Type<DB>,
+{
+    qb.push(" ORDER BY c.id LIMIT ").push_bind(i64::from(limit));
+    qb
 }
 
 /// The least string above every string that starts with `prefix`, in

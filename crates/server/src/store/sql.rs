@@ -45,23 +45,41 @@ macro_rules! meta_columns {
 #[cfg(test)]
 pub(crate) use meta_columns;
 
+/// The row a replace or delete may change, for clips and documents alike:
+/// `$1` its id, `$2` the version it must be at, or NULL for any.
+macro_rules! at_version {
+    () => {
+        "WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)"
+    };
+}
+pub(super) use at_version;
+
+/// The [`Named`] checks of table `$table`, whose rows are `$what`s.
+macro_rules! named {
+    ($table:literal, $what:literal) => {
+        Named {
+            what: $what,
+            holders: concat!("SELECT id FROM ", $table, " WHERE name = $1 ORDER BY id LIMIT 8"),
+            name_of: concat!("SELECT name FROM ", $table, " WHERE id = $1"),
+            version_of: concat!("SELECT version FROM ", $table, " WHERE id = $1"),
+        }
+    };
+}
+pub(super) use named;
+
 const INSERT_CLIP: &str = "INSERT INTO clips (id, name, version, doc, joints, tracks, events, start_time, end_time, \
      playback, tags, created_at, updated_at) VALUES ($1, $2, 1, $3, $4, $5, $6, $7, $8, $9, $11, $10, $10)";
 const GET_CLIP: &str = concat!("SELECT ", meta_columns!(), ", doc FROM clips WHERE id = $1");
 const REPLACE_CLIP: &str = concat!(
     "UPDATE clips SET name = $3, doc = $4, joints = $5, tracks = $6, events = $7, start_time = $8, ",
     "end_time = $9, playback = $10, updated_at = $11, tags = $12, version = version + 1 ",
-    "WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2) RETURNING ",
+    at_version!(),
+    " RETURNING ",
     meta_columns!()
 );
-const DELETE_CLIP: &str = "DELETE FROM clips WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)";
+const DELETE_CLIP: &str = concat!("DELETE FROM clips ", at_version!());
 /// The name checks of clips.
-const CLIPS: Named = Named {
-    what: "clip",
-    holders: "SELECT id FROM clips WHERE name = $1 ORDER BY id LIMIT 8",
-    name_of: "SELECT name FROM clips WHERE id = $1",
-    version_of: "SELECT version FROM clips WHERE id = $1",
-};
+const CLIPS: Named = named!("clips", "clip");
 const CLIP_JOINTS: &str = "SELECT joints FROM clips WHERE id = $1";
 /// The clips' meshes.
 const CLIP_MESHES: Meshes = Meshes {

@@ -10,7 +10,7 @@ use super::dialect::Dialect;
 use super::document::{DocKind, DocMeta, DocQuery, NewDoc, StoredDoc, name_reference};
 use super::filter::document_query;
 use super::retry::Retry;
-use super::sql::{Meshes, NameCheck, Named, SqlStore, Written};
+use super::sql::{Meshes, NameCheck, Named, SqlStore, Written, at_version, named};
 use super::{MeshWrite, OnName, StoreError, new_clip_id, now_millis};
 
 /// The statements of one table of documents (aliased `c`): its figure and
@@ -33,28 +33,28 @@ pub(super) struct DocTable {
     pub meshes: Option<Meshes>,
 }
 
+/// The columns of a [`DocTable`]'s rows as [`DocMeta`] reads them.
+macro_rules! doc_columns {
+    ($figure:literal, $report:literal, $mesh:literal) => {
+        concat!(
+            "SELECT c.id, c.name, c.version, c.",
+            $figure,
+            " AS figure, c.",
+            $report,
+            " AS report, c.created_at, c.updated_at, CAST(",
+            $mesh,
+            " AS BIGINT) AS mesh"
+        )
+    };
+}
+
 /// The [`DocTable`] of `$table`, its figure in column `$figure`, its report
 /// in `$report`, whether a mesh is kept as the SQL expression `$mesh`.
 macro_rules! doc_table {
     ($table:literal, $what:literal, $figure:literal, $report:literal, $mesh:literal, $meshes:expr) => {
         DocTable {
-            named: Named {
-                what: $what,
-                holders: concat!("SELECT id FROM ", $table, " WHERE name = $1 ORDER BY id LIMIT 8"),
-                name_of: concat!("SELECT name FROM ", $table, " WHERE id = $1"),
-                version_of: concat!("SELECT version FROM ", $table, " WHERE id = $1"),
-            },
-            select: concat!(
-                "SELECT c.id, c.name, c.version, c.",
-                $figure,
-                " AS figure, c.",
-                $report,
-                " AS report, c.created_at, c.updated_at, CAST(",
-                $mesh,
-                " AS BIGINT) AS mesh FROM ",
-                $table,
-                " c"
-            ),
+            named: named!($table, $what),
+            select: concat!(doc_columns!($figure, $report, $mesh), " FROM ", $table, " c"),
             insert: concat!(
                 "INSERT INTO ",
                 $table,
@@ -64,25 +64,10 @@ macro_rules! doc_table {
                 $report,
                 ", created_at, updated_at) VALUES ($1, $2, 1, $3, $4, $5, $6, $6)"
             ),
-            get: concat!(
-                "SELECT c.id, c.name, c.version, c.",
-                $figure,
-                " AS figure, c.",
-                $report,
-                " AS report, c.created_at, c.updated_at, CAST(",
-                $mesh,
-                " AS BIGINT) AS mesh, c.doc FROM ",
-                $table,
-                " c WHERE c.id = $1"
-            ),
+            get: concat!(doc_columns!($figure, $report, $mesh), ", c.doc FROM ", $table, " c WHERE c.id = $1"),
             get_named: concat!(
-                "SELECT c.id, c.name, c.version, c.",
-                $figure,
-                " AS figure, c.",
-                $report,
-                " AS report, c.created_at, c.updated_at, CAST(",
-                $mesh,
-                " AS BIGINT) AS mesh, c.doc FROM ",
+                doc_columns!($figure, $report, $mesh),
+                ", c.doc FROM ",
                 $table,
                 " c WHERE c.name = $1 ORDER BY c.id LIMIT 8"
             ),
@@ -93,10 +78,11 @@ macro_rules! doc_table {
                 $figure,
                 " = $5, ",
                 $report,
-                " = $6, updated_at = $7, version = version + 1 WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR ",
-                "version = $2) RETURNING version, created_at"
+                " = $6, updated_at = $7, version = version + 1 ",
+                at_version!(),
+                " RETURNING version, created_at"
             ),
-            delete: concat!("DELETE FROM ", $table, " WHERE id = $1 AND (CAST($2 AS BIGINT) IS NULL OR version = $2)"),
+            delete: concat!("DELETE FROM ", $table, " ", at_version!()),
             meshes: $meshes,
         }
     };
