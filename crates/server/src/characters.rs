@@ -34,7 +34,7 @@ use anim::motion::CharacterSpec;
 use anim::{Channel, Clip, Interpolation, Keys, Skeleton, TrackSpec};
 use formats::import::Warning;
 use formats::wire::character::{CharacterDoc, parse_character_doc};
-use formats::wire::json::ClipDoc;
+use formats::wire::json::{ClipDoc, SkeletonDoc};
 
 /// The `missing_role` warning code (docs/warnings.md).
 pub const MISSING_ROLE: &str = "missing_role";
@@ -234,6 +234,12 @@ pub fn skeleton_clip(doc: &CharacterDoc) -> ClipDoc {
         metadata: None,
         springs: Vec::new(),
     }
+}
+
+/// The skeleton of a clip (an imported skin's, a gRPC message's) as a
+/// character document's: the way back from [`skeleton_clip`].
+pub fn skeleton_doc(spec: &anim::ClipSpec) -> SkeletonDoc {
+    ClipDoc::from_spec(spec).skeleton.unwrap_or(SkeletonDoc { joints: Vec::new() })
 }
 
 /// The skeleton built by the core as a clip with one constant key.

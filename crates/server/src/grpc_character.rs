@@ -21,7 +21,6 @@ use crate::state::AppState;
 use crate::store::{CharacterMeta, DocKind, NewCharacter, OnName};
 use formats::import::{ImportOptions, Source, Warning, file_stem};
 use formats::wire::character::{CharacterDoc, parse_character_doc};
-use formats::wire::json::{ClipDoc, SkeletonDoc};
 use formats::wire::proto::{clip_from_pb, clip_to_pb, pb};
 
 /// `CreateCharacter`: `POST /v1/characters`.
@@ -148,7 +147,7 @@ async fn admit_message(
 fn doc_from_pb(character: pb::Character) -> Result<CharacterDoc, ApiError> {
     let clip = pb::Clip { name: character.name.clone(), skeleton: character.skeleton, ..Default::default() };
     let spec = clip_from_pb(&clip)?;
-    let skeleton = ClipDoc::from_spec(&spec).skeleton.unwrap_or(SkeletonDoc { joints: Vec::new() });
+    let skeleton = crate::characters::skeleton_doc(&spec);
     let mut roles: BTreeMap<String, Option<String>> =
         character.roles.into_iter().map(|(role, joint)| (role, Some(joint))).collect();
     roles.extend(character.unmapped_roles.into_iter().map(|role| (role, None)));

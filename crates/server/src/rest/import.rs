@@ -49,7 +49,7 @@ use formats::import::{
     SNIFF_BYTES, Source, UpAxis, Warning, detect, file_stem, import_from,
 };
 use formats::wire::character::CharacterDoc;
-use formats::wire::json::{ClipDoc, InterpolationDoc, PlaybackDoc, SkeletonDoc};
+use formats::wire::json::{ClipDoc, InterpolationDoc, PlaybackDoc};
 use formats::wire::mesh;
 
 use super::characters::CharacterSummary;
@@ -199,7 +199,7 @@ pub(crate) fn admit_characters(
         .into_iter()
         .map(|c| {
             let spec = ClipSpec { name: c.name.clone(), skeleton: Some(c.skeleton), ..Default::default() };
-            let skeleton = ClipDoc::from_spec(&spec).skeleton.unwrap_or(SkeletonDoc { joints: Vec::new() });
+            let skeleton = crate::characters::skeleton_doc(&spec);
             let doc = CharacterDoc { name: c.name, skeleton, roles: c.roles };
             let mesh =
                 c.mesh.map_or(MeshWrite::None, |bytes| MeshWrite::Set(StoredMesh { etag: mesh::etag(&bytes), bytes }));
