@@ -2,13 +2,14 @@
 //! (`AppState`'s `graphs` and `characters`): `graphs` and `characters`
 //! build them, whatever plays a graph or a character reads them.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use crate::cache::{Cacheable, CachedClip};
 use crate::store::DocMeta;
 use crate::stream::PinnedClip;
 use anim::graph::Graph;
 use anim::motion::CharacterSpec;
+use formats::wire::graph::GraphDoc;
 
 /// The core's graph over clips pinned at their versions.
 pub type PinnedGraph = Graph<Arc<dyn PinnedClip>>;
@@ -17,20 +18,49 @@ pub type PinnedGraph = Graph<Arc<dyn PinnedClip>>;
 #[derive(Debug)]
 pub struct BuiltGraph {
     pub meta: DocMeta,
-    pub graph: PinnedGraph,
+    pub graph: Arc<PinnedGraph>,
+    /// The document it was built from, to build it again on a character.
+    pub doc: GraphDoc,
     /// The distinct clips the document names, in its order, each the
     /// clip cache's entry at the version the graph was built on.
     pub clips: Vec<Arc<CachedClip>>,
+    /// The graph built on characters (`server::graphs::on_character`), by
+    /// the character's id and version and the retarget options: at most
+    /// [`MAX_ON_CHARACTERS`], the oldest replaced. They leave with it.
+    pub on_characters: Mutex<Vec<(String, Arc<PinnedGraph>)>>,
     /// An estimate of the heap it keeps alive besides its clips (their
-    /// bytes are the clip cache's).
+    /// bytes are the clip cache's), room for its builds on characters
+    /// included.
     pub bytes: usize,
 }
+
+/// How many builds on characters a built graph keeps.
+pub const MAX_ON_CHARACTERS: usize = 4;
 
 impl BuiltGraph {
     /// Each clip it plays, as `(id, version)`: what a motion or stream over
     /// it is pinned to.
     pub fn clip_versions(&self) -> impl Iterator<Item = (&str, u64)> {
         self.clips.iter().map(|c| (c.meta.id.as_str(), c.meta.version))
+    }
+
+    /// Its build on a character, by [`BuiltGraph::on_character`]'s key.
+    pub fn on_character(&self, key: &str) -> Option<Arc<PinnedGraph>> {
+        let kept = self.on_characters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        kept.iter().find(|(k, _)| k == key).map(|(_, graph)| Arc::clone(graph))
+    }
+
+    /// Keeps its build on a character under `key`, the oldest let go when
+    /// [`MAX_ON_CHARACTERS`] are kept.
+    pub fn keep_on_character(&self, key: String, graph: Arc<PinnedGraph>) {
+        let mut kept = self.on_characters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if kept.iter().any(|(k, _)| *k == key) {
+            return;
+        }
+        if kept.len() >= MAX_ON_CHARACTERS {
+            kept.remove(0);
+        }
+        kept.push((key, graph));
     }
 
     /// Whether it was built on a version of clip `id`.

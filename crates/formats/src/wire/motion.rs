@@ -103,7 +103,7 @@ impl RetargetDoc {
     /// `zero_quaternion` for a rotation that cannot be normalised (as a
     /// clip's keys, docs/clip-format.md); `target_pose_needs_rotations` for
     /// a `target_pose` given as a time.
-    fn to_spec(&self, pointer: &str) -> Result<RetargetSpec, DocError> {
+    pub fn to_spec(&self, pointer: &str) -> Result<RetargetSpec, DocError> {
         let source_pose = match &self.source_pose {
             None => SourcePose::Rest,
             Some(SourcePoseDoc::Time(t)) => SourcePose::Time(*t),

@@ -13,7 +13,7 @@ use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, ik_reports, json_str
 use super::raw::{Field, Format, Locate, Raw, RawModes, joint_subset, unprocessable};
 use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
-use crate::built::BuiltGraph;
+use crate::built::{BuiltGraph, PinnedGraph};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
@@ -44,10 +44,13 @@ pub struct GraphLayer<'a> {
     pub stages: GraphStages,
 }
 
-/// A motion's IK constraints and spring chains, checked against the graph's
-/// skeleton once it is resolved.
+/// The character the motion plays the graph on, with its retarget
+/// options, and its IK constraints and spring chains, checked against the
+/// graph's (or the character's) skeleton once it is resolved.
 #[derive(Debug, Clone, Default)]
 pub struct GraphStages {
+    character: Option<String>,
+    retarget: anim::motion::RetargetSpec,
     ik: Vec<anim::ik::IkSpec>,
     springs: anim::spring::SpringsSpec,
 }
@@ -69,28 +72,37 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> 
         let detail = format!("a graph layer takes no `{field}` (it plays at weight 1 with the layer's defaults)");
         return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
     }
-    let motion_fields = [
-        ("root_motion", doc.root_motion.is_some(), "root motion"),
-        ("character", doc.character.is_some(), "a character"),
-        ("retarget", doc.retarget.is_some(), "retargeting"),
-    ];
-    if let Some((field, _, what)) = motion_fields.iter().find(|(_, set, _)| *set) {
-        let detail = format!(
-            "a motion over a graph takes no `{field}` yet: {what} needs the graph's nodes built for it; \
-             `ik` and `springs` run on a graph's pose"
-        );
-        return Err(unsupported(&format!("/motion/{field}"), &detail));
+    if doc.root_motion.is_some() {
+        let detail = "a motion over a graph takes no `root_motion` yet; `character`, `retarget`, `ik` and \
+                      `springs` play with a graph";
+        return Err(unsupported("/motion/root_motion", detail));
     }
+    let retarget = doc.retarget.as_ref().map(|r| r.to_spec("/motion/retarget")).transpose()?.unwrap_or_default();
     let ik = (doc.ik.iter().enumerate())
         .map(|(i, c)| c.to_spec(&format!("/motion/ik/{i}")))
         .collect::<Result<_, _>>()
         .map_err(ApiError::from)?;
     let springs = doc.springs("/motion").map_err(ApiError::from)?;
     let Some(reference) = layer.graph.as_deref() else { return Ok(None) };
-    Ok(Some(GraphLayer { reference, stages: GraphStages { ik, springs } }))
+    let character = doc.character.clone();
+    Ok(Some(GraphLayer { reference, stages: GraphStages { character, retarget, ik, springs } }))
 }
 
 impl GraphStages {
+    /// The graph `built` plays for this motion: its own, or built on the
+    /// motion's character (`server::graphs::on_character`).
+    ///
+    /// # Errors
+    /// As `server::graphs::on_character`.
+    pub async fn graph(
+        &self,
+        state: &AppState,
+        caller: &CallerKey,
+        built: &Arc<BuiltGraph>,
+    ) -> Result<Arc<PinnedGraph>, ApiError> {
+        crate::graphs::on_character(state, caller, built, self.character.as_deref(), &self.retarget).await
+    }
+
     /// The stages built on `graph`'s skeleton, as a motion's are on its
     /// output skeleton, refusals pointed into `/motion`.
     ///
@@ -168,6 +180,8 @@ pub struct RawGraphSampling<'a> {
 /// A checked, priced graph sampling request.
 pub struct GraphSampling {
     pub built: Arc<BuiltGraph>,
+    /// What plays: the built graph's own, or its build on the character.
+    pub graph: Arc<PinnedGraph>,
     /// The motion's IK and springs on the graph's pose.
     pub post: Arc<GraphPost>,
     pub range: TickRange,
@@ -198,17 +212,18 @@ impl RawGraphSampling<'_> {
         let space = RawModes { space: self.space, ..RawModes::default() }.check(self.at)?.space;
         let range = self.range(state.config.limits.max_poses)?;
         let built = crate::graphs::resolve(state, caller, self.reference, GRAPH_AT).await?;
-        let inputs = formats::wire::graph_inputs::inputs(&built.graph, self.inputs, range.fps, "/inputs")?;
-        let skeleton = built.graph.skeleton();
+        let graph = self.stages.graph(state, caller, &built).await?;
+        let inputs = formats::wire::graph_inputs::inputs(&graph, self.inputs, range.fps, "/inputs")?;
+        let skeleton = graph.skeleton();
         if format == Format::Skinning && !skeleton.has_inverse_binds() {
             let detail = "format=skinning needs inverse bind matrices, which the graph's skeleton has not";
             return Err(unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(skeleton, names, self.at)).transpose()?;
-        let post = Arc::new(self.stages.build(&built.graph, state)?);
-        let cost = cost(&built, &post, &range, (format, self.wire), self.report);
+        let post = Arc::new(self.stages.build(&graph, state)?);
+        let cost = cost((&built, &graph), &post, &range, (format, self.wire), self.report);
         let report = self.report;
-        Ok(GraphSampling { built, post, range, inputs, format, space, joints, report, cost })
+        Ok(GraphSampling { built, graph, post, range, inputs, format, space, joints, report, cost })
     }
 
     fn range(&self, max_poses: usize) -> Result<TickRange, ApiError> {
@@ -284,9 +299,9 @@ impl GraphTicks {
     /// call to call.
     pub fn play(&mut self, s: &GraphSampling, i: usize) -> GraphTick<'_> {
         let k = s.range.first + i as u64;
-        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
+        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::clone(&s.graph)));
         let run = self.post.get_or_insert_with(|| PostRun::new(&s.post));
-        let skeleton = s.built.graph.skeleton();
+        let skeleton = s.graph.skeleton();
         let evaluated = (&s.range, s.post.first_run(&s.range));
         let each = |tick, p: &GraphPlayer<_>| {
             if !s.post.is_empty() {
@@ -313,12 +328,17 @@ pub struct GraphTick<'a> {
 }
 
 /// Every tick played (from 0, answered or not) at the graph's costliest
-/// tick, and an answer as long as the largest of its clips' poses, with
-/// the reports when asked for.
-fn cost(built: &BuiltGraph, post: &GraphPost, range: &TickRange, (format, wire): (Format, Wire), report: bool) -> Cost {
-    let graph = &built.graph;
-    let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, wire);
-    let per_pose = built.clips.iter().map(|c| pose_bytes(c).per_pose).max().unwrap_or(0)
+/// tick, and an answer as long as the largest of its clips' poses (or of
+/// the character's, which every pose then is), with the reports when asked
+/// for.
+fn cost(
+    (built, graph): (&BuiltGraph, &PinnedGraph),
+    post: &GraphPost,
+    range: &TickRange,
+    (format, wire): (Format, Wire),
+    report: bool,
+) -> Cost {
+    let per_pose = pose_bound(built, graph, |clip| Estimate::batch(clip, &built.meta.id, format, wire).per_pose)
         + json_str(&built.meta.id)
         + ik_reports(post.ik().len() as u64, wire)
         + if report { report_bytes(built) } else { 0 };
@@ -328,6 +348,20 @@ fn cost(built: &BuiltGraph, post: &GraphPost, range: &TickRange, (format, wire):
         (range.last - post.first_run(range) + 1).saturating_mul(price::graph_post(post, graph.skeleton(), range.fps));
     let per_tick = price::graph_tick(graph).saturating_add(stages.div_ceil(ticks));
     Cost::new(ticks, graph.skeleton().len() as u64, per_tick, bytes)
+}
+
+/// The largest pose `graph` plays, by `bytes` of a clip: its clips'
+/// largest; on a character, whose joints every pose then has, each clip's
+/// scaled by how many more joints the character has, and its names' text.
+pub(super) fn pose_bound(built: &BuiltGraph, graph: &PinnedGraph, bytes: impl Fn(&anim::Clip) -> u64) -> u64 {
+    let skeleton = graph.skeleton();
+    if std::ptr::eq(skeleton, built.graph.skeleton()) {
+        return built.clips.iter().map(|c| bytes(&c.clip)).max().unwrap_or(0);
+    }
+    let joints = skeleton.len() as u64;
+    let scale = |clip: &anim::Clip| joints.div_ceil(clip.joint_count().max(1) as u64).max(1);
+    let clips = built.clips.iter().map(|c| bytes(&c.clip).saturating_mul(scale(&c.clip))).max().unwrap_or(0);
+    clips.saturating_add(skeleton.names().iter().map(|n| json_str(n)).sum())
 }
 
 /// The longest `,"graph":{…}` a tick's report can write.
