@@ -28,8 +28,8 @@ use crate::state::AppState;
 use crate::store::{DocKind, DocMeta, MeshWrite, NewDoc, OnName, StoreError, StoredDoc, name_reference};
 use crate::stream::PinnedClip;
 use crate::work::price;
-use anim::graph::OnCharacter;
-use anim::motion::RetargetSpec;
+use anim::graph::NodeOptions;
+use anim::motion::{RetargetSpec, RootMotionSpec};
 use formats::wire::graph::{GraphDoc, ParameterDoc, parse_graph_doc};
 
 /// What a graph's summary shows beyond its identity, derived when it is
@@ -285,11 +285,11 @@ async fn find_clips(state: &AppState, doc: &GraphDoc) -> Result<Vec<Arc<CachedCl
 
 /// The core's build over the found clips (each id resolved to its entry).
 fn build(doc: &GraphDoc, clips: &[Arc<CachedClip>]) -> Result<PinnedGraph, ApiError> {
-    build_on(doc, clips, None)
+    build_with(doc, clips, &NodeOptions::default())
 }
 
-/// [`build`], played on a character when `on` names one.
-fn build_on(doc: &GraphDoc, clips: &[Arc<CachedClip>], on: Option<&OnCharacter>) -> Result<PinnedGraph, ApiError> {
+/// [`build`], every node's motion built with `options`.
+fn build_with(doc: &GraphDoc, clips: &[Arc<CachedClip>], options: &NodeOptions) -> Result<PinnedGraph, ApiError> {
     let by_id: HashMap<&str, &Arc<CachedClip>> = clips.iter().map(|c| (c.meta.id.as_str(), c)).collect();
     let resolve = |id: &str, at: &str| match by_id.get(id) {
         Some(clip) => Ok(Arc::clone(*clip) as Arc<dyn PinnedClip>),
@@ -299,63 +299,95 @@ fn build_on(doc: &GraphDoc, clips: &[Arc<CachedClip>], on: Option<&OnCharacter>)
             detail: format!("the clip `{id}` does not exist"),
         }),
     };
-    Ok(doc.compile_on("", resolve, on)?)
+    Ok(doc.compile_with("", resolve, options)?)
 }
 
-/// The graph `built` plays on the character `character` names (an id or
-/// `name:…`; none: `built`'s own graph), with `retarget`'s options: each
-/// node's clips retargeted onto the character as a clip motion's layers
-/// are (docs/characters.md), built once per character version and options
-/// (priced, charged to `caller`, on the pool) and kept with `built`.
+/// What a motion over a graph builds its nodes with besides the graph: the
+/// character it plays on (an id or `name:…`), its retarget options and its
+/// root motion.
+#[derive(Debug, Clone, Default)]
+pub struct MotionOnGraph {
+    pub character: Option<String>,
+    pub retarget: RetargetSpec,
+    pub root_motion: Option<RootMotionSpec>,
+}
+
+/// The graph `built` plays for `motion`: its own when the motion names no
+/// character and no root motion, else `built` built again with them —
+/// each node's clips retargeted onto the character as a clip motion's
+/// layers are (docs/characters.md), each node reporting root motion
+/// (docs/motion.md) — once per character version and options (priced,
+/// charged to `caller`, on the pool) and kept with `built`.
 ///
 /// # Errors
 /// `character_not_found` (404) at `/motion/character`; a clip of the graph
 /// the character cannot map (`unmappable_skeleton`) at `/motion/character`,
-/// the detail saying where in the graph; the retarget options' refusals
-/// at `/motion/retarget/…`; the price's refusals.
-pub async fn on_character(
+/// or without the root joint (`no_root_joint`) at `/motion/root_motion`,
+/// the detail saying where in the graph; the options' refusals at
+/// `/motion/retarget/…` and `/motion/root_motion/…`; the price's refusals.
+pub async fn played(
     state: &AppState,
     caller: &CallerKey,
     built: &Arc<BuiltGraph>,
-    character: Option<&str>,
-    retarget: &RetargetSpec,
+    motion: &MotionOnGraph,
 ) -> Result<Arc<PinnedGraph>, ApiError> {
-    let Some(reference) = character else { return Ok(Arc::clone(&built.graph)) };
-    let character = crate::characters::resolve(state, caller, reference).await?;
-    let key = format!("{}@{} {retarget:?}", character.meta.id, character.meta.version);
+    if motion.character.is_none() && motion.root_motion.is_none() {
+        return Ok(Arc::clone(&built.graph));
+    }
+    let character = match &motion.character {
+        Some(reference) => Some(crate::characters::resolve(state, caller, reference).await?),
+        None => None,
+    };
+    let on = character.as_ref().map(|c| format!("{}@{}", c.meta.id, c.meta.version));
+    let key = format!("{on:?} {:?} {:?}", motion.retarget, motion.root_motion);
     if let Some(hit) = built.on_character(&key) {
         return Ok(hit);
     }
-    let on = OnCharacter { character: Arc::clone(&character.spec), retarget: retarget.clone() };
-    let joints = built.clips.iter().map(|c| c.clip.joint_count() as u64).max().unwrap_or(0);
-    let (output, feet) = (character.spec.skeleton.len() as u64, retarget.feet.is_some());
-    let setup = price::graph_retarget_setup(node_layers(&built.doc), joints, output, feet);
-    let units = build_price(&built.doc, &built.clips).saturating_add(setup);
+    let options = NodeOptions {
+        character: character.as_ref().map(|c| Arc::clone(&c.spec)),
+        retarget: motion.retarget.clone(),
+        root_motion: motion.root_motion.clone(),
+    };
+    let units = build_price(&built.doc, &built.clips).saturating_add(setup_price(built, &options));
     let building = Arc::clone(built);
-    let graph =
-        crate::builds::run(&state.work, caller, &state.config.limits, units, "building this graph on the character", {
-            move |_| {
-                build_on(&building.doc, &building.clips, Some(&on))
-                    .map_err(|e| on_character_error(e, &building.meta.id))
-            }
-        });
+    let graph = crate::builds::run(&state.work, caller, &state.config.limits, units, "building this graph's motion", {
+        move |_| {
+            let on_character = options.character.is_some();
+            build_with(&building.doc, &building.clips, &options)
+                .map_err(|e| motion_error(e, &building.meta.id, on_character))
+        }
+    });
     let graph = Arc::new(graph.await?);
     built.keep_on_character(key, Arc::clone(&graph));
     Ok(graph)
 }
 
-/// A refusal of a graph's build on a character, pointed into the request's
-/// motion: the retarget options' at `/motion/retarget/…`, anything else
-/// (a clip the character cannot map) at `/motion/character`.
-fn on_character_error(e: ApiError, id: &str) -> ApiError {
+/// The price of the nodes' retargeters beyond [`build_price`]: as a
+/// motion's on a character, over every node's layers.
+fn setup_price(built: &BuiltGraph, options: &NodeOptions) -> u64 {
+    let Some(character) = &options.character else { return 0 };
+    let joints = built.clips.iter().map(|c| c.clip.joint_count() as u64).max().unwrap_or(0);
+    let (output, feet, root) =
+        (character.skeleton.len() as u64, options.retarget.feet.is_some(), options.root_motion.is_some());
+    price::graph_retarget_setup(node_layers(&built.doc), joints, output, (feet, root))
+}
+
+/// A refusal of a graph's build with a motion's options, pointed into the
+/// request's motion: the options' own at `/motion/retarget/…` and
+/// `/motion/root_motion/…`, anything else (a clip the character cannot
+/// map, or without the root joint) at `/motion/character` on a character,
+/// else at `/motion/root_motion`.
+fn motion_error(e: ApiError, id: &str, on_character: bool) -> ApiError {
     match e {
-        ApiError::Invalid { code, at: At::Pointer(inner), detail } if inner.starts_with("/retarget") => {
+        ApiError::Invalid { code, at: At::Pointer(inner), detail }
+            if inner.starts_with("/retarget") || inner.starts_with("/root_motion") =>
+        {
             ApiError::Invalid { code, at: At::Pointer(format!("/motion{inner}")), detail }
         }
         ApiError::Invalid { code, at: At::Pointer(inner), detail } => ApiError::Invalid {
             code,
-            at: At::Pointer("/motion/character".into()),
-            detail: format!("graph {id} does not play on this character: {detail} (at {inner} in the graph)"),
+            at: At::Pointer(if on_character { "/motion/character" } else { "/motion/root_motion" }.into()),
+            detail: format!("graph {id} does not play with this motion: {detail} (at {inner} in the graph)"),
         },
         other => other,
     }

@@ -399,6 +399,7 @@ impl GraphPacker {
         };
         pose.graph = s.report.then(|| report_to_proto(&tick.player.report()));
         pose.ik = ik_reports_to_pb(tick.ik);
+        pose.root_motion = tick.root_motion.map(root_motion_to_pb);
         match &s.joints {
             Some(joints) => select_joints(pose, joints),
             None => pose,

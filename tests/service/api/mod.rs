@@ -16,6 +16,7 @@ mod concurrency;
 mod cost;
 mod durability;
 pub(crate) mod graph_characters;
+pub(crate) mod graph_root_motion;
 pub(crate) mod graph_samples;
 mod graphs;
 mod grpc_motions;

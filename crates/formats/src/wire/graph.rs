@@ -19,7 +19,7 @@ use super::motion::{LayerModeDoc, MaskDoc};
 use anim::Ease;
 use anim::graph::{
     Blend1dSpec, Blend2dSpec, ClipNodeSpec, Comparison, Condition, EntrySource, EntrySpec, Graph, GraphSpec,
-    MachineSpec, NodeKind, NodeSpec, OnCharacter, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec,
+    MachineSpec, NodeKind, NodeOptions, NodeSpec, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec,
     Value,
 };
 use anim::motion::{ClipSource, LayerMode, MaskSpec};
@@ -278,19 +278,20 @@ impl GraphDoc {
         pointer: &str,
         resolve: impl FnMut(&str, &str) -> Result<C, DocError>,
     ) -> Result<Graph<C>, DocError> {
-        self.compile_on(pointer, resolve, None)
+        self.compile_with(pointer, resolve, &NodeOptions::default())
     }
 
-    /// [`GraphDoc::compile`] played on a character (`Graph::build_on`):
-    /// a refusal at `retarget/…` is pointed there, not into the document.
+    /// [`GraphDoc::compile`] with a motion's node options
+    /// (`Graph::build_with`): a refusal at `retarget/…` or `root_motion/…`
+    /// is pointed there, not into the document.
     ///
     /// # Errors
     /// As [`GraphDoc::compile`].
-    pub fn compile_on<C: ClipSource + Clone>(
+    pub fn compile_with<C: ClipSource + Clone>(
         &self,
         pointer: &str,
         mut resolve: impl FnMut(&str, &str) -> Result<C, DocError>,
-        on: Option<&OnCharacter>,
+        options: &NodeOptions,
     ) -> Result<Graph<C>, DocError> {
         let mut names = Names {
             doc: self,
@@ -301,9 +302,10 @@ impl GraphDoc {
         };
         let spec = names.spec()?;
         let clips = (names.clips.iter()).map(|(id, at)| resolve(id, at)).collect::<Result<Vec<C>, DocError>>()?;
-        Graph::build_on(spec, &clips, on).map_err(|e| {
+        Graph::build_with(spec, &clips, options).map_err(|e| {
             let at = e.path.to_pointer();
-            let at = if at.starts_with("/retarget") { at } else { format!("{pointer}{at}") };
+            let motion_own = at.starts_with("/retarget") || at.starts_with("/root_motion");
+            let at = if motion_own { at } else { format!("{pointer}{at}") };
             problem(e.kind.code(), at, e.kind.to_string())
         })
     }

@@ -15,6 +15,7 @@ use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
 use crate::built::{BuiltGraph, PinnedGraph};
 use crate::error::ApiError;
+use crate::graphs::MotionOnGraph;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
 use crate::stream::PinnedClip;
@@ -22,6 +23,7 @@ use crate::work::price;
 use anim::Pose;
 use anim::Space;
 use anim::graph::{GraphPlayer, GraphPost, Inputs, PostRun, TickRange};
+use anim::motion::{Planar, RootMotion};
 use formats::wire::graph_inputs::InputDoc;
 use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
 
@@ -44,13 +46,13 @@ pub struct GraphLayer<'a> {
     pub stages: GraphStages,
 }
 
-/// The character the motion plays the graph on, with its retarget
-/// options, and its IK constraints and spring chains, checked against the
-/// graph's (or the character's) skeleton once it is resolved.
+/// What the motion builds the graph's nodes with (its character, retarget
+/// options and root motion), and its IK constraints and spring chains,
+/// checked against the graph's (or the character's) skeleton once it is
+/// resolved.
 #[derive(Debug, Clone, Default)]
 pub struct GraphStages {
-    character: Option<String>,
-    retarget: anim::motion::RetargetSpec,
+    motion: MotionOnGraph,
     ik: Vec<anim::ik::IkSpec>,
     springs: anim::spring::SpringsSpec,
 }
@@ -61,7 +63,7 @@ pub struct GraphStages {
 ///
 /// # Errors
 /// `graph_unsupported` at the field that is not supported with a graph yet;
-/// the `ik` and `springs` documents' own refusals.
+/// the `retarget`, `ik` and `springs` documents' own refusals.
 pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> {
     let Some(i) = doc.layers.iter().position(|l| l.graph.is_some()) else { return Ok(None) };
     if doc.layers.len() != 1 {
@@ -72,35 +74,31 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> 
         let detail = format!("a graph layer takes no `{field}` (it plays at weight 1 with the layer's defaults)");
         return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
     }
-    if doc.root_motion.is_some() {
-        let detail = "a motion over a graph takes no `root_motion` yet; `character`, `retarget`, `ik` and \
-                      `springs` play with a graph";
-        return Err(unsupported("/motion/root_motion", detail));
-    }
     let retarget = doc.retarget.as_ref().map(|r| r.to_spec("/motion/retarget")).transpose()?.unwrap_or_default();
+    let root_motion = doc.root_motion.as_ref().map(formats::wire::motion::RootMotionDoc::to_spec);
     let ik = (doc.ik.iter().enumerate())
         .map(|(i, c)| c.to_spec(&format!("/motion/ik/{i}")))
         .collect::<Result<_, _>>()
         .map_err(ApiError::from)?;
     let springs = doc.springs("/motion").map_err(ApiError::from)?;
     let Some(reference) = layer.graph.as_deref() else { return Ok(None) };
-    let character = doc.character.clone();
-    Ok(Some(GraphLayer { reference, stages: GraphStages { character, retarget, ik, springs } }))
+    let motion = MotionOnGraph { character: doc.character.clone(), retarget, root_motion };
+    Ok(Some(GraphLayer { reference, stages: GraphStages { motion, ik, springs } }))
 }
 
 impl GraphStages {
-    /// The graph `built` plays for this motion: its own, or built on the
-    /// motion's character (`server::graphs::on_character`).
+    /// The graph `built` plays for this motion: its own, or built with the
+    /// motion's character and root motion (`server::graphs::played`).
     ///
     /// # Errors
-    /// As `server::graphs::on_character`.
+    /// As `server::graphs::played`.
     pub async fn graph(
         &self,
         state: &AppState,
         caller: &CallerKey,
         built: &Arc<BuiltGraph>,
     ) -> Result<Arc<PinnedGraph>, ApiError> {
-        crate::graphs::on_character(state, caller, built, self.character.as_deref(), &self.retarget).await
+        crate::graphs::played(state, caller, built, &self.motion).await
     }
 
     /// The stages built on `graph`'s skeleton, as a motion's are on its
@@ -292,6 +290,9 @@ pub struct GraphTicks {
     player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
     post: Option<PostRun>,
     next_input: usize,
+    /// The root motion's total at the first answered tick, which the
+    /// answer's totals start from.
+    root_base: Planar,
 }
 
 impl GraphTicks {
@@ -311,8 +312,21 @@ impl GraphTicks {
         // The inputs were checked against this graph, so no setting fails.
         let _ = player.play_through(k, evaluated, &s.inputs, &mut self.next_input, each);
         let pose = if s.post.is_empty() { player.pose() } else { run.pose() };
-        GraphTick { player, pose, ik: run.ik_reports(), time: s.range.time(k) }
+        let root_motion = answered_root(player, i, &mut self.root_base);
+        GraphTick { player, pose, ik: run.ik_reports(), root_motion, time: s.range.time(k) }
     }
+}
+
+/// Answered tick `i`'s root motion (docs/motion.md, “Root motion”): the
+/// first's delta and total 0 (its total is the `base` the others' start
+/// from), the others' delta the player's and their total since the first.
+fn answered_root(player: &GraphPlayer<Arc<dyn PinnedClip>>, i: usize, base: &mut Planar) -> Option<RootMotion> {
+    let (root, up) = (player.root_motion()?, player.graph().initial_motion().root_up()?);
+    if i == 0 {
+        *base = root.total;
+        return Some(RootMotion::default());
+    }
+    Some(RootMotion { delta: root.delta, total: base.inverse(up).then(root.total, up) })
 }
 
 /// One answered tick of a graph sampling.
@@ -323,6 +337,8 @@ pub struct GraphTick<'a> {
     pub pose: &'a Pose,
     /// The motion's IK reports, one per constraint.
     pub ik: &'a [anim::ik::IkReport],
+    /// Its root motion since the answer's first tick, when the motion asks for it.
+    pub root_motion: Option<RootMotion>,
     /// Its motion time `k/fps`.
     pub time: f64,
 }
@@ -341,6 +357,7 @@ fn cost(
     let per_pose = pose_bound(built, graph, |clip| Estimate::batch(clip, &built.meta.id, format, wire).per_pose)
         + json_str(&built.meta.id)
         + ik_reports(post.ik().len() as u64, wire)
+        + if graph.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 }
         + if report { report_bytes(built) } else { 0 };
     let bytes = 12 + per_pose.saturating_mul(range.answered());
     let ticks = range.last.saturating_add(1);

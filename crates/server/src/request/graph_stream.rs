@@ -96,7 +96,9 @@ impl RawStream<'_> {
         let report = if graph.report { report_bytes(&built) } else { 0 };
         let post = Arc::new(graph.stages.build(&played, state)?);
         let ik = ik_reports(post.ik().len() as u64, wire);
-        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(2 * F64_TEXT + json_str(id));
+        let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
+        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
+        let frame = frame.saturating_add(2 * F64_TEXT + json_str(id));
         let stages = price::graph_post(&post, played.skeleton(), f64::from(request.fps));
         let per_frame = price::graph_tick(&played).saturating_add(stages);
         let program =

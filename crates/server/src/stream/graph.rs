@@ -86,8 +86,9 @@ impl GraphDeck {
 
     /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
     /// shown (those are stepped without a pose, as are the ticks before a
-    /// first tick that came late — but with springs they are evaluated, so
-    /// that the chains see every tick), so that a stream never paused shows
+    /// first tick that came late — but with springs or root motion they are
+    /// evaluated, so that the chains and the root's travel see every tick),
+    /// so that a stream never paused shows
     /// graph tick `k` at tick `k`; while `paused` only the springs go on
     /// settling on the held pose (the first tick is always played).
     /// Returns the motion time shown, as a frame's `clip_time`.
@@ -97,8 +98,9 @@ impl GraphDeck {
         let first = self.player.ticks() == 0;
         if !paused || first {
             let n = if first { k } else { skipped };
+            let every_tick = self.post.springs().is_some() || self.player.graph().initial_motion().has_root_motion();
             for j in 0..n {
-                if self.post.springs().is_some() {
+                if every_tick {
                     self.player.tick(dt);
                     self.run_post(clock(k - n + j));
                 } else {
@@ -158,6 +160,11 @@ impl GraphDeck {
             (Space::Local, true) => self.player.pose(),
             (Space::Local, false) => self.run.pose(),
         }
+    }
+
+    /// The last tick's root motion since tick 0, when the motion asks for it.
+    pub(super) fn root_motion(&self) -> Option<anim::motion::RootMotion> {
+        self.player.root_motion()
     }
 
     /// The last tick's IK reports (the motion's constraints).

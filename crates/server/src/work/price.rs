@@ -271,11 +271,18 @@ pub fn graph_tick(graph: &anim::graph::Graph<Arc<dyn PinnedClip>>) -> u64 {
 
 /// The work of building a graph on a character of `output` joints, beyond
 /// [`graph_build`]: each layer's retargeter set up as a clip motion's is
-/// ([`motion_build`]: both references in model space, and with planted
-/// `feet` each source foot's lowest over up to 4096 poses), every layer
-/// over the graph's largest clip of `joints`.
-pub fn graph_retarget_setup(node_layers: impl Iterator<Item = u64>, joints: u64, output: u64, feet: bool) -> u64 {
-    let per_layer = (joints + output).saturating_mul(3 * JOINT)
+/// ([`motion_build`]: both references in model space, with `root` motion
+/// the root's cycle at up to 4096 poses, and with planted `feet` each source
+/// foot's lowest over up to 4096 poses), every layer over the graph's
+/// largest clip of `joints`.
+pub fn graph_retarget_setup(
+    node_layers: impl Iterator<Item = u64>,
+    joints: u64,
+    output: u64,
+    (feet, root): (bool, bool),
+) -> u64 {
+    let poses = if root { 4100 } else { 3 };
+    let per_layer = (joints + output).saturating_mul(poses * JOINT)
         + if feet { 4100u64.saturating_mul(joints).saturating_mul(JOINT) } else { 0 };
     node_layers.map(|layers| layers.saturating_mul(per_layer)).fold(0, u64::saturating_add)
 }
