@@ -6,7 +6,8 @@
 //! independent path: a clip motion retargets each layer, then mixes them);
 //! a graph over clips the character cannot map, a missing character and
 //! bad retarget options are refused where a clip motion's are; a tick is
-//! priced as the clip motion's pose, retargets included.
+//! priced as the clip motion's pose, retargets included; its root motion on
+//! the character is the clip motion's.
 
 use serde_json::{Value, json};
 
@@ -186,5 +187,40 @@ async fn a_graph_tick_on_a_character_pays_its_layers_retargets_as_a_clip_motion_
     assert_eq!(plain, 2 * take_joints as u64, "a tick of the blend samples its two layers' joints");
     // docs/motion.md, “Playing a take on a character”: a retargeted layer adds a pass over its clip and the character.
     assert_eq!(on_cesium, plain + 2 * (take_joints + cesium_joints) as u64);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_graph_on_a_character_travels_as_its_layers_clip_motion_does() {
+    let app = TestApp::start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let graph = pace_graph(&app, &take).await;
+    let root = json!({"mode": "extract"});
+    let end = LAST_TICK as f64 / FPS;
+    let motion = json!({"layers": [{"graph": graph}], "character": cesium, "root_motion": root});
+    let (status, answer) =
+        send(&app, "/v1/samples", &json!({"motion": motion, "start": 0, "end": end, "fps": FPS})).await;
+    assert_eq!(status, 200, "{answer}");
+    let clips = graph_clips(&app, &graph).await;
+    let layers = json!([{"clip": clips[0], "sync": "pace"}, {"clip": clips[1], "sync": "pace", "weight": 0.3}]);
+    let times: Vec<f64> = (0..=LAST_TICK).map(|k| k as f64 / FPS).collect();
+    let clip_motion = json!({"layers": layers, "character": cesium, "root_motion": root});
+    let (status, want) = send(&app, "/v1/samples", &json!({"motion": clip_motion, "times": times})).await;
+    assert_eq!(status, 200, "{want}");
+    let travel = |pose: &Value, which: &str| -> Vec<f64> {
+        let part = &pose["root_motion"][which];
+        let t = part["translation"].as_array().unwrap_or_else(|| panic!("{pose}"));
+        t.iter().chain([&part["yaw"]]).map(|x| x.as_f64().unwrap()).collect()
+    };
+    let (got, want) = (answer["poses"].as_array().unwrap(), want["poses"].as_array().unwrap());
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        for which in ["delta", "total"] {
+            let worst = travel(g, which).iter().zip(travel(w, which)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(worst <= 1e-5, "tick {k}'s {which}: {worst} from the clip motion's");
+        }
+    }
+    let total = travel(&got[LAST_TICK as usize], "total");
+    // The take's first 1.5 s mostly turn on the spot.
+    assert!(total[0].hypot(total[2]) > 1e-3 && total[3].abs() > 0.1, "the character moves: {total:?}");
     app.stop().await;
 }

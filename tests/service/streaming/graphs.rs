@@ -519,4 +519,16 @@ async fn a_graph_stream_s_root_motion_is_what_samples_answer_for_the_same_inputs
     for (seq, frame) in &seen {
         assert_eq!(frame["pose"]["root_motion"], poses[*seq as usize]["root_motion"], "broadcast tick {seq}");
     }
+
+    // gRPC `StreamFrames`: the same numbers.
+    let layer = pb::Layer { graph: graph.clone(), ..Default::default() };
+    let root = pb::RootMotionOptions { joint: "hips".into(), ..Default::default() };
+    let on = pb::Motion { layers: vec![layer], root_motion: Some(root), ..Default::default() };
+    let request = pb::StreamRequest { fps: FPS, motion: Some(on), max_frames: 5, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request).await.unwrap().into_inner();
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let total = frame.pose.unwrap().root_motion.unwrap().total.unwrap();
+        let want = &poses[frame.seq as usize]["root_motion"]["total"];
+        assert_eq!(json!([total.x, total.y, total.z]), want["translation"], "gRPC tick {}", frame.seq);
+    }
 }

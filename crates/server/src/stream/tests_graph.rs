@@ -205,5 +205,12 @@ fn root_motion_on_a_graph_rides_its_frames_and_a_restored_program_makes_the_same
     // Line a walks 1 on x a second: 1/30 a tick at 30 fps, until `s` brings in b (which walks on z).
     assert_eq!((x(0, "delta"), x(0, "total")), (0.0, 0.0));
     assert!((x(3, "delta") - 1.0 / 30.0).abs() < 1e-6 && (x(3, "total") - 0.1).abs() < 1e-6, "{}", root_motion(3));
+    // Paused from tick 20 to 26: the root holds, its deltas 0.
+    for k in 21..=25 {
+        assert_eq!(x(k, "delta"), 0.0, "tick {k}: {}", root_motion(k));
+        assert_eq!(root_motion(k)["total"], root_motion(20)["total"], "tick {k}");
+    }
+    // Line c moves up, not on the ground; `s` at 0.2 fades back to the mix of a (on x) and b (on z).
+    assert!(x(50, "delta") > 0.0, "play goes on: {}", root_motion(50));
     assert_restores(&params, &log, &frames, &texts);
 }
