@@ -19,23 +19,24 @@ pub type PinnedGraph = Graph<Arc<dyn PinnedClip>>;
 pub struct BuiltGraph {
     pub meta: DocMeta,
     pub graph: Arc<PinnedGraph>,
-    /// The document it was built from, to build it again on a character.
+    /// The document it was built from, to build it again with a motion's
+    /// character and root motion.
     pub doc: GraphDoc,
     /// The distinct clips the document names, in its order, each the
     /// clip cache's entry at the version the graph was built on.
     pub clips: Vec<Arc<CachedClip>>,
-    /// The graph built on characters (`server::graphs::on_character`), by
-    /// the character's id and version and the retarget options: at most
-    /// [`MAX_ON_CHARACTERS`], the oldest replaced. They leave with it.
-    pub on_characters: Mutex<Vec<(String, Arc<PinnedGraph>)>>,
+    /// The graph built again for motions over it (`server::graphs::played`),
+    /// by the character's id and version, the retarget options and the root
+    /// motion: at most [`MAX_PLAYED`], the oldest replaced. They leave with it.
+    pub played: Mutex<Vec<(String, Arc<PinnedGraph>)>>,
     /// An estimate of the heap it keeps alive besides its clips (their
-    /// bytes are the clip cache's), room for its builds on characters
+    /// bytes are the clip cache's), room for its builds for motions
     /// included.
     pub bytes: usize,
 }
 
-/// How many builds on characters a built graph keeps.
-pub const MAX_ON_CHARACTERS: usize = 4;
+/// How many builds for motions (on characters, with root motion) a built graph keeps.
+pub const MAX_PLAYED: usize = 4;
 
 impl BuiltGraph {
     /// Each clip it plays, as `(id, version)`: what a motion or stream over
@@ -44,20 +45,20 @@ impl BuiltGraph {
         self.clips.iter().map(|c| (c.meta.id.as_str(), c.meta.version))
     }
 
-    /// Its build on a character, by [`BuiltGraph::on_character`]'s key.
-    pub fn on_character(&self, key: &str) -> Option<Arc<PinnedGraph>> {
-        let kept = self.on_characters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    /// Its build for a motion, by `server::graphs::played`'s key.
+    pub fn played_for(&self, key: &str) -> Option<Arc<PinnedGraph>> {
+        let kept = self.played.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         kept.iter().find(|(k, _)| k == key).map(|(_, graph)| Arc::clone(graph))
     }
 
-    /// Keeps its build on a character under `key`, the oldest let go when
-    /// [`MAX_ON_CHARACTERS`] are kept.
-    pub fn keep_on_character(&self, key: String, graph: Arc<PinnedGraph>) {
-        let mut kept = self.on_characters.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    /// Keeps its build for a motion under `key`, the oldest let go when
+    /// [`MAX_PLAYED`] are kept.
+    pub fn keep_played(&self, key: String, graph: Arc<PinnedGraph>) {
+        let mut kept = self.played.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if kept.iter().any(|(k, _)| *k == key) {
             return;
         }
-        if kept.len() >= MAX_ON_CHARACTERS {
+        if kept.len() >= MAX_PLAYED {
             kept.remove(0);
         }
         kept.push((key, graph));

@@ -80,7 +80,7 @@ impl CheckedGraph {
     pub fn built(self, meta: DocMeta) -> BuiltGraph {
         let bytes = built_bytes(&self.new_doc.doc_json, &self.clips);
         let (graph, doc, clips) = (Arc::new(self.graph), self.doc, self.clips);
-        BuiltGraph { meta, graph, doc, clips, on_characters: Default::default(), bytes }
+        BuiltGraph { meta, graph, doc, clips, played: Default::default(), bytes }
     }
 
     /// Stores the graph as a new document (or, as `on_name` allows, the new
@@ -340,7 +340,7 @@ pub async fn played(
     };
     let on = character.as_ref().map(|c| format!("{}@{}", c.meta.id, c.meta.version));
     let key = format!("{on:?} {:?} {:?}", motion.retarget, motion.root_motion);
-    if let Some(hit) = built.on_character(&key) {
+    if let Some(hit) = built.played_for(&key) {
         return Ok(hit);
     }
     let options = NodeOptions {
@@ -358,7 +358,7 @@ pub async fn played(
         }
     });
     let graph = Arc::new(graph.await?);
-    built.keep_on_character(key, Arc::clone(&graph));
+    built.keep_played(key, Arc::clone(&graph));
     Ok(graph)
 }
 
@@ -418,13 +418,13 @@ fn node_layers(doc: &GraphDoc) -> impl Iterator<Item = u64> + '_ {
 /// An estimate of a built graph's own heap: per node, a motion whose
 /// layers map the clips' joints; the document's size stands for its names
 /// (twice: the graph's and the document's own); and room for its builds
-/// on characters, each as large again with a retargeter per clip (about
+/// for motions, each as large again with a retargeter per clip (about
 /// 256 bytes a joint: offsets, references and two model-space poses).
 fn built_bytes(doc_json: &str, clips: &[Arc<CachedClip>]) -> usize {
     let joints: usize = clips.iter().map(|c| c.clip.joint_count()).max().unwrap_or(0);
     let own = doc_json.len() * 6 + clips.len() * joints * 16;
-    let on_character = doc_json.len() * 4 + clips.len() * joints * (16 + 256);
-    std::mem::size_of::<BuiltGraph>() + own + crate::built::MAX_ON_CHARACTERS * on_character
+    let played = doc_json.len() * 4 + clips.len() * joints * (16 + 256);
+    std::mem::size_of::<BuiltGraph>() + own + crate::built::MAX_PLAYED * played
 }
 
 /// A store refusal of a graph write or read: a missing row is a missing graph.
