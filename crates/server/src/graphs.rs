@@ -28,6 +28,8 @@ use crate::state::AppState;
 use crate::store::{DocKind, DocMeta, MeshWrite, NewDoc, OnName, StoreError, StoredDoc, name_reference};
 use crate::stream::PinnedClip;
 use crate::work::price;
+use anim::graph::NodeOptions;
+use anim::motion::{RetargetSpec, RootMotionSpec};
 use formats::wire::graph::{GraphDoc, ParameterDoc, parse_graph_doc};
 
 /// What a graph's summary shows beyond its identity, derived when it is
@@ -68,6 +70,7 @@ impl GraphReport {
 #[derive(Debug)]
 pub struct CheckedGraph {
     pub graph: PinnedGraph,
+    pub doc: GraphDoc,
     pub clips: Vec<Arc<CachedClip>>,
     pub new_doc: NewDoc,
 }
@@ -76,7 +79,8 @@ impl CheckedGraph {
     /// The graph as the cache keeps it, once the store has given it `meta`.
     pub fn built(self, meta: DocMeta) -> BuiltGraph {
         let bytes = built_bytes(&self.new_doc.doc_json, &self.clips);
-        BuiltGraph { meta, graph: self.graph, clips: self.clips, bytes }
+        let (graph, doc, clips) = (Arc::new(self.graph), self.doc, self.clips);
+        BuiltGraph { meta, graph, doc, clips, played: Default::default(), bytes }
     }
 
     /// Stores the graph as a new document (or, as `on_name` allows, the new
@@ -165,7 +169,7 @@ pub async fn check_doc(state: &AppState, caller: &CallerKey, doc: GraphDoc) -> R
         report_json: serde_json::to_string(&GraphReport::of(&doc)).map_err(ApiError::internal)?,
         mesh: MeshWrite::None,
     };
-    Ok(CheckedGraph { graph, clips, new_doc })
+    Ok(CheckedGraph { graph, doc, clips, new_doc })
 }
 
 /// The graph `reference` names (its id, or `name:<name>`) built at its
@@ -281,23 +285,126 @@ async fn find_clips(state: &AppState, doc: &GraphDoc) -> Result<Vec<Arc<CachedCl
 
 /// The core's build over the found clips (each id resolved to its entry).
 fn build(doc: &GraphDoc, clips: &[Arc<CachedClip>]) -> Result<PinnedGraph, ApiError> {
+    build_with(doc, clips, &NodeOptions::default())
+}
+
+/// [`build`], every node's motion built with `options`.
+fn build_with(doc: &GraphDoc, clips: &[Arc<CachedClip>], options: &NodeOptions) -> Result<PinnedGraph, ApiError> {
     let by_id: HashMap<&str, &Arc<CachedClip>> = clips.iter().map(|c| (c.meta.id.as_str(), c)).collect();
-    let graph = doc.compile("", |id, at| match by_id.get(id) {
+    let resolve = |id: &str, at: &str| match by_id.get(id) {
         Some(clip) => Ok(Arc::clone(*clip) as Arc<dyn PinnedClip>),
         None => Err(formats::wire::json::DocError {
             code: "clip_not_found",
             pointer: at.to_owned(),
             detail: format!("the clip `{id}` does not exist"),
         }),
-    })?;
+    };
+    Ok(doc.compile_with("", resolve, options)?)
+}
+
+/// What a motion over a graph builds its nodes with besides the graph: the
+/// character it plays on (an id or `name:…`), its retarget options and its
+/// root motion.
+#[derive(Debug, Clone, Default)]
+pub struct MotionOnGraph {
+    pub character: Option<String>,
+    pub retarget: RetargetSpec,
+    pub root_motion: Option<RootMotionSpec>,
+}
+
+/// The graph `built` plays for `motion`: its own when the motion names no
+/// character and no root motion, else `built` built again with them —
+/// each node's clips retargeted onto the character as a clip motion's
+/// layers are (docs/characters.md), each node reporting root motion
+/// (docs/motion.md) — once per character version and options (priced,
+/// charged to `caller`, on the pool) and kept with `built`.
+///
+/// # Errors
+/// `character_not_found` (404) at `/motion/character`; a clip of the graph
+/// the character cannot map (`unmappable_skeleton`) at `/motion/character`,
+/// or without the root joint (`no_root_joint`) at `/motion/root_motion`,
+/// the detail saying where in the graph; the options' refusals at
+/// `/motion/retarget/…` and `/motion/root_motion/…`; the price's refusals.
+pub async fn played(
+    state: &AppState,
+    caller: &CallerKey,
+    built: &Arc<BuiltGraph>,
+    motion: &MotionOnGraph,
+) -> Result<Arc<PinnedGraph>, ApiError> {
+    if motion.character.is_none() && motion.root_motion.is_none() {
+        return Ok(Arc::clone(&built.graph));
+    }
+    let character = match &motion.character {
+        Some(reference) => Some(crate::characters::resolve(state, caller, reference).await?),
+        None => None,
+    };
+    let on = character.as_ref().map(|c| format!("{}@{}", c.meta.id, c.meta.version));
+    let key = format!("{on:?} {:?} {:?}", motion.retarget, motion.root_motion);
+    if let Some(hit) = built.played_for(&key) {
+        return Ok(hit);
+    }
+    let options = NodeOptions {
+        character: character.as_ref().map(|c| Arc::clone(&c.spec)),
+        retarget: motion.retarget.clone(),
+        root_motion: motion.root_motion.clone(),
+    };
+    let units = build_price(&built.doc, &built.clips).saturating_add(setup_price(built, &options));
+    let building = Arc::clone(built);
+    let graph = crate::builds::run(&state.work, caller, &state.config.limits, units, "building this graph's motion", {
+        move |_| {
+            let on_character = options.character.is_some();
+            build_with(&building.doc, &building.clips, &options)
+                .map_err(|e| motion_error(e, &building.meta.id, on_character))
+        }
+    });
+    let graph = Arc::new(graph.await?);
+    built.keep_played(key, Arc::clone(&graph));
     Ok(graph)
+}
+
+/// The price of the nodes' retargeters beyond [`build_price`]: as a
+/// motion's on a character, over every node's layers.
+fn setup_price(built: &BuiltGraph, options: &NodeOptions) -> u64 {
+    let Some(character) = &options.character else { return 0 };
+    let joints = built.clips.iter().map(|c| c.clip.joint_count() as u64).max().unwrap_or(0);
+    let (output, feet, root) =
+        (character.skeleton.len() as u64, options.retarget.feet.is_some(), options.root_motion.is_some());
+    price::graph_retarget_setup(node_layers(&built.doc), joints, output, (feet, root))
+}
+
+/// A refusal of a graph's build with a motion's options, pointed into the
+/// request's motion: the options' own at `/motion/retarget/…` and
+/// `/motion/root_motion/…`, anything else (a clip the character cannot
+/// map, or without the root joint) at `/motion/character` on a character,
+/// else at `/motion/root_motion`.
+fn motion_error(e: ApiError, id: &str, on_character: bool) -> ApiError {
+    match e {
+        ApiError::Invalid { code, at: At::Pointer(inner), detail }
+            if inner.starts_with("/retarget") || inner.starts_with("/root_motion") =>
+        {
+            ApiError::Invalid { code, at: At::Pointer(format!("/motion{inner}")), detail }
+        }
+        ApiError::Invalid { code, at: At::Pointer(inner), detail } => ApiError::Invalid {
+            code,
+            at: At::Pointer(if on_character { "/motion/character" } else { "/motion/root_motion" }.into()),
+            detail: format!("graph {id} does not play with this motion: {detail} (at {inner} in the graph)"),
+        },
+        other => other,
+    }
 }
 
 /// The price of [`build`]: each node's layers over the largest clip's
 /// joints, each 2D blend's triangulation (`server::work::price`).
 fn build_price(doc: &GraphDoc, clips: &[Arc<CachedClip>]) -> u64 {
     let joints = clips.iter().map(|c| c.clip.joint_count() as u64).max().unwrap_or(0);
-    let layers = doc.nodes.values().map(|node| {
+    let blend2d = doc.nodes.values().filter_map(|node| node.blend2d.as_ref().map(|b| b.points.len() as u64));
+    price::graph_build(node_layers(doc), blend2d, joints)
+}
+
+/// Each node's layers, as its motion is built: its clip, its points, its
+/// entries (an entry naming a node at most a motion's bound of layers).
+fn node_layers(doc: &GraphDoc) -> impl Iterator<Item = u64> + '_ {
+    doc.nodes.values().map(|node| {
         let points =
             node.blend1d.as_ref().map_or(0, |b| b.points.len()) + node.blend2d.as_ref().map_or(0, |b| b.points.len());
         let entries = node.layers.as_ref().map_or(0, |entries| {
@@ -305,16 +412,19 @@ fn build_price(doc: &GraphDoc, clips: &[Arc<CachedClip>]) -> u64 {
             entries.iter().map(|e| if e.node.is_some() { anim::motion::MAX_LAYERS } else { 1 }).sum()
         });
         (usize::from(node.clip.is_some()) + points + entries) as u64
-    });
-    let blend2d = doc.nodes.values().filter_map(|node| node.blend2d.as_ref().map(|b| b.points.len() as u64));
-    price::graph_build(layers, blend2d, joints)
+    })
 }
 
 /// An estimate of a built graph's own heap: per node, a motion whose
-/// layers map the clips' joints; the document's size stands for its names.
+/// layers map the clips' joints; the document's size stands for its names
+/// (twice: the graph's and the document's own); and room for its builds
+/// for motions, each as large again with a retargeter per clip (about
+/// 256 bytes a joint: offsets, references and two model-space poses).
 fn built_bytes(doc_json: &str, clips: &[Arc<CachedClip>]) -> usize {
     let joints: usize = clips.iter().map(|c| c.clip.joint_count()).max().unwrap_or(0);
-    std::mem::size_of::<BuiltGraph>() + doc_json.len() * 4 + clips.len() * joints * 16
+    let own = doc_json.len() * 6 + clips.len() * joints * 16;
+    let played = doc_json.len() * 4 + clips.len() * joints * (16 + 256);
+    std::mem::size_of::<BuiltGraph>() + own + crate::built::MAX_PLAYED * played
 }
 
 /// A store refusal of a graph write or read: a missing row is a missing graph.

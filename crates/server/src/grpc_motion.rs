@@ -362,7 +362,7 @@ impl GraphPacker {
 
     /// The joint names sent (the subset's, in skeleton order).
     fn names(&self) -> Vec<String> {
-        let names = self.sampling.built.graph.skeleton().names();
+        let names = self.sampling.graph.skeleton().names();
         match &self.sampling.joints {
             Some(joints) => joints.iter().map(|&j| names[j].clone()).collect(),
             None => names.to_vec(),
@@ -375,7 +375,7 @@ impl GraphPacker {
         let s = &self.sampling;
         let tick = self.ticks.play(s, i);
         let time = tick.time;
-        let skeleton = s.built.graph.skeleton();
+        let skeleton = s.graph.skeleton();
         let names = named.then(|| skeleton.names());
         let mut pose = match s.format {
             Format::Trs => {
@@ -399,6 +399,7 @@ impl GraphPacker {
         };
         pose.graph = s.report.then(|| report_to_proto(&tick.player.report()));
         pose.ik = ik_reports_to_pb(tick.ik);
+        pose.root_motion = tick.root_motion.map(root_motion_to_pb);
         match &s.joints {
             Some(joints) => select_joints(pose, joints),
             None => pose,

@@ -223,9 +223,9 @@ async fn bad_graph_requests_are_422_at_their_pointers() {
             "/motion/layers/1/graph",
         ),
         (
-            json!({"motion": {"layers": [{"graph": graph}], "root_motion": {"joint": "hips"}}, "start": 0, "end": 1}),
-            "graph_unsupported",
-            "/motion/root_motion",
+            json!({"motion": {"layers": [{"graph": graph}], "root_motion": {"joint": "nope"}}, "start": 0, "end": 1}),
+            "unknown_joint",
+            "/motion/root_motion/joint",
         ),
         (
             json!({"motion": {"layers": [{"clip": "x"}]}, "start": 0, "end": 1, "fps": 10, "report": true}),

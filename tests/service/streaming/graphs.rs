@@ -7,6 +7,9 @@
 //! `StreamFrames` carries `Pose.graph` and `Play` takes `set`. A motion's
 //! springs and IK on a graph stream are what samples answer from tick 0,
 //! and a graph pose warms its springs up as a samples request from its tick.
+//! A graph on a character streams, broadcasts and streams over gRPC the
+//! poses samples answer on it; a graph stream's and a broadcast's root
+//! motion is the samples' for the same inputs.
 //!
 //! The graph is the Fox's shipped locomotion (`examples/graphs/fox-locomotion.json`):
 //! it stands (`idle`) until `speed` rises above 0.2, then `move`s at once
@@ -23,6 +26,9 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 
 use super::{TestApp, within};
+use crate::api::character_routes::take_and_cesium;
+use crate::api::graph_characters::pace_graph;
+use crate::api::graph_root_motion::walks_graph;
 use crate::api::graph_samples::fox_graph;
 use crate::common::app::Ws;
 
@@ -261,8 +267,9 @@ async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
         ),
         (json!({"motion": over("0193e0c0-0000-7000-8000-000000000000")}), "graph_not_found", "/motion/layers/0/graph"),
         (
+            // The Fox's root joints carry no translation track (docs/motion.md, “Root motion”).
             json!({"motion": {"layers": [{"graph": graph}], "root_motion": {}}}),
-            "graph_unsupported",
+            "no_root_joint",
             "/motion/root_motion",
         ),
         (
@@ -435,4 +442,93 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     };
     assert_eq!(status.code(), tonic::Code::InvalidArgument);
     assert_eq!(status.metadata().get("x-error-code").unwrap(), "parameter_out_of_range");
+}
+
+#[tokio::test]
+async fn a_graph_on_a_character_streams_and_broadcasts_what_samples_answer() {
+    let app = TestApp::start().await;
+    let (take, cesium) = take_and_cesium(&app).await;
+    let graph = pace_graph(&app, &take).await;
+    let motion = json!({"layers": [{"graph": graph}], "character": cesium});
+    let poses = samples_of(&app, motion.clone(), 120, FPS, json!([])).await;
+    let cesium_joints = app.get_json(&format!("/v1/characters/{cesium}")).await["skeleton"]["joints"].clone();
+    assert_eq!(poses[0]["joints"].as_array().unwrap().len(), cesium_joints.as_array().unwrap().len());
+
+    let (mut ws, opened) = open(&app, json!({"op": "open", "motion": motion, "fps": FPS, "report": true})).await;
+    assert!(opened.get("opened").is_some(), "{opened}");
+    for (seq, frame) in frames_until(&mut ws, 20).await {
+        assert_same_tick(seq, &frame, &poses[seq as usize]);
+    }
+
+    let body = json!({"motion": motion, "fps": FPS, "report": true});
+    let resp = app.http.post(app.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let mut viewer = app.ws(&format!("/v1/broadcasts/{id}/stream")).await;
+    for (seq, frame) in frames_until(&mut viewer, 10).await.into_iter().filter(|(seq, _)| *seq <= 120) {
+        assert_same_tick(seq, &frame, &poses[seq as usize]);
+    }
+
+    let layer = pb::Layer { graph: graph.clone(), ..Default::default() };
+    let on = pb::Motion { layers: vec![layer], character: cesium.clone(), ..Default::default() };
+    let request = pb::StreamRequest { fps: FPS, motion: Some(on), max_frames: 5, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request).await.unwrap().into_inner();
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let pose = frame.pose.unwrap();
+        let want = &poses[frame.seq as usize]["joints"];
+        let rotations: Vec<f32> = (want.as_array().unwrap().iter())
+            .flat_map(|j| j["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32))
+            .collect();
+        assert_eq!(pose.rotations, rotations, "tick {}'s rotations", frame.seq);
+    }
+}
+
+#[tokio::test]
+async fn a_graph_stream_s_root_motion_is_what_samples_answer_for_the_same_inputs() {
+    let app = TestApp::start().await;
+    let graph = walks_graph(&app, [(0.25, 1.0), (0.5, 4.0)], 0.0, 0.2).await;
+    let motion = json!({"layers": [{"graph": graph}], "root_motion": {"joint": "hips"}});
+    let (mut ws, opened) = open(&app, json!({"op": "open", "motion": motion, "fps": FPS, "report": true})).await;
+    assert!(opened.get("opened").is_some(), "{opened}");
+    let mut frames = frames_until(&mut ws, 3).await;
+    send(&mut ws, json!({"op": "set", "parameters": {"pace": 0.6}})).await;
+    frames.extend(frames_until(&mut ws, 30).await);
+    let set_at = *frames.iter().find(|(_, f)| f["graph"]["weights"]["walk"][1] != json!(0.0)).unwrap().0;
+    let sent = *frames.keys().last().unwrap();
+    send(&mut ws, json!({"op": "set", "parameters": {"halt": true}})).await;
+    frames.extend(frames_until(&mut ws, sent + 30).await);
+    let halted = first_in(&frames, sent + 1, "stop");
+    let last = *frames.keys().last().unwrap();
+    let t = |k: u64| k as f64 / f64::from(FPS);
+    let inputs = json!([{"time": t(set_at), "set": {"pace": 0.6}}, {"time": t(halted), "set": {"halt": true}}]);
+    let poses = samples_of(&app, motion.clone(), last, FPS, inputs).await;
+    for (seq, frame) in &frames {
+        assert_same_tick(*seq, frame, &poses[*seq as usize]);
+        let root = &frame["pose"]["root_motion"];
+        assert!(root.is_object(), "tick {seq}: {frame}");
+        assert_eq!(root, &poses[*seq as usize]["root_motion"], "tick {seq}'s root motion");
+    }
+
+    let body = json!({"motion": motion, "fps": FPS});
+    let resp = app.http.post(app.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let mut viewer = app.ws(&format!("/v1/broadcasts/{id}/stream")).await;
+    let seen = frames_until(&mut viewer, 10).await;
+    let poses = samples_of(&app, motion, *seen.keys().last().unwrap(), FPS, json!([])).await;
+    for (seq, frame) in &seen {
+        assert_eq!(frame["pose"]["root_motion"], poses[*seq as usize]["root_motion"], "broadcast tick {seq}");
+    }
+
+    // gRPC `StreamFrames`: the same numbers.
+    let layer = pb::Layer { graph: graph.clone(), ..Default::default() };
+    let root = pb::RootMotionOptions { joint: "hips".into(), ..Default::default() };
+    let on = pb::Motion { layers: vec![layer], root_motion: Some(root), ..Default::default() };
+    let request = pb::StreamRequest { fps: FPS, motion: Some(on), max_frames: 5, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request).await.unwrap().into_inner();
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let total = frame.pose.unwrap().root_motion.unwrap().total.unwrap();
+        let want = &poses[frame.seq as usize]["root_motion"]["total"];
+        assert_eq!(json!([total.x, total.y, total.z]), want["translation"], "gRPC tick {}", frame.seq);
+    }
 }

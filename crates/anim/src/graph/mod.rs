@@ -34,7 +34,9 @@ pub use ticks::{Inputs, TickRange, due_tick};
 
 use self::blend::{Line, Plane};
 use self::error::GraphErrorKind as K;
-use crate::motion::{ClipSource, LayerMode, LayerSpec, MAX_FADES, Motion, MotionSpec};
+use crate::motion::{
+    CharacterSpec, ClipSource, LayerMode, LayerSpec, MAX_FADES, Motion, MotionSpec, RetargetSpec, RootMotionSpec,
+};
 use crate::{Path, Playback, Step};
 
 /// A validated graph, ready to play.
@@ -108,6 +110,21 @@ impl<C: ClipSource + Clone> Graph<C> {
     /// The first rule of docs/graphs.md it breaks, with the path of the
     /// field in the graph document (`nodes/strafe/blend2d/points`).
     pub fn build(spec: GraphSpec, clips: &[C]) -> Result<Graph<C>, GraphError> {
+        Graph::build_with(spec, clips, &NodeOptions::default())
+    }
+
+    /// [`Graph::build`], every node's motion built with a motion's
+    /// `options`: played on a character as a clip motion is
+    /// (docs/characters.md: each layer whose clip is of another skeleton
+    /// retargeted before the node's layers are mixed, so the graph's poses
+    /// are the character's), reporting root motion (docs/motion.md).
+    ///
+    /// # Errors
+    /// As [`Graph::build`]; a clip the character cannot map
+    /// (`unmappable_skeleton`) or without the root joint (`no_root_joint`)
+    /// at its place in the graph; the options' own refusals at
+    /// `retarget/…` and `root_motion/…`.
+    pub fn build_with(spec: GraphSpec, clips: &[C], options: &NodeOptions) -> Result<Graph<C>, GraphError> {
         check_parameters(&spec.parameters)?;
         let blends = build_blends(&spec)?;
         let (states, transitions, initial) = match spec.top {
@@ -133,7 +150,7 @@ impl<C: ClipSource + Clone> Graph<C> {
                 return Err(GraphError::new(state_path(&graph.states, s).field("node"), unknown("node", state.node)));
             }
         }
-        let builder = Builder { nodes: &spec.nodes, clips, blends: &graph.blends };
+        let builder = Builder { nodes: &spec.nodes, clips, blends: &graph.blends, options };
         for n in 0..spec.nodes.len() {
             graph.stacks[n] = Some(builder.stack(n)?);
         }
@@ -414,11 +431,22 @@ fn plane_axis(parameters: &[ParameterSpec], p: usize, path: Path) -> Result<(usi
     Ok((p, min, span))
 }
 
+/// What a motion over a graph builds every node's motion with: the
+/// character it plays on and how its clips are retargeted onto it, and its
+/// root motion (a motion's `character`, `retarget` and `root_motion`).
+#[derive(Debug, Clone, Default)]
+pub struct NodeOptions {
+    pub character: Option<Arc<CharacterSpec>>,
+    pub retarget: RetargetSpec,
+    pub root_motion: Option<RootMotionSpec>,
+}
+
 /// What turning nodes into layer stacks needs.
 struct Builder<'a, C> {
     nodes: &'a [NodeSpec],
     clips: &'a [C],
     blends: &'a [Blend],
+    options: &'a NodeOptions,
 }
 
 impl<C: ClipSource + Clone> Builder<'_, C> {
@@ -429,8 +457,9 @@ impl<C: ClipSource + Clone> Builder<'_, C> {
         self.flatten(n, &mut visiting, &mut flat)?;
         let weights = flat.layers.iter().map(|l| l.weight).collect();
         let exit = flat.exit.unwrap_or(Exit::Phase);
-        let motion = Motion::build(MotionSpec { layers: flat.layers, ..MotionSpec::default() })
-            .map_err(|e| motion_error(e, &flat.origins, node_path(self.nodes, n)))?;
+        let NodeOptions { character, retarget, root_motion } = self.options.clone();
+        let spec = MotionSpec { layers: flat.layers, character, retarget, root_motion, ..MotionSpec::default() };
+        let motion = Motion::build(spec).map_err(|e| motion_error(e, &flat.origins, node_path(self.nodes, n)))?;
         Ok(Stack { motion: Arc::new(motion), weights, blends: flat.blends, exit })
     }
 
@@ -547,8 +576,13 @@ impl<C> Flat<C> {
 }
 
 /// A motion's error with its `layers/i/…` path put at layer `i`'s place in
-/// the graph document (the node's own for anything else).
+/// the graph document, its `retarget/…` and `root_motion/…` paths kept
+/// (the options are the caller's, not the graph's), the node's own for
+/// anything else.
 fn motion_error(e: crate::MotionError, origins: &[Path], node: Path) -> GraphError {
+    if matches!(e.path.0.first(), Some(Step::Field("retarget" | "root_motion"))) {
+        return GraphError::new(e.path, K::Motion(e.kind));
+    }
     let mut steps = e.path.0.into_iter();
     let path = match (steps.next(), steps.next()) {
         (Some(Step::Field("layers")), Some(Step::Index(i))) if i < origins.len() => {

@@ -18,7 +18,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use super::{Condition, Graph, ParameterKind, Stack, Value};
-use crate::motion::{ClipSource, MAX_FADES, MotionOptions, MotionSampler, mix};
+use crate::motion::{ClipSource, MAX_FADES, MotionOptions, MotionSampler, Planar, RootMotion, mix};
 use crate::{Pose, Space};
 
 /// A graph playing; see the module doc.
@@ -39,6 +39,8 @@ pub struct GraphPlayer<C> {
     evaluated: Vec<bool>,
     mixed: Pose,
     spare: Pose,
+    /// The last evaluated tick's root motion, when the nodes report it.
+    root: Option<RootMotion>,
 }
 
 /// One state playing: its node time, phases and live layer weights.
@@ -74,13 +76,15 @@ pub struct SlotState {
 
 /// Everything a [`GraphPlayer`] carries from one tick to the next (a
 /// broadcast checkpoint): parameter values, ticks played, the current
-/// state and the slots bottom to top. Poses and weights are computed afresh.
+/// state, the slots bottom to top and the last tick's root motion. Poses
+/// and weights are computed afresh.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraphState {
     pub values: Vec<f64>,
     pub ticks: u64,
     pub current: usize,
     pub chain: Vec<SlotState>,
+    pub root: Option<RootMotion>,
 }
 
 /// Why a parameter value or a state was refused.
@@ -149,6 +153,7 @@ impl<C: ClipSource> GraphPlayer<C> {
             evaluated: vec![false; graph.blends.len()],
             mixed: Pose::default(),
             spare: Pose::default(),
+            root: None,
             graph,
         };
         player.warm();
@@ -281,10 +286,11 @@ impl<C: ClipSource> GraphPlayer<C> {
         self.chain.push(free);
     }
 
-    /// Puts `state` in slot `s` at node time 0.
+    /// Puts `state` in slot `s` at node time 0, its root motion from there.
     fn start(&mut self, s: usize, state: usize, fade: Option<FadeProgress>) {
         let slot = &mut self.slots[s];
         (slot.state, slot.tau, slot.fade) = (state, 0.0, fade);
+        slot.sampler.restart_root();
         self.set_layer_weights(s);
         let slot = &mut self.slots[s];
         let stack = self.graph.state_stack(state);
@@ -359,6 +365,22 @@ impl<C: ClipSource> GraphPlayer<C> {
                 mix(&self.spare, top, alpha, &mut self.mixed);
             }
         }
+        self.layer_root_motion();
+    }
+
+    /// The tick's root motion (docs/graphs.md, “Root motion”): each slot's
+    /// delta since its last evaluated tick (its layers' deltas weighted as
+    /// its pose, a seam crossed counting whole cycles), crossfaded up the
+    /// chain at each transition's `α` as the poses are; and the total.
+    fn layer_root_motion(&mut self) {
+        let Some(up) = self.graph.initial_motion().root_up() else { return };
+        let delta_of = |s: usize| self.slots[s].sampler.root_motion().map_or(Planar::IDENTITY, |r| r.delta);
+        let mut delta = delta_of(self.chain[0]);
+        for &s in &self.chain[1..] {
+            delta = delta.lerp(delta_of(s), f64::from(self.alpha(s)));
+        }
+        let total = self.root.map_or(Planar::IDENTITY, |r| r.total).then(delta, up);
+        self.root = Some(RootMotion { delta, total });
     }
 }
 
@@ -388,6 +410,13 @@ impl<C> GraphPlayer<C> {
         if self.chain.len() == 1 { self.slots[self.chain[0]].sampler.local() } else { &self.mixed }
     }
 
+    /// The last evaluated tick's root motion: its delta since the tick
+    /// evaluated before it, and the total since the first; `None` unless
+    /// the nodes report root motion.
+    pub fn root_motion(&self) -> Option<RootMotion> {
+        self.root
+    }
+
     /// The last tick's state, transition and blend weights.
     pub fn report(&self) -> GraphReport<'_, C> {
         GraphReport { player: self }
@@ -414,6 +443,7 @@ impl<C> GraphPlayer<C> {
             ticks: self.ticks,
             current: self.current,
             chain: self.chain.iter().map(slot).collect(),
+            root: self.root,
         }
     }
 }
@@ -456,6 +486,8 @@ impl<C: ClipSource> GraphPlayer<C> {
         }
         (player.values, player.ticks, player.current) = (state.values, state.ticks, state.current);
         player.show_again();
+        // The slots' roots are where that tick put them, so the next delta starts there.
+        player.root = state.root;
         Ok(player)
     }
 

@@ -42,7 +42,7 @@ impl Ground {
     }
 }
 
-fn assert_ground(total: anim::motion::Planar, expected: Ground, tol: f64, what: &str) {
+pub fn assert_ground(total: anim::motion::Planar, expected: Ground, tol: f64, what: &str) {
     let got = (total.translation.x, total.translation.z, total.yaw);
     let err = (got.0 - expected.x).abs().max((got.1 - expected.z).abs()).max((got.2 - expected.yaw).abs());
     assert!(err < tol, "{what}: got {got:?}, expected {expected:?}");

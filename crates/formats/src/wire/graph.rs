@@ -19,7 +19,8 @@ use super::motion::{LayerModeDoc, MaskDoc};
 use anim::Ease;
 use anim::graph::{
     Blend1dSpec, Blend2dSpec, ClipNodeSpec, Comparison, Condition, EntrySource, EntrySpec, Graph, GraphSpec,
-    MachineSpec, NodeKind, NodeSpec, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec, Value,
+    MachineSpec, NodeKind, NodeOptions, NodeSpec, ParameterKind, ParameterSpec, StateSpec, TopSpec, TransitionSpec,
+    Value,
 };
 use anim::motion::{ClipSource, LayerMode, MaskSpec};
 
@@ -275,7 +276,22 @@ impl GraphDoc {
     pub fn compile<C: ClipSource + Clone>(
         &self,
         pointer: &str,
+        resolve: impl FnMut(&str, &str) -> Result<C, DocError>,
+    ) -> Result<Graph<C>, DocError> {
+        self.compile_with(pointer, resolve, &NodeOptions::default())
+    }
+
+    /// [`GraphDoc::compile`] with a motion's node options
+    /// (`Graph::build_with`): a refusal at `retarget/…` or `root_motion/…`
+    /// is pointed there, not into the document.
+    ///
+    /// # Errors
+    /// As [`GraphDoc::compile`].
+    pub fn compile_with<C: ClipSource + Clone>(
+        &self,
+        pointer: &str,
         mut resolve: impl FnMut(&str, &str) -> Result<C, DocError>,
+        options: &NodeOptions,
     ) -> Result<Graph<C>, DocError> {
         let mut names = Names {
             doc: self,
@@ -286,8 +302,12 @@ impl GraphDoc {
         };
         let spec = names.spec()?;
         let clips = (names.clips.iter()).map(|(id, at)| resolve(id, at)).collect::<Result<Vec<C>, DocError>>()?;
-        Graph::build(spec, &clips)
-            .map_err(|e| problem(e.kind.code(), format!("{pointer}{}", e.path.to_pointer()), e.kind.to_string()))
+        Graph::build_with(spec, &clips, options).map_err(|e| {
+            let at = e.path.to_pointer();
+            let motion_own = at.starts_with("/retarget") || at.starts_with("/root_motion");
+            let at = if motion_own { at } else { format!("{pointer}{at}") };
+            problem(e.kind.code(), at, e.kind.to_string())
+        })
     }
 }
 

@@ -103,7 +103,7 @@ impl RetargetDoc {
     /// `zero_quaternion` for a rotation that cannot be normalised (as a
     /// clip's keys, docs/clip-format.md); `target_pose_needs_rotations` for
     /// a `target_pose` given as a time.
-    fn to_spec(&self, pointer: &str) -> Result<RetargetSpec, DocError> {
+    pub fn to_spec(&self, pointer: &str) -> Result<RetargetSpec, DocError> {
         let source_pose = match &self.source_pose {
             None => SourcePose::Rest,
             Some(SourcePoseDoc::Time(t)) => SourcePose::Time(*t),
@@ -302,6 +302,23 @@ pub struct RootMotionDoc {
     pub up: UpAxisDoc,
 }
 
+impl RootMotionDoc {
+    /// The core's form.
+    pub fn to_spec(&self) -> RootMotionSpec {
+        RootMotionSpec {
+            joint: self.joint.clone(),
+            mode: match self.mode {
+                RootModeDoc::Report => RootMode::Report,
+                RootModeDoc::Extract => RootMode::Extract,
+            },
+            up: match self.up {
+                UpAxisDoc::Y => UpAxis::Y,
+                UpAxisDoc::Z => UpAxis::Z,
+            },
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RootModeDoc {
@@ -334,17 +351,7 @@ impl MotionDoc {
             layers: (self.layers.iter().enumerate())
                 .map(|(i, layer)| layer.to_spec(&format!("{pointer}/layers/{i}")))
                 .collect::<Result<_, _>>()?,
-            root_motion: self.root_motion.as_ref().map(|r| RootMotionSpec {
-                joint: r.joint.clone(),
-                mode: match r.mode {
-                    RootModeDoc::Report => RootMode::Report,
-                    RootModeDoc::Extract => RootMode::Extract,
-                },
-                up: match r.up {
-                    UpAxisDoc::Y => UpAxis::Y,
-                    UpAxisDoc::Z => UpAxis::Z,
-                },
-            }),
+            root_motion: self.root_motion.as_ref().map(RootMotionDoc::to_spec),
             ik,
             character: None,
             retarget: match &self.retarget {

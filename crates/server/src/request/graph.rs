@@ -13,8 +13,9 @@ use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, ik_reports, json_str
 use super::raw::{Field, Format, Locate, Raw, RawModes, joint_subset, unprocessable};
 use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
-use crate::built::BuiltGraph;
+use crate::built::{BuiltGraph, PinnedGraph};
 use crate::error::ApiError;
+use crate::graphs::MotionOnGraph;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
 use crate::stream::PinnedClip;
@@ -22,6 +23,7 @@ use crate::work::price;
 use anim::Pose;
 use anim::Space;
 use anim::graph::{GraphPlayer, GraphPost, Inputs, PostRun, TickRange};
+use anim::motion::{Planar, RootMotion};
 use formats::wire::graph_inputs::InputDoc;
 use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
 
@@ -44,10 +46,13 @@ pub struct GraphLayer<'a> {
     pub stages: GraphStages,
 }
 
-/// A motion's IK constraints and spring chains, checked against the graph's
-/// skeleton once it is resolved.
+/// What the motion builds the graph's nodes with (its character, retarget
+/// options and root motion), and its IK constraints and spring chains,
+/// checked against the graph's (or the character's) skeleton once it is
+/// resolved.
 #[derive(Debug, Clone, Default)]
 pub struct GraphStages {
+    motion: MotionOnGraph,
     ik: Vec<anim::ik::IkSpec>,
     springs: anim::spring::SpringsSpec,
 }
@@ -58,7 +63,7 @@ pub struct GraphStages {
 ///
 /// # Errors
 /// `graph_unsupported` at the field that is not supported with a graph yet;
-/// the `ik` and `springs` documents' own refusals.
+/// the `retarget`, `ik` and `springs` documents' own refusals.
 pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> {
     let Some(i) = doc.layers.iter().position(|l| l.graph.is_some()) else { return Ok(None) };
     if doc.layers.len() != 1 {
@@ -69,28 +74,33 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> 
         let detail = format!("a graph layer takes no `{field}` (it plays at weight 1 with the layer's defaults)");
         return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
     }
-    let motion_fields = [
-        ("root_motion", doc.root_motion.is_some(), "root motion"),
-        ("character", doc.character.is_some(), "a character"),
-        ("retarget", doc.retarget.is_some(), "retargeting"),
-    ];
-    if let Some((field, _, what)) = motion_fields.iter().find(|(_, set, _)| *set) {
-        let detail = format!(
-            "a motion over a graph takes no `{field}` yet: {what} needs the graph's nodes built for it; \
-             `ik` and `springs` run on a graph's pose"
-        );
-        return Err(unsupported(&format!("/motion/{field}"), &detail));
-    }
+    let retarget = doc.retarget.as_ref().map(|r| r.to_spec("/motion/retarget")).transpose()?.unwrap_or_default();
+    let root_motion = doc.root_motion.as_ref().map(formats::wire::motion::RootMotionDoc::to_spec);
     let ik = (doc.ik.iter().enumerate())
         .map(|(i, c)| c.to_spec(&format!("/motion/ik/{i}")))
         .collect::<Result<_, _>>()
         .map_err(ApiError::from)?;
     let springs = doc.springs("/motion").map_err(ApiError::from)?;
     let Some(reference) = layer.graph.as_deref() else { return Ok(None) };
-    Ok(Some(GraphLayer { reference, stages: GraphStages { ik, springs } }))
+    let motion = MotionOnGraph { character: doc.character.clone(), retarget, root_motion };
+    Ok(Some(GraphLayer { reference, stages: GraphStages { motion, ik, springs } }))
 }
 
 impl GraphStages {
+    /// The graph `built` plays for this motion: its own, or built with the
+    /// motion's character and root motion (`server::graphs::played`).
+    ///
+    /// # Errors
+    /// As `server::graphs::played`.
+    pub async fn graph(
+        &self,
+        state: &AppState,
+        caller: &CallerKey,
+        built: &Arc<BuiltGraph>,
+    ) -> Result<Arc<PinnedGraph>, ApiError> {
+        crate::graphs::played(state, caller, built, &self.motion).await
+    }
+
     /// The stages built on `graph`'s skeleton, as a motion's are on its
     /// output skeleton, refusals pointed into `/motion`.
     ///
@@ -168,6 +178,8 @@ pub struct RawGraphSampling<'a> {
 /// A checked, priced graph sampling request.
 pub struct GraphSampling {
     pub built: Arc<BuiltGraph>,
+    /// What plays: the built graph's own, or its build on the character.
+    pub graph: Arc<PinnedGraph>,
     /// The motion's IK and springs on the graph's pose.
     pub post: Arc<GraphPost>,
     pub range: TickRange,
@@ -198,17 +210,18 @@ impl RawGraphSampling<'_> {
         let space = RawModes { space: self.space, ..RawModes::default() }.check(self.at)?.space;
         let range = self.range(state.config.limits.max_poses)?;
         let built = crate::graphs::resolve(state, caller, self.reference, GRAPH_AT).await?;
-        let inputs = formats::wire::graph_inputs::inputs(&built.graph, self.inputs, range.fps, "/inputs")?;
-        let skeleton = built.graph.skeleton();
+        let graph = self.stages.graph(state, caller, &built).await?;
+        let inputs = formats::wire::graph_inputs::inputs(&graph, self.inputs, range.fps, "/inputs")?;
+        let skeleton = graph.skeleton();
         if format == Format::Skinning && !skeleton.has_inverse_binds() {
             let detail = "format=skinning needs inverse bind matrices, which the graph's skeleton has not";
             return Err(unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(skeleton, names, self.at)).transpose()?;
-        let post = Arc::new(self.stages.build(&built.graph, state)?);
-        let cost = cost(&built, &post, &range, (format, self.wire), self.report);
+        let post = Arc::new(self.stages.build(&graph, state)?);
+        let cost = cost((&built, &graph), &post, &range, (format, self.wire), self.report);
         let report = self.report;
-        Ok(GraphSampling { built, post, range, inputs, format, space, joints, report, cost })
+        Ok(GraphSampling { built, graph, post, range, inputs, format, space, joints, report, cost })
     }
 
     fn range(&self, max_poses: usize) -> Result<TickRange, ApiError> {
@@ -277,6 +290,9 @@ pub struct GraphTicks {
     player: Option<GraphPlayer<Arc<dyn PinnedClip>>>,
     post: Option<PostRun>,
     next_input: usize,
+    /// The root motion's total at the first answered tick, which the
+    /// answer's totals start from.
+    root_base: Planar,
 }
 
 impl GraphTicks {
@@ -284,9 +300,9 @@ impl GraphTicks {
     /// call to call.
     pub fn play(&mut self, s: &GraphSampling, i: usize) -> GraphTick<'_> {
         let k = s.range.first + i as u64;
-        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::new(s.built.graph.clone())));
+        let player = self.player.get_or_insert_with(|| GraphPlayer::new(Arc::clone(&s.graph)));
         let run = self.post.get_or_insert_with(|| PostRun::new(&s.post));
-        let skeleton = s.built.graph.skeleton();
+        let skeleton = s.graph.skeleton();
         let evaluated = (&s.range, s.post.first_run(&s.range));
         let each = |tick, p: &GraphPlayer<_>| {
             if !s.post.is_empty() {
@@ -296,8 +312,21 @@ impl GraphTicks {
         // The inputs were checked against this graph, so no setting fails.
         let _ = player.play_through(k, evaluated, &s.inputs, &mut self.next_input, each);
         let pose = if s.post.is_empty() { player.pose() } else { run.pose() };
-        GraphTick { player, pose, ik: run.ik_reports(), time: s.range.time(k) }
+        let root_motion = answered_root(player, i, &mut self.root_base);
+        GraphTick { player, pose, ik: run.ik_reports(), root_motion, time: s.range.time(k) }
     }
+}
+
+/// Answered tick `i`'s root motion (docs/motion.md, “Root motion”): the
+/// first's delta and total 0 (its total is the `base` the others' start
+/// from), the others' delta the player's and their total since the first.
+fn answered_root(player: &GraphPlayer<Arc<dyn PinnedClip>>, i: usize, base: &mut Planar) -> Option<RootMotion> {
+    let (root, up) = (player.root_motion()?, player.graph().initial_motion().root_up()?);
+    if i == 0 {
+        *base = root.total;
+        return Some(RootMotion::default());
+    }
+    Some(RootMotion { delta: root.delta, total: base.inverse(up).then(root.total, up) })
 }
 
 /// One answered tick of a graph sampling.
@@ -308,19 +337,27 @@ pub struct GraphTick<'a> {
     pub pose: &'a Pose,
     /// The motion's IK reports, one per constraint.
     pub ik: &'a [anim::ik::IkReport],
+    /// Its root motion since the answer's first tick, when the motion asks for it.
+    pub root_motion: Option<RootMotion>,
     /// Its motion time `k/fps`.
     pub time: f64,
 }
 
 /// Every tick played (from 0, answered or not) at the graph's costliest
-/// tick, and an answer as long as the largest of its clips' poses, with
-/// the reports when asked for.
-fn cost(built: &BuiltGraph, post: &GraphPost, range: &TickRange, (format, wire): (Format, Wire), report: bool) -> Cost {
-    let graph = &built.graph;
-    let pose_bytes = |c: &Arc<crate::cache::CachedClip>| Estimate::batch(&c.clip, &built.meta.id, format, wire);
-    let per_pose = built.clips.iter().map(|c| pose_bytes(c).per_pose).max().unwrap_or(0)
+/// tick, and an answer as long as the largest of its clips' poses (or of
+/// the character's, which every pose then is), with the reports when asked
+/// for.
+fn cost(
+    (built, graph): (&BuiltGraph, &PinnedGraph),
+    post: &GraphPost,
+    range: &TickRange,
+    (format, wire): (Format, Wire),
+    report: bool,
+) -> Cost {
+    let per_pose = pose_bound(built, graph, |clip| Estimate::batch(clip, &built.meta.id, format, wire).per_pose)
         + json_str(&built.meta.id)
         + ik_reports(post.ik().len() as u64, wire)
+        + if graph.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 }
         + if report { report_bytes(built) } else { 0 };
     let bytes = 12 + per_pose.saturating_mul(range.answered());
     let ticks = range.last.saturating_add(1);
@@ -328,6 +365,20 @@ fn cost(built: &BuiltGraph, post: &GraphPost, range: &TickRange, (format, wire):
         (range.last - post.first_run(range) + 1).saturating_mul(price::graph_post(post, graph.skeleton(), range.fps));
     let per_tick = price::graph_tick(graph).saturating_add(stages.div_ceil(ticks));
     Cost::new(ticks, graph.skeleton().len() as u64, per_tick, bytes)
+}
+
+/// The largest pose `graph` plays, by `bytes` of a clip: its clips'
+/// largest; on a character, whose joints every pose then has, each clip's
+/// scaled by how many more joints the character has, and its names' text.
+pub(super) fn pose_bound(built: &BuiltGraph, graph: &PinnedGraph, bytes: impl Fn(&anim::Clip) -> u64) -> u64 {
+    let skeleton = graph.skeleton();
+    if std::ptr::eq(skeleton, built.graph.skeleton()) {
+        return built.clips.iter().map(|c| bytes(&c.clip)).max().unwrap_or(0);
+    }
+    let joints = skeleton.len() as u64;
+    let scale = |clip: &anim::Clip| joints.div_ceil(clip.joint_count().max(1) as u64).max(1);
+    let clips = built.clips.iter().map(|c| bytes(&c.clip).saturating_mul(scale(&c.clip))).max().unwrap_or(0);
+    clips.saturating_add(skeleton.names().iter().map(|n| json_str(n)).sum())
 }
 
 /// The longest `,"graph":{…}` a tick's report can write.

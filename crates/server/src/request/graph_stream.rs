@@ -11,7 +11,7 @@
 use std::sync::Arc;
 
 use super::cost::{Estimate, F64_TEXT, check_stream, check_stream_work, ik_reports, json_str, stream_work};
-use super::graph::{GRAPH_AT, GraphStages, report_bytes};
+use super::graph::{GRAPH_AT, GraphStages, pose_bound, report_bytes};
 use super::raw::{Field, unprocessable};
 use super::stream::{Admitted, Opening, RawStream};
 use crate::auth::{Caller, CallerKey};
@@ -88,23 +88,21 @@ impl RawStream<'_> {
         self.fits_a_graph(&request)?;
         self.check_fps(request.fps)?;
         let built = crate::graphs::resolve(state, caller, graph.reference, GRAPH_AT).await?;
+        let played = graph.stages.graph(state, caller, &built).await?;
         let id: &str = &built.meta.id;
         let wire = request.encoding.into();
-        let pose = built.clips.iter().map(|c| Estimate::frame(&c.clip, id, wire)).max().unwrap_or(0);
+        let pose = pose_bound(&built, &played, |clip| Estimate::frame(clip, id, wire));
         // The report's JSON bound also bounds its protobuf (floats of 4 bytes, not text).
         let report = if graph.report { report_bytes(&built) } else { 0 };
-        let post = Arc::new(graph.stages.build(&built.graph, state)?);
+        let post = Arc::new(graph.stages.build(&played, state)?);
         let ik = ik_reports(post.ik().len() as u64, wire);
-        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(2 * F64_TEXT + json_str(id));
-        let stages = price::graph_post(&post, built.graph.skeleton(), f64::from(request.fps));
-        let per_frame = price::graph_tick(&built.graph).saturating_add(stages);
-        let program = GraphProgram {
-            graph: Arc::new(built.graph.clone()),
-            post,
-            id: id.into(),
-            version: built.meta.version,
-            report: graph.report,
-        };
+        let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
+        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
+        let frame = frame.saturating_add(2 * F64_TEXT + json_str(id));
+        let stages = price::graph_post(&post, played.skeleton(), f64::from(request.fps));
+        let per_frame = price::graph_tick(&played).saturating_add(stages);
+        let program =
+            GraphProgram { graph: played, post, id: id.into(), version: built.meta.version, report: graph.report };
         let motion = Arc::clone(program.graph.initial_motion());
         let params = StreamParams::of_motion(motion, Arc::clone(&program.id), request).map_err(|e| self.refused(e))?;
         let params = self.bind(params.with_graph(program), state)?;

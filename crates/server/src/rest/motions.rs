@@ -122,7 +122,7 @@ async fn compose(
         (status = 200, description = "The pose (its `clip` the first layer's), with `root_motion` (delta and total 0) when the motion asks for it; over a graph, the pose of the last tick at or before `time` (its `clip` the graph's id, its `time` the tick's), with the tick's `graph` report when `report` is true", body = super::schemas::PoseSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
         (status = 404, description = "A layer's clip (`clip_not_found`), graph (`graph_not_found`) or the character does not exist", body = super::schemas::Problem),
-        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, `incompatible_skeleton` (a layer of another rig), …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`; over a graph (docs/graphs.md), `bad_range` (`time` below 0), `fps_out_of_range`, the inputs' `bad_time`, `unknown_parameter`, `parameter_type`, `parameter_out_of_range`, and `graph_unsupported` (what a graph does not take yet; `inputs`, `report` or `fps` without a graph layer)", body = super::schemas::Problem),
+        (status = 422, description = "A field of the wrong type or unknown (`invalid_field`); a motion rule at `/motion/…` (`weight_out_of_range`, `speed_out_of_range`, `unknown_joint`, `no_layers`, `too_many_layers`, `no_root_joint`, `incompatible_skeleton` (a layer of another rig), …); a joint of `joints` not in the output skeleton (`unknown_joint`); a name of `parameters` the first layer's clip lacks (`unknown_parameter`); layers' parameters of one name and different widths (`parameter_width_mismatch`); `no_inverse_binds`; the cost model's `too_many_poses`, `too_much_work`, `answer_too_large`; over a graph (docs/graphs.md), `bad_range` (`time` below 0), `fps_out_of_range`, the inputs' `bad_time`, `unknown_parameter`, `parameter_type`, `parameter_out_of_range`, a clip of the graph the motion's `character` cannot map (`unmappable_skeleton` at `/motion/character`) or without its `root_motion` joint (`no_root_joint` at `/motion/root_motion`), and `graph_unsupported` (a motion over a graph takes no second layer, no layer field but its defaults, no `parameters` subset; `inputs`, `report` or `fps` without a graph layer)", body = super::schemas::Problem),
         (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
         (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`); the request outlived `request_timeout_secs` (`request_timeout`)", body = super::schemas::Problem),
     ),
@@ -179,7 +179,7 @@ pub(super) async fn answer_pose(
     responses(
         (status = 200, description = "`{\"poses\": [pose, ...]}`, each with `root_motion` when the motion asks for it (the first with delta and total 0); sent chunked, as it is evaluated, when the answer may exceed 1 MiB", body = super::schemas::PosesSchema),
         (status = 400, description = "Not JSON, or a value that does not parse", body = super::schemas::Problem),
-        (status = 404, description = "A layer's clip does not exist", body = super::schemas::Problem),
+        (status = 404, description = "As `POST /v1/poses`: a layer's clip, the graph or the character does not exist", body = super::schemas::Problem),
         (status = 422, description = "As `POST /v1/poses`, and `times_or_range`, `fps_out_of_range`, `bad_range`, `too_many_poses`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
@@ -344,8 +344,9 @@ impl GraphPoses {
             write_report(&mut self.report, &tick.player.report());
         }
         let joints = s.joints.as_deref();
-        let extras = Extras { joints, root_motion: None, ik: tick.ik, parameters: None, tail: &self.report, feet: &[] };
-        let (clip, skeleton) = (s.built.meta.id.as_str(), s.built.graph.skeleton());
+        let root_motion = tick.root_motion;
+        let extras = Extras { joints, root_motion, ik: tick.ik, parameters: None, tail: &self.report, feet: &[] };
+        let (clip, skeleton) = (s.built.meta.id.as_str(), s.graph.skeleton());
         let clip_time = time as f32;
         match s.format {
             Format::Trs => {

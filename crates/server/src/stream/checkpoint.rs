@@ -101,6 +101,9 @@ struct GraphBits {
     current: usize,
     /// Bottom to top.
     chain: Vec<SlotBits>,
+    /// The last tick's root motion (absent from checkpoints of graphs without it).
+    #[serde(default)]
+    root: Option<RootBits>,
 }
 
 /// A state playing: the state, its node time, its phases, and (above the
@@ -121,6 +124,7 @@ fn graph_bits(g: GraphState) -> GraphBits {
                 (s.state, s.tau.to_bits(), s.phases.into_iter().map(f64::to_bits).collect(), fade)
             })
             .collect(),
+        root: g.root.map(root_bits),
     }
 }
 
@@ -143,6 +147,7 @@ fn graph_state(b: &GraphBits) -> GraphState {
                 }),
             })
             .collect(),
+        root: b.root.map(root),
     }
 }
 

@@ -51,6 +51,8 @@ pub(crate) struct GraphDeck {
     space: Space,
     /// The pose in model space, when frames are.
     model: Pose,
+    /// The last tick held the graph (paused): its root did not move.
+    held: bool,
 }
 
 impl GraphDeck {
@@ -58,7 +60,7 @@ impl GraphDeck {
     pub(super) fn new(program: &GraphProgram, space: Space) -> Self {
         let player = GraphPlayer::new(Arc::clone(&program.graph));
         let (post, run) = (Arc::clone(&program.post), PostRun::new(&program.post));
-        GraphDeck { player, post, run, report: program.report, space, model: Pose::default() }
+        GraphDeck { player, post, run, report: program.report, space, model: Pose::default(), held: false }
     }
 
     /// The deck a checkpoint's `state` and `springs` describe, showing the
@@ -76,7 +78,8 @@ impl GraphDeck {
         let run = PostRun::from_state(&program.post, springs)
             .map_err(|_| SetError::State("a spring state that does not fit the motion's springs"))?;
         let post = Arc::clone(&program.post);
-        let mut deck = GraphDeck { player, post, run, report: program.report, space, model: Pose::default() };
+        let mut deck =
+            GraphDeck { player, post, run, report: program.report, space, model: Pose::default(), held: false };
         if deck.player.ticks() > 0 {
             deck.run_post(clock);
             deck.put_in_space();
@@ -86,8 +89,9 @@ impl GraphDeck {
 
     /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
     /// shown (those are stepped without a pose, as are the ticks before a
-    /// first tick that came late — but with springs they are evaluated, so
-    /// that the chains see every tick), so that a stream never paused shows
+    /// first tick that came late — but with springs or root motion they are
+    /// evaluated, so that the chains and the root's travel see every tick),
+    /// so that a stream never paused shows
     /// graph tick `k` at tick `k`; while `paused` only the springs go on
     /// settling on the held pose (the first tick is always played).
     /// Returns the motion time shown, as a frame's `clip_time`.
@@ -95,10 +99,12 @@ impl GraphDeck {
         let dt = 1.0 / f64::from(fps);
         let clock = |tick: u64| tick as f64 / f64::from(fps);
         let first = self.player.ticks() == 0;
+        self.held = paused && !first;
         if !paused || first {
             let n = if first { k } else { skipped };
+            let every_tick = self.post.springs().is_some() || self.player.graph().initial_motion().has_root_motion();
             for j in 0..n {
-                if self.post.springs().is_some() {
+                if every_tick {
                     self.player.tick(dt);
                     self.run_post(clock(k - n + j));
                 } else {
@@ -158,6 +164,13 @@ impl GraphDeck {
             (Space::Local, true) => self.player.pose(),
             (Space::Local, false) => self.run.pose(),
         }
+    }
+
+    /// The last tick's root motion since tick 0, when the motion asks for
+    /// it: a held tick's delta is 0, its total the last played tick's.
+    pub(super) fn root_motion(&self) -> Option<anim::motion::RootMotion> {
+        let root = self.player.root_motion()?;
+        Some(if self.held { anim::motion::RootMotion { delta: anim::motion::Planar::IDENTITY, ..root } } else { root })
     }
 
     /// The last tick's IK reports (the motion's constraints).

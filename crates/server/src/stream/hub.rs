@@ -312,7 +312,7 @@ pub(super) fn frame_data<'a>(
             pose: graph.pose(),
             joints: params.joints.as_deref(),
             parameters: None,
-            root_motion: None,
+            root_motion: graph.root_motion(),
             ik: graph.ik_reports(),
             feet: &[],
             events: &[],

@@ -7,8 +7,8 @@
 
 use std::sync::Arc;
 
-use anim::graph::GraphPost;
 use anim::graph::Value;
+use anim::graph::{GraphPost, NodeOptions};
 use anim::spring::{ChainSpec, SpringsSpec};
 use anim::{Channel, Clip, ClipSpec, Interpolation, JointSpec, Keys, Playback, SkeletonSpec, TrackSpec, Transform};
 use glam::Vec3;
@@ -49,6 +49,11 @@ fn line(duration: f32, to: Vec3) -> Arc<Clip> {
 /// third, and `s` under 0.5 fades back; with `springs`, the motion's tail
 /// swings on it.
 fn graph_params(springs: bool) -> StreamParams {
+    graph_params_with(springs, &NodeOptions::default())
+}
+
+/// [`graph_params`], the nodes built with `options`.
+fn graph_params_with(springs: bool, options: &NodeOptions) -> StreamParams {
     let doc = serde_json::json!({"name": "g",
         "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
         "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": "a", "at": 0}, {"clip": "b", "at": 1}]}},
@@ -59,8 +64,8 @@ fn graph_params(springs: bool) -> StreamParams {
                              "ease": "ease_in_out"}]}});
     let clips = [("a", line(1.0, Vec3::X)), ("b", line(0.6, Vec3::new(0.0, 0.0, 2.0))), ("c", line(0.8, Vec3::Y))];
     let doc = formats::wire::graph::parse_graph_doc(doc.to_string().as_bytes()).unwrap();
-    let graph =
-        doc.compile("", |id, _| Ok(pinned(id, Arc::clone(&clips.iter().find(|(n, _)| *n == id).unwrap().1)))).unwrap();
+    let clip = |id: &str, _: &str| Ok(pinned(id, Arc::clone(&clips.iter().find(|(n, _)| *n == id).unwrap().1)));
+    let graph = doc.compile_with("", clip, options).unwrap();
     let mut chain = ChainSpec::new("tail", &["tail0", "tail1", "tip"]);
     chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
     let chains = if springs { vec![chain] } else { Vec::new() };
@@ -186,4 +191,26 @@ fn a_graph_streams_check_resolves_set_and_refuses_what_a_graph_does_not_take() {
     let plain = StreamParams::new(pinned("a", line(1.0, Vec3::X)), StreamRequest { fps: 30, ..Default::default() });
     let e = ControlCheck::new(&plain.unwrap()).check(set(serde_json::json!({"s": 0.5}))).unwrap_err();
     assert_eq!(e.code(), "graph_unsupported");
+}
+
+#[test]
+fn root_motion_on_a_graph_rides_its_frames_and_a_restored_program_makes_the_same_bytes() {
+    let root = anim::motion::RootMotionSpec { joint: Some("root".into()), ..Default::default() };
+    let params = graph_params_with(false, &NodeOptions { root_motion: Some(root), ..Default::default() });
+    let log = log(&params);
+    let (frames, texts) = uninterrupted(&params, &log);
+    let root_motion =
+        |k: usize| serde_json::from_slice::<serde_json::Value>(&frames[k]).unwrap()["pose"]["root_motion"].clone();
+    let x = |k: usize, which: &str| root_motion(k)[which]["translation"][0].as_f64().unwrap();
+    // Line a walks 1 on x a second: 1/30 a tick at 30 fps, until `s` brings in b (which walks on z).
+    assert_eq!((x(0, "delta"), x(0, "total")), (0.0, 0.0));
+    assert!((x(3, "delta") - 1.0 / 30.0).abs() < 1e-6 && (x(3, "total") - 0.1).abs() < 1e-6, "{}", root_motion(3));
+    // Paused from tick 20 to 26: the root holds, its deltas 0.
+    for k in 21..=25 {
+        assert_eq!(x(k, "delta"), 0.0, "tick {k}: {}", root_motion(k));
+        assert_eq!(root_motion(k)["total"], root_motion(20)["total"], "tick {k}");
+    }
+    // Line c moves up, not on the ground; `s` at 0.2 fades back to the mix of a (on x) and b (on z).
+    assert!(x(50, "delta") > 0.0, "play goes on: {}", root_motion(50));
+    assert_restores(&params, &log, &frames, &texts);
 }

@@ -261,8 +261,30 @@ pub fn graph_build(
 /// costliest tick's joint samples ([`anim::graph::Graph::tick_joint_samples`]),
 /// whether or not the tick's pose is answered, since every tick is priced
 /// at the bound.
-pub fn graph_tick<C: anim::motion::ClipSource>(graph: &anim::graph::Graph<C>) -> u64 {
-    graph.tick_joint_samples().saturating_mul(JOINT)
+/// On a character, each slot also pays its state's retargets as a clip
+/// motion's pose does (the costliest state's, in every slot).
+pub fn graph_tick(graph: &anim::graph::Graph<Arc<dyn PinnedClip>>) -> u64 {
+    let retargets = graph.state_motions().map(|m| retargets(m)).max().unwrap_or(0);
+    let slots = graph.max_slots() as u64;
+    graph.tick_joint_samples().saturating_mul(JOINT).saturating_add(retargets.saturating_mul(slots))
+}
+
+/// The work of building a graph on a character of `output` joints, beyond
+/// [`graph_build`]: each layer's retargeter set up as a clip motion's is
+/// ([`motion_build`]: both references in model space, with `root` motion
+/// the root's cycle at up to 4096 poses, and with planted `feet` each source
+/// foot's lowest over up to 4096 poses), every layer over the graph's
+/// largest clip of `joints`.
+pub fn graph_retarget_setup(
+    node_layers: impl Iterator<Item = u64>,
+    joints: u64,
+    output: u64,
+    (feet, root): (bool, bool),
+) -> u64 {
+    let poses = if root { 4100 } else { 3 };
+    let per_layer = (joints + output).saturating_mul(poses * JOINT)
+        + if feet { 4100u64.saturating_mul(joints).saturating_mul(JOINT) } else { 0 };
+    node_layers.map(|layers| layers.saturating_mul(per_layer)).fold(0, u64::saturating_add)
 }
 
 /// The work a motion's IK and springs add to one tick of a graph played at
