@@ -138,7 +138,10 @@ impl RawStream<'_> {
             return refuse(Field::Ease, "plays its ticks as they are: it takes no `ease`");
         }
         if request.encoding == Encoding::Compact && report {
-            return refuse(Field::Encoding, "in compact frames carries no `report` (a compact frame holds the pose only)");
+            return refuse(
+                Field::Encoding,
+                "in compact frames carries no `report` (a compact frame holds the pose only)",
+            );
         }
         if self.parameters.is_some() {
             return refuse(Field::ParameterAt(0), "carries no parameter subset yet");
