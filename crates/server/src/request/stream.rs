@@ -105,7 +105,7 @@ pub async fn compact_watch(
         let detail = "compact frames carry the whole local pose; this broadcast sends a joint subset".to_owned();
         return Err(unprocessable("compact_unsupported", Field::Encoding, at, detail));
     }
-    range_source(params).map_err(|e| raw.compact_refused(e))?;
+    range_source(&params.motion, params.graph.as_ref()).map_err(|e| raw.compact_refused(e))?;
     let joints = params.motion.skeleton().len();
     let per_sec = stream_work(price::compact_frame(joints), compact_frame(joints), params.fps);
     check_stream_work(per_sec, &state.config.limits, at)?;
@@ -410,8 +410,9 @@ impl RawStream<'_> {
         caller: &CallerKey,
     ) -> Result<StreamParams, ApiError> {
         let Some((max_error, distance)) = compact else { return Ok(params) };
-        let (_, samples) = range_source(&params).map_err(|e| self.compact_refused(e))?;
-        let units = price::compact_layout(samples, range_sample_price(&params, price::clip_pose));
+        let (motion, graph) = (&params.motion, params.graph.as_ref());
+        let (_, samples) = range_source(motion, graph).map_err(|e| self.compact_refused(e))?;
+        let units = price::compact_layout(samples, range_sample_price(motion, graph, price::clip_pose));
         if units > state.config.limits.max_request_work {
             let detail = format!(
                 "choosing this stream's compact layout costs {units} work units; the limit (max_request_work, \
@@ -420,10 +421,12 @@ impl RawStream<'_> {
             );
             return Err(unprocessable("too_much_work", Field::Encoding, self.at, detail));
         }
-        let stream = params.clone();
+        let (motion, graph, fps) = (Arc::clone(&params.motion), params.graph.clone(), params.fps);
         let layout = state
             .work
-            .spend(caller, units, move |_| CompactLayout::of_stream(&stream, max_error, distance))
+            .spend(caller, units, move |_| {
+                CompactLayout::of_stream((&motion, graph.as_ref()), max_error, distance, fps)
+            })
             .await?
             .map_err(|e| self.compact_refused(e))?;
         Ok(params.with_compact(Arc::new(layout)))

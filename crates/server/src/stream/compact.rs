@@ -17,7 +17,7 @@ use anim::compact::{Layout, MIN_DISTANCE, MIN_MAX_ERROR, Ranges, Unbounded, defa
 use anim::{Clip, Skeleton};
 use formats::wire::compact::LayoutDoc;
 
-use super::params::StreamParams;
+use super::graph::GraphProgram;
 use super::pinned::StreamMotion;
 
 /// Samples per second the ranges are taken at, besides every key.
@@ -92,19 +92,21 @@ pub enum RangeSource<'a> {
     Derived,
 }
 
-/// What choosing the layout of `params`' stream reads, and what it costs
-/// in poses: its one clip's, or every distinct clip of its motion (a graph:
-/// of its states' motions), with the rest pose.
+/// What choosing the layout of a stream of `motion` (or `graph`) reads,
+/// and what it costs in poses: its one clip's, or every distinct clip of
+/// its motion (a graph: of its states' motions), with the rest pose.
 ///
 /// # Errors
 /// `compact_unsupported`, saying what the stream has that no range can bound.
-pub fn range_source(params: &StreamParams) -> Result<(RangeSource<'_>, u64), CompactRefusal> {
-    if let Some(graph) = &params.graph {
+pub fn range_source<'a>(
+    motion: &'a StreamMotion,
+    graph: Option<&GraphProgram>,
+) -> Result<(RangeSource<'a>, u64), CompactRefusal> {
+    if let Some(graph) = graph {
         let refuse = |u: Unbounded| refusal(u.0);
         check_graph(&graph.graph).map_err(refuse)?;
         return Ok((RangeSource::Derived, Ranges::graph_samples(&graph.graph, RANGE_RATE)));
     }
-    let motion = &params.motion;
     if let Some(clip) = plain_clip(motion) {
         return Ok((RangeSource::Clip(clip), Ranges::clip_samples(clip, RANGE_RATE) + 1));
     }
@@ -114,7 +116,7 @@ pub fn range_source(params: &StreamParams) -> Result<(RangeSource<'_>, u64), Com
     if motion.extracts_root_motion().is_some() {
         return Err(refusal("root motion `extract`, which moves the root joint off its clips' ranges"));
     }
-    Ok((RangeSource::Derived, Ranges::motion_samples(motion.as_ref(), RANGE_RATE)))
+    Ok((RangeSource::Derived, Ranges::motion_samples(motion, RANGE_RATE)))
 }
 
 fn refusal(what: &str) -> CompactRefusal {
@@ -153,37 +155,44 @@ fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
     whole.then_some(clip)
 }
 
-/// The largest price of one pose of any clip `params`' stream plays: what
-/// each of its range samples costs.
-pub fn range_sample_price(params: &StreamParams, clip_pose: impl Fn(&Clip) -> u64) -> u64 {
+/// The largest price of one pose of any clip a stream of `motion` (or
+/// `graph`) plays: what each of its range samples costs.
+pub fn range_sample_price(
+    motion: &StreamMotion,
+    graph: Option<&GraphProgram>,
+    clip_pose: impl Fn(&Clip) -> u64,
+) -> u64 {
     let largest = |m: &StreamMotion| m.layers().map(|c| clip_pose(c.clip())).max().unwrap_or(0);
-    match &params.graph {
+    match graph {
         Some(g) => g.graph.state_motions().map(|m| largest(m)).max().unwrap_or(0),
-        None => largest(&params.motion),
+        None => largest(motion),
     }
 }
 
 impl CompactLayout {
-    /// The layout of `params`' stream at `max_error` and `distance`
-    /// (`None`: 10 % of the rest height), with key frames at least once a
-    /// second at its fps.
+    /// The layout of a stream of `motion` (or `graph`) at `max_error` and
+    /// `distance` (`None`: 10 % of the rest height), with key frames at
+    /// least once a second at `fps`.
     ///
     /// # Errors
     /// As [`range_source`].
-    pub fn of_stream(params: &StreamParams, max_error: f32, distance: Option<f32>) -> Result<Self, CompactRefusal> {
-        let skeleton = params.motion.skeleton();
-        let ranges = match (&params.graph, range_source(params)?.0) {
-            (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, params.fps)),
+    pub fn of_stream(
+        (motion, graph): (&StreamMotion, Option<&GraphProgram>),
+        max_error: f32,
+        distance: Option<f32>,
+        fps: u32,
+    ) -> Result<Self, CompactRefusal> {
+        let skeleton = motion.skeleton();
+        let ranges = match (graph, range_source(motion, graph)?.0) {
+            (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
             (Some(g), RangeSource::Derived) => {
                 let mut ranges = Ranges::of_graph(&g.graph, RANGE_RATE).map_err(|u| refusal(u.0))?;
                 ranges.turned_by(skeleton, g.post.ik(), g.post.springs());
                 ranges
             }
-            (None, RangeSource::Derived) => {
-                Ranges::of_motion(params.motion.as_ref(), RANGE_RATE).map_err(|u| refusal(u.0))?
-            }
+            (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
-        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), params.fps, true))
+        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, true))
     }
 
     /// The layout of `clip`'s poses (and its rest pose) at `max_error` and
