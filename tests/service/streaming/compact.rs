@@ -695,7 +695,8 @@ async fn a_composed_motion_with_additive_layers_and_ik_decodes_within_max_error(
     let (mut compact, mut plain) = (app.ws("/v1/stream").await, app.ws("/v1/stream").await);
     compact.send(open("compact")).await.unwrap();
     plain.send(open("protobuf")).await.unwrap();
-    let (doc, frames, _) = compact_frames(&mut compact, 75).await;
+    let (doc, frames, sizes) = compact_frames(&mut compact, 75).await;
+    eprintln!("composed: key frame {} B, deltas {:?} B", sizes[0], &sizes[1..4]);
     let Message::Text(_) = next_message(&mut plain).await else { panic!("the protobuf stream's `opened` first") };
     let plain = protobuf_frames(&mut plain, 75).await;
     assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
