@@ -375,10 +375,23 @@ async fn next_message(ws: &mut Ws) -> Message {
 
 /// A compact WebSocket's `opened` layout and its next `n` frames, decoded.
 async fn compact_frames(ws: &mut Ws, n: usize) -> (Value, Vec<Decoded>, Vec<usize>) {
+    let doc = opened_layout(ws).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (frames, sizes) = more_frames(ws, &mut decoder, n).await;
+    (doc, frames, sizes)
+}
+
+/// The layout a compact socket's `opened` message states.
+async fn opened_layout(ws: &mut Ws) -> Value {
     let Message::Text(opened) = next_message(ws).await else { panic!("the `opened` message first") };
     let opened: Value = serde_json::from_str(&opened).unwrap();
     let doc = opened["opened"]["compact"].clone();
-    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    assert!(doc.is_object(), "a compact layout: {opened}");
+    doc
+}
+
+/// The next `n` compact frames of `ws`, decoded by `decoder`, and their sizes.
+async fn more_frames(ws: &mut Ws, decoder: &mut Decoder, n: usize) -> (Vec<Decoded>, Vec<usize>) {
     let (mut frames, mut sizes) = (Vec::new(), Vec::new());
     while frames.len() < n {
         match next_message(ws).await {
@@ -389,7 +402,7 @@ async fn compact_frames(ws: &mut Ws, n: usize) -> (Value, Vec<Decoded>, Vec<usiz
             other => panic!("expected a compact frame, got {other:?}"),
         }
     }
-    (doc, frames, sizes)
+    (frames, sizes)
 }
 
 async fn protobuf_frames(ws: &mut Ws, n: usize) -> BTreeMap<u64, Vec<Pose>> {
@@ -622,4 +635,144 @@ async fn figures_key_and_delta_frames_on_the_wire() {
         );
         assert!(key * 6.0 <= protobuf, "{name}: key frames at most 1/6 of the protobuf frame");
     }
+}
+
+// ------------------------------------------- composed motions and graphs
+
+/// The arm clip with its root's path, the upper joint's scales and the
+/// lower joint's turns changed: another clip of the same rig.
+fn arm_variant(name: &str, path: Value, scales: Value, turn: f64) -> String {
+    let mut clip: Value = serde_json::from_str(&arm_clip()).unwrap();
+    clip["name"] = json!(name);
+    clip["tracks"][0]["values"] = path;
+    clip["tracks"][6]["values"] = scales;
+    let (s, c) = (turn.sin(), turn.cos());
+    clip["tracks"][5]["values"] = json!([[0, 0, 0, 1], [s, 0, 0, c], [0, 0, 0, 1], [-s, 0, 0, c], [0, 0, 0, 1]]);
+    clip.to_string()
+}
+
+/// Two blend layers (one masked, weight 0.4), an additive layer whose
+/// scales and turns differ from its reference, and a two-bone IK on the
+/// result: streamed compact over `GET /v1/stream`, every decoded frame is
+/// within `max_error` of the same motion's protobuf frames; a `layer` ramp
+/// is taken (the derived ranges hold any weights), a crossfade refused.
+#[tokio::test]
+async fn a_composed_motion_with_additive_layers_and_ik_decodes_within_max_error() {
+    use futures_util::SinkExt;
+    let app = TestApp::start().await;
+    let base = app.create_id(&arm_clip(), None).await;
+    let swing = arm_variant(
+        "swing",
+        json!([[0, 0, 0], [-0.3, 0.25, 0.1], [0, 0, 0]]),
+        json!([[1, 1, 1], [0.8, 1.1, 1.3], [1, 1, 1]]),
+        1.2,
+    );
+    let swing = app.create_id(&swing, None).await;
+    let breathe = arm_variant(
+        "breathe",
+        json!([[0, 0, 0], [0.05, 0.02, 0], [0, 0, 0]]),
+        json!([[1, 1, 1], [1.1, 1.1, 0.9], [1, 1, 1]]),
+        0.4,
+    );
+    let breathe = app.create_id(&breathe, None).await;
+    let motion = json!({
+        "layers": [
+            {"clip": base},
+            {"clip": swing, "weight": 0.4, "offset": 0.3, "mask": {"joints": {"neck": 1}, "descendants": true}},
+            {"clip": breathe, "mode": "additive", "weight": 0.6, "reference_time": 0.2}
+        ],
+        "ik": [{"kind": "two_bone", "joints": ["spine", "neck", "upper"], "target": [0.3, 0.8, 0.2]}]
+    });
+    let max_error = 1e-4;
+    let open = |encoding: &str| {
+        let mut msg =
+            json!({"op": "open", "motion": motion, "fps": 30, "start": 0, "max_frames": 75, "encoding": encoding});
+        if encoding == "compact" {
+            msg["max_error"] = json!(max_error);
+        }
+        Message::Text(msg.to_string().into())
+    };
+    let (mut compact, mut plain) = (app.ws("/v1/stream").await, app.ws("/v1/stream").await);
+    compact.send(open("compact")).await.unwrap();
+    plain.send(open("protobuf")).await.unwrap();
+    let (doc, frames, sizes) = compact_frames(&mut compact, 75).await;
+    eprintln!("composed: key frame {} B, deltas {:?} B", sizes[0], &sizes[1..4]);
+    let Message::Text(_) = next_message(&mut plain).await else { panic!("the protobuf stream's `opened` first") };
+    let plain = protobuf_frames(&mut plain, 75).await;
+    assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
+    // The IK's joints turn freely; the tip, which no layer or solver turns, stays constant.
+    assert!(doc["joints"][1]["rotation"]["smallest_three"]["largest"].is_null(), "{}", doc["joints"][1]);
+    assert!(doc["joints"][5]["rotation"]["constant"].is_array(), "{}", doc["joints"][5]);
+    let l = layout(&doc);
+    check_keys(&frames, l.key_interval);
+    let (compared, keys, deltas) = compare(&frames, &plain, max_error, &l);
+    assert!(compared >= 60 && keys >= 2 && deltas >= 40, "{compared} compared, {keys} keys, {deltas} deltas");
+
+    // Controls: a layer ramp goes through, a crossfade is refused and the stream goes on.
+    let mut ws = app.ws("/v1/stream").await;
+    ws.send(Message::Text(
+        json!({"op": "open", "motion": motion, "fps": 30, "encoding": "compact"}).to_string().into(),
+    ))
+    .await
+    .unwrap();
+    let doc = opened_layout(&mut ws).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let crossfade = json!({"op": "crossfade", "to": {"layers": [{"clip": swing}]}, "duration": 0.2});
+    ws.send(Message::Text(crossfade.to_string().into())).await.unwrap();
+    ws.send(Message::Text(r#"{"op":"layer","index":1,"weight":1,"duration":0}"#.into())).await.unwrap();
+    let error = loop {
+        match next_message(&mut ws).await {
+            Message::Text(t) => break serde_json::from_str::<Value>(&t).unwrap(),
+            Message::Binary(b) => drop(decoder.decode(&b)),
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!(error["error"]["code"], "bad_control", "the crossfade is refused: {error}");
+    // The layer ramp after it is taken (a refusal would be a text message
+    // among these frames), and the frames go on decoding.
+    let (more, _) = more_frames(&mut ws, &mut decoder, 35).await;
+    assert!(more.iter().any(|d| d.key));
+}
+
+/// A graph broadcast (the Fox's locomotion) driven by `set` controls: a
+/// compact viewer's frames decode within `max_error` of a protobuf viewer's
+/// frames of the same ticks, through the transitions the sets fire.
+#[tokio::test]
+async fn a_graph_broadcast_with_set_controls_decodes_within_max_error() {
+    let app = TestApp::start().await;
+    let (graph, _) = crate::api::graph_samples::fox_graph(&app).await;
+    let listed = app.get_json("/v1/graphs").await;
+    let summary = listed["graphs"].as_array().unwrap().iter().find(|g| g["id"] == json!(graph)).unwrap();
+    let parents = parents(&app, summary["clips"][0].as_str().unwrap()).await;
+    let created = app.post_json("/v1/broadcasts", &json!({"motion": {"layers": [{"graph": graph}]}, "fps": 20})).await;
+    let b = created["id"].as_str().unwrap_or_else(|| panic!("a broadcast: {created}")).to_owned();
+    let max_error = 1e-3;
+    let mut compact = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=compact&max_error={max_error}")).await;
+    let mut plain = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=protobuf")).await;
+    let plain = tokio::spawn(async move { protobuf_frames(&mut plain, 110).await });
+    let doc = opened_layout(&mut compact).await;
+    let l = layout(&doc);
+    assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let app = &app;
+    let set = |parameters: Value| {
+        let url = app.url(&format!("/v1/broadcasts/{b}/controls"));
+        let body = json!({"op": "set", "parameters": parameters});
+        async move {
+            let resp = app.http.post(url).json(&body).send().await.unwrap();
+            assert!(resp.status().is_success(), "{}", resp.text().await.unwrap());
+        }
+    };
+    let (mut frames, _) = more_frames(&mut compact, &mut decoder, 15).await;
+    set(json!({"speed": 2.5})).await;
+    frames.extend(more_frames(&mut compact, &mut decoder, 45).await.0);
+    set(json!({"survey": true})).await;
+    frames.extend(more_frames(&mut compact, &mut decoder, 40).await.0);
+    check_keys(&frames, l.key_interval);
+    let plain = plain.await.unwrap();
+    let (compared, keys, _) = compare_on(&parents, &frames, &plain, max_error, &l);
+    assert!(compared >= 80 && keys >= 4, "{compared} compared, {keys} key frames");
+    // The sets moved the fox: the poses of the last ticks are not the idle's of the first.
+    let (first, last) = (plain.values().next().unwrap(), plain.values().last().unwrap());
+    assert!(worst(&parents, first, last, l.distance) > 0.01, "the graph left its idle");
 }

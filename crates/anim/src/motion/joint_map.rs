@@ -4,7 +4,7 @@
 use crate::Skeleton;
 
 /// A layer's joint absent from the output skeleton's mapping.
-pub(super) const UNMAPPED: u32 = u32::MAX;
+pub(crate) const UNMAPPED: u32 = u32::MAX;
 
 /// Per output joint, the same-named joint of `layer` (or [`UNMAPPED`]).
 pub(super) fn joint_map(output: &Skeleton, layer: &Skeleton) -> Vec<u32> {

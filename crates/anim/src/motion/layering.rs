@@ -30,10 +30,21 @@ pub(super) fn blend(pose: &mut Joint, layer: &Joint, w: f32) {
     if w >= 1.0 {
         *pose = *layer;
     } else if w > 0.0 {
-        pose.t = pose.t.lerp(layer.t, w);
-        pose.s = pose.s.lerp(layer.s, w);
-        pose.q = slerp_fast(pose.q, layer.q, w);
+        pose.t = toward(pose.t, layer.t, w);
+        pose.s = toward(pose.s, layer.s, w);
+        // The same rotation (either sign) stays exactly as it is.
+        if pose.q != layer.q && pose.q != -layer.q {
+            pose.q = slerp_fast(pose.q, layer.q, w);
+        }
     }
+}
+
+/// `a + (b − a)·w`: equal values blend to themselves exactly, so a channel
+/// every layer holds constant stays constant (compact frames send it once:
+/// docs/compact-frames.md).
+#[inline]
+fn toward(a: Vec3A, b: Vec3A, w: f32) -> Vec3A {
+    a + (b - a) * w
 }
 
 /// Adds `w` times `layer`'s difference from `reference`.
@@ -43,18 +54,25 @@ pub(super) fn add(pose: &mut Joint, layer: &Joint, reference: &Joint, w: f32) {
         return;
     }
     pose.t = clamp(pose.t + (layer.t - reference.t) * w);
-    let difference = reference.q.conjugate() * layer.q;
-    let difference = if difference.w < 0.0 { -difference } else { difference };
-    let step = if w >= 1.0 { difference } else { slerp_fast(Quat::IDENTITY, difference, w) };
-    pose.q = (pose.q * step).normalize();
+    // A rotation the layer holds at its reference's adds nothing, exactly.
+    if layer.q != reference.q && layer.q != -reference.q {
+        pose.q = (pose.q * additive_step(layer.q, reference.q, w)).normalize();
+    }
     let ratio = Vec3A::select(reference.s.cmpeq(Vec3A::ZERO), Vec3A::ONE, layer.s / reference.s);
     pose.s = clamp(pose.s * (Vec3A::ONE + (ratio - Vec3A::ONE) * w));
+}
+
+/// `slerp(I, short(reference⁻¹·layer), w)`: what an additive layer turns by.
+fn additive_step(layer: Quat, reference: Quat, w: f32) -> Quat {
+    let difference = reference.conjugate() * layer;
+    let difference = if difference.w < 0.0 { -difference } else { difference };
+    if w >= 1.0 { difference } else { slerp_fast(Quat::IDENTITY, difference, w) }
 }
 
 /// A parameter entry's blend: the translation's lerp (a copy at `w ≥ 1`).
 #[inline]
 pub(super) fn lerp(value: Vec3A, layer: Vec3A, w: f32) -> Vec3A {
-    if w >= 1.0 { layer } else { value.lerp(layer, w) }
+    if w >= 1.0 { layer } else { toward(value, layer, w) }
 }
 
 /// A parameter entry's additive step: `value + w·difference`, bounded as

@@ -48,7 +48,8 @@ pub use warning::MotionWarning;
 
 use self::coverage::Reach;
 use self::error::MotionErrorKind as K;
-use self::joint_map::{UNMAPPED, joint_map};
+pub(crate) use self::joint_map::UNMAPPED;
+use self::joint_map::joint_map;
 use self::root::motion_transform;
 use self::sync::SyncGroup;
 use super::character::{FootPlanter, Retargeter};
@@ -104,6 +105,19 @@ pub struct Motion<C> {
     character: Option<Arc<spec::CharacterSpec>>,
     /// Spring chains on the output skeleton (docs/springs.md), if any.
     springs: Option<Springs>,
+}
+
+/// One layer of a motion, read-only: what bounds its poses.
+pub(crate) struct LayerView<'a> {
+    pub clip: &'a Clip,
+    pub mode: LayerMode,
+    /// One weight per output joint.
+    pub mask: &'a [f32],
+    /// Per output joint, the layer clip's joint (or `UNMAPPED`).
+    pub map: &'a [u32],
+    /// Additive layers' reference pose, in the layer clip's joints.
+    pub reference: Option<&'a Pose>,
+    pub retargeted: bool,
 }
 
 /// Root motion as built: the output skeleton's root-motion joint.
@@ -297,6 +311,23 @@ impl<C: ClipSource> Motion<C> {
     /// Each layer's clip, bottom to top.
     pub fn layers(&self) -> impl Iterator<Item = &C> {
         self.layers.iter().map(|l| &l.clip)
+    }
+
+    /// Each layer as compact frames' bounds read it (docs/compact-frames.md), bottom to top.
+    pub(crate) fn layer_views(&self) -> impl Iterator<Item = LayerView<'_>> {
+        self.layers.iter().map(|l| LayerView {
+            clip: l.clip.clip(),
+            mode: l.mode,
+            mask: &l.mask,
+            map: &l.map,
+            reference: l.reference.as_ref(),
+            retargeted: l.retarget.is_some(),
+        })
+    }
+
+    /// Whether root motion `extract` rewrites the root joint's local transform.
+    pub fn extracts_root_motion(&self) -> Option<usize> {
+        self.root.filter(|r| r.mode == RootMode::Extract).map(|r| r.joint)
     }
 
     /// The request-time IK constraints, solved after layering.

@@ -164,3 +164,48 @@ fn constant_channels_are_detected_and_cost_no_bits() {
         matches!(layout.joints[1].rotation, Rotation::Constant(q) if q.abs_diff_eq(Quat::from_rotation_x(0.3), 1e-7))
     );
 }
+
+/// Derived ranges (docs/compact-frames.md, “What a compact stream plays”):
+/// a motion of blend layers (one masked) and an additive layer over random
+/// clips of one rig, sampled at random times under random layer weights,
+/// never leaves the ranges derived from its clips; and the layout chosen
+/// from them keeps those poses within its bound.
+#[test]
+fn composed_poses_stay_within_their_derived_ranges() {
+    use anim::motion::{LayerMode, LayerSpec, MaskSpec, MotionOptions, MotionSpec};
+    use anim::{Clip, Motion, MotionSampler};
+
+    let mut rng = Rng::new(0xc0ba);
+    for case in 0..24 {
+        let n = 3 + rng.below(6);
+        let base = crate::random::skeleton_clip(&mut rng, n);
+        let clips: Vec<Clip> = (0..3)
+            .map(|i| {
+                let mut spec = if i == 0 { base.clone() } else { crate::random::skeleton_clip(&mut rng, n) };
+                spec.skeleton = base.skeleton.clone();
+                Clip::build(&spec).unwrap()
+            })
+            .collect();
+        let mask = MaskSpec { joints: vec![("j1".to_owned(), 0.7)], descendants: true, default: None };
+        let layers = vec![
+            LayerSpec::new(&clips[0]),
+            LayerSpec { mask: Some(mask), weight: 0.5, ..LayerSpec::new(&clips[1]) },
+            LayerSpec { mode: LayerMode::Additive, reference_time: Some(0.1), ..LayerSpec::new(&clips[2]) },
+        ];
+        let motion = Motion::build(MotionSpec { layers, root_motion: None, ..Default::default() }).unwrap();
+        let ranges = Ranges::of_motion(&motion, 240.0).unwrap();
+        let skeleton = motion.skeleton();
+        let layout = Layout::choose(skeleton, &ranges, 1e-4, 0.1);
+        let (mut sampler, mut phases) = (MotionSampler::new(), Vec::new());
+        for _ in 0..200 {
+            let weights: Vec<f32> = (0..3).map(|_| rng.unit() as f32).collect();
+            let tau = rng.range(-1.0, 4.0);
+            motion.phases_at(tau, &weights, &mut phases);
+            motion.sample_with(tau, &phases, &weights, &MotionOptions::default(), &mut sampler);
+            let pose = sampler.pose();
+            assert_eq!(ranges.outside(pose), None, "case {case}, weights {weights:?}, τ {tau}");
+            let error = worst_error(skeleton, &layout, pose);
+            assert!(error <= 1e-4, "case {case}: {error} > 1e-4");
+        }
+    }
+}

@@ -105,10 +105,10 @@ impl Estimate {
 /// a key frame a viewer missed and the delta frame after it, each a
 /// header of varints at their widest and a clip time, and per joint its
 /// changed bit, a rotation's largest index and every channel at 24 bits.
-pub fn compact_frame(clip: &Clip) -> u64 {
+pub fn compact_frame(joints: usize) -> u64 {
     let header = 1 + 4 * 10 + 4;
     let joint_bits = 1 + 2 + 9 * u64::from(anim::compact::MAX_BITS);
-    2 * (header + (clip.joint_count() as u64 * joint_bits).div_ceil(8))
+    2 * (header + (joints as u64 * joint_bits).div_ceil(8))
 }
 
 /// The JSON text of one pose, names included.

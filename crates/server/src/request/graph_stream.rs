@@ -3,14 +3,16 @@
 //! `graph`. The graph comes built from the cache of built graphs, pinned at
 //! its version for as long as the stream plays; it plays on the stream's
 //! tick grid from motion time 0 at speed 1, so what a graph stream does not
-//! take — a `start` or `speed`, an `ease`, compact frames, a parameter
-//! subset — is refused `graph_unsupported` at its field. Its price per
+//! take — a `start` or `speed`, an `ease`, a parameter subset, a report in
+//! compact frames — is refused `graph_unsupported` at its field. Its price per
 //! frame is the graph's costliest tick (as a sampling request's ticks are
 //! priced) and its frame's encoding, the report included when asked.
 
 use std::sync::Arc;
 
-use super::cost::{Estimate, F64_TEXT, check_stream, check_stream_work, ik_reports, json_str, stream_work};
+use super::cost::{
+    Estimate, F64_TEXT, check_stream, check_stream_work, compact_frame, ik_reports, json_str, stream_work,
+};
 use super::graph::{GRAPH_AT, GraphStages, pose_bound, report_bytes};
 use super::raw::{Field, unprocessable};
 use super::stream::{Admitted, Opening, RawStream};
@@ -85,7 +87,8 @@ impl RawStream<'_> {
         caller: &CallerKey,
     ) -> Result<GraphStream, ApiError> {
         let request = self.check()?;
-        self.fits_a_graph(&request)?;
+        self.fits_a_graph(&request, graph.report)?;
+        let compact = self.compact(&request)?;
         self.check_fps(request.fps)?;
         let built = crate::graphs::resolve(state, caller, graph.reference, GRAPH_AT).await?;
         let played = graph.stages.graph(state, caller, &built).await?;
@@ -97,20 +100,28 @@ impl RawStream<'_> {
         let post = Arc::new(graph.stages.build(&played, state)?);
         let ik = ik_reports(post.ik().len() as u64, wire);
         let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
-        let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
-        let frame = frame.saturating_add(2 * F64_TEXT + json_str(id));
+        let joints = played.skeleton().len();
+        let (frame, encoding) = match compact {
+            Some(_) => (compact_frame(joints), price::compact_frame(joints)),
+            None => {
+                let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
+                (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)
+            }
+        };
         let stages = price::graph_post(&post, played.skeleton(), f64::from(request.fps));
-        let per_frame = price::graph_tick(&played).saturating_add(stages);
+        let per_frame = price::graph_tick(&played).saturating_add(stages).saturating_add(encoding);
         let program =
             GraphProgram { graph: played, post, id: id.into(), version: built.meta.version, report: graph.report };
         let motion = Arc::clone(program.graph.initial_motion());
         let params = StreamParams::of_motion(motion, Arc::clone(&program.id), request).map_err(|e| self.refused(e))?;
         let params = self.bind(params.with_graph(program), state)?;
+        let params = self.with_layout(params, compact, state, caller).await?;
         Ok(GraphStream { params, frame, per_frame })
     }
 
-    /// A graph plays from motion time 0 at speed 1, its own poses in full.
-    fn fits_a_graph(&self, request: &StreamRequest) -> Result<(), ApiError> {
+    /// A graph plays from motion time 0 at speed 1, its own poses in full
+    /// (compact frames carry no report).
+    fn fits_a_graph(&self, request: &StreamRequest, report: bool) -> Result<(), ApiError> {
         let refuse = |field: Field, detail: &str| {
             Err(unprocessable("graph_unsupported", field, self.at, format!("a graph stream {detail}")))
         };
@@ -126,8 +137,11 @@ impl RawStream<'_> {
         if request.ease != anim::Ease::Linear {
             return refuse(Field::Ease, "plays its ticks as they are: it takes no `ease`");
         }
-        if request.encoding == Encoding::Compact {
-            return refuse(Field::Encoding, "has no compact frames (their layout holds one clip's poses)");
+        if request.encoding == Encoding::Compact && report {
+            return refuse(
+                Field::Encoding,
+                "in compact frames carries no `report` (a compact frame holds the pose only)",
+            );
         }
         if self.parameters.is_some() {
             return refuse(Field::ParameterAt(0), "carries no parameter subset yet");

@@ -19,7 +19,7 @@ use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
     AdmitError, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, MAX_FPS, ParamError, Repricing,
-    StreamMotion, StreamParams, StreamPermit, StreamRequest, layout_samples, plain_clip,
+    StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
 };
 use crate::work::{Ticket, price};
 
@@ -99,18 +99,15 @@ pub async fn compact_watch(
         parameters: None,
         at,
     };
-    if params.graph.is_some() {
-        let detail = "compact frames hold one clip's poses; this broadcast plays a graph".to_owned();
-        return Err(unprocessable("graph_unsupported", Field::Encoding, at, detail));
-    }
     let request = StreamRequest { space: params.space, encoding: Encoding::Compact, ..StreamRequest::default() };
     let compact = raw.compact(&request)?;
     if params.joints.is_some() {
         let detail = "compact frames carry the whole local pose; this broadcast sends a joint subset".to_owned();
         return Err(unprocessable("compact_unsupported", Field::Encoding, at, detail));
     }
-    let clip = plain_clip(&params.motion).map_err(|e| raw.compact_refused(e))?;
-    let per_sec = stream_work(price::compact_frame(clip.joint_count()), compact_frame(clip), params.fps);
+    range_source(&params.motion, params.graph.as_ref()).map_err(|e| raw.compact_refused(e))?;
+    let joints = params.motion.skeleton().len();
+    let per_sec = stream_work(price::compact_frame(joints), compact_frame(joints), params.fps);
     check_stream_work(per_sec, &state.config.limits, at)?;
     let ticket = state.work.charge(&caller.key(), per_sec)?;
     let with = raw.with_layout(params.clone(), compact, state, &caller.key()).await?;
@@ -209,7 +206,7 @@ impl RawStream<'_> {
         let cached = super::raw::clip(state, id).await?;
         self.check_fps(request.fps)?;
         let (frame, encoding) = match compact {
-            Some(_) => (compact_frame(&cached.clip), price::compact_frame(cached.clip.joint_count())),
+            Some(_) => (compact_frame(cached.clip.joint_count()), price::compact_frame(cached.clip.joint_count())),
             None => (Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into()), 0),
         };
         let per_frame = encoding.saturating_add(price::clip_frame(&cached.clip, &cached.springs, request.fps));
@@ -287,7 +284,7 @@ impl RawStream<'_> {
         self.check_fps(request.fps)?;
         let first = composed.motion.first_clip().clip();
         let mut frame = match request.encoding {
-            Encoding::Compact => compact_frame(first),
+            Encoding::Compact => compact_frame(composed.motion.skeleton().len()),
             _ => Estimate::frame(first, composed.clip_id(), request.encoding.into()),
         };
         if composed.motion.has_root_motion() {
@@ -355,7 +352,7 @@ impl RawStream<'_> {
     /// `compact_unsupported` for model space or a joint subset (compact
     /// frames carry the whole local pose); `unknown_parameter` for
     /// `max_error` or `distance` without compact frames.
-    fn compact(&self, request: &StreamRequest) -> Result<Option<(f32, Option<f32>)>, ApiError> {
+    pub(super) fn compact(&self, request: &StreamRequest) -> Result<Option<(f32, Option<f32>)>, ApiError> {
         let at = self.at;
         let max_error = self.max_error.map(|raw| finite(raw, Field::MaxError, at)).transpose()?;
         let distance = self.distance.map(|raw| finite(raw, Field::Distance, at)).transpose()?;
@@ -396,14 +393,16 @@ impl RawStream<'_> {
         compact.map_or(0, |_| price::compact_frame(composed.motion.skeleton().len()))
     }
 
-    /// The stream in compact frames, when asked: its layout chosen from its
-    /// clip's poses, priced and charged to `caller` and run as work.
+    /// The stream in compact frames, when asked: its layout chosen from
+    /// ranges that hold its poses (docs/compact-frames.md), priced (a pose of
+    /// its costliest clip per range sample) and charged to `caller` and run
+    /// as work.
     ///
     /// # Errors
-    /// `compact_unsupported` (a motion that is more than one clip played
-    /// whole); `too_much_work`, `caller_work_limit`, `overloaded`,
-    /// `request_timeout`.
-    async fn with_layout(
+    /// `compact_unsupported` (poses no range bounds: a retargeted layer,
+    /// root motion `extract`); `too_much_work`, `caller_work_limit`,
+    /// `overloaded`, `request_timeout`.
+    pub(super) async fn with_layout(
         &self,
         params: StreamParams,
         compact: Option<(f32, Option<f32>)>,
@@ -411,8 +410,9 @@ impl RawStream<'_> {
         caller: &CallerKey,
     ) -> Result<StreamParams, ApiError> {
         let Some((max_error, distance)) = compact else { return Ok(params) };
-        let clip = plain_clip(&params.motion).map_err(|e| self.compact_refused(e))?;
-        let units = price::compact_layout(layout_samples(clip), price::clip_pose(clip));
+        let (motion, graph) = (&params.motion, params.graph.as_ref());
+        let (_, samples) = range_source(motion, graph).map_err(|e| self.compact_refused(e))?;
+        let units = price::compact_layout(samples, range_sample_price(motion, graph, price::clip_pose));
         if units > state.config.limits.max_request_work {
             let detail = format!(
                 "choosing this stream's compact layout costs {units} work units; the limit (max_request_work, \
@@ -421,14 +421,14 @@ impl RawStream<'_> {
             );
             return Err(unprocessable("too_much_work", Field::Encoding, self.at, detail));
         }
-        let (motion, fps) = (Arc::clone(&params.motion), params.fps);
+        let (motion, graph, fps) = (Arc::clone(&params.motion), params.graph.clone(), params.fps);
         let layout = state
             .work
             .spend(caller, units, move |_| {
-                let clip = motion.first_clip().clip();
-                CompactLayout::of_clip(clip, max_error, distance, fps)
+                CompactLayout::of_stream((&motion, graph.as_ref()), max_error, distance, fps)
             })
-            .await?;
+            .await?
+            .map_err(|e| self.compact_refused(e))?;
         Ok(params.with_compact(Arc::new(layout)))
     }
 

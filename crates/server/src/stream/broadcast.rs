@@ -608,12 +608,12 @@ impl Broadcast {
     ) -> Result<Subscription, CompactRefusal> {
         // Under the desk's lock, so no control that leaves the clip is stamped meanwhile.
         let desk = self.desk();
-        if desk.check.departed() {
+        if desk.check.departed(layout.any_weights) {
             return Err(CompactRefusal {
                 code: "compact_unsupported",
                 field: "encoding",
-                detail: "this broadcast has played a crossfade, layer or ik control: its poses are no longer its \
-                         clip's, which a compact layout holds"
+                detail: "this broadcast has played a crossfade or ik control (or a layer ramp on one clip): its \
+                         poses are no longer those a compact layout's ranges hold"
                     .into(),
             });
         }
@@ -653,9 +653,10 @@ impl Broadcast {
         Ok(Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls: sink }, shutdown, permit))
     }
 
-    /// Whether compact viewers watch: controls that would leave the clip are refused then.
-    fn has_compact_viewers(&self) -> bool {
-        crate::sync::lock(&self.compact).iter().any(|c| c.tx.receiver_count() > 0)
+    /// Whether compact viewers watch a layout `control` would leave: it is refused then.
+    fn leaves_a_watched_layout(&self, control: &Control) -> bool {
+        let channels = crate::sync::lock(&self.compact);
+        channels.iter().any(|c| c.tx.receiver_count() > 0 && control.leaves_the_layout(c.layout.any_weights))
     }
 
     fn desk(&self) -> MutexGuard<'_, Desk> {
@@ -741,10 +742,10 @@ impl Broadcast {
         if let Some(refusal) = control.refused_on_broadcast() {
             return Err(ControlError::Invalid(refusal));
         }
-        if control.leaves_the_clip() && self.has_compact_viewers() {
+        if self.leaves_a_watched_layout(control) {
             return Err(ControlError::Invalid(
-                "compact viewers watch this broadcast, whose layout holds its clip's poses only: crossfade, layer \
-                 and ik controls are refused while they do",
+                "compact viewers watch this broadcast, whose layout holds its poses only: crossfade and ik controls \
+                 (and layer ramps on one clip) are refused while they do",
             ));
         }
         if self.ended.load(Ordering::Acquire) {

@@ -1,18 +1,23 @@
 //! Compact frames on a stream (docs/compact-frames.md): the layout a stream
-//! states once, chosen from the poses its motion can produce.
+//! states once, chosen from ranges that hold every pose its motion can
+//! produce.
 //!
 //! The layout's ranges are what makes its error bound hold: a pose outside
-//! them is clamped. So a compact stream plays only what its ranges were
-//! taken from — one clip at full weight, sampled at every key and on a
-//! 240 Hz grid, with its rest pose — and refuses the controls that would
-//! play something else (a crossfade, a layer ramp, an `ik` control).
+//! them is clamped. A stream of one clip played whole takes them from the
+//! clip's poses (sampled at every key and on a 240 Hz grid, with its rest
+//! pose), and refuses the controls that would play something else (a
+//! crossfade, a layer ramp, an `ik` control). A composed motion or a graph
+//! takes ranges derived from its clips' (`anim::compact`), which hold its
+//! poses under any layer weights and parameters, so only crossfades and
+//! `ik` controls are refused.
 
 use std::sync::Arc;
 
-use anim::compact::{Layout, MIN_DISTANCE, MIN_MAX_ERROR, Ranges, default_distance};
+use anim::compact::{Layout, MIN_DISTANCE, MIN_MAX_ERROR, Ranges, Unbounded, default_distance};
 use anim::{Clip, Skeleton};
 use formats::wire::compact::LayoutDoc;
 
+use super::graph::GraphProgram;
 use super::pinned::StreamMotion;
 
 /// Samples per second the ranges are taken at, besides every key.
@@ -27,6 +32,9 @@ pub struct CompactLayout {
     /// The layout document (docs/compact-frames.md, "The layout document").
     pub document: Arc<str>,
     pub key_interval: u64,
+    /// Whether the ranges hold the stream's poses at any layer weights
+    /// (derived ones), so `layer` ramps keep within them.
+    pub any_weights: bool,
 }
 
 /// What a client asked for: `max_error` and `distance` in metres (`None`:
@@ -75,45 +83,118 @@ impl CompactRequest {
     }
 }
 
-/// The clip a compact stream of `motion` plays: its one layer's, when that
-/// layer is the whole pose (full weight, not retargeted, the same joints, no
-/// motion-level IK or root motion).
-///
-/// # Errors
-/// `compact_unsupported`, saying what the motion has that compact frames cannot bound.
-pub fn plain_clip(motion: &StreamMotion) -> Result<&Clip, CompactRefusal> {
-    let refuse = |what: &str| CompactRefusal {
-        code: "compact_unsupported",
-        field: "encoding",
-        detail: format!(
-            "compact frames need a motion of one clip played whole; this one has {what} (docs/compact-frames.md)"
-        ),
-    };
-    if motion.layer_count() != 1 {
-        return Err(refuse("several layers"));
-    }
-    if !motion.ik().is_empty() {
-        return Err(refuse("IK constraints of its own"));
-    }
-    if motion.has_root_motion() || motion.is_retargeted(0) {
-        return Err(refuse("root motion or retargeting"));
-    }
-    if motion.weights().first().is_some_and(|w| *w != 1.0) {
-        return Err(refuse("a layer weight below 1"));
-    }
-    let clip = motion.first_clip().clip();
-    if clip.joint_count() != motion.skeleton().len() {
-        return Err(refuse("a mask or a skeleton other than its clip's"));
-    }
-    Ok(clip)
+/// Where a compact stream's ranges come from.
+#[derive(Debug, Clone, Copy)]
+pub enum RangeSource<'a> {
+    /// One clip played whole: its poses, observed.
+    Clip(&'a Clip),
+    /// A composed motion or a graph: derived from its clips' ranges.
+    Derived,
 }
 
-/// The poses choosing a layout for `clip` samples (its rest pose too).
-pub fn layout_samples(clip: &Clip) -> u64 {
-    Ranges::clip_samples(clip, RANGE_RATE) + 1
+/// What choosing the layout of a stream of `motion` (or `graph`) reads,
+/// and what it costs in poses: its one clip's, or every distinct clip of
+/// its motion (a graph: of its states' motions), with the rest pose.
+///
+/// # Errors
+/// `compact_unsupported`, saying what the stream has that no range can bound.
+pub fn range_source<'a>(
+    motion: &'a StreamMotion,
+    graph: Option<&GraphProgram>,
+) -> Result<(RangeSource<'a>, u64), CompactRefusal> {
+    if let Some(graph) = graph {
+        let refuse = |u: Unbounded| refusal(u.0);
+        check_graph(&graph.graph).map_err(refuse)?;
+        return Ok((RangeSource::Derived, Ranges::graph_samples(&graph.graph, RANGE_RATE)));
+    }
+    if let Some(clip) = plain_clip(motion) {
+        return Ok((RangeSource::Clip(clip), Ranges::clip_samples(clip, RANGE_RATE) + 1));
+    }
+    if (0..motion.layer_count()).any(|i| motion.is_retargeted(i)) {
+        return Err(refusal("a layer retargeted onto a character"));
+    }
+    if motion.extracts_root_motion().is_some() {
+        return Err(refusal("root motion `extract`, which moves the root joint off its clips' ranges"));
+    }
+    Ok((RangeSource::Derived, Ranges::motion_samples(motion, RANGE_RATE)))
+}
+
+fn refusal(what: &str) -> CompactRefusal {
+    CompactRefusal {
+        code: "compact_unsupported",
+        field: "encoding",
+        detail: format!("compact frames cannot bound this stream's poses: it has {what} (docs/compact-frames.md)"),
+    }
+}
+
+/// A graph's states' motions must each be boundable.
+fn check_graph(graph: &super::graph::StreamGraph) -> Result<(), Unbounded> {
+    for motion in graph.state_motions() {
+        if (0..motion.layer_count()).any(|i| motion.is_retargeted(i)) {
+            return Err(Unbounded("a layer retargeted onto a character"));
+        }
+        if motion.extracts_root_motion().is_some() {
+            return Err(Unbounded("root motion `extract`"));
+        }
+    }
+    Ok(())
+}
+
+/// The clip of a motion that is one clip played whole (one full-weight
+/// layer, not retargeted, the same joints, no motion-level IK, springs or
+/// root motion), whose own poses bound it.
+fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
+    let clip = motion.first_clip().clip();
+    let whole = motion.layer_count() == 1
+        && motion.ik().is_empty()
+        && motion.springs().is_none()
+        && !motion.has_root_motion()
+        && !motion.is_retargeted(0)
+        && motion.weights().first().is_some_and(|w| *w == 1.0)
+        && clip.joint_count() == motion.skeleton().len();
+    whole.then_some(clip)
+}
+
+/// The largest price of one pose of any clip a stream of `motion` (or
+/// `graph`) plays: what each of its range samples costs.
+pub fn range_sample_price(
+    motion: &StreamMotion,
+    graph: Option<&GraphProgram>,
+    clip_pose: impl Fn(&Clip) -> u64,
+) -> u64 {
+    let largest = |m: &StreamMotion| m.layers().map(|c| clip_pose(c.clip())).max().unwrap_or(0);
+    match graph {
+        Some(g) => g.graph.state_motions().map(|m| largest(m)).max().unwrap_or(0),
+        None => largest(motion),
+    }
 }
 
 impl CompactLayout {
+    /// The layout of a stream of `motion` (or `graph`) at `max_error` and
+    /// `distance` (`None`: 10 % of the rest height), with key frames at
+    /// least once a second at `fps`.
+    ///
+    /// # Errors
+    /// As [`range_source`].
+    pub fn of_stream(
+        (motion, graph): (&StreamMotion, Option<&GraphProgram>),
+        max_error: f32,
+        distance: Option<f32>,
+        fps: u32,
+    ) -> Result<Self, CompactRefusal> {
+        let skeleton = motion.skeleton();
+        let ranges = match (graph, range_source(motion, graph)?.0) {
+            (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
+            (Some(g), RangeSource::Derived) => {
+                let mut ranges = Ranges::of_graph(&g.graph, RANGE_RATE).map_err(|u| refusal(u.0))?;
+                ranges.turned_by(skeleton, g.post.ik(), g.post.springs());
+                ranges
+            }
+            (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
+        };
+        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, true))
+    }
+
     /// The layout of `clip`'s poses (and its rest pose) at `max_error` and
     /// `distance` (`None`: 10 % of the rest height), with key frames at least
     /// once a second at `fps`.
@@ -121,12 +202,22 @@ impl CompactLayout {
         let skeleton: &Skeleton = clip.skeleton();
         let mut ranges = Ranges::of_clip(clip, RANGE_RATE);
         ranges.observe(skeleton.rest());
+        CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, false)
+    }
+
+    fn of_ranges(
+        skeleton: &Skeleton,
+        ranges: &Ranges,
+        (max_error, distance): (f32, Option<f32>),
+        fps: u32,
+        any_weights: bool,
+    ) -> CompactLayout {
         let distance = distance.unwrap_or_else(|| default_distance(skeleton));
-        let layout = Layout::choose(skeleton, &ranges, max_error, distance);
+        let layout = Layout::choose(skeleton, ranges, max_error, distance);
         let key_interval = u64::from(fps.max(1));
         let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval);
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
-        CompactLayout { layout, document, key_interval }
+        CompactLayout { layout, document, key_interval, any_weights }
     }
 
     /// What tells two layouts apart for sharing a playback.

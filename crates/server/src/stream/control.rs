@@ -123,10 +123,15 @@ impl Control {
         }
     }
 
-    /// Whether it makes the stream play something other than its clip's
-    /// poses (which a compact layout's ranges hold: docs/compact-frames.md).
-    pub(crate) fn leaves_the_clip(&self) -> bool {
-        matches!(self, Control::Crossfade(_) | Control::Layer { .. } | Control::Ik(_) | Control::SetIk(_))
+    /// Whether it makes the stream play poses a compact layout's ranges may
+    /// not hold (docs/compact-frames.md): a crossfade or an `ik` control
+    /// always; a layer ramp unless the ranges hold any layer weights.
+    pub(crate) fn leaves_the_layout(&self, any_weights: bool) -> bool {
+        match self {
+            Control::Crossfade(_) | Control::Ik(_) | Control::SetIk(_) => true,
+            Control::Layer { .. } => !any_weights,
+            _ => false,
+        }
     }
 
     /// Why a broadcast refuses this control, if it does (its viewers share
@@ -535,10 +540,13 @@ pub(crate) struct ControlCheck {
     ik: Arc<[IkConstraint]>,
     ik_limits: IkLimits,
     repricing: Option<Arc<dyn Repricing>>,
-    /// A compact stream plays only the poses its layout's ranges hold.
-    compact: bool,
-    /// A control that leaves the stream's clip was accepted (a crossfade, a layer ramp, an `ik` control).
+    /// A compact stream plays only the poses its layout's ranges hold:
+    /// whether they hold any layer weights (`None`: not compact).
+    compact: Option<bool>,
+    /// A crossfade or an `ik` control was accepted.
     departed: bool,
+    /// A layer ramp was accepted.
+    reweighted: bool,
     /// A graph stream's graph, which its `set` controls are checked against.
     graph: Option<Arc<StreamGraph>>,
 }
@@ -551,17 +559,18 @@ impl ControlCheck {
             ik: params.motion.ik().into(),
             ik_limits: params.ik_limits,
             repricing: None,
-            compact: params.compact.is_some(),
+            compact: params.compact.as_ref().map(|c| c.any_weights),
             departed: false,
+            reweighted: false,
             graph: params.graph.as_ref().map(|g| Arc::clone(&g.graph)),
         }
     }
 
-    /// Whether a control that leaves the stream's clip passed this check
-    /// (one a later rule refused may count too, which only ever refuses
-    /// compact viewers more).
-    pub(crate) fn departed(&self) -> bool {
-        self.departed
+    /// Whether a control that leaves a layout of `any_weights` passed this
+    /// check (one a later rule refused may count too, which only ever
+    /// refuses compact viewers more).
+    pub(crate) fn departed(&self, any_weights: bool) -> bool {
+        self.departed || (self.reweighted && !any_weights)
     }
 
     /// The motion whose skeleton controls are checked against.
@@ -599,15 +608,17 @@ impl ControlCheck {
                 return Ok(Control::SetGraph(values));
             }
         }
-        if control.leaves_the_clip() {
-            if self.compact {
-                return Err(ControlError::Invalid(
-                    "a compact stream's layout holds its clip's poses only: crossfade, layer and ik controls are \
-                     refused",
-                ));
-            }
-            self.departed = true;
+        if let Some(any_weights) = self.compact
+            && control.leaves_the_layout(any_weights)
+        {
+            return Err(ControlError::Invalid(if any_weights {
+                "a compact stream's layout holds its motion's poses only: crossfade and ik controls are refused"
+            } else {
+                "a compact stream's layout holds its clip's poses only: crossfade, layer and ik controls are refused"
+            }));
         }
+        self.departed |= control.leaves_the_layout(true);
+        self.reweighted |= matches!(control, Control::Layer { .. });
         match &control {
             Control::Crossfade(fade) => {
                 self.check_fade(fade)?;

@@ -67,7 +67,7 @@ pub use broadcast::{
 pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
 pub use checkpoint::{Checkpoint, CheckpointError};
-pub use compact::{CompactLayout, CompactRefusal, CompactRequest, RANGE_RATE, layout_samples, plain_clip};
+pub use compact::{CompactLayout, CompactRefusal, CompactRequest, RANGE_RATE, range_sample_price, range_source};
 pub use control::{
     Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, Repricing, parse_control,
 };

@@ -18,6 +18,9 @@
 
 use glam::{Quat, Vec3, Vec3A};
 
+mod bound;
+pub use bound::Unbounded;
+
 use crate::{Clip, Cursor, Pose, Skeleton};
 
 /// The default error bound, metres.
@@ -154,6 +157,9 @@ struct JointRange {
     q_max: [f32; 4],
     /// Bit `k`: component `k` was the largest in some pose.
     largest_seen: u8,
+    /// The largest magnitude of any translation or scale value that went
+    /// into the ranges (what a derived range's rounding margin scales with).
+    magnitude: f32,
 }
 
 impl Ranges {
@@ -169,6 +175,7 @@ impl Ranges {
             q_min: [f32::INFINITY; 4],
             q_max: [f32::NEG_INFINITY; 4],
             largest_seen: 0,
+            magnitude: 0.0,
         };
         Ranges { joints: vec![empty; joints] }
     }
@@ -181,6 +188,7 @@ impl Ranges {
             r.t_max = r.t_max.max(t);
             r.s_min = r.s_min.min(s);
             r.s_max = r.s_max.max(s);
+            r.magnitude = r.magnitude.max(t.abs().max(s.abs()).max_element());
             let q = canonical(pose.rotations[j]);
             r.largest_seen |= 1 << largest_component(q).0;
             for (k, c) in q.to_array().into_iter().enumerate() {
