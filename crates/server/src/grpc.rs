@@ -27,6 +27,7 @@ use crate::auth::{Caller, Identity, Scope};
 use crate::cache::CachedClip;
 use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
+use crate::grpc_motion::PosesJob;
 use crate::request::{
     Field, Format, GraphStages, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes,
     RawPage, RawPose, RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
@@ -215,17 +216,6 @@ fn batch(
             .map(|&t| pose(cached, t, &options, format, false, &mut sampler, &mut matrices))
             .collect(),
     }
-}
-
-/// The poses of a `SampleStream` answer, packed a message at a time.
-pub(crate) trait PosesJob: Send + 'static {
-    /// How many poses the answer holds.
-    fn count(&self) -> usize;
-    /// The answer's size bound, in bytes.
-    fn answer_bytes(&self) -> u64;
-    /// The poses `range` (after the last call's), with the names when
-    /// `names`; fewer once `cancel` is raised.
-    fn batch(&mut self, range: std::ops::Range<usize>, names: bool, cancel: &Cancel) -> pb::PoseBatch;
 }
 
 /// A clip's poses, each evaluated on its own.

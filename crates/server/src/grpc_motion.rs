@@ -16,7 +16,6 @@ use crate::auth::Caller;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::error::At;
-use crate::grpc::PosesJob;
 use crate::request::{
     ClipRoute, Composed, Cost, Field, Format, GraphLayer, GraphSampling, GraphTicks, Locate, MAX_UNARY_ANSWER_BYTES,
     Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route_as, graph_layer,
@@ -207,6 +206,17 @@ async fn motion_poses(
     cost.check(&state.config.limits, field, in_batch_message)?;
     let packer = Packer::new(composed, sampling.options.space, sampling.format);
     Ok((MotionPoses { packer, times: sampling.times, answer_bytes: cost.bytes }, cost))
+}
+
+/// The poses of a `SampleStream` answer, packed a message at a time.
+pub trait PosesJob: Send + 'static {
+    /// How many poses the answer holds.
+    fn count(&self) -> usize;
+    /// The answer's size bound, in bytes.
+    fn answer_bytes(&self) -> u64;
+    /// The poses `range` (after the last call's), with the names when
+    /// `names`; fewer once `cancel` is raised.
+    fn batch(&mut self, range: std::ops::Range<usize>, names: bool, cancel: &Cancel) -> pb::PoseBatch;
 }
 
 /// A motion's poses at a batch's times, packed in order: root motion runs
