@@ -81,9 +81,9 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 }
 
 impl GrpcService {
-    /// A `SampleBatchRequest` checked and bound to its clip (`SampleBatch`
-    /// and `SampleStream` alike). `character` is `SampleBatch`'s alone (it
-    /// answers in one message); here it is refused.
+    /// A `SampleBatchRequest` whose route plays the clip itself (no
+    /// character, no chains running: `grpc_motion::batch_route`) checked and
+    /// bound to its clip (`SampleBatch` and `SampleStream` alike).
     async fn sampling(&self, request: &Request<pb::SampleBatchRequest>) -> Result<(Sampling, Arc<CachedClip>), Status> {
         use pb::sample_batch_request::When;
         let (req, coding) = (request.get_ref(), AnswerCoding::of_grpc(request));
