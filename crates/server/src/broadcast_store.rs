@@ -137,6 +137,7 @@ pub async fn spec_from_body(state: &AppState, body: &[u8]) -> Result<BroadcastSp
         distance: None,
         max_frames: None,
         paused: false,
+        springs: true,
         joints: req.joints.as_deref(),
         parameters: req.parameters.as_deref(),
         at: in_body,

@@ -27,10 +27,10 @@ use crate::auth::{Caller, Identity, Scope};
 use crate::cache::CachedClip;
 use crate::compression::{AnswerCoding, grpc_answer};
 use crate::error::{ApiError, At};
+use crate::grpc_motion::PosesJob;
 use crate::request::{
     Field, Format, GraphStages, MAX_UNARY_ANSWER_BYTES, Opening, Page, Raw, RawBatch, RawGraphStream, RawModes,
     RawPage, RawPose, RawStream, Sampling, Wire, clip as request_clip, evaluate, graph_layer, in_body, in_pose_body,
-    runs_springs,
 };
 use crate::rest::skeleton::ClipSkeleton;
 use crate::state::AppState;
@@ -81,18 +81,12 @@ fn bearer(metadata: &MetadataMap) -> Option<&[u8]> {
 }
 
 impl GrpcService {
-    /// A `SampleBatchRequest` checked and bound to its clip (`SampleBatch`
-    /// and `SampleStream` alike). `character` is `SampleBatch`'s alone (it
-    /// answers in one message); here it is refused.
+    /// A `SampleBatchRequest` whose route plays the clip itself (no
+    /// character, no chains running: `grpc_motion::batch_route`) checked and
+    /// bound to its clip (`SampleBatch` and `SampleStream` alike).
     async fn sampling(&self, request: &Request<pb::SampleBatchRequest>) -> Result<(Sampling, Arc<CachedClip>), Status> {
         use pb::sample_batch_request::When;
         let (req, coding) = (request.get_ref(), AnswerCoding::of_grpc(request));
-        if req.character.is_some() {
-            let detail = "`character` does not apply to SampleStream: ask SampleMotionBatch (or SampleBatch) for the clip's motion on the character".to_owned();
-            return Err(
-                ApiError::BadParameter { code: "unknown_parameter", at: in_body(Field::Character), detail }.into()
-            );
-        }
         let (times, range) = match &req.when {
             Some(When::Times(t)) => (Some(t), None),
             Some(When::Range(r)) => (None, Some(r)),
@@ -143,6 +137,7 @@ impl GrpcService {
             // 0: no limit.
             max_frames: (req.max_frames > 0).then_some(Raw::Number(req.max_frames as f64)),
             paused,
+            springs: !req.without_springs,
             joints: (!req.joints.is_empty()).then_some(req.joints.as_slice()),
             parameters: (!req.parameters.is_empty()).then_some(req.parameters.as_slice()),
             at: stream_at,
@@ -154,6 +149,11 @@ impl GrpcService {
         }
         // Unspecified (0) is no playback; any other is refused as on the WebSocket.
         let playback = (req.playback != 0).then_some(Raw::Enum(req.playback));
+        if req.motion.is_some() && req.without_springs {
+            let detail = "`without_springs` is a clip stream's: a motion names its own spring chains".to_owned();
+            let at = At::Pointer("/without_springs".into());
+            return Err(ApiError::BadParameter { code: "unknown_parameter", at, detail }.into());
+        }
         let opening = match (&req.motion, graph) {
             (None, _) => raw.open(&self.state, &req.clip_id, caller).await?,
             (Some(_), _) if !req.clip_id.is_empty() => {
@@ -218,6 +218,26 @@ fn batch(
     }
 }
 
+/// A clip's poses, each evaluated on its own.
+struct ClipPoses {
+    sampling: Sampling,
+    cached: Arc<CachedClip>,
+}
+
+impl PosesJob for ClipPoses {
+    fn count(&self) -> usize {
+        self.sampling.times.len()
+    }
+
+    fn answer_bytes(&self) -> u64 {
+        self.sampling.answer_bytes
+    }
+
+    fn batch(&mut self, range: std::ops::Range<usize>, names: bool, cancel: &Cancel) -> pb::PoseBatch {
+        batch(&self.cached, &self.sampling, range, names, cancel)
+    }
+}
+
 /// A `SampleStream` answer, evaluated a message at a time: the next
 /// message is evaluated (on the work pool) only when tonic asks for it,
 /// which HTTP/2 flow control holds back while the client does not read; a
@@ -227,28 +247,27 @@ struct Batches {
     state: AppState,
     /// The answer's price, charged until it is sent or dropped.
     _ticket: Ticket,
-    job: Arc<(Sampling, Arc<CachedClip>)>,
+    /// Away on the pool while a message is evaluated.
+    job: Option<Box<dyn PosesJob>>,
+    count: usize,
     per_batch: usize,
     next: usize,
     done: bool,
 }
 
 impl Batches {
-    fn new(state: AppState, sampling: Sampling, cached: Arc<CachedClip>, ticket: Ticket) -> Batches {
-        let per_pose = sampling.answer_bytes / sampling.times.len().max(1) as u64;
+    fn new(state: AppState, job: Box<dyn PosesJob>, ticket: Ticket) -> Batches {
+        let count = job.count();
+        let per_pose = job.answer_bytes() / count.max(1) as u64;
         let per_batch = (STREAM_BATCH_BYTES / per_pose.max(1)).max(1) as usize;
-        Batches { state, _ticket: ticket, job: Arc::new((sampling, cached)), per_batch, next: 0, done: false }
+        Batches { state, _ticket: ticket, job: Some(job), count, per_batch, next: 0, done: false }
     }
 
     /// The next message, `None` after the last. An empty request is one
     /// message with the names and no poses.
     async fn next(&mut self) -> Option<Result<pb::PoseBatch, Status>> {
-        if self.done {
-            return None;
-        }
-        let n = self.job.0.times.len();
-        let range = self.next..(self.next + self.per_batch).min(n);
-        let job = Arc::clone(&self.job);
+        let mut job = self.job.take().filter(|_| !self.done)?;
+        let range = self.next..(self.next + self.per_batch).min(self.count);
         let deadline = self.state.config.limits.request_timeout;
         let built = self
             .state
@@ -256,14 +275,16 @@ impl Batches {
             .pool()
             .run(deadline, move |cancel| {
                 let names = range.start == 0;
-                batch(&job.1, &job.0, range, names, cancel)
+                let batch = job.batch(range, names, cancel);
+                (job, batch)
             })
             .await;
         Some(match built {
-            Ok(batch) => {
+            Ok((job, batch)) => {
                 self.state.counters.poses.increment(batch.poses.len() as u64);
                 self.next += batch.poses.len();
-                self.done = self.next == n;
+                self.done = self.next == self.count;
+                self.job = Some(job);
                 Ok(batch)
             }
             Err(e) => {
@@ -278,28 +299,9 @@ impl Drop for Batches {
     fn drop(&mut self) {
         if !self.done {
             self.state.counters.answers_abandoned.increment(1);
-            self.state.counters.poses_abandoned.increment((self.job.0.times.len() - self.next) as u64);
+            self.state.counters.poses_abandoned.increment((self.count - self.next) as u64);
         }
     }
-}
-
-/// A clip's `SampleBatch` as the `SampleMotionBatch` of its one-layer
-/// motion (its spring chains running).
-fn clip_motion_batch(req: &pb::SampleBatchRequest) -> Result<pb::SampleMotionBatchRequest, ApiError> {
-    use pb::sample_batch_request::When;
-    use pb::sample_motion_batch_request::When as MotionWhen;
-    let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
-    let when = req.when.clone().map(|when| match when {
-        When::Times(times) => MotionWhen::Times(times),
-        When::Range(range) => MotionWhen::Range(range),
-    });
-    Ok(pb::SampleMotionBatchRequest {
-        motion: Some(motion),
-        when,
-        space: req.space,
-        format: req.format,
-        ..Default::default()
-    })
 }
 
 /// Where the fields of `StreamRequest` sit.
@@ -426,16 +428,9 @@ fn refused(e: &ControlError) -> Status {
 impl Animation for GrpcService {
     async fn sample(&self, request: Request<pb::SampleRequest>) -> Result<Response<pb::Pose>, Status> {
         let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
-        let mut req = request.into_inner();
-        if let Some(character) = req.character.take() {
-            let on = (req, character.as_str());
-            return Ok(grpc_answer(super::grpc_motion::sample_on_character(&self.state, &caller, on, coding).await?));
-        }
-        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
-            let motion = super::grpc_motion::clip_motion(&req.clip_id, req.playback, req.ease)?;
-            let (time, space, format) = (req.time, req.space, req.format);
-            let req = pb::SampleMotionRequest { motion: Some(motion), time, space, format, ..Default::default() };
-            return Ok(grpc_answer(super::grpc_motion::sample(&self.state, &caller, req, coding).await?));
+        let req = request.into_inner();
+        if let Some(pose) = super::grpc_motion::sample_route(&self.state, &caller, &req, coding).await? {
+            return Ok(grpc_answer(pose));
         }
         let raw = RawPose {
             t: Some(Raw::Number(req.time)),
@@ -465,20 +460,10 @@ impl Animation for GrpcService {
     }
 
     async fn sample_batch(&self, request: Request<pb::SampleBatchRequest>) -> Result<Response<pb::PoseBatch>, Status> {
-        let caller = self.read(&request)?;
-        if request.get_ref().character.is_some() {
-            let coding = AnswerCoding::of_grpc(&request);
-            let mut req = request.into_inner();
-            let character = req.character.take().unwrap_or_default();
-            let on = (req, character.as_str());
-            let batch = super::grpc_motion::sample_batch_on_character(&self.state, &caller, on, coding).await?;
+        let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
+        let route = super::grpc_motion::sample_batch_route(&self.state, &caller, request.get_ref(), coding);
+        if let Some(batch) = route.await? {
             return Ok(grpc_answer(batch));
-        }
-        let req = request.get_ref();
-        if runs_springs(&self.state, &req.clip_id, !req.without_springs).await? {
-            let batch = clip_motion_batch(req)?;
-            let coding = AnswerCoding::of_grpc(&request);
-            return Ok(grpc_answer(super::grpc_motion::sample_batch(&self.state, &caller, batch, coding).await?));
         }
         let (sampling, cached) = self.sampling(&request).await?;
         if sampling.answer_bytes > MAX_UNARY_ANSWER_BYTES {
@@ -502,10 +487,17 @@ impl Animation for GrpcService {
         &self,
         request: Request<pb::SampleBatchRequest>,
     ) -> Result<Response<Self::SampleStreamStream>, Status> {
-        let caller = self.read(&request)?;
-        let (sampling, cached) = self.sampling(&request).await?;
-        let ticket = self.state.work.charge(&caller.key(), sampling.work)?;
-        let batches = Batches::new(self.state.clone(), sampling, cached, ticket);
+        let (caller, coding) = (self.read(&request)?, AnswerCoding::of_grpc(&request));
+        let route = super::grpc_motion::stream_route(&self.state, &caller, request.get_ref(), coding).await?;
+        let (job, ticket): (Box<dyn PosesJob>, Ticket) = match route {
+            Some((poses, ticket)) => (Box::new(poses), ticket),
+            None => {
+                let (sampling, cached) = self.sampling(&request).await?;
+                let ticket = self.state.work.charge(&caller.key(), sampling.work)?;
+                (Box::new(ClipPoses { sampling, cached }), ticket)
+            }
+        };
+        let batches = Batches::new(self.state.clone(), job, ticket);
         let stream = futures_util::stream::unfold(batches, |mut batches| async move {
             let next = batches.next().await?;
             Some((next, batches))

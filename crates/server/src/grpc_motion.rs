@@ -15,13 +15,16 @@ use glam::Mat4;
 use crate::auth::Caller;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
+use crate::error::At;
 use crate::request::{
-    Composed, Field, Format, GraphLayer, GraphSampling, GraphTicks, MAX_UNARY_ANSWER_BYTES, Raw, RawBatch,
-    RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route, graph_layer, in_batch_message, in_pose_body,
-    no_graph_fields, on_character,
+    ClipRoute, Composed, Cost, Field, Format, GraphLayer, GraphSampling, GraphTicks, Locate, MAX_UNARY_ANSWER_BYTES,
+    Raw, RawBatch, RawGraphSampling, RawModes, RawMotion, RawPose, Wire, at_clip_route_as, graph_layer,
+    in_batch_message, in_pose_body, no_graph_fields,
 };
+
 use crate::state::AppState;
 use crate::work::Cancel;
+use crate::work::Ticket;
 use anim::motion::MotionOptions;
 use anim::{MotionSampler, Pose, Space};
 use std::sync::Arc;
@@ -119,25 +122,10 @@ async fn sample_doc(
     let cost = composed.cost(&[checked.t], checked.format, Wire::Protobuf);
     let cost = cost.compressed(coding.at(cost.bytes));
     cost.check(&state.config.limits, Field::Time, in_pose_body)?;
-    let pack = move |_: &Cancel| Packer::new(&composed, checked.options.space, checked.format).pose(checked.t, true);
+    let pack = move |_: &Cancel| Packer::new(composed, checked.options.space, checked.format).pose(checked.t, true);
     let pose = state.work.spend(&caller.key(), cost.work(), pack).await?;
     state.counters.poses.increment(1);
     Ok(pose)
-}
-
-/// The one-layer motion a clip's `Sample` or `SampleBatch` plays when the
-/// clip's spring chains run (docs/springs.md, “Clip routes”): the clip
-/// with the request's `playback`, as `SampleMotion` takes it.
-///
-/// # Errors
-/// `unknown_parameter` for an `ease` (a motion's layers have none).
-pub fn clip_motion(clip_id: &str, playback: i32, ease: i32) -> Result<pb::Motion, ApiError> {
-    if ease != 0 {
-        let why = "to a clip's spring chains (`without_springs` eases its keyed pose)";
-        return Err(crate::request::no_ease_in_motion(in_pose_body(Field::Ease), why));
-    }
-    let layer = pb::Layer { clip_id: clip_id.to_owned(), playback, ..pb::Layer::default() };
-    Ok(pb::Motion { layers: vec![layer], ..pb::Motion::default() })
 }
 
 /// `SampleMotionBatch`: many poses, the names once.
@@ -163,10 +151,45 @@ async fn sample_batch_doc(
     req: pb::SampleMotionBatchRequest,
     coding: AnswerCoding,
 ) -> Result<pb::PoseBatch, ApiError> {
-    use pb::sample_motion_batch_request::When;
     if let Some(layer) = graph_layer(&doc)? {
         return graph_batch(state, caller, &req, &layer, coding).await;
     }
+    let (mut poses, cost) = motion_poses(state, caller, &doc, &req, coding).await?;
+    if cost.bytes > MAX_UNARY_ANSWER_BYTES {
+        let (bytes, limit) = (cost.bytes, MAX_UNARY_ANSWER_BYTES);
+        return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });
+    }
+    let n = poses.times.len();
+    let pack = move |cancel: &Cancel| poses.batch(0..n, true, cancel);
+    let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
+    state.counters.poses.increment(n as u64);
+    Ok(batch)
+}
+
+/// `SampleStream` of the motion `doc` (a clip route's: no graph), checked
+/// and priced as `SampleMotionBatch` is but for the unary limit, its price
+/// charged until the answer is sent or dropped.
+async fn stream_poses(
+    state: &AppState,
+    caller: &Caller,
+    doc: MotionDoc,
+    req: pb::SampleMotionBatchRequest,
+    coding: AnswerCoding,
+) -> Result<(MotionPoses, Ticket), ApiError> {
+    let (poses, cost) = motion_poses(state, caller, &doc, &req, coding).await?;
+    Ok((poses, state.work.charge(&caller.key(), cost.work())?))
+}
+
+/// A motion batch's poses to pack (its graph layer aside), checked, built
+/// and priced, the price within `max_request_work`.
+async fn motion_poses(
+    state: &AppState,
+    caller: &Caller,
+    doc: &MotionDoc,
+    req: &pb::SampleMotionBatchRequest,
+    coding: AnswerCoding,
+) -> Result<(MotionPoses, Cost), ApiError> {
+    use pb::sample_motion_batch_request::When;
     no_graph_fields(req.report, !req.inputs.is_empty(), false)?;
     let (times, range) = match &req.when {
         Some(When::Times(t)) => (Some(t), None),
@@ -176,66 +199,120 @@ async fn sample_batch_doc(
     let modes = RawModes { space: Some(Raw::Enum(req.space)), ..RawModes::default() };
     let raw = RawBatch::of_message(times, range, modes, req.format);
     let sampling = raw.check(state.config.limits.max_poses)?;
-    let composed = compose(state, caller, &doc, (&req.joints, &req.parameters), sampling.format).await?;
-    let n = sampling.times.len();
+    let composed = compose(state, caller, doc, (&req.joints, &req.parameters), sampling.format).await?;
     let cost = composed.cost(&sampling.times, sampling.format, Wire::Protobuf);
     let cost = cost.compressed(coding.at(cost.bytes));
     let field = if matches!(req.when, Some(When::Times(_))) { Field::Times } else { Field::When };
     cost.check(&state.config.limits, field, in_batch_message)?;
-    if cost.bytes > MAX_UNARY_ANSWER_BYTES {
-        let (bytes, limit) = (cost.bytes, MAX_UNARY_ANSWER_BYTES);
-        return Err(ApiError::AnswerTooLargeForUnary { bytes, limit, stream: "REST POST /v1/samples" });
-    }
-    let (space, format) = (sampling.options.space, sampling.format);
-    let pack = move |cancel: &Cancel| {
-        let mut packer = Packer::new(&composed, space, format);
-        let times = sampling.times.iter().take_while(|_| cancel.proceed());
-        let poses: Vec<pb::Pose> = times.map(|&t| packer.pose(t, false)).collect();
-        let (parameter_names, parameter_widths) = packer.parameter_names();
-        pb::PoseBatch { joint_names: packer.names(), poses, parameter_names, parameter_widths }
-    };
-    let batch = state.work.spend(&caller.key(), cost.work(), pack).await?;
-    state.counters.poses.increment(n as u64);
-    Ok(batch)
+    let packer = Packer::new(composed, sampling.options.space, sampling.format);
+    Ok((MotionPoses { packer, times: sampling.times, answer_bytes: cost.bytes }, cost))
 }
 
-/// `Sample` with `character`: `SampleMotion` of the one-layer motion of the
-/// clip on the character (docs/characters.md, “Clip routes on a
-/// character”), as REST's `GET …/pose?character=`, its refusals at the
-/// request's field names.
+/// The poses of a `SampleStream` answer, packed a message at a time.
+pub trait PosesJob: Send + 'static {
+    /// How many poses the answer holds.
+    fn count(&self) -> usize;
+    /// The answer's size bound, in bytes.
+    fn answer_bytes(&self) -> u64;
+    /// The poses `range` (after the last call's), with the names when
+    /// `names`; fewer once `cancel` is raised.
+    fn batch(&mut self, range: std::ops::Range<usize>, names: bool, cancel: &Cancel) -> pb::PoseBatch;
+}
+
+/// A motion's poses at a batch's times, packed in order: root motion runs
+/// from each to the next, and its springs are one simulation through them
+/// (docs/springs.md, “Time”), however many messages carry them.
+pub struct MotionPoses {
+    packer: Packer,
+    times: Vec<f64>,
+    answer_bytes: u64,
+}
+
+impl PosesJob for MotionPoses {
+    fn count(&self) -> usize {
+        self.times.len()
+    }
+
+    fn answer_bytes(&self) -> u64 {
+        self.answer_bytes
+    }
+
+    /// The poses `range` (the next ones after the last batch's), with the
+    /// names when `names`; fewer once `cancel` is raised.
+    fn batch(&mut self, range: std::ops::Range<usize>, names: bool, cancel: &Cancel) -> pb::PoseBatch {
+        let times = self.times[range].iter().take_while(|_| cancel.proceed());
+        let poses: Vec<pb::Pose> = times.map(|&t| self.packer.pose(t, false)).collect();
+        if !names {
+            return pb::PoseBatch { poses, ..Default::default() };
+        }
+        let (parameter_names, parameter_widths) = self.packer.parameter_names();
+        pb::PoseBatch { joint_names: self.packer.names(), poses, parameter_names, parameter_widths }
+    }
+}
+
+/// The one-layer motion a gRPC clip route plays instead of its clip, if it
+/// plays one: REST's rule ([`ClipRoute::motion`]), `at` locating the
+/// request's `ease`.
+async fn route_motion(
+    state: &AppState,
+    clip_id: &str,
+    (character, without_springs): (Option<&str>, bool),
+    (playback, ease): (Option<anim::Playback>, i32),
+    at: Locate,
+) -> Result<Option<(MotionDoc, Field)>, ApiError> {
+    let route =
+        ClipRoute { id: clip_id, character, springs: !without_springs, playback, ease: (ease != 0).then_some(at) };
+    route.motion(state).await
+}
+
+/// A `Sample` or `SampleMotion` field, the spring chains' switch at `/without_springs`.
+fn in_pose_route(field: Field) -> At {
+    match field {
+        Field::Springs => At::Pointer("/without_springs".into()),
+        other => in_pose_body(other),
+    }
+}
+
+/// A `SampleBatch` field, the spring chains' switch at `/without_springs`.
+fn in_batch_route(field: Field) -> At {
+    match field {
+        Field::Springs => At::Pointer("/without_springs".into()),
+        other => in_batch_message(other),
+    }
+}
+
+/// `Sample` of a clip route that plays a motion (on a `character`, or the
+/// clip's spring chains: docs/springs.md, “Clip routes”): `SampleMotion`
+/// of that motion, as REST's `GET …/pose`, its refusals at the request's
+/// field names. `None`: the route plays the clip itself.
 ///
 /// # Errors
 /// As `SampleMotion`; `unknown_parameter` for an `ease`.
-pub async fn sample_on_character(
+pub async fn sample_route(
     state: &AppState,
     caller: &Caller,
-    (req, character): (pb::SampleRequest, &str),
+    req: &pb::SampleRequest,
     coding: AnswerCoding,
-) -> Result<pb::Pose, ApiError> {
+) -> Result<Option<pb::Pose>, ApiError> {
     let modes = RawModes::of_enums(req.space, req.playback, req.ease);
-    let checked =
-        RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
-    let checked = checked.check()?;
-    if req.ease != 0 {
-        return Err(crate::request::no_ease_in_motion(in_pose_body(Field::Ease), "with `character`"));
-    }
-    let doc = on_character(&req.clip_id, checked.options.playback, character);
+    let raw = RawPose { t: Some(Raw::Number(req.time)), modes, format: Some(Raw::Enum(req.format)), at: in_pose_body };
+    let modes = (raw.check()?.options.playback, req.ease);
+    let on = (req.character.as_deref(), req.without_springs);
+    let Some((doc, field)) = route_motion(state, &req.clip_id, on, modes, in_pose_body).await? else {
+        return Ok(None);
+    };
     let motion = pb::SampleMotionRequest { time: req.time, space: req.space, format: req.format, ..Default::default() };
-    sample_doc(state, caller, doc, motion, coding).await.map_err(|e| at_clip_route(e, in_pose_body))
+    let pose = sample_doc(state, caller, doc, motion, coding).await;
+    Ok(Some(pose.map_err(|e| at_clip_route_as(e, in_pose_route, field))?))
 }
 
-/// `SampleBatch` with `character`: `SampleMotionBatch` of the one-layer
-/// motion of the clip on the character, as REST's `POST …/sample` with
-/// `character`.
-///
-/// # Errors
-/// As `SampleMotionBatch`; `unknown_parameter` for an `ease`.
-pub async fn sample_batch_on_character(
+/// A clip's `SampleBatch` or `SampleStream` as the `SampleMotionBatch` of
+/// the motion its route plays, with the route's field that motion's
+/// refusals point at. `None`: the route plays the clip itself.
+async fn batch_route(
     state: &AppState,
-    caller: &Caller,
-    (req, character): (pb::SampleBatchRequest, &str),
-    coding: AnswerCoding,
-) -> Result<pb::PoseBatch, ApiError> {
+    req: &pb::SampleBatchRequest,
+) -> Result<Option<(MotionDoc, pb::SampleMotionBatchRequest, Field)>, ApiError> {
     use pb::sample_batch_request::When as ClipWhen;
     use pb::sample_motion_batch_request::When;
     let (times, range) = match &req.when {
@@ -244,17 +321,51 @@ pub async fn sample_batch_on_character(
         None => (None, None),
     };
     let raw = RawBatch::of_message(times, range, RawModes::of_enums(req.space, req.playback, req.ease), req.format);
-    let playback = raw.check(state.config.limits.max_poses)?.options.playback;
-    if req.ease != 0 {
-        return Err(crate::request::no_ease_in_motion(in_batch_message(Field::Ease), "with `character`"));
-    }
-    let doc = on_character(&req.clip_id, playback, character);
-    let when = req.when.map(|when| match when {
+    let modes = (raw.check(state.config.limits.max_poses)?.options.playback, req.ease);
+    let on = (req.character.as_deref(), req.without_springs);
+    let Some((doc, field)) = route_motion(state, &req.clip_id, on, modes, in_batch_message).await? else {
+        return Ok(None);
+    };
+    let when = req.when.clone().map(|when| match when {
         ClipWhen::Times(times) => When::Times(times),
         ClipWhen::Range(range) => When::Range(range),
     });
     let motion = pb::SampleMotionBatchRequest { when, space: req.space, format: req.format, ..Default::default() };
-    sample_batch_doc(state, caller, doc, motion, coding).await.map_err(|e| at_clip_route(e, in_batch_message))
+    Ok(Some((doc, motion, field)))
+}
+
+/// `SampleBatch` of a clip route that plays a motion: `SampleMotionBatch`
+/// of it, as REST's `POST …/sample`. `None`: the clip itself.
+///
+/// # Errors
+/// As `SampleMotionBatch`; `unknown_parameter` for an `ease`.
+pub async fn sample_batch_route(
+    state: &AppState,
+    caller: &Caller,
+    req: &pb::SampleBatchRequest,
+    coding: AnswerCoding,
+) -> Result<Option<pb::PoseBatch>, ApiError> {
+    let Some((doc, motion, field)) = batch_route(state, req).await? else { return Ok(None) };
+    let batch = sample_batch_doc(state, caller, doc, motion, coding).await;
+    Ok(Some(batch.map_err(|e| at_clip_route_as(e, in_batch_route, field))?))
+}
+
+/// `SampleStream` of a clip route that plays a motion: that motion's poses
+/// in order (one spring simulation through them), priced as
+/// `SampleMotionBatch` prices them and charged. `None`: the clip itself.
+///
+/// # Errors
+/// As `SampleMotionBatch` but `use_sample_stream`; `unknown_parameter`
+/// for an `ease`.
+pub async fn stream_route(
+    state: &AppState,
+    caller: &Caller,
+    req: &pb::SampleBatchRequest,
+    coding: AnswerCoding,
+) -> Result<Option<(MotionPoses, Ticket)>, ApiError> {
+    let Some((doc, motion, field)) = batch_route(state, req).await? else { return Ok(None) };
+    let poses = stream_poses(state, caller, doc, motion, coding).await;
+    Ok(Some(poses.map_err(|e| at_clip_route_as(e, in_batch_route, field))?))
 }
 
 /// `SampleMotion` over a graph: the ticks up to the last at or before
@@ -408,16 +519,16 @@ impl GraphPacker {
 }
 
 /// Packs a motion's poses in order (root motion runs from each to the next).
-struct Packer<'a> {
-    composed: &'a Composed,
+struct Packer {
+    composed: Composed,
     space: Space,
     format: Format,
     sampler: MotionSampler,
     matrices: Vec<Mat4>,
 }
 
-impl<'a> Packer<'a> {
-    fn new(composed: &'a Composed, space: Space, format: Format) -> Packer<'a> {
+impl Packer {
+    fn new(composed: Composed, space: Space, format: Format) -> Packer {
         Packer { composed, space, format, sampler: MotionSampler::new(), matrices: Vec::new() }
     }
 

@@ -527,7 +527,7 @@ fn own_request(clip: &str) -> pb::SampleRequest {
 
 /// The refusals of a clip on a character are REST's, with the same codes at
 /// `/character`: a character that does not exist, a clip it cannot map; an
-/// `ease` is refused with it; `SampleStream` does not take it.
+/// `ease` is refused with it; `SampleStream` answers as `SampleBatch`.
 #[tokio::test]
 async fn a_refused_character_is_refused_alike_on_both_wires() {
     let app = TestApp::start().await;
@@ -573,8 +573,9 @@ async fn a_refused_character_is_refused_alike_on_both_wires() {
         character: Some("name:cesium".into()),
         ..Default::default()
     };
-    let Err(status) = grpc.sample_stream(stream).await else { panic!("SampleStream takes no character") };
-    assert_eq!(status.metadata().get("x-error-code").unwrap(), "unknown_parameter");
-    assert!(status.message().contains("(at /character)"), "{}", status.message());
+    let batch = grpc.sample_batch(stream.clone()).await.unwrap().into_inner();
+    let mut messages = grpc.sample_stream(stream).await.unwrap().into_inner();
+    let streamed = messages.message().await.unwrap().expect("one message");
+    assert_eq!(streamed, batch, "SampleStream plays the clip on the character as SampleBatch does");
     app.stop().await;
 }

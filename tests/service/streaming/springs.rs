@@ -434,3 +434,190 @@ async fn a_clip_route_s_chains_are_priced_as_the_motion_s() {
     assert_eq!((motion_status, &route["detail"]), (422, &composed["detail"]), "{composed}");
     app.stop().await;
 }
+
+/// The first `n` frames of the clip stream of `id` at 60 fps opened with
+/// `query`, and the work the open stream holds.
+async fn clip_stream(app: &TestApp, id: &str, query: &str, n: usize) -> (Vec<Value>, u64) {
+    let mut ws = app.ws(&format!("/v1/clips/{id}/stream?fps=60&{query}")).await;
+    let mut frames = Vec::new();
+    while frames.len() < n {
+        frames.push(next_json(&mut ws).await);
+    }
+    let held = app.state.work.meter().held();
+    drop(ws);
+    crate::common::eventually(std::time::Duration::from_secs(5), "the stream's price comes back", || async {
+        app.state.work.meter().held() == 0
+    })
+    .await;
+    (frames, held)
+}
+
+/// `springs=false` on a clip stream: every frame is the keyed pose the
+/// pose route answers at its clip time (`springs=false`), exactly, and the
+/// stream is priced without its substeps; with them on the tail swings.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clip_stream_without_springs_plays_the_keyed_poses() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let (off, off_held) = clip_stream(&app, &id, "springs=false", 40).await;
+    for frame in &off {
+        let t = frame["clip_time"].as_f64().unwrap();
+        let keyed = app.get_json(&format!("/v1/clips/{id}/pose?t={t}&springs=false")).await;
+        assert_eq!(frame["pose"]["joints"], keyed["joints"], "the keyed pose at {t}");
+    }
+    let (on, on_held) = clip_stream(&app, &id, "", 40).await;
+    let swung = on.iter().filter(|f| f["seq"].as_u64().unwrap() > 0 && !at_rest(&f["pose"])).count();
+    assert!(swung > 30, "with its springs the tail swings: {swung} of 40 frames");
+    // 60 fps at 120 Hz: 2 substeps a frame, each the pose (5 joints) and 3 turning joints × 10.
+    assert_eq!(on_held - off_held, 60 * 2 * (5 + 3 * 10), "the substeps are all the difference");
+    let bad = app.http.get(app.url(&format!("/v1/clips/{id}/stream?springs=no"))).send().await.unwrap();
+    assert_eq!(bad.status(), 400);
+    app.stop().await;
+}
+
+/// gRPC `StreamFrames` with `without_springs`: the keyed poses (gRPC
+/// `Sample` with `without_springs` at each frame's clip time); a motion
+/// stream refuses the switch.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn grpc_streams_without_springs_play_the_keyed_poses() {
+    use formats::wire::proto::pb;
+    let app = TestApp::start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let mut grpc = app.grpc().await;
+    let request = |without_springs| pb::StreamRequest {
+        clip_id: id.clone(),
+        fps: 60,
+        max_frames: 30,
+        without_springs,
+        ..Default::default()
+    };
+    for without_springs in [true, false] {
+        let mut frames = grpc.stream_frames(request(without_springs)).await.unwrap().into_inner();
+        let mut differ = 0;
+        while let Some(frame) = frames.message().await.unwrap() {
+            let time = f64::from(frame.clip_time);
+            let keyed = pb::SampleRequest { clip_id: id.clone(), time, without_springs: true, ..Default::default() };
+            let keyed = grpc.sample(keyed).await.unwrap().into_inner();
+            let pose = frame.pose.unwrap();
+            if without_springs {
+                assert_eq!(pose.rotations, keyed.rotations, "the keyed pose at {time}");
+                assert_eq!(pose.translations, keyed.translations, "the keyed pose at {time}");
+            } else if pose.rotations != keyed.rotations {
+                differ += 1;
+            }
+        }
+        assert!(without_springs || differ > 20, "with springs the tail turns: {differ} of 30 frames differ");
+    }
+    let motion =
+        pb::Motion { layers: vec![pb::Layer { clip_id: id.clone(), ..Default::default() }], ..Default::default() };
+    let on_motion = pb::StreamRequest { motion: Some(motion), fps: 30, without_springs: true, ..Default::default() };
+    let status = grpc.stream_frames(on_motion).await.unwrap_err();
+    assert_eq!(status.metadata().get("x-error-code").unwrap(), "unknown_parameter");
+    assert!(status.message().contains("/without_springs"), "{}", status.message());
+    app.stop().await;
+}
+
+/// The Fox's Walk as a clip carrying the example's tail chain
+/// (examples/motions/fox-tail-springs.json); its id.
+async fn fox_walk_with_tail_springs(app: &TestApp) -> String {
+    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
+    let url = app.url("/v1/clips/import?format=glb&scale=0.01");
+    let resp = app.http.post(url).header("content-type", "application/octet-stream").body(glb).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let imported: Value = resp.json().await.unwrap();
+    let walk = imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("a Walk clip");
+    let mut doc = app.get_json(&format!("/v1/clips/{}", walk["id"].as_str().unwrap())).await;
+    let example: Value = serde_json::from_str(include_str!("../../../examples/motions/fox-tail-springs.json")).unwrap();
+    doc["springs"] = example["springs"].clone();
+    doc["name"] = json!("Walk with its tail");
+    app.create_id(&doc.to_string(), None).await
+}
+
+/// gRPC `SampleStream` of a clip with chains answers the poses
+/// `SampleBatch` answers, byte for byte, over several messages (one
+/// simulation through them all); `without_springs` too, and the two differ.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn grpc_sample_stream_runs_a_clip_s_chains_as_sample_batch_does() {
+    use formats::wire::proto::pb;
+    use prost::Message as _;
+    let app = TestApp::start().await;
+    let id = fox_walk_with_tail_springs(&app).await;
+    let mut grpc = app.grpc().await;
+    let range = pb::FrameRange { start: 0.0, end: 40.0, fps: 60.0 };
+    let request = |without_springs| pb::SampleBatchRequest {
+        clip_id: id.clone(),
+        when: Some(pb::sample_batch_request::When::Range(range)),
+        without_springs,
+        ..Default::default()
+    };
+    let mut answers = Vec::new();
+    for without_springs in [false, true] {
+        let batch = grpc.sample_batch(request(without_springs)).await.unwrap().into_inner();
+        let mut messages = grpc.sample_stream(request(without_springs)).await.unwrap().into_inner();
+        let (mut streamed, mut count) = (Vec::new(), 0);
+        while let Some(message) = messages.message().await.unwrap() {
+            if count == 0 {
+                assert_eq!(message.joint_names, batch.joint_names);
+            }
+            streamed.extend(message.poses);
+            count += 1;
+        }
+        assert!(count > 1, "the answer takes several messages: {count}");
+        let bytes = |poses: &[pb::Pose]| poses.iter().map(|p| p.encode_to_vec()).collect::<Vec<_>>();
+        assert_eq!(streamed.len(), batch.poses.len());
+        assert!(bytes(&streamed) == bytes(&batch.poses), "SampleStream's poses are SampleBatch's");
+        answers.push(batch);
+    }
+    let tail = answers[0].joint_names.iter().position(|n| n == "b_Tail02_013").unwrap();
+    let rotation = |pose: &pb::Pose| pose.rotations[4 * tail..4 * tail + 4].to_vec();
+    let (on, off) = (&answers[0].poses[90], &answers[1].poses[90]);
+    assert_ne!(rotation(on), rotation(off), "the chain turns the tail at 1.5 s");
+    app.stop().await;
+}
+
+/// A crossfade on a clip stream with chains is priced with its substeps
+/// evaluating both motions, and over `max_request_work` it is refused
+/// `too_much_work` while the stream goes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crossfades_substeps_are_priced_on_both_motions() {
+    let fade = |id: &str| json!({"op": "crossfade", "to": {"layers": [{"clip": id}]}, "duration": 30});
+    let app = TestApp::start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let meter = app.state.work.meter();
+    let mut ws = app.ws(&format!("/v1/clips/{id}/stream?fps=60")).await;
+    next_json(&mut ws).await;
+    let opened = meter.held();
+    send(&mut ws, fade(&id)).await;
+    // A frame was 5 + 2 × (5 + 30); fading, each of the 2 substeps evaluates both 5-joint motions: 10 + 2 × (10 + 30).
+    let fading = opened + 60 * ((10 + 2 * (10 + 30)) - (5 + 2 * (5 + 30)));
+    crate::common::eventually(std::time::Duration::from_secs(5), "the crossfade is charged", || async {
+        meter.held() == fading
+    })
+    .await;
+    drop(ws);
+    app.stop().await;
+    // One unit under that price: the stream opens, its crossfade is refused, and it goes on.
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = fading - 1).start().await;
+    let id = app.create_id(&sprung_clip(), None).await;
+    let mut ws = app.ws(&format!("/v1/clips/{id}/stream?fps=60")).await;
+    next_json(&mut ws).await;
+    assert_eq!(app.state.work.meter().held(), opened, "the same stream, the same price");
+    send(&mut ws, fade(&id)).await;
+    let problem = loop {
+        if let Some(problem) = next_json(&mut ws).await.get("error") {
+            break problem.clone();
+        }
+    };
+    assert_eq!((problem["code"].as_str(), problem["status"].as_u64()), (Some("too_much_work"), Some(422)));
+    assert!(problem["detail"].as_str().unwrap().contains(&fading.to_string()), "{problem}");
+    let seqs: Vec<u64> = {
+        let mut seqs = Vec::new();
+        while seqs.len() < 3 {
+            seqs.push(next_json(&mut ws).await["seq"].as_u64().expect("a frame"));
+        }
+        seqs
+    };
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "the stream goes on: {seqs:?}");
+    assert_eq!(app.state.work.meter().held(), opened, "holding what it held");
+    app.stop().await;
+}

@@ -48,18 +48,18 @@ pub use body::parse_json;
 pub use broadcast::RawBroadcast;
 #[cfg(test)]
 pub use cost::Estimate;
-pub use cost::{MAX_UNARY_ANSWER_BYTES, Wire};
+pub use cost::{Cost, MAX_UNARY_ANSWER_BYTES, Wire};
 pub use graph::{GraphLayer, GraphSampling, GraphStages, GraphTicks, RawGraphSampling, graph_layer, no_graph_fields};
 pub use graph_stream::RawGraphStream;
 pub use list::{Page, RawPage};
 pub use motion::{
-    Composed, RawMotion, at_clip_route, at_clip_route_as, crossfade_target, of_clip, on_character, warnings,
+    ClipRoute, Composed, RawMotion, at_clip_route, at_clip_route_as, crossfade_target, on_character, warnings,
 };
 pub use raw::{
     Field, Format, Locate, Raw, RawModes, clip, in_batch_message, in_body, in_pose_body, in_query, joint_subset,
     parameter_subset,
 };
-pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate, no_ease_in_motion, runs_springs};
+pub use sample::{RawBatch, RawPose, STREAM_ABOVE_BYTES, Sampling, evaluate};
 pub use stream::{Opening, RawStream, compact_watch};
 
 #[cfg(test)]

@@ -247,6 +247,46 @@ pub fn on_character(clip: &str, playback: Option<anim::Playback>, character: &st
     MotionDoc { character: Some(character.to_owned()), ..of_clip(clip, playback) }
 }
 
+/// What a clip route (`GET …/pose`, `POST …/sample`, gRPC `Sample`,
+/// `SampleBatch`, `SampleStream`) asks to play.
+#[derive(Debug, Clone, Copy)]
+pub struct ClipRoute<'a> {
+    pub id: &'a str,
+    /// A character id or `name:…` to play the clip on.
+    pub character: Option<&'a str>,
+    /// The clip's own spring chains run (`false`: its keyed poses).
+    pub springs: bool,
+    pub playback: Option<anim::Playback>,
+    /// Where the request's `ease` sits, if it gave one.
+    pub ease: Option<Locate>,
+}
+
+impl ClipRoute<'_> {
+    /// The one-layer motion the route plays instead of its clip, with the
+    /// route's field its motion's refusals point at: on its `character`
+    /// (docs/characters.md), else with the clip's own spring chains when it
+    /// has some and the route did not turn them off (docs/springs.md, “Clip
+    /// routes”). `None`: the clip itself.
+    ///
+    /// # Errors
+    /// `clip_not_found` (a clip looked up for its chains); `unknown_parameter`
+    /// for an `ease` (a motion's layers have none).
+    pub async fn motion(&self, state: &AppState) -> Result<Option<(MotionDoc, Field)>, ApiError> {
+        let (motion, why, field) = match self.character {
+            Some(character) => (on_character(self.id, self.playback, character), "with `character`", Field::Character),
+            None if super::sample::runs_springs(state, self.id, self.springs).await? => {
+                let why = "to a clip's spring chains (turning them off eases its keyed pose)";
+                (of_clip(self.id, self.playback), why, Field::Springs)
+            }
+            None => return Ok(None),
+        };
+        if let Some(at) = self.ease {
+            return Err(super::sample::no_ease_in_motion(at(Field::Ease), why));
+        }
+        Ok(Some((motion, field)))
+    }
+}
+
 /// A refusal of [`on_character`]'s motion, located on the clip route that
 /// asked for it (`at`): whatever the motion path points into `/motion`
 /// (the character not found, a clip it cannot map) is the route's

@@ -64,13 +64,13 @@ pub fn evaluate(
 ///
 /// # Errors
 /// `clip_not_found`.
-pub async fn runs_springs(state: &AppState, id: &str, springs: bool) -> Result<bool, ApiError> {
+pub(super) async fn runs_springs(state: &AppState, id: &str, springs: bool) -> Result<bool, ApiError> {
     Ok(springs && !super::raw::clip(state, id).await?.springs.chains.is_empty())
 }
 
 /// `ease` on a clip route that plays a motion (a character, or the clip's
 /// spring chains): a motion's layers have no ease (its streams do).
-pub fn no_ease_in_motion(at: crate::error::At, why: &str) -> ApiError {
+pub(super) fn no_ease_in_motion(at: crate::error::At, why: &str) -> ApiError {
     let detail = format!("`ease` does not apply {why}: the one-layer motion played has no ease");
     ApiError::BadParameter { code: "unknown_parameter", at, detail }
 }

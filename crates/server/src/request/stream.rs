@@ -43,11 +43,8 @@ struct StreamCharge {
 
 impl Repricing for StreamCharge {
     fn reprice(&self, motions: &[&StreamMotion], ik: &[IkConstraint]) -> Result<(), ControlError> {
-        let layers = motions.iter().flat_map(|m| m.layers()).map(|c| price::clip_pose(c.clip()));
         let constraints = motions.first().map_or(0, |m| price::ik(ik, m.skeleton()));
-        // The springs of the motion playing (the last one) run every frame.
-        let springs = motions.last().map_or(0, |m| price::motion_frame(m, self.fps) - price::motion_pose(m));
-        let per_frame = layers.fold(constraints.saturating_add(springs), u64::saturating_add);
+        let per_frame = price::stream_frame(motions, constraints, self.fps);
         let per_sec = stream_work(per_frame, self.frame, self.fps);
         if per_sec > self.limit {
             let detail = format!(
@@ -95,6 +92,7 @@ pub async fn compact_watch(
         distance,
         max_frames: None,
         paused: false,
+        springs: true,
         joints: None,
         parameters: None,
         at,
@@ -138,6 +136,9 @@ pub struct RawStream<'a> {
     pub max_frames: Option<Raw<'a>>,
     /// Start paused (private playbacks only).
     pub paused: bool,
+    /// A clip stream's spring chains run (docs/springs.md, “Clip routes”);
+    /// `false`: its keyed poses. Motion streams play their motion's.
+    pub springs: bool,
     /// Only these joints in every frame (docs/motion.md); `None`: all.
     pub joints: Option<&'a [String]>,
     /// Only these parameters in every frame (docs/clip-format.md §3); `None`: all.
@@ -185,6 +186,7 @@ impl RawStream<'_> {
             encoding,
             max_frames: max_frames.map_or(0, |n| n as u64),
             paused: self.paused,
+            without_springs: !self.springs,
         })
     }
 
@@ -209,7 +211,9 @@ impl RawStream<'_> {
             Some(_) => (compact_frame(cached.clip.joint_count()), price::compact_frame(cached.clip.joint_count())),
             None => (Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into()), 0),
         };
-        let per_frame = encoding.saturating_add(price::clip_frame(&cached.clip, &cached.springs, request.fps));
+        let keyed = anim::spring::SpringsSpec::default();
+        let springs = if request.without_springs { &keyed } else { &cached.springs };
+        let per_frame = encoding.saturating_add(price::clip_frame(&cached.clip, springs, request.fps));
         let permit = match self.admit(per_frame, frame, request.fps, state, caller)? {
             Ok(permit) => permit,
             Err(refused) => return Ok(Err(refused)),

@@ -113,6 +113,7 @@ fn stream(fps: Option<Raw<'static>>) -> RawStream<'static> {
         distance: None,
         max_frames: None,
         paused: false,
+        springs: true,
         joints: None,
         parameters: None,
         at: in_query,

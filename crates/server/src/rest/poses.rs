@@ -26,8 +26,8 @@ use crate::cache::CachedClip;
 use crate::compression::AnswerCoding;
 use crate::error::ApiError;
 use crate::request::{
-    Field, Format, Locate, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route_as, evaluate, in_body,
-    in_query, joint_subset, no_ease_in_motion, of_clip, on_character, parameter_subset, parse_json, runs_springs,
+    ClipRoute, Field, Format, Locate, Raw, RawBatch, RawModes, RawPose, Sampling, Wire, at_clip_route_as, evaluate,
+    in_body, in_query, joint_subset, parameter_subset, parse_json,
 };
 use crate::state::AppState;
 use crate::work::Cancel;
@@ -130,11 +130,16 @@ pub async fn get_pose(
     Query(q): Query,
 ) -> Result<Response, ApiError> {
     let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
-    if let Some(character) = q.get("character") {
-        return pose_as_motion(state, caller.key(), &headers, (&id, Some(character)), &q).await;
-    }
-    if runs_springs(&state, &id, q.springs()?).await? {
-        return pose_as_motion(state, caller.key(), &headers, (&id, None), &q).await;
+    let checked = raw.check()?;
+    let route = ClipRoute {
+        id: &id,
+        character: q.get("character"),
+        springs: q.springs()?,
+        playback: checked.options.playback,
+        ease: q.get("ease").map(|_| in_query as Locate),
+    };
+    if let Some(motion) = route.motion(&state).await? {
+        return pose_as_motion(state, caller.key(), &headers, (motion, checked.t), &q).await;
     }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (req, cached) = raw.resolve(&state, &id, Wire::Json, coding).await?;
@@ -160,27 +165,6 @@ pub async fn get_pose(
     Ok(json_response(body))
 }
 
-/// The one-layer motion a clip route plays instead of its clip: on
-/// `character` (docs/characters.md), else with the clip's own spring
-/// chains (docs/springs.md); `ease` refused at `at`, the motion's
-/// refusals pointed at the route's `character` or `springs`.
-fn motion_of_route(
-    id: &str,
-    playback: Option<anim::Playback>,
-    character: Option<&str>,
-    ease: Option<Locate>,
-) -> Result<(MotionDoc, Field), ApiError> {
-    let (why, field) = match character {
-        Some(_) => ("with `character`", Field::Character),
-        None => ("to a clip's spring chains (`springs=false` eases its keyed pose)", Field::Springs),
-    };
-    if let Some(at) = ease {
-        return Err(no_ease_in_motion(at(Field::Ease), why));
-    }
-    let motion = character.map_or_else(|| of_clip(id, playback), |c| on_character(id, playback, c));
-    Ok((motion, field))
-}
-
 /// `GET …/pose` as `POST /v1/poses` of the one-layer motion of the clip
 /// (on a character, or running its spring chains), refusals at the
 /// query's names.
@@ -188,17 +172,13 @@ async fn pose_as_motion(
     state: AppState,
     caller: CallerKey,
     headers: &HeaderMap,
-    (id, character): (&str, Option<&str>),
+    ((motion, field), time): ((MotionDoc, Field), f64),
     q: &QueryParams,
 ) -> Result<Response, ApiError> {
-    let raw = RawPose { t: q.raw("t"), modes: q.modes(), format: q.raw("format"), at: in_query };
-    let checked = raw.check()?;
-    let ease = q.get("ease").map(|_| in_query as Locate);
-    let (motion, field) = motion_of_route(id, checked.options.playback, character, ease)?;
     let list = |name: &str| q.get(name).map(|text| text.split(',').map(str::to_owned).collect());
     let req = PoseOfMotion {
         motion,
-        time: checked.t,
+        time,
         space: q.get("space").map(str::to_owned),
         format: q.get("format").map(str::to_owned),
         joints: list("joints"),
@@ -216,12 +196,9 @@ async fn samples_as_motion(
     state: AppState,
     caller: CallerKey,
     headers: &HeaderMap,
-    (id, character): (&str, Option<&str>),
+    (motion, field): (MotionDoc, Field),
     req: SampleRequest,
 ) -> Result<Response, ApiError> {
-    let checked = req.raw().check(state.config.limits.max_poses)?;
-    let ease = req.ease.as_ref().map(|_| in_body as Locate);
-    let (motion, field) = motion_of_route(id, checked.options.playback, character, ease)?;
     let samples = SamplesOfMotion {
         motion,
         times: req.times,
@@ -327,11 +304,15 @@ pub async fn sample(
     JsonBody(body): JsonBody,
 ) -> Result<Response, ApiError> {
     let req: SampleRequest = parse_json(&body)?;
-    if let Some(character) = req.character.clone() {
-        return samples_as_motion(state, caller.key(), &headers, (&id, Some(&character)), req).await;
-    }
-    if runs_springs(&state, &id, req.springs != Some(false)).await? {
-        return samples_as_motion(state, caller.key(), &headers, (&id, None), req).await;
+    let route = ClipRoute {
+        id: &id,
+        character: req.character.as_deref(),
+        springs: req.springs != Some(false),
+        playback: req.raw().check(state.config.limits.max_poses)?.options.playback,
+        ease: req.ease.as_ref().map(|_| in_body as Locate),
+    };
+    if let Some(motion) = route.motion(&state).await? {
+        return samples_as_motion(state, caller.key(), &headers, motion, req).await;
     }
     let coding = AnswerCoding::of(&headers, state.config.compression.min_bytes);
     let (sampling, cached) = req.raw().resolve(&state, &id, Wire::Json, coding).await?;

@@ -82,6 +82,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         ("max_frames" = Option<u64>, Query, minimum = 1, description = "End after this many frames (close 1000)"),
         ("joints" = Option<String>, Query, description = "Comma-separated joint names: frames carry only those joints, in skeleton order"),
         ("parameters" = Option<String>, Query, description = "Comma-separated parameter names (docs/clip-format.md §3): frames carry only those parameters, in the clip's order"),
+        ("springs" = Option<bool>, Query, description = "true (default) | false. A clip with spring chains streams its one-layer motion, its chains running (docs/springs.md, “Clip routes”); false: its keyed poses, priced without spring substeps"),
         ("character" = Option<String>, Query, description = "A character id or `name:<name>`: the clip played on it, the stream `GET /v1/stream` opens for the one-layer motion `{\"layers\":[{\"clip\":id}],\"character\":…}` (its `opened` message first; docs/characters.md); refusals `character_not_found` (404), `unmappable_skeleton` (422) at `character`"),
     ),
     responses(
@@ -121,6 +122,7 @@ pub async fn stream(
         distance: q.raw("distance"),
         max_frames: q.raw("max_frames"),
         paused: false,
+        springs: q.springs()?,
         joints: joints.as_deref(),
         parameters: parameters.as_deref(),
         at: in_query,
@@ -318,6 +320,7 @@ async fn open(
         distance: msg.distance.map(Raw::Number),
         max_frames: msg.max_frames.map(Raw::Number),
         paused: msg.paused,
+        springs: true,
         joints: msg.joints.as_deref(),
         parameters: msg.parameters.as_deref(),
         at: in_body,

@@ -5,10 +5,11 @@
 //! ends alone instead of starving the others on the producers' thread.
 //!
 //! - [`Budget`]: the price of one tick in work units (`work::price`): the
-//!   motion it plays, the motion the latest crossfade left (both are
-//!   evaluated while it fades), the constraints of the latest `ik` control,
-//!   and the rest (the frame's encoding, the tick itself) as admitted. Its
-//!   price per second is held in the node's meters by [`Ticket`]s.
+//!   motion it plays and the motion the latest crossfade left (both are
+//!   evaluated while it fades, at the tick and at each spring substep),
+//!   the constraints of the latest `ik` control, and the rest (the frame's
+//!   encoding, the tick itself) as admitted. Its price per second is held
+//!   in the node's meters by [`Ticket`]s.
 //! - [`Overrun`]: the thread CPU of each tick against the price of a tick;
 //!   a broadcast whose ticks took more than [`OVERRUN_FACTOR`] times their
 //!   price (plus [`TICK_ALLOWANCE`]) over a whole second of ticks is over
@@ -19,6 +20,7 @@ use super::pinned::StreamMotion;
 use crate::error::ApiError;
 use crate::work::{Ticket, price};
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 /// How many times its price a broadcast's ticks may take, over a second.
 pub const OVERRUN_FACTOR: u64 = 4;
@@ -54,8 +56,8 @@ pub(crate) struct Budget {
     fps: u64,
     /// Units of a tick besides the motions and the `ik` control's constraints.
     base: u64,
-    motion: u64,
-    fading_from: u64,
+    motion: Arc<StreamMotion>,
+    fading_from: Option<Arc<StreamMotion>>,
     ik: u64,
     limit_per_sec: u64,
     ns_per_unit: f64,
@@ -64,13 +66,12 @@ pub(crate) struct Budget {
 
 impl Budget {
     /// The budget of a broadcast of `motion` at `fps`, admitted as `charge` says.
-    pub(crate) fn new(charge: BroadcastCharge, motion: &StreamMotion, fps: u32) -> Self {
-        let motion = price::motion_frame(motion, fps);
+    pub(crate) fn new(charge: BroadcastCharge, motion: &Arc<StreamMotion>, fps: u32) -> Self {
         Budget {
             fps: u64::from(fps),
-            base: charge.per_tick.saturating_sub(motion),
-            motion,
-            fading_from: 0,
+            base: charge.per_tick.saturating_sub(price::motion_frame(motion, fps)),
+            motion: Arc::clone(motion),
+            fading_from: None,
             ik: 0,
             limit_per_sec: charge.limit_per_sec,
             ns_per_unit: charge.ns_per_unit,
@@ -80,7 +81,8 @@ impl Budget {
 
     /// Work units of one tick now.
     pub(crate) fn per_tick(&self) -> u64 {
-        self.base.saturating_add(self.motion).saturating_add(self.fading_from).saturating_add(self.ik)
+        let decks: Vec<&StreamMotion> = self.fading_from.iter().chain([&self.motion]).map(|m| &**m).collect();
+        self.base.saturating_add(price::stream_frame(&decks, self.ik, self.fps as u32))
     }
 
     /// Nanoseconds of one core a tick may take on average over a second:
@@ -102,11 +104,16 @@ impl Budget {
     /// `too_much_work` over `max_request_work` per second; the meters'
     /// `caller_work_limit` and `overloaded`. Nothing changed then.
     pub(crate) fn reprice(&mut self, control: &Control, skeleton_of: &StreamMotion) -> Result<(), ControlError> {
-        let mut next = Budget { tickets: Vec::new(), ..*self };
+        let mut next = Budget {
+            motion: Arc::clone(&self.motion),
+            fading_from: self.fading_from.clone(),
+            tickets: Vec::new(),
+            ..*self
+        };
         match control {
             Control::Crossfade(fade) => {
-                next.fading_from = self.motion;
-                next.motion = price::motion_frame(&fade.to, self.fps as u32);
+                next.fading_from = Some(Arc::clone(&self.motion));
+                next.motion = Arc::clone(&fade.to);
             }
             Control::SetIk(constraints) => next.ik = price::ik(constraints, skeleton_of.skeleton()),
             Control::Play

@@ -12,6 +12,7 @@ use super::pinned::{PinnedClip, StreamMotion};
 use super::playhead::MAX_SPEED;
 use anim::ik::IkLimits;
 use anim::motion::{LayerSpec, MotionSpec};
+use anim::spring::SpringsSpec;
 use anim::{Clip, Ease, Motion, Playback, Space};
 
 /// The highest accepted frame rate.
@@ -34,6 +35,9 @@ pub struct StreamRequest {
     pub max_frames: u64,
     /// Start paused (private playbacks only).
     pub paused: bool,
+    /// A clip stream's keyed poses: the clip's own spring chains left out
+    /// (docs/springs.md, “Clip routes”).
+    pub without_springs: bool,
 }
 
 /// A request the engine cannot serve: the field at fault and why.
@@ -93,15 +97,17 @@ impl std::fmt::Debug for StreamParams {
 impl StreamParams {
     /// A stream of one clip: validates `req` against the stream rules
     /// (docs/api.md) and plays the clip as a one-layer motion with the
-    /// request's playback.
+    /// request's playback, and the clip's spring chains unless it asks
+    /// `without_springs` (a program of its own then: other poses).
     ///
     /// # Errors
     /// `fps` outside 1..=240, a non-finite start, a speed that is not finite
     /// or exceeds ±1000.
     pub fn new(pinned: Arc<dyn PinnedClip>, req: StreamRequest) -> Result<Self, ParamError> {
         let playback = req.playback.unwrap_or(pinned.clip().playback());
-        let identity = format!("clip {}@{} {}", pinned.id(), pinned.version(), playback.as_str());
-        let springs = pinned.springs().clone();
+        let springs = if req.without_springs { SpringsSpec::default() } else { pinned.springs().clone() };
+        let keyed = if req.without_springs && !pinned.springs().chains.is_empty() { " keyed" } else { "" };
+        let identity = format!("clip {}@{} {}{keyed}", pinned.id(), pinned.version(), playback.as_str());
         let layer = LayerSpec { playback: Some(playback), ..LayerSpec::new(pinned) };
         let motion =
             Motion::build(MotionSpec { layers: vec![layer], root_motion: None, springs, ..Default::default() })

@@ -106,9 +106,19 @@ fn substeps_per_frame(hz: f64, fps: u32) -> u64 {
 /// The work of one stream or broadcast frame of `motion` at `fps`: its
 /// pose, and the spring substeps a frame runs at most (`⌈hz / fps⌉`).
 pub fn motion_frame(motion: &StreamMotion, fps: u32) -> u64 {
-    let pose = motion_pose(motion);
-    let Some(springs) = motion.springs() else { return pose };
-    pose.saturating_add(substeps_per_frame(springs.substep_hz(), fps).saturating_mul(spring_substep(motion)))
+    stream_frame(&[motion], 0, fps)
+}
+
+/// The work of one frame at `fps` of a stream whose decks play `motions`
+/// (the one playing last), with `ik` units of the stream's own IK: every
+/// deck's pose and the IK on their mix, then the playing motion's spring
+/// substeps, each of which evaluates that whole mix again at its own time
+/// (docs/springs.md, “Time”: a crossfade's substeps see both motions).
+pub fn stream_frame(motions: &[&StreamMotion], ik: u64, fps: u32) -> u64 {
+    let mix = motions.iter().map(|m| motion_pose(m)).fold(ik, u64::saturating_add);
+    let Some(springs) = motions.last().and_then(|top| top.springs()) else { return mix };
+    let substeps = substeps_per_frame(springs.substep_hz(), fps);
+    mix.saturating_add(substeps.saturating_mul(substep(mix, springs.substep_work())))
 }
 
 /// The work of one frame of a clip stream at `fps`: the clip's pose, and

@@ -273,3 +273,26 @@ fn price_table() {
     println!("worst ratio {worst:.2}");
     assert!((0.5..=2.0).contains(&worst), "a price is off its measured time by {worst:.2}×");
 }
+
+#[test]
+fn a_crossfades_spring_substeps_evaluate_both_motions() {
+    // A: one layer of a 10-joint chain, no springs. B: two layers (20 joints)
+    // with a chain j5..j9 turning 4 joints (10 units each per substep).
+    let plain = motion(chain_clip(10, Vec::new()), 1, Vec::new());
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(chain_clip(10, Vec::new()))));
+    let springs = anim::spring::SpringsSpec {
+        chains: vec![anim::spring::ChainSpec::new("tail", &["j5", "j6", "j7", "j8", "j9"])],
+        ..Default::default()
+    };
+    let layers = vec![LayerSpec::new(Arc::clone(&pinned)), LayerSpec::new(pinned)];
+    let sprung = anim::Motion::build(MotionSpec { layers, springs, ..Default::default() }).unwrap();
+    assert_eq!(price::stream_frame(&[&plain], 0, 60), 10, "no springs: the pose");
+    // 120 Hz at 60 fps: 2 substeps of the pose (20) and the chain (40).
+    assert_eq!(price::stream_frame(&[&sprung], 0, 60), 20 + 2 * (20 + 40));
+    assert_eq!(price::motion_frame(&sprung, 60), 140, "a motion's frame is its stream's");
+    // Fading into B with 7 units of stream IK: each substep evaluates A, B and the IK (37), then the chain.
+    assert_eq!(price::stream_frame(&[&plain, &sprung], 7, 60), 37 + 2 * (37 + 40));
+    assert_eq!(price::stream_frame(&[&plain, &sprung], 0, 50), 30 + 3 * (30 + 40), "3 substeps at 50 fps");
+    // Fading into A: its springs (none) run, B's stop.
+    assert_eq!(price::stream_frame(&[&sprung, &plain], 0, 60), 30);
+}
