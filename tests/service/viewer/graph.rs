@@ -9,6 +9,12 @@
 //! from the same graph's without them at the same tick, and the stream the
 //! slider takes to a run opens with the chain.
 //!
+//! With root motion ("trail") and a two-bone handle on a foreleg picked
+//! beside the graph, the stream opens with both, its frames are the
+//! server's samples of that motion tick for tick (root motion and IK
+//! reports included), the trail grows from them, and removing the handle
+//! opens the graph's stream again without it (its IK is fixed when it opens).
+//!
 //! `INBETWEEN_GRAPH_SCREENSHOT=docs/images/viewer-graph.png` saves the page
 //! with the Fox running on the graph, its tail on springs (docs/viewer.md).
 
@@ -175,4 +181,101 @@ async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_
     let open = page.eval("window.sentOpens[1]").await;
     assert!(open["motion"].get("springs").is_none(), "{open}");
     page.wait_for("window.inbetweenViewer.state.frames > 0 && window.inbetweenViewer.state.playing", 10).await;
+}
+
+/// Keeps, from now on, every `open` message the page sends (`window.sentOpens`)
+/// and every frame its streams receive (`window.graphFrames`: seq, pose).
+async fn record_streams(page: &mut super::cdp::Page) {
+    page.eval(
+        "(() => { window.sentOpens = []; window.graphFrames = []; const send = WebSocket.prototype.send; \
+         WebSocket.prototype.send = function (m) { \
+           if (JSON.parse(m).op === 'open') { window.sentOpens.push(JSON.parse(m)); \
+             this.addEventListener('message', (e) => { const f = JSON.parse(e.data); \
+               if (f.seq !== undefined) window.graphFrames.push({ seq: f.seq, pose: f.pose }); }); } \
+           return send.call(this, m); }; return true; })()",
+    )
+    .await;
+}
+
+const FOOT: &str = "b_LeftFoot01_017";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_fox_graph_streams_with_a_root_motion_trail_and_a_foot_handle_picked_beside_it() {
+    let app = super::start().await;
+    let Some((graph, survey, mut browser)) = fox_graph_viewer(&app).await else { return };
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+    state_shows(page, "idle", 10).await;
+
+    // Only the layer controls step aside: the root row, the character picker and the IK panel stay.
+    let shown = "(id => document.getElementById(id).offsetParent !== null)";
+    let visible = page
+        .eval(&format!(
+            "['layers', 'layer-add', 'fade', 'root-mode', 'root-joint', 'character', 'ik-joint', 'ik-add'].map({shown})"
+        ))
+        .await;
+    assert_eq!(visible, json!([false, false, false, true, true, true, true, true]), "{visible}");
+
+    // The joint selects name the graph's output skeleton (its initial state's clip, Survey).
+    let skeleton = app.get_json(&format!("/v1/clips/{survey}")).await;
+    let joints: Vec<Value> =
+        skeleton["skeleton"]["joints"].as_array().unwrap().iter().map(|j| j["name"].clone()).collect();
+    let ik_options = page.eval("[...document.getElementById('ik-joint').options].map(o => o.value)").await;
+    assert_eq!(ik_options, json!(joints));
+    assert_eq!(page.eval("document.getElementById('root-joint').value").await, json!("b_Hip_01"));
+
+    set_value(page, "root-mode", "report").await;
+    set_value(page, "ik-joint", FOOT).await;
+    page.wait_for("window.inbetweenViewer.state.positions.length > 0", 10).await;
+    click(page, "ik-add").await;
+    let motion = page.eval("window.inbetweenViewer.panel.motion()").await;
+    assert_eq!(motion["layers"], json!([{"graph": graph}]), "{motion}");
+    assert_eq!(motion["root_motion"], json!({"mode": "report", "joint": "b_Hip_01"}), "{motion}");
+    assert_eq!(motion["ik"][0]["joints"], json!(["b_LeftLeg01_015", "b_LeftLeg02_016", FOOT]), "{motion}");
+
+    record_streams(page).await;
+    click(page, "play").await;
+    page.wait_for("window.graphFrames.length >= 20 && window.inbetweenViewer.panel.trail.length >= 10", 10).await;
+    let open = page.eval("window.sentOpens[0]").await;
+    assert_eq!(open["motion"], motion, "the stream opens with the root motion and the handle: {open}");
+
+    // Each frame is the server's sample of that motion at its tick: root motion and IK report included.
+    let frames = page.eval("window.graphFrames.slice(0, 20)").await;
+    let frames = frames.as_array().unwrap();
+    let last = frames.iter().map(|f| f["seq"].as_u64().unwrap()).max().unwrap();
+    let body = json!({"motion": motion, "start": 0, "end": last as f64 / 30.0, "fps": 30, "space": open["space"],
+                      "inputs": [{"time": 0, "set": {"speed": 0}}]});
+    let samples = post_json(&app, "/v1/samples", &body).await;
+    for frame in frames {
+        let (seq, pose) = (frame["seq"].as_u64().unwrap(), &frame["pose"]);
+        let sample = &samples["poses"][seq as usize];
+        let total = |p: &Value| floats(&p["root_motion"]["total"]["translation"]);
+        assert_eq!(total(pose).len(), 3, "tick {seq} carries root motion: {pose}");
+        assert_close(&total(pose), &total(sample), &format!("tick {seq}'s root motion"));
+        assert_eq!(pose["ik"].as_array().map(Vec::len), Some(1), "tick {seq}'s IK report");
+        let foot = |p: &Value| {
+            floats(&p["joints"].as_array().unwrap().iter().find(|j| j["name"] == FOOT).unwrap()["translation"])
+        };
+        assert_close(&foot(pose), &foot(sample), &format!("tick {seq}'s solved foot"));
+    }
+    // The trail grows with the frames.
+    let trail = page.eval("window.inbetweenViewer.panel.trail.length").await.as_u64().unwrap();
+    page.wait_for(&format!("window.inbetweenViewer.panel.trail.length > {trail}"), 10).await;
+
+    // A graph stream's IK is fixed when it opens: removing the handle opens it again without.
+    click(page, "ik-remove").await;
+    page.wait_for("window.sentOpens.length === 2", 10).await;
+    let reopened = page.eval("window.sentOpens[1].motion").await;
+    assert_eq!(reopened, json!({"layers": [{"graph": graph}], "root_motion": {"mode": "report", "joint": "b_Hip_01"}}));
+    page.wait_for(
+        "window.inbetweenViewer.state.playing && !window.inbetweenViewer.panel.lastFrame.pose.ik?.length",
+        10,
+    )
+    .await;
+}
+
+/// `got` within 1e-9 of `want`, component by component.
+fn assert_close(got: &[f64], want: &[f64], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: {got:?} vs {want:?}");
+    assert!(got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9), "{what}: {got:?} vs {want:?}");
 }
