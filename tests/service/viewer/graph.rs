@@ -14,13 +14,16 @@
 //! server's samples of that motion tick for tick (root motion and IK
 //! reports included), the trail grows from them, and removing the handle
 //! opens the graph's stream again without it (its IK is fixed when it opens).
+//! A graph over the CMU take played on CesiumMan: the joint selects offer
+//! CesiumMan's joints, root motion follows its hips, the stream opens with
+//! the character and its frames, CesiumMan's, are the server's samples.
 //!
 //! `INBETWEEN_GRAPH_SCREENSHOT=docs/images/viewer-graph.png` saves the page
 //! with the Fox running on the graph, its tail on springs (docs/viewer.md).
 
 use serde_json::{Value, json};
 
-use super::{click, floats, post_json, set_value, text, viewer_on_clip};
+use super::{TOKEN, click, floats, post_json, set_value, text, viewer_on_clip};
 use crate::api::graph_samples::fox_graph_as;
 
 /// Waits until the panel's state line says `want`.
@@ -44,7 +47,8 @@ async fn pick_graph(page: &mut super::cdp::Page, graph: &str) {
     let option = format!("[...document.getElementById('graph').options].some(o => o.value === {})", json!(graph));
     page.wait_for(&option, 10).await;
     set_value(page, "graph", graph).await;
-    page.wait_for("document.body.classList.contains('graphing') && document.getElementById('graph-speed')", 10).await;
+    let picked = format!("window.inbetweenViewer.state.graph?.id === {}", json!(graph));
+    page.wait_for(&format!("document.body.classList.contains('graphing') && {picked}"), 10).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -239,25 +243,14 @@ async fn the_fox_graph_streams_with_a_root_motion_trail_and_a_foot_handle_picked
     let open = page.eval("window.sentOpens[0]").await;
     assert_eq!(open["motion"], motion, "the stream opens with the root motion and the handle: {open}");
 
-    // Each frame is the server's sample of that motion at its tick: root motion and IK report included.
+    // Each frame is the server's sample of that motion at its tick: root motion, IK report and solved foot.
     let frames = page.eval("window.graphFrames.slice(0, 20)").await;
     let frames = frames.as_array().unwrap();
-    let last = frames.iter().map(|f| f["seq"].as_u64().unwrap()).max().unwrap();
-    let body = json!({"motion": motion, "start": 0, "end": last as f64 / 30.0, "fps": 30, "space": open["space"],
-                      "inputs": [{"time": 0, "set": {"speed": 0}}]});
-    let samples = post_json(&app, "/v1/samples", &body).await;
-    for frame in frames {
-        let (seq, pose) = (frame["seq"].as_u64().unwrap(), &frame["pose"]);
-        let sample = &samples["poses"][seq as usize];
-        let total = |p: &Value| floats(&p["root_motion"]["total"]["translation"]);
-        assert_eq!(total(pose).len(), 3, "tick {seq} carries root motion: {pose}");
-        assert_close(&total(pose), &total(sample), &format!("tick {seq}'s root motion"));
-        assert_eq!(pose["ik"].as_array().map(Vec::len), Some(1), "tick {seq}'s IK report");
-        let foot = |p: &Value| {
-            floats(&p["joints"].as_array().unwrap().iter().find(|j| j["name"] == FOOT).unwrap()["translation"])
-        };
-        assert_close(&foot(pose), &foot(sample), &format!("tick {seq}'s solved foot"));
-    }
+    assert!(
+        frames.iter().all(|f| f["pose"]["ik"].as_array().map(Vec::len) == Some(1)),
+        "every frame reports the handle"
+    );
+    frames_are_samples(&app, &open, frames, json!({"speed": 0}), FOOT).await;
     // The trail grows with the frames.
     let trail = page.eval("window.inbetweenViewer.panel.trail.length").await.as_u64().unwrap();
     page.wait_for(&format!("window.inbetweenViewer.panel.trail.length > {trail}"), 10).await;
@@ -278,4 +271,68 @@ async fn the_fox_graph_streams_with_a_root_motion_trail_and_a_foot_handle_picked
 fn assert_close(got: &[f64], want: &[f64], what: &str) {
     assert_eq!(got.len(), want.len(), "{what}: {got:?} vs {want:?}");
     assert!(got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9), "{what}: {got:?} vs {want:?}");
+}
+
+/// The frames' root motion totals and the named joint's translation, tick
+/// for tick, against `POST /v1/samples` of the stream's `open` motion from
+/// tick 0 with the page's held settings.
+async fn frames_are_samples(app: &crate::common::TestApp, open: &Value, frames: &[Value], held: Value, joint: &str) {
+    let last = frames.iter().map(|f| f["seq"].as_u64().unwrap()).max().unwrap();
+    let body = json!({"motion": open["motion"], "start": 0, "end": last as f64 / 30.0, "fps": 30, "space": open["space"],
+                      "inputs": [{"time": 0, "set": held}]});
+    let samples = post_json(app, "/v1/samples", &body).await;
+    let at = |p: &Value| {
+        floats(&p["joints"].as_array().unwrap().iter().find(|j| j["name"] == joint).unwrap()["translation"])
+    };
+    let total = |p: &Value| floats(&p["root_motion"]["total"]["translation"]);
+    for frame in frames {
+        let (seq, pose) = (frame["seq"].as_u64().unwrap(), &frame["pose"]);
+        let sample = &samples["poses"][seq as usize];
+        assert_eq!(total(pose).len(), 3, "tick {seq} carries root motion: {pose}");
+        assert_close(&total(pose), &total(sample), &format!("tick {seq}'s root motion"));
+        assert_close(&at(pose), &at(sample), &format!("tick {seq}'s {joint}"));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_graph_over_the_cmu_take_walks_a_trail_on_cesium_man() {
+    let app = super::start().await;
+    let cesium =
+        super::character::import(&app, "/v1/characters/import", "gltf/CesiumMan/CesiumMan.gltf", "cesium").await;
+    let take = super::character::import(&app, "/v1/clips/import", "bvh/131_01.bvh", "131_01").await;
+    let (character, take) = (cesium["id"].as_str().unwrap().to_owned(), take["id"].as_str().unwrap().to_owned());
+    let hips = cesium["roles"]["hips"]["joint"].as_str().unwrap().to_owned();
+    let doc = json!({"name": "take-walk", "parameters": {"pace": {"type": "float", "default": 0, "min": 0, "max": 1}},
+                     "nodes": {"walk": {"clip": take}}, "output": "walk"});
+    let resp = app.http.post(app.url("/v1/graphs")).bearer_auth(TOKEN).json(&doc).send().await.unwrap();
+    let created: Value = resp.json().await.unwrap();
+    let graph = created["id"].as_str().unwrap_or_else(|| panic!("{created}")).to_owned();
+    let Some(mut browser) = viewer_on_clip(&app, &take).await else { return };
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+
+    // On CesiumMan, the joint selects offer its joints, the root its hips.
+    let option =
+        format!("[...document.getElementById('character').options].some(o => o.value === {})", json!(character));
+    page.wait_for(&option, 10).await;
+    set_value(page, "character", &character).await;
+    let joints = app.get_json(&format!("/v1/characters/{character}")).await["skeleton"]["joints"].clone();
+    let names: Vec<Value> = joints.as_array().unwrap().iter().map(|j| j["name"].clone()).collect();
+    let ik_joints = "JSON.stringify([...document.getElementById('ik-joint').options].map(o => o.value))";
+    page.wait_for(&format!("{ik_joints} === {}", json!(json!(names).to_string())), 10).await;
+    assert_eq!(page.eval("[...document.getElementById('root-joint').options].map(o => o.value)").await, json!([hips]));
+
+    set_value(page, "root-mode", "report").await;
+    record_streams(page).await;
+    click(page, "play").await;
+    page.wait_for("window.graphFrames.length >= 20 && window.inbetweenViewer.panel.trail.length >= 10", 10).await;
+    let open = page.eval("window.sentOpens[0]").await;
+    let want =
+        json!({"layers": [{"graph": graph}], "root_motion": {"mode": "report", "joint": hips}, "character": character});
+    assert_eq!(open["motion"], want, "{open}");
+    let frames = page.eval("window.graphFrames.slice(0, 20)").await;
+    frames_are_samples(&app, &open, frames.as_array().unwrap(), json!({"pace": 0}), &hips).await;
+    // The take walks: the trail on the ground leaves where it started.
+    let walked = "(t => t.length > 1 && Math.hypot(t.at(-1)[0] - t[0][0], t.at(-1)[2] - t[0][2]) > 0.05)";
+    page.wait_for(&format!("{walked}(window.inbetweenViewer.panel.trail)"), 10).await;
 }

@@ -1,5 +1,6 @@
 // The graph the page plays (docs/graphs.md): picked in the graph panel, it
-// is the motion's only layer (the springs panel's chains run on its pose). Each parameter gets a control — a slider for
+// is the motion's only layer, with the page's character, root motion, IK
+// handle and spring chains (composition.js). Each parameter gets a control — a slider for
 // a float, a box for a bool, a button for a trigger — whose changes go to
 // the stream (or the watched broadcast) as live `set` controls; each frame's
 // report (the state, a transition in progress, the blend weights) is shown.

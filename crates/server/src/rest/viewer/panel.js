@@ -33,15 +33,14 @@ const TRAIL_COLOR = "#ff8c1a";
 
 /// The class of the controls only clip layers have (a graph is the motion's
 /// only layer, so panel.css hides them while one plays).
-const LAYERS_ONLY = "layers-only";
-const layersOnly = (element) => (element.classList.add(LAYERS_ONLY), element);
+const layersOnly = (element) => (element.classList.add("layers-only"), element);
 
 function build() {
   const composition = el(
     "section",
     { id: "composition" },
     el("h2", { textContent: "Composition" }),
-    el("ol", { id: "layers", ariaLabel: "Layers", className: LAYERS_ONLY }),
+    layersOnly(el("ol", { id: "layers", ariaLabel: "Layers" })),
     layersOnly(row(el("select", { id: "layer-clip", ariaLabel: "Clip to add as a layer" }), el("button", { id: "layer-add", type: "button", textContent: "Add layer" }))),
     layersOnly(row(
       el("select", { id: "fade-clip", ariaLabel: "Clip to crossfade to" }),
@@ -194,11 +193,13 @@ function clipSelected(clip) {
   renderLayers();
 }
 
-/// Another skeleton plays: its joints in the selects, and the motion shown again.
+/// Another skeleton plays: its joints in the selects and masks, and the
+/// motion shown again (`adopted`: a watched broadcast plays it already).
 function characterChanged(_, adopted) {
   resetTrail();
   fillJointSelects();
-  if (!adopted) recompose();
+  if (adopted) renderLayers();
+  else recompose();
 }
 
 /// Layers, masks, root motion and character as a broadcast plays them.
