@@ -13,7 +13,7 @@ use super::{TOKEN, differs, floats, post_json, set_value, viewer_on_clip};
 use crate::common::{TestApp, testdata};
 
 /// `file` imported at `route` (a clip or character import) under `name`; the first summary.
-async fn import(app: &TestApp, route: &str, file: &str, name: &str) -> Value {
+pub(super) async fn import(app: &TestApp, route: &str, file: &str, name: &str) -> Value {
     let url = app.url(&format!("{route}?name={name}&replace=true"));
     let resp = app.http.post(url).bearer_auth(TOKEN).body(testdata(file)).send().await.unwrap();
     assert_eq!(resp.status(), 201, "{file}");

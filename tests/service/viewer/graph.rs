@@ -9,12 +9,21 @@
 //! from the same graph's without them at the same tick, and the stream the
 //! slider takes to a run opens with the chain.
 //!
+//! With root motion ("trail") and a two-bone handle on a foreleg picked
+//! beside the graph, the stream opens with both, its frames are the
+//! server's samples of that motion tick for tick (root motion and IK
+//! reports included), the trail grows from them, and removing the handle
+//! opens the graph's stream again without it (its IK is fixed when it opens).
+//! A graph over the CMU take played on CesiumMan: the joint selects offer
+//! CesiumMan's joints, root motion follows its hips, the stream opens with
+//! the character and its frames, CesiumMan's, are the server's samples.
+//!
 //! `INBETWEEN_GRAPH_SCREENSHOT=docs/images/viewer-graph.png` saves the page
 //! with the Fox running on the graph, its tail on springs (docs/viewer.md).
 
 use serde_json::{Value, json};
 
-use super::{click, floats, post_json, set_value, text, viewer_on_clip};
+use super::{TOKEN, click, floats, post_json, set_value, text, viewer_on_clip};
 use crate::api::graph_samples::fox_graph_as;
 
 /// Waits until the panel's state line says `want`.
@@ -38,7 +47,8 @@ async fn pick_graph(page: &mut super::cdp::Page, graph: &str) {
     let option = format!("[...document.getElementById('graph').options].some(o => o.value === {})", json!(graph));
     page.wait_for(&option, 10).await;
     set_value(page, "graph", graph).await;
-    page.wait_for("document.body.classList.contains('graphing') && document.getElementById('graph-speed')", 10).await;
+    let picked = format!("window.inbetweenViewer.state.graph?.id === {}", json!(graph));
+    page.wait_for(&format!("document.body.classList.contains('graphing') && {picked}"), 10).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -175,4 +185,154 @@ async fn a_tail_chain_swings_the_fox_s_tail_on_the_graph_as_the_slider_takes_it_
     let open = page.eval("window.sentOpens[1]").await;
     assert!(open["motion"].get("springs").is_none(), "{open}");
     page.wait_for("window.inbetweenViewer.state.frames > 0 && window.inbetweenViewer.state.playing", 10).await;
+}
+
+/// Keeps, from now on, every `open` message the page sends (`window.sentOpens`)
+/// and every frame its streams receive (`window.graphFrames`: seq, pose).
+async fn record_streams(page: &mut super::cdp::Page) {
+    page.eval(
+        "(() => { window.sentOpens = []; window.graphFrames = []; const send = WebSocket.prototype.send; \
+         WebSocket.prototype.send = function (m) { \
+           if (JSON.parse(m).op === 'open') { window.sentOpens.push(JSON.parse(m)); \
+             this.addEventListener('message', (e) => { const f = JSON.parse(e.data); \
+               if (f.seq !== undefined) window.graphFrames.push({ seq: f.seq, pose: f.pose }); }); } \
+           return send.call(this, m); }; return true; })()",
+    )
+    .await;
+}
+
+const FOOT: &str = "b_LeftFoot01_017";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_fox_graph_streams_with_a_root_motion_trail_and_a_foot_handle_picked_beside_it() {
+    let app = super::start().await;
+    let Some((graph, survey, mut browser)) = fox_graph_viewer(&app).await else { return };
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+    state_shows(page, "idle", 10).await;
+
+    // Only the layer controls step aside: the root row, the character picker and the IK panel stay.
+    let shown = "(id => document.getElementById(id).offsetParent !== null)";
+    let visible = page
+        .eval(&format!(
+            "['layers', 'layer-add', 'fade', 'root-mode', 'root-joint', 'character', 'ik-joint', 'ik-add'].map({shown})"
+        ))
+        .await;
+    assert_eq!(visible, json!([false, false, false, true, true, true, true, true]), "{visible}");
+
+    // The joint selects name the graph's output skeleton (its initial state's clip, Survey).
+    let skeleton = app.get_json(&format!("/v1/clips/{survey}")).await;
+    let joints: Vec<Value> =
+        skeleton["skeleton"]["joints"].as_array().unwrap().iter().map(|j| j["name"].clone()).collect();
+    let ik_options = page.eval("[...document.getElementById('ik-joint').options].map(o => o.value)").await;
+    assert_eq!(ik_options, json!(joints));
+    assert_eq!(page.eval("document.getElementById('root-joint').value").await, json!("b_Hip_01"));
+
+    set_value(page, "root-mode", "report").await;
+    set_value(page, "ik-joint", FOOT).await;
+    page.wait_for("window.inbetweenViewer.state.positions.length > 0", 10).await;
+    click(page, "ik-add").await;
+    let motion = page.eval("window.inbetweenViewer.panel.motion()").await;
+    assert_eq!(motion["layers"], json!([{"graph": graph}]), "{motion}");
+    assert_eq!(motion["root_motion"], json!({"mode": "report", "joint": "b_Hip_01"}), "{motion}");
+    assert_eq!(motion["ik"][0]["joints"], json!(["b_LeftLeg01_015", "b_LeftLeg02_016", FOOT]), "{motion}");
+
+    record_streams(page).await;
+    click(page, "play").await;
+    page.wait_for("window.graphFrames.length >= 20 && window.inbetweenViewer.panel.trail.length >= 10", 10).await;
+    let open = page.eval("window.sentOpens[0]").await;
+    assert_eq!(open["motion"], motion, "the stream opens with the root motion and the handle: {open}");
+
+    // Each frame is the server's sample of that motion at its tick: root motion, IK report and solved foot.
+    let frames = page.eval("window.graphFrames.slice(0, 20)").await;
+    let frames = frames.as_array().unwrap();
+    assert!(
+        frames.iter().all(|f| f["pose"]["ik"].as_array().map(Vec::len) == Some(1)),
+        "every frame reports the handle"
+    );
+    frames_are_samples(&app, &open, frames, json!({"speed": 0}), FOOT).await;
+    // The trail grows with the frames.
+    let trail = page.eval("window.inbetweenViewer.panel.trail.length").await.as_u64().unwrap();
+    page.wait_for(&format!("window.inbetweenViewer.panel.trail.length > {trail}"), 10).await;
+
+    // A graph stream's IK is fixed when it opens: removing the handle opens it again without.
+    click(page, "ik-remove").await;
+    page.wait_for("window.sentOpens.length === 2", 10).await;
+    let reopened = page.eval("window.sentOpens[1].motion").await;
+    assert_eq!(reopened, json!({"layers": [{"graph": graph}], "root_motion": {"mode": "report", "joint": "b_Hip_01"}}));
+    page.wait_for(
+        "window.inbetweenViewer.state.playing && !window.inbetweenViewer.panel.lastFrame.pose.ik?.length",
+        10,
+    )
+    .await;
+}
+
+/// `got` within 1e-9 of `want`, component by component.
+fn assert_close(got: &[f64], want: &[f64], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: {got:?} vs {want:?}");
+    assert!(got.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-9), "{what}: {got:?} vs {want:?}");
+}
+
+/// The frames' root motion totals and the named joint's translation, tick
+/// for tick, against `POST /v1/samples` of the stream's `open` motion from
+/// tick 0 with the page's held settings.
+async fn frames_are_samples(app: &crate::common::TestApp, open: &Value, frames: &[Value], held: Value, joint: &str) {
+    let last = frames.iter().map(|f| f["seq"].as_u64().unwrap()).max().unwrap();
+    let body = json!({"motion": open["motion"], "start": 0, "end": last as f64 / 30.0, "fps": 30, "space": open["space"],
+                      "inputs": [{"time": 0, "set": held}]});
+    let samples = post_json(app, "/v1/samples", &body).await;
+    let at = |p: &Value| {
+        floats(&p["joints"].as_array().unwrap().iter().find(|j| j["name"] == joint).unwrap()["translation"])
+    };
+    let total = |p: &Value| floats(&p["root_motion"]["total"]["translation"]);
+    for frame in frames {
+        let (seq, pose) = (frame["seq"].as_u64().unwrap(), &frame["pose"]);
+        let sample = &samples["poses"][seq as usize];
+        assert_eq!(total(pose).len(), 3, "tick {seq} carries root motion: {pose}");
+        assert_close(&total(pose), &total(sample), &format!("tick {seq}'s root motion"));
+        assert_close(&at(pose), &at(sample), &format!("tick {seq}'s {joint}"));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_graph_over_the_cmu_take_walks_a_trail_on_cesium_man() {
+    let app = super::start().await;
+    let cesium =
+        super::character::import(&app, "/v1/characters/import", "gltf/CesiumMan/CesiumMan.gltf", "cesium").await;
+    let take = super::character::import(&app, "/v1/clips/import", "bvh/131_01.bvh", "131_01").await;
+    let (character, take) = (cesium["id"].as_str().unwrap().to_owned(), take["id"].as_str().unwrap().to_owned());
+    let hips = cesium["roles"]["hips"]["joint"].as_str().unwrap().to_owned();
+    let doc = json!({"name": "take-walk", "parameters": {"pace": {"type": "float", "default": 0, "min": 0, "max": 1}},
+                     "nodes": {"walk": {"clip": take}}, "output": "walk"});
+    let resp = app.http.post(app.url("/v1/graphs")).bearer_auth(TOKEN).json(&doc).send().await.unwrap();
+    let created: Value = resp.json().await.unwrap();
+    let graph = created["id"].as_str().unwrap_or_else(|| panic!("{created}")).to_owned();
+    let Some(mut browser) = viewer_on_clip(&app, &take).await else { return };
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+
+    // On CesiumMan, the joint selects offer its joints, the root its hips.
+    let option =
+        format!("[...document.getElementById('character').options].some(o => o.value === {})", json!(character));
+    page.wait_for(&option, 10).await;
+    set_value(page, "character", &character).await;
+    let joints = app.get_json(&format!("/v1/characters/{character}")).await["skeleton"]["joints"].clone();
+    let names: Vec<Value> = joints.as_array().unwrap().iter().map(|j| j["name"].clone()).collect();
+    let ik_joints = "JSON.stringify([...document.getElementById('ik-joint').options].map(o => o.value))";
+    page.wait_for(&format!("{ik_joints} === {}", json!(json!(names).to_string())), 10).await;
+    assert_eq!(page.eval("[...document.getElementById('root-joint').options].map(o => o.value)").await, json!([hips]));
+
+    set_value(page, "root-mode", "report").await;
+    record_streams(page).await;
+    click(page, "play").await;
+    page.wait_for("window.graphFrames.length >= 20 && window.inbetweenViewer.panel.trail.length >= 10", 10).await;
+    let open = page.eval("window.sentOpens[0]").await;
+    let want =
+        json!({"layers": [{"graph": graph}], "root_motion": {"mode": "report", "joint": hips}, "character": character});
+    assert_eq!(open["motion"], want, "{open}");
+    let frames = page.eval("window.graphFrames.slice(0, 20)").await;
+    frames_are_samples(&app, &open, frames.as_array().unwrap(), json!({"pace": 0}), &hips).await;
+    // The take walks: the trail on the ground leaves where it started.
+    let walked = "(t => t.length > 1 && Math.hypot(t.at(-1)[0] - t[0][0], t.at(-1)[2] - t[0][2]) > 0.05)";
+    page.wait_for(&format!("{walked}(window.inbetweenViewer.panel.trail)"), 10).await;
 }

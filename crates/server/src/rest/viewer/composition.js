@@ -42,16 +42,22 @@ export function layerDoc(layer, playback) {
   return doc;
 }
 
-/// The motion the page plays (docs/motion.md), IK included unless `ik` is false
-/// (a crossfade's motion carries none: a stream has one IK list).
+/// The motion the page plays (docs/motion.md), IK included unless `ik` is
+/// false (a crossfade's motion carries none: a stream has one IK list). A
+/// graph is its only layer, with the page's root motion, IK, character and
+/// springs all the same (docs/graphs.md, “What composes with a graph”).
 export function motion({ ik = true } = {}) {
-  if (state.graph) return withSprings({ layers: [{ graph: state.graph.id }] }, panel.springs);
-  const playback = options().playback;
-  const doc = { layers: panel.layers.map((l) => layerDoc(l, playback)) };
+  const doc = { layers: state.graph ? [{ graph: state.graph.id }] : clipLayers() };
   if (panel.rootMode) doc.root_motion = { mode: panel.rootMode, ...(panel.rootJoint ? { joint: panel.rootJoint } : {}) };
   if (ik && panel.ik) doc.ik = [constraint()];
   if (state.character) doc.character = state.character.id;
   return withSprings(doc, panel.springs);
+}
+
+/// The page's clip layers, at the playback the page chooses.
+function clipLayers() {
+  const playback = options().playback;
+  return panel.layers.map((l) => layerDoc(l, playback));
 }
 
 /// A motion `doc` with the page's chains as its `springs` when they are on:

@@ -1,5 +1,6 @@
 // The graph the page plays (docs/graphs.md): picked in the graph panel, it
-// is the motion's only layer (the springs panel's chains run on its pose). Each parameter gets a control — a slider for
+// is the motion's only layer, with the page's character, root motion, IK
+// handle and spring chains (composition.js). Each parameter gets a control — a slider for
 // a float, a box for a bool, a button for a trigger — whose changes go to
 // the stream (or the watched broadcast) as live `set` controls; each frame's
 // report (the state, a transition in progress, the blend weights) is shown.
@@ -53,6 +54,25 @@ export function describeWeights(doc, node, weights, names = {}) {
     .sort((a, b) => b.weight - a.weight);
 }
 
+/// The clip a graph's poses take their skeleton from (the graph's output
+/// skeleton): the initial state's node's first clip, or the output node's,
+/// through a blend's first point and a stack's first entry. `null` when the
+/// document names none.
+export function outputClip(doc) {
+  let name = doc.machine ? doc.machine.states?.[doc.machine.initial]?.node : doc.output;
+  for (let hops = 0; hops <= Object.keys(doc.nodes || {}).length; hops++) {
+    const node = doc.nodes?.[name];
+    const first = node?.clip ? node : (node?.blend1d ?? node?.blend2d)?.points?.[0] ?? node?.layers?.[0];
+    if (!first) return null;
+    if (first.clip) return first.clip;
+    name = first.node;
+  }
+  return null; // a cycle (the server refuses those)
+}
+
+/// A clip reference's id: `name:<name>` looked up in `clips`, else the id itself.
+export const clipIdOf = (ref, clips) => (ref?.startsWith("name:") ? clips.find((c) => c.name === ref.slice(5))?.id : ref) ?? null;
+
 // ---- the panel ----
 
 const report = (e) => setStatus(e.message, true);
@@ -73,13 +93,13 @@ const refresh = (quiet = false) =>
     .then(fill)
     .catch((e) => quiet || setStatus(`listing graphs: ${e.message}`, true));
 
-/// Plays graph `id` (empty: back to the layers). Its first clip becomes the
-/// page's clip, for its skeleton, mesh and framing.
+/// Plays graph `id` (empty: back to the layers). The clip of its output
+/// skeleton becomes the page's clip, for the skeleton, joints, mesh and framing.
 export async function choose(id) {
   const summary = id ? state.graphs.find((g) => g.id === id) ?? (await api(`/v1/graphs/${encodeURIComponent(id)}`)) : null;
   if (!summary) return forget();
   const doc = await api(`/v1/graphs/${encodeURIComponent(id)}`);
-  const first = summary.clips?.[0];
+  const first = clipIdOf(outputClip(doc), state.clips) ?? summary.clips?.[0];
   choosing = true;
   try {
     if (first && state.clip?.id !== first) await selectClip(first);

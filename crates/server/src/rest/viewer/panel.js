@@ -18,7 +18,7 @@ import { IDENTITY, applyTransform, composeTransforms, conj, qmul, toCamera, toSc
 import { reopen, showPoseAt } from "./player.js";
 import { requestDraw, sceneCamera } from "./scene.js";
 import { fps, options } from "./settings.js";
-import { state } from "./state.js";
+import { shownSkeleton, state } from "./state.js";
 
 const HANDLE_PX = 9; // the handle's radius on screen, CSS pixels
 const GRAB_PX = 16; // how near a press must be to grab it
@@ -31,18 +31,22 @@ const TRAIL_COLOR = "#ff8c1a";
 
 // ---- the DOM ----
 
+/// The class of the controls only clip layers have (a graph is the motion's
+/// only layer, so panel.css hides them while one plays).
+const layersOnly = (element) => (element.classList.add("layers-only"), element);
+
 function build() {
   const composition = el(
     "section",
     { id: "composition" },
     el("h2", { textContent: "Composition" }),
-    el("ol", { id: "layers", ariaLabel: "Layers" }),
-    row(el("select", { id: "layer-clip", ariaLabel: "Clip to add as a layer" }), el("button", { id: "layer-add", type: "button", textContent: "Add layer" })),
-    row(
+    layersOnly(el("ol", { id: "layers", ariaLabel: "Layers" })),
+    layersOnly(row(el("select", { id: "layer-clip", ariaLabel: "Clip to add as a layer" }), el("button", { id: "layer-add", type: "button", textContent: "Add layer" }))),
+    layersOnly(row(
       el("select", { id: "fade-clip", ariaLabel: "Clip to crossfade to" }),
       el("input", { id: "fade-duration", type: "number", min: "0", max: "60", step: "0.1", value: "0.5", ariaLabel: "Crossfade seconds" }),
       el("button", { id: "fade", type: "button", textContent: "Crossfade" }),
-    ),
+    )),
     row(
       el("label", {}, "root ", el("select", { id: "root-mode" }, new Option("off", ""), new Option("trail", "report"), new Option("trail, extract", "extract"))),
       el("select", { id: "root-joint", ariaLabel: "Root-motion joint" }),
@@ -147,15 +151,36 @@ function fillClipSelect(select) {
   if (value) select.value = value;
 }
 
-function jointNames() {
-  return (state.doc?.skeleton?.joints || []).map((j) => j.name);
+/// The joints of the skeleton the poses are on: the character's, else the
+/// clip's (a graph's clip is its output skeleton's, graph.js).
+const skeletonJoints = () => shownSkeleton()?.joints || [];
+const jointNames = () => skeletonJoints().map((j) => j.name);
+
+/// Joints a root motion can follow: those with a translation track, roots
+/// first; on a character, its hips (the only joint a retarget moves), else its roots.
+function rootCandidates() {
+  if (state.character) {
+    const hips = state.characters.find((c) => c.id === state.character.id)?.roles?.hips?.joint;
+    return hips ? [hips] : skeletonJoints().filter((j) => j.parent == null).map((j) => j.name);
+  }
+  const moving = new Set((state.doc?.tracks || []).filter((t) => t.channel === "translation").map((t) => t.joint));
+  const joints = skeletonJoints().filter((j) => moving.has(j.name));
+  return [...joints.filter((j) => j.parent == null), ...joints.filter((j) => j.parent != null)].map((j) => j.name);
 }
 
-/// Joints a root motion can follow: those with a translation track, roots first.
-function rootCandidates() {
-  const moving = new Set((state.doc?.tracks || []).filter((t) => t.channel === "translation").map((t) => t.joint));
-  const joints = (state.doc?.skeleton?.joints || []).filter((j) => moving.has(j.name));
-  return [...joints.filter((j) => j.parent == null), ...joints.filter((j) => j.parent != null)].map((j) => j.name);
+/// The root and IK joint selects, from the skeleton the poses are on; the
+/// root joint and the handle are kept where that skeleton has their joints.
+function fillJointSelects() {
+  const roots = rootCandidates(), names = jointNames();
+  $("root-joint").replaceChildren(...roots.map((j) => new Option(j, j)));
+  panel.rootJoint = roots.includes(panel.rootJoint) ? panel.rootJoint : roots[0] ?? null;
+  $("root-joint").value = panel.rootJoint ?? "";
+  $("ik-joint").replaceChildren(...names.map((j) => new Option(j, j)));
+  const chains = names.filter((j) => ancestors(j).length >= 2);
+  if (chains.length) $("ik-joint").value = chains[chains.length - 1];
+  const kept = (panel.ik?.joints ?? [panel.ik?.joint]).every((j) => names.includes(j));
+  if (!kept) panel.ik = panel.sentIk = null;
+  showIk();
 }
 
 function clipSelected(clip) {
@@ -164,14 +189,17 @@ function clipSelected(clip) {
   panel.sentIk = null;
   resetTrail();
   for (const id of ["layer-clip", "fade-clip"]) fillClipSelect($(id));
-  const roots = rootCandidates();
-  $("root-joint").replaceChildren(...roots.map((j) => new Option(j, j)));
-  panel.rootJoint = roots[0] ?? null;
-  $("ik-joint").replaceChildren(...jointNames().map((j) => new Option(j, j)));
-  const chains = jointNames().filter((j) => ancestors(j).length >= 2);
-  if (chains.length) $("ik-joint").value = chains[chains.length - 1];
-  showIk();
+  fillJointSelects();
   renderLayers();
+}
+
+/// Another skeleton plays: its joints in the selects and masks, and the
+/// motion shown again (`adopted`: a watched broadcast plays it already).
+function characterChanged(_, adopted) {
+  resetTrail();
+  fillJointSelects();
+  if (adopted) renderLayers();
+  else recompose();
 }
 
 /// Layers, masks, root motion and character as a broadcast plays them.
@@ -280,7 +308,7 @@ function onFrame(frame) {
 // ---- IK handles ----
 
 function ancestors(name) {
-  const parent = new Map((state.doc?.skeleton?.joints || []).map((j) => [j.name, j.parent]));
+  const parent = new Map(skeletonJoints().map((j) => [j.name, j.parent]));
   const out = [];
   for (let p = parent.get(name); p != null && out.length < 64; p = parent.get(p)) out.push(p);
   return out;
@@ -326,10 +354,17 @@ const sendIkNow = () => {
   send({ op: "ik", constraints: panel.ik ? [constraint()] : [] });
 };
 const sendIkThrottled = throttled(sendIkNow);
-function sendIk() {
+/// A graph stream's IK is fixed when it opens (docs/graphs.md): the stream
+/// opens again with the handle, once a drag ends (`dragging`: not yet).
+function sendIk({ dragging = false } = {}) {
+  if (state.ws && state.graph) return dragging || reopenGraph();
   if (state.ws) sendIkThrottled();
   else if (state.clip) refreshThrottled();
 }
+/// The handle's final place, whatever the throttle held back.
+const sendIkFinal = () => (state.graph ? reopenGraph() : sendIkNow());
+/// The graph's stream opens again (a watched broadcast's motion is its own).
+const reopenGraph = () => state.watching || reopen();
 
 function handleOnScreen(cam) {
   const v = toCamera(cam, panel.ik.target);
@@ -413,18 +448,18 @@ function setupDrag() {
       const t = alongAxis(cam, [x, y], drag.start, drag.axis) - drag.t0;
       panel.ik.target = drag.start.map((c, k) => c + drag.axis[k] * t);
       requestDraw();
-      return sendIk();
+      return sendIk({ dragging: true });
     }
     const sx = x + drag.grab[0], sy = y + drag.grab[1];
     const right = ((sx - cam.cx) / cam.focal) * drag.depth, up = (-(sy - cam.cy) / cam.focal) * drag.depth;
     panel.ik.target = [0, 1, 2].map((k) => cam.eye[k] + cam.f[k] * drag.depth + cam.r[k] * right + cam.u[k] * up);
     requestDraw();
-    sendIk();
+    sendIk({ dragging: true });
   });
   const end = () => {
     if (!drag) return;
     drag = null;
-    if (state.ws) setTimeout(sendIkNow, 0); // the final place, whatever the throttle held back
+    if (state.ws) setTimeout(sendIkFinal, 0);
   };
   view.addEventListener("pointerup", end);
   view.addEventListener("pointercancel", end);
@@ -502,7 +537,7 @@ function overlay(ctx, cam, dpr) {
 export function setup() {
   build();
   on("clipSelected", clipSelected);
-  on("characterChanged", (_, adopted) => adopted || recompose());
+  on("characterChanged", characterChanged);
   // A joint picked in the view is the IK joint a new handle goes on.
   on("jointSelected", (name) => name && [...$("ik-joint").options].some((o) => o.value === name) && ($("ik-joint").value = name));
   on("refused", refused);

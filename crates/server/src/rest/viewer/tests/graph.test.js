@@ -1,10 +1,12 @@
 // Unit tests of the graph panel's pure parts (../graph.js): the controls a
-// graph document gets, and its report as text: `node --test`.
+// graph document gets, its report as text, the clip of its output skeleton,
+// and the motion the page plays over it (../composition.js): `node --test`.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 
-import { heldSettings } from "../composition.js";
-import { describeState, describeWeights, parameterControls } from "../graph.js";
+import { heldSettings, motion, panel } from "../composition.js";
+import { clipIdOf, describeState, describeWeights, outputClip, parameterControls } from "../graph.js";
+import { state } from "../state.js";
 
 const doc = {
   parameters: {
@@ -45,4 +47,66 @@ test("a blend's weights by clip name, heaviest first, zeros left out", () => {
     { name: "Walk", weight: 0.25 },
   ]);
   assert.deepEqual(describeWeights(doc, "gone", [1]), [{ name: "point 0", weight: 1 }]);
+});
+
+test("the output skeleton's clip: the initial state's node's first clip, through blends and stacks", () => {
+  const nodes = {
+    idle: { clip: "name:Survey" },
+    move: { blend1d: { parameter: "speed", points: [{ clip: "id-w", at: 1 }, { clip: "id-r", at: 3 }] } },
+    aim: { layers: [{ node: "move" }, { clip: "id-a", mask: { joints: { spine: 1 } } }] },
+  };
+  const machine = (initial) => ({ nodes, machine: { initial, states: { idle: { node: "idle" }, moving: { node: "move" }, aiming: { node: "aim" } } } });
+  assert.equal(outputClip(machine("idle")), "name:Survey");
+  assert.equal(outputClip(machine("moving")), "id-w");
+  assert.equal(outputClip(machine("aiming")), "id-w");
+  assert.equal(outputClip({ nodes, output: "aim" }), "id-w");
+  assert.equal(outputClip({ nodes: { a: { layers: [{ node: "b" }] }, b: { layers: [{ node: "a" }] } }, output: "a" }), null);
+  assert.equal(outputClip({ nodes, output: "gone" }), null);
+});
+
+test("a clip reference's id: by name from the list, else the id itself", () => {
+  const clips = [{ id: "id-s", name: "Survey" }];
+  assert.equal(clipIdOf("name:Survey", clips), "id-s");
+  assert.equal(clipIdOf("name:Gone", clips), null);
+  assert.equal(clipIdOf("id-x", clips), "id-x");
+  assert.equal(clipIdOf(null, clips), null);
+});
+
+test("a graph's motion carries the page's character, root motion with its joint, IK and springs", () => {
+  const page = { graph: state.graph, character: state.character };
+  const before = { ...panel, springs: { ...panel.springs } };
+  try {
+    state.graph = { id: "g1", name: "fox", doc: {}, controls: [] };
+    Object.assign(panel, {
+      layers: [{ clip: "id-s", weight: 0.5, mask: "spine" }], // a clip's layers: not the graph's
+      rootMode: "report",
+      rootJoint: "b_Hip_01",
+      ik: { kind: "two_bone", joint: "foot", joints: ["thigh", "shin", "foot"], target: [0.1, 0, 0.3] },
+    });
+    assert.deepEqual(motion(), {
+      layers: [{ graph: "g1" }],
+      root_motion: { mode: "report", joint: "b_Hip_01" },
+      ik: [{ kind: "two_bone", joints: ["thigh", "shin", "foot"], target: [0.1, 0, 0.3] }],
+    });
+
+    state.character = { id: "c1", name: "cesium", doc: {} };
+    Object.assign(panel, { rootMode: "extract", rootJoint: null, ik: { kind: "aim", joint: "head", target: [0, 2, 1] } });
+    panel.springs = { chains: [{ name: "tail", joints: ["t1", "t2"] }], on: true, stiffness: 2, drag: 0.5, gravity: 10 };
+    assert.deepEqual(motion(), {
+      layers: [{ graph: "g1" }],
+      root_motion: { mode: "extract" },
+      ik: [{ kind: "aim", joint: "head", target: [0, 2, 1] }],
+      character: "c1",
+      springs: [{ name: "tail", joints: ["t1", "t2"], stiffness: 2, drag: 0.5, gravity: [0, -10, 0] }],
+    });
+    assert.equal(motion({ ik: false }).ik, undefined);
+
+    Object.assign(panel, { rootMode: "", ik: null });
+    panel.springs.on = false;
+    state.character = null;
+    assert.deepEqual(motion(), { layers: [{ graph: "g1" }] });
+  } finally {
+    Object.assign(state, page);
+    Object.assign(panel, before);
+  }
 });
