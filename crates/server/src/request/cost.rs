@@ -16,6 +16,7 @@ use crate::error::ApiError;
 use crate::stream::{Encoding, MAX_EVENTS_PER_FRAME};
 use crate::work::price;
 use anim::Clip;
+use prost::encoding::encoded_len_varint;
 
 /// The longest JSON text of a finite `f32` (`-1.17549435e-38`, with room).
 pub const F32_TEXT: u64 = 16;
@@ -103,13 +104,20 @@ impl Estimate {
 
 /// The most a compact stream sends in one tick (docs/compact-frames.md):
 /// a key frame a viewer missed and the delta frame after it, each a
-/// header of varints at their widest and a clip time, and per joint its
-/// changed bit, a rotation's largest index and every channel at 24 bits.
-pub fn compact_frame(joints: usize) -> u64 {
+/// header of varints at their widest and a clip time, per joint its
+/// changed bit, a rotation's largest index and every channel at 24 bits,
+/// then the most events a frame carries (as indices into the clip's
+/// `events`) and a root motion report.
+pub fn compact_frame(joints: usize, events: usize) -> u64 {
     let header = 1 + 4 * 10 + 4;
     let joint_bits = 1 + 2 + 9 * u64::from(anim::compact::MAX_BITS);
-    2 * (header + (joints as u64 * joint_bits).div_ceil(8))
+    let index = encoded_len_varint(events.saturating_sub(1) as u64) as u64;
+    let events = if events == 0 { 0 } else { VARINT + MAX_EVENTS_PER_FRAME as u64 * index };
+    2 * (header + (joints as u64 * joint_bits).div_ceil(8) + events + COMPACT_ROOT_MOTION)
 }
+
+/// A compact frame's root motion section: delta and total, four f32s each.
+const COMPACT_ROOT_MOTION: u64 = 32;
 
 /// The JSON text of one pose, names included.
 fn json_pose(clip: &Clip, clip_id: &str, format: Format) -> u64 {
