@@ -448,6 +448,12 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
             &[],
         ),
     ];
+    // The page's worked examples are these frames.
+    let page = std::fs::read_to_string(dir.join("../compact-frames.md")).unwrap();
+    for (vector, frame) in [(1, 1), (2, 2)] {
+        let hex = vectors[vector]["frames"][frame]["hex"].as_str().unwrap();
+        assert!(page.contains(hex), "docs/compact-frames.md shows {hex}");
+    }
     let bless = std::env::var_os("INBETWEEN_BLESS").is_some();
     for v in vectors {
         let path = dir.join(format!("{}.json", v["name"].as_str().unwrap()));
