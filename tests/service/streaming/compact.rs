@@ -523,7 +523,7 @@ async fn compact_frames_carry_the_protobuf_frames_root_motion() {
     let plain = whole_protobuf_frames(&mut plain, 70).await;
     let mut compared = 0;
     for (d, p) in both_played(&frames, &plain) {
-        let r = p.pose.as_ref().unwrap().root_motion.clone().expect("the protobuf frame reports root motion");
+        let r = p.pose.as_ref().unwrap().root_motion.expect("the protobuf frame reports root motion");
         let planar = |p: Option<pb::Planar>| {
             let p = p.unwrap_or_default();
             [p.x, p.y, p.z, p.yaw].map(|v| v as f32)

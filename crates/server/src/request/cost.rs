@@ -470,6 +470,48 @@ mod tests {
         }
     }
 
+    /// The compact bound holds a key frame and a delta frame of a pose at the
+    /// ends of its ranges' quantisation, each with the most events a frame
+    /// carries and a root motion report.
+    #[test]
+    fn the_compact_bound_holds_a_key_and_a_delta_frame_with_both_sections() {
+        use crate::stream::{CompactLayout, FrameData, FrameEncoder};
+        use anim::motion::{Planar, RootMotion};
+        let clip = clip(24, |j| format!("j{j}"), true);
+        let layout = CompactLayout::of_clip(&clip, anim::compact::MIN_MAX_ERROR, None, 30);
+        let mut encoder = FrameEncoder::compact(&layout.layout, 30);
+        let mut sampler = Sampler::new();
+        let last = (clip.events().len() - 1) as u32;
+        let planar = Planar { translation: glam::DVec3::splat(1e30), yaw: -1e30 };
+        let mut written = 0;
+        for (seq, t) in [(u64::MAX - 1, 0.0), (u64::MAX, 0.75)] {
+            let clip_time = clip.sample(t, &SampleOptions::default(), &mut sampler);
+            let frame = FrameData {
+                seq,
+                dropped: u64::MAX,
+                sent_at_unix_nanos: i64::MIN,
+                clip_id: ID,
+                time: t,
+                clip_time,
+                space: anim::Space::Local,
+                skeleton: clip.skeleton(),
+                pose: sampler.pose(),
+                joints: None,
+                parameters: None,
+                root_motion: Some(RootMotion { delta: planar, total: planar }),
+                ik: &[],
+                feet: &[],
+                events: clip.events(),
+                crossed: &[last; MAX_EVENTS_PER_FRAME],
+                with_names: true,
+                graph: None,
+            };
+            written += encoder.encode(&frame).bytes.len() as u64;
+        }
+        let bound = compact_frame(clip.joint_count(), clip.events().len());
+        assert!(written <= bound && bound <= 4 * written, "{written} written, bound {bound}");
+    }
+
     /// The IK reports' bound holds the widest reports really written, on
     /// both wires, and is exact for protobuf's widest.
     #[test]
