@@ -23,7 +23,8 @@ namespace Inbetween
     public sealed class CompactException : Exception
     {
         /// <summary>Stable: compact_truncated, compact_unknown_flags, compact_trailing_bytes,
-        /// compact_missing_key_frame, compact_varint_overflow, compact_version, compact_bad_layout.</summary>
+        /// compact_missing_key_frame, compact_varint_overflow, compact_unknown_event, compact_version,
+        /// compact_bad_layout.</summary>
         public readonly string Code;
 
         public CompactException(string code, string message) : base(code + ": " + message)
@@ -50,6 +51,14 @@ namespace Inbetween
         public float[] Rotations;
         /// <summary>Local scales, 3 floats per joint.</summary>
         public float[] Scales;
+        /// <summary>The events crossed since the previous frame, in order: the first EventCount entries are
+        /// indices into the layout's EventNames and EventTimes. Grown by a decode that needs more room.</summary>
+        public int[] Events = new int[8];
+        public int EventCount;
+        /// <summary>Whether the frame reports root motion (then RootMotion holds it).</summary>
+        public bool HasRootMotion;
+        /// <summary>The root motion report: delta x, y, z, yaw, then total x, y, z, yaw (docs/motion.md).</summary>
+        public readonly float[] RootMotion = new float[8];
 
         public CompactFrame(float[] translations, float[] rotations, float[] scales)
         {
@@ -111,6 +120,9 @@ namespace Inbetween
         public int KeyInterval;
         /// <summary>The joints' names in skeleton order (parents first), the order of the pose arrays.</summary>
         public string[] Names;
+        /// <summary>The events a frame's Events index: their names and clip times (empty when there are none).</summary>
+        public string[] EventNames = new string[0];
+        public float[] EventTimes = new float[0];
         internal CompactJoint[] Joints;
 
         /// <summary>Parses a layout document (the `compact` member of an `opened` message).</summary>
@@ -148,7 +160,19 @@ namespace Inbetween
                 layout.Names[j] = Reader.String(joints[j], "name", path);
                 layout.Joints[j] = ReadJoint(joints[j], path);
             }
+            if (Reader.Has(document, "events")) ReadEvents(layout, Reader.List(Reader.Member(document, "events", ""), "/events"));
             return layout;
+        }
+
+        private static void ReadEvents(CompactLayout layout, List<object> events)
+        {
+            layout.EventNames = new string[events.Count];
+            layout.EventTimes = new float[events.Count];
+            for (int i = 0; i < events.Count; i++)
+            {
+                layout.EventNames[i] = Reader.String(events[i], "name", "/events/" + i);
+                layout.EventTimes[i] = Reader.Float(events[i], "time", "/events/" + i);
+            }
         }
 
         private static CompactJoint ReadJoint(object joint, string path)
@@ -279,6 +303,9 @@ namespace Inbetween
     public sealed class CompactDecoder
     {
         private const int KeyFrameFlag = 1;
+        private const int EventsFlag = 2;
+        private const int RootMotionFlag = 4;
+        private const int KnownFlags = KeyFrameFlag | EventsFlag | RootMotionFlag;
         // Per joint in a value store: largest index, three rotation components, translation x y z, scale x y z.
         private const int Stride = 10;
 
@@ -291,6 +318,9 @@ namespace Inbetween
         private bool hasKey;
         private ulong keySeq;
         private readonly double[] small = new double[3];
+        // The frame being read's events and root motion, copied out once it is whole.
+        private int[] events = new int[8];
+        private readonly float[] rootMotion = new float[8];
 
         public CompactDecoder(CompactLayout layout)
         {
@@ -342,9 +372,9 @@ namespace Inbetween
             int end = offset + count;
             if (count == 0) throw Truncated("flags");
             int flags = bytes[offset];
-            if ((flags & ~KeyFrameFlag) != 0)
+            if ((flags & ~KnownFlags) != 0)
             {
-                throw new CompactException("compact_unknown_flags", "flags 0x" + flags.ToString("x2") + " use bits other than the key-frame bit");
+                throw new CompactException("compact_unknown_flags", "flags 0x" + flags.ToString("x2") + " use bits other than key frame, events and root motion");
             }
             bool isKey = (flags & KeyFrameFlag) != 0;
             int at = offset + 1;
@@ -371,7 +401,16 @@ namespace Inbetween
                 }
                 sent = ReadDelta(ref bits);
             }
-            int trailing = end - bits.BytesEnd;
+            at = bits.BytesEnd;
+            int eventCount = (flags & EventsFlag) != 0 ? ReadEvents(bytes, ref at, end) : 0;
+            bool hasRoot = (flags & RootMotionFlag) != 0;
+            if (hasRoot)
+            {
+                if (end - at < 32) throw Truncated("root motion");
+                for (int k = 0; k < 8; k++) rootMotion[k] = ReadFloat(bytes, at + 4 * k);
+                at += 32;
+            }
+            int trailing = end - at;
             if (trailing != 0)
             {
                 throw new CompactException("compact_trailing_bytes", trailing + " bytes follow the frame's last field");
@@ -390,7 +429,30 @@ namespace Inbetween
             frame.SentAtUnixNanos = sentAt;
             frame.ClipTime = clipTime;
             frame.JointsSent = sent;
+            if (frame.Events == null || frame.Events.Length < eventCount) frame.Events = new int[events.Length];
+            Array.Copy(events, frame.Events, eventCount);
+            frame.EventCount = eventCount;
+            frame.HasRootMotion = hasRoot;
+            if (hasRoot) Array.Copy(rootMotion, frame.RootMotion, 8);
             return frame;
+        }
+
+        // The events section: a count, then indices into the layout's events.
+        private int ReadEvents(byte[] bytes, ref int at, int end)
+        {
+            ulong count = ReadVarint(bytes, ref at, end, "events");
+            int known = Layout.EventNames.Length;
+            for (ulong n = 0; n < count; n++)
+            {
+                ulong index = ReadVarint(bytes, ref at, end, "events");
+                if (index >= (ulong)known)
+                {
+                    throw new CompactException("compact_unknown_event", "event " + index + " is not in the layout's " + known + " events");
+                }
+                if ((int)n == events.Length) Array.Resize(ref events, 2 * events.Length);
+                events[n] = (int)index;
+            }
+            return (int)count;
         }
 
         private void CheckArguments(byte[] bytes, int offset, int count, CompactFrame frame)

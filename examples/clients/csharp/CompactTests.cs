@@ -37,6 +37,7 @@ static class CompactTests
         Run("a layout of another version is refused compact_version", WrongVersion);
         Run("malformed layouts are refused compact_bad_layout at their JSON pointer", MalformedLayouts);
         Run("an opened message's layout is the vector's", OpenedMessage);
+        Run("an event past the layout's list is refused", UnknownEvent);
         Run("GltfToUnity and GltfToUnityMirrorZ are the mirrors of X and Z applied to the local transform", AxisConversionIsTheMirror);
         Console.WriteLine("{0} passed, {1} failed", passes, failures);
         return failures == 0 ? 0 : 1;
@@ -105,7 +106,7 @@ static class CompactTests
     static void ThereAreVectors()
     {
         int count = Vectors().Count;
-        Check(count >= 4, count + " vectors in " + vectorsDir);
+        Check(count >= 5, count + " vectors in " + vectorsDir);
     }
 
     static void DecodesExactly(Dictionary<string, object> vector)
@@ -120,7 +121,22 @@ static class CompactTests
             SameBits(got.Rotations, Flat(frame, "rotations"), "rotations" + at);
             SameBits(got.Translations, Flat(frame, "translations"), "translations" + at);
             SameBits(got.Scales, Flat(frame, "scales"), "scales" + at);
+            CheckTrailer(got, frame, at);
         }
+    }
+
+    // The frame's events (indices into the layout's list) and root motion, as the vector states them.
+    static void CheckTrailer(CompactFrame got, Dictionary<string, object> frame, string at)
+    {
+        object events;
+        var expected = frame.TryGetValue("events", out events) ? ((List<object>)events).Select(i => (int)(double)i).ToArray() : new int[0];
+        Check(got.Events.Take(got.EventCount).SequenceEqual(expected), "events" + at);
+        object root;
+        Equal(frame.TryGetValue("root_motion", out root), got.HasRootMotion, "has root motion" + at);
+        if (!got.HasRootMotion) return;
+        var r = (Dictionary<string, object>)root;
+        var values = ((List<object>)r["delta"]).Concat((List<object>)r["total"]).Select(x => (float)(double)x).ToArray();
+        SameBits(got.RootMotion, values, "root motion" + at);
     }
 
     static void CheckHeader(CompactFrame got, Dictionary<string, object> frame)
@@ -210,7 +226,7 @@ static class CompactTests
         var longer = new byte[key.Length + 1];
         Array.Copy(key, longer, key.Length);
         Refused("compact_trailing_bytes", () => decoder.Decode(longer, got));
-        foreach (byte flags in new byte[] { 2, 3, 0x80 })
+        foreach (byte flags in new byte[] { 8, 9, 0x80 })
         {
             var bad = (byte[])key.Clone();
             bad[0] = flags;
@@ -220,6 +236,17 @@ static class CompactTests
         var overlong = new byte[] { 1, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x01 };
         Refused("compact_varint_overflow", () => decoder.Decode(overlong, got));
         Refused("compact_truncated", () => decoder.Decode(new byte[0], got));
+    }
+
+    static void UnknownEvent()
+    {
+        var vector = Vector("stepping");
+        var decoder = DecoderOf(vector);
+        Equal("land", decoder.Layout.EventNames[2], "the layout's events");
+        var key = Hex(Frames(vector)[0]); // events [0], then root motion
+        Equal((byte)1, key[key.Length - 34], "one event");
+        key[key.Length - 33] = 3;
+        Refused("compact_unknown_event", () => decoder.Decode(key, decoder.NewFrame()));
     }
 
     static void RefusedFrameChangesNothing()

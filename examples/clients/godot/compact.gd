@@ -17,12 +17,16 @@ class_name InbetweenCompact
 extends RefCounted
 
 const KEY_FRAME := 1
+const EVENTS := 2  # an events section follows the body
+const ROOT_MOTION := 4  # a root motion section follows the body (and the events)
+const KNOWN_FLAGS := KEY_FRAME | EVENTS | ROOT_MOTION
 # Per joint in the value store: largest index, three rotation components,
 # translation x y z, scale x y z.
 const STRIDE := 10
 
 var layout: Dictionary
 var names := PackedStringArray()
+var events: Array = []  # the clip's events ({time, name}), which frames index
 var joints: Array = []
 var key := PackedInt64Array()
 var values := PackedInt64Array()
@@ -45,6 +49,7 @@ func _init(compact_layout: Dictionary) -> void:
 	layout = compact_layout
 	if int(layout.get("version", 0)) != 1:
 		push_error("inbetween: compact layout version %s" % layout.get("version"))
+	events = layout.get("events", [])
 	for joint in layout["joints"]:
 		joints.append(_compile_joint(joint))
 		names.append(joint["name"])
@@ -139,8 +144,10 @@ func _read_zigzag() -> int:
 
 ## Decodes one frame (a PackedByteArray). Returns the header and the pose:
 ## {seq, dropped, sent_at_unix_nanos, clip_time, key, key_seq, translations,
-## rotations, scales} (flat PackedFloat32Arrays, 3/4/3 per joint), or
-## {error, detail}.
+## rotations, scales} (flat PackedFloat32Arrays, 3/4/3 per joint), events
+## (crossed since the previous frame, in order: {index, time, name}, index into
+## the layout's `events`) and root_motion ({delta, total}, each [x, y, z, yaw],
+## or null); or {error, detail}.
 func decode(bytes: PackedByteArray) -> Dictionary:
 	var frame := _read_header(bytes)
 	if frame.has("error"):
@@ -158,11 +165,14 @@ func decode(bytes: PackedByteArray) -> Dictionary:
 		)
 	else:
 		_read_delta()
-	var used := _at + 4 + ceili((_bit - (_at + 4) * 8) / 8.0)
-	if _error == "" and used != bytes.size():
+	_at += 4 + ceili((_bit - (_at + 4) * 8) / 8.0)
+	var flags := bytes[0]
+	frame["events"] = _read_events() if flags & EVENTS else []
+	frame["root_motion"] = _read_root_motion() if flags & ROOT_MOTION else null
+	if _error == "" and _at != bytes.size():
 		_fail(
 			"compact_trailing_bytes",
-			"%d bytes follow the frame's last field" % (bytes.size() - used)
+			"%d bytes follow the frame's last field" % (bytes.size() - _at)
 		)
 	if _error != "":
 		return _refusal(_error, _detail)
@@ -177,6 +187,40 @@ func decode(bytes: PackedByteArray) -> Dictionary:
 	return frame
 
 
+## The events section: a count, then indices into the layout's `events`.
+func _read_events() -> Array:
+	var out := []
+	var count := _read_varint("events")
+	for n in count:
+		if _error != "":
+			break
+		var index := _read_varint("events")
+		if _error == "" and index >= events.size():
+			_fail(
+				"compact_unknown_event",
+				"event %d is not in the layout's %d events" % [index, events.size()]
+			)
+		elif _error == "":
+			out.append(
+				{"index": index, "time": events[index]["time"], "name": events[index]["name"]}
+			)
+	return out
+
+
+## The root motion section: delta then total, each x, y, z, yaw as little-endian f32s.
+func _read_root_motion() -> Variant:
+	if _error != "":
+		return null
+	if _at + 32 > _bytes.size():
+		_fail("compact_truncated", "the frame ends before its root motion")
+		return null
+	var values := []
+	for k in 8:
+		values.append(_bytes.decode_float(_at + 4 * k))
+	_at += 32
+	return {"delta": values.slice(0, 4), "total": values.slice(4)}
+
+
 static func _refusal(code: String, detail: String) -> Dictionary:
 	return {"error": code, "detail": detail}
 
@@ -189,9 +233,10 @@ func _read_header(bytes: PackedByteArray) -> Dictionary:
 	if bytes.size() == 0:
 		return _refusal("compact_truncated", "the frame ends before its flags")
 	var flags := bytes[0]
-	if (flags & ~KEY_FRAME) != 0:
+	if (flags & ~KNOWN_FLAGS) != 0:
 		return _refusal(
-			"compact_unknown_flags", "flags %d use bits other than the key-frame bit" % flags
+			"compact_unknown_flags",
+			"flags %d use bits other than key frame, events and root motion" % flags
 		)
 	var seq := _read_varint("seq")
 	var dropped := _read_varint("dropped")

@@ -3,7 +3,7 @@
 # came from, set `clip_id`, and the skeleton moves with the stream.
 #
 # - Compact frames by default (docs/compact-frames.md; compact.gd decodes them),
-#   `encoding = "json"` for JSON frames (with clip events and root motion).
+#   `encoding = "json"` for JSON frames; both carry clip events and root motion.
 # - Smooth at any frame rate: a snapshot interpolation buffer
 #   (snapshot_buffer.gd) shows the pose two ticks behind the newest frame,
 #   interpolated between frames, extrapolated at most one tick when one is late.
@@ -19,7 +19,7 @@
 # axes, as glTF does, so nothing is converted.
 extends Node3D
 
-## A clip event (a footstep, a sound cue) crossed since the previous frame (JSON frames).
+## A clip event (a footstep, a sound cue) crossed since the previous frame.
 signal event_crossed(name: String, time: float)
 
 const Compact = preload("compact.gd")
@@ -73,7 +73,7 @@ func _process(_delta: float) -> void:
 				if _socket.was_string_packet():
 					_receive_text(packet.get_string_from_utf8(), now)
 				elif _decoder != null:
-					_take(_decoder.decode(packet), now)
+					_take(_compact_frame(_decoder.decode(packet)), now)
 			_show(now)
 		WebSocketPeer.STATE_CLOSED:
 			if _socket.get_close_code() != 1000:
@@ -143,6 +143,18 @@ func _show(now: float) -> void:
 		var root: PackedFloat64Array = _pose["root"]
 		var moved := Transform3D(Basis(Vector3.UP, root[3]), Vector3(root[0], root[1], root[2]))
 		transform = _origin * moved
+
+
+## A decoded compact frame, its root motion's total as the buffer takes it; its
+## events emitted as they arrive.
+func _compact_frame(frame: Dictionary) -> Dictionary:
+	if frame.has("error"):
+		return frame
+	var root_motion = frame["root_motion"]
+	frame["root"] = root_motion["total"] if root_motion is Dictionary else null
+	for event in frame["events"]:
+		event_crossed.emit(event["name"], event["time"])
+	return frame
 
 
 ## A JSON frame as flat arrays (the decoder's shape); its events re-emitted as they arrive.

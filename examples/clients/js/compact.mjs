@@ -10,6 +10,9 @@
 // copy them to keep them.
 
 const KEY_FRAME = 1;
+const EVENTS = 2; // an events section follows the body
+const ROOT_MOTION = 4; // a root motion section follows the body (and the events)
+const KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION;
 // Per joint in the value store: largest index, three rotation components,
 // translation x y z, scale x y z.
 const STRIDE = 10;
@@ -110,6 +113,7 @@ export class CompactDecoder {
     this.joints = layout.joints.map(compileJoint);
     const n = this.joints.length;
     this.names = layout.joints.map((j) => j.name);
+    this.events = layout.events ?? []; // the clip's events, which frames index
     this.key = new Uint32Array(n * STRIDE);
     this.values = new Uint32Array(n * STRIDE);
     this.keySeq = null;
@@ -124,13 +128,16 @@ export class CompactDecoder {
   /**
    * Decodes `bytes` (a Uint8Array). Returns the header and the pose:
    * `{seq, dropped, sentAtUnixNanos (BigInt), clipTime, key, keySeq,
-   * translations, rotations, scales}` (flat Float32Arrays, 3/4/3 per joint).
+   * translations, rotations, scales}` (flat Float32Arrays, 3/4/3 per joint),
+   * `events` (the events crossed since the previous frame, in order:
+   * `{index, time, name}`, index into the layout's `events`) and
+   * `rootMotion` (`{delta, total}`, each `[x, y, z, yaw]`, or null).
    */
   decode(bytes) {
     if (bytes.length === 0) throw new CompactError("compact_truncated", "the frame ends before its flags");
     const flags = bytes[0];
-    if ((flags & ~KEY_FRAME) !== 0) {
-      throw new CompactError("compact_unknown_flags", `flags ${flags} use bits other than the key-frame bit`);
+    if ((flags & ~KNOWN_FLAGS) !== 0) {
+      throw new CompactError("compact_unknown_flags", `flags ${flags} use bits other than key frame, events and root motion`);
     }
     const key = (flags & KEY_FRAME) !== 0;
     const at = { i: 1 };
@@ -154,9 +161,11 @@ export class CompactDecoder {
       }
       this.readDelta(reader);
     }
-    const used = at.i + 4 + Math.ceil((reader.bit - (at.i + 4) * 8) / 8);
-    if (used !== bytes.length) {
-      throw new CompactError("compact_trailing_bytes", `${bytes.length - used} bytes follow the frame's last field`);
+    at.i += 4 + Math.ceil((reader.bit - (at.i + 4) * 8) / 8);
+    const events = (flags & EVENTS) !== 0 ? this.readEvents(bytes, at) : [];
+    const rootMotion = (flags & ROOT_MOTION) !== 0 ? readRootMotion(bytes, at) : null;
+    if (at.i !== bytes.length) {
+      throw new CompactError("compact_trailing_bytes", `${bytes.length - at.i} bytes follow the frame's last field`);
     }
     this.dequantise();
     return {
@@ -169,7 +178,23 @@ export class CompactDecoder {
       translations: this.translations,
       rotations: this.rotations,
       scales: this.scales,
+      events,
+      rootMotion,
     };
+  }
+
+  // The events section: a count, then indices into the layout's `events`.
+  readEvents(bytes, at) {
+    const count = readVarint(bytes, at, "events");
+    const events = [];
+    for (let n = 0; n < count; n++) {
+      const index = readVarint(bytes, at, "events");
+      if (index >= this.events.length) {
+        throw new CompactError("compact_unknown_event", `event ${index} is not in the layout's ${this.events.length} events`);
+      }
+      events.push({ index, time: this.events[index].time, name: this.events[index].name });
+    }
+    return events;
   }
 
   readKey(reader) {
@@ -232,6 +257,15 @@ export class CompactDecoder {
       }
     }
   }
+}
+
+// The root motion section: delta then total, each x, y, z, yaw as little-endian f32s.
+function readRootMotion(bytes, at) {
+  if (at.i + 32 > bytes.length) throw new CompactError("compact_truncated", "the frame ends before its root motion");
+  const view = new DataView(bytes.buffer, bytes.byteOffset + at.i, 32);
+  const values = Array.from({ length: 8 }, (_, k) => view.getFloat32(4 * k, true));
+  at.i += 32;
+  return { delta: values.slice(0, 4), total: values.slice(4) };
 }
 
 /** `"0a1b..."` → Uint8Array, for test vectors. */

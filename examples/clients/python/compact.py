@@ -15,6 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 KEY_FRAME = 1
+EVENTS = 2  # an events section follows the body
+ROOT_MOTION = 4  # a root motion section follows the body (and the events)
+KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION
 
 
 class CompactError(ValueError):
@@ -36,6 +39,11 @@ class Frame:
     translations: np.ndarray  # (joints, 3) float32
     rotations: np.ndarray  # (joints, 4) float32, [x, y, z, w]
     scales: np.ndarray  # (joints, 3) float32
+    # The events crossed since the previous frame, in order: indices into the
+    # layout's ``events`` (``CompactDecoder.events`` holds their times and names).
+    events: list
+    # ``{"delta": [x, y, z, yaw], "total": [...]}`` (f32 values), or None.
+    root_motion: dict | None
 
 
 def _value(field, u):
@@ -78,6 +86,15 @@ def _varint(data, at, what):
     raise CompactError("compact_varint_overflow", "a varint is longer than 64 bits")
 
 
+def _read_root_motion(data, at):
+    """The root motion section: delta then total, each x, y, z, yaw as little-endian f32s."""
+    if at[0] + 32 > len(data):
+        raise CompactError("compact_truncated", "the frame ends before its root motion")
+    values = list(struct.unpack_from("<8f", data, at[0]))
+    at[0] += 32
+    return {"delta": values[:4], "total": values[4:]}
+
+
 class CompactDecoder:
     """Decodes one stream's compact frames against its ``opened`` layout."""
 
@@ -87,6 +104,7 @@ class CompactDecoder:
         self.layout = layout
         self.names = [j["name"] for j in layout["joints"]]
         self.joints = [self._compile(j) for j in layout["joints"]]
+        self.events = layout.get("events", [])
         self.key = None
         self.key_seq = None
 
@@ -109,8 +127,10 @@ class CompactDecoder:
         if not data:
             raise CompactError("compact_truncated", "the frame ends before its flags")
         flags = data[0]
-        if flags & ~KEY_FRAME:
-            raise CompactError("compact_unknown_flags", f"flags {flags:#04x} use bits other than the key-frame bit")
+        if flags & ~KNOWN_FLAGS:
+            raise CompactError(
+                "compact_unknown_flags", f"flags {flags:#04x} use bits other than key frame, events and root motion"
+            )
         key = bool(flags & KEY_FRAME)
         at = [1]
         seq = _varint(data, at, "seq")
@@ -134,11 +154,25 @@ class CompactDecoder:
             values = [
                 self._read_joint(bits, j) if j["animated"] and bits.read(1) else v for j, v in zip(self.joints, self.key)
             ]
-        used = (bits.bit + 7) // 8
-        if used != len(data):
-            raise CompactError("compact_trailing_bytes", f"{len(data) - used} bytes follow the frame's last field")
+        at[0] = (bits.bit + 7) // 8
+        events = self._read_events(data, at) if flags & EVENTS else []
+        root_motion = _read_root_motion(data, at) if flags & ROOT_MOTION else None
+        if at[0] != len(data):
+            raise CompactError("compact_trailing_bytes", f"{len(data) - at[0]} bytes follow the frame's last field")
         t, r, s = self._dequantise(values)
-        return Frame(seq, dropped, sent_at, clip_time, key, key_seq, t, r, s)
+        return Frame(seq, dropped, sent_at, clip_time, key, key_seq, t, r, s, events, root_motion)
+
+    def _read_events(self, data, at):
+        """The events section: a count, then indices into the layout's ``events``."""
+        events = []
+        for _ in range(_varint(data, at, "events")):
+            index = _varint(data, at, "events")
+            if index >= len(self.events):
+                raise CompactError(
+                    "compact_unknown_event", f"event {index} is not in the layout's {len(self.events)} events"
+                )
+            events.append(index)
+        return events
 
     @staticmethod
     def _read_joint(bits, joint):

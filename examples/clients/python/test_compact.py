@@ -20,7 +20,7 @@ def load():
 class CompactVectors(unittest.TestCase):
     def test_every_frame_decodes_to_the_stored_pose_exactly(self):
         vectors = load()
-        self.assertGreaterEqual(len(vectors), 4)
+        self.assertGreaterEqual(len(vectors), 5)
         for vector in vectors:
             decoder = CompactDecoder(vector["layout"])
             for frame in vector["frames"]:
@@ -32,6 +32,11 @@ class CompactVectors(unittest.TestCase):
                     for name in ("rotations", "translations", "scales"):
                         expected = np.array(frame["pose"][name], dtype=np.float32)
                         np.testing.assert_array_equal(getattr(got, name), expected, err_msg=name)
+                    self.assertEqual(got.events, frame.get("events", []))
+                    root = frame.get("root_motion")
+                    f32 = lambda values: [float(np.float32(v)) for v in values]
+                    expected = root and {"delta": f32(root["delta"]), "total": f32(root["total"])}
+                    self.assertEqual(got.root_motion, expected)
 
     def test_a_delta_frame_without_its_key_frame_is_refused(self):
         vector = next(v for v in load() if v["name"] == "bench20")
@@ -43,6 +48,19 @@ class CompactVectors(unittest.TestCase):
         for bad, code in [(key[:-1], "compact_truncated"), (key + b"\0", "compact_trailing_bytes")]:
             with self.assertRaises(CompactError) as refused:
                 decoder.decode(bad)
+            self.assertEqual(refused.exception.code, code)
+        with self.assertRaises(CompactError) as refused:
+            CompactDecoder(vector["layout"]).decode(bytes([key[0] | 8]) + key[1:])
+        self.assertEqual(refused.exception.code, "compact_unknown_flags")
+
+    def test_an_unknown_event_and_a_short_root_motion_are_refused(self):
+        vector = next(v for v in load() if v["name"] == "stepping")
+        key = bytes.fromhex(vector["frames"][0]["hex"])  # events [0], then root motion
+        self.assertEqual(key[-34], 1, "one event")
+        unknown = key[:-33] + bytes([len(vector["layout"]["events"])]) + key[-32:]
+        for bad, code in [(unknown, "compact_unknown_event"), (key[:-1], "compact_truncated")]:
+            with self.assertRaises(CompactError) as refused:
+                CompactDecoder(vector["layout"]).decode(bad)
             self.assertEqual(refused.exception.code, code)
 
 

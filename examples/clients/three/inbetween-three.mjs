@@ -70,7 +70,7 @@ export class InbetweenPlayer {
   receive(data, now) {
     if (typeof data !== "string") {
       this.bytes += data.byteLength;
-      this.take(this.decoder.decode(new Uint8Array(data)), now);
+      this.take(compactFrame(this.decoder.decode(new Uint8Array(data))), now);
       return;
     }
     this.bytes += data.length;
@@ -100,7 +100,9 @@ export class InbetweenPlayer {
     this.missing = names.filter((_, j) => index[j] < 0);
   }
 
+  /** Keeps a frame; its events (`{time, name}`, in the order crossed) go to `onevents` as they arrive. */
   take(frame, now) {
+    if (frame.events.length > 0) this.onevents?.(frame.events, frame);
     this.frames++;
     this.buffer.push(frame, now);
   }
@@ -144,6 +146,12 @@ export class InbetweenPlayer {
   }
 }
 
+/** A decoded compact frame, its root motion's total as the buffer takes it. */
+function compactFrame(frame) {
+  const total = frame.rootMotion?.total;
+  return { ...frame, root: total ?? null };
+}
+
 /** A JSON frame as flat arrays (the decoder's shape), binding the names from the first one. */
 function jsonFrame(message, player) {
   const joints = message.pose.joints;
@@ -156,5 +164,6 @@ function jsonFrame(message, player) {
     rotations: joints.flatMap((j) => j.rotation),
     scales: joints.flatMap((j) => j.scale),
     root: total ? [...total.translation, total.yaw] : null,
+    events: message.events ?? [],
   };
 }

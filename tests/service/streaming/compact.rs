@@ -166,6 +166,10 @@ struct Decoded {
     key: bool,
     key_seq: u64,
     pose: Vec<Pose>,
+    /// Indices into the layout's `events` (docs: flags bit 1).
+    events: Vec<u64>,
+    /// Root motion delta then total, each x, y, z, yaw (docs: flags bit 2).
+    root_motion: Option<[f32; 8]>,
 }
 
 struct Decoder {
@@ -194,7 +198,7 @@ impl Decoder {
 
     fn decode(&mut self, bytes: &[u8]) -> Decoded {
         let flags = bytes[0];
-        assert_eq!(flags & !1, 0, "unknown flags");
+        assert_eq!(flags & !0b111, 0, "unknown flags");
         let key = flags & 1 == 1;
         let mut at = 1;
         let seq = varint(bytes, &mut at);
@@ -216,12 +220,24 @@ impl Decoder {
             }
             raws
         };
-        assert_eq!(bytes.len(), at + bits.at.div_ceil(8), "seq {seq}: no trailing bytes");
+        at += bits.at.div_ceil(8);
+        let mut events = Vec::new();
+        if flags & 2 != 0 {
+            let count = varint(bytes, &mut at);
+            events = (0..count).map(|_| varint(bytes, &mut at)).collect();
+        }
+        let root_motion = (flags & 4 != 0).then(|| {
+            let values: [f32; 8] =
+                std::array::from_fn(|k| f32::from_le_bytes(bytes[at + 4 * k..at + 4 * k + 4].try_into().unwrap()));
+            at += 32;
+            values
+        });
+        assert_eq!(bytes.len(), at, "seq {seq}: no trailing bytes");
         if key {
             self.keys = Some((seq, raws.clone()));
         }
         let pose = self.layout.joints.iter().zip(&raws).map(|(j, raw)| pose_of(j, raw)).collect();
-        Decoded { seq, dropped, key, key_seq, pose }
+        Decoded { seq, dropped, key, key_seq, pose, events, root_motion }
     }
 }
 
@@ -406,18 +422,121 @@ async fn more_frames(ws: &mut Ws, decoder: &mut Decoder, n: usize) -> (Vec<Decod
 }
 
 async fn protobuf_frames(ws: &mut Ws, n: usize) -> BTreeMap<u64, Vec<Pose>> {
+    let frames = whole_protobuf_frames(ws, n).await;
+    frames.into_iter().map(|(seq, f)| (seq, pose_of_pb(f.pose.as_ref().unwrap()))).collect()
+}
+
+/// The next `n` protobuf frames of `ws` (fewer if it closes), by `seq`.
+async fn whole_protobuf_frames(ws: &mut Ws, n: usize) -> BTreeMap<u64, pb::Frame> {
     let mut out = BTreeMap::new();
     while out.len() < n {
         match next_message(ws).await {
             Message::Binary(b) => {
                 let f = pb::Frame::decode(b).unwrap();
-                out.insert(f.seq, pose_of_pb(f.pose.as_ref().unwrap()));
+                out.insert(f.seq, f);
             }
             Message::Close(_) => break,
             other => panic!("expected a protobuf frame, got {other:?}"),
         }
     }
     out
+}
+
+/// The arm clip with footsteps, two of them at its loop's ends.
+fn stepping_arm_clip() -> String {
+    let mut clip: Value = serde_json::from_str(&arm_clip()).unwrap();
+    clip["name"] = json!("stepping arm");
+    clip["events"] = json!([
+        {"time": 0, "name": "start"}, {"time": 0.5, "name": "step_left"},
+        {"time": 1.25, "name": "step_right"}, {"time": 2, "name": "end"}
+    ]);
+    clip.to_string()
+}
+
+/// The ticks both streams played after playing the one before: what
+/// happened since the previous frame (events, a root delta) is the same
+/// span of the clip in both. A loaded machine may make either skip ticks.
+fn both_played<'a>(
+    compact: &'a [Decoded],
+    plain: &'a BTreeMap<u64, pb::Frame>,
+) -> impl Iterator<Item = (&'a Decoded, &'a pb::Frame)> {
+    compact.windows(2).filter(|w| w[1].seq == w[0].seq + 1).filter_map(|w| {
+        let previous = plain.contains_key(&w[0].seq);
+        plain.get(&w[1].seq).filter(|_| previous).map(|p| (&w[1], p))
+    })
+}
+
+/// Per tick both played, the compact frame's events (named through the
+/// layout's `events`) are the protobuf frame's; returns how many events
+/// were compared.
+fn same_events(doc: &Value, compact: &[Decoded], plain: &BTreeMap<u64, pb::Frame>) -> usize {
+    let named = |i: &u64| {
+        let e = &doc["events"][*i as usize];
+        (e["time"].as_f64().unwrap() as f32, e["name"].as_str().unwrap().to_owned())
+    };
+    let mut seen = 0;
+    for (d, p) in both_played(compact, plain) {
+        let expected: Vec<(f32, String)> = p.events.iter().map(|e| (e.time, e.name.clone())).collect();
+        assert_eq!(d.events.iter().map(named).collect::<Vec<_>>(), expected, "seq {}", d.seq);
+        seen += expected.len();
+    }
+    seen
+}
+
+/// A compact clip stream of a clip with events carries, frame by frame,
+/// the events its protobuf stream carries (through the loop's seam).
+#[tokio::test]
+async fn compact_frames_carry_the_protobuf_frames_events() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&stepping_arm_clip(), None).await;
+    let query = "fps=30&start=0&speed=1.3&max_frames=75";
+    let mut compact = app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=compact")).await;
+    let mut plain = app.ws(&format!("/v1/clips/{id}/stream?{query}&encoding=protobuf")).await;
+    let (doc, frames, _) = compact_frames(&mut compact, 75).await;
+    let plain = whole_protobuf_frames(&mut plain, 75).await;
+    let names: Vec<&str> = doc["events"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["start", "step_left", "step_right", "end"]);
+    // 75 frames at 1.3× cover 3.2 s of a 2 s loop: about seven events.
+    assert!(same_events(&doc, &frames, &plain) >= 4);
+    assert!(frames.iter().all(|d| d.root_motion.is_none()), "a clip stream reports no root motion");
+}
+
+/// A motion with root motion `report` streamed compact: every frame's root
+/// delta and total are the protobuf frame's doubles rounded to f32, and
+/// its events are the protobuf frame's.
+#[tokio::test]
+async fn compact_frames_carry_the_protobuf_frames_root_motion() {
+    use futures_util::SinkExt;
+    let app = TestApp::start().await;
+    let id = app.create_id(&stepping_arm_clip(), None).await;
+    let motion = json!({"layers": [{"clip": id}], "root_motion": {"joint": "root", "mode": "report"}});
+    let open = |encoding: &str| {
+        let msg =
+            json!({"op": "open", "motion": motion, "fps": 30, "start": 0, "max_frames": 70, "encoding": encoding});
+        Message::Text(msg.to_string().into())
+    };
+    let (mut compact, mut plain) = (app.ws("/v1/stream").await, app.ws("/v1/stream").await);
+    compact.send(open("compact")).await.unwrap();
+    plain.send(open("protobuf")).await.unwrap();
+    let (doc, frames, _) = compact_frames(&mut compact, 70).await;
+    let Message::Text(_) = next_message(&mut plain).await else { panic!("the protobuf stream's `opened` first") };
+    let plain = whole_protobuf_frames(&mut plain, 70).await;
+    let mut compared = 0;
+    for (d, p) in both_played(&frames, &plain) {
+        let r = p.pose.as_ref().unwrap().root_motion.expect("the protobuf frame reports root motion");
+        let planar = |p: Option<pb::Planar>| {
+            let p = p.unwrap_or_default();
+            [p.x, p.y, p.z, p.yaw].map(|v| v as f32)
+        };
+        let (delta, total) = (planar(r.delta), planar(r.total));
+        let got = d.root_motion.unwrap_or_else(|| panic!("seq {}: no root motion section", d.seq));
+        assert_eq!((got[..4].to_vec(), got[4..].to_vec()), (delta.to_vec(), total.to_vec()), "seq {}", d.seq);
+        compared += 1;
+    }
+    assert!(compared >= 40, "{compared} frames compared");
+    let last = frames.last().unwrap().root_motion.unwrap();
+    assert!(last[4] != 0.0 || last[6] != 0.0, "the root travels: {last:?}");
+    assert!(same_events(&doc, &frames, &plain) >= 4);
 }
 
 #[tokio::test]

@@ -9,8 +9,8 @@
 //! decoder each keep their buffers across frames, so steady state allocates
 //! nothing.
 
-use anim::Pose;
 use anim::compact::{Axis, JointLayout, Layout, QuantisedJoint, Rotation, SmallestThree};
+use anim::{Event, Pose};
 use glam::Quat;
 use serde::{Deserialize, Serialize};
 
@@ -18,6 +18,11 @@ use serde::{Deserialize, Serialize};
 pub const VERSION: u32 = 1;
 /// Flags bit 0: a key frame (every joint's values), else a delta frame.
 pub const KEY_FRAME: u8 = 1;
+/// Flags bit 1: an events section follows the body.
+pub const EVENTS: u8 = 2;
+/// Flags bit 2: a root motion section follows the body (and the events).
+pub const ROOT_MOTION: u8 = 4;
+const KNOWN_FLAGS: u8 = KEY_FRAME | EVENTS | ROOT_MOTION;
 
 /// The per-frame values outside the pose.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -28,7 +33,42 @@ pub struct Header {
     pub clip_time: f32,
 }
 
-/// What a decoded frame said besides its pose.
+/// A frame's root motion report (docs/motion.md): its `delta` and `total`,
+/// each `[x, y, z, yaw]` as f32s, in the order the frame sends them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RootMotionReport {
+    pub delta: [f32; 4],
+    pub total: [f32; 4],
+}
+
+/// What a frame carries after its pose, each section only when present:
+/// the events crossed, as indices into the layout's `events`, and the
+/// root motion report.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Trailer<'a> {
+    pub events: &'a [u32],
+    pub root_motion: Option<RootMotionReport>,
+}
+
+impl Trailer<'_> {
+    /// The flag bits of the sections present.
+    fn flags(&self) -> u8 {
+        let events = if self.events.is_empty() { 0 } else { EVENTS };
+        events | if self.root_motion.is_some() { ROOT_MOTION } else { 0 }
+    }
+
+    fn write(&self, out: &mut Vec<u8>) {
+        if !self.events.is_empty() {
+            put_varint(out, self.events.len() as u64);
+            self.events.iter().for_each(|&i| put_varint(out, u64::from(i)));
+        }
+        if let Some(r) = &self.root_motion {
+            r.delta.iter().chain(&r.total).for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        }
+    }
+}
+
+/// What a decoded frame said besides its pose (its events: [`CompactDecoder::events`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decoded {
     pub header: Header,
@@ -38,6 +78,7 @@ pub struct Decoded {
     pub key_seq: u64,
     /// Delta frames: how many joints it carried.
     pub joints_sent: usize,
+    pub root_motion: Option<RootMotionReport>,
 }
 
 /// Why bytes are not a compact frame of this layout.
@@ -45,7 +86,7 @@ pub struct Decoded {
 pub enum CompactError {
     #[error("the frame ends before its {0}")]
     Truncated(&'static str),
-    #[error("flags {0:#04x} use bits other than the key-frame bit")]
+    #[error("flags {0:#04x} use bits other than the key-frame, events and root motion bits")]
     UnknownFlags(u8),
     #[error("{0} bytes follow the frame's last field")]
     TrailingBytes(usize),
@@ -53,6 +94,8 @@ pub enum CompactError {
     MissingKeyFrame { wanted: u64, seen: Option<u64> },
     #[error("a varint is longer than 64 bits")]
     VarintOverflow,
+    #[error("event {index} is not in the layout's {count} events")]
+    UnknownEvent { index: u64, count: usize },
 }
 
 impl CompactError {
@@ -64,6 +107,7 @@ impl CompactError {
             CompactError::TrailingBytes(_) => "compact_trailing_bytes",
             CompactError::MissingKeyFrame { .. } => "compact_missing_key_frame",
             CompactError::VarintOverflow => "compact_varint_overflow",
+            CompactError::UnknownEvent { .. } => "compact_unknown_event",
         }
     }
 }
@@ -152,8 +196,8 @@ fn unzigzag(v: u64) -> i64 {
     (v >> 1) as i64 ^ -((v & 1) as i64)
 }
 
-fn write_header(out: &mut Vec<u8>, h: &Header, key: bool, key_seq: u64) {
-    out.push(if key { KEY_FRAME } else { 0 });
+fn write_header(out: &mut Vec<u8>, h: &Header, flags: u8, key_seq: u64) {
+    out.push(flags);
     put_varint(out, h.seq);
     put_varint(out, h.dropped);
     put_varint(out, h.seq - key_seq);
@@ -236,21 +280,28 @@ impl CompactEncoder {
 
     /// The frame for `pose` (a local pose of the layout's joints).
     pub fn encode(&mut self, header: &Header, pose: &Pose, force_key: bool) -> &[u8] {
+        self.encode_with(header, pose, force_key, &Trailer::default())
+    }
+
+    /// The frame for `pose`, with `trailer`'s sections after the body.
+    pub fn encode_with(&mut self, header: &Header, pose: &Pose, force_key: bool, trailer: &Trailer<'_>) -> &[u8] {
         self.layout.quantise(pose, &mut self.values);
         let due = self.key_seq.is_none_or(|k| header.seq < k || header.seq - k >= self.key_interval);
         self.frame.clear();
         if force_key || due {
             self.key.clone_from(&self.values);
             self.key_seq = Some(header.seq);
-            write_header(&mut self.frame, header, true, header.seq);
+            write_header(&mut self.frame, header, KEY_FRAME | trailer.flags(), header.seq);
             let mut bits = BitWriter::new(&mut self.frame);
             for (layout, v) in self.layout.joints.iter().zip(&self.values) {
                 write_joint(&mut bits, layout, v);
             }
             bits.finish();
+            trailer.write(&mut self.frame);
             self.key_frame.clone_from(&self.frame);
         } else {
-            write_header(&mut self.frame, header, false, self.key_seq.expect("a key frame was sent"));
+            let key_seq = self.key_seq.expect("a key frame was sent");
+            write_header(&mut self.frame, header, trailer.flags(), key_seq);
             let mut bits = BitWriter::new(&mut self.frame);
             for ((layout, v), key) in self.layout.joints.iter().zip(&self.values).zip(&self.key) {
                 if layout.is_animated() {
@@ -262,6 +313,7 @@ impl CompactEncoder {
                 }
             }
             bits.finish();
+            trailer.write(&mut self.frame);
         }
         &self.frame
     }
@@ -283,14 +335,30 @@ impl CompactEncoder {
 #[derive(Debug)]
 pub struct CompactDecoder {
     layout: Layout,
+    /// How many events the layout document lists: an index beyond is refused.
+    event_count: usize,
     key: Vec<QuantisedJoint>,
     key_seq: Option<u64>,
     values: Vec<QuantisedJoint>,
+    events: Vec<u32>,
 }
 
 impl CompactDecoder {
+    /// A decoder of frames of `layout` that carry no events.
     pub fn new(layout: Layout) -> Self {
-        CompactDecoder { layout, key: Vec::new(), key_seq: None, values: Vec::new() }
+        let (key, values, events) = (Vec::new(), Vec::new(), Vec::new());
+        CompactDecoder { layout, event_count: 0, key, key_seq: None, values, events }
+    }
+
+    /// A decoder of the frames the layout document `doc` describes.
+    pub fn of_document(doc: &LayoutDoc) -> Self {
+        CompactDecoder { event_count: doc.events.len(), ..CompactDecoder::new(doc.layout()) }
+    }
+
+    /// The events of the last frame decoded: indices into the layout
+    /// document's `events`, in the order they were crossed.
+    pub fn events(&self) -> &[u32] {
+        &self.events
     }
 
     /// Decodes `bytes` into `pose`.
@@ -300,7 +368,7 @@ impl CompactDecoder {
     /// frame was not seen.
     pub fn decode(&mut self, bytes: &[u8], pose: &mut Pose) -> Result<Decoded, CompactError> {
         let flags = *bytes.first().ok_or(CompactError::Truncated("flags"))?;
-        if flags & !KEY_FRAME != 0 {
+        if flags & !KNOWN_FLAGS != 0 {
             return Err(CompactError::UnknownFlags(flags));
         }
         let key = flags & KEY_FRAME != 0;
@@ -313,13 +381,32 @@ impl CompactDecoder {
         let clip_time = f32::from_le_bytes(clip_time.try_into().expect("four bytes"));
         let mut bits = BitReader { bytes: &bytes[at + 4..], bit: 0 };
         let joints_sent = if key { self.read_key(&mut bits, seq)? } else { self.read_delta(&mut bits, key_seq)? };
-        let trailing = bytes.len() - (at + 4) - bits.bytes_used();
-        if trailing > 0 {
-            return Err(CompactError::TrailingBytes(trailing));
+        at += 4 + bits.bytes_used();
+        self.read_events(bytes, &mut at, flags & EVENTS != 0)?;
+        let root_motion = if flags & ROOT_MOTION != 0 { Some(read_root_motion(bytes, &mut at)?) } else { None };
+        if at < bytes.len() {
+            return Err(CompactError::TrailingBytes(bytes.len() - at));
         }
         self.layout.dequantise(&self.values, pose);
         let header = Header { seq, dropped, sent_at_unix_nanos, clip_time };
-        Ok(Decoded { header, key, key_seq, joints_sent })
+        Ok(Decoded { header, key, key_seq, joints_sent, root_motion })
+    }
+
+    /// The events section, when the flags announce it.
+    fn read_events(&mut self, bytes: &[u8], at: &mut usize, present: bool) -> Result<(), CompactError> {
+        self.events.clear();
+        if !present {
+            return Ok(());
+        }
+        let count = take_varint(bytes, at, "events")?;
+        for _ in 0..count {
+            let index = take_varint(bytes, at, "events")?;
+            match u32::try_from(index) {
+                Ok(i) if (i as usize) < self.event_count => self.events.push(i),
+                _ => return Err(CompactError::UnknownEvent { index, count: self.event_count }),
+            }
+        }
+        Ok(())
     }
 
     fn read_key(&mut self, bits: &mut BitReader<'_>, seq: u64) -> Result<usize, CompactError> {
@@ -348,6 +435,14 @@ impl CompactDecoder {
     }
 }
 
+/// The root motion section: eight little-endian f32s.
+fn read_root_motion(bytes: &[u8], at: &mut usize) -> Result<RootMotionReport, CompactError> {
+    let section = bytes.get(*at..*at + 32).ok_or(CompactError::Truncated("root motion"))?;
+    *at += 32;
+    let value = |k: usize| f32::from_le_bytes(section[4 * k..4 * k + 4].try_into().expect("four bytes"));
+    Ok(RootMotionReport { delta: std::array::from_fn(value), total: std::array::from_fn(|k| value(k + 4)) })
+}
+
 /// The layout as the `opened` message states it (docs/compact-frames.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -360,6 +455,18 @@ pub struct LayoutDoc {
     /// Key frames come at least this many frames apart at most.
     pub key_interval: u64,
     pub joints: Vec<JointDoc>,
+    /// The events a frame's events section indexes (the stream's clip's),
+    /// sent once here; absent when there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<EventDoc>,
+}
+
+/// An event of the layout's list: its clip time and name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EventDoc {
+    pub time: f32,
+    pub name: String,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -400,8 +507,9 @@ pub struct AxesDoc {
 }
 
 impl LayoutDoc {
-    /// The document of `layout` for joints called `names`.
-    pub fn new(layout: &Layout, names: &[String], key_interval: u64) -> LayoutDoc {
+    /// The document of `layout` for joints called `names`, whose frames'
+    /// events index `events`.
+    pub fn new(layout: &Layout, names: &[String], key_interval: u64, events: &[Event]) -> LayoutDoc {
         let axes = |a: &[Axis; 3]| AxesDoc { bits: a.map(|x| x.bits), min: a.map(|x| x.min), max: a.map(|x| x.max) };
         let joints = layout
             .joints
@@ -429,6 +537,7 @@ impl LayoutDoc {
             bound: layout.bound,
             key_interval,
             joints,
+            events: events.iter().map(|e| EventDoc { time: e.time, name: e.name.clone() }).collect(),
         }
     }
 

@@ -8,11 +8,13 @@
 
 use anim::compact::{DEFAULT_MAX_ERROR, Layout, Ranges, default_distance};
 use anim::{
-    Channel, Clip, ClipSpec, Cursor, Ease, Interpolation, JointSpec, Keys, Playback, Pose, Skeleton, SkeletonSpec,
-    TrackSpec, Transform,
+    Channel, Clip, ClipSpec, Cursor, Ease, EventSpec, Interpolation, JointSpec, Keys, Playback, Pose, Skeleton,
+    SkeletonSpec, TrackSpec, Transform,
 };
 use formats::import::ImportOptions;
-use formats::wire::compact::{CompactDecoder, CompactEncoder, CompactError, Header, LayoutDoc};
+use formats::wire::compact::{
+    CompactDecoder, CompactEncoder, CompactError, Header, LayoutDoc, RootMotionReport, Trailer,
+};
 use formats::wire::proto::pb;
 use glam::{DQuat, DVec3, Vec3, Vec4};
 use prost::Message;
@@ -193,7 +195,8 @@ fn a_viewer_that_missed_the_key_frame_is_refused_until_it_gets_it() {
         Layout::choose(skeleton, &Ranges::of_clip(&clip, 240.0), DEFAULT_MAX_ERROR, default_distance(skeleton));
     // The layout travels as JSON in `opened`: the decoder works from that.
     let doc: LayoutDoc =
-        serde_json::from_str(&serde_json::to_string(&LayoutDoc::new(&layout, skeleton.names(), 30)).unwrap()).unwrap();
+        serde_json::from_str(&serde_json::to_string(&LayoutDoc::new(&layout, skeleton.names(), 30, &[])).unwrap())
+            .unwrap();
     assert_eq!(doc.layout(), layout);
     let mut encoder = CompactEncoder::new(layout.clone(), 30);
     let (mut cursor, mut pose, mut decoded) = (Cursor::default(), Pose::default(), Pose::default());
@@ -222,6 +225,39 @@ fn a_viewer_that_missed_the_key_frame_is_refused_until_it_gets_it() {
     let mut long = frames[5].0.clone();
     long.push(0);
     assert_eq!(late.decode(&long, &mut decoded), Err(CompactError::TrailingBytes(1)));
+}
+
+#[test]
+fn events_and_root_motion_follow_the_body_and_are_checked() {
+    let clip = stepping_half_turn();
+    let layout = Layout::choose(clip.skeleton(), &Ranges::of_clip(&clip, 240.0), DEFAULT_MAX_ERROR, 0.1);
+    let doc = LayoutDoc::new(&layout, clip.skeleton().names(), 30, clip.events());
+    let mut encoder = CompactEncoder::new(layout.clone(), 30);
+    let (header, pose) = (Header { seq: 3, ..Header::default() }, clip.skeleton().rest().clone());
+    let plain = encoder.encode(&header, &pose, true).to_vec();
+    let trailer = Trailer { events: &[2, 0], root_motion: Some(STEPS[2]) };
+    let full = encoder.encode_with(&header, &pose, true, &trailer).to_vec();
+    // Flags gain bits 1 and 2; the body is the same; then count, indices, 8 f32s.
+    assert_eq!(full[0], 0b111);
+    assert_eq!(full[1..plain.len()], plain[1..]);
+    let mut tail = vec![2, 2, 0];
+    STEPS[2].delta.iter().chain(&STEPS[2].total).for_each(|v| tail.extend(v.to_le_bytes()));
+    assert_eq!(full[plain.len()..], tail);
+    let (mut decoder, mut out) = (CompactDecoder::of_document(&doc), Pose::default());
+    assert_eq!(decoder.decode(&full, &mut out).unwrap().root_motion, Some(STEPS[2]));
+    assert_eq!(decoder.events(), [2, 0]);
+    assert_eq!(decoder.decode(&plain, &mut out).unwrap().root_motion, None);
+    assert!(decoder.events().is_empty());
+    // An index past the layout's three events, a section cut short, an unknown flag.
+    let mut unknown = full.clone();
+    unknown[plain.len() + 1] = 3;
+    assert_eq!(decoder.decode(&unknown, &mut out), Err(CompactError::UnknownEvent { index: 3, count: 3 }));
+    assert_eq!(decoder.decode(&full[..full.len() - 1], &mut out), Err(CompactError::Truncated("root motion")));
+    let mut flagged = plain.clone();
+    flagged[0] |= 8;
+    assert_eq!(decoder.decode(&flagged, &mut out), Err(CompactError::UnknownFlags(9)));
+    // A decoder without the document knows no events.
+    assert!(matches!(CompactDecoder::new(layout).decode(&full, &mut out), Err(CompactError::UnknownEvent { .. })));
 }
 
 /// A clip of `joints` joints in a chain, each turning about all three axes
@@ -265,26 +301,57 @@ fn turning_chain(name: &str, joints: usize, bone: f32, scaled: bool) -> Clip {
 /// A joint that turns half a revolution about x: the largest component
 /// changes from w to x, so its index is sent in every frame.
 fn half_turn() -> Clip {
+    build(&half_turn_spec())
+}
+
+fn half_turn_spec() -> ClipSpec {
     let joints =
         vec![JointSpec { name: "spinner".into(), parent: None, rest: Transform::IDENTITY, inverse_bind: None }];
     let values = (0..5).map(|k| Vec4::from(glam::Quat::from_rotation_x(k as f32 * 0.75))).collect();
     let times = (0..5).map(|k| k as f32 * 0.25).collect();
     let track = TrackSpec::new("spinner", Channel::Rotation, Interpolation::Linear, times, Keys::Vec4(values));
-    build(&ClipSpec {
+    ClipSpec {
         name: "half-turn".into(),
         skeleton: Some(SkeletonSpec { joints }),
         tracks: vec![track],
         ..Default::default()
-    })
+    }
 }
 
+/// The half turn with three footsteps, for the vector whose frames carry
+/// events and root motion.
+fn stepping_half_turn() -> Clip {
+    let mut spec = half_turn_spec();
+    spec.name = "stepping".into();
+    spec.events = [(0.0, "step_left"), (0.5, "step_right"), (0.875, "land")]
+        .map(|(time, name)| EventSpec { time, name: name.into() })
+        .to_vec();
+    build(&spec)
+}
+
+/// Root motion reports of the stepping vector: a step forward turning a
+/// little each frame, with a total in f32 that no short decimal states.
+const STEPS: [RootMotionReport; 3] = [
+    RootMotionReport { delta: [0.0, 0.0, 0.0, 0.0], total: [0.0, 0.0, 0.0, 0.0] },
+    RootMotionReport { delta: [0.05, 0.0, -0.125, 0.1], total: [0.05, 0.0, -0.125, 0.1] },
+    RootMotionReport { delta: [0.0625, -0.001, -0.1, 0.2], total: [0.1125, -0.001, -0.225, 0.3] },
+];
+
 /// One test vector of docs/compact-frames/: the layout, then frames in
-/// order (one decoder for all of them) with the pose each decodes to.
-fn vector(name: &str, description: &str, clip: &Clip, times: &[f32], key_interval: u64) -> serde_json::Value {
+/// order (one decoder for all of them) with the pose each decodes to, and
+/// the events and root motion of frames that carry them (`trailers`, per
+/// frame; empty: none).
+fn vector(
+    (name, description): (&str, &str),
+    clip: &Clip,
+    times: &[f32],
+    key_interval: u64,
+    trailers: &[Trailer<'_>],
+) -> serde_json::Value {
     let skeleton = clip.skeleton();
     let layout = Layout::choose(skeleton, &Ranges::of_clip(clip, 240.0), DEFAULT_MAX_ERROR, default_distance(skeleton));
     assert!(layout.bound <= DEFAULT_MAX_ERROR, "{name}: bound {}", layout.bound);
-    let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval);
+    let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, clip.events());
     let mut encoder = CompactEncoder::new(layout, key_interval);
     let (mut cursor, mut pose, mut quantised) = (Cursor::default(), Pose::default(), Pose::default());
     let frames: Vec<serde_json::Value> = times
@@ -298,10 +365,11 @@ fn vector(name: &str, description: &str, clip: &Clip, times: &[f32], key_interva
                 sent_at_unix_nanos: 1_764_680_000_000_000_000 + seq as i64 * 50_000_000,
                 clip_time: t,
             };
-            let bytes = encoder.encode(&header, &pose, false).to_vec();
+            let trailer = trailers.get(seq).copied().unwrap_or_default();
+            let bytes = encoder.encode_with(&header, &pose, false, &trailer).to_vec();
             encoder.quantised_pose(&mut quantised);
             let v3 = |v: &[glam::Vec3A]| v.iter().map(|t| t.to_array()).collect::<Vec<_>>();
-            serde_json::json!({
+            let mut frame = serde_json::json!({
                 "hex": hex::encode(&bytes),
                 "key": bytes[0] & 1 == 1,
                 "seq": header.seq,
@@ -314,7 +382,14 @@ fn vector(name: &str, description: &str, clip: &Clip, times: &[f32], key_interva
                     "rotations": quantised.rotations.iter().map(|q| q.to_array()).collect::<Vec<_>>(),
                     "scales": v3(&quantised.scales),
                 },
-            })
+            });
+            if !trailer.events.is_empty() {
+                frame["events"] = serde_json::json!(trailer.events);
+            }
+            if let Some(r) = trailer.root_motion {
+                frame["root_motion"] = serde_json::json!({"delta": r.delta, "total": r.total});
+            }
+            frame
         })
         .collect();
     serde_json::json!({ "name": name, "description": description, "layout": doc, "frames": frames })
@@ -325,34 +400,60 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/compact-frames");
     let vectors = [
         vector(
-            "chain",
-            "Four joints turning about three axes, the root moving and the second joint scaling: a key frame, deltas, a key frame (key_interval 3).",
+            (
+                "chain",
+                "Four joints turning about three axes, the root moving and the second joint scaling: a key frame, deltas, a key frame (key_interval 3).",
+            ),
             &turning_chain("chain", 4, 0.08, true),
             &[0.0, 0.125, 0.25, 0.3, 0.5],
             3,
+            &[],
         ),
         vector(
-            "half-turn",
-            "One joint whose largest component changes from w to x: its index is sent in every frame.",
+            ("half-turn", "One joint whose largest component changes from w to x: its index is sent in every frame."),
             &half_turn(),
             &[0.0, 0.4, 0.9],
             30,
+            &[],
         ),
         vector(
-            "bench20",
-            "The 20-joint benchmark clip (scripts/bench_rest.sh): rotations about z only, the root moving along x.",
+            (
+                "stepping",
+                "The half turn with three events and root motion: a key frame with an event and root motion, a delta frame with root motion only, one with two events and root motion, and one with neither.",
+            ),
+            &stepping_half_turn(),
+            &[0.0, 0.4, 0.9, 0.95],
+            30,
+            &[
+                Trailer { events: &[0], root_motion: Some(STEPS[0]) },
+                Trailer { events: &[], root_motion: Some(STEPS[1]) },
+                Trailer { events: &[1, 2], root_motion: Some(STEPS[2]) },
+            ],
+        ),
+        vector(
+            (
+                "bench20",
+                "The 20-joint benchmark clip (scripts/bench_rest.sh): rotations about z only, the root moving along x.",
+            ),
             &bench20(),
             &[0.0, 1.0 / 30.0, 2.0 / 30.0],
             30,
+            &[],
         ),
         vector(
-            "chain71",
-            "71 joints turning about three axes, for timing decoders: a key frame and a delta frame.",
+            ("chain71", "71 joints turning about three axes, for timing decoders: a key frame and a delta frame."),
             &turning_chain("chain71", 71, 0.02, false),
             &[0.2, 0.25],
             30,
+            &[],
         ),
     ];
+    // The page's worked examples are these frames.
+    let page = std::fs::read_to_string(dir.join("../compact-frames.md")).unwrap();
+    for (vector, frame) in [(1, 1), (2, 2)] {
+        let hex = vectors[vector]["frames"][frame]["hex"].as_str().unwrap();
+        assert!(page.contains(hex), "docs/compact-frames.md shows {hex}");
+    }
     let bless = std::env::var_os("INBETWEEN_BLESS").is_some();
     for v in vectors {
         let path = dir.join(format!("{}.json", v["name"].as_str().unwrap()));
@@ -365,11 +466,19 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
         assert!(stored == text, "{} drifted from the encoder; regenerate with INBETWEEN_BLESS=1", path.display());
         // And the Rust decoder reads the stored vector back exactly.
         let doc: LayoutDoc = serde_json::from_value(v["layout"].clone()).unwrap();
-        let mut decoder = CompactDecoder::new(doc.layout());
+        let mut decoder = CompactDecoder::of_document(&doc);
         let mut pose = Pose::default();
         for frame in v["frames"].as_array().unwrap() {
             let info = decoder.decode(&hex::decode(frame["hex"].as_str().unwrap()).unwrap(), &mut pose).unwrap();
             assert_eq!(info.key, frame["key"].as_bool().unwrap());
+            let events: Vec<u32> =
+                serde_json::from_value(frame.get("events").cloned().unwrap_or_default()).unwrap_or_default();
+            assert_eq!(decoder.events(), events);
+            let root = frame.get("root_motion").map(|r| RootMotionReport {
+                delta: serde_json::from_value(r["delta"].clone()).unwrap(),
+                total: serde_json::from_value(r["total"].clone()).unwrap(),
+            });
+            assert_eq!(info.root_motion, root);
             let rotations: Vec<[f32; 4]> = serde_json::from_value(frame["pose"]["rotations"].clone()).unwrap();
             assert_eq!(pose.rotations.iter().map(|q| q.to_array()).collect::<Vec<_>>(), rotations);
         }

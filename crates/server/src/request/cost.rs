@@ -16,6 +16,7 @@ use crate::error::ApiError;
 use crate::stream::{Encoding, MAX_EVENTS_PER_FRAME};
 use crate::work::price;
 use anim::Clip;
+use prost::encoding::encoded_len_varint;
 
 /// The longest JSON text of a finite `f32` (`-1.17549435e-38`, with room).
 pub const F32_TEXT: u64 = 16;
@@ -103,13 +104,20 @@ impl Estimate {
 
 /// The most a compact stream sends in one tick (docs/compact-frames.md):
 /// a key frame a viewer missed and the delta frame after it, each a
-/// header of varints at their widest and a clip time, and per joint its
-/// changed bit, a rotation's largest index and every channel at 24 bits.
-pub fn compact_frame(joints: usize) -> u64 {
+/// header of varints at their widest and a clip time, per joint its
+/// changed bit, a rotation's largest index and every channel at 24 bits,
+/// then the most events a frame carries (as indices into the clip's
+/// `events`) and a root motion report.
+pub fn compact_frame(joints: usize, events: usize) -> u64 {
     let header = 1 + 4 * 10 + 4;
     let joint_bits = 1 + 2 + 9 * u64::from(anim::compact::MAX_BITS);
-    2 * (header + (joints as u64 * joint_bits).div_ceil(8))
+    let index = encoded_len_varint(events.saturating_sub(1) as u64) as u64;
+    let events = if events == 0 { 0 } else { VARINT + MAX_EVENTS_PER_FRAME as u64 * index };
+    2 * (header + (joints as u64 * joint_bits).div_ceil(8) + events + COMPACT_ROOT_MOTION)
 }
+
+/// A compact frame's root motion section: delta and total, four f32s each.
+const COMPACT_ROOT_MOTION: u64 = 32;
 
 /// The JSON text of one pose, names included.
 fn json_pose(clip: &Clip, clip_id: &str, format: Format) -> u64 {
@@ -460,6 +468,48 @@ mod tests {
             let bound = Estimate::frame(&clip, ID, encoding.into());
             assert!(bytes <= bound && bound <= 4 * bytes, "{encoding:?}: {bytes} written, bound {bound}");
         }
+    }
+
+    /// The compact bound holds a key frame and a delta frame of a pose at the
+    /// ends of its ranges' quantisation, each with the most events a frame
+    /// carries and a root motion report.
+    #[test]
+    fn the_compact_bound_holds_a_key_and_a_delta_frame_with_both_sections() {
+        use crate::stream::{CompactLayout, FrameData, FrameEncoder};
+        use anim::motion::{Planar, RootMotion};
+        let clip = clip(24, |j| format!("j{j}"), true);
+        let layout = CompactLayout::of_clip(&clip, anim::compact::MIN_MAX_ERROR, None, 30);
+        let mut encoder = FrameEncoder::compact(&layout.layout, 30);
+        let mut sampler = Sampler::new();
+        let last = (clip.events().len() - 1) as u32;
+        let planar = Planar { translation: glam::DVec3::splat(1e30), yaw: -1e30 };
+        let mut written = 0;
+        for (seq, t) in [(u64::MAX - 1, 0.0), (u64::MAX, 0.75)] {
+            let clip_time = clip.sample(t, &SampleOptions::default(), &mut sampler);
+            let frame = FrameData {
+                seq,
+                dropped: u64::MAX,
+                sent_at_unix_nanos: i64::MIN,
+                clip_id: ID,
+                time: t,
+                clip_time,
+                space: anim::Space::Local,
+                skeleton: clip.skeleton(),
+                pose: sampler.pose(),
+                joints: None,
+                parameters: None,
+                root_motion: Some(RootMotion { delta: planar, total: planar }),
+                ik: &[],
+                feet: &[],
+                events: clip.events(),
+                crossed: &[last; MAX_EVENTS_PER_FRAME],
+                with_names: true,
+                graph: None,
+            };
+            written += encoder.encode(&frame).bytes.len() as u64;
+        }
+        let bound = compact_frame(clip.joint_count(), clip.events().len());
+        assert!(written <= bound && bound <= 4 * written, "{written} written, bound {bound}");
     }
 
     /// The IK reports' bound holds the widest reports really written, on

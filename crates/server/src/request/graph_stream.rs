@@ -102,7 +102,7 @@ impl RawStream<'_> {
         let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
         let joints = played.skeleton().len();
         let (frame, encoding) = match compact {
-            Some(_) => (compact_frame(joints), price::compact_frame(joints)),
+            Some(_) => (compact_frame(joints, 0), price::compact_frame(joints)),
             None => {
                 let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
                 (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)

@@ -105,7 +105,8 @@ pub async fn compact_watch(
     }
     range_source(&params.motion, params.graph.as_ref()).map_err(|e| raw.compact_refused(e))?;
     let joints = params.motion.skeleton().len();
-    let per_sec = stream_work(price::compact_frame(joints), compact_frame(joints), params.fps);
+    let events = params.motion.first_clip().clip().events().len();
+    let per_sec = stream_work(price::compact_frame(joints), compact_frame(joints, events), params.fps);
     check_stream_work(per_sec, &state.config.limits, at)?;
     let ticket = state.work.charge(&caller.key(), per_sec)?;
     let with = raw.with_layout(params.clone(), compact, state, &caller.key()).await?;
@@ -208,7 +209,10 @@ impl RawStream<'_> {
         let cached = super::raw::clip(state, id).await?;
         self.check_fps(request.fps)?;
         let (frame, encoding) = match compact {
-            Some(_) => (compact_frame(cached.clip.joint_count()), price::compact_frame(cached.clip.joint_count())),
+            Some(_) => {
+                let joints = cached.clip.joint_count();
+                (compact_frame(joints, cached.clip.events().len()), price::compact_frame(joints))
+            }
             None => (Estimate::frame(&cached.clip, &cached.meta.id, request.encoding.into()), 0),
         };
         let keyed = anim::spring::SpringsSpec::default();
@@ -288,7 +292,7 @@ impl RawStream<'_> {
         self.check_fps(request.fps)?;
         let first = composed.motion.first_clip().clip();
         let mut frame = match request.encoding {
-            Encoding::Compact => compact_frame(composed.motion.skeleton().len()),
+            Encoding::Compact => compact_frame(composed.motion.skeleton().len(), first.events().len()),
             _ => Estimate::frame(first, composed.clip_id(), request.encoding.into()),
         };
         if composed.motion.has_root_motion() {

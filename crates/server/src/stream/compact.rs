@@ -14,7 +14,7 @@
 use std::sync::Arc;
 
 use anim::compact::{Layout, MIN_DISTANCE, MIN_MAX_ERROR, Ranges, Unbounded, default_distance};
-use anim::{Clip, Skeleton};
+use anim::{Clip, Event, Skeleton};
 use formats::wire::compact::LayoutDoc;
 
 use super::graph::GraphProgram;
@@ -188,11 +188,12 @@ impl CompactLayout {
             (Some(g), RangeSource::Derived) => {
                 let mut ranges = Ranges::of_graph(&g.graph, RANGE_RATE).map_err(|u| refusal(u.0))?;
                 ranges.turned_by(skeleton, g.post.ik(), g.post.springs());
-                ranges
+                return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]));
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
-        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, true))
+        let events = motion.first_clip().clip().events();
+        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events))
     }
 
     /// The layout of `clip`'s poses (and its rest pose) at `max_error` and
@@ -202,22 +203,28 @@ impl CompactLayout {
         let skeleton: &Skeleton = clip.skeleton();
         let mut ranges = Ranges::of_clip(clip, RANGE_RATE);
         ranges.observe(skeleton.rest());
-        CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, false)
+        CompactLayout {
+            any_weights: false,
+            ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, clip.events())
+        }
     }
 
+    /// A layout of derived `ranges` (they hold any layer weights), whose
+    /// frames' events index `events` (the stream's clip's: what its
+    /// frames cross, docs/compact-frames.md).
     fn of_ranges(
         skeleton: &Skeleton,
         ranges: &Ranges,
         (max_error, distance): (f32, Option<f32>),
         fps: u32,
-        any_weights: bool,
+        events: &[Event],
     ) -> CompactLayout {
         let distance = distance.unwrap_or_else(|| default_distance(skeleton));
         let layout = Layout::choose(skeleton, ranges, max_error, distance);
         let key_interval = u64::from(fps.max(1));
-        let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval);
+        let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, events);
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
-        CompactLayout { layout, document, key_interval, any_weights }
+        CompactLayout { layout, document, key_interval, any_weights: true }
     }
 
     /// What tells two layouts apart for sharing a playback.

@@ -24,7 +24,7 @@ use anim::character::FootReport;
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{Event, Pose, Skeleton, Space};
-use formats::wire::compact::{CompactEncoder, Header, KEY_FRAME};
+use formats::wire::compact::{CompactEncoder, Header, KEY_FRAME, RootMotionReport, Trailer};
 use formats::wire::graph_inputs::write_report;
 use formats::wire::json::{Extras, ParameterValues, PoseJson};
 use formats::wire::proto::{ik_kind_to_pb, space_to_pb};
@@ -162,7 +162,8 @@ impl FrameEncoder {
         let compact = self.compact.as_mut().expect("a compact encoder has its layout");
         let header =
             Header { seq: f.seq, dropped: f.dropped, sent_at_unix_nanos: f.sent_at_unix_nanos, clip_time: f.clip_time };
-        let frame = compact.encoder.encode(&header, f.pose, false);
+        let trailer = Trailer { events: f.crossed, root_motion: f.root_motion.as_ref().map(compact_root_motion) };
+        let frame = compact.encoder.encode_with(&header, f.pose, false, &trailer);
         let is_key = frame[0] & KEY_FRAME != 0;
         self.buf.extend_from_slice(frame);
         let key_seq = if is_key { f.seq } else { compact.key.as_ref().map_or(f.seq, |k| k.seq) };
@@ -182,6 +183,16 @@ impl FrameEncoder {
         }
         encoded
     }
+}
+
+/// A root motion report as a compact frame carries it: the f64s of the
+/// JSON and protobuf frames, rounded to f32.
+fn compact_root_motion(r: &RootMotion) -> RootMotionReport {
+    let planar = |p: &Planar| {
+        let [x, y, z] = p.translation.to_array();
+        [x, y, z, p.yaw].map(|v| v as f32)
+    };
+    RootMotionReport { delta: planar(&r.delta), total: planar(&r.total) }
 }
 
 /// Where a compact frame's `dropped` varint sits: after the flags byte and

@@ -29,7 +29,7 @@ fn layout(b: &Broadcast, max_error: f32) -> Arc<CompactLayout> {
 
 fn decoder(layout: &CompactLayout) -> CompactDecoder {
     let doc: LayoutDoc = serde_json::from_str(&layout.document).unwrap();
-    CompactDecoder::new(doc.layout())
+    CompactDecoder::of_document(&doc)
 }
 
 async fn frame(sub: &mut Subscription) -> Delivered {

@@ -27,7 +27,7 @@ func _init() -> void:
 	for file in files:
 		if file.ends_with(".json"):
 			loaded.append(JSON.parse_string(FileAccess.get_file_as_string(vectors.path_join(file))))
-	_check(loaded.size() >= 4, "%d vectors in %s" % [loaded.size(), vectors])
+	_check(loaded.size() >= 5, "%d vectors in %s" % [loaded.size(), vectors])
 	for vector in loaded:
 		_check_vector(vector)
 	_check_refusals(loaded)
@@ -87,6 +87,18 @@ func _check_vector(vector: Dictionary) -> void:
 		_check(got["rotations"] == _f32(frame["pose"]["rotations"]), what + ": rotations")
 		_check(got["translations"] == _f32(frame["pose"]["translations"]), what + ": translations")
 		_check(got["scales"] == _f32(frame["pose"]["scales"]), what + ": scales")
+		var indices := []
+		for e in got["events"]:
+			indices.append(e["index"])
+		_check(indices == frame.get("events", []).map(func(i): return int(i)), what + ": events")
+		var root = frame.get("root_motion")
+		var want = null
+		if root != null:
+			want = {
+				"delta": Array(_f32([root["delta"]])).map(func(x): return float(x)),
+				"total": Array(_f32([root["total"]])).map(func(x): return float(x)),
+			}
+		_check(got["root_motion"] == want, what + ": root motion")
 
 
 func _check_refusals(vectors: Array) -> void:
@@ -106,10 +118,17 @@ func _check_refusals(vectors: Array) -> void:
 		decoder.decode(longer).get("error") == "compact_trailing_bytes", "a byte after the frame"
 	)
 	var flagged := key.duplicate()
-	flagged[0] = 2
+	flagged[0] = 8
 	_check(decoder.decode(flagged).get("error") == "compact_unknown_flags", "an unknown flag")
 	_check(not decoder.decode(key).has("error"), "the key frame itself decodes")
 	_check(not decoder.decode(delta).has("error"), "and then its delta frame")
+	var stepping: Dictionary = vectors.filter(func(v): return v["name"] == "stepping")[0]
+	var unknown := Compact.from_hex(stepping["frames"][0]["hex"])  # events [0], then root motion
+	unknown[unknown.size() - 33] = stepping["layout"]["events"].size()
+	_check(
+		Compact.new(stepping["layout"]).decode(unknown).get("error") == "compact_unknown_event",
+		"an event past the layout's list"
+	)
 
 
 ## The unit quaternion of `deg` degrees about +Z, [x, y, z, w].

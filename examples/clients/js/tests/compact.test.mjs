@@ -17,7 +17,7 @@ const vectors = readdirSync(dir)
 const flat = (rows) => Float32Array.from(rows.flat());
 
 test("there are vectors to read", () => {
-  assert.ok(vectors.length >= 4, `${vectors.length} vectors in ${dir}`);
+  assert.ok(vectors.length >= 5, `${vectors.length} vectors in ${dir}`);
 });
 
 for (const vector of vectors) {
@@ -33,6 +33,10 @@ for (const vector of vectors) {
       assert.deepEqual(got.rotations, flat(frame.pose.rotations));
       assert.deepEqual(got.translations, flat(frame.pose.translations));
       assert.deepEqual(got.scales, flat(frame.pose.scales));
+      assert.deepEqual(got.events.map((e) => e.index), frame.events ?? []);
+      for (const e of got.events) assert.equal(e.name, vector.layout.events[e.index].name);
+      const root = frame.root_motion;
+      assert.deepEqual(got.rootMotion, root ? { delta: root.delta.map(Math.fround), total: root.total.map(Math.fround) } : null);
     }
   });
 }
@@ -44,5 +48,16 @@ test("a delta frame without its key frame is refused", () => {
   const key = fromHex(vector.frames[0].hex);
   assert.throws(() => decoder.decode(key.subarray(0, key.length - 1)), (e) => e.code === "compact_truncated");
   assert.throws(() => decoder.decode(Uint8Array.from([...key, 0])), (e) => e.code === "compact_trailing_bytes");
-  assert.throws(() => decoder.decode(Uint8Array.from([2, ...key.subarray(1)])), (e) => e.code === "compact_unknown_flags");
+  assert.throws(() => decoder.decode(Uint8Array.from([8 | key[0], ...key.subarray(1)])), (e) => e.code === "compact_unknown_flags");
+});
+
+test("events past the layout's list and a root motion cut short are refused", () => {
+  const vector = vectors.find((v) => v.name === "stepping");
+  const key = fromHex(vector.frames[0].hex); // events [0], then root motion
+  const at = key.length - 32 - 1; // the index
+  assert.equal(key[at - 1], 1, "one event");
+  const unknown = Uint8Array.from(key);
+  unknown[at] = vector.layout.events.length;
+  assert.throws(() => new CompactDecoder(vector.layout).decode(unknown), (e) => e.code === "compact_unknown_event");
+  assert.throws(() => new CompactDecoder(vector.layout).decode(key.subarray(0, key.length - 1)), (e) => e.code === "compact_truncated");
 });

@@ -55,6 +55,17 @@ class Triple {
   get z() {
     return this.v[2];
   }
+  /** A quaternion's `q · this`. */
+  premultiply(q) {
+    const [ax, ay, az, aw] = q.v;
+    const [bx, by, bz, bw] = this.v;
+    return this.set(
+      aw * bx + ax * bw + ay * bz - az * by,
+      aw * by - ax * bz + ay * bw + az * bx,
+      aw * bz + ax * by - ay * bx + az * bw,
+      aw * bw - ax * bx - ay * by - az * bz,
+    );
+  }
 }
 
 /** What the player touches of a three.js Object3D. */
@@ -125,4 +136,29 @@ test("a compact stream's frames land on the nodes, interpolated at the render ti
   });
   assert.equal(player.frames, 3);
   assert.ok(player.bytes > 0);
+});
+
+test("a compact stream's events reach onevents and its root motion moves the target", () => {
+  const stepping = JSON.parse(
+    readFileSync(join(dirname(fileURLToPath(import.meta.url)), "../../../../docs/compact-frames/stepping.json"), "utf8"),
+  );
+  const target = new Node("character", false);
+  target.children = [new Node("spinner", true)];
+  const socket = {};
+  const player = new InbetweenPlayer(socket, { fps: 30, target });
+  const heard = [];
+  player.onevents = (events, frame) => heard.push(...events.map((e) => [frame.seq, e.name]));
+  socket.onmessage({ data: JSON.stringify({ opened: { compact: stepping.layout } }) });
+  stepping.frames.forEach((f) => player.receive(fromHex(f.hex).buffer, 1000 + ((f.seq - 7) * 1000) / 30));
+  assert.deepEqual(heard, [
+    [7, "step_left"],
+    [9, "step_right"],
+    [9, "land"],
+  ]);
+  // Exactly on seq 8's time: its total, [0.05, 0, -0.125] travelled and 0.1 rad about +Y.
+  player.update(1000 + 3 * (1000 / 30));
+  const total = stepping.frames[1].root_motion.total.map(Math.fround);
+  target.position.v.forEach((x, k) => assert.ok(Math.abs(x - total[k]) < 1e-6, `position ${k}: ${x}`));
+  const [, y, , w] = target.quaternion.v;
+  assert.ok(Math.abs(y - Math.sin(total[3] / 2)) < 1e-6 && Math.abs(w - Math.cos(total[3] / 2)) < 1e-6);
 });

@@ -56,7 +56,8 @@ function streamTarget() {
   return { url: socketUrl("/v1/stream"), open };
 }
 
-/// A compact frame as the page's JSON frame: its header and local pose.
+/// A compact frame as the page's JSON frame: its header, events, local pose
+/// and root motion.
 function fromCompact(decoder, data) {
   const f = decoder.decode(new Uint8Array(data));
   const part = (a, n, i) => Array.from(a.subarray(n * i, n * i + n));
@@ -67,7 +68,10 @@ function fromCompact(decoder, data) {
     scale: part(f.scales, 3, i),
   }));
   const pose = { space: "local", time: f.clipTime, clip_time: f.clipTime, joints };
-  return { seq: f.seq, dropped: f.dropped, clip_time: f.clipTime, sent_at_unix_nanos: Number(f.sentAtUnixNanos), events: [], pose };
+  const planar = ([x, y, z, yaw]) => ({ translation: [x, y, z], yaw });
+  if (f.rootMotion) pose.root_motion = { delta: planar(f.rootMotion.delta), total: planar(f.rootMotion.total) };
+  const events = f.events.map(({ time, name }) => ({ time, name }));
+  return { seq: f.seq, dropped: f.dropped, clip_time: f.clipTime, sent_at_unix_nanos: Number(f.sentAtUnixNanos), events, pose };
 }
 
 /// The bytes a stream received over the last second.
