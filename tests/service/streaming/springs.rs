@@ -304,12 +304,7 @@ async fn reset_springs_shows_the_rest_pose_on_its_tick() {
 #[tokio::test]
 async fn the_fox_example_swings_its_tail() {
     let app = TestApp::start().await;
-    let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
-    let url = app.url("/v1/clips/import?format=glb&scale=0.01");
-    let resp = app.http.post(url).header("content-type", "application/octet-stream").body(glb).send().await.unwrap();
-    assert_eq!(resp.status(), 201);
-    let imported: Value = resp.json().await.unwrap();
-    let walk = imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("a Walk clip");
+    let walk = import_fox_walk(&app).await;
     let example = include_str!("../../../examples/motions/fox-tail-springs.json");
     let mut motion: Value = serde_json::from_str(example).unwrap();
     assert_eq!(motion["layers"][0]["clip"], "name:Walk");
@@ -517,15 +512,20 @@ async fn grpc_streams_without_springs_play_the_keyed_poses() {
     app.stop().await;
 }
 
-/// The Fox's Walk as a clip carrying the example's tail chain
-/// (examples/motions/fox-tail-springs.json); its id.
-async fn fox_walk_with_tail_springs(app: &TestApp) -> String {
+/// The Fox imported in metres: the summary of its Walk clip.
+async fn import_fox_walk(app: &TestApp) -> Value {
     let glb = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/gltf/Fox/Fox.glb")).unwrap();
     let url = app.url("/v1/clips/import?format=glb&scale=0.01");
     let resp = app.http.post(url).header("content-type", "application/octet-stream").body(glb).send().await.unwrap();
     assert_eq!(resp.status(), 201);
     let imported: Value = resp.json().await.unwrap();
-    let walk = imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("a Walk clip");
+    imported["clips"].as_array().unwrap().iter().find(|c| c["name"] == "Walk").expect("a Walk clip").clone()
+}
+
+/// The Fox's Walk as a clip carrying the example's tail chain
+/// (examples/motions/fox-tail-springs.json); its id.
+async fn fox_walk_with_tail_springs(app: &TestApp) -> String {
+    let walk = import_fox_walk(app).await;
     let mut doc = app.get_json(&format!("/v1/clips/{}", walk["id"].as_str().unwrap())).await;
     let example: Value = serde_json::from_str(include_str!("../../../examples/motions/fox-tail-springs.json")).unwrap();
     doc["springs"] = example["springs"].clone();
