@@ -109,6 +109,22 @@ impl Ranges {
         of_motion(motion, &mut clips)
     }
 
+    /// Whether its clips' ranges can bound `motion`'s poses: what
+    /// [`Ranges::of_motion`] refuses, checked without sampling a clip.
+    ///
+    /// # Errors
+    /// A retargeted layer or root motion `extract` (which move joints in ways
+    /// the clips' ranges do not bound).
+    pub fn boundable<C: ClipSource>(motion: &Motion<C>) -> Result<(), Unbounded> {
+        if motion.extracts_root_motion().is_some() {
+            return Err(Unbounded("root motion `extract`, which moves the root joint off its clips' ranges"));
+        }
+        if motion.layer_views().any(|layer| layer.retargeted) {
+            return Err(Unbounded("a layer retargeted onto a character"));
+        }
+        Ok(())
+    }
+
     /// Ranges holding every pose `graph` produces under any parameters and
     /// transitions (the union over its states' motions).
     ///
@@ -156,15 +172,10 @@ fn distinct_samples<'a>(clips: impl Iterator<Item = &'a Clip>, rate: f32) -> u64
 }
 
 fn of_motion<'a, C: ClipSource>(motion: &'a Motion<C>, clips: &mut ClipRanges<'a>) -> Result<Ranges, Unbounded> {
-    if motion.extracts_root_motion().is_some() {
-        return Err(Unbounded("root motion `extract`, which moves the root joint off its clips' ranges"));
-    }
+    Ranges::boundable(motion)?;
     let skeleton = motion.skeleton();
     let mut ranges = Ranges::at_rest(skeleton);
     for layer in motion.layer_views() {
-        if layer.retargeted {
-            return Err(Unbounded("a layer retargeted onto a character"));
-        }
         let own = clips.of(layer.clip);
         apply_layer(&mut ranges, &layer, own);
     }

@@ -102,20 +102,15 @@ pub fn range_source<'a>(
     motion: &'a StreamMotion,
     graph: Option<&GraphProgram>,
 ) -> Result<(RangeSource<'a>, u64), CompactRefusal> {
+    let refuse = |u: Unbounded| refusal(u.0);
     if let Some(graph) = graph {
-        let refuse = |u: Unbounded| refusal(u.0);
-        check_graph(&graph.graph).map_err(refuse)?;
+        graph.graph.state_motions().try_for_each(|m| Ranges::boundable(m)).map_err(refuse)?;
         return Ok((RangeSource::Derived, Ranges::graph_samples(&graph.graph, RANGE_RATE)));
     }
     if let Some(clip) = plain_clip(motion) {
         return Ok((RangeSource::Clip(clip), Ranges::clip_samples(clip, RANGE_RATE) + 1));
     }
-    if (0..motion.layer_count()).any(|i| motion.is_retargeted(i)) {
-        return Err(refusal("a layer retargeted onto a character"));
-    }
-    if motion.extracts_root_motion().is_some() {
-        return Err(refusal("root motion `extract`, which moves the root joint off its clips' ranges"));
-    }
+    Ranges::boundable(motion).map_err(refuse)?;
     Ok((RangeSource::Derived, Ranges::motion_samples(motion, RANGE_RATE)))
 }
 
@@ -125,19 +120,6 @@ fn refusal(what: &str) -> CompactRefusal {
         field: "encoding",
         detail: format!("compact frames cannot bound this stream's poses: it has {what} (docs/compact-frames.md)"),
     }
-}
-
-/// A graph's states' motions must each be boundable.
-fn check_graph(graph: &super::graph::StreamGraph) -> Result<(), Unbounded> {
-    for motion in graph.state_motions() {
-        if (0..motion.layer_count()).any(|i| motion.is_retargeted(i)) {
-            return Err(Unbounded("a layer retargeted onto a character"));
-        }
-        if motion.extracts_root_motion().is_some() {
-            return Err(Unbounded("root motion `extract`"));
-        }
-    }
-    Ok(())
 }
 
 /// The clip of a motion that is one clip played whole (one full-weight
