@@ -213,14 +213,9 @@ pub fn motion_build(spec: &MotionSpec<Arc<dyn PinnedClip>>) -> u64 {
         let clip = layer.clip.clip();
         let map = (output + clip.joint_count() as u64 + clip.parameters().total_width() as u64) * MOTION_PER_JOINT;
         let reference = if layer.mode == LayerMode::Additive { clip.joint_count() as u64 * JOINT } else { 0 };
-        // With a character, a retargeter's setup: both references in model
-        // space and, with root motion, the root's cycle at up to 4096 poses;
-        // planted feet find each source foot's lowest over up to 4096 poses.
         let retarget = if spec.character.is_some() {
-            let per_pose = (clip.joint_count() as u64 + output) * JOINT;
             let plants = layer.retarget.as_ref().unwrap_or(&spec.retarget).feet.is_some();
-            let feet = if plants { 4100 * clip.joint_count() as u64 * JOINT } else { 0 };
-            per_pose * if spec.root_motion.is_some() { 4100 } else { 3 } + feet
+            retarget_setup(clip.joint_count() as u64, output, (plants, spec.root_motion.is_some()))
         } else {
             0
         };
@@ -281,20 +276,26 @@ pub fn graph_tick(graph: &anim::graph::Graph<Arc<dyn PinnedClip>>) -> u64 {
 
 /// The work of building a graph on a character of `output` joints, beyond
 /// [`graph_build`]: each layer's retargeter set up as a clip motion's is
-/// ([`motion_build`]: both references in model space, with `root` motion
-/// the root's cycle at up to 4096 poses, and with planted `feet` each source
-/// foot's lowest over up to 4096 poses), every layer over the graph's
-/// largest clip of `joints`.
+/// ([`retarget_setup`]), every layer over the graph's largest clip of
+/// `joints`.
 pub fn graph_retarget_setup(
     node_layers: impl Iterator<Item = u64>,
     joints: u64,
     output: u64,
     (feet, root): (bool, bool),
 ) -> u64 {
-    let poses = if root { 4100 } else { 3 };
-    let per_layer = (joints + output).saturating_mul(poses * JOINT)
-        + if feet { 4100u64.saturating_mul(joints).saturating_mul(JOINT) } else { 0 };
+    let per_layer = retarget_setup(joints, output, (feet, root));
     node_layers.map(|layers| layers.saturating_mul(per_layer)).fold(0, u64::saturating_add)
+}
+
+/// The setup of one layer's retargeter from a clip of `joints` onto a
+/// character of `output` joints: both references in model space and, with
+/// `root` motion, the root's cycle at up to 4096 poses; with planted `feet`,
+/// each source foot's lowest over up to 4096 poses.
+fn retarget_setup(joints: u64, output: u64, (feet, root): (bool, bool)) -> u64 {
+    let poses = if root { 4100 } else { 3 };
+    let planted = if feet { 4100u64.saturating_mul(joints).saturating_mul(JOINT) } else { 0 };
+    (joints + output).saturating_mul(poses * JOINT).saturating_add(planted)
 }
 
 /// The work a motion's IK and springs add to one tick of a graph played at
