@@ -291,11 +291,17 @@ mod tests {
     async fn a_job_dropped_before_it_starts_is_skipped() {
         let pool = Arc::new(Pool::new(1));
         let (release_tx, release_rx) = std::sync::mpsc::channel::<()>();
+        let (started_tx, started_rx) = std::sync::mpsc::channel::<()>();
         let blocker = tokio::spawn({
             let pool = pool.clone();
-            async move { pool.run(Duration::from_secs(10), move |_| release_rx.recv().unwrap()).await }
+            let job = move |_: &Cancel| {
+                started_tx.send(()).unwrap();
+                release_rx.recv().unwrap()
+            };
+            async move { pool.run(Duration::from_secs(10), job).await }
         });
-        while pool.queued() > 0 {
+        // The one thread busy with the blocker, so the next job can only queue.
+        while started_rx.try_recv().is_err() {
             tokio::task::yield_now().await;
         }
         let ran = Arc::new(AtomicBool::new(false));
