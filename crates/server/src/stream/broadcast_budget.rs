@@ -4,10 +4,11 @@
 //! measured against that price so that a broadcast the price misjudged
 //! ends alone instead of starving the others on the producers' thread.
 //!
-//! - [`Budget`]: the price of one tick in work units (`work::price`): the
-//!   motion it plays and the motion the latest crossfade left (both are
-//!   evaluated while it fades, at the tick and at each spring substep),
-//!   the constraints of the latest `ik` control, and the rest (the frame's
+//! - [`Budget`]: the price of one tick in work units (`work::price`): every
+//!   motion its crossfades may leave the player evaluating (`fade_chain`:
+//!   the fades in progress and the motion playing, at the tick and at each
+//!   spring substep), the constraints of the latest `ik` control on their
+//!   mix, and the rest (the frame's
 //!   encoding, the tick itself) as admitted. Its price per second is held
 //!   in the node's meters by [`Ticket`]s.
 //! - [`Overrun`]: the thread CPU of each tick against the price of a tick;
@@ -16,6 +17,7 @@
 //!   budget, and ends with `too_much_work`.
 
 use super::control::{Control, ControlError};
+use super::fade_chain::FadeChain;
 use super::pinned::StreamMotion;
 use crate::error::ApiError;
 use crate::work::{Ticket, price};
@@ -56,8 +58,7 @@ pub(crate) struct Budget {
     fps: u64,
     /// Units of a tick besides the motions and the `ik` control's constraints.
     base: u64,
-    motion: Arc<StreamMotion>,
-    fading_from: Option<Arc<StreamMotion>>,
+    chain: FadeChain,
     ik: u64,
     limit_per_sec: u64,
     ns_per_unit: f64,
@@ -70,8 +71,7 @@ impl Budget {
         Budget {
             fps: u64::from(fps),
             base: charge.per_tick.saturating_sub(price::motion_frame(motion, fps)),
-            motion: Arc::clone(motion),
-            fading_from: None,
+            chain: FadeChain::new(motion),
             ik: 0,
             limit_per_sec: charge.limit_per_sec,
             ns_per_unit: charge.ns_per_unit,
@@ -81,8 +81,7 @@ impl Budget {
 
     /// Work units of one tick now.
     pub(crate) fn per_tick(&self) -> u64 {
-        let decks: Vec<&StreamMotion> = self.fading_from.iter().chain([&self.motion]).map(|m| &**m).collect();
-        self.base.saturating_add(price::stream_frame(&decks, self.ik, self.fps as u32))
+        self.base.saturating_add(price::stream_frame(&self.chain.motions(), self.ik, self.fps as u32))
     }
 
     /// Nanoseconds of one core a tick may take on average over a second:
@@ -104,17 +103,9 @@ impl Budget {
     /// `too_much_work` over `max_request_work` per second; the meters'
     /// `caller_work_limit` and `overloaded`. Nothing changed then.
     pub(crate) fn reprice(&mut self, control: &Control, skeleton_of: &StreamMotion) -> Result<(), ControlError> {
-        let mut next = Budget {
-            motion: Arc::clone(&self.motion),
-            fading_from: self.fading_from.clone(),
-            tickets: Vec::new(),
-            ..*self
-        };
+        let mut next = Budget { chain: self.chain.clone(), tickets: Vec::new(), ..*self };
         match control {
-            Control::Crossfade(fade) => {
-                next.fading_from = Some(Arc::clone(&self.motion));
-                next.motion = Arc::clone(&fade.to);
-            }
+            Control::Crossfade(fade) => next.chain = self.chain.crossfaded(&fade.to),
             Control::SetIk(constraints) => next.ik = price::ik(constraints, skeleton_of.skeleton()),
             Control::Play
             | Control::Pause

@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::fade_chain::FadeChain;
 use super::graph::{GraphDeck, StreamGraph};
 use super::params::StreamParams;
 use super::pinned::StreamMotion;
@@ -506,9 +507,10 @@ impl ControlError {
 /// What a control may make a stream cost: one write of its caller's
 /// write budget, and what it leaves the stream evaluating, which the
 /// service prices and charges its caller for in place of what it held
-/// (`request::stream`). A crossfade is priced at both
-/// motions (the fade evaluates both), an `ik` control at the motion playing
-/// with the new constraints.
+/// (`request::stream`). A crossfade is priced at every motion its fade
+/// chain may evaluate (`fade_chain`: the fades begun before it, then its
+/// target), an `ik` control at that chain with the new constraints (the
+/// IK runs on the mix of them all).
 pub trait Repricing: Send + Sync + std::fmt::Debug {
     /// Charges the stream for evaluating `motions` each frame under the
     /// stream's constraints `ik`, from now on.
@@ -534,8 +536,9 @@ pub trait Repricing: Send + Sync + std::fmt::Debug {
 #[derive(Debug, Clone)]
 pub(crate) struct ControlCheck {
     skeleton: Arc<StreamMotion>,
-    /// The motion the latest accepted control left playing.
-    playing: Arc<StreamMotion>,
+    /// The motions the accepted crossfades may leave the player
+    /// evaluating, the one playing last.
+    chain: FadeChain,
     /// The stream's constraints, as the latest accepted control left them.
     ik: Arc<[IkConstraint]>,
     ik_limits: IkLimits,
@@ -555,7 +558,7 @@ impl ControlCheck {
     pub(crate) fn new(params: &StreamParams) -> Self {
         ControlCheck {
             skeleton: Arc::clone(&params.motion),
-            playing: Arc::clone(&params.motion),
+            chain: FadeChain::new(&params.motion),
             ik: params.motion.ik().into(),
             ik_limits: params.ik_limits,
             repricing: None,
@@ -622,16 +625,17 @@ impl ControlCheck {
         match &control {
             Control::Crossfade(fade) => {
                 self.check_fade(fade)?;
-                self.reprice(&[&self.playing, &fade.to], &self.ik)?;
-                self.playing = Arc::clone(&fade.to);
+                let chain = self.chain.crossfaded(&fade.to);
+                self.reprice(&chain.motions(), &self.ik)?;
+                self.chain = chain;
             }
-            Control::Layer { index, .. } if *index >= self.playing.layer_count() => {
+            Control::Layer { index, .. } if *index >= self.chain.playing().layer_count() => {
                 return Err(ControlError::Invalid("no such layer in the motion playing"));
             }
             Control::Ik(specs) => {
                 let skeleton = self.skeleton.skeleton();
                 let constraints = build_constraints(specs, skeleton, &self.ik_limits).map_err(ControlError::Ik)?;
-                self.reprice(&[&self.playing], &constraints)?;
+                self.reprice(&self.chain.motions(), &constraints)?;
                 self.ik = constraints.as_slice().into();
                 return Ok(Control::SetIk(constraints));
             }

@@ -46,6 +46,7 @@ mod control;
 mod encode;
 mod engine;
 mod events;
+mod fade_chain;
 mod graph;
 pub mod grpc;
 mod hub;

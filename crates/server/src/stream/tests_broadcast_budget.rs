@@ -163,8 +163,9 @@ fn a_crossfade_or_ik_control_re_prices_the_broadcast_and_one_over_the_limit_is_r
         Control::Crossfade(Crossfade { to: Arc::clone(motion), duration: 0.5, ease: anim::Ease::Linear, source: None });
     budget.reprice(&fade, motion).unwrap();
     assert_eq!(budget.per_tick(), 100 + one_pose, "while it fades both motions are evaluated");
-    let refused = budget.reprice(&fade, motion);
-    assert!(refused.is_ok(), "from the faded-to motion again: the same price");
+    let refused = budget.reprice(&fade, motion).unwrap_err();
+    assert_eq!(refused.code(), "too_much_work", "a fade begun while the first may still run evaluates three motions");
+    assert_eq!(budget.per_tick(), 100 + one_pose, "nothing changed");
     let ik = Control::SetIk(Vec::new());
     budget.reprice(&ik, motion).unwrap();
     assert_eq!(budget.per_tick(), 100 + one_pose);
