@@ -265,19 +265,13 @@ async fn route_motion(
     route.motion(state).await
 }
 
-/// A `Sample` or `SampleMotion` field, the spring chains' switch at `/without_springs`.
-fn in_pose_route(field: Field) -> At {
-    match field {
+/// A gRPC clip route's field, located as `locate` says (`in_pose_body`,
+/// `in_batch_message`) but for the spring chains' switch, which the
+/// message names `/without_springs`.
+fn in_route(locate: Locate) -> impl Fn(Field) -> At {
+    move |field| match field {
         Field::Springs => At::Pointer("/without_springs".into()),
-        other => in_pose_body(other),
-    }
-}
-
-/// A `SampleBatch` field, the spring chains' switch at `/without_springs`.
-fn in_batch_route(field: Field) -> At {
-    match field {
-        Field::Springs => At::Pointer("/without_springs".into()),
-        other => in_batch_message(other),
+        other => locate(other),
     }
 }
 
@@ -303,7 +297,7 @@ pub async fn sample_route(
     };
     let motion = pb::SampleMotionRequest { time: req.time, space: req.space, format: req.format, ..Default::default() };
     let pose = sample_doc(state, caller, doc, motion, coding).await;
-    Ok(Some(pose.map_err(|e| at_clip_route_as(e, in_pose_route, field))?))
+    Ok(Some(pose.map_err(|e| at_clip_route_as(e, in_route(in_pose_body), field))?))
 }
 
 /// A clip's `SampleBatch` or `SampleStream` as the `SampleMotionBatch` of
@@ -347,7 +341,7 @@ pub async fn sample_batch_route(
 ) -> Result<Option<pb::PoseBatch>, ApiError> {
     let Some((doc, motion, field)) = batch_route(state, req).await? else { return Ok(None) };
     let batch = sample_batch_doc(state, caller, doc, motion, coding).await;
-    Ok(Some(batch.map_err(|e| at_clip_route_as(e, in_batch_route, field))?))
+    Ok(Some(batch.map_err(|e| at_clip_route_as(e, in_route(in_batch_message), field))?))
 }
 
 /// `SampleStream` of a clip route that plays a motion: that motion's poses
@@ -365,7 +359,7 @@ pub async fn stream_route(
 ) -> Result<Option<(MotionPoses, Ticket)>, ApiError> {
     let Some((doc, motion, field)) = batch_route(state, req).await? else { return Ok(None) };
     let poses = stream_poses(state, caller, doc, motion, coding).await;
-    Ok(Some(poses.map_err(|e| at_clip_route_as(e, in_batch_route, field))?))
+    Ok(Some(poses.map_err(|e| at_clip_route_as(e, in_route(in_batch_message), field))?))
 }
 
 /// `SampleMotion` over a graph: the ticks up to the last at or before

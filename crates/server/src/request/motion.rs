@@ -297,7 +297,7 @@ pub fn at_clip_route(e: ApiError, at: Locate) -> ApiError {
 
 /// [`at_clip_route`], a motion path pointed at `motion` (the route's
 /// `character`, or its `springs` when the clip's chains made the motion).
-pub fn at_clip_route_as(e: ApiError, at: Locate, motion: Field) -> ApiError {
+pub fn at_clip_route_as(e: ApiError, at: impl Fn(Field) -> At, motion: Field) -> ApiError {
     let to_route = |pointer: &str| {
         if pointer.starts_with("/motion") {
             return at(motion);
