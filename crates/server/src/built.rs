@@ -8,7 +8,7 @@ use crate::cache::{Cacheable, CachedClip};
 use crate::store::DocMeta;
 use crate::stream::PinnedClip;
 use anim::graph::Graph;
-use anim::motion::CharacterSpec;
+use anim::motion::{CharacterSpec, RetargetSpec, RootMotionSpec};
 use formats::wire::graph::GraphDoc;
 
 /// The core's graph over clips pinned at their versions.
@@ -26,13 +26,22 @@ pub struct BuiltGraph {
     /// clip cache's entry at the version the graph was built on.
     pub clips: Vec<Arc<CachedClip>>,
     /// The graph built again for motions over it (`server::graphs::played`),
-    /// by the character's id and version, the retarget options and the root
-    /// motion: at most [`MAX_PLAYED`], the oldest replaced. They leave with it.
-    pub played: Mutex<Vec<(String, Arc<PinnedGraph>)>>,
+    /// by [`PlayedKey`]: at most [`MAX_PLAYED`], the oldest replaced. They
+    /// leave with it.
+    pub played: Mutex<Vec<(PlayedKey, Arc<PinnedGraph>)>>,
     /// An estimate of the heap it keeps alive besides its clips (their
     /// bytes are the clip cache's), room for its builds for motions
     /// included.
     pub bytes: usize,
+}
+
+/// What a graph's build for a motion depends on besides the graph: the
+/// character's id and version, the retarget options, the root motion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlayedKey {
+    pub character: Option<(String, u64)>,
+    pub retarget: RetargetSpec,
+    pub root_motion: Option<RootMotionSpec>,
 }
 
 /// How many builds for motions (on characters, with root motion) a built graph keeps.
@@ -45,15 +54,15 @@ impl BuiltGraph {
         self.clips.iter().map(|c| (c.meta.id.as_str(), c.meta.version))
     }
 
-    /// Its build for a motion, by `server::graphs::played`'s key.
-    pub fn played_for(&self, key: &str) -> Option<Arc<PinnedGraph>> {
+    /// Its build for a motion with `key`.
+    pub fn played_for(&self, key: &PlayedKey) -> Option<Arc<PinnedGraph>> {
         let kept = self.played.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         kept.iter().find(|(k, _)| k == key).map(|(_, graph)| Arc::clone(graph))
     }
 
     /// Keeps its build for a motion under `key`, the oldest let go when
     /// [`MAX_PLAYED`] are kept.
-    pub fn keep_played(&self, key: String, graph: Arc<PinnedGraph>) {
+    pub fn keep_played(&self, key: PlayedKey, graph: Arc<PinnedGraph>) {
         let mut kept = self.played.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if kept.iter().any(|(k, _)| *k == key) {
             return;

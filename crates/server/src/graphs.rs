@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::auth::CallerKey;
-use crate::built::{BuiltGraph, PinnedGraph};
+use crate::built::{BuiltGraph, PinnedGraph, PlayedKey};
 use crate::cache::CachedClip;
 use crate::config::Limits;
 use crate::error::{ApiError, At};
@@ -338,8 +338,11 @@ pub async fn played(
         Some(reference) => Some(crate::characters::resolve(state, caller, reference).await?),
         None => None,
     };
-    let on = character.as_ref().map(|c| format!("{}@{}", c.meta.id, c.meta.version));
-    let key = format!("{on:?} {:?} {:?}", motion.retarget, motion.root_motion);
+    let key = PlayedKey {
+        character: character.as_ref().map(|c| (c.meta.id.clone(), c.meta.version)),
+        retarget: motion.retarget.clone(),
+        root_motion: motion.root_motion.clone(),
+    };
     if let Some(hit) = built.played_for(&key) {
         return Ok(hit);
     }

@@ -183,7 +183,7 @@ pub struct MaskSpec {
 
 /// `root_motion`: which joint carries the character's motion and whether
 /// to take it out of the pose.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct RootMotionSpec {
     /// `None`: the first root joint with a translation track.
     pub joint: Option<String>,
