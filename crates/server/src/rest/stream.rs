@@ -166,6 +166,7 @@ pub async fn stream(
 /// `GET …/stream?character=`: the one-layer motion of the clip on the
 /// character (docs/characters.md), opened as `GET /v1/stream` opens it, the
 /// query's `playback` the layer's; refusals at the query's names.
+/// Not via `ClipRoute::motion`: a stream eases its motion (a route refuses `ease`); a sprung clip streams as a clip.
 async fn open_on_character(
     state: &AppState,
     raw: RawStream<'_>,
