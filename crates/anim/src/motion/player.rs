@@ -510,6 +510,15 @@ impl<C: ClipSource> Player<C> {
         self.springs.jumped = true;
     }
 
+    /// The current motion's spring substeps at or before stream time
+    /// `clock` not run yet are skipped: the next tick runs those after it
+    /// only (a frame woken late catches up a bounded span).
+    pub fn skip_springs_to(&mut self, clock: f64) {
+        if let (Some(run), Some(springs)) = (self.springs.run.as_mut(), self.top.motion.springs()) {
+            run.skip_to(springs, clock);
+        }
+    }
+
     /// Runs the current motion's springs for the tick at `clock` on the
     /// mixed pose (into `local`); the substeps before it see the mix
     /// between the ticks ([`Player::pose_between`]).

@@ -62,6 +62,12 @@ impl SpringRun {
         self.previous = None;
     }
 
+    /// The substeps at or before `clock` not run yet are skipped
+    /// ([`SpringSolver::skip_to`]).
+    pub fn skip_to(&mut self, springs: &Springs, clock: f64) {
+        self.solver.skip_to(springs, clock);
+    }
+
     /// Substeps a frame at `clock` would run now (for pricing).
     pub fn pending(&self, springs: &Springs, clock: f64) -> u64 {
         self.solver.pending(springs, clock)

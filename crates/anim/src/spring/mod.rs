@@ -128,6 +128,15 @@ impl SpringSolver {
         Ok(SpringSolver { state, ..SpringSolver::new(springs) })
     }
 
+    /// The substeps at or before `time` not run yet are never run: the
+    /// chains go on from where they were, as if that time had not passed
+    /// (a stream frame woken late catches up a bounded span only).
+    pub fn skip_to(&mut self, springs: &Springs, time: f64) {
+        if let Some(k) = self.state.next.as_mut() {
+            *k = (*k).max(first_after(springs.hz, time));
+        }
+    }
+
     /// How many substeps a frame at `time` would run now (for pricing).
     pub fn pending(&self, springs: &Springs, time: f64) -> u64 {
         match self.state.next {

@@ -6,7 +6,9 @@
 //! take — a `start` or `speed`, an `ease`, a parameter subset, a report in
 //! compact frames — is refused `graph_unsupported` at its field. Its price per
 //! frame is the graph's costliest tick (as a sampling request's ticks are
-//! priced) and its frame's encoding, the report included when asked.
+//! priced) and its frame's encoding, the report included when asked; with
+//! springs or root motion, also its share of the skipped ticks a frame
+//! woken late evaluates (`price::catch_up`).
 
 use std::sync::Arc;
 
@@ -39,6 +41,9 @@ struct GraphStream {
     params: StreamParams,
     frame: u64,
     per_frame: u64,
+    /// A stream frame's share of the skipped ticks late frames evaluate
+    /// (`price::catch_up`; a broadcast steps each tick once).
+    catch_up: u64,
 }
 
 impl RawStream<'_> {
@@ -55,8 +60,8 @@ impl RawStream<'_> {
         graph: RawGraphStream<'_>,
         caller: &Caller,
     ) -> Result<Admitted, ApiError> {
-        let GraphStream { params, frame, per_frame } = self.graph_stream(state, graph, &caller.key()).await?;
-        let permit = match self.admit(per_frame, frame, params.fps, state, caller)? {
+        let GraphStream { params, frame, per_frame, catch_up } = self.graph_stream(state, graph, &caller.key()).await?;
+        let permit = match self.admit(per_frame.saturating_add(catch_up), frame, params.fps, state, caller)? {
             Ok(permit) => permit,
             Err(refused) => return Ok(Err(refused)),
         };
@@ -73,7 +78,7 @@ impl RawStream<'_> {
         state: &AppState,
         graph: RawGraphStream<'_>,
     ) -> Result<(StreamParams, u64), ApiError> {
-        let GraphStream { params, frame, per_frame } = self.graph_stream(state, graph, &CallerKey::Node).await?;
+        let GraphStream { params, frame, per_frame, .. } = self.graph_stream(state, graph, &CallerKey::Node).await?;
         check_stream(frame, params.fps, &state.config.limits, self.at)?;
         let per_sec = stream_work(per_frame.saturating_add(price::BROADCAST_TICK), frame, params.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
@@ -108,15 +113,20 @@ impl RawStream<'_> {
                 (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)
             }
         };
-        let stages = price::graph_post(&post, played.skeleton(), f64::from(request.fps));
-        let per_frame = price::graph_tick(&played).saturating_add(stages).saturating_add(encoding);
+        let tick = price::graph_tick(&played).saturating_add(price::graph_post(
+            &post,
+            played.skeleton(),
+            f64::from(request.fps),
+        ));
         let program =
             GraphProgram { graph: played, post, id: id.into(), version: built.meta.version, report: graph.report };
+        let catch_up = if program.catches_up() { price::catch_up(tick, request.fps) } else { 0 };
+        let per_frame = tick.saturating_add(encoding);
         let motion = Arc::clone(program.graph.initial_motion());
         let params = StreamParams::of_motion(motion, Arc::clone(&program.id), request).map_err(|e| self.refused(e))?;
         let params = self.bind(params.with_graph(program), state)?;
         let params = self.with_layout(params, compact, state, caller).await?;
-        Ok(GraphStream { params, frame, per_frame })
+        Ok(GraphStream { params, frame, per_frame, catch_up })
     }
 
     /// A graph plays from motion time 0 at speed 1, its own poses in full

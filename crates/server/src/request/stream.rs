@@ -270,7 +270,8 @@ impl RawStream<'_> {
     ) -> Result<(StreamParams, u64), ApiError> {
         let (composed, request, frame) = self.composed(state, motion, &CallerKey::Node).await?;
         check_stream(frame, request.fps, &state.config.limits, self.at)?;
-        let per_frame = price::motion_frame(&composed.motion, request.fps).saturating_add(price::BROADCAST_TICK);
+        let per_frame =
+            price::broadcast_frame(&[&composed.motion], 0, request.fps).saturating_add(price::BROADCAST_TICK);
         let per_sec = stream_work(per_frame, frame, request.fps);
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         Ok((self.motion_stream(composed, request, state)?, per_sec))

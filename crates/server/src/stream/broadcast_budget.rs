@@ -70,7 +70,7 @@ impl Budget {
     pub(crate) fn new(charge: BroadcastCharge, motion: &Arc<StreamMotion>, fps: u32) -> Self {
         Budget {
             fps: u64::from(fps),
-            base: charge.per_tick.saturating_sub(price::motion_frame(motion, fps)),
+            base: charge.per_tick.saturating_sub(price::broadcast_frame(&[motion], 0, fps)),
             chain: FadeChain::new(motion),
             ik: 0,
             limit_per_sec: charge.limit_per_sec,
@@ -81,7 +81,7 @@ impl Budget {
 
     /// Work units of one tick now.
     pub(crate) fn per_tick(&self) -> u64 {
-        self.base.saturating_add(price::stream_frame(&self.chain.motions(), self.ik, self.fps as u32))
+        self.base.saturating_add(price::broadcast_frame(&self.chain.motions(), self.ik, self.fps as u32))
     }
 
     /// Nanoseconds of one core a tick may take on average over a second:

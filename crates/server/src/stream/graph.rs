@@ -17,6 +17,7 @@
 use std::sync::Arc;
 
 use super::pinned::PinnedClip;
+use super::schedule::MAX_CATCH_UP;
 use anim::graph::{Graph, GraphPlayer, GraphPost, GraphReport, GraphState, PostRun, SetError, Value};
 use anim::ik::IkReport;
 use anim::spring::SpringState;
@@ -37,6 +38,20 @@ pub struct GraphProgram {
     pub id: Arc<str>,
     pub version: u64,
     pub report: bool,
+}
+
+impl GraphProgram {
+    /// Whether a frame woken late evaluates the ticks it skipped (up to
+    /// [`MAX_CATCH_UP`]) rather than only stepping them: with springs or
+    /// root motion, which must see every tick.
+    pub fn catches_up(&self) -> bool {
+        catches_up(&self.graph, &self.post)
+    }
+}
+
+/// [`GraphProgram::catches_up`] of `graph` under `post`.
+fn catches_up(graph: &StreamGraph, post: &GraphPost) -> bool {
+    post.springs().is_some() || graph.initial_motion().has_root_motion()
 }
 
 /// A graph playing on a stream or a broadcast.
@@ -89,9 +104,10 @@ impl GraphDeck {
 
     /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
     /// shown (those are stepped without a pose, as are the ticks before a
-    /// first tick that came late — but with springs or root motion they are
-    /// evaluated, so that the chains and the root's travel see every tick),
-    /// so that a stream never paused shows
+    /// first tick that came late — but with springs or root motion the
+    /// latest [`MAX_CATCH_UP`] of them are evaluated, so that the chains
+    /// and the root's travel see them; the chains skip the older ones'
+    /// substeps), so that a stream never paused shows
     /// graph tick `k` at tick `k`; while `paused` only the springs go on
     /// settling on the held pose (the first tick is always played).
     /// Returns the motion time shown, as a frame's `clip_time`.
@@ -102,14 +118,16 @@ impl GraphDeck {
         self.held = paused && !first;
         if !paused || first {
             let n = if first { k } else { skipped };
-            let every_tick = self.post.springs().is_some() || self.player.graph().initial_motion().has_root_motion();
-            for j in 0..n {
-                if every_tick {
-                    self.player.tick(dt);
-                    self.run_post(clock(k - n + j));
-                } else {
-                    self.player.step(dt);
-                }
+            let evaluated = if catches_up(self.player.graph(), &self.post) { n.min(MAX_CATCH_UP) } else { 0 };
+            for _ in evaluated..n {
+                self.player.step(dt);
+            }
+            if evaluated < n {
+                self.run.skip_springs_to(&self.post, clock(k - evaluated - 1));
+            }
+            for j in (0..evaluated).rev() {
+                self.player.tick(dt);
+                self.run_post(clock(k - 1 - j));
             }
             self.player.tick(dt);
             self.run_post(clock(k));

@@ -82,7 +82,7 @@ pub use limits::{AdmitError, StreamPermit};
 pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use pinned::{Pinned, PinnedClip, StreamMotion};
 pub use playhead::{MAX_SPEED, Playhead};
-pub use schedule::{Grid, Schedule, Tick};
+pub use schedule::{Grid, MAX_CATCH_UP, Schedule, Tick};
 pub use subscription::{Controller, Delivered, Next, StoreOutcome, Subscription};
 
 pub use formats::wire::grid::PHASE_HEADER;

@@ -17,6 +17,15 @@ use std::time::Duration;
 
 use tokio::time::{Instant, sleep_until};
 
+/// Skipped ticks a stream frame evaluates at most besides its own (docs/api.md,
+/// “Work and its price”): a frame woken late evaluates the latest this
+/// many of the ticks it skipped when its graph has springs or root motion,
+/// or runs this many frames' spring substeps, and only steps the older
+/// ones (a graph's transitions; the chains go on from where they were), so
+/// a frame's work is bounded however late it wakes. Every tick is evaluated
+/// once at most: a second of playback evaluates at most `fps` + this many.
+pub const MAX_CATCH_UP: u64 = 4;
+
 /// The grid of one rate and phase: tick `n` at
 /// `epoch + phase_ms·10⁶ + ⌊n·10⁹/fps⌋ ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

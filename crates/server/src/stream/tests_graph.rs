@@ -214,3 +214,21 @@ fn root_motion_on_a_graph_rides_its_frames_and_a_restored_program_makes_the_same
     assert!(x(50, "delta") > 0.0, "play goes on: {}", root_motion(50));
     assert_restores(&params, &log, &frames, &texts);
 }
+
+#[test]
+fn a_frame_woken_late_runs_the_substeps_of_its_latest_skipped_ticks_only() {
+    // The graph's tail at the default 120 Hz, on a 60 fps stream: 2 substeps a tick.
+    let params = graph_params(true);
+    let springs = params.graph.as_ref().unwrap().post.springs().unwrap();
+    let mut solver = anim::spring::SpringSolver::new(springs);
+    solver.skip_to(springs, 0.5);
+    assert_eq!(solver.pending(springs, 1.0), 0, "at rest: the next frame starts there");
+    solver.start_at(springs, 0.0, &anim::Pose::identity(4));
+    assert_eq!(solver.pending(springs, 1.0), 120, "a frame at 1 s after one at 0 runs a second of substeps");
+    // Tick 60 woken late: the substeps after tick 60 − MAX_CATCH_UP − 1 only.
+    let fps = 60.0;
+    solver.skip_to(springs, (60 - MAX_CATCH_UP - 1) as f64 / fps);
+    assert_eq!(solver.pending(springs, 1.0), 2 * (MAX_CATCH_UP + 1));
+    solver.skip_to(springs, 0.25);
+    assert_eq!(solver.pending(springs, 1.0), 2 * (MAX_CATCH_UP + 1), "never back");
+}

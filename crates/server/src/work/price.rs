@@ -22,7 +22,7 @@ use anim::motion::{LayerMode, MotionSpec};
 use anim::spring::{DEFAULT_WARMUP, SpringsSpec, warmup_start};
 use anim::{Clip, ClipSpec, Skeleton, Speed};
 
-use crate::stream::{PinnedClip, StreamMotion};
+use crate::stream::{MAX_CATCH_UP, PinnedClip, StreamMotion};
 
 /// Nanoseconds of one core a work unit stands for (measured; BENCHMARKS.md).
 pub const NS_PER_UNIT: u64 = 10;
@@ -103,32 +103,58 @@ fn substeps_per_frame(hz: f64, fps: u32) -> u64 {
     (hz / f64::from(fps.max(1))).ceil() as u64
 }
 
-/// The work of one stream or broadcast frame of `motion` at `fps`: its
-/// pose, and the spring substeps a frame runs at most (`⌈hz / fps⌉`).
+/// The work of one stream frame of `motion` at `fps` ([`stream_frame`]).
 pub fn motion_frame(motion: &StreamMotion, fps: u32) -> u64 {
     stream_frame(&[motion], 0, fps)
 }
 
+/// A stream frame's share of the ticks frames woken late catch up: `tick`
+/// units a late frame runs again for each tick it skipped, at most
+/// [`MAX_CATCH_UP`] of them, and each tick once at most, so a second of
+/// playback runs at most `fps + MAX_CATCH_UP` ticks' worth: each of its
+/// `fps` frames pays `MAX_CATCH_UP / fps` of a tick more.
+pub fn catch_up(tick: u64, fps: u32) -> u64 {
+    tick.saturating_mul(MAX_CATCH_UP).div_ceil(u64::from(fps.max(1)))
+}
+
 /// The work of one frame at `fps` of a stream whose decks play `motions`
-/// (the one playing last), with `ik` units of the stream's own IK: every
-/// deck's pose and the IK on their mix, then the playing motion's spring
-/// substeps, each of which evaluates that whole mix again at its own time
-/// (docs/springs.md, “Time”: a crossfade's substeps see both motions).
+/// (the one playing last), with `ik` units of the stream's own IK: a
+/// broadcast tick's ([`broadcast_frame`]), and the catch-up of its spring
+/// substeps ([`catch_up`]): a frame woken late runs the substeps of the
+/// ticks it skipped.
 pub fn stream_frame(motions: &[&StreamMotion], ik: u64, fps: u32) -> u64 {
+    let (mix, springs) = frame_parts(motions, ik, fps);
+    mix.saturating_add(springs).saturating_add(catch_up(springs, fps))
+}
+
+/// The work of one broadcast tick at `fps` (every tick stepped once, none
+/// caught up) of decks playing `motions`, with `ik` units of its own IK.
+pub fn broadcast_frame(motions: &[&StreamMotion], ik: u64, fps: u32) -> u64 {
+    let (mix, springs) = frame_parts(motions, ik, fps);
+    mix.saturating_add(springs)
+}
+
+/// One tick's mix and its spring substeps: every deck's pose and the IK on
+/// their mix, then the playing motion's substeps (`⌈hz / fps⌉`), each of
+/// which evaluates that whole mix again at its own time (docs/springs.md,
+/// “Time”: a crossfade's substeps see every motion fading).
+fn frame_parts(motions: &[&StreamMotion], ik: u64, fps: u32) -> (u64, u64) {
     let mix = motions.iter().map(|m| motion_pose(m)).fold(ik, u64::saturating_add);
-    let Some(springs) = motions.last().and_then(|top| top.springs()) else { return mix };
+    let Some(springs) = motions.last().and_then(|top| top.springs()) else { return (mix, 0) };
     let substeps = substeps_per_frame(springs.substep_hz(), fps);
-    mix.saturating_add(substeps.saturating_mul(substep(mix, springs.substep_work())))
+    (mix, substeps.saturating_mul(substep(mix, springs.substep_work())))
 }
 
 /// The work of one frame of a clip stream at `fps`: the clip's pose, and
-/// its spring chains' substeps (`springs`, checked against its skeleton).
+/// its spring chains' substeps (`springs`, checked against its skeleton)
+/// with their catch-up ([`catch_up`]).
 pub fn clip_frame(clip: &Clip, springs: &SpringsSpec, fps: u32) -> u64 {
     let pose = clip_pose(clip);
     let joints: usize = springs.chains.iter().map(|c| c.joints.len().saturating_sub(1)).sum();
     let tests = springs.chains.iter().map(|c| c.joints.len().saturating_sub(1) * c.colliders.len()).sum();
     let substeps = if joints == 0 { 0 } else { substeps_per_frame(springs.substep_hz, fps) };
-    pose.saturating_add(substeps.saturating_mul(substep(pose, (joints, tests))))
+    let chains = substeps.saturating_mul(substep(pose, (joints, tests)));
+    pose.saturating_add(chains).saturating_add(catch_up(chains, fps))
 }
 
 /// The work of the spring substeps of a stateless request at `times` (in

@@ -324,13 +324,41 @@ fn a_crossfades_spring_substeps_evaluate_both_motions() {
     };
     let layers = vec![LayerSpec::new(Arc::clone(&pinned)), LayerSpec::new(pinned)];
     let sprung = anim::Motion::build(MotionSpec { layers, springs, ..Default::default() }).unwrap();
-    assert_eq!(price::stream_frame(&[&plain], 0, 60), 10, "no springs: the pose");
+    assert_eq!(price::broadcast_frame(&[&plain], 0, 60), 10, "no springs: the pose");
     // 120 Hz at 60 fps: 2 substeps of the pose (20) and the chain (40).
-    assert_eq!(price::stream_frame(&[&sprung], 0, 60), 20 + 2 * (20 + 40));
-    assert_eq!(price::motion_frame(&sprung, 60), 140, "a motion's frame is its stream's");
+    assert_eq!(price::broadcast_frame(&[&sprung], 0, 60), 20 + 2 * (20 + 40));
     // Fading into B with 7 units of stream IK: each substep evaluates A, B and the IK (37), then the chain.
-    assert_eq!(price::stream_frame(&[&plain, &sprung], 7, 60), 37 + 2 * (37 + 40));
-    assert_eq!(price::stream_frame(&[&plain, &sprung], 0, 50), 30 + 3 * (30 + 40), "3 substeps at 50 fps");
+    assert_eq!(price::broadcast_frame(&[&plain, &sprung], 7, 60), 37 + 2 * (37 + 40));
+    assert_eq!(price::broadcast_frame(&[&plain, &sprung], 0, 50), 30 + 3 * (30 + 40), "3 substeps at 50 fps");
     // Fading into A: its springs (none) run, B's stop.
-    assert_eq!(price::stream_frame(&[&sprung, &plain], 0, 60), 30);
+    assert_eq!(price::broadcast_frame(&[&sprung, &plain], 0, 60), 30);
+}
+
+#[test]
+fn a_stream_frame_pays_its_share_of_the_substeps_late_frames_catch_up() {
+    use crate::stream::MAX_CATCH_UP;
+    assert_eq!(MAX_CATCH_UP, 4, "the sums below catch up 4 ticks");
+    let plain = motion(chain_clip(10, Vec::new()), 1, Vec::new());
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(chain_clip(10, Vec::new()))));
+    let springs = anim::spring::SpringsSpec {
+        chains: vec![anim::spring::ChainSpec::new("tail", &["j5", "j6", "j7", "j8", "j9"])],
+        ..Default::default()
+    };
+    let sprung =
+        anim::Motion::build(MotionSpec { layers: vec![LayerSpec::new(pinned)], springs, ..Default::default() })
+            .unwrap();
+    assert_eq!(price::stream_frame(&[&plain], 0, 60), 10, "no springs: nothing to catch up");
+    // 2 substeps of the pose (10) and the chain (40) a tick: 100; a second of
+    // 60 frames catches up 4 ticks more, ⌈400 / 60⌉ = 7 a frame.
+    assert_eq!(price::stream_frame(&[&sprung], 0, 60), 10 + 100 + 7);
+    assert_eq!(price::motion_frame(&sprung, 60), 117, "a motion's frame is its stream's");
+    // At 10 fps: 12 substeps of 50, 600 a tick, 4 × 600 / 10 = 240 a frame.
+    assert_eq!(price::stream_frame(&[&sprung], 0, 10), 10 + 600 + 240);
+    assert_eq!(price::catch_up(600, 10), 240);
+    // A clip stream's chains: the 10-joint chain's own frame, priced alike.
+    let chains = anim::spring::SpringsSpec {
+        chains: vec![anim::spring::ChainSpec::new("tail", &["j5", "j6", "j7", "j8", "j9"])],
+        ..Default::default()
+    };
+    assert_eq!(price::clip_frame(&chain_clip(10, Vec::new()), &chains, 60), 10 + 100 + 7);
 }
