@@ -232,3 +232,71 @@ fn a_frame_woken_late_runs_the_substeps_of_its_latest_skipped_ticks_only() {
     solver.skip_to(springs, 0.25);
     assert_eq!(solver.pending(springs, 1.0), 2 * (MAX_CATCH_UP + 1), "never back");
 }
+
+#[test]
+fn a_late_graph_frame_evaluates_its_latest_skipped_ticks_and_steps_the_older_ones() {
+    let params = graph_params(true);
+    let program = params.graph.as_ref().unwrap();
+    assert!(program.catches_up(), "springs: skipped ticks are evaluated");
+    let space = anim::Space::Local;
+    let on_time = |last: u64| {
+        let mut deck = graph::GraphDeck::new(program, space);
+        for k in 0..=last {
+            deck.tick(30, false, (k, 0));
+        }
+        deck
+    };
+    // Woken late by MAX_CATCH_UP ticks: every one evaluated, the frame a play that never skipped shows.
+    let mut late = on_time(20);
+    late.tick(30, false, (21 + MAX_CATCH_UP, MAX_CATCH_UP));
+    assert_eq!(late.pose(), on_time(21 + MAX_CATCH_UP).pose());
+    // Woken 40 ticks late: the graph steps every tick (its state is the same), the chains skip the older
+    // ticks' substeps and so swing otherwise.
+    let mut later = on_time(20);
+    later.tick(30, false, (61, 40));
+    let never = on_time(61);
+    assert_eq!(later.state().0, never.state().0, "every tick stepped");
+    assert_ne!(later.pose(), never.pose(), "the chains caught up 4 ticks of 40");
+    assert_eq!(later.state().1.map(|s| s.next), never.state().1.map(|s| s.next), "both at tick 61's substep");
+}
+
+/// The local rotations of a JSON frame's joints.
+fn frame_rotations(frame: &Delivered) -> Vec<[f32; 4]> {
+    let v: serde_json::Value = serde_json::from_slice(&frame.bytes).unwrap();
+    let joints = v["pose"]["joints"].as_array().unwrap();
+    let quat =
+        |j: &serde_json::Value| -> [f32; 4] { std::array::from_fn(|i| j["rotation"][i].as_f64().unwrap() as f32) };
+    joints.iter().map(quat).collect()
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_motion_streams_frame_woken_late_runs_the_substeps_of_its_latest_skipped_ticks_only() {
+    use anim::motion::{LayerSpec, MotionOptions, MotionSpec, Player};
+    let mut chain = ChainSpec::new("tail", &["tail0", "tail1", "tip"]);
+    chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
+    let springs = SpringsSpec { chains: vec![chain], ..SpringsSpec::default() };
+    let layers = vec![LayerSpec::new(pinned("a", line(1.0, Vec3::X)))];
+    let motion = Arc::new(anim::Motion::build(MotionSpec { layers, springs, ..MotionSpec::default() }).unwrap());
+    let e = Engine::new(EngineConfig { max_streams: 10, max_streams_per_client: 10, ..EngineConfig::default() });
+    let req = StreamRequest { fps: 30, encoding: Encoding::Json, ..StreamRequest::default() };
+    let params = StreamParams::of_motion(Arc::clone(&motion), "m".into(), req).unwrap();
+    let mut sub = e.watch(params, e.admit(None).unwrap(), None);
+    let Next::Frame(first) = sub.next().await else { panic!("a first frame") };
+    assert_eq!(first.seq, 0);
+    // Stuck for a second: ticks 1..=30 fall due, 29 skipped.
+    tokio::time::advance(std::time::Duration::from_millis(1000)).await;
+    let Next::Frame(late) = sub.next().await else { panic!("a late frame") };
+    assert_eq!((late.seq, late.dropped), (30, 29));
+    // What the player shows at 1 s after 0 s: every substep of the second, or those after tick 25 only.
+    let at = |skip: bool| {
+        let mut player = Player::new(Arc::clone(&motion));
+        player.sample_clocked(0.0, 0.0, &MotionOptions::default());
+        if skip {
+            player.skip_springs_to((30 - MAX_CATCH_UP - 1) as f64 / 30.0);
+        }
+        player.sample_clocked(1.0, 1.0, &MotionOptions::default());
+        player.pose().rotations.iter().map(|q| q.to_array()).collect::<Vec<_>>()
+    };
+    assert_eq!(frame_rotations(&late), at(true), "the substeps of the latest 4 skipped ticks and its own");
+    assert_ne!(at(true), at(false), "a second of substeps swings the tail otherwise");
+}
