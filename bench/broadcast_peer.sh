@@ -74,16 +74,18 @@ echo "== broadcasts: the server against a plain Node \`ws\` broadcaster (the iss
 python3 - "$out" "${scenarios[@]}" <<'PY'
 import json, os, sys
 out, names = sys.argv[1], sys.argv[2:]
+nan = float("nan")
 def load(name):
     p = os.path.join(out, name + ".json")
     if not os.path.exists(p):
         return None
     r = json.load(open(p)); s = r["streams"]; srv = r.get("server") or {}
     return {"opened": s["opened"], "streams": s["streams"], "fps": s["frames_per_stream_per_sec"],
-            "cores": srv.get("cpu_cores", float("nan")), "us": srv.get("cpu_us_per_op", float("nan")),
-            "kib": (srv.get("rss_per_stream_bytes") or float("nan")) / 1024, "loss": s["loss_ratio"],
+            "cores": srv.get("cpu_cores", nan), "us": srv.get("cpu_us_per_op", nan),
+            "kib": nan if srv.get("rss_per_stream_bytes") is None else srv["rss_per_stream_bytes"] / 1024,
+            "loss": s["loss_ratio"],
             "p50": s["receive_lateness"]["p50_us"] / 1e3, "p99": s["receive_lateness"]["p99_us"] / 1e3,
-            "client": r.get("client_cpu_cores") or float("nan"), "errors": r["errors"] or "none",
+            "client": r.get("client_cpu_cores") or nan, "errors": r["errors"] or "none",
             "load": open(os.path.join(out, name + ".loadavg0")).read().split()[0]}
 ok = lambda b: "met" if b else "MISSED"
 print("| scenario | run | viewers opened | frames/s each | CPU per delivered frame | server / peer | cores (client) | loss | receive late p50 / p99 | RSS per viewer | load avg before |")
@@ -91,7 +93,7 @@ print("|---|---|---|---|---|---|---|---|---|---|---|")
 verdicts = []
 for n in names:
     server, peer = load("server-" + n), load("peer-" + n)
-    ratio = server["us"] / peer["us"] if server and peer and peer["us"] > 0 else float("nan")
+    ratio = server["us"] / peer["us"] if server and peer and peer["us"] > 0 else nan
     for who, run, r in (("server", "server", server), ("Node `ws` peer", "peer", peer)):
         if r is None:
             print("| %s | %s | (failed: see %s-%s.err) |" % (n, who, run, n)); continue
