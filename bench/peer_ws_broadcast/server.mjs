@@ -20,7 +20,7 @@
 // `n·10⁹/fps` ns after the process's clock origin, which `Ping` reports as its monotonic zero, and `seq` counts
 // the broadcast's ticks from its creation, so the load generator measures lateness on the peer's grid as it does
 // on the server's. A timer that wakes past a later tick skips to the latest due tick (the viewers see a gap); a
-// viewer holding 8 frames unsent loses the tick's frame, as the server's slow viewer does.
+// viewer holding 8 frames unsent loses the tick's frame (the server's slow viewer keeps 8 and loses its oldest).
 //
 //   node server.mjs --frame frame.json    # prints "peer listening on http://…" and "peer gRPC listening on http://…"
 
