@@ -100,14 +100,15 @@ for n in names:
         print("| %s | %s | %d/%d | %.2f | %.2f µs | %s | %.2f (%.2f) | %.3f %% | %.1f / %.1f ms | %.1f KiB | %s |" % (
             n, who, r["opened"], r["streams"], r["fps"], r["us"], "×%.2f" % ratio if who == "server" else "",
             r["cores"], r["client"], 100 * r["loss"], r["p50"], r["p99"], r["kib"], r["load"]))
-    if server and peer:
-        verdicts.append("%s: CPU per frame ×%.2f the peer's: %s" % (n, ratio, ok(ratio <= 1)))
-        if n.startswith("5000-"):
-            verdicts.append("%s: p99 %.1f ms against the peer's %.1f ms: %s" % (
-                n, server["p99"], peer["p99"], ok(server["p99"] <= peer["p99"])))
-        for who, r in (("server", server), ("peer", peer)):
-            if r["errors"] != "none":
-                verdicts.append("%s %s errors: %s" % (n, who, r["errors"]))
+    if not (server and peer):
+        continue
+    # A run whose viewers were closed or refused did not carry its viewers for the window: no verdict on it.
+    failed = ["%s errors %s" % (who, r["errors"]) for who, r in (("server", server), ("peer", peer)) if r["errors"] != "none"]
+    judge = lambda b: "NOT JUDGED (%s)" % "; ".join(failed) if failed else ok(b)
+    verdicts.append("%s: CPU per frame ×%.2f the peer's: %s" % (n, ratio, judge(ratio <= 1)))
+    if n.startswith("5000-"):
+        verdicts.append("%s: p99 %.1f ms against the peer's %.1f ms: %s" % (
+            n, server["p99"], peer["p99"], judge(server["p99"] <= peer["p99"])))
 print()
 for v in verdicts:
     print("- " + v)
