@@ -28,27 +28,11 @@ set -euo pipefail
 source "$(dirname "$0")/streams_lib.sh"
 ib_help "$@"
 bs_serve
-fds=$(ulimit -n)
-echo "file descriptors: soft limit $fds (hard $(ulimit -Hn)) per process"
-
-# A fresh server for each scenario, so no earlier run's freed memory hides in "RSS before".
-fresh_server() {
-  kill "$pid" 2>/dev/null || true
-  wait "$pid" 2>/dev/null || true
-  ib_serve "server-$1" --data-dir "$IB_WORK/data-$1" --max-streams 40000 --max-streams-per-client 40000 \
-    --max-connections 40000
-  pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
-  echo "server pid $pid, $http"
-}
+echo "file descriptors: soft limit $(ulimit -n) (hard $(ulimit -Hn)) per process"
 
 runs=()
 for scenario in ${SCENARIOS:-20000x10 5000x30}; do
-  viewers=${scenario%x*} fps=${scenario#*x}
-  if [ "$viewers" -gt $((fds - 256)) ]; then
-    echo "!! $viewers viewers need more than the $fds file descriptors a process may hold here:" \
-      "running $((fds - 256)) instead"
-    viewers=$((fds - 256))
-  fi
+  viewers=$(bs_viewers "${scenario%x*}") fps=${scenario#*x}
   for enc in ${ENCODINGS:-ws}; do
     case $enc in
       ws) flags=() ;;
@@ -56,7 +40,7 @@ for scenario in ${SCENARIOS:-20000x10 5000x30}; do
       *) echo "unknown encoding $enc (ws, wspb)" >&2; exit 2 ;;
     esac
     name=$enc-$viewers-at-$fps
-    fresh_server "$name"
+    bs_fresh_server "server-$name"
     common=(ws-broadcast "${flags[@]}" --fps "$fps" --joints "${JOINTS:-20}")
     bs_run "warm-$name" "${common[@]}" -c 200 -d 3
     bs_run --now "$name" "${common[@]}" -c "$viewers" -d "${SECS:-20}"

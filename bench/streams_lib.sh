@@ -6,6 +6,8 @@
 #
 #   source "$(dirname "$0")/streams_lib.sh"
 #   bs_serve                   # IB_BIN, and a server: pid, http, grpc; out (reports)
+#   bs_fresh_server NAME       # stops that server, starts a fresh one (stream caps at 40000): pid, http, grpc
+#   bs_viewers N               # N, or the most viewers the file descriptors allow (limit − 256), saying so
 #   bs_run NAME ARGS…          # waits for quiet, runs `inbetween load ARGS… --json` into $out/NAME.json
 #   bs_run --now NAME ARGS…    # the same without the wait (the second run of a pair shares the first's conditions)
 #   bs_compare CLIP MOTION…    # p99 receive lateness, loss and server CPU of clip vs motion runs, and the ratio
@@ -16,7 +18,7 @@
 source "$(dirname "${BASH_SOURCE[0]}")/../scripts/lib.sh"
 
 bs_serve() {
-  cd "$IB_ROOT"
+  cd "$IB_ROOT" || exit
   out=${OUT:-$(mktemp -d)}
   mkdir -p "$out"
   ulimit -n 65536 2>/dev/null || ulimit -n "$(ulimit -Hn)" || true
@@ -27,6 +29,28 @@ bs_serve() {
     --write-rate 100000 --write-burst 100000
   pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
   echo "server pid $pid, $http, $grpc; reports in $out"
+}
+
+# A fresh server in place of the current one, so no earlier run's freed memory hides in "RSS before".
+bs_fresh_server() {
+  kill "$pid" 2>/dev/null || true
+  wait "$pid" 2>/dev/null || true
+  ib_serve "$1" --data-dir "$IB_WORK/data-$1" --max-streams 40000 --max-streams-per-client 40000 \
+    --max-connections 40000
+  pid=$IB_PID http=$IB_HTTP grpc=$IB_GRPC
+  echo "server pid $pid, $http"
+}
+
+# The server and the generator each hold one descriptor per viewer (and a few hundred more).
+bs_viewers() {
+  local fds
+  fds=$(ulimit -n)
+  if [ "$1" -gt $((fds - 256)) ]; then
+    echo "!! $1 viewers need more than the $fds file descriptors a process may hold here: running $((fds - 256)) instead" >&2
+    echo $((fds - 256))
+  else
+    echo "$1"
+  fi
 }
 
 bs_wait_quiet() {
