@@ -66,10 +66,13 @@ fn assert_kept(what: &str, (got, span): (u64, u64)) {
     assert!(share >= 0.99, "{what}: the bystander kept {got} of {span} frames");
 }
 
-/// (a) and (d): 63 viewerless 240 fps broadcasts of a one-joint subset
-/// beside a watched one. The creates past the producers' share are refused
-/// (503 `overloaded`, or 429 `caller_work_limit` past the caller's share);
-/// the bystander keeps its frames; deleting them all stops their CPU at once.
+/// (a) and (d): viewerless 240 fps broadcasts of a one-joint subset beside
+/// a watched one, created until eight are refused (63 once took a node
+/// down; a release build's calibrated units admit more than a debug
+/// build's, so the attack goes on until the price bounds them). The creates
+/// past the producers' share are refused (503 `overloaded`, or 429
+/// `caller_work_limit` past the caller's share); the bystander keeps its
+/// frames; deleting them all stops their CPU at once.
 #[tokio::test(flavor = "multi_thread")]
 async fn sixty_three_viewerless_240_fps_broadcasts_leave_a_bystander_its_frames() {
     let mut target = target(&[]).await;
@@ -79,7 +82,10 @@ async fn sixty_three_viewerless_240_fps_broadcasts_leave_a_bystander_its_frames(
     let probes = target.probes().await;
     let body = json!({"motion": {"layers": [{"clip": clip}]}, "fps": 240, "joints": ["j63"]});
     let (mut admitted, mut refused) = (Vec::new(), 0);
-    for _ in 0..63 {
+    for _ in 0..1024 {
+        if refused == 8 {
+            break;
+        }
         let (status, b) = create(&target, &http, &body).await;
         match status {
             201 => admitted.push(b["id"].as_str().unwrap().to_owned()),
@@ -91,7 +97,7 @@ async fn sixty_three_viewerless_240_fps_broadcasts_leave_a_bystander_its_frames(
             _ => panic!("{status}: {b}"),
         }
     }
-    println!("FIGURE 63 creates of 240 fps broadcasts: {} admitted, {refused} refused", admitted.len());
+    println!("FIGURE creates of 240 fps broadcasts until 8 refused: {} admitted, {refused} refused", admitted.len());
     assert!(!admitted.is_empty() && refused > 0, "{} admitted: the price bounds them", admitted.len());
     assert_kept("beside the admitted 240 fps broadcasts", frames_kept(&mut viewer, 5).await);
     // (d) Deleted, their work stops at once.
@@ -112,7 +118,7 @@ async fn sixty_three_viewerless_240_fps_broadcasts_leave_a_bystander_its_frames(
         after.as_secs_f64() * 1e3
     );
     assert!(after < Duration::from_millis(250), "{after:?} of CPU ran on after the deletes");
-    target.assert_survived("63 viewerless broadcasts at 240 fps", &report);
+    target.assert_survived("viewerless broadcasts at 240 fps", &report);
 }
 
 /// (b) One broadcast of a chain IK over 4,096 joints: refused by its price

@@ -878,6 +878,13 @@ impl Broadcast {
     }
 }
 
+/// Sends `item` to a channel's viewers; returns the thread CPU it took.
+fn hand_over(tx: &broadcast::Sender<Item>, item: Item) -> u64 {
+    let start = thread_cpu_ns();
+    let _ = tx.send(item);
+    thread_cpu_ns().saturating_sub(start)
+}
+
 /// Withdraws control `id` from the desk (see [`Broadcast::revoke`]).
 fn revoke(desk: &Mutex<Desk>, id: &Arc<str>) {
     let mut desk = crate::sync::lock(desk);
@@ -998,11 +1005,12 @@ impl Task {
             if let Some(reason) = self.idle(viewers, last_control) {
                 return reason;
             }
-            if viewers > 0 {
-                self.publish();
-            }
-            // A catch-up on a blocking thread is not this tick's work.
-            if stepped_here && self.overrun.over(thread_cpu_ns().saturating_sub(cpu), allowed_ns) {
+            let handed = if viewers > 0 { self.publish() } else { 0 };
+            // A catch-up on a blocking thread is not this tick's work, nor is
+            // waking its viewers' tasks (that grows with viewers, which
+            // their streams' caps bound, not the broadcast's price).
+            let worked = thread_cpu_ns().saturating_sub(cpu).saturating_sub(handed);
+            if stepped_here && self.overrun.over(worked, allowed_ns) {
                 metrics::counter!("inbetween_broadcasts_overrun_total").increment(1);
                 tracing::warn!(broadcast = %b.id, allowed_ns, "a broadcast's ticks overran their price; it ends");
                 return EndReason::TooMuchWork;
@@ -1010,25 +1018,28 @@ impl Task {
         }
     }
 
-    /// Encodes the tick stepped, once per encoding with viewers, and sends it.
-    fn publish(&mut self) {
+    /// Encodes the tick stepped, once per encoding with viewers, and sends
+    /// it; returns the thread CPU the sends took (waking the viewers' tasks).
+    fn publish(&mut self) -> u64 {
         let b = &self.broadcast;
         let sent_at = unix_nanos();
         metrics::counter!("inbetween_broadcast_ticks_total").increment(1);
         let program = self.program.as_mut().expect("the program is back after each catch-up");
+        let mut handed = 0;
         for encoding in [Encoding::Json, Encoding::Protobuf] {
             let tx = b.channel(encoding);
             if tx.receiver_count() > 0 {
-                let _ = tx.send(Item::Frame(program.encode(encoding, sent_at)));
+                handed += hand_over(tx, Item::Frame(program.encode(encoding, sent_at)));
             }
         }
         // Once per layout watched, whatever its viewers' number.
         let mut channels = crate::sync::lock(&b.compact);
         channels.retain(|c| c.tx.receiver_count() > 0);
         for c in channels.iter() {
-            let _ = c.tx.send(Item::Frame(program.encode_compact(&c.layout, sent_at)));
+            handed += hand_over(&c.tx, Item::Frame(program.encode_compact(&c.layout, sent_at)));
         }
         program.keep_compact(|key| channels.iter().any(|c| c.layout.key() == key));
+        handed
     }
 
     /// Files `controls` (and drops the `revoked` ones) and steps the program
