@@ -1,5 +1,5 @@
 //! A stream's per-frame cost with and without springs (BENCHMARKS.md,
-//! “Springs on a stream, per frame”), for counting instructions rather
+//! “Springs on a stream”), for counting instructions rather
 //! than timing on a shared machine: the Fox's walk (`examples/gltf/Fox`,
 //! imported at scale 0.01) played by a stream [`Player`] at 60 fps, plain
 //! (`clip`) or with `examples/motions/fox-tail-springs.json`'s tail chain
@@ -12,8 +12,8 @@
 //!
 //! Run: `cargo bench -p inbetween-anim --bench spring_stream -- CASE [FRAMES]`
 //! (`CASE`: `clip` or `springs`; 600 frames by default); count with
-//! `valgrind --tool=callgrind target/release/deps/spring_stream-* springs 600`
-//! against a run of 0 frames (the setup), divided by the frames.
+//! `valgrind --tool=callgrind --toggle-collect='*Player*sample_clocked*'
+//! target/release/deps/spring_stream-<hash> springs 600`, divided by the frames.
 
 extern crate inbetween_anim as anim;
 
