@@ -27,8 +27,9 @@ pub(super) struct Link {
     pub joint: u32,
     pub parent_slot: u32,
     pub bone: u32,
-    /// Whether another link is its child, so its model transform is read
-    /// (a chain's last turning joint has none: only its rotation counts).
+    /// Whether another link is its child. A driven link without one (a
+    /// chain's last turning joint) is not placed in model space: nothing
+    /// reads it there, only its rotation counts.
     pub parent: bool,
 }
 
