@@ -108,6 +108,16 @@ pub(super) fn needs<'a>(
     }
 }
 
+/// Cuts each layer's needs (`words` words per layer) to the joints in
+/// `only`: a caller that reads only those joints of the pose.
+pub(super) fn restrict(needs: &mut [u64], words: usize, only: &[u64]) {
+    for need in needs.chunks_exact_mut(words) {
+        for (n, o) in need.iter_mut().zip(only) {
+            *n &= o;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -235,9 +235,9 @@ impl<C: ClipSource> Deck<C> {
     }
 
     /// The deck's local pose at the share `u` of the way from its previous
-    /// tick to its last (see [`Between`]); the last tick's own pose when
-    /// it had no previous one.
-    fn sample_between(&mut self, u: f64, ease: Ease) -> &Pose {
+    /// tick to its last (see [`Between`]), right at the joints in `only`
+    /// (all without); the last tick's own pose when it had no previous one.
+    fn sample_between(&mut self, u: f64, ease: Ease, only: Option<&[u64]>) -> &Pose {
         let Some((tau, ds)) = self.between.from else { return self.sampler.local() };
         let b = &mut self.between;
         b.at_phases.clone_from(&b.phases);
@@ -246,8 +246,14 @@ impl<C: ClipSource> Deck<C> {
         for (w, last) in b.at_weights.iter_mut().zip(&self.weights) {
             *w += (*last - *w) * u as f32;
         }
-        let options = MotionOptions { ease, space: Space::Local };
-        self.motion.sample_with(tau + u * ds, &b.at_phases, &b.at_weights, &options, &mut b.sampler);
+        let (at, live) = (tau + u * ds, (&b.at_phases[..], &b.at_weights[..]));
+        match only {
+            Some(only) => self.motion.sample_joints_with(at, live, ease, only, &mut b.sampler),
+            None => {
+                let options = MotionOptions { ease, space: Space::Local };
+                self.motion.sample_with(at, live.0, live.1, &options, &mut b.sampler);
+            }
+        }
         b.sampler.local()
     }
 }
@@ -534,8 +540,11 @@ impl<C: ClipSource> Player<C> {
         let tau = self.motion_time();
         let same = !std::mem::take(&mut self.springs.jumped);
         let mut local = std::mem::take(&mut self.local);
+        // The substeps read only the chains' joints and their ancestors,
+        // unless the stream's IK, which reads whole chains, runs first.
+        let only = self.ik.constraints.is_empty().then(|| springs.reads());
         run.clocked_frame(springs, (clock, tau, same), &mut local, |u, pose| {
-            self.pose_between(u, ease, pose);
+            self.pose_between(u, (ease, only), pose);
             self.solve_ik_between(pose);
         });
         (self.local, self.springs.run) = (local, Some(run));
@@ -545,14 +554,15 @@ impl<C: ClipSource> Player<C> {
     /// The mixed local pose at the share `u` of the way from the previous
     /// tick to the last, into `out`: every deck at its time and weights
     /// then, every fade (one that ended at the last tick included) at its
-    /// `α` then (docs/springs.md, “Time”).
-    fn pose_between(&mut self, u: f64, ease: Ease, out: &mut Pose) {
-        let top = self.top.sample_between(u, ease);
+    /// `α` then (docs/springs.md, “Time”); right at the joints in `only`
+    /// (all without), which are what they would be in the whole pose.
+    fn pose_between(&mut self, u: f64, (ease, only): (Ease, Option<&[u64]>), out: &mut Pose) {
+        let top = self.top.sample_between(u, ease, only);
         match self.fade.as_deref_mut().or(self.ended.as_deref_mut()) {
             None => out.copy_from(top),
             Some(fade) => {
                 let alpha = fade.alpha_between(u);
-                fade.under.pose_between(u, ease, out);
+                fade.under.pose_between(u, (ease, only), out);
                 if alpha > 0.0 {
                     blend_into(out, top, alpha);
                 }

@@ -187,7 +187,7 @@ impl<C: ClipSource> Motion<C> {
     pub(super) fn sample_local(&self, tau: f64, ease: Ease, sampler: &mut MotionSampler) -> f32 {
         let mut phases = std::mem::take(&mut sampler.phases);
         self.phases_at(tau, &self.weights, &mut phases);
-        let clip_time = self.layer_into(tau, &phases, &self.weights, ease, sampler);
+        let clip_time = self.layer_into(tau, &phases, &self.weights, (ease, None), sampler);
         sampler.phases = phases;
         if !self.ik.is_empty() {
             let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;
@@ -212,15 +212,40 @@ impl<C: ClipSource> Motion<C> {
         options: &MotionOptions,
         sampler: &mut MotionSampler,
     ) -> f32 {
-        let clip_time = self.layer_into(tau, phases, weights, options.ease, sampler);
+        let clip_time = self.layer_into(tau, phases, weights, (options.ease, None), sampler);
         sampler.finish(self.skeleton(), options.space);
         clip_time
     }
 
+    /// [`Motion::sample_with`] in local space, right at the output joints
+    /// in `only` (a bit set, joint `j` bit `j % 64` of word `j / 64`) and
+    /// unspecified elsewhere: each layer samples and layers only those of
+    /// its joints, so they are bit for bit what the whole pose has there.
+    /// What a spring substep sees ([`crate::spring::Springs::reads`]).
+    pub(crate) fn sample_joints_with(
+        &self,
+        tau: f64,
+        (phases, weights): (&[f64], &[f32]),
+        ease: Ease,
+        only: &[u64],
+        sampler: &mut MotionSampler,
+    ) {
+        self.layer_into(tau, phases, weights, (ease, Some(only)), sampler);
+        sampler.space = Space::Local;
+    }
+
     /// Each layer's clip pose (its clip IK solved), layered into the
     /// sampler's local pose, with root motion; returns the first layer's
-    /// clip time.
-    fn layer_into(&self, tau: f64, phases: &[f64], weights: &[f32], ease: Ease, sampler: &mut MotionSampler) -> f32 {
+    /// clip time. With `only`, the output joints outside it are skipped
+    /// (see [`Motion::sample_joints_with`]).
+    fn layer_into(
+        &self,
+        tau: f64,
+        phases: &[f64],
+        weights: &[f32],
+        (ease, only): (Ease, Option<&[u64]>),
+        sampler: &mut MotionSampler,
+    ) -> f32 {
         let MotionSampler {
             cursors,
             layer: scratch,
@@ -243,6 +268,9 @@ impl<C: ClipSource> Motion<C> {
         let skeleton = self.skeleton();
         let words = coverage::words(self.skeleton().len());
         coverage::needs(self.layers.iter().map(|l| (l.mode, &l.reach)), weights, words, needs, hidden);
+        if let Some(only) = only {
+            coverage::restrict(needs, words, only);
+        }
         cursors.resize_with(self.layers.len(), Cursor::default);
         roots.clear();
         clip_times.clear();
@@ -472,4 +500,77 @@ fn joint(pose: &Pose, j: usize) -> Joint {
 
 fn set_joint(pose: &mut Pose, j: usize, joint: Joint) {
     (pose.translations[j], pose.rotations[j], pose.scales[j]) = (joint.t, joint.q, joint.s);
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec3, Vec4};
+
+    use super::*;
+    use crate::motion::{LayerSpec, MaskSpec, MotionSpec, RootMode, RootMotionSpec};
+    use crate::{Channel, ClipSpec, Interpolation, JointSpec, Keys, SkeletonSpec, TrackSpec, Transform};
+
+    /// Six joints (two branches), every one turning and moving; `k` makes
+    /// the clips differ.
+    fn clip(k: f32) -> Clip {
+        let joint = |name: &str, parent: Option<&str>| JointSpec {
+            name: name.into(),
+            parent: parent.map(Into::into),
+            rest: Transform { translation: Vec3::new(0.0, 0.1, 0.0), ..Transform::IDENTITY },
+            inverse_bind: None,
+        };
+        let names = ["root", "a", "b", "c", "d", "e"];
+        let parents = [None, Some("root"), Some("a"), Some("root"), Some("c"), Some("d")];
+        let joints = names.iter().zip(parents).map(|(n, p)| joint(n, p)).collect();
+        let times = vec![0.0, 0.4, 1.0];
+        let mut tracks = Vec::new();
+        for (i, name) in names.iter().enumerate() {
+            let a = k + i as f32 * 0.1;
+            let turn = |x: f32| Vec4::from(Quat::from_euler(glam::EulerRot::XYZ, x, 0.5 * x, -x));
+            let turns = Keys::Vec4(vec![turn(0.0), turn(a), turn(-a)]);
+            let moves = Keys::Vec3(vec![Vec3::ZERO, Vec3::splat(a), Vec3::new(a, 0.0, -a)]);
+            tracks.push(TrackSpec::new(name, Channel::Rotation, Interpolation::Linear, times.clone(), turns));
+            tracks.push(TrackSpec::new(name, Channel::Translation, Interpolation::CatmullRom, times.clone(), moves));
+        }
+        let skeleton = Some(SkeletonSpec { joints });
+        Clip::build(&ClipSpec { name: format!("c{k}"), skeleton, tracks, ..Default::default() }).unwrap()
+    }
+
+    #[test]
+    fn sampling_some_joints_gives_them_bit_for_bit_as_the_whole_pose_does() {
+        let (walk, wave, lean) = (clip(0.3), clip(0.9), clip(-0.5));
+        let mask = MaskSpec { joints: vec![("c".into(), 0.5), ("a".into(), 1.0)], descendants: true, default: None };
+        let spec = MotionSpec {
+            layers: vec![
+                LayerSpec { speed: 1.3, ..LayerSpec::new(&walk) },
+                LayerSpec { weight: 0.7, mask: Some(mask), offset: 0.2, ..LayerSpec::new(&wave) },
+                LayerSpec { weight: 0.4, mode: LayerMode::Additive, ..LayerSpec::new(&lean) },
+            ],
+            root_motion: Some(RootMotionSpec { mode: RootMode::Extract, ..RootMotionSpec::default() }),
+            ..MotionSpec::default()
+        };
+        let motion = Motion::build(spec).unwrap();
+        let options = MotionOptions::default();
+        // Joints 1 (a), 2 (b) and 4 (d): neither the root nor every joint.
+        let only = [0b10110u64];
+        let (mut whole, mut some) = (MotionSampler::new(), MotionSampler::new());
+        let mut phases = Vec::new();
+        for weights in [[1.0, 0.7, 0.4], [0.6, 1.0, 0.0], [1.0, 0.0, 1.0]] {
+            for i in 0..40 {
+                let tau = f64::from(i) * 0.07 - 0.5;
+                motion.phases_at(tau, &weights, &mut phases);
+                motion.sample_with(tau, &phases, &weights, &options, &mut whole);
+                motion.sample_joints_with(tau, (&phases, &weights), options.ease, &only, &mut some);
+                let (w, s) = (whole.local(), some.local());
+                for j in [1, 2, 4] {
+                    let bits = |p: &Pose| {
+                        let (t, q, s) = (p.translations[j], p.rotations[j], p.scales[j]);
+                        [t.to_array(), s.to_array()].concat().into_iter().chain(q.to_array()).map(f32::to_bits)
+                    };
+                    assert!(bits(w).eq(bits(s)), "joint {j} at {tau}: {:?} vs {:?}", w.rotations[j], s.rotations[j]);
+                }
+                assert_eq!(whole.root_motion(), some.root_motion(), "the root's travel at {tau}");
+            }
+        }
+    }
 }

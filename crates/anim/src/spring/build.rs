@@ -27,6 +27,10 @@ pub(super) struct Link {
     pub joint: u32,
     pub parent_slot: u32,
     pub bone: u32,
+    /// Whether another link is its child. A driven link without one (a
+    /// chain's last turning joint) is not placed in model space: nothing
+    /// reads it there, only its rotation counts.
+    pub parent: bool,
 }
 
 /// One turning joint, with everything its substep needs precomputed.
@@ -73,6 +77,9 @@ pub struct Springs {
     /// Per bone, its joint (bones are in joint order).
     pub(super) bone_joints: Vec<u32>,
     pub(super) colliders: Vec<Collider>,
+    /// The joints of `links`, as a bit set (joint `j` is bit `j % 64` of
+    /// word `j / 64`): the only joints of a substep's pose it reads.
+    reads: Vec<u64>,
     names: Vec<String>,
 }
 
@@ -150,7 +157,12 @@ impl Springs {
             })
             .collect();
         let names = spec.chains.iter().map(|c| c.name.clone()).collect();
-        Ok(Springs { hz: spec.substep_hz, joints: skeleton.len(), links, free, bones, bone_joints, colliders, names })
+        let mut reads = vec![0u64; skeleton.len().div_ceil(64)];
+        for link in &links {
+            reads[link.joint as usize / 64] |= 1 << (link.joint % 64);
+        }
+        let joints = skeleton.len();
+        Ok(Springs { hz: spec.substep_hz, joints, links, free, bones, bone_joints, colliders, reads, names })
     }
 
     /// Springs that move nothing (a document without chains).
@@ -179,6 +191,14 @@ impl Springs {
         self.bone_joints.iter().map(|&j| j as usize)
     }
 
+    /// The joints whose local transforms a substep reads (the chains, the
+    /// colliders' joints and their ancestors), as a bit set over the
+    /// skeleton's joints, joint `j` bit `j % 64` of word `j / 64`: a pose
+    /// given to the substeps need be right at these joints only.
+    pub fn reads(&self) -> &[u64] {
+        &self.reads
+    }
+
     /// Bytes held on the heap (what a cache counts).
     pub fn heap_bytes(&self) -> usize {
         use crate::heap::vec_bytes;
@@ -186,6 +206,7 @@ impl Springs {
             + vec_bytes(&self.bones)
             + vec_bytes(&self.bone_joints)
             + vec_bytes(&self.colliders)
+            + vec_bytes(&self.reads)
             + vec_bytes(&self.names)
             + self.names.iter().map(String::capacity).sum::<usize>()
     }
@@ -388,8 +409,11 @@ fn lay_out(
         for j in (0..n).filter(|&j| needed[j] && driven[j] == pass_driven) {
             slot_of[j] = links.len() as u32;
             let parent_slot = skeleton.parent(j).map_or(NONE, |p| slot_of[p]);
-            links.push(Link { joint: j as u32, parent_slot, bone: bone_of[j] });
+            links.push(Link { joint: j as u32, parent_slot, bone: bone_of[j], parent: false });
         }
+    }
+    for slot in links.iter().map(|l| l.parent_slot).filter(|&p| p != NONE).collect::<Vec<_>>() {
+        links[slot as usize].parent = true;
     }
     let free = links.iter().filter(|l| !driven[l.joint as usize]).count();
     Ok((links, free, slot_of))

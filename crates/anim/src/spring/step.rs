@@ -88,7 +88,9 @@ pub(super) fn run(
             tails.rotations[b] = turned;
             turned
         };
-        model[springs.free + k] = up.child(t[j], rotation, s[j]);
+        if link.parent {
+            model[springs.free + k] = up.child(t[j], rotation, s[j]);
+        }
     }
 }
 
