@@ -94,13 +94,14 @@ impl RawStream<'_> {
         let played = graph.stages.graph(state, caller, &built).await?;
         let id: &str = &built.meta.id;
         let wire = request.encoding.into();
-        let pose = pose_bound(&built, &played, |clip| Estimate::frame(clip, id, wire));
+        let post = Arc::new(graph.stages.build(&played, state, caller).await?);
+        let pose = pose_bound((&built, &played, &post), |clip| Estimate::frame(clip, id, wire));
         // The report's JSON bound also bounds its protobuf (floats of 4 bytes, not text).
         let report = if graph.report { report_bytes(&built) } else { 0 };
-        let post = Arc::new(graph.stages.build(&played, state)?);
         let ik = ik_reports(post.ik().len() as u64, wire);
         let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
-        let joints = played.skeleton().len();
+        let skeleton = post.skeleton(played.skeleton());
+        let joints = skeleton.len();
         let (frame, encoding) = match compact {
             Some(_) => (compact_frame(joints, 0), price::compact_frame(joints)),
             None => {
@@ -108,11 +109,11 @@ impl RawStream<'_> {
                 (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)
             }
         };
-        let stages = price::graph_post(&post, played.skeleton(), f64::from(request.fps));
+        let stages = price::graph_post(&post, skeleton, f64::from(request.fps));
         let per_frame = price::graph_tick(&played).saturating_add(stages).saturating_add(encoding);
         let program =
             GraphProgram { graph: played, post, id: id.into(), version: built.meta.version, report: graph.report };
-        let motion = Arc::clone(program.graph.initial_motion());
+        let motion = Arc::clone(program.post.mix().unwrap_or(program.graph.initial_motion()));
         let params = StreamParams::of_motion(motion, Arc::clone(&program.id), request).map_err(|e| self.refused(e))?;
         let params = self.bind(params.with_graph(program), state)?;
         let params = self.with_layout(params, compact, state, caller).await?;

@@ -17,7 +17,8 @@
 use std::sync::Arc;
 
 use super::pinned::PinnedClip;
-use anim::graph::{Graph, GraphPlayer, GraphPost, GraphReport, GraphState, PostRun, SetError, Value};
+use crate::built::PinnedPost;
+use anim::graph::{Graph, GraphPlayer, GraphReport, GraphState, PostRun, SetError, Value};
 use anim::ik::IkReport;
 use anim::spring::SpringState;
 use anim::{Pose, Space};
@@ -32,7 +33,7 @@ pub type StreamGraph = Graph<Arc<dyn PinnedClip>>;
 #[derive(Debug, Clone)]
 pub struct GraphProgram {
     pub graph: Arc<StreamGraph>,
-    pub post: Arc<GraphPost>,
+    pub post: Arc<PinnedPost>,
     /// The stored graph's id (frames name it as their clip) and version.
     pub id: Arc<str>,
     pub version: u64,
@@ -43,7 +44,7 @@ pub struct GraphProgram {
 #[derive(Debug, Clone)]
 pub(crate) struct GraphDeck {
     player: GraphPlayer<Arc<dyn PinnedClip>>,
-    post: Arc<GraphPost>,
+    post: Arc<PinnedPost>,
     /// The motion's IK and springs on the player's pose, run in stream
     /// time (docs/springs.md, “Time”).
     run: PostRun,
@@ -72,7 +73,7 @@ impl GraphDeck {
         program: &GraphProgram,
         space: Space,
         (state, springs): (GraphState, Option<SpringState>),
-        clock: f64,
+        (clock, fps): (f64, u32),
     ) -> Result<Self, SetError> {
         let player = GraphPlayer::from_state(Arc::clone(&program.graph), state)?;
         let run = PostRun::from_state(&program.post, springs)
@@ -81,7 +82,7 @@ impl GraphDeck {
         let mut deck =
             GraphDeck { player, post, run, report: program.report, space, model: Pose::default(), held: false };
         if deck.player.ticks() > 0 {
-            deck.run_post(clock);
+            deck.run_post(fps, clock);
             deck.put_in_space();
         }
         Ok(deck)
@@ -106,13 +107,13 @@ impl GraphDeck {
             for j in 0..n {
                 if every_tick {
                     self.player.tick(dt);
-                    self.run_post(clock(k - n + j));
+                    self.run_post(fps, clock(k - n + j));
                 } else {
                     self.player.step(dt);
                 }
             }
             self.player.tick(dt);
-            self.run_post(clock(k));
+            self.run_post(fps, clock(k));
             self.put_in_space();
         } else if self.post.springs().is_some() {
             self.run.settle(&self.post, clock(k));
@@ -121,10 +122,12 @@ impl GraphDeck {
         self.time(fps) as f32
     }
 
-    /// The motion's stages on the player's pose of the tick at `clock`.
-    fn run_post(&mut self, clock: f64) {
+    /// The motion's stages on the player's pose of its last tick (whose
+    /// motion time the clip layers play at), the springs at `clock`.
+    fn run_post(&mut self, fps: u32, clock: f64) {
         if !self.post.is_empty() {
-            self.run.run(&self.post, self.player.graph().skeleton(), self.player.pose(), clock);
+            let tau = self.time(fps);
+            self.run.run(&self.post, self.player.graph().skeleton(), self.player.pose(), (tau, clock));
         }
     }
 
@@ -132,7 +135,7 @@ impl GraphDeck {
     fn put_in_space(&mut self) {
         if self.space == Space::Model {
             let local = if self.post.is_empty() { self.player.pose() } else { self.run.pose() };
-            self.player.graph().skeleton().to_model(local, &mut self.model);
+            self.post.skeleton(self.player.graph().skeleton()).to_model(local, &mut self.model);
         }
     }
 
