@@ -91,17 +91,17 @@ fn clip_pose(clip: &Clip, tau: f64) -> Pose {
 /// Per joint of `skeleton`, 1 on `joint` and its descendants, else 0.
 fn mask_by_hand(skeleton: &Skeleton, joint: &str) -> Vec<f64> {
     let named = skeleton.names().iter().position(|n| n == joint).unwrap();
-    let mut mask = vec![0.0; skeleton.len()];
-    for j in 0..skeleton.len() {
+    let under = |j: usize| {
         let mut at = Some(j);
         while let Some(a) = at {
             if a == named {
-                mask[j] = 1.0;
+                return 1.0;
             }
             at = skeleton.parent(a);
         }
-    }
-    mask
+        0.0
+    };
+    (0..skeleton.len()).map(under).collect()
 }
 
 /// One layer as the hand evaluation reads it.
