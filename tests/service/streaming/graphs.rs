@@ -409,6 +409,33 @@ async fn a_broadcast_set_reaches_every_viewer_at_the_seq_it_answers() {
 }
 
 #[tokio::test]
+async fn grpc_frames_of_a_graph_among_clip_layers_are_what_samples_answer() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let survey = fox_clip(&app, "Survey").await;
+    let layers = vec![
+        pb::Layer { clip_id: survey.clone(), ..Default::default() },
+        pb::Layer { graph: graph.clone(), weight: Some(0.5), ..Default::default() },
+    ];
+    let motion = pb::Motion { layers, ..Default::default() };
+    let request = pb::StreamRequest { fps: FPS, motion: Some(motion), max_frames: 30, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request).await.unwrap().into_inner();
+    let json_motion = json!({"layers": [{"clip": survey}, {"graph": graph, "weight": 0.5}]});
+    let poses = samples_of(&app, json_motion, 60, FPS, json!([])).await;
+    let mut seen = 0;
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let k = frame.seq as usize;
+        let Some(pose) = poses.get(k) else { break };
+        let rotations: Vec<f32> = (pose["joints"].as_array().unwrap().iter())
+            .flat_map(|j| j["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32))
+            .collect();
+        assert_eq!(frame.pose.unwrap().rotations, rotations, "tick {k}'s rotations");
+        seen += 1;
+    }
+    assert!(seen >= 20, "{seen} frames compared");
+}
+
+#[tokio::test]
 async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     let app = TestApp::start().await;
     let (graph, _) = fox_graph(&app).await;
