@@ -1,5 +1,6 @@
 //! Sampling requests over a graph (docs/graphs.md, “Using a graph”): a
-//! motion whose only layer names `"graph"`, played on the tick grid `k/fps`
+//! motion one of whose layers names `"graph"` (alone, or among clip layers
+//! run on its pose with the motion's IK and springs), played on the tick grid `k/fps`
 //! from 0 with the request's timed `inputs`, the poses of the ticks from
 //! `start` to `end` answered (or, for one pose, of the last tick at or
 //! before `time`). REST and gRPC alike: each says where its fields sit

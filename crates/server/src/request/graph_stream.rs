@@ -1,6 +1,6 @@
 //! Opening a graph stream or broadcast (docs/graphs.md, “Streams and
-//! broadcasts”): a stream request whose motion's only layer names a
-//! `graph`. The graph comes built from the cache of built graphs, pinned at
+//! broadcasts”): a stream request one of whose motion's layers names a
+//! `graph` (its clip layers, if any, run on the graph's pose). The graph comes built from the cache of built graphs, pinned at
 //! its version for as long as the stream plays; it plays on the stream's
 //! tick grid from motion time 0 at speed 1, so what a graph stream does not
 //! take — a `start` or `speed`, an `ease`, a parameter subset, a report in

@@ -7,8 +7,9 @@
 //! steps the ticks before its `start`. A pause holds the pose and the
 //! graph's time (the first tick is always played: it shows node time 0).
 //!
-//! The motion's IK and springs run on each tick's pose (docs/graphs.md,
-//! “What composes with a graph”), the springs in stream time.
+//! The motion's clip layers (at the tick's motion time), IK and springs run
+//! on each tick's pose (docs/graphs.md, “What composes with a graph”), the
+//! springs in stream time.
 //!
 //! The player's state is plain values (`anim::graph::GraphState`), and so is
 //! the springs' (`anim::spring::SpringState`), which a broadcast checkpoint
