@@ -14,6 +14,9 @@ use formats::wire::graph::GraphDoc;
 /// The core's graph over clips pinned at their versions.
 pub type PinnedGraph = Graph<Arc<dyn PinnedClip>>;
 
+/// What a motion over a pinned graph runs on its pose: its clip layers, IK and springs.
+pub type PinnedPost = anim::graph::GraphPost<Arc<dyn PinnedClip>>;
+
 /// A stored graph at one version, built over its clips at theirs.
 #[derive(Debug)]
 pub struct BuiltGraph {

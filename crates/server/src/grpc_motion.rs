@@ -467,7 +467,7 @@ impl GraphPacker {
 
     /// The joint names sent (the subset's, in skeleton order).
     fn names(&self) -> Vec<String> {
-        let names = self.sampling.graph.skeleton().names();
+        let names = self.sampling.skeleton().names();
         match &self.sampling.joints {
             Some(joints) => joints.iter().map(|&j| names[j].clone()).collect(),
             None => names.to_vec(),
@@ -480,7 +480,7 @@ impl GraphPacker {
         let s = &self.sampling;
         let tick = self.ticks.play(s, i);
         let time = tick.time;
-        let skeleton = s.graph.skeleton();
+        let skeleton = s.skeleton();
         let names = named.then(|| skeleton.names());
         let mut pose = match s.format {
             Format::Trs => {

@@ -213,14 +213,24 @@ async fn bad_graph_requests_are_422_at_their_pointers() {
         (json!({"motion": over(&graph), "start": 1, "end": 0}), "bad_range", "/end"),
         (json!({"motion": over(&graph)}), "times_or_range", ""),
         (
-            json!({"motion": {"layers": [{"graph": graph, "weight": 0.5}]}, "start": 0, "end": 1}),
+            json!({"motion": {"layers": [{"graph": graph, "offset": 0.5}]}, "start": 0, "end": 1}),
             "graph_unsupported",
-            "/motion/layers/0/weight",
+            "/motion/layers/0/offset",
         ),
         (
-            json!({"motion": {"layers": [{"clip": "x"}, {"graph": graph}]}, "start": 0, "end": 1}),
+            json!({"motion": {"layers": [{"graph": graph}, {"graph": graph, "weight": 0.5}]}, "start": 0, "end": 1}),
             "graph_unsupported",
             "/motion/layers/1/graph",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph, "playback": "once"}, {"graph": graph}]}, "start": 0, "end": 1}),
+            "graph_unsupported",
+            "/motion/layers/1/graph",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph, "mode": "additive"}], "root_motion": {}}, "start": 0, "end": 1}),
+            "graph_unsupported",
+            "/motion/root_motion",
         ),
         (
             json!({"motion": {"layers": [{"graph": graph}], "root_motion": {"joint": "nope"}}, "start": 0, "end": 1}),
@@ -245,6 +255,10 @@ async fn bad_graph_requests_are_422_at_their_pointers() {
     let (status, problem) = send(&app, "/v1/samples", &missing).await;
     assert_eq!((status, problem["code"].as_str()), (404, Some("graph_not_found")), "{problem}");
     assert_eq!(problem["pointer"], "/motion/layers/0/graph");
+    let no_clip = json!({"motion": {"layers": [{"graph": graph}, {"clip": "no-such-clip"}]}, "start": 0, "end": 1});
+    let (status, problem) = send(&app, "/v1/samples", &no_clip).await;
+    assert_eq!((status, problem["code"].as_str()), (404, Some("clip_not_found")), "{problem}");
+    assert_eq!(problem["pointer"], "/motion/layers/1/clip");
     app.stop().await;
 }
 

@@ -155,6 +155,55 @@ async fn a_websocket_graph_stream_shows_what_samples_answer_for_the_same_setting
     assert_eq!((&fired["from"], &fired["to"], fired["alpha"].as_f64()), (&json!("idle"), &json!("move"), Some(0.0)));
 }
 
+/// The Fox clip named `name`'s id.
+async fn fox_clip(app: &TestApp, name: &str) -> String {
+    app.get_json(&format!("/v1/clips?name={name}")).await["clips"][0]["id"].as_str().unwrap().to_owned()
+}
+
+/// The Fox's locomotion graph among clip layers (docs/graphs.md, “What
+/// composes with a graph”): Survey on the upper body at half weight, Walk
+/// added at half weight.
+async fn mixed_over(app: &TestApp, graph: &str) -> Value {
+    let (survey, walk) = (fox_clip(app, "Survey").await, fox_clip(app, "Walk").await);
+    json!({"layers": [{"graph": graph},
+        {"clip": survey, "weight": 0.5, "mask": {"joints": {"b_Spine01_02": 1}, "descendants": true}},
+        {"clip": walk, "mode": "additive", "weight": 0.5}]})
+}
+
+#[tokio::test]
+async fn a_graph_among_clip_layers_streams_what_samples_answer_for_the_same_settings() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let motion = mixed_over(&app, &graph).await;
+    let open_msg = json!({"op": "open", "motion": motion, "fps": FPS, "report": true});
+    let (mut ws, opened) = open(&app, open_msg).await;
+    assert_eq!(opened["opened"]["clip"], graph.as_str(), "{opened}");
+    let mut frames = frames_until(&mut ws, 3).await;
+    send(&mut ws, json!({"op": "set", "parameters": {"speed": 2.5}})).await;
+    frames.extend(frames_until(&mut ws, 40).await);
+    let moved = first_in(&frames, 0, "move");
+    let last = *frames.keys().last().unwrap();
+    let inputs = json!([{"time": moved as f64 / f64::from(FPS), "set": {"speed": 2.5}}]);
+    let poses = samples_of(&app, motion.clone(), last, FPS, inputs.clone()).await;
+    let alone = samples(&app, &graph, last, FPS, inputs.clone()).await;
+    for (seq, frame) in &frames {
+        assert_same_tick(*seq, frame, &poses[*seq as usize]);
+        if *seq > 0 {
+            assert_ne!(
+                poses[*seq as usize]["joints"], alone[*seq as usize]["joints"],
+                "the clip layers show, tick {seq}"
+            );
+        }
+    }
+    // A pose is the samples' pose of its tick; compact frames derive their ranges.
+    let body = json!({"motion": motion, "time": 30.0 / f64::from(FPS), "fps": FPS, "report": true, "inputs": inputs});
+    let pose = app.post_json("/v1/poses", &body).await;
+    assert_eq!(pose["joints"], poses[30]["joints"], "{pose}");
+    let (_, compact) =
+        open(&app, json!({"op": "open", "motion": mixed_over(&app, &graph).await, "encoding": "compact"})).await;
+    assert!(compact.get("opened").is_some(), "{compact}");
+}
+
 /// A motion over `graph` with the Fox's tail chain (`examples/motions/fox-tail-springs.json`)
 /// and its leg and head constraints (`examples/motions/walk-look-and-plant.json`).
 fn with_tail_and_ik(graph: &str) -> Value {
@@ -255,15 +304,26 @@ async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
         (json!({"encoding": "compact"}), "graph_unsupported", "/encoding"),
         (json!({"parameters": ["fov"]}), "graph_unsupported", "/parameters/0"),
         (json!({"fps": 0}), "fps_out_of_range", "/fps"),
+        (json!({"motion": {"layers": [{"graph": graph, "speed": 2}]}}), "graph_unsupported", "/motion/layers/0/speed"),
         (
-            json!({"motion": {"layers": [{"graph": graph, "weight": 0.5}]}}),
+            json!({"motion": {"layers": [{"clip": clip}, {"graph": graph, "sync": "s"}]}}),
             "graph_unsupported",
-            "/motion/layers/0/weight",
+            "/motion/layers/1/sync",
         ),
         (
-            json!({"motion": {"layers": [{"graph": graph}, {"clip": clip}]}}),
+            json!({"motion": {"layers": [{"graph": graph}, {"clip": clip}, {"graph": graph}]}}),
             "graph_unsupported",
-            "/motion/layers/0/graph",
+            "/motion/layers/2/graph",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph, "weight": 0.5}], "root_motion": {}}}),
+            "graph_unsupported",
+            "/motion/root_motion",
+        ),
+        (
+            json!({"motion": {"layers": [{"graph": graph}, {"clip": clip, "mask": {"joints": {"nope": 1}}}]}}),
+            "unknown_joint",
+            "/motion/layers/1/mask/joints/nope",
         ),
         (json!({"motion": over("0193e0c0-0000-7000-8000-000000000000")}), "graph_not_found", "/motion/layers/0/graph"),
         (
@@ -349,6 +409,33 @@ async fn a_broadcast_set_reaches_every_viewer_at_the_seq_it_answers() {
 }
 
 #[tokio::test]
+async fn grpc_frames_of_a_graph_among_clip_layers_are_what_samples_answer() {
+    let app = TestApp::start().await;
+    let (graph, _) = fox_graph(&app).await;
+    let survey = fox_clip(&app, "Survey").await;
+    let layers = vec![
+        pb::Layer { clip_id: survey.clone(), ..Default::default() },
+        pb::Layer { graph: graph.clone(), weight: Some(0.5), ..Default::default() },
+    ];
+    let motion = pb::Motion { layers, ..Default::default() };
+    let request = pb::StreamRequest { fps: FPS, motion: Some(motion), max_frames: 30, ..Default::default() };
+    let mut frames = app.grpc().await.stream_frames(request).await.unwrap().into_inner();
+    let json_motion = json!({"layers": [{"clip": survey}, {"graph": graph, "weight": 0.5}]});
+    let poses = samples_of(&app, json_motion, 60, FPS, json!([])).await;
+    let mut seen = 0;
+    while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
+        let k = frame.seq as usize;
+        let Some(pose) = poses.get(k) else { break };
+        let rotations: Vec<f32> = (pose["joints"].as_array().unwrap().iter())
+            .flat_map(|j| j["rotation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32))
+            .collect();
+        assert_eq!(frame.pose.unwrap().rotations, rotations, "tick {k}'s rotations");
+        seen += 1;
+    }
+    assert!(seen >= 20, "{seen} frames compared");
+}
+
+#[tokio::test]
 async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     let app = TestApp::start().await;
     let (graph, _) = fox_graph(&app).await;
@@ -363,13 +450,13 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     assert!(!pose.joint_names.is_empty());
 
     // The refusals of the WebSocket, with the same codes.
-    let weighted = pb::Layer { graph: graph.clone(), weight: Some(0.5), ..Default::default() };
+    let synced = pb::Layer { graph: graph.clone(), sync: "s".into(), ..Default::default() };
     let refusals = [
         (pb::StreamRequest { start_time: Some(1.0), ..request.clone() }, "graph_unsupported"),
         (pb::StreamRequest { playback: 2, ..request.clone() }, "graph_unsupported"),
         (
             pb::StreamRequest {
-                motion: Some(pb::Motion { layers: vec![weighted], ..Default::default() }),
+                motion: Some(pb::Motion { layers: vec![synced], ..Default::default() }),
                 ..request.clone()
             },
             "graph_unsupported",

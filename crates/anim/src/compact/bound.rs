@@ -17,11 +17,13 @@
 //!
 //! A graph's poses are its states' motions under weights its parameters
 //! set, crossfaded (a lerp): the union of every state's bound holds them.
+//! Clip layers around a graph layer its poses as a clip's: that union is
+//! the graph layer's own ranges.
 
 use glam::{Quat, Vec3A};
 
 use super::{JointRange, Ranges, canonical};
-use crate::graph::Graph;
+use crate::graph::{Graph, GraphPost};
 use crate::ik::IkConstraint;
 use crate::motion::{ClipSource, LayerMode, LayerView, Motion, UNMAPPED};
 use crate::spring::Springs;
@@ -137,6 +139,52 @@ impl Ranges {
             ranges.union(&of_motion(motion, &mut clips)?);
         }
         Ok(ranges)
+    }
+
+    /// Ranges holding every pose a motion over `graph` produces: the graph's
+    /// own, or with clip layers beside it ([`GraphPost::mix`]) those layered
+    /// as [`Ranges::of_motion`] does with the graph's ranges as its layer's;
+    /// then the joints `post`'s IK and springs turn.
+    ///
+    /// # Errors
+    /// As [`Ranges::of_graph`], and for the clip layers [`Ranges::of_motion`].
+    pub fn of_played<C: ClipSource>(graph: &Graph<C>, post: &GraphPost<C>, rate: f32) -> Result<Ranges, Unbounded> {
+        let mut clips = ClipRanges { rate, taken: Vec::new() };
+        let mut own = Ranges::at_rest(graph.skeleton());
+        for motion in graph.state_motions() {
+            own.union(&of_motion(motion, &mut clips)?);
+        }
+        let Some(mix) = post.mix() else {
+            own.turned_by(graph.skeleton(), post.ik(), post.springs());
+            return Ok(own);
+        };
+        Ranges::boundable(mix)?;
+        let skeleton = mix.skeleton();
+        let mut ranges = Ranges::at_rest(skeleton);
+        for layer in mix.layer_views() {
+            let own = if layer.external { &own } else { clips.of(layer.clip) };
+            apply_layer(&mut ranges, &layer, own);
+        }
+        ranges.turned_by(skeleton, post.ik(), post.springs());
+        for r in &mut ranges.joints {
+            r.pad();
+        }
+        Ok(ranges)
+    }
+
+    /// Whether [`Ranges::of_played`] bounds a motion over `graph`.
+    ///
+    /// # Errors
+    /// As [`Ranges::of_played`].
+    pub fn played_boundable<C: ClipSource>(graph: &Graph<C>, post: &GraphPost<C>) -> Result<(), Unbounded> {
+        graph.state_motions().try_for_each(|m| Ranges::boundable(m))?;
+        post.mix().map_or(Ok(()), |m| Ranges::boundable(m))
+    }
+
+    /// As [`Ranges::graph_samples`], and each clip layer's beside the graph.
+    pub fn played_samples<C: ClipSource>(graph: &Graph<C>, post: &GraphPost<C>, rate: f32) -> u64 {
+        let layers = post.mix().into_iter().flat_map(|m| m.layer_views().filter(|l| !l.external).map(|l| l.clip));
+        distinct_samples(graph.state_motions().flat_map(|m| m.layers().map(ClipSource::clip)).chain(layers), rate)
     }
 
     /// How many clip poses [`Ranges::of_motion`] samples: each distinct

@@ -105,6 +105,19 @@ pub struct Motion<C> {
     character: Option<Arc<spec::CharacterSpec>>,
     /// Spring chains on the output skeleton (docs/springs.md), if any.
     springs: Option<Springs>,
+    /// The layer whose pose the caller hands in instead of a clip sample (a
+    /// graph's, docs/graphs.md “What composes with a graph”), if any.
+    external: Option<usize>,
+}
+
+/// A layer whose pose is handed in at each sample instead of sampled from
+/// its clip: at layer `layer`, poses of `skeleton` (mapped onto the output
+/// by joint name, as a clip of that skeleton is, never retargeted), and the
+/// reference pose an additive such layer is measured from.
+pub(crate) struct External<'a> {
+    pub layer: usize,
+    pub skeleton: &'a Skeleton,
+    pub reference: Pose,
 }
 
 /// One layer of a motion, read-only: what bounds its poses.
@@ -118,6 +131,8 @@ pub(crate) struct LayerView<'a> {
     /// Additive layers' reference pose, in the layer clip's joints.
     pub reference: Option<&'a Pose>,
     pub retargeted: bool,
+    /// Its pose is handed in (a graph's), not its clip's.
+    pub external: bool,
 }
 
 /// Root motion as built: the output skeleton's root-motion joint.
@@ -196,6 +211,17 @@ impl<C: ClipSource> Motion<C> {
     /// As [`Motion::build`]; `ik` constraints are checked against the
     /// output skeleton and `ik_limits` (paths `ik/0/joints/1`).
     pub fn build_limited(spec: MotionSpec<C>, ik_limits: &IkLimits) -> Result<Motion<C>, MotionError> {
+        Motion::build_external(spec, ik_limits, None)
+    }
+
+    /// [`Motion::build_limited`] with one layer's pose handed in at each
+    /// sample ([`External`]): that layer's clip only lends its parameters'
+    /// layout and its place among the layers.
+    pub(crate) fn build_external(
+        spec: MotionSpec<C>,
+        ik_limits: &IkLimits,
+        mut external: Option<External<'_>>,
+    ) -> Result<Motion<C>, MotionError> {
         let layers_path = Path::root().field("layers");
         if spec.layers.is_empty() {
             return Err(MotionError::new(layers_path, K::NoLayers));
@@ -218,9 +244,10 @@ impl<C: ClipSource> Motion<C> {
             let time = layer_time(&layer, i, &mut groups);
             durations.push(layer.clip.clip().range().duration());
             let mask = mask::resolve(layer.mask.as_ref(), output, &path.clone().field("mask"))?;
-            let clip_path = path.clone().field("clip");
+            let outside = external.as_ref().filter(|e| e.layer == i).map(|e| e.skeleton);
+            let clip_path = path.clone().field(if outside.is_some() { "graph" } else { "clip" });
             let (retarget, planter) = match &character {
-                Some(c) if !retarget::same_rig(c, layer.clip.clip()) => {
+                Some(c) if outside.is_none() && !retarget::same_rig(c, layer.clip.clip()) => {
                     let (options, at) = match &layer.retarget {
                         Some(own) => (own, path.clone().field("retarget")),
                         None => (&spec.retarget, Path::root().field("retarget")),
@@ -233,16 +260,24 @@ impl<C: ClipSource> Motion<C> {
             let (map, joint_count) = match &retarget {
                 Some(_) => ((0..output.len() as u32).collect(), output.len()),
                 None => {
-                    let map = joint_map(output, layer.clip.clip().skeleton());
-                    check_shared_joints(&map, output, layer.clip.clip().skeleton(), &clip_path)?;
-                    warnings.extend(MotionWarning::for_layer(clip_path, output, layer.clip.clip().skeleton()));
-                    (map, layer.clip.clip().joint_count())
+                    let own = outside.unwrap_or(layer.clip.clip().skeleton());
+                    let map = joint_map(output, own);
+                    check_shared_joints(&map, output, own, &clip_path)?;
+                    warnings.extend(MotionWarning::for_layer(clip_path, output, own));
+                    (map, own.len())
                 }
             };
             let first = layers.first().map_or(layer.clip.clip(), |l: &Layer<C>| l.clip.clip());
             let parameters = parameter_map(first.parameters(), layer.clip.clip().parameters(), &path)?;
-            let reference = (layer.mode == LayerMode::Additive)
-                .then(|| reference_pose(layer.clip.clip(), layer.reference_time, retarget.as_deref().cloned()));
+            let handed = match outside {
+                Some(_) => external.as_mut().map(|e| std::mem::take(&mut e.reference)),
+                None => None,
+            };
+            let reference = (layer.mode == LayerMode::Additive).then(|| {
+                handed.unwrap_or_else(|| {
+                    reference_pose(layer.clip.clip(), layer.reference_time, retarget.as_deref().cloned())
+                })
+            });
             layers.push(Layer {
                 parameters,
                 reach: Reach::new(layer.mode, &map, &mask, joint_count),
@@ -273,7 +308,8 @@ impl<C: ClipSource> Motion<C> {
                 };
             }
         }
-        Ok(Motion { layers, groups, durations, weights, root, ik, warnings, character, springs })
+        let external = external.map(|e| e.layer);
+        Ok(Motion { layers, groups, durations, weights, root, ik, warnings, character, springs, external })
     }
 
     /// Layers whose clips have joints the output skeleton lacks, bottom to
@@ -315,7 +351,8 @@ impl<C: ClipSource> Motion<C> {
 
     /// Each layer as compact frames' bounds read it (docs/compact-frames.md), bottom to top.
     pub(crate) fn layer_views(&self) -> impl Iterator<Item = LayerView<'_>> {
-        self.layers.iter().map(|l| LayerView {
+        self.layers.iter().enumerate().map(|(i, l)| LayerView {
+            external: self.external == Some(i),
             clip: l.clip.clip(),
             mode: l.mode,
             mask: &l.mask,
@@ -369,9 +406,10 @@ impl<C: ClipSource> Motion<C> {
     }
 
     /// IK reports each sample gives: every layer's clip constraints, bottom
-    /// to top, then the motion's own.
+    /// to top (a handed-in layer has none), then the motion's own.
     pub fn ik_report_count(&self) -> usize {
-        self.layers.iter().map(|l| l.clip.clip().ik_count()).sum::<usize>() + self.ik.len()
+        let keyed = |(i, l): (usize, &Layer<C>)| if self.external == Some(i) { 0 } else { l.clip.clip().ik_count() };
+        self.layers.iter().enumerate().map(keyed).sum::<usize>() + self.ik.len()
     }
 
     /// The up axis of the motion's root motion, if it has one.

@@ -187,7 +187,7 @@ impl<C: ClipSource> Motion<C> {
     pub(super) fn sample_local(&self, tau: f64, ease: Ease, sampler: &mut MotionSampler) -> f32 {
         let mut phases = std::mem::take(&mut sampler.phases);
         self.phases_at(tau, &self.weights, &mut phases);
-        let clip_time = self.layer_into(tau, &phases, &self.weights, (ease, None), sampler);
+        let clip_time = self.layer_into(tau, (&phases, &self.weights), (ease, None), sampler, None);
         sampler.phases = phases;
         if !self.ik.is_empty() {
             let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;
@@ -212,7 +212,7 @@ impl<C: ClipSource> Motion<C> {
         options: &MotionOptions,
         sampler: &mut MotionSampler,
     ) -> f32 {
-        let clip_time = self.layer_into(tau, phases, weights, (options.ease, None), sampler);
+        let clip_time = self.layer_into(tau, (phases, weights), (options.ease, None), sampler, None);
         sampler.finish(self.skeleton(), options.space);
         clip_time
     }
@@ -230,21 +230,35 @@ impl<C: ClipSource> Motion<C> {
         only: &[u64],
         sampler: &mut MotionSampler,
     ) {
-        self.layer_into(tau, phases, weights, (ease, Some(only)), sampler);
+        self.layer_into(tau, (phases, weights), (ease, Some(only)), sampler, None);
         sampler.space = Space::Local;
+    }
+
+    /// [`Motion::sample_with`], in local space, for a motion built with a
+    /// handed-in layer: `external` is that layer's pose (in the skeleton it
+    /// was built with), layered where its clip's pose would be.
+    pub(crate) fn sample_external(
+        &self,
+        tau: f64,
+        (phases, weights): (&[f64], &[f32]),
+        external: &Pose,
+        sampler: &mut MotionSampler,
+    ) {
+        self.layer_into(tau, (phases, weights), (Ease::Linear, None), sampler, Some(external));
+        sampler.finish(self.skeleton(), Space::Local);
     }
 
     /// Each layer's clip pose (its clip IK solved), layered into the
     /// sampler's local pose, with root motion; returns the first layer's
     /// clip time. With `only`, the output joints outside it are skipped
-    /// (see [`Motion::sample_joints_with`]).
+    /// (see [`Motion::sample_joints_with`]); a handed-in layer's pose is `external`.
     fn layer_into(
         &self,
         tau: f64,
-        phases: &[f64],
-        weights: &[f32],
+        (phases, weights): (&[f64], &[f32]),
         (ease, only): (Ease, Option<&[u64]>),
         sampler: &mut MotionSampler,
+        external: Option<&Pose>,
     ) -> f32 {
         let MotionSampler {
             cursors,
@@ -281,6 +295,17 @@ impl<C: ClipSource> Motion<C> {
             clip_times.push(t);
             let need = &needs[i * words..(i + 1) * words];
             let direct = i == 0 && layer.mode == LayerMode::Blend && weights[0] >= 1.0 && layer.unmasked;
+            if let Some(pose) = external.filter(|_| self.external == Some(i)) {
+                handed_in(
+                    layer,
+                    (i, direct),
+                    (pose, weights[i], need),
+                    (self.skeleton(), self.parameters().entries()),
+                    local,
+                );
+                roots.push(None);
+                continue;
+            }
             if direct {
                 // The common case, and the bit-for-bit promise: the first
                 // full-weight layer is the clip's own pose.
@@ -292,11 +317,7 @@ impl<C: ClipSource> Motion<C> {
                 continue;
             }
             if i == 0 {
-                local.copy_from(self.skeleton().rest());
-                // A parameter's rest value is 0 (docs/clip-format.md,
-                // “Parameters”: no morph, no offset).
-                local.parameters.clear();
-                local.parameters.resize(self.parameters().entries(), glam::Vec3A::ZERO);
+                at_rest(self.skeleton(), self.parameters().entries(), local);
             }
             let parameters = !layer.parameters.is_empty() && weights[i] > 0.0;
             if layer.root.is_none() && !has_ik && !parameters && need.iter().all(|w| *w == 0) {
@@ -389,6 +410,34 @@ impl<C: ClipSource> Motion<C> {
         sampler.root_motion = Some(RootMotion { delta, total });
         sampler.previous.clone_from(&sampler.roots);
     }
+}
+
+/// The rest pose of `skeleton`, each of its `parameters` entries at its
+/// rest value 0 (docs/clip-format.md, “Parameters”: no morph, no offset):
+/// what the first layer is layered over.
+fn at_rest(skeleton: &Skeleton, parameters: usize, local: &mut Pose) {
+    local.copy_from(skeleton.rest());
+    local.parameters.clear();
+    local.parameters.resize(parameters, glam::Vec3A::ZERO);
+}
+
+/// Layers a handed-in `pose` as layer `i` (`direct`: the first, full and
+/// unmasked, so it is the pose itself) at `weight` on the joints `need`s.
+fn handed_in<C>(
+    layer: &super::Layer<C>,
+    (i, direct): (usize, bool),
+    (pose, weight, need): (&Pose, f32, &[u64]),
+    (skeleton, parameters): (&Skeleton, usize),
+    local: &mut Pose,
+) {
+    if direct {
+        local.copy_from(pose);
+        return;
+    }
+    if i == 0 {
+        at_rest(skeleton, parameters, local);
+    }
+    layer.apply(pose, weight, need, local);
 }
 
 /// What sampling one layer needs besides its clip: the output joints it

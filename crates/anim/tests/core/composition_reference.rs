@@ -303,7 +303,7 @@ pub fn blend(a: Trs, b: Trs, w: f64) -> Trs {
 
 /// An `additive` layer: `t += w·(t_l − t_r)`, `q = q·slerp(I, short(q_r⁻¹·q_l), w)`,
 /// `s = s ⊙ (1 + w·(s_l ⊘ s_r − 1))`.
-fn add(a: Trs, l: Trs, r: Trs, w: f64) -> Trs {
+pub fn add(a: Trs, l: Trs, r: Trs, w: f64) -> Trs {
     let step = qpow(short(r.r.conjugate() * l.r), w);
     Trs { t: a.t + (l.t - r.t) * w, r: (a.r * step).normalize(), s: a.s * (DVec3::ONE + (l.s / r.s - DVec3::ONE) * w) }
 }

@@ -28,6 +28,7 @@ pub mod character;
 mod compact;
 mod composition_reference;
 mod crossfade;
+mod graph_mix;
 mod graph_root_motion;
 mod ik;
 mod lecture;

@@ -210,8 +210,8 @@ pub struct LayerDoc {
     /// Required unless the layer names a `graph`.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub clip: String,
-    /// A stored graph's id (or `name:<name>`) instead of a clip (docs/graphs.md, “Using a graph”): only a
-    /// sampling request's only layer, with the layer's defaults, may name one.
+    /// A stored graph's id (or `name:<name>`) instead of a clip (docs/graphs.md, “What composes with a graph”):
+    /// one layer of a motion, taking `weight`, `mask` and `mode` and no clip time fields.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub graph: Option<String>,
     /// In [0, 1].
@@ -430,8 +430,8 @@ impl LayerDoc {
     /// takes them before this), `missing_field` for one naming nothing.
     fn to_spec(&self, pointer: &str) -> Result<LayerSpec<String>, DocError> {
         if self.graph.is_some() {
-            let detail = "a graph plays only as the only layer of a sampling request's motion (POST /v1/poses, \
-                          /v1/samples), with the layer's defaults (docs/graphs.md)";
+            let detail = "a graph layer plays where a motion is played as a whole (poses, samples, streams, \
+                          broadcasts), not here (docs/graphs.md)";
             return Err(DocError {
                 code: "graph_unsupported",
                 pointer: format!("{pointer}/graph"),

@@ -1,5 +1,6 @@
 //! Sampling requests over a graph (docs/graphs.md, “Using a graph”): a
-//! motion whose only layer names `"graph"`, played on the tick grid `k/fps`
+//! motion one of whose layers names `"graph"` (alone, or among clip layers
+//! run on its pose with the motion's IK and springs), played on the tick grid `k/fps`
 //! from 0 with the request's timed `inputs`, the poses of the ticks from
 //! `start` to `end` answered (or, for one pose, of the last tick at or
 //! before `time`). REST and gRPC alike: each says where its fields sit
@@ -13,8 +14,8 @@ use super::cost::{Cost, Estimate, F32_TEXT, F64_TEXT, Wire, ik_reports, json_str
 use super::raw::{Field, Format, Locate, Raw, RawModes, joint_subset, unprocessable};
 use super::sample::FPS_RANGE;
 use crate::auth::CallerKey;
-use crate::built::{BuiltGraph, PinnedGraph};
-use crate::error::ApiError;
+use crate::built::{BuiltGraph, PinnedGraph, PinnedPost};
+use crate::error::{ApiError, At};
 use crate::graphs::MotionOnGraph;
 use crate::state::AppState;
 use crate::stream::MAX_FPS;
@@ -23,6 +24,7 @@ use crate::work::price;
 use anim::Pose;
 use anim::Space;
 use anim::graph::{GraphPlayer, GraphPost, Inputs, PostRun, TickRange};
+use anim::motion::MotionSpec;
 use anim::motion::{Planar, RootMotion};
 use formats::wire::graph_inputs::InputDoc;
 use formats::wire::motion::{LayerDoc, LayerModeDoc, MotionDoc};
@@ -47,33 +49,47 @@ pub struct GraphLayer<'a> {
 }
 
 /// What the motion builds the graph's nodes with (its character, retarget
-/// options and root motion), and its IK constraints and spring chains,
-/// checked against the graph's (or the character's) skeleton once it is
-/// resolved.
+/// options and root motion), its clip layers beside the graph's, and its IK
+/// constraints and spring chains, checked against the output skeleton once
+/// the graph is resolved.
 #[derive(Debug, Clone, Default)]
 pub struct GraphStages {
     motion: MotionOnGraph,
+    /// The motion with the graph's layer at `at` (its clip a stand-in),
+    /// when it has clip layers beside it.
+    mix: Option<(usize, MotionSpec<String>)>,
     ik: Vec<anim::ik::IkSpec>,
     springs: anim::spring::SpringsSpec,
 }
 
 /// The graph `doc` names, when a layer names one: its reference and the
-/// motion's stages, once the layer is checked to be the motion's only one,
-/// with every default.
+/// motion's stages, once the graph's layer is checked to take only what a
+/// graph layer takes (`weight`, `mask`, `mode`).
 ///
 /// # Errors
-/// `graph_unsupported` at the field that is not supported with a graph yet;
-/// the `retarget`, `ik` and `springs` documents' own refusals.
+/// `graph_unsupported` at the field that a graph layer does not take (a
+/// second graph layer at its `graph`; `root_motion` beside clip layers);
+/// the `retarget`, `ik`, `springs` and clip layers' documents' own refusals.
 pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> {
-    let Some(i) = doc.layers.iter().position(|l| l.graph.is_some()) else { return Ok(None) };
-    if doc.layers.len() != 1 {
-        return Err(unsupported(&format!("/motion/layers/{i}/graph"), "a graph is a motion's only layer"));
+    let mut graphs = doc.layers.iter().enumerate().filter(|(_, l)| l.graph.is_some()).map(|(i, _)| i);
+    let Some(at) = graphs.next() else { return Ok(None) };
+    if let Some(second) = graphs.next() {
+        return Err(unsupported(&format!("/motion/layers/{second}/graph"), "a motion plays at most one graph"));
     }
-    let layer = &doc.layers[0];
+    let layer = &doc.layers[at];
     if let Some(field) = layer_field_set(layer) {
-        let detail = format!("a graph layer takes no `{field}` (it plays at weight 1 with the layer's defaults)");
-        return Err(unsupported(&format!("/motion/layers/0/{field}"), &detail));
+        let detail = format!(
+            "a graph layer takes no `{field}` (it plays its own clock: it takes `weight`, `mask` and `mode` only)"
+        );
+        return Err(unsupported(&format!("/motion/layers/{at}/{field}"), &detail));
     }
+    let mixed =
+        doc.layers.len() > 1 || layer.weight != 1.0 || layer.mask.is_some() || layer.mode != LayerModeDoc::Blend;
+    if mixed && doc.root_motion.is_some() {
+        let detail = "root motion plays with a graph that is its motion's only layer, at its defaults";
+        return Err(unsupported("/motion/root_motion", detail));
+    }
+    let mix = mixed.then(|| mix_spec(doc, at)).transpose()?;
     let retarget = doc.retarget.as_ref().map(|r| r.to_spec("/motion/retarget")).transpose()?.unwrap_or_default();
     let root_motion = doc.root_motion.as_ref().map(formats::wire::motion::RootMotionDoc::to_spec);
     let ik = (doc.ik.iter().enumerate())
@@ -83,8 +99,21 @@ pub fn graph_layer(doc: &MotionDoc) -> Result<Option<GraphLayer<'_>>, ApiError> 
     let springs = doc.springs("/motion").map_err(ApiError::from)?;
     let Some(reference) = layer.graph.as_deref() else { return Ok(None) };
     let motion = MotionOnGraph { character: doc.character.clone(), retarget, root_motion };
-    Ok(Some(GraphLayer { reference, stages: GraphStages { motion, ik, springs } }))
+    Ok(Some(GraphLayer { reference, stages: GraphStages { motion, mix, ik, springs } }))
 }
+
+/// The motion `doc` says with its graph's layer `at` as a clip layer of
+/// the same weight, mask and mode (its clip a stand-in the core replaces).
+fn mix_spec(doc: &MotionDoc, at: usize) -> Result<(usize, MotionSpec<String>), ApiError> {
+    let mut doc = doc.clone();
+    doc.layers[at] = LayerDoc { clip: GRAPH_STAND_IN.into(), graph: None, ..doc.layers[at].clone() };
+    (doc.ik, doc.springs, doc.root_motion) = (Vec::new(), Vec::new(), None);
+    Ok((at, doc.to_spec("/motion")?))
+}
+
+/// What a mixed motion's graph layer names as its clip until the core puts
+/// the graph's own first clip there.
+const GRAPH_STAND_IN: &str = "graph";
 
 impl GraphStages {
     /// The graph `built` plays for this motion: its own, or built with the
@@ -101,19 +130,66 @@ impl GraphStages {
         crate::graphs::played(state, caller, built, &self.motion).await
     }
 
-    /// The stages built on `graph`'s skeleton, as a motion's are on its
-    /// output skeleton, refusals pointed into `/motion`.
+    /// The stages built on `graph`: its clip layers (looked up, pinned,
+    /// built priced on the pool with the graph's layer among them), then
+    /// IK and springs on the output skeleton, refusals pointed into
+    /// `/motion`.
     ///
     /// # Errors
-    /// As a motion's `ik` and `springs`.
-    pub fn build(
+    /// `clip_not_found` (404) at `/motion/layers/i/clip`;
+    /// `character_not_found`; as a motion's layers, `ik` and `springs`.
+    pub async fn build(
         &self,
-        graph: &anim::graph::Graph<Arc<dyn PinnedClip>>,
+        graph: &Arc<PinnedGraph>,
         state: &AppState,
-    ) -> Result<GraphPost, ApiError> {
-        GraphPost::build(&self.ik, &self.springs, graph.skeleton(), &state.config.limits.ik()).map_err(|e| {
+        caller: &CallerKey,
+    ) -> Result<PinnedPost, ApiError> {
+        let moved = |e: anim::MotionError| {
             ApiError::invalid(e.kind.code(), format!("/motion{}", e.path.to_pointer()), e.kind.to_string())
+        };
+        let limits = state.config.limits.ik();
+        let Some((at, spec)) = &self.mix else {
+            return GraphPost::build(&self.ik, &self.springs, graph.skeleton(), &limits).map_err(moved);
+        };
+        let mut pinned = self.pin(state, (*at, spec.clone()), graph).await?;
+        if let Some(reference) = &self.motion.character {
+            pinned.character = Some(Arc::clone(&crate::characters::resolve(state, caller, reference).await?.spec));
+        }
+        (pinned.ik, pinned.springs) = (self.ik.clone(), self.springs.clone());
+        let units = price::motion_build(&pinned).saturating_add(price::graph_tick(graph));
+        let (at, graph) = (*at, Arc::clone(graph));
+        crate::builds::run(&state.work, caller, &state.config.limits, units, "building this motion", move |_| {
+            GraphPost::mixed(pinned, at, &graph, &limits).map_err(moved)
         })
+        .await
+    }
+
+    /// The mix's spec with each clip layer's clip looked up (the graph's
+    /// layer given the graph's first clip, which the core puts there too).
+    async fn pin(
+        &self,
+        state: &AppState,
+        (at, spec): (usize, MotionSpec<String>),
+        graph: &PinnedGraph,
+    ) -> Result<MotionSpec<Arc<dyn PinnedClip>>, ApiError> {
+        let mut clips = Vec::with_capacity(spec.layers.len());
+        for (i, layer) in spec.layers.iter().enumerate() {
+            if i == at {
+                clips.push(Arc::clone(graph.initial_motion().first_clip()));
+                continue;
+            }
+            let clip = super::raw::clip(state, &layer.clip).await.map_err(|e| match e {
+                ApiError::NotFound { .. } => ApiError::ClipNotFoundAt {
+                    at: At::Pointer(format!("/motion/layers/{i}/clip")),
+                    detail: format!("layer {i}'s clip `{}` does not exist", layer.clip),
+                },
+                other => other,
+            })?;
+            clips.push(clip as Arc<dyn PinnedClip>);
+        }
+        let mut clips = clips.into_iter();
+        spec.try_map(|_, _| clips.next().ok_or(()))
+            .map_err(|()| ApiError::internal(anyhow::anyhow!("a layer lost its clip")))
     }
 }
 
@@ -132,13 +208,11 @@ pub fn no_graph_fields(report: bool, inputs: bool, fps: bool) -> Result<(), ApiE
     Err(unsupported(&format!("/{field}"), &detail))
 }
 
-/// The first field of a graph layer that is not its default.
+/// The first field of a graph layer that a graph layer does not take: a
+/// graph plays its own clock, so no time of a clip's.
 fn layer_field_set(layer: &LayerDoc) -> Option<&'static str> {
     [
         ("clip", !layer.clip.is_empty()),
-        ("weight", layer.weight != 1.0),
-        ("mode", layer.mode != LayerModeDoc::Blend),
-        ("mask", layer.mask.is_some()),
         ("offset", layer.offset != 0.0),
         ("speed", layer.speed != 1.0),
         ("playback", layer.playback.is_some()),
@@ -181,7 +255,7 @@ pub struct GraphSampling {
     /// What plays: the built graph's own, or its build on the character.
     pub graph: Arc<PinnedGraph>,
     /// The motion's IK and springs on the graph's pose.
-    pub post: Arc<GraphPost>,
+    pub post: Arc<PinnedPost>,
     pub range: TickRange,
     pub inputs: Inputs,
     pub format: Format,
@@ -189,6 +263,13 @@ pub struct GraphSampling {
     pub joints: Option<Vec<usize>>,
     pub report: bool,
     pub cost: Cost,
+}
+
+impl GraphSampling {
+    /// The skeleton its poses are of: the motion's output skeleton.
+    pub fn skeleton(&self) -> &anim::Skeleton {
+        self.post.skeleton(self.graph.skeleton())
+    }
 }
 
 impl RawGraphSampling<'_> {
@@ -212,13 +293,13 @@ impl RawGraphSampling<'_> {
         let built = crate::graphs::resolve(state, caller, self.reference, GRAPH_AT).await?;
         let graph = self.stages.graph(state, caller, &built).await?;
         let inputs = formats::wire::graph_inputs::inputs(&graph, self.inputs, range.fps, "/inputs")?;
-        let skeleton = graph.skeleton();
+        let post = Arc::new(self.stages.build(&graph, state, caller).await?);
+        let skeleton = post.skeleton(graph.skeleton());
         if format == Format::Skinning && !skeleton.has_inverse_binds() {
             let detail = "format=skinning needs inverse bind matrices, which the graph's skeleton has not";
             return Err(unprocessable("no_inverse_binds", Field::Format, self.at, detail.into()));
         }
         let joints = self.joints.map(|names| joint_subset(skeleton, names, self.at)).transpose()?;
-        let post = Arc::new(self.stages.build(&graph, state)?);
         let cost = cost((&built, &graph), &post, &range, (format, self.wire), self.report);
         let report = self.report;
         Ok(GraphSampling { built, graph, post, range, inputs, format, space, joints, report, cost })
@@ -306,7 +387,8 @@ impl GraphTicks {
         let evaluated = (&s.range, s.post.first_run(&s.range));
         let each = |tick, p: &GraphPlayer<_>| {
             if !s.post.is_empty() {
-                run.run(&s.post, skeleton, p.pose(), s.range.time(tick));
+                let time = s.range.time(tick);
+                run.run(&s.post, skeleton, p.pose(), (time, time));
             }
         };
         // The inputs were checked against this graph, so no setting fails.
@@ -349,36 +431,44 @@ pub struct GraphTick<'a> {
 /// for.
 fn cost(
     (built, graph): (&BuiltGraph, &PinnedGraph),
-    post: &GraphPost,
+    post: &PinnedPost,
     range: &TickRange,
     (format, wire): (Format, Wire),
     report: bool,
 ) -> Cost {
-    let per_pose = pose_bound(built, graph, |clip| Estimate::batch(clip, &built.meta.id, format, wire).per_pose)
-        + json_str(&built.meta.id)
-        + ik_reports(post.ik().len() as u64, wire)
-        + if graph.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 }
-        + if report { report_bytes(built) } else { 0 };
+    let per_pose =
+        pose_bound((built, graph, post), |clip| Estimate::batch(clip, &built.meta.id, format, wire).per_pose)
+            + json_str(&built.meta.id)
+            + ik_reports(post.ik().len() as u64, wire)
+            + if graph.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 }
+            + if report { report_bytes(built) } else { 0 };
     let bytes = 12 + per_pose.saturating_mul(range.answered());
     let ticks = range.last.saturating_add(1);
-    let stages =
-        (range.last - post.first_run(range) + 1).saturating_mul(price::graph_post(post, graph.skeleton(), range.fps));
+    let skeleton = post.skeleton(graph.skeleton());
+    let stages = (range.last - post.first_run(range) + 1).saturating_mul(price::graph_post(post, skeleton, range.fps));
     let per_tick = price::graph_tick(graph).saturating_add(stages.div_ceil(ticks));
-    Cost::new(ticks, graph.skeleton().len() as u64, per_tick, bytes)
+    Cost::new(ticks, skeleton.len() as u64, per_tick, bytes)
 }
 
 /// The largest pose `graph` plays, by `bytes` of a clip: its clips'
 /// largest; on a character, whose joints every pose then has, each clip's
 /// scaled by how many more joints the character has, and its names' text.
-pub(super) fn pose_bound(built: &BuiltGraph, graph: &PinnedGraph, bytes: impl Fn(&anim::Clip) -> u64) -> u64 {
-    let skeleton = graph.skeleton();
-    if std::ptr::eq(skeleton, built.graph.skeleton()) {
-        return built.clips.iter().map(|c| bytes(&c.clip)).max().unwrap_or(0);
+pub(super) fn pose_bound(
+    (built, graph, post): (&BuiltGraph, &PinnedGraph, &PinnedPost),
+    bytes: impl Fn(&anim::Clip) -> u64,
+) -> u64 {
+    let skeleton = post.skeleton(graph.skeleton());
+    let clips = || {
+        let layers = post.mix().into_iter().flat_map(|m| m.layers()).map(|c| c.clip());
+        built.clips.iter().map(|c| &c.clip).chain(layers)
+    };
+    if std::ptr::eq(skeleton, built.graph.skeleton()) && post.mix().is_none() {
+        return clips().map(&bytes).max().unwrap_or(0);
     }
     let joints = skeleton.len() as u64;
     let scale = |clip: &anim::Clip| joints.div_ceil(clip.joint_count().max(1) as u64).max(1);
-    let clips = built.clips.iter().map(|c| bytes(&c.clip).saturating_mul(scale(&c.clip))).max().unwrap_or(0);
-    clips.saturating_add(skeleton.names().iter().map(|n| json_str(n)).sum())
+    let largest = clips().map(|c| bytes(c).saturating_mul(scale(c))).max().unwrap_or(0);
+    largest.saturating_add(skeleton.names().iter().map(|n| json_str(n)).sum())
 }
 
 /// The longest `,"graph":{…}` a tick's report can write.

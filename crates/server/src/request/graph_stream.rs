@@ -1,6 +1,6 @@
 //! Opening a graph stream or broadcast (docs/graphs.md, “Streams and
-//! broadcasts”): a stream request whose motion's only layer names a
-//! `graph`. The graph comes built from the cache of built graphs, pinned at
+//! broadcasts”): a stream request one of whose motion's layers names a
+//! `graph` (its clip layers, if any, run on the graph's pose). The graph comes built from the cache of built graphs, pinned at
 //! its version for as long as the stream plays; it plays on the stream's
 //! tick grid from motion time 0 at speed 1, so what a graph stream does not
 //! take — a `start` or `speed`, an `ease`, a parameter subset, a report in
@@ -99,13 +99,14 @@ impl RawStream<'_> {
         let played = graph.stages.graph(state, caller, &built).await?;
         let id: &str = &built.meta.id;
         let wire = request.encoding.into();
-        let pose = pose_bound(&built, &played, |clip| Estimate::frame(clip, id, wire));
+        let post = Arc::new(graph.stages.build(&played, state, caller).await?);
+        let pose = pose_bound((&built, &played, &post), |clip| Estimate::frame(clip, id, wire));
         // The report's JSON bound also bounds its protobuf (floats of 4 bytes, not text).
         let report = if graph.report { report_bytes(&built) } else { 0 };
-        let post = Arc::new(graph.stages.build(&played, state)?);
         let ik = ik_reports(post.ik().len() as u64, wire);
         let root = if played.initial_motion().has_root_motion() { super::motion::ROOT_MOTION_BYTES } else { 0 };
-        let joints = played.skeleton().len();
+        let skeleton = post.skeleton(played.skeleton());
+        let joints = skeleton.len();
         let (frame, encoding) = match compact {
             Some(_) => (compact_frame(joints, 0), price::compact_frame(joints)),
             None => {
@@ -113,16 +114,13 @@ impl RawStream<'_> {
                 (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)
             }
         };
-        let tick = price::graph_tick(&played).saturating_add(price::graph_post(
-            &post,
-            played.skeleton(),
-            f64::from(request.fps),
-        ));
+        let stages = price::graph_post(&post, skeleton, f64::from(request.fps));
+        let tick = price::graph_tick(&played).saturating_add(stages);
         let program =
             GraphProgram { graph: played, post, id: id.into(), version: built.meta.version, report: graph.report };
         let catch_up = if program.catches_up() { price::catch_up(tick, request.fps) } else { 0 };
         let per_frame = tick.saturating_add(encoding);
-        let motion = Arc::clone(program.graph.initial_motion());
+        let motion = Arc::clone(program.post.mix().unwrap_or(program.graph.initial_motion()));
         let params = StreamParams::of_motion(motion, Arc::clone(&program.id), request).map_err(|e| self.refused(e))?;
         let params = self.bind(params.with_graph(program), state)?;
         let params = self.with_layout(params, compact, state, caller).await?;

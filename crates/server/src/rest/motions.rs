@@ -346,7 +346,7 @@ impl GraphPoses {
         let joints = s.joints.as_deref();
         let root_motion = tick.root_motion;
         let extras = Extras { joints, root_motion, ik: tick.ik, parameters: None, tail: &self.report, feet: &[] };
-        let (clip, skeleton) = (s.built.meta.id.as_str(), s.graph.skeleton());
+        let (clip, skeleton) = (s.built.meta.id.as_str(), s.skeleton());
         let clip_time = time as f32;
         match s.format {
             Format::Trs => {

@@ -282,7 +282,7 @@ impl Checkpoint {
                     program,
                     params.space,
                     (graph_state(bits), self.graph_springs.as_ref().map(|b| spring_state(b).0)),
-                    super::hub::stream_clock(params, self.tick),
+                    (super::hub::stream_clock(params, self.tick), params.fps),
                 )
                 .map_err(|e| CheckpointError::Mismatch(e.to_string()))?,
             ),

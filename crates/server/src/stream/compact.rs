@@ -104,8 +104,8 @@ pub fn range_source<'a>(
 ) -> Result<(RangeSource<'a>, u64), CompactRefusal> {
     let refuse = |u: Unbounded| refusal(u.0);
     if let Some(graph) = graph {
-        graph.graph.state_motions().try_for_each(|m| Ranges::boundable(m)).map_err(refuse)?;
-        return Ok((RangeSource::Derived, Ranges::graph_samples(&graph.graph, RANGE_RATE)));
+        Ranges::played_boundable(&graph.graph, &graph.post).map_err(refuse)?;
+        return Ok((RangeSource::Derived, Ranges::played_samples(&graph.graph, &graph.post, RANGE_RATE)));
     }
     if let Some(clip) = plain_clip(motion) {
         return Ok((RangeSource::Clip(clip), Ranges::clip_samples(clip, RANGE_RATE) + 1));
@@ -146,7 +146,7 @@ pub fn range_sample_price(
 ) -> u64 {
     let largest = |m: &StreamMotion| m.layers().map(|c| clip_pose(c.clip())).max().unwrap_or(0);
     match graph {
-        Some(g) => g.graph.state_motions().map(|m| largest(m)).max().unwrap_or(0),
+        Some(g) => g.graph.state_motions().chain(g.post.mix()).map(|m| largest(m)).max().unwrap_or(0),
         None => largest(motion),
     }
 }
@@ -168,8 +168,7 @@ impl CompactLayout {
         let ranges = match (graph, range_source(motion, graph)?.0) {
             (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
             (Some(g), RangeSource::Derived) => {
-                let mut ranges = Ranges::of_graph(&g.graph, RANGE_RATE).map_err(|u| refusal(u.0))?;
-                ranges.turned_by(skeleton, g.post.ik(), g.post.springs());
+                let ranges = Ranges::of_played(&g.graph, &g.post, RANGE_RATE).map_err(|u| refusal(u.0))?;
                 return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]));
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,

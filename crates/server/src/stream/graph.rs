@@ -7,8 +7,9 @@
 //! steps the ticks before its `start`. A pause holds the pose and the
 //! graph's time (the first tick is always played: it shows node time 0).
 //!
-//! The motion's IK and springs run on each tick's pose (docs/graphs.md,
-//! “What composes with a graph”), the springs in stream time.
+//! The motion's clip layers (at the tick's motion time), IK and springs run
+//! on each tick's pose (docs/graphs.md, “What composes with a graph”), the
+//! springs in stream time.
 //!
 //! The player's state is plain values (`anim::graph::GraphState`), and so is
 //! the springs' (`anim::spring::SpringState`), which a broadcast checkpoint
@@ -18,7 +19,8 @@ use std::sync::Arc;
 
 use super::pinned::PinnedClip;
 use super::schedule::MAX_CATCH_UP;
-use anim::graph::{Graph, GraphPlayer, GraphPost, GraphReport, GraphState, PostRun, SetError, Value};
+use crate::built::PinnedPost;
+use anim::graph::{Graph, GraphPlayer, GraphReport, GraphState, PostRun, SetError, Value};
 use anim::ik::IkReport;
 use anim::spring::SpringState;
 use anim::{Pose, Space};
@@ -33,7 +35,7 @@ pub type StreamGraph = Graph<Arc<dyn PinnedClip>>;
 #[derive(Debug, Clone)]
 pub struct GraphProgram {
     pub graph: Arc<StreamGraph>,
-    pub post: Arc<GraphPost>,
+    pub post: Arc<PinnedPost>,
     /// The stored graph's id (frames name it as their clip) and version.
     pub id: Arc<str>,
     pub version: u64,
@@ -50,7 +52,7 @@ impl GraphProgram {
 }
 
 /// [`GraphProgram::catches_up`] of `graph` under `post`.
-fn catches_up(graph: &StreamGraph, post: &GraphPost) -> bool {
+fn catches_up(graph: &StreamGraph, post: &PinnedPost) -> bool {
     post.springs().is_some() || graph.initial_motion().has_root_motion()
 }
 
@@ -58,7 +60,7 @@ fn catches_up(graph: &StreamGraph, post: &GraphPost) -> bool {
 #[derive(Debug, Clone)]
 pub(crate) struct GraphDeck {
     player: GraphPlayer<Arc<dyn PinnedClip>>,
-    post: Arc<GraphPost>,
+    post: Arc<PinnedPost>,
     /// The motion's IK and springs on the player's pose, run in stream
     /// time (docs/springs.md, “Time”).
     run: PostRun,
@@ -87,7 +89,7 @@ impl GraphDeck {
         program: &GraphProgram,
         space: Space,
         (state, springs): (GraphState, Option<SpringState>),
-        clock: f64,
+        (clock, fps): (f64, u32),
     ) -> Result<Self, SetError> {
         let player = GraphPlayer::from_state(Arc::clone(&program.graph), state)?;
         let run = PostRun::from_state(&program.post, springs)
@@ -96,7 +98,7 @@ impl GraphDeck {
         let mut deck =
             GraphDeck { player, post, run, report: program.report, space, model: Pose::default(), held: false };
         if deck.player.ticks() > 0 {
-            deck.run_post(clock);
+            deck.run_post(fps, clock);
             deck.put_in_space();
         }
         Ok(deck)
@@ -127,10 +129,10 @@ impl GraphDeck {
             }
             for j in (0..evaluated).rev() {
                 self.player.tick(dt);
-                self.run_post(clock(k - 1 - j));
+                self.run_post(fps, clock(k - 1 - j));
             }
             self.player.tick(dt);
-            self.run_post(clock(k));
+            self.run_post(fps, clock(k));
             self.put_in_space();
         } else if self.post.springs().is_some() {
             self.run.settle(&self.post, clock(k));
@@ -139,10 +141,12 @@ impl GraphDeck {
         self.time(fps) as f32
     }
 
-    /// The motion's stages on the player's pose of the tick at `clock`.
-    fn run_post(&mut self, clock: f64) {
+    /// The motion's stages on the player's pose of its last tick (whose
+    /// motion time the clip layers play at), the springs at `clock`.
+    fn run_post(&mut self, fps: u32, clock: f64) {
         if !self.post.is_empty() {
-            self.run.run(&self.post, self.player.graph().skeleton(), self.player.pose(), clock);
+            let tau = self.time(fps);
+            self.run.run(&self.post, self.player.graph().skeleton(), self.player.pose(), (tau, clock));
         }
     }
 
@@ -150,7 +154,7 @@ impl GraphDeck {
     fn put_in_space(&mut self) {
         if self.space == Space::Model {
             let local = if self.post.is_empty() { self.player.pose() } else { self.run.pose() };
-            self.player.graph().skeleton().to_model(local, &mut self.model);
+            self.post.skeleton(self.player.graph().skeleton()).to_model(local, &mut self.model);
         }
     }
 

@@ -54,6 +54,13 @@ fn graph_params(springs: bool) -> StreamParams {
 
 /// [`graph_params`], the nodes built with `options`.
 fn graph_params_with(springs: bool, options: &NodeOptions) -> StreamParams {
+    graph_params_mixed(springs, options, false)
+}
+
+/// [`graph_params_with`]; `mixed`: the graph's layer under a line at
+/// weight 0.5 and an additive line at weight 0.5 (docs/graphs.md, “What
+/// composes with a graph”).
+fn graph_params_mixed(springs: bool, options: &NodeOptions, mixed: bool) -> StreamParams {
     let doc = serde_json::json!({"name": "g",
         "parameters": {"s": {"type": "float", "default": 0, "min": 0, "max": 1}, "go": {"type": "trigger"}},
         "nodes": {"mix": {"blend1d": {"parameter": "s", "points": [{"clip": "a", "at": 0}, {"clip": "b", "at": 1}]}},
@@ -70,10 +77,27 @@ fn graph_params_with(springs: bool, options: &NodeOptions) -> StreamParams {
     chain.params.gravity = Vec3::new(0.0, -9.81, 0.0);
     let chains = if springs { vec![chain] } else { Vec::new() };
     let spec = SpringsSpec { chains, ..SpringsSpec::default() };
-    let post = Arc::new(GraphPost::build(&[], &spec, graph.skeleton(), &Default::default()).unwrap());
-    let program = GraphProgram { graph: Arc::new(graph), post, id: "g".into(), version: 1, report: true };
+    let graph = Arc::new(graph);
+    let post = if mixed {
+        let layer = |id: &str, clip: Arc<Clip>, mode| anim::motion::LayerSpec {
+            weight: 0.5,
+            mode,
+            ..anim::motion::LayerSpec::new(pinned(id, clip))
+        };
+        let layers = vec![
+            layer("g", line(1.0, Vec3::X), anim::motion::LayerMode::Blend),
+            layer("d", line(0.7, Vec3::new(0.0, 3.0, 0.0)), anim::motion::LayerMode::Blend),
+            layer("e", line(0.9, Vec3::new(-1.0, 0.0, 1.0)), anim::motion::LayerMode::Additive),
+        ];
+        let spec = anim::motion::MotionSpec { layers, springs: spec, ..Default::default() };
+        GraphPost::mixed(spec, 0, &graph, &Default::default()).unwrap()
+    } else {
+        GraphPost::build(&[], &spec, graph.skeleton(), &Default::default()).unwrap()
+    };
+    let post = Arc::new(post);
+    let program = GraphProgram { graph, post, id: "g".into(), version: 1, report: true };
     let req = StreamRequest { fps: 30, ..Default::default() };
-    let motion = Arc::clone(program.graph.initial_motion());
+    let motion = Arc::clone(program.post.mix().unwrap_or(program.graph.initial_motion()));
     StreamParams::of_motion(motion, "g".into(), req).unwrap().with_graph(program)
 }
 
@@ -150,6 +174,29 @@ fn a_graph_program_restored_from_any_checkpoint_makes_the_same_bytes() {
     assert_ne!(shown(26), shown(25), "play goes on");
     assert_eq!(report(&frames[40])["transition"]["to"], "mix", "s under 0.5 fades back");
     assert_restores(&params, &log, &frames, &texts);
+}
+
+#[test]
+fn a_graph_among_clip_layers_restored_from_any_checkpoint_makes_the_same_bytes() {
+    for springs in [false, true] {
+        let (alone, mixed) = (graph_params(springs), graph_params_mixed(springs, &NodeOptions::default(), true));
+        let log = log(&mixed);
+        let (frames, texts) = uninterrupted(&mixed, &log);
+        let (graph_alone, _) = uninterrupted(&alone, &log);
+        let shown = |bytes: &bytes::Bytes| {
+            let v = serde_json::from_slice::<serde_json::Value>(bytes).unwrap();
+            (v["pose"]["joints"].clone(), v["graph"].clone())
+        };
+        for k in 0..80 {
+            let ((mixed_pose, mixed_report), (alone_pose, alone_report)) = (shown(&frames[k]), shown(&graph_alone[k]));
+            assert_eq!(mixed_report, alone_report, "the report is the graph's, tick {k}");
+            // Every line starts at the origin: from tick 1 on the clip layers move the root.
+            assert!(k == 0 || mixed_pose != alone_pose, "the clip layers move the root, tick {k}");
+        }
+        let (a, b) = (shown(&frames[21]), shown(&frames[25]));
+        assert_eq!((&a.0[0], &a.1), (&b.0[0], &b.1), "paused, the mixed root holds with the graph's (springs settle)");
+        assert_restores(&mixed, &log, &frames, &texts);
+    }
 }
 
 #[test]

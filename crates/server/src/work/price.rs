@@ -324,12 +324,15 @@ fn retarget_setup(joints: u64, output: u64, (feet, root): (bool, bool)) -> u64 {
     (joints + output).saturating_mul(poses * JOINT).saturating_add(planted)
 }
 
-/// The work a motion's IK and springs add to one tick of a graph played at
-/// `fps` (docs/graphs.md, “What composes with a graph”): its constraints
-/// solved once, and the spring substeps a tick runs at most, each on the
+/// The work a motion's clip layers, IK and springs add to one tick of a
+/// graph played at `fps` (docs/graphs.md, “What composes with a graph”):
+/// its clip layers' pose (each clip's joints, the graph's layer mixed in
+/// as one of its first clip's), its constraints solved once on `skeleton`
+/// (the output's), and the spring substeps a tick runs at most, each on the
 /// tick's pose (a substep evaluates no pose of its own).
-pub fn graph_post(post: &anim::graph::GraphPost, skeleton: &Skeleton, fps: f64) -> u64 {
-    let solve = ik(post.ik(), skeleton);
+pub fn graph_post(post: &crate::built::PinnedPost, skeleton: &Skeleton, fps: f64) -> u64 {
+    let layers = post.mix().map_or(0, |m| motion_pose(m));
+    let solve = ik(post.ik(), skeleton).saturating_add(layers);
     let Some(springs) = post.springs() else { return solve };
     let substeps = (springs.substep_hz() / fps.max(1.0)).ceil() as u64;
     solve.saturating_add(substeps.saturating_mul(substep(0, springs.substep_work())))

@@ -139,6 +139,27 @@ fn a_graphs_ik_and_springs_are_priced_as_a_motions() {
 }
 
 #[test]
+fn a_graph_among_clip_layers_pays_its_clip_layers_as_a_motions_pose() {
+    use anim::graph::{ClipNodeSpec, Graph, GraphPost, GraphSpec, NodeKind, NodeSpec, TopSpec};
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(chain_clip(10, Vec::new()))));
+    let node = NodeSpec { name: "n".into(), kind: NodeKind::Clip(ClipNodeSpec::new(0)) };
+    let spec = GraphSpec { parameters: Vec::new(), nodes: vec![node], top: TopSpec::Output(0) };
+    let graph = Arc::new(Graph::build(spec, std::slice::from_ref(&pinned)).unwrap());
+    let layers = vec![LayerSpec::new(Arc::clone(&pinned)), LayerSpec { weight: 0.5, ..LayerSpec::new(pinned) }];
+    let mixed = GraphPost::mixed(MotionSpec { layers, ..Default::default() }, 0, &graph, &Default::default()).unwrap();
+    let skeleton = graph.skeleton().clone();
+    // The graph's layer as its first clip's 10 joints, and the clip layer's 10: a two-layer motion's pose.
+    assert_eq!(
+        price::graph_post(&mixed, &skeleton, 60.0),
+        price::motion_pose(&motion(chain_clip(10, Vec::new()), 2, Vec::new()))
+    );
+    assert_eq!(price::graph_post(&mixed, &skeleton, 60.0), 20);
+    let alone: crate::built::PinnedPost =
+        GraphPost::build(&[], &Default::default(), &skeleton, &Default::default()).unwrap();
+    assert_eq!(price::graph_post(&alone, &skeleton, 60.0), 0, "a graph alone pays its nodes in graph_tick");
+}
+
+#[test]
 fn ik_keyed_in_a_clip_is_priced_like_a_requests() {
     let keyed = anim::KeyedIkSpec {
         constraint: chain(&[9], Vec3::X, 50),

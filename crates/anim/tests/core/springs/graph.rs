@@ -30,19 +30,24 @@ fn tail_springs() -> SpringsSpec {
     SpringsSpec { chains: vec![chain], ..SpringsSpec::default() }
 }
 
-fn post(clip: &Clip, ik: &[IkSpec], springs: &SpringsSpec) -> GraphPost {
+fn post<'a>(clip: &Clip, ik: &[IkSpec], springs: &SpringsSpec) -> GraphPost<&'a Clip> {
     GraphPost::build(ik, springs, clip.skeleton(), &IkLimits::default()).unwrap()
 }
 
 /// Ticks `0..=ticks` of `graph` at `fps` with `post` run on each: the graph's
 /// pose and the pose after the stages.
-fn play(graph: &Arc<Graph<&Clip>>, post: &GraphPost, fps: u32, ticks: u32) -> Vec<(Pose, Pose)> {
+fn play(graph: &Arc<Graph<&Clip>>, post: &GraphPost<&Clip>, fps: u32, ticks: u32) -> Vec<(Pose, Pose)> {
     let (mut player, mut run) = (GraphPlayer::new(Arc::clone(graph)), PostRun::new(post));
     let dt = 1.0 / f64::from(fps);
     (0..=ticks)
         .map(|k| {
             player.tick(dt);
-            run.run(post, graph.skeleton(), player.pose(), f64::from(k) / f64::from(fps));
+            run.run(
+                post,
+                graph.skeleton(),
+                player.pose(),
+                (f64::from(k) / f64::from(fps), f64::from(k) / f64::from(fps)),
+            );
             (player.pose().clone(), run.pose().clone())
         })
         .collect()
@@ -88,15 +93,15 @@ fn a_run_restored_from_its_state_shows_its_tick_and_steps_on_bit_for_bit() {
     let dt = 1.0 / 60.0;
     for k in 0..=70u32 {
         player.tick(dt);
-        run.run(&sprung, graph.skeleton(), player.pose(), f64::from(k) / 60.0);
+        run.run(&sprung, graph.skeleton(), player.pose(), (f64::from(k) / 60.0, f64::from(k) / 60.0));
     }
     let mut player = GraphPlayer::from_state(Arc::clone(&graph), player.state()).unwrap();
     let mut run = PostRun::from_state(&sprung, run.spring_state()).unwrap();
-    run.run(&sprung, graph.skeleton(), player.pose(), 70.0 / 60.0);
+    run.run(&sprung, graph.skeleton(), player.pose(), (70.0 / 60.0, 70.0 / 60.0));
     assert_eq!(run.pose(), &uninterrupted[70].1, "the restored run shows the tick it was taken after");
     for k in 71..=150u32 {
         player.tick(dt);
-        run.run(&sprung, graph.skeleton(), player.pose(), f64::from(k) / 60.0);
+        run.run(&sprung, graph.skeleton(), player.pose(), (f64::from(k) / 60.0, f64::from(k) / 60.0));
         assert_eq!(run.pose(), &uninterrupted[k as usize].1, "tick {k}");
     }
     assert!(PostRun::from_state(&sprung, None).is_err(), "springs need their state");
@@ -153,7 +158,7 @@ fn a_restart_shows_the_rest_rotations_and_the_chain_runs_on_from_them() {
             run.restart_springs();
         }
         player.tick(dt);
-        run.run(&sprung, graph.skeleton(), player.pose(), f64::from(k) / 60.0);
+        run.run(&sprung, graph.skeleton(), player.pose(), (f64::from(k) / 60.0, f64::from(k) / 60.0));
         // The clip keys only the body: its tail is at rest rotations.
         let at_rest = tail(run.pose()) == tail(player.pose());
         match k {
