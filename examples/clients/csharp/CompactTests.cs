@@ -31,6 +31,7 @@ static class CompactTests
         }
         Run("the worked example decodes to the hand-computed rotation", WorkedExample);
         Run("a delta frame without its key frame is refused", MissingKeyFrame);
+        Run("a new layout mid-stream forgets the old key frame", NewLayoutForgetsTheKeyFrame);
         Run("trailing bytes, unknown flags and overlong varints are refused", MalformedHeaders);
         Run("a refused frame changes neither the decoder nor the output", RefusedFrameChangesNothing);
         Run("random bytes decode or throw CompactException, nothing else", RandomBytes);
@@ -81,6 +82,13 @@ static class CompactTests
         return new CompactDecoder(CompactLayout.FromJson(vector["layout"]));
     }
 
+    // A frame that comes first in a new layout mid-stream carries it (docs/compact-frames.md, "A new layout").
+    static void NewLayout(CompactDecoder decoder, Dictionary<string, object> frame)
+    {
+        object layout;
+        if (frame.TryGetValue("layout", out layout)) decoder.Relayout(CompactLayout.FromJson(layout));
+    }
+
     static List<Dictionary<string, object>> Frames(Dictionary<string, object> vector)
     {
         return ((List<object>)vector["frames"]).Cast<Dictionary<string, object>>().ToList();
@@ -115,6 +123,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             decoder.Decode(Hex(frame), got);
             CheckHeader(got, frame);
             var at = " (seq " + got.Seq + ")";
@@ -154,6 +163,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             var bytes = Hex(frame);
             for (int n = 0; n < bytes.Length; n++)
             {
@@ -169,6 +179,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             var bytes = Hex(frame);
             var buffer = new byte[bytes.Length + 7];
             for (int i = 0; i < buffer.Length; i++) buffer[i] = 0xff;
@@ -215,6 +226,22 @@ static class CompactTests
         Check(delta[offsetAt] < 0x7f, "a one-byte key offset");
         delta[offsetAt]++;
         Refused("compact_missing_key_frame", () => decoder.Decode(delta, got));
+    }
+
+    static void NewLayoutForgetsTheKeyFrame()
+    {
+        var vector = Vector("relayout");
+        var frames = Frames(vector);
+        var decoder = DecoderOf(vector);
+        var got = decoder.NewFrame();
+        decoder.Decode(Hex(frames[0]), got);
+        decoder.Decode(Hex(frames[1]), got);
+        NewLayout(decoder, frames[2]);
+        Refused("compact_missing_key_frame", () => decoder.Decode(Hex(frames[3]), got));
+        decoder.Decode(Hex(frames[2]), got);
+        Check(got.Key, "the new layout's key frame");
+        decoder.Decode(Hex(frames[3]), got);
+        SameBits(got.Translations, Flat(frames[3], "translations"), "translations in the new layout");
     }
 
     static void MalformedHeaders()
