@@ -1131,3 +1131,54 @@ async fn a_grpc_compact_play_crossfades_and_takes_ik_in_new_layouts() {
     let compared = compare_shifted(&frames, &plain, shift, (max_error, l.distance));
     assert!(compared >= 40, "{compared} frames compared");
 }
+
+/// Choosing a new layout is priced as the open's layout is (docs:
+/// "Price"): a crossfade to a clip so long that its range samples cost
+/// more than `max_request_work` is refused `too_much_work` before any work,
+/// and the stream goes on in its layout, holding what it held.
+#[tokio::test]
+async fn a_new_layout_over_the_request_limit_is_refused_and_the_stream_goes_on() {
+    use futures_util::SinkExt;
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 100_000).start().await;
+    let walk = app.create_id(&arm_clip(), None).await;
+    // The arm slowed fifty times: 100 s, so 24,001 grid samples of a six-joint pose (7 units each) and more.
+    let mut slow: Value = serde_json::from_str(&arm_clip()).unwrap();
+    for track in slow["tracks"].as_array_mut().unwrap() {
+        let times: Vec<f64> = track["times"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap() * 50.0).collect();
+        track["times"] = json!(times);
+    }
+    slow["name"] = json!("slow arm");
+    let slow = app.create_id(&slow.to_string(), None).await;
+    let mut ws = app.ws("/v1/stream").await;
+    let open = json!({"op": "open", "motion": {"layers": [{"clip": walk}]}, "fps": 30, "encoding": "compact"});
+    ws.send(Message::Text(open.to_string().into())).await.unwrap();
+    let doc = opened_layout(&mut ws).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    drop(more_frames(&mut ws, &mut decoder, 2).await);
+    let held = app.state.work.meter().held();
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": slow}]}, "duration": 0.2});
+    ws.send(Message::Text(fade.to_string().into())).await.unwrap();
+    let problem = loop {
+        match next_message(&mut ws).await {
+            Message::Binary(b) => drop(decoder.decode(&b)),
+            Message::Text(t) => break serde_json::from_str::<Value>(&t).unwrap()["error"].clone(),
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!((problem["code"].as_str(), problem["status"].as_u64()), (Some("too_much_work"), Some(422)), "{problem}");
+    let units: u64 = problem["detail"]
+        .as_str()
+        .unwrap()
+        .split(" costs ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(units >= 24_001 * 7, "{problem}");
+    let (frames, _) = more_frames(&mut ws, &mut decoder, 5).await;
+    assert!(frames.iter().all(|d| !d.new_layout), "the stream goes on in its layout");
+    assert_eq!(app.state.work.meter().held(), held, "holding what it held");
+}

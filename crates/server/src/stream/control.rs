@@ -631,17 +631,10 @@ impl ControlCheck {
     /// A control the stream refuses, or its work.
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         self.relayout = None;
+        // Priced and charged before any work on it, held while the layout is chosen.
+        let _held = self.charge_layout(&control)?;
         let control = self.check_control(control)?;
-        let Some(layout) = &self.compact else { return Ok(control) };
-        let change = match &control {
-            Control::Crossfade(fade) => Relayout::Plays(&fade.to),
-            Control::Layer { .. } if !layout.any_weights => Relayout::Plays(&self.playing),
-            Control::SetIk(constraints) => Relayout::Ik(constraints),
-            _ => return Ok(control),
-        };
-        let pose = super::compact::range_sample_price(&self.playing, None, crate::work::price::clip_pose);
-        let units = crate::work::price::compact_layout(change.samples(), pose);
-        let _held = self.repricing.as_ref().map(|r| r.charge_layout(units)).transpose()?;
+        let (Some(layout), Some(change)) = (&self.compact, self.layout_change(&control)) else { return Ok(control) };
         let next = layout.after(change, self.skeleton.skeleton()).map_err(|_| ControlError::Invalid(UNBOUNDED))?;
         if let Some(next) = next {
             let next = Arc::new(next);
@@ -649,6 +642,33 @@ impl ControlCheck {
             self.relayout = Some(next);
         }
         Ok(control)
+    }
+
+    /// What `control` makes a compact stream's layout hold besides what it
+    /// holds (`None`: nothing, or not compact). An `ik` control counts as
+    /// sent or as resolved; only the resolved one names its joints.
+    fn layout_change<'a>(&'a self, control: &'a Control) -> Option<Relayout<'a>> {
+        let layout = self.compact.as_ref()?;
+        match control {
+            Control::Crossfade(fade) => Some(Relayout::Plays(&fade.to)),
+            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(&self.playing)),
+            Control::SetIk(constraints) => Some(Relayout::Ik(constraints)),
+            Control::Ik(_) => Some(Relayout::Ik(&[])),
+            _ => None,
+        }
+    }
+
+    /// Charges the work of the new layout `control` would make the stream
+    /// choose (docs/compact-frames.md, "A new layout"): its range samples,
+    /// each a pose of the costliest clip they read.
+    fn charge_layout(&self, control: &Control) -> Result<Option<Box<dyn std::any::Any + Send>>, ControlError> {
+        let (Some(change), Some(repricing)) = (self.layout_change(control), &self.repricing) else { return Ok(None) };
+        let motion = match change {
+            Relayout::Plays(motion) => motion,
+            Relayout::Ik(_) => &self.playing,
+        };
+        let pose = super::compact::range_sample_price(motion, None, crate::work::price::clip_pose);
+        repricing.charge_layout(crate::work::price::compact_layout(change.samples(), pose)).map(Some)
     }
 
     fn check_control(&mut self, control: Control) -> Result<Control, ControlError> {
