@@ -309,12 +309,12 @@ namespace Inbetween
         // Per joint in a value store: largest index, three rotation components, translation x y z, scale x y z.
         private const int Stride = 10;
 
-        public readonly CompactLayout Layout;
-        private readonly CompactJoint[] joints;
+        public CompactLayout Layout { get; private set; }
+        private CompactJoint[] joints;
         // The quantised values of the last key frame, and scratch for the frame being read: a frame that turns out
         // malformed half-way leaves `key` and the caller's arrays untouched.
-        private readonly int[] key;
-        private readonly int[] values;
+        private int[] key;
+        private int[] values;
         private bool hasKey;
         private ulong keySeq;
         private readonly double[] small = new double[3];
@@ -324,11 +324,29 @@ namespace Inbetween
 
         public CompactDecoder(CompactLayout layout)
         {
+            Relayout(layout);
+        }
+
+        /// <summary>
+        /// Decodes frames of <paramref name="layout"/> from now on (docs/compact-frames.md, "A new layout": a
+        /// WebSocket text message {"layout", "seq"}, or a later Frame's compact_layout on gRPC). The last key frame
+        /// is forgotten, so a delta frame before the new layout's first key frame is refused. The skeleton is the
+        /// stream's, so frames from <see cref="NewFrame"/> keep fitting.
+        /// </summary>
+        public void Relayout(CompactLayout layout)
+        {
             if (layout == null) throw new ArgumentNullException("layout");
             Layout = layout;
             joints = layout.Joints;
             key = new int[joints.Length * Stride];
             values = new int[joints.Length * Stride];
+            hasKey = false;
+        }
+
+        /// <summary>Parses the layout document (JSON) and decodes against it from now on.</summary>
+        public void Relayout(string layoutJson)
+        {
+            Relayout(CompactLayout.Parse(layoutJson));
         }
 
         /// <summary>Parses the layout document (JSON) and decodes against it.</summary>

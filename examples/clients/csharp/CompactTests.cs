@@ -31,6 +31,9 @@ static class CompactTests
         }
         Run("the worked example decodes to the hand-computed rotation", WorkedExample);
         Run("a delta frame without its key frame is refused", MissingKeyFrame);
+        Run("a new layout mid-stream forgets the old key frame", NewLayoutForgetsTheKeyFrame);
+        Run("the stream client takes a new layout, names events and keeps root motion", ClientTakesLayoutsEventsAndRootMotion);
+        Run("root motion converts to Unity's axes", RootMotionConversion);
         Run("trailing bytes, unknown flags and overlong varints are refused", MalformedHeaders);
         Run("a refused frame changes neither the decoder nor the output", RefusedFrameChangesNothing);
         Run("random bytes decode or throw CompactException, nothing else", RandomBytes);
@@ -81,6 +84,13 @@ static class CompactTests
         return new CompactDecoder(CompactLayout.FromJson(vector["layout"]));
     }
 
+    // A frame that comes first in a new layout mid-stream carries it (docs/compact-frames.md, "A new layout").
+    static void NewLayout(CompactDecoder decoder, Dictionary<string, object> frame)
+    {
+        object layout;
+        if (frame.TryGetValue("layout", out layout)) decoder.Relayout(CompactLayout.FromJson(layout));
+    }
+
     static List<Dictionary<string, object>> Frames(Dictionary<string, object> vector)
     {
         return ((List<object>)vector["frames"]).Cast<Dictionary<string, object>>().ToList();
@@ -115,6 +125,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             decoder.Decode(Hex(frame), got);
             CheckHeader(got, frame);
             var at = " (seq " + got.Seq + ")";
@@ -154,6 +165,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             var bytes = Hex(frame);
             for (int n = 0; n < bytes.Length; n++)
             {
@@ -169,6 +181,7 @@ static class CompactTests
         var got = decoder.NewFrame();
         foreach (var frame in Frames(vector))
         {
+            NewLayout(decoder, frame);
             var bytes = Hex(frame);
             var buffer = new byte[bytes.Length + 7];
             for (int i = 0; i < buffer.Length; i++) buffer[i] = 0xff;
@@ -215,6 +228,86 @@ static class CompactTests
         Check(delta[offsetAt] < 0x7f, "a one-byte key offset");
         delta[offsetAt]++;
         Refused("compact_missing_key_frame", () => decoder.Decode(delta, got));
+    }
+
+    static void NewLayoutForgetsTheKeyFrame()
+    {
+        var vector = Vector("relayout");
+        var frames = Frames(vector);
+        var decoder = DecoderOf(vector);
+        var got = decoder.NewFrame();
+        decoder.Decode(Hex(frames[0]), got);
+        decoder.Decode(Hex(frames[1]), got);
+        NewLayout(decoder, frames[2]);
+        Refused("compact_missing_key_frame", () => decoder.Decode(Hex(frames[3]), got));
+        decoder.Decode(Hex(frames[2]), got);
+        Check(got.Key, "the new layout's key frame");
+        decoder.Decode(Hex(frames[3]), got);
+        SameBits(got.Translations, Flat(frames[3], "translations"), "translations in the new layout");
+    }
+
+    // The layout objects of a vector's text, in the order they appear (the keys are sorted: a frame's new layout
+    // comes before the vector's own).
+    static List<string> LayoutTexts(string name)
+    {
+        var text = File.ReadAllText(Path.Combine(vectorsDir, name + ".json"));
+        var found = new List<string>();
+        for (int at = text.IndexOf("\"layout\": ", StringComparison.Ordinal); at >= 0; at = text.IndexOf("\"layout\": ", at + 1, StringComparison.Ordinal))
+        {
+            found.Add(ExtractObject(text, at + "\"layout\": ".Length));
+        }
+        return found;
+    }
+
+    // The stream client as its socket would feed it: the opened message, frames, a new layout mid-stream; the
+    // newest frame with its root motion, and every event crossed, named by the layout it was decoded in.
+    static void ClientTakesLayoutsEventsAndRootMotion()
+    {
+        var client = new CompactStreamClient(new Uri("ws://127.0.0.1:1/"), null);
+        client.OnText("{\"opened\": {\"compact\": " + LayoutTexts("stepping")[0] + "}}");
+        foreach (var frame in Frames(Vector("stepping")))
+        {
+            var bytes = Hex(frame);
+            client.OnFrame(bytes, bytes.Length);
+        }
+        var events = new List<CrossedEvent>();
+        Equal(3, client.TakeEvents(events), "events crossed");
+        Equal("step_left@7 step_right@9 land@9", string.Join(" ", events.Select(e => e.Name + "@" + e.Seq)), "events");
+        Equal(0, client.TakeEvents(events), "taken once");
+        var got = client.Decoder.NewFrame();
+        Check(client.TryTakeNewest(got), "a newest frame");
+        Check(!got.HasRootMotion, "the last stepping frame reports none");
+        var relayout = Vector("relayout");
+        var texts = LayoutTexts("relayout");
+        client = new CompactStreamClient(new Uri("ws://127.0.0.1:1/"), null);
+        client.OnText("{\"opened\": {\"compact\": " + texts[1] + "}}");
+        var frames = Frames(relayout);
+        for (int i = 0; i < frames.Count; i++)
+        {
+            if (i == 2) client.OnText("{\"layout\": " + texts[0] + ", \"seq\": 9}");
+            var bytes = Hex(frames[i]);
+            client.OnFrame(bytes, bytes.Length);
+        }
+        Equal(null, client.Error, "no error across the new layout");
+        Check(client.TryTakeNewest(got), "the newest frame");
+        SameBits(got.Translations, Flat(frames[3], "translations"), "the new layout's delta frame");
+    }
+
+    // Root motion as the MonoBehaviour puts it on its Transform: mirrored as a joint's translation, the yaw negated,
+    // and the yaw turned before the placement.
+    static void RootMotionConversion()
+    {
+        var m = new[] { 1f, 2f, 3f, 0.5f };
+        UnityAxes.ConvertRootMotion(AxisConversion.GltfToUnity, m);
+        Equal("-1 2 3 -0.5", string.Join(" ", m.Select(x => x.ToString(CultureInfo.InvariantCulture))), "mirror X");
+        m = new[] { 1f, 2f, 3f, 0.5f };
+        UnityAxes.ConvertRootMotion(AxisConversion.GltfToUnityMirrorZ, m);
+        Equal("1 2 -3 -0.5", string.Join(" ", m.Select(x => x.ToString(CultureInfo.InvariantCulture))), "mirror Z");
+        var q = UnityAxes.YawThen(1.0f, new[] { 0f, 0f, 0f, 1f });
+        Check(Math.Abs(q[1] - Math.Sin(0.5)) < 1e-6 && Math.Abs(q[3] - Math.Cos(0.5)) < 1e-6 && q[0] == 0 && q[2] == 0, "yaw alone");
+        // Two yaws compose: 0.25 then 0.75 is 1.
+        q = UnityAxes.YawThen(0.75f, UnityAxes.YawThen(0.25f, new[] { 0f, 0f, 0f, 1f }));
+        Check(Math.Abs(q[1] - Math.Sin(0.5)) < 1e-6 && Math.Abs(q[3] - Math.Cos(0.5)) < 1e-6, "yaws add");
     }
 
     static void MalformedHeaders()

@@ -5,8 +5,9 @@
 // Three parts, the first two plain C# (Mono compiles and tests them without Unity):
 // - UnityAxes: the glTF → Unity axis conversion of a decoded pose, in place.
 // - CompactStreamClient: opens the WebSocket (System.Net.WebSockets), reads the
-//   `opened` message's layout, decodes every frame off the game thread and keeps
-//   the newest for the game thread to take.
+//   `opened` message's layout (and a new layout mid-stream, `{"layout", "seq"}`),
+//   decodes every frame off the game thread and keeps the newest, and every
+//   event crossed, for the game thread to take.
 // - InbetweenStream (Unity only, under UNITY_5_3_OR_NEWER): the MonoBehaviour.
 //   Add it to a character, set `clip`, and the skeleton moves with the stream.
 //
@@ -63,6 +64,35 @@ namespace Inbetween
                 }
             }
         }
+
+        /// <summary>
+        /// Converts a root motion report's [x, y, z, yaw] in place: the translation as a joint's, and the yaw about
+        /// +Y negated (a mirror's conjugation negates the quaternion's y, as in Convert).
+        /// </summary>
+        public static void ConvertRootMotion(AxisConversion conversion, float[] xyzYaw)
+        {
+            if (conversion == AxisConversion.None) return;
+            int k = conversion == AxisConversion.GltfToUnity ? 0 : 2;
+            xyzYaw[k] = -xyzYaw[k];
+            xyzYaw[3] = -xyzYaw[3];
+        }
+
+        /// <summary>
+        /// The rotation by <paramref name="yaw"/> radians about +Y, then <paramref name="q"/> [x, y, z, w] under it:
+        /// (0, sin(yaw/2), 0, cos(yaw/2)) · q, as [x, y, z, w].
+        /// </summary>
+        public static float[] YawThen(float yaw, float[] q)
+        {
+            float s = (float)Math.Sin(yaw / 2), c = (float)Math.Cos(yaw / 2);
+            return new[] { c * q[0] + s * q[2], c * q[1] + s * q[3], c * q[2] - s * q[0], c * q[3] - s * q[1] };
+        }
+    }
+
+    /// <summary>An event a frame crossed (docs/compact-frames.md): its name in the layout, and the frame's seq.</summary>
+    public struct CrossedEvent
+    {
+        public string Name;
+        public ulong Seq;
     }
 
     /// <summary>
@@ -84,6 +114,9 @@ namespace Inbetween
         private CompactFrame newest;
         private bool fresh;
         private long framesDecoded;
+        // Every event crossed since the game thread last took them (at most MaxEvents: the oldest go first).
+        private readonly Queue<CrossedEvent> crossed = new Queue<CrossedEvent>();
+        private const int MaxEvents = 1024;
         private volatile string error;
         private volatile bool finished;
         private Task run;
@@ -180,6 +213,20 @@ namespace Inbetween
             }
         }
 
+        /// <summary>
+        /// Moves every event crossed since the last call into <paramref name="into"/>, in the order crossed (events
+        /// of frames TryTakeNewest skipped too); returns how many.
+        /// </summary>
+        public int TakeEvents(List<CrossedEvent> into)
+        {
+            lock (gate)
+            {
+                int n = crossed.Count;
+                while (crossed.Count > 0) into.Add(crossed.Dequeue());
+                return n;
+            }
+        }
+
         /// <summary>Sends a control (docs/api.md, "Streams"), e.g. <c>{"op":"seek","time":1.5}</c>; it acts on the next tick.</summary>
         public async Task SendAsync(string control)
         {
@@ -271,12 +318,18 @@ namespace Inbetween
             }
         }
 
-        // The `opened` message (the layout) or an `error` (a control refused; the stream goes on).
-        private void OnText(string text)
+        // The `opened` message (the layout), a new layout mid-stream (docs/compact-frames.md, "A new layout": the
+        // frames after it, from a key frame, are in it) or an `error` (a control refused; the stream goes on).
+        internal void OnText(string text)
         {
             var message = CompactJson.Parse(text) as Dictionary<string, object>;
             object value;
-            if (message != null && message.TryGetValue("opened", out value))
+            if (message != null && message.TryGetValue("layout", out value) && decoder != null)
+            {
+                // The skeleton is the stream's: the frames the game thread holds still fit.
+                decoder.Relayout(CompactLayout.FromJson(value));
+            }
+            else if (message != null && message.TryGetValue("opened", out value))
             {
                 var opened = value as Dictionary<string, object>;
                 object layout;
@@ -302,7 +355,7 @@ namespace Inbetween
             }
         }
 
-        private void OnFrame(byte[] bytes, int length)
+        internal void OnFrame(byte[] bytes, int length)
         {
             var d = decoder;
             if (d == null)
@@ -324,6 +377,13 @@ namespace Inbetween
             {
                 Copy(decoded, newest);
                 fresh = true;
+                // Named now: a later layout may list other events.
+                var names = d.Layout.EventNames;
+                for (int i = 0; i < decoded.EventCount; i++)
+                {
+                    if (crossed.Count == MaxEvents) crossed.Dequeue();
+                    crossed.Enqueue(new CrossedEvent { Name = names[decoded.Events[i]], Seq = decoded.Seq });
+                }
             }
         }
 
@@ -339,6 +399,8 @@ namespace Inbetween
             Array.Copy(from.Translations, to.Translations, from.Translations.Length);
             Array.Copy(from.Rotations, to.Rotations, from.Rotations.Length);
             Array.Copy(from.Scales, to.Scales, from.Scales.Length);
+            to.HasRootMotion = from.HasRootMotion;
+            Array.Copy(from.RootMotion, to.RootMotion, from.RootMotion.Length);
         }
     }
 }
@@ -373,11 +435,24 @@ namespace Inbetween
         public Transform root;
         [Tooltip("GltfToUnity for models imported by glTFast or UnityGLTF (X mirrored), GltfToUnityMirrorZ for UniGLTF and UniVRM")]
         public AxisConversion axes = AxisConversion.GltfToUnity;
+        [Tooltip("Move this object by the stream's root motion (its total since the stream began), on top of where it was placed")]
+        public bool applyRootMotion = true;
+
+        /// <summary>
+        /// Raised on the game thread, in Update, for every event the stream's frames crossed since the last Update
+        /// (its name in the clip, and the frame's seq), in the order crossed: footsteps, sound cues.
+        /// </summary>
+        public event Action<string, ulong> EventCrossed;
 
         private CompactStreamClient client;
         private CompactFrame frame;
         private Transform[] targets;
         private string reported;
+        private readonly List<CrossedEvent> events = new List<CrossedEvent>();
+        private readonly float[] rootMotion = new float[4];
+        // Where this object was when the stream started: root motion is added to it.
+        private Vector3 originPosition;
+        private float[] originRotation;
 
         /// <summary>The newest frame applied (its seq, dropped, clip time), or null before the first.</summary>
         public CompactFrame Frame
@@ -392,6 +467,9 @@ namespace Inbetween
                 : CompactStreamClient.BroadcastUri(server, broadcast, maxError, distance);
             client = new CompactStreamClient(uri, token);
             client.Start();
+            originPosition = transform.localPosition;
+            var q = transform.localRotation;
+            originRotation = new[] { q.x, q.y, q.z, q.w };
         }
 
         private void OnDisable()
@@ -406,6 +484,7 @@ namespace Inbetween
             var decoder = client.Decoder;
             if (decoder != null && targets == null) Bind(decoder);
             if (targets != null && client.TryTakeNewest(frame)) Apply();
+            RaiseEvents();
             var error = client.Error;
             if (error != null && error != reported)
             {
@@ -450,6 +529,25 @@ namespace Inbetween
                 target.localRotation = new Quaternion(r[4 * j], r[4 * j + 1], r[4 * j + 2], r[4 * j + 3]);
                 target.localScale = new Vector3(s[3 * j], s[3 * j + 1], s[3 * j + 2]);
             }
+            if (applyRootMotion && frame.HasRootMotion) ApplyRootMotion();
+        }
+
+        // As the three.js player: the total travelled on top of the placement, the yaw turned before it.
+        private void ApplyRootMotion()
+        {
+            Array.Copy(frame.RootMotion, 4, rootMotion, 0, 4);
+            UnityAxes.ConvertRootMotion(axes, rootMotion);
+            var p = originPosition;
+            transform.localPosition = new Vector3(p.x + rootMotion[0], p.y + rootMotion[1], p.z + rootMotion[2]);
+            var q = UnityAxes.YawThen(rootMotion[3], originRotation);
+            transform.localRotation = new Quaternion(q[0], q[1], q[2], q[3]);
+        }
+
+        private void RaiseEvents()
+        {
+            events.Clear();
+            if (client.TakeEvents(events) == 0 || EventCrossed == null) return;
+            foreach (var e in events) EventCrossed(e.Name, e.Seq);
         }
 
         /// <summary>

@@ -46,7 +46,18 @@ var _detail := ""
 
 
 func _init(compact_layout: Dictionary) -> void:
+	relayout(compact_layout)
+
+
+## Decodes frames of `compact_layout` from now on (docs/compact-frames.md, "A
+## new layout": a `{"layout", "seq"}` message mid-stream): the last key frame is
+## forgotten, so a delta frame before the new layout's first key frame is refused.
+func relayout(compact_layout: Dictionary) -> void:
 	layout = compact_layout
+	joints = []
+	names = PackedStringArray()
+	key_seq = -1
+	has_key = false
 	if int(layout.get("version", 0)) != 1:
 		push_error("inbetween: compact layout version %s" % layout.get("version"))
 	events = layout.get("events", [])

@@ -97,6 +97,9 @@ func _receive_text(text: String, now: float) -> void:
 		if opened.has("compact"):
 			_decoder = Compact.new(opened["compact"])
 			_bind(_decoder.names)
+	elif message.has("layout") and _decoder != null:
+		# A new layout mid-stream: the skeleton and the buffered frames stay, so the pose interpolates on.
+		_decoder.relayout(message["layout"])
 	elif message.has("pose"):
 		_take(_json_frame(message), now)
 

@@ -6,7 +6,9 @@
 //   const frame = decoder.decode(new Uint8Array(message)); // frame.rotations, ...
 //
 // A decoder keeps the last key frame's values, so feed it every frame of one
-// stream in order. The pose arrays it returns are reused by the next decode:
+// stream in order. A new layout mid-stream (a text message `{"layout", "seq"}`
+// on a WebSocket, a later `compact_layout` on gRPC) goes to
+// `decoder.relayout(layout)` before the frame after it, a key frame. The pose arrays it returns are reused by the next decode:
 // copy them to keep them.
 
 const KEY_FRAME = 1;
@@ -108,6 +110,15 @@ function readZigzag(bytes, at) {
 /** Decodes one stream's compact frames against the layout of its `opened` message. */
 export class CompactDecoder {
   constructor(layout) {
+    this.relayout(layout);
+  }
+
+  /**
+   * Decodes frames of `layout` from now on (docs/compact-frames.md, "A new
+   * layout"): the last key frame is forgotten, so a delta frame before the
+   * new layout's first key frame is refused. The pose arrays are new.
+   */
+  relayout(layout) {
     if (layout.version !== 1) throw new CompactError("compact_version", `layout version ${layout.version}`);
     this.layout = layout;
     this.joints = layout.joints.map(compileJoint);

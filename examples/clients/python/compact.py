@@ -6,6 +6,9 @@
     frame = decoder.decode(message_bytes)   # frame.rotations: (joints, 4)
 
 A decoder keeps the last key frame's values: feed it one stream's frames in order.
+A new layout mid-stream (a WebSocket text message ``{"layout", "seq"}``, a later
+``compact_layout`` on gRPC) goes to ``decoder.relayout(layout)`` before the frame
+after it, a key frame.
 """
 
 import math
@@ -99,6 +102,12 @@ class CompactDecoder:
     """Decodes one stream's compact frames against its ``opened`` layout."""
 
     def __init__(self, layout):
+        self.relayout(layout)
+
+    def relayout(self, layout):
+        """Decodes frames of ``layout`` from now on (docs/compact-frames.md, "A new
+        layout"): the last key frame is forgotten, so a delta frame before the new
+        layout's first key frame is refused."""
         if layout.get("version") != 1:
             raise CompactError("compact_version", f"layout version {layout.get('version')}")
         self.layout = layout

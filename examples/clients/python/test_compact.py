@@ -24,6 +24,8 @@ class CompactVectors(unittest.TestCase):
         for vector in vectors:
             decoder = CompactDecoder(vector["layout"])
             for frame in vector["frames"]:
+                if "layout" in frame:  # a new layout mid-stream
+                    decoder.relayout(frame["layout"])
                 got = decoder.decode(bytes.fromhex(frame["hex"]))
                 with self.subTest(vector=vector["name"], seq=frame["seq"]):
                     self.assertEqual((got.key, got.seq, got.dropped), (frame["key"], frame["seq"], frame["dropped"]))
@@ -62,6 +64,19 @@ class CompactVectors(unittest.TestCase):
             with self.assertRaises(CompactError) as refused:
                 CompactDecoder(vector["layout"]).decode(bad)
             self.assertEqual(refused.exception.code, code)
+
+    def test_a_new_layout_forgets_the_old_key_frame(self):
+        vector = next(v for v in load() if v["name"] == "relayout")
+        frames = [bytes.fromhex(f["hex"]) for f in vector["frames"]]
+        decoder = CompactDecoder(vector["layout"])
+        decoder.decode(frames[0])
+        decoder.decode(frames[1])
+        decoder.relayout(vector["frames"][2]["layout"])
+        with self.assertRaises(CompactError) as refused:
+            decoder.decode(frames[3])
+        self.assertEqual(refused.exception.code, "compact_missing_key_frame")
+        self.assertTrue(decoder.decode(frames[2]).key)
+        self.assertFalse(decoder.decode(frames[3]).key)
 
 
 if __name__ == "__main__":

@@ -77,6 +77,7 @@ export class InbetweenPlayer {
     const message = JSON.parse(data);
     if (message.error) this.error = message.error;
     else if (message.opened) this.open(message.opened);
+    else if (message.layout) this.relayout(message.layout);
     else if (message.pose) this.take(jsonFrame(message, this), now);
   }
 
@@ -85,6 +86,16 @@ export class InbetweenPlayer {
     if (opened.compact) this.decoder = new CompactDecoder(opened.compact);
     const names = this.decoder?.names ?? opened.joints;
     if (names) this.bind(names);
+  }
+
+  /**
+   * A new layout mid-stream (docs/compact-frames.md, "A new layout"): the
+   * frames after it decode in it. The skeleton and the buffered frames stay,
+   * so the pose interpolates on from the last frame of the old layout to the
+   * first of the new without a jump.
+   */
+  relayout(layout) {
+    this.decoder.relayout(layout);
   }
 
   bind(names) {

@@ -87,6 +87,8 @@ impl Joint {
 }
 
 struct Layout {
+    /// The error it states it keeps within (docs: "The error bound").
+    bound: f64,
     distance: f64,
     key_interval: u64,
     joints: Vec<Joint>,
@@ -118,7 +120,12 @@ fn layout(doc: &Value) -> Layout {
             scale: fields(&j["scale"]),
         })
         .collect();
-    Layout { distance: doc["distance"].as_f64().unwrap(), key_interval: doc["key_interval"].as_u64().unwrap(), joints }
+    Layout {
+        bound: doc["bound"].as_f64().unwrap(),
+        distance: doc["distance"].as_f64().unwrap(),
+        key_interval: doc["key_interval"].as_u64().unwrap(),
+        joints,
+    }
 }
 
 /// Bits least significant first, each byte from bit 0 (docs: "Bit order").
@@ -165,6 +172,11 @@ struct Decoded {
     dropped: u64,
     key: bool,
     key_seq: u64,
+    clip_time: f32,
+    /// Its layout's `bound`.
+    bound: f64,
+    /// The first frame of a layout sent mid-stream.
+    new_layout: bool,
     pose: Vec<Pose>,
     /// Indices into the layout's `events` (docs: flags bit 1).
     events: Vec<u64>,
@@ -205,7 +217,8 @@ impl Decoder {
         let dropped = varint(bytes, &mut at);
         let key_seq = seq - varint(bytes, &mut at);
         let _sent_at = varint(bytes, &mut at);
-        at += 4; // the clip time
+        let clip_time = f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+        at += 4;
         let mut bits = Bits { bytes: &bytes[at..], at: 0 };
         let raws: Vec<Raw> = if key {
             self.layout.joints.iter().map(|j| self.joint(j, &mut bits)).collect()
@@ -237,7 +250,15 @@ impl Decoder {
             self.keys = Some((seq, raws.clone()));
         }
         let pose = self.layout.joints.iter().zip(&raws).map(|(j, raw)| pose_of(j, raw)).collect();
-        Decoded { seq, dropped, key, key_seq, pose, events, root_motion }
+        let bound = self.layout.bound;
+        Decoded { seq, dropped, key, key_seq, clip_time, bound, new_layout: false, pose, events, root_motion }
+    }
+
+    /// A new layout mid-stream (docs: "A new layout"): its frames decode
+    /// with it, from a key frame on.
+    fn relayout(&mut self, doc: &Value) {
+        self.layout = layout(doc);
+        self.keys = None;
     }
 }
 
@@ -414,6 +435,16 @@ async fn more_frames(ws: &mut Ws, decoder: &mut Decoder, n: usize) -> (Vec<Decod
             Message::Binary(b) => {
                 sizes.push(b.len());
                 frames.push(decoder.decode(&b));
+            }
+            Message::Text(t) => {
+                let v: Value = serde_json::from_str(&t).unwrap();
+                assert!(v["layout"].is_object(), "expected a compact frame or a layout, got {v}");
+                decoder.relayout(&v["layout"]);
+                let Message::Binary(b) = next_message(ws).await else { panic!("a frame after the layout") };
+                let d = Decoded { new_layout: true, ..decoder.decode(&b) };
+                assert!(d.key && v["seq"] == d.seq, "the first frame in a new layout is a key frame of its seq: {v}");
+                sizes.push(b.len());
+                frames.push(d);
             }
             other => panic!("expected a compact frame, got {other:?}"),
         }
@@ -676,19 +707,15 @@ async fn bad_compact_parameters_are_refused_with_stable_codes() {
         assert_eq!(status.code(), tonic::Code::InvalidArgument, "{code}: {status:?}");
         assert_eq!(status.metadata().get("x-error-code").unwrap().to_str().unwrap(), code);
     }
-    // A control that would leave the clip is refused on a compact stream, which goes on.
+    // A layer ramp leaves one clip's observed ranges: the stream sends a new layout, then a key frame in it.
     let mut ws = app.ws(&format!("/v1/clips/{id}/stream?encoding=compact&fps=30")).await;
-    let (_, _, _) = compact_frames(&mut ws, 1).await;
+    let doc = opened_layout(&mut ws).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    drop(more_frames(&mut ws, &mut decoder, 1).await);
     use futures_util::SinkExt;
     ws.send(Message::Text(r#"{"op":"layer","index":0,"weight":0.5,"duration":0}"#.into())).await.unwrap();
-    loop {
-        if let Message::Text(t) = next_message(&mut ws).await {
-            let v: Value = serde_json::from_str(&t).unwrap();
-            assert_eq!(v["error"]["code"], "bad_control", "{v}");
-            break;
-        }
-    }
-    assert!(matches!(next_message(&mut ws).await, Message::Binary(_)), "the stream goes on");
+    let (frames, _) = more_frames(&mut ws, &mut decoder, 10).await;
+    assert!(frames.iter().any(|d| d.new_layout), "a new layout within 10 frames");
 }
 
 /// The parents of a stored clip's joints, from its skeleton.
@@ -776,7 +803,8 @@ fn arm_variant(name: &str, path: Value, scales: Value, turn: f64) -> String {
 /// scales and turns differ from its reference, and a two-bone IK on the
 /// result: streamed compact over `GET /v1/stream`, every decoded frame is
 /// within `max_error` of the same motion's protobuf frames; a `layer` ramp
-/// is taken (the derived ranges hold any weights), a crossfade refused.
+/// is taken in its layout (the derived ranges hold any weights), a
+/// crossfade with a new one.
 #[tokio::test]
 async fn a_composed_motion_with_additive_layers_and_ik_decodes_within_max_error() {
     use futures_util::SinkExt;
@@ -829,7 +857,7 @@ async fn a_composed_motion_with_additive_layers_and_ik_decodes_within_max_error(
     let (compared, keys, deltas) = compare(&frames, &plain, max_error, &l);
     assert!(compared >= 60 && keys >= 2 && deltas >= 40, "{compared} compared, {keys} keys, {deltas} deltas");
 
-    // Controls: a layer ramp goes through, a crossfade is refused and the stream goes on.
+    // Controls: a crossfade brings a new layout, a layer ramp goes through.
     let mut ws = app.ws("/v1/stream").await;
     ws.send(Message::Text(
         json!({"op": "open", "motion": motion, "fps": 30, "encoding": "compact"}).to_string().into(),
@@ -840,19 +868,11 @@ async fn a_composed_motion_with_additive_layers_and_ik_decodes_within_max_error(
     let mut decoder = Decoder { layout: layout(&doc), keys: None };
     let crossfade = json!({"op": "crossfade", "to": {"layers": [{"clip": swing}]}, "duration": 0.2});
     ws.send(Message::Text(crossfade.to_string().into())).await.unwrap();
-    ws.send(Message::Text(r#"{"op":"layer","index":1,"weight":1,"duration":0}"#.into())).await.unwrap();
-    let error = loop {
-        match next_message(&mut ws).await {
-            Message::Text(t) => break serde_json::from_str::<Value>(&t).unwrap(),
-            Message::Binary(b) => drop(decoder.decode(&b)),
-            other => panic!("{other:?}"),
-        }
-    };
-    assert_eq!(error["error"]["code"], "bad_control", "the crossfade is refused: {error}");
-    // The layer ramp after it is taken (a refusal would be a text message
-    // among these frames), and the frames go on decoding.
+    ws.send(Message::Text(r#"{"op":"layer","index":0,"weight":0.5,"duration":0.2}"#.into())).await.unwrap();
+    // Both are taken (a refusal would be a text message among these
+    // frames), and the frames go on decoding.
     let (more, _) = more_frames(&mut ws, &mut decoder, 35).await;
-    assert!(more.iter().any(|d| d.key));
+    assert_eq!(more.iter().filter(|d| d.new_layout).count(), 1, "one new layout, for the crossfade");
 }
 
 /// A graph broadcast (the Fox's locomotion) driven by `set` controls: a
@@ -896,4 +916,269 @@ async fn a_graph_broadcast_with_set_controls_decodes_within_max_error() {
     // The sets moved the fox: the poses of the last ticks are not the idle's of the first.
     let (first, last) = (plain.values().next().unwrap(), plain.values().last().unwrap());
     assert!(worst(&parents, first, last, l.distance) > 0.01, "the graph left its idle");
+}
+
+// ------------------------------------------------- a new layout mid-stream
+
+/// The walk (the arm clip) and a run of the same rig: a longer stride,
+/// other scales, a wider turn of the lower joint.
+async fn walk_and_run(app: &TestApp) -> (String, String) {
+    let walk = app.create_id(&arm_clip(), None).await;
+    let run = arm_variant(
+        "run",
+        json!([[0, 0, 0], [0.9, 0.3, -0.5], [0, 0, 0]]),
+        json!([[1, 1, 1], [0.7, 1.2, 1.1], [1, 1, 1]]),
+        1.4,
+    );
+    (walk, app.create_id(&run, None).await)
+}
+
+/// A two-bone IK on the arm's spine, neck and upper joints.
+fn arm_ik() -> Value {
+    json!([{"kind": "two_bone", "joints": ["spine", "neck", "upper"], "target": [0.3, 0.8, 0.2]}])
+}
+
+/// The seq of `plain` at the tick of `compact`'s `seq`: both streams
+/// opened paused and took the same controls, then `play`, each at its own
+/// tick; the first frame whose clip time moved is the same tick after play
+/// in both, matched by its clip time. Returns the shift from a compact
+/// seq to a plain one, and the compact seq of that first frame.
+fn aligned(compact: &[(u64, f32)], plain: &[(u64, f32)]) -> (i64, u64) {
+    let moved = |frames: &[(u64, f32)]| {
+        let at = frames.windows(2).position(|w| w[1].1 != w[0].1).expect("the clip time moves after play");
+        frames[at + 1]
+    };
+    let (c, p) = (moved(compact), moved(plain));
+    assert_eq!(c.1, p.1, "both streams' first frame after play shows the same clip time");
+    (p.0 as i64 - c.0 as i64, c.0)
+}
+
+/// Holds every compact frame to the uncompressed frame of the same tick,
+/// within its own layout's stated bound; returns how many were compared.
+fn compare_shifted(
+    compact: &[Decoded],
+    plain: &BTreeMap<u64, Vec<Pose>>,
+    (shift, from): (i64, u64),
+    (max_error, distance): (f64, f64),
+) -> usize {
+    let mut compared = 0;
+    for d in compact.iter().filter(|d| d.seq >= from) {
+        assert!(d.bound <= max_error, "seq {}: a layout of bound {} over {max_error}", d.seq, d.bound);
+        if let Some(p) = plain.get(&((d.seq as i64 + shift) as u64)) {
+            let e = worst(&PARENTS, &d.pose, p, distance);
+            assert!(e <= d.bound, "seq {} (key {}): {e} m off, over its layout's bound {}", d.seq, d.key, d.bound);
+            compared += 1;
+        }
+    }
+    compared
+}
+
+/// A compact stream of the walk crossfades to the run and takes an `ik`
+/// control, each with a new layout sent before a key frame in it (docs:
+/// "A new layout"); every frame decodes within its layout's bound of the
+/// same stream's protobuf frames at the same tick.
+#[tokio::test]
+async fn a_websocket_compact_stream_crossfades_and_takes_ik_in_new_layouts() {
+    use futures_util::SinkExt;
+    let app = TestApp::start().await;
+    let (walk, run) = walk_and_run(&app).await;
+    let max_error = 1e-4;
+    let open = |encoding: &str| {
+        let motion = json!({"layers": [{"clip": walk}]});
+        let mut msg =
+            json!({"op": "open", "motion": motion, "fps": 30, "start": 0.3, "paused": true, "encoding": encoding});
+        if encoding == "compact" {
+            msg["max_error"] = json!(max_error);
+        }
+        Message::Text(msg.to_string().into())
+    };
+    let (mut compact, mut plain) = (app.ws("/v1/stream").await, app.ws("/v1/stream").await);
+    compact.send(open("compact")).await.unwrap();
+    plain.send(open("protobuf")).await.unwrap();
+    let doc = opened_layout(&mut compact).await;
+    let Message::Text(_) = next_message(&mut plain).await else { panic!("the protobuf stream's `opened` first") };
+    assert!(doc["joints"][1]["rotation"]["smallest_three"]["largest"].is_u64(), "the walk's spine: {doc}");
+    let crossfade = json!({"op": "crossfade", "to": {"layers": [{"clip": run}]}, "duration": 0.5});
+    let ik = json!({"op": "ik", "constraints": arm_ik()});
+    for ws in [&mut compact, &mut plain] {
+        ws.send(Message::Text(crossfade.to_string().into())).await.unwrap();
+        ws.send(Message::Text(ik.to_string().into())).await.unwrap();
+    }
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (mut frames, _) = more_frames(&mut compact, &mut decoder, 6).await;
+    let mut pb = whole_protobuf_frames(&mut plain, 6).await;
+    for ws in [&mut compact, &mut plain] {
+        ws.send(Message::Text(r#"{"op":"play"}"#.into())).await.unwrap();
+    }
+    frames.extend(more_frames(&mut compact, &mut decoder, 60).await.0);
+    pb.extend(whole_protobuf_frames(&mut plain, 60).await);
+    assert!(frames.iter().any(|d| d.new_layout), "a new layout");
+    // The IK's joints turn freely in the layout the frames end in.
+    assert!(
+        decoder.layout.joints[1..4].iter().all(|j| matches!(j.rotation, Rotation::SmallestThree { largest: None, .. }))
+    );
+    let times: Vec<(u64, f32)> = frames.iter().map(|d| (d.seq, d.clip_time)).collect();
+    let shift = aligned(&times, &pb.iter().map(|(s, f)| (*s, f.clip_time)).collect::<Vec<_>>());
+    let plain: BTreeMap<u64, Vec<Pose>> = pb.iter().map(|(s, f)| (*s, pose_of_pb(f.pose.as_ref().unwrap()))).collect();
+    let distance = doc["distance"].as_f64().unwrap();
+    let compared = compare_shifted(&frames, &plain, shift, (max_error, distance));
+    assert!(compared >= 40, "{compared} frames compared");
+}
+
+/// A `Play` call of `motion` opened paused at 0.3 s, and its frames.
+async fn paused_play(
+    app: &TestApp,
+    motion: &pb::Motion,
+    encoding: pb::FrameEncoding,
+    max_error: Option<f64>,
+) -> (tokio::sync::mpsc::Sender<pb::PlaybackControl>, tonic::Streaming<pb::Frame>) {
+    use pb::playback_control::Op;
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    let stream = pb::StreamRequest {
+        fps: 30,
+        start_time: Some(0.3),
+        motion: Some(motion.clone()),
+        encoding: encoding as i32,
+        max_error,
+        ..Default::default()
+    };
+    let open = Op::Open(pb::Open { stream: Some(stream), paused: true });
+    tx.send(pb::PlaybackControl { op: Some(open) }).await.unwrap();
+    let frames = app.grpc().await.play(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+    (tx, frames)
+}
+
+/// The next `n` compact `Frame`s of a gRPC stream, decoded; a layout in
+/// `compact_layout` after the first frame is a new one, its frame a key
+/// frame in it.
+async fn grpc_compact_frames(
+    frames: &mut tonic::Streaming<pb::Frame>,
+    decoder: &mut Option<Decoder>,
+    n: usize,
+) -> Vec<Decoded> {
+    let mut out = Vec::new();
+    while out.len() < n {
+        let f = within(5, "a compact frame", frames.message()).await.unwrap().expect("a frame");
+        let new_layout = !f.compact_layout.is_empty() && decoder.is_some();
+        if !f.compact_layout.is_empty() {
+            let doc: Value = serde_json::from_str(&f.compact_layout).unwrap();
+            decoder.get_or_insert_with(|| Decoder { layout: layout(&doc), keys: None }).relayout(&doc);
+        }
+        let d = Decoded { new_layout, ..decoder.as_mut().expect("the layout on the first frame").decode(&f.compact) };
+        assert!(!new_layout || d.key, "seq {}: the first frame in a new layout is a key frame", d.seq);
+        out.push(d);
+    }
+    out
+}
+
+/// The gRPC `Play` twin of the WebSocket test above: a crossfade and an
+/// `ik` control bring new layouts in `compact_layout`, and every frame
+/// decodes within its layout's bound of a protobuf `Play` of the same.
+#[tokio::test]
+async fn a_grpc_compact_play_crossfades_and_takes_ik_in_new_layouts() {
+    use pb::playback_control::Op;
+    let app = TestApp::start().await;
+    let (walk, run) = walk_and_run(&app).await;
+    let motion = |clip: &str| pb::Motion {
+        layers: vec![pb::Layer { clip_id: clip.to_owned(), ..Default::default() }],
+        ..Default::default()
+    };
+    let max_error = 1e-4;
+    let (ctx, mut compact) = paused_play(&app, &motion(&walk), pb::FrameEncoding::Compact, Some(max_error)).await;
+    let (ptx, mut plain) = paused_play(&app, &motion(&walk), pb::FrameEncoding::Protobuf, None).await;
+    let v3 = |[x, y, z]: [f32; 3]| pb::Vec3 { x, y, z };
+    let ik = pb::IkConstraint {
+        kind: Some(pb::ik_constraint::Kind::TwoBone(pb::IkTwoBone {
+            joints: vec!["spine".into(), "neck".into(), "upper".into()],
+            target: Some(pb::IkTarget { target: Some(pb::ik_target::Target::Point(v3([0.3, 0.8, 0.2]))) }),
+            pole: None,
+            weight: None,
+        })),
+    };
+    // Frames of the walk first, so that the controls come mid-stream.
+    let mut decoder = None;
+    let mut frames = grpc_compact_frames(&mut compact, &mut decoder, 2).await;
+    let mut pb = BTreeMap::new();
+    while pb.len() < 2 {
+        let f = within(5, "a frame", plain.message()).await.unwrap().expect("a frame");
+        pb.insert(f.seq, f);
+    }
+    for tx in [&ctx, &ptx] {
+        let fade = Op::Crossfade(pb::Crossfade { to: Some(motion(&run)), duration: 0.5, ease: 0 });
+        tx.send(pb::PlaybackControl { op: Some(fade) }).await.unwrap();
+        let ik = Op::Ik(pb::IkControl { constraints: vec![ik.clone()] });
+        tx.send(pb::PlaybackControl { op: Some(ik) }).await.unwrap();
+    }
+    frames.extend(grpc_compact_frames(&mut compact, &mut decoder, 6).await);
+    while pb.len() < 8 {
+        let f = within(5, "a frame", plain.message()).await.unwrap().expect("a frame");
+        pb.insert(f.seq, f);
+    }
+    for tx in [&ctx, &ptx] {
+        tx.send(pb::PlaybackControl { op: Some(Op::Play(pb::Resume {})) }).await.unwrap();
+    }
+    frames.extend(grpc_compact_frames(&mut compact, &mut decoder, 60).await);
+    while pb.len() < 68 {
+        let f = within(5, "a frame", plain.message()).await.unwrap().expect("a frame");
+        pb.insert(f.seq, f);
+    }
+    assert!(frames.iter().any(|d| d.new_layout), "a new layout");
+    let l = &decoder.unwrap().layout;
+    assert!(l.joints[1..4].iter().all(|j| matches!(j.rotation, Rotation::SmallestThree { largest: None, .. })));
+    let times: Vec<(u64, f32)> = frames.iter().map(|d| (d.seq, d.clip_time)).collect();
+    let shift = aligned(&times, &pb.iter().map(|(s, f)| (*s, f.clip_time)).collect::<Vec<_>>());
+    let plain: BTreeMap<u64, Vec<Pose>> = pb.iter().map(|(s, f)| (*s, pose_of_pb(f.pose.as_ref().unwrap()))).collect();
+    let compared = compare_shifted(&frames, &plain, shift, (max_error, l.distance));
+    assert!(compared >= 40, "{compared} frames compared");
+}
+
+/// Choosing a new layout is priced as the open's layout is (docs:
+/// "Price"): a crossfade to a clip so long that its range samples cost
+/// more than `max_request_work` is refused `too_much_work` before any work,
+/// and the stream goes on in its layout, holding what it held.
+#[tokio::test]
+async fn a_new_layout_over_the_request_limit_is_refused_and_the_stream_goes_on() {
+    use futures_util::SinkExt;
+    let app = TestApp::builder().configure(|c| c.limits.max_request_work = 100_000).start().await;
+    let walk = app.create_id(&arm_clip(), None).await;
+    // The arm slowed fifty times: 100 s, so 24,001 grid samples of a six-joint pose (7 units each) and more.
+    let mut slow: Value = serde_json::from_str(&arm_clip()).unwrap();
+    for track in slow["tracks"].as_array_mut().unwrap() {
+        let times: Vec<f64> = track["times"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap() * 50.0).collect();
+        track["times"] = json!(times);
+    }
+    slow["name"] = json!("slow arm");
+    let slow = app.create_id(&slow.to_string(), None).await;
+    let mut ws = app.ws("/v1/stream").await;
+    let open = json!({"op": "open", "motion": {"layers": [{"clip": walk}]}, "fps": 30, "encoding": "compact"});
+    ws.send(Message::Text(open.to_string().into())).await.unwrap();
+    let doc = opened_layout(&mut ws).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    drop(more_frames(&mut ws, &mut decoder, 2).await);
+    let held = app.state.work.meter().held();
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": slow}]}, "duration": 0.2});
+    ws.send(Message::Text(fade.to_string().into())).await.unwrap();
+    let problem = loop {
+        match next_message(&mut ws).await {
+            Message::Binary(b) => drop(decoder.decode(&b)),
+            Message::Text(t) => break serde_json::from_str::<Value>(&t).unwrap()["error"].clone(),
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!((problem["code"].as_str(), problem["status"].as_u64()), (Some("too_much_work"), Some(422)), "{problem}");
+    let units: u64 = problem["detail"]
+        .as_str()
+        .unwrap()
+        .split(" costs ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(units >= 24_001 * 7, "{problem}");
+    let (frames, _) = more_frames(&mut ws, &mut decoder, 5).await;
+    assert!(frames.iter().all(|d| !d.new_layout), "the stream goes on in its layout");
+    assert_eq!(app.state.work.meter().held(), held, "holding what it held");
 }

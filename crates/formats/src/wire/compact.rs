@@ -355,6 +355,14 @@ impl CompactDecoder {
         CompactDecoder { event_count: doc.events.len(), ..CompactDecoder::new(doc.layout()) }
     }
 
+    /// Decodes frames of the layout document `doc` from now on: a new
+    /// layout mid-stream (docs/compact-frames.md, "A new layout"). What
+    /// the last key frame held is forgotten, so a delta frame before the
+    /// new layout's first key frame is refused.
+    pub fn relayout(&mut self, doc: &LayoutDoc) {
+        *self = CompactDecoder::of_document(doc);
+    }
+
     /// The events of the last frame decoded: indices into the layout
     /// document's `events`, in the order they were crossed.
     pub fn events(&self) -> &[u32] {

@@ -348,16 +348,32 @@ fn vector(
     key_interval: u64,
     trailers: &[Trailer<'_>],
 ) -> serde_json::Value {
+    let (mut encoder, doc) = encoder_of(clip, &Ranges::of_clip(clip, 240.0), key_interval);
+    let frames = frames_of(&mut encoder, clip, times.iter().copied().enumerate(), trailers);
+    serde_json::json!({ "name": name, "description": description, "layout": doc, "frames": frames })
+}
+
+/// An encoder of the layout `ranges` choose on `clip`'s skeleton (with its
+/// events), and the layout's document.
+fn encoder_of(clip: &Clip, ranges: &Ranges, key_interval: u64) -> (CompactEncoder, LayoutDoc) {
     let skeleton = clip.skeleton();
-    let layout = Layout::choose(skeleton, &Ranges::of_clip(clip, 240.0), DEFAULT_MAX_ERROR, default_distance(skeleton));
-    assert!(layout.bound <= DEFAULT_MAX_ERROR, "{name}: bound {}", layout.bound);
+    let layout = Layout::choose(skeleton, ranges, DEFAULT_MAX_ERROR, default_distance(skeleton));
+    assert!(layout.bound <= DEFAULT_MAX_ERROR, "{}: bound {}", clip.name(), layout.bound);
     let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, clip.events());
-    let mut encoder = CompactEncoder::new(layout, key_interval);
+    (CompactEncoder::new(layout, key_interval), doc)
+}
+
+/// The frames of `clip` at `(index, time)`s in `encoder`'s layout: frame
+/// `index` is `seq` 7 + index, and index 2 says it dropped one.
+fn frames_of(
+    encoder: &mut CompactEncoder,
+    clip: &Clip,
+    times: impl Iterator<Item = (usize, f32)>,
+    trailers: &[Trailer<'_>],
+) -> Vec<serde_json::Value> {
     let (mut cursor, mut pose, mut quantised) = (Cursor::default(), Pose::default(), Pose::default());
-    let frames: Vec<serde_json::Value> = times
-        .iter()
-        .enumerate()
-        .map(|(seq, &t)| {
+    times
+        .map(|(seq, t)| {
             clip.sample_into(t, &mut cursor, &mut pose);
             let header = Header {
                 seq: seq as u64 + 7,
@@ -391,8 +407,35 @@ fn vector(
             }
             frame
         })
-        .collect();
-    serde_json::json!({ "name": name, "description": description, "layout": doc, "frames": frames })
+        .collect()
+}
+
+/// The half turn, then a new layout mid-stream (docs/compact-frames.md, "A
+/// new layout") that also holds the spinner rising as it turns: two
+/// frames in the first layout, then the new layout with a key frame and a
+/// delta frame in it. The frame that comes first in a layout carries it as
+/// `layout`.
+fn relayout_vector() -> serde_json::Value {
+    let turn = half_turn();
+    let mut spec = half_turn_spec();
+    spec.name = "rising".into();
+    let rise = Keys::Vec3((0..3).map(|k| Vec3::new(0.0, 0.25 * k as f32, 0.1 * k as f32)).collect());
+    spec.tracks.push(TrackSpec::new("spinner", Channel::Translation, Interpolation::Linear, vec![0.0, 0.5, 1.0], rise));
+    let rising = build(&spec);
+    let (mut encoder, first) = encoder_of(&turn, &Ranges::of_clip(&turn, 240.0), 30);
+    let mut frames = frames_of(&mut encoder, &turn, [(0, 0.0), (1, 0.4)].into_iter(), &[]);
+    let mut ranges = Ranges::of_clip(&turn, 240.0);
+    ranges.union(&Ranges::of_clip(&rising, 240.0));
+    let (mut encoder, second) = encoder_of(&rising, &ranges, 30);
+    let mut after = frames_of(&mut encoder, &rising, [(2, 0.6), (3, 0.9)].into_iter(), &[]);
+    after[0]["layout"] = serde_json::to_value(&second).unwrap();
+    frames.extend(after);
+    serde_json::json!({
+        "name": "relayout",
+        "description": "The half turn, then a new layout mid-stream that also holds the joint rising: a key frame and a delta frame in the first layout, then a frame carrying the new layout (`layout`: adopt it before decoding the frame, as a stream's layout message says), a key frame, and a delta frame in it.",
+        "layout": first,
+        "frames": frames,
+    })
 }
 
 #[test]
@@ -447,6 +490,7 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
             30,
             &[],
         ),
+        relayout_vector(),
     ];
     // The page's worked examples are these frames.
     let page = std::fs::read_to_string(dir.join("../compact-frames.md")).unwrap();
@@ -469,6 +513,9 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
         let mut decoder = CompactDecoder::of_document(&doc);
         let mut pose = Pose::default();
         for frame in v["frames"].as_array().unwrap() {
+            if let Some(layout) = frame.get("layout") {
+                decoder.relayout(&serde_json::from_value(layout.clone()).unwrap());
+            }
             let info = decoder.decode(&hex::decode(frame["hex"].as_str().unwrap()).unwrap(), &mut pose).unwrap();
             assert_eq!(info.key, frame["key"].as_bool().unwrap());
             let events: Vec<u32> =
@@ -483,4 +530,21 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
             assert_eq!(pose.rotations.iter().map(|q| q.to_array()).collect::<Vec<_>>(), rotations);
         }
     }
+}
+
+/// A new layout forgets the old key frame: the new layout's delta frame
+/// before its key frame is refused, as any delta frame without its key.
+#[test]
+fn a_new_layout_resets_the_key_frame() {
+    let v = relayout_vector();
+    let frames = v["frames"].as_array().unwrap();
+    let bytes = |i: usize| hex::decode(frames[i]["hex"].as_str().unwrap()).unwrap();
+    let mut decoder = CompactDecoder::of_document(&serde_json::from_value(v["layout"].clone()).unwrap());
+    let mut pose = Pose::default();
+    decoder.decode(&bytes(0), &mut pose).unwrap();
+    decoder.decode(&bytes(1), &mut pose).unwrap();
+    decoder.relayout(&serde_json::from_value(frames[2]["layout"].clone()).unwrap());
+    assert_eq!(decoder.decode(&bytes(3), &mut pose).unwrap_err().code(), "compact_missing_key_frame");
+    assert!(decoder.decode(&bytes(2), &mut pose).unwrap().key);
+    decoder.decode(&bytes(3), &mut pose).unwrap();
 }

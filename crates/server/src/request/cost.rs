@@ -479,7 +479,7 @@ mod tests {
         use anim::motion::{Planar, RootMotion};
         let clip = clip(24, |j| format!("j{j}"), true);
         let layout = CompactLayout::of_clip(&clip, anim::compact::MIN_MAX_ERROR, None, 30);
-        let mut encoder = FrameEncoder::compact(&layout.layout, 30);
+        let mut encoder = FrameEncoder::compact(&layout);
         let mut sampler = Sampler::new();
         let last = (clip.events().len() - 1) as u32;
         let planar = Planar { translation: glam::DVec3::splat(1e30), yaw: -1e30 };

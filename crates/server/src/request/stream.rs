@@ -63,6 +63,22 @@ impl Repricing for StreamCharge {
     fn admit(&self) -> Result<(), ControlError> {
         self.writes.admit(&self.caller).map_err(|e| e.to_control())
     }
+
+    fn charge_layout(&self, units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError> {
+        if units > self.limit {
+            let detail = format!(
+                "choosing this stream's new compact layout costs {units} work units; the limit (max_request_work, \
+                 --max-request-work) is {}",
+                self.limit
+            );
+            return Err(ApiError::Relayed { status: 422, code: "too_much_work", detail }.to_control());
+        }
+        let ticket = crate::sync::lock(&self.ticket).also(units).map_err(|e| {
+            let detail = format!("choosing this stream's new compact layout costs {units} work units: {e}");
+            ApiError::Relayed { status: e.status().as_u16(), code: e.code(), detail }.to_control()
+        })?;
+        Ok(Box::new(ticket))
+    }
 }
 
 /// A broadcast viewer's compact frames (docs/compact-frames.md): the

@@ -480,7 +480,7 @@ impl Program {
         let at = match self.compact.iter().position(|(k, _)| *k == key) {
             Some(at) => at,
             None => {
-                self.compact.push((key, FrameEncoder::compact(&layout.layout, layout.key_interval)));
+                self.compact.push((key, FrameEncoder::compact(layout)));
                 self.compact.len() - 1
             }
         };

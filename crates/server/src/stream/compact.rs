@@ -8,8 +8,12 @@
 //! pose), and refuses the controls that would play something else (a
 //! crossfade, a layer ramp, an `ik` control). A composed motion or a graph
 //! takes ranges derived from its clips' (`anim::compact`), which hold its
-//! poses under any layer weights and parameters, so only crossfades and
-//! `ik` controls are refused.
+//! poses under any layer weights and parameters.
+//!
+//! A control that would take a stream outside its layout (a crossfade, an
+//! `ik` control, a layer ramp on one clip) gets a new one
+//! ([`CompactLayout::after`]): the ranges widened to hold what the stream
+//! plays from then on, sent before the next frame, a key frame.
 
 use std::sync::Arc;
 
@@ -29,6 +33,10 @@ pub const RANGE_RATE: f32 = 240.0;
 #[derive(Debug)]
 pub struct CompactLayout {
     pub layout: Layout,
+    /// The ranges it was chosen from, which a new layout widens.
+    pub ranges: Ranges,
+    /// The events its frames index (the stream's first clip's).
+    pub events: Vec<Event>,
     /// The layout document (docs/compact-frames.md, "The layout document").
     pub document: Arc<str>,
     pub key_interval: u64,
@@ -137,6 +145,28 @@ fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
     whole.then_some(clip)
 }
 
+/// What makes a compact stream choose a new layout (docs/compact-frames.md).
+#[derive(Debug, Clone, Copy)]
+pub enum Relayout<'a> {
+    /// It plays this motion from now on, at any layer weights: a
+    /// crossfade's target (the fade itself between it and what played), or
+    /// a clip stream's motion once a layer ramp weighs it.
+    Plays(&'a StreamMotion),
+    /// An `ik` control's constraints turn these joints.
+    Ik(&'a [anim::ik::IkConstraint]),
+}
+
+impl Relayout<'_> {
+    /// The range samples it takes: each distinct clip of the motion it
+    /// plays and the rest pose, or (IK) one pass over the ranges.
+    pub fn samples(&self) -> u64 {
+        match self {
+            Relayout::Plays(motion) => Ranges::motion_samples(motion, RANGE_RATE),
+            Relayout::Ik(_) => 1,
+        }
+    }
+}
+
 /// The largest price of one pose of any clip a stream of `motion` (or
 /// `graph`) plays: what each of its range samples costs.
 pub fn range_sample_price(
@@ -205,7 +235,38 @@ impl CompactLayout {
         let key_interval = u64::from(fps.max(1));
         let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, events);
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
-        CompactLayout { layout, document, key_interval, any_weights: true }
+        let (ranges, events) = (ranges.clone(), events.to_vec());
+        CompactLayout { layout, ranges, events, document, key_interval, any_weights: true }
+    }
+
+    /// The layout a stream of this one needs once `change` applies, or
+    /// `None` when this one still holds every pose it can play and its
+    /// frames' events are the same. The ranges only widen, so they hold
+    /// both sides of a crossfade (docs/compact-frames.md, "A new layout").
+    ///
+    /// # Errors
+    /// As [`range_source`]: a crossfade to a motion no range bounds.
+    pub fn after(&self, change: Relayout<'_>, skeleton: &Skeleton) -> Result<Option<CompactLayout>, CompactRefusal> {
+        let mut ranges = self.ranges.clone();
+        let (events, any_weights) = match change {
+            Relayout::Plays(motion) => {
+                // A lerp between values within either range stays within
+                // their union (derived ranges carry their rounding margin).
+                ranges.union(&Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?);
+                (motion.first_clip().clip().events(), true)
+            }
+            Relayout::Ik(constraints) => {
+                ranges.turned_by(skeleton, constraints, None);
+                (self.events.as_slice(), self.any_weights)
+            }
+        };
+        if ranges == self.ranges && events == self.events.as_slice() {
+            return Ok(None);
+        }
+        let (max_error, distance) = (self.layout.max_error, Some(self.layout.distance));
+        let fps = u32::try_from(self.key_interval).unwrap_or(u32::MAX);
+        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events);
+        Ok(Some(CompactLayout { any_weights, ..layout }))
     }
 
     /// What tells two layouts apart for sharing a playback.

@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::compact::{CompactLayout, Relayout};
 use super::fade_chain::FadeChain;
 use super::graph::{GraphDeck, StreamGraph};
 use super::params::StreamParams;
@@ -126,7 +127,9 @@ impl Control {
 
     /// Whether it makes the stream play poses a compact layout's ranges may
     /// not hold (docs/compact-frames.md): a crossfade or an `ik` control
-    /// always; a layer ramp unless the ranges hold any layer weights.
+    /// always; a layer ramp unless the ranges hold any layer weights. A
+    /// stream chooses a new layout for it; a broadcast refuses it while
+    /// compact viewers watch.
     pub(crate) fn leaves_the_layout(&self, any_weights: bool) -> bool {
         match self {
             Control::Crossfade(_) | Control::Ik(_) | Control::SetIk(_) => true,
@@ -260,6 +263,15 @@ impl Control {
         };
         Some(serde_json::to_value(msg).expect("a control message is JSON"))
     }
+}
+
+/// A checked control on its way to a playback, with the compact layout
+/// its check chose for it (docs/compact-frames.md), which the playback
+/// encodes with from the control's tick.
+#[derive(Debug)]
+pub(crate) struct Queued {
+    pub control: Control,
+    pub layout: Option<Arc<CompactLayout>>,
 }
 
 /// What applying a control did to its playback.
@@ -512,6 +524,14 @@ impl ControlError {
 /// target), an `ik` control at that chain with the new constraints (the
 /// IK runs on the mix of them all).
 pub trait Repricing: Send + Sync + std::fmt::Debug {
+    /// Charges the stream's caller `units` for choosing a new compact
+    /// layout (docs/compact-frames.md), held until the returned guard drops.
+    ///
+    /// # Errors
+    /// [`ControlError::Refused`]: `too_much_work` over `max_request_work`,
+    /// `caller_work_limit` or `overloaded` as for any work.
+    fn charge_layout(&self, units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError>;
+
     /// Charges the stream for evaluating `motions` each frame under the
     /// stream's constraints `ik`, from now on.
     ///
@@ -529,10 +549,15 @@ pub trait Repricing: Send + Sync + std::fmt::Debug {
     fn admit(&self) -> Result<(), ControlError>;
 }
 
+/// Why a compact stream refuses a crossfade: no range bounds its target.
+const UNBOUNDED: &str = "a compact stream cannot crossfade to a motion whose poses no range bounds \
+                         (a layer retargeted onto a character, root motion `extract`)";
+
 /// Checks controls against the stream's motions: numbers in range, a
 /// crossfade target with the stream's skeleton, a ramp of a layer the
 /// motion playing has; and, for a priced stream, what a crossfade or an
-/// `ik` control would make it cost ([`Repricing`]).
+/// `ik` control would make it cost ([`Repricing`]). On a compact stream, a
+/// control that leaves its layout gets a new one.
 #[derive(Debug, Clone)]
 pub(crate) struct ControlCheck {
     skeleton: Arc<StreamMotion>,
@@ -543,9 +568,12 @@ pub(crate) struct ControlCheck {
     ik: Arc<[IkConstraint]>,
     ik_limits: IkLimits,
     repricing: Option<Arc<dyn Repricing>>,
-    /// A compact stream plays only the poses its layout's ranges hold:
-    /// whether they hold any layer weights (`None`: not compact).
-    compact: Option<bool>,
+    /// A compact stream's layout, as the latest accepted control left it
+    /// (`None`: not compact).
+    compact: Option<Arc<CompactLayout>>,
+    /// The new layout the latest accepted control made the stream choose,
+    /// until its sender takes it ([`ControlCheck::take_layout`]).
+    relayout: Option<Arc<CompactLayout>>,
     /// A crossfade or an `ik` control was accepted.
     departed: bool,
     /// A layer ramp was accepted.
@@ -562,7 +590,8 @@ impl ControlCheck {
             ik: params.motion.ik().into(),
             ik_limits: params.ik_limits,
             repricing: None,
-            compact: params.compact.as_ref().map(|c| c.any_weights),
+            compact: params.compact.clone(),
+            relayout: None,
             departed: false,
             reweighted: false,
             graph: params.graph.as_ref().map(|g| Arc::clone(&g.graph)),
@@ -590,7 +619,62 @@ impl ControlCheck {
         self.repricing.as_ref().map_or(Ok(()), |r| r.reprice(motions, ik))
     }
 
+    /// The new compact layout the control just checked needs, if it needs
+    /// one: it goes to the playback with the control, which sends it
+    /// before its next frame (a key frame).
+    pub(crate) fn take_layout(&mut self) -> Option<Arc<CompactLayout>> {
+        self.relayout.take()
+    }
+
+    /// Checks `control` (see [`ControlCheck`]); on a compact stream whose
+    /// layout it leaves, prices and chooses the new layout
+    /// ([`ControlCheck::take_layout`]).
+    ///
+    /// # Errors
+    /// A control the stream refuses, or its work.
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        self.relayout = None;
+        // Priced and charged before any work on it, held while the layout is chosen.
+        let _held = self.charge_layout(&control)?;
+        let control = self.check_control(control)?;
+        let (Some(layout), Some(change)) = (&self.compact, self.layout_change(&control)) else { return Ok(control) };
+        let next = layout.after(change, self.skeleton.skeleton()).map_err(|_| ControlError::Invalid(UNBOUNDED))?;
+        if let Some(next) = next {
+            let next = Arc::new(next);
+            self.compact = Some(Arc::clone(&next));
+            self.relayout = Some(next);
+        }
+        Ok(control)
+    }
+
+    /// What `control` makes a compact stream's layout hold besides what it
+    /// holds (`None`: nothing, or not compact). An `ik` control counts as
+    /// sent or as resolved; only the resolved one names its joints.
+    fn layout_change<'a>(&'a self, control: &'a Control) -> Option<Relayout<'a>> {
+        let layout = self.compact.as_ref()?;
+        match control {
+            Control::Crossfade(fade) => Some(Relayout::Plays(&fade.to)),
+            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(&self.playing)),
+            Control::SetIk(constraints) => Some(Relayout::Ik(constraints)),
+            Control::Ik(_) => Some(Relayout::Ik(&[])),
+            _ => None,
+        }
+    }
+
+    /// Charges the work of the new layout `control` would make the stream
+    /// choose (docs/compact-frames.md, "A new layout"): its range samples,
+    /// each a pose of the costliest clip they read.
+    fn charge_layout(&self, control: &Control) -> Result<Option<Box<dyn std::any::Any + Send>>, ControlError> {
+        let (Some(change), Some(repricing)) = (self.layout_change(control), &self.repricing) else { return Ok(None) };
+        let motion = match change {
+            Relayout::Plays(motion) => motion,
+            Relayout::Ik(_) => &self.playing,
+        };
+        let pose = super::compact::range_sample_price(motion, None, crate::work::price::clip_pose);
+        repricing.charge_layout(crate::work::price::compact_layout(change.samples(), pose)).map(Some)
+    }
+
+    fn check_control(&mut self, control: Control) -> Result<Control, ControlError> {
         // Before any work on it; `stop` ends the stream, so it cannot flood.
         if control != Control::Stop
             && let Some(priced) = &self.repricing
@@ -611,14 +695,10 @@ impl ControlCheck {
                 return Ok(Control::SetGraph(values));
             }
         }
-        if let Some(any_weights) = self.compact
-            && control.leaves_the_layout(any_weights)
+        if let (Some(_), Control::Crossfade(fade)) = (&self.compact, &control)
+            && anim::compact::Ranges::boundable(&fade.to).is_err()
         {
-            return Err(ControlError::Invalid(if any_weights {
-                "a compact stream's layout holds its motion's poses only: crossfade and ik controls are refused"
-            } else {
-                "a compact stream's layout holds its clip's poses only: crossfade, layer and ik controls are refused"
-            }));
+            return Err(ControlError::Invalid(UNBOUNDED));
         }
         self.departed |= control.leaves_the_layout(true);
         self.reweighted |= matches!(control, Control::Layer { .. });

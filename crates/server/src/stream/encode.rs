@@ -31,6 +31,7 @@ use formats::wire::proto::{ik_kind_to_pb, space_to_pb};
 use formats::wire::proto_graph::report_to_proto;
 use prost::Message;
 
+use super::compact::CompactLayout;
 use super::pinned::PinnedClip;
 use anim::graph::GraphReport;
 
@@ -104,6 +105,9 @@ pub struct Encoded {
     pub key_seq: Option<u64>,
     /// Compact delta frames: that key frame, for a viewer that missed it.
     pub key: Option<Arc<Encoded>>,
+    /// Compact: the document of the layout it is encoded in, which a viewer
+    /// that has not had it is sent first (docs/compact-frames.md).
+    pub layout: Option<Arc<str>>,
 }
 
 /// A reusable encoder: the buffer's storage is recycled once viewers drop
@@ -115,11 +119,20 @@ pub struct FrameEncoder {
     compact: Option<Compact>,
 }
 
-/// A compact stream's encoder and its last key frame.
+/// A compact stream's encoder, its layout's document and its last key frame.
 #[derive(Debug)]
 struct Compact {
     encoder: CompactEncoder,
+    document: Arc<str>,
     key: Option<Arc<Encoded>>,
+}
+
+impl Compact {
+    /// A new encoder of `layout`: its first frame is a key frame.
+    fn of(layout: &CompactLayout) -> Compact {
+        let encoder = CompactEncoder::new(layout.layout.clone(), layout.key_interval);
+        Compact { encoder, document: Arc::clone(&layout.document), key: None }
+    }
 }
 
 impl FrameEncoder {
@@ -128,10 +141,18 @@ impl FrameEncoder {
         FrameEncoder { encoding, buf: BytesMut::new(), compact: None }
     }
 
-    /// A compact encoder of `layout`, a key frame at least every `key_interval` frames.
-    pub fn compact(layout: &anim::compact::Layout, key_interval: u64) -> Self {
-        let compact = Compact { encoder: CompactEncoder::new(layout.clone(), key_interval), key: None };
+    /// A compact encoder of `layout`.
+    pub fn compact(layout: &CompactLayout) -> Self {
+        let compact = Compact::of(layout);
         FrameEncoder { encoding: Encoding::Compact, buf: BytesMut::new(), compact: Some(compact) }
+    }
+
+    /// Encodes in `layout` from the next frame on, a key frame
+    /// (docs/compact-frames.md, "A new layout"); a no-op for JSON and protobuf.
+    pub fn relayout(&mut self, layout: &CompactLayout) {
+        if let Some(compact) = self.compact.as_mut() {
+            *compact = Compact::of(layout);
+        }
     }
 
     pub fn encode(&mut self, f: &FrameData<'_>) -> Encoded {
@@ -153,6 +174,7 @@ impl FrameEncoder {
             dropped_at,
             key_seq: None,
             key: None,
+            layout: None,
         }
     }
 
@@ -177,6 +199,7 @@ impl FrameEncoder {
             dropped_at: compact_dropped_at(f.seq, f.dropped),
             key_seq: Some(key_seq),
             key: if is_key { None } else { compact.key.clone() },
+            layout: Some(Arc::clone(&compact.document)),
         };
         if is_key {
             compact.key = Some(Arc::new(encoded.clone()));

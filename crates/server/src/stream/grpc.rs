@@ -1,6 +1,8 @@
 //! The gRPC side of a stream: a [`Subscription`] as the response stream of
 //! `StreamFrames` and `Play`. Compact frames travel as `Frame.compact`
-//! bytes, the layout document in the first frame's `compact_layout`.
+//! bytes, the layout document in the first frame's `compact_layout`, and a
+//! new layout (docs/compact-frames.md) in the `compact_layout` of the first
+//! frame in it, a key frame.
 //!
 //! The stream is polled by tonic only when the client's HTTP/2 window has
 //! room, so a client that stops reading simply stops polling; its playback
@@ -50,12 +52,15 @@ pub fn frames(sub: Subscription) -> impl Stream<Item = Result<WireFrame, Status>
         }
         match crate::panics::guarded("grpc_stream", sub.next()).await {
             Some(Next::Frame(f)) if sub.encoding() == Encoding::Compact => {
-                // The layout rides on the first frame; a key frame the viewer missed goes first.
+                // The layout rides on the first frame (a new one on the first
+                // in it); a key frame the viewer missed goes first.
+                let opened = layout.take();
+                let layout = f.layout.map(|(_, doc)| doc).or(opened);
                 let (first, then) = match f.prelude {
-                    Some(key) => (compact_frame(&key, layout.take()), Some(compact_frame(&f.bytes, None))),
-                    None => (compact_frame(&f.bytes, layout.take()), None),
+                    Some(key) => (compact_frame(&key, layout), Some(compact_frame(&f.bytes, None))),
+                    None => (compact_frame(&f.bytes, layout), None),
                 };
-                Some((Ok(first), (Some(sub), layout, then)))
+                Some((Ok(first), (Some(sub), None, then)))
             }
             Some(Next::Frame(f)) => Some((Ok(WireFrame(f.bytes)), (Some(sub), layout, None))),
             Some(Next::End(reason)) => end_status(reason).map(|status| (Err(status), (None, None, None))),
@@ -65,7 +70,7 @@ pub fn frames(sub: Subscription) -> impl Stream<Item = Result<WireFrame, Status>
 }
 
 /// A compact frame as a `Frame` message: its bytes in `compact` (field 7),
-/// and the layout document in `compact_layout` (field 8) on the first.
+/// and the layout document in `compact_layout` (field 8) on the first in it.
 fn compact_frame(bytes: &[u8], layout: Option<Arc<str>>) -> WireFrame {
     let layout_len = layout.as_ref().map_or(0, |l| 1 + encoded_len_varint(l.len() as u64) + l.len());
     let mut out = BytesMut::with_capacity(1 + encoded_len_varint(bytes.len() as u64) + bytes.len() + layout_len);

@@ -30,7 +30,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
-use super::control::{Applied, Control, Refused};
+use super::control::{Applied, Queued, Refused};
 use super::encode::{Encoded, Encoding, FrameData, FrameEncoder};
 use super::events::crossed;
 use super::params::StreamParams;
@@ -85,7 +85,7 @@ pub(crate) struct Hub {
     encoder: FrameEncoder,
     with_names: bool,
     tx: broadcast::Sender<Item>,
-    controls: Option<mpsc::Receiver<Control>>,
+    controls: Option<mpsc::Receiver<Queued>>,
     /// A shared playback's entry in the registry, dropped (unlisting it)
     /// before its first tick.
     listing: Option<Listing<Item>>,
@@ -105,7 +105,7 @@ impl Hub {
         params: &StreamParams,
         schedule: Schedule,
         tx: broadcast::Sender<Item>,
-        controls: Option<mpsc::Receiver<Control>>,
+        controls: Option<mpsc::Receiver<Queued>>,
         listing: Option<Listing<Item>>,
         shutdown: watch::Receiver<bool>,
     ) -> Self {
@@ -183,7 +183,10 @@ impl Hub {
         let mut jumped = false;
         if let Some(controls) = &mut self.controls {
             let mut stop = false;
-            while let Ok(control) = controls.try_recv() {
+            while let Ok(Queued { control, layout }) = controls.try_recv() {
+                if let Some(layout) = layout {
+                    self.encoder.relayout(&layout);
+                }
                 match control.apply(&mut self.playhead, &mut self.player, self.graph.as_mut(), tick.k) {
                     Ok(Applied::Continued) => {}
                     Ok(Applied::Jumped) => jumped = true,
@@ -356,7 +359,7 @@ pub(crate) fn private(
     params: &StreamParams,
     schedule: Schedule,
     shutdown: watch::Receiver<bool>,
-) -> (Box<Hub>, broadcast::Receiver<Item>, mpsc::Sender<Control>) {
+) -> (Box<Hub>, broadcast::Receiver<Item>, mpsc::Sender<Queued>) {
     let (tx, rx) = broadcast::channel(1);
     let (ctl_tx, ctl_rx) = mpsc::channel(CONTROL_QUEUE);
     (Box::new(Hub::new(params, schedule, tx, Some(ctl_rx), None, shutdown)), rx, ctl_tx)

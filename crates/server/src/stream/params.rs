@@ -181,7 +181,7 @@ impl StreamParams {
     /// An encoder of this stream's frames.
     pub fn encoder(&self) -> FrameEncoder {
         match (&self.compact, self.encoding) {
-            (Some(c), Encoding::Compact) => FrameEncoder::compact(&c.layout, c.key_interval),
+            (Some(c), Encoding::Compact) => FrameEncoder::compact(c),
             _ => FrameEncoder::new(self.encoding),
         }
     }

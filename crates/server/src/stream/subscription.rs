@@ -5,7 +5,7 @@
 use bytes::Bytes;
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
-use super::control::{Control, ControlCheck, ControlError};
+use super::control::{Control, ControlCheck, ControlError, Queued};
 use super::encode::Encoding;
 use super::hub::{self, EndReason, Hub, Item};
 use super::limits::StreamPermit;
@@ -24,6 +24,10 @@ pub struct Delivered {
     /// Compact frames: the key frame this delta frame is relative to, sent
     /// before it because this viewer missed it (docs/compact-frames.md).
     pub prelude: Option<Bytes>,
+    /// Compact frames: a new layout (docs/compact-frames.md, "A new
+    /// layout") to send before them, with the `seq` of the first frame in
+    /// it (the prelude's, else this frame's).
+    pub layout: Option<(u64, std::sync::Arc<str>)>,
 }
 
 /// The next thing to send.
@@ -51,7 +55,7 @@ pub type StoreOutcome = oneshot::Receiver<ControlError>;
 /// (gRPC `Play` reads controls and frames on different tasks).
 #[derive(Debug, Clone)]
 pub struct Controller {
-    tx: mpsc::Sender<Control>,
+    tx: mpsc::Sender<Queued>,
     check: ControlCheck,
 }
 
@@ -63,7 +67,8 @@ impl Controller {
     /// An invalid control, or too many pending.
     pub fn send(&mut self, control: Control) -> Result<bool, ControlError> {
         let control = self.check.check(control)?;
-        match self.tx.try_send(control) {
+        let layout = self.check.take_layout();
+        match self.tx.try_send(Queued { control, layout }) {
             Ok(()) => Ok(true),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
             Err(mpsc::error::TrySendError::Closed(_)) => Ok(false),
@@ -89,7 +94,7 @@ pub struct Subscription {
     /// Where a shared playback this viewer started comes back to it after
     /// its first tick if nobody else joined.
     handback: Option<oneshot::Receiver<Box<Hub>>>,
-    controls: Option<mpsc::Sender<Control>>,
+    controls: Option<mpsc::Sender<Queued>>,
     /// A broadcast viewer (docs/broadcasts.md): its first frame has `dropped` 0, and
     /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
     /// whose controls are refused), never into a fork.
@@ -103,6 +108,9 @@ pub struct Subscription {
     last_seq: Option<u64>,
     /// Compact frames: the last key frame this viewer was sent.
     last_key: Option<u64>,
+    /// Compact frames: the layout this viewer was last sent (at first, its
+    /// `opened` message's).
+    layout: Option<std::sync::Arc<str>>,
     delivered: u64,
     stopped: bool,
     /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
@@ -128,7 +136,7 @@ pub(crate) enum Source {
     /// this viewer started it and nobody joins (see `hub`).
     Shared { rx: broadcast::Receiver<Item>, handback: Option<oneshot::Receiver<Box<Hub>>> },
     /// A private playback for this viewer to drive, and its controls.
-    Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Control> },
+    Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Queued> },
     /// A broadcast's frames of one encoding, and where this viewer's
     /// controls go (`None`: it may not control).
     Broadcast { rx: broadcast::Receiver<Item>, controls: Option<std::sync::Arc<dyn ControlSink>> },
@@ -151,6 +159,7 @@ impl Subscription {
                 (rx, None, None, None)
             }
         };
+        let layout = params.compact.as_ref().map(|c| std::sync::Arc::clone(&c.document));
         Subscription {
             check: ControlCheck::new(&params).priced_by(permit.repricing()),
             params,
@@ -164,6 +173,7 @@ impl Subscription {
             shutdown,
             last_seq: None,
             last_key: None,
+            layout,
             delivered: 0,
             stopped: false,
             sent: metrics::counter!("inbetween_stream_frames_total"),
@@ -232,11 +242,14 @@ impl Subscription {
             // A broadcast viewer's first frame is the tick after it joined:
             // the ticks before were not its losses.
             let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
+            let mut first_seq = frame.seq;
             let prelude = self.missed_key(&frame).map(|key| {
                 let dropped = self.last_seq.map_or(first_dropped.min(key.seq), |last| key.seq - last - 1);
                 self.last_seq = Some(key.seq);
+                first_seq = key.seq;
                 key.for_viewer(dropped, None)
             });
+            let layout = self.new_layout(&frame).map(|doc| (first_seq, doc));
             let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
             if let Some(key) = frame.key_seq {
                 self.last_key = Some(key);
@@ -252,8 +265,21 @@ impl Subscription {
             if dropped > 0 {
                 self.dropped.increment(dropped);
             }
-            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time: frame.clip_time, bytes, prelude });
+            let clip_time = frame.clip_time;
+            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time, bytes, prelude, layout });
         }
+    }
+
+    /// A compact frame's layout, when this viewer was last sent another.
+    fn new_layout(&mut self, frame: &super::encode::Encoded) -> Option<std::sync::Arc<str>> {
+        let doc = frame.layout.as_ref()?;
+        if self.layout.as_ref().is_some_and(|had| std::sync::Arc::ptr_eq(had, doc)) {
+            return None;
+        }
+        // A broadcast viewer's layout may be an equal copy of the one encoded.
+        let same = self.layout.as_ref().is_some_and(|had| had == doc);
+        self.layout = Some(std::sync::Arc::clone(doc));
+        (!same).then(|| std::sync::Arc::clone(doc))
     }
 
     /// A compact delta frame's key frame, when this viewer has not had it.
@@ -285,6 +311,7 @@ impl Subscription {
             return Ok(());
         }
         let control = self.check.check(control)?;
+        let layout = self.check.take_layout();
         if self.controls.is_none() {
             if control == Control::Stop {
                 self.stopped = true;
@@ -293,7 +320,7 @@ impl Subscription {
             self.fork();
         }
         let tx = self.controls.as_ref().expect("forked above");
-        match tx.try_send(control) {
+        match tx.try_send(Queued { control, layout }) {
             Ok(()) | Err(mpsc::error::TrySendError::Closed(_)) => Ok(()),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
         }

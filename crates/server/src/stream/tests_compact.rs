@@ -1,8 +1,9 @@
 //! Compact frames in the engine on a paused clock (docs/compact-frames.md):
 //! a broadcast encodes each tick once per layout for all its compact
 //! viewers, a viewer that lagged past a key frame is sent that key frame
-//! before the delta frame after it (so every frame it receives decodes), and
-//! controls that would leave the layout's clip are refused.
+//! before the delta frame after it (so every frame it receives decodes),
+//! controls that would leave the layout's clip are refused on a broadcast,
+//! and a stream's own bring a new layout.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -109,6 +110,36 @@ async fn layouts_are_encoded_apart_and_compact_viewers_hold_the_clip() {
     b.control(fade).unwrap();
     let refused = b.watch_compact(fine, e.admit(None).unwrap(), None).unwrap_err();
     assert_eq!(refused.code, "compact_unsupported");
+}
+
+/// A layer ramp on a compact clip stream leaves its observed ranges: the
+/// next frame carries a new layout and is a key frame in it. The new,
+/// derived ranges hold any weights, so another ramp brings none.
+#[tokio::test(start_paused = true)]
+async fn a_layer_ramp_on_a_clip_stream_brings_a_new_layout_once() {
+    let e = engine();
+    let params = StreamParams::new(pinned("c1", clip()), StreamRequest { fps: 10, ..Default::default() }).unwrap();
+    let l = Arc::new(CompactLayout::of_clip(params.clip(), 1e-4, None, 10));
+    let mut sub = e.play(params.with_compact(Arc::clone(&l)), e.admit(None).unwrap(), None);
+    let mut d = decoder(&l);
+    for _ in 0..2 {
+        let f = frame(&mut sub).await;
+        assert!(f.layout.is_none(), "the opened layout holds the clip");
+        decode(&mut d, &f);
+    }
+    sub.control(Control::Layer { index: 0, weight: 0.5, duration: 0.0 }).unwrap();
+    let f = frame(&mut sub).await;
+    let (seq, doc) = f.layout.clone().expect("a new layout");
+    assert_eq!(seq, f.seq, "it names the first frame in it");
+    assert_ne!(*doc, *l.document);
+    d.relayout(&serde_json::from_str(&doc).unwrap());
+    assert!(decode(&mut d, &f)[0].1, "the first frame in a new layout is a key frame");
+    sub.control(Control::Layer { index: 0, weight: 1.0, duration: 0.0 }).unwrap();
+    for _ in 0..3 {
+        let f = frame(&mut sub).await;
+        assert!(f.layout.is_none(), "seq {}: the derived ranges hold any weight", f.seq);
+        decode(&mut d, &f);
+    }
 }
 
 #[test]

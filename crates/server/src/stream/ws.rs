@@ -1,6 +1,8 @@
 //! The WebSocket side of a stream (docs/api.md): frames out as JSON text,
 //! binary protobuf or binary compact frames (a delta frame preceded by the
-//! key frame its viewer missed), control messages in, ping/pong keepalive.
+//! key frame its viewer missed; a new layout, docs/compact-frames.md, as a
+//! text message `{"layout": document, "seq": n}` before the first frame in
+//! it), control messages in, ping/pong keepalive.
 //!
 //! [`serve`] is generic over any `Sink + Stream` of axum WebSocket messages,
 //! so unit tests drive it with in-memory channels and a paused clock while
@@ -231,6 +233,12 @@ pub trait FrameSocket: Sink<Message> + Unpin {
     }
 }
 
+/// A compact stream's new layout (docs/compact-frames.md, "A new layout"):
+/// `{"layout": document, "seq": n}`, `n` the first frame in it.
+fn layout_message(seq: u64, document: &str) -> Message {
+    Message::Text(format!("{{\"layout\":{document},\"seq\":{seq}}}").into())
+}
+
 /// A frame as a WebSocket message.
 fn frame_message(encoding: Encoding, bytes: bytes::Bytes) -> Option<Message> {
     match encoding {
@@ -267,6 +275,11 @@ pub async fn serve<S, E>(
                     Next::Frame(f) => {
                         let encoding = sub.encoding();
                         let send = async {
+                            if let Some((seq, doc)) = f.layout
+                                && let Err(e) = socket.send(layout_message(seq, &doc)).await
+                            {
+                                return Err(e);
+                            }
                             if let Some(key) = f.prelude
                                 && let Err(e) = socket.send_frame(encoding, key).await
                             {

@@ -47,6 +47,16 @@ impl Ticket {
         self.units
     }
 
+    /// A further charge of `units` to this ticket's caller on its meter,
+    /// held until the new ticket drops (work a stream's control asks for
+    /// once: choosing a new compact layout).
+    ///
+    /// # Errors
+    /// As [`Meter::charge`].
+    pub fn also(&self, units: u64) -> Result<Ticket, ApiError> {
+        self.meter.charge(&self.caller, units)
+    }
+
     /// Holds `units` from now on instead (a broadcast re-priced by a
     /// control): a rise is checked like a new charge of the difference,
     /// a fall always succeeds.

@@ -31,6 +31,7 @@ func _init() -> void:
 	for vector in loaded:
 		_check_vector(vector)
 	_check_refusals(loaded)
+	_check_relayout(loaded)
 	_check_slerp()
 	_check_buffer()
 	_check_names()
@@ -72,6 +73,8 @@ func _check_vector(vector: Dictionary) -> void:
 	var decoder := Compact.new(vector["layout"])
 	for frame in vector["frames"]:
 		var what := "%s seq %d" % [vector["name"], int(frame["seq"])]
+		if frame.has("layout"):  # a new layout mid-stream
+			decoder.relayout(frame["layout"])
 		var got := decoder.decode(Compact.from_hex(frame["hex"]))
 		if got.has("error"):
 			_check(false, "%s: %s %s" % [what, got["error"], got["detail"]])
@@ -99,6 +102,19 @@ func _check_vector(vector: Dictionary) -> void:
 				"total": Array(_f32([root["total"]])).map(func(x): return float(x)),
 			}
 		_check(got["root_motion"] == want, what + ": root motion")
+
+
+func _check_relayout(vectors: Array) -> void:
+	var vector: Dictionary = vectors.filter(func(v): return v["name"] == "relayout")[0]
+	var frames: Array = vector["frames"]
+	var decoder := Compact.new(vector["layout"])
+	decoder.decode(Compact.from_hex(frames[0]["hex"]))
+	decoder.decode(Compact.from_hex(frames[1]["hex"]))
+	decoder.relayout(frames[2]["layout"])
+	var early := decoder.decode(Compact.from_hex(frames[3]["hex"]))
+	_check(early.get("error") == "compact_missing_key_frame", "a new layout forgets the old key frame")
+	_check(decoder.decode(Compact.from_hex(frames[2]["hex"]))["key"], "the new layout's key frame")
+	_check(not decoder.decode(Compact.from_hex(frames[3]["hex"])).has("error"), "its delta frame")
 
 
 func _check_refusals(vectors: Array) -> void:

@@ -23,7 +23,10 @@ test("there are vectors to read", () => {
 for (const vector of vectors) {
   test(`${vector.name}: every frame decodes to the stored pose exactly`, () => {
     const decoder = new CompactDecoder(vector.layout);
+    let layout = vector.layout;
     for (const frame of vector.frames) {
+      // A new layout mid-stream (docs/compact-frames.md, "A new layout").
+      if (frame.layout) decoder.relayout((layout = frame.layout));
       const got = decoder.decode(fromHex(frame.hex));
       assert.equal(got.key, frame.key);
       assert.equal(got.seq, frame.seq);
@@ -34,7 +37,7 @@ for (const vector of vectors) {
       assert.deepEqual(got.translations, flat(frame.pose.translations));
       assert.deepEqual(got.scales, flat(frame.pose.scales));
       assert.deepEqual(got.events.map((e) => e.index), frame.events ?? []);
-      for (const e of got.events) assert.equal(e.name, vector.layout.events[e.index].name);
+      for (const e of got.events) assert.equal(e.name, layout.events[e.index].name);
       const root = frame.root_motion;
       assert.deepEqual(got.rootMotion, root ? { delta: root.delta.map(Math.fround), total: root.total.map(Math.fround) } : null);
     }
@@ -60,4 +63,16 @@ test("events past the layout's list and a root motion cut short are refused", ()
   unknown[at] = vector.layout.events.length;
   assert.throws(() => new CompactDecoder(vector.layout).decode(unknown), (e) => e.code === "compact_unknown_event");
   assert.throws(() => new CompactDecoder(vector.layout).decode(key.subarray(0, key.length - 1)), (e) => e.code === "compact_truncated");
+});
+
+test("a new layout forgets the old key frame", () => {
+  const vector = vectors.find((v) => v.name === "relayout");
+  const frames = vector.frames.map((f) => fromHex(f.hex));
+  const decoder = new CompactDecoder(vector.layout);
+  decoder.decode(frames[0]);
+  decoder.decode(frames[1]);
+  decoder.relayout(vector.frames[2].layout);
+  assert.throws(() => decoder.decode(frames[3]), (e) => e.code === "compact_missing_key_frame");
+  assert.equal(decoder.decode(frames[2]).key, true);
+  assert.equal(decoder.decode(frames[3]).key, false);
 });

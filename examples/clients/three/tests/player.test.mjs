@@ -162,3 +162,26 @@ test("a compact stream's events reach onevents and its root motion moves the tar
   const [, y, , w] = target.quaternion.v;
   assert.ok(Math.abs(y - Math.sin(total[3] / 2)) < 1e-6 && Math.abs(w - Math.cos(total[3] / 2)) < 1e-6);
 });
+
+test("a new layout mid-stream decodes on, and the pose interpolates across it without a jump", () => {
+  const vector = JSON.parse(
+    readFileSync(join(dirname(fileURLToPath(import.meta.url)), "../../../../docs/compact-frames/relayout.json"), "utf8"),
+  );
+  const target = new Node("character", false);
+  const spinner = new Node("spinner", true);
+  target.children = [spinner];
+  const socket = {};
+  const player = new InbetweenPlayer(socket, { fps: 30, target });
+  socket.onmessage({ data: JSON.stringify({ opened: { compact: vector.layout } }) });
+  const at = (f) => 1000 + ((f.seq - 7) * 1000) / 30;
+  for (const f of vector.frames) {
+    if (f.layout) socket.onmessage({ data: JSON.stringify({ layout: f.layout, seq: f.seq }) });
+    player.receive(fromHex(f.hex).buffer, at(f));
+  }
+  assert.equal(player.frames, 4);
+  assert.equal(player.error, null);
+  // Halfway between seq 8 (the old layout's last frame) and seq 9 (the new one's key frame), two ticks behind.
+  player.update(at(vector.frames[1]) + 2 * (1000 / 30) + 500 / 30);
+  const [a, b] = [vector.frames[1].pose.translations[0], vector.frames[2].pose.translations[0]];
+  spinner.position.v.forEach((x, k) => assert.ok(Math.abs(x - (a[k] + b[k]) / 2) < 1e-6, `position ${k}: ${x}`));
+});

@@ -136,6 +136,8 @@ export function openStream() {
       decoder = frame.opened.compact ? new CompactDecoder(frame.opened.compact) : null;
       return emit("opened", frame.opened);
     }
+    // A new layout mid-stream (a control left the old one): the frames after it decode in it.
+    if (frame.layout && decoder) return decoder.relayout(frame.layout);
     if (frame.error && target.open && !tally.frames) return setStatus(`stream refused: ${describeProblem(frame.error)}`, true);
     if (frame.error) return refusedControl(frame.error);
     const nowNanos = (performance.timeOrigin + performance.now()) * 1e6;
