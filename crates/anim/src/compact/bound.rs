@@ -20,7 +20,7 @@
 
 use glam::{Quat, Vec3A};
 
-use super::{JointRange, Ranges, canonical};
+use super::{JointRange, Ranges, canonical, moved};
 use crate::graph::Graph;
 use crate::ik::IkConstraint;
 use crate::motion::{ClipSource, LayerMode, LayerView, Motion, UNMAPPED};
@@ -30,7 +30,7 @@ use crate::{Clip, Pose, Skeleton};
 /// How far a derived range is widened on either side, relative to the
 /// largest magnitude that went into it: the f32 rounding of the layering
 /// arithmetic (a few steps of 2⁻²⁴ per layer) stays inside.
-const ROUNDING_MARGIN: f32 = 1.0 / (1u32 << 16) as f32;
+pub(super) const ROUNDING_MARGIN: f32 = 1.0 / (1u32 << 16) as f32;
 
 /// Why a stream's poses cannot be bounded at open.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -102,8 +102,7 @@ impl Ranges {
     /// every key and `rate` times a second.
     ///
     /// # Errors
-    /// A retargeted layer or root motion `extract` (which move joints in ways
-    /// the clips' ranges do not bound).
+    /// As [`Ranges::boundable`].
     pub fn of_motion<C: ClipSource>(motion: &Motion<C>, rate: f32) -> Result<Ranges, Unbounded> {
         let mut clips = ClipRanges { rate, taken: Vec::new() };
         of_motion(motion, &mut clips)
@@ -113,16 +112,10 @@ impl Ranges {
     /// [`Ranges::of_motion`] refuses, checked without sampling a clip.
     ///
     /// # Errors
-    /// A retargeted layer or root motion `extract` (which move joints in ways
-    /// the clips' ranges do not bound).
+    /// A layer retargeted onto a character whose hips are below a joint of
+    /// another role (`Ranges::retargeted`).
     pub fn boundable<C: ClipSource>(motion: &Motion<C>) -> Result<(), Unbounded> {
-        if motion.extracts_root_motion().is_some() {
-            return Err(Unbounded("root motion `extract`, which moves the root joint off its clips' ranges"));
-        }
-        if motion.layer_views().any(|layer| layer.retargeted) {
-            return Err(Unbounded("a layer retargeted onto a character"));
-        }
-        Ok(())
+        motion.layer_views().filter_map(|l| l.retarget).try_for_each(|(r, _)| moved::retarget_boundable(r))
     }
 
     /// Ranges holding every pose `graph` produces under any parameters and
@@ -177,7 +170,18 @@ fn of_motion<'a, C: ClipSource>(motion: &'a Motion<C>, clips: &mut ClipRanges<'a
     let mut ranges = Ranges::at_rest(skeleton);
     for layer in motion.layer_views() {
         let own = clips.of(layer.clip);
-        apply_layer(&mut ranges, &layer, own);
+        let moved = match (layer.retarget, &layer.extract) {
+            (None, None) => None,
+            (retarget, extract) => {
+                let mut own = match retarget {
+                    Some((retargeter, planter)) => Ranges::retargeted(retargeter, planter, own)?,
+                    None => own.clone(),
+                };
+                extract.iter().for_each(|e| own.extracted(e));
+                Some(own)
+            }
+        };
+        apply_layer(&mut ranges, &layer, moved.as_ref().unwrap_or(own));
     }
     ranges.turned_by(skeleton, motion.ik(), motion.springs());
     for r in &mut ranges.joints {
@@ -202,7 +206,7 @@ fn apply_layer(ranges: &mut Ranges, layer: &LayerView<'_>, own: &Ranges) {
 }
 
 impl JointRange {
-    fn free_rotation(&mut self) {
+    pub(super) fn free_rotation(&mut self) {
         self.first_rotation = Some(Quat::IDENTITY);
         self.rotation_varies = true;
         self.largest_seen = 0b1111;
@@ -210,6 +214,11 @@ impl JointRange {
 
     fn is_constant_rotation(&self) -> bool {
         !self.rotation_varies
+    }
+
+    /// The one rotation of every pose (sign: largest positive), if it is one.
+    pub(super) fn constant_rotation(&self) -> Option<Quat> {
+        self.first_rotation.filter(|_| !self.rotation_varies)
     }
 
     /// Any lerp (slerp) of a pose within `self` toward one within `other`.

@@ -19,6 +19,7 @@
 use glam::{Quat, Vec3, Vec3A};
 
 mod bound;
+mod moved;
 pub use bound::Unbounded;
 
 use crate::{Clip, Cursor, Pose, Skeleton};

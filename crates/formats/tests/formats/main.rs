@@ -6,6 +6,7 @@
 
 mod bvh;
 mod compact;
+mod derived_ranges;
 mod conventions;
 mod feet;
 mod files;

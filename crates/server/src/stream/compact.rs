@@ -170,7 +170,11 @@ impl CompactLayout {
             (Some(g), RangeSource::Derived) => {
                 let mut ranges = Ranges::of_graph(&g.graph, RANGE_RATE).map_err(|u| refusal(u.0))?;
                 ranges.turned_by(skeleton, g.post.ik(), g.post.springs());
-                return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]));
+                let mut layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]);
+                if g.report {
+                    layout.name_graph(&g.graph);
+                }
+                return Ok(layout);
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
@@ -207,6 +211,14 @@ impl CompactLayout {
         let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, events);
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
         CompactLayout { layout, document, key_interval, any_weights: true }
+    }
+
+    /// Names `graph`'s states and blend nodes in the document, which its
+    /// frames' graph report section indexes (a graph stream with `report`).
+    fn name_graph<C>(&mut self, graph: &anim::graph::Graph<C>) {
+        let doc: LayoutDoc = serde_json::from_str(&self.document).expect("the layout document reads back");
+        let doc = doc.with_graph(graph);
+        self.document = serde_json::to_string(&doc).expect("a layout document serialises").into();
     }
 
     /// What tells two layouts apart for sharing a playback.
