@@ -409,8 +409,8 @@ impl RawStream<'_> {
     /// as work.
     ///
     /// # Errors
-    /// `compact_unsupported` (poses no range bounds: a retargeted layer,
-    /// root motion `extract`); `too_much_work`, `caller_work_limit`,
+    /// `compact_unsupported` (poses no range bounds: a character whose
+    /// hips sit below a joint of another role); `too_much_work`, `caller_work_limit`,
     /// `overloaded`, `request_timeout`.
     pub(super) async fn with_layout(
         &self,
