@@ -7,7 +7,9 @@
 
 use glam::{Quat, Vec3A, Vec4};
 
-use super::curve::{ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, lerp_keys, slerp_bezier, step};
+use super::curve::{
+    ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, lerp_keys, slerp_bezier, step,
+};
 use super::heap::vec_bytes;
 use super::soa::{Lanes, QuatGroup, QuatSegment4, Vec3Group};
 use super::timeline::Span;

@@ -977,7 +977,10 @@ async fn a_take_on_a_character_streams_compact_within_max_error_of_its_protobuf_
         let plain = protobuf_frames(&mut plain, 60).await;
         check_keys(&frames, l.key_interval);
         let (compared, keys, deltas) = compare_on(&parents, &frames, &plain, max_error, &l);
-        assert!(compared >= 30 && keys >= 1 && deltas >= 20, "{root}: {compared} compared, {keys} keys, {deltas} deltas");
+        assert!(
+            compared >= 30 && keys >= 1 && deltas >= 20,
+            "{root}: {compared} compared, {keys} keys, {deltas} deltas"
+        );
         assert_eq!(frames.iter().all(|d| d.root_motion.is_some()), !root.is_null(), "{root}: the root motion section");
         eprintln!("131_01 on CesiumMan, root motion {root}: key frame {} B, deltas {:?} B", sizes[0], &sizes[1..4]);
     }
@@ -1048,9 +1051,9 @@ fn report_as_f32(report: &Value) -> Value {
     match report {
         Value::Number(n) => json!(n.as_f64().unwrap() as f32),
         Value::Array(a) => Value::Array(a.iter().map(report_as_f32).collect()),
-        Value::Object(o) => Value::Object(
-            o.iter().filter(|(_, v)| !v.is_null()).map(|(k, v)| (k.clone(), report_as_f32(v))).collect(),
-        ),
+        Value::Object(o) => {
+            Value::Object(o.iter().filter(|(_, v)| !v.is_null()).map(|(k, v)| (k.clone(), report_as_f32(v))).collect())
+        }
         other => other.clone(),
     }
 }
@@ -1090,5 +1093,8 @@ async fn a_compact_graph_watch_carries_the_json_frames_report() {
         transitions += usize::from(report.1.is_some());
         states.insert(report.0);
     }
-    assert!(compared >= 20 && transitions >= 3 && states.len() == 3, "{compared} compared, {transitions} in a transition, states {states:?}");
+    assert!(
+        compared >= 20 && transitions >= 3 && states.len() == 3,
+        "{compared} compared, {transitions} in a transition, states {states:?}"
+    );
 }

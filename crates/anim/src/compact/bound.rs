@@ -20,21 +20,12 @@
 
 use glam::{Quat, Vec3A};
 
-use super::{JointRange, Ranges, canonical, moved};
+use super::{JointRange, ROUNDING_MARGIN, Ranges, Unbounded, canonical, moved};
 use crate::graph::Graph;
 use crate::ik::IkConstraint;
 use crate::motion::{ClipSource, LayerMode, LayerView, Motion, UNMAPPED};
 use crate::spring::Springs;
 use crate::{Clip, Pose, Skeleton};
-
-/// How far a derived range is widened on either side, relative to the
-/// largest magnitude that went into it: the f32 rounding of the layering
-/// arithmetic (a few steps of 2⁻²⁴ per layer) stays inside.
-pub(super) const ROUNDING_MARGIN: f32 = 1.0 / (1u32 << 16) as f32;
-
-/// Why a stream's poses cannot be bounded at open.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Unbounded(pub &'static str);
 
 /// The ranges of each distinct clip a bound reads, taken once.
 struct ClipRanges<'a> {

@@ -6,8 +6,7 @@
 
 use glam::{Mat3A, Quat, Vec3A};
 
-use super::bound::{ROUNDING_MARGIN, Unbounded};
-use super::{JointRange, Ranges};
+use super::{JointRange, ROUNDING_MARGIN, Ranges, Unbounded};
 use crate::Pose;
 use crate::character::{FootPlanter, NO_JOINT, Retargeter, Translation};
 use crate::motion::{LayerExtract, UpAxis};

@@ -289,7 +289,8 @@ fn the_graph_report_follows_the_root_motion_and_is_checked() {
     assert_eq!(decoder.graph_report(), None);
     // A state, a transition's state or a node past the layout's; a section cut short.
     let at = plain.len() + 32;
-    for (offset, what, index, count) in [(0, "state", 5, 3), (1, "state", 8, 3), (2, "state", 3, 3), (8, "node", 2, 2)] {
+    for (offset, what, index, count) in [(0, "state", 5, 3), (1, "state", 8, 3), (2, "state", 3, 3), (8, "node", 2, 2)]
+    {
         let mut bad = full.clone();
         bad[at + offset] = u8::try_from(index + u64::from(offset == 1)).unwrap();
         assert_eq!(decoder.decode(&bad, &mut out), Err(CompactError::UnknownGraphIndex { what, index, count }));
@@ -449,7 +450,10 @@ fn graph_json(g: &GraphFrame) -> serde_json::Value {
 /// The graph of the `graph-report` vector: three states, two blend nodes.
 fn report_graph() -> GraphDoc {
     let node = |name: &str, points| GraphNodeDoc { name: name.to_owned(), points };
-    GraphDoc { states: ["idle", "move", "jump"].map(str::to_owned).to_vec(), nodes: vec![node("walkrun", 2), node("aim", 3)] }
+    GraphDoc {
+        states: ["idle", "move", "jump"].map(str::to_owned).to_vec(),
+        nodes: vec![node("walkrun", 2), node("aim", 3)],
+    }
 }
 
 /// The `graph-report` vector's reports: a state alone, a transition with

@@ -6,8 +6,8 @@
 
 mod bvh;
 mod compact;
-mod derived_ranges;
 mod conventions;
+mod derived_ranges;
 mod feet;
 mod files;
 mod fuzz_regressions;
