@@ -349,11 +349,6 @@ impl<C: ClipSource> Motion<C> {
         Some(LayerExtract { joint: root.joint, start: root.cycle.start, up: setup.up })
     }
 
-    /// Whether root motion `extract` rewrites the root joint's local transform.
-    pub fn extracts_root_motion(&self) -> Option<usize> {
-        self.root.filter(|r| r.mode == RootMode::Extract).map(|r| r.joint)
-    }
-
     /// The request-time IK constraints, solved after layering.
     pub fn ik(&self) -> &[IkConstraint] {
         &self.ik
