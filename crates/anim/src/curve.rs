@@ -92,7 +92,7 @@ impl Vec3Curve {
         match self {
             Vec3Curve::Constant(v) => *v,
             Vec3Curve::Step(keys) => step(keys, s),
-            Vec3Curve::Linear(keys) => keys[i].lerp(keys[i + 1], s.u),
+            Vec3Curve::Linear(keys) => lerp_keys(keys[i], keys[i + 1], s.u),
             Vec3Curve::Bezier(segments) => bezier3(&segments[i], s.u),
             Vec3Curve::ConstantSpeed { segments, pieces } => {
                 let piece = pieces[i];
@@ -143,6 +143,14 @@ impl SlerpCurve {
     pub fn heap_bytes(&self) -> usize {
         std::mem::size_of_val(&*self.keys) + std::mem::size_of_val(&*self.sine)
     }
+}
+
+/// `a + (b − a)·u`: a linear key pair's value, exactly `a` between equal
+/// keys (glam's `lerp`, `a·(1 − u) + b·u`, can round an ulp off them, which
+/// would leave a constant channel's compact range, docs/compact-frames.md).
+#[inline]
+pub(crate) fn lerp_keys(a: Vec3A, b: Vec3A, u: f32) -> Vec3A {
+    a + (b - a) * u
 }
 
 #[inline(always)]

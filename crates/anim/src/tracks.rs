@@ -7,7 +7,9 @@
 
 use glam::{Quat, Vec3A, Vec4};
 
-use super::curve::{ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, slerp_bezier, step};
+use super::curve::{
+    ArcPiece, QuatCurve, QuatSegment, SlerpCurve, Vec3Curve, bezier3, bezier4, lerp_keys, slerp_bezier, step,
+};
 use super::heap::vec_bytes;
 use super::soa::{Lanes, QuatGroup, QuatSegment4, Vec3Group};
 use super::timeline::Span;
@@ -188,7 +190,7 @@ impl Vec3Tracks {
         run(&self.step, spans, out, |k, s| step(k, s));
         run(&self.linear, spans, out, |k, s| {
             let i = s.index as usize;
-            k[i].lerp(k[i + 1], s.u)
+            lerp_keys(k[i], k[i + 1], s.u)
         });
         run(&self.bezier, spans, out, |segs, s| bezier3(&segs[s.index as usize], s.u));
         run_groups(&self.groups, spans, out, |g| (&g.lanes, g.timeline), Vec3Group::at);

@@ -14,7 +14,8 @@
 const KEY_FRAME = 1;
 const EVENTS = 2; // an events section follows the body
 const ROOT_MOTION = 4; // a root motion section follows the body (and the events)
-const KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION;
+const GRAPH = 8; // a graph report section follows (after the root motion)
+const KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION | GRAPH;
 // Per joint in the value store: largest index, three rotation components,
 // translation x y z, scale x y z.
 const STRIDE = 10;
@@ -125,6 +126,7 @@ export class CompactDecoder {
     const n = this.joints.length;
     this.names = layout.joints.map((j) => j.name);
     this.events = layout.events ?? []; // the clip's events, which frames index
+    this.graph = layout.graph ?? { states: [], nodes: [] }; // a graph stream's names, which reports index
     this.key = new Uint32Array(n * STRIDE);
     this.values = new Uint32Array(n * STRIDE);
     this.keySeq = null;
@@ -142,13 +144,16 @@ export class CompactDecoder {
    * translations, rotations, scales}` (flat Float32Arrays, 3/4/3 per joint),
    * `events` (the events crossed since the previous frame, in order:
    * `{index, time, name}`, index into the layout's `events`) and
-   * `rootMotion` (`{delta, total}`, each `[x, y, z, yaw]`, or null).
+   * `rootMotion` (`{delta, total}`, each `[x, y, z, yaw]`, or null) and
+   * `graph` (a graph stream's report as a JSON frame's `graph` member
+   * states it, `{state, transition?: {from, to, alpha}, weights: {node:
+   * [w…]}}`, its numbers f32s; or null).
    */
   decode(bytes) {
     if (bytes.length === 0) throw new CompactError("compact_truncated", "the frame ends before its flags");
     const flags = bytes[0];
     if ((flags & ~KNOWN_FLAGS) !== 0) {
-      throw new CompactError("compact_unknown_flags", `flags ${flags} use bits other than key frame, events and root motion`);
+      throw new CompactError("compact_unknown_flags", `flags ${flags} use bits other than key frame, events, root motion and graph`);
     }
     const key = (flags & KEY_FRAME) !== 0;
     const at = { i: 1 };
@@ -175,6 +180,7 @@ export class CompactDecoder {
     at.i += 4 + Math.ceil((reader.bit - (at.i + 4) * 8) / 8);
     const events = (flags & EVENTS) !== 0 ? this.readEvents(bytes, at) : [];
     const rootMotion = (flags & ROOT_MOTION) !== 0 ? readRootMotion(bytes, at) : null;
+    const graph = (flags & GRAPH) !== 0 ? this.readGraph(bytes, at) : null;
     if (at.i !== bytes.length) {
       throw new CompactError("compact_trailing_bytes", `${bytes.length - at.i} bytes follow the frame's last field`);
     }
@@ -191,7 +197,37 @@ export class CompactDecoder {
       scales: this.scales,
       events,
       rootMotion,
+      graph,
     };
+  }
+
+  // The graph report section: the state, the transition (0, or from + 1, to
+  // and alpha), then each evaluated blend node's index and weights.
+  readGraph(bytes, at) {
+    const { states, nodes } = this.graph;
+    const index = (list, what) => {
+      const i = readVarint(bytes, at, "graph report");
+      if (i >= list.length) {
+        throw new CompactError("compact_unknown_graph_index", `graph ${what} ${i} is not in the layout's ${list.length}`);
+      }
+      return i;
+    };
+    const report = { state: states[index(states, "state")] };
+    const from = readVarint(bytes, at, "graph report");
+    if (from !== 0) {
+      if (from - 1 >= states.length) {
+        throw new CompactError("compact_unknown_graph_index", `graph state ${from - 1} is not in the layout's ${states.length}`);
+      }
+      const to = states[index(states, "state")];
+      report.transition = { from: states[from - 1], to, alpha: readF32s(bytes, at, 1)[0] };
+    }
+    report.weights = {};
+    const count = readVarint(bytes, at, "graph report");
+    for (let n = 0; n < count; n++) {
+      const node = nodes[index(nodes, "node")];
+      report.weights[node.name] = readF32s(bytes, at, node.points);
+    }
+    return report;
   }
 
   // The events section: a count, then indices into the layout's `events`.
@@ -277,6 +313,14 @@ function readRootMotion(bytes, at) {
   const values = Array.from({ length: 8 }, (_, k) => view.getFloat32(4 * k, true));
   at.i += 32;
   return { delta: values.slice(0, 4), total: values.slice(4) };
+}
+
+// `count` little-endian f32s of the graph report section.
+function readF32s(bytes, at, count) {
+  if (at.i + 4 * count > bytes.length) throw new CompactError("compact_truncated", "the frame ends before its graph report");
+  const view = new DataView(bytes.buffer, bytes.byteOffset + at.i, 4 * count);
+  at.i += 4 * count;
+  return Array.from({ length: count }, (_, k) => view.getFloat32(4 * k, true));
 }
 
 /** `"0a1b..."` → Uint8Array, for test vectors. */

@@ -20,7 +20,8 @@ import numpy as np
 KEY_FRAME = 1
 EVENTS = 2  # an events section follows the body
 ROOT_MOTION = 4  # a root motion section follows the body (and the events)
-KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION
+GRAPH = 8  # a graph report section follows (after the root motion)
+KNOWN_FLAGS = KEY_FRAME | EVENTS | ROOT_MOTION | GRAPH
 
 
 class CompactError(ValueError):
@@ -47,6 +48,10 @@ class Frame:
     events: list
     # ``{"delta": [x, y, z, yaw], "total": [...]}`` (f32 values), or None.
     root_motion: dict | None
+    # A graph stream's report by index into the layout's ``graph``:
+    # ``{"state": i, "transition": {"from", "to", "alpha"} or None,
+    # "weights": [{"node": i, "weights": [...]}]}`` (f32 values), or None.
+    graph: dict | None = None
 
 
 def _value(field, u):
@@ -98,6 +103,15 @@ def _read_root_motion(data, at):
     return {"delta": values[:4], "total": values[4:]}
 
 
+def _f32s(data, at, count):
+    """``count`` little-endian f32s of the graph report section."""
+    if at[0] + 4 * count > len(data):
+        raise CompactError("compact_truncated", "the frame ends before its graph report")
+    values = list(struct.unpack_from(f"<{count}f", data, at[0]))
+    at[0] += 4 * count
+    return values
+
+
 class CompactDecoder:
     """Decodes one stream's compact frames against its ``opened`` layout."""
 
@@ -114,6 +128,7 @@ class CompactDecoder:
         self.names = [j["name"] for j in layout["joints"]]
         self.joints = [self._compile(j) for j in layout["joints"]]
         self.events = layout.get("events", [])
+        self.graph = layout.get("graph") or {"states": [], "nodes": []}
         self.key = None
         self.key_seq = None
 
@@ -138,7 +153,7 @@ class CompactDecoder:
         flags = data[0]
         if flags & ~KNOWN_FLAGS:
             raise CompactError(
-                "compact_unknown_flags", f"flags {flags:#04x} use bits other than key frame, events and root motion"
+                "compact_unknown_flags", f"flags {flags:#04x} use bits other than key frame, events, root motion and graph"
             )
         key = bool(flags & KEY_FRAME)
         at = [1]
@@ -166,10 +181,34 @@ class CompactDecoder:
         at[0] = (bits.bit + 7) // 8
         events = self._read_events(data, at) if flags & EVENTS else []
         root_motion = _read_root_motion(data, at) if flags & ROOT_MOTION else None
+        graph = self._read_graph(data, at) if flags & GRAPH else None
         if at[0] != len(data):
             raise CompactError("compact_trailing_bytes", f"{len(data) - at[0]} bytes follow the frame's last field")
         t, r, s = self._dequantise(values)
-        return Frame(seq, dropped, sent_at, clip_time, key, key_seq, t, r, s, events, root_motion)
+        return Frame(seq, dropped, sent_at, clip_time, key, key_seq, t, r, s, events, root_motion, graph)
+
+    def _read_graph(self, data, at):
+        """The graph report section: the state, the transition (0, or from + 1,
+        to and alpha), then each evaluated blend node's index and weights."""
+        states, nodes = self.graph["states"], self.graph["nodes"]
+
+        def index(value, names, what):
+            if value >= len(names):
+                raise CompactError("compact_unknown_graph_index", f"graph {what} {value} is not in the layout's {len(names)}")
+            return value
+
+        report = {"state": index(_varint(data, at, "graph report"), states, "state"), "transition": None}
+        start = _varint(data, at, "graph report")
+        if start:
+            source = index(start - 1, states, "state")
+            target = index(_varint(data, at, "graph report"), states, "state")
+            report["transition"] = {"from": source, "to": target, "alpha": _f32s(data, at, 1)[0]}
+        weights = []
+        for _ in range(_varint(data, at, "graph report")):
+            node = index(_varint(data, at, "graph report"), nodes, "node")
+            weights.append({"node": node, "weights": _f32s(data, at, nodes[node]["points"])})
+        report["weights"] = weights
+        return report
 
     def _read_events(self, data, at):
         """The events section: a count, then indices into the layout's ``events``."""

@@ -17,6 +17,17 @@ def load():
     return [json.loads(p.read_text()) for p in sorted(VECTORS.glob("*.json"))]
 
 
+def as_f32(value):
+    """A vector's report with its floats rounded to f32, as a frame sends them."""
+    if isinstance(value, float):
+        return float(np.float32(value))
+    if isinstance(value, list):
+        return [as_f32(v) for v in value]
+    if isinstance(value, dict):
+        return {k: as_f32(v) for k, v in value.items()}
+    return value
+
+
 class CompactVectors(unittest.TestCase):
     def test_every_frame_decodes_to_the_stored_pose_exactly(self):
         vectors = load()
@@ -39,6 +50,7 @@ class CompactVectors(unittest.TestCase):
                     f32 = lambda values: [float(np.float32(v)) for v in values]
                     expected = root and {"delta": f32(root["delta"]), "total": f32(root["total"])}
                     self.assertEqual(got.root_motion, expected)
+                    self.assertEqual(got.graph, frame.get("graph") and as_f32(frame["graph"]))
 
     def test_a_delta_frame_without_its_key_frame_is_refused(self):
         vector = next(v for v in load() if v["name"] == "bench20")
@@ -52,7 +64,7 @@ class CompactVectors(unittest.TestCase):
                 decoder.decode(bad)
             self.assertEqual(refused.exception.code, code)
         with self.assertRaises(CompactError) as refused:
-            CompactDecoder(vector["layout"]).decode(bytes([key[0] | 8]) + key[1:])
+            CompactDecoder(vector["layout"]).decode(bytes([key[0] | 16]) + key[1:])
         self.assertEqual(refused.exception.code, "compact_unknown_flags")
 
     def test_an_unknown_event_and_a_short_root_motion_are_refused(self):
@@ -77,6 +89,23 @@ class CompactVectors(unittest.TestCase):
         self.assertEqual(refused.exception.code, "compact_missing_key_frame")
         self.assertTrue(decoder.decode(frames[2]).key)
         self.assertFalse(decoder.decode(frames[3]).key)
+
+    def test_graph_indices_past_the_layouts_graph_and_a_short_report_are_refused(self):
+        vector = next(v for v in load() if v["name"] == "graph-report")
+        key, delta = (bytes.fromhex(f["hex"]) for f in vector["frames"][:2])
+        at = len(delta) - 17  # the state: then from + 1, to, alpha, one node, its index and two weights
+        self.assertEqual(delta[at], 2)
+        for offset, value in [(0, 3), (1, 4), (2, 3), (8, 2)]:
+            decoder = CompactDecoder(vector["layout"])
+            decoder.decode(key)
+            with self.assertRaises(CompactError) as refused:
+                decoder.decode(delta[: at + offset] + bytes([value]) + delta[at + offset + 1 :])
+            self.assertEqual(refused.exception.code, "compact_unknown_graph_index", (offset, value))
+        decoder = CompactDecoder(vector["layout"])
+        decoder.decode(key)
+        with self.assertRaises(CompactError) as refused:
+            decoder.decode(delta[:-1])
+        self.assertEqual(refused.exception.code, "compact_truncated")
 
 
 if __name__ == "__main__":

@@ -92,6 +92,8 @@ struct Layout {
     distance: f64,
     key_interval: u64,
     joints: Vec<Joint>,
+    /// Each blend node's number of points, when the layout has a `graph`.
+    points: Vec<usize>,
 }
 
 fn fields<const N: usize>(v: &Value) -> [Field; N] {
@@ -120,11 +122,14 @@ fn layout(doc: &Value) -> Layout {
             scale: fields(&j["scale"]),
         })
         .collect();
+    let nodes = doc["graph"]["nodes"].as_array().cloned().unwrap_or_default();
+    let points = nodes.iter().map(|n| n["points"].as_u64().unwrap() as usize).collect();
     Layout {
         bound: doc["bound"].as_f64().unwrap(),
         distance: doc["distance"].as_f64().unwrap(),
         key_interval: doc["key_interval"].as_u64().unwrap(),
         joints,
+        points,
     }
 }
 
@@ -182,6 +187,17 @@ struct Decoded {
     events: Vec<u64>,
     /// Root motion delta then total, each x, y, z, yaw (docs: flags bit 2).
     root_motion: Option<[f32; 8]>,
+    /// The graph report (docs: flags bit 3).
+    graph: Option<Report>,
+}
+
+/// A graph report by index: the state, the transition `(from, to, alpha)`,
+/// each blend node's index and weights.
+type Report = (u64, Option<(u64, u64, f32)>, Vec<(u64, Vec<f32>)>);
+
+fn f32_at(bytes: &[u8], at: &mut usize) -> f32 {
+    *at += 4;
+    f32::from_le_bytes(bytes[*at - 4..*at].try_into().unwrap())
 }
 
 struct Decoder {
@@ -210,7 +226,7 @@ impl Decoder {
 
     fn decode(&mut self, bytes: &[u8]) -> Decoded {
         let flags = bytes[0];
-        assert_eq!(flags & !0b111, 0, "unknown flags");
+        assert_eq!(flags & !0b1111, 0, "unknown flags");
         let key = flags & 1 == 1;
         let mut at = 1;
         let seq = varint(bytes, &mut at);
@@ -245,13 +261,25 @@ impl Decoder {
             at += 32;
             values
         });
+        let graph = (flags & 8 != 0).then(|| {
+            let state = varint(bytes, &mut at);
+            let transition = match varint(bytes, &mut at) {
+                0 => None,
+                from => Some((from - 1, varint(bytes, &mut at), f32_at(bytes, &mut at))),
+            };
+            let nodes = (0..varint(bytes, &mut at)).map(|_| {
+                let node = varint(bytes, &mut at);
+                (node, (0..self.layout.points[node as usize]).map(|_| f32_at(bytes, &mut at)).collect())
+            });
+            (state, transition, nodes.collect())
+        });
         assert_eq!(bytes.len(), at, "seq {seq}: no trailing bytes");
         if key {
             self.keys = Some((seq, raws.clone()));
         }
         let pose = self.layout.joints.iter().zip(&raws).map(|(j, raw)| pose_of(j, raw)).collect();
         let bound = self.layout.bound;
-        Decoded { seq, dropped, key, key_seq, clip_time, bound, new_layout: false, pose, events, root_motion }
+        Decoded { seq, dropped, key, key_seq, clip_time, bound, new_layout: false, pose, events, root_motion, graph }
     }
 
     /// A new layout mid-stream (docs: "A new layout"): its frames decode
@@ -1181,4 +1209,176 @@ async fn a_new_layout_over_the_request_limit_is_refused_and_the_stream_goes_on()
     let (frames, _) = more_frames(&mut ws, &mut decoder, 5).await;
     assert!(frames.iter().all(|d| !d.new_layout), "the stream goes on in its layout");
     assert_eq!(app.state.work.meter().held(), held, "holding what it held");
+
+// ------------------------------------------- derived ranges and graph reports
+
+/// A stream opened on `GET /v1/stream` with `open` and `encoding`; its
+/// `opened` message read.
+async fn open_stream(app: &TestApp, open: &Value, encoding: &str) -> (Ws, Value) {
+    use futures_util::SinkExt;
+    let mut ws = app.ws("/v1/stream").await;
+    let mut msg = open.clone();
+    msg["encoding"] = json!(encoding);
+    ws.send(Message::Text(msg.to_string().into())).await.unwrap();
+    let Message::Text(opened) = next_message(&mut ws).await else { panic!("the `opened` message first") };
+    let opened: Value = serde_json::from_str(&opened).unwrap();
+    assert!(opened.get("opened").is_some(), "{msg}: {opened}");
+    (ws, opened)
+}
+
+/// A character's parents by index, from its skeleton's joints.
+async fn character_parents(app: &TestApp, character: &str) -> Vec<Option<usize>> {
+    let joints = app.get_json(&format!("/v1/characters/{character}")).await["skeleton"]["joints"].clone();
+    let joints = joints.as_array().unwrap();
+    let names: Vec<&str> = joints.iter().map(|j| j["name"].as_str().unwrap()).collect();
+    let index = |p: &str| names.iter().position(|n| *n == p).unwrap();
+    joints.iter().map(|j| j["parent"].as_str().map(index)).collect()
+}
+
+/// A CMU take played on CesiumMan (retargeted, feet planted, with and without
+/// root motion `extract`) streamed compact: each frame decodes within the
+/// layout's `max_error` of the protobuf frame of the same tick (docs/
+/// compact-frames.md, “What a compact stream plays”).
+#[tokio::test]
+async fn a_take_on_a_character_streams_compact_within_max_error_of_its_protobuf_frames() {
+    let app = TestApp::start().await;
+    let (take, cesium) = crate::api::character_routes::take_and_cesium(&app).await;
+    let parents = character_parents(&app, &cesium).await;
+    for root in [json!(null), json!({"mode": "extract"})] {
+        let mut motion = json!({"layers": [{"clip": take}], "character": cesium, "retarget": {"feet": "plant"}});
+        if !root.is_null() {
+            motion["root_motion"] = root.clone();
+        }
+        let open = json!({"op": "open", "motion": motion, "fps": 30, "start": 0.5, "max_frames": 60});
+        let ((mut compact, opened), (mut plain, _)) =
+            (open_stream(&app, &open, "compact").await, open_stream(&app, &open, "protobuf").await);
+        let doc = opened["opened"]["compact"].clone();
+        let max_error = doc["max_error"].as_f64().unwrap();
+        assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
+        let l = layout(&doc);
+        let mut decoder = Decoder { layout: layout(&doc), keys: None };
+        let (frames, sizes) = more_frames(&mut compact, &mut decoder, 60).await;
+        let plain = protobuf_frames(&mut plain, 60).await;
+        check_keys(&frames, l.key_interval);
+        let (compared, keys, deltas) = compare_on(&parents, &frames, &plain, max_error, &l);
+        assert!(
+            compared >= 30 && keys >= 1 && deltas >= 20,
+            "{root}: {compared} compared, {keys} keys, {deltas} deltas"
+        );
+        assert_eq!(frames.iter().all(|d| d.root_motion.is_some()), !root.is_null(), "{root}: the root motion section");
+        eprintln!("131_01 on CesiumMan, root motion {root}: key frame {} B, deltas {:?} B", sizes[0], &sizes[1..4]);
+    }
+}
+
+/// A motion with root motion `extract` streamed compact: the root kept in
+/// place decodes within `max_error` of the protobuf frames, and the root
+/// motion section is theirs.
+#[tokio::test]
+async fn an_extracted_root_streams_compact_within_max_error_of_its_protobuf_frames() {
+    let app = TestApp::start().await;
+    let id = app.create_id(&stepping_arm_clip(), None).await;
+    let motion = json!({"layers": [{"clip": id}], "root_motion": {"joint": "root", "mode": "extract"}});
+    let open = json!({"op": "open", "motion": motion, "fps": 30, "start": 0, "max_frames": 70});
+    let ((mut compact, opened), (mut plain, _)) =
+        (open_stream(&app, &open, "compact").await, open_stream(&app, &open, "protobuf").await);
+    let doc = opened["opened"]["compact"].clone();
+    let l = layout(&doc);
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (frames, _) = more_frames(&mut compact, &mut decoder, 70).await;
+    let whole = whole_protobuf_frames(&mut plain, 70).await;
+    let poses = whole.iter().map(|(seq, f)| (*seq, pose_of_pb(f.pose.as_ref().unwrap()))).collect();
+    let (compared, _, _) = compare(&frames, &poses, doc["max_error"].as_f64().unwrap(), &l);
+    assert!(compared >= 35, "{compared} frames compared");
+    let mut reports = 0;
+    for (d, p) in both_played(&frames, &whole) {
+        let r = p.pose.as_ref().unwrap().root_motion.expect("the protobuf frame reports root motion");
+        let total = r.total.unwrap_or_default();
+        let got = d.root_motion.unwrap_or_else(|| panic!("seq {}: no root motion section", d.seq));
+        assert_eq!(got[4..].to_vec(), [total.x, total.y, total.z, total.yaw].map(|v| v as f32).to_vec());
+        reports += 1;
+    }
+    assert!(reports >= 30, "{reports} reports compared");
+}
+
+/// The JSON frames of `ws` until one of seq `until` or later: seq → frame.
+async fn json_frames_until(ws: &mut Ws, until: u64) -> BTreeMap<u64, Value> {
+    let mut out = BTreeMap::new();
+    loop {
+        let Message::Text(text) = next_message(ws).await else { panic!("a JSON frame") };
+        let frame: Value = serde_json::from_str(&text).unwrap();
+        let Some(seq) = frame["seq"].as_u64() else { continue };
+        out.insert(seq, frame);
+        if seq >= until {
+            return out;
+        }
+    }
+}
+
+/// A compact frame's graph report, named through the layout's `graph`, as
+/// a JSON frame's `graph` member states it (weights as f32s).
+fn named_report(doc: &Value, (state, transition, weights): &Report) -> Value {
+    let states = &doc["graph"]["states"];
+    let mut report = json!({"state": states[*state as usize]});
+    if let Some((from, to, alpha)) = transition {
+        report["transition"] = json!({"from": states[*from as usize], "to": states[*to as usize], "alpha": alpha});
+    }
+    let nodes = &doc["graph"]["nodes"];
+    let weights: serde_json::Map<String, Value> =
+        weights.iter().map(|(n, w)| (nodes[*n as usize]["name"].as_str().unwrap().to_owned(), json!(w))).collect();
+    report["weights"] = Value::Object(weights);
+    report
+}
+
+/// A report with its numbers rounded to f32 (as a compact frame sends them)
+/// and no null members.
+fn report_as_f32(report: &Value) -> Value {
+    match report {
+        Value::Number(n) => json!(n.as_f64().unwrap() as f32),
+        Value::Array(a) => Value::Array(a.iter().map(report_as_f32).collect()),
+        Value::Object(o) => {
+            Value::Object(o.iter().filter(|(_, v)| !v.is_null()).map(|(k, v)| (k.clone(), report_as_f32(v))).collect())
+        }
+        other => other.clone(),
+    }
+}
+
+/// A graph broadcast with `report` watched in compact frames and in JSON:
+/// every tick both show carries the same report (states, a transition, blend
+/// weights as f32s) as the Fox goes from idle to a run and into a look.
+#[tokio::test]
+async fn a_compact_graph_watch_carries_the_json_frames_report() {
+    let app = TestApp::start().await;
+    let (graph, _) = crate::api::graph_samples::fox_graph(&app).await;
+    let body = json!({"motion": {"layers": [{"graph": graph}]}, "fps": 30, "report": true});
+    let resp = app.http.post(app.url("/v1/broadcasts")).json(&body).send().await.unwrap();
+    assert_eq!(resp.status(), 201);
+    let id = resp.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_owned();
+    let mut compact = app.ws(&format!("/v1/broadcasts/{id}/stream?encoding=compact")).await;
+    let mut plain = app.ws(&format!("/v1/broadcasts/{id}/stream")).await;
+    let doc = opened_layout(&mut compact).await;
+    assert_eq!(doc["graph"]["states"], json!(["idle", "look", "move"]), "the graph's states in its order");
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (mut frames, _) = more_frames(&mut compact, &mut decoder, 1).await;
+    let controls = format!("/v1/broadcasts/{id}/controls");
+    let set = |parameters: Value| json!({"op": "set", "parameters": parameters});
+    let speed = app.post_json(&controls, &set(json!({"speed": 2.5}))).await["seq"].as_u64().unwrap();
+    let mut plain_frames = json_frames_until(&mut plain, speed + 15).await;
+    let survey = app.post_json(&controls, &set(json!({"survey": true}))).await["seq"].as_u64().unwrap();
+    plain_frames.extend(json_frames_until(&mut plain, survey + 15).await);
+    while frames.last().unwrap().seq < survey + 15 {
+        frames.extend(more_frames(&mut compact, &mut decoder, 1).await.0);
+    }
+    let (mut compared, mut transitions, mut states) = (0, 0, std::collections::BTreeSet::new());
+    for d in &frames {
+        let Some(p) = plain_frames.get(&d.seq) else { continue };
+        let report = d.graph.as_ref().unwrap_or_else(|| panic!("seq {}: no graph report section", d.seq));
+        assert_eq!(report_as_f32(&named_report(&doc, report)), report_as_f32(&p["graph"]), "seq {}", d.seq);
+        compared += 1;
+        transitions += usize::from(report.1.is_some());
+        states.insert(report.0);
+    }
+    assert!(
+        compared >= 20 && transitions >= 3 && states.len() == 3,
+        "{compared} compared, {transitions} in a transition, states {states:?}"
+    );
 }

@@ -301,7 +301,6 @@ async fn what_a_graph_stream_does_not_take_is_refused_at_its_field() {
         (json!({"start": 1}), "graph_unsupported", "/start"),
         (json!({"speed": 2}), "graph_unsupported", "/speed"),
         (json!({"ease": "ease_in"}), "graph_unsupported", "/ease"),
-        (json!({"encoding": "compact"}), "graph_unsupported", "/encoding"),
         (json!({"parameters": ["fov"]}), "graph_unsupported", "/parameters/0"),
         (json!({"fps": 0}), "fps_out_of_range", "/fps"),
         (json!({"motion": {"layers": [{"graph": graph, "speed": 2}]}}), "graph_unsupported", "/motion/layers/0/speed"),

@@ -83,6 +83,31 @@ async fn the_speed_slider_takes_the_fox_from_idle_to_a_run_and_the_trigger_to_a_
     assert_eq!(text(page, "graph-state").await, "");
 }
 
+/// With **frames: compact** a graph streams compact frames, and the page
+/// shows the report of their graph report section (docs/compact-frames.md):
+/// the state, the transition into a look, the blend weights.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_compact_graph_stream_shows_the_report_its_frames_carry() {
+    let app = super::start().await;
+    let Some((graph, _, mut browser)) = fox_graph_viewer(&app).await else { return };
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+    set_value(page, "encoding", "compact").await;
+    click(page, "play").await;
+    page.wait_for("window.inbetweenViewer.state.frames > 0", 10).await;
+    state_shows(page, "idle", 10).await;
+    set_value(page, "graph-speed", "2").await;
+    state_shows(page, "move", 10).await;
+    page.wait_for("document.getElementById('graph-weights').textContent.includes('move: Walk 0.50 · Run 0.50')", 10)
+        .await;
+    click(page, "graph-survey").await;
+    page.wait_for("document.getElementById('graph-state').textContent.startsWith('move → look')", 10).await;
+    state_shows(page, "look", 10).await;
+    // The frames were compact: binary messages, decoded in the page.
+    let layout = page.eval("window.inbetweenViewer.state.compactLayout?.graph?.states ?? null").await;
+    assert_eq!(layout, json!(["idle", "look", "move"]), "the compact layout names the graph's states");
+}
+
 const TAIL_TIP: &str = "b_Tail03_014";
 
 /// The server's model-space position of `joint` in the graph `motion` at

@@ -128,6 +128,12 @@ impl FootPlanter {
         self.feet.len()
     }
 
+    /// Each planted leg's target upper leg, lower leg and foot: the joints
+    /// its two-bone solve turns.
+    pub(crate) fn legs(&self) -> impl Iterator<Item = [usize; 3]> + '_ {
+        self.feet.iter().map(|f| f.joints)
+    }
+
     /// Forgets the last frame (after a seek): the next contact is new.
     pub fn reset(&mut self) {
         for foot in &mut self.feet {

@@ -28,6 +28,7 @@ mod structure;
 
 pub use self::feet::{FeetOptions, FootPlanter, FootReport, lowest_feet};
 pub use self::map::{ESSENTIAL_ROLES, FoundBy, RoleError, RoleJoint, RoleMap};
+pub(crate) use self::retarget::NO_JOINT;
 pub use self::retarget::{
     MIN_SHARED_ROLES, RetargetError, RetargetOptions, Retargeter, Rig, Translation, rest_with_rotations,
 };

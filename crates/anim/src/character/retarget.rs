@@ -34,7 +34,7 @@ use crate::{Pose, Skeleton};
 pub const MIN_SHARED_ROLES: usize = 8;
 
 /// No parent, or no source joint.
-const NO_JOINT: u32 = u32::MAX;
+pub(crate) const NO_JOINT: u32 = u32::MAX;
 
 /// What happens to translations (the hips' by default).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -136,31 +136,31 @@ impl std::error::Error for RetargetError {}
 
 /// The hips of both sides and how far the source's move the target's.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Hips {
-    target: usize,
-    source: usize,
+pub(crate) struct Hips {
+    pub(crate) target: usize,
+    pub(crate) source: usize,
     /// `p⁰_d`, `p⁰_s`: model positions in the references.
-    target_reference: Vec3A,
-    source_reference: Vec3A,
-    k: f32,
+    pub(crate) target_reference: Vec3A,
+    pub(crate) source_reference: Vec3A,
+    pub(crate) k: f32,
 }
 
 /// Plays poses of one skeleton on another (module docs). Built once per
 /// pair of rigs; [`Retargeter::retarget`] allocates nothing once warm.
 #[derive(Debug, Clone)]
 pub struct Retargeter {
-    source_parents: Vec<u32>,
-    target_parents: Vec<u32>,
+    pub(crate) source_parents: Vec<u32>,
+    pub(crate) target_parents: Vec<u32>,
     /// Per target joint, the source joint driving it, or `NO_JOINT`.
-    source_of: Vec<u32>,
+    pub(crate) source_of: Vec<u32>,
     /// Per target joint, `(G⁰_s)⁻¹·G⁰_d` (identity when unmapped).
     offsets: Vec<Quat>,
     /// The target's reference pose (local).
-    reference: Pose,
+    pub(crate) reference: Pose,
     /// Per target joint, its source's reference local translation `t⁰_s`.
-    source_translations: Vec<Vec3A>,
-    hips: Hips,
-    translation: Translation,
+    pub(crate) source_translations: Vec<Vec3A>,
+    pub(crate) hips: Hips,
+    pub(crate) translation: Translation,
     /// The source's model space, recomputed per pose.
     source_model: Pose,
     /// The target's model space as the pass goes.

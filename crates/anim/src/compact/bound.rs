@@ -22,21 +22,12 @@
 
 use glam::{Quat, Vec3A};
 
-use super::{JointRange, Ranges, canonical};
+use super::{JointRange, ROUNDING_MARGIN, Ranges, Unbounded, canonical, moved};
 use crate::graph::{Graph, GraphPost};
 use crate::ik::IkConstraint;
 use crate::motion::{ClipSource, LayerMode, LayerView, Motion, UNMAPPED};
 use crate::spring::Springs;
 use crate::{Clip, Pose, Skeleton};
-
-/// How far a derived range is widened on either side, relative to the
-/// largest magnitude that went into it: the f32 rounding of the layering
-/// arithmetic (a few steps of 2⁻²⁴ per layer) stays inside.
-const ROUNDING_MARGIN: f32 = 1.0 / (1u32 << 16) as f32;
-
-/// Why a stream's poses cannot be bounded at open.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Unbounded(pub &'static str);
 
 /// The ranges of each distinct clip a bound reads, taken once.
 struct ClipRanges<'a> {
@@ -104,8 +95,7 @@ impl Ranges {
     /// every key and `rate` times a second.
     ///
     /// # Errors
-    /// A retargeted layer or root motion `extract` (which move joints in ways
-    /// the clips' ranges do not bound).
+    /// As [`Ranges::boundable`].
     pub fn of_motion<C: ClipSource>(motion: &Motion<C>, rate: f32) -> Result<Ranges, Unbounded> {
         let mut clips = ClipRanges { rate, taken: Vec::new() };
         of_motion(motion, &mut clips)
@@ -115,30 +105,10 @@ impl Ranges {
     /// [`Ranges::of_motion`] refuses, checked without sampling a clip.
     ///
     /// # Errors
-    /// A retargeted layer or root motion `extract` (which move joints in ways
-    /// the clips' ranges do not bound).
+    /// A layer retargeted onto a character whose hips are below a joint of
+    /// another role (`Ranges::retargeted`).
     pub fn boundable<C: ClipSource>(motion: &Motion<C>) -> Result<(), Unbounded> {
-        if motion.extracts_root_motion().is_some() {
-            return Err(Unbounded("root motion `extract`, which moves the root joint off its clips' ranges"));
-        }
-        if motion.layer_views().any(|layer| layer.retargeted) {
-            return Err(Unbounded("a layer retargeted onto a character"));
-        }
-        Ok(())
-    }
-
-    /// Ranges holding every pose `graph` produces under any parameters and
-    /// transitions (the union over its states' motions).
-    ///
-    /// # Errors
-    /// As [`Ranges::of_motion`], for any state's motion.
-    pub fn of_graph<C: ClipSource>(graph: &Graph<C>, rate: f32) -> Result<Ranges, Unbounded> {
-        let mut clips = ClipRanges { rate, taken: Vec::new() };
-        let mut ranges = Ranges::at_rest(graph.skeleton());
-        for motion in graph.state_motions() {
-            ranges.union(&of_motion(motion, &mut clips)?);
-        }
-        Ok(ranges)
+        motion.layer_views().filter_map(|l| l.retarget).try_for_each(|(r, _)| moved::retarget_boundable(r))
     }
 
     /// Ranges holding every pose a motion over `graph` produces: the graph's
@@ -147,7 +117,7 @@ impl Ranges {
     /// then the joints `post`'s IK and springs turn.
     ///
     /// # Errors
-    /// As [`Ranges::of_graph`], and for the clip layers [`Ranges::of_motion`].
+    /// As [`Ranges::of_motion`], for any state's motion and the clip layers.
     pub fn of_played<C: ClipSource>(graph: &Graph<C>, post: &GraphPost<C>, rate: f32) -> Result<Ranges, Unbounded> {
         let mut clips = ClipRanges { rate, taken: Vec::new() };
         let mut own = Ranges::at_rest(graph.skeleton());
@@ -162,8 +132,12 @@ impl Ranges {
         let skeleton = mix.skeleton();
         let mut ranges = Ranges::at_rest(skeleton);
         for layer in mix.layer_views() {
-            let own = if layer.external { &own } else { clips.of(layer.clip) };
-            apply_layer(&mut ranges, &layer, own);
+            if layer.external {
+                apply_layer(&mut ranges, &layer, &own);
+            } else {
+                let clip = clips.of(layer.clip);
+                apply_layer(&mut ranges, &layer, moved(&layer, clip)?.as_ref().unwrap_or(clip));
+            }
         }
         ranges.turned_by(skeleton, post.ik(), post.springs());
         for r in &mut ranges.joints {
@@ -225,13 +199,27 @@ fn of_motion<'a, C: ClipSource>(motion: &'a Motion<C>, clips: &mut ClipRanges<'a
     let mut ranges = Ranges::at_rest(skeleton);
     for layer in motion.layer_views() {
         let own = clips.of(layer.clip);
-        apply_layer(&mut ranges, &layer, own);
+        apply_layer(&mut ranges, &layer, moved(&layer, own)?.as_ref().unwrap_or(own));
     }
     ranges.turned_by(skeleton, motion.ik(), motion.springs());
     for r in &mut ranges.joints {
         r.pad();
     }
     Ok(ranges)
+}
+
+/// A layer's clip ranges `own` as the layer plays them, when it moves them:
+/// retargeted onto its character, its root kept in place by `extract`.
+fn moved(layer: &LayerView<'_>, own: &Ranges) -> Result<Option<Ranges>, Unbounded> {
+    if layer.retarget.is_none() && layer.extract.is_none() {
+        return Ok(None);
+    }
+    let mut own = match layer.retarget {
+        Some((retargeter, planter)) => Ranges::retargeted(retargeter, planter, own)?,
+        None => own.clone(),
+    };
+    layer.extract.iter().for_each(|e| own.extracted(e));
+    Ok(Some(own))
 }
 
 /// Layers one motion layer's ranges (`own`, in its clip's joints) onto `ranges`.
@@ -250,7 +238,7 @@ fn apply_layer(ranges: &mut Ranges, layer: &LayerView<'_>, own: &Ranges) {
 }
 
 impl JointRange {
-    fn free_rotation(&mut self) {
+    pub(super) fn free_rotation(&mut self) {
         self.first_rotation = Some(Quat::IDENTITY);
         self.rotation_varies = true;
         self.largest_seen = 0b1111;
@@ -258,6 +246,11 @@ impl JointRange {
 
     fn is_constant_rotation(&self) -> bool {
         !self.rotation_varies
+    }
+
+    /// The one rotation of every pose (sign: largest positive), if it is one.
+    pub(super) fn constant_rotation(&self) -> Option<Quat> {
+        self.first_rotation.filter(|_| !self.rotation_varies)
     }
 
     /// Any lerp (slerp) of a pose within `self` toward one within `other`.

@@ -19,7 +19,7 @@
 use glam::{Quat, Vec3, Vec3A};
 
 mod bound;
-pub use bound::Unbounded;
+mod moved;
 
 use crate::{Clip, Cursor, Pose, Skeleton};
 
@@ -33,6 +33,15 @@ pub const MIN_DISTANCE: f32 = 0.01;
 pub const DISTANCE_OF_REST_HEIGHT: f32 = 0.1;
 /// The widest channel: more bits than an f32 mantissa carry nothing.
 pub const MAX_BITS: u8 = 24;
+
+/// How far a derived range is widened on either side, relative to the
+/// largest magnitude that went into it: the f32 rounding of the layering
+/// arithmetic (a few steps of 2⁻²⁴ per layer) stays inside.
+const ROUNDING_MARGIN: f32 = 1.0 / (1u32 << 16) as f32;
+
+/// Why a stream's poses cannot be bounded at open.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unbounded(pub &'static str);
 
 /// `1/√2`: the largest magnitude of a unit quaternion's three smallest
 /// components.

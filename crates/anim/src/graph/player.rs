@@ -537,24 +537,38 @@ impl<'a, C> GraphReport<'a, C> {
 
     /// The transition in progress, if any.
     pub fn transition(&self) -> Option<TransitionReport<'a>> {
+        let states = &self.player.graph.states[..];
+        let (from, to, alpha) = self.indices().1?;
+        Some(TransitionReport { from: &states[from].name, to: &states[to].name, alpha })
+    }
+
+    /// The report by index, as compact frames send it (docs/compact-frames.md,
+    /// “The graph report section”): the current state's index in
+    /// [`Graph::state_names`](super::Graph::state_names), and the
+    /// transition's `(from, to, α)` likewise.
+    pub fn indices(&self) -> (usize, Option<(usize, usize, f32)>) {
         let player = self.player;
-        let top = *player.chain.last()?;
-        let fade = player.slots[top].fade?;
-        let states = &player.graph.states;
-        Some(TransitionReport {
-            from: &states[fade.from].name,
-            to: &states[player.slots[top].state].name,
-            alpha: player.alpha(top),
+        let transition = player.chain.last().and_then(|&top| {
+            let fade = player.slots[top].fade?;
+            Some((fade.from, player.slots[top].state, player.alpha(top)))
+        });
+        (player.current, transition)
+    }
+
+    /// Each blend node a slot played this tick, by its index in
+    /// [`Graph::blend_nodes`](super::Graph::blend_nodes), with one weight per point.
+    pub fn indexed_weights(&self) -> impl Iterator<Item = (usize, &'a [f64])> + 'a {
+        let player = self.player;
+        player.graph.blends.iter().enumerate().filter(move |(b, _)| player.evaluated[*b]).map(move |(b, blend)| {
+            let at = player.offsets[b];
+            (b, &player.weights[at..at + blend.points])
         })
     }
 
     /// Each blend node a slot played this tick: its name and one weight per point.
     pub fn weights(&self) -> impl Iterator<Item = (&'a str, &'a [f64])> + 'a {
-        let player = self.player;
-        player.graph.blends.iter().enumerate().filter(move |(b, _)| player.evaluated[*b]).map(move |(b, blend)| {
-            let at = player.offsets[b];
-            (player.graph.node_names[blend.node].as_str(), &player.weights[at..at + blend.points])
-        })
+        let graph = &*self.player.graph;
+        self.indexed_weights().map(move |(b, w)| (graph.node_names[graph.blends[b].node].as_str(), w))
     }
 }
 

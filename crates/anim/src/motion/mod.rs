@@ -128,11 +128,26 @@ pub(crate) struct LayerView<'a> {
     pub mask: &'a [f32],
     /// Per output joint, the layer clip's joint (or `UNMAPPED`).
     pub map: &'a [u32],
-    /// Additive layers' reference pose, in the layer clip's joints.
+    /// Additive layers' reference pose, in the layer clip's joints (a
+    /// retargeted layer's: the character's).
     pub reference: Option<&'a Pose>,
-    pub retargeted: bool,
     /// Its pose is handed in (a graph's), not its clip's.
     pub external: bool,
+    /// Onto the character, with the layer's foot planter.
+    pub retarget: Option<(&'a Retargeter, Option<&'a FootPlanter>)>,
+    /// Root motion `extract` on this (blend) layer: its root joint (in the
+    /// layer's pose) put back at `M(start)`.
+    pub extract: Option<LayerExtract>,
+}
+
+/// Where root motion `extract` keeps a blend layer's root (docs/motion.md,
+/// “Root motion”): its joint in the layer's pose, its clip's `M(start)`,
+/// and the up axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LayerExtract {
+    pub joint: usize,
+    pub start: Planar,
+    pub up: UpAxis,
 }
 
 /// Root motion as built: the output skeleton's root-motion joint.
@@ -358,13 +373,17 @@ impl<C: ClipSource> Motion<C> {
             mask: &l.mask,
             map: &l.map,
             reference: l.reference.as_ref(),
-            retargeted: l.retarget.is_some(),
+            retarget: l.retarget.as_deref().map(|r| (r, l.planter.as_deref())),
+            extract: self.layer_extract(l),
         })
     }
 
-    /// Whether root motion `extract` rewrites the root joint's local transform.
-    pub fn extracts_root_motion(&self) -> Option<usize> {
-        self.root.filter(|r| r.mode == RootMode::Extract).map(|r| r.joint)
+    /// Where `extract` keeps layer `l`'s root, if it does (a blend layer
+    /// that has the root joint, under root motion `extract`).
+    fn layer_extract(&self, l: &Layer<C>) -> Option<LayerExtract> {
+        let setup = self.root.filter(|r| r.mode == RootMode::Extract && l.mode == LayerMode::Blend)?;
+        let root = l.root.as_ref()?;
+        Some(LayerExtract { joint: root.joint, start: root.cycle.start, up: setup.up })
     }
 
     /// The request-time IK constraints, solved after layering.

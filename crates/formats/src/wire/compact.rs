@@ -22,7 +22,9 @@ pub const KEY_FRAME: u8 = 1;
 pub const EVENTS: u8 = 2;
 /// Flags bit 2: a root motion section follows the body (and the events).
 pub const ROOT_MOTION: u8 = 4;
-const KNOWN_FLAGS: u8 = KEY_FRAME | EVENTS | ROOT_MOTION;
+/// Flags bit 3: a graph report section follows (after the root motion).
+pub const GRAPH: u8 = 8;
+const KNOWN_FLAGS: u8 = KEY_FRAME | EVENTS | ROOT_MOTION | GRAPH;
 
 /// The per-frame values outside the pose.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -41,20 +43,102 @@ pub struct RootMotionReport {
     pub total: [f32; 4],
 }
 
+/// A graph stream's report of one tick (docs/graphs.md, “Reports”) by
+/// index into the layout's `graph`: the current state, the transition in
+/// progress as `(from, to, α)`, and each blend node evaluated with its
+/// weights (as many as the node has points), as f32s.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct GraphFrame {
+    pub state: u32,
+    pub transition: Option<(u32, u32, f32)>,
+    pub weights: Vec<(u32, Vec<f32>)>,
+}
+
+impl GraphFrame {
+    /// A tick's report as its section carries it (weights rounded to f32).
+    pub fn of_report<C>(report: &anim::graph::GraphReport<'_, C>) -> GraphFrame {
+        let (state, transition) = report.indices();
+        let index = |i: usize| u32::try_from(i).expect("a graph has fewer than 2³² states and nodes");
+        GraphFrame {
+            state: index(state),
+            transition: transition.map(|(from, to, alpha)| (index(from), index(to), alpha)),
+            weights: report.indexed_weights().map(|(b, w)| (index(b), w.iter().map(|&w| w as f32).collect())).collect(),
+        }
+    }
+
+    fn write(&self, out: &mut Vec<u8>) {
+        put_varint(out, u64::from(self.state));
+        match self.transition {
+            None => put_varint(out, 0),
+            Some((from, to, alpha)) => {
+                put_varint(out, u64::from(from) + 1);
+                put_varint(out, u64::from(to));
+                out.extend_from_slice(&alpha.to_le_bytes());
+            }
+        }
+        put_varint(out, self.weights.len() as u64);
+        for (node, weights) in &self.weights {
+            put_varint(out, u64::from(*node));
+            weights.iter().for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+        }
+    }
+
+    /// The section at `at`, its indices checked against `graph`.
+    fn read(bytes: &[u8], at: &mut usize, graph: &GraphDoc, out: &mut GraphFrame) -> Result<(), CompactError> {
+        let states = graph.states.len();
+        let state = |v: u64| graph_index(v, states, "state");
+        out.state = state(take_varint(bytes, at, "graph report")?)?;
+        out.transition = match take_varint(bytes, at, "graph report")? {
+            0 => None,
+            from => {
+                let from = state(from - 1)?;
+                let to = state(take_varint(bytes, at, "graph report")?)?;
+                Some((from, to, take_f32(bytes, at, "graph report")?))
+            }
+        };
+        let count = take_varint(bytes, at, "graph report")?;
+        out.weights.clear();
+        for _ in 0..count {
+            let node = graph_index(take_varint(bytes, at, "graph report")?, graph.nodes.len(), "node")?;
+            let points = graph.nodes[node as usize].points;
+            let weights = (0..points).map(|_| take_f32(bytes, at, "graph report")).collect::<Result<_, _>>()?;
+            out.weights.push((node, weights));
+        }
+        Ok(())
+    }
+}
+
+/// `index` when it is below `count` (a state or blend node of the layout's `graph`).
+fn graph_index(index: u64, count: usize, what: &'static str) -> Result<u32, CompactError> {
+    match u32::try_from(index) {
+        Ok(i) if (i as usize) < count => Ok(i),
+        _ => Err(CompactError::UnknownGraphIndex { what, index, count }),
+    }
+}
+
+/// A little-endian f32 at `at`.
+fn take_f32(bytes: &[u8], at: &mut usize, what: &'static str) -> Result<f32, CompactError> {
+    let four = bytes.get(*at..*at + 4).ok_or(CompactError::Truncated(what))?;
+    *at += 4;
+    Ok(f32::from_le_bytes(four.try_into().expect("four bytes")))
+}
+
 /// What a frame carries after its pose, each section only when present:
-/// the events crossed, as indices into the layout's `events`, and the
-/// root motion report.
+/// the events crossed, as indices into the layout's `events`, the root
+/// motion report and a graph stream's report.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Trailer<'a> {
     pub events: &'a [u32],
     pub root_motion: Option<RootMotionReport>,
+    pub graph: Option<&'a GraphFrame>,
 }
 
 impl Trailer<'_> {
     /// The flag bits of the sections present.
     fn flags(&self) -> u8 {
         let events = if self.events.is_empty() { 0 } else { EVENTS };
-        events | if self.root_motion.is_some() { ROOT_MOTION } else { 0 }
+        let graph = if self.graph.is_some() { GRAPH } else { 0 };
+        events | graph | if self.root_motion.is_some() { ROOT_MOTION } else { 0 }
     }
 
     fn write(&self, out: &mut Vec<u8>) {
@@ -64,6 +148,9 @@ impl Trailer<'_> {
         }
         if let Some(r) = &self.root_motion {
             r.delta.iter().chain(&r.total).for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        }
+        if let Some(g) = self.graph {
+            g.write(out);
         }
     }
 }
@@ -86,7 +173,7 @@ pub struct Decoded {
 pub enum CompactError {
     #[error("the frame ends before its {0}")]
     Truncated(&'static str),
-    #[error("flags {0:#04x} use bits other than the key-frame, events and root motion bits")]
+    #[error("flags {0:#04x} use bits other than the key-frame, events, root motion and graph bits")]
     UnknownFlags(u8),
     #[error("{0} bytes follow the frame's last field")]
     TrailingBytes(usize),
@@ -96,6 +183,8 @@ pub enum CompactError {
     VarintOverflow,
     #[error("event {index} is not in the layout's {count} events")]
     UnknownEvent { index: u64, count: usize },
+    #[error("graph {what} {index} is not in the layout's {count} (or the layout has no `graph`)")]
+    UnknownGraphIndex { what: &'static str, index: u64, count: usize },
 }
 
 impl CompactError {
@@ -108,6 +197,7 @@ impl CompactError {
             CompactError::MissingKeyFrame { .. } => "compact_missing_key_frame",
             CompactError::VarintOverflow => "compact_varint_overflow",
             CompactError::UnknownEvent { .. } => "compact_unknown_event",
+            CompactError::UnknownGraphIndex { .. } => "compact_unknown_graph_index",
         }
     }
 }
@@ -341,18 +431,29 @@ pub struct CompactDecoder {
     key_seq: Option<u64>,
     values: Vec<QuantisedJoint>,
     events: Vec<u32>,
+    /// The layout's `graph` (empty without one: every index is refused).
+    graph: GraphDoc,
+    /// The last frame's graph report, when it had one.
+    report: Option<GraphFrame>,
 }
 
 impl CompactDecoder {
-    /// A decoder of frames of `layout` that carry no events.
+    /// A decoder of frames of `layout` that carry no events and no graph report.
     pub fn new(layout: Layout) -> Self {
         let (key, values, events) = (Vec::new(), Vec::new(), Vec::new());
-        CompactDecoder { layout, event_count: 0, key, key_seq: None, values, events }
+        let graph = GraphDoc::default();
+        CompactDecoder { layout, event_count: 0, key, key_seq: None, values, events, graph, report: None }
     }
 
     /// A decoder of the frames the layout document `doc` describes.
     pub fn of_document(doc: &LayoutDoc) -> Self {
-        CompactDecoder { event_count: doc.events.len(), ..CompactDecoder::new(doc.layout()) }
+        let graph = doc.graph.clone().unwrap_or_default();
+        CompactDecoder { event_count: doc.events.len(), graph, ..CompactDecoder::new(doc.layout()) }
+    }
+
+    /// The graph report of the last frame decoded, when it carried one.
+    pub fn graph_report(&self) -> Option<&GraphFrame> {
+        self.report.as_ref()
     }
 
     /// Decodes frames of the layout document `doc` from now on: a new
@@ -392,6 +493,7 @@ impl CompactDecoder {
         at += 4 + bits.bytes_used();
         self.read_events(bytes, &mut at, flags & EVENTS != 0)?;
         let root_motion = if flags & ROOT_MOTION != 0 { Some(read_root_motion(bytes, &mut at)?) } else { None };
+        self.read_graph(bytes, &mut at, flags & GRAPH != 0)?;
         if at < bytes.len() {
             return Err(CompactError::TrailingBytes(bytes.len() - at));
         }
@@ -414,6 +516,18 @@ impl CompactDecoder {
                 _ => return Err(CompactError::UnknownEvent { index, count: self.event_count }),
             }
         }
+        Ok(())
+    }
+
+    /// The graph report section, when the flags announce it.
+    fn read_graph(&mut self, bytes: &[u8], at: &mut usize, present: bool) -> Result<(), CompactError> {
+        if !present {
+            self.report = None;
+            return Ok(());
+        }
+        let mut report = self.report.take().unwrap_or_default();
+        GraphFrame::read(bytes, at, &self.graph, &mut report)?;
+        self.report = Some(report);
         Ok(())
     }
 
@@ -467,6 +581,27 @@ pub struct LayoutDoc {
     /// sent once here; absent when there are none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub events: Vec<EventDoc>,
+    /// A graph stream with `report`: the names its graph report section
+    /// indexes, sent once here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub graph: Option<GraphDoc>,
+}
+
+/// The graph's states and blend nodes, in the graph's order: a frame's
+/// graph report names them by index.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraphDoc {
+    pub states: Vec<String>,
+    pub nodes: Vec<GraphNodeDoc>,
+}
+
+/// A blend node: its name and how many points (weights) it has.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GraphNodeDoc {
+    pub name: String,
+    pub points: usize,
 }
 
 /// An event of the layout's list: its clip time and name.
@@ -546,7 +681,16 @@ impl LayoutDoc {
             key_interval,
             joints,
             events: events.iter().map(|e| EventDoc { time: e.time, name: e.name.clone() }).collect(),
+            graph: None,
         }
+    }
+
+    /// The same document naming `graph`'s states and blend nodes (a graph
+    /// stream with `report`).
+    pub fn with_graph<C>(self, graph: &anim::graph::Graph<C>) -> LayoutDoc {
+        let states = graph.state_names().map(str::to_owned).collect();
+        let nodes = graph.blend_nodes().map(|(name, points)| GraphNodeDoc { name: name.to_owned(), points }).collect();
+        LayoutDoc { graph: Some(GraphDoc { states, nodes }), ..self }
     }
 
     /// The core's layout this document states.

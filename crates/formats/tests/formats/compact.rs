@@ -13,7 +13,8 @@ use anim::{
 };
 use formats::import::ImportOptions;
 use formats::wire::compact::{
-    CompactDecoder, CompactEncoder, CompactError, Header, LayoutDoc, RootMotionReport, Trailer,
+    CompactDecoder, CompactEncoder, CompactError, GraphDoc, GraphFrame, GraphNodeDoc, Header, LayoutDoc,
+    RootMotionReport, Trailer,
 };
 use formats::wire::proto::pb;
 use glam::{DQuat, DVec3, Vec3, Vec4};
@@ -235,7 +236,7 @@ fn events_and_root_motion_follow_the_body_and_are_checked() {
     let mut encoder = CompactEncoder::new(layout.clone(), 30);
     let (header, pose) = (Header { seq: 3, ..Header::default() }, clip.skeleton().rest().clone());
     let plain = encoder.encode(&header, &pose, true).to_vec();
-    let trailer = Trailer { events: &[2, 0], root_motion: Some(STEPS[2]) };
+    let trailer = Trailer { events: &[2, 0], root_motion: Some(STEPS[2]), graph: None };
     let full = encoder.encode_with(&header, &pose, true, &trailer).to_vec();
     // Flags gain bits 1 and 2; the body is the same; then count, indices, 8 f32s.
     assert_eq!(full[0], 0b111);
@@ -254,10 +255,50 @@ fn events_and_root_motion_follow_the_body_and_are_checked() {
     assert_eq!(decoder.decode(&unknown, &mut out), Err(CompactError::UnknownEvent { index: 3, count: 3 }));
     assert_eq!(decoder.decode(&full[..full.len() - 1], &mut out), Err(CompactError::Truncated("root motion")));
     let mut flagged = plain.clone();
-    flagged[0] |= 8;
-    assert_eq!(decoder.decode(&flagged, &mut out), Err(CompactError::UnknownFlags(9)));
+    flagged[0] |= 16;
+    assert_eq!(decoder.decode(&flagged, &mut out), Err(CompactError::UnknownFlags(17)));
     // A decoder without the document knows no events.
     assert!(matches!(CompactDecoder::new(layout).decode(&full, &mut out), Err(CompactError::UnknownEvent { .. })));
+}
+
+#[test]
+fn the_graph_report_follows_the_root_motion_and_is_checked() {
+    let clip = half_turn();
+    let layout = Layout::choose(clip.skeleton(), &Ranges::of_clip(&clip, 240.0), DEFAULT_MAX_ERROR, 0.1);
+    let mut doc = LayoutDoc::new(&layout, clip.skeleton().names(), 30, clip.events());
+    doc.graph = Some(report_graph());
+    let mut encoder = CompactEncoder::new(layout.clone(), 30);
+    let (header, pose) = (Header { seq: 3, ..Header::default() }, clip.skeleton().rest().clone());
+    let plain = encoder.encode(&header, &pose, true).to_vec();
+    let report = &graph_reports()[1];
+    let trailer = Trailer { root_motion: Some(STEPS[0]), graph: Some(report), ..Trailer::default() };
+    let full = encoder.encode_with(&header, &pose, true, &trailer).to_vec();
+    // Flags gain bits 2 and 3; after the root motion's 32 bytes: state 2, from + 1 = 2,
+    // to 2, α, one node: index 0 and its two weights.
+    assert_eq!(full[0], 0b1101);
+    let section = &full[plain.len() + 32..];
+    let mut expected = vec![2, 2, 2];
+    expected.extend(0.25f32.to_le_bytes());
+    expected.extend([1, 0]);
+    [0.25f32, 0.75].iter().for_each(|w| expected.extend(w.to_le_bytes()));
+    assert_eq!(section, expected);
+    let (mut decoder, mut out) = (CompactDecoder::of_document(&doc), Pose::default());
+    decoder.decode(&full, &mut out).unwrap();
+    assert_eq!(decoder.graph_report(), Some(report));
+    decoder.decode(&plain, &mut out).unwrap();
+    assert_eq!(decoder.graph_report(), None);
+    // A state, a transition's state or a node past the layout's; a section cut short.
+    let at = plain.len() + 32;
+    for (offset, what, index, count) in [(0, "state", 5, 3), (1, "state", 8, 3), (2, "state", 3, 3), (8, "node", 2, 2)]
+    {
+        let mut bad = full.clone();
+        bad[at + offset] = u8::try_from(index + u64::from(offset == 1)).unwrap();
+        assert_eq!(decoder.decode(&bad, &mut out), Err(CompactError::UnknownGraphIndex { what, index, count }));
+    }
+    assert_eq!(decoder.decode(&full[..full.len() - 1], &mut out), Err(CompactError::Truncated("graph report")));
+    // A decoder without the layout's `graph` knows no states.
+    let no_graph = CompactDecoder::new(layout).decode(&full, &mut out);
+    assert!(matches!(no_graph, Err(CompactError::UnknownGraphIndex { what: "state", .. })));
 }
 
 /// A clip of `joints` joints in a chain, each turning about all three axes
@@ -405,6 +446,9 @@ fn frames_of(
             if let Some(r) = trailer.root_motion {
                 frame["root_motion"] = serde_json::json!({"delta": r.delta, "total": r.total});
             }
+            if let Some(g) = trailer.graph {
+                frame["graph"] = graph_json(g);
+            }
             frame
         })
         .collect()
@@ -438,8 +482,36 @@ fn relayout_vector() -> serde_json::Value {
     })
 }
 
+/// A frame's graph report as a test vector states it: indices into the
+/// layout's `graph`, the weights as f32s.
+fn graph_json(g: &GraphFrame) -> serde_json::Value {
+    let transition = g.transition.map(|(from, to, alpha)| serde_json::json!({"from": from, "to": to, "alpha": alpha}));
+    let weights: Vec<_> = g.weights.iter().map(|(node, w)| serde_json::json!({"node": node, "weights": w})).collect();
+    serde_json::json!({"state": g.state, "transition": transition, "weights": weights})
+}
+
+/// The graph of the `graph-report` vector: three states, two blend nodes.
+fn report_graph() -> GraphDoc {
+    let node = |name: &str, points| GraphNodeDoc { name: name.to_owned(), points };
+    GraphDoc {
+        states: ["idle", "move", "jump"].map(str::to_owned).to_vec(),
+        nodes: vec![node("walkrun", 2), node("aim", 3)],
+    }
+}
+
+/// The `graph-report` vector's reports: a state alone, a transition with
+/// one node's weights, both nodes' weights.
+fn graph_reports() -> [GraphFrame; 3] {
+    [
+        GraphFrame { state: 0, transition: None, weights: vec![] },
+        GraphFrame { state: 2, transition: Some((1, 2, 0.25)), weights: vec![(0, vec![0.25, 0.75])] },
+        GraphFrame { state: 1, transition: None, weights: vec![(0, vec![0.5, 0.5]), (1, vec![0.125, 0.375, 0.5])] },
+    ]
+}
+
 #[test]
 fn the_documented_test_vectors_are_what_the_encoder_writes() {
+    let reports = graph_reports();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/compact-frames");
     let vectors = [
         vector(
@@ -468,11 +540,29 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
             &[0.0, 0.4, 0.9, 0.95],
             30,
             &[
-                Trailer { events: &[0], root_motion: Some(STEPS[0]) },
-                Trailer { events: &[], root_motion: Some(STEPS[1]) },
-                Trailer { events: &[1, 2], root_motion: Some(STEPS[2]) },
+                Trailer { events: &[0], root_motion: Some(STEPS[0]), graph: None },
+                Trailer { events: &[], root_motion: Some(STEPS[1]), graph: None },
+                Trailer { events: &[1, 2], root_motion: Some(STEPS[2]), graph: None },
             ],
         ),
+        {
+            let mut v = vector(
+                (
+                    "graph-report",
+                    "The half turn on a graph stream with report: a key frame with a state alone, a delta frame with a transition and one blend node's weights, and one with root motion and both nodes' weights.",
+                ),
+                &half_turn(),
+                &[0.0, 0.4, 0.9],
+                30,
+                &[
+                    Trailer { graph: Some(&reports[0]), ..Trailer::default() },
+                    Trailer { graph: Some(&reports[1]), ..Trailer::default() },
+                    Trailer { root_motion: Some(STEPS[2]), graph: Some(&reports[2]), ..Trailer::default() },
+                ],
+            );
+            v["layout"]["graph"] = serde_json::to_value(report_graph()).unwrap();
+            v
+        },
         vector(
             (
                 "bench20",
@@ -494,7 +584,7 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
     ];
     // The page's worked examples are these frames.
     let page = std::fs::read_to_string(dir.join("../compact-frames.md")).unwrap();
-    for (vector, frame) in [(1, 1), (2, 2)] {
+    for (vector, frame) in [(1, 1), (2, 2), (3, 1)] {
         let hex = vectors[vector]["frames"][frame]["hex"].as_str().unwrap();
         assert!(page.contains(hex), "docs/compact-frames.md shows {hex}");
     }
@@ -526,6 +616,7 @@ fn the_documented_test_vectors_are_what_the_encoder_writes() {
                 total: serde_json::from_value(r["total"].clone()).unwrap(),
             });
             assert_eq!(info.root_motion, root);
+            assert_eq!(decoder.graph_report().map(graph_json), frame.get("graph").cloned());
             let rotations: Vec<[f32; 4]> = serde_json::from_value(frame["pose"]["rotations"].clone()).unwrap();
             assert_eq!(pose.rotations.iter().map(|q| q.to_array()).collect::<Vec<_>>(), rotations);
         }

@@ -22,7 +22,7 @@ use glam::Vec3A;
 use super::{build, import_file};
 
 /// CesiumMan's joints by role (its nodes have no names: the importer calls them `node<i>`).
-const CESIUM_MAN_ROLES: [(Role, &str); 19] = [
+pub const CESIUM_MAN_ROLES: [(Role, &str); 19] = [
     (Role::Hips, "node2"),
     (Role::Spine, "node11"),
     (Role::Chest, "node12"),

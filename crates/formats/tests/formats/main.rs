@@ -7,6 +7,7 @@
 mod bvh;
 mod compact;
 mod conventions;
+mod derived_ranges;
 mod feet;
 mod files;
 mod fuzz_regressions;

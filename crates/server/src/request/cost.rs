@@ -116,6 +116,16 @@ pub fn compact_frame(joints: usize, events: usize) -> u64 {
     2 * (header + (joints as u64 * joint_bits).div_ceil(8) + events + COMPACT_ROOT_MOTION)
 }
 
+/// A compact graph stream's frame's report section at most
+/// (docs/compact-frames.md, “The graph report section”): the state, the
+/// transition (`from + 1`, `to`, `alpha`) and the node count, then per blend
+/// node its index and its weights as f32s; twice, as [`compact_frame`]
+/// counts (a delta frame may carry its key frame along).
+pub fn compact_graph_report<C>(graph: &anim::graph::Graph<C>) -> u64 {
+    let nodes: u64 = graph.blend_nodes().map(|(_, points)| VARINT + 4 * points as u64).sum();
+    2 * (4 * VARINT + 4 + nodes)
+}
+
 /// A compact frame's root motion section: delta and total, four f32s each.
 const COMPACT_ROOT_MOTION: u64 = 32;
 

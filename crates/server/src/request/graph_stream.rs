@@ -3,8 +3,7 @@
 //! `graph` (its clip layers, if any, run on the graph's pose). The graph comes built from the cache of built graphs, pinned at
 //! its version for as long as the stream plays; it plays on the stream's
 //! tick grid from motion time 0 at speed 1, so what a graph stream does not
-//! take — a `start` or `speed`, an `ease`, a parameter subset, a report in
-//! compact frames — is refused `graph_unsupported` at its field. Its price per
+//! take — a `start` or `speed`, an `ease`, a parameter subset — is refused `graph_unsupported` at its field. Its price per
 //! frame is the graph's costliest tick (as a sampling request's ticks are
 //! priced) and its frame's encoding, the report included when asked; with
 //! springs or root motion, also its share of the skipped ticks a frame
@@ -13,7 +12,8 @@
 use std::sync::Arc;
 
 use super::cost::{
-    Estimate, F64_TEXT, check_stream, check_stream_work, compact_frame, ik_reports, json_str, stream_work,
+    Estimate, F64_TEXT, check_stream, check_stream_work, compact_frame, compact_graph_report, ik_reports, json_str,
+    stream_work,
 };
 use super::graph::{GRAPH_AT, GraphStages, pose_bound, report_bytes};
 use super::raw::{Field, unprocessable};
@@ -21,7 +21,7 @@ use super::stream::{Admitted, Opening, RawStream};
 use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
-use crate::stream::{Encoding, GraphProgram, StreamParams, StreamRequest};
+use crate::stream::{GraphProgram, StreamParams, StreamRequest};
 use crate::work::price;
 
 /// A graph stream's own fields.
@@ -92,7 +92,7 @@ impl RawStream<'_> {
         caller: &CallerKey,
     ) -> Result<GraphStream, ApiError> {
         let request = self.check()?;
-        self.fits_a_graph(&request, graph.report)?;
+        self.fits_a_graph(&request)?;
         let compact = self.compact(&request)?;
         self.check_fps(request.fps)?;
         let built = crate::graphs::resolve(state, caller, graph.reference, GRAPH_AT).await?;
@@ -108,7 +108,10 @@ impl RawStream<'_> {
         let skeleton = post.skeleton(played.skeleton());
         let joints = skeleton.len();
         let (frame, encoding) = match compact {
-            Some(_) => (compact_frame(joints, 0), price::compact_frame(joints)),
+            Some(_) => {
+                let report = if graph.report { compact_graph_report(&played) } else { 0 };
+                (compact_frame(joints, 0).saturating_add(report), price::compact_frame(joints))
+            }
             None => {
                 let frame = pose.saturating_add(report).saturating_add(ik).saturating_add(root);
                 (frame.saturating_add(2 * F64_TEXT + json_str(id)), 0)
@@ -127,9 +130,8 @@ impl RawStream<'_> {
         Ok(GraphStream { params, frame, per_frame, catch_up })
     }
 
-    /// A graph plays from motion time 0 at speed 1, its own poses in full
-    /// (compact frames carry no report).
-    fn fits_a_graph(&self, request: &StreamRequest, report: bool) -> Result<(), ApiError> {
+    /// A graph plays from motion time 0 at speed 1, its own poses in full.
+    fn fits_a_graph(&self, request: &StreamRequest) -> Result<(), ApiError> {
         let refuse = |field: Field, detail: &str| {
             Err(unprocessable("graph_unsupported", field, self.at, format!("a graph stream {detail}")))
         };
@@ -144,12 +146,6 @@ impl RawStream<'_> {
         }
         if request.ease != anim::Ease::Linear {
             return refuse(Field::Ease, "plays its ticks as they are: it takes no `ease`");
-        }
-        if request.encoding == Encoding::Compact && report {
-            return refuse(
-                Field::Encoding,
-                "in compact frames carries no `report` (a compact frame holds the pose only)",
-            );
         }
         if self.parameters.is_some() {
             return refuse(Field::ParameterAt(0), "carries no parameter subset yet");

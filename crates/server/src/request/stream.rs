@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 
 use anim::ik::IkConstraint;
 
-use super::cost::{Estimate, check_stream, check_stream_work, compact_frame, stream_work};
+use super::cost::{Estimate, check_stream, check_stream_work, compact_frame, compact_graph_report, stream_work};
 use super::motion::{Composed, ROOT_MOTION_BYTES, RawMotion};
 use super::raw::{Field, Locate, Raw, RawModes, choice, finite, joint_subset, parameter_subset, unprocessable, whole};
 use crate::auth::{Caller, CallerKey};
@@ -122,7 +122,9 @@ pub async fn compact_watch(
     range_source(&params.motion, params.graph.as_ref()).map_err(|e| raw.compact_refused(e))?;
     let joints = params.motion.skeleton().len();
     let events = params.motion.first_clip().clip().events().len();
-    let per_sec = stream_work(price::compact_frame(joints), compact_frame(joints, events), params.fps);
+    let report = params.graph.as_ref().filter(|g| g.report).map_or(0, |g| compact_graph_report(&g.graph));
+    let frame = compact_frame(joints, events).saturating_add(report);
+    let per_sec = stream_work(price::compact_frame(joints), frame, params.fps);
     check_stream_work(per_sec, &state.config.limits, at)?;
     let ticket = state.work.charge(&caller.key(), per_sec)?;
     let with = raw.with_layout(params.clone(), compact, state, &caller.key()).await?;
@@ -424,8 +426,8 @@ impl RawStream<'_> {
     /// as work.
     ///
     /// # Errors
-    /// `compact_unsupported` (poses no range bounds: a retargeted layer,
-    /// root motion `extract`); `too_much_work`, `caller_work_limit`,
+    /// `compact_unsupported` (poses no range bounds: a character whose
+    /// hips sit below a joint of another role); `too_much_work`, `caller_work_limit`,
     /// `overloaded`, `request_timeout`.
     pub(super) async fn with_layout(
         &self,

@@ -89,7 +89,7 @@ fn ws_write_buffer(l: &Limits) -> usize {
         (status = 101, description = "Switching to WebSocket; frames follow. Controls (text): pause, play, seek, speed, stop, crossfade (to a motion with this clip's skeleton), layer"),
         (status = 400, description = "A parameter does not parse (`bad_number`, `bad_parameter`)", body = super::schemas::Problem),
         (status = 404, body = super::schemas::Problem),
-        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, compact frames' `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported` (model space, a joint subset, or poses no range bounds: a retargeted layer, root motion `extract`), `too_much_work` (the price per second of playback over `max_request_work`), `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
+        (status = 422, description = "`fps_out_of_range`, `speed_out_of_range`, `max_frames_out_of_range`, `unknown_joint`, compact frames' `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported` (model space, a joint subset, or poses no range bounds: a character whose hips sit below a joint of another role), `too_much_work` (the price per second of playback over `max_request_work`), `frame_too_large`, `stream_rate_too_high`", body = super::schemas::Problem),
         (status = 429, description = "The caller holds its share of the node's work (`caller_work_limit`, with `Retry-After`)", body = super::schemas::Problem),
         (status = 503, description = "The node's work capacity is taken (`overloaded`, with `Retry-After`)", body = super::schemas::Problem),
     ),

@@ -199,7 +199,11 @@ impl CompactLayout {
             (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
             (Some(g), RangeSource::Derived) => {
                 let ranges = Ranges::of_played(&g.graph, &g.post, RANGE_RATE).map_err(|u| refusal(u.0))?;
-                return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]));
+                let mut layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]);
+                if g.report {
+                    layout.name_graph(&g.graph);
+                }
+                return Ok(layout);
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
@@ -267,6 +271,14 @@ impl CompactLayout {
         let fps = u32::try_from(self.key_interval).unwrap_or(u32::MAX);
         let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events);
         Ok(Some(CompactLayout { any_weights, ..layout }))
+    }
+
+    /// Names `graph`'s states and blend nodes in the document, which its
+    /// frames' graph report section indexes (a graph stream with `report`).
+    fn name_graph<C>(&mut self, graph: &anim::graph::Graph<C>) {
+        let doc: LayoutDoc = serde_json::from_str(&self.document).expect("the layout document reads back");
+        let doc = doc.with_graph(graph);
+        self.document = serde_json::to_string(&doc).expect("a layout document serialises").into();
     }
 
     /// What tells two layouts apart for sharing a playback.

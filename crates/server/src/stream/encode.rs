@@ -24,7 +24,7 @@ use anim::character::FootReport;
 use anim::ik::IkReport;
 use anim::motion::{Planar, RootMotion};
 use anim::{Event, Pose, Skeleton, Space};
-use formats::wire::compact::{CompactEncoder, Header, KEY_FRAME, RootMotionReport, Trailer};
+use formats::wire::compact::{CompactEncoder, GraphFrame, Header, KEY_FRAME, RootMotionReport, Trailer};
 use formats::wire::graph_inputs::write_report;
 use formats::wire::json::{Extras, ParameterValues, PoseJson};
 use formats::wire::proto::{ik_kind_to_pb, space_to_pb};
@@ -184,7 +184,9 @@ impl FrameEncoder {
         let compact = self.compact.as_mut().expect("a compact encoder has its layout");
         let header =
             Header { seq: f.seq, dropped: f.dropped, sent_at_unix_nanos: f.sent_at_unix_nanos, clip_time: f.clip_time };
-        let trailer = Trailer { events: f.crossed, root_motion: f.root_motion.as_ref().map(compact_root_motion) };
+        let graph = f.graph.as_ref().map(GraphFrame::of_report);
+        let root_motion = f.root_motion.as_ref().map(compact_root_motion);
+        let trailer = Trailer { events: f.crossed, root_motion, graph: graph.as_ref() };
         let frame = compact.encoder.encode_with(&header, f.pose, false, &trailer);
         let is_key = frame[0] & KEY_FRAME != 0;
         self.buf.extend_from_slice(frame);

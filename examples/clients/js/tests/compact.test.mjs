@@ -20,6 +20,15 @@ test("there are vectors to read", () => {
   assert.ok(vectors.length >= 5, `${vectors.length} vectors in ${dir}`);
 });
 
+/** A vector's graph report (indices into the layout's `graph`) as a JSON frame names it, numbers as f32s. */
+function named(graph, report) {
+  const out = { state: graph.states[report.state] };
+  const t = report.transition;
+  if (t) out.transition = { from: graph.states[t.from], to: graph.states[t.to], alpha: Math.fround(t.alpha) };
+  out.weights = Object.fromEntries(report.weights.map((w) => [graph.nodes[w.node].name, w.weights.map(Math.fround)]));
+  return out;
+}
+
 for (const vector of vectors) {
   test(`${vector.name}: every frame decodes to the stored pose exactly`, () => {
     const decoder = new CompactDecoder(vector.layout);
@@ -40,6 +49,7 @@ for (const vector of vectors) {
       for (const e of got.events) assert.equal(e.name, layout.events[e.index].name);
       const root = frame.root_motion;
       assert.deepEqual(got.rootMotion, root ? { delta: root.delta.map(Math.fround), total: root.total.map(Math.fround) } : null);
+      assert.deepEqual(got.graph, frame.graph ? named(vector.layout.graph, frame.graph) : null);
     }
   });
 }
@@ -51,7 +61,7 @@ test("a delta frame without its key frame is refused", () => {
   const key = fromHex(vector.frames[0].hex);
   assert.throws(() => decoder.decode(key.subarray(0, key.length - 1)), (e) => e.code === "compact_truncated");
   assert.throws(() => decoder.decode(Uint8Array.from([...key, 0])), (e) => e.code === "compact_trailing_bytes");
-  assert.throws(() => decoder.decode(Uint8Array.from([8 | key[0], ...key.subarray(1)])), (e) => e.code === "compact_unknown_flags");
+  assert.throws(() => decoder.decode(Uint8Array.from([16 | key[0], ...key.subarray(1)])), (e) => e.code === "compact_unknown_flags");
 });
 
 test("events past the layout's list and a root motion cut short are refused", () => {
@@ -75,4 +85,21 @@ test("a new layout forgets the old key frame", () => {
   assert.throws(() => decoder.decode(frames[3]), (e) => e.code === "compact_missing_key_frame");
   assert.equal(decoder.decode(frames[2]).key, true);
   assert.equal(decoder.decode(frames[3]).key, false);
+});
+
+test("a graph report's indices past the layout's graph and a report cut short are refused", () => {
+  const vector = vectors.find((v) => v.name === "graph-report");
+  const decoder = new CompactDecoder(vector.layout);
+  decoder.decode(fromHex(vector.frames[0].hex)); // the key frame
+  const delta = fromHex(vector.frames[1].hex); // state 2, transition 1 → 2, one node (docs/compact-frames.md)
+  const at = delta.length - 4 - 4 - 1 - 1 - 4 - 1 - 1 - 1; // the state
+  assert.equal(delta[at], 2);
+  for (const [offset, value] of [[0, 3], [1, 4], [2, 3], [8, 2]]) {
+    const bad = Uint8Array.from(delta);
+    bad[at + offset] = value;
+    assert.throws(() => decoder.decode(bad), (e) => e.code === "compact_unknown_graph_index", `byte ${offset} = ${value}`);
+  }
+  assert.throws(() => decoder.decode(delta.subarray(0, delta.length - 1)), (e) => e.code === "compact_truncated");
+  const plain = { ...vector.layout, graph: undefined };
+  assert.throws(() => new CompactDecoder(plain).decode(fromHex(vector.frames[0].hex)), (e) => e.code === "compact_unknown_graph_index");
 });

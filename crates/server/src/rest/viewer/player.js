@@ -44,8 +44,9 @@ export function reopen() {
 }
 
 /// Whether the stream asks for compact frames (docs/compact-frames.md): when
-/// chosen, for a plain clip (a compact stream plays one clip whole, in local space).
-const compactFrames = () => $("encoding").value === "compact" && !composed() && !state.watching;
+/// chosen, for a plain clip or a graph (in local space; a graph's report
+/// comes in each frame's graph report section).
+const compactFrames = () => $("encoding").value === "compact" && (!composed() || Boolean(state.graph)) && !state.watching;
 
 /// What a new stream connects to: the watched broadcast's stream, else
 /// `/v1/stream` opened with the page's motion (docs/motion.md).
@@ -56,8 +57,8 @@ function streamTarget() {
   return { url: socketUrl("/v1/stream"), open };
 }
 
-/// A compact frame as the page's JSON frame: its header, events, local pose
-/// and root motion.
+/// A compact frame as the page's JSON frame: its header, events, local pose,
+/// root motion and graph report.
 function fromCompact(decoder, data) {
   const f = decoder.decode(new Uint8Array(data));
   const part = (a, n, i) => Array.from(a.subarray(n * i, n * i + n));
@@ -71,7 +72,9 @@ function fromCompact(decoder, data) {
   const planar = ([x, y, z, yaw]) => ({ translation: [x, y, z], yaw });
   if (f.rootMotion) pose.root_motion = { delta: planar(f.rootMotion.delta), total: planar(f.rootMotion.total) };
   const events = f.events.map(({ time, name }) => ({ time, name }));
-  return { seq: f.seq, dropped: f.dropped, clip_time: f.clipTime, sent_at_unix_nanos: Number(f.sentAtUnixNanos), events, pose };
+  const frame = { seq: f.seq, dropped: f.dropped, clip_time: f.clipTime, sent_at_unix_nanos: Number(f.sentAtUnixNanos), events, pose };
+  if (f.graph) frame.graph = f.graph;
+  return frame;
 }
 
 /// The bytes a stream received over the last second.
@@ -133,7 +136,8 @@ export function openStream() {
     if (!text && !decoder) return;
     const frame = text ? JSON.parse(message.data) : fromCompact(decoder, message.data);
     if (frame.opened) {
-      decoder = frame.opened.compact ? new CompactDecoder(frame.opened.compact) : null;
+      state.compactLayout = frame.opened.compact ?? null;
+      decoder = state.compactLayout ? new CompactDecoder(state.compactLayout) : null;
       return emit("opened", frame.opened);
     }
     // A new layout mid-stream (a control left the old one): the frames after it decode in it.

@@ -23,6 +23,7 @@ export const state = {
   frames: 0,
   seq: null,
   dropped: 0,
+  compactLayout: null, // the running stream's compact layout (docs/compact-frames.md), or null: JSON frames
   latencyMs: null, // sent → received, of the newest frame
   lateMs: null, // sent → shown (the animation frame that drew it): how far the page is behind
   pendingFrame: null, // the newest frame received, not shown yet (render.js shows it)
