@@ -361,3 +361,47 @@ async fn a_graph_over_the_cmu_take_walks_a_trail_on_cesium_man() {
     let walked = "(t => t.length > 1 && Math.hypot(t.at(-1)[0] - t[0][0], t.at(-1)[2] - t[0][2]) > 0.05)";
     page.wait_for(&format!("{walked}(window.inbetweenViewer.panel.trail)"), 10).await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_graph_broadcast_made_in_one_tab_is_adopted_by_its_link_in_another_and_driven_from_either() {
+    let app = super::start().await;
+    let Some((graph, _, mut browser)) = fox_graph_viewer(&app).await else { return };
+    let mut second = browser.new_page().await;
+    let page = &mut browser.page;
+    pick_graph(page, &graph).await;
+    set_value(page, "graph-speed", "3").await; // held by the page, then sent to the broadcast it makes
+    click(page, "broadcast").await;
+    let id = page.wait_for("window.inbetweenViewer.broadcast.id", 10).await.as_str().unwrap().to_owned();
+    let made = app.get_json(&format!("/v1/broadcasts/{id}")).await;
+    assert_eq!(made["motion"]["layers"], json!([{"graph": graph}]), "{made}");
+    // The page's speed reaches the broadcast: its frames report the run.
+    page.wait_for("document.getElementById('graph-weights').textContent === 'move: Run 1.00'", 15).await;
+
+    // The link, in a tab that has never picked the graph: it adopts the graph
+    // and its controls, and shows the broadcast's reports.
+    let link = page.eval("document.getElementById('broadcast-link').value").await.as_str().unwrap().to_owned();
+    second.navigate(&link).await;
+    let adopted = format!(
+        "window.inbetweenViewer.state.graph?.id === {} && document.body.classList.contains('graphing') \
+         && document.getElementById('graph').value === {0} && !!document.getElementById('graph-speed')",
+        json!(graph)
+    );
+    second.wait_for(&adopted, 15).await;
+    second.wait_for("document.getElementById('graph-weights').textContent === 'move: Run 1.00'", 15).await;
+    assert_eq!(second.eval("window.inbetweenViewer.state.watching").await, json!(id));
+
+    // A setting from the first tab changes what both show; the frames are the broadcast's, seq for seq.
+    set_value(page, "graph-speed", "2").await;
+    for tab in [&mut *page, &mut second] {
+        tab.wait_for("document.getElementById('graph-weights').textContent.includes('move: Walk 0.50 · Run 0.50')", 15)
+            .await;
+    }
+    let frames = "Object.fromEntries([...window.inbetweenViewer.broadcast.frames].slice(-30))";
+    let (a, b) = (page.eval(frames).await, second.eval(frames).await);
+    let (a, b) = (a.as_object().unwrap(), b.as_object().unwrap());
+    let common: Vec<&String> = b.keys().filter(|seq| a.contains_key(*seq)).collect();
+    assert!(common.len() >= 5, "frames in common: {}", common.len());
+    assert!(common.iter().all(|seq| a[*seq] == b[*seq]), "the same seq, the same pose");
+    assert!(common.iter().all(|seq| a[*seq]["clip"] == json!(graph)), "the frames are the graph's");
+    assert_eq!(second.eval("window.inbetweenViewer.cspViolations").await, json!([]));
+}

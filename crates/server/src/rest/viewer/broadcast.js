@@ -1,6 +1,6 @@
 // The viewer's broadcasts (issue 20, docs/broadcasts.md). "Broadcast" creates one from
-// the current view (`POST /v1/broadcasts` with the page's motion, fps and
-// space), shows a link to it (`/viewer?broadcast=ID`) and watches it; a
+// the current view (`POST /v1/broadcasts` with the page's motion — a graph
+// with its settings and report — fps and space), shows a link to it (`/viewer?broadcast=ID`) and watches it; a
 // page opened with that link watches it too (WebSocket
 // `/v1/broadcasts/{id}/stream`). While watching, the page's controls (play,
 // pause, seek, speed, layer weights, crossfades, IK handles) go to
@@ -12,10 +12,11 @@
 
 import { api, postJson } from "./api.js";
 import { loadClips, selectClip } from "./clips.js";
-import { motion } from "./composition.js";
-import { probeScope, setControlsShown, showWatching } from "./controls.js";
+import { heldSettings, motion } from "./composition.js";
+import { probeScope, send, setControlsShown, showWatching } from "./controls.js";
 import { $, el, row, setStatus } from "./dom.js";
 import { on } from "./events.js";
+import { choose as chooseGraph } from "./graph.js";
 import { adopt } from "./panel.js";
 import { openStream, setPlaying, stopStream } from "./player.js";
 import { fps, options } from "./settings.js";
@@ -53,26 +54,26 @@ async function create() {
     motion: motion(),
     fps: fps(),
     space: options().space,
+    ...(state.graph ? { report: true } : {}),
   };
   const summary = await postJson("/v1/broadcasts", body);
   await watch(summary.id, summary);
+  // A graph broadcast starts from the graph's defaults: the page's settings follow.
+  if (state.graph) send({ op: "set", parameters: heldSettings(state.graph.controls) });
   setStatus(`broadcasting ${summary.id}: anyone with the link watches the same frames`);
 }
 
-/// Watches the broadcast `id`: its clip selected, its motion in the panel,
-/// the page's stream its watch socket, the controls its controls route.
+/// Watches the broadcast `id`: its clip (or graph) selected, its motion in
+/// the panel, the page's stream its watch socket, the controls its controls route.
 async function watch(id, known) {
   const summary = known || (await api(path(id)));
-  const first = summary.motion.layers[0].clip;
+  const graph = summary.motion.layers.find((l) => l.graph)?.graph ?? "";
   leave({ quiet: true });
-  if (!state.clips.some((c) => c.id === first)) await loadClips();
-  if (state.clip?.id !== first) {
-    broadcast.selecting = true;
-    try {
-      await selectClip(first);
-    } finally {
-      broadcast.selecting = false;
-    }
+  broadcast.selecting = true;
+  try {
+    await (graph ? chooseGraph(graph, { quiet: true }) : showClip(summary.motion.layers[0].clip));
+  } finally {
+    broadcast.selecting = false;
   }
   adopt(summary.motion);
   Object.assign(broadcast, { id: summary.id, summary, link: linkTo(summary.id), canControl: null });
@@ -85,6 +86,13 @@ async function watch(id, known) {
   stopStream();
   if (openStream()) setPlaying(summary.state === "playing");
   await probeScope();
+}
+
+/// The broadcast's first clip as the page's clip, and no graph.
+async function showClip(clip) {
+  if (!state.clips.some((c) => c.id === clip)) await loadClips();
+  if (state.clip?.id !== clip) await selectClip(clip);
+  await chooseGraph("", { quiet: true });
 }
 
 /// Stops watching: the page is its own player again.

@@ -95,10 +95,15 @@ const refresh = (quiet = false) =>
 
 /// Plays graph `id` (empty: back to the layers). The clip of its output
 /// skeleton becomes the page's clip, for the skeleton, joints, mesh and framing.
-export async function choose(id) {
+/// `quiet`: a watched broadcast plays it already (no stream of the page's own).
+export async function choose(id, { quiet = false } = {}) {
   const summary = id ? state.graphs.find((g) => g.id === id) ?? (await api(`/v1/graphs/${encodeURIComponent(id)}`)) : null;
-  if (!summary) return forget();
+  if (!summary) return forget(quiet);
   const doc = await api(`/v1/graphs/${encodeURIComponent(id)}`);
+  if (!state.graphs.some((g) => g.id === id)) {
+    state.graphs.push({ ...summary, id }); // a watched broadcast's graph, before the list is read
+    fill();
+  }
   const first = clipIdOf(outputClip(doc), state.clips) ?? summary.clips?.[0];
   choosing = true;
   try {
@@ -110,12 +115,13 @@ export async function choose(id) {
   dispatchStatus({ type: "graph", name: summary.name });
   renderControls();
   showGraphing();
-  restart();
+  if (!quiet) restart();
 }
 
 let choosing = false; // selecting the graph's clip (which is not leaving the graph)
 
-/// Back to the layers ("none"); `quiet` when another clip was picked, which shows itself.
+/// Back to the layers ("none"); `quiet` when another clip was picked, which shows itself,
+/// or a watched broadcast plays its layers.
 function forget(quiet = false) {
   if (!state.graph) return;
   state.graph = null;

@@ -202,10 +202,12 @@ function characterChanged(_, adopted) {
   else recompose();
 }
 
-/// Layers, masks, root motion and character as a broadcast plays them.
+/// Layers, masks, root motion and character as a broadcast plays them (a
+/// graph's layer is the graph panel's: graph.js).
 export function adopt(doc) {
   if ((doc.character ?? null) !== (state.character?.id ?? null)) choose(doc.character ?? "", true).catch(report);
-  panel.layers = doc.layers.map((l) => ({ clip: l.clip, weight: l.weight ?? 1, mask: Object.keys(l.mask?.joints || {})[0] ?? null }));
+  const clips = doc.layers.filter((l) => l.clip);
+  if (clips.length) panel.layers = clips.map((l) => ({ clip: l.clip, weight: l.weight ?? 1, mask: Object.keys(l.mask?.joints || {})[0] ?? null }));
   panel.rootMode = doc.root_motion?.mode ?? "";
   panel.rootJoint = doc.root_motion?.joint ?? panel.rootJoint;
   $("root-mode").value = panel.rootMode;
