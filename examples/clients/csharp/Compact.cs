@@ -23,8 +23,8 @@ namespace Inbetween
     public sealed class CompactException : Exception
     {
         /// <summary>Stable: compact_truncated, compact_unknown_flags, compact_trailing_bytes,
-        /// compact_missing_key_frame, compact_varint_overflow, compact_unknown_event, compact_version,
-        /// compact_bad_layout.</summary>
+        /// compact_missing_key_frame, compact_varint_overflow, compact_unknown_event,
+        /// compact_unknown_graph_index, compact_version, compact_bad_layout.</summary>
         public readonly string Code;
 
         public CompactException(string code, string message) : base(code + ": " + message)
@@ -59,12 +59,83 @@ namespace Inbetween
         public bool HasRootMotion;
         /// <summary>The root motion report: delta x, y, z, yaw, then total x, y, z, yaw (docs/motion.md).</summary>
         public readonly float[] RootMotion = new float[8];
+        /// <summary>Whether the frame carries a graph stream's report (then Graph holds it).</summary>
+        public bool HasGraph;
+        // Kept across decodes so that reading a report allocates nothing once it has grown.
+        private readonly CompactGraphReport graph = new CompactGraphReport();
+
+        /// <summary>A graph stream's report of the tick (docs/compact-frames.md, "The graph report section"), by
+        /// index into the layout's GraphStates and GraphNodes; null when the frame carries none.</summary>
+        public CompactGraphReport Graph
+        {
+            get { return HasGraph ? graph : null; }
+        }
+
+        /// <summary>The report a decode fills; the same object every time.</summary>
+        internal CompactGraphReport GraphStore
+        {
+            get { return graph; }
+        }
 
         public CompactFrame(float[] translations, float[] rotations, float[] scales)
         {
             Translations = translations;
             Rotations = rotations;
             Scales = scales;
+        }
+    }
+
+    /// <summary>A graph's transition in progress: from and to as indices into the layout's GraphStates.</summary>
+    public struct CompactTransition
+    {
+        public int From;
+        public int To;
+        /// <summary>How far the crossfade has gone, 0 to 1 (the JSON frame's alpha rounded to f32).</summary>
+        public float Alpha;
+    }
+
+    /// <summary>
+    /// A graph stream's report of one tick (docs/graphs.md, "Reports"): the current state, the transition in
+    /// progress and the weights of each blend node the tick evaluated, all by index into the layout's graph.
+    /// </summary>
+    public sealed class CompactGraphReport
+    {
+        /// <summary>The current state's index in the layout's GraphStates.</summary>
+        public int State;
+        /// <summary>Whether a transition is in progress (then Transition holds it).</summary>
+        public bool HasTransition;
+        public CompactTransition Transition;
+        /// <summary>How many blend nodes the tick evaluated: the first NodeCount entries of Nodes.</summary>
+        public int NodeCount;
+        /// <summary>Each evaluated node's index in the layout's GraphNodes, in the frame's order.</summary>
+        public int[] Nodes = new int[4];
+        // The evaluated nodes' weights one after another; entry i's start at starts[i].
+        internal float[] weights = new float[16];
+        internal int[] starts = new int[4];
+        internal int WeightCount;
+
+        /// <summary>The weights of the i-th evaluated node (as many as its GraphNodePoints), in its points' order.</summary>
+        public ArraySegment<float> NodeWeights(int i)
+        {
+            if (i < 0 || i >= NodeCount) throw new ArgumentOutOfRangeException("i", i + " is not below the " + NodeCount + " nodes reported");
+            int end = i + 1 < NodeCount ? starts[i + 1] : WeightCount;
+            return new ArraySegment<float>(weights, starts[i], end - starts[i]);
+        }
+
+        /// <summary>Copies <paramref name="other"/> into this report, growing its arrays when they are too short.</summary>
+        internal void CopyFrom(CompactGraphReport other)
+        {
+            State = other.State;
+            HasTransition = other.HasTransition;
+            Transition = other.Transition;
+            NodeCount = other.NodeCount;
+            WeightCount = other.WeightCount;
+            if (Nodes.Length < NodeCount) Nodes = new int[other.Nodes.Length];
+            if (starts.Length < NodeCount) starts = new int[other.starts.Length];
+            if (weights.Length < WeightCount) weights = new float[other.weights.Length];
+            Array.Copy(other.Nodes, Nodes, NodeCount);
+            Array.Copy(other.starts, starts, NodeCount);
+            Array.Copy(other.weights, weights, WeightCount);
         }
     }
 
@@ -123,6 +194,11 @@ namespace Inbetween
         /// <summary>The events a frame's Events index: their names and clip times (empty when there are none).</summary>
         public string[] EventNames = new string[0];
         public float[] EventTimes = new float[0];
+        /// <summary>A graph stream's states and blend nodes (names, and how many weights each node has), which a
+        /// frame's Graph indexes; empty unless the stream asked for <c>report</c>.</summary>
+        public string[] GraphStates = new string[0];
+        public string[] GraphNodes = new string[0];
+        public int[] GraphNodePoints = new int[0];
         internal CompactJoint[] Joints;
 
         /// <summary>Parses a layout document (the `compact` member of an `opened` message).</summary>
@@ -161,7 +237,29 @@ namespace Inbetween
                 layout.Joints[j] = ReadJoint(joints[j], path);
             }
             if (Reader.Has(document, "events")) ReadEvents(layout, Reader.List(Reader.Member(document, "events", ""), "/events"));
+            if (Reader.Has(document, "graph")) ReadGraph(layout, Reader.Member(document, "graph", ""));
             return layout;
+        }
+
+        // The layout's `graph`: {"states": [names], "nodes": [{"name", "points"}]}.
+        private static void ReadGraph(CompactLayout layout, object graph)
+        {
+            var states = Reader.List(Reader.Member(graph, "states", "/graph"), "/graph/states");
+            layout.GraphStates = new string[states.Count];
+            for (int i = 0; i < states.Count; i++)
+            {
+                layout.GraphStates[i] = states[i] as string;
+                if (layout.GraphStates[i] == null) throw Reader.Bad("/graph/states/" + i, "is not a string");
+            }
+            var nodes = Reader.List(Reader.Member(graph, "nodes", "/graph"), "/graph/nodes");
+            layout.GraphNodes = new string[nodes.Count];
+            layout.GraphNodePoints = new int[nodes.Count];
+            for (int i = 0; i < nodes.Count; i++)
+            {
+                layout.GraphNodes[i] = Reader.String(nodes[i], "name", "/graph/nodes/" + i);
+                // A node's weights are f32s of one frame: far fewer than 2^24.
+                layout.GraphNodePoints[i] = Reader.Int(nodes[i], "points", "/graph/nodes/" + i, 0, 1 << 24);
+            }
         }
 
         private static void ReadEvents(CompactLayout layout, List<object> events)
@@ -305,7 +403,8 @@ namespace Inbetween
         private const int KeyFrameFlag = 1;
         private const int EventsFlag = 2;
         private const int RootMotionFlag = 4;
-        private const int KnownFlags = KeyFrameFlag | EventsFlag | RootMotionFlag;
+        private const int GraphFlag = 8;
+        private const int KnownFlags = KeyFrameFlag | EventsFlag | RootMotionFlag | GraphFlag;
         // Per joint in a value store: largest index, three rotation components, translation x y z, scale x y z.
         private const int Stride = 10;
 
@@ -318,9 +417,10 @@ namespace Inbetween
         private bool hasKey;
         private ulong keySeq;
         private readonly double[] small = new double[3];
-        // The frame being read's events and root motion, copied out once it is whole.
+        // The frame being read's events, root motion and graph report, copied out once it is whole.
         private int[] events = new int[8];
         private readonly float[] rootMotion = new float[8];
+        private readonly CompactGraphReport graph = new CompactGraphReport();
 
         public CompactDecoder(CompactLayout layout)
         {
@@ -392,7 +492,7 @@ namespace Inbetween
             int flags = bytes[offset];
             if ((flags & ~KnownFlags) != 0)
             {
-                throw new CompactException("compact_unknown_flags", "flags 0x" + flags.ToString("x2") + " use bits other than key frame, events and root motion");
+                throw new CompactException("compact_unknown_flags", "flags 0x" + flags.ToString("x2") + " use bits other than key frame, events, root motion and graph");
             }
             bool isKey = (flags & KeyFrameFlag) != 0;
             int at = offset + 1;
@@ -428,6 +528,8 @@ namespace Inbetween
                 for (int k = 0; k < 8; k++) rootMotion[k] = ReadFloat(bytes, at + 4 * k);
                 at += 32;
             }
+            bool hasGraph = (flags & GraphFlag) != 0;
+            if (hasGraph) ReadGraph(bytes, ref at, end);
             int trailing = end - at;
             if (trailing != 0)
             {
@@ -452,7 +554,65 @@ namespace Inbetween
             frame.EventCount = eventCount;
             frame.HasRootMotion = hasRoot;
             if (hasRoot) Array.Copy(rootMotion, frame.RootMotion, 8);
+            frame.HasGraph = hasGraph;
+            if (hasGraph) frame.GraphStore.CopyFrom(graph);
             return frame;
+        }
+
+        // The graph report section: the state, the transition (0, or from + 1, to and alpha), then each evaluated
+        // blend node's index and weights; indices past the layout's graph are refused as the other decoders do.
+        private void ReadGraph(byte[] bytes, ref int at, int end)
+        {
+            int states = Layout.GraphStates.Length;
+            graph.State = GraphIndex(ReadVarint(bytes, ref at, end, "graph report"), states, "state");
+            ulong from = ReadVarint(bytes, ref at, end, "graph report");
+            graph.HasTransition = from != 0;
+            graph.Transition = default(CompactTransition);
+            if (from != 0)
+            {
+                graph.Transition.From = GraphIndex(from - 1, states, "state");
+                graph.Transition.To = GraphIndex(ReadVarint(bytes, ref at, end, "graph report"), states, "state");
+                if (end - at < 4) throw Truncated("graph report");
+                graph.Transition.Alpha = ReadFloat(bytes, at);
+                at += 4;
+            }
+            ulong count = ReadVarint(bytes, ref at, end, "graph report");
+            graph.WeightCount = 0;
+            graph.NodeCount = 0;
+            for (ulong n = 0; n < count; n++)
+            {
+                int node = GraphIndex(ReadVarint(bytes, ref at, end, "graph report"), Layout.GraphNodes.Length, "node");
+                int i = graph.NodeCount;
+                if (i == graph.Nodes.Length)
+                {
+                    Array.Resize(ref graph.Nodes, 2 * i);
+                    Array.Resize(ref graph.starts, 2 * i);
+                }
+                graph.Nodes[i] = node;
+                graph.starts[i] = graph.WeightCount;
+                graph.NodeCount = i + 1;
+                ReadWeights(bytes, ref at, end, Layout.GraphNodePoints[node]);
+            }
+        }
+
+        // A node's `points` little-endian f32 weights, after the weights read so far.
+        private void ReadWeights(byte[] bytes, ref int at, int end, int points)
+        {
+            if ((end - at) / 4 < points) throw Truncated("graph report");
+            int start = graph.WeightCount;
+            if (graph.weights.Length < start + points) Array.Resize(ref graph.weights, Math.Max(2 * graph.weights.Length, start + points));
+            for (int k = 0; k < points; k++) graph.weights[start + k] = ReadFloat(bytes, at + 4 * k);
+            at += 4 * points;
+            graph.WeightCount = start + points;
+        }
+
+        private static int GraphIndex(ulong index, int known, string what)
+        {
+            if (index >= (ulong)known)
+            {
+                throw new CompactException("compact_unknown_graph_index", "graph " + what + " " + index + " is not in the layout's " + known);
+            }
+            return (int)index;
         }
 
         // The events section: a count, then indices into the layout's events.

@@ -32,7 +32,7 @@ static class CompactTests
         Run("the worked example decodes to the hand-computed rotation", WorkedExample);
         Run("a delta frame without its key frame is refused", MissingKeyFrame);
         Run("a new layout mid-stream forgets the old key frame", NewLayoutForgetsTheKeyFrame);
-        Run("the stream client takes a new layout, names events and keeps root motion", ClientTakesLayoutsEventsAndRootMotion);
+        Run("the stream client takes a new layout, names events and keeps root motion and graph reports", ClientTakesLayoutsEventsAndRootMotion);
         Run("root motion converts to Unity's axes", RootMotionConversion);
         Run("trailing bytes, unknown flags and overlong varints are refused", MalformedHeaders);
         Run("a refused frame changes neither the decoder nor the output", RefusedFrameChangesNothing);
@@ -41,6 +41,8 @@ static class CompactTests
         Run("malformed layouts are refused compact_bad_layout at their JSON pointer", MalformedLayouts);
         Run("an opened message's layout is the vector's", OpenedMessage);
         Run("an event past the layout's list is refused", UnknownEvent);
+        Run("the graph-report vector's reports name the layout's states and nodes", GraphReports);
+        Run("a graph report's indices past the layout's graph and a report cut short are refused", GraphRefusals);
         Run("GltfToUnity and GltfToUnityMirrorZ are the mirrors of X and Z applied to the local transform", AxisConversionIsTheMirror);
         Console.WriteLine("{0} passed, {1} failed", passes, failures);
         return failures == 0 ? 0 : 1;
@@ -133,6 +135,7 @@ static class CompactTests
             SameBits(got.Translations, Flat(frame, "translations"), "translations" + at);
             SameBits(got.Scales, Flat(frame, "scales"), "scales" + at);
             CheckTrailer(got, frame, at);
+            CheckGraph(got, frame, at);
         }
     }
 
@@ -148,6 +151,34 @@ static class CompactTests
         var r = (Dictionary<string, object>)root;
         var values = ((List<object>)r["delta"]).Concat((List<object>)r["total"]).Select(x => (float)(double)x).ToArray();
         SameBits(got.RootMotion, values, "root motion" + at);
+    }
+
+    // The frame's graph report (indices into the layout's graph, numbers rounded to f32), as the vector states it.
+    static void CheckGraph(CompactFrame got, Dictionary<string, object> frame, string at)
+    {
+        object graph;
+        Equal(frame.TryGetValue("graph", out graph), got.HasGraph, "has a graph report" + at);
+        Equal(got.HasGraph, got.Graph != null, "Graph is set exactly when HasGraph" + at);
+        if (!got.HasGraph) return;
+        var want = (Dictionary<string, object>)graph;
+        Equal((int)(double)want["state"], got.Graph.State, "state" + at);
+        var transition = want["transition"] as Dictionary<string, object>;
+        Equal(transition != null, got.Graph.HasTransition, "has a transition" + at);
+        if (transition != null)
+        {
+            Equal((int)(double)transition["from"], got.Graph.Transition.From, "from" + at);
+            Equal((int)(double)transition["to"], got.Graph.Transition.To, "to" + at);
+            SameBits(new[] { got.Graph.Transition.Alpha }, new[] { (float)(double)transition["alpha"] }, "alpha" + at);
+        }
+        var nodes = ((List<object>)want["weights"]).Cast<Dictionary<string, object>>().ToList();
+        Equal(nodes.Count, got.Graph.NodeCount, "nodes" + at);
+        for (int i = 0; i < nodes.Count; i++)
+        {
+            Equal((int)(double)nodes[i]["node"], got.Graph.Nodes[i], "node " + i + at);
+            var weights = ((List<object>)nodes[i]["weights"]).Select(x => (float)(double)x).ToArray();
+            Equal(weights.Length, got.Graph.NodeWeights(i).Count, "node " + i + "'s weights" + at);
+            SameBits(got.Graph.NodeWeights(i).ToArray(), weights, "node " + i + "'s weights" + at);
+        }
     }
 
     static void CheckHeader(CompactFrame got, Dictionary<string, object> frame)
@@ -277,6 +308,15 @@ static class CompactTests
         var got = client.Decoder.NewFrame();
         Check(client.TryTakeNewest(got), "a newest frame");
         Check(!got.HasRootMotion, "the last stepping frame reports none");
+        client = new CompactStreamClient(new Uri("ws://127.0.0.1:1/"), null);
+        client.OnText("{\"opened\": {\"compact\": " + LayoutTexts("graph-report")[0] + "}}");
+        foreach (var frame in Frames(Vector("graph-report")))
+        {
+            var bytes = Hex(frame);
+            client.OnFrame(bytes, bytes.Length);
+        }
+        Check(client.TryTakeNewest(got), "a newest graph frame");
+        Equal("move - walkrun[0.5,0.5] aim[0.125,0.375,0.5]", Report(client.Decoder.Layout, got.Graph), "the newest frame's graph report");
         var relayout = Vector("relayout");
         var texts = LayoutTexts("relayout");
         client = new CompactStreamClient(new Uri("ws://127.0.0.1:1/"), null);
@@ -319,7 +359,7 @@ static class CompactTests
         var longer = new byte[key.Length + 1];
         Array.Copy(key, longer, key.Length);
         Refused("compact_trailing_bytes", () => decoder.Decode(longer, got));
-        foreach (byte flags in new byte[] { 8, 9, 0x80 })
+        foreach (byte flags in new byte[] { 16, 17, 0x80 })
         {
             var bad = (byte[])key.Clone();
             bad[0] = flags;
@@ -340,6 +380,74 @@ static class CompactTests
         Equal((byte)1, key[key.Length - 34], "one event");
         key[key.Length - 33] = 3;
         Refused("compact_unknown_event", () => decoder.Decode(key, decoder.NewFrame()));
+    }
+
+    // The vector's three reports, written out from docs/compact-frames/graph-report.json's description: the key
+    // frame in idle alone; a delta frame in jump, 1/4 of the way from move, walkrun at 1/4 and 3/4; one in move with
+    // walkrun halved and aim at 1/8, 3/8, 1/2 (all exact in f32).
+    static void GraphReports()
+    {
+        var vector = Vector("graph-report");
+        var decoder = DecoderOf(vector);
+        Equal("idle move jump", string.Join(" ", decoder.Layout.GraphStates), "states");
+        Equal("walkrun:2 aim:3", string.Join(" ", decoder.Layout.GraphNodes.Select((n, i) => n + ":" + decoder.Layout.GraphNodePoints[i])), "nodes");
+        var got = decoder.NewFrame();
+        var frames = Frames(vector);
+        decoder.Decode(Hex(frames[0]), got);
+        Equal("idle -", Report(decoder.Layout, got.Graph), "the key frame's report");
+        decoder.Decode(Hex(frames[1]), got);
+        Equal("jump move>jump@0.25 walkrun[0.25,0.75]", Report(decoder.Layout, got.Graph), "the first delta frame's");
+        decoder.Decode(Hex(frames[2]), got);
+        Equal("move - walkrun[0.5,0.5] aim[0.125,0.375,0.5]", Report(decoder.Layout, got.Graph), "the second delta frame's");
+        Check(got.HasRootMotion, "root motion before the report");
+        // A frame without the section has no report, however many came before.
+        decoder.Decode(Hex(Frames(Vector("half-turn"))[0]), got);
+        Check(!got.HasGraph && got.Graph == null, "no report without flags bit 3");
+    }
+
+    static string Report(CompactLayout layout, CompactGraphReport r)
+    {
+        var parts = new List<string> { layout.GraphStates[r.State] };
+        var t = r.Transition;
+        parts.Add(r.HasTransition ? layout.GraphStates[t.From] + ">" + layout.GraphStates[t.To] + "@" + t.Alpha.ToString(CultureInfo.InvariantCulture) : "-");
+        for (int i = 0; i < r.NodeCount; i++)
+        {
+            var w = r.NodeWeights(i).Select(x => x.ToString(CultureInfo.InvariantCulture));
+            parts.Add(layout.GraphNodes[r.Nodes[i]] + "[" + string.Join(",", w) + "]");
+        }
+        return string.Join(" ", parts);
+    }
+
+    // The JavaScript test's cases: the delta frame's state, transition from and to, and node index each set past
+    // the layout's three states or two nodes; the frame cut by a byte; the key frame against a layout with no graph.
+    static void GraphRefusals()
+    {
+        var vector = Vector("graph-report");
+        var frames = Frames(vector);
+        var decoder = DecoderOf(vector);
+        var got = decoder.NewFrame();
+        decoder.Decode(Hex(frames[0]), got);
+        var delta = Hex(frames[1]); // state 2, transition 1 → 2 (from + 1 = 2), alpha, one node: 0, two weights
+        int at = delta.Length - 4 - 4 - 1 - 1 - 4 - 1 - 1 - 1;
+        Equal((byte)2, delta[at], "the state's byte");
+        foreach (var c in new[] { new[] { 0, 3 }, new[] { 1, 4 }, new[] { 2, 3 }, new[] { 8, 2 } })
+        {
+            var bad = (byte[])delta.Clone();
+            bad[at + c[0]] = (byte)c[1];
+            Refused("compact_unknown_graph_index", () => decoder.Decode(bad, got));
+        }
+        Refused("compact_truncated", () => decoder.Decode(delta, 0, delta.Length - 1, got));
+        Check(got.Graph.State == 0 && !got.Graph.HasTransition && got.Graph.NodeCount == 0, "a refused report changes nothing");
+        decoder.Decode(delta, got);
+        Equal(2, got.Graph.State, "the whole frame still decodes after the refusals");
+        var plain = (Dictionary<string, object>)vector["layout"];
+        plain.Remove("graph");
+        Refused("compact_unknown_graph_index", () => new CompactDecoder(CompactLayout.FromJson(plain)).Decode(Hex(frames[0]), got));
+        var negative = (Dictionary<string, object>)Vector("graph-report")["layout"];
+        var node = (Dictionary<string, object>)((List<object>)((Dictionary<string, object>)negative["graph"])["nodes"])[1];
+        node["points"] = -1.0;
+        var e = Refused("compact_bad_layout", () => CompactLayout.FromJson(negative));
+        Check(e.Message.Contains("/graph/nodes/1/points "), e.Message);
     }
 
     static void RefusedFrameChangesNothing()

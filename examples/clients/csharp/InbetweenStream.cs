@@ -401,6 +401,8 @@ namespace Inbetween
             Array.Copy(from.Scales, to.Scales, from.Scales.Length);
             to.HasRootMotion = from.HasRootMotion;
             Array.Copy(from.RootMotion, to.RootMotion, from.RootMotion.Length);
+            to.HasGraph = from.HasGraph;
+            if (from.HasGraph) to.GraphStore.CopyFrom(from.GraphStore);
         }
     }
 }

@@ -19,7 +19,8 @@ extends RefCounted
 const KEY_FRAME := 1
 const EVENTS := 2  # an events section follows the body
 const ROOT_MOTION := 4  # a root motion section follows the body (and the events)
-const KNOWN_FLAGS := KEY_FRAME | EVENTS | ROOT_MOTION
+const GRAPH := 8  # a graph report section follows (after the root motion)
+const KNOWN_FLAGS := KEY_FRAME | EVENTS | ROOT_MOTION | GRAPH
 # Per joint in the value store: largest index, three rotation components,
 # translation x y z, scale x y z.
 const STRIDE := 10
@@ -27,6 +28,7 @@ const STRIDE := 10
 var layout: Dictionary
 var names := PackedStringArray()
 var events: Array = []  # the clip's events ({time, name}), which frames index
+var graph: Dictionary = {}  # a graph stream's {states, nodes}, which reports index
 var joints: Array = []
 var key := PackedInt64Array()
 var values := PackedInt64Array()
@@ -61,6 +63,7 @@ func relayout(compact_layout: Dictionary) -> void:
 	if int(layout.get("version", 0)) != 1:
 		push_error("inbetween: compact layout version %s" % layout.get("version"))
 	events = layout.get("events", [])
+	graph = layout.get("graph", {"states": [], "nodes": []})
 	for joint in layout["joints"]:
 		joints.append(_compile_joint(joint))
 		names.append(joint["name"])
@@ -157,8 +160,10 @@ func _read_zigzag() -> int:
 ## {seq, dropped, sent_at_unix_nanos, clip_time, key, key_seq, translations,
 ## rotations, scales} (flat PackedFloat32Arrays, 3/4/3 per joint), events
 ## (crossed since the previous frame, in order: {index, time, name}, index into
-## the layout's `events`) and root_motion ({delta, total}, each [x, y, z, yaw],
-## or null); or {error, detail}.
+## the layout's `events`), root_motion ({delta, total}, each [x, y, z, yaw],
+## or null) and graph (a graph stream's report as a JSON frame's `graph` member
+## states it, {state, transition?: {from, to, alpha}, weights: {node: [w…]}},
+## its numbers f32s; or null); or {error, detail}.
 func decode(bytes: PackedByteArray) -> Dictionary:
 	var frame := _read_header(bytes)
 	if frame.has("error"):
@@ -180,6 +185,7 @@ func decode(bytes: PackedByteArray) -> Dictionary:
 	var flags := bytes[0]
 	frame["events"] = _read_events() if flags & EVENTS else []
 	frame["root_motion"] = _read_root_motion() if flags & ROOT_MOTION else null
+	frame["graph"] = _read_graph() if flags & GRAPH else null
 	if _error == "" and _at != bytes.size():
 		_fail(
 			"compact_trailing_bytes",
@@ -232,6 +238,66 @@ func _read_root_motion() -> Variant:
 	return {"delta": values.slice(0, 4), "total": values.slice(4)}
 
 
+## The graph report section: the state, the transition (0, or from + 1, to
+## and alpha), then each evaluated blend node's index and weights.
+func _read_graph() -> Variant:
+	var states: Array = graph["states"]
+	var nodes: Array = graph["nodes"]
+	var state := _graph_index(_read_varint("graph report"), states.size(), "state")
+	var from := _read_varint("graph report")
+	var report := {}
+	if _error == "":
+		report["state"] = states[state]
+	if _error == "" and from != 0:
+		var source := _graph_index(from - 1, states.size(), "state")
+		var target := _graph_index(_read_varint("graph report"), states.size(), "state")
+		var alpha := _read_f32s(1)
+		if _error == "":
+			report["transition"] = {"from": states[source], "to": states[target], "alpha": alpha[0]}
+	var weights := {}
+	var count := _read_varint("graph report")
+	var n := 0
+	# `count` is unsigned: past 2^63 it reads as negative, and is cut short as the JS decoder's is.
+	while _error == "" and (count < 0 or n < count):
+		var index := _graph_index(_read_varint("graph report"), nodes.size(), "node")
+		if _error == "":
+			var node: Dictionary = nodes[index]
+			weights[node["name"]] = _read_f32s(int(node["points"]))
+		n += 1
+	report["weights"] = weights
+	if _error != "":
+		return null
+	return report
+
+
+## `index` when it is below `known` (an unsigned varint: past 2^63 it reads as
+## negative); else a refusal, and 0.
+func _graph_index(index: int, known: int, what: String) -> int:
+	if _error != "":
+		return 0
+	if index < 0 or index >= known:
+		_fail(
+			"compact_unknown_graph_index",
+			"graph %s %d is not in the layout's %d" % [what, index, known]
+		)
+		return 0
+	return index
+
+
+## `count` little-endian f32s of the graph report section.
+func _read_f32s(count: int) -> Array:
+	var out := []
+	if _error != "" or count < 0:
+		return out
+	if _at + 4 * count > _bytes.size():
+		_fail("compact_truncated", "the frame ends before its graph report")
+		return out
+	for k in count:
+		out.append(_bytes.decode_float(_at + 4 * k))
+	_at += 4 * count
+	return out
+
+
 static func _refusal(code: String, detail: String) -> Dictionary:
 	return {"error": code, "detail": detail}
 
@@ -247,7 +313,7 @@ func _read_header(bytes: PackedByteArray) -> Dictionary:
 	if (flags & ~KNOWN_FLAGS) != 0:
 		return _refusal(
 			"compact_unknown_flags",
-			"flags %d use bits other than key frame, events and root motion" % flags
+			"flags %d use bits other than key frame, events, root motion and graph" % flags
 		)
 	var seq := _read_varint("seq")
 	var dropped := _read_varint("dropped")

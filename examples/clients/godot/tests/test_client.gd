@@ -31,6 +31,7 @@ func _init() -> void:
 	for vector in loaded:
 		_check_vector(vector)
 	_check_refusals(loaded)
+	_check_graph(loaded)
 	_check_relayout(loaded)
 	_check_slerp()
 	_check_buffer()
@@ -102,6 +103,34 @@ func _check_vector(vector: Dictionary) -> void:
 				"total": Array(_f32([root["total"]])).map(func(x): return float(x)),
 			}
 		_check(got["root_motion"] == want, what + ": root motion")
+		var report = null
+		if frame.has("graph"):
+			report = _named(vector["layout"]["graph"], frame["graph"])
+		_check(got["graph"] == report, what + ": graph report")
+
+
+## Numbers as f32 values, in an Array as the decoder returns them.
+static func _f32_list(numbers: Array) -> Array:
+	return Array(_f32([numbers])).map(func(x): return float(x))
+
+
+## A vector's graph report (indices into the layout's `graph`) as the decoder
+## names it (the JavaScript test's `named`), numbers as f32s.
+static func _named(graph: Dictionary, report: Dictionary) -> Dictionary:
+	var states: Array = graph["states"]
+	var out := {"state": states[int(report["state"])]}
+	var t = report["transition"]
+	if t != null:
+		out["transition"] = {
+			"from": states[int(t["from"])],
+			"to": states[int(t["to"])],
+			"alpha": _f32_list([t["alpha"]])[0],
+		}
+	var weights := {}
+	for w in report["weights"]:
+		weights[graph["nodes"][int(w["node"])]["name"]] = _f32_list(w["weights"])
+	out["weights"] = weights
+	return out
 
 
 func _check_relayout(vectors: Array) -> void:
@@ -134,7 +163,7 @@ func _check_refusals(vectors: Array) -> void:
 		decoder.decode(longer).get("error") == "compact_trailing_bytes", "a byte after the frame"
 	)
 	var flagged := key.duplicate()
-	flagged[0] = 8
+	flagged[0] = 16
 	_check(decoder.decode(flagged).get("error") == "compact_unknown_flags", "an unknown flag")
 	_check(not decoder.decode(key).has("error"), "the key frame itself decodes")
 	_check(not decoder.decode(delta).has("error"), "and then its delta frame")
@@ -144,6 +173,42 @@ func _check_refusals(vectors: Array) -> void:
 	_check(
 		Compact.new(stepping["layout"]).decode(unknown).get("error") == "compact_unknown_event",
 		"an event past the layout's list"
+	)
+
+
+## The graph-report vector's last report written out (move; walkrun halved, aim
+## at 1/8, 3/8, 1/2: exact in f32), and the JavaScript test's refusals: the
+## state, transition from and to, and node index past the layout's three states
+## or two nodes, a report cut short, and a report against a layout without graph.
+func _check_graph(vectors: Array) -> void:
+	var vector: Dictionary = vectors.filter(func(v): return v["name"] == "graph-report")[0]
+	var frames: Array = vector["frames"]
+	var decoder := Compact.new(vector["layout"])
+	var key := Compact.from_hex(frames[0]["hex"])
+	_check(
+		decoder.decode(key)["graph"] == {"state": "idle", "weights": {}}, "the key frame's report"
+	)
+	var delta := Compact.from_hex(frames[1]["hex"])
+	var last := decoder.decode(Compact.from_hex(frames[2]["hex"]))
+	var want := {"state": "move", "weights": {"walkrun": [0.5, 0.5], "aim": [0.125, 0.375, 0.5]}}
+	_check(last["graph"] == want, "the last frame's report: %s" % last["graph"])
+	decoder.decode(key)
+	var at := delta.size() - 4 - 4 - 1 - 1 - 4 - 1 - 1 - 1  # the state
+	_check(delta[at] == 2, "the delta frame's state byte")
+	for case in [[0, 3], [1, 4], [2, 3], [8, 2]]:
+		var bad := delta.duplicate()
+		bad[at + case[0]] = case[1]
+		_check(
+			decoder.decode(bad).get("error") == "compact_unknown_graph_index",
+			"graph report byte %d = %d" % case
+		)
+	var cut := delta.slice(0, delta.size() - 1)
+	_check(decoder.decode(cut).get("error") == "compact_truncated", "a graph report cut short")
+	var plain: Dictionary = vector["layout"].duplicate()
+	plain.erase("graph")
+	_check(
+		Compact.new(plain).decode(key).get("error") == "compact_unknown_graph_index",
+		"a graph report against a layout without graph"
 	)
 
 
