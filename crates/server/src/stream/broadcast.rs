@@ -878,13 +878,6 @@ impl Broadcast {
     }
 }
 
-/// Sends `item` to a channel's viewers; returns the thread CPU it took.
-fn hand_over(tx: &broadcast::Sender<Item>, item: Item) -> u64 {
-    let start = thread_cpu_ns();
-    let _ = tx.send(item);
-    thread_cpu_ns().saturating_sub(start)
-}
-
 /// Withdraws control `id` from the desk (see [`Broadcast::revoke`]).
 fn revoke(desk: &Mutex<Desk>, id: &Arc<str>) {
     let mut desk = crate::sync::lock(desk);
@@ -999,18 +992,19 @@ impl Task {
             if !self.catch_up(controls, &revoked, k).await {
                 return if *self.shutdown.borrow() { EndReason::Shutdown } else { EndReason::Ended };
             }
+            let stepped = thread_cpu_ns().saturating_sub(cpu);
             self.checkpoint();
             let viewers = b.viewers();
             self.count_viewers(viewers);
             if let Some(reason) = self.idle(viewers, last_control) {
                 return reason;
             }
-            let handed = if viewers > 0 { self.publish() } else { 0 };
-            // A catch-up on a blocking thread is not this tick's work, nor is
-            // waking its viewers' tasks (that grows with viewers, which
-            // their streams' caps bound, not the broadcast's price).
-            let worked = thread_cpu_ns().saturating_sub(cpu).saturating_sub(handed);
-            if stepped_here && self.overrun.over(worked, allowed_ns) {
+            let encoded = if viewers > 0 { self.publish() } else { 0 };
+            // The tick's own work is stepping and encoding it: a catch-up on
+            // a blocking thread is not, nor is waking its viewers' tasks (and
+            // the network work the kernel does meanwhile), which grows with
+            // viewers — their streams' caps bound that, not this price.
+            if stepped_here && self.overrun.over(stepped.saturating_add(encoded), allowed_ns) {
                 metrics::counter!("inbetween_broadcasts_overrun_total").increment(1);
                 tracing::warn!(broadcast = %b.id, allowed_ns, "a broadcast's ticks overran their price; it ends");
                 return EndReason::TooMuchWork;
@@ -1019,27 +1013,33 @@ impl Task {
     }
 
     /// Encodes the tick stepped, once per encoding with viewers, and sends
-    /// it; returns the thread CPU the sends took (waking the viewers' tasks).
+    /// it; returns the thread CPU the encoding took (not the sends).
     fn publish(&mut self) -> u64 {
         let b = &self.broadcast;
         let sent_at = unix_nanos();
         metrics::counter!("inbetween_broadcast_ticks_total").increment(1);
         let program = self.program.as_mut().expect("the program is back after each catch-up");
-        let mut handed = 0;
+        let mut encoded = 0;
+        let mut timed = |encode: &mut dyn FnMut() -> Item| {
+            let start = thread_cpu_ns();
+            let item = encode();
+            encoded += thread_cpu_ns().saturating_sub(start);
+            item
+        };
         for encoding in [Encoding::Json, Encoding::Protobuf] {
             let tx = b.channel(encoding);
             if tx.receiver_count() > 0 {
-                handed += hand_over(tx, Item::Frame(program.encode(encoding, sent_at)));
+                let _ = tx.send(timed(&mut || Item::Frame(program.encode(encoding, sent_at))));
             }
         }
         // Once per layout watched, whatever its viewers' number.
         let mut channels = crate::sync::lock(&b.compact);
         channels.retain(|c| c.tx.receiver_count() > 0);
         for c in channels.iter() {
-            handed += hand_over(&c.tx, Item::Frame(program.encode_compact(&c.layout, sent_at)));
+            let _ = c.tx.send(timed(&mut || Item::Frame(program.encode_compact(&c.layout, sent_at))));
         }
         program.keep_compact(|key| channels.iter().any(|c| c.layout.key() == key));
-        handed
+        encoded
     }
 
     /// Files `controls` (and drops the `revoked` ones) and steps the program

@@ -11,8 +11,8 @@
 //!   mix, and the rest (the frame's
 //!   encoding, the tick itself) as admitted. Its price per second is held
 //!   in the node's meters by [`Ticket`]s.
-//! - [`Overrun`]: the thread CPU of each tick (stepping and encoding it;
-//!   waking its viewers' tasks is theirs) against the price of a tick;
+//! - [`Overrun`]: the thread CPU of each tick's stepping and encoding
+//!   (waking its viewers' tasks is theirs) against the price of a tick;
 //!   a broadcast whose ticks took more than [`OVERRUN_FACTOR`] times their
 //!   price (plus [`TICK_ALLOWANCE`]) over a whole second of ticks is over
 //!   budget, and ends with `too_much_work`.
