@@ -1209,6 +1209,7 @@ async fn a_new_layout_over_the_request_limit_is_refused_and_the_stream_goes_on()
     let (frames, _) = more_frames(&mut ws, &mut decoder, 5).await;
     assert!(frames.iter().all(|d| !d.new_layout), "the stream goes on in its layout");
     assert_eq!(app.state.work.meter().held(), held, "holding what it held");
+}
 
 // ------------------------------------------- derived ranges and graph reports
 

@@ -182,7 +182,7 @@ impl PostRun {
 
     /// The springs' substeps at or before `clock` not run yet are skipped
     /// (`SpringSolver::skip_to`): ticks stepped without their pose.
-    pub fn skip_springs_to(&mut self, post: &GraphPost, clock: f64) {
+    pub fn skip_springs_to<C>(&mut self, post: &GraphPost<C>, clock: f64) {
         if let (Some(springs), Some(solver)) = (post.springs.as_ref(), self.springs.as_mut()) {
             solver.skip_to(springs, clock);
         }

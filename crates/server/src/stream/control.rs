@@ -654,7 +654,7 @@ impl ControlCheck {
         let layout = self.compact.as_ref()?;
         match control {
             Control::Crossfade(fade) => Some(Relayout::Plays(&fade.to)),
-            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(&self.playing)),
+            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(self.chain.playing())),
             Control::SetIk(constraints) => Some(Relayout::Ik(constraints)),
             Control::Ik(_) => Some(Relayout::Ik(&[])),
             _ => None,
@@ -668,7 +668,7 @@ impl ControlCheck {
         let (Some(change), Some(repricing)) = (self.layout_change(control), &self.repricing) else { return Ok(None) };
         let motion = match change {
             Relayout::Plays(motion) => motion,
-            Relayout::Ik(_) => &self.playing,
+            Relayout::Ik(_) => self.chain.playing(),
         };
         let pose = super::compact::range_sample_price(motion, None, crate::work::price::clip_pose);
         repricing.charge_layout(crate::work::price::compact_layout(change.samples(), pose)).map(Some)

@@ -90,6 +90,10 @@ mod tests {
         fn admit(&self) -> Result<(), ControlError> {
             Ok(())
         }
+
+        fn charge_layout(&self, _units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError> {
+            Ok(Box::new(()))
+        }
     }
 
     fn fade(to: &Arc<StreamMotion>) -> Control {
