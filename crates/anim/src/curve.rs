@@ -148,9 +148,12 @@ impl SlerpCurve {
 /// `a + (b − a)·u`: a linear key pair's value, exactly `a` between equal
 /// keys (glam's `lerp`, `a·(1 − u) + b·u`, can round an ulp off them, which
 /// would leave a constant channel's compact range, docs/compact-frames.md).
+/// Keys so far apart that `b − a` overflows (near ±`f32::MAX`, which clips
+/// may hold) take glam's form, which stays finite.
 #[inline]
 pub(crate) fn lerp_keys(a: Vec3A, b: Vec3A, u: f32) -> Vec3A {
-    a + (b - a) * u
+    let d = b - a;
+    if d.is_finite() { a + d * u } else { a.lerp(b, u) }
 }
 
 #[inline(always)]
@@ -259,6 +262,19 @@ mod tests {
     use super::*;
     use crate::Ends;
     use crate::compile::catmull_rom;
+
+    /// Equal keys give themselves exactly at any `u`, and keys at ±`f32::MAX`
+    /// a finite value (their difference overflows).
+    #[test]
+    fn linear_keys_keep_equal_values_exact_and_extreme_ones_finite() {
+        let a = Vec3A::new(0.1, -3.7e-5, 1234.567);
+        for u in [0.0, 0.1, 1.0 / 3.0, 0.5, 0.999_999, 1.0] {
+            assert_eq!(lerp_keys(a, a, u), a, "u {u}");
+            let wide = lerp_keys(Vec3A::splat(-f32::MAX), Vec3A::splat(f32::MAX), u);
+            assert!(wide.is_finite(), "u {u}: {wide}");
+        }
+        assert_eq!(lerp_keys(Vec3A::ZERO, Vec3A::splat(2.0), 0.25), Vec3A::splat(0.5));
+    }
 
     /// The polynomial pyramid agrees with exact slerps on segments of every
     /// tier (keys up to ~100° apart).

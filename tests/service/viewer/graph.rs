@@ -368,6 +368,8 @@ async fn a_graph_broadcast_made_in_one_tab_is_adopted_by_its_link_in_another_and
     let Some((graph, _, mut browser)) = fox_graph_viewer(&app).await else { return };
     let mut second = browser.new_page().await;
     let page = &mut browser.page;
+    set_value(page, "token", TOKEN).await; // the write scope, to make and drive a broadcast
+    page.eval("document.getElementById('token-form').requestSubmit()").await;
     pick_graph(page, &graph).await;
     set_value(page, "graph-speed", "3").await; // held by the page, then sent to the broadcast it makes
     click(page, "broadcast").await;
