@@ -968,12 +968,14 @@ fn arm_ik() -> Value {
 
 /// The seq of `plain` at the tick of `compact`'s `seq`: both streams
 /// opened paused and took the same controls, then `play`, each at its own
-/// tick; the first frame whose clip time moved is the same tick after play
-/// in both, matched by its clip time. Returns the shift from a compact
-/// seq to a plain one, and the compact seq of that first frame.
+/// tick; the first frame whose clip time went forward is the same tick
+/// after play in both, matched by its clip time. (A crossfade taken while
+/// paused moves the clip time back to its target's start, at whichever
+/// of the frames read first it lands on.) Returns the shift from a
+/// compact seq to a plain one, and the compact seq of that first frame.
 fn aligned(compact: &[(u64, f32)], plain: &[(u64, f32)]) -> (i64, u64) {
     let moved = |frames: &[(u64, f32)]| {
-        let at = frames.windows(2).position(|w| w[1].1 != w[0].1).expect("the clip time moves after play");
+        let at = frames.windows(2).position(|w| w[1].1 > w[0].1).expect("the clip time moves after play");
         frames[at + 1]
     };
     let (c, p) = (moved(compact), moved(plain));
