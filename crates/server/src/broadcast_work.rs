@@ -9,7 +9,9 @@ use std::sync::Arc;
 use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
-use crate::stream::{BroadcastCharge, BroadcastSpec, ControlGate};
+use futures_util::future::BoxFuture;
+
+use crate::stream::{BroadcastCharge, BroadcastSpec, ControlError, ControlGate, Held, LayoutWork};
 
 /// Whom the broadcasts this node runs for another node (or for itself
 /// before a restart) are charged to: they were admitted where they were
@@ -49,4 +51,46 @@ fn priced(state: &AppState, spec: &BroadcastSpec, tickets: Vec<crate::work::Tick
 pub fn gate(state: &AppState, caller: Caller) -> ControlGate {
     let writes = Arc::clone(&state.writes);
     Arc::new(move || writes.admit(&caller).map_err(|e| e.to_control()))
+}
+
+/// Whom broadcasts' new compact layouts are charged to: they serve every
+/// compact viewer of the broadcast, on every node, whoever sent the control.
+const LAYOUTS: &str = "broadcasts' compact layouts";
+
+/// Broadcasts' new compact layouts (docs/compact-frames.md, "A broadcast's
+/// layouts"), priced in the node's meter and chosen on its work pool.
+pub struct PooledLayouts {
+    pub work: Arc<crate::work::Work>,
+}
+
+impl LayoutWork for PooledLayouts {
+    fn charge(&self, units: u64) -> Result<Held, ControlError> {
+        let caller = CallerKey::Token(Arc::from(LAYOUTS));
+        let ticket = self.work.charge(&caller, units).map_err(|e| {
+            let detail = format!("choosing this broadcast's new compact layouts costs {units} work units: {e}");
+            ApiError::Relayed { status: e.status().as_u16(), code: e.code(), detail }.to_control()
+        })?;
+        Ok(Box::new(ticket))
+    }
+
+    fn hold(&self, units: u64) -> Held {
+        Box::new(self.work.broadcast_meters()[0].hold(&CallerKey::Token(Arc::from(LAYOUTS)), units))
+    }
+
+    fn run(&self, held: Held, job: Box<dyn FnOnce() + Send>) -> BoxFuture<'static, bool> {
+        let work = Arc::clone(&self.work);
+        let ticket = work.broadcast_meters()[0].hold(&CallerKey::Token(Arc::from(LAYOUTS)), 0);
+        Box::pin(async move {
+            let ran = work
+                .run(ticket, move |_| {
+                    let _held = held;
+                    job();
+                })
+                .await;
+            if let Err(e) = &ran {
+                tracing::warn!(error = %e, "choosing a broadcast's compact layouts failed");
+            }
+            ran.is_ok()
+        })
+    }
 }

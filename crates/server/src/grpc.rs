@@ -583,7 +583,7 @@ impl Animation for GrpcService {
             0 | 1 => None,
             2 => {
                 let asked = (req.max_error.map(Raw::Number), req.distance.map(Raw::Number));
-                Some(crate::request::compact_watch(&self.state, b.params(), asked, in_body, &caller).await?)
+                Some(crate::request::compact_watch(&self.state, &b, asked, in_body, &caller).await?)
             }
             n => {
                 let detail = format!("`encoding`: unknown frame encoding {n}");

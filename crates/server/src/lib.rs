@@ -190,6 +190,8 @@ impl Application {
         // Broadcasts are kept in the store: resumed after a restart, shared by every node.
         let journal = broadcast_store::StoreJournal { store: Arc::clone(&state.store) };
         state.streams.broadcasts().set_journal(Arc::new(journal));
+        let layouts = broadcast_work::PooledLayouts { work: Arc::clone(&state.work) };
+        state.streams.broadcasts().set_layout_work(Arc::new(layouts));
         let app = Application { listener, grpc_listener, state, tls, change_feed };
         // One line with every setting in effect; `Secret` and `StoreConfig` print no token or password.
         tracing::info!(

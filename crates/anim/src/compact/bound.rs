@@ -71,22 +71,7 @@ impl Ranges {
     /// Frees the rotations `ik` and `springs` turn (they change rotations
     /// only: docs/ik.md, docs/springs.md).
     pub fn turned_by(&mut self, skeleton: &Skeleton, ik: &[IkConstraint], springs: Option<&Springs>) {
-        for c in ik {
-            match c {
-                IkConstraint::TwoBone(t) => t.joints.iter().for_each(|&j| self.free_rotation(j)),
-                IkConstraint::Aim(a) => self.free_rotation(a.joint),
-                IkConstraint::Chain(chain) => {
-                    chain.joints.iter().flatten().for_each(|&j| self.free_rotation(j));
-                    for e in &chain.effectors {
-                        let mut at = Some(e.joint);
-                        while let Some(j) = at {
-                            self.free_rotation(j);
-                            at = skeleton.parent(j);
-                        }
-                    }
-                }
-            }
-        }
+        turned_joints(skeleton, ik).into_iter().for_each(|j| self.free_rotation(j));
         springs.into_iter().flat_map(Springs::spring_joints).for_each(|j| self.free_rotation(j));
     }
 
@@ -339,4 +324,29 @@ fn factor(lo: f32, hi: f32, reference: f32) -> (f32, f32) {
     }
     let (a, b) = (lo / reference, hi / reference);
     (a.min(b).min(1.0), a.max(b).max(1.0))
+}
+
+/// The joints `ik` turns, ascending, each once: a two-bone chain's three,
+/// an aim joint, a chain's joints and every ancestor of its effectors.
+pub fn turned_joints(skeleton: &Skeleton, ik: &[IkConstraint]) -> Vec<usize> {
+    let mut joints = Vec::new();
+    for c in ik {
+        match c {
+            IkConstraint::TwoBone(t) => joints.extend(t.joints),
+            IkConstraint::Aim(a) => joints.push(a.joint),
+            IkConstraint::Chain(chain) => {
+                joints.extend(chain.joints.iter().flatten());
+                for e in &chain.effectors {
+                    let mut at = Some(e.joint);
+                    while let Some(j) = at {
+                        joints.push(j);
+                        at = skeleton.parent(j);
+                    }
+                }
+            }
+        }
+    }
+    joints.sort_unstable();
+    joints.dedup();
+    joints
 }

@@ -19,6 +19,7 @@
 use glam::{Quat, Vec3, Vec3A};
 
 mod bound;
+pub use bound::turned_joints;
 mod moved;
 
 use crate::{Clip, Cursor, Pose, Skeleton};

@@ -18,8 +18,8 @@ use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
-    AdmitError, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, MAX_FPS, ParamError, Repricing,
-    StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
+    AdmitError, Broadcast, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, MAX_FPS, ParamError,
+    ReachSig, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
 };
 use crate::work::{Ticket, price};
 
@@ -82,8 +82,10 @@ impl Repricing for StreamCharge {
 }
 
 /// A broadcast viewer's compact frames (docs/compact-frames.md): the
-/// layout of `params`' clip at the bound and distance asked for, chosen as
-/// a stream's is, and the ticket that holds the encoding's price per
+/// layout at the bound and distance asked for of what `b` has played
+/// (`Broadcast::reach`: its definition, and every motion its crossfades
+/// faded to and joint its `ik` controls turned), chosen on the work pool
+/// and priced by its range samples, and the ticket that holds the encoding's price per
 /// second of playback against `caller` while it watches (the broadcast's
 /// own price, its creator's, covers its JSON and protobuf frames).
 ///
@@ -93,11 +95,12 @@ impl Repricing for StreamCharge {
 /// `caller_work_limit`, `overloaded`.
 pub async fn compact_watch(
     state: &AppState,
-    params: &StreamParams,
+    b: &Broadcast,
     (max_error, distance): (Option<Raw<'_>>, Option<Raw<'_>>),
     at: Locate,
     caller: &Caller,
-) -> Result<(Arc<CompactLayout>, Ticket), ApiError> {
+) -> Result<((Arc<CompactLayout>, ReachSig), Ticket), ApiError> {
+    let params = b.params();
     let raw = RawStream {
         fps: None,
         start: None,
@@ -127,9 +130,24 @@ pub async fn compact_watch(
     let per_sec = stream_work(price::compact_frame(joints), frame, params.fps);
     check_stream_work(per_sec, &state.config.limits, at)?;
     let ticket = state.work.charge(&caller.key(), per_sec)?;
-    let with = raw.with_layout(params.clone(), compact, state, &caller.key()).await?;
-    let layout = with.compact.expect("a compact request has its layout");
-    Ok((layout, ticket))
+    let (max_error, distance) = compact.expect("a compact request has its bound");
+    let reach = b.reach();
+    let units = price::compact_layout(reach.samples(params), reach.sample_price(params, &price::clip_pose));
+    let limit = state.config.limits.max_request_work;
+    if units > limit {
+        let detail = format!(
+            "choosing this broadcast's compact layout costs {units} work units; the limit (max_request_work, \
+             --max-request-work) is {limit}"
+        );
+        return Err(unprocessable("too_much_work", Field::Encoding, at, detail));
+    }
+    let (params, sig) = (params.clone(), reach.sig());
+    let layout = state
+        .work
+        .spend(&caller.key(), units, move |_| reach.layout(&params, max_error, distance))
+        .await?
+        .map_err(|e| raw.compact_refused(e))?;
+    Ok(((Arc::new(layout), sig), ticket))
 }
 
 /// The frame rate of a stream that names none (the WebSocket's default;

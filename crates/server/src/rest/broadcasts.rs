@@ -259,7 +259,7 @@ pub async fn watch(
     let compact_asked = (q.raw("max_error"), q.raw("distance"));
     let b = live(&state, &id).await?;
     let compact = match encoding {
-        Encoding::Compact => Some(compact_watch(&state, b.params(), compact_asked, in_query, &caller).await?),
+        Encoding::Compact => Some(compact_watch(&state, &b, compact_asked, in_query, &caller).await?),
         _ if compact_asked.0.is_some() || compact_asked.1.is_some() => {
             let detail = "`max_error` and `distance` apply to `encoding=compact` only";
             return Err(ApiError::parameter("unknown_parameter", "max_error", detail));

@@ -61,6 +61,7 @@ use tokio::time::Instant;
 
 use super::broadcast_budget::{BroadcastCharge, Budget, Overrun, thread_cpu_ns};
 use super::broadcast_program::{ControlLog, Program, StampedControl};
+use super::broadcast_reach::{Reach, ReachSig};
 use super::checkpoint::Checkpoint;
 use super::compact::{CompactLayout, CompactRefusal};
 use super::control::{Control, ControlCheck, ControlError};
@@ -144,6 +145,27 @@ pub trait Journal: Send + Sync + 'static {
     }
 }
 
+/// Where a broadcast's new compact layouts are priced and chosen (the
+/// server's work pool, docs/compact-frames.md "A broadcast's layouts");
+/// without one they are chosen on a blocking thread, unpriced.
+pub trait LayoutWork: Send + Sync + 'static {
+    /// Charges `units` for choosing new layouts, before any work.
+    ///
+    /// # Errors
+    /// `too_much_work` over `max_request_work`, `caller_work_limit`,
+    /// `overloaded`.
+    fn charge(&self, units: u64) -> Result<Held, ControlError>;
+    /// Charges `units` without refusing: the layouts of controls already
+    /// applied (heard from another node, or stepped before a viewer came).
+    fn hold(&self, units: u64) -> Held;
+    /// Runs `job` on the work pool, holding `held` until it ends; yields
+    /// whether it ran (not past the request timeout).
+    fn run(&self, held: Held, job: Box<dyn FnOnce() + Send>) -> BoxFuture<'static, bool>;
+}
+
+/// A charge held while layouts are chosen.
+pub type Held = Box<dyn std::any::Any + Send>;
+
 /// How often broadcasts are checkpointed, and how many controls one may
 /// hold between checkpoints (docs/broadcasts.md "Checkpoints").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -208,6 +230,7 @@ struct Registry {
     lead: Duration,
     checkpointing: Checkpointing,
     journal: OnceLock<Arc<dyn Journal>>,
+    layout_work: OnceLock<Arc<dyn LayoutWork>>,
     shutdown: watch::Receiver<bool>,
 }
 
@@ -250,8 +273,16 @@ impl Broadcasts {
     ) -> Self {
         let journal = OnceLock::new();
         let live = Mutex::default();
-        let registry = Registry { live, max, epoch, buffer, precise, lead, checkpointing, journal, shutdown };
+        let layout_work = OnceLock::new();
+        let registry =
+            Registry { live, max, epoch, buffer, precise, lead, checkpointing, journal, layout_work, shutdown };
         Broadcasts { inner: Arc::new(registry) }
+    }
+
+    /// Prices and chooses broadcasts' new compact layouts with `work` from
+    /// now on (set once, at startup).
+    pub fn set_layout_work(&self, work: Arc<dyn LayoutWork>) {
+        let _ = self.inner.layout_work.set(work);
     }
 
     /// Keeps broadcasts in `journal` from now on (set once, at startup).
@@ -355,6 +386,9 @@ impl Broadcasts {
             json: broadcast::channel(self.inner.buffer).0,
             protobuf: broadcast::channel(self.inner.buffer).0,
             compact: Mutex::new(Vec::new()),
+            layouts: Arc::new(Mutex::new(Book::default())),
+            layout_work: self.inner.layout_work.get().cloned(),
+            runtime: tokio::runtime::Handle::current(),
             buffer: self.inner.buffer,
             desk: Arc::new(Mutex::new(Desk {
                 budget: Budget::new(charge, &spec.params.motion, spec.params.fps),
@@ -363,6 +397,7 @@ impl Broadcasts {
                 revoked: Vec::new(),
                 known: HashSet::new(),
                 check: ControlCheck::new(&spec.params),
+                reach: Reach::new(&spec.params),
                 paused: spec.params.paused,
                 speed: spec.params.speed,
                 last_control: Instant::now(),
@@ -402,6 +437,7 @@ impl Broadcasts {
         {
             let mut desk = broadcast.desk();
             (desk.paused, desk.speed) = program.playing();
+            desk.reach = program.reach().clone();
         }
         for c in controls {
             broadcast.heard(c);
@@ -502,6 +538,8 @@ struct Desk {
     /// Ids of every control accepted (one heard twice is taken once).
     known: HashSet<Arc<str>>,
     check: ControlCheck,
+    /// What it will have played once the controls accepted apply.
+    reach: Reach,
     /// Its price, raised or lowered by the controls that change it.
     budget: Budget,
     paused: bool,
@@ -512,10 +550,48 @@ struct Desk {
 /// Layouts of compact frames one broadcast encodes at once.
 pub const MAX_COMPACT_LAYOUTS: usize = 4;
 
-/// The viewers of one compact layout.
+/// The viewers of one compact `max_error` and `distance`, and the layout
+/// they are sent now: the one of the reach it was chosen for.
 struct CompactChannel {
     layout: Arc<CompactLayout>,
+    sig: ReachSig,
     tx: broadcast::Sender<Item>,
+}
+
+/// Layouts of one `max_error` and `distance` kept for reaches, at most.
+const BOOK: usize = 32;
+
+/// The compact layouts chosen (or being chosen) for the reaches the
+/// broadcast played or is about to, per `max_error` and `distance`.
+#[derive(Default)]
+struct Book {
+    entries: std::collections::VecDeque<((u32, u32), ReachSig, Chosen)>,
+}
+
+#[derive(Clone)]
+enum Chosen {
+    Pending,
+    Ready(Arc<CompactLayout>),
+    /// Its work was refused or failed: its viewers are ended.
+    Failed,
+}
+
+impl Book {
+    fn get(&self, key: (u32, u32), sig: &ReachSig) -> Option<Chosen> {
+        self.entries.iter().find(|(k, s, _)| *k == key && s == sig).map(|(_, _, c)| c.clone())
+    }
+
+    fn put(&mut self, key: (u32, u32), sig: &ReachSig, chosen: Chosen) {
+        match self.entries.iter_mut().find(|(k, s, _)| *k == key && s == sig) {
+            Some(entry) => entry.2 = chosen,
+            None => {
+                if self.entries.len() >= BOOK * MAX_COMPACT_LAYOUTS {
+                    self.entries.pop_front();
+                }
+                self.entries.push_back((key, sig.clone(), chosen));
+            }
+        }
+    }
 }
 
 /// One live broadcast.
@@ -532,6 +608,11 @@ pub struct Broadcast {
     protobuf: broadcast::Sender<Item>,
     /// Compact viewers' channels, one per layout (at most [`MAX_COMPACT_LAYOUTS`]).
     compact: Mutex<Vec<CompactChannel>>,
+    /// Their layouts for each reach (locked after `compact`, never before).
+    layouts: Arc<Mutex<Book>>,
+    layout_work: Option<Arc<dyn LayoutWork>>,
+    /// Where the choosing of layouts is started from.
+    runtime: tokio::runtime::Handle,
     /// Frames a viewer's channel holds.
     buffer: usize,
     desk: Arc<Mutex<Desk>>,
@@ -593,39 +674,35 @@ impl Broadcast {
         self.json.receiver_count() + self.protobuf.receiver_count() + compact
     }
 
-    /// A viewer of compact frames of `layout` from the next tick on, as
-    /// [`Broadcast::watch`]. Refused while the broadcast plays anything but
-    /// its clip (a crossfade, layer or ik control was applied), and beyond
-    /// [`MAX_COMPACT_LAYOUTS`] layouts at once.
+    /// What it will have played once the controls accepted apply: what a
+    /// compact watch opened now chooses its layout for.
+    pub fn reach(&self) -> Reach {
+        self.desk().reach.clone()
+    }
+
+    /// A viewer of compact frames of `layout` (chosen for `reach`) from
+    /// the next tick on, as [`Broadcast::watch`]; a viewer of a `max_error`
+    /// and `distance` already watched joins its channel, in the layout it
+    /// is sent. Refused beyond [`MAX_COMPACT_LAYOUTS`] layouts at once.
     ///
     /// # Errors
-    /// `compact_unsupported`, `too_many_compact_layouts`.
+    /// `too_many_compact_layouts`.
     pub fn watch_compact(
         self: &Arc<Self>,
-        layout: Arc<CompactLayout>,
+        (layout, reach): (Arc<CompactLayout>, ReachSig),
         permit: StreamPermit,
         controls: Option<ControlGate>,
     ) -> Result<Subscription, CompactRefusal> {
-        // Under the desk's lock, so no control that leaves the clip is stamped meanwhile.
-        let desk = self.desk();
-        if desk.check.departed(layout.any_weights) {
-            return Err(CompactRefusal {
-                code: "compact_unsupported",
-                field: "encoding",
-                detail: "this broadcast has played a crossfade or ik control (or a layer ramp on one clip): its \
-                         poses are no longer those a compact layout's ranges hold"
-                    .into(),
-            });
-        }
         let rx = {
             let mut channels = crate::sync::lock(&self.compact);
             if self.ended.load(Ordering::Acquire) {
                 let (tx, rx) = broadcast::channel(1);
                 let _ = tx.send(Item::End(EndReason::Ended));
-                drop((channels, desk));
+                drop(channels);
                 return Ok(self.subscription(Encoding::Compact, rx, None, permit));
             }
             channels.retain(|c| c.tx.receiver_count() > 0);
+            crate::sync::lock(&self.layouts).put(layout.key(), &reach, Chosen::Ready(Arc::clone(&layout)));
             match channels.iter().find(|c| c.layout.key() == layout.key()) {
                 Some(c) => c.tx.subscribe(),
                 None if channels.len() >= MAX_COMPACT_LAYOUTS => {
@@ -640,12 +717,11 @@ impl Broadcast {
                 }
                 None => {
                     let (tx, rx) = broadcast::channel(self.buffer);
-                    channels.push(CompactChannel { layout: Arc::clone(&layout), tx });
+                    channels.push(CompactChannel { layout: Arc::clone(&layout), sig: reach, tx });
                     rx
                 }
             }
         };
-        drop(desk);
         metrics::counter!("inbetween_broadcast_viewers_total").increment(1);
         let sink = controls.map(|gate| Arc::new(Gated { broadcast: Arc::clone(self), gate }) as Arc<dyn ControlSink>);
         let params = StreamParams { max_frames: None, ..self.spec.params.clone() }.with_compact(layout);
@@ -653,10 +729,93 @@ impl Broadcast {
         Ok(Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls: sink }, shutdown, permit))
     }
 
-    /// Whether compact viewers watch a layout `control` would leave: it is refused then.
-    fn leaves_a_watched_layout(&self, control: &Control) -> bool {
+    /// Puts each channel in its layout for `reach` (what the tick just
+    /// stepped has played); returns the keys of those whose layout is not
+    /// chosen yet (they skip this tick). A channel whose layout could not
+    /// be chosen ends.
+    fn follow_reach(&self, channels: &mut Vec<CompactChannel>, reach: &Reach) -> Vec<(u32, u32)> {
+        let sig = reach.sig();
+        let book = crate::sync::lock(&self.layouts);
+        let mut missing = Vec::new();
+        channels.retain_mut(|c| {
+            if c.sig == sig {
+                return true;
+            }
+            match book.get(c.layout.key(), &sig) {
+                Some(Chosen::Ready(layout)) => (c.layout, c.sig) = (layout, sig.clone()),
+                Some(Chosen::Failed) => {
+                    let _ = c.tx.send(Item::End(EndReason::Failed));
+                    return false;
+                }
+                Some(Chosen::Pending) => missing.push(c.layout.key()),
+                None => missing.push(c.layout.key()),
+            }
+            true
+        });
+        missing
+    }
+
+    /// The `max_error` and `distance` of the compact layouts watched now.
+    fn watched_keys(&self) -> Vec<(u32, u32)> {
         let channels = crate::sync::lock(&self.compact);
-        channels.iter().any(|c| c.tx.receiver_count() > 0 && control.leaves_the_layout(c.layout.any_weights))
+        channels.iter().filter(|c| c.tx.receiver_count() > 0).map(|c| c.layout.key()).collect()
+    }
+
+    /// What choosing the layouts of `keys` for `reach` costs: its range
+    /// samples (each a pose of the costliest clip they read) and one
+    /// choice per layout.
+    fn layouts_price(&self, reach: &Reach, keys: usize) -> u64 {
+        let params = &self.spec.params;
+        let samples = reach.samples(params).saturating_add(keys as u64);
+        crate::work::price::compact_layout(samples, reach.sample_price(params, &crate::work::price::clip_pose))
+    }
+
+    /// Chooses the layouts of `keys` for `reach` on the work pool (those
+    /// not chosen or being chosen yet), holding `held` (`None`: charged
+    /// now, without refusing).
+    fn choose_layouts(&self, reach: &Reach, keys: Vec<(u32, u32)>, held: Option<Held>) {
+        let sig = reach.sig();
+        let keys: Vec<_> = {
+            let mut book = crate::sync::lock(&self.layouts);
+            let missing: Vec<_> = keys.into_iter().filter(|k| book.get(*k, &sig).is_none()).collect();
+            missing.iter().for_each(|k| book.put(*k, &sig, Chosen::Pending));
+            missing
+        };
+        if keys.is_empty() {
+            return;
+        }
+        let units = self.layouts_price(reach, keys.len());
+        let (params, reach, book) = (self.spec.params.clone(), reach.clone(), Arc::clone(&self.layouts));
+        let (failed, book_again, sig_again) = (keys.clone(), Arc::clone(&book), sig.clone());
+        let job = move || {
+            for key in keys {
+                let (max_error, distance) = (f32::from_bits(key.0), Some(f32::from_bits(key.1)));
+                let chosen = match reach.layout(&params, max_error, distance) {
+                    Ok(layout) => Chosen::Ready(Arc::new(layout)),
+                    Err(e) => {
+                        tracing::warn!(error = %e, "a broadcast's compact layout could not be chosen");
+                        Chosen::Failed
+                    }
+                };
+                crate::sync::lock(&book).put(key, &sig, chosen);
+            }
+        };
+        let Some(work) = &self.layout_work else {
+            drop(self.runtime.spawn_blocking(job));
+            return;
+        };
+        let held = held.unwrap_or_else(|| work.hold(units));
+        let run = work.run(held, Box::new(job));
+        drop(self.runtime.spawn(async move {
+            if !run.await {
+                let mut book = crate::sync::lock(&book_again);
+                for k in failed {
+                    if matches!(book.get(k, &sig_again), Some(Chosen::Pending)) {
+                        book.put(k, &sig_again, Chosen::Failed);
+                    }
+                }
+            }
+        }));
     }
 
     fn desk(&self) -> MutexGuard<'_, Desk> {
@@ -721,7 +880,7 @@ impl Broadcast {
     pub fn prepare(&self, control: Control) -> Result<(u64, Control), ControlError> {
         self.admissible(&control)?;
         let ahead = self.ahead();
-        Self::stamp(&mut self.desk(), control, ahead)
+        self.stamp(&mut self.desk(), control, ahead).map(|(seq, control, _)| (seq, control))
     }
 
     /// [`Broadcast::prepare`] and [`Broadcast::accept`] under one lock (so
@@ -733,8 +892,8 @@ impl Broadcast {
         self.admissible(&control)?;
         let ahead = self.ahead();
         let mut desk = self.desk();
-        let (seq, control) = Self::stamp(&mut desk, control, ahead)?;
-        Self::file(&mut desk, StampedControl { seq, id, control });
+        let (seq, control, held) = self.stamp(&mut desk, control, ahead)?;
+        self.file(&mut desk, StampedControl { seq, id, control }, held);
         Ok(seq)
     }
 
@@ -742,10 +901,13 @@ impl Broadcast {
         if let Some(refusal) = control.refused_on_broadcast() {
             return Err(ControlError::Invalid(refusal));
         }
-        if self.leaves_a_watched_layout(control) {
+        if let Control::Crossfade(fade) = control
+            && anim::compact::Ranges::boundable(&fade.to).is_err()
+            && !self.watched_keys().is_empty()
+        {
             return Err(ControlError::Invalid(
-                "compact viewers watch this broadcast, whose layout holds its poses only: crossfade and ik controls \
-                 (and layer ramps on one clip) are refused while they do",
+                "compact viewers watch this broadcast: it cannot crossfade to a motion whose poses no range bounds \
+                 (a layer retargeted onto a character, root motion `extract`)",
             ));
         }
         if self.ended.load(Ordering::Acquire) {
@@ -766,26 +928,74 @@ impl Broadcast {
     }
 
     /// Checks and prices `control` (nothing changes if either refuses it)
-    /// and stamps it.
-    fn stamp(desk: &mut Desk, control: Control, ahead: Option<u64>) -> Result<(u64, Control), ControlError> {
+    /// and stamps it; with the charge for the compact layouts it makes the
+    /// broadcast choose, if it leaves the watched ones.
+    fn stamp(
+        &self,
+        desk: &mut Desk,
+        control: Control,
+        ahead: Option<u64>,
+    ) -> Result<(u64, Control, Option<Held>), ControlError> {
         if desk.inbox.len() >= PENDING_CONTROLS {
             return Err(ControlError::Busy);
         }
         let mut check = desk.check.clone();
         let control = check.check(control)?;
+        if desk.reach.full_for(&control) {
+            let detail = format!(
+                "this broadcast has crossfaded to {} distinct motions, the most its compact layouts keep track of; \
+                 crossfade to one of those",
+                super::broadcast_reach::MAX_PLAYED
+            );
+            return Err(
+                crate::error::ApiError::Relayed { status: 422, code: "broadcast_motions_full", detail }.to_control()
+            );
+        }
+        let held = self.charge_layouts(desk, &control)?;
         desk.budget.reprice(&control, check.motion())?;
         desk.check = check;
-        Ok((ahead.unwrap_or(0).max(desk.next), control))
+        Ok((ahead.unwrap_or(0).max(desk.next), control, held))
+    }
+
+    /// Charges choosing the new layouts `control` makes the watched ones
+    /// need (docs/compact-frames.md "A broadcast's layouts"), before any
+    /// work; `None`: it needs none.
+    fn charge_layouts(&self, desk: &Desk, control: &Control) -> Result<Option<Held>, ControlError> {
+        let (Some(work), keys) = (&self.layout_work, self.watched_keys()) else { return Ok(None) };
+        let mut next = desk.reach.clone();
+        next.apply(control, &new_control_id(), self.spec.params.motion.skeleton());
+        if keys.is_empty() || next.sig() == desk.reach.sig() {
+            return Ok(None);
+        }
+        let units = self.layouts_price(&next, keys.len());
+        let limit = desk.budget.limit();
+        if units > limit {
+            let detail = format!(
+                "choosing this broadcast's new compact layouts costs {units} work units; the limit \
+                 (max_request_work, --max-request-work) is {limit}"
+            );
+            return Err(crate::error::ApiError::Relayed { status: 422, code: "too_much_work", detail }.to_control());
+        }
+        work.charge(units).map(Some)
     }
 
     /// Applies a prepared control from its stamp on, for every viewer.
     pub fn accept(&self, control: StampedControl) {
-        Self::file(&mut self.desk(), control);
+        self.file(&mut self.desk(), control, None);
     }
 
-    fn file(desk: &mut Desk, control: StampedControl) {
+    /// Files `control` for the task; if it changes what the broadcast will
+    /// have played, chooses the watched layouts for that (holding `held`,
+    /// its charge, if it was charged).
+    fn file(&self, desk: &mut Desk, control: StampedControl, held: Option<Held>) {
         if !desk.known.insert(Arc::clone(&control.id)) {
             return;
+        }
+        let before = desk.reach.sig();
+        desk.reach.apply(&control.control, &control.id, self.spec.params.motion.skeleton());
+        let keys = self.watched_keys();
+        if desk.reach.sig() != before && !keys.is_empty() {
+            self.choose_layouts(&desk.reach, keys, held);
         }
         (desk.paused, desk.speed) = control.control.status_after(desk.paused, desk.speed);
         desk.inbox.push(control);
@@ -1035,10 +1245,15 @@ impl Task {
         // Once per layout watched, whatever its viewers' number.
         let mut channels = crate::sync::lock(&b.compact);
         channels.retain(|c| c.tx.receiver_count() > 0);
-        for c in channels.iter() {
+        let missing = b.follow_reach(&mut channels, program.reach());
+        for c in channels.iter().filter(|c| !missing.contains(&c.layout.key())) {
             let _ = c.tx.send(timed(&mut || Item::Frame(program.encode_compact(&c.layout, sent_at))));
         }
         program.keep_compact(|key| channels.iter().any(|c| c.layout.key() == key));
+        drop(channels);
+        if !missing.is_empty() {
+            b.choose_layouts(program.reach(), missing, None);
+        }
         encoded
     }
 

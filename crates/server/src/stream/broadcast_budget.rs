@@ -80,6 +80,11 @@ impl Budget {
         }
     }
 
+    /// The most one piece of its work may cost (`max_request_work`).
+    pub(crate) fn limit(&self) -> u64 {
+        self.limit_per_sec
+    }
+
     /// Work units of one tick now.
     pub(crate) fn per_tick(&self) -> u64 {
         self.base.saturating_add(price::broadcast_frame(&self.chain.motions(), self.ik, self.fps as u32))

@@ -31,6 +31,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use super::broadcast_reach::Reach;
 use super::checkpoint::{Checkpoint, CheckpointError, Lookup, Naming, Source};
 use super::compact::CompactLayout;
 use super::control::{Applied, Control, Refused};
@@ -152,6 +153,8 @@ struct State {
     fades: VecDeque<(Arc<StreamMotion>, Arc<str>)>,
     /// The `ik` control whose list the player has (`None`: the definition's).
     ik_from: Option<Arc<str>>,
+    /// What it has played since tick 0, which its compact layouts hold.
+    reach: Reach,
 }
 
 impl State {
@@ -166,6 +169,7 @@ impl State {
             stepped: None,
             fades: VecDeque::new(),
             ik_from: None,
+            reach: Reach::new(params),
         }
     }
 
@@ -183,7 +187,8 @@ impl State {
         let naming = Naming { motion: &|m| self.source_of(m), ik };
         let prev = self.prev.as_ref().map(|(x, _)| *x);
         let playing = Playing { player: &self.player, graph: self.graph.as_ref() };
-        Some(Checkpoint::capture(tick, &self.playhead, playing, prev, self.clip_time, &naming))
+        let checkpoint = Checkpoint::capture(tick, &self.playhead, playing, prev, self.clip_time, &naming);
+        Some(checkpoint.with_reach(self.reach.bits()))
     }
 
     /// The state `checkpoint` describes, its motions and IK list found in
@@ -216,6 +221,12 @@ impl State {
             .into_values()
             .collect();
         let ik_from = named.iter().filter_map(|id| log.find(id)).find(|c| matches!(c.control, Control::SetIk(_)));
+        let fade_of = |id: &str| match &log.find(id)?.control {
+            Control::Crossfade(fade) => Some(fade.clone()),
+            _ => None,
+        };
+        let reach = Reach::from_bits(params, checkpoint.reach(), &fade_of)
+            .ok_or_else(|| CheckpointError::MissingControl("a motion the broadcast played".into()))?;
         let top = Arc::clone(restored.player.motion());
         Ok(State {
             playhead: restored.playhead,
@@ -227,6 +238,7 @@ impl State {
             stepped: Some(checkpoint.tick),
             fades,
             ik_from: ik_from.map(|c| Arc::clone(&c.id)),
+            reach,
         })
     }
 
@@ -254,8 +266,9 @@ pub struct Program {
     floor: State,
     json: FrameEncoder,
     protobuf: FrameEncoder,
-    /// Compact frames' encoders, one per layout its viewers asked for.
-    compact: Vec<((u32, u32), FrameEncoder)>,
+    /// Compact frames' encoders, one per `max_error` and `distance` its
+    /// viewers asked for, with the document of the layout each encodes in.
+    compact: Vec<((u32, u32), Arc<str>, FrameEncoder)>,
 }
 
 impl Program {
@@ -298,6 +311,12 @@ impl Program {
     pub fn checkpointing(mut self, every: u64) -> Self {
         self.checkpoint_every = every;
         self
+    }
+
+    /// What it has played through the last tick stepped (its compact
+    /// layouts hold it: `broadcast_reach`).
+    pub fn reach(&self) -> &Reach {
+        &self.state.reach
     }
 
     /// Whether it is paused, and its speed, as of the last tick stepped.
@@ -440,6 +459,7 @@ impl Program {
             Ok(Applied::Jumped) => true,
             // A broadcast refuses `stop` (`Control::refused_on_broadcast`).
             Ok(Applied::Continued | Applied::Stopped) => {
+                st.reach.apply(&c.control, &c.id, self.params.motion.skeleton());
                 match named {
                     Some(Some(to)) => {
                         if st.fades.len() > anim::motion::MAX_FADES {
@@ -474,25 +494,32 @@ impl Program {
     }
 
     /// The last stepped tick as a compact frame of `layout` (a key frame
-    /// when this layout's encoder is new, or its key interval is up).
+    /// when this layout's encoder is new, its key interval is up, or the
+    /// layout of its `max_error` and `distance` changed: a new layout,
+    /// docs/compact-frames.md).
     pub fn encode_compact(&mut self, layout: &CompactLayout, sent_at: i64) -> Encoded {
         let key = layout.key();
-        let at = match self.compact.iter().position(|(k, _)| *k == key) {
+        let at = match self.compact.iter().position(|(k, _, _)| *k == key) {
             Some(at) => at,
             None => {
-                self.compact.push((key, FrameEncoder::compact(layout)));
+                self.compact.push((key, Arc::clone(&layout.document), FrameEncoder::compact(layout)));
                 self.compact.len() - 1
             }
         };
+        let (_, document, encoder) = &mut self.compact[at];
+        if !Arc::ptr_eq(document, &layout.document) {
+            encoder.relayout(layout);
+            *document = Arc::clone(&layout.document);
+        }
         let st = &self.state;
         let tick = TickStamp { seq: st.stepped.unwrap_or(0), dropped: 0, sent_at, clip_time: st.clip_time };
         let playing = Playing { player: &st.player, graph: st.graph.as_ref() };
         let data = frame_data(playing, &self.params, &st.crossed, tick, false);
-        self.compact[at].1.encode(&data)
+        self.compact[at].2.encode(&data)
     }
 
     /// Drops the compact encoders of layouts nobody watches any more.
     pub fn keep_compact(&mut self, watched: impl Fn((u32, u32)) -> bool) {
-        self.compact.retain(|(k, _)| watched(*k));
+        self.compact.retain(|(k, _, _)| watched(*k));
     }
 }

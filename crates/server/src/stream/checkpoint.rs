@@ -24,6 +24,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+use super::broadcast_reach::ReachBits;
 use super::graph::GraphDeck;
 use super::hub::Playing;
 use super::params::StreamParams;
@@ -81,6 +82,10 @@ pub struct Checkpoint {
     /// The springs of a graph broadcast's motion, when it has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     graph_springs: Option<SpringBits>,
+    /// What it has played since tick 0, which its compact layouts hold
+    /// (`broadcast_reach`; absent: nothing beyond its definition).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    reach: Option<ReachBits>,
 }
 
 /// What a [`Checkpoint`] restores.
@@ -260,7 +265,18 @@ impl Checkpoint {
             player: player_bits(playing.player.state(), naming, true),
             graph: playing.graph.map(|g| graph_bits(g.state().0)),
             graph_springs: playing.graph.and_then(|g| g.state().1).map(|s| spring_bits((s, None))),
+            reach: None,
         }
+    }
+
+    /// The same checkpoint carrying what the broadcast played (`reach`).
+    pub(super) fn with_reach(self, reach: Option<ReachBits>) -> Self {
+        Checkpoint { reach, ..self }
+    }
+
+    /// What the broadcast had played through its tick.
+    pub(super) fn reach(&self) -> Option<&ReachBits> {
+        self.reach.as_ref()
     }
 
     /// A program state again, its motions and IK list found by `lookup`.
@@ -298,10 +314,13 @@ impl Checkpoint {
         })
     }
 
-    /// The controls it names (the store keeps them while it is the newest).
+    /// The controls it names (the store keeps them while it is the newest):
+    /// the motions and IK list on the player, and every motion the
+    /// broadcast has played (`broadcast_reach`, at most `MAX_PLAYED`).
     pub fn controls(&self) -> Vec<String> {
         let mut ids = Vec::new();
         named(&self.player, &mut ids);
+        ids.extend(self.reach.iter().flat_map(|r| r.motions.iter().cloned()));
         ids.sort();
         ids.dedup();
         ids

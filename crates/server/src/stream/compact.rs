@@ -122,7 +122,7 @@ pub fn range_source<'a>(
     Ok((RangeSource::Derived, Ranges::motion_samples(motion, RANGE_RATE)))
 }
 
-fn refusal(what: &str) -> CompactRefusal {
+pub(super) fn refusal(what: &str) -> CompactRefusal {
     CompactRefusal {
         code: "compact_unsupported",
         field: "encoding",
@@ -133,7 +133,7 @@ fn refusal(what: &str) -> CompactRefusal {
 /// The clip of a motion that is one clip played whole (one full-weight
 /// layer, not retargeted, the same joints, no motion-level IK, springs or
 /// root motion), whose own poses bound it.
-fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
+pub(super) fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
     let clip = motion.first_clip().clip();
     let whole = motion.layer_count() == 1
         && motion.ik().is_empty()
@@ -143,6 +143,14 @@ fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
         && motion.weights().first().is_some_and(|w| *w == 1.0)
         && clip.joint_count() == motion.skeleton().len();
     whole.then_some(clip)
+}
+
+/// The ranges of `clip`'s poses and its rest pose: what a stream of it
+/// played whole takes its layout from.
+pub(super) fn clip_ranges(clip: &Clip) -> Ranges {
+    let mut ranges = Ranges::of_clip(clip, RANGE_RATE);
+    ranges.observe(clip.skeleton().rest());
+    ranges
 }
 
 /// What makes a compact stream choose a new layout (docs/compact-frames.md).
@@ -215,9 +223,7 @@ impl CompactLayout {
     /// `distance` (`None`: 10 % of the rest height), with key frames at least
     /// once a second at `fps`.
     pub fn of_clip(clip: &Clip, max_error: f32, distance: Option<f32>, fps: u32) -> CompactLayout {
-        let skeleton: &Skeleton = clip.skeleton();
-        let mut ranges = Ranges::of_clip(clip, RANGE_RATE);
-        ranges.observe(skeleton.rest());
+        let (skeleton, ranges) = (clip.skeleton(), clip_ranges(clip));
         CompactLayout {
             any_weights: false,
             ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, clip.events())
@@ -227,7 +233,7 @@ impl CompactLayout {
     /// A layout of derived `ranges` (they hold any layer weights), whose
     /// frames' events index `events` (the stream's clip's: what its
     /// frames cross, docs/compact-frames.md).
-    fn of_ranges(
+    pub(super) fn of_ranges(
         skeleton: &Skeleton,
         ranges: &Ranges,
         (max_error, distance): (f32, Option<f32>),

@@ -125,19 +125,6 @@ impl Control {
         }
     }
 
-    /// Whether it makes the stream play poses a compact layout's ranges may
-    /// not hold (docs/compact-frames.md): a crossfade or an `ik` control
-    /// always; a layer ramp unless the ranges hold any layer weights. A
-    /// stream chooses a new layout for it; a broadcast refuses it while
-    /// compact viewers watch.
-    pub(crate) fn leaves_the_layout(&self, any_weights: bool) -> bool {
-        match self {
-            Control::Crossfade(_) | Control::Ik(_) | Control::SetIk(_) => true,
-            Control::Layer { .. } => !any_weights,
-            _ => false,
-        }
-    }
-
     /// Why a broadcast refuses this control, if it does (its viewers share
     /// one playback, which only `DELETE` ends).
     pub(crate) fn refused_on_broadcast(&self) -> Option<&'static str> {
@@ -574,10 +561,6 @@ pub(crate) struct ControlCheck {
     /// The new layout the latest accepted control made the stream choose,
     /// until its sender takes it ([`ControlCheck::take_layout`]).
     relayout: Option<Arc<CompactLayout>>,
-    /// A crossfade or an `ik` control was accepted.
-    departed: bool,
-    /// A layer ramp was accepted.
-    reweighted: bool,
     /// A graph stream's graph, which its `set` controls are checked against.
     graph: Option<Arc<StreamGraph>>,
 }
@@ -592,17 +575,8 @@ impl ControlCheck {
             repricing: None,
             compact: params.compact.clone(),
             relayout: None,
-            departed: false,
-            reweighted: false,
             graph: params.graph.as_ref().map(|g| Arc::clone(&g.graph)),
         }
-    }
-
-    /// Whether a control that leaves a layout of `any_weights` passed this
-    /// check (one a later rule refused may count too, which only ever
-    /// refuses compact viewers more).
-    pub(crate) fn departed(&self, any_weights: bool) -> bool {
-        self.departed || (self.reweighted && !any_weights)
     }
 
     /// The motion whose skeleton controls are checked against.
@@ -700,8 +674,6 @@ impl ControlCheck {
         {
             return Err(ControlError::Invalid(UNBOUNDED));
         }
-        self.departed |= control.leaves_the_layout(true);
-        self.reweighted |= matches!(control, Control::Layer { .. });
         match &control {
             Control::Crossfade(fade) => {
                 self.check_fade(fade)?;

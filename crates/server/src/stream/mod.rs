@@ -40,6 +40,7 @@
 mod broadcast;
 mod broadcast_budget;
 mod broadcast_program;
+mod broadcast_reach;
 mod checkpoint;
 mod compact;
 mod control;
@@ -62,11 +63,12 @@ mod ticker;
 pub mod ws;
 
 pub use broadcast::{
-    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Checkpointing, ControlGate, Journal,
-    STORE_QUEUE, new_control_id,
+    Broadcast, BroadcastError, BroadcastSpec, BroadcastStatus, Broadcasts, Checkpointing, ControlGate, Held, Journal,
+    LayoutWork, STORE_QUEUE, new_control_id,
 };
 pub use broadcast_budget::{BroadcastCharge, OVERRUN_FACTOR, TICK_ALLOWANCE_UNITS};
 pub use broadcast_program::{ControlLog, Program, StampedControl};
+pub use broadcast_reach::{MAX_PLAYED, Reach, ReachSig};
 pub use checkpoint::{Checkpoint, CheckpointError};
 pub use compact::{CompactLayout, CompactRefusal, CompactRequest, RANGE_RATE, range_sample_price, range_source};
 pub use control::{

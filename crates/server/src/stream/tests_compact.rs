@@ -2,8 +2,8 @@
 //! a broadcast encodes each tick once per layout for all its compact
 //! viewers, a viewer that lagged past a key frame is sent that key frame
 //! before the delta frame after it (so every frame it receives decodes),
-//! controls that would leave the layout's clip are refused on a broadcast,
-//! and a stream's own bring a new layout.
+//! and controls that leave a layout bring a new one, on a stream and on a
+//! broadcast (each of its layouts at the control's tick).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -58,8 +58,8 @@ async fn viewers_of_a_layout_share_its_bytes_and_a_lagging_one_gets_the_key_fram
     let b = broadcast(&e, 10);
     let l = layout(&b, 1e-4);
     assert_eq!(l.key_interval, 10, "a key frame at least once a second");
-    let mut steady = b.watch_compact(Arc::clone(&l), e.admit(None).unwrap(), None).unwrap();
-    let mut slow = b.watch_compact(Arc::clone(&l), e.admit(None).unwrap(), None).unwrap();
+    let mut steady = b.watch_compact((Arc::clone(&l), ReachSig::default()), e.admit(None).unwrap(), None).unwrap();
+    let mut slow = b.watch_compact((Arc::clone(&l), ReachSig::default()), e.admit(None).unwrap(), None).unwrap();
     let (mut ds, mut dl) = (decoder(&l), decoder(&l));
     for seq in 0..3 {
         let (a, c) = (frame(&mut steady).await, frame(&mut slow).await);
@@ -91,25 +91,55 @@ async fn viewers_of_a_layout_share_its_bytes_and_a_lagging_one_gets_the_key_fram
     }
 }
 
+/// The next frame of `sub` that brings a new layout, decoded by `d` (a
+/// key frame in it); the frames before it decode in the old layout.
+async fn relayout(sub: &mut Subscription, d: &mut CompactDecoder) -> (u64, Arc<str>) {
+    for _ in 0..20 {
+        let f = frame(sub).await;
+        if let Some((seq, doc)) = f.layout.clone() {
+            assert_eq!(seq, f.seq, "it names the first frame in it");
+            d.relayout(&serde_json::from_str(&doc).unwrap());
+            assert!(decode(d, &f)[0].1, "the first frame in a new layout is a key frame");
+            return (seq, doc);
+        }
+        decode(d, &f);
+    }
+    panic!("no new layout in 20 frames")
+}
+
 #[tokio::test(start_paused = true)]
-async fn layouts_are_encoded_apart_and_compact_viewers_hold_the_clip() {
+async fn layouts_are_encoded_apart_and_each_follows_a_layer_ramp_into_a_new_layout() {
     let e = engine();
     let b = broadcast(&e, 10);
     let (fine, coarse) = (layout(&b, 1e-5), layout(&b, 1e-3));
-    let mut a = b.watch_compact(Arc::clone(&fine), e.admit(None).unwrap(), None).unwrap();
-    let mut c = b.watch_compact(Arc::clone(&coarse), e.admit(None).unwrap(), None).unwrap();
+    let mut a = b.watch_compact((Arc::clone(&fine), ReachSig::default()), e.admit(None).unwrap(), None).unwrap();
+    let mut c = b.watch_compact((Arc::clone(&coarse), ReachSig::default()), e.admit(None).unwrap(), None).unwrap();
     let (fa, fc) = (frame(&mut a).await, frame(&mut c).await);
     assert_eq!(fa.seq, fc.seq);
     assert!(fa.bytes.len() > fc.bytes.len(), "a tighter bound takes more bits: {fa:?} {fc:?}");
-    // A layer ramp (as a crossfade, an `ik` control) would play poses outside the layouts' ranges.
-    let fade = Control::Layer { index: 0, weight: 0.5, duration: 0.0 };
-    assert_eq!(b.control(fade.clone()).unwrap_err().code(), "bad_control");
-    assert_eq!(b.control(Control::Seek(0.5)).map(|_| ()), Ok(()), "a seek stays within the clip");
+    let (mut da, mut dc) = (decoder(&fine), decoder(&coarse));
+    decode(&mut da, &fa);
+    decode(&mut dc, &fc);
+    // A layer ramp plays poses outside the clip's own ranges: both layouts widen, at the same tick.
+    let ramp = Control::Layer { index: 0, weight: 0.5, duration: 0.0 };
+    let (stamp, _) = b.control(ramp).unwrap();
+    let ((sa, doc_a), (sc, doc_c)) = (relayout(&mut a, &mut da).await, relayout(&mut c, &mut dc).await);
+    assert_eq!((sa, sc), (stamp, stamp), "each viewer's new layout from the ramp's tick");
+    assert_ne!((&*doc_a, &*doc_c), (&*fine.document, &*coarse.document));
+    assert_ne!(doc_a, doc_c, "one layout per bound");
+    // A seek stays within them.
+    b.control(Control::Seek(0.5)).unwrap();
+    for _ in 0..3 {
+        let f = frame(&mut a).await;
+        assert!(f.layout.is_none(), "seq {}: the derived ranges hold it", f.seq);
+        decode(&mut da, &f);
+    }
     drop((a, c));
-    // Without compact viewers it is accepted, and then a compact watch is refused.
-    b.control(fade).unwrap();
-    let refused = b.watch_compact(fine, e.admit(None).unwrap(), None).unwrap_err();
-    assert_eq!(refused.code, "compact_unsupported");
+    // A watch opened now chooses the layout of what the broadcast has played: the very same.
+    let reach = b.reach();
+    let again = reach.layout(b.params(), 1e-5, None).unwrap();
+    assert_eq!(*again.document, *doc_a);
+    assert!(b.watch_compact((Arc::new(again), reach.sig()), e.admit(None).unwrap(), None).is_ok());
 }
 
 /// A layer ramp on a compact clip stream leaves its observed ranges: the
