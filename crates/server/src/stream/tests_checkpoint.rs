@@ -126,12 +126,12 @@ fn a_program_restored_from_any_checkpoint_makes_the_same_bytes_as_one_stepped_fr
         other.step_to(c, &log);
         assert_eq!(other.checkpoint().unwrap().to_text(), *text, "the checkpoint of tick {c} on another node");
     }
-    // The last crossfade's checkpoint names the controls on the player, and only those.
+    // The last crossfade's checkpoint names the controls on the player and
+    // the motions the broadcast played (its compact layouts hold them), and only those.
     let last = Checkpoint::from_text(texts.last().unwrap()).unwrap();
-    let fade_ids: Vec<String> = log.at(130).iter().chain(log.at(29)).map(|c| c.id.to_string()).collect::<Vec<_>>();
-    let named = last.controls();
-    assert!(named.contains(&fade_ids[0]), "the motion playing: {named:?}");
-    assert!(named.len() <= 2, "at most the fade's two sides: {named:?}");
+    let mut fade_ids: Vec<String> = [20, 29, 130].iter().map(|&k| log.at(k)[0].id.to_string()).collect();
+    fade_ids.sort();
+    assert_eq!(last.controls(), fade_ids, "the three crossfades' motions");
 }
 
 #[test]
@@ -199,4 +199,63 @@ fn a_checkpoint_that_names_a_missing_control_or_another_format_is_refused() {
         Ok(Err(CheckpointError::Unreadable(_)))
     ));
     assert!(Checkpoint::from_text("{}").is_err());
+}
+
+/// A one-layer motion of `clip`, as a crossfade's target.
+fn alone(clip: &Arc<dyn PinnedClip>) -> Arc<StreamMotion> {
+    let spec = MotionSpec { layers: vec![anim::motion::LayerSpec::new(Arc::clone(clip))], ..Default::default() };
+    Arc::new(Motion::build(spec).unwrap())
+}
+
+/// The compact layouts a broadcast chooses follow what it has played (a
+/// layer ramp on its clip, crossfades, an `ik` control), and a program
+/// restored from a checkpoint, or stepped by another node, chooses the
+/// very same documents at every tick after it.
+#[test]
+fn a_restored_program_chooses_the_compact_layouts_of_the_one_stepped_from_tick_0() {
+    let walk = pinned("walk", line(1.0, Vec3::ZERO, Vec3::new(1.0, 0.0, 0.5)));
+    let run = pinned("run", line(0.6, Vec3::ZERO, Vec3::new(0.3, 0.0, 1.5)));
+    let params = StreamParams::new(Arc::clone(&walk), StreamRequest { fps: 30, ..Default::default() }).unwrap();
+    let fade = |to: &Arc<dyn PinnedClip>| {
+        Control::Crossfade(Crossfade { to: alone(to), duration: 0.3, ease: anim::Ease::Linear, source: None })
+    };
+    let aim = anim::ik::IkConstraint::Aim(anim::ik::Aim::new(1, glam::Vec3A::new(0.0, 1.0, 1.0)));
+    let schedule = [
+        (10, Control::Layer { index: 0, weight: 0.5, duration: 0.2 }),
+        (30, fade(&run)),
+        (50, Control::SetIk(vec![aim])),
+        (70, fade(&walk)),
+    ];
+    let mut log = ControlLog::default();
+    for (seq, control) in schedule {
+        log.insert(StampedControl { seq, id: new_control_id(), control });
+    }
+    let document = |p: &Program| Arc::clone(&p.reach().layout(&params, 1e-4, None).unwrap().document);
+    let mut reference = Program::new(&params).checkpointing(EVERY);
+    let mut docs = Vec::new();
+    let mut texts = Vec::new();
+    for k in 0..100 {
+        reference.step_to(k, &log);
+        docs.push(document(&reference));
+        if (k + 1) % EVERY == 0 {
+            texts.push(reference.checkpoint().unwrap().to_text());
+        }
+    }
+    let changes: Vec<u64> = (1..100).filter(|&k| docs[k] != docs[k - 1]).map(|k| k as u64).collect();
+    assert_eq!(changes, [10, 30, 50, 70], "a new layout at each control that widens it, none else");
+    let ik_doc: serde_json::Value = serde_json::from_str(&docs[50]).unwrap();
+    assert!(ik_doc["joints"][1]["rotation"]["smallest_three"]["largest"].is_null(), "the aimed joint is free");
+    for (i, text) in texts.iter().enumerate() {
+        let c = (i as u64 + 1) * EVERY - 1;
+        let checkpoint = Checkpoint::from_text(text).unwrap();
+        let mut restored = Program::from_checkpoint(&params, &checkpoint, &log).unwrap();
+        for k in c + 1..100 {
+            restored.step_to(k, &log);
+            assert_eq!(document(&restored), docs[k as usize], "tick {k} from the checkpoint of {c}");
+        }
+        // Its played motions are named, so the store keeps their controls.
+        if c >= 30 {
+            assert!(checkpoint.controls().contains(&log.at(30)[0].id.to_string()), "tick {c}");
+        }
+    }
 }
