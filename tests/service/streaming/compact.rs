@@ -1385,3 +1385,146 @@ async fn a_compact_graph_watch_carries_the_json_frames_report() {
         "{compared} compared, {transitions} in a transition, states {states:?}"
     );
 }
+
+// ------------------------------------------------ a broadcast's new layouts
+
+/// The JSON frame's local pose (f32 values, as the server evaluated them).
+fn pose_of_json(frame: &Value) -> Vec<Pose> {
+    let v = |x: &Value| x.as_f64().unwrap();
+    let joints = frame["pose"]["joints"].as_array().expect("a JSON frame's pose");
+    let three = |x: &Value| std::array::from_fn(|k| v(&x[k]));
+    joints
+        .iter()
+        .map(|j| (three(&j["translation"]), std::array::from_fn(|k| v(&j["rotation"][k])), three(&j["scale"])))
+        .collect()
+}
+
+/// Holds each compact frame to the JSON frame of the same `seq` within its
+/// layout's stated bound (itself within `max_error`); returns how many.
+fn compare_json(compact: &[Decoded], json: &BTreeMap<u64, Value>, max_error: f64, distance: f64) -> usize {
+    let mut compared = 0;
+    for d in compact {
+        assert!(d.bound <= max_error, "seq {}: a layout of bound {} over {max_error}", d.seq, d.bound);
+        if let Some(frame) = json.get(&d.seq) {
+            let e = worst(&PARENTS, &d.pose, &pose_of_json(frame), distance);
+            assert!(e <= d.bound, "seq {} (key {}): {e} m off, over its layout's bound {}", d.seq, d.key, d.bound);
+            compared += 1;
+        }
+    }
+    compared
+}
+
+/// Whether the layout turns the arm's spine, neck and upper joints freely
+/// (the two-bone IK's joints: `largest: null`).
+fn ik_free(doc: &Value) -> bool {
+    (1..4).all(|j| doc["joints"][j]["rotation"]["smallest_three"]["largest"].is_null())
+}
+
+/// Creates a broadcast of `clip` at 20 fps; returns its id.
+async fn arm_broadcast(app: &TestApp, clip: &str) -> String {
+    let created = app.post_json("/v1/broadcasts", &json!({"motion": {"layers": [{"clip": clip}]}, "fps": 20})).await;
+    created["id"].as_str().unwrap_or_else(|| panic!("a broadcast: {created}")).to_owned()
+}
+
+/// Posts the crossfade to `run` and the arm's IK to broadcast `b`; returns the later stamp.
+async fn fade_and_aim(app: &TestApp, b: &str, run: &str) -> u64 {
+    let mut stamp = 0;
+    let fade = json!({"op": "crossfade", "to": {"layers": [{"clip": run}]}, "duration": 0.5});
+    for control in [fade, json!({"op": "ik", "constraints": arm_ik()})] {
+        let resp = app.http.post(app.url(&format!("/v1/broadcasts/{b}/controls"))).json(&control).send().await.unwrap();
+        let status = resp.status().as_u16();
+        let answer: Value = resp.json().await.unwrap();
+        assert_eq!(status, 200, "{answer}");
+        stamp = answer["seq"].as_u64().unwrap();
+    }
+    stamp
+}
+
+/// docs/compact-frames.md "A broadcast's layouts": while a compact viewer
+/// watches, a crossfade and an `ik` control make the broadcast send it a
+/// new layout followed by a key frame in it; every frame decodes within its
+/// layout's bound of a JSON viewer's frame of the same `seq`; and a compact
+/// watch opened after the controls gets a layout that holds all of it.
+#[tokio::test]
+async fn a_broadcast_crossfades_and_takes_ik_in_new_compact_layouts() {
+    let app = TestApp::start().await;
+    let (walk, run) = walk_and_run(&app).await;
+    let b = arm_broadcast(&app, &walk).await;
+    let max_error = 1e-4;
+    let mut compact = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=compact&max_error={max_error}")).await;
+    let mut plain = app.ws(&format!("/v1/broadcasts/{b}/stream")).await;
+    let doc = opened_layout(&mut compact).await;
+    assert!(!ik_free(&doc), "the walk's own layout: {doc}");
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    let (mut frames, _) = more_frames(&mut compact, &mut decoder, 5).await;
+    let stamp = fade_and_aim(&app, &b, &run).await;
+    frames.extend(more_frames(&mut compact, &mut decoder, 50).await.0);
+    let json = json_frames_until(&mut plain, frames.last().unwrap().seq).await;
+    assert!(frames.iter().any(|d| d.new_layout), "a new layout");
+    assert!(frames.iter().filter(|d| d.seq > stamp).count() >= 30, "frames after the controls");
+    assert!(
+        decoder.layout.joints[1..4].iter().all(|j| matches!(j.rotation, Rotation::SmallestThree { largest: None, .. })),
+        "the IK's joints turn freely in the layout the frames end in"
+    );
+    let compared = compare_json(&frames, &json, max_error, doc["distance"].as_f64().unwrap());
+    assert!(compared >= 40, "{compared} frames compared");
+    // A watch opened afterwards: its layout holds what was played, and no new one follows.
+    let mut late = app.ws(&format!("/v1/broadcasts/{b}/stream?encoding=compact&max_error={max_error}")).await;
+    let late_doc = opened_layout(&mut late).await;
+    assert!(ik_free(&late_doc), "the late watch's layout frees the IK's joints: {late_doc}");
+    let mut late_decoder = Decoder { layout: layout(&late_doc), keys: None };
+    let (late_frames, _) = more_frames(&mut late, &mut late_decoder, 20).await;
+    assert!(late_frames.iter().all(|d| !d.new_layout), "its first layout holds the broadcast");
+    let json = json_frames_until(&mut plain, late_frames.last().unwrap().seq).await;
+    assert!(compare_json(&late_frames, &json, max_error, late_doc["distance"].as_f64().unwrap()) >= 15);
+}
+
+/// A broadcast that crossfaded and took `ik` under a compact viewer, resumed
+/// after a restart from its stored checkpoint (which carries what it
+/// played): a compact watch gets the very layout document it had before,
+/// and its frames decode within the bound of the restarted node's JSON frames.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_broadcast_restored_from_its_checkpoint_sends_the_same_compact_layout() {
+    let data = tempfile::tempdir().unwrap();
+    let every_second =
+        |c: &mut server::config::Config| c.limits.broadcast_checkpoint = std::time::Duration::from_secs(1);
+    let app = TestApp::builder().data_dir(data.path()).configure(every_second).start().await;
+    let (walk, run) = walk_and_run(&app).await;
+    let b = arm_broadcast(&app, &walk).await;
+    let watch = format!("/v1/broadcasts/{b}/stream?encoding=compact");
+    let mut compact = app.ws(&watch).await;
+    let doc = opened_layout(&mut compact).await;
+    let mut decoder = Decoder { layout: layout(&doc), keys: None };
+    drop(more_frames(&mut compact, &mut decoder, 3).await);
+    let stamp = fade_and_aim(&app, &b, &run).await;
+    let (frames, _) = more_frames(&mut compact, &mut decoder, 10).await;
+    assert!(frames.iter().any(|d| d.new_layout), "a new layout before the restart");
+    let mut before = app.ws(&watch).await;
+    let before = opened_layout(&mut before).await;
+    assert!(ik_free(&before), "{before}");
+    // A checkpoint of a tick after the controls is stored (the controls it names kept with it).
+    let store = std::sync::Arc::clone(&app.state.store);
+    crate::common::eventually(std::time::Duration::from_secs(10), "a checkpoint after the controls", || async {
+        store.broadcast_checkpoint(&b).await.unwrap().is_some_and(|c| c.seq > stamp)
+    })
+    .await;
+    drop(compact);
+    app.stop().await;
+
+    let app = TestApp::builder().data_dir(data.path()).configure(every_second).start().await;
+    let summary = app.url(&format!("/v1/broadcasts/{b}"));
+    crate::common::eventually(std::time::Duration::from_secs(5), "the resumed broadcast", || async {
+        app.http.get(&summary).send().await.unwrap().status() == 200
+    })
+    .await;
+    let mut compact = app.ws(&watch).await;
+    let mut plain = app.ws(&format!("/v1/broadcasts/{b}/stream")).await;
+    let after = opened_layout(&mut compact).await;
+    assert_eq!(after, before, "the same layout document after the restart");
+    let mut decoder = Decoder { layout: layout(&after), keys: None };
+    let (frames, _) = more_frames(&mut compact, &mut decoder, 20).await;
+    assert!(frames.iter().all(|d| !d.new_layout), "it holds the broadcast");
+    let json = json_frames_until(&mut plain, frames.last().unwrap().seq).await;
+    assert!(compare_json(&frames, &json, 1e-4, after["distance"].as_f64().unwrap()) >= 15);
+    app.stop().await;
+}
