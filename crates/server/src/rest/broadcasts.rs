@@ -235,7 +235,7 @@ pub async fn control(
         (status = 101, description = "Switching to WebSocket; frames follow from the next tick (`seq` is the broadcast's tick, the first frame's `dropped` 0). A caller with the write scope may send stream controls (not `stop`, which only ends its own socket) that act on the broadcast for every viewer; a read-only caller's are answered `{\"error\":{\"code\":\"insufficient_scope\"}}`. Close 1000 when the broadcast ends, 1001 at shutdown, 1013 over the stream caps"),
         (status = 400, description = "`websocket_upgrade_required`, `bad_parameter`", body = super::schemas::Problem),
         (status = 404, description = "`broadcast_not_found`", body = super::schemas::Problem),
-        (status = 422, description = "Compact frames: `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported` (a broadcast whose poses no range bounds: a character whose hips sit below a joint of another role; or one that played a crossfade or ik control, or a layer ramp on one clip), `too_many_compact_layouts`, `too_much_work`", body = super::schemas::Problem),
+        (status = 422, description = "Compact frames: `max_error_out_of_range`, `distance_out_of_range`, `compact_unsupported` (a broadcast whose poses no range bounds: a character whose hips sit below a joint of another role; or one that crossfaded to such a motion, or to more distinct motions than its layouts keep track of), `too_many_compact_layouts`, `too_much_work`", body = super::schemas::Problem),
     ),
     security((), ("bearer" = []))
 )]

@@ -41,6 +41,13 @@
 //! ([`STORE_QUEUE`]) before it is applied, and is withdrawn if the store
 //! refuses it, so every control applied is stored.
 //!
+//! Compact viewers are encoded once per layout (`max_error`, `distance`);
+//! each layout follows what the program has played (`broadcast_reach`):
+//! a control that widens it has the layouts of that reach chosen on the
+//! work pool ([`LayoutWork`], charged before any work), kept in a small
+//! book, and each tick puts every channel in the layout of the reach it
+//! stepped (a channel whose layout is not chosen yet skips the tick).
+//!
 //! After `idle_timeout` with no viewers and no controls it ends (with a
 //! [`Journal`], only when no node had viewers either). It also ends when
 //! deleted (viewers get [`EndReason::Ended`]: close 1000 / gRPC OK) and at
