@@ -23,6 +23,14 @@
 //! a viewer that stops reading then holds at most that much in the kernel
 //! beside its bounded user-space buffer, and when it is given up on, its
 //! connection is reset so the kernel frees that at once.
+//!
+//! A gRPC connection's writes are gathered ([`Tracked::gathering`]): h2
+//! sends a DATA frame of 256 bytes or more as its own vectored write, so a
+//! connection carrying a hundred streams made a hundred `writev` calls a
+//! tick. Told the socket cannot write vectored, h2 copies frames under 1 KiB
+//! into its 16 KiB buffer and writes them together; a larger frame's head and
+//! payload, which it then writes apart, are gathered here and go out in one
+//! write when h2 flushes.
 
 use std::future::Future;
 use std::io;
@@ -34,6 +42,7 @@ use std::task::{Context, Poll};
 use std::time::Duration;
 
 use axum::http::{Request, Response};
+use bytes::{Buf, BytesMut};
 use http_body::{Body, Frame, SizeHint};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::TcpStream;
@@ -129,8 +138,14 @@ pub struct Tracked {
     write_stall_timeout: Duration,
     /// Armed while a write cannot proceed.
     stall: Option<Pin<Box<Sleep>>>,
+    /// Writes held until the next flush, when gathering (module doc).
+    gathered: Option<BytesMut>,
     _permit: OwnedSemaphorePermit,
 }
+
+/// The most a gathering connection holds before it writes: room for h2's
+/// whole buffer and a largest (16 KiB) DATA frame's payload.
+const GATHER_BYTES: usize = 32 * 1024;
 
 impl Tracked {
     pub fn new(io: TcpStream, peer: Option<SocketAddr>, permit: OwnedSemaphorePermit, idle_timeout: Duration) -> Self {
@@ -150,8 +165,45 @@ impl Tracked {
             expired,
             write_stall_timeout,
             stall,
+            gathered: None,
             _permit: permit,
         }
+    }
+
+    /// Gathers writes until a flush (module doc): for connections whose
+    /// writer, h2, flushes after each batch of frames.
+    pub fn gathering(mut self) -> Self {
+        self.gathered = Some(BytesMut::new());
+        self
+    }
+
+    /// Writes what was gathered, all of it or `Pending`.
+    fn poll_write_gathered(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        while let Some(gathered) = self.gathered.as_mut().filter(|g| !g.is_empty()) {
+            let written = Pin::new(&mut self.io).poll_write(cx, gathered);
+            let n = std::task::ready!(self.unless_stalled(cx, written))?;
+            if n == 0 {
+                return Poll::Ready(Err(io::ErrorKind::WriteZero.into()));
+            }
+            self.gathered.as_mut().map(|g| g.advance(n));
+        }
+        Poll::Ready(Ok(()))
+    }
+
+    /// Holds `buf` for the next flush, writing what was held first when it
+    /// would not fit; `None` when not gathering.
+    fn poll_gather(&mut self, cx: &mut Context<'_>, buf: &[u8]) -> Option<Poll<io::Result<usize>>> {
+        let held = self.gathered.as_ref()?.len();
+        if held + buf.len() > GATHER_BYTES {
+            match self.poll_write_gathered(cx) {
+                Poll::Ready(Ok(())) => {}
+                other => return Some(other.map_ok(|()| 0)),
+            }
+        }
+        let gathered = self.gathered.as_mut()?;
+        let taken = buf.len().min(GATHER_BYTES - gathered.len());
+        gathered.extend_from_slice(&buf[..taken]);
+        Some(Poll::Ready(Ok(taken)))
     }
 
     /// Fails a write that has made no progress for `timeout`.
@@ -279,6 +331,9 @@ impl AsyncWrite for Tracked {
     fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
         this.bound_if_upgraded();
+        if let Some(gathered) = this.poll_gather(cx, buf) {
+            return gathered;
+        }
         let written = Pin::new(&mut this.io).poll_write(cx, buf);
         this.unless_stalled(cx, written)
     }
@@ -290,20 +345,28 @@ impl AsyncWrite for Tracked {
     ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
         this.bound_if_upgraded();
+        if this.gathered.is_some() {
+            let first = bufs.iter().find(|b| !b.is_empty()).map_or(&[][..], |b| &**b);
+            return Pin::new(this).poll_write(cx, first);
+        }
         let written = Pin::new(&mut this.io).poll_write_vectored(cx, bufs);
         this.unless_stalled(cx, written)
     }
 
     fn is_write_vectored(&self) -> bool {
-        self.io.is_write_vectored()
+        self.gathered.is_none() && self.io.is_write_vectored()
     }
 
     fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.get_mut().io).poll_flush(cx)
+        let this = self.get_mut();
+        std::task::ready!(this.poll_write_gathered(cx))?;
+        Pin::new(&mut this.io).poll_flush(cx)
     }
 
     fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.get_mut().io).poll_shutdown(cx)
+        let this = self.get_mut();
+        std::task::ready!(this.poll_write_gathered(cx))?;
+        Pin::new(&mut this.io).poll_shutdown(cx)
     }
 }
 
@@ -346,7 +409,8 @@ pub fn tracked_incoming(
                 let peer = stream.peer_addr().ok();
                 Ok(Tracked::new(stream, peer, permit, idle_timeout)
                     .with_write_stall(write_stall_timeout)
-                    .with_stream_buffer(stream_buffer, false))
+                    .with_stream_buffer(stream_buffer, false)
+                    .gathering())
             }),
             Err(e) => Some(Err(e)),
         };
@@ -436,4 +500,57 @@ fn conn_info(extensions: &axum::http::Extensions) -> Option<ConnInfo> {
         .get::<ConnInfo>()
         .or_else(|| extensions.get::<TlsConnectInfo<ConnInfo>>().map(TlsConnectInfo::get_ref))
         .cloned()
+}
+
+#[cfg(test)]
+mod tests {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+    use super::*;
+
+    /// A gathering socket and the peer reading it, over loopback.
+    async fn gathering_pair() -> (Tracked, TcpStream) {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let peer = TcpStream::connect(listener.local_addr().unwrap()).await.unwrap();
+        let (io, _) = listener.accept().await.unwrap();
+        let permit = ConnGate::new(1, "grpc").admit().unwrap();
+        (Tracked::new(io, None, permit, Duration::from_secs(60)).gathering(), peer)
+    }
+
+    /// Whether `peer` has anything to read within 50 ms.
+    async fn readable(peer: &mut TcpStream) -> bool {
+        let mut byte = [0u8; 1];
+        tokio::time::timeout(Duration::from_millis(50), peer.peek(&mut byte)).await.is_ok()
+    }
+
+    #[tokio::test]
+    async fn gathered_writes_wait_for_the_flush_and_arrive_whole_and_in_order() {
+        let (mut tracked, mut peer) = gathering_pair().await;
+        assert!(!tracked.is_write_vectored(), "h2 must copy small frames into its buffer");
+        let sent: Vec<u8> = (0..3000u32).map(|i| (i % 251) as u8).collect();
+        for chunk in sent.chunks(700) {
+            tracked.write_all(chunk).await.unwrap();
+        }
+        assert!(!readable(&mut peer).await, "nothing is written before the flush");
+        tracked.flush().await.unwrap();
+        let mut got = vec![0u8; sent.len()];
+        peer.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, sent);
+    }
+
+    #[tokio::test]
+    async fn more_than_the_gather_bound_is_written_without_a_flush() {
+        let (mut tracked, mut peer) = gathering_pair().await;
+        let sent: Vec<u8> = (0..GATHER_BYTES as u32 + 5000).map(|i| (i % 253) as u8).collect();
+        for chunk in sent.chunks(4096) {
+            tracked.write_all(chunk).await.unwrap();
+        }
+        let mut got = vec![0u8; GATHER_BYTES];
+        peer.read_exact(&mut got).await.unwrap();
+        assert_eq!(got, sent[..GATHER_BYTES], "the first bound's worth went out when it filled");
+        tracked.shutdown().await.unwrap();
+        let mut rest = Vec::new();
+        peer.read_to_end(&mut rest).await.unwrap();
+        assert_eq!(rest, sent[GATHER_BYTES..], "the rest went out at shutdown");
+    }
 }

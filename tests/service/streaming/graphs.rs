@@ -477,11 +477,14 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
     let sprung_request = pb::StreamRequest { motion: Some(sprung), max_frames: 30, report: false, ..request.clone() };
     let mut frames = app.grpc().await.stream_frames(sprung_request).await.unwrap().into_inner();
     let json_motion = json!({"layers": [{"graph": graph}], "springs": [{"name": "tail", "joints": joints, "gravity": [0, -9.81, 0]}]});
-    // Frame `seq` is tick `seq`, a tick the server woke late for evaluated all the same.
+    // Frame `seq` is tick `seq`, a tick the server woke late for evaluated all the same, up to 4 skipped
+    // ticks (docs/graphs.md): after a longer gap a loaded machine's springs may part from the samples'.
     let poses = samples_of(&app, json_motion, 120, FPS, json!([])).await;
+    let (mut compared, mut next) = (0, 0);
     while let Some(frame) = within(5, "a frame", frames.message()).await.unwrap() {
         let k = frame.seq as usize;
-        let Some(pose) = poses.get(k) else { break };
+        let Some(pose) = poses.get(k).filter(|_| k <= next + 4) else { break };
+        (compared, next) = (compared + 1, k + 1);
         let rotations: Vec<f32> = pose["joints"]
             .as_array()
             .unwrap()
@@ -492,6 +495,7 @@ async fn grpc_graph_frames_carry_the_report_and_play_takes_set() {
             .collect();
         assert_eq!(frame.pose.unwrap().rotations, rotations, "tick {k}'s rotations");
     }
+    assert!(compared > 0, "the first frame is always compared");
 
     let plain = pb::StreamRequest { report: false, ..request.clone() };
     let mut frames = app.grpc().await.stream_frames(plain).await.unwrap().into_inner();
