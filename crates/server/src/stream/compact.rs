@@ -146,17 +146,17 @@ fn plain_clip(motion: &StreamMotion) -> Option<&Clip> {
 }
 
 /// What makes a compact stream choose a new layout (docs/compact-frames.md).
-#[derive(Debug, Clone, Copy)]
-pub enum Relayout<'a> {
+#[derive(Debug, Clone)]
+pub enum Relayout {
     /// It plays this motion from now on, at any layer weights: a
     /// crossfade's target (the fade itself between it and what played), or
     /// a clip stream's motion once a layer ramp weighs it.
-    Plays(&'a StreamMotion),
+    Plays(Arc<StreamMotion>),
     /// An `ik` control's constraints turn these joints.
-    Ik(&'a [anim::ik::IkConstraint]),
+    Ik(Vec<anim::ik::IkConstraint>),
 }
 
-impl Relayout<'_> {
+impl Relayout {
     /// The range samples it takes: each distinct clip of the motion it
     /// plays and the rest pose, or (IK) one pass over the ranges.
     pub fn samples(&self) -> u64 {
@@ -250,7 +250,7 @@ impl CompactLayout {
     ///
     /// # Errors
     /// As [`range_source`]: a crossfade to a motion no range bounds.
-    pub fn after(&self, change: Relayout<'_>, skeleton: &Skeleton) -> Result<Option<CompactLayout>, CompactRefusal> {
+    pub fn after(&self, change: &Relayout, skeleton: &Skeleton) -> Result<Option<CompactLayout>, CompactRefusal> {
         let mut ranges = self.ranges.clone();
         let (events, any_weights) = match change {
             Relayout::Plays(motion) => {

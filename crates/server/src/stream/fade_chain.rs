@@ -91,8 +91,8 @@ mod tests {
             Ok(())
         }
 
-        fn charge_layout(&self, _units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError> {
-            Ok(Box::new(()))
+        fn charge_layout(&self, _units: u64) -> Result<crate::stream::LayoutRunner, ControlError> {
+            Ok(Box::new(|job| Box::pin(async move { Ok(job()) })))
         }
     }
 
