@@ -441,12 +441,7 @@ impl Program {
             // A broadcast refuses `stop` (`Control::refused_on_broadcast`).
             Ok(Applied::Continued | Applied::Stopped) => {
                 match named {
-                    Some(Some(to)) => {
-                        if st.fades.len() > anim::motion::MAX_FADES {
-                            st.fades.pop_front();
-                        }
-                        st.fades.push_back((to, Arc::clone(&c.id)));
-                    }
+                    Some(Some(to)) => anim::motion::push_crossfade(&mut st.fades, (to, Arc::clone(&c.id))),
                     Some(None) => st.ik_from = Some(Arc::clone(&c.id)),
                     None => {}
                 }
