@@ -199,16 +199,15 @@ impl CompactLayout {
             (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
             (Some(g), RangeSource::Derived) => {
                 let ranges = Ranges::of_played(&g.graph, &g.post, RANGE_RATE).map_err(|u| refusal(u.0))?;
-                let mut layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]);
-                if g.report {
-                    layout.name_graph(&g.graph);
-                }
-                return Ok(layout);
+                // A graph stream with `report` names its states and blend nodes in the document,
+                // which its frames' graph report section indexes.
+                let named = |doc: LayoutDoc| if g.report { doc.with_graph(&g.graph) } else { doc };
+                return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (&[], named)));
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
         let events = motion.first_clip().clip().events();
-        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events))
+        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (events, |doc| doc)))
     }
 
     /// The layout of `clip`'s poses (and its rest pose) at `max_error` and
@@ -220,24 +219,25 @@ impl CompactLayout {
         ranges.observe(skeleton.rest());
         CompactLayout {
             any_weights: false,
-            ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, clip.events())
+            ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (clip.events(), |doc| doc))
         }
     }
 
     /// A layout of derived `ranges` (they hold any layer weights), whose
     /// frames' events index `events` (the stream's clip's: what its
-    /// frames cross, docs/compact-frames.md).
+    /// frames cross, docs/compact-frames.md), its document as `named`
+    /// completes it.
     fn of_ranges(
         skeleton: &Skeleton,
         ranges: &Ranges,
         (max_error, distance): (f32, Option<f32>),
         fps: u32,
-        events: &[Event],
+        (events, named): (&[Event], impl FnOnce(LayoutDoc) -> LayoutDoc),
     ) -> CompactLayout {
         let distance = distance.unwrap_or_else(|| default_distance(skeleton));
         let layout = Layout::choose(skeleton, ranges, max_error, distance);
         let key_interval = u64::from(fps.max(1));
-        let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, events);
+        let doc = named(LayoutDoc::new(&layout, skeleton.names(), key_interval, events));
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
         let (ranges, events) = (ranges.clone(), events.to_vec());
         CompactLayout { layout, ranges, events, document, key_interval, any_weights: true }
@@ -269,16 +269,8 @@ impl CompactLayout {
         }
         let (max_error, distance) = (self.layout.max_error, Some(self.layout.distance));
         let fps = u32::try_from(self.key_interval).unwrap_or(u32::MAX);
-        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events);
+        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (events, |doc| doc));
         Ok(Some(CompactLayout { any_weights, ..layout }))
-    }
-
-    /// Names `graph`'s states and blend nodes in the document, which its
-    /// frames' graph report section indexes (a graph stream with `report`).
-    fn name_graph<C>(&mut self, graph: &anim::graph::Graph<C>) {
-        let doc: LayoutDoc = serde_json::from_str(&self.document).expect("the layout document reads back");
-        let doc = doc.with_graph(graph);
-        self.document = serde_json::to_string(&doc).expect("a layout document serialises").into();
     }
 
     /// What tells two layouts apart for sharing a playback.
