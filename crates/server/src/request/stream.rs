@@ -18,9 +18,8 @@ use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
-    AdmitError, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, LayoutRunner, MAX_FPS, ParamError,
-    Repricing,
-    StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
+    AdmitError, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, LayoutRunner, MAX_FPS,
+    ParamError, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
 };
 use crate::work::{Ticket, price};
 

@@ -640,7 +640,9 @@ impl ControlCheck {
     /// that would leave its layout.
     pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
         if self.layout_change(&control).is_some() {
-            return Err(ControlError::Invalid("this control needs a new compact layout, which this check cannot choose"));
+            return Err(ControlError::Invalid(
+                "this control needs a new compact layout, which this check cannot choose",
+            ));
         }
         self.check_control(control)
     }
