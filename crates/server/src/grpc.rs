@@ -554,9 +554,10 @@ impl Animation for GrpcService {
                 };
                 match message {
                     Ok(Some(msg)) => {
-                        let sent = control_from_pb(&state, msg.op)
-                            .await
-                            .and_then(|c| controller.send(c).map_err(|e| refused(&e)));
+                        let sent = match control_from_pb(&state, msg.op).await {
+                            Ok(c) => controller.send(c).await.map_err(|e| refused(&e)),
+                            Err(status) => Err(status),
+                        };
                         match sent {
                             Ok(true) => {}
                             Ok(false) => return,

@@ -1238,6 +1238,16 @@ async fn open_stream(app: &TestApp, open: &Value, encoding: &str) -> (Ws, Value)
     (ws, opened)
 }
 
+/// The stream `open` opened twice, in compact and in protobuf frames: both
+/// sockets, the compact one's layout document and a decoder of it.
+async fn compact_and_protobuf(app: &TestApp, open: &Value) -> (Ws, Ws, Value, Decoder) {
+    let ((compact, opened), (plain, _)) =
+        (open_stream(app, open, "compact").await, open_stream(app, open, "protobuf").await);
+    let doc = opened["opened"]["compact"].clone();
+    let decoder = Decoder { layout: layout(&doc), keys: None };
+    (compact, plain, doc, decoder)
+}
+
 /// A character's parents by index, from its skeleton's joints.
 async fn character_parents(app: &TestApp, character: &str) -> Vec<Option<usize>> {
     let joints = app.get_json(&format!("/v1/characters/{character}")).await["skeleton"]["joints"].clone();
@@ -1262,13 +1272,10 @@ async fn a_take_on_a_character_streams_compact_within_max_error_of_its_protobuf_
             motion["root_motion"] = root.clone();
         }
         let open = json!({"op": "open", "motion": motion, "fps": 30, "start": 0.5, "max_frames": 60});
-        let ((mut compact, opened), (mut plain, _)) =
-            (open_stream(&app, &open, "compact").await, open_stream(&app, &open, "protobuf").await);
-        let doc = opened["opened"]["compact"].clone();
+        let (mut compact, mut plain, doc, mut decoder) = compact_and_protobuf(&app, &open).await;
         let max_error = doc["max_error"].as_f64().unwrap();
         assert!(doc["bound"].as_f64().unwrap() <= max_error, "{doc}");
         let l = layout(&doc);
-        let mut decoder = Decoder { layout: layout(&doc), keys: None };
         let (frames, sizes) = more_frames(&mut compact, &mut decoder, 60).await;
         let plain = protobuf_frames(&mut plain, 60).await;
         check_keys(&frames, l.key_interval);
@@ -1291,11 +1298,8 @@ async fn an_extracted_root_streams_compact_within_max_error_of_its_protobuf_fram
     let id = app.create_id(&stepping_arm_clip(), None).await;
     let motion = json!({"layers": [{"clip": id}], "root_motion": {"joint": "root", "mode": "extract"}});
     let open = json!({"op": "open", "motion": motion, "fps": 30, "start": 0, "max_frames": 70});
-    let ((mut compact, opened), (mut plain, _)) =
-        (open_stream(&app, &open, "compact").await, open_stream(&app, &open, "protobuf").await);
-    let doc = opened["opened"]["compact"].clone();
+    let (mut compact, mut plain, doc, mut decoder) = compact_and_protobuf(&app, &open).await;
     let l = layout(&doc);
-    let mut decoder = Decoder { layout: layout(&doc), keys: None };
     let (frames, _) = more_frames(&mut compact, &mut decoder, 70).await;
     let whole = whole_protobuf_frames(&mut plain, 70).await;
     let poses = whole.iter().map(|(seq, f)| (*seq, pose_of_pb(f.pose.as_ref().unwrap()))).collect();

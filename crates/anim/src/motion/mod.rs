@@ -36,7 +36,10 @@ use std::sync::Arc;
 
 pub use error::{MotionError, MotionErrorKind};
 pub(crate) use player::mix;
-pub use player::{DeckState, FadeState, LayerPosition, MAX_FADES, Player, PlayerError, PlayerState, RampState};
+pub use player::{
+    DeckState, FadeState, LayerPosition, MAX_FADES, Player, PlayerError, PlayerState, RampState,
+    crossfade_drops_oldest, push_crossfade,
+};
 pub use root::Planar;
 pub use sampler::{MotionOptions, MotionSampler, RootMotion};
 pub use spec::{

@@ -35,6 +35,24 @@ use crate::{Ease, Playback, Pose, Space};
 /// at once (its pose leaves the mix), which bounds the work per tick.
 pub const MAX_FADES: usize = 8;
 
+/// Whether a crossfade onto a player with `fades` fades in progress
+/// finishes the oldest at once ([`MAX_FADES`]).
+pub const fn crossfade_drops_oldest(fades: usize) -> bool {
+    fades + 1 > MAX_FADES
+}
+
+/// Records a crossfade to `to` on `motions`, the motions a player
+/// evaluates, oldest first and the one playing last, as [`Player::crossfade`]
+/// changes them: `to` on top, the oldest gone past [`MAX_FADES`] fades. A
+/// list that leaves out the motion played before any crossfade keeps the
+/// latest `MAX_FADES + 1` targets, all the player can hold.
+pub fn push_crossfade<T>(motions: &mut std::collections::VecDeque<T>, to: T) {
+    if !motions.is_empty() && crossfade_drops_oldest(motions.len() - 1) {
+        motions.pop_front();
+    }
+    motions.push_back(to);
+}
+
 /// A layer weight moving linearly to a target.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Ramp {
@@ -316,7 +334,7 @@ impl<C: ClipSource> Player<C> {
         if !to.ik().is_empty() {
             return Err(PlayerError::CrossfadeIk);
         }
-        if self.fades() + 1 > MAX_FADES {
+        if crossfade_drops_oldest(self.fades()) {
             self.drop_oldest_fade();
         }
         let under = Player {

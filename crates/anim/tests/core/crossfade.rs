@@ -11,7 +11,9 @@
 
 use std::sync::Arc;
 
-use anim::motion::{LayerSpec, MAX_FADES, MotionOptions, MotionSpec, Planar, Player, PlayerError, RootMotionSpec};
+use anim::motion::{
+    LayerSpec, MAX_FADES, MotionOptions, MotionSpec, Planar, Player, PlayerError, RootMotionSpec, push_crossfade,
+};
 use anim::{
     Channel, Clip, ClipSpec, Ease, Interpolation, Keys, Motion, MotionSampler, Playback, Pose, Space, TrackSpec,
 };
@@ -426,6 +428,26 @@ fn root_motion_deltas_are_lerped_across_a_fade_and_the_total_accumulates() {
     let got = player.root_motion().unwrap();
     assert_eq!(got.delta, Planar::IDENTITY);
     assert_planar(got.total, total, "total after a seek");
+}
+
+/// `push_crossfade` keeps a list of the player's motions as its crossfades
+/// do: one more than its fades, the newest, while no fade ends.
+#[test]
+fn a_list_pushed_by_push_crossfade_holds_the_players_motions() {
+    let clips = [body("a", 1.0, 0.0, 2.0, 0.3), body("b", 0.7, 5.0, 6.0, 1.0)];
+    let motions: Vec<Shared> = clips.iter().map(ping_pong).collect();
+    let mut player = Player::new(motions[0].clone());
+    let (mut all, mut targets) = (std::collections::VecDeque::from([0]), std::collections::VecDeque::new());
+    for i in 1..=3 * MAX_FADES {
+        player.crossfade(motions[i % 2].clone(), 60.0, Ease::Linear).unwrap();
+        push_crossfade(&mut all, i);
+        push_crossfade(&mut targets, i);
+        assert_eq!(all.len(), player.fades() + 1, "after crossfade {i}");
+        assert_eq!(all.len(), (i + 1).min(MAX_FADES + 1));
+        assert_eq!((all.back(), all.front()), (Some(&i), Some(&(i + 1).saturating_sub(MAX_FADES + 1))));
+        assert_eq!(targets.len(), i.min(MAX_FADES + 1), "the targets alone: the latest the player can hold");
+        assert_eq!(targets.back(), Some(&i));
+    }
 }
 
 #[test]

@@ -16,6 +16,8 @@ use anim::motion::{
 };
 use anim::{Clip, ClipSpec, Motion, MotionSampler, Skeleton};
 use formats::import::ImportOptions;
+use proptest::prelude::RngExt;
+use proptest::test_runner::{RngAlgorithm, TestRng};
 
 use super::feet::CESIUM_MAN_ROLES;
 use super::{build, import_file};
@@ -70,18 +72,6 @@ fn extract(joint: Option<&str>) -> Option<RootMotionSpec> {
     Some(RootMotionSpec { joint: joint.map(str::to_owned), mode: RootMode::Extract, ..RootMotionSpec::default() })
 }
 
-/// A tiny deterministic generator (xorshift64*), for times and weights.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Samples `motion` at every key of `takes`, at 240 Hz over two loops and at
 /// 600 random times (random weights when it has several layers), in that
 /// order (a planted foot carries state from frame to frame); every pose is
@@ -90,14 +80,15 @@ fn stays_within(name: &str, motion: &Motion<&Clip>, takes: &[&Take]) -> usize {
     let ranges = Ranges::of_motion(motion, 240.0).unwrap_or_else(|u| panic!("{name}: refused: {}", u.0));
     let layers = motion.layers().count();
     let longest = takes.iter().map(|t| f64::from(t.clip.duration())).fold(0.0, f64::max);
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    // Times and weights from proptest's deterministic generator: the same every run.
+    let mut rng = TestRng::deterministic_rng(RngAlgorithm::ChaCha);
     let keys = takes.iter().flat_map(|t| t.keys().map(|k| (f64::from(k), vec![1.0; layers])));
     let grid_steps = (2.0 * longest * 240.0).ceil() as usize;
     let grid = (0..=grid_steps).map(|i| (i as f64 / 240.0, vec![1.0; layers]));
     let random: Vec<(f64, Vec<f32>)> = (0..600)
         .map(|_| {
-            let tau = -1.0 + rng.unit() * (2.0 * longest + 2.0);
-            let weights = (0..layers).map(|l| if l == 0 { 1.0 } else { rng.unit() as f32 }).collect();
+            let tau = -1.0 + rng.random::<f64>() * (2.0 * longest + 2.0);
+            let weights = (0..layers).map(|l| if l == 0 { 1.0 } else { rng.random::<f32>() }).collect();
             (tau, weights)
         })
         .collect();

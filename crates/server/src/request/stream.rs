@@ -18,8 +18,9 @@ use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
-    AdmitError, Broadcast, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, MAX_FPS, ParamError,
-    ReachSig, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price, range_source,
+    AdmitError, Broadcast, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, LayoutRunner, MAX_FPS,
+    ParamError, ReachSig, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price,
+    range_source,
 };
 use crate::work::{Ticket, price};
 
@@ -39,6 +40,8 @@ struct StreamCharge {
     /// Whose write budget its controls draw on.
     caller: Caller,
     writes: Arc<crate::ratelimit::WriteLimiter>,
+    /// Where a new compact layout is chosen.
+    work: Arc<crate::work::Work>,
 }
 
 impl Repricing for StreamCharge {
@@ -64,7 +67,7 @@ impl Repricing for StreamCharge {
         self.writes.admit(&self.caller).map_err(|e| e.to_control())
     }
 
-    fn charge_layout(&self, units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError> {
+    fn charge_layout(&self, units: u64) -> Result<LayoutRunner, ControlError> {
         if units > self.limit {
             let detail = format!(
                 "choosing this stream's new compact layout costs {units} work units; the limit (max_request_work, \
@@ -77,7 +80,10 @@ impl Repricing for StreamCharge {
             let detail = format!("choosing this stream's new compact layout costs {units} work units: {e}");
             ApiError::Relayed { status: e.status().as_u16(), code: e.code(), detail }.to_control()
         })?;
-        Ok(Box::new(ticket))
+        let work = Arc::clone(&self.work);
+        Ok(Box::new(move |job| {
+            Box::pin(async move { work.spend_held(ticket, move |_| job()).await.map_err(|e| e.to_control()) })
+        }))
     }
 }
 
@@ -376,8 +382,9 @@ impl RawStream<'_> {
         check_stream_work(per_sec, &state.config.limits, self.at)?;
         let ticket = state.work.charge(&caller.key(), per_sec)?;
         let limit = state.config.limits.max_request_work;
-        let (writes, payer) = (Arc::clone(&state.writes), caller.clone());
-        let charge = Arc::new(StreamCharge { ticket: Mutex::new(ticket), frame, fps, limit, caller: payer, writes });
+        let (writes, payer, work) = (Arc::clone(&state.writes), caller.clone(), Arc::clone(&state.work));
+        let ticket = Mutex::new(ticket);
+        let charge = Arc::new(StreamCharge { ticket, frame, fps, limit, caller: payer, writes, work });
         Ok(state.streams.admit_for(caller.addr, caller.token.clone()).map(|permit| permit.priced(charge)))
     }
 

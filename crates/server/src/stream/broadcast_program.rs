@@ -461,12 +461,7 @@ impl Program {
             Ok(Applied::Continued | Applied::Stopped) => {
                 st.reach.apply(&c.control, &c.id, self.params.motion.skeleton());
                 match named {
-                    Some(Some(to)) => {
-                        if st.fades.len() > anim::motion::MAX_FADES {
-                            st.fades.pop_front();
-                        }
-                        st.fades.push_back((to, Arc::clone(&c.id)));
-                    }
+                    Some(Some(to)) => anim::motion::push_crossfade(&mut st.fades, (to, Arc::clone(&c.id))),
                     Some(None) => st.ik_from = Some(Arc::clone(&c.id)),
                     None => {}
                 }

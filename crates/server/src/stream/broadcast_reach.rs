@@ -230,7 +230,7 @@ impl Reach {
         let playing = self.playing.map_or(motion, |at| &self.motions[at].motion);
         let events = playing.first_clip().clip().events();
         let skeleton = motion.skeleton();
-        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events);
+        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (events, |doc| doc));
         let any_weights = !(self.plain && self.motions.is_empty() && !self.reweighted);
         Ok(CompactLayout { any_weights, ..layout })
     }

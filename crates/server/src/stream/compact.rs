@@ -154,17 +154,17 @@ pub(super) fn clip_ranges(clip: &Clip) -> Ranges {
 }
 
 /// What makes a compact stream choose a new layout (docs/compact-frames.md).
-#[derive(Debug, Clone, Copy)]
-pub enum Relayout<'a> {
+#[derive(Debug, Clone)]
+pub enum Relayout {
     /// It plays this motion from now on, at any layer weights: a
     /// crossfade's target (the fade itself between it and what played), or
     /// a clip stream's motion once a layer ramp weighs it.
-    Plays(&'a StreamMotion),
+    Plays(Arc<StreamMotion>),
     /// An `ik` control's constraints turn these joints.
-    Ik(&'a [anim::ik::IkConstraint]),
+    Ik(Vec<anim::ik::IkConstraint>),
 }
 
-impl Relayout<'_> {
+impl Relayout {
     /// The range samples it takes: each distinct clip of the motion it
     /// plays and the rest pose, or (IK) one pass over the ranges.
     pub fn samples(&self) -> u64 {
@@ -207,16 +207,15 @@ impl CompactLayout {
             (_, RangeSource::Clip(clip)) => return Ok(CompactLayout::of_clip(clip, max_error, distance, fps)),
             (Some(g), RangeSource::Derived) => {
                 let ranges = Ranges::of_played(&g.graph, &g.post, RANGE_RATE).map_err(|u| refusal(u.0))?;
-                let mut layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, &[]);
-                if g.report {
-                    layout.name_graph(&g.graph);
-                }
-                return Ok(layout);
+                // A graph stream with `report` names its states and blend nodes in the document,
+                // which its frames' graph report section indexes.
+                let named = |doc: LayoutDoc| if g.report { doc.with_graph(&g.graph) } else { doc };
+                return Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (&[], named)));
             }
             (None, RangeSource::Derived) => Ranges::of_motion(motion, RANGE_RATE).map_err(|u| refusal(u.0))?,
         };
         let events = motion.first_clip().clip().events();
-        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events))
+        Ok(CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (events, |doc| doc)))
     }
 
     /// The layout of `clip`'s poses (and its rest pose) at `max_error` and
@@ -226,24 +225,25 @@ impl CompactLayout {
         let (skeleton, ranges) = (clip.skeleton(), clip_ranges(clip));
         CompactLayout {
             any_weights: false,
-            ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, clip.events())
+            ..CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (clip.events(), |doc| doc))
         }
     }
 
     /// A layout of derived `ranges` (they hold any layer weights), whose
     /// frames' events index `events` (the stream's clip's: what its
-    /// frames cross, docs/compact-frames.md).
+    /// frames cross, docs/compact-frames.md), its document as `named`
+    /// completes it.
     pub(super) fn of_ranges(
         skeleton: &Skeleton,
         ranges: &Ranges,
         (max_error, distance): (f32, Option<f32>),
         fps: u32,
-        events: &[Event],
+        (events, named): (&[Event], impl FnOnce(LayoutDoc) -> LayoutDoc),
     ) -> CompactLayout {
         let distance = distance.unwrap_or_else(|| default_distance(skeleton));
         let layout = Layout::choose(skeleton, ranges, max_error, distance);
         let key_interval = u64::from(fps.max(1));
-        let doc = LayoutDoc::new(&layout, skeleton.names(), key_interval, events);
+        let doc = named(LayoutDoc::new(&layout, skeleton.names(), key_interval, events));
         let document = serde_json::to_string(&doc).expect("a layout document serialises").into();
         let (ranges, events) = (ranges.clone(), events.to_vec());
         CompactLayout { layout, ranges, events, document, key_interval, any_weights: true }
@@ -256,7 +256,7 @@ impl CompactLayout {
     ///
     /// # Errors
     /// As [`range_source`]: a crossfade to a motion no range bounds.
-    pub fn after(&self, change: Relayout<'_>, skeleton: &Skeleton) -> Result<Option<CompactLayout>, CompactRefusal> {
+    pub fn after(&self, change: &Relayout, skeleton: &Skeleton) -> Result<Option<CompactLayout>, CompactRefusal> {
         let mut ranges = self.ranges.clone();
         let (events, any_weights) = match change {
             Relayout::Plays(motion) => {
@@ -275,16 +275,8 @@ impl CompactLayout {
         }
         let (max_error, distance) = (self.layout.max_error, Some(self.layout.distance));
         let fps = u32::try_from(self.key_interval).unwrap_or(u32::MAX);
-        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, events);
+        let layout = CompactLayout::of_ranges(skeleton, &ranges, (max_error, distance), fps, (events, |doc| doc));
         Ok(Some(CompactLayout { any_weights, ..layout }))
-    }
-
-    /// Names `graph`'s states and blend nodes in the document, which its
-    /// frames' graph report section indexes (a graph stream with `report`).
-    fn name_graph<C>(&mut self, graph: &anim::graph::Graph<C>) {
-        let doc: LayoutDoc = serde_json::from_str(&self.document).expect("the layout document reads back");
-        let doc = doc.with_graph(graph);
-        self.document = serde_json::to_string(&doc).expect("a layout document serialises").into();
     }
 
     /// What tells two layouts apart for sharing a playback.

@@ -13,7 +13,9 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use super::compact::{CompactLayout, Relayout};
+use futures_util::future::BoxFuture;
+
+use super::compact::{CompactLayout, CompactRefusal, Relayout};
 use super::fade_chain::FadeChain;
 use super::graph::{GraphDeck, StreamGraph};
 use super::params::StreamParams;
@@ -512,12 +514,15 @@ impl ControlError {
 /// IK runs on the mix of them all).
 pub trait Repricing: Send + Sync + std::fmt::Debug {
     /// Charges the stream's caller `units` for choosing a new compact
-    /// layout (docs/compact-frames.md), held until the returned guard drops.
+    /// layout (docs/compact-frames.md), before any work: the returned
+    /// runner runs the choice off the async workers (the work pool),
+    /// holding the charge until it ends.
     ///
     /// # Errors
     /// [`ControlError::Refused`]: `too_much_work` over `max_request_work`,
-    /// `caller_work_limit` or `overloaded` as for any work.
-    fn charge_layout(&self, units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError>;
+    /// `caller_work_limit` or `overloaded` as for any work (the runner's
+    /// future: `request_timeout`).
+    fn charge_layout(&self, units: u64) -> Result<LayoutRunner, ControlError>;
 
     /// Charges the stream for evaluating `motions` each frame under the
     /// stream's constraints `ik`, from now on.
@@ -535,6 +540,16 @@ pub trait Repricing: Send + Sync + std::fmt::Debug {
     /// [`ControlError::Refused`] with `rate_limited` (429) past the budget.
     fn admit(&self) -> Result<(), ControlError>;
 }
+
+/// The choice of a compact stream's new layout: `None` when its layout
+/// still holds what the stream plays ([`CompactLayout::after`]).
+pub type LayoutJob = Box<dyn FnOnce() -> Result<Option<CompactLayout>, CompactRefusal> + Send>;
+
+/// Runs a [`LayoutJob`] off the async workers, answering what it chose.
+pub type LayoutRunner = Box<dyn FnOnce(LayoutJob) -> LayoutRun + Send>;
+
+/// A [`LayoutRunner`]'s run under way.
+pub type LayoutRun = BoxFuture<'static, Result<Result<Option<CompactLayout>, CompactRefusal>, ControlError>>;
 
 /// Why a compact stream refuses a crossfade: no range bounds its target.
 const UNBOUNDED: &str = "a compact stream cannot crossfade to a motion whose poses no range bounds \
@@ -558,9 +573,6 @@ pub(crate) struct ControlCheck {
     /// A compact stream's layout, as the latest accepted control left it
     /// (`None`: not compact).
     compact: Option<Arc<CompactLayout>>,
-    /// The new layout the latest accepted control made the stream choose,
-    /// until its sender takes it ([`ControlCheck::take_layout`]).
-    relayout: Option<Arc<CompactLayout>>,
     /// A graph stream's graph, which its `set` controls are checked against.
     graph: Option<Arc<StreamGraph>>,
 }
@@ -574,7 +586,6 @@ impl ControlCheck {
             ik_limits: params.ik_limits,
             repricing: None,
             compact: params.compact.clone(),
-            relayout: None,
             graph: params.graph.as_ref().map(|g| Arc::clone(&g.graph)),
         }
     }
@@ -593,44 +604,83 @@ impl ControlCheck {
         self.repricing.as_ref().map_or(Ok(()), |r| r.reprice(motions, ik))
     }
 
-    /// The new compact layout the control just checked needs, if it needs
-    /// one: it goes to the playback with the control, which sends it
-    /// before its next frame (a key frame).
-    pub(crate) fn take_layout(&mut self) -> Option<Arc<CompactLayout>> {
-        self.relayout.take()
+    /// Checks `control` (see [`ControlCheck`]) for a playback without a
+    /// compact layout (a broadcast's: its compact viewers' layouts refuse
+    /// the controls that would leave them); a compact stream's go through
+    /// [`ControlCheck::queue`].
+    ///
+    /// # Errors
+    /// A control the stream refuses, or its work; on a compact check, one
+    /// that would leave its layout.
+    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
+        if self.layout_change(&control).is_some() {
+            return Err(ControlError::Invalid(
+                "this control needs a new compact layout, which this check cannot choose",
+            ));
+        }
+        self.check_control(control)
     }
 
     /// Checks `control` (see [`ControlCheck`]); on a compact stream whose
-    /// layout it leaves, prices and chooses the new layout
-    /// ([`ControlCheck::take_layout`]).
+    /// layout it leaves, prices and charges the new layout before any work,
+    /// then chooses it off the async workers ([`Repricing::charge_layout`];
+    /// unpriced, here), to go to the playback with the control, which sends
+    /// it before its next frame (a key frame). A refused control leaves the
+    /// check as it was.
     ///
     /// # Errors
     /// A control the stream refuses, or its work.
-    pub(crate) fn check(&mut self, control: Control) -> Result<Control, ControlError> {
-        self.relayout = None;
-        // Priced and charged before any work on it, held while the layout is chosen.
-        let _held = self.charge_layout(&control)?;
-        let control = self.check_control(control)?;
-        let (Some(layout), Some(change)) = (&self.compact, self.layout_change(&control)) else { return Ok(control) };
-        let next = layout.after(change, self.skeleton.skeleton()).map_err(|_| ControlError::Invalid(UNBOUNDED))?;
-        if let Some(next) = next {
-            let next = Arc::new(next);
-            self.compact = Some(Arc::clone(&next));
-            self.relayout = Some(next);
+    pub(crate) async fn queue(&mut self, control: Control) -> Result<Queued, ControlError> {
+        let mut next = self.clone();
+        let runner = next.charge_layout(&control)?;
+        let control = next.check_control(control)?;
+        let Some(job) = next.layout_job(&control) else {
+            *self = next;
+            return Ok(Queued { control, layout: None });
+        };
+        let chosen = match runner {
+            Some(run) => run(job).await,
+            None => Ok(job()),
+        };
+        let layout = match chosen {
+            Ok(Ok(layout)) => layout.map(Arc::new),
+            Ok(Err(_)) => return Err(self.refused(ControlError::Invalid(UNBOUNDED), &control)),
+            Err(e) => return Err(self.refused(e, &control)),
+        };
+        next.compact = layout.clone().or(next.compact);
+        *self = next;
+        Ok(Queued { control, layout })
+    }
+
+    /// `e`, once the stream's price is back to what it was before
+    /// `control` repriced it (a crossfade, an `ik` control).
+    fn refused(&self, e: ControlError, control: &Control) -> ControlError {
+        if matches!(control, Control::Crossfade(_) | Control::SetIk(_))
+            && let Err(again) = self.reprice(&self.chain.motions(), &self.ik)
+        {
+            tracing::warn!(error = %again, "a refused control's stream could not be priced back");
         }
-        Ok(control)
+        e
+    }
+
+    /// The choice of the new layout `control` (checked) makes a compact
+    /// stream need, to run off the async workers (`None`: it needs none).
+    fn layout_job(&self, control: &Control) -> Option<LayoutJob> {
+        let (layout, change) = (Arc::clone(self.compact.as_ref()?), self.layout_change(control)?);
+        let skeleton = Arc::clone(&self.skeleton);
+        Some(Box::new(move || layout.after(&change, skeleton.skeleton())))
     }
 
     /// What `control` makes a compact stream's layout hold besides what it
     /// holds (`None`: nothing, or not compact). An `ik` control counts as
     /// sent or as resolved; only the resolved one names its joints.
-    fn layout_change<'a>(&'a self, control: &'a Control) -> Option<Relayout<'a>> {
+    fn layout_change(&self, control: &Control) -> Option<Relayout> {
         let layout = self.compact.as_ref()?;
         match control {
-            Control::Crossfade(fade) => Some(Relayout::Plays(&fade.to)),
-            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(self.chain.playing())),
-            Control::SetIk(constraints) => Some(Relayout::Ik(constraints)),
-            Control::Ik(_) => Some(Relayout::Ik(&[])),
+            Control::Crossfade(fade) => Some(Relayout::Plays(Arc::clone(&fade.to))),
+            Control::Layer { .. } if !layout.any_weights => Some(Relayout::Plays(Arc::clone(self.chain.playing()))),
+            Control::SetIk(constraints) => Some(Relayout::Ik(constraints.clone())),
+            Control::Ik(_) => Some(Relayout::Ik(Vec::new())),
             _ => None,
         }
     }
@@ -638,9 +688,9 @@ impl ControlCheck {
     /// Charges the work of the new layout `control` would make the stream
     /// choose (docs/compact-frames.md, "A new layout"): its range samples,
     /// each a pose of the costliest clip they read.
-    fn charge_layout(&self, control: &Control) -> Result<Option<Box<dyn std::any::Any + Send>>, ControlError> {
+    fn charge_layout(&self, control: &Control) -> Result<Option<LayoutRunner>, ControlError> {
         let (Some(change), Some(repricing)) = (self.layout_change(control), &self.repricing) else { return Ok(None) };
-        let motion = match change {
+        let motion = match &change {
             Relayout::Plays(motion) => motion,
             Relayout::Ik(_) => self.chain.playing(),
         };

@@ -4,7 +4,7 @@
 //!
 //! `anim::motion::Player` keeps a fade chain: the motion playing on top
 //! and, beneath it, every fade still in progress, each evaluating the
-//! motion it fades from; a crossfade beyond [`MAX_FADES`] finishes the
+//! motion it fades from; a crossfade beyond `MAX_FADES` finishes the
 //! oldest at once. A fade ends once `duration` seconds of stream time have
 //! moved, which pauses hold and speed changes, so whoever checks a control
 //! (on the transport's task, ahead of the ticks) cannot tell that one has
@@ -13,7 +13,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use anim::motion::MAX_FADES;
+use anim::motion::push_crossfade;
 
 use super::pinned::StreamMotion;
 
@@ -31,15 +31,12 @@ impl FadeChain {
     }
 
     /// The chain after a crossfade to `to`: every motion still fading, and
-    /// `to` on top, the oldest gone past [`MAX_FADES`] fades (as the player
-    /// drops it).
+    /// `to` on top, the oldest gone past `anim::motion::MAX_FADES` fades (as
+    /// the player drops it).
     #[must_use]
     pub(crate) fn crossfaded(&self, to: &Arc<StreamMotion>) -> Self {
         let mut motions = self.motions.clone();
-        if motions.len() > MAX_FADES {
-            motions.pop_front();
-        }
-        motions.push_back(Arc::clone(to));
+        push_crossfade(&mut motions, Arc::clone(to));
         FadeChain { motions }
     }
 
@@ -60,7 +57,7 @@ mod tests {
     use std::sync::Mutex;
 
     use anim::ik::IkConstraint;
-    use anim::motion::{LayerSpec, MotionOptions, MotionSpec, Player};
+    use anim::motion::{LayerSpec, MAX_FADES, MotionOptions, MotionSpec, Player};
     use anim::{Ease, Motion};
 
     use super::*;
@@ -91,8 +88,8 @@ mod tests {
             Ok(())
         }
 
-        fn charge_layout(&self, _units: u64) -> Result<Box<dyn std::any::Any + Send>, ControlError> {
-            Ok(Box::new(()))
+        fn charge_layout(&self, _units: u64) -> Result<crate::stream::LayoutRunner, ControlError> {
+            Ok(Box::new(|job| Box::pin(async move { Ok(job()) })))
         }
     }
 

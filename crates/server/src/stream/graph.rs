@@ -18,7 +18,7 @@
 use std::sync::Arc;
 
 use super::pinned::PinnedClip;
-use super::schedule::MAX_CATCH_UP;
+use super::schedule::CatchUp;
 use crate::built::PinnedPost;
 use anim::graph::{Graph, GraphPlayer, GraphReport, GraphState, PostRun, SetError, Value};
 use anim::ik::IkReport;
@@ -44,7 +44,7 @@ pub struct GraphProgram {
 
 impl GraphProgram {
     /// Whether a frame woken late evaluates the ticks it skipped (up to
-    /// [`MAX_CATCH_UP`]) rather than only stepping them: with springs or
+    /// [`MAX_CATCH_UP`](super::schedule::MAX_CATCH_UP)) rather than only stepping them: with springs or
     /// root motion, which must see every tick.
     pub fn catches_up(&self) -> bool {
         catches_up(&self.graph, &self.post)
@@ -107,7 +107,7 @@ impl GraphDeck {
     /// Stream tick `k` at `fps`, `skipped` ticks after the previous one was
     /// shown (those are stepped without a pose, as are the ticks before a
     /// first tick that came late — but with springs or root motion the
-    /// latest [`MAX_CATCH_UP`] of them are evaluated, so that the chains
+    /// latest [`MAX_CATCH_UP`](super::schedule::MAX_CATCH_UP) of them are evaluated, so that the chains
     /// and the root's travel see them; the chains skip the older ones'
     /// substeps), so that a stream never paused shows
     /// graph tick `k` at tick `k`; while `paused` only the springs go on
@@ -120,12 +120,12 @@ impl GraphDeck {
         self.held = paused && !first;
         if !paused || first {
             let n = if first { k } else { skipped };
-            let evaluated = if catches_up(self.player.graph(), &self.post) { n.min(MAX_CATCH_UP) } else { 0 };
+            let CatchUp { evaluated, skip_to } = CatchUp::of(k, n, catches_up(self.player.graph(), &self.post));
             for _ in evaluated..n {
                 self.player.step(dt);
             }
-            if evaluated < n {
-                self.run.skip_springs_to(&self.post, clock(k - evaluated - 1));
+            if let Some(last) = skip_to {
+                self.run.skip_springs_to(&self.post, clock(last));
             }
             for j in (0..evaluated).rev() {
                 self.player.tick(dt);

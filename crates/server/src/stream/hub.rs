@@ -36,7 +36,7 @@ use super::events::crossed;
 use super::params::StreamParams;
 use super::playhead::Playhead;
 use super::registry::Listing;
-use super::schedule::{MAX_CATCH_UP, Schedule};
+use super::schedule::{CatchUp, Schedule};
 use std::sync::Arc;
 
 use super::pinned::StreamMotion;
@@ -234,9 +234,9 @@ impl Hub {
         let clip_time = match &mut self.graph {
             Some(graph) => graph.tick(self.params.fps, self.playhead.paused(), (k, skipped)),
             None => {
-                if skipped > MAX_CATCH_UP {
-                    // The chains catch up the latest skipped ticks only.
-                    self.player.skip_springs_to(stream_clock(&self.params, k - MAX_CATCH_UP - 1));
+                // The chains catch up the latest skipped ticks only.
+                if let Some(last) = CatchUp::of(k, skipped, true).skip_to {
+                    self.player.skip_springs_to(stream_clock(&self.params, last));
                 }
                 let time = (self.playhead.time_at(k), stream_clock(&self.params, k));
                 sample_tick(&mut self.player, &self.params, time, jumped, &mut self.prev, &mut self.crossed)

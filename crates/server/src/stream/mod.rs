@@ -72,7 +72,8 @@ pub use broadcast_reach::{MAX_PLAYED, Reach, ReachSig};
 pub use checkpoint::{Checkpoint, CheckpointError};
 pub use compact::{CompactLayout, CompactRefusal, CompactRequest, RANGE_RATE, range_sample_price, range_source};
 pub use control::{
-    Control, ControlError, ControlRefusal, Crossfade, MAX_FADE_SECONDS, ParsedControl, Repricing, parse_control,
+    Control, ControlError, ControlRefusal, Crossfade, LayoutJob, LayoutRun, LayoutRunner, MAX_FADE_SECONDS,
+    ParsedControl, Repricing, parse_control,
 };
 pub use encode::{Encoded, Encoding, FrameData, FrameEncoder, Names};
 pub use engine::{Engine, EngineConfig};

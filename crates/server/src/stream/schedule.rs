@@ -26,6 +26,26 @@ use tokio::time::{Instant, sleep_until};
 /// once at most: a second of playback evaluates at most `fps` + this many.
 pub const MAX_CATCH_UP: u64 = 4;
 
+/// What a frame woken late does with the ticks it skipped ([`MAX_CATCH_UP`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct CatchUp {
+    /// The latest skipped ticks it evaluates.
+    pub evaluated: u64,
+    /// The last tick it only steps, whose stream time the spring chains
+    /// skip to (`None`: it steps none).
+    pub skip_to: Option<u64>,
+}
+
+impl CatchUp {
+    /// Tick `k`'s catch-up of the `skipped` ticks before it: the latest
+    /// [`MAX_CATCH_UP`] evaluated when `evaluate` (a playback with springs
+    /// or root motion), the older ones stepped; none evaluated otherwise.
+    pub(crate) fn of(k: u64, skipped: u64, evaluate: bool) -> Self {
+        let evaluated = if evaluate { skipped.min(MAX_CATCH_UP) } else { 0 };
+        CatchUp { evaluated, skip_to: (evaluated < skipped).then(|| k - evaluated - 1) }
+    }
+}
+
 /// The grid of one rate and phase: tick `n` at
 /// `epoch + phase_ms·10⁶ + ⌊n·10⁹/fps⌋ ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -153,6 +173,18 @@ impl Schedule {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_late_tick_evaluates_the_latest_four_skipped_and_steps_the_rest() {
+        // Tick 20 after 10 skipped (10..=19): 16..=19 evaluated, 10..=15 stepped.
+        assert_eq!(CatchUp::of(20, 10, true), CatchUp { evaluated: 4, skip_to: Some(15) });
+        assert_eq!(CatchUp::of(20, 4, true), CatchUp { evaluated: 4, skip_to: None });
+        assert_eq!(CatchUp::of(20, 2, true), CatchUp { evaluated: 2, skip_to: None });
+        assert_eq!(CatchUp::of(20, 10, false), CatchUp { evaluated: 0, skip_to: Some(19) });
+        assert_eq!(CatchUp::of(20, 0, false), CatchUp { evaluated: 0, skip_to: None });
+        // A first tick late at 5: ticks 0..=4 skipped, 1..=4 evaluated, 0 stepped.
+        assert_eq!(CatchUp::of(5, 5, true), CatchUp { evaluated: 4, skip_to: Some(0) });
+    }
     use tokio::time::advance;
 
     fn grid(fps: u32) -> Grid {

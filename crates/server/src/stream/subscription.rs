@@ -60,15 +60,14 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// Queues `control` for the next tick. Returns `false` if the playback
-    /// has ended.
+    /// Queues `control` for the next tick (once a new compact layout it
+    /// needs is chosen, see [`ControlCheck::queue`]). Returns `false` if
+    /// the playback has ended.
     ///
     /// # Errors
-    /// An invalid control, or too many pending.
-    pub fn send(&mut self, control: Control) -> Result<bool, ControlError> {
-        let control = self.check.check(control)?;
-        let layout = self.check.take_layout();
-        match self.tx.try_send(Queued { control, layout }) {
+    /// An invalid control, its work refused, or too many pending.
+    pub async fn send(&mut self, control: Control) -> Result<bool, ControlError> {
+        match self.tx.try_send(self.check.queue(control).await?) {
             Ok(()) => Ok(true),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
             Err(mpsc::error::TrySendError::Closed(_)) => Ok(false),
@@ -296,11 +295,16 @@ impl Subscription {
     /// schedule, same playhead), so other viewers are unaffected. `stop` on
     /// a shared viewer just ends this stream.
     ///
+    /// A compact stream's control that leaves its layout waits here for
+    /// the new one to be chosen ([`ControlCheck::queue`]): no frame is
+    /// taken meanwhile, so the layout goes with the control, before the
+    /// frame after it.
+    ///
     /// # Errors
     /// An invalid control (non-finite numbers, speed beyond ±1000, a
-    /// crossfade to another skeleton, a layer the motion lacks), or too
-    /// many pending.
-    pub fn control(&mut self, control: Control) -> Result<(), ControlError> {
+    /// crossfade to another skeleton, a layer the motion lacks), its work
+    /// refused, or too many pending.
+    pub async fn control(&mut self, control: Control) -> Result<(), ControlError> {
         if let Some(sink) = &self.broadcast {
             if control == Control::Stop {
                 self.stopped = true;
@@ -310,17 +314,16 @@ impl Subscription {
             self.storing.extend(storing);
             return Ok(());
         }
-        let control = self.check.check(control)?;
-        let layout = self.check.take_layout();
+        let queued = self.check.queue(control).await?;
         if self.controls.is_none() {
-            if control == Control::Stop {
+            if queued.control == Control::Stop {
                 self.stopped = true;
                 return Ok(());
             }
             self.fork();
         }
         let tx = self.controls.as_ref().expect("forked above");
-        match tx.try_send(Queued { control, layout }) {
+        match tx.try_send(queued) {
             Ok(()) | Err(mpsc::error::TrySendError::Closed(_)) => Ok(()),
             Err(mpsc::error::TrySendError::Full(_)) => Err(ControlError::Busy),
         }

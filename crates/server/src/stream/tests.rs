@@ -218,7 +218,7 @@ async fn clip_times(sub: &mut Subscription, n: u64, controls: &[(u64, Control)])
     let mut out = Vec::new();
     for k in 0..n {
         for (_, c) in controls.iter().filter(|(at, _)| *at == k) {
-            sub.control(c.clone()).unwrap();
+            sub.control(c.clone()).await.unwrap();
         }
         let f = frame(sub).await;
         assert_eq!((f.seq, f.dropped), (k, 0));
@@ -234,7 +234,7 @@ async fn play_controls_act_on_the_next_tick() {
     let controls = [(2, Control::Pause), (4, Control::Play), (5, Control::Seek(5.0)), (7, Control::Speed(-2.0))];
     let t = clip_times(&mut sub, 9, &controls).await;
     assert_eq!(t, [1.0, 1.1, 1.1, 1.1, 1.2, 5.0, 5.1, 4.9, 4.7]);
-    sub.control(Control::Stop).unwrap();
+    sub.control(Control::Stop).await.unwrap();
     assert_eq!(sub.next().await, Next::End(EndReason::Stopped));
 }
 
@@ -246,22 +246,22 @@ async fn a_viewer_that_sends_a_control_forks_and_the_others_play_on() {
     let ta = clip_times(&mut a, 3, &[]).await;
     let tb = clip_times(&mut b, 3, &[]).await;
     assert_eq!(ta, tb);
-    a.control(Control::Pause).unwrap();
+    a.control(Control::Pause).await.unwrap();
     let (fa, fb) = (frame(&mut a).await, frame(&mut b).await);
     assert_eq!((fa.seq, fa.dropped, fb.seq), (3, 0, 3), "the fork continues the schedule");
     assert!(close(fa.clip_time, 0.2), "paused at the previous time: {}", fa.clip_time);
     assert!(close(fb.clip_time, 0.3));
     // Frames from the fork carry no names again (JSON has them per pose) and
     // keep seq contiguous.
-    a.control(Control::Speed(3.0)).unwrap();
-    a.control(Control::Play).unwrap();
+    a.control(Control::Speed(3.0)).await.unwrap();
+    a.control(Control::Play).await.unwrap();
     let fa = frame(&mut a).await;
     assert_eq!((fa.seq, fa.dropped), (4, 0));
     assert!(close(fa.clip_time, 0.5), "{}", fa.clip_time);
-    a.control(Control::Stop).unwrap();
+    a.control(Control::Stop).await.unwrap();
     assert_eq!(a.next().await, Next::End(EndReason::Stopped));
     assert!(close(frame(&mut b).await.clip_time, 0.4));
-    b.control(Control::Stop).unwrap();
+    b.control(Control::Stop).await.unwrap();
     assert_eq!(b.next().await, Next::End(EndReason::Stopped));
 }
 
@@ -358,7 +358,7 @@ async fn a_fork_carries_the_root_motion_total_on_across_loop_seams() {
         assert!((root_total_x(&f) - 2.0 * k as f64).abs() < 1e-9, "frame {k}: {}", root_total_x(&f));
     }
     // A control forks a private playback from frame 6; the total goes on from 12.
-    sub.control(Control::Speed(4.0)).unwrap();
+    sub.control(Control::Speed(4.0)).await.unwrap();
     for k in 7..13 {
         let f = frame(&mut sub).await;
         assert_eq!(f.seq, k);

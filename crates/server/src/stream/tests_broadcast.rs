@@ -95,7 +95,7 @@ async fn controls_apply_from_their_stamp_for_every_viewer() {
         times.push((time(&fa) * 1e9).round() / 1e9);
         if seq == 4 {
             // Sent by the controlling viewer (its sink is the broadcast): stamped 5.
-            c.control(Control::Pause).unwrap();
+            c.control(Control::Pause).await.unwrap();
         }
     }
     assert_eq!(times, [5.0, 5.1, 5.1, 5.1], "seek at 3; pause at 5 holds tick 4's time");
@@ -108,10 +108,10 @@ async fn read_only_viewers_cannot_control_and_stop_ends_only_their_own_stream() 
     let b = create(&e, 10, 300);
     let mut reader = viewer(&e, &b, Encoding::Json, false);
     let mut writer = viewer(&e, &b, Encoding::Json, true);
-    assert_eq!(reader.control(Control::Pause), Err(ControlError::ReadOnly));
+    assert_eq!(reader.control(Control::Pause).await, Err(ControlError::ReadOnly));
     assert_eq!(b.control(Control::Stop).unwrap_err().code(), "bad_control");
     assert_eq!(b.control(Control::Speed(5000.0)).unwrap_err().code(), "bad_control");
-    writer.control(Control::Stop).unwrap();
+    writer.control(Control::Stop).await.unwrap();
     assert_eq!(writer.next().await, Next::End(EndReason::Stopped));
     frame(&mut reader).await;
     assert!(!b.status().paused, "the refused controls changed nothing");

@@ -157,18 +157,89 @@ async fn a_layer_ramp_on_a_clip_stream_brings_a_new_layout_once() {
         assert!(f.layout.is_none(), "the opened layout holds the clip");
         decode(&mut d, &f);
     }
-    sub.control(Control::Layer { index: 0, weight: 0.5, duration: 0.0 }).unwrap();
+    sub.control(Control::Layer { index: 0, weight: 0.5, duration: 0.0 }).await.unwrap();
     let f = frame(&mut sub).await;
     let (seq, doc) = f.layout.clone().expect("a new layout");
     assert_eq!(seq, f.seq, "it names the first frame in it");
     assert_ne!(*doc, *l.document);
     d.relayout(&serde_json::from_str(&doc).unwrap());
     assert!(decode(&mut d, &f)[0].1, "the first frame in a new layout is a key frame");
-    sub.control(Control::Layer { index: 0, weight: 1.0, duration: 0.0 }).unwrap();
+    sub.control(Control::Layer { index: 0, weight: 1.0, duration: 0.0 }).await.unwrap();
     for _ in 0..3 {
         let f = frame(&mut sub).await;
         assert!(f.layout.is_none(), "seq {}: the derived ranges hold any weight", f.seq);
         decode(&mut d, &f);
+    }
+}
+
+/// A stream's pricing that takes any price and runs each new layout's
+/// choice on a thread of its own, as the server's work pool does (or
+/// refuses it once begun, as at the pool's deadline).
+#[derive(Debug, Default)]
+struct LayoutsOffTask {
+    charged: std::sync::Mutex<Vec<u64>>,
+    /// Jobs run on the runner's thread.
+    ran: Arc<std::sync::atomic::AtomicUsize>,
+    time_out: bool,
+}
+
+impl Repricing for LayoutsOffTask {
+    fn reprice(&self, _: &[&pinned::StreamMotion], _: &[anim::ik::IkConstraint]) -> Result<(), ControlError> {
+        Ok(())
+    }
+
+    fn admit(&self) -> Result<(), ControlError> {
+        Ok(())
+    }
+
+    fn charge_layout(&self, units: u64) -> Result<LayoutRunner, ControlError> {
+        self.charged.lock().unwrap().push(units);
+        let (ran, time_out) = (Arc::clone(&self.ran), self.time_out);
+        Ok(Box::new(move |job| {
+            Box::pin(async move {
+                let (tx, rx) = tokio::sync::oneshot::channel();
+                std::thread::spawn(move || {
+                    ran.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    let _ = tx.send(job());
+                });
+                let chosen = rx.await.expect("the job ran");
+                if time_out {
+                    return Err(ControlError::Invalid("timed out"));
+                }
+                Ok(chosen)
+            })
+        }))
+    }
+}
+
+/// A control that leaves a compact stream's layout has its new layout
+/// charged to the stream and chosen by the runner the stream's pricing
+/// gives (the work pool), not on the task that sent it; a choice refused
+/// once begun refuses the control and leaves the stream as it was, so the
+/// next such control needs a layout again.
+#[tokio::test]
+async fn a_new_layout_is_chosen_by_the_streams_runner_and_a_refused_one_changes_nothing() {
+    let e = engine();
+    for time_out in [false, true] {
+        let params = StreamParams::new(pinned("c1", clip()), StreamRequest { fps: 10, ..Default::default() }).unwrap();
+        let l = Arc::new(CompactLayout::of_clip(params.clip(), 1e-4, None, 10));
+        let pricing = Arc::new(LayoutsOffTask { time_out, ..LayoutsOffTask::default() });
+        let permit = e.admit(None).unwrap().priced(Arc::clone(&pricing) as Arc<dyn Repricing>);
+        let mut sub = e.play(params.with_compact(Arc::clone(&l)), permit, None);
+        assert!(frame(&mut sub).await.layout.is_none());
+        let ramp = Control::Layer { index: 0, weight: 0.5, duration: 0.0 };
+        let sent = sub.control(ramp.clone()).await;
+        assert_eq!(pricing.ran.load(std::sync::atomic::Ordering::SeqCst), 1, "the runner chose it");
+        assert_eq!(pricing.charged.lock().unwrap().len(), 1);
+        if !time_out {
+            sent.unwrap();
+            assert!(frame(&mut sub).await.layout.is_some(), "the new layout goes with the control");
+            continue;
+        }
+        assert_eq!(sent, Err(ControlError::Invalid("timed out")));
+        assert!(frame(&mut sub).await.layout.is_none(), "refused: the stream keeps its layout");
+        assert!(sub.control(ramp).await.is_err(), "and the next ramp needs a new one again");
+        assert_eq!(pricing.charged.lock().unwrap().len(), 2);
     }
 }
 

@@ -103,7 +103,7 @@ struct Controls {
 
 impl Controls {
     /// Takes a control message's text; returns the error message to send, if any.
-    fn receive(&mut self, text: &str, sub: &mut Subscription) -> Option<Message> {
+    async fn receive(&mut self, text: &str, sub: &mut Subscription) -> Option<Message> {
         let msg = match serde_json::from_str::<ControlMsg>(text) {
             Ok(msg) => msg,
             Err(e) => return Some(error_message(&not_a_control(&e, true))),
@@ -115,14 +115,14 @@ impl Controls {
             self.queued.push_back(msg);
             return None;
         }
-        self.apply(msg, sub)
+        self.apply(msg, sub).await
     }
 
     /// Applies `msg` now, or starts its motion's lookup.
-    fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
+    async fn apply(&mut self, msg: ControlMsg, sub: &mut Subscription) -> Option<Message> {
         match msg.parse() {
             Ok(ParsedControl::Ready(control)) => {
-                let sent = sub.control(control);
+                let sent = sub.control(control).await;
                 self.storing.extend(sub.storing());
                 sent.err().map(|e| refusal(&e))
             }
@@ -142,13 +142,13 @@ impl Controls {
     /// A lookup finished: the crossfade goes to the playback (or its refusal
     /// back to the client), then the controls queued behind it, up to the
     /// next crossfade. Returns the error messages to send.
-    fn looked_up(&mut self, (motion, duration, ease, source): LookedUp, sub: &mut Subscription) -> Vec<Message> {
+    async fn looked_up(&mut self, (motion, duration, ease, source): LookedUp, sub: &mut Subscription) -> Vec<Message> {
         self.lookup = None;
         let mut errors = Vec::new();
         match motion {
             Ok(to) => {
                 let fade = Control::Crossfade(Crossfade { to, duration, ease, source: Some(source) });
-                errors.extend(sub.control(fade).err().map(|e| refusal(&e)));
+                errors.extend(sub.control(fade).await.err().map(|e| refusal(&e)));
                 self.storing.extend(sub.storing());
             }
             Err(problem) => errors.push(Message::Text(serde_json::json!({ "error": problem }).to_string().into())),
@@ -156,7 +156,7 @@ impl Controls {
         while self.lookup.is_none()
             && let Some(msg) = self.queued.pop_front()
         {
-            errors.extend(self.apply(msg, sub));
+            errors.extend(self.apply(msg, sub).await);
         }
         errors
     }
@@ -315,14 +315,14 @@ pub async fn serve<S, E>(
                     }
                     Some(Ok(Message::Ping(_))) => continue, // the socket answers pings itself
                     Some(Ok(Message::Binary(_))) => error_message("control messages are JSON text"),
-                    Some(Ok(Message::Text(text))) => match controls.receive(&text, &mut sub) {
+                    Some(Ok(Message::Text(text))) => match controls.receive(&text, &mut sub).await {
                         Some(error) => error,
                         None => continue,
                     },
                 },
                 refused = not_stored(&mut controls.storing) => refusal(&refused),
                 done = lookup_done(&mut controls.lookup) => {
-                    outbox.extend(controls.looked_up(done, &mut sub));
+                    outbox.extend(controls.looked_up(done, &mut sub).await);
                     continue;
                 }
                 _ = ping.tick() => {

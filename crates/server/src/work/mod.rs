@@ -39,6 +39,15 @@ pub struct Work {
     deadline: Duration,
 }
 
+impl std::fmt::Debug for Work {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Work")
+            .field("threads", &self.pool.threads())
+            .field("capacity", &self.meter.capacity())
+            .finish_non_exhaustive()
+    }
+}
+
 impl Work {
     /// The node's work, as `limits` configure it (measuring its capacity
     /// if `node_work_per_sec` is 0).
@@ -79,7 +88,21 @@ impl Work {
         T: Send + 'static,
     {
         let ticket = self.charge(caller, units)?;
-        if units <= INLINE_UNITS {
+        self.spend_held(ticket, job).await
+    }
+
+    /// Runs `job`, already charged for with `ticket`, as [`Work::spend`]
+    /// does: on the pool, or here if the ticket holds at most
+    /// [`INLINE_UNITS`].
+    ///
+    /// # Errors
+    /// As [`Work::run`].
+    pub async fn spend_held<T, F>(&self, ticket: Ticket, job: F) -> Result<T, ApiError>
+    where
+        F: FnOnce(&Cancel) -> T + Send + 'static,
+        T: Send + 'static,
+    {
+        if ticket.units() <= INLINE_UNITS {
             let out = job(&self.pool.cancel());
             drop(ticket);
             return Ok(out);
