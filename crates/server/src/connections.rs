@@ -185,7 +185,9 @@ impl Tracked {
             if n == 0 {
                 return Poll::Ready(Err(io::ErrorKind::WriteZero.into()));
             }
-            self.gathered.as_mut().map(|g| g.advance(n));
+            if let Some(gathered) = self.gathered.as_mut() {
+                gathered.advance(n);
+            }
         }
         Poll::Ready(Ok(()))
     }

@@ -18,9 +18,9 @@ use crate::auth::{Caller, CallerKey};
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::stream::{
-    AdmitError, Broadcast, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, LayoutRunner, MAX_FPS,
-    ParamError, ReachSig, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest, range_sample_price,
-    range_source,
+    AdmitError, Broadcast, CompactLayout, CompactRefusal, CompactRequest, ControlError, Encoding, LayoutRunner,
+    MAX_FPS, ParamError, ReachSig, Repricing, StreamMotion, StreamParams, StreamPermit, StreamRequest,
+    range_sample_price, range_source,
 };
 use crate::work::{Ticket, price};
 
