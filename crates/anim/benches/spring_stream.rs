@@ -11,7 +11,8 @@
 //! leave the output alone. Not a criterion bench: one process per case.
 //!
 //! Run: `cargo bench -p inbetween-anim --bench spring_stream -- CASE [FRAMES]`
-//! (`CASE`: `clip` or `springs`; 600 frames by default); count with
+//! (`CASE`: `clip` or `springs`, or `pose`: that many stateless poses
+//! with the tail's chain, each from rest; 600 frames by default); count with
 //! `valgrind --tool=callgrind --toggle-collect='*Player*sample_clocked*'
 //! target/release/deps/spring_stream-<hash> springs 600`, divided by the frames.
 
@@ -73,19 +74,40 @@ fn main() {
     let clip = walk();
     let springs = match case {
         "clip" => SpringsSpec::default(),
-        "springs" => tail(),
-        other => panic!("unknown case {other} (clip, springs)"),
+        "springs" | "pose" => tail(),
+        other => panic!("unknown case {other} (clip, springs, pose)"),
     };
     let spec = MotionSpec { layers: vec![LayerSpec::new(&clip)], springs, ..MotionSpec::default() };
-    let mut player = Player::new(Arc::new(Motion::build(spec).expect("the motion builds")));
+    let motion = Arc::new(Motion::build(spec).expect("the motion builds"));
+    let start = Instant::now();
+    let h = if case == "pose" { poses(&motion, frames) } else { stream(motion, frames) };
+    let per_frame = start.elapsed().as_nanos() as f64 / frames.max(1) as f64;
+    println!("{case}: {frames} frames at {FPS} fps, {per_frame:.0} ns/frame, poses {h:016x}");
+}
+
+/// `frames` ticks of a stream at [`FPS`]; the hash of their poses.
+fn stream(motion: Arc<Motion<&Clip>>, frames: u64) -> u64 {
+    let mut player = Player::new(motion);
     let options = MotionOptions::default();
     let mut h = 0xcbf2_9ce4_8422_2325;
-    let start = Instant::now();
     for k in 0..frames {
         let s = k as f64 / f64::from(FPS);
         player.sample_clocked(s, s, &options);
         h = hash(h, player.pose());
     }
-    let per_frame = start.elapsed().as_nanos() as f64 / frames.max(1) as f64;
-    println!("{case}: {frames} frames at {FPS} fps, {per_frame:.0} ns/frame, poses {h:016x}");
+    h
+}
+
+/// `count` stateless poses (each its own simulation from rest, a second of
+/// warm-up: 121 substeps), at times 1/[`FPS`] apart from 1 s; the hash.
+fn poses(motion: &Motion<&Clip>, count: u64) -> u64 {
+    let mut sampler = anim::MotionSampler::new();
+    let options = MotionOptions::default();
+    let mut h = 0xcbf2_9ce4_8422_2325;
+    for k in 0..count {
+        sampler.restart_springs();
+        motion.sample(1.0 + k as f64 / f64::from(FPS), &options, &mut sampler);
+        h = hash(h, sampler.local());
+    }
+    h
 }

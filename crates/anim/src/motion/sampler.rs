@@ -172,7 +172,7 @@ impl<C: ClipSource> Motion<C> {
     /// times it is given in order, from rest `warmup` before the first
     /// (docs/springs.md, “Time”); a time before the last starts it again.
     pub fn sample(&self, tau: f64, options: &MotionOptions, sampler: &mut MotionSampler) -> f32 {
-        let clip_time = self.sample_local(tau, options.ease, sampler);
+        let clip_time = self.sample_local(tau, options.ease, None, sampler);
         if let Some(springs) = &self.springs {
             let MotionSampler { springs: run, local, .. } = sampler;
             let run = run.get_or_insert_with(|| Box::new(super::SpringRun::new(springs)));
@@ -183,11 +183,16 @@ impl<C: ClipSource> Motion<C> {
     }
 
     /// The layered local pose at `tau` with the motion's own weights and
-    /// its IK solved: what springs run on.
-    pub(super) fn sample_local(&self, tau: f64, ease: Ease, sampler: &mut MotionSampler) -> f32 {
+    /// its IK solved: what springs run on. With `only` (the joints a spring
+    /// substep reads, [`crate::spring::Springs::reads`]) and no IK of the
+    /// motion's own, right at those joints only, bit for bit as the whole
+    /// pose has them ([`Motion::sample_joints_with`]); the motion's IK
+    /// reads whole chains, so with it the whole pose is sampled.
+    pub(super) fn sample_local(&self, tau: f64, ease: Ease, only: Option<&[u64]>, sampler: &mut MotionSampler) -> f32 {
         let mut phases = std::mem::take(&mut sampler.phases);
         self.phases_at(tau, &self.weights, &mut phases);
-        let clip_time = self.layer_into(tau, (&phases, &self.weights), (ease, None), sampler, None);
+        let only = only.filter(|_| self.ik.is_empty());
+        let clip_time = self.layer_into(tau, (&phases, &self.weights), (ease, only), sampler, None);
         sampler.phases = phases;
         if !self.ik.is_empty() {
             let MotionSampler { ik, local, ik_reports, solved, .. } = sampler;

@@ -89,7 +89,7 @@ impl SpringRun {
             Some(from) if tau >= self.last => from,
             _ => {
                 let from = warmup_start(tau.min(0.0), tau, DEFAULT_WARMUP);
-                motion.sample_local(from, ease, &mut self.scratch);
+                motion.sample_local(from, ease, Some(springs.reads()), &mut self.scratch);
                 self.solver.start_at(springs, 0.0, self.scratch.local());
                 self.from = Some(from);
                 from
@@ -98,7 +98,7 @@ impl SpringRun {
         self.last = tau;
         let SpringRun { solver, scratch, .. } = self;
         solver.frame(springs, tau - from, local, |u, pose| {
-            motion.sample_local(from + u, ease, scratch);
+            motion.sample_local(from + u, ease, Some(springs.reads()), scratch);
             pose.copy_from(scratch.local());
         });
     }

@@ -66,6 +66,10 @@ const SPRING_JOINT: u64 = 10;
 /// Units per collider test of one spring substep (each turning joint
 /// against each collider of its chain).
 const SPRING_TEST: u64 = 1;
+/// Joints of a whole pose copied per unit: a joint is 48 bytes, about 5
+/// instructions to copy (BENCHMARKS.md, “Springs”), so 4 take well under
+/// a unit's 10 ns.
+const JOINTS_PER_COPY: u64 = 4;
 /// Units per joint of each layer a motion build maps by name, and per
 /// output joint its mask resolves.
 const MOTION_PER_JOINT: u64 = 6;
@@ -80,14 +84,6 @@ pub fn clip_pose(clip: &Clip) -> u64 {
 pub fn motion_pose(motion: &StreamMotion) -> u64 {
     let layers = motion.layers().map(|c| clip_pose(c.clip())).fold(0, u64::saturating_add);
     layers.saturating_add(ik(motion.ik(), motion.skeleton())).saturating_add(retargets(motion))
-}
-
-/// The work of one spring substep of `motion` (docs/springs.md, “Cost”):
-/// the motion evaluated at the substep's time, then per turning joint its
-/// integration and one test per collider of its chain. 0 without springs.
-pub fn spring_substep(motion: &StreamMotion) -> u64 {
-    let Some(springs) = motion.springs() else { return 0 };
-    substep(motion_pose(motion), springs.substep_work())
 }
 
 /// One substep: the pose at its time, then `joints` integrations and
@@ -157,9 +153,50 @@ pub fn clip_frame(clip: &Clip, springs: &SpringsSpec, fps: u32) -> u64 {
     pose.saturating_add(chains).saturating_add(catch_up(chains, fps))
 }
 
+/// The work of one substep of a stateless request (docs/springs.md,
+/// “Cost”): the motion sampled at the joints the chains read
+/// ([`warmup_pose`]), then the chains' integration and collider tests.
+/// 0 without springs.
+pub fn warmup_substep(motion: &StreamMotion) -> u64 {
+    let Some(springs) = motion.springs() else { return 0 };
+    substep(warmup_pose(motion, springs), springs.substep_work())
+}
+
+/// The motion's pose as a stateless request's substep samples it: with
+/// the motion's own IK (which reads whole chains), the whole pose; else
+/// each layer at the joints the chains read (`Springs::reads`), and its
+/// root-motion joint, at most its clip's joints (a layer whose clip has
+/// keyed IK, or that is retargeted, whole, with its retarget), and per
+/// [`JOINTS_PER_COPY`] joints of each clip and of the output one unit: the
+/// whole poses copied (a clip's base, the rest under the layers, the
+/// substep's input). Never more than the whole pose, whose price covers
+/// those copies.
+fn warmup_pose(motion: &StreamMotion, springs: &anim::spring::Springs) -> u64 {
+    if !motion.ik().is_empty() {
+        return motion_pose(motion);
+    }
+    let reads = springs.reads().iter().map(|w| u64::from(w.count_ones())).sum::<u64>();
+    let root = u64::from(motion.has_root_motion());
+    let layer = |(i, clip): (usize, &Arc<dyn PinnedClip>)| {
+        let clip = clip.clip();
+        let joints = clip.joint_count() as u64;
+        let sampled = if motion.is_retargeted(i) || clip.ik_count() > 0 {
+            clip_pose(clip)
+        } else {
+            (reads + root).min(joints).saturating_mul(JOINT)
+        };
+        sampled.saturating_add(joints.div_ceil(JOINTS_PER_COPY))
+    };
+    let layers = motion.layers().enumerate().map(layer).fold(0, u64::saturating_add);
+    let output = (motion.skeleton().len() as u64).div_ceil(JOINTS_PER_COPY);
+    let cut = layers.saturating_add(output).saturating_add(retargets(motion));
+    cut.min(motion_pose(motion))
+}
+
 /// The work of the spring substeps of a stateless request at `times` (in
 /// the order given): a simulation from rest `warmup` before its first time,
-/// run through the times, started again wherever a time goes back.
+/// run through the times, started again wherever a time goes back; each
+/// substep a [`warmup_substep`].
 pub fn spring_run(motion: &StreamMotion, times: &[f64]) -> u64 {
     let Some(springs) = motion.springs() else { return 0 };
     let hz = springs.substep_hz();
@@ -173,7 +210,7 @@ pub fn spring_run(motion: &StreamMotion, times: &[f64]) -> u64 {
         last = Some(t);
     }
     let substeps = (seconds * hz).ceil() as u64 + times.len() as u64;
-    substeps.saturating_mul(spring_substep(motion))
+    substeps.saturating_mul(warmup_substep(motion))
 }
 
 /// The work of the retargets of one pose (docs/motion.md, “Characters”): per

@@ -383,3 +383,39 @@ fn a_stream_frame_pays_its_share_of_the_substeps_late_frames_catch_up() {
     };
     assert_eq!(price::clip_frame(&chain_clip(10, Vec::new()), &chains, 60), 10 + 100 + 7);
 }
+
+#[test]
+fn a_stateless_spring_warmup_pays_only_the_joints_its_chains_read() {
+    let springs = |joints: &[&str]| anim::spring::SpringsSpec {
+        chains: vec![anim::spring::ChainSpec::new("tail", joints)],
+        ..Default::default()
+    };
+    // A 64-joint chain; springs j1..j3 turn 2 joints (20 units a substep)
+    // and read j0..j2 (3 joints: the turning ones and their ancestors, not
+    // the tip). The layer pays those 3 and a copy of its clip (⌈64 / 4⌉ =
+    // 16), the output its copy (16): 35, not the whole pose's 64.
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(chain_clip(64, Vec::new()))));
+    let layers = vec![LayerSpec::new(Arc::clone(&pinned))];
+    let near = MotionSpec { layers, springs: springs(&["j1", "j2", "j3"]), ..Default::default() };
+    let near = anim::Motion::build(near).unwrap();
+    assert_eq!(price::warmup_substep(&near), 35 + 20);
+    // A pose at 1.5: 1 s of warm-up at 120 Hz (120 substeps) and its own.
+    assert_eq!(price::spring_run(&near, &[1.5]), 121 * 55);
+    // Samples at 0.25 then 0.75: from 0 (the warm-up stops at the start),
+    // 0.75 s in all, 90 substeps and one per pose.
+    assert_eq!(price::spring_run(&near, &[0.25, 0.75]), 92 * 55);
+    // Two layers of a 20-joint chain, springs j15..j19 (4 turning joints,
+    // 40 units) reading 19 joints: 19 + 5 per layer + 5 is more than the
+    // whole pose's 40, which bounds it.
+    let pinned: Arc<dyn PinnedClip> = Arc::new(Pinned::new("c", 1, Arc::new(chain_clip(20, Vec::new()))));
+    let tip = || springs(&["j15", "j16", "j17", "j18", "j19"]);
+    let layers = vec![LayerSpec::new(Arc::clone(&pinned)), LayerSpec::new(Arc::clone(&pinned))];
+    let far = anim::Motion::build(MotionSpec { layers, springs: tip(), ..Default::default() }).unwrap();
+    assert_eq!(price::warmup_substep(&far), 40 + 40);
+    // The motion's own IK reads whole chains: the whole pose, with the
+    // aim at j19 (4 + its 20 joints of ancestry).
+    let layers = vec![LayerSpec::new(Arc::clone(&pinned)), LayerSpec::new(pinned)];
+    let spec = MotionSpec { layers, springs: tip(), ik: vec![aim(20)], ..Default::default() };
+    let aimed = anim::Motion::build(spec).unwrap();
+    assert_eq!(price::warmup_substep(&aimed), 40 + 24 + 40);
+}

@@ -8,7 +8,7 @@
 //! the glTF rigs as tables of their nodes (`rigs`, copied from the files).
 
 mod feet;
-mod motion;
+pub mod motion;
 pub mod names;
 mod properties;
 pub mod reference;

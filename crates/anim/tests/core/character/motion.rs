@@ -19,7 +19,7 @@ use super::names::{MIXAMO, UNREAL, humanoid};
 
 /// A take on `skeleton`: the hips walk along z and sway, the left upper
 /// arm and right knee swing, over 2 s, looping.
-fn take(skeleton: &Skeleton) -> Clip {
+pub(crate) fn take(skeleton: &Skeleton) -> Clip {
     let joints = (0..skeleton.len())
         .map(|j| JointSpec {
             name: skeleton.names()[j].clone(),

@@ -179,7 +179,7 @@ fn check_family(family: &str, names: [&str; 22], roles: [Option<Role>; 22], by_s
 
 /// A Mixamo rig's names in the slot order of the family tests (without its
 /// `mixamorig:` namespace); the motion tests retarget between it and [`UNREAL`].
-pub(super) const MIXAMO: [&str; 22] = [
+pub(crate) const MIXAMO: [&str; 22] = [
     "Hips",
     "Spine",
     "Spine1",
@@ -205,7 +205,7 @@ pub(super) const MIXAMO: [&str; 22] = [
 ];
 
 /// An Unreal mannequin's names in the same slot order.
-pub(super) const UNREAL: [&str; 22] = [
+pub(crate) const UNREAL: [&str; 22] = [
     "pelvis",
     "spine_01",
     "spine_02",

@@ -7,6 +7,7 @@
 mod graph;
 mod player;
 mod reference;
+mod warmup;
 
 use anim::spring::{
     ChainSpec, ColliderShape, ColliderSpec, JointParams, SpringParams, SpringSolver, Springs, SpringsSpec,
