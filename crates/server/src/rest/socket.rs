@@ -12,7 +12,10 @@
 //! does everything else: it reads (controls, pings, close, the size limits)
 //! and writes pongs, pings, closes and error messages. Both writers go
 //! through one ordered queue ([`FrameIo`]) that takes whole frames only, so
-//! their frames never interleave on the wire.
+//! their frames never interleave on the wire. That queue is shared with a
+//! broadcast's fan-out ([`FrameWriter`], `stream::fanout`), which writes a
+//! parked viewer's frames from its own task the same way, and only when
+//! nothing waits before them.
 //!
 //! The upgrade is axum's `WebSocketUpgrade` (its checks, rejections and
 //! subprotocol choice) with hyper's upgrade future kept aside, because axum
@@ -21,7 +24,8 @@
 use std::collections::VecDeque;
 use std::io::{self, IoSlice};
 use std::pin::Pin;
-use std::task::{Context, Poll, ready};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::task::{Context, Poll, Waker, ready};
 
 use axum::body::Body;
 use axum::extract::FromRequestParts;
@@ -39,8 +43,8 @@ use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::protocol::{Role, WebSocketConfig, frame::coding::CloseCode};
 use tokio_tungstenite::tungstenite::{self as ts, handshake::derive_accept_key};
 
-use crate::stream::Encoding;
 use crate::stream::ws::FrameSocket;
+use crate::stream::{Direct, DirectWrite, Encoding};
 
 /// A WebSocket upgrade of a stream route: axum's checks, and hyper's
 /// upgrade to finish it with a [`StreamSocket`].
@@ -113,14 +117,22 @@ pub struct StreamSocket {
 
 impl FrameSocket for StreamSocket {
     async fn send_frame(&mut self, encoding: Encoding, bytes: Bytes) -> Result<(), ts::Error> {
-        let opcode = match encoding {
-            Encoding::Json => OP_TEXT,
-            Encoding::Protobuf | Encoding::Compact => OP_BINARY,
-        };
-        self.ws.get_mut().push_frame(opcode, bytes);
+        self.ws.get_ref().frames().push_frame(opcode(encoding), bytes);
         // Written out and flushed (TLS keeps records until flushed), as a
         // message sent through tungstenite is.
         std::future::poll_fn(|cx| Pin::new(self.ws.get_mut()).poll_flush(cx)).await.map_err(ts::Error::Io)
+    }
+
+    fn direct(&self) -> Option<Arc<dyn DirectWrite>> {
+        Some(Arc::new(FrameWriter(Arc::clone(&self.ws.get_ref().shared))))
+    }
+}
+
+/// The opcode of a frame of `encoding`: JSON text, else binary.
+fn opcode(encoding: Encoding) -> u8 {
+    match encoding {
+        Encoding::Json => OP_TEXT,
+        Encoding::Protobuf | Encoding::Compact => OP_BINARY,
     }
 }
 
@@ -248,12 +260,19 @@ impl Chunk {
 const MAX_SLICES: usize = 16;
 
 /// The upgraded connection with an ordered queue of whole frames in front
-/// of its write side. [`FrameIo::push_frame`] queues a stream frame;
+/// of its write side. [`Frames::push_frame`] queues a stream frame;
 /// tungstenite's writes (`AsyncWrite`) are taken whole or not at all —
 /// written through when nothing is queued, else queued behind the frames
 /// (copied: they are small and rare) up to `limit` bytes — so its frames
-/// and ours never interleave. Reads pass through.
+/// and ours never interleave. Reads pass through. A handle to [`Frames`],
+/// which a [`FrameWriter`] shares: each call holds its lock for one write
+/// or read, never across an await.
 pub struct FrameIo<T> {
+    shared: Arc<Mutex<Frames<T>>>,
+}
+
+/// The connection and its queue.
+pub struct Frames<T> {
     io: T,
     queue: VecDeque<Chunk>,
     /// Bytes in `queue`.
@@ -262,12 +281,19 @@ pub struct FrameIo<T> {
     limit: usize,
 }
 
-impl<T: AsyncWrite + Unpin> FrameIo<T> {
+impl<T> FrameIo<T> {
     fn new(io: T, limit: usize) -> Self {
-        FrameIo { io, queue: VecDeque::new(), queued: 0, limit }
+        let frames = Frames { io, queue: VecDeque::new(), queued: 0, limit };
+        FrameIo { shared: Arc::new(Mutex::new(frames)) }
     }
 
-    /// Queues a frame of `body`; [`FrameIo::poll_drain`] writes it.
+    fn frames(&self) -> MutexGuard<'_, Frames<T>> {
+        crate::sync::lock(&self.shared)
+    }
+}
+
+impl<T: AsyncWrite + Unpin> Frames<T> {
+    /// Queues a frame of `body`; [`Frames::poll_drain`] writes it.
     fn push_frame(&mut self, opcode: u8, body: Bytes) {
         self.push(Chunk::frame(opcode, body));
     }
@@ -306,49 +332,84 @@ impl<T: AsyncWrite + Unpin> FrameIo<T> {
         }
         Poll::Ready(Ok(()))
     }
-}
 
-impl<T: AsyncRead + Unpin> AsyncRead for FrameIo<T> {
-    fn poll_read(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.get_mut().io).poll_read(cx, buf)
-    }
-}
-
-impl<T: AsyncWrite + Unpin> AsyncWrite for FrameIo<T> {
-    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
-        let this = self.get_mut();
-        if let Poll::Ready(Err(e)) = this.poll_drain(cx) {
+    fn poll_write(&mut self, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+        if let Poll::Ready(Err(e)) = self.poll_drain(cx) {
             return Poll::Ready(Err(e));
         }
-        if this.queue.is_empty() {
-            let written = match Pin::new(&mut this.io).poll_write(cx, buf) {
+        if self.queue.is_empty() {
+            let written = match Pin::new(&mut self.io).poll_write(cx, buf) {
                 Poll::Ready(Ok(n)) => n,
                 Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
                 Poll::Pending => 0,
             };
             if written < buf.len() {
-                this.push(Chunk::bytes(Bytes::copy_from_slice(&buf[written..])));
+                self.push(Chunk::bytes(Bytes::copy_from_slice(&buf[written..])));
             }
             return Poll::Ready(Ok(buf.len()));
         }
-        if this.queued + buf.len() > this.limit {
+        if self.queued + buf.len() > self.limit {
             // The drain above is pending: it wakes the task.
             return Poll::Pending;
         }
-        this.push(Chunk::bytes(Bytes::copy_from_slice(buf)));
+        self.push(Chunk::bytes(Bytes::copy_from_slice(buf)));
         Poll::Ready(Ok(buf.len()))
     }
 
+    fn poll_flush(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        ready!(self.poll_drain(cx))?;
+        Pin::new(&mut self.io).poll_flush(cx)
+    }
+
+    fn poll_shutdown(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        ready!(self.poll_drain(cx))?;
+        Pin::new(&mut self.io).poll_shutdown(cx)
+    }
+}
+
+impl<T: AsyncRead + Unpin> AsyncRead for FrameIo<T> {
+    fn poll_read(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.frames().io).poll_read(cx, buf)
+    }
+}
+
+impl<T: AsyncWrite + Unpin> AsyncWrite for FrameIo<T> {
+    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+        self.frames().poll_write(cx, buf)
+    }
+
     fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        let this = self.get_mut();
-        ready!(this.poll_drain(cx))?;
-        Pin::new(&mut this.io).poll_flush(cx)
+        self.frames().poll_flush(cx)
     }
 
     fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        let this = self.get_mut();
-        ready!(this.poll_drain(cx))?;
-        Pin::new(&mut this.io).poll_shutdown(cx)
+        self.frames().poll_shutdown(cx)
+    }
+}
+
+/// A broadcast's fan-out's way into a viewer's socket (`stream::lane`): a
+/// whole frame, written now without waiting, only when nothing is queued
+/// before it. What the socket does not take at once stays queued for the
+/// viewer's task, which the fan-out then wakes; the write side's wake-up is
+/// registered by that task's next write (the one here has no task to wake).
+pub struct FrameWriter<T>(Arc<Mutex<Frames<T>>>);
+
+impl<T: AsyncWrite + Unpin + Send> DirectWrite for FrameWriter<T> {
+    fn try_frame(&self, encoding: Encoding, frame: &mut dyn FnMut() -> Bytes) -> Direct {
+        let mut frames = crate::sync::lock(&self.0);
+        if !frames.queue.is_empty() {
+            return Direct::Busy;
+        }
+        frames.push_frame(opcode(encoding), frame());
+        match frames.poll_drain(&mut Context::from_waker(Waker::noop())) {
+            Poll::Ready(Ok(())) => Direct::Written,
+            Poll::Ready(Err(_)) => Direct::Failed,
+            Poll::Pending => Direct::Partly,
+        }
+    }
+
+    fn idle(&self) -> bool {
+        crate::sync::lock(&self.0).queue.is_empty()
     }
 }
 
@@ -356,20 +417,23 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for FrameIo<T> {
 mod tests {
     use super::*;
 
-    /// A writer that takes at most `step` bytes a call, one slice at a time.
+    /// A writer that takes at most `step` bytes a call, one slice at a time,
+    /// and `room` bytes in all before it is pending.
     struct Trickle {
         out: Vec<u8>,
         step: usize,
+        room: usize,
         pending: bool,
     }
 
     impl AsyncWrite for Trickle {
         fn poll_write(self: Pin<&mut Self>, _: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
             let this = self.get_mut();
-            if this.pending {
+            if this.pending || this.room == 0 {
                 return Poll::Pending;
             }
-            let n = buf.len().min(this.step);
+            let n = buf.len().min(this.step).min(this.room);
+            this.room -= n;
             this.out.extend_from_slice(&buf[..n]);
             Poll::Ready(Ok(n))
         }
@@ -397,17 +461,17 @@ mod tests {
 
     #[test]
     fn frames_and_tungstenite_writes_leave_whole_and_in_order() {
-        let mut io = FrameIo::new(Trickle { out: Vec::new(), step: 3, pending: true }, 64);
-        io.push_frame(OP_TEXT, Bytes::from_static(b"frame one"));
-        assert!(io.poll_drain(&mut cx()).is_pending());
+        let mut io = FrameIo::new(Trickle { out: Vec::new(), step: 3, room: usize::MAX, pending: true }, 64);
+        io.frames().push_frame(OP_TEXT, Bytes::from_static(b"frame one"));
+        assert!(io.frames().poll_drain(&mut cx()).is_pending());
         // Behind a queued frame, tungstenite's bytes are queued whole.
         assert!(matches!(Pin::new(&mut io).poll_write(&mut cx(), b"PONG"), Poll::Ready(Ok(4))));
         // Over the limit, they wait.
         assert!(Pin::new(&mut io).poll_write(&mut cx(), &[0; 64]).is_pending());
-        io.io.pending = false;
-        io.push_frame(OP_TEXT, Bytes::from_static(b"two"));
-        assert!(matches!(io.poll_drain(&mut cx()), Poll::Ready(Ok(()))));
-        assert_eq!(io.queued, 0);
+        io.frames().io.pending = false;
+        io.frames().push_frame(OP_TEXT, Bytes::from_static(b"two"));
+        assert!(matches!(io.frames().poll_drain(&mut cx()), Poll::Ready(Ok(()))));
+        assert_eq!(io.frames().queued, 0);
         // Written through when nothing is queued; a partial write queues the rest.
         assert!(matches!(Pin::new(&mut io).poll_write(&mut cx(), b"CLOSE"), Poll::Ready(Ok(5))));
         assert!(matches!(Pin::new(&mut io).poll_flush(&mut cx()), Poll::Ready(Ok(()))));
@@ -415,6 +479,30 @@ mod tests {
         want.extend_from_slice(b"frame onePONG");
         want.extend_from_slice(&[0x81, 3]);
         want.extend_from_slice(b"twoCLOSE");
-        assert_eq!(io.io.out, want);
+        assert_eq!(io.frames().io.out, want);
+    }
+
+    #[test]
+    fn a_direct_frame_waits_for_nothing_and_is_written_whole_or_left_to_the_task() {
+        let io = FrameIo::new(Trickle { out: Vec::new(), step: 100, room: usize::MAX, pending: false }, 64);
+        let writer = FrameWriter(Arc::clone(&io.shared));
+        let frame = |body: &'static [u8]| move || Bytes::from_static(body);
+        assert_eq!(writer.try_frame(Encoding::Json, &mut frame(b"one")), Direct::Written);
+        assert!(writer.idle());
+        // The socket has room for 4 bytes: a frame of 7 is taken, its rest left queued.
+        io.frames().io.room = 4;
+        assert_eq!(writer.try_frame(Encoding::Protobuf, &mut frame(b"two..")), Direct::Partly);
+        assert!(!writer.idle());
+        // Behind it, a frame is not taken at all (nor made).
+        let mut never = || -> Bytes { panic!("a frame made for a busy socket") };
+        assert_eq!(writer.try_frame(Encoding::Json, &mut never), Direct::Busy);
+        io.frames().io.room = usize::MAX;
+        assert!(matches!(io.frames().poll_drain(&mut cx()), Poll::Ready(Ok(()))));
+        assert!(writer.idle());
+        let mut want = vec![0x81, 3];
+        want.extend_from_slice(b"one");
+        want.extend_from_slice(&[0x82, 5]);
+        want.extend_from_slice(b"two..");
+        assert_eq!(io.frames().io.out, want);
     }
 }

@@ -73,6 +73,7 @@ use super::checkpoint::Checkpoint;
 use super::compact::{CompactLayout, CompactRefusal};
 use super::control::{Control, ControlCheck, ControlError};
 use super::encode::Encoding;
+use super::fanout::Fanout;
 use super::hub::{EndReason, Item, unix_nanos};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
@@ -390,8 +391,8 @@ impl Broadcasts {
         let broadcast = Arc::new(Broadcast {
             id: Arc::clone(&id),
             created_at,
-            json: broadcast::channel(self.inner.buffer).0,
-            protobuf: broadcast::channel(self.inner.buffer).0,
+            json: Channel::new(self.inner.buffer),
+            protobuf: Channel::new(self.inner.buffer),
             compact: Mutex::new(Vec::new()),
             layouts: Arc::new(Mutex::new(Book::default())),
             layout_work: self.inner.layout_work.get().cloned(),
@@ -562,7 +563,39 @@ pub const MAX_COMPACT_LAYOUTS: usize = 4;
 struct CompactChannel {
     layout: Arc<CompactLayout>,
     sig: ReachSig,
+    tx: Channel,
+}
+
+/// The viewers of one encoding (or compact layout): the channel their tasks
+/// read, and the fan-out that writes the frames of those whose lanes are
+/// parked (`fanout`, `lane`).
+struct Channel {
     tx: broadcast::Sender<Item>,
+    fanout: Arc<Fanout>,
+}
+
+impl Channel {
+    fn new(buffer: usize) -> Self {
+        Channel { tx: broadcast::channel(buffer).0, fanout: Arc::new(Fanout::new(buffer)) }
+    }
+
+    fn receiver_count(&self) -> usize {
+        self.tx.receiver_count()
+    }
+
+    /// A new viewer's frames from the next tick on, and its fan-out.
+    fn subscribe(&self) -> (broadcast::Receiver<Item>, Option<Arc<Fanout>>) {
+        (self.tx.subscribe(), Some(Arc::clone(&self.fanout)))
+    }
+
+    /// Sends `item` to the viewers' tasks, then to the fan-out: in that
+    /// order, as a lane parks only while its channel holds nothing it has
+    /// not seen (`lane`). Never waits.
+    fn send(&self, item: Item) {
+        // An error only means no task reads the channel now.
+        let _ = self.tx.send(item.clone());
+        self.fanout.publish(&item);
+    }
 }
 
 /// Layouts of one `max_error` and `distance` kept for reaches, at most.
@@ -611,8 +644,8 @@ pub struct Broadcast {
     schedule: Schedule,
     lead: Duration,
     journal: Option<Arc<dyn Journal>>,
-    json: broadcast::Sender<Item>,
-    protobuf: broadcast::Sender<Item>,
+    json: Channel,
+    protobuf: Channel,
     /// Compact viewers' channels, one per layout (at most [`MAX_COMPACT_LAYOUTS`]).
     compact: Mutex<Vec<CompactChannel>>,
     /// Their layouts for each reach (locked after `compact`, never before).
@@ -669,7 +702,7 @@ impl Broadcast {
     }
 
     /// The channel of JSON or protobuf frames (compact frames have one per layout).
-    fn channel(&self, encoding: Encoding) -> &broadcast::Sender<Item> {
+    fn channel(&self, encoding: Encoding) -> &Channel {
         match encoding {
             Encoding::Json => &self.json,
             Encoding::Protobuf | Encoding::Compact => &self.protobuf,
@@ -700,13 +733,13 @@ impl Broadcast {
         permit: StreamPermit,
         controls: Option<ControlGate>,
     ) -> Result<Subscription, CompactRefusal> {
-        let rx = {
+        let (rx, fanout) = {
             let mut channels = crate::sync::lock(&self.compact);
             if self.ended.load(Ordering::Acquire) {
                 let (tx, rx) = broadcast::channel(1);
                 let _ = tx.send(Item::End(EndReason::Ended));
                 drop(channels);
-                return Ok(self.subscription(Encoding::Compact, rx, None, permit));
+                return Ok(self.subscription(Encoding::Compact, (rx, None), None, permit));
             }
             channels.retain(|c| c.tx.receiver_count() > 0);
             crate::sync::lock(&self.layouts).put(layout.key(), &reach, Chosen::Ready(Arc::clone(&layout)));
@@ -723,7 +756,8 @@ impl Broadcast {
                     });
                 }
                 None => {
-                    let (tx, rx) = broadcast::channel(self.buffer);
+                    let tx = Channel::new(self.buffer);
+                    let rx = tx.subscribe();
                     channels.push(CompactChannel { layout: Arc::clone(&layout), sig: reach, tx });
                     rx
                 }
@@ -733,7 +767,8 @@ impl Broadcast {
         let sink = controls.map(|gate| Arc::new(Gated { broadcast: Arc::clone(self), gate }) as Arc<dyn ControlSink>);
         let params = StreamParams { max_frames: None, ..self.spec.params.clone() }.with_compact(layout);
         let shutdown = watch::Sender::new(false).subscribe();
-        Ok(Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls: sink }, shutdown, permit))
+        let source = Source::Broadcast { rx, controls: sink, fanout };
+        Ok(Subscription::new(params, self.schedule.clone(), source, shutdown, permit))
     }
 
     /// Puts each channel in its layout for `reach` (what the tick just
@@ -751,7 +786,7 @@ impl Broadcast {
             match book.get(c.layout.key(), &sig) {
                 Some(Chosen::Ready(layout)) => (c.layout, c.sig) = (layout, sig.clone()),
                 Some(Chosen::Failed) => {
-                    let _ = c.tx.send(Item::End(EndReason::Failed));
+                    c.tx.send(Item::End(EndReason::Failed));
                     return false;
                 }
                 Some(Chosen::Pending) => missing.push(c.layout.key()),
@@ -852,28 +887,28 @@ impl Broadcast {
         permit: StreamPermit,
         controls: Option<ControlGate>,
     ) -> Subscription {
-        let rx = self.channel(encoding).subscribe();
+        let (rx, fanout) = self.channel(encoding).subscribe();
         if self.ended.load(Ordering::Acquire) {
             // It ended between the lookup and the subscription: say so at once.
             let (tx, rx) = broadcast::channel(1);
             let _ = tx.send(Item::End(EndReason::Ended));
-            return self.subscription(encoding, rx, None, permit);
+            return self.subscription(encoding, (rx, None), None, permit);
         }
         metrics::counter!("inbetween_broadcast_viewers_total").increment(1);
         let sink = controls.map(|gate| Arc::new(Gated { broadcast: Arc::clone(self), gate }) as Arc<dyn ControlSink>);
-        self.subscription(encoding, rx, sink, permit)
+        self.subscription(encoding, (rx, fanout), sink, permit)
     }
 
     fn subscription(
         &self,
         encoding: Encoding,
-        rx: broadcast::Receiver<Item>,
+        (rx, fanout): (broadcast::Receiver<Item>, Option<Arc<Fanout>>),
         controls: Option<Arc<dyn ControlSink>>,
         permit: StreamPermit,
     ) -> Subscription {
         let params = StreamParams { encoding, max_frames: None, ..self.spec.params.clone() };
         let shutdown = watch::Sender::new(false).subscribe();
-        Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls }, shutdown, permit)
+        Subscription::new(params, self.schedule.clone(), Source::Broadcast { rx, controls, fanout }, shutdown, permit)
     }
 
     /// Checks `control` like a stream's (`stop` is refused: delete the
@@ -1172,11 +1207,11 @@ impl Task {
         self.broadcast.desk().budget.release();
         self.registry.unlist(&self.broadcast);
         for tx in [&self.broadcast.json, &self.broadcast.protobuf] {
-            let _ = tx.send(Item::End(reason));
+            tx.send(Item::End(reason));
         }
         // Under the lock a compact watch checks `ended` under: each viewer hears the end.
         for c in crate::sync::lock(&self.broadcast.compact).iter() {
-            let _ = c.tx.send(Item::End(reason));
+            c.tx.send(Item::End(reason));
         }
         self.count_viewers(0);
         metrics::gauge!("inbetween_broadcasts").decrement(1.0);
@@ -1246,7 +1281,7 @@ impl Task {
         for encoding in [Encoding::Json, Encoding::Protobuf] {
             let tx = b.channel(encoding);
             if tx.receiver_count() > 0 {
-                let _ = tx.send(timed(&mut || Item::Frame(program.encode(encoding, sent_at))));
+                tx.send(timed(&mut || Item::Frame(program.encode(encoding, sent_at))));
             }
         }
         // Once per layout watched, whatever its viewers' number.
@@ -1254,7 +1289,7 @@ impl Task {
         channels.retain(|c| c.tx.receiver_count() > 0);
         let missing = b.follow_reach(&mut channels, program.reach());
         for c in channels.iter().filter(|c| !missing.contains(&c.layout.key())) {
-            let _ = c.tx.send(timed(&mut || Item::Frame(program.encode_compact(&c.layout, sent_at))));
+            c.tx.send(timed(&mut || Item::Frame(program.encode_compact(&c.layout, sent_at))));
         }
         program.keep_compact(|key| channels.iter().any(|c| c.layout.key() == key));
         drop(channels);

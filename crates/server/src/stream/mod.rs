@@ -19,7 +19,10 @@
 //! reads from that buffer, turning overwritten frames into its own
 //! `dropped` count, and its transport sends the bytes: `grpc` as a
 //! response stream of pre-encoded [`WireFrame`]s, `ws` as text or binary
-//! messages.
+//! messages. What a subscription has sent its client is its `lane`; a
+//! broadcast's WebSocket viewer whose socket keeps up parks its lane, and
+//! the broadcast's `fanout` writes its frames to the socket directly, a few
+//! tasks per encoding rather than one per viewer.
 //!
 //! A graph stream (docs/graphs.md, `graph`) plays a stored graph in place
 //! of the motion player, one graph tick per tick, driven by `set` controls.
@@ -48,9 +51,11 @@ mod encode;
 mod engine;
 mod events;
 mod fade_chain;
+mod fanout;
 mod graph;
 pub mod grpc;
 mod hub;
+mod lane;
 mod limits;
 mod params;
 mod pinned;
@@ -81,12 +86,13 @@ pub use events::{MAX_EVENTS_PER_FRAME, crossed};
 pub use formats::wire::frame::WireFrame;
 pub use graph::{GraphProgram, StreamGraph};
 pub use hub::{EndReason, unix_nanos};
+pub use lane::{Delivered, Direct, DirectWrite};
 pub use limits::{AdmitError, StreamPermit};
 pub use params::{MAX_FPS, ParamError, StreamParams, StreamRequest};
 pub use pinned::{Pinned, PinnedClip, StreamMotion};
 pub use playhead::{MAX_SPEED, Playhead};
 pub use schedule::{Grid, MAX_CATCH_UP, Schedule, Tick};
-pub use subscription::{Controller, Delivered, Next, StoreOutcome, Subscription};
+pub use subscription::{Controller, Next, StoreOutcome, Subscription};
 
 pub use formats::wire::grid::PHASE_HEADER;
 
@@ -100,6 +106,8 @@ mod tests_broadcast_budget;
 mod tests_checkpoint;
 #[cfg(test)]
 mod tests_compact;
+#[cfg(test)]
+mod tests_fanout;
 #[cfg(test)]
 mod tests_graph;
 #[cfg(test)]

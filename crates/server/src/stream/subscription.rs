@@ -2,33 +2,19 @@
 //! its playback, with its own `dropped` count and frame limit, and the way
 //! to send it controls.
 
-use bytes::Bytes;
+use std::sync::Arc;
+
 use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 use super::control::{Control, ControlCheck, ControlError, Queued};
 use super::encode::Encoding;
+use super::fanout::Fanout;
 use super::hub::{self, EndReason, Hub, Item};
+use super::lane::{Delivered, Delivery, DirectWrite, Lane};
 use super::limits::StreamPermit;
 use super::params::StreamParams;
 use super::playhead::Playhead;
 use super::schedule::{Grid, Schedule};
-
-/// A frame as this stream's client must receive it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Delivered {
-    pub seq: u64,
-    /// Ticks skipped since this client's previous frame.
-    pub dropped: u64,
-    pub clip_time: f32,
-    pub bytes: Bytes,
-    /// Compact frames: the key frame this delta frame is relative to, sent
-    /// before it because this viewer missed it (docs/compact-frames.md).
-    pub prelude: Option<Bytes>,
-    /// Compact frames: a new layout (docs/compact-frames.md, "A new
-    /// layout") to send before them, with the `seq` of the first frame in
-    /// it (the prelude's, else this frame's).
-    pub layout: Option<(u64, std::sync::Arc<str>)>,
-}
 
 /// The next thing to send.
 #[derive(Debug, Clone, PartialEq)]
@@ -97,24 +83,19 @@ pub struct Subscription {
     /// A broadcast viewer (docs/broadcasts.md): its first frame has `dropped` 0, and
     /// its controls go to the broadcast (`Some(None)`: a read-only viewer,
     /// whose controls are refused), never into a fork.
-    broadcast: Option<Option<std::sync::Arc<dyn ControlSink>>>,
+    broadcast: Option<Option<Arc<dyn ControlSink>>>,
     /// This viewer's broadcast controls whose store writes are under way,
     /// until its transport takes them ([`Subscription::storing`]).
     storing: Vec<StoreOutcome>,
     check: ControlCheck,
     /// The engine's shutdown flag, for a playback this viewer forks.
     shutdown: watch::Receiver<bool>,
-    last_seq: Option<u64>,
-    /// Compact frames: the last key frame this viewer was sent.
-    last_key: Option<u64>,
-    /// Compact frames: the layout this viewer was last sent (at first, its
-    /// `opened` message's).
-    layout: Option<std::sync::Arc<str>>,
-    delivered: u64,
+    /// What this viewer has been sent, shared with its broadcast's fan-out
+    /// once its transport attaches a direct writer (`lane`).
+    lane: Arc<Lane>,
+    /// A broadcast viewer's fan-out, which its lane joins when attached.
+    fanout: Option<Arc<Fanout>>,
     stopped: bool,
-    /// `inbetween_stream_frames_total` and `…_dropped_total`, all viewers.
-    sent: metrics::Counter,
-    dropped: metrics::Counter,
     _permit: StreamPermit,
 }
 
@@ -122,8 +103,7 @@ impl std::fmt::Debug for Subscription {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Subscription")
             .field("identity", &self.params.identity)
-            .field("last_seq", &self.last_seq)
-            .field("delivered", &self.delivered)
+            .field("last_seq", &self.lane.lock().delivery.last_seq())
             .field("private", &self.controls.is_some())
             .finish_non_exhaustive()
     }
@@ -136,9 +116,10 @@ pub(crate) enum Source {
     Shared { rx: broadcast::Receiver<Item>, handback: Option<oneshot::Receiver<Box<Hub>>> },
     /// A private playback for this viewer to drive, and its controls.
     Private { hub: Box<Hub>, rx: broadcast::Receiver<Item>, controls: mpsc::Sender<Queued> },
-    /// A broadcast's frames of one encoding, and where this viewer's
-    /// controls go (`None`: it may not control).
-    Broadcast { rx: broadcast::Receiver<Item>, controls: Option<std::sync::Arc<dyn ControlSink>> },
+    /// A broadcast's frames of one encoding, where this viewer's controls
+    /// go (`None`: it may not control), and the channel's fan-out (`None`:
+    /// the broadcast had ended).
+    Broadcast { rx: broadcast::Receiver<Item>, controls: Option<Arc<dyn ControlSink>>, fanout: Option<Arc<Fanout>> },
 }
 
 impl Subscription {
@@ -149,16 +130,17 @@ impl Subscription {
         shutdown: watch::Receiver<bool>,
         permit: StreamPermit,
     ) -> Self {
-        let mut broadcast = None;
+        let (mut broadcast, mut fanout) = (None, None);
         let (rx, driver, handback, controls) = match source {
             Source::Shared { rx, handback } => (rx, None, handback, None),
             Source::Private { hub, rx, controls } => (rx, Some(hub), None, Some(controls)),
-            Source::Broadcast { rx, controls } => {
-                broadcast = Some(controls);
+            Source::Broadcast { rx, controls, fanout: f } => {
+                (broadcast, fanout) = (Some(controls), f);
                 (rx, None, None, None)
             }
         };
-        let layout = params.compact.as_ref().map(|c| std::sync::Arc::clone(&c.document));
+        let layout = params.compact.as_ref().map(|c| Arc::clone(&c.document));
+        let lane = Lane::new(Delivery::new(broadcast.is_some(), layout), params.encoding);
         Subscription {
             check: ControlCheck::new(&params).priced_by(permit.repricing()),
             params,
@@ -170,13 +152,9 @@ impl Subscription {
             broadcast,
             storing: Vec::new(),
             shutdown,
-            last_seq: None,
-            last_key: None,
-            layout,
-            delivered: 0,
+            lane,
+            fanout,
             stopped: false,
-            sent: metrics::counter!("inbetween_stream_frames_total"),
-            dropped: metrics::counter!("inbetween_stream_frames_dropped_total"),
             _permit: permit,
         }
     }
@@ -205,7 +183,7 @@ impl Subscription {
         if self.stopped {
             return Next::End(EndReason::Stopped);
         }
-        if self.params.max_frames.is_some_and(|max| self.delivered >= max) {
+        if self.params.max_frames.is_some_and(|max| self.lane.lock().delivery.delivered() >= max) {
             return Next::End(EndReason::MaxFrames);
         }
         loop {
@@ -235,59 +213,42 @@ impl Subscription {
                     return Next::End(EndReason::Failed);
                 }
             };
-            if self.last_seq.is_some_and(|last| frame.seq <= last) {
-                continue;
-            }
-            // A broadcast viewer's first frame is the tick after it joined:
-            // the ticks before were not its losses.
-            let first_dropped = if self.broadcast.is_some() { 0 } else { frame.seq };
-            let mut first_seq = frame.seq;
-            let prelude = self.missed_key(&frame).map(|key| {
-                let dropped = self.last_seq.map_or(first_dropped.min(key.seq), |last| key.seq - last - 1);
-                self.last_seq = Some(key.seq);
-                first_seq = key.seq;
-                key.for_viewer(dropped, None)
-            });
-            let layout = self.new_layout(&frame).map(|doc| (first_seq, doc));
-            let dropped = self.last_seq.map_or(first_dropped, |last| frame.seq - last - 1);
-            if let Some(key) = frame.key_seq {
-                self.last_key = Some(key);
-            }
+            let mut lane = self.lane.lock();
             // The names of the joints frames carry, on a protobuf viewer's
             // first frame (made then: kept, they cost every viewer ~1 KiB).
-            let first_pb = self.last_seq.is_none() && self.params.encoding == Encoding::Protobuf;
+            let first_pb = lane.delivery.last_seq().is_none() && self.params.encoding == Encoding::Protobuf;
             let names = first_pb.then(|| self.params.names());
-            let bytes = frame.for_viewer(dropped, names.as_ref());
-            self.last_seq = Some(frame.seq);
-            self.delivered += 1;
-            self.sent.increment(1);
-            if dropped > 0 {
-                self.dropped.increment(dropped);
+            if let Some(delivered) = lane.delivery.deliver(&frame, names.as_ref()) {
+                return Next::Frame(delivered);
             }
-            let clip_time = frame.clip_time;
-            return Next::Frame(Delivered { seq: frame.seq, dropped, clip_time, bytes, prelude, layout });
         }
     }
 
-    /// A compact frame's layout, when this viewer was last sent another.
-    fn new_layout(&mut self, frame: &super::encode::Encoded) -> Option<std::sync::Arc<str>> {
-        let doc = frame.layout.as_ref()?;
-        if self.layout.as_ref().is_some_and(|had| std::sync::Arc::ptr_eq(had, doc)) {
-            return None;
-        }
-        // A broadcast viewer's layout may be an equal copy of the one encoded.
-        let same = self.layout.as_ref().is_some_and(|had| had == doc);
-        self.layout = Some(std::sync::Arc::clone(doc));
-        (!same).then(|| std::sync::Arc::clone(doc))
+    /// Lets its broadcast's fan-out write this viewer's frames through
+    /// `writer` while its lane is parked ([`Subscription::park`]). Returns
+    /// whether it does (`false`: not a broadcast's viewer, or it had ended).
+    pub(crate) fn attach(&mut self, writer: Arc<dyn DirectWrite>) -> bool {
+        let Some(fanout) = &self.fanout else { return false };
+        self.lane.attach(writer);
+        fanout.join(Arc::clone(&self.lane));
+        true
     }
 
-    /// A compact delta frame's key frame, when this viewer has not had it.
-    fn missed_key(&self, frame: &super::encode::Encoded) -> Option<std::sync::Arc<super::encode::Encoded>> {
-        frame
-            .key
-            .as_ref()
-            .filter(|key| self.last_key != Some(key.seq) && self.last_seq.is_none_or(|l| l < key.seq))
-            .cloned()
+    /// Parks this viewer's lane if it may be (`lane`): its transport then
+    /// waits for [`Subscription::unparked`] instead of [`Subscription::next`].
+    /// Returns whether it is parked.
+    pub(crate) fn park(&mut self) -> bool {
+        if self.stopped || self.fanout.is_none() {
+            self.lane.unpark();
+            return false;
+        }
+        let rx = &self.rx;
+        self.lane.park(|| rx.is_empty())
+    }
+
+    /// Resolves once the fan-out has handed the lane back. Cancel-safe.
+    pub(crate) async fn unparked(&mut self) {
+        std::future::poll_fn(|cx| self.lane.poll_unparked(cx)).await;
     }
 
     /// Applies `control` at the next tick. A viewer of a shared playback
@@ -343,17 +304,25 @@ impl Subscription {
 
     fn fork(&mut self) {
         let p = &self.params;
-        let next = self.last_seq.map_or(0, |last| last + 1);
+        let last_seq = self.lane.lock().delivery.last_seq();
+        let next = last_seq.map_or(0, |last| last + 1);
         let playhead = Playhead::new(p.start, p.speed, p.fps, p.paused);
-        let prev_time = self.last_seq.map(|last| playhead.time_at(last));
+        let prev_time = last_seq.map(|last| playhead.time_at(last));
         let schedule = self.schedule.resumed_at(next);
         let (mut hub, rx, tx) = hub::private(p, schedule, self.shutdown.clone());
-        hub.resume(prev_time, self.last_seq.is_none());
+        hub.resume(prev_time, last_seq.is_none());
         // The shared playback goes on for its other viewers (or, if this
         // viewer drove it alone, ends here).
         self.rx = rx;
         self.handback = None;
         self.driver = Some(hub);
         self.controls = Some(tx);
+    }
+}
+
+impl Drop for Subscription {
+    fn drop(&mut self) {
+        // Its connection is let go now, not at the fan-out's next frame.
+        self.lane.detach();
     }
 }

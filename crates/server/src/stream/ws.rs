@@ -7,11 +7,15 @@
 //! [`serve`] is generic over any `Sink + Stream` of axum WebSocket messages,
 //! so unit tests drive it with in-memory channels and a paused clock while
 //! the server hands it the real socket. It is the only task of a WebSocket
-//! stream; it owns its [`Subscription`] and ends (with a close frame saying
-//! why) on `max_frames`, `stop`, shutdown, a client that goes away, one that
-//! stops answering pings, or one that does not accept a frame for a whole
-//! keepalive period (a slow consumer: close 1008 `slow_consumer` if that still
-//! fits; its unsent bytes are bounded by `stream_buffer_bytes` meanwhile).
+//! stream that reads its socket; it owns its [`Subscription`]. A broadcast
+//! viewer's frames are written by its broadcast's fan-out while its lane is
+//! parked (`lane`, `fanout`): the task then waits for controls, pings and
+//! the lane's hand-back, and first writes out whatever the fan-out left
+//! unwritten. It ends (with a close frame saying why) on `max_frames`,
+//! `stop`, shutdown, a client that goes away, one that stops answering
+//! pings, or one that does not accept a frame for a whole keepalive period
+//! (a slow consumer: close 1008 `slow_consumer` if that still fits; its
+//! unsent bytes are bounded by `stream_buffer_bytes` meanwhile).
 //!
 //! Control messages are JSON text: `{"op":"pause"}`, `{"op":"play"}`,
 //! `{"op":"seek","time":1.5}`, `{"op":"speed","speed":-1}`, `{"op":"stop"}`,
@@ -46,6 +50,7 @@ use futures_util::task::AtomicWaker;
 use super::control::{Control, ControlError, ControlMsg, Crossfade, ParsedControl, not_a_control};
 use super::encode::Encoding;
 use super::hub::EndReason;
+use super::lane::DirectWrite;
 use super::pinned::StreamMotion;
 use super::subscription::{Next, StoreOutcome, Subscription};
 
@@ -222,6 +227,13 @@ fn problem_message(code: &str, pointer: Option<String>, detail: &str) -> Message
 /// connection itself, behind a frame header, without copying them into a
 /// per-viewer buffer (`server::rest::socket`, issue 19).
 pub trait FrameSocket: Sink<Message> + Unpin {
+    /// A writer another task may write whole frames to (a broadcast's
+    /// fan-out, `fanout`); `None` (the default): every frame goes through
+    /// [`FrameSocket::send_frame`].
+    fn direct(&self) -> Option<Arc<dyn DirectWrite>> {
+        None
+    }
+
     /// Sends one frame: JSON text or protobuf binary, as `encoding` says.
     fn send_frame(&mut self, encoding: Encoding, bytes: bytes::Bytes) -> impl Future<Output = Result<(), Self::Error>> {
         async move {
@@ -264,15 +276,29 @@ pub async fn serve<S, E>(
     let mut controls = Controls { motions, lookup: None, queued: VecDeque::new(), storing: FuturesUnordered::new() };
     let mut outbox: VecDeque<Message> = VecDeque::new();
     let mut reads = ReadGate::new();
+    let direct = socket.direct().filter(|writer| sub.attach(Arc::clone(writer)));
     loop {
+        if let Some(writer) = &direct
+            && !writer.idle()
+        {
+            // What the fan-out handed back unwritten goes before anything else.
+            match timeout(config.keepalive, socket.flush()).await {
+                Ok(Ok(())) => {}
+                Ok(Err(_)) => return,
+                Err(_) => return close_slow_consumer(&mut socket).await,
+            }
+        }
         let outgoing = if let Some(message) = outbox.pop_front() {
             message
         } else {
+            let parked = sub.park();
             tokio::select! {
-                next = sub.next() => match next {
+                next = next_or_handed_back(&mut sub, parked) => match next {
+                    // The broadcast's fan-out sent the frames meanwhile.
+                    None => continue,
                     // Sent here (not below) so that a frame's bytes go to the
                     // socket's own frame path.
-                    Next::Frame(f) => {
+                    Some(Next::Frame(f)) => {
                         let encoding = sub.encoding();
                         let send = async {
                             if let Some((seq, doc)) = f.layout
@@ -293,7 +319,7 @@ pub async fn serve<S, E>(
                             Err(_) => return close_slow_consumer(&mut socket).await,
                         }
                     }
-                    Next::End(reason) => {
+                    Some(Next::End(reason)) => {
                         let _ = timeout(config.keepalive, socket.send(Message::Close(Some(close_frame(reason))))).await;
                         return;
                     }
@@ -342,6 +368,16 @@ pub async fn serve<S, E>(
             Err(_) => return close_slow_consumer(&mut socket).await,
         }
     }
+}
+
+/// The stream's next frame or end; while its lane is `parked`, `None` once
+/// its broadcast's fan-out hands it back (`lane`). Cancel-safe.
+async fn next_or_handed_back(sub: &mut Subscription, parked: bool) -> Option<Next> {
+    if parked {
+        sub.unparked().await;
+        return None;
+    }
+    Some(sub.next().await)
 }
 
 /// Reads the socket only when it has woken the task (or gave a message
